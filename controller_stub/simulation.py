@@ -1,0 +1,655 @@
+"""The simulated controller's world: robot, truth, motion, sensors.
+
+Synchronous and free of I/O: the asyncio server (`server.py`) is a thin shell that turns
+protocol requests into calls on one `Simulation` and sleeps `duration_s * time_scale` for
+motions. Everything here is reproducible from the scenario's seed.
+
+Angles are radians, lengths metres, times seconds (docs/conventions.md). "Reported" joint
+angles are what a real controller reports: `q_reported = encoder + zero_offset`. The physical
+angle differs from the reported one by the injected zero error and by the hidden effects.
+The simulation never imports hostpc: it has its own forward model (`robot_model.py`).
+
+INTERFACE CONTRACT (the server depends on exactly these names):
+
+    sim = Simulation(scenario)                 # scenario: controller_stub.scenario.Scenario
+    sim.robot_name -> str ; sim.n_joints -> int ; sim.time -> float (simulated clock, s)
+    sim.time_scale -> float                    # wall seconds per simulated second of motion
+    sim.joint_positions() -> (n,) reported angles
+    sim.joint_limits() -> ((n,), (n,))         # lower, upper (reported frame)
+    sim.zero_offsets() -> (n,)
+    sim.set_zero_offsets(offsets) -> (n,) previous offsets   # raises SimulationRefused
+    sim.digital_inputs() -> list[bool] ; sim.digital_outputs() -> list[bool]
+    sim.set_digital_output(index, value) -> None
+    sim.move_joints(q_target, speed) -> MoveResult            # speed: fraction of max (0, 1]
+    sim.guarded_move(q_target, speed, io_line) -> GuardedMoveResult
+    sim.capture_stereo(pattern="target", view=0) -> StereoFrame   # pattern: target|chessboard
+    sim.camera_description() -> dict          # what the controller reports of its camera
+                                               # (image size, nominal mount); never the truth
+    sim.estop() -> None ; sim.reset_estop() -> None ; sim.estopped -> bool
+    sim.offset_history() -> list[(id, (n,))]   # every offset set held, id 0 = original
+    sim.rollback(id) -> (n,) previous offsets  # restore a history entry (SimulationRefused)
+    sim.truth() -> dict                        # JSON-serialisable; for --truth-out only
+    sim.on_io_edge: Callable[[int, bool, float, (n,)], None] | None
+                                               # set by the server; called for each IO edge
+                                               # (line, new value, sim time, latched q)
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from controller_stub import probe as probe_mod
+from controller_stub.physics import HiddenEffects, Physics
+from controller_stub.render import CameraModel, Renderer
+from controller_stub.robot_model import get_robot, make_transform, matrix_to_rpy
+from controller_stub.scenario import RandomSpec, Scenario
+
+
+class SimulationRefused(Exception):  # noqa: N818 (name fixed by the contract)
+    """The simulated controller refuses a request (limit, estop, injected fault).
+
+    `code` is a short machine-readable reason (e.g. "offset_limit", "joint_limit", "estop",
+    "refused_fault"); the message says it in words.
+    """
+
+    def __init__(self, code: str, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+@dataclass(frozen=True)
+class MoveResult:
+    """Outcome of a joint move.
+
+    completed: True if the target was reached; False with `reason` (code) if aborted.
+    q: (n,) reported joint angles where the robot stopped.
+    duration_s: simulated motion time (the server sleeps duration_s * time_scale).
+    """
+
+    completed: bool
+    q: np.ndarray
+    duration_s: float
+    reason: str | None = None
+
+
+@dataclass(frozen=True)
+class GuardedMoveResult:
+    """Outcome of a guarded move toward q_target that stops at a rising IO edge.
+
+    contact: True if the edge came before the end of travel.
+    q_latched: (n,) reported angles latched at the edge (late by the trigger latency), or None.
+    q: (n,) reported angles where the robot stopped.
+    speed_mps: Cartesian speed of the probe tip at the contact (m/s), or None.
+    """
+
+    contact: bool
+    q_latched: np.ndarray | None
+    q: np.ndarray
+    duration_s: float
+    io_line: int
+    speed_mps: float | None = None
+    reason: str | None = None
+
+
+@dataclass(frozen=True)
+class StereoFrame:
+    """One stereo exposure: 8-bit grey images (H, W) and the reported joints at exposure."""
+
+    left: np.ndarray
+    right: np.ndarray
+    q: np.ndarray
+    time: float
+
+
+OnIoEdge = Callable[[int, bool, float, np.ndarray], None]
+
+# Independent random streams (so adding draws to one feature never changes another).
+_STREAM_TRUTH, _STREAM_VIEWS, _STREAM_PROBE, _STREAM_LEFT, _STREAM_RIGHT = range(1, 6)
+
+
+def _rng(seed: int, stream: int) -> np.random.Generator:
+    return np.random.default_rng([int(seed) & 0xFFFFFFFF, stream])
+
+
+def _pose_dict(T: np.ndarray) -> dict[str, list[float]]:
+    return {"xyz": T[:3, 3].tolist(), "rpy": matrix_to_rpy(T[:3, :3]).tolist()}
+
+
+class Simulation:
+    """The simulated controller's world. See the module docstring for the contract.
+
+    State: the encoder positions (as reported angles and the current zero offsets), the
+    direction each joint last moved (backlash), the simulated clock, digital IO, estop and
+    the fault counters. Everything random is drawn from the scenario's seed.
+    """
+
+    def __init__(self, scenario: Scenario) -> None:
+        self.scenario = scenario
+        self.model = get_robot(scenario.robot)
+        n = self.model.n_joints
+        self._n = n
+        truth = scenario.truth
+        rng_truth = _rng(scenario.seed, _STREAM_TRUTH)
+        if isinstance(truth.zero_errors, RandomSpec):
+            half = math.radians(truth.zero_errors.random_deg)
+            self._zero_error_initial = rng_truth.uniform(-half, half, n)
+        else:
+            self._zero_error_initial = np.asarray(truth.zero_errors, dtype=float)
+        self.effects = HiddenEffects.from_spec(truth, n)
+        self.physics = Physics(self.model, self.effects)
+
+        motion = scenario.motion
+        self._q_min = np.asarray(
+            motion.q_min if motion.q_min is not None else self.model.q_min, float
+        )
+        self._q_max = np.asarray(
+            motion.q_max if motion.q_max is not None else self.model.q_max, float
+        )
+        if motion.max_joint_speed is None:
+            self._max_speed = self.model.max_speed.astype(float)
+        else:
+            self._max_speed = np.broadcast_to(
+                np.asarray(motion.max_joint_speed, float), (n,)
+            ).copy()
+
+        server = scenario.server
+        self._offsets_initial = (
+            np.zeros(n)
+            if server.initial_offsets is None
+            else np.asarray(server.initial_offsets, float)
+        )
+        self._offsets = self._offsets_initial.copy()
+        self._history: list[tuple[int, np.ndarray]] = [(0, self._offsets.copy())]
+        self._next_history_id = 1
+        start = motion.initial_q if motion.initial_q is not None else self.model.home
+        self._q = np.clip(np.asarray(start, float), self._q_min, self._q_max)
+        self._approach = np.ones(n)
+        self._time = 0.0
+
+        self._n_io = server.n_digital_io
+        self._inputs = [False] * self._n_io
+        self._outputs = [False] * self._n_io
+        self._estopped = False
+        self._estop_fault_fired = False
+        self._move_count = 0
+        self._completed_moves = 0
+        self._guarded_count = 0
+        self._rng_probe = _rng(scenario.seed, _STREAM_PROBE)
+        self.on_io_edge: OnIoEdge | None = None
+
+        cam = scenario.camera
+        self.camera = CameraModel(
+            width=cam.image_width,
+            height=cam.image_height,
+            fx=cam.fx,
+            fy=cam.fy,
+            cx=cam.cx,
+            cy=cam.cy,
+            distortion=np.asarray(cam.distortion, float),
+        )
+        self.T_flange_camera_nominal = make_transform(cam.mount.xyz, cam.mount.rpy)
+        self.T_flange_camera = self.T_flange_camera_nominal @ make_transform(
+            cam.mount_error.xyz, cam.mount_error.rpy
+        )
+        self.T_left_right = make_transform([cam.baseline, 0.0, 0.0], cam.right_rpy)
+        self.target_centre = np.asarray(scenario.target.centre, float) + np.asarray(
+            scenario.target.centre_error, float
+        )
+        pr = scenario.probe
+        self.tip_flange = np.asarray(pr.tip, float) + np.asarray(pr.tip_error, float)
+        self.sphere_centre = np.asarray(pr.sphere_centre, float) + np.asarray(
+            pr.sphere_centre_error, float
+        )
+        self._left = Renderer(self.camera, cam.pixel_noise_sigma, _rng(scenario.seed, _STREAM_LEFT))
+        self._right = Renderer(
+            self.camera, cam.pixel_noise_sigma, _rng(scenario.seed, _STREAM_RIGHT)
+        )
+        self._update_probe_input(emit=False)
+
+    # ------------------------------------------------------------------ simple state
+
+    @property
+    def robot_name(self) -> str:
+        return self.model.name
+
+    @property
+    def n_joints(self) -> int:
+        return self._n
+
+    @property
+    def time(self) -> float:
+        """Simulated clock (s); advances only by motion durations."""
+        return self._time
+
+    @property
+    def time_scale(self) -> float:
+        return float(self.scenario.motion.time_scale)
+
+    @property
+    def estopped(self) -> bool:
+        return self._estopped
+
+    def joint_positions(self) -> np.ndarray:
+        """(n,) reported joint angles (rad)."""
+        return self._q.copy()
+
+    def joint_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """((n,), (n,)) lower and upper limits in the reported frame (rad)."""
+        return self._q_min.copy(), self._q_max.copy()
+
+    def max_joint_speed(self) -> np.ndarray:
+        """(n,) maximum joint speeds (rad/s)."""
+        return self._max_speed.copy()
+
+    def zero_offsets(self) -> np.ndarray:
+        """(n,) current controller zero offsets (rad): q_reported = encoder + offset."""
+        return self._offsets.copy()
+
+    def estop(self) -> None:
+        self._estopped = True
+
+    def reset_estop(self) -> None:
+        self._estopped = False
+
+    # ------------------------------------------------------------------ zero offsets
+
+    def set_zero_offsets(self, offsets: np.ndarray | list[float]) -> np.ndarray:
+        """Write new zero offsets (n,) rad; returns the previous ones.
+
+        The encoders do not move, so the reported angles shift by (new - old) and the same
+        reported command afterwards reaches a different physical pose. Refused with
+        "offset_limit" if any joint would differ from the ORIGINAL offsets by more than
+        server.offset_limit_rad, "invalid_argument" for a wrong shape or non-finite values.
+        """
+        new = self._check_vector(offsets, "offsets")
+        limit = self.scenario.server.offset_limit_rad
+        change = np.abs(new - self._offsets_initial)
+        if np.any(change > limit):
+            i = int(np.argmax(change))
+            raise SimulationRefused(
+                "offset_limit",
+                f"joint {i + 1}: offset change {math.degrees(change[i]):.3f} deg from the "
+                f"original exceeds the limit {math.degrees(limit):.3f} deg",
+            )
+        previous = self._offsets.copy()
+        self._q = self._q + (new - self._offsets)
+        self._offsets = new
+        self._history.append((self._next_history_id, new.copy()))
+        self._next_history_id += 1
+        return previous
+
+    def offset_history(self) -> list[tuple[int, np.ndarray]]:
+        """Every offset set the controller has held, oldest first: (id, (n,) offsets).
+
+        id 0 is the original set; every successful set_zero_offsets / rollback appends one.
+        """
+        return [(i, o.copy()) for i, o in self._history]
+
+    def rollback(self, history_id: int) -> np.ndarray:
+        """Restore the offsets recorded under `history_id`; returns the previous offsets.
+
+        Raises SimulationRefused("unknown_history_id") for an id never recorded.
+        """
+        for i, offsets in self._history:
+            if i == history_id:
+                return self.set_zero_offsets(offsets)
+        raise SimulationRefused("unknown_history_id", f"no offset history entry {history_id}")
+
+    def current_zero_errors(self) -> np.ndarray:
+        """(n,) rad: constant part of q_phys - q_reported with the CURRENT offsets."""
+        return self._zero_error_initial + self._offsets_initial - self._offsets
+
+    # ------------------------------------------------------------------ IO
+
+    def digital_inputs(self) -> list[bool]:
+        return list(self._inputs)
+
+    def digital_outputs(self) -> list[bool]:
+        return list(self._outputs)
+
+    def set_digital_output(self, index: int, value: bool) -> None:
+        if not 0 <= int(index) < self._n_io:
+            raise SimulationRefused(
+                "invalid_argument", f"digital output {index} out of range 0..{self._n_io - 1}"
+            )
+        self._outputs[int(index)] = bool(value)
+
+    # ------------------------------------------------------------------ physics views
+
+    def physical_angles(self, q_reported: np.ndarray | None = None) -> np.ndarray:
+        """(n,) physical joint angles for reported angles (default: the current pose), with
+        the current offsets, backlash state and clock."""
+        q = self._q if q_reported is None else np.asarray(q_reported, float)
+        return self.physics.physical_angles(
+            q[None, :], self.current_zero_errors(), self._approach, self._time
+        )[0]
+
+    def flange_pose(self) -> np.ndarray:
+        """(4, 4) true T_base_flange at the current pose."""
+        return self.physics.flange_pose(self.physical_angles()[None, :], self._time)[0]
+
+    def camera_pose(self) -> np.ndarray:
+        """(4, 4) true T_base_leftcamera at the current pose."""
+        return self.flange_pose() @ self.T_flange_camera
+
+    def tip_position(self) -> np.ndarray:
+        """(3,) true stylus tip centre in base (m) at the current pose."""
+        return probe_mod.tip_positions(self.flange_pose()[None], self.tip_flange)[0]
+
+    # ------------------------------------------------------------------ motion
+
+    def _check_vector(self, values: Any, name: str) -> np.ndarray:
+        try:
+            v = np.asarray(values, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise SimulationRefused("invalid_argument", f"{name}: not a numeric vector") from None
+        if v.shape != (self._n,):
+            raise SimulationRefused(
+                "invalid_argument", f"{name}: expected {self._n} values, got {v.size}"
+            )
+        if not np.all(np.isfinite(v)):
+            raise SimulationRefused("invalid_argument", f"{name}: non-finite value")
+        return v
+
+    def _begin_motion(self, q_target: Any, speed: float) -> tuple[np.ndarray, float]:
+        """Common checks; returns (target (n,), duration (s)). Counts the move."""
+        target = self._check_vector(q_target, "q_target")
+        if not (isinstance(speed, int | float) and 0.0 < float(speed) <= 1.0):
+            raise SimulationRefused("invalid_argument", f"speed {speed!r} not in (0, 1]")
+        if self._estopped:
+            raise SimulationRefused("estop", "emergency stop active; reset it before moving")
+        index = self._move_count
+        self._move_count += 1
+        if index in self.scenario.faults.refuse_move_indices:
+            raise SimulationRefused("refused_fault", f"move {index} refused (injected fault)")
+        outside = (target < self._q_min) | (target > self._q_max)
+        if np.any(outside):
+            i = int(np.argmax(outside))
+            raise SimulationRefused(
+                "joint_limit",
+                f"joint {i + 1}: target {target[i]:.6f} rad outside "
+                f"[{self._q_min[i]:.6f}, {self._q_max[i]:.6f}]",
+            )
+        return target, self.motion_duration(self._q, target, float(speed))
+
+    def motion_duration(self, q_from: np.ndarray, q_to: np.ndarray, speed: float) -> float:
+        """Simulated time (s) of a joint move: max_i |dq_i| / (speed * max_speed_i)."""
+        return float(np.max(np.abs(np.asarray(q_to) - q_from) / (speed * self._max_speed)))
+
+    def _finish_motion(self, q_start: np.ndarray, q_end: np.ndarray, duration: float) -> None:
+        moved = np.sign(q_end - q_start)
+        self._approach = np.where(moved != 0, moved, self._approach)
+        self._q = q_end.copy()
+        self._time += duration
+        self._completed_moves += 1
+        after = self.scenario.faults.estop_after_moves
+        if after is not None and not self._estop_fault_fired and self._completed_moves >= after:
+            self._estop_fault_fired = True
+            self._estopped = True
+
+    def move_joints(self, q_target: Any, speed: float) -> MoveResult:
+        """Move to q_target (n,) reported rad at `speed` (fraction of max joint speed).
+
+        Raises SimulationRefused: "estop", "joint_limit", "refused_fault", "invalid_argument".
+        The probe IO line follows contact along the path (rising/falling edges reported).
+        """
+        target, duration = self._begin_motion(q_target, speed)
+        q_start = self._q.copy()
+        t_start = self._time
+        crossings = self._path_crossings(q_start, target, duration, t_start)
+        for c in crossings:
+            q_at = q_start + c.s * (target - q_start)
+            self._set_probe_input(c.rising, t_start + c.s * duration, q_at, emit=True)
+        self._finish_motion(q_start, target, duration)
+        return MoveResult(completed=True, q=target.copy(), duration_s=duration)
+
+    # ------------------------------------------------------------------ probe
+
+    def _gap_function(
+        self, q_start: np.ndarray, target: np.ndarray, t_start: float, duration: float, extra: float
+    ) -> probe_mod.GapFunction:
+        """Gap (m) along the path: |tip - P_b| - (R + r + extra), < 0 inside."""
+        moved = np.sign(target - q_start)
+        approach = np.where(moved != 0, moved, self._approach)
+        zero_error = self.current_zero_errors()
+        contact = self.scenario.probe.sphere_radius + self.scenario.probe.stylus_radius + extra
+
+        def gap(s: np.ndarray) -> np.ndarray:
+            s = np.asarray(s, float)
+            q_rep = q_start[None, :] + s[:, None] * (target - q_start)[None, :]
+            # time-varying lengths: the clock at each path point (drift over one move is tiny,
+            # but this keeps it exact)
+            out = np.empty(s.shape[0])
+            times = t_start + s * duration
+            # drift is linear and slow; group by identical times (usually all distinct) only
+            # when drift is on, else one vectorised call
+            if np.any(self.effects.drift_d) or np.any(self.effects.drift_a):
+                for k in range(s.shape[0]):
+                    qp = self.physics.physical_angles(
+                        q_rep[k : k + 1], zero_error, approach, times[k]
+                    )
+                    T = self.physics.flange_pose(qp, times[k])
+                    tip = probe_mod.tip_positions(T, self.tip_flange)
+                    out[k] = np.linalg.norm(tip[0] - self.sphere_centre) - contact
+                return out
+            qp = self.physics.physical_angles(q_rep, zero_error, approach, t_start)
+            T = self.physics.flange_pose(qp, t_start)
+            tips = probe_mod.tip_positions(T, self.tip_flange)
+            return np.linalg.norm(tips - self.sphere_centre, axis=1) - contact
+
+        return gap
+
+    def _tip_path_length(self, gap_q: np.ndarray, target: np.ndarray) -> float:
+        s = np.linspace(0.0, 1.0, 33)
+        q_rep = gap_q[None, :] + s[:, None] * (target - gap_q)[None, :]
+        qp = self.physics.physical_angles(
+            q_rep, self.current_zero_errors(), self._approach, self._time
+        )
+        tips = probe_mod.tip_positions(self.physics.flange_pose(qp, self._time), self.tip_flange)
+        return float(np.sum(np.linalg.norm(np.diff(tips, axis=0), axis=1))) * 1.5 + 1e-6
+
+    def _path_crossings(
+        self,
+        q_start: np.ndarray,
+        target: np.ndarray,
+        duration: float,
+        t_start: float,
+        extra: float = 0.0,
+    ) -> list[probe_mod.Crossing]:
+        if duration <= 0.0:
+            return []
+        gap = self._gap_function(q_start, target, t_start, duration, extra)
+        n = probe_mod.sample_count(self._tip_path_length(q_start, target))
+        return probe_mod.find_crossings(gap, n)
+
+    def _set_probe_input(self, value: bool, t: float, q: np.ndarray, emit: bool) -> None:
+        line = self.scenario.probe.io_line
+        if self._inputs[line] == value:
+            return
+        self._inputs[line] = value
+        if emit and self.on_io_edge is not None:
+            self.on_io_edge(line, value, t, q.copy())
+
+    def _update_probe_input(self, emit: bool) -> None:
+        tip = self.tip_position()
+        pr = self.scenario.probe
+        inside = np.linalg.norm(tip - self.sphere_centre) <= pr.sphere_radius + pr.stylus_radius
+        self._set_probe_input(bool(inside), self._time, self._q, emit)
+
+    def guarded_move(self, q_target: Any, speed: float, io_line: int) -> GuardedMoveResult:
+        """Move toward q_target until a rising edge on `io_line` (the probe trigger).
+
+        The contact is the first time the stylus tip sphere touches the reference sphere
+        (contact distance R + r plus the probe's repeatability noise). The joints are latched
+        `probe_trigger_latency_s` after the true contact; the robot stops `probe.stop_time_s`
+        after the latch (it keeps moving along the path until then). A lost-edge fault or no
+        contact runs to the end of travel and returns contact=False. The IO edge callback
+        gets (line, True, latch time, latched q).
+        """
+        if not 0 <= int(io_line) < self._n_io:
+            raise SimulationRefused(
+                "invalid_argument", f"io_line {io_line} out of range 0..{self._n_io - 1}"
+            )
+        target, duration = self._begin_motion(q_target, speed)
+        index = self._guarded_count
+        self._guarded_count += 1
+        lose_edge = index in self.scenario.faults.lose_io_edge_indices
+        probe_line = self.scenario.probe.io_line
+        q_start = self._q.copy()
+        t_start = self._time
+        noise = float(self._rng_probe.normal(0.0, self.scenario.probe.repeatability_sigma))
+        crossings = self._path_crossings(q_start, target, duration, t_start, extra=noise)
+        latency = self.effects.probe_trigger_latency_s
+        for c in crossings:
+            t_c = t_start + c.s * duration
+            q_c = q_start + c.s * (target - q_start)
+            if not c.rising:
+                self._set_probe_input(False, t_c, q_c, emit=True)
+                continue
+            if int(io_line) != probe_line or lose_edge:
+                # the edge happens on the probe line, but the guarded move does not see it
+                self._set_probe_input(True, t_c, q_c, emit=not lose_edge)
+                continue
+            rate = (target - q_start) / duration
+            s_latch = min(1.0, c.s + latency / duration)
+            s_stop = min(1.0, s_latch + self.scenario.probe.stop_time_s / duration)
+            q_latched = q_start + s_latch * (target - q_start)
+            q_stop = q_start + s_stop * (target - q_start)
+            speed_mps = self._tip_speed(q_start, target, c.s, duration)
+            self._inputs[probe_line] = True
+            if self.on_io_edge is not None:
+                self.on_io_edge(probe_line, True, t_start + s_latch * duration, q_latched.copy())
+            del rate
+            self._finish_motion(q_start, q_stop, s_stop * duration)
+            self._update_probe_input(emit=True)
+            return GuardedMoveResult(
+                contact=True,
+                q_latched=q_latched,
+                q=q_stop,
+                duration_s=s_stop * duration,
+                io_line=int(io_line),
+                speed_mps=speed_mps,
+            )
+        self._finish_motion(q_start, target, duration)
+        return GuardedMoveResult(
+            contact=False,
+            q_latched=None,
+            q=target.copy(),
+            duration_s=duration,
+            io_line=int(io_line),
+            reason="no_contact",
+        )
+
+    def _tip_speed(
+        self, q_start: np.ndarray, target: np.ndarray, s: float, duration: float
+    ) -> float:
+        """Cartesian tip speed (m/s) at path parameter s (central difference)."""
+        h = 1e-6
+        s_pair = np.array([max(0.0, s - h), min(1.0, s + h)])
+        q_rep = q_start[None, :] + s_pair[:, None] * (target - q_start)[None, :]
+        moved = np.sign(target - q_start)
+        approach = np.where(moved != 0, moved, self._approach)
+        qp = self.physics.physical_angles(q_rep, self.current_zero_errors(), approach, self._time)
+        tips = probe_mod.tip_positions(self.physics.flange_pose(qp, self._time), self.tip_flange)
+        return float(np.linalg.norm(tips[1] - tips[0]) / ((s_pair[1] - s_pair[0]) * duration))
+
+    # ------------------------------------------------------------------ cameras
+
+    def capture_stereo(self, pattern: str = "target", view: int = 0) -> StereoFrame:
+        """Render a stereo pair.
+
+        pattern "target": the circular target seen from the robot's physical pose.
+        pattern "chessboard": the `view`-th chessboard pose (relative to the left camera,
+        independent of the robot). Raises SimulationRefused("invalid_argument") otherwise.
+        """
+        level = self.scenario.target.background_level
+        if pattern == "target":
+            pass
+        elif pattern == "chessboard":
+            if not 0 <= int(view) < self.scenario.chessboard.n_views:
+                raise SimulationRefused(
+                    "invalid_argument",
+                    f"chessboard view {view} out of range 0..{self.scenario.chessboard.n_views - 1}",
+                )
+        else:
+            raise SimulationRefused("invalid_argument", f"unknown pattern {pattern!r}")
+        return StereoFrame(
+            left=self._left.background(level),
+            right=self._right.background(level),
+            q=self._q.copy(),
+            time=self._time,
+        )
+
+    def camera_description(self) -> dict[str, Any]:
+        """What the controller reports about its camera: never the hidden truth."""
+        sc = self.scenario
+        cam, tgt, board = sc.camera, sc.target, sc.chessboard
+        return {
+            "image_width": cam.image_width,
+            "image_height": cam.image_height,
+            "baseline_nominal": cam.baseline,
+            "T_flange_camera_nominal": {"xyz": list(cam.mount.xyz), "rpy": list(cam.mount.rpy)},
+            "target": {
+                "radius": tgt.radius,
+                "centre_nominal": list(tgt.centre),
+                "normal": list(tgt.normal),
+                "plate_radius": tgt.plate_radius,
+            },
+            "chessboard": {
+                "cols": board.cols,
+                "rows": board.rows,
+                "square_size": board.square_size,
+                "n_views": board.n_views,
+            },
+        }
+
+    # ------------------------------------------------------------------ truth
+
+    def truth(self) -> dict[str, Any]:
+        """The hidden truth, JSON-serialisable (for --truth-out and tests only)."""
+        sc = self.scenario
+        cam = sc.camera
+        delta_d, delta_a = self.physics.length_deltas(self._time)
+        return {
+            "robot": self.model.name,
+            "time_s": self._time,
+            "zero_errors": self.current_zero_errors().tolist(),
+            "zero_errors_initial": self._zero_error_initial.tolist(),
+            "zero_offsets": self._offsets.tolist(),
+            "zero_offsets_initial": self._offsets_initial.tolist(),
+            "q_reported": self._q.tolist(),
+            "q_physical": self.physical_angles().tolist(),
+            "approach": self._approach.tolist(),
+            "camera": {
+                "image_width": cam.image_width,
+                "image_height": cam.image_height,
+                "fx": cam.fx,
+                "fy": cam.fy,
+                "cx": cam.cx,
+                "cy": cam.cy,
+                "distortion": list(cam.distortion),
+                "baseline": cam.baseline,
+                "T_left_right": _pose_dict(self.T_left_right),
+                "T_flange_camera": _pose_dict(self.T_flange_camera),
+                "T_flange_camera_nominal": _pose_dict(self.T_flange_camera_nominal),
+            },
+            "target": {
+                "centre": self.target_centre.tolist(),
+                "radius": sc.target.radius,
+                "normal": list(sc.target.normal),
+            },
+            "probe": {
+                "stylus_tip": self.tip_flange.tolist(),
+                "stylus_radius": sc.probe.stylus_radius,
+                "sphere_centre": self.sphere_centre.tolist(),
+                "sphere_radius": sc.probe.sphere_radius,
+                "repeatability_sigma": sc.probe.repeatability_sigma,
+            },
+            "effects": self.effects.as_dict(),
+            "link_length_deltas_now": {"d": delta_d.tolist(), "a": delta_a.tolist()},
+        }

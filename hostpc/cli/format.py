@@ -1,0 +1,69 @@
+"""Human-readable text of results: mm and degrees (docs/conventions.md: only at the edges)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hostpc.fit import FitResult
+
+DISPLAY_UNITS = {
+    "rad": ("deg", math.degrees(1.0)),
+    "m": ("mm", 1e3),
+    "rad/(N m)": ("deg/(N m)", math.degrees(1.0)),
+    "1": ("ppm", 1e6),
+}
+
+
+def display(value: float | None, unit: str) -> tuple[str, str]:
+    """(number text, display unit) of an SI value."""
+    shown_unit, factor = DISPLAY_UNITS.get(unit, (unit, 1.0))
+    if value is None or not math.isfinite(value):
+        return "-", shown_unit
+    return f"{value * factor:+.4f}", shown_unit
+
+
+def format_parameter_table(result: FitResult) -> list[str]:
+    lines = [f"  {'parameter':<32} {'value':>12} {'+/- sigma':>11}  unit"]
+    for p in result.parameters.values():
+        value, unit = display(p.value, p.unit)
+        if p.fixed:
+            sigma = "  (fixed)"
+        else:
+            sigma_text, _ = display(p.std, p.unit)
+            sigma = sigma_text.lstrip("+")
+        lines.append(f"  {p.name:<32} {value:>12} {sigma:>11}  {unit}")
+    return lines
+
+
+def format_fit_summary(result: FitResult, source: str = "") -> str:
+    n_samples = result.residuals_raw.shape[0]
+    head = f"fit of {source}" if source else "fit"
+    lines = [
+        f"{head}: method {result.problem.method}, {n_samples} samples, "
+        f"effects {', '.join(result.problem.effect_names)}",
+        f"  converged: {'yes' if result.converged else 'NO'} ({result.message}, "
+        f"{result.iterations} iterations)",
+        f"  residual RMS {result.rms * 1e3:.4f} mm, max {result.max * 1e3:.4f} mm, "
+        f"chi2/dof {result.chi2_dof:.3f} (dof {result.dof})"
+        + (f", {result.cv_folds}-fold cross-validated RMS {result.cv_rms * 1e3:.4f} mm"
+           if result.cv_rms is not None else ""),
+        f"  Jacobian rank {result.rank} of {len(result.names)}, "
+        f"condition number {result.condition_number:.3g}",
+        "",
+        *format_parameter_table(result),
+    ]
+    if result.unidentifiable:
+        lines += ["", "identifiability warnings:"]
+        lines += [f"  - {d.description}" for d in result.unidentifiable]
+    if result.correlations:
+        lines += ["", "strong correlations (|rho| > 0.9):"]
+        lines += [f"  - {a} ~ {b}: {rho:+.3f}" for a, b, rho in result.correlations[:10]]
+        if len(result.correlations) > 10:
+            lines.append(f"  ... and {len(result.correlations) - 10} more")
+    offsets = [p for p in result.parameters.values() if p.name.startswith("joint_offsets.")]
+    if offsets:
+        worst = max(abs(p.value) for p in offsets)
+        lines += ["", f"largest joint offset correction: {np.degrees(worst):.4f} deg"]
+    return "\n".join(lines)

@@ -1,0 +1,57 @@
+"""`hostpc` command line: one subcommand per module in hostpc.cli.
+
+Each command module exposes `register(subparsers)` which adds its parser and sets
+`func=run` where `run(args) -> int` returns the exit code. Errors derived from
+`hostpc.errors.ZerocalError` become one line on stderr and their `exit_code`; nothing
+else prints a traceback unless `--debug` is given.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from hostpc.errors import ZerocalError
+
+COMMAND_MODULES = ("fit", "status")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="hostpc",
+        description="zerocal host: calibrate robot joint zero offsets, fit and diagnose datasets.",
+    )
+    parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(f"hostpc.cli.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"hostpc.cli.{name}":
+                continue  # command not built yet
+            raise
+        module.register(subparsers)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args))
+    except ZerocalError as exc:
+        if args.debug:
+            raise
+        print(f"hostpc {args.command}: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print(f"hostpc {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,125 @@
+"""fit(): build the problem, fix the unidentifiable directions, solve, and measure the result
+(covariance, correlations, cross-validated RMS)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+
+from hostpc.dataset import Dataset
+from hostpc.errors import InputError
+from hostpc.fit.identifiability import analyse
+from hostpc.fit.result import CORRELATION_THRESHOLD, FitResult
+from hostpc.fit.solver import Loss, evaluate, levenberg_marquardt
+from hostpc.model.problem import Problem, build_problem
+
+DEFAULT_CV_FOLDS = 5
+
+
+def fold_indices(n_samples: int, folds: int) -> list[np.ndarray]:
+    """Interleaved fold assignment (sample i goes to fold i mod k): deterministic, and
+    balanced over a run recorded in time order."""
+    assignment = np.arange(n_samples) % folds
+    return [np.flatnonzero(assignment == k) for k in range(folds)]
+
+
+def _covariance(J_free: np.ndarray) -> np.ndarray:
+    """Inverse of J^T J by SVD (J has full column rank after gauge fixing)."""
+    _, s, Vt = np.linalg.svd(J_free, full_matrices=False)
+    s_inv2 = np.where(s > s[0] * 1e-14, 1.0 / s**2, 0.0) if s.size else s
+    return (Vt.T * s_inv2) @ Vt
+
+
+def cross_validated_rms(problem: Problem, x: np.ndarray, free: np.ndarray, folds: int,
+                        loss: Loss, loss_scale: float) -> float | None:
+    """RMS over all samples of the residual norm, each predicted by a fit that did not see it.
+
+    Each fold's fit starts from the full fit's solution (it is a perturbation of it)."""
+    n_samples = problem.measured.shape[0]
+    if folds < 2 or n_samples < 2 * folds:
+        return None
+    squared = np.empty(n_samples)
+    for test in fold_indices(n_samples, folds):
+        train = np.setdiff1d(np.arange(n_samples), test)
+        outcome = levenberg_marquardt(problem.subset(train), x, free, loss=loss,
+                                      loss_scale=loss_scale, max_iterations=30)
+        held_out = evaluate(problem.subset(test), outcome.x, jacobian=False)
+        squared[test] = np.sum(held_out.raw**2, axis=1)
+    return float(np.sqrt(np.mean(squared)))
+
+
+def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linear",
+          loss_scale: float = 3.0, cv_folds: int = DEFAULT_CV_FOLDS,
+          max_iterations: int = 100) -> FitResult:
+    """Fit a built problem and return a frozen FitResult (never raises on poor data)."""
+    layout = problem.layout
+    x_start = np.zeros(layout.size) if x0 is None else np.asarray(x0, dtype=float).copy()
+    if x_start.shape != (layout.size,):
+        raise InputError(f"x0 must have {layout.size} values, got {x_start.shape}")
+    start = evaluate(problem, x_start)
+    assert start.jacobian is not None
+    ident = analyse(start.jacobian, layout.names, layout.units)
+    free = ~ident.fixed
+    outcome = levenberg_marquardt(problem, x_start, free, loss=loss, loss_scale=loss_scale,
+                                  max_iterations=max_iterations)
+    final = outcome.evaluation
+    assert final.jacobian is not None
+    m = problem.measured.shape[1]
+    row_weight = np.repeat(np.sqrt(outcome.weights), m)
+    J_free = final.jacobian[:, free] * row_weight[:, None]
+    covariance = np.zeros((layout.size, layout.size))
+    if np.any(free):
+        covariance[np.ix_(free, free)] = _covariance(J_free)
+    std = np.sqrt(np.diag(covariance))
+    std[~free] = np.nan
+    correlations = []
+    free_index = np.flatnonzero(free)
+    for i_pos, i in enumerate(free_index):
+        for j in free_index[i_pos + 1:]:
+            rho = covariance[i, j] / max(std[i] * std[j], 1e-300)
+            if abs(rho) > CORRELATION_THRESHOLD:
+                correlations.append((layout.names[i], layout.names[j], float(rho)))
+    correlations.sort(key=lambda c: -abs(c[2]))
+    norms = np.linalg.norm(final.raw, axis=1)
+    n_rows = final.whitened.size
+    cv = cross_validated_rms(problem, outcome.x, free, cv_folds, loss, loss_scale)
+    return FitResult(
+        problem=problem,
+        x=outcome.x,
+        std=std,
+        fixed=ident.fixed,
+        covariance=covariance,
+        residuals_raw=final.raw,
+        residuals_whitened=final.whitened,
+        weights=outcome.weights,
+        rms=float(np.sqrt(np.mean(norms**2))),
+        max=float(np.max(norms)) if norms.size else 0.0,
+        chi2=float(np.sum(final.whitened**2)),
+        dof=int(n_rows - np.count_nonzero(free)),
+        rank=ident.rank,
+        singular_values=ident.singular_values,
+        condition_number=ident.condition_number,
+        unidentifiable=ident.null_directions,
+        correlations=tuple(correlations),
+        converged=outcome.converged,
+        iterations=outcome.iterations,
+        message=outcome.message,
+        cv_rms=cv,
+        cv_folds=cv_folds if cv is not None else 0,
+        loss=loss,
+    )
+
+
+def fit(dataset: Dataset, effects: str | Iterable[str] | None = None, *,
+        plugins: Iterable[str | Path] = (), **options: object) -> FitResult:
+    """Fit an error model to a dataset.
+
+    effects: None for the default model (joint_offsets plus every frame not marked known),
+    a list of effect names, or a spec string (``"joint_offsets,tool"``, ``"+backlash"``).
+    plugins: Python files defining extra effects. options: see ``solve`` (loss, loss_scale,
+    cv_folds, max_iterations, x0).
+    """
+    problem = build_problem(dataset, effects, plugins=plugins)
+    return solve(problem, **options)  # type: ignore[arg-type]

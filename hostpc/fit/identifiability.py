@@ -1,0 +1,130 @@
+"""Which parameters the data can separate, and a gauge for those it cannot.
+
+The whitened Jacobian's columns are normalised (each parameter measured by its own effect on
+the data), then its singular values give the rank. Each direction of the null space is a
+combination of parameters that leaves every measurement unchanged. We fix one parameter per
+null direction (held at its start value, i.e. nominal) so the fit cannot drift along it, and
+say in words which parameters could not be separated.
+
+Which parameter to hold: a pivoted QR of the null basis picks parameters that span it,
+preferring (in order) geometry deltas, joint offsets, other effects, and frames last, so a
+frame absorbs what cannot be told apart and no unobservable zero offset is ever pushed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+RELATIVE_RANK_TOLERANCE = 1e-7
+FIX_PRIORITY = {"geometry": 3, "joint_offsets": 2}
+FRAME_EFFECTS = ("tool", "target", "base", "sphere", "camera", "left_base", "right_base",
+                 "left_target", "right_target")
+
+
+@dataclass(frozen=True)
+class NullDirection:
+    """A combination of parameters the data cannot see.
+
+    fixed: the parameter held at its start value for this direction;
+    parameters / coefficients: the combination (fixed parameter first, coefficient 1; the
+    others in their own SI units per unit of the fixed parameter); description: in words.
+    """
+
+    fixed: str
+    parameters: tuple[str, ...]
+    coefficients: tuple[float, ...]
+    description: str
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "fixed": self.fixed,
+            "parameters": list(self.parameters),
+            "coefficients": list(self.coefficients),
+            "description": self.description,
+        }
+
+
+@dataclass(frozen=True)
+class Identifiability:
+    """rank of the normalised whitened Jacobian, its singular values (descending, relative
+    to the largest), condition number of the free part, fixed mask (P,), null directions."""
+
+    rank: int
+    singular_values: np.ndarray
+    condition_number: float
+    fixed: np.ndarray
+    null_directions: tuple[NullDirection, ...]
+
+
+def _priority(name: str) -> int:
+    effect = name.split(".", 1)[0]
+    if effect in FIX_PRIORITY:
+        return FIX_PRIORITY[effect]
+    return 0 if effect in FRAME_EFFECTS else 1
+
+
+def _describe(names: Sequence[str], units: Sequence[str], fixed: int, vector: np.ndarray
+              ) -> NullDirection:
+    order = [fixed] + [k for k in np.argsort(-np.abs(vector)) if k != fixed]
+    participants = [k for k in order if k == fixed or abs(vector[k]) > 1e-3 * abs(vector[fixed])]
+    coefficients = tuple(float(vector[k] / vector[fixed]) for k in participants)
+    others = [names[k] for k in participants[1:]]
+    if others:
+        listed = ", ".join(others[:4]) + (f" and {len(others) - 4} more" if len(others) > 4 else "")
+        terms = ", ".join(
+            f"{coefficients[i]:+.3g} {units[participants[i]]}/{units[fixed]} {names[k]}"
+            for i, k in enumerate(participants[1:5], start=1)
+        )
+        frames = sorted({names[k].split(".")[0] for k in participants[1:]} & set(FRAME_EFFECTS))
+        advice = (f"; to determine it, mark {' or '.join(frames)} as known or add a reference"
+                  if frames else "; add poses or a reference that separate them")
+        text = (f"{names[fixed]} and {listed} are not separable (changing {names[fixed]} by 1 "
+                f"together with {terms} leaves every measurement unchanged): "
+                f"{names[fixed]} held at its nominal value{advice}")
+    else:
+        text = (f"{names[fixed]} has no effect on these measurements: held at its nominal value")
+    return NullDirection(names[fixed], tuple(names[k] for k in participants), coefficients, text)
+
+
+def analyse(jacobian: np.ndarray, names: Sequence[str], units: Sequence[str],
+            tolerance: float = RELATIVE_RANK_TOLERANCE) -> Identifiability:
+    """Rank, null directions and the gauge (fixed mask) for a whitened Jacobian (M, P)."""
+    n_params = jacobian.shape[1]
+    norms = np.linalg.norm(jacobian, axis=0)
+    dead = norms <= 1e-12 * max(float(norms.max(initial=0.0)), 1e-300)
+    scale = np.where(dead, 1.0, norms)
+    Jn = np.where(dead[None, :], 0.0, jacobian / scale)
+    if n_params == 0:
+        return Identifiability(0, np.zeros(0), 1.0, np.zeros(0, bool), ())
+    _, s, Vt = np.linalg.svd(Jn, full_matrices=True)
+    s_full = np.zeros(n_params)
+    s_full[: s.size] = s
+    s_rel = s_full / max(s_full[0], 1e-300)
+    rank = int(np.sum(s_rel > tolerance))
+    null_basis = Vt[rank:].T  # (P, k) in normalised coordinates
+    fixed = np.zeros(n_params, dtype=bool)
+    directions: list[NullDirection] = []
+    if null_basis.shape[1]:
+        participation = np.linalg.norm(null_basis, axis=1)
+        weight = np.where(participation > 1e-3, 10.0 ** np.array([_priority(n) for n in names]), 0)
+        _, _, pivots = scipy.linalg.qr(null_basis.T * weight[None, :], pivoting=True)
+        chosen = list(pivots[: null_basis.shape[1]])
+        block = null_basis[chosen, :]
+        if np.linalg.cond(block) > 1e8:  # preference made a poor choice: plain pivoting
+            _, _, pivots = scipy.linalg.qr(null_basis.T, pivoting=True)
+            chosen = list(pivots[: null_basis.shape[1]])
+            block = null_basis[chosen, :]
+        # one null vector per fixed parameter: 1 on it, 0 on the other fixed ones
+        combos = null_basis @ np.linalg.inv(block)  # (P, k), normalised coordinates
+        physical = combos / scale[:, None]
+        for column, index in enumerate(chosen):
+            fixed[index] = True
+            directions.append(_describe(names, units, int(index), physical[:, column]))
+    free = ~fixed
+    s_free = np.linalg.svd(Jn[:, free], compute_uv=False) if np.any(free) else np.ones(1)
+    condition = float(s_free[0] / max(s_free[-1], 1e-300))
+    return Identifiability(rank, s_rel, condition, fixed, tuple(directions))

@@ -1,0 +1,137 @@
+"""FitResult: the frozen value a fit returns, and its JSON form."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hostpc.fit.identifiability import NullDirection
+from hostpc.model.problem import Problem
+
+CORRELATION_THRESHOLD = 0.9
+
+
+@dataclass(frozen=True)
+class ParameterEstimate:
+    """One parameter: value (SI delta from nominal), std (None if held fixed), unit."""
+
+    name: str
+    value: float
+    std: float | None
+    unit: str
+    fixed: bool
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """Everything a fit found, and the problem that produced it.
+
+    x: (P,) parameter vector; std: (P,) standard deviations (NaN where fixed);
+    fixed: (P,) bool; covariance: (P, P) (zero rows/columns where fixed);
+    residuals_raw: (N, m) measured - predicted (m); residuals_whitened: (N, m);
+    rms / max: RMS and max over samples of the raw residual norm (m);
+    chi2 = sum of squared whitened residuals; dof = N*m - free parameters;
+    rank, singular_values (relative), condition_number: of the normalised Jacobian;
+    unidentifiable: null directions held fixed; correlations: (a, b, rho) with |rho| > 0.9;
+    cv_rms: k-fold cross-validated RMS (m) or None; weights: robust IRLS weights per sample.
+    """
+
+    problem: Problem
+    x: np.ndarray
+    std: np.ndarray
+    fixed: np.ndarray
+    covariance: np.ndarray
+    residuals_raw: np.ndarray
+    residuals_whitened: np.ndarray
+    weights: np.ndarray
+    rms: float
+    max: float
+    chi2: float
+    dof: int
+    rank: int
+    singular_values: np.ndarray
+    condition_number: float
+    unidentifiable: tuple[NullDirection, ...]
+    correlations: tuple[tuple[str, str, float], ...]
+    converged: bool
+    iterations: int
+    message: str
+    cv_rms: float | None
+    cv_folds: int
+    loss: str
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.problem.layout.names
+
+    @property
+    def chi2_dof(self) -> float:
+        return self.chi2 / self.dof if self.dof > 0 else math.nan
+
+    @property
+    def parameters(self) -> dict[str, ParameterEstimate]:
+        units = self.problem.layout.units
+        return {
+            name: ParameterEstimate(
+                name=name,
+                value=float(self.x[k]),
+                std=None if self.fixed[k] else float(self.std[k]),
+                unit=units[k],
+                fixed=bool(self.fixed[k]),
+            )
+            for k, name in enumerate(self.names)
+        }
+
+    def value(self, name: str) -> float:
+        return float(self.x[self.problem.layout.index(name)])
+
+    def sigma(self, name: str) -> float:
+        return float(self.std[self.problem.layout.index(name)])
+
+    def effect_values(self, effect: str) -> np.ndarray:
+        """The parameter values of one effect (in layout order)."""
+        return self.x[self.problem.layout.effect_slices[effect]].copy()
+
+    @property
+    def residual_norms(self) -> np.ndarray:
+        """(N,) norm of each sample's raw residual (m)."""
+        return np.linalg.norm(self.residuals_raw, axis=1)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON document (SI units and radians) with the keys of the CLI's --json."""
+
+        def finite(v: float | None) -> float | None:
+            return None if v is None or not math.isfinite(v) else float(v)
+
+        return {
+            "method": self.problem.method,
+            "effects": list(self.problem.effect_names),
+            "parameters": {
+                p.name: {"value": p.value, "std": finite(p.std), "unit": p.unit,
+                         "fixed": p.fixed}
+                for p in self.parameters.values()
+            },
+            "rms": self.rms,
+            "max": self.max,
+            "chi2": self.chi2,
+            "dof": self.dof,
+            "chi2_dof": finite(self.chi2_dof),
+            "converged": self.converged,
+            "iterations": self.iterations,
+            "message": self.message,
+            "rank": self.rank,
+            "n_parameters": len(self.names),
+            "n_samples": int(self.residuals_raw.shape[0]),
+            "singular_values": [float(s) for s in self.singular_values],
+            "condition_number": finite(self.condition_number),
+            "unidentifiable": [d.to_dict() for d in self.unidentifiable],
+            "correlations": [
+                {"a": a, "b": b, "rho": rho} for a, b, rho in self.correlations
+            ],
+            "cv_rms": finite(self.cv_rms),
+            "cv_folds": self.cv_folds,
+            "loss": self.loss,
+        }

@@ -1,0 +1,157 @@
+"""Levenberg-Marquardt on whitened residuals, with an optional robust loss (IRLS).
+
+Residuals are ``r = W (measured - predicted)`` per sample (W = whitening matrix, W^T W =
+cov^-1), so the objective is the Mahalanobis distance. Only the parameters in ``free`` move;
+the others stay at their start values. Pure numpy: no I/O, no global state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from hostpc.model.measurement import predict
+from hostpc.model.problem import Problem
+
+Loss = Literal["linear", "huber", "cauchy"]
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Residuals and Jacobian at one parameter vector.
+
+    raw: (N, m) measured - predicted (SI units); whitened: (N, m);
+    jacobian: (N*m, P) derivative of the flattened whitened residuals by x, or None.
+    """
+
+    x: np.ndarray
+    raw: np.ndarray
+    whitened: np.ndarray
+    jacobian: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class SolverOutcome:
+    x: np.ndarray
+    evaluation: Evaluation
+    weights: np.ndarray
+    converged: bool
+    iterations: int
+    message: str
+    cost: float
+
+
+def evaluate(problem: Problem, x: np.ndarray, jacobian: bool = True) -> Evaluation:
+    """Raw and whitened residuals at x, and d(whitened)/dx flattened to (N*m, P)."""
+    predicted, d_predicted = predict(problem, x, jacobian)
+    raw = problem.measured - predicted
+    W = problem.sqrt_information
+    whitened = np.einsum("nij,nj->ni", W, raw)
+    J = None
+    if d_predicted is not None:
+        J = -np.einsum("nij,njp->nip", W, d_predicted).reshape(-1, x.size)
+    return Evaluation(x=x, raw=raw, whitened=whitened, jacobian=J)
+
+
+def robust_weights(whitened: np.ndarray, loss: Loss, scale: float) -> np.ndarray:
+    """Per-sample IRLS weights (N,) from the whitened residual norm of each sample."""
+    if loss == "linear":
+        return np.ones(whitened.shape[0])
+    e = np.linalg.norm(whitened, axis=1) / scale
+    if loss == "huber":
+        return np.where(e <= 1.0, 1.0, 1.0 / np.maximum(e, 1e-300))
+    if loss == "cauchy":
+        return 1.0 / (1.0 + e**2)
+    raise ValueError(f"unknown loss {loss!r}; use linear, huber or cauchy")
+
+
+def robust_cost(whitened: np.ndarray, loss: Loss, scale: float) -> float:
+    """Sum over samples of rho(|r_i|), with rho(e) = e^2 / 2 for the linear loss."""
+    e = np.linalg.norm(whitened, axis=1)
+    if loss == "linear":
+        return float(0.5 * np.sum(e**2))
+    s = e / scale
+    if loss == "huber":
+        rho = np.where(s <= 1.0, 0.5 * s**2, s - 0.5)
+    else:
+        rho = 0.5 * np.log1p(s**2)
+    return float(scale**2 * np.sum(rho))
+
+
+def levenberg_marquardt(
+    problem: Problem,
+    x0: np.ndarray,
+    free: np.ndarray,
+    *,
+    loss: Loss = "linear",
+    loss_scale: float = 3.0,
+    max_iterations: int = 100,
+    step_tolerance: float = 1e-12,
+    cost_tolerance: float = 1e-15,
+) -> SolverOutcome:
+    """Minimise the (robust) whitened cost over the free parameters, starting at x0.
+
+    free: (P,) bool mask of the parameters that may move. Uses Marquardt's diagonal scaling
+    and Nielsen's damping update.
+    """
+    x = np.array(x0, dtype=float)
+    free_index = np.flatnonzero(free)
+    m = problem.measured.shape[1]
+    current = evaluate(problem, x)
+    weights = robust_weights(current.whitened, loss, loss_scale)
+    cost = robust_cost(current.whitened, loss, loss_scale)
+    if free_index.size == 0:
+        return SolverOutcome(x, current, weights, True, 0, "nothing to fit", cost)
+    mu = 1e-3
+    nu = 2.0
+    message = "maximum iterations reached"
+    converged = False
+    iterations = 0
+    for iterations in range(1, max_iterations + 1):
+        assert current.jacobian is not None
+        row_weight = np.repeat(np.sqrt(weights), m)
+        J = current.jacobian[:, free_index] * row_weight[:, None]
+        r = current.whitened.ravel() * row_weight
+        A = J.T @ J
+        g = J.T @ r
+        diag = np.maximum(np.diag(A), 1e-30)
+        while True:
+            try:
+                step = -np.linalg.solve(A + mu * np.diag(diag), g)
+            except np.linalg.LinAlgError:
+                mu *= nu
+                nu *= 2.0
+                continue
+            x_trial = x.copy()
+            x_trial[free_index] += step
+            trial = evaluate(problem, x_trial)
+            trial_cost = robust_cost(trial.whitened, loss, loss_scale)
+            predicted_gain = 0.5 * float(step @ (mu * diag * step - g))
+            actual_gain = cost - trial_cost
+            if actual_gain > 0.0 and np.all(np.isfinite(trial.whitened)):
+                rho = actual_gain / max(predicted_gain, 1e-300)
+                mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+                nu = 2.0
+                break
+            small_step = np.linalg.norm(step) <= step_tolerance * (np.linalg.norm(x) + 1e-9)
+            if small_step or mu > 1e16:
+                message = "converged: no further decrease of the cost"
+                converged = True
+                break
+            mu *= nu
+            nu *= 2.0
+        if converged:
+            break
+        relative_gain = (cost - trial_cost) / max(cost, 1e-300)
+        x, current, cost = x_trial, trial, trial_cost
+        weights = robust_weights(current.whitened, loss, loss_scale)
+        cost = robust_cost(current.whitened, loss, loss_scale)
+        if np.linalg.norm(step) <= step_tolerance * (np.linalg.norm(x) + step_tolerance):
+            message, converged = "converged: step below tolerance", True
+            break
+        if relative_gain < cost_tolerance:
+            message, converged = "converged: relative cost change below tolerance", True
+            break
+    return SolverOutcome(x, current, weights, converged, iterations, message, cost)

@@ -1,0 +1,7 @@
+"""The error model: effect plugins, parameter layout, measurement models."""
+
+from hostpc.model.effect import Effect, EffectTerm, ModelContext
+from hostpc.model.problem import ParameterLayout, Problem, build_problem, default_effects
+
+__all__ = ["Effect", "EffectTerm", "ModelContext", "ParameterLayout", "Problem",
+           "build_problem", "default_effects"]

@@ -1,0 +1,147 @@
+"""The physical-effect plugin contract.
+
+An effect is one small class that names its parameters and acts at one hook point:
+
+- ``joint``: joint-space deltas, ``q_true = q_cmd + joint_delta(ctx, p)``, shape (N, n);
+- ``geometry``: deltas of the kinematic table per pose, shape (N, 5n), ordered as the
+  kinematic parameter vector of docs/conventions.md (theta, d, a, alpha, beta; joint-minor);
+- ``sensor``: a function applied to the ideal sensor-frame measurement (N, 3);
+- ``frame``: the unknown frames of a method (tool, target, sphere, ...). Frame effects carry
+  no code of their own: each measurement model knows how its frames enter.
+
+Every parameter is a delta from nominal, so ``p = 0`` must give the nominal model (zero delta,
+identity sensor function). An effect may supply analytic Jacobians; where it returns ``None``
+the model differentiates it numerically (central differences).
+
+A linear joint or geometry effect only has to give its ``basis``: ``delta = basis @ p``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import ClassVar, Literal
+
+import numpy as np
+
+from hostpc.kinematics import Chain
+
+Hook = Literal["joint", "geometry", "sensor", "frame"]
+
+
+@dataclass(frozen=True)
+class ModelContext:
+    """What an effect may read about the robot and the samples; constant during a fit.
+
+    chain: the robot's nominal chain; q_cmd: (N, n) commanded joint angles (rad);
+    tau: (N, n) gravity load torque at q_cmd (N m), NaN if the robot has no mass data;
+    approach: (N, n) sign of the last motion into each pose (+1/-1, 0 where unknown);
+    variables: every recorded or derived variable by its contract name (``q1``, ``tau2``,
+    ``approach3``, ``t``, ``temperature``, ``speed``, ``depth``, ``extra.NAME``), each (N,).
+    """
+
+    chain: Chain
+    method: str
+    q_cmd: np.ndarray
+    tau: np.ndarray
+    approach: np.ndarray
+    variables: Mapping[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.q_cmd.shape[0])
+
+    @property
+    def n_joints(self) -> int:
+        return int(self.q_cmd.shape[1])
+
+    def variable(self, name: str) -> np.ndarray:
+        """One variable (N,) by contract name; raises KeyError naming what exists."""
+        try:
+            return self.variables[name]
+        except KeyError:
+            known = ", ".join(sorted(self.variables))
+            raise KeyError(f"variable {name!r} not in this dataset (have: {known})") from None
+
+
+class Effect:
+    """Base class of every effect. Subclasses set ``name`` and ``hook`` and override the
+    methods of their hook. Instances must be cheap and stateless apart from options."""
+
+    name: ClassVar[str]
+    hook: ClassVar[Hook]
+    description: ClassVar[str] = ""
+
+    def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
+        """Local parameter names (without the ``<effect>.`` prefix)."""
+        raise NotImplementedError
+
+    def parameter_units(self, ctx: ModelContext) -> Sequence[str]:
+        """SI unit of each parameter: "rad", "m", "1", "rad/(N m)", ... (display only)."""
+        return [self.unit] * len(self.parameter_names(ctx))
+
+    unit: ClassVar[str] = "1"
+
+    # joint hook -------------------------------------------------------------------------
+    def joint_delta(self, ctx: ModelContext, p: np.ndarray) -> np.ndarray:
+        """(N, n) joint-angle deltas (rad) for parameters p (P,)."""
+        return self.basis(ctx) @ p
+
+    def joint_jacobian(self, ctx: ModelContext, p: np.ndarray) -> np.ndarray | None:
+        """(N, n, P) derivative of joint_delta by p, or None for a numeric one."""
+        return self.basis(ctx) if self.is_linear else None
+
+    # geometry hook ----------------------------------------------------------------------
+    def kinematic_delta(self, ctx: ModelContext, p: np.ndarray) -> np.ndarray:
+        """(N, 5n) kinematic-table deltas for parameters p (P,)."""
+        return self.basis(ctx) @ p
+
+    def kinematic_jacobian(self, ctx: ModelContext, p: np.ndarray) -> np.ndarray | None:
+        """(N, 5n, P) derivative of kinematic_delta by p, or None for a numeric one."""
+        return self.basis(ctx) if self.is_linear else None
+
+    # sensor hook ------------------------------------------------------------------------
+    def sensor_apply(self, ctx: ModelContext, p: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Measured point (N, 3) from the ideal sensor-frame point y (N, 3)."""
+        raise NotImplementedError
+
+    def sensor_jacobians(
+        self, ctx: ModelContext, p: np.ndarray, y: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """(d out / d y (N, 3, 3), d out / d p (N, 3, P)), or None for numeric ones."""
+        return None
+
+    # linear effects ---------------------------------------------------------------------
+    is_linear: ClassVar[bool] = False
+
+    def basis(self, ctx: ModelContext) -> np.ndarray:
+        """For linear joint/geometry effects: (N, n, P) or (N, 5n, P) with delta = basis @ p."""
+        raise NotImplementedError(f"effect {self.name!r} is not linear: override its delta")
+
+
+@dataclass(frozen=True)
+class EffectTerm:
+    """An effect placed in a model: its instance and the slice of the parameter vector."""
+
+    effect: Effect
+    names: tuple[str, ...]
+    slice: slice
+
+    @property
+    def size(self) -> int:
+        return self.slice.stop - self.slice.start
+
+
+def numeric_jacobian(fun, p: np.ndarray, step: float = 1e-6) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """Central-difference derivative of fun(p) (any shape S) by p (P,): shape S + (P,)."""
+    p = np.asarray(p, dtype=float)
+    columns = []
+    for k in range(p.size):
+        dp = np.zeros_like(p)
+        h = step * max(1.0, abs(float(p[k])))
+        dp[k] = h
+        columns.append((np.asarray(fun(p + dp)) - np.asarray(fun(p - dp))) / (2.0 * h))
+    if not columns:
+        shape = np.asarray(fun(p)).shape
+        return np.zeros(shape + (0,))
+    return np.stack(columns, axis=-1)

@@ -1,0 +1,28 @@
+"""Built-in physical effects. The registry (hostpc.model.registry) lists them by name."""
+
+from hostpc.model.effects.frames import BaseFrame, SphereFrame, TargetFrame, ToolFrame
+from hostpc.model.effects.geometry import Geometry
+from hostpc.model.effects.joint_space import (
+    Backlash,
+    EncoderScale,
+    JointCompliance,
+    JointOffsets,
+    TransmissionHarmonic,
+)
+from hostpc.model.effects.sensor import DepthScale
+
+BUILTIN_EFFECTS = (
+    JointOffsets,
+    ToolFrame,
+    BaseFrame,
+    TargetFrame,
+    SphereFrame,
+    Geometry,
+    JointCompliance,
+    EncoderScale,
+    TransmissionHarmonic,
+    Backlash,
+    DepthScale,
+)
+
+__all__ = [cls.__name__ for cls in BUILTIN_EFFECTS] + ["BUILTIN_EFFECTS"]

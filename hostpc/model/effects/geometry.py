@@ -1,0 +1,49 @@
+"""Geometry effect: deltas of the DH/MDH table (d, a, alpha, and Hayati beta where the
+axis is near-parallel to the next). theta deltas are the joint offsets and are left out."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import ClassVar
+
+import numpy as np
+
+from hostpc.kinematics import kin_index
+from hostpc.model.effect import Effect, Hook, ModelContext
+
+
+class Geometry(Effect):
+    """delta_kin = basis @ p with a constant selection basis (5n, P)."""
+
+    name = "geometry"
+    hook: ClassVar[Hook] = "geometry"
+    is_linear: ClassVar[bool] = True
+    description = "link lengths, offsets and twists differ from the nominal table"
+
+    def _slots(self, ctx: ModelContext) -> list[tuple[str, int]]:
+        chain = ctx.chain
+        slots = []
+        for kind in ("d", "a", "alpha"):
+            for joint in range(1, chain.n + 1):
+                slots.append((f"{kind}{joint}", kin_index(kind, joint, chain.n)))
+        for joint in range(1, chain.n + 1):
+            if chain.hayati[joint - 1]:
+                slots.append((f"beta{joint}", kin_index("beta", joint, chain.n)))
+        return slots
+
+    def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
+        return [name for name, _ in self._slots(ctx)]
+
+    def parameter_units(self, ctx: ModelContext) -> Sequence[str]:
+        return ["m" if name[0] in "ad" and not name.startswith("alpha") else "rad"
+                for name in self.parameter_names(ctx)]
+
+    def basis(self, ctx: ModelContext) -> np.ndarray:
+        slots = self._slots(ctx)
+        selection = np.zeros((5 * ctx.n_joints, len(slots)))
+        for column, (_, row) in enumerate(slots):
+            selection[row, column] = 1.0
+        return np.broadcast_to(selection, (ctx.n_samples,) + selection.shape)
+
+    def kinematic_delta(self, ctx: ModelContext, p: np.ndarray) -> np.ndarray:
+        return np.einsum("nkp,p->nk", self.basis(ctx), p)

@@ -1,0 +1,110 @@
+"""Joint-space effects: q_true = q_cmd + delta(q_cmd, context, p). All are linear in p."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import ClassVar
+
+import numpy as np
+
+from hostpc.model.effect import Effect, Hook, ModelContext
+
+
+def _diagonal_basis(values: np.ndarray) -> np.ndarray:
+    """(N, n) per-joint regressors -> (N, n, n) basis with delta_i = values_i * p_i."""
+    n_samples, n_joints = values.shape
+    basis = np.zeros((n_samples, n_joints, n_joints))
+    index = np.arange(n_joints)
+    basis[:, index, index] = values
+    return basis
+
+
+class _LinearJointEffect(Effect):
+    hook: ClassVar[Hook] = "joint"
+    is_linear: ClassVar[bool] = True
+
+    def joint_delta(self, ctx: ModelContext, p: np.ndarray) -> np.ndarray:
+        return np.einsum("njp,p->nj", self.basis(ctx), p)
+
+
+class JointOffsets(_LinearJointEffect):
+    """Joint zero offsets: dq_i = p_i (rad)."""
+
+    name = "joint_offsets"
+    unit = "rad"
+    description = "constant zero offset of every joint"
+
+    def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
+        return [f"q{i + 1}" for i in range(ctx.n_joints)]
+
+    def basis(self, ctx: ModelContext) -> np.ndarray:
+        return _diagonal_basis(np.ones_like(ctx.q_cmd))
+
+
+class JointCompliance(_LinearJointEffect):
+    """Joint compliance under gravity: dq_i = c_i * tau_i(q_cmd) (rad per N m)."""
+
+    name = "joint_compliance"
+    unit = "rad/(N m)"
+    description = "joints bend under the gravity load torque"
+
+    def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
+        return [f"c{i + 1}" for i in range(ctx.n_joints)]
+
+    def basis(self, ctx: ModelContext) -> np.ndarray:
+        if not np.all(np.isfinite(ctx.tau)):
+            from hostpc.errors import EffectError
+
+            raise EffectError(
+                f"joint_compliance needs link masses, but robot {ctx.chain.name!r} has none"
+            )
+        return _diagonal_basis(ctx.tau)
+
+
+class EncoderScale(_LinearJointEffect):
+    """Encoder scale error: dq_i = s_i * q_cmd_i."""
+
+    name = "encoder_scale"
+    description = "joint angle reads scaled by (1 + s)"
+
+    def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
+        return [f"s{i + 1}" for i in range(ctx.n_joints)]
+
+    def basis(self, ctx: ModelContext) -> np.ndarray:
+        return _diagonal_basis(ctx.q_cmd)
+
+
+class Backlash(_LinearJointEffect):
+    """Backlash: dq_i = b_i * approach_i (approach = +1/-1 direction of the last motion)."""
+
+    name = "backlash"
+    unit = "rad"
+    description = "joint angle depends on the direction of the last motion"
+
+    def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
+        return [f"b{i + 1}" for i in range(ctx.n_joints)]
+
+    def basis(self, ctx: ModelContext) -> np.ndarray:
+        return _diagonal_basis(ctx.approach)
+
+
+class TransmissionHarmonic(_LinearJointEffect):
+    """Transmission harmonics per joint: dq = a1 sin q + b1 cos q + a2 sin 2q + b2 cos 2q."""
+
+    name = "transmission_harmonic"
+    unit = "rad"
+    description = "once- and twice-per-revolution errors of each joint's transmission"
+    _terms = (("sin1", np.sin, 1.0), ("cos1", np.cos, 1.0), ("sin2", np.sin, 2.0),
+              ("cos2", np.cos, 2.0))
+
+    def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
+        return [f"{term}_q{i + 1}" for i in range(ctx.n_joints) for term, _, _ in self._terms]
+
+    def basis(self, ctx: ModelContext) -> np.ndarray:
+        n_samples, n_joints = ctx.q_cmd.shape
+        n_terms = len(self._terms)
+        basis = np.zeros((n_samples, n_joints, n_joints * n_terms))
+        for joint in range(n_joints):
+            for k, (_, function, order) in enumerate(self._terms):
+                basis[:, joint, joint * n_terms + k] = function(order * ctx.q_cmd[:, joint])
+        return basis

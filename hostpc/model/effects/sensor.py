@@ -1,0 +1,35 @@
+"""Sensor effects: functions applied to the ideal sensor-frame measurement."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import ClassVar
+
+import numpy as np
+
+from hostpc.model.effect import Effect, Hook, ModelContext
+
+
+class DepthScale(Effect):
+    """Stereo depth scale: the coordinate along the optical axis (z) is scaled by 1 + s."""
+
+    name = "depth_scale"
+    hook: ClassVar[Hook] = "sensor"
+    description = "stereo depth measured scaled by (1 + s) (baseline or focal length error)"
+
+    def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
+        return ["s"]
+
+    def sensor_apply(self, ctx: ModelContext, p: np.ndarray, y: np.ndarray) -> np.ndarray:
+        out = y.copy()
+        out[:, 2] = (1.0 + p[0]) * y[:, 2]
+        return out
+
+    def sensor_jacobians(
+        self, ctx: ModelContext, p: np.ndarray, y: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        n_samples = y.shape[0]
+        d_out_d_y = np.broadcast_to(np.diag([1.0, 1.0, 1.0 + p[0]]), (n_samples, 3, 3)).copy()
+        d_out_d_p = np.zeros((n_samples, 3, 1))
+        d_out_d_p[:, 2, 0] = y[:, 2]
+        return d_out_d_y, d_out_d_p

@@ -1,0 +1,204 @@
+"""Measurement models: predicted measurements and their analytic Jacobians.
+
+``predict(problem, x, jacobian=True)`` returns the predicted measurement (N, m) and its
+derivative by the parameter vector (N, m, P). The Jacobian is composed by the chain rule:
+joint and geometry effects give per-pose kinematic deltas (N, 5n) and their derivatives
+(N, 5n, P_effect); the kinematic screws give d(flange motion)/d(kinematic parameter); frame
+and sensor effects add their own factors. Effects without analytic Jacobians are
+differentiated numerically here.
+
+- stereo_target (m = 3): the target point in the sensor frame,
+  ``y = R_ft^T (R_bf^T (p_b - t_bf) - t_ft)``, then sensor effects in order.
+- sphere_probe (m = 1): the distance from the stylus tip centre to the sphere centre,
+  ``|R_bf t_ft + t_bf - c_b|``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hostpc.kinematics import forward, point_jacobian, screws
+from hostpc.kinematics.rotations import pose_to_transform
+from hostpc.model.effect import EffectTerm, numeric_jacobian
+from hostpc.model.frame_math import inverse_point_derivatives, perturbed_pose
+from hostpc.model.problem import Problem
+
+
+def _term_params(term: EffectTerm | None, x: np.ndarray) -> np.ndarray | None:
+    return None if term is None else x[term.slice]
+
+
+def kinematic_deltas(problem: Problem, x: np.ndarray, jacobian: bool
+                     ) -> tuple[np.ndarray, np.ndarray | None]:
+    """Per-pose kinematic deltas (N, 5n) and their derivative by x (N, 5n, P)."""
+    ctx = problem.context
+    n_samples, n_joints = ctx.q_cmd.shape
+    delta = np.zeros((n_samples, 5 * n_joints))
+    d_delta = np.zeros((n_samples, 5 * n_joints, x.size)) if jacobian else None
+    for term in problem.terms:
+        p = x[term.slice]
+        if term.effect.hook == "joint":
+            delta[:, :n_joints] += term.effect.joint_delta(ctx, p)
+            if d_delta is not None:
+                J = term.effect.joint_jacobian(ctx, p)
+                if J is None:
+                    J = numeric_jacobian(lambda v, e=term.effect: e.joint_delta(ctx, v), p)
+                d_delta[:, :n_joints, term.slice] += J
+        elif term.effect.hook == "geometry":
+            delta += term.effect.kinematic_delta(ctx, p)
+            if d_delta is not None:
+                J = term.effect.kinematic_jacobian(ctx, p)
+                if J is None:
+                    J = numeric_jacobian(lambda v, e=term.effect: e.kinematic_delta(ctx, v), p)
+                d_delta[:, :, term.slice] += J
+    return delta, d_delta
+
+
+def _frame_pose(problem: Problem, name: str, x: np.ndarray):  # type: ignore[no-untyped-def]
+    """(R, t, J_r) of a pose frame (tool or base) with its delta applied, if estimated."""
+    frame = problem.dataset.frames.get(name)
+    if frame is None:
+        T = np.eye(4)
+    else:
+        T = pose_to_transform(np.asarray(frame.xyz, float), np.asarray(frame.rpy, float))
+    term = problem.term(name)
+    delta = _term_params(term, x)
+    if delta is not None and delta.size == 3:  # point-only tool (sphere_probe)
+        delta = np.concatenate([delta, np.zeros(3)])
+    return perturbed_pose(T[:3, :3], T[:3, 3], delta)
+
+
+def _world_point_in_base(problem: Problem, x: np.ndarray, point_name: str, nominal: np.ndarray
+                         ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """A fixed world point (target or sphere centre) in base coordinates (3,), and its
+    derivatives (3, P_term) by the point's own term and the base term."""
+    term = problem.term(point_name)
+    point_world = nominal + (x[term.slice] if term is not None else 0.0)
+    derivatives: dict[str, np.ndarray] = {}
+    base_term = problem.term("base")
+    if base_term is None:
+        if term is not None:
+            derivatives[point_name] = np.eye(3)
+        return point_world, derivatives
+    R_wb, t_wb, J_r = _frame_pose(problem, "base", x)
+    point_base = R_wb.T @ (point_world - t_wb)
+    dy_dt, dy_dr = inverse_point_derivatives(point_base[None, :], R_wb, J_r)
+    derivatives["base"] = np.concatenate([dy_dt, dy_dr[0]], axis=1)
+    if term is not None:
+        derivatives[point_name] = R_wb.T
+    return point_base, derivatives
+
+
+def predict_stereo_target(problem: Problem, x: np.ndarray, jacobian: bool = True
+                          ) -> tuple[np.ndarray, np.ndarray | None]:
+    """Predicted target point in the sensor frame (N, 3) and d/dx (N, 3, P)."""
+    chain = problem.chain
+    delta, d_delta = kinematic_deltas(problem, x, jacobian)
+    poses = forward(chain, problem.context.q_cmd, delta)
+    T_bf = poses.T_base_flange
+    R_bf, t_bf = T_bf[:, :3, :3], T_bf[:, :3, 3]
+    p_b, d_pb = _world_point_in_base(
+        problem, x, "target", np.asarray(problem.dataset.frames["target"], dtype=float)
+    )
+    R_ft, t_ft, J_r_tool = _frame_pose(problem, "tool", x)
+    R_bf_T = np.swapaxes(R_bf, 1, 2)
+    p_f = np.einsum("nij,nj->ni", R_bf_T, p_b[None, :] - t_bf)
+    y = (p_f - t_ft) @ R_ft  # rows: R_ft^T (p_f - t_ft)
+    if not jacobian:
+        for term in problem.terms:
+            if term.effect.hook == "sensor":
+                y = term.effect.sensor_apply(problem.context, x[term.slice], y)
+        return y, None
+    assert d_delta is not None
+    n_samples = y.shape[0]
+    J = np.zeros((n_samples, 3, x.size))
+    # kinematic parameters: moving the flange by a screw moves the fixed target point the
+    # opposite way in the flange frame: dp_f = -R_bf^T (w x (p_b - c)) or -R_bf^T v
+    S = screws(chain, poses)
+    d_pb_world_dkin = point_jacobian(S, np.broadcast_to(p_b, (n_samples, 3)))
+    A = R_ft.T @ R_bf_T  # (N, 3, 3): d y / d p_b  (and -d y / d (flange motion))
+    d_y_dkin = -np.einsum("nij,njk->nik", A, d_pb_world_dkin)
+    J += np.einsum("nik,nkp->nip", d_y_dkin, d_delta)
+    for name, d_pb_term in d_pb.items():
+        span = problem.term(name).slice  # type: ignore[union-attr]
+        J[:, :, span] += np.einsum("nij,jp->nip", A, d_pb_term)
+    tool = problem.term("tool")
+    if tool is not None:
+        dy_dt, dy_dr = inverse_point_derivatives(y, R_ft, J_r_tool)
+        J[:, :, tool.slice.start:tool.slice.start + 3] += dy_dt
+        J[:, :, tool.slice.start + 3:tool.slice.stop] += dy_dr
+    for term in problem.terms:
+        if term.effect.hook != "sensor":
+            continue
+        p = x[term.slice]
+        analytic = term.effect.sensor_jacobians(problem.context, p, y)
+        if analytic is None:
+            d_out_d_p, d_out_d_y = _numeric_sensor_jacobians(term, problem, p, y)
+        else:
+            d_out_d_y, d_out_d_p = analytic
+        J = np.einsum("nij,njp->nip", d_out_d_y, J)
+        J[:, :, term.slice] += d_out_d_p
+        y = term.effect.sensor_apply(problem.context, p, y)
+    return y, J
+
+
+def _numeric_sensor_jacobians(term: EffectTerm, problem: Problem, p: np.ndarray, y: np.ndarray
+                              ) -> tuple[np.ndarray, np.ndarray]:
+    """Central differences of a sensor effect without analytic Jacobians: (N,3,P), (N,3,3).
+    A sensor function acts on each sample's point independently."""
+    def apply(pp: np.ndarray, yy: np.ndarray) -> np.ndarray:
+        return np.asarray(term.effect.sensor_apply(problem.context, pp, yy), dtype=float)
+
+    d_out_d_p = numeric_jacobian(lambda v: apply(v, y), p)
+    d_out_d_y = np.zeros((y.shape[0], 3, 3))
+    for k in range(3):
+        h = 1e-7 * max(1.0, float(np.max(np.abs(y[:, k]))))
+        step = np.zeros(3)
+        step[k] = h
+        d_out_d_y[:, :, k] = (apply(p, y + step) - apply(p, y - step)) / (2.0 * h)
+    return d_out_d_p, d_out_d_y
+
+
+def predict_sphere_probe(problem: Problem, x: np.ndarray, jacobian: bool = True
+                         ) -> tuple[np.ndarray, np.ndarray | None]:
+    """Predicted tip-to-centre distance (N, 1) and d/dx (N, 1, P)."""
+    chain = problem.chain
+    delta, d_delta = kinematic_deltas(problem, x, jacobian)
+    poses = forward(chain, problem.context.q_cmd, delta)
+    T_bf = poses.T_base_flange
+    R_bf, t_bf = T_bf[:, :3, :3], T_bf[:, :3, 3]
+    _, t_ft, _ = _frame_pose(problem, "tool", x)
+    tip = np.einsum("nij,j->ni", R_bf, t_ft) + t_bf
+    sphere = problem.dataset.frames["sphere"]
+    c_b, d_cb = _world_point_in_base(problem, x, "sphere", np.asarray(sphere.center, float))
+    diff = tip - c_b[None, :]
+    distance = np.linalg.norm(diff, axis=1)
+    prediction = distance[:, None]
+    if not jacobian:
+        return prediction, None
+    assert d_delta is not None
+    u = diff / distance[:, None]
+    n_samples = tip.shape[0]
+    J = np.zeros((n_samples, 1, x.size))
+    d_tip_dkin = point_jacobian(screws(chain, poses), tip)
+    d_dist_dkin = np.einsum("ni,nik->nk", u, d_tip_dkin)
+    J[:, 0, :] += np.einsum("nk,nkp->np", d_dist_dkin, d_delta)
+    tool = problem.term("tool")
+    if tool is not None:
+        J[:, 0, tool.slice] += np.einsum("ni,nij->nj", u, R_bf)
+    for name, d_cb_term in d_cb.items():
+        span = problem.term(name).slice  # type: ignore[union-attr]
+        J[:, 0, span] -= u @ d_cb_term
+    return prediction, J
+
+
+PREDICTORS = {
+    "stereo_target": predict_stereo_target,
+    "sphere_probe": predict_sphere_probe,
+}
+
+
+def predict(problem: Problem, x: np.ndarray, jacobian: bool = True
+            ) -> tuple[np.ndarray, np.ndarray | None]:
+    """Predicted measurements (N, m) and their derivative by x (N, m, P) (or None)."""
+    return PREDICTORS[problem.method](problem, np.asarray(x, dtype=float), jacobian)
