@@ -45,7 +45,13 @@ import numpy as np
 
 from controller_stub import probe as probe_mod
 from controller_stub.physics import HiddenEffects, Physics
-from controller_stub.render import CameraModel, Renderer
+from controller_stub.render import (
+    CameraModel,
+    ChessboardPattern,
+    DiskPattern,
+    Renderer,
+    chessboard_views,
+)
 from controller_stub.robot_model import get_robot, make_transform, matrix_to_rpy
 from controller_stub.scenario import RandomSpec, Scenario
 
@@ -114,6 +120,18 @@ _STREAM_TRUTH, _STREAM_VIEWS, _STREAM_PROBE, _STREAM_LEFT, _STREAM_RIGHT = range
 
 def _rng(seed: int, stream: int) -> np.random.Generator:
     return np.random.default_rng([int(seed) & 0xFFFFFFFF, stream])
+
+
+def _plane_frame(origin: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """(4, 4) frame at `origin` whose z axis is `normal` (x chosen orthogonal, deterministic)."""
+    z = normal / np.linalg.norm(normal)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = helper - (helper @ z) * z
+    x /= np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+    T[:3, 3] = origin
+    return T
 
 
 def _pose_dict(T: np.ndarray) -> dict[str, list[float]]:
@@ -190,7 +208,7 @@ class Simulation:
             fy=cam.fy,
             cx=cam.cx,
             cy=cam.cy,
-            distortion=np.asarray(cam.distortion, float),
+            distortion=tuple(float(v) for v in cam.distortion),  # type: ignore[arg-type]
         )
         self.T_flange_camera_nominal = make_transform(cam.mount.xyz, cam.mount.rpy)
         self.T_flange_camera = self.T_flange_camera_nominal @ make_transform(
@@ -205,10 +223,17 @@ class Simulation:
         self.sphere_centre = np.asarray(pr.sphere_centre, float) + np.asarray(
             pr.sphere_centre_error, float
         )
-        self._left = Renderer(self.camera, cam.pixel_noise_sigma, _rng(scenario.seed, _STREAM_LEFT))
-        self._right = Renderer(
-            self.camera, cam.pixel_noise_sigma, _rng(scenario.seed, _STREAM_RIGHT)
+        tgt = scenario.target
+        self.T_base_target = _plane_frame(self.target_centre, np.asarray(tgt.normal, float))
+        self.disk_pattern = DiskPattern(
+            tgt.radius, tgt.plate_radius, tgt.dot_level, tgt.plate_level
         )
+        board = scenario.chessboard
+        self.board_pattern = ChessboardPattern(
+            board.cols, board.rows, board.square_size, board.dark_level, board.light_level
+        )
+        self._board_views: np.ndarray | None = None  # drawn lazily (rejection sampling)
+        self._renderers: tuple[Renderer, Renderer] | None = None  # built on first capture
         self._update_probe_input(emit=False)
 
     # ------------------------------------------------------------------ simple state
@@ -324,7 +349,7 @@ class Simulation:
     def physical_angles(self, q_reported: np.ndarray | None = None) -> np.ndarray:
         """(n,) physical joint angles for reported angles (default: the current pose), with
         the current offsets, backlash state and clock."""
-        q = self._q if q_reported is None else np.asarray(q_reported, float)
+        q = self._q if q_reported is None else np.asarray(q_reported, float).reshape(-1)
         return self.physics.physical_angles(
             q[None, :], self.current_zero_errors(), self._approach, self._time
         )[0]
@@ -413,45 +438,36 @@ class Simulation:
     def _gap_function(
         self, q_start: np.ndarray, target: np.ndarray, t_start: float, duration: float, extra: float
     ) -> probe_mod.GapFunction:
-        """Gap (m) along the path: |tip - P_b| - (R + r + extra), < 0 inside."""
+        """Gap (m) along the path s in [0, 1]: |tip - P_b| - (R + r + extra), < 0 inside.
+
+        Uses the backlash state of this motion (moving joints approach in their direction)
+        and the clock at each path point (thermal drift)."""
         moved = np.sign(target - q_start)
         approach = np.where(moved != 0, moved, self._approach)
         zero_error = self.current_zero_errors()
-        contact = self.scenario.probe.sphere_radius + self.scenario.probe.stylus_radius + extra
+        pr = self.scenario.probe
+        contact = pr.sphere_radius + pr.stylus_radius + extra
+        drifting = self.physics.drifting
 
         def gap(s: np.ndarray) -> np.ndarray:
             s = np.asarray(s, float)
             q_rep = q_start[None, :] + s[:, None] * (target - q_start)[None, :]
-            # time-varying lengths: the clock at each path point (drift over one move is tiny,
-            # but this keeps it exact)
-            out = np.empty(s.shape[0])
-            times = t_start + s * duration
-            # drift is linear and slow; group by identical times (usually all distinct) only
-            # when drift is on, else one vectorised call
-            if np.any(self.effects.drift_d) or np.any(self.effects.drift_a):
-                for k in range(s.shape[0]):
-                    qp = self.physics.physical_angles(
-                        q_rep[k : k + 1], zero_error, approach, times[k]
-                    )
-                    T = self.physics.flange_pose(qp, times[k])
-                    tip = probe_mod.tip_positions(T, self.tip_flange)
-                    out[k] = np.linalg.norm(tip[0] - self.sphere_centre) - contact
-                return out
-            qp = self.physics.physical_angles(q_rep, zero_error, approach, t_start)
-            T = self.physics.flange_pose(qp, t_start)
-            tips = probe_mod.tip_positions(T, self.tip_flange)
+            times = t_start + s * duration if drifting else t_start
+            qp = self.physics.physical_angles(q_rep, zero_error, approach, times)
+            tips = probe_mod.tip_positions(self.physics.flange_pose(qp, times), self.tip_flange)
             return np.linalg.norm(tips - self.sphere_centre, axis=1) - contact
 
         return gap
 
-    def _tip_path_length(self, gap_q: np.ndarray, target: np.ndarray) -> float:
-        s = np.linspace(0.0, 1.0, 33)
-        q_rep = gap_q[None, :] + s[:, None] * (target - gap_q)[None, :]
-        qp = self.physics.physical_angles(
-            q_rep, self.current_zero_errors(), self._approach, self._time
+    def _tip_lipschitz(self, q_start: np.ndarray, target: np.ndarray) -> float:
+        """Upper bound of |d tip / d s| (m) along the path: sum_i |dq_i| * (reach to tip),
+        with a margin for the joint-space effects."""
+        reach = (
+            float(np.sum(np.linalg.norm(self.model.origin_xyz, axis=1)))
+            + float(np.linalg.norm(self.model.flange_xyz))
+            + float(np.linalg.norm(self.tip_flange))
         )
-        tips = probe_mod.tip_positions(self.physics.flange_pose(qp, self._time), self.tip_flange)
-        return float(np.sum(np.linalg.norm(np.diff(tips, axis=0), axis=1))) * 1.5 + 1e-6
+        return 1.2 * reach * float(np.sum(np.abs(target - q_start))) + 1e-9
 
     def _path_crossings(
         self,
@@ -464,8 +480,7 @@ class Simulation:
         if duration <= 0.0:
             return []
         gap = self._gap_function(q_start, target, t_start, duration, extra)
-        n = probe_mod.sample_count(self._tip_path_length(q_start, target))
-        return probe_mod.find_crossings(gap, n)
+        return probe_mod.find_crossings(gap, self._tip_lipschitz(q_start, target))
 
     def _set_probe_input(self, value: bool, t: float, q: np.ndarray, emit: bool) -> None:
         line = self.scenario.probe.io_line
@@ -515,7 +530,6 @@ class Simulation:
                 # the edge happens on the probe line, but the guarded move does not see it
                 self._set_probe_input(True, t_c, q_c, emit=not lose_edge)
                 continue
-            rate = (target - q_start) / duration
             s_latch = min(1.0, c.s + latency / duration)
             s_stop = min(1.0, s_latch + self.scenario.probe.stop_time_s / duration)
             q_latched = q_start + s_latch * (target - q_start)
@@ -524,7 +538,6 @@ class Simulation:
             self._inputs[probe_line] = True
             if self.on_io_edge is not None:
                 self.on_io_edge(probe_line, True, t_start + s_latch * duration, q_latched.copy())
-            del rate
             self._finish_motion(q_start, q_stop, s_stop * duration)
             self._update_probe_input(emit=True)
             return GuardedMoveResult(
@@ -560,30 +573,73 @@ class Simulation:
 
     # ------------------------------------------------------------------ cameras
 
+    def renderers(self) -> tuple[Renderer, Renderer]:
+        """(left, right) renderers with the truth intrinsics (built on first use)."""
+        if self._renderers is None:
+            cam = self.scenario.camera
+            level = self.scenario.target.background_level
+            self._renderers = (
+                Renderer(
+                    self.camera,
+                    cam.pixel_noise_sigma,
+                    cam.blur_sigma,
+                    level,
+                    _rng(self.scenario.seed, _STREAM_LEFT),
+                ),
+                Renderer(
+                    self.camera,
+                    cam.pixel_noise_sigma,
+                    cam.blur_sigma,
+                    level,
+                    _rng(self.scenario.seed, _STREAM_RIGHT),
+                ),
+            )
+        return self._renderers
+
+    def chessboard_poses(self) -> np.ndarray:
+        """(n_views, 4, 4) T_leftcamera_board of the rig-calibration views (truth)."""
+        if self._board_views is None:
+            board = self.scenario.chessboard
+            self._board_views = chessboard_views(
+                self.camera,
+                self.T_left_right,
+                self.board_pattern,
+                board.n_views,
+                (board.distance_min, board.distance_max),
+                math.radians(board.max_tilt_deg),
+                _rng(self.scenario.seed, _STREAM_VIEWS),
+            )
+        return self._board_views.copy()
+
+    def chessboard_corners(self) -> np.ndarray:
+        """(rows*cols, 3) inner corners in the board frame (m), row-major."""
+        return self.board_pattern.corners()
+
     def capture_stereo(self, pattern: str = "target", view: int = 0) -> StereoFrame:
-        """Render a stereo pair.
+        """Render a stereo pair (left, right (H, W) uint8).
 
         pattern "target": the circular target seen from the robot's physical pose.
         pattern "chessboard": the `view`-th chessboard pose (relative to the left camera,
         independent of the robot). Raises SimulationRefused("invalid_argument") otherwise.
         """
-        level = self.scenario.target.background_level
+        T_right_left = np.linalg.inv(self.T_left_right)
+        left_r, right_r = self.renderers()
         if pattern == "target":
-            pass
+            T_left_target = np.linalg.inv(self.camera_pose()) @ self.T_base_target
+            left = left_r.render_disk(T_left_target, self.disk_pattern)
+            right = right_r.render_disk(T_right_left @ T_left_target, self.disk_pattern)
         elif pattern == "chessboard":
-            if not 0 <= int(view) < self.scenario.chessboard.n_views:
+            n_views = self.scenario.chessboard.n_views
+            if not (isinstance(view, int) and 0 <= view < n_views):
                 raise SimulationRefused(
-                    "invalid_argument",
-                    f"chessboard view {view} out of range 0..{self.scenario.chessboard.n_views - 1}",
+                    "invalid_argument", f"chessboard view {view!r} not in 0..{n_views - 1}"
                 )
+            T_left_board = self.chessboard_poses()[view]
+            left = left_r.render_chessboard(T_left_board, self.board_pattern)
+            right = right_r.render_chessboard(T_right_left @ T_left_board, self.board_pattern)
         else:
             raise SimulationRefused("invalid_argument", f"unknown pattern {pattern!r}")
-        return StereoFrame(
-            left=self._left.background(level),
-            right=self._right.background(level),
-            q=self._q.copy(),
-            time=self._time,
-        )
+        return StereoFrame(left=left, right=right, q=self._q.copy(), time=self._time)
 
     def camera_description(self) -> dict[str, Any]:
         """What the controller reports about its camera: never the hidden truth."""

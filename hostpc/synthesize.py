@@ -24,7 +24,7 @@ from hostpc.model.problem import build_problem
 HOME_POSES = {
     "ur5e": (0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0),
     "ur10e": (0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0),
-    "industrial6": (0.0, -np.pi / 4, np.pi / 4, 0.0, -np.pi / 2, 0.0),
+    "industrial6": (0.0, -0.9, 2.9, 0.0, np.pi - 2.0, 0.0),
 }
 DEFAULT_TOOL = FramePose(xyz=np.array([0.0, 0.045, 0.06]), rpy=np.array([0.0, 0.0, np.pi / 2]))
 LATERAL_SIGMA_AT_HALF_METRE = 5e-5   # m, grows linearly with depth
@@ -73,7 +73,9 @@ def look_at_poses(robot: str, tool: FramePose, target: np.ndarray, n_poses: int,
     T_flange_tool = pose_to_transform(tool.xyz, tool.rpy)
     T_tool_flange = invert_transform(T_flange_tool)
     accepted: list[np.ndarray] = []
-    while sum(len(a) for a in accepted) < n_poses:
+    for _ in range(50):
+        if sum(len(a) for a in accepted) >= n_poses:
+            break
         m = 2 * n_poses
         polar = np.radians(cone_deg) * np.sqrt(rng.uniform(0, 1, m))
         azimuth = rng.uniform(0, 2 * np.pi, m)
@@ -88,7 +90,11 @@ def look_at_poses(robot: str, tool: FramePose, target: np.ndarray, n_poses: int,
         q, ok = solve_ik(chain, goals, seeds)
         near_home = np.all(np.abs(q - home) < 1.6, axis=1)
         accepted.append(q[ok & near_home])
-    return np.concatenate(accepted)[:n_poses]
+    found = np.concatenate(accepted)
+    if found.shape[0] < n_poses:
+        raise ValueError(f"only {found.shape[0]} of {n_poses} look-at poses are reachable by "
+                         f"{robot}; move the target or widen the distance range")
+    return found[:n_poses]
 
 
 def approach_signs(q: np.ndarray, rng: np.random.Generator) -> np.ndarray:

@@ -1,0 +1,108 @@
+"""`controller-stub` command line: run the simulated controller.
+
+    controller-stub serve [--scenario FILE] [--host 127.0.0.1] [--port 47800]
+                          [--truth-out FILE] [--modbus-port PORT] [--log-level LEVEL]
+
+`serve` prints exactly `listening on HOST:PORT` (flushed) once it accepts connections; with
+`--port 0` the OS picks a free port and that line tells which. With `--modbus-port` the
+digital IO is also served over Modbus TCP (0, the default, means no Modbus server); the
+line `modbus on HOST:PORT` is printed before `listening on`. Errors are one line on stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import logging
+import signal
+import sys
+from pathlib import Path
+
+from protocol import DEFAULT_PORT
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="controller-stub", description="zerocal simulated robot controller"
+    )
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    serve = subparsers.add_parser("serve", help="serve a scenario over the zerocal protocol")
+    serve.add_argument(
+        "--scenario",
+        type=Path,
+        help="scenario file (YAML/JSON); default: the packaged default.yaml",
+    )
+    serve.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    serve.add_argument(
+        "--port", type=int, default=DEFAULT_PORT, help=f"TCP port, 0 = any (default {DEFAULT_PORT})"
+    )
+    serve.add_argument("--truth-out", type=Path, help="write the hidden truth here as JSON")
+    serve.add_argument(
+        "--modbus-port", type=int, default=0, help="Modbus TCP port for the IO (default 0 = off)"
+    )
+    serve.add_argument("--log-level", default="WARNING", help="Python logging level")
+    return parser
+
+
+def _load_scenario(path: Path | None) -> object:
+    from controller_stub.scenario import default_scenario, load_scenario
+
+    return load_scenario(path) if path is not None else default_scenario()
+
+
+async def _serve(args: argparse.Namespace) -> int:
+    from controller_stub.modbus_io import ModbusIoServer
+    from controller_stub.server import ControllerServer
+
+    scenario = _load_scenario(args.scenario)
+    server = ControllerServer.from_scenario(scenario, truth_out=args.truth_out)
+    modbus: ModbusIoServer | None = None
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(NotImplementedError, RuntimeError):
+            loop.add_signal_handler(signum, stop.set)
+    try:
+        if args.modbus_port:
+            modbus = ModbusIoServer(server.sim, host=args.host, port=args.modbus_port)
+            host, port = await modbus.start()
+            print(f"modbus on {host}:{port}", flush=True)
+        host, port = await server.start(args.host, args.port)
+        print(f"listening on {host}:{port}", flush=True)
+        await stop.wait()
+    finally:
+        await server.close()
+        if modbus is not None:
+            await modbus.close()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command != "serve":
+        parser.print_help()
+        return 2
+    logging.basicConfig(
+        level=getattr(logging, str(args.log_level).upper(), logging.WARNING),
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+        stream=sys.stderr,
+    )
+    try:
+        from controller_stub.scenario import ScenarioError
+
+        try:
+            return asyncio.run(_serve(args))
+        except ScenarioError as exc:
+            print(f"controller-stub serve: error: {exc}", file=sys.stderr)
+            return 2
+    except OSError as exc:
+        print(f"controller-stub serve: error: cannot listen: {exc}", file=sys.stderr)
+        return 3
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

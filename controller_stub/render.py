@@ -1,0 +1,439 @@
+"""Stereo camera renderer: circular dot target and chessboard, 8-bit grey images.
+
+Camera model: pinhole plus OpenCV distortion (k1, k2, p1, p2, k3); pixel (0, 0) is the CENTRE
+of the top-left pixel (OpenCV convention). Camera frame: x right, y down, z forward.
+
+Every pattern lies on a plane given by `T_cam_plane` (plane coordinates u = x, v = y of the
+plane frame, plane z = 0). For each pixel the exact ray through its centre (from a
+precomputed undistortion map, solved to 1e-12) is intersected with the plane; each edge of
+the pattern is anti-aliased by its signed distance divided by the local pixel footprint
+(|gradient| of that distance in pixels), a one-pixel box filter that is exact to first order
+and unbiased, so the centroid of a disk and the saddle of a chessboard corner are
+sub-pixel exact. Then a Gaussian blur and pixel noise. The pattern is only computed inside
+its projected bounding box (plus the blur support); the background is flat plus noise.
+
+Noise comes from a bank of Gaussian samples drawn once from the seeded RNG; each frame
+uses a window at a random offset with a random flip (also seeded), so a 1280x1024 pair costs
+a copy, not 2.6 M fresh Gaussians.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import cv2
+import numpy as np
+
+from controller_stub.robot_model import rpy_to_matrix
+
+_NOISE_MARGIN = 128  # the noise bank is this many pixels larger than the image
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """Pinhole + OpenCV distortion. Intrinsics in pixels; distortion (5,) k1, k2, p1, p2, k3."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    distortion: tuple[float, float, float, float, float]
+
+    @property
+    def K(self) -> np.ndarray:
+        """(3, 3) camera matrix."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+
+def distort_normalized(camera: CameraModel, xy: np.ndarray) -> np.ndarray:
+    """(N, 2) ideal normalised coordinates -> (N, 2) distorted normalised coordinates."""
+    k1, k2, p1, p2, k3 = camera.distortion
+    x, y = xy[:, 0], xy[:, 1]
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+    return np.stack([xd, yd], axis=1)
+
+
+def project_points(camera: CameraModel, points_cam: np.ndarray) -> np.ndarray:
+    """(N, 3) points in the camera frame (m, z > 0) -> (N, 2) pixel coordinates."""
+    p = np.atleast_2d(np.asarray(points_cam, dtype=float))
+    xy = p[:, :2] / p[:, 2:3]
+    d = distort_normalized(camera, xy)
+    return np.stack([camera.fx * d[:, 0] + camera.cx, camera.fy * d[:, 1] + camera.cy], axis=1)
+
+
+def project_point(camera: CameraModel, T_cam_frame: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """(3,) point in `frame` -> (2,) pixel coordinates in the camera (T_cam_frame (4, 4))."""
+    p = T_cam_frame[:3, :3] @ np.asarray(point, dtype=float) + T_cam_frame[:3, 3]
+    return project_points(camera, p[None, :])[0]
+
+
+def undistort_pixels(camera: CameraModel, uv: np.ndarray, tol: float = 1e-14) -> np.ndarray:
+    """(N, 2) pixels -> (N, 2) ideal normalised coordinates (inverse of the distortion).
+
+    Newton's method with the analytic Jacobian of the distortion, from the distorted
+    coordinates as the first guess; converges to `tol` (normalised units) in a few steps.
+    """
+    k1, k2, p1, p2, k3 = camera.distortion
+    uv = np.asarray(uv, dtype=float)
+    xd = (uv[:, 0] - camera.cx) / camera.fx
+    yd = (uv[:, 1] - camera.cy) / camera.fy
+    x, y = xd.copy(), yd.copy()
+    for _ in range(20):
+        x2, y2, xy = x * x, y * y, x * y
+        r2 = x2 + y2
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        d_radial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # d radial / d r2
+        ex = x * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * x2) - xd
+        ey = y * radial + p1 * (r2 + 2.0 * y2) + 2.0 * p2 * xy - yd
+        jxx = radial + 2.0 * x2 * d_radial + 2.0 * p1 * y + 6.0 * p2 * x
+        jyy = radial + 2.0 * y2 * d_radial + 6.0 * p1 * y + 2.0 * p2 * x
+        jxy = 2.0 * xy * d_radial + 2.0 * p1 * x + 2.0 * p2 * y  # d ex/dy = d ey/dx
+        det = jxx * jyy - jxy * jxy
+        x -= (jyy * ex - jxy * ey) / det
+        y -= (jxx * ey - jxy * ex) / det
+        if (
+            float(np.max(np.abs(ex), initial=0.0)) < tol
+            and float(np.max(np.abs(ey), initial=0.0)) < tol
+        ):
+            break
+    return np.stack([x, y], axis=1)
+
+
+@lru_cache(maxsize=8)
+def ray_map(camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised ray coordinates (x, y) of every pixel centre: two (H, W) float32 arrays."""
+    v, u = np.mgrid[0 : camera.height, 0 : camera.width]
+    xy = undistort_pixels(camera, np.stack([u.ravel(), v.ravel()], axis=1).astype(float))
+    shape = (camera.height, camera.width)
+    x = xy[:, 0].reshape(shape).astype(np.float32)
+    y = xy[:, 1].reshape(shape).astype(np.float32)
+    x.setflags(write=False)
+    y.setflags(write=False)
+    return x, y
+
+
+@dataclass(frozen=True)
+class DiskPattern:
+    """Dark disk (radius) on a bright round plate (plate_radius), grey levels 0..255."""
+
+    radius: float
+    plate_radius: float
+    dot_level: float
+    plate_level: float
+
+
+@dataclass(frozen=True)
+class ChessboardPattern:
+    """cols x rows INNER corners at (i*square, j*square) in the board plane; a light margin of
+    one square surrounds the (cols+1) x (rows+1) squares. The square whose lower corner is
+    (0, 0) is dark."""
+
+    cols: int
+    rows: int
+    square: float
+    dark_level: float
+    light_level: float
+
+    def corners(self) -> np.ndarray:
+        """(rows*cols, 3) inner corners in the board frame, row-major (x fastest)."""
+        j, i = np.mgrid[0 : self.rows, 0 : self.cols]
+        return np.stack(
+            [i.ravel() * self.square, j.ravel() * self.square, np.zeros(i.size)], axis=1
+        )
+
+    def outline(self) -> tuple[float, float, float, float]:
+        """(u_min, u_max, v_min, v_max) of the board incl. its light margin (m)."""
+        s = self.square
+        return -2 * s, (self.cols + 1) * s, -2 * s, (self.rows + 1) * s
+
+
+def _smooth_step(signed_distance: np.ndarray, footprint: np.ndarray) -> np.ndarray:
+    """Box-filtered coverage of the half-plane signed_distance > 0 (in place, float32)."""
+    out = np.divide(signed_distance, footprint, out=signed_distance)
+    out += 0.5
+    return np.clip(out, 0.0, 1.0, out=out)
+
+
+def _gradient_norm(f: np.ndarray) -> np.ndarray:
+    """|grad f| in pixel units by central differences (one-sided at the border), (h, w)."""
+    gx = np.empty_like(f)
+    gy = np.empty_like(f)
+    gx[:, 1:-1] = (f[:, 2:] - f[:, :-2]) * 0.5
+    gx[:, 0] = f[:, 1] - f[:, 0]
+    gx[:, -1] = f[:, -1] - f[:, -2]
+    gy[1:-1] = (f[2:] - f[:-2]) * 0.5
+    gy[0] = f[1] - f[0]
+    gy[-1] = f[-1] - f[-2]
+    g = np.hypot(gx, gy, out=gx)
+    np.maximum(g, 1e-12, out=g)
+    return g
+
+
+class Renderer:
+    """Renders one camera of the rig. Deterministic given the RNG it is built with.
+
+    camera: truth intrinsics; noise_sigma: grey levels; blur_sigma: pixels;
+    background_level: grey level of everything that is not the pattern.
+    """
+
+    def __init__(
+        self,
+        camera: CameraModel,
+        noise_sigma: float,
+        blur_sigma: float,
+        background_level: float,
+        rng: np.random.Generator,
+    ) -> None:
+        self.camera = camera
+        self.noise_sigma = float(noise_sigma)
+        self.blur_sigma = float(blur_sigma)
+        self.background_level = float(background_level)
+        self._rng = rng
+        self._ray_x, self._ray_y = ray_map(camera)
+        shape = (camera.height + _NOISE_MARGIN, camera.width + _NOISE_MARGIN)
+        if self.noise_sigma > 0:
+            self._noise = (rng.standard_normal(shape, dtype=np.float32) * self.noise_sigma).astype(
+                np.float32
+            )
+        else:
+            self._noise = np.zeros(shape, np.float32)
+        self._background_bank = np.clip(
+            np.rint(self._noise + np.float32(self.background_level)), 0, 255
+        ).astype(np.uint8)
+        self._pad = int(math.ceil(4 * self.blur_sigma)) + 3
+
+    # -------------------------------------------------------------- frame assembly
+
+    def _noise_window(self) -> tuple[int, int, bool, bool]:
+        oy, ox = (int(v) for v in self._rng.integers(0, _NOISE_MARGIN + 1, size=2))
+        fy, fx = (bool(v) for v in self._rng.integers(0, 2, size=2))
+        return oy, ox, fy, fx
+
+    def _window(self, bank: np.ndarray, win: tuple[int, int, bool, bool]) -> np.ndarray:
+        oy, ox, fy, fx = win
+        h, w = self.camera.height, self.camera.width
+        view = bank[oy : oy + h, ox : ox + w]
+        if fy:
+            view = view[::-1]
+        if fx:
+            view = view[:, ::-1]
+        return view
+
+    def _compose(
+        self, patch: np.ndarray | None, box: tuple[int, int, int, int] | None
+    ) -> np.ndarray:
+        """Background+noise frame with the (blurred) float patch pasted at box (y0, y1, x0, x1)."""
+        win = self._noise_window()
+        image = np.ascontiguousarray(self._window(self._background_bank, win))
+        if patch is None or box is None:
+            return image
+        y0, y1, x0, x1 = box
+        if self.blur_sigma > 0:
+            patch = cv2.GaussianBlur(
+                patch, (0, 0), self.blur_sigma, borderType=cv2.BORDER_REPLICATE
+            )
+        patch += self._window(self._noise, win)[y0:y1, x0:x1]
+        np.rint(patch, out=patch)
+        np.clip(patch, 0, 255, out=patch)
+        image[y0:y1, x0:x1] = patch.astype(np.uint8)
+        return image
+
+    def background(self) -> np.ndarray:
+        """(H, W) uint8: flat background plus noise."""
+        return self._compose(None, None)
+
+    # -------------------------------------------------------------- geometry helpers
+
+    def _bbox(
+        self, T_cam_plane: np.ndarray, outline_pts: np.ndarray
+    ) -> tuple[int, int, int, int] | None:
+        """Pixel box (y0, y1, x0, x1) covering the projected outline (K, 2) plane points, plus
+        the blur pad; None if nothing is visible. Points behind the camera -> whole image."""
+        pts = np.column_stack([outline_pts, np.zeros(len(outline_pts))])
+        cam_pts = pts @ T_cam_plane[:3, :3].T + T_cam_plane[:3, 3]
+        h, w = self.camera.height, self.camera.width
+        if np.all(cam_pts[:, 2] <= 1e-6):
+            return None
+        if np.any(cam_pts[:, 2] <= 1e-3):
+            return 0, h, 0, w
+        uv = project_points(self.camera, cam_pts)
+        x0 = max(0, int(math.floor(uv[:, 0].min())) - self._pad)
+        x1 = min(w, int(math.ceil(uv[:, 0].max())) + self._pad + 1)
+        y0 = max(0, int(math.floor(uv[:, 1].min())) - self._pad)
+        y1 = min(h, int(math.ceil(uv[:, 1].max())) + self._pad + 1)
+        if x1 - x0 < 3 or y1 - y0 < 3:
+            return None
+        return y0, y1, x0, x1
+
+    def _plane_coords(
+        self, T_cam_plane: np.ndarray, box: tuple[int, int, int, int]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Plane coordinates (u, v) (m, float32 (h, w)) hit by each pixel ray in box, and the
+        mask of rays that hit the plane in front of the camera."""
+        y0, y1, x0, x1 = box
+        rx = self._ray_x[y0:y1, x0:x1]
+        ry = self._ray_y[y0:y1, x0:x1]
+        R = T_cam_plane[:3, :3]
+        p0 = T_cam_plane[:3, 3]
+        n = R[:, 2]
+        e1, e2 = R[:, 0], R[:, 1]
+        f32 = np.float32
+        denom = f32(n[0]) * rx + f32(n[1]) * ry + f32(n[2])
+        t = np.divide(f32(n @ p0), denom, out=np.zeros_like(denom), where=np.abs(denom) > 1e-9)
+        valid = t > 0
+        u = t * (f32(e1[0]) * rx + f32(e1[1]) * ry + f32(e1[2])) - f32(e1 @ p0)
+        v = t * (f32(e2[0]) * rx + f32(e2[1]) * ry + f32(e2[2])) - f32(e2 @ p0)
+        return u, v, valid
+
+    # -------------------------------------------------------------- patterns
+
+    def render_disk(self, T_cam_target: np.ndarray, pattern: DiskPattern) -> np.ndarray:
+        """(H, W) uint8 image of the disk target; T_cam_target (4, 4): the target frame has
+        the disk centre at its origin and the plate normal as its z axis."""
+        angles = np.linspace(0.0, 2 * math.pi, 73)
+        ring = pattern.plate_radius * np.column_stack([np.cos(angles), np.sin(angles)])
+        box = self._bbox(T_cam_target, ring)
+        if box is None:
+            return self.background()
+        u, v, valid = self._plane_coords(T_cam_target, box)
+        rho = np.hypot(u, v)
+        footprint = _gradient_norm(rho)
+        plate = _smooth_step(np.float32(pattern.plate_radius) - rho, footprint)
+        dot = _smooth_step(np.float32(pattern.radius) - rho, footprint)
+        bg = np.float32(self.background_level)
+        patch = bg + np.float32(pattern.plate_level - self.background_level) * plate
+        patch += np.float32(pattern.dot_level - pattern.plate_level) * dot
+        patch[~valid] = bg
+        return self._compose(patch, box)
+
+    def render_chessboard(self, T_cam_board: np.ndarray, pattern: ChessboardPattern) -> np.ndarray:
+        """(H, W) uint8 image of the chessboard; T_cam_board (4, 4): board frame with the first
+        inner corner at its origin, x along a row of corners, z the board normal."""
+        u_min, u_max, v_min, v_max = pattern.outline()
+        k = np.linspace(0.0, 1.0, 17)
+        outline = np.concatenate(
+            [
+                np.column_stack([u_min + (u_max - u_min) * k, np.full(17, v_min)]),
+                np.column_stack([u_min + (u_max - u_min) * k, np.full(17, v_max)]),
+                np.column_stack([np.full(17, u_min), v_min + (v_max - v_min) * k]),
+                np.column_stack([np.full(17, u_max), v_min + (v_max - v_min) * k]),
+            ]
+        )
+        box = self._bbox(T_cam_board, outline)
+        if box is None:
+            return self.background()
+        u, v, valid = self._plane_coords(T_cam_board, box)
+        wu = _gradient_norm(u)
+        wv = _gradient_norm(v)
+        s = pattern.square
+        f32 = np.float32
+
+        def half_width_cover(coord: np.ndarray, lo: float, hi: float, w: np.ndarray) -> np.ndarray:
+            centre, half = f32(0.5 * (lo + hi)), f32(0.5 * (hi - lo))
+            return _smooth_step(half - np.abs(coord - centre), w)
+
+        plate = half_width_cover(u, u_min, u_max, wu) * half_width_cover(v, v_min, v_max, wv)
+        squares = half_width_cover(u, -s, pattern.cols * s, wu) * half_width_cover(
+            v, -s, pattern.rows * s, wv
+        )
+
+        def even_square(coord: np.ndarray, w: np.ndarray) -> np.ndarray:
+            t = coord / f32(s)
+            k_floor = np.floor(t)
+            frac = t - k_floor
+            dist = np.minimum(frac, 1 - frac) * f32(s)
+            odd = (k_floor.astype(np.int64) & 1).astype(bool)
+            dist[odd] *= -1
+            return _smooth_step(dist, w)
+
+        # clamp to the centres of the border squares so the checker value is constant across
+        # the outer edge of the squares area (that edge is drawn by `squares` alone)
+        half = 0.5 * s
+        eu = even_square(np.clip(u, f32(-half), f32(pattern.cols * s - half)), wu)
+        ev = even_square(np.clip(v, f32(-half), f32(pattern.rows * s - half)), wv)
+        dark = eu * ev + (1 - eu) * (1 - ev)
+        bg = f32(self.background_level)
+        patch = bg + f32(pattern.light_level - self.background_level) * plate
+        patch += f32(pattern.dark_level - pattern.light_level) * dark * squares
+        patch[~valid] = bg
+        return self._compose(patch.astype(np.float32), box)
+
+
+# ---------------------------------------------------------------------------------------
+# chessboard views for rig calibration
+
+
+def chessboard_views(
+    camera: CameraModel,
+    T_left_right: np.ndarray,
+    pattern: ChessboardPattern,
+    n_views: int,
+    distance_range: tuple[float, float],
+    max_tilt_rad: float,
+    rng: np.random.Generator,
+    border_px: float = 12.0,
+) -> np.ndarray:
+    """(n_views, 4, 4) board poses T_leftcamera_board with the whole board (incl. margin)
+    inside both images, distance of the board centre 0.3-0.8 m (distance_range), tilted up
+    to max_tilt_rad about a random in-plane axis, rolled freely about the normal by up to
+    +-30 deg around the upright orientation. Drawn from `rng` by rejection."""
+    u_min, u_max, v_min, v_max = pattern.outline()
+    centre = np.array([0.5 * (u_min + u_max), 0.5 * (v_min + v_max), 0.0])
+    k = np.linspace(0.0, 1.0, 9)
+    outline = np.concatenate(
+        [
+            np.column_stack([u_min + (u_max - u_min) * k, np.full(9, v_min)]),
+            np.column_stack([u_min + (u_max - u_min) * k, np.full(9, v_max)]),
+            np.column_stack([np.full(9, u_min), v_min + (v_max - v_min) * k]),
+            np.column_stack([np.full(9, u_max), v_min + (v_max - v_min) * k]),
+        ]
+    )
+    outline3 = np.column_stack([outline, np.zeros(len(outline))])
+    T_right_left = np.linalg.inv(T_left_right)
+    views: list[np.ndarray] = []
+    d_lo, d_hi = distance_range
+    attempts = 0
+    while len(views) < n_views:
+        attempts += 1
+        if attempts > 200000:
+            raise ValueError("chessboard: cannot place the board inside both images")
+        dist = rng.uniform(d_lo, d_hi)  # rejection keeps the distances where the board fits
+        tilt = rng.uniform(0.0, max_tilt_rad)
+        axis_angle = rng.uniform(0.0, 2 * math.pi)
+        roll = rng.uniform(-math.pi / 6, math.pi / 6)
+        px = rng.uniform(0.2, 0.8) * camera.width
+        py = rng.uniform(0.2, 0.8) * camera.height
+        # board facing the camera: board z along camera +z (board behind its printed side)
+        axis = np.array([math.cos(axis_angle), math.sin(axis_angle), 0.0])
+        R_tilt = cv2.Rodrigues(axis * tilt)[0]
+        R = R_tilt @ rpy_to_matrix([0.0, 0.0, roll])
+        ray = undistort_pixels(camera, np.array([[px, py]]))[0]
+        p_centre = dist * np.array([ray[0], ray[1], 1.0]) / math.sqrt(1 + ray @ ray)
+        T = np.eye(4)
+        T[:3, :3] = R
+        T[:3, 3] = p_centre - R @ centre
+        ok = True
+        for T_cam in (T, T_right_left @ T):
+            pts = outline3 @ T_cam[:3, :3].T + T_cam[:3, 3]
+            if np.any(pts[:, 2] < 0.05):
+                ok = False
+                break
+            uv = project_points(camera, pts)
+            if (
+                uv[:, 0].min() < border_px
+                or uv[:, 1].min() < border_px
+                or uv[:, 0].max() > camera.width - 1 - border_px
+                or uv[:, 1].max() > camera.height - 1 - border_px
+            ):
+                ok = False
+                break
+        if ok:
+            views.append(T)
+    return np.stack(views)

@@ -1,0 +1,32 @@
+"""Calibration dataset files (``zerocal-dataset/1``) and their in-memory value.
+
+``load_dataset``/``dataset_from_dict`` validate a file and convert it to SI units;
+``save_dataset``/``dataset_to_dict`` write one back. Bad input raises
+``hostpc.errors.DatasetError`` with a one-line message naming the file, the field and the
+sample index. The format is documented in ``docs/dataset-format.md``.
+"""
+
+from hostpc.dataset.io import dataset_from_dict, dataset_to_dict, load_dataset, save_dataset
+from hostpc.dataset.model import (
+    METHODS,
+    Dataset,
+    FramePose,
+    RobotDescription,
+    Samples,
+    SphereFrame,
+)
+from hostpc.dataset.schema import FORMAT_TAG
+
+__all__ = [
+    "FORMAT_TAG",
+    "METHODS",
+    "Dataset",
+    "FramePose",
+    "RobotDescription",
+    "Samples",
+    "SphereFrame",
+    "dataset_from_dict",
+    "dataset_to_dict",
+    "load_dataset",
+    "save_dataset",
+]

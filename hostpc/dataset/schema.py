@@ -1,0 +1,328 @@
+"""The ``zerocal-dataset/1`` file as pydantic models, and one-line field errors.
+
+This is the only module of hostpc.dataset that uses pydantic. The models check structure
+and types only (strict: numbers must be JSON numbers, no strings, no booleans); the
+checks that need the method, the units or several fields at once live in
+``hostpc.dataset.io``. Numbers here are in the file's units.
+
+Every failure is a :class:`FieldError` carrying the location of the offending value
+(``("samples", 3, "cov")``) and a one-line message; ``io`` prefixes the file name and
+turns it into ``hostpc.errors.DatasetError``.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import re
+from collections.abc import Callable, Sequence
+from typing import Annotated, Any, Literal
+
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    TypeAdapter,
+    ValidationError,
+)
+from pydantic_core import PydanticCustomError
+
+FORMAT_TAG = "zerocal-dataset/1"
+
+Loc = tuple[str | int, ...]
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+class FieldError(Exception):
+    """A value of the document breaks the format; ``loc`` says where, ``message`` what."""
+
+    def __init__(self, loc: Loc, message: str) -> None:
+        super().__init__(format_error(loc, message))
+        self.loc = loc
+        self.message = message
+
+
+def format_loc(loc: Loc) -> str:
+    """``("samples", 3, "p", 1)`` -> ``"samples[3].p[1]"``."""
+    text = ""
+    for part in loc:
+        if isinstance(part, int):
+            text += f"[{part}]"
+        elif not _NAME.fullmatch(part):
+            text += f"[{show(part)}]"
+        else:
+            text += f".{part}" if text else part
+    return text
+
+
+def format_error(loc: Loc, message: str) -> str:
+    """One line: ``"<field path>: <message>"`` (just the message at the top level)."""
+    return f"{format_loc(loc)}: {message}" if loc else message
+
+
+def show(value: Any, limit: int = 40) -> str:
+    """A short JSON-like rendering of an offending value for an error message."""
+    if isinstance(value, str):
+        text = repr(value)
+        return text if len(text) <= limit else text[: limit - 4] + "...'"
+    try:
+        text = json.dumps(value, allow_nan=True)
+    except (TypeError, ValueError):
+        text = repr(value)
+    text = text.replace("\n", " ")
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _length(n: int) -> AfterValidator:
+    """Validator: the list has exactly ``n`` entries."""
+
+    def check(value: list[Any]) -> list[Any]:
+        if len(value) != n:
+            raise PydanticCustomError(
+                "wrong_length", "expected {n} values, got {got}", {"n": n, "got": len(value)}
+            )
+        return value
+
+    return AfterValidator(check)
+
+
+def _matrix(rows: int, cols: int) -> BeforeValidator:
+    """Validator: a list of ``rows`` lists of ``cols`` entries (checked before the entries)."""
+
+    def check(value: Any) -> Any:
+        if isinstance(value, list) and (
+            len(value) != rows
+            or not all(isinstance(row, list) and len(row) == cols for row in value)
+        ):
+            raise PydanticCustomError(
+                "wrong_shape",
+                "expected a {rows}x{cols} matrix ({rows} lists of {cols} numbers), got {got}",
+                {"rows": rows, "cols": cols, "got": show(value)},
+            )
+        return value
+
+    return BeforeValidator(check)
+
+
+Vec2 = Annotated[list[float], _length(2)]
+Vec3 = Annotated[list[float], _length(3)]
+Mat3 = Annotated[list[Vec3], _matrix(3, 3)]
+Mat2 = Annotated[list[Vec2], _matrix(2, 2)]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(strict=True, extra="forbid", frozen=True)
+
+
+class UnitsSchema(_Strict):
+    """``units``: the units of the file's numbers (default SI)."""
+
+    length: Literal["m", "mm"] = "m"
+    angle: Literal["rad", "deg"] = "rad"
+    time: Literal["s", "ms"] = "s"
+
+
+class JointRowSchema(_Strict):
+    """One row of an explicit DH/MDH table (lengths and angles in the file's units)."""
+
+    a: float
+    alpha: float
+    d: float
+    theta: float
+
+
+class RobotSchema(_Strict):
+    """``robot``: ``{"name": ...}`` or ``{"convention", "joints", "mass"?, "com"?}``."""
+
+    name: str | None = None
+    convention: Literal["dh", "mdh"] | None = None
+    joints: list[JointRowSchema] | None = None
+    mass: list[float] | None = None
+    com: list[Vec3] | None = None
+
+
+class FramePoseSchema(_Strict):
+    """A frame as ``xyz`` (length) and ``rpy`` (angle)."""
+
+    xyz: Vec3
+    rpy: Vec3
+
+
+class TipFrameSchema(_Strict):
+    """``frames.tool`` of sphere_probe: only ``xyz`` matters, ``rpy`` may be omitted."""
+
+    xyz: Vec3
+    rpy: Vec3 | None = None
+
+
+class SphereSchema(_Strict):
+    """``frames.sphere``: centre (length, base frame) and radius (length)."""
+
+    center: Vec3
+    radius: float
+
+
+class ProbeSchema(_Strict):
+    """``probe``: the stylus ball radius (length)."""
+
+    stylus_radius: float
+
+
+class SampleSchema(_Strict):
+    """One sample, all methods together; ``io`` checks which fields a method needs."""
+
+    q: list[float] | None = None
+    chain: Literal["left", "right"] | None = None
+    q_head: list[float] | None = None
+    q_arm: list[float] | None = None
+    p: Vec3 | None = None
+    cov: Mat3 | None = None
+    sigma: float | None = None
+    group: Annotated[int, Field(ge=0, lt=2**31)] | None = None
+    t: float | None = None
+    approach: list[float] | None = None
+    temperature: float | None = None
+    speed: float | None = None
+    extra: dict[str, float] | None = None
+    uv: Mat2 | None = None
+
+
+class DocumentSchema(BaseModel):
+    """The whole document; unknown top-level fields are allowed and kept."""
+
+    model_config = ConfigDict(strict=True, extra="allow", frozen=True)
+
+    format: str
+    method: str
+    units: UnitsSchema = UnitsSchema()
+    robot: RobotSchema
+    frames: dict[str, Any]
+    known: list[str] = []
+    probe: ProbeSchema | None = None
+    samples: list[SampleSchema]
+
+
+SAMPLE_FIELDS: tuple[str, ...] = tuple(SampleSchema.model_fields)
+DOCUMENT_FIELDS: tuple[str, ...] = tuple(DocumentSchema.model_fields)
+
+
+def _describe(error: Any) -> str:
+    """One line for one pydantic error dict."""
+    kind = error["type"]
+    ctx = error.get("ctx") or {}
+    got = show(error.get("input"))
+    messages: dict[str, Callable[[], str]] = {
+        "missing": lambda: "required field missing",
+        "extra_forbidden": lambda: "unknown field",
+        "float_type": lambda: f"expected a number, got {got}",
+        "int_type": lambda: f"expected an integer, got {got}",
+        "string_type": lambda: f"expected a string, got {got}",
+        "list_type": lambda: f"expected a list, got {got}",
+        "dict_type": lambda: f"expected a JSON object, got {got}",
+        "model_type": lambda: f"expected a JSON object, got {got}",
+        "model_attributes_type": lambda: f"expected a JSON object, got {got}",
+        "literal_error": lambda: f"expected {ctx.get('expected')}, got {got}",
+        "too_short": lambda: f"expected at least {ctx.get('min_length')} entries, got {got}",
+        "greater_than_equal": lambda: f"must be >= {ctx.get('ge')}, got {got}",
+        "less_than": lambda: f"must be < {ctx.get('lt')}, got {got}",
+    }
+    if kind in messages:
+        return messages[kind]()
+    return " ".join(str(error.get("msg", kind)).split())
+
+
+@functools.cache
+def _adapter(kind: Any) -> TypeAdapter[Any]:
+    return TypeAdapter(kind)
+
+
+def validate(kind: Any, value: Any, loc: Loc = ()) -> Any:
+    """Validate ``value`` (a normalized JSON value) as ``kind`` (a model or a type).
+
+    Raises:
+        FieldError: at the first offending value, located under ``loc``.
+    """
+    try:
+        return _adapter(kind).validate_python(value, strict=True)
+    except ValidationError as exc:
+        errors = exc.errors(include_url=False)
+        first = errors[0]
+        raise FieldError(loc + tuple(first["loc"]), _describe(first)) from None
+
+
+class DuplicateKeys(dict[str, Any]):
+    """A JSON object in which some key appeared more than once (see ``pairs_hook``)."""
+
+    duplicates: tuple[str, ...] = ()
+
+
+class NonFinite:
+    """Stands for a ``NaN``/``Infinity`` token of the JSON text until its path is known."""
+
+    def __init__(self, token: str) -> None:
+        self.token = token
+
+
+def pairs_hook(pairs: Sequence[tuple[str, Any]]) -> dict[str, Any]:
+    """``json`` object hook that remembers duplicate keys instead of keeping the last."""
+    result: dict[str, Any] = {}
+    duplicates: list[str] = []
+    for key, value in pairs:
+        if key in result:
+            duplicates.append(key)
+        result[key] = value
+    if not duplicates:
+        return result
+    marked = DuplicateKeys(result)
+    marked.duplicates = tuple(duplicates)
+    return marked
+
+
+_MAX_DEPTH = 64
+
+
+def normalize(value: Any, loc: Loc = (), depth: int = 0) -> Any:
+    """Copy a JSON-like value into plain dict/list/str/int/float/bool/None.
+
+    Tuples and numpy arrays become lists, numpy scalars Python scalars.
+
+    Raises:
+        FieldError: a non-finite number, a duplicate key, a non-string key, nesting deeper
+            than 64 levels, or a value JSON cannot hold.
+    """
+    if depth > _MAX_DEPTH:
+        raise FieldError(loc, "nested too deeply")
+    if isinstance(value, NonFinite):
+        raise FieldError(loc, f"not a finite number ({value.token} is not allowed)")
+    if value is None or isinstance(value, bool | str):
+        return value
+    if hasattr(value, "tolist") and callable(value.tolist) and not isinstance(value, list):
+        try:
+            value = value.tolist()  # numpy array or scalar
+        except (TypeError, ValueError) as exc:
+            raise FieldError(loc, f"unsupported value of type {type(value).__name__}") from exc
+        if value is None or isinstance(value, bool | str):
+            return value
+    if isinstance(value, int):
+        if abs(value) > 1.7976931348623157e308:
+            raise FieldError(loc, "not a finite number (out of range)")
+        return value
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            raise FieldError(loc, "not a finite number")
+        return value
+    if isinstance(value, dict):
+        if isinstance(value, DuplicateKeys):
+            raise FieldError(loc, f"duplicate key {show(value.duplicates[0])}")
+        result: dict[str, Any] = {}
+        for key, item in value.items():
+            if not isinstance(key, str):
+                raise FieldError(loc, f"keys must be strings, got {show(key)}")
+            result[key] = normalize(item, (*loc, key), depth + 1)
+        return result
+    if isinstance(value, list | tuple):
+        return [normalize(item, (*loc, i), depth + 1) for i, item in enumerate(value)]
+    raise FieldError(loc, f"unsupported value of type {type(value).__name__}")

@@ -1,0 +1,25 @@
+"""asyncio transport to a zerocal controller (the I/O shell around `protocol`)."""
+
+from hostpc.transport.client import (
+    IDEMPOTENT_KINDS,
+    ControllerClient,
+    ControllerRefusedError,
+    ControllerState,
+    GuardedMoveOutcome,
+    IoEdgeEvent,
+    IoEventSubscription,
+    IoSnapshot,
+    MoveOutcome,
+)
+
+__all__ = [
+    "IDEMPOTENT_KINDS",
+    "ControllerClient",
+    "ControllerRefusedError",
+    "ControllerState",
+    "GuardedMoveOutcome",
+    "IoEdgeEvent",
+    "IoEventSubscription",
+    "IoSnapshot",
+    "MoveOutcome",
+]

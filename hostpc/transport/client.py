@@ -1,0 +1,619 @@
+"""asyncio client of the zerocal protocol: a thin driver around `protocol.Connection`.
+
+    async with ControllerClient.connect("127.0.0.1", 47800, token=token, timeout=5.0) as robot:
+        state = await robot.state()
+        outcome = await robot.move_joints(q, speed=0.2)
+        left, right, q_exposure, t = await robot.capture("target")
+
+Every request has a timeout (`RequestTimeout`). If the connection drops, requests that are
+safe to repeat (state, get_offsets, read_io, capture, heartbeat) are re-sent on a new
+connection; a motion, an offset write, a rollback or an abort is NEVER re-sent: the caller
+gets `ConnectionFailed` and decides (the robot may or may not have executed it). A request
+made while the link is already known to be down opens a new connection first (that is not
+a re-send). Errors map onto `hostpc.errors`: `ConnectionFailed` (cannot connect / link
+lost), `RequestTimeout`, `ProtocolViolation` (the controller broke the protocol or rejected
+ours), `ControllerError` (refused: code and reason in the message and as attributes).
+
+Angles are radians (reported frame), times seconds; arrays are numpy float64 (n,).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import os
+import socket
+from collections.abc import AsyncIterator, Callable, Generator
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+import numpy as np
+
+from hostpc.errors import ConnectionFailed, ControllerError, ProtocolViolation, RequestTimeout
+from protocol import DEFAULT_PORT
+from protocol import messages as m
+from protocol.connection import Connection, ConnectionState, Rejected, Role, StateChanged
+from protocol.errors import ErrorCode
+
+logger = logging.getLogger(__name__)
+
+READ_CHUNK = 1 << 20
+IDEMPOTENT_KINDS = frozenset({"get_state", "get_offsets", "read_io", "capture", "heartbeat"})
+"""Requests re-sent after a reconnection; everything else raises instead."""
+_PROTOCOL_CODES = frozenset(
+    {
+        ErrorCode.BAD_FRAME,
+        ErrorCode.FRAME_TOO_LARGE,
+        ErrorCode.BAD_MESSAGE,
+        ErrorCode.UNKNOWN_KIND,
+        ErrorCode.UNEXPECTED_MESSAGE,
+        ErrorCode.VERSION_MISMATCH,
+    }
+)
+
+ReplyT = TypeVar("ReplyT", bound=m.Reply)
+
+
+class ControllerRefusedError(ControllerError):
+    """The controller answered a request with an error reply.
+
+    code: the protocol `ErrorCode` value (e.g. "refused", "busy", "auth_required");
+    reason: the controller's specific reason for "refused" (e.g. "joint_limit", "estop").
+    """
+
+    def __init__(self, message: str, code: str, reason: str | None = None) -> None:
+        super().__init__(message)
+        self.code = code
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class ControllerState:
+    """Snapshot of the controller. q, zero_offsets, q_min, q_max: (n,) rad."""
+
+    robot_name: str
+    n_joints: int
+    mode: str
+    time: float
+    q: np.ndarray
+    zero_offsets: np.ndarray
+    q_min: np.ndarray
+    q_max: np.ndarray
+    digital_inputs: tuple[bool, ...]
+    digital_outputs: tuple[bool, ...]
+    camera: dict[str, Any]
+    authenticated: bool
+
+
+@dataclass(frozen=True)
+class MoveOutcome:
+    """completed, or stopped early with `reason`; q: (n,) rad where the robot stopped."""
+
+    completed: bool
+    q: np.ndarray
+    duration_s: float
+    reason: str | None
+
+
+@dataclass(frozen=True)
+class GuardedMoveOutcome:
+    """contact False = no contact at the end of travel; q_latched: (n,) rad at the edge."""
+
+    contact: bool
+    q_latched: np.ndarray | None
+    q: np.ndarray
+    io_line: int
+    duration_s: float
+    speed_mps: float | None
+    reason: str | None
+
+
+@dataclass(frozen=True)
+class IoSnapshot:
+    """Digital inputs and outputs (line 0 first) at controller time `time` (s)."""
+
+    digital_inputs: tuple[bool, ...]
+    digital_outputs: tuple[bool, ...]
+    time: float
+
+
+@dataclass(frozen=True)
+class IoEdgeEvent:
+    """A digital input changed: line, new value, controller time, (n,) latched q (rad)."""
+
+    line: int
+    value: bool
+    time: float
+    q_latched: np.ndarray
+
+
+class _LinkLostError(Exception):
+    """The TCP connection ended while a request was in flight."""
+
+
+class _Link:
+    """One TCP connection: the sans-IO Connection, the reader task, pending replies."""
+
+    def __init__(
+        self,
+        reader: asyncio.StreamReader,
+        writer: asyncio.StreamWriter,
+        conn: Connection,
+        on_event: Callable[[m.IoEdge], None],
+    ) -> None:
+        self.reader = reader
+        self.writer = writer
+        self.conn = conn
+        self.pending: dict[int, asyncio.Future[m._Message]] = {}
+        self.handshake: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self.closed_reason: str | None = None
+        self._on_event = on_event
+        self.task = asyncio.get_running_loop().create_task(self._read_loop())
+
+    @property
+    def alive(self) -> bool:
+        return self.closed_reason is None and self.conn.state is not ConnectionState.CLOSED
+
+    def send(self, request: m.Request) -> asyncio.Future[m._Message]:
+        data = self.conn.send(request)
+        future: asyncio.Future[m._Message] = asyncio.get_running_loop().create_future()
+        self.pending[request.id] = future
+        self.writer.write(data)
+        return future
+
+    async def _read_loop(self) -> None:
+        reason = "connection closed by the controller"
+        try:
+            while True:
+                try:
+                    data = await self.reader.read(READ_CHUNK)
+                except (ConnectionError, OSError) as exc:
+                    reason = f"connection lost ({exc})"
+                    data = b""
+                events = self.conn.receive_data(data)
+                outgoing = self.conn.data_to_send()
+                if outgoing:
+                    self.writer.write(outgoing)
+                for event in events:
+                    self._dispatch(event)
+                if self.conn.state is ConnectionState.CLOSED:
+                    break
+        finally:
+            self._lost(reason)
+
+    def _dispatch(self, event: object) -> None:
+        if isinstance(event, m.IoEdge):
+            self._on_event(event)
+        elif isinstance(event, (m.Reply, m.ErrorReply)):
+            future = self.pending.pop(event.reply_to, None) if event.reply_to is not None else None
+            if future is not None:
+                if not future.done():
+                    future.set_result(event)
+            elif isinstance(event, m.ErrorReply) and not self.handshake.done():
+                self.handshake.set_exception(_handshake_error(event))
+            elif isinstance(event, m.ErrorReply):
+                logger.warning("controller error %s: %s", event.code, event.message)
+        elif isinstance(event, StateChanged):
+            ready = ConnectionState.READY if self.conn.has_token else ConnectionState.AUTHENTICATING
+            if event.new is ready and not self.handshake.done():
+                self.handshake.set_result(None)
+        elif isinstance(event, Rejected):
+            logger.warning("controller broke the protocol: %s (%s)", event.message, event.code)
+            error = ProtocolViolation(f"controller sent an invalid message: {event.message}")
+            if not self.handshake.done():
+                self.handshake.set_exception(error)
+            future = self.pending.pop(event.reply_to, None) if event.reply_to is not None else None
+            if future is not None and not future.done():
+                future.set_exception(error)
+
+    def _lost(self, reason: str) -> None:
+        if self.closed_reason is None:
+            self.closed_reason = reason
+        if not self.handshake.done():
+            self.handshake.set_exception(ConnectionFailed(f"handshake failed: {reason}"))
+        for future in self.pending.values():
+            if not future.done():
+                future.set_exception(_LinkLostError(reason))
+        self.pending.clear()
+        if not self.writer.is_closing():
+            self.writer.close()
+
+    async def close(self) -> None:
+        self.task.cancel()
+        with contextlib.suppress(asyncio.CancelledError, Exception):
+            await self.task
+        self._lost("closed by the client")
+        with contextlib.suppress(Exception):
+            await self.writer.wait_closed()
+
+
+def _handshake_error(error: m.ErrorReply) -> Exception:
+    text = f"controller refused the session: {error.message} ({error.code})"
+    if error.code in _PROTOCOL_CODES:
+        return ProtocolViolation(text)
+    return ControllerRefusedError(text, error.code, error.reason)
+
+
+class IoEventSubscription:
+    """IO edge events pushed by the controller, in order, from subscription on.
+
+    Use as an async iterator or call `get(timeout)`; `close()` (or leaving an `async with`)
+    unsubscribes. Events arrive only on an authenticated session.
+    """
+
+    def __init__(self, client: ControllerClient, maxsize: int) -> None:
+        self._client = client
+        self.queue: asyncio.Queue[IoEdgeEvent] = asyncio.Queue(maxsize)
+
+    def _put(self, event: IoEdgeEvent) -> None:
+        try:
+            self.queue.put_nowait(event)
+        except asyncio.QueueFull:
+            logger.warning("IO event queue full; dropping edge on line %d", event.line)
+
+    async def get(self, timeout: float | None = None) -> IoEdgeEvent:
+        """The next event; RequestTimeout if none arrives within `timeout` seconds."""
+        try:
+            return await asyncio.wait_for(self.queue.get(), timeout)
+        except TimeoutError:
+            raise RequestTimeout(f"no IO edge event within {timeout} s") from None
+
+    def close(self) -> None:
+        """Stop receiving events."""
+        self._client._subscriptions.discard(self)
+
+    def __aiter__(self) -> AsyncIterator[IoEdgeEvent]:
+        return self
+
+    async def __anext__(self) -> IoEdgeEvent:
+        return await self.queue.get()
+
+    async def __aenter__(self) -> IoEventSubscription:
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        self.close()
+
+
+class _Connect:
+    """`ControllerClient.connect(...)`: await it, or use it as an async context manager."""
+
+    def __init__(self, client: ControllerClient) -> None:
+        self._client = client
+
+    def __await__(self) -> Generator[Any, None, ControllerClient]:
+        return self._open().__await__()
+
+    async def _open(self) -> ControllerClient:
+        await self._client._ensure_link()
+        return self._client
+
+    async def __aenter__(self) -> ControllerClient:
+        return await self._open()
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        await self._client.close()
+
+
+class ControllerClient:
+    """A session with a zerocal controller (see the module docstring).
+
+    token: shared secret (None = read-only session: motions and writes are refused).
+    timeout: default per-request timeout (s); connect_timeout: TCP connect + handshake (s).
+    reconnect_attempts: how often an idempotent request is re-sent after a lost link.
+    """
+
+    def __init__(
+        self,
+        host: str,
+        port: int = DEFAULT_PORT,
+        *,
+        token: str | None = None,
+        timeout: float = 5.0,
+        connect_timeout: float | None = None,
+        reconnect_attempts: int = 3,
+        max_frame_size: int = 256 * 1024 * 1024,
+        client_name: str = "hostpc",
+    ) -> None:
+        self.host = host
+        self.port = port
+        self.token = token
+        self.timeout = timeout
+        self.connect_timeout = connect_timeout if connect_timeout is not None else timeout
+        self.reconnect_attempts = reconnect_attempts
+        self.max_frame_size = max_frame_size
+        self.client_name = client_name
+        self.connections_opened = 0
+        self._link: _Link | None = None
+        self._connecting: asyncio.Lock | None = None
+        self._subscriptions: set[IoEventSubscription] = set()
+
+    @classmethod
+    def connect(
+        cls,
+        host: str,
+        port: int = DEFAULT_PORT,
+        *,
+        token: str | None = None,
+        timeout: float = 5.0,
+        **options: Any,
+    ) -> _Connect:
+        """Open a session: `async with ControllerClient.connect(...) as client` or `await`."""
+        return _Connect(cls(host, port, token=token, timeout=timeout, **options))
+
+    @property
+    def robot_name(self) -> str:
+        """The robot the controller announced in its hello reply."""
+        return self._link.conn.robot_name if self._link is not None else ""
+
+    @property
+    def authenticated(self) -> bool:
+        """True if the current session proved the token."""
+        return self._link is not None and self._link.alive and self._link.conn.authenticated
+
+    async def close(self) -> None:
+        """Close the connection (pending requests fail with ConnectionFailed)."""
+        if self._link is not None:
+            await self._link.close()
+            self._link = None
+
+    # -------------------------------------------------------------------- requests
+
+    async def state(self, timeout: float | None = None) -> ControllerState:
+        """The controller state."""
+        reply = await self._request(lambda i: m.GetState(id=i), m.State, timeout)
+        return ControllerState(
+            robot_name=reply.robot_name,
+            n_joints=reply.n_joints,
+            mode=reply.mode,
+            time=reply.time,
+            q=_array(reply.q),
+            zero_offsets=_array(reply.zero_offsets),
+            q_min=_array(reply.q_min),
+            q_max=_array(reply.q_max),
+            digital_inputs=tuple(reply.digital_inputs),
+            digital_outputs=tuple(reply.digital_outputs),
+            camera=reply.camera,
+            authenticated=reply.authenticated,
+        )
+
+    async def move_joints(self, q: Any, speed: float, timeout: float | None = None) -> MoveOutcome:
+        """Move to q (n,) rad at speed (fraction of max, (0, 1]); returns when it stopped."""
+        q_list = _floats(q)
+        reply = await self._request(
+            lambda i: m.MoveJoints(id=i, q=q_list, speed=speed), m.MoveDone, timeout
+        )
+        return MoveOutcome(reply.completed, _array(reply.q), reply.duration_s, reply.reason)
+
+    async def guarded_move(
+        self, q: Any, speed: float, io_line: int, timeout: float | None = None
+    ) -> GuardedMoveOutcome:
+        """Move toward q (n,) rad until a rising edge on input `io_line`."""
+        q_list = _floats(q)
+        reply = await self._request(
+            lambda i: m.GuardedMove(id=i, q=q_list, speed=speed, io_line=io_line),
+            m.GuardedMoveDone,
+            timeout,
+        )
+        return GuardedMoveOutcome(
+            contact=reply.contact,
+            q_latched=None if reply.q_latched is None else _array(reply.q_latched),
+            q=_array(reply.q),
+            io_line=reply.io_line,
+            duration_s=reply.duration_s,
+            speed_mps=reply.speed_mps,
+            reason=reply.reason,
+        )
+
+    async def capture(
+        self,
+        pattern: str = "target",
+        view: int = 0,
+        *,
+        encoding: str = "raw",
+        timeout: float | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """Expose a stereo pair -> (left (H, W) uint8, right (H, W) uint8, q (n,) rad, t s).
+
+        Raw images are read-only views of the received frame (no copy).
+        """
+        reply = await self._request(
+            lambda i: m.Capture(id=i, pattern=pattern, view=view, encoding=encoding),  # type: ignore[arg-type]
+            m.CaptureDone,
+            timeout,
+        )
+        images = [
+            _decode_image(info, data)
+            for info, data in zip(reply.images, reply.attachments, strict=True)
+        ]
+        by_camera = {info.camera: image for info, image in zip(reply.images, images, strict=True)}
+        if set(by_camera) != {"left", "right"}:
+            raise ProtocolViolation(
+                f"capture reply has cameras {sorted(by_camera)}, not left/right"
+            )
+        return by_camera["left"], by_camera["right"], _array(reply.q), reply.time
+
+    async def read_io(self, timeout: float | None = None) -> IoSnapshot:
+        """Digital inputs and outputs."""
+        reply = await self._request(lambda i: m.ReadIo(id=i), m.IoState, timeout)
+        return IoSnapshot(tuple(reply.digital_inputs), tuple(reply.digital_outputs), reply.time)
+
+    async def get_offsets(self, timeout: float | None = None) -> np.ndarray:
+        """The zero offsets (n,) rad."""
+        reply = await self._request(lambda i: m.GetOffsets(id=i), m.Offsets, timeout)
+        return _array(reply.offsets)
+
+    async def set_offsets(
+        self, offsets: Any, timeout: float | None = None
+    ) -> tuple[np.ndarray, str]:
+        """Write the zero offsets (n,) rad -> (previous offsets (n,), rollback id)."""
+        values = _floats(offsets)
+        reply = await self._request(
+            lambda i: m.SetOffsets(id=i, offsets=values), m.OffsetsSet, timeout
+        )
+        return _array(reply.previous), reply.rollback_id
+
+    async def rollback(self, rollback_id: str, timeout: float | None = None) -> np.ndarray:
+        """Undo the offset write `rollback_id`; returns the offsets now in force (n,) rad."""
+        reply = await self._request(
+            lambda i: m.RollbackOffsets(id=i, rollback_id=rollback_id),
+            m.OffsetsRolledBack,
+            timeout,
+        )
+        return _array(reply.offsets)
+
+    async def abort(self, timeout: float | None = None) -> bool:
+        """Stop the motion in progress; True if one was stopped."""
+        reply = await self._request(lambda i: m.Abort(id=i), m.Aborted, timeout)
+        return reply.was_moving
+
+    async def heartbeat(self, timeout: float | None = None) -> float:
+        """Liveness check; returns the controller's clock (s)."""
+        reply = await self._request(lambda i: m.Heartbeat(id=i), m.HeartbeatReply, timeout)
+        return reply.time
+
+    def subscribe_io(self, maxsize: int = 10000) -> IoEventSubscription:
+        """Receive IO edge events from now on (see IoEventSubscription)."""
+        subscription = IoEventSubscription(self, maxsize)
+        self._subscriptions.add(subscription)
+        return subscription
+
+    # ------------------------------------------------------------------- internals
+
+    async def _request(
+        self,
+        make: Callable[[int], m.Request],
+        reply_type: type[ReplyT],
+        timeout: float | None,
+    ) -> ReplyT:
+        timeout = self.timeout if timeout is None else timeout
+        attempt = 0
+        while True:
+            link = await self._ensure_link()
+            request = make(link.conn.next_id())
+            future = link.send(request)
+            try:
+                reply = await asyncio.wait_for(future, timeout)
+            except TimeoutError:
+                link.pending.pop(request.id, None)
+                raise RequestTimeout(
+                    f"{request.kind} (request {request.id}) got no reply within {timeout} s "
+                    f"from {self.host}:{self.port}"
+                ) from None
+            except _LinkLostError as exc:
+                if request.kind in IDEMPOTENT_KINDS and attempt < self.reconnect_attempts:
+                    attempt += 1
+                    logger.info("link lost during %s (%s); re-sending", request.kind, exc)
+                    await asyncio.sleep(0.05 * attempt)
+                    continue
+                what = (
+                    "not re-sent: it may or may not have been executed"
+                    if request.kind not in IDEMPOTENT_KINDS
+                    else f"gave up after {attempt} reconnections"
+                )
+                raise ConnectionFailed(
+                    f"{exc} at {self.host}:{self.port} during {request.kind}; {what}"
+                ) from None
+            if isinstance(reply, m.ErrorReply):
+                raise _reply_error(request.kind, reply)
+            if not isinstance(reply, reply_type):
+                raise ProtocolViolation(f"{request.kind} answered by {reply.kind}")
+            return reply
+
+    async def _ensure_link(self) -> _Link:
+        if self._link is not None and self._link.alive:
+            return self._link
+        if self._connecting is None:
+            self._connecting = asyncio.Lock()
+        async with self._connecting:
+            if self._link is not None and self._link.alive:
+                return self._link
+            if self._link is not None:
+                await self._link.close()
+                self._link = None
+            self._link = await self._open_link()
+            return self._link
+
+    async def _open_link(self) -> _Link:
+        address = f"{self.host}:{self.port}"
+        try:
+            reader, writer = await asyncio.wait_for(
+                asyncio.open_connection(self.host, self.port, limit=READ_CHUNK),
+                self.connect_timeout,
+            )
+        except TimeoutError:
+            raise ConnectionFailed(
+                f"cannot reach controller at {address}: no answer within {self.connect_timeout} s"
+            ) from None
+        except OSError as exc:
+            detail = os.strerror(exc.errno) if exc.errno else str(exc) or type(exc).__name__
+            raise ConnectionFailed(f"cannot reach controller at {address}: {detail}") from None
+        sock = writer.get_extra_info("socket")
+        if sock is not None:
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        conn = Connection(
+            Role.CLIENT,
+            token=self.token,
+            max_frame_size=self.max_frame_size,
+            client_name=self.client_name,
+        )
+        link = _Link(reader, writer, conn, self._on_io_edge)
+        writer.write(conn.initiate())
+        try:
+            await asyncio.wait_for(asyncio.shield(link.handshake), self.connect_timeout)
+        except TimeoutError:
+            await link.close()
+            raise ConnectionFailed(
+                f"controller at {address} did not complete the handshake within "
+                f"{self.connect_timeout} s"
+            ) from None
+        except BaseException:
+            await link.close()
+            raise
+        self.connections_opened += 1
+        return link
+
+    def _on_io_edge(self, event: m.IoEdge) -> None:
+        edge = IoEdgeEvent(event.line, event.value, event.time, _array(event.q_latched))
+        for subscription in list(self._subscriptions):
+            subscription._put(edge)
+
+
+def _reply_error(kind: str, error: m.ErrorReply) -> Exception:
+    reason = f", reason {error.reason}" if error.reason else ""
+    text = f"controller rejected {kind}: {error.message} (code {error.code}{reason})"
+    if error.code in _PROTOCOL_CODES:
+        return ProtocolViolation(text)
+    return ControllerRefusedError(text, error.code, error.reason)
+
+
+def _array(values: list[float]) -> np.ndarray:
+    return np.asarray(values, dtype=float)
+
+
+def _floats(values: Any) -> list[float]:
+    return [float(v) for v in np.asarray(values, dtype=float).reshape(-1)]
+
+
+def _decode_image(info: m.ImageInfo, data: bytes | memoryview) -> np.ndarray:
+    if info.encoding == "png":
+        import cv2
+
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            raise ProtocolViolation(f"{info.camera} image: PNG cannot be decoded")
+    else:
+        expected = info.width * info.height
+        if memoryview(data).nbytes != expected:
+            raise ProtocolViolation(
+                f"{info.camera} image: {memoryview(data).nbytes} bytes, expected {expected}"
+            )
+        image = np.frombuffer(data, dtype=np.uint8).reshape(info.height, info.width)
+    if image.shape != (info.height, info.width):
+        raise ProtocolViolation(
+            f"{info.camera} image has shape {image.shape}, header says "
+            f"({info.height}, {info.width})"
+        )
+    return image

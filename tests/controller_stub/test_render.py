@@ -1,0 +1,138 @@
+"""Renderer accuracy against OpenCV and exact projections."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import cv2
+import numpy as np
+import pytest
+
+from controller_stub.render import (
+    CameraModel,
+    DiskPattern,
+    Renderer,
+    project_points,
+    undistort_pixels,
+)
+from controller_stub.robot_model import make_transform
+from controller_stub.simulation import Simulation
+
+CAMERA = CameraModel(1280, 1024, 1400.0, 1395.0, 641.3, 509.7, (-0.08, 0.05, 4e-4, -3e-4, 0.01))
+DISK = DiskPattern(radius=0.01, plate_radius=0.05, dot_level=30.0, plate_level=220.0)
+
+
+def test_projection_matches_opencv() -> None:
+    rng = np.random.default_rng(0)
+    pts = np.column_stack([rng.uniform(-0.2, 0.2, (50, 2)), rng.uniform(0.3, 0.9, 50)])
+    ours = project_points(CAMERA, pts)
+    cv, _ = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), CAMERA.K, np.array(CAMERA.distortion))
+    np.testing.assert_allclose(ours, cv.reshape(-1, 2), atol=1e-9)
+
+
+def test_undistort_inverts_distortion() -> None:
+    rng = np.random.default_rng(1)
+    uv = np.column_stack([rng.uniform(0, 1279, 200), rng.uniform(0, 1023, 200)])
+    xy = undistort_pixels(CAMERA, uv)
+    back = project_points(CAMERA, np.column_stack([xy, np.ones(len(xy))]))
+    np.testing.assert_allclose(back, uv, atol=1e-9)
+
+
+def _centroid(img: np.ndarray, centre: np.ndarray, radius_px: float, plate: float) -> np.ndarray:
+    """Intensity-weighted centroid of the dark dot: weights plate - I inside a window."""
+    r = int(radius_px * 1.6)
+    x0, y0 = int(round(centre[0])) - r, int(round(centre[1])) - r
+    win = img[y0 : y0 + 2 * r + 1, x0 : x0 + 2 * r + 1].astype(float)
+    w = np.clip(plate - win, 0.0, None)
+    ys, xs = np.mgrid[0 : win.shape[0], 0 : win.shape[1]]
+    return np.array([np.sum(w * xs) / w.sum() + x0, np.sum(w * ys) / w.sum() + y0])
+
+
+@pytest.mark.parametrize("offset", [(0.0, 0.0), (0.0123, -0.0071), (-0.031, 0.0207)])
+def test_disk_centroid_subpixel_exact(offset: tuple[float, float]) -> None:
+    renderer = Renderer(CAMERA, 0.0, 0.7, 120.0, np.random.default_rng(2))
+    T = make_transform([offset[0], offset[1], 0.3], [0.0, 0.0, 0.3])  # fronto-parallel
+    img = renderer.render_disk(T, DISK)
+    expected = project_points(CAMERA, T[:3, 3][None])[0]
+    found = _centroid(img, expected, 1400 * 0.01 / 0.3, 220.0)
+    assert np.linalg.norm(found - expected) < 0.05, (found, expected)
+
+
+def test_disk_centroid_with_noise() -> None:
+    renderer = Renderer(CAMERA, 2.0, 0.7, 120.0, np.random.default_rng(3))
+    T = make_transform([0.004, -0.003, 0.3], [0.0, 0.0, 0.0])
+    expected = project_points(CAMERA, T[:3, 3][None])[0]
+    errors = [
+        np.linalg.norm(_centroid(renderer.render_disk(T, DISK), expected, 46.7, 220.0) - expected)
+        for _ in range(5)
+    ]
+    assert np.mean(errors) < 0.05
+
+
+def test_disk_moves_with_subpixel_shift() -> None:
+    """A 0.1 px shift of the target moves the centroid by 0.1 px (no pixel locking)."""
+    renderer = Renderer(CAMERA, 0.0, 0.7, 120.0, np.random.default_rng(4))
+    px = 0.3 / 1400.0
+    found = []
+    for k in range(4):
+        T = make_transform([k * 0.1 * px, 0.0, 0.3], [0.0, 0.0, 0.0])
+        expected = project_points(CAMERA, T[:3, 3][None])[0]
+        found.append(_centroid(renderer.render_disk(T, DISK), expected, 46.7, 220.0)[0])
+    np.testing.assert_allclose(np.diff(found), 0.1, atol=0.01)
+
+
+def test_chessboard_corners_found_by_opencv(make_sim: Callable[..., Simulation]) -> None:
+    sim = make_sim(seed=4)
+    corners = sim.chessboard_corners()
+    T_right_left = np.linalg.inv(sim.T_left_right)
+    worst = 0.0
+    for view in range(0, sim.scenario.chessboard.n_views, 7):
+        frame = sim.capture_stereo("chessboard", view)
+        T_left = sim.chessboard_poses()[view]
+        for img, T in ((frame.left, T_left), (frame.right, T_right_left @ T_left)):
+            exact = project_points(sim.camera, corners @ T[:3, :3].T + T[:3, 3])
+            ok, found = cv2.findChessboardCornersSB(img, (9, 6), flags=cv2.CALIB_CB_ACCURACY)
+            assert ok, f"view {view}: board not found"
+            d = np.linalg.norm(found.reshape(-1, 1, 2) - exact[None], axis=2).min(axis=1)
+            worst = max(worst, float(d.max()))
+    assert worst < 0.1, worst
+
+
+def test_chessboard_cornersubpix(make_sim: Callable[..., Simulation]) -> None:
+    sim = make_sim(seed=4)
+    frame = sim.capture_stereo("chessboard", 1)
+    T = sim.chessboard_poses()[1]
+    exact = project_points(sim.camera, sim.chessboard_corners() @ T[:3, :3].T + T[:3, 3])
+    ok, found = cv2.findChessboardCorners(frame.left, (9, 6))
+    assert ok
+    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
+    refined = cv2.cornerSubPix(frame.left, found, (5, 5), (-1, -1), criteria).reshape(-1, 2)
+    d = np.linalg.norm(refined[:, None] - exact[None], axis=2).min(axis=1)
+    assert d.max() < 0.15 and d.mean() < 0.06
+
+
+def test_target_capture_matches_true_projection(
+    make_sim: Callable[..., Simulation], pose_looking_at: Callable[..., np.ndarray]
+) -> None:
+    """The rendered dot is where the TRUE camera pose projects the TRUE target centre."""
+    sim = make_sim(seed=6, camera={"pixel_noise_sigma": 0.0})
+    q = pose_looking_at(sim, sim.target_centre, sim.scenario.target.normal, 0.35)
+    sim.move_joints(q, 0.5)
+    frame = sim.capture_stereo("target")
+    T_base_left = sim.camera_pose()
+    T_left_base = np.linalg.inv(T_base_left)
+    for img, T in (
+        (frame.left, T_left_base),
+        (frame.right, np.linalg.inv(sim.T_left_right) @ T_left_base),
+    ):
+        p = T[:3, :3] @ sim.target_centre + T[:3, 3]
+        expected = project_points(sim.camera, p[None])[0]
+        found = _centroid(img, expected, 1400 * 0.01 / 0.35, 220.0)
+        assert np.linalg.norm(found - expected) < 0.1, (found, expected)
+
+
+def test_target_out_of_view_is_background(make_sim: Callable[..., Simulation]) -> None:
+    sim = make_sim()
+    frame = sim.capture_stereo("target")  # home pose does not look at the target
+    assert abs(float(frame.left.mean()) - 120.0) < 1.0
+    assert frame.left.dtype == np.uint8 and frame.left.shape == (1024, 1280)

@@ -1,0 +1,282 @@
+"""Fuzz a RUNNING controller stub over real loopback sockets.
+
+The stub runs in a background thread with its own event loop; hypothesis throws random
+bytes, truncated frames, huge length prefixes, invalid JSON, wrong field types and unknown
+message kinds at it, each on a fresh connection. Every reply must be valid framing carrying
+valid messages, the connection must end, and a well-behaved client (a plain blocking socket
+driven by `protocol.Connection`) is checked after every example. No hostpc imports.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import socket
+import struct
+import threading
+import typing
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from controller_stub.scenario import scenario_from_dict
+from controller_stub.server import ControllerServer
+from protocol import messages as m
+from protocol.connection import Connection, ConnectionState, Role
+from protocol.framing import MAGIC, FrameDecoder, encode_frame
+
+TOKEN = "fuzz-token"
+SCENARIO = {
+    "camera": {"image_width": 64, "image_height": 48, "fx": 70.0, "fy": 70.0, "cx": 32, "cy": 24},
+    "server": {"token": TOKEN, "max_frame_bytes": 65536},
+}
+
+
+class _ErrorCollector(logging.Handler):
+    """Collects ERROR log records (handler crashes, protocol-layer failures)."""
+
+    def __init__(self, sink: list[str]) -> None:
+        super().__init__(logging.ERROR)
+        self.sink = sink
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.sink.append(record.getMessage())
+
+
+class ThreadedStub:
+    """A ControllerServer on 127.0.0.1:0 served by an event loop in a daemon thread."""
+
+    def __init__(self, scenario: dict[str, Any]) -> None:
+        self.loop = asyncio.new_event_loop()
+        self.unhandled: list[str] = []
+        self.loop.set_exception_handler(lambda _, context: self.unhandled.append(str(context)))
+        self._log_handler = _ErrorCollector(self.unhandled)
+        logging.getLogger("controller_stub").addHandler(self._log_handler)
+        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
+        self.thread.start()
+        self.server = ControllerServer.from_scenario(scenario_from_dict(scenario))
+        self.address = self.call(self.server.start("127.0.0.1", 0))
+
+    def call(self, coroutine: Any) -> Any:
+        return asyncio.run_coroutine_threadsafe(coroutine, self.loop).result(timeout=10)
+
+    def close(self) -> None:
+        logging.getLogger("controller_stub").removeHandler(self._log_handler)
+        self.call(self.server.close())
+        self.loop.call_soon_threadsafe(self.loop.stop)
+        self.thread.join(timeout=5)
+        self.loop.close()
+
+
+class BlockingClient:
+    """A well-behaved client: blocking socket + sans-IO Connection."""
+
+    def __init__(self, address: tuple[str, int], token: str | None = TOKEN) -> None:
+        self.sock = socket.create_connection(address, timeout=5)
+        self.conn = Connection(Role.CLIENT, token=token)
+        self.sock.sendall(self.conn.initiate())
+        target = ConnectionState.READY if token else ConnectionState.AUTHENTICATING
+        while self.conn.state is not target:
+            self._pump()
+
+    def _pump(self) -> list[object]:
+        data = self.sock.recv(1 << 20)
+        if not data:
+            raise ConnectionError("server closed the connection")
+        events = self.conn.receive_data(data)
+        outgoing = self.conn.data_to_send()
+        if outgoing:
+            self.sock.sendall(outgoing)
+        return events
+
+    def request(self, request: m.Request) -> m._Message:
+        self.sock.sendall(self.conn.send(request))
+        while True:
+            for event in self._pump():
+                if getattr(event, "reply_to", None) == request.id:
+                    return typing.cast(m._Message, event)
+
+    def heartbeat(self) -> float:
+        reply = self.request(m.Heartbeat(id=self.conn.next_id()))
+        assert isinstance(reply, m.HeartbeatReply), reply
+        return reply.time
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+@pytest.fixture(scope="module")
+def running_stub() -> Iterator[ThreadedStub]:
+    stub = ThreadedStub(SCENARIO)
+    yield stub
+    stub.close()
+
+
+@pytest.fixture(scope="module")
+def good_client(running_stub: ThreadedStub) -> Iterator[BlockingClient]:
+    client = BlockingClient(running_stub.address)
+    yield client
+    client.close()
+
+
+# ------------------------------------------------------------------------ strategies
+
+ALL_KINDS = sorted(
+    cls.model_fields["kind"].default for cls in typing.get_args(typing.get_args(m.Message)[0])
+)
+FIELD_NAMES = sorted(
+    {
+        name
+        for cls in typing.get_args(typing.get_args(m.Message)[0])
+        for name in cls.model_fields
+        if name != "kind"
+    }
+)
+
+json_values = st.recursive(
+    st.none()
+    | st.booleans()
+    | st.integers(-(2**64), 2**64)
+    | st.floats(allow_nan=False)
+    | st.text(max_size=12),
+    lambda children: (
+        st.lists(children, max_size=4) | st.dictionaries(st.text(max_size=6), children, max_size=4)
+    ),
+    max_leaves=10,
+)
+
+headers = st.builds(
+    lambda kind, fields: {"kind": kind, **fields},
+    st.sampled_from(ALL_KINDS) | st.text(max_size=12),
+    st.dictionaries(st.sampled_from(FIELD_NAMES) | st.text(max_size=8), json_values, max_size=6),
+)
+
+
+def valid_request_frame(kind: str) -> bytes:
+    samples = {
+        "get_state": m.GetState(id=1),
+        "move_joints": m.MoveJoints(id=2, q=[0.0] * 6, speed=0.5),
+        "capture": m.Capture(id=3),
+        "set_offsets": m.SetOffsets(id=4, offsets=[0.0] * 6),
+    }
+    return encode_frame(samples[kind].model_dump_json().encode())
+
+
+payloads = st.one_of(
+    st.binary(max_size=600).map(lambda b: ("random bytes", b)),
+    st.tuples(
+        st.sampled_from(["get_state", "move_joints", "capture", "set_offsets"]),
+        st.floats(0.0, 0.999),
+    ).map(
+        lambda t: (
+            "truncated frame",
+            valid_request_frame(t[0])[: int(t[1] * len(valid_request_frame(t[0])))],
+        )
+    ),
+    st.tuples(st.integers(0, 2**16 - 1), st.integers(65537, 2**32 - 1), st.binary(max_size=64)).map(
+        lambda t: ("huge length prefix", struct.pack(">2sHI", MAGIC, t[0], t[1]) + t[2])
+    ),
+    st.binary(max_size=200).map(lambda b: ("invalid json", encode_frame(b))),
+    headers.map(lambda h: ("fuzzed header", encode_frame(json.dumps(h).encode()))),
+    st.tuples(headers, st.lists(st.binary(max_size=64), max_size=3)).map(
+        lambda t: ("header with attachments", encode_frame(json.dumps(t[0]).encode(), t[1]))
+    ),
+)
+
+
+def open_prelude(address: tuple[str, int], prelude: str) -> socket.socket:
+    """A raw socket that has said nothing, said hello, or authenticated."""
+    if prelude == "none":
+        return socket.create_connection(address, timeout=5)
+    client = BlockingClient(address, token=TOKEN if prelude == "authenticated" else None)
+    return client.sock
+
+
+def read_until_closed(sock: socket.socket) -> bytes:
+    received = bytearray()
+    while True:
+        try:
+            chunk = sock.recv(1 << 20)
+        except ConnectionResetError:
+            break
+        if not chunk:
+            break
+        received += chunk
+    return bytes(received)
+
+
+@settings(
+    max_examples=100,
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
+@given(
+    prelude=st.sampled_from(["none", "hello", "authenticated"]),
+    attack=st.lists(payloads, min_size=1, max_size=3),
+)
+def test_fuzzed_clients_get_errors_or_closed_and_others_keep_working(
+    running_stub: ThreadedStub,
+    good_client: BlockingClient,
+    prelude: str,
+    attack: list[tuple[str, bytes]],
+) -> None:
+    sock = open_prelude(running_stub.address, prelude)
+    try:
+        try:
+            for _, payload in attack:
+                sock.sendall(payload)
+            sock.shutdown(socket.SHUT_WR)
+        except OSError:
+            pass  # the server already closed this connection: allowed
+        sock.settimeout(5)
+        received = read_until_closed(sock)  # must end: the server closes its side
+    finally:
+        sock.close()
+    decoder = FrameDecoder()
+    decoder.feed(received)
+    while (frame := decoder.next_frame()) is not None:
+        message = m.MESSAGE_ADAPTER.validate_json(frame.header)  # replies are valid messages
+        assert not isinstance(message, m.Request)
+        assert getattr(message, "code", None) != "internal"  # no handler crashed
+    assert decoder.buffered == 0  # no partial frame: every reply was complete
+    assert running_stub.unhandled == []  # no session died of an exception, nothing logged
+    # the well-behaved client is unaffected
+    assert good_client.heartbeat() >= 0.0
+
+
+def test_huge_length_prefix_gets_an_error_and_the_server_closes(
+    running_stub: ThreadedStub, good_client: BlockingClient
+) -> None:
+    sock = socket.create_connection(running_stub.address, timeout=5)
+    try:
+        sock.sendall(struct.pack(">2sHI", MAGIC, 0, 2**31))  # never half-closed by us
+        received = read_until_closed(sock)
+    finally:
+        sock.close()
+    decoder = FrameDecoder()
+    decoder.feed(received)
+    frame = decoder.next_frame()
+    assert frame is not None
+    error = m.MESSAGE_ADAPTER.validate_json(frame.header)
+    assert error.kind == "error" and error.code == "frame_too_large"
+    assert good_client.heartbeat() >= 0.0
+
+
+def test_stalled_half_frame_does_not_block_others(
+    running_stub: ThreadedStub, good_client: BlockingClient
+) -> None:
+    stalled = socket.create_connection(running_stub.address, timeout=5)
+    try:
+        stalled.sendall(encode_frame(b'{"kind": "heartbeat", "id": 1}')[:10])
+        fresh = BlockingClient(running_stub.address)
+        try:
+            assert fresh.heartbeat() >= 0.0
+        finally:
+            fresh.close()
+        assert good_client.heartbeat() >= 0.0
+    finally:
+        stalled.close()

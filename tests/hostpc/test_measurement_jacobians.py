@@ -1,0 +1,70 @@
+"""Every analytic derivative of the measurement models against central differences."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hostpc.model.measurement import predict
+from hostpc.model.problem import build_problem
+from tests.support import sphere_dataset
+
+ALL_STEREO = ["joint_offsets", "tool", "target", "base", "geometry", "joint_compliance",
+              "encoder_scale", "transmission_harmonic", "backlash", "depth_scale"]
+ALL_SPHERE = ["joint_offsets", "tool", "sphere", "base", "geometry", "joint_compliance",
+              "encoder_scale", "transmission_harmonic", "backlash"]
+
+
+def central_difference(problem, x: np.ndarray, step: float = 1e-6) -> np.ndarray:  # type: ignore[no-untyped-def]
+    columns = []
+    for k in range(x.size):
+        dx = np.zeros_like(x)
+        dx[k] = step
+        plus, _ = predict(problem, x + dx, jacobian=False)
+        minus, _ = predict(problem, x - dx, jacobian=False)
+        columns.append((plus - minus) / (2 * step))
+    return np.stack(columns, axis=-1)
+
+
+def assert_jacobian_close(problem, analytic: np.ndarray, numeric: np.ndarray) -> None:  # type: ignore[no-untyped-def]
+    """Relative to each column's size, with an absolute floor for columns that are zero by
+    physics (e.g. tau6 = 0 on a UR, whose last link's centre of mass is on its axis): there the
+    central difference is pure rounding noise (~1e-10)."""
+    scale = np.max(np.abs(numeric), axis=(0, 1), keepdims=True)
+    error = np.abs(analytic - numeric) / (scale + 1e-4)
+    worst = np.unravel_index(np.argmax(error), error.shape)
+    assert error.max() < 1e-6, f"worst column {problem.layout.names[worst[2]]}: {error.max()}"
+
+
+def random_parameters(problem, rng: np.random.Generator) -> np.ndarray:  # type: ignore[no-untyped-def]
+    x = np.empty(problem.layout.size)
+    for k, unit in enumerate(problem.layout.units):
+        scale = {"rad": 0.01, "m": 0.003, "1": 1e-3, "rad/(N m)": 1e-4}[unit]
+        x[k] = rng.uniform(-scale, scale)
+    return x
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_stereo_target_jacobian_matches_central_differences(noisy_stereo, seed: int) -> None:
+    problem = build_problem(noisy_stereo.dataset, ALL_STEREO)
+    x = random_parameters(problem, np.random.default_rng(seed))
+    _, analytic = predict(problem, x)
+    numeric = central_difference(problem, x)
+    assert_jacobian_close(problem, analytic, numeric)
+
+
+@pytest.mark.parametrize("robot", ["ur5e", "industrial6"])
+def test_sphere_probe_jacobian_matches_central_differences(robot: str) -> None:
+    problem = build_problem(sphere_dataset(robot), ALL_SPHERE)
+    x = random_parameters(problem, np.random.default_rng(3))
+    _, analytic = predict(problem, x)
+    numeric = central_difference(problem, x)
+    assert_jacobian_close(problem, analytic, numeric)
+
+
+def test_zero_parameters_give_the_nominal_prediction(noisy_stereo) -> None:
+    nominal = build_problem(noisy_stereo.dataset, ["joint_offsets"])
+    everything = build_problem(noisy_stereo.dataset, ALL_STEREO)
+    p_nominal, _ = predict(nominal, np.zeros(nominal.layout.size), jacobian=False)
+    p_all, _ = predict(everything, np.zeros(everything.layout.size), jacobian=False)
+    np.testing.assert_allclose(p_all, p_nominal, atol=1e-15)
