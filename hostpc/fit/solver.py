@@ -109,7 +109,8 @@ def levenberg_marquardt(
     message = "maximum iterations reached"
     converged = False
     iterations = 0
-    for iterations in range(1, max_iterations + 1):
+    while iterations < max_iterations:
+        iterations += 1
         assert current.jacobian is not None
         row_weight = np.repeat(np.sqrt(weights), m)
         J = current.jacobian[:, free_index] * row_weight[:, None]

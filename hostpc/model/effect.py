@@ -71,6 +71,9 @@ class Effect:
     name: ClassVar[str]
     hook: ClassVar[Hook]
     description: ClassVar[str] = ""
+    #: methods the effect applies to (None: all). A sensor effect acts on the method's
+    #: measurement: (N, 3) points for stereo_target, (N, 1) distances for sphere_probe.
+    methods: ClassVar[tuple[str, ...] | None] = None
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         """Local parameter names (without the ``<effect>.`` prefix)."""
@@ -102,13 +105,13 @@ class Effect:
 
     # sensor hook ------------------------------------------------------------------------
     def sensor_apply(self, ctx: ModelContext, p: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """Measured point (N, 3) from the ideal sensor-frame point y (N, 3)."""
+        """Measurement (N, m) from the ideal one y (N, m) (m = 3: sensor-frame point)."""
         raise NotImplementedError
 
     def sensor_jacobians(
         self, ctx: ModelContext, p: np.ndarray, y: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray] | None:
-        """(d out / d y (N, 3, 3), d out / d p (N, 3, P)), or None for numeric ones."""
+        """(d out / d y (N, m, m), d out / d p (N, m, P)), or None for numeric ones."""
         return None
 
     # linear effects ---------------------------------------------------------------------

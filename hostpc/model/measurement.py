@@ -105,10 +105,7 @@ def predict_stereo_target(problem: Problem, x: np.ndarray, jacobian: bool = True
     p_f = np.einsum("nij,nj->ni", R_bf_T, p_b[None, :] - t_bf)
     y = (p_f - t_ft) @ R_ft  # rows: R_ft^T (p_f - t_ft)
     if not jacobian:
-        for term in problem.terms:
-            if term.effect.hook == "sensor":
-                y = term.effect.sensor_apply(problem.context, x[term.slice], y)
-        return y, None
+        return apply_sensor_effects(problem, x, y, None)
     assert d_delta is not None
     n_samples = y.shape[0]
     J = np.zeros((n_samples, 3, x.size))
@@ -127,17 +124,25 @@ def predict_stereo_target(problem: Problem, x: np.ndarray, jacobian: bool = True
         dy_dt, dy_dr = inverse_point_derivatives(y, R_ft, J_r_tool)
         J[:, :, tool.slice.start:tool.slice.start + 3] += dy_dt
         J[:, :, tool.slice.start + 3:tool.slice.stop] += dy_dr
+    return apply_sensor_effects(problem, x, y, J)
+
+
+def apply_sensor_effects(problem: Problem, x: np.ndarray, y: np.ndarray, J: np.ndarray | None
+                         ) -> tuple[np.ndarray, np.ndarray | None]:
+    """Apply the sensor effects in order to the ideal measurement y (N, m), carrying its
+    Jacobian J (N, m, P) through them by the chain rule (J None: values only)."""
     for term in problem.terms:
         if term.effect.hook != "sensor":
             continue
         p = x[term.slice]
-        analytic = term.effect.sensor_jacobians(problem.context, p, y)
-        if analytic is None:
-            d_out_d_p, d_out_d_y = _numeric_sensor_jacobians(term, problem, p, y)
-        else:
-            d_out_d_y, d_out_d_p = analytic
-        J = np.einsum("nij,njp->nip", d_out_d_y, J)
-        J[:, :, term.slice] += d_out_d_p
+        if J is not None:
+            analytic = term.effect.sensor_jacobians(problem.context, p, y)
+            if analytic is None:
+                d_out_d_p, d_out_d_y = _numeric_sensor_jacobians(term, problem, p, y)
+            else:
+                d_out_d_y, d_out_d_p = analytic
+            J = np.einsum("nij,njp->nip", d_out_d_y, J)
+            J[:, :, term.slice] += d_out_d_p
         y = term.effect.sensor_apply(problem.context, p, y)
     return y, J
 
@@ -150,10 +155,11 @@ def _numeric_sensor_jacobians(term: EffectTerm, problem: Problem, p: np.ndarray,
         return np.asarray(term.effect.sensor_apply(problem.context, pp, yy), dtype=float)
 
     d_out_d_p = numeric_jacobian(lambda v: apply(v, y), p)
-    d_out_d_y = np.zeros((y.shape[0], 3, 3))
-    for k in range(3):
+    m = y.shape[1]
+    d_out_d_y = np.zeros((y.shape[0], m, m))
+    for k in range(m):
         h = 1e-7 * max(1.0, float(np.max(np.abs(y[:, k]))))
-        step = np.zeros(3)
+        step = np.zeros(m)
         step[k] = h
         d_out_d_y[:, :, k] = (apply(p, y + step) - apply(p, y - step)) / (2.0 * h)
     return d_out_d_p, d_out_d_y
@@ -175,7 +181,7 @@ def predict_sphere_probe(problem: Problem, x: np.ndarray, jacobian: bool = True
     distance = np.linalg.norm(diff, axis=1)
     prediction = distance[:, None]
     if not jacobian:
-        return prediction, None
+        return apply_sensor_effects(problem, x, prediction, None)
     assert d_delta is not None
     u = diff / distance[:, None]
     n_samples = tip.shape[0]
@@ -189,7 +195,7 @@ def predict_sphere_probe(problem: Problem, x: np.ndarray, jacobian: bool = True
     for name, d_cb_term in d_cb.items():
         span = problem.term(name).slice  # type: ignore[union-attr]
         J[:, 0, span] -= u @ d_cb_term
-    return prediction, J
+    return apply_sensor_effects(problem, x, prediction, J)
 
 
 PREDICTORS = {

@@ -216,8 +216,11 @@ def build_problem(
                 f"effect {effect.name!r} is a frame the dataset marks as known; "
                 "remove it from `known` to estimate it"
             )
-        if effect.hook == "sensor" and dataset.method != "stereo_target":
-            raise EffectError(f"sensor effect {effect.name!r} needs a 3-D point measurement")
+        if effect.methods is not None and dataset.method not in effect.methods:
+            raise EffectError(
+                f"effect {effect.name!r} does not apply to method {dataset.method!r} "
+                f"(only to {', '.join(effect.methods)})"
+            )
         span = slice(start, start + len(local))
         terms.append(EffectTerm(effect=effect, names=local, slice=span))
         slices[effect.name] = span

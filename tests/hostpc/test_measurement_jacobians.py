@@ -12,7 +12,7 @@ from tests.support import sphere_dataset
 ALL_STEREO = ["joint_offsets", "tool", "target", "base", "geometry", "joint_compliance",
               "encoder_scale", "transmission_harmonic", "backlash", "depth_scale"]
 ALL_SPHERE = ["joint_offsets", "tool", "sphere", "base", "geometry", "joint_compliance",
-              "encoder_scale", "transmission_harmonic", "backlash"]
+              "encoder_scale", "transmission_harmonic", "backlash", "trigger_latency"]
 
 
 def central_difference(problem, x: np.ndarray, step: float = 1e-6) -> np.ndarray:  # type: ignore[no-untyped-def]
@@ -39,7 +39,7 @@ def assert_jacobian_close(problem, analytic: np.ndarray, numeric: np.ndarray) ->
 def random_parameters(problem, rng: np.random.Generator) -> np.ndarray:  # type: ignore[no-untyped-def]
     x = np.empty(problem.layout.size)
     for k, unit in enumerate(problem.layout.units):
-        scale = {"rad": 0.01, "m": 0.003, "1": 1e-3, "rad/(N m)": 1e-4}[unit]
+        scale = {"rad": 0.01, "m": 0.003, "1": 1e-3, "rad/(N m)": 1e-4, "s": 1e-3}[unit]
         x[k] = rng.uniform(-scale, scale)
     return x
 

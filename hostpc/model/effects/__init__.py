@@ -9,7 +9,7 @@ from hostpc.model.effects.joint_space import (
     JointOffsets,
     TransmissionHarmonic,
 )
-from hostpc.model.effects.sensor import DepthScale
+from hostpc.model.effects.sensor import DepthScale, TriggerLatency
 
 BUILTIN_EFFECTS = (
     JointOffsets,
@@ -23,6 +23,7 @@ BUILTIN_EFFECTS = (
     TransmissionHarmonic,
     Backlash,
     DepthScale,
+    TriggerLatency,
 )
 
 __all__ = [cls.__name__ for cls in BUILTIN_EFFECTS] + ["BUILTIN_EFFECTS"]

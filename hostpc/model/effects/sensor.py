@@ -16,6 +16,7 @@ class DepthScale(Effect):
     name = "depth_scale"
     hook: ClassVar[Hook] = "sensor"
     description = "stereo depth measured scaled by (1 + s) (baseline or focal length error)"
+    methods = ("stereo_target", "dual_loop")
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         return ["s"]
@@ -33,3 +34,34 @@ class DepthScale(Effect):
         d_out_d_p = np.zeros((n_samples, 3, 1))
         d_out_d_p[:, 2, 0] = y[:, 2]
         return d_out_d_y, d_out_d_p
+
+
+class TriggerLatency(Effect):
+    """Probe trigger latency: the joints are latched `latency` seconds after the contact, so
+    the stylus has travelled speed * latency further into the sphere:
+    measured distance = ideal distance - latency * speed (speed: approach speed, m/s)."""
+
+    name = "trigger_latency"
+    hook: ClassVar[Hook] = "sensor"
+    unit = "s"
+    description = "joints latched late after the probe's contact: overtravel grows with speed"
+    methods = ("sphere_probe",)
+
+    def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
+        return ["latency"]
+
+    def _speed(self, ctx: ModelContext) -> np.ndarray:
+        if "speed" not in ctx.variables:
+            from hostpc.errors import EffectError
+
+            raise EffectError("trigger_latency needs the approach `speed` of every contact")
+        return ctx.variables["speed"]
+
+    def sensor_apply(self, ctx: ModelContext, p: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return y - p[0] * self._speed(ctx)[:, None]
+
+    def sensor_jacobians(
+        self, ctx: ModelContext, p: np.ndarray, y: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        n_samples = y.shape[0]
+        return np.ones((n_samples, 1, 1)), -self._speed(ctx).reshape(n_samples, 1, 1)

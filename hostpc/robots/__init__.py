@@ -1,0 +1,1 @@
+"""Robot adapters: one interface (hostpc.robots.base.RobotAdapter) over every controller."""
