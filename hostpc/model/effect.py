@@ -46,6 +46,22 @@ class ModelContext:
     tau: np.ndarray
     approach: np.ndarray
     variables: Mapping[str, np.ndarray] = field(default_factory=dict)
+    #: name of each column of q_cmd: ("q1", ..., "qn"), or for a kinematic tree
+    #: ("head.q1", "head.q2", "left.q1", ...)
+    joint_labels: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not self.joint_labels:
+            labels = tuple(f"q{i + 1}" for i in range(self.q_cmd.shape[1]))
+            object.__setattr__(self, "joint_labels", labels)
+
+    def per_joint_names(self, letter: str) -> list[str]:
+        """Per-joint parameter names: "c" -> ["c1", ..] (or ["left.c1", ..] on a tree)."""
+        names = []
+        for label in self.joint_labels:
+            prefix, _, joint = label.rpartition(".")
+            names.append(f"{prefix + '.' if prefix else ''}{letter}{joint[1:]}")
+        return names
 
     @property
     def n_samples(self) -> int:

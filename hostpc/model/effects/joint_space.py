@@ -35,7 +35,7 @@ class JointOffsets(_LinearJointEffect):
     description = "constant zero offset of every joint"
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
-        return [f"q{i + 1}" for i in range(ctx.n_joints)]
+        return ctx.per_joint_names("q")
 
     def basis(self, ctx: ModelContext) -> np.ndarray:
         return _diagonal_basis(np.ones_like(ctx.q_cmd))
@@ -49,7 +49,7 @@ class JointCompliance(_LinearJointEffect):
     description = "joints bend under the gravity load torque"
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
-        return [f"c{i + 1}" for i in range(ctx.n_joints)]
+        return ctx.per_joint_names("c")
 
     def basis(self, ctx: ModelContext) -> np.ndarray:
         if not np.all(np.isfinite(ctx.tau)):
@@ -68,7 +68,7 @@ class EncoderScale(_LinearJointEffect):
     description = "joint angle reads scaled by (1 + s)"
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
-        return [f"s{i + 1}" for i in range(ctx.n_joints)]
+        return ctx.per_joint_names("s")
 
     def basis(self, ctx: ModelContext) -> np.ndarray:
         return _diagonal_basis(ctx.q_cmd)
@@ -82,7 +82,7 @@ class Backlash(_LinearJointEffect):
     description = "joint angle depends on the direction of the last motion"
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
-        return [f"b{i + 1}" for i in range(ctx.n_joints)]
+        return ctx.per_joint_names("b")
 
     def basis(self, ctx: ModelContext) -> np.ndarray:
         return _diagonal_basis(ctx.approach)
@@ -98,7 +98,7 @@ class TransmissionHarmonic(_LinearJointEffect):
               ("cos2", np.cos, 2.0))
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
-        return [f"{term}_q{i + 1}" for i in range(ctx.n_joints) for term, _, _ in self._terms]
+        return [f"{term}_{label}" for label in ctx.joint_labels for term, _, _ in self._terms]
 
     def basis(self, ctx: ModelContext) -> np.ndarray:
         n_samples, n_joints = ctx.q_cmd.shape
