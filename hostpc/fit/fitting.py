@@ -63,7 +63,7 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
     ident = analyse(start.jacobian, layout.names, layout.units)
     free = ~ident.fixed
     outcome = levenberg_marquardt(problem, x_start, free, loss=loss, loss_scale=loss_scale,
-                                  max_iterations=max_iterations)
+                                  max_iterations=max_iterations, initial=start)
     final = outcome.evaluation
     assert final.jacobian is not None
     m = problem.measured.shape[1]

@@ -100,7 +100,7 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], units: Sequence[str],
     Jn = np.where(dead[None, :], 0.0, jacobian / scale)
     if n_params == 0:
         return Identifiability(0, np.zeros(0), 1.0, np.zeros(0, bool), ())
-    _, s, Vt = np.linalg.svd(Jn, full_matrices=True)
+    _, s, Vt = np.linalg.svd(Jn, full_matrices=Jn.shape[0] < n_params)
     s_full = np.zeros(n_params)
     s_full[: s.size] = s
     s_rel = s_full / max(s_full[0], 1e-300)
@@ -125,6 +125,9 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], units: Sequence[str],
             fixed[index] = True
             directions.append(_describe(names, units, int(index), physical[:, column]))
     free = ~fixed
-    s_free = np.linalg.svd(Jn[:, free], compute_uv=False) if np.any(free) else np.ones(1)
+    if not np.any(fixed):
+        s_free = s_full
+    else:
+        s_free = np.linalg.svd(Jn[:, free], compute_uv=False) if np.any(free) else np.ones(1)
     condition = float(s_free[0] / max(s_free[-1], 1e-300))
     return Identifiability(rank, s_rel, condition, fixed, tuple(directions))

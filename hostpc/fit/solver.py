@@ -48,10 +48,10 @@ def evaluate(problem: Problem, x: np.ndarray, jacobian: bool = True) -> Evaluati
     predicted, d_predicted = predict(problem, x, jacobian)
     raw = problem.measured - predicted
     W = problem.sqrt_information
-    whitened = np.einsum("nij,nj->ni", W, raw)
+    whitened = (W @ raw[:, :, None])[:, :, 0]
     J = None
     if d_predicted is not None:
-        J = -np.einsum("nij,njp->nip", W, d_predicted).reshape(-1, x.size)
+        J = -(W @ d_predicted).reshape(-1, x.size)
     return Evaluation(x=x, raw=raw, whitened=whitened, jacobian=J)
 
 
@@ -89,7 +89,8 @@ def levenberg_marquardt(
     loss_scale: float = 3.0,
     max_iterations: int = 100,
     step_tolerance: float = 1e-12,
-    cost_tolerance: float = 1e-15,
+    cost_tolerance: float = 1e-10,
+    initial: Evaluation | None = None,
 ) -> SolverOutcome:
     """Minimise the (robust) whitened cost over the free parameters, starting at x0.
 
@@ -99,7 +100,8 @@ def levenberg_marquardt(
     x = np.array(x0, dtype=float)
     free_index = np.flatnonzero(free)
     m = problem.measured.shape[1]
-    current = evaluate(problem, x)
+    reuse = initial is not None and initial.jacobian is not None and np.array_equal(initial.x, x)
+    current = initial if reuse else evaluate(problem, x)  # type: ignore[assignment]
     weights = robust_weights(current.whitened, loss, loss_scale)
     cost = robust_cost(current.whitened, loss, loss_scale)
     if free_index.size == 0:
@@ -125,11 +127,15 @@ def levenberg_marquardt(
                 mu *= nu
                 nu *= 2.0
                 continue
+            predicted_gain = 0.5 * float(step @ (mu * diag * step - g))
+            if predicted_gain <= cost_tolerance * cost:
+                message = "converged: the model predicts no further decrease of the cost"
+                converged = True
+                break
             x_trial = x.copy()
             x_trial[free_index] += step
             trial = evaluate(problem, x_trial)
             trial_cost = robust_cost(trial.whitened, loss, loss_scale)
-            predicted_gain = 0.5 * float(step @ (mu * diag * step - g))
             actual_gain = cost - trial_cost
             if actual_gain > 0.0 and np.all(np.isfinite(trial.whitened)):
                 rho = actual_gain / max(predicted_gain, 1e-300)

@@ -29,29 +29,40 @@ def _term_params(term: EffectTerm | None, x: np.ndarray) -> np.ndarray | None:
 
 
 def kinematic_deltas(problem: Problem, x: np.ndarray, jacobian: bool
-                     ) -> tuple[np.ndarray, np.ndarray | None]:
-    """Per-pose kinematic deltas (N, 5n) and their derivative by x (N, 5n, P)."""
+                     ) -> tuple[np.ndarray, np.ndarray | None, slice]:
+    """Per-pose kinematic deltas (N, 5n), their derivative by x (N, k, P) over the rows
+    that effects touch, and that row slice (the theta rows only, unless a geometry effect)."""
     ctx = problem.context
     n_samples, n_joints = ctx.q_cmd.shape
+    geometric = any(t.effect.hook == "geometry" for t in problem.terms)
+    rows = slice(0, 5 * n_joints) if geometric else slice(0, n_joints)
     delta = np.zeros((n_samples, 5 * n_joints))
-    d_delta = np.zeros((n_samples, 5 * n_joints, x.size)) if jacobian else None
-    for term in problem.terms:
+    d_delta = np.zeros((n_samples, rows.stop, x.size)) if jacobian else None
+    for term, basis in zip(problem.terms, problem.linear_bases or (None,) * len(problem.terms),
+                           strict=False):
+        hook = term.effect.hook
+        if hook not in ("joint", "geometry"):
+            continue
         p = x[term.slice]
-        if term.effect.hook == "joint":
-            delta[:, :n_joints] += term.effect.joint_delta(ctx, p)
+        target = slice(0, n_joints) if hook == "joint" else slice(0, 5 * n_joints)
+        if basis is not None:
+            delta[:, target] += basis @ p
             if d_delta is not None:
-                J = term.effect.joint_jacobian(ctx, p)
-                if J is None:
-                    J = numeric_jacobian(lambda v, e=term.effect: e.joint_delta(ctx, v), p)
-                d_delta[:, :n_joints, term.slice] += J
-        elif term.effect.hook == "geometry":
-            delta += term.effect.kinematic_delta(ctx, p)
-            if d_delta is not None:
-                J = term.effect.kinematic_jacobian(ctx, p)
-                if J is None:
-                    J = numeric_jacobian(lambda v, e=term.effect: e.kinematic_delta(ctx, v), p)
-                d_delta[:, :, term.slice] += J
-    return delta, d_delta
+                d_delta[:, target, term.slice] += basis
+            continue
+        if hook == "joint":
+            delta[:, target] += term.effect.joint_delta(ctx, p)
+            J = term.effect.joint_jacobian(ctx, p) if d_delta is not None else None
+            if d_delta is not None and J is None:
+                J = numeric_jacobian(lambda v, e=term.effect: e.joint_delta(ctx, v), p)
+        else:
+            delta[:, target] += term.effect.kinematic_delta(ctx, p)
+            J = term.effect.kinematic_jacobian(ctx, p) if d_delta is not None else None
+            if d_delta is not None and J is None:
+                J = numeric_jacobian(lambda v, e=term.effect: e.kinematic_delta(ctx, v), p)
+        if d_delta is not None:
+            d_delta[:, target, term.slice] += J
+    return delta, d_delta, rows
 
 
 def _frame_pose(problem: Problem, name: str, x: np.ndarray):  # type: ignore[no-untyped-def]
@@ -93,7 +104,7 @@ def predict_stereo_target(problem: Problem, x: np.ndarray, jacobian: bool = True
                           ) -> tuple[np.ndarray, np.ndarray | None]:
     """Predicted target point in the sensor frame (N, 3) and d/dx (N, 3, P)."""
     chain = problem.chain
-    delta, d_delta = kinematic_deltas(problem, x, jacobian)
+    delta, d_delta, rows = kinematic_deltas(problem, x, jacobian)
     poses = forward(chain, problem.context.q_cmd, delta)
     T_bf = poses.T_base_flange
     R_bf, t_bf = T_bf[:, :3, :3], T_bf[:, :3, 3]
@@ -112,13 +123,12 @@ def predict_stereo_target(problem: Problem, x: np.ndarray, jacobian: bool = True
     # kinematic parameters: moving the flange by a screw moves the fixed target point the
     # opposite way in the flange frame: dp_f = -R_bf^T (w x (p_b - c)) or -R_bf^T v
     S = screws(chain, poses)
-    d_pb_world_dkin = point_jacobian(S, np.broadcast_to(p_b, (n_samples, 3)))
+    d_pb_world_dkin = point_jacobian(S, np.broadcast_to(p_b, (n_samples, 3)))[:, :, rows]
     A = R_ft.T @ R_bf_T  # (N, 3, 3): d y / d p_b  (and -d y / d (flange motion))
-    d_y_dkin = -np.einsum("nij,njk->nik", A, d_pb_world_dkin)
-    J += np.einsum("nik,nkp->nip", d_y_dkin, d_delta)
+    J -= (A @ d_pb_world_dkin) @ d_delta
     for name, d_pb_term in d_pb.items():
         span = problem.term(name).slice  # type: ignore[union-attr]
-        J[:, :, span] += np.einsum("nij,jp->nip", A, d_pb_term)
+        J[:, :, span] += A @ d_pb_term
     tool = problem.term("tool")
     if tool is not None:
         dy_dt, dy_dr = inverse_point_derivatives(y, R_ft, J_r_tool)
@@ -169,7 +179,7 @@ def predict_sphere_probe(problem: Problem, x: np.ndarray, jacobian: bool = True
                          ) -> tuple[np.ndarray, np.ndarray | None]:
     """Predicted tip-to-centre distance (N, 1) and d/dx (N, 1, P)."""
     chain = problem.chain
-    delta, d_delta = kinematic_deltas(problem, x, jacobian)
+    delta, d_delta, rows = kinematic_deltas(problem, x, jacobian)
     poses = forward(chain, problem.context.q_cmd, delta)
     T_bf = poses.T_base_flange
     R_bf, t_bf = T_bf[:, :3, :3], T_bf[:, :3, 3]
@@ -186,9 +196,9 @@ def predict_sphere_probe(problem: Problem, x: np.ndarray, jacobian: bool = True
     u = diff / distance[:, None]
     n_samples = tip.shape[0]
     J = np.zeros((n_samples, 1, x.size))
-    d_tip_dkin = point_jacobian(screws(chain, poses), tip)
-    d_dist_dkin = np.einsum("ni,nik->nk", u, d_tip_dkin)
-    J[:, 0, :] += np.einsum("nk,nkp->np", d_dist_dkin, d_delta)
+    d_tip_dkin = point_jacobian(screws(chain, poses), tip)[:, :, rows]
+    d_dist_dkin = (u[:, None, :] @ d_tip_dkin)  # (N, 1, k)
+    J += d_dist_dkin @ d_delta
     tool = problem.term("tool")
     if tool is not None:
         J[:, 0, tool.slice] += np.einsum("ni,nij->nj", u, R_bf)

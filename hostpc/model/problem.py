@@ -68,6 +68,9 @@ class Problem:
     measured: np.ndarray
     sqrt_information: np.ndarray
     plugins: tuple[str, ...] = field(default=())
+    #: per term: the constant basis of a linear joint/geometry effect (delta = basis @ p),
+    #: computed once here, or None
+    linear_bases: tuple[np.ndarray | None, ...] = field(default=())
 
     @property
     def method(self) -> str:
@@ -228,6 +231,11 @@ def build_problem(
         all_units += list(units)
         start += len(local)
     measured, W = _measurements(dataset)
+    bases = tuple(
+        np.ascontiguousarray(term.effect.basis(context))
+        if term.effect.is_linear and term.effect.hook in ("joint", "geometry") else None
+        for term in terms
+    )
     return Problem(
         dataset=dataset,
         chain=chain,
@@ -237,4 +245,5 @@ def build_problem(
         measured=measured,
         sqrt_information=W,
         plugins=plugins,
+        linear_bases=bases,
     )
