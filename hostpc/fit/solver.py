@@ -106,7 +106,7 @@ def levenberg_marquardt(
     cost = robust_cost(current.whitened, loss, loss_scale)
     if free_index.size == 0:
         return SolverOutcome(x, current, weights, True, 0, "nothing to fit", cost)
-    mu = 1e-3
+    mu = 1e-6
     nu = 2.0
     message = "maximum iterations reached"
     converged = False
