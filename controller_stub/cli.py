@@ -1,12 +1,16 @@
 """`controller-stub` command line: run the simulated controller.
 
     controller-stub serve [--scenario FILE] [--host 127.0.0.1] [--port 47800]
-                          [--truth-out FILE] [--modbus-port PORT] [--log-level LEVEL]
+                          [--truth-out FILE] [--modbus-port PORT] [--ur] [--log-level LEVEL]
 
 `serve` prints exactly `listening on HOST:PORT` (flushed) once it accepts connections; with
 `--port 0` the OS picks a free port and that line tells which. With `--modbus-port` the
 digital IO is also served over Modbus TCP (0, the default, means no Modbus server); the
-line `modbus on HOST:PORT` is printed before `listening on`. Errors are one line on stderr.
+line `modbus on HOST:PORT` is printed before `listening on`. With `--ur` the same simulated
+robot is also served as a Universal Robots controller (RTDE 30004, dashboard 29999, script
+port 30003 on --host; fixed ports, see docs/robots.md) and the line
+`ur on HOST (rtde 30004, dashboard 29999, script 30003)` is printed before `listening on`.
+Errors are one line on stderr.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import logging
 import signal
 import sys
 from pathlib import Path
+from typing import Any
 
 from protocol import DEFAULT_PORT
 
@@ -41,6 +46,12 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument(
         "--modbus-port", type=int, default=0, help="Modbus TCP port for the IO (default 0 = off)"
     )
+    serve.add_argument(
+        "--ur",
+        action="store_true",
+        help="also serve the robot as a Universal Robots controller (RTDE 30004, dashboard "
+        "29999, script 30003) for ur_rtde",
+    )
     serve.add_argument("--log-level", default="WARNING", help="Python logging level")
     return parser
 
@@ -58,6 +69,7 @@ async def _serve(args: argparse.Namespace) -> int:
     scenario = _load_scenario(args.scenario)
     server = ControllerServer.from_scenario(scenario, truth_out=args.truth_out)
     modbus: ModbusIoServer | None = None
+    ur: Any = None
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for signum in (signal.SIGINT, signal.SIGTERM):
@@ -68,10 +80,26 @@ async def _serve(args: argparse.Namespace) -> int:
             modbus = ModbusIoServer(server.sim, host=args.host, port=args.modbus_port)
             host, port = await modbus.start()
             print(f"modbus on {host}:{port}", flush=True)
+        if args.ur:
+            from controller_stub.ur import UrPersonality
+
+            try:
+                ur = UrPersonality(server.sim, server)
+            except ValueError as exc:
+                print(f"controller-stub serve: error: --ur: {exc}", file=sys.stderr)
+                return 2
+            ports = await ur.start(args.host)
+            print(
+                f"ur on {args.host} (rtde {ports['rtde'][1]}, dashboard {ports['dashboard'][1]}, "
+                f"script {ports['script'][1]})",
+                flush=True,
+            )
         host, port = await server.start(args.host, args.port)
         print(f"listening on {host}:{port}", flush=True)
         await stop.wait()
     finally:
+        if ur is not None:
+            await ur.close()
         await server.close()
         if modbus is not None:
             await modbus.close()

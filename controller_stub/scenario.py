@@ -19,9 +19,10 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-RobotName = Literal["ur5e", "ur10e", "industrial6"]
+RobotName = Literal["ur5e", "ur10e", "industrial6", "humanoid_upper"]
 
-ROBOT_JOINTS: dict[str, int] = {"ur5e": 6, "ur10e": 6, "industrial6": 6}
+ROBOT_JOINTS: dict[str, int] = {"ur5e": 6, "ur10e": 6, "industrial6": 6,
+                                "humanoid_upper": 16}  # head 2 + left 7 + right 7
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 NonNegative = Annotated[float, Field(ge=0.0)]
@@ -213,6 +214,30 @@ class FaultSpec(_Model):
     estop_after_moves: Annotated[int, Field(ge=0)] | None = None
 
 
+class HumanoidSpec(_Model):
+    """The humanoid_upper world (robot: humanoid_upper; controller_stub/humanoid.py).
+
+    Hidden truth deltas of the dual_loop frames (nominal values: the design in
+    humanoid.py): poses T_true = T_nom @ [R(rpy), xyz]; points p_true = p_nom + error (m,
+    in the flange frame). The head camera is a rectified stereo pair (focal_px, baseline,
+    principal point at the image centre) whose target centroids carry Gaussian pixel noise
+    pixel_sigma (px, each image coordinate).
+    """
+
+    camera_error: PoseSpec = PoseSpec(xyz=[0.0015, -0.001, 0.002], rpy=[0.004, -0.003, 0.005])
+    left_base_error: PoseSpec = PoseSpec(xyz=[-0.002, 0.0015, 0.001],
+                                         rpy=[-0.003, 0.002, 0.004])
+    right_base_error: PoseSpec = PoseSpec(xyz=[0.001, -0.002, -0.0015],
+                                          rpy=[0.002, 0.004, -0.003])
+    left_target_error: Vec3 = [0.0008, -0.0006, 0.001]
+    right_target_error: Vec3 = [-0.0007, 0.0009, -0.0005]
+    focal_px: Annotated[float, Field(gt=0.0)] = 1400.0
+    baseline: Annotated[float, Field(gt=0.0)] = 0.12
+    image_width: Annotated[int, Field(ge=16, le=8192)] = 1280
+    image_height: Annotated[int, Field(ge=16, le=8192)] = 1024
+    pixel_sigma: NonNegative = 0.15
+
+
 class Scenario(_Model):
     """The whole simulated world. See the module docstring."""
 
@@ -226,6 +251,7 @@ class Scenario(_Model):
     motion: MotionSpec = MotionSpec()
     server: ServerSpec = ServerSpec()
     faults: FaultSpec = FaultSpec()
+    humanoid: HumanoidSpec = HumanoidSpec()
 
     @model_validator(mode="after")
     def _check_lengths(self) -> Scenario:

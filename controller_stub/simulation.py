@@ -138,6 +138,17 @@ def _pose_dict(T: np.ndarray) -> dict[str, list[float]]:
     return {"xyz": T[:3, 3].tolist(), "rpy": matrix_to_rpy(T[:3, :3]).tolist()}
 
 
+def create_simulation(scenario: Scenario) -> Any:
+    """The simulation of `scenario`: a `Simulation`, or for robot "humanoid_upper" a
+    `controller_stub.humanoid.HumanoidSimulation` (the same contract over the combined
+    16-joint vector, plus `measure_targets()`)."""
+    if scenario.robot == "humanoid_upper":
+        from controller_stub.humanoid import HumanoidSimulation
+
+        return HumanoidSimulation(scenario)
+    return Simulation(scenario)
+
+
 class Simulation:
     """The simulated controller's world. See the module docstring for the contract.
 
@@ -661,6 +672,14 @@ class Simulation:
                 "rows": board.rows,
                 "square_size": board.square_size,
                 "n_views": board.n_views,
+            },
+            "probe": {
+                "tip_nominal": list(sc.probe.tip),
+                "stylus_radius": sc.probe.stylus_radius,
+                "sphere_centre_nominal": list(sc.probe.sphere_centre),
+                "sphere_radius": sc.probe.sphere_radius,
+                "io_line": sc.probe.io_line,
+                "repeatability": sc.probe.repeatability_sigma,
             },
         }
 

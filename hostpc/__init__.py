@@ -7,7 +7,8 @@
 """
 
 from hostpc.dataset import load_dataset, save_dataset
+from hostpc.diagnose import Diagnosis, diagnose
 from hostpc.fit import FitResult, fit
 
-__all__ = ["load_dataset", "save_dataset", "fit", "FitResult"]
+__all__ = ["load_dataset", "save_dataset", "fit", "FitResult", "diagnose", "Diagnosis"]
 __version__ = "0.1.0"

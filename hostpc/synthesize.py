@@ -146,7 +146,8 @@ def synthesize_stereo_target(
     approach = approach_signs(q, rng)
     temperature = 21.0 + 0.002 * t
     placeholder = Samples(q=q, p=np.zeros((n_samples, 3)),
-                          cov=np.broadcast_to(np.eye(3) * 1e-8, (n_samples, 3, 3)))
+                          cov=np.broadcast_to(np.eye(3) * 1e-8, (n_samples, 3, 3)),
+                          t=t, approach=approach, temperature=temperature)
     dataset = Dataset(method="stereo_target", robot=RobotDescription(name=robot),
                       frames={"tool": tool, "target": target}, samples=placeholder)
     effects = tuple(dict.fromkeys(name.split(".", 1)[0] for name in truth))

@@ -59,7 +59,8 @@ class Request(_Message):
 
     id: RequestId
     read_only: ClassVar[bool] = False
-    """True if the request neither moves the robot nor writes state (allowed before auth)."""
+    """True if the request is allowed before auth: a cheap read that neither moves the robot
+    nor writes state (`capture` is a read but not cheap, so it needs auth)."""
 
 
 class Reply(_Message):
@@ -233,10 +234,13 @@ class Aborted(Reply):
 
 
 class Capture(Request):
-    """Expose the stereo pair: pattern "target" or "chessboard" (view index for the latter)."""
+    """Expose the stereo pair: pattern "target" or "chessboard" (view index for the latter).
+
+    Needs an authenticated session: rendering and sending megabytes of pixels is the most
+    expensive thing a controller does, so it is not offered to anonymous peers.
+    """
 
     kind: Literal["capture"] = "capture"
-    read_only: ClassVar[bool] = True
     pattern: Pattern = "target"
     view: Annotated[int, Field(ge=0)] = 0
     encoding: ImageEncoding = "raw"

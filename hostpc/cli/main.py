@@ -14,7 +14,7 @@ import sys
 
 from hostpc.errors import ZerocalError
 
-COMMAND_MODULES = ("fit", "status")
+COMMAND_MODULES = ("fit", "status", "diagnose", "calibrate", "rollback", "stereo_calibrate")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -51,6 +51,11 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"hostpc {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # e.g. `hostpc fit ... | head`: the reader went away
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -10,7 +11,7 @@ import numpy as np
 
 from hostpc.dataset import Dataset
 from hostpc.errors import InputError
-from hostpc.fit.identifiability import analyse
+from hostpc.fit.identifiability import Identifiability, analyse
 from hostpc.fit.result import CORRELATION_THRESHOLD, FitResult
 from hostpc.fit.solver import Loss, evaluate, levenberg_marquardt
 from hostpc.model.problem import Problem, build_problem
@@ -54,13 +55,20 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
           loss_scale: float = 3.0, cv_folds: int = DEFAULT_CV_FOLDS,
           max_iterations: int = 100) -> FitResult:
     """Fit a built problem and return a frozen FitResult (never raises on poor data)."""
+    if cv_folds < 0 or cv_folds == 1:
+        raise InputError(f"cv_folds must be 0 (no cross-validation) or at least 2, got {cv_folds}")
     layout = problem.layout
     x_start = np.zeros(layout.size) if x0 is None else np.asarray(x0, dtype=float).copy()
     if x_start.shape != (layout.size,):
         raise InputError(f"x0 must have {layout.size} values, got {x_start.shape}")
     start = evaluate(problem, x_start)
     assert start.jacobian is not None
-    ident = analyse(start.jacobian, layout.names, layout.units)
+    finite = bool(np.all(np.isfinite(start.jacobian)) and np.all(np.isfinite(start.whitened)))
+    if finite:
+        ident = analyse(start.jacobian, layout.names, layout.units)
+    else:  # reported through the solver's "failed" status; nothing can be analysed
+        ident = Identifiability(0, np.zeros(layout.size), math.nan,
+                                np.zeros(layout.size, dtype=bool), ())
     free = ~ident.fixed
     outcome = levenberg_marquardt(problem, x_start, free, loss=loss, loss_scale=loss_scale,
                                   max_iterations=max_iterations, initial=start)
@@ -70,8 +78,10 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
     row_weight = np.repeat(np.sqrt(outcome.weights), m)
     J_free = final.jacobian[:, free] * row_weight[:, None]
     covariance = np.zeros((layout.size, layout.size))
-    if np.any(free):
+    if np.any(free) and np.all(np.isfinite(J_free)):
         covariance[np.ix_(free, free)] = _covariance(J_free)
+    elif np.any(free):
+        covariance[np.ix_(free, free)] = np.nan
     std = np.sqrt(np.diag(covariance))
     std[~free] = np.nan
     correlations = []
@@ -84,7 +94,8 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
     correlations.sort(key=lambda c: -abs(c[2]))
     norms = np.linalg.norm(final.raw, axis=1)
     n_rows = final.whitened.size
-    cv = cross_validated_rms(problem, outcome.x, free, cv_folds, loss, loss_scale)
+    cv = (cross_validated_rms(problem, outcome.x, free, cv_folds, loss, loss_scale)
+          if outcome.converged else None)
     return FitResult(
         problem=problem,
         x=outcome.x,

@@ -20,6 +20,7 @@ import numpy as np
 import scipy.linalg
 
 RELATIVE_RANK_TOLERANCE = 1e-7
+MIN_GAUGE_SPAN = 0.2
 FIX_PRIORITY = {"geometry": 3, "joint_offsets": 2}
 FRAME_EFFECTS = ("tool", "target", "base", "sphere", "camera", "left_base", "right_base",
                  "left_target", "right_target")
@@ -110,11 +111,16 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], units: Sequence[str],
     directions: list[NullDirection] = []
     if null_basis.shape[1]:
         participation = np.linalg.norm(null_basis, axis=1)
-        weight = np.where(participation > 1e-3, 10.0 ** np.array([_priority(n) for n in names]), 0)
+        # prefer by priority only among parameters that take a real part in the null space
+        strong = participation >= 0.1 * participation.max()
+        priority = np.array([_priority(n) for n in names], dtype=float)
+        weight = np.where(strong, 10.0**priority, 1e-3)
         _, _, pivots = scipy.linalg.qr(null_basis.T * weight[None, :], pivoting=True)
         chosen = list(pivots[: null_basis.shape[1]])
         block = null_basis[chosen, :]
-        if np.linalg.cond(block) > 1e8:  # preference made a poor choice: plain pivoting
+        # the basis is orthonormal: the held set spans the null space well when the block's
+        # smallest singular value is not small; otherwise fall back to plain pivoting
+        if np.linalg.svd(block, compute_uv=False).min() < MIN_GAUGE_SPAN:
             _, _, pivots = scipy.linalg.qr(null_basis.T, pivoting=True)
             chosen = list(pivots[: null_basis.shape[1]])
             block = null_basis[chosen, :]

@@ -63,6 +63,13 @@ class FitResult:
     cv_folds: int
     loss: str
 
+    def __post_init__(self) -> None:
+        for name in ("x", "std", "fixed", "covariance", "residuals_raw", "residuals_whitened",
+                     "weights", "singular_values"):
+            array = np.array(getattr(self, name), copy=True)
+            array.setflags(write=False)
+            object.__setattr__(self, name, array)
+
     @property
     def names(self) -> tuple[str, ...]:
         return self.problem.layout.names

@@ -106,6 +106,9 @@ def levenberg_marquardt(
     cost = robust_cost(current.whitened, loss, loss_scale)
     if free_index.size == 0:
         return SolverOutcome(x, current, weights, True, 0, "nothing to fit", cost)
+    # residuals below this are rounding noise of the predictions: an exact fit
+    measured = (problem.sqrt_information @ problem.measured[:, :, None])[:, :, 0]
+    round_off_cost = 0.5 * float(np.sum(measured**2)) * (64 * np.finfo(float).eps) ** 2
     mu = 1e-6
     nu = 2.0
     message = "maximum iterations reached"
@@ -117,10 +120,25 @@ def levenberg_marquardt(
         row_weight = np.repeat(np.sqrt(weights), m)
         J = current.jacobian[:, free_index] * row_weight[:, None]
         r = current.whitened.ravel() * row_weight
+        if not (np.all(np.isfinite(J)) and np.all(np.isfinite(r))):
+            message = "failed: the model gives non-finite residuals or derivatives"
+            break
         A = J.T @ J
         g = J.T @ r
         diag = np.maximum(np.diag(A), 1e-30)
-        while True:
+        # converged when even an undamped Gauss-Newton step would gain (almost) nothing
+        try:
+            gauss_newton_gain = 0.5 * float(g @ np.linalg.solve(A + 1e-12 * np.diag(diag), g))
+        except np.linalg.LinAlgError:
+            gauss_newton_gain = np.inf
+        if cost <= round_off_cost:
+            message, converged = "converged: exact fit (residuals at rounding level)", True
+            break
+        if gauss_newton_gain <= cost_tolerance * cost:
+            message, converged = "converged: no step can decrease the cost further", True
+            break
+        accepted = False
+        while mu <= 1e16:
             try:
                 step = -np.linalg.solve(A + mu * np.diag(diag), g)
             except np.linalg.LinAlgError:
@@ -128,37 +146,31 @@ def levenberg_marquardt(
                 nu *= 2.0
                 continue
             predicted_gain = 0.5 * float(step @ (mu * diag * step - g))
-            if predicted_gain <= cost_tolerance * cost:
-                message = "converged: the model predicts no further decrease of the cost"
-                converged = True
-                break
             x_trial = x.copy()
             x_trial[free_index] += step
             trial = evaluate(problem, x_trial)
             trial_cost = robust_cost(trial.whitened, loss, loss_scale)
             actual_gain = cost - trial_cost
-            if actual_gain > 0.0 and np.all(np.isfinite(trial.whitened)):
+            if actual_gain > 0.0 and np.isfinite(trial_cost):
                 rho = actual_gain / max(predicted_gain, 1e-300)
                 mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
                 nu = 2.0
-                break
-            small_step = np.linalg.norm(step) <= step_tolerance * (np.linalg.norm(x) + 1e-9)
-            if small_step or mu > 1e16:
-                message = "converged: no further decrease of the cost"
-                converged = True
+                accepted = True
                 break
             mu *= nu
             nu *= 2.0
-        if converged:
+        if not accepted:
+            if cost <= 1e6 * round_off_cost:
+                message, converged = "converged: exact fit (residuals at rounding level)", True
+            else:
+                message = ("stalled: no step along the model's gradient decreases the cost "
+                           "(an effect's Jacobian may be wrong)")
             break
-        relative_gain = (cost - trial_cost) / max(cost, 1e-300)
         x, current, cost = x_trial, trial, trial_cost
         weights = robust_weights(current.whitened, loss, loss_scale)
         cost = robust_cost(current.whitened, loss, loss_scale)
-        if np.linalg.norm(step) <= step_tolerance * (np.linalg.norm(x) + step_tolerance):
+        small = np.linalg.norm(step) <= step_tolerance * (np.linalg.norm(x) + step_tolerance)
+        if small and mu < 1.0:  # a tiny step that damping did not force: at the minimum
             message, converged = "converged: step below tolerance", True
-            break
-        if relative_gain < cost_tolerance:
-            message, converged = "converged: relative cost change below tolerance", True
             break
     return SolverOutcome(x, current, weights, converged, iterations, message, cost)

@@ -211,5 +211,10 @@ def get_robot(name: str) -> Chain:
     """
     factory = _ROBOTS.get(name)
     if factory is None:
+        from hostpc.kinematics.humanoid import tree_names  # a sibling module imports this one
+
+        if name in tree_names():
+            raise InputError(f"robot {name!r} is a kinematic tree (several chains), not a "
+                             "serial chain; use hostpc.kinematics.humanoid.get_tree")
         raise InputError(f"unknown robot {name!r}; built-in robots: {', '.join(names())}")
     return factory()

@@ -19,6 +19,7 @@ import numpy as np
 
 from hostpc.kinematics import forward, point_jacobian, screws
 from hostpc.kinematics.rotations import pose_to_transform
+from hostpc.model.dual_loop import predict_dual_loop
 from hostpc.model.effect import EffectTerm, numeric_jacobian
 from hostpc.model.frame_math import inverse_point_derivatives, perturbed_pose
 from hostpc.model.problem import Problem
@@ -211,6 +212,7 @@ def predict_sphere_probe(problem: Problem, x: np.ndarray, jacobian: bool = True
 PREDICTORS = {
     "stereo_target": predict_stereo_target,
     "sphere_probe": predict_sphere_probe,
+    "dual_loop": predict_dual_loop,
 }
 
 

@@ -13,16 +13,24 @@ from hostpc.dataset import Dataset
 from hostpc.errors import EffectError, InputError
 from hostpc.kinematics import Chain, gravity_torque
 from hostpc.kinematics.robots import chain_from_table, get_robot
+from hostpc.model.contract import check_effect
 from hostpc.model.effect import Effect, EffectTerm, ModelContext
-from hostpc.model.registry import available_effects, instantiate, parse_effect_list
+from hostpc.model.registry import (
+    available_effects,
+    builtin_effects,
+    instantiate,
+    parse_effect_list,
+)
 
 FRAME_EFFECTS_BY_METHOD = {
     "stereo_target": ("tool", "target", "base"),
     "sphere_probe": ("tool", "sphere", "base"),
+    "dual_loop": ("camera", "left_base", "right_base", "left_target", "right_target"),
 }
 DEFAULT_FRAMES_BY_METHOD = {
     "stereo_target": ("tool", "target"),
     "sphere_probe": ("tool", "sphere"),
+    "dual_loop": ("camera", "left_base", "right_base", "left_target", "right_target"),
 }
 
 
@@ -99,6 +107,10 @@ class Problem:
 def robot_chain(dataset: Dataset) -> Chain:
     """The nominal chain of the dataset's robot (built-in by name, or explicit table)."""
     robot = dataset.robot
+    if dataset.method == "dual_loop":  # a kinematic tree: its stacked bookkeeping chain
+        from hostpc.model.dual_loop import tree_of
+
+        return tree_of(dataset).stacked_chain()
     if robot.name is not None and robot.a is None:
         return get_robot(robot.name)
     return chain_from_table(
@@ -120,6 +132,10 @@ def default_effects(dataset: Dataset) -> list[str]:
 
 
 def _context(dataset: Dataset, chain: Chain) -> ModelContext:
+    if dataset.method == "dual_loop":
+        from hostpc.model.dual_loop import dual_loop_context
+
+        return dual_loop_context(dataset, chain)
     samples = dataset.samples
     q_cmd = np.asarray(samples.q, dtype=float)
     if chain.mass is not None and chain.com is not None:
@@ -153,7 +169,7 @@ def _context(dataset: Dataset, chain: Chain) -> ModelContext:
 
 def _measurements(dataset: Dataset) -> tuple[np.ndarray, np.ndarray]:
     samples = dataset.samples
-    if dataset.method == "stereo_target":
+    if dataset.method in ("stereo_target", "dual_loop"):
         cov = np.asarray(samples.cov, dtype=float)
         # W = L^-1 with cov = L L^T gives W^T W = cov^-1
         L = np.linalg.cholesky(cov)
@@ -186,7 +202,11 @@ def build_problem(
     chain = robot_chain(dataset)
     if dataset.method not in FRAME_EFFECTS_BY_METHOD:
         raise InputError(f"method {dataset.method!r} is not supported by the fit yet")
-    if dataset.n_joints != chain.n:
+    if dataset.method == "dual_loop":
+        from hostpc.model.dual_loop import check_dual_loop, tree_of
+
+        check_dual_loop(dataset, tree_of(dataset))
+    elif dataset.n_joints != chain.n:
         raise InputError(
             f"samples have {dataset.n_joints} joint angles but robot {chain.name!r} has {chain.n}"
         )
@@ -224,6 +244,8 @@ def build_problem(
                 f"effect {effect.name!r} does not apply to method {dataset.method!r} "
                 f"(only to {', '.join(effect.methods)})"
             )
+        if type(effect) not in builtin_effects().values():
+            check_effect(effect, context, 1 if dataset.method == "sphere_probe" else 3)
         span = slice(start, start + len(local))
         terms.append(EffectTerm(effect=effect, names=local, slice=span))
         slices[effect.name] = span

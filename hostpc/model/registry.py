@@ -107,12 +107,18 @@ def parse_effect_list(
     names = list(default) if relative else []
     for item in items:
         if item.startswith("-"):
-            if item[1:] in names:
-                names.remove(item[1:])
+            if item[1:] not in names:
+                raise EffectError(
+                    f"cannot remove effect {item[1:]!r}: it is not in the model "
+                    f"({', '.join(names) or 'empty'})"
+                )
+            names.remove(item[1:])
             continue
         name = item.lstrip("+")
         if name not in names:
             names.append(name)
+    if not names:
+        raise EffectError("no effects to fit: name at least one (e.g. --effects joint_offsets)")
     return names
 
 

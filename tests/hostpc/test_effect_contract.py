@@ -57,6 +57,12 @@ def test_effect_contract(name: str, noisy_stereo) -> None:  # type: ignore[no-un
             return
         d_out_d_y, analytic = jac
         assert d_out_d_y.shape == (N, m, m)
+        for k in range(m):  # d out / d y, column by column
+            step = np.zeros(m)
+            step[k] = 1e-6
+            column = (effect.sensor_apply(ctx, p, y + step)
+                      - effect.sensor_apply(ctx, p, y - step)) / 2e-6
+            np.testing.assert_allclose(d_out_d_y[:, :, k], column, rtol=1e-6, atol=1e-9)
         numeric = numeric_jacobian(lambda v: effect.sensor_apply(ctx, v, y), p)
     else:  # frame effects: their math is in the measurement models (tested there)
         assert effect.hook == "frame"

@@ -68,3 +68,38 @@ def test_zero_parameters_give_the_nominal_prediction(noisy_stereo) -> None:
     p_nominal, _ = predict(nominal, np.zeros(nominal.layout.size), jacobian=False)
     p_all, _ = predict(everything, np.zeros(everything.layout.size), jacobian=False)
     np.testing.assert_allclose(p_all, p_nominal, atol=1e-15)
+
+
+# hypothesis-generated joint vectors: the analytic derivatives hold anywhere, not only at
+# the fixture's look-at poses
+from dataclasses import replace  # noqa: E402
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+from hypothesis.extra.numpy import arrays  # noqa: E402
+
+joint_vectors = arrays(np.float64, (4, 6), elements=st.floats(-3.0, 3.0))
+
+
+@settings(max_examples=15, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])  # fixture is read-only
+@given(q=joint_vectors, seed=st.integers(0, 1000))
+def test_stereo_jacobian_at_random_joint_vectors(noisy_stereo, q: np.ndarray, seed: int) -> None:
+    dataset = noisy_stereo.dataset
+    samples = dataset.samples.subset(np.arange(4))
+    dataset = dataset.with_samples(replace(samples, q=q, approach=np.sign(q + 0.1)))
+    problem = build_problem(dataset, ALL_STEREO)
+    x = random_parameters(problem, np.random.default_rng(seed))
+    _, analytic = predict(problem, x)
+    assert_jacobian_close(problem, analytic, central_difference(problem, x))
+
+
+@settings(max_examples=10, deadline=None)
+@given(q=joint_vectors, seed=st.integers(0, 1000))
+def test_sphere_jacobian_at_random_joint_vectors(q: np.ndarray, seed: int) -> None:
+    dataset = sphere_dataset("ur5e", n=4)
+    dataset = dataset.with_samples(replace(dataset.samples, q=q))
+    problem = build_problem(dataset, ALL_SPHERE)
+    x = random_parameters(problem, np.random.default_rng(seed))
+    _, analytic = predict(problem, x)
+    assert_jacobian_close(problem, analytic, central_difference(problem, x))

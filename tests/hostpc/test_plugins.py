@@ -90,3 +90,46 @@ def test_effect_list_spec() -> None:
     assert parse_effect_list("+backlash,-tool", default) == ["joint_offsets", "target",
                                                              "backlash"]
     assert parse_effect_list("joint_offsets,geometry", default) == ["joint_offsets", "geometry"]
+
+
+BROKEN_SIGN = textwrap.dedent('''
+    import numpy as np
+    from hostpc.model.effect import Effect
+
+    class Wrong(Effect):
+        name = "wrong"
+        hook = "joint"
+
+        def parameter_names(self, ctx):
+            return ["k"]
+
+        def joint_delta(self, ctx, p):
+            delta = np.zeros_like(ctx.q_cmd)
+            delta[:, 1] = p[0] * np.cos(ctx.q_cmd[:, 2])
+            return delta
+
+        def joint_jacobian(self, ctx, p):
+            J = np.zeros(ctx.q_cmd.shape + (1,))
+            J[:, 1, 0] = -np.cos(ctx.q_cmd[:, 2])   # wrong sign
+            return J
+''')
+
+
+def test_plugin_with_a_wrong_jacobian_is_refused(tmp_path: Path) -> None:
+    plugin = tmp_path / "wrong.py"
+    plugin.write_text(BROKEN_SIGN)
+    data = Path(__file__).resolve().parents[2] / "examples" / "ur5e_stereo.json"
+    from hostpc.dataset import load_dataset
+
+    with pytest.raises(EffectError, match="disagrees with a numeric derivative"):
+        fit(load_dataset(data), "+wrong", plugins=[plugin])
+
+
+def test_plugin_not_zero_at_zero_is_refused(tmp_path: Path) -> None:
+    plugin = tmp_path / "offset.py"
+    plugin.write_text(BROKEN_SIGN.replace("p[0] * np.cos", "(p[0] + 1e-3) * np.cos"))
+    data = Path(__file__).resolve().parents[2] / "examples" / "ur5e_stereo.json"
+    from hostpc.dataset import load_dataset
+
+    with pytest.raises(EffectError, match="nominal model"):
+        fit(load_dataset(data), "+wrong", plugins=[plugin])

@@ -1,5 +1,6 @@
 """Built-in physical effects. The registry (hostpc.model.registry) lists them by name."""
 
+from hostpc.model.effects.dual_loop_frames import DUAL_LOOP_FRAME_EFFECTS
 from hostpc.model.effects.frames import BaseFrame, SphereFrame, TargetFrame, ToolFrame
 from hostpc.model.effects.geometry import Geometry
 from hostpc.model.effects.joint_space import (
@@ -24,6 +25,7 @@ BUILTIN_EFFECTS = (
     Backlash,
     DepthScale,
     TriggerLatency,
+    *DUAL_LOOP_FRAME_EFFECTS,
 )
 
 __all__ = [cls.__name__ for cls in BUILTIN_EFFECTS] + ["BUILTIN_EFFECTS"]

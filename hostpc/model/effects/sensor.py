@@ -38,8 +38,10 @@ class DepthScale(Effect):
 
 class TriggerLatency(Effect):
     """Probe trigger latency: the joints are latched `latency` seconds after the contact, so
-    the stylus has travelled speed * latency further into the sphere:
-    measured distance = ideal distance - latency * speed (speed: approach speed, m/s)."""
+    at the latched angles the stylus is speed * latency deeper into the sphere. The contact
+    distance R + r is therefore predicted as
+    distance(latched q) + latency * speed (speed: approach speed along the contact normal,
+    m/s), so a positive latency is a late latch."""
 
     name = "trigger_latency"
     hook: ClassVar[Hook] = "sensor"
@@ -58,10 +60,10 @@ class TriggerLatency(Effect):
         return ctx.variables["speed"]
 
     def sensor_apply(self, ctx: ModelContext, p: np.ndarray, y: np.ndarray) -> np.ndarray:
-        return y - p[0] * self._speed(ctx)[:, None]
+        return y + p[0] * self._speed(ctx)[:, None]
 
     def sensor_jacobians(
         self, ctx: ModelContext, p: np.ndarray, y: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         n_samples = y.shape[0]
-        return np.ones((n_samples, 1, 1)), -self._speed(ctx).reshape(n_samples, 1, 1)
+        return np.ones((n_samples, 1, 1)), self._speed(ctx).reshape(n_samples, 1, 1)

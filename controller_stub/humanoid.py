@@ -1,0 +1,463 @@
+"""The simulated humanoid upper body: a pan-tilt head with a stereo camera and two 7-DoF arms.
+
+The stub's OWN model of the ``humanoid_upper`` design (never imports hostpc). Each chain is
+a :class:`~controller_stub.robot_model.RobotModel` in URDF form (fixed joint origins, then a
+rotation about the local z axis), derived BY HAND from the design's DH tables
+(docs/dual-loop.md) exactly as robot_model.py does for the UR robots:
+``O_1 = I``, ``O_k = [Rx(alpha_{k-1}), (a_{k-1}, 0, d_{k-1})]``, ``O_flange = [Rx(alpha_n),
+(a_n, 0, d_n)]``, so each chain's base and flange are its DH frames 0 and n.
+
+    head  (DH a, alpha, d):  (0, +pi/2, 0.12), (0.06, 0, 0)
+      O_1 = I, O_2 = xyz (0, 0, 0.12) rpy (pi/2, 0, 0), O_f = xyz (0.06, 0, 0)
+    arm   (DH a = 0; alpha = -pi/2, pi/2, pi/2, -pi/2, -pi/2, pi/2, 0;
+           d = 0, 0, 0.28, 0, 0.25, 0, 0.10)
+      O_1 = I, O_2 = rpy (-pi/2,0,0), O_3 = rpy (pi/2,0,0), O_4 = xyz (0,0,0.28) rpy (pi/2,0,0),
+      O_5 = rpy (-pi/2,0,0), O_6 = xyz (0,0,0.25) rpy (-pi/2,0,0), O_7 = rpy (pi/2,0,0),
+      O_f = xyz (0, 0, 0.10)
+
+The world: the head base is fixed (the torso); each arm base hangs from it at the true
+``T_headbase_armbase``; the stereo camera (left optical frame: x right, y down, z forward)
+sits at the true ``T_headend_camera``; one target point per flange. All four frames and
+all 16 joint zero errors are hidden truth (scenario ``humanoid`` and ``truth.zero_errors``,
+combined joint order head 1-2, left 1-7, right 1-7).
+
+Measurement (:meth:`HumanoidSimulation.measure_targets`): the stub returns each visible
+target already triangulated, with its covariance, instead of images. The camera is a
+rectified pinhole pair (focal ``f`` px, principal point at the image centre, right camera
+at ``+baseline`` along the left camera's x). The true point is projected into both images,
+each centroid coordinate gets Gaussian noise ``pixel_sigma``, and the point is triangulated:
+
+    z = f b / (u_L - u_R),  x = (u_L - c_x) z / f,  y = ((v_L + v_R) / 2 - c_y) z / f
+
+Its covariance is the first-order propagation of the pixel noise through that function
+(evaluated at the measured point): depth noise grows with z^2, lateral noise with z, and x
+and z are correlated. A target is visible when it is in front of the camera and inside both
+images. Rendering the two targets into images (``capture_stereo``) is not implemented for
+the humanoid: it refuses with ``unsupported``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from controller_stub.robot_model import (
+    LengthSite,
+    RobotModel,
+    forward,
+    make_transform,
+    matrix_to_rpy,
+)
+from controller_stub.scenario import RandomSpec, Scenario
+
+HALF_PI = math.pi / 2
+DEG = math.pi / 180
+
+CHAINS = ("head", "left", "right")
+N_JOINTS = {"head": 2, "left": 7, "right": 7}
+ARMS = ("left", "right")
+
+# nominal frames of the design (xyz m, rpy rad)
+CAMERA_NOMINAL = ((0.02, 0.04, 0.0), (0.0, -HALF_PI, math.pi - 0.15))
+BASE_NOMINAL = {"left": ((0.0, 0.20, -0.10), (math.pi, 0.0, 0.0)),
+                "right": ((0.0, -0.20, -0.10), (math.pi, 0.0, 0.0))}
+TARGET_NOMINAL = {"left": (0.0, 0.03, 0.04), "right": (0.0, 0.03, 0.04)}
+HOME = np.array([0.0, -0.45,
+                 0.1, 0.05, 0.1, -1.45, 0.0, 0.8, 0.0,
+                 -0.1, 0.05, -0.1, -1.45, 0.0, 0.8, 0.0])
+
+
+def _no_sites(n: int) -> tuple[LengthSite, ...]:
+    return tuple(LengthSite(i + 1, (0.0, 0.0, 1.0)) for i in range(n))
+
+
+def head_model() -> RobotModel:
+    """The pan-tilt head (see the module docstring)."""
+    limits_lo = np.array([-100.0, -70.0]) * DEG
+    limits_hi = np.array([100.0, 35.0]) * DEG
+    return RobotModel(
+        name="humanoid_upper.head",
+        origin_xyz=np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.12]]),
+        origin_rpy=np.array([[0.0, 0.0, 0.0], [HALF_PI, 0.0, 0.0]]),
+        flange_xyz=np.array([0.06, 0.0, 0.0]),
+        flange_rpy=np.zeros(3),
+        d_sites=_no_sites(2),
+        a_sites=_no_sites(2),
+        mass=np.array([0.6, 1.2]),
+        com_body=np.zeros((2, 3)),
+        q_min=limits_lo,
+        q_max=limits_hi,
+        max_speed=np.array([3.0, 3.0]),
+        home=HOME[:2].copy(),
+    )
+
+
+def arm_model(side: str) -> RobotModel:
+    """One 7-DoF arm (the same design on both sides; see the module docstring)."""
+    limits = np.array([170.0, 120.0, 170.0, 120.0, 170.0, 120.0, 175.0]) * DEG
+    rx = [0.0, -HALF_PI, HALF_PI, HALF_PI, -HALF_PI, -HALF_PI, HALF_PI]
+    z = [0.0, 0.0, 0.0, 0.28, 0.0, 0.25, 0.0]
+    home = HOME[2:9] if side == "left" else HOME[9:16]
+    return RobotModel(
+        name=f"humanoid_upper.{side}",
+        origin_xyz=np.array([[0.0, 0.0, zi] for zi in z]),
+        origin_rpy=np.array([[r, 0.0, 0.0] for r in rx]),
+        flange_xyz=np.array([0.0, 0.0, 0.10]),
+        flange_rpy=np.zeros(3),
+        d_sites=_no_sites(7),
+        a_sites=_no_sites(7),
+        mass=np.array([2.0, 1.8, 1.5, 1.2, 0.8, 0.5, 0.4]),
+        com_body=np.zeros((7, 3)),
+        q_min=-limits,
+        q_max=limits,
+        max_speed=np.full(7, 2.0),
+        home=np.array(home),
+    )
+
+
+def _span(chain: str) -> slice:
+    start = 0
+    for name in CHAINS:
+        if name == chain:
+            return slice(start, start + N_JOINTS[name])
+        start += N_JOINTS[name]
+    raise KeyError(chain)
+
+
+class StereoTriangulator:
+    """Rectified stereo pair: projection, pixel noise, triangulation and its covariance.
+
+    focal: px; baseline: m; width, height: px; pixel_sigma: px per image coordinate."""
+
+    def __init__(self, focal: float, baseline: float, width: int, height: int,
+                 pixel_sigma: float) -> None:
+        self.f = float(focal)
+        self.b = float(baseline)
+        self.width = int(width)
+        self.height = int(height)
+        self.cx = (width - 1) / 2.0
+        self.cy = (height - 1) / 2.0
+        self.sigma = float(pixel_sigma)
+
+    def project(self, p: np.ndarray) -> np.ndarray:
+        """(4,) pixels [uL, vL, uR, vR] of a point p (3,) in the left camera frame."""
+        x, y, z = p
+        return np.array([self.f * x / z + self.cx, self.f * y / z + self.cy,
+                         self.f * (x - self.b) / z + self.cx, self.f * y / z + self.cy])
+
+    def visible(self, p: np.ndarray) -> bool:
+        if p[2] <= 0.05:
+            return False
+        uv = self.project(p)
+        inside_u = (0.0 <= uv[[0, 2]]) & (uv[[0, 2]] <= self.width - 1)
+        inside_v = (0.0 <= uv[[1, 3]]) & (uv[[1, 3]] <= self.height - 1)
+        return bool(np.all(inside_u) and np.all(inside_v))
+
+    def triangulate(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Point (3,) m from pixels (4,), and the Jacobian d point / d pixels (3, 4)."""
+        uL, vL, uR, vR = uv
+        disparity = uL - uR
+        z = self.f * self.b / disparity
+        v = 0.5 * (vL + vR)
+        x = (uL - self.cx) * z / self.f
+        y = (v - self.cy) * z / self.f
+        dz = np.array([-z / disparity, 0.0, z / disparity, 0.0])
+        dx = (uL - self.cx) / self.f * dz + np.array([z / self.f, 0.0, 0.0, 0.0])
+        dy = (v - self.cy) / self.f * dz + np.array([0.0, 0.5, 0.0, 0.5]) * z / self.f
+        return np.array([x, y, z]), np.vstack([dx, dy, dz])
+
+    def measure(self, p_true: np.ndarray, rng: np.random.Generator
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """Noisy triangulated point (3,) and its covariance (3, 3) (m, m^2)."""
+        uv = self.project(p_true) + rng.normal(0.0, self.sigma, 4)
+        p, J = self.triangulate(uv)
+        cov = (self.sigma**2) * J @ J.T
+        return p, cov
+
+
+class HumanoidSimulation:
+    """The simulated humanoid controller: the Simulation contract over the combined joint
+    vector (head 2, left 7, right 7; reported angles, rad) plus :meth:`measure_targets`.
+
+    Motion is ideal (no hidden joint-space physics): the physical angle is the reported one
+    plus the current zero error.
+    """
+
+    def __init__(self, scenario: Scenario) -> None:
+        from controller_stub.simulation import _rng  # the stub's seeded streams
+
+        self.scenario = scenario
+        self.models = {"head": head_model(), "left": arm_model("left"),
+                       "right": arm_model("right")}
+        n = sum(N_JOINTS.values())
+        self._n = n
+        spec = scenario.humanoid
+        truth = scenario.truth
+        if isinstance(truth.zero_errors, RandomSpec):
+            half = math.radians(truth.zero_errors.random_deg)
+            errors = _rng(scenario.seed, 1).uniform(-half, half, n)
+        else:
+            errors = np.asarray(truth.zero_errors, dtype=float)
+        self._zero_error_initial: np.ndarray = errors
+        self._rng_noise = _rng(scenario.seed, 11)
+        self.T_headend_camera_nominal = make_transform(list(CAMERA_NOMINAL[0]),
+                                                       list(CAMERA_NOMINAL[1]))
+        self.T_headend_camera = self.T_headend_camera_nominal @ make_transform(
+            spec.camera_error.xyz, spec.camera_error.rpy)
+        self.T_headbase_armbase_nominal = {
+            s: make_transform(list(BASE_NOMINAL[s][0]), list(BASE_NOMINAL[s][1])) for s in ARMS}
+        base_errors = {"left": spec.left_base_error, "right": spec.right_base_error}
+        self.T_headbase_armbase = {
+            s: self.T_headbase_armbase_nominal[s]
+            @ make_transform(base_errors[s].xyz, base_errors[s].rpy)
+            for s in ARMS}
+        target_errors = {"left": spec.left_target_error, "right": spec.right_target_error}
+        self.target_flange = {s: np.asarray(TARGET_NOMINAL[s]) + np.asarray(target_errors[s])
+                              for s in ARMS}
+        self.stereo = StereoTriangulator(spec.focal_px, spec.baseline, spec.image_width,
+                                         spec.image_height, spec.pixel_sigma)
+        motion = scenario.motion
+        model_min = np.concatenate([self.models[c].q_min for c in CHAINS])
+        model_max = np.concatenate([self.models[c].q_max for c in CHAINS])
+        self._q_min = np.asarray(motion.q_min if motion.q_min is not None else model_min, float)
+        self._q_max = np.asarray(motion.q_max if motion.q_max is not None else model_max, float)
+        speeds = np.concatenate([self.models[c].max_speed for c in CHAINS])
+        self._max_speed = (speeds if motion.max_joint_speed is None else
+                           np.broadcast_to(np.asarray(motion.max_joint_speed, float), (n,)).copy())
+        server = scenario.server
+        self._offsets_initial = (np.zeros(n) if server.initial_offsets is None
+                                 else np.asarray(server.initial_offsets, float))
+        self._offsets: np.ndarray = self._offsets_initial.copy()
+        self._history: list[tuple[int, np.ndarray]] = [(0, self._offsets.copy())]
+        self._next_history_id = 1
+        start = motion.initial_q if motion.initial_q is not None else HOME
+        self._q: np.ndarray = np.clip(np.asarray(start, float), self._q_min, self._q_max)
+        self._time = 0.0
+        self._n_io = server.n_digital_io
+        self._outputs = [False] * self._n_io
+        self._estopped = False
+        self._moves = 0
+        self.on_io_edge = None
+
+    # ------------------------------------------------------------------ simple state
+
+    @property
+    def robot_name(self) -> str:
+        return "humanoid_upper"
+
+    @property
+    def n_joints(self) -> int:
+        return self._n
+
+    @property
+    def time(self) -> float:
+        return self._time
+
+    @property
+    def time_scale(self) -> float:
+        return float(self.scenario.motion.time_scale)
+
+    @property
+    def estopped(self) -> bool:
+        return self._estopped
+
+    def estop(self) -> None:
+        self._estopped = True
+
+    def reset_estop(self) -> None:
+        self._estopped = False
+
+    def joint_positions(self) -> np.ndarray:
+        """(16,) reported angles (rad): head 1-2, left 1-7, right 1-7."""
+        return self._q.copy()
+
+    def joint_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._q_min.copy(), self._q_max.copy()
+
+    def max_joint_speed(self) -> np.ndarray:
+        return self._max_speed.copy()
+
+    def digital_inputs(self) -> list[bool]:
+        return [False] * self._n_io
+
+    def digital_outputs(self) -> list[bool]:
+        return list(self._outputs)
+
+    def set_digital_output(self, index: int, value: bool) -> None:
+        from controller_stub.simulation import SimulationRefused
+
+        if not 0 <= int(index) < self._n_io:
+            raise SimulationRefused("invalid_argument", f"digital output {index} out of range")
+        self._outputs[int(index)] = bool(value)
+
+    # ------------------------------------------------------------------ zero offsets
+
+    def zero_offsets(self) -> np.ndarray:
+        return self._offsets.copy()
+
+    def current_zero_errors(self) -> np.ndarray:
+        """(16,) rad: q_physical - q_reported with the current offsets."""
+        errors: np.ndarray = self._zero_error_initial + self._offsets_initial - self._offsets
+        return errors
+
+    def set_zero_offsets(self, offsets: Any) -> np.ndarray:
+        """Write new offsets (16,); refused beyond server.offset_limit_rad from the original."""
+        from controller_stub.simulation import SimulationRefused
+
+        new = self._vector(offsets, "offsets")
+        change = np.abs(new - self._offsets_initial)
+        limit = self.scenario.server.offset_limit_rad
+        if np.any(change > limit):
+            i = int(np.argmax(change))
+            raise SimulationRefused("offset_limit", f"joint {i + 1}: offset change "
+                                    f"{math.degrees(change[i]):.3f} deg exceeds the limit")
+        previous = self._offsets.copy()
+        self._q = self._q + (new - self._offsets)
+        self._offsets = new
+        self._history.append((self._next_history_id, new.copy()))
+        self._next_history_id += 1
+        return previous
+
+    def offset_history(self) -> list[tuple[int, np.ndarray]]:
+        return [(i, o.copy()) for i, o in self._history]
+
+    def rollback(self, history_id: int) -> np.ndarray:
+        from controller_stub.simulation import SimulationRefused
+
+        for i, offsets in self._history:
+            if i == history_id:
+                return self.set_zero_offsets(offsets)
+        raise SimulationRefused("unknown_history_id", f"no offset history entry {history_id}")
+
+    # ------------------------------------------------------------------ motion
+
+    def _vector(self, values: Any, name: str) -> np.ndarray:
+        from controller_stub.simulation import SimulationRefused
+
+        try:
+            v = np.asarray(values, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise SimulationRefused("invalid_argument", f"{name}: not numbers") from None
+        if v.shape != (self._n,) or not np.all(np.isfinite(v)):
+            raise SimulationRefused("invalid_argument",
+                                    f"{name}: expected {self._n} finite values")
+        return v
+
+    def move_joints(self, q_target: Any, speed: float) -> Any:
+        """Move to q_target (16,) reported rad at `speed` (fraction of max joint speed)."""
+        from controller_stub.simulation import MoveResult, SimulationRefused
+
+        if self._estopped:
+            raise SimulationRefused("estop", "emergency stop is active")
+        target = self._vector(q_target, "q_target")
+        if not 0.0 < float(speed) <= 1.0:
+            raise SimulationRefused("invalid_argument", f"speed {speed} not in (0, 1]")
+        outside = (target < self._q_min) | (target > self._q_max)
+        if np.any(outside):
+            i = int(np.argmax(outside))
+            raise SimulationRefused("joint_limit", f"joint {i + 1}: target {target[i]:.6f} rad "
+                                    "outside its limits")
+        duration = float(np.max(np.abs(target - self._q) / (speed * self._max_speed)))
+        self._q = target.copy()
+        self._time += duration
+        self._moves += 1
+        return MoveResult(completed=True, q=target.copy(), duration_s=duration)
+
+    def guarded_move(self, q_target: Any, speed: float, io_line: int) -> Any:
+        from controller_stub.simulation import SimulationRefused
+
+        raise SimulationRefused("unsupported", "the humanoid has no touch probe")
+
+    # ------------------------------------------------------------------ truth views
+
+    def physical_angles(self) -> np.ndarray:
+        """(16,) physical joint angles at the current pose (rad)."""
+        physical: np.ndarray = self._q + self.current_zero_errors()
+        return physical
+
+    def frames(self) -> dict[str, np.ndarray]:
+        """True poses at the current pose, in the head base: ``camera`` (4, 4) and
+        ``left``/``right`` target points (3,)."""
+        q = self.physical_angles()
+        out: dict[str, np.ndarray] = {}
+        _, T_hb_he = forward(self.models["head"], q[_span("head")])
+        out["camera"] = T_hb_he[0] @ self.T_headend_camera
+        for side in ARMS:
+            _, T_ab_af = forward(self.models[side], q[_span(side)])
+            T = self.T_headbase_armbase[side] @ T_ab_af[0]
+            out[side] = T[:3, :3] @ self.target_flange[side] + T[:3, 3]
+        return out
+
+    def target_in_camera(self, side: str) -> np.ndarray:
+        """(3,) true target point of arm `side` in the camera frame (m)."""
+        frames = self.frames()
+        T = frames["camera"]
+        point: np.ndarray = T[:3, :3].T @ (frames[side] - T[:3, 3])
+        return point
+
+    # ------------------------------------------------------------------ sensing
+
+    def measure_targets(self) -> dict[str, Any]:
+        """Triangulate both targets at the current pose (see the module docstring).
+
+        Returns ``{"q": (16,) reported angles, "time": s, "targets": {side: {"p": (3,) m,
+        "cov": (3, 3) m^2}}}`` with an entry only for each visible target."""
+        from controller_stub.simulation import SimulationRefused
+
+        if self._estopped:
+            raise SimulationRefused("estop", "emergency stop is active")
+        targets: dict[str, dict[str, np.ndarray]] = {}
+        for side in ARMS:
+            p_true = self.target_in_camera(side)
+            if not self.stereo.visible(p_true):
+                continue
+            p, cov = self.stereo.measure(p_true, self._rng_noise)
+            targets[side] = {"p": p, "cov": cov}
+        return {"q": self._q.copy(), "time": self._time, "targets": targets}
+
+    def capture_stereo(self, pattern: str = "target", view: int = 0) -> Any:
+        from controller_stub.simulation import SimulationRefused
+
+        raise SimulationRefused("unsupported", "humanoid_upper serves measure_targets, not "
+                                "images")
+
+    def camera_description(self) -> dict[str, Any]:
+        """What the controller reports of its head camera: nominal values only."""
+        spec = self.scenario.humanoid
+        return {
+            "image_width": spec.image_width,
+            "image_height": spec.image_height,
+            "baseline_nominal": spec.baseline,
+            "focal_px_nominal": spec.focal_px,
+            "T_headend_camera_nominal": {"xyz": list(CAMERA_NOMINAL[0]),
+                                         "rpy": list(CAMERA_NOMINAL[1])},
+            "measures": "targets",
+        }
+
+    # ------------------------------------------------------------------ truth
+
+    def truth(self) -> dict[str, Any]:
+        """The hidden truth, JSON-serialisable (for --truth-out and tests only)."""
+
+        def pose(T: np.ndarray) -> dict[str, list[float]]:
+            return {"xyz": T[:3, 3].tolist(), "rpy": matrix_to_rpy(T[:3, :3]).tolist()}
+
+        return {
+            "robot": self.robot_name,
+            "time_s": self._time,
+            "joint_order": [f"{c}.q{j + 1}" for c in CHAINS for j in range(N_JOINTS[c])],
+            "zero_errors": self.current_zero_errors().tolist(),
+            "zero_errors_initial": self._zero_error_initial.tolist(),
+            "zero_offsets": self._offsets.tolist(),
+            "q_reported": self._q.tolist(),
+            "q_physical": self.physical_angles().tolist(),
+            "camera": pose(self.T_headend_camera),
+            "left_base": pose(self.T_headbase_armbase["left"]),
+            "right_base": pose(self.T_headbase_armbase["right"]),
+            "left_target": self.target_flange["left"].tolist(),
+            "right_target": self.target_flange["right"].tolist(),
+            "stereo": {"focal_px": self.stereo.f, "baseline": self.stereo.b,
+                       "pixel_sigma": self.stereo.sigma},
+        }

@@ -1,0 +1,424 @@
+"""The Universal Robots personality of the simulated controller.
+
+`controller-stub serve --ur` serves, next to the zerocal protocol and from the SAME
+`Simulation`, what the unmodified ur_rtde library needs of a UR controller:
+
+    30004  RTDE (`rtde_server.py`): joint angles, IO, registers, robot / safety state
+    29999  dashboard (`dashboard.py`)
+    30003  script port (`script_server.py`): ur_rtde uploads its control program here;
+           `control_script.py` emulates that program on the simulation
+
+The ports are fixed by ur_rtde (it has no option for 30004 and 29999), so only one UR
+personality can run per host. The personality runs in the stub's own process: ur_rtde's
+constructors hold the Python GIL while they wait for the controller, so a stub in the same
+interpreter as ur_rtde deadlocks.
+
+State shown to RTDE clients (docs/robots.md has the table): `actual_q` / `target_q` are the
+simulation's reported angles (interpolated in wall time while a paced move runs),
+`actual_digital_input_bits` bit i = simulated digital input i (the probe line is input
+`probe.io_line`), `actual_digital_output_bits` bit i = output i, standard digital outputs
+0..7 write simulated outputs 0..7 and configurable outputs 0..7 write outputs 8..15 where
+they exist. Motions of the control script go through the zerocal server's motion pacing
+(`ControllerServer.begin_motion` / `run_motion`), so one motion at a time holds across both
+interfaces and the zerocal `abort` also stops a UR move.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import re
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from controller_stub.robot_model import forward
+from controller_stub.simulation import SimulationRefused
+from controller_stub.ur.control_script import ControlScript
+from controller_stub.ur.dashboard import DashboardServer
+from controller_stub.ur.rtde_server import N_REGISTERS, RtdeServer, output_type, register_field
+from controller_stub.ur.script_server import ScriptServer
+
+logger = logging.getLogger(__name__)
+
+RTDE_PORT = 30004
+DASHBOARD_PORT = 29999
+SCRIPT_PORT = 30003
+CONTROLLER_VERSION = (5, 11, 1, 108318)
+SERIAL_NUMBER = "20235500001"
+
+RUNTIME_STOPPED, RUNTIME_PLAYING = 1, 2
+ROBOT_MODE_RUNNING = 7
+SAFETY_MODE_NORMAL, SAFETY_MODE_PROTECTIVE_STOP, SAFETY_MODE_ROBOT_EMERGENCY_STOP = 1, 3, 7
+JOINT_MODE_RUNNING = 253
+SAFETY_BIT_NORMAL, SAFETY_BIT_PROTECTIVE_STOPPED, SAFETY_BIT_EMERGENCY_STOPPED = 0, 2, 7
+STATUS_BIT_POWER_ON, STATUS_BIT_PROGRAM_RUNNING = 0, 1
+
+_WRITE_INT = re.compile(r"write_output_integer_register\(\s*([0-9+\s]+?)\s*,\s*(-?\d+)\s*\)")
+_ZEROS = {"DOUBLE": 0.0, "UINT64": 0, "UINT32": 0, "INT32": 0, "UINT8": 0, "BOOL": False}
+
+
+def _zero(rtde_type: str) -> Any:
+    if rtde_type in _ZEROS:
+        return _ZEROS[rtde_type]
+    width = 3 if rtde_type == "VECTOR3D" else 6
+    return (0.0 if rtde_type.endswith("D") else 0,) * width
+
+
+def _mask(bits: list[bool]) -> int:
+    return sum(1 << i for i, bit in enumerate(bits) if bit)
+
+
+def _rotation_vector(R: np.ndarray) -> np.ndarray:
+    """(3,) axis * angle of the rotation matrix R (3, 3)."""
+    cos_angle = float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))
+    angle = math.acos(cos_angle)
+    if angle < 1e-12:
+        return np.zeros(3)
+    if math.pi - angle < 1e-6:
+        axis = np.sqrt(np.clip((np.diag(R) + 1.0) / 2.0, 0.0, None))
+        signs = np.sign([1.0, R[0, 1] + R[1, 0], R[0, 2] + R[2, 0]])
+        axis = axis * np.where(signs == 0, 1.0, signs)
+        return axis / np.linalg.norm(axis) * angle
+    axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    return axis / (2.0 * math.sin(angle)) * angle
+
+
+@dataclass(frozen=True)
+class _Motion:
+    """A paced motion in progress: q (6,) from q_start to q_end over `wall_s` seconds."""
+
+    q_start: np.ndarray
+    q_end: np.ndarray
+    t_start: float
+    wall_s: float
+
+    def fraction(self, now: float) -> float:
+        if self.wall_s <= 0.0:
+            return 1.0
+        return min(1.0, max(0.0, (now - self.t_start) / self.wall_s))
+
+
+class UrPersonality:
+    """Serve one `Simulation` as a Universal Robots controller (RTDE, dashboard, script).
+
+    sim: the Simulation (6 joints). server: the stub's `ControllerServer` sharing `sim`
+    (motion pacing and busy/abort across both interfaces), or None (pacing by sleeping).
+    max_stream_hz: cap of the RTDE data package rate.
+    """
+
+    def __init__(
+        self,
+        sim: Any,
+        server: Any | None = None,
+        *,
+        controller_version: tuple[int, int, int, int] = CONTROLLER_VERSION,
+        serial_number: str = SERIAL_NUMBER,
+        max_stream_hz: float = 125.0,
+    ) -> None:
+        if sim.n_joints != 6:
+            raise ValueError(f"the UR personality needs a 6-joint robot, {sim.robot_name} has "
+                             f"{sim.n_joints}")
+        self.sim = sim
+        self.server = server
+        self.controller_version = controller_version
+        self.serial_number = serial_number
+        self.robot_model = sim.robot_name.upper().rstrip("E") if sim.robot_name.startswith(
+            "ur") else "UR5"
+        self.input_int = [0] * N_REGISTERS
+        self.input_double = [0.0] * N_REGISTERS
+        self.output_int = [0] * N_REGISTERS
+        self.output_double = [0.0] * N_REGISTERS
+        self.input_bits = 0
+        self.output_bits = 0
+        self.speed_slider = 1.0
+        self.standard_analog_output = [0.0, 0.0]
+        self.tool_outputs = 0
+        self._program_name = ""
+        self._program: asyncio.Task[None] | None = None
+        self._protective_stop = False
+        self._motion: _Motion | None = None
+        self._t0 = time.monotonic()
+        self._rtde = RtdeServer(self, max_stream_hz=max_stream_hz)
+        self._dashboard = DashboardServer(self)
+        self._script = ScriptServer(self)
+
+    # ------------------------------------------------------------------ lifecycle
+
+    async def start(
+        self,
+        host: str = "127.0.0.1",
+        rtde_port: int = RTDE_PORT,
+        dashboard_port: int = DASHBOARD_PORT,
+        script_port: int = SCRIPT_PORT,
+    ) -> dict[str, tuple[str, int]]:
+        """Start the three servers; returns {"rtde"|"dashboard"|"script": (host, port)}."""
+        bound: dict[str, tuple[str, int]] = {}
+        try:
+            bound["rtde"] = await self._rtde.start(host, rtde_port)
+            bound["dashboard"] = await self._dashboard.start(host, dashboard_port)
+            bound["script"] = await self._script.start(host, script_port)
+        except BaseException:
+            await self.close()
+            raise
+        return bound
+
+    async def close(self) -> None:
+        """Stop the program and the servers."""
+        await self._stop_program_task()
+        for server in (self._script, self._dashboard, self._rtde):
+            await server.close()
+
+    # ------------------------------------------------------------------ state
+
+    @property
+    def moving(self) -> bool:
+        """True while a paced motion runs."""
+        return self._motion is not None
+
+    def program_running(self) -> bool:
+        return self._program is not None and not self._program.done()
+
+    def program_name(self) -> str:
+        return self._program_name
+
+    def protective_stopped(self) -> bool:
+        return self._protective_stop
+
+    def emergency_stopped(self) -> bool:
+        return bool(self.sim.estopped)
+
+    def unlock_protective_stop(self) -> None:
+        self._protective_stop = False
+
+    def protective_stop(self, reason: str) -> None:
+        """Enter a protective stop (the program is stopped by its caller)."""
+        logger.warning("protective stop: %s", reason)
+        self._protective_stop = True
+
+    def displayed_q(self) -> np.ndarray:
+        """(6,) reported angles, interpolated while a paced motion runs."""
+        motion = self._motion
+        if motion is None:
+            return np.asarray(self.sim.joint_positions(), float)
+        s = motion.fraction(time.monotonic())
+        return motion.q_start + s * (motion.q_end - motion.q_start)
+
+    def displayed_qd(self) -> np.ndarray:
+        """(6,) joint speeds (rad/s) of the paced motion, zeros at rest."""
+        motion = self._motion
+        if motion is None or motion.wall_s <= 0.0 or motion.fraction(time.monotonic()) >= 1.0:
+            return np.zeros(6)
+        return (motion.q_end - motion.q_start) / motion.wall_s
+
+    def tcp_pose(self, q: np.ndarray | None = None) -> list[float]:
+        """UR pose [x, y, z, rx, ry, rz] of the flange (nominal model, reported angles)."""
+        q = self.displayed_q() if q is None else q
+        _, T = forward(self.sim.model, np.asarray(q, float)[None, :])
+        return [*T[0, :3, 3].tolist(), *_rotation_vector(T[0, :3, :3]).tolist()]
+
+    # ------------------------------------------------------------------ RTDE source
+
+    def output_values(self, names: Sequence[str]) -> list[Any]:
+        """Current values of the named RTDE outputs (see rtde_server.OUTPUT_TYPES)."""
+        q = self.displayed_q()
+        return [self._output(name, q) for name in names]
+
+    def _output(self, name: str, q: np.ndarray) -> Any:
+        if name in ("actual_q", "target_q"):
+            return tuple(q.tolist())
+        if name in ("actual_qd", "target_qd"):
+            return tuple(self.displayed_qd().tolist())
+        if name == "timestamp":
+            return time.monotonic() - self._t0
+        if name == "actual_digital_input_bits":
+            return _mask(self.sim.digital_inputs())
+        if name == "actual_digital_output_bits":
+            return _mask(self.sim.digital_outputs()) | (self.tool_outputs & 0x3) << 16
+        if name == "runtime_state":
+            return RUNTIME_PLAYING if self.program_running() else RUNTIME_STOPPED
+        if name == "robot_status_bits":
+            running = self.program_running()
+            return 1 << STATUS_BIT_POWER_ON | (1 << STATUS_BIT_PROGRAM_RUNNING if running else 0)
+        if name == "safety_status_bits":
+            if self.emergency_stopped():
+                return 1 << SAFETY_BIT_EMERGENCY_STOPPED
+            if self._protective_stop:
+                return 1 << SAFETY_BIT_PROTECTIVE_STOPPED
+            return 1 << SAFETY_BIT_NORMAL
+        if name in ("safety_mode", "safety_status"):
+            if self.emergency_stopped():
+                return SAFETY_MODE_ROBOT_EMERGENCY_STOP
+            return SAFETY_MODE_PROTECTIVE_STOP if self._protective_stop else SAFETY_MODE_NORMAL
+        if name == "robot_mode":
+            return ROBOT_MODE_RUNNING
+        if name == "joint_mode":
+            return (JOINT_MODE_RUNNING,) * 6
+        if name in ("actual_TCP_pose", "target_TCP_pose"):
+            return tuple(self.tcp_pose(q))
+        if name in ("speed_scaling", "target_speed_fraction"):
+            return self.speed_slider
+        if name == "joint_temperatures":
+            return (30.0,) * 6
+        if name in ("actual_main_voltage", "actual_robot_voltage"):
+            return 48.0
+        if name == "actual_joint_voltage":
+            return (48.0,) * 6
+        if name == "actual_tool_accelerometer":
+            return (0.0, 0.0, 9.81)
+        if name in ("standard_analog_output0", "standard_analog_output1"):
+            return self.standard_analog_output[int(name[-1])]
+        if name == "actual_execution_time":
+            return 0.2
+        if name == "output_bit_registers0_to_31":
+            return self.output_bits & 0xFFFFFFFF
+        if name == "output_bit_registers32_to_63":
+            return self.output_bits >> 32 & 0xFFFFFFFF
+        if name == "input_bit_registers0_to_31":
+            return self.input_bits & 0xFFFFFFFF
+        if name == "input_bit_registers32_to_63":
+            return self.input_bits >> 32 & 0xFFFFFFFF
+        register = register_field(name)
+        if register is not None:
+            direction, kind, index = register
+            if kind == "int":
+                return (self.input_int if direction == "input" else self.output_int)[index]
+            if kind == "double":
+                return (self.input_double if direction == "input" else self.output_double)[index]
+            bits = self.input_bits if direction == "input" else self.output_bits
+            return bool(bits >> index & 1)
+        rtde_type = output_type(name)
+        return _zero(rtde_type) if rtde_type else 0
+
+    def apply_inputs(self, values: dict[str, Any]) -> None:
+        """Apply one RTDE input data package (name -> value)."""
+        for name, value in values.items():
+            register = register_field(name)
+            if register is not None:
+                _, kind, index = register
+                if kind == "int":
+                    self.input_int[index] = int(value)
+                elif kind == "double":
+                    self.input_double[index] = float(value)
+                else:
+                    bit = 1 << index
+                    self.input_bits = self.input_bits | bit if value else self.input_bits & ~bit
+            elif name == "input_bit_registers0_to_31":
+                self.input_bits = (self.input_bits & ~0xFFFFFFFF) | int(value)
+            elif name == "input_bit_registers32_to_63":
+                self.input_bits = (self.input_bits & 0xFFFFFFFF) | int(value) << 32
+        self._apply_io(values)
+
+    def _apply_io(self, values: dict[str, Any]) -> None:
+        n_io = len(self.sim.digital_outputs())
+        for prefix, first_line in (("standard", 0), ("configurable", 8)):
+            mask = int(values.get(f"{prefix}_digital_output_mask", 0))
+            if not mask:
+                continue
+            levels = int(values.get(f"{prefix}_digital_output", 0))
+            for bit in range(8):
+                if mask >> bit & 1 and first_line + bit < n_io:
+                    self.sim.set_digital_output(first_line + bit, bool(levels >> bit & 1))
+        tool_mask = int(values.get("tool_digital_output_mask", 0))
+        if tool_mask:
+            levels = int(values.get("tool_digital_output", 0))
+            self.tool_outputs = (self.tool_outputs & ~tool_mask) | (levels & tool_mask)
+        if int(values.get("speed_slider_mask", 0)) & 1:
+            self.speed_slider = float(np.clip(values.get("speed_slider_fraction", 1.0), 0.0, 1.0))
+        analog_mask = int(values.get("standard_analog_output_mask", 0))
+        for k in range(2):
+            if analog_mask >> k & 1:
+                self.standard_analog_output[k] = float(values.get(f"standard_analog_output_{k}",
+                                                                  0.0))
+
+    # ------------------------------------------------------------------ programs
+
+    def run_program(self, name: str, text: str) -> None:
+        """Start program `name` from the script port, replacing the running one."""
+        old = self._program
+        self._program_name = name
+        if self._is_control_script(name, text):
+            script = ControlScript(self, text)
+            self._program = asyncio.create_task(self._run_after(old, script.run()))
+        else:
+            logger.warning(
+                "program %r is not emulated (only ur_rtde's control script is); its "
+                "write_output_integer_register calls are applied and it ends at once", name
+            )
+            self._program = asyncio.create_task(self._run_after(old, self._generic(text)))
+
+    @staticmethod
+    def _is_control_script(name: str, text: str) -> bool:
+        return name == "rtde_control" or ("def rtde_cmd():" in text and "signal_ready" in text)
+
+    async def _run_after(self, old: asyncio.Task[None] | None, body: Any) -> None:
+        if old is not None and not old.done():
+            old.cancel()
+            with contextlib.suppress(BaseException):
+                await old
+        await body
+
+    async def _generic(self, text: str) -> None:
+        for index_text, value in _WRITE_INT.findall(text):
+            try:
+                index = sum(int(part) for part in index_text.split("+") if part.strip())
+            except ValueError:
+                continue
+            if 0 <= index < N_REGISTERS:
+                self.output_int[index] = int(value)
+        await asyncio.sleep(0.01)
+
+    def stop_program(self) -> None:
+        """Dashboard `stop`: end the running program."""
+        if self._program is not None and not self._program.done():
+            self._program.cancel()
+
+    async def _stop_program_task(self) -> None:
+        task, self._program = self._program, None
+        if task is not None and not task.done():
+            task.cancel()
+            with contextlib.suppress(BaseException):
+                await task
+
+    # ------------------------------------------------------------------ motion
+
+    async def move_joints(self, q_target: np.ndarray, velocity: float) -> tuple[bool, str | None]:
+        """A movej to q_target (6,) reported rad at joint `velocity` (rad/s).
+
+        The speed fraction handed to the simulation is velocity over the slowest joint's
+        maximum speed (clipped to (0, 1]). Returns (completed, reason): reason "busy" (a
+        zerocal motion runs), "aborted" (stopped early), or the simulation's refusal code
+        ("joint_limit", "estop", ...) which also raises a protective stop.
+        """
+        from controller_stub.server import RequestRefusedError
+
+        max_speed = float(np.min(self.sim.max_joint_speed()))
+        fraction = float(np.clip(velocity / max_speed, 1e-3, 1.0)) * max(self.speed_slider, 1e-3)
+        if self._protective_stop or self.emergency_stopped():
+            return False, "estop" if self.emergency_stopped() else "protective_stop"
+        try:
+            if self.server is not None:
+                self.server.begin_motion()
+            q_start = np.asarray(self.sim.joint_positions(), float)
+            result = self.sim.move_joints(np.asarray(q_target, float), min(fraction, 1.0))
+        except RequestRefusedError:
+            return False, "busy"
+        except SimulationRefused as exc:
+            self.protective_stop(f"movej refused: {exc}")
+            return False, exc.code
+        wall = float(result.duration_s) * float(self.sim.time_scale)
+        self._motion = _Motion(q_start, np.asarray(result.q, float), time.monotonic(), wall)
+        try:
+            if self.server is not None:
+                finished = await self.server.run_motion(result.duration_s)
+            else:
+                await asyncio.sleep(wall)
+                finished = True
+        finally:
+            self._motion = None
+        return (True, None) if finished else (False, "aborted")

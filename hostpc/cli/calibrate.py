@@ -1,0 +1,240 @@
+"""`hostpc calibrate`: measure the robot, fit, push compensated zero offsets, verify.
+
+    hostpc calibrate --robot HOST[:PORT] --method stereo_target [--poses N] [--effects ...]
+                     [--rig FILE] [--known tool,target] [--cell FILE] [--push/--no-push]
+                     [--force] [--out DIR] [--json]
+    hostpc calibrate --robot sim [--scenario FILE]     the simulated controller, with truth
+    hostpc calibrate --resume DIR [--force] [--push/--no-push] [--max-correction DEG]
+                                                       continue an interrupted run (the push
+                                                       options may change: they act after
+                                                       the measurements)
+
+Everything lands in the run folder (DIR): run.json (settings, seed, plan), journal.jsonl
+(every pose as measured), rig.json, dataset.json, fit.json, push.json (rollback id and the
+previous offsets), verify.json, result.json, summary.txt and report.html. Progress goes to
+stderr; the summary (or, with --json, the result document) to stdout.
+
+Exit codes: 0 done (verification passed or not run), 2 bad input, 3 controller unreachable
+or link lost (resume with --resume DIR), 4 controller refused / failed, 5 push refused by a
+guard rail, 6 verification failed. See docs/calibrate.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import datetime as _dt
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from hostpc.cli.fit import add_model_options
+from hostpc.cli.progress import StderrProgress
+from hostpc.errors import InputError
+from hostpc.methods import METHOD_CLASSES
+from hostpc.methods.base import RunSettings
+from hostpc.methods.cell import load_cell_file, parse_known
+from hostpc.methods.journal import Journal
+from hostpc.methods.runner import RobotInfo, Runner, RunOutcome
+from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot, resolve_token
+
+SIM_FOLDER = "sim"
+
+
+def register(subparsers: Any) -> None:
+    """Add the `calibrate` subcommand."""
+    parser = subparsers.add_parser(
+        "calibrate",
+        help="measure the robot, fit, push compensated zero offsets and verify",
+        description=(
+            "Drive the robot through informative poses, measure them, fit the error model, "
+            "push the compensated zero offsets (guarded) and verify on fresh poses. "
+            "`--robot sim` runs against the simulated controller and compares with its truth."
+        ),
+    )
+    parser.add_argument("--robot", metavar="HOST[:PORT]|sim",
+                        help="controller address, or `sim` for the simulated controller")
+    parser.add_argument("--driver", choices=DRIVERS, default="zerocal",
+                        help="robot driver (default zerocal)")
+    parser.add_argument("--token", help="shared token (default: $ZEROCAL_TOKEN, else the "
+                        "simulator's default)")
+    parser.add_argument("--timeout", type=float, default=10.0, help="seconds per request")
+    parser.add_argument("--method", choices=tuple(METHOD_CLASSES), default="stereo_target",
+                        help="measurement method (default stereo_target)")
+    parser.add_argument("--poses", type=int, default=60, help="fit poses (default 60)")
+    parser.add_argument("--verify-poses", type=int, default=10,
+                        help="fresh verification poses after the push (default 10; 0 = none)")
+    parser.add_argument("--seed", type=int, default=0, help="planning seed (default 0)")
+    add_model_options(parser)
+    parser.add_argument("--known", metavar="FRAMES",
+                        help="frames measured in the cell and held fixed: tool,target or none "
+                        "(default: the cell's; for a controller: none)")
+    parser.add_argument("--cell", metavar="FILE", help="cell description JSON (mount, target)")
+    parser.add_argument("--rig", metavar="FILE",
+                        help="calibrated stereo rig JSON (default: calibrate from chessboard "
+                        "captures through the controller)")
+    parser.add_argument("--depth", choices=("triangulate", "sgbm"), default="triangulate",
+                        help="stereo depth method (default triangulate)")
+    parser.add_argument("--push", action=argparse.BooleanOptionalAction, default=None,
+                        help="write the compensated offsets to the controller (default yes)")
+    parser.add_argument("--force", action="store_true", default=None,
+                        help="push even corrections beyond --max-correction")
+    parser.add_argument("--max-correction", type=float, default=None, metavar="DEG",
+                        help="largest correction pushed without --force (default 2 deg)")
+    parser.add_argument("--verify-factor", type=float, default=None,
+                        help="verification passes if RMS <= this x expected noise (1.5)")
+    parser.add_argument("--speed", type=float, default=0.5, help="motion speed (0, 1]")
+    parser.add_argument("--criterion", choices=("D", "random"), default="D",
+                        help="pose selection (default D-optimal)")
+    parser.add_argument("--candidates", type=int, default=1500,
+                        help="candidate pool size of the planner (default 1500)")
+    parser.add_argument("--scenario", metavar="FILE", help="with --robot sim: scenario file")
+    parser.add_argument("--time-scale", type=float, default=0.0,
+                        help="with --robot sim: wall seconds per simulated second (default 0)")
+    parser.add_argument("--out", metavar="DIR", help="run folder (default ./zerocal-runs/...)")
+    parser.add_argument("--resume", metavar="DIR", help="continue the run in DIR")
+    parser.add_argument("--no-report", action="store_true", help="skip report.html")
+    parser.add_argument("--json", action="store_true", help="print the result document")
+    parser.set_defaults(func=run)
+
+
+def _settings(args: argparse.Namespace) -> RunSettings:
+    if args.poses < 1:
+        raise InputError(f"--poses {args.poses}: must be at least 1")
+    if args.verify_poses < 0:
+        raise InputError(f"--verify-poses {args.verify_poses}: must not be negative")
+    if not 0.0 < args.speed <= 1.0:
+        raise InputError(f"--speed {args.speed}: must be in (0, 1]")
+    max_correction = 2.0 if args.max_correction is None else args.max_correction
+    if not max_correction > 0:
+        raise InputError(f"--max-correction {args.max_correction}: must be positive")
+    if args.candidates < args.poses + args.verify_poses:
+        raise InputError(f"--candidates {args.candidates}: fewer than --poses + --verify-poses")
+    if args.timeout <= 0:
+        raise InputError(f"--timeout {args.timeout}: must be positive")
+    options: dict[str, Any] = {"depth": args.depth}
+    if args.rig:
+        options["rig"] = str(Path(args.rig).resolve())
+    return RunSettings(
+        method=args.method, n_poses=args.poses, n_verify=args.verify_poses, seed=args.seed,
+        effects=args.effects, plugins=tuple(args.plugin), loss=args.loss,
+        cv_folds=args.cv_folds, speed=args.speed, push=args.push is not False,
+        force=bool(args.force), max_correction_deg=max_correction,
+        verify_factor=1.5 if args.verify_factor is None else args.verify_factor,
+        criterion=args.criterion, n_candidates=args.candidates, options=options,
+    )
+
+
+def _default_out(method: str) -> Path:
+    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    return Path("zerocal-runs") / f"{stamp}-{method}"
+
+
+def _check_rig(settings: RunSettings) -> None:
+    """A bad --rig file fails before anything connects or moves (exit code 2)."""
+    rig = settings.options.get("rig")
+    if rig:
+        from hostpc.vision import load_rig
+
+        load_rig(rig)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Entry point of `hostpc calibrate`; returns the exit code."""
+    settings: RunSettings | None = None
+    cell_file = None
+    known = None
+    if args.resume:
+        run_dir = Path(args.resume)
+        header = Journal(run_dir).read_header()
+        recorded = header.get("robot", {})
+        sim = bool(recorded.get("sim"))
+        address = parse_robot(args.robot) if args.robot else (
+            RobotAddress(sim=True) if sim else parse_robot(str(recorded.get("address", ""))))
+        driver = recorded.get("driver", args.driver)
+        scenario_file = None
+    else:
+        if not args.robot:
+            raise InputError("--robot HOST[:PORT] or --robot sim is required (or --resume DIR)")
+        address = parse_robot(args.robot)
+        driver = args.driver
+        settings = _settings(args)
+        _check_rig(settings)
+        cell_file = load_cell_file(args.cell) if args.cell else None
+        known = parse_known(args.known)
+        run_dir = Path(args.out) if args.out else _default_out(settings.method)
+        if Journal(run_dir).exists:
+            raise InputError(f"--out {run_dir}: already holds a run; continue it with "
+                             f"--resume {run_dir} or choose another folder")
+        scenario_file = args.scenario
+    if args.scenario and not address.sim:
+        raise InputError("--scenario needs --robot sim")
+    progress = StderrProgress()
+    try:
+        outcome = _run_with_robot(args, address, driver, run_dir, settings, cell_file, known,
+                                  scenario_file, progress)
+    finally:
+        progress.close()
+    if args.json:
+        json.dump(outcome.document, sys.stdout, indent=2, allow_nan=False)
+        sys.stdout.write("\n")
+    else:
+        print(outcome.summary)
+    return outcome.exit_code
+
+
+def _run_with_robot(args: argparse.Namespace, address: RobotAddress, driver: str,
+                    run_dir: Path, settings: RunSettings | None, cell_file: Any,
+                    known: tuple[str, ...] | None, scenario_file: str | None,
+                    progress: StderrProgress) -> RunOutcome:
+    if not address.sim:
+        info = RobotInfo(address=str(address), driver=driver, sim=False)
+        return asyncio.run(_calibrate(args, address, driver, run_dir, settings, cell_file,
+                                      known, (), info, progress, None, args.token))
+    from hostpc.robots.simulator import (
+        SIM_DEFAULT_KNOWN,
+        SimulatedController,
+        default_sim_scenario,
+        load_scenario_file,
+    )
+
+    sim_dir = run_dir / SIM_FOLDER
+    recorded_scenario = sim_dir / "scenario.json"
+    if args.resume and recorded_scenario.is_file():
+        scenario = load_scenario_file(recorded_scenario, time_scale=None)
+        default_known: tuple[str, ...] = ()
+    elif scenario_file:
+        scenario = load_scenario_file(scenario_file, time_scale=args.time_scale)
+        default_known = ()
+    else:
+        scenario = default_sim_scenario(time_scale=args.time_scale)
+        default_known = SIM_DEFAULT_KNOWN
+    token = args.token or (scenario.get("server") or {}).get("token") or resolve_token(None)
+    progress.stage("start simulator")
+    with SimulatedController(scenario, sim_dir) as simulator:
+        info = RobotInfo(address=f"{simulator.address.host}:{simulator.address.port}",
+                         driver="zerocal", sim=True, scenario=str(simulator.scenario_path))
+        return asyncio.run(_calibrate(args, simulator.address, "zerocal", run_dir, settings,
+                                      cell_file, known, default_known, info, progress,
+                                      simulator.truth, token))
+
+
+async def _calibrate(args: argparse.Namespace, address: RobotAddress, driver: str,
+                     run_dir: Path, settings: RunSettings | None, cell_file: Any,
+                     known: tuple[str, ...] | None, default_known: tuple[str, ...],
+                     info: RobotInfo, progress: StderrProgress, truth: Any,
+                     token: str | None) -> RunOutcome:
+    progress.stage("connect")
+    robot = await open_robot(address, driver, token=token, timeout=args.timeout)
+    try:
+        overrides = {"push": args.push, "force": args.force,
+                     "max_correction_deg": args.max_correction,
+                     "verify_factor": args.verify_factor}
+        runner = Runner(robot, run_dir, robot_info=info, settings=settings,
+                        cell_file=cell_file, known=known, default_known=default_known,
+                        progress=progress, truth=truth, report=not args.no_report,
+                        resume_overrides=overrides)
+        return await runner.run()
+    finally:
+        await robot.close()

@@ -1,0 +1,21 @@
+"""Diagnostics: is the model adequate, where does it fail, which effect is missing.
+
+    import hostpc
+    diagnosis = hostpc.diagnose("run/dataset.json", ladder=True)
+    print(diagnosis.adequate, diagnosis.candidates[0].effect)
+    for sentence in diagnosis.advice:
+        print(sentence)
+
+See docs/diagnostics.md for the walk-through and the JSON schema.
+"""
+
+from hostpc.diagnose.adequacy import Adequacy, HeldOut, held_out_residuals
+from hostpc.diagnose.candidates import Candidate, SkippedCandidate
+from hostpc.diagnose.diagnosis import Diagnosis, LadderStep, ModelCheck
+from hostpc.diagnose.interactions import Interaction
+from hostpc.diagnose.pipeline import DEFAULT_ALPHA, diagnose
+from hostpc.diagnose.residual_analysis import ResidualAnalysis, VariablePattern
+
+__all__ = ["diagnose", "Diagnosis", "ModelCheck", "LadderStep", "Adequacy", "HeldOut",
+           "Candidate", "SkippedCandidate", "Interaction", "ResidualAnalysis",
+           "VariablePattern", "held_out_residuals", "DEFAULT_ALPHA"]

@@ -1,0 +1,152 @@
+"""Is the model adequate? Chi-square against its band, the noise level, held-out residuals.
+
+All lengths in metres (SI); the CLI and the report convert to mm. ``m`` is the size of one
+measurement (3 for a stereo point, 1 for a probe contact distance).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from hostpc.fit import FitResult, fold_indices
+from hostpc.fit.solver import evaluate, levenberg_marquardt
+from hostpc.model.problem import Problem
+
+
+@dataclass(frozen=True)
+class HeldOut:
+    """Residuals of every sample predicted by a fit that did not see it (k-fold).
+
+    raw: (N, m) held-out residuals (m); whitened: (N, m); folds: how many folds.
+    """
+
+    raw: np.ndarray
+    whitened: np.ndarray
+    folds: int
+
+    @property
+    def norms(self) -> np.ndarray:
+        """(N,) norm of each held-out residual (m)."""
+        return np.linalg.norm(self.raw, axis=1)
+
+    @property
+    def rms(self) -> float:
+        return float(np.sqrt(np.mean(self.norms**2)))
+
+    @property
+    def max(self) -> float:
+        return float(np.max(self.norms))
+
+    @property
+    def whitened_rms(self) -> float:
+        """RMS of the whitened held-out residual per scalar row (1 at the noise level)."""
+        return float(np.sqrt(np.mean(self.whitened**2)))
+
+
+def held_out_residuals(problem: Problem, x: np.ndarray, free: np.ndarray, folds: int,
+                       max_iterations: int = 30) -> HeldOut | None:
+    """k-fold held-out residuals, each fold's fit warm-started at the full fit's x.
+
+    Same folds and solver as ``hostpc.fit`` (so the RMS equals ``FitResult.cv_rms`` for a
+    linear loss); None when there are too few samples for ``folds`` folds.
+    """
+    n_samples, m = problem.measured.shape
+    if folds < 2 or n_samples < 2 * folds:
+        return None
+    raw = np.empty((n_samples, m))
+    whitened = np.empty((n_samples, m))
+    everyone = np.arange(n_samples)
+    for test in fold_indices(n_samples, folds):
+        train = np.setdiff1d(everyone, test)
+        outcome = levenberg_marquardt(problem.subset(train), x, free,
+                                      max_iterations=max_iterations)
+        held = evaluate(problem.subset(test), outcome.x, jacobian=False)
+        raw[test] = held.raw
+        whitened[test] = held.whitened
+    return HeldOut(raw=raw, whitened=whitened, folds=folds)
+
+
+@dataclass(frozen=True)
+class Adequacy:
+    """The verdict on one fitted model.
+
+    chi2, dof, chi2_dof: of the whitened residuals; chi2_band: (low, high) central interval
+    of chi2/dof expected for dof degrees of freedom at the significance ``alpha``;
+    p_value: upper-tail probability of a chi2 this large if the model and the stated
+    covariances were right; noise_scale: sqrt(chi2/dof), the measured noise relative to the
+    stated one (corrected for the parameters fitted); noise_rms: the RMS residual norm
+    corrected for the parameters fitted (m); expected_noise_rms: the RMS norm the stated
+    covariances predict (m); rms, max: in-sample residual norms (m); cv_rms, cv_max:
+    held-out ones (m, None without cross-validation); adequate: the verdict; reasons:
+    plain sentences why not (empty when adequate).
+    """
+
+    chi2: float
+    dof: int
+    chi2_dof: float
+    chi2_band: tuple[float, float]
+    p_value: float
+    chi2_ok: bool
+    noise_scale: float
+    noise_rms: float
+    expected_noise_rms: float
+    rms: float
+    max: float
+    cv_rms: float | None
+    cv_max: float | None
+    cv_whitened_rms: float | None
+    cv_folds: int
+    adequate: bool
+    reasons: tuple[str, ...]
+
+
+def chi2_band(dof: int, alpha: float) -> tuple[float, float]:
+    """Central interval of chi2/dof with probability 1 - alpha for dof degrees of freedom."""
+    if dof <= 0:
+        return (float("nan"), float("nan"))
+    low = stats.chi2.ppf(alpha / 2.0, dof) / dof
+    high = stats.chi2.isf(alpha / 2.0, dof) / dof
+    return (float(low), float(high))
+
+
+def expected_noise_rms(problem: Problem) -> float:
+    """RMS residual norm (m) the stated covariances predict: sqrt(mean trace(cov))."""
+    W = problem.sqrt_information
+    cov = np.linalg.inv(np.einsum("nji,njk->nik", W, W))  # (W^T W)^-1
+    return float(np.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2))))
+
+
+def assess(result: FitResult, held_out: HeldOut | None, alpha: float,
+           missing: tuple[str, ...] = ()) -> Adequacy:
+    """The verdict: the chi-square is inside its band (upper tail at ``alpha``) and no
+    missing effect was found significant (``missing``: sentences naming what was)."""
+    dof = result.dof
+    chi2_dof = result.chi2_dof
+    p_value = float(stats.chi2.sf(result.chi2, dof)) if dof > 0 else float("nan")
+    chi2_ok = bool(dof > 0 and p_value >= alpha / 2.0)
+    m = result.residuals_raw.shape[1]
+    sum_squares = float(np.sum(result.residuals_raw**2))
+    noise_rms = float(np.sqrt(sum_squares * m / dof)) if dof > 0 else float("nan")
+    band = chi2_band(dof, alpha)
+    reasons: list[str] = []
+    if dof <= 0:
+        reasons.append("no degrees of freedom left: more samples than parameters are needed")
+    elif not chi2_ok:
+        reasons.append(f"chi2/dof {chi2_dof:.3f} is above its band "
+                       f"[{band[0]:.3f}, {band[1]:.3f}] for {dof} degrees of freedom "
+                       f"(p = {p_value:.2g})")
+    reasons.extend(missing)
+    return Adequacy(
+        chi2=result.chi2, dof=dof, chi2_dof=chi2_dof, chi2_band=band, p_value=p_value,
+        chi2_ok=chi2_ok, noise_scale=float(np.sqrt(chi2_dof)) if dof > 0 else float("nan"),
+        noise_rms=noise_rms, expected_noise_rms=expected_noise_rms(result.problem),
+        rms=result.rms, max=result.max,
+        cv_rms=None if held_out is None else held_out.rms,
+        cv_max=None if held_out is None else held_out.max,
+        cv_whitened_rms=None if held_out is None else held_out.whitened_rms,
+        cv_folds=0 if held_out is None else held_out.folds,
+        adequate=not reasons, reasons=tuple(reasons),
+    )

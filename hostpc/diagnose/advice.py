@@ -1,0 +1,150 @@
+"""Plain sentences from a diagnosis: the verdict, the noise, what is missing and the command
+that adds it. Lengths in mm here (human text, docs/conventions.md)."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+
+from hostpc.diagnose.candidates import Candidate
+from hostpc.diagnose.diagnosis import LadderStep, ModelCheck
+from hostpc.diagnose.interactions import Interaction
+from hostpc.diagnose.residual_analysis import ResidualAnalysis
+from hostpc.model.problem import default_effects
+
+# what the residuals follow when a built-in effect is missing; {j}: the joint
+EFFECT_PHRASES = {
+    "joint_compliance": "Residuals follow the gravity torque on joint {j}",
+    "encoder_scale": "Residuals grow with the angle of joint {j} (a scale error of its encoder)",
+    "transmission_harmonic": "Residuals follow a once- or twice-per-revolution pattern of "
+                             "joint {j}'s angle",
+    "backlash": "Residuals depend on the direction of the last motion of joint {j}",
+    "depth_scale": "Residuals grow with the distance along the camera's optical axis",
+    "geometry": "Residuals follow the link geometry ({parameter} differs from the nominal "
+                "table)",
+    "trigger_latency": "Residuals grow with the probe's approach speed",
+}
+# which built-in effect a "parameter varies with variable" pattern is
+PATTERN_EFFECTS = (
+    (re.compile(r"joint_offsets\.q(\d+)$"), "tau{j}", "joint_compliance"),
+    (re.compile(r"joint_offsets\.q(\d+)$"), "approach{j}", "backlash"),
+    (re.compile(r"joint_offsets\.q(\d+)$"), "q{j}", "encoder_scale or transmission_harmonic"),
+    (re.compile(r"tool\.z$"), "depth", "depth_scale"),
+    (re.compile(r".*$"), "speed", "trigger_latency"),
+)
+
+
+def mm(value: float | None) -> str:
+    return "-" if value is None else f"{value * 1e3:.4f} mm"
+
+
+def _joint(parameter: str | None) -> str:
+    match = re.search(r"(\d+)$", parameter or "")
+    return match.group(1) if match else "?"
+
+
+def effects_option(check: ModelCheck, name: str) -> str:
+    """The --effects value that gives the current model plus ``name``."""
+    current = list(check.effects)
+    if current == default_effects(check.fit.problem.dataset):
+        return f"+{name}"
+    return ",".join(current + [name])
+
+
+def command(check: ModelCheck, name: str, source: str | None, plugins: Sequence[str]) -> str:
+    parts = ["hostpc diagnose", source or "DATASET", "--effects", effects_option(check, name)]
+    parts += [f"--plugin {p}" for p in plugins]
+    return " ".join(parts)
+
+
+def candidate_sentence(check: ModelCheck, candidate: Candidate, source: str | None,
+                       plugins: Sequence[str]) -> str:
+    parameter = candidate.strongest[0] if candidate.strongest else None
+    template = EFFECT_PHRASES.get(candidate.effect)
+    if template is None:
+        description = type(candidate.fit.problem.term(candidate.effect).effect).description  # type: ignore[union-attr]
+        phrase = f"Residuals are explained by {candidate.effect}" + (
+            f" ({description})" if description else "")
+    else:
+        phrase = template.format(j=_joint(parameter), parameter=parameter)
+    a = check.adequacy
+    evidence = (f"delta BIC {candidate.delta_bic:.1f}, chi2/dof {a.chi2_dof:.3f} -> "
+                f"{candidate.chi2_dof:.3f}, held-out RMS {mm(a.cv_rms)} -> {mm(candidate.cv_rms)}")
+    return (f"{phrase}: add {candidate.effect} "
+            f"({command(check, candidate.effect, source, plugins)}); {evidence}.")
+
+
+def interaction_sentence(interaction: Interaction, check: ModelCheck) -> str:
+    """"X varies with Y", what that is, and what to do about it."""
+    head = (f"The effect-agnostic search finds: {interaction.sentence} "
+            f"(score {interaction.score:.1f}, p = {interaction.p_value:.2g})")
+    for pattern, variable, effect in PATTERN_EFFECTS:
+        match = pattern.match(interaction.parameter)
+        joint = match.group(1) if match and match.groups() else ""
+        if match and interaction.variable == variable.format(j=joint):
+            if all(e not in check.effects for e in effect.split(" or ")):
+                return f"{head}: that is what {effect} models."
+    return (f"{head}. If no built-in effect explains it, write one whose parameter makes "
+            f"{interaction.parameter} depend on {interaction.variable} (docs/effects.md) and "
+            f"add it with --plugin FILE --effects +NAME.")
+
+
+def verdict_sentence(check: ModelCheck) -> str:
+    a = check.adequacy
+    model = ", ".join(check.effects)
+    band = f"[{a.chi2_band[0]:.3f}, {a.chi2_band[1]:.3f}]"
+    held = (f", held-out RMS {mm(a.cv_rms)} (in-sample {mm(a.rms)})"
+            if a.cv_rms is not None else f", RMS {mm(a.rms)}")
+    if a.adequate:
+        return (f"The model ({model}) is adequate: chi2/dof {a.chi2_dof:.3f} is inside its "
+                f"band {band} and no missing effect is significant{held}.")
+    return f"The model ({model}) is NOT adequate: {'; '.join(a.reasons)}{held}."
+
+
+def noise_sentence(check: ModelCheck) -> str:
+    a = check.adequacy
+    n_free = int((~check.fit.fixed).sum())
+    text = (f"Noise: {mm(a.noise_rms)} RMS per sample (corrected for {n_free} fitted "
+            f"parameters); the stated covariances predict {mm(a.expected_noise_rms)} "
+            f"(ratio {a.noise_scale:.2f}).")
+    if a.dof > 0 and a.chi2_dof < a.chi2_band[0]:
+        text += (" chi2/dof is below its band: the stated covariances are pessimistic "
+                 f"(about {1 / max(a.noise_scale, 1e-9):.2f} times too large).")
+    return text
+
+
+def advise(check: ModelCheck, residuals: ResidualAnalysis, ladder: Sequence[LadderStep] | None,
+           source: str | None, plugins: Sequence[str]) -> tuple[str, ...]:
+    """The advice, most important first."""
+    sentences = [verdict_sentence(check), noise_sentence(check)]
+    best = check.best_candidate
+    if best is not None:
+        sentences.append(candidate_sentence(check, best, source, plugins))
+    top = check.significant_interactions[:1]
+    if top:
+        sentences.append(interaction_sentence(top[0], check))
+    if not check.adequacy.adequate and best is None and not top:
+        sentences.append("No candidate effect and no parameter-variable pattern is "
+                         "significant: the excess is spread evenly; check the stated "
+                         "covariances and the worst samples.")
+    patterns = [p for p in residuals.patterns if p.significant][:3]
+    if patterns:
+        listed = ", ".join(f"{p.variable} (p = {p.p_value:.2g})" for p in patterns)
+        sentences.append(f"Binned residuals change significantly with {listed}.")
+    if residuals.worst:
+        worst = residuals.worst[0]
+        sentences.append(f"Worst sample: #{worst.index}, {mm(worst.norm)} "
+                         f"({worst.whitened_norm:.2f} sigma whitened).")
+    if ladder:
+        last = ladder[-1]
+        path = " -> ".join(f"{mm(s.cv_rms if s.cv_rms is not None else s.rms)}"
+                           for s in ladder)
+        added = [s.added for s in ladder if s.added]
+        if added:
+            verdict = "adequate" if last.adequate else "still NOT adequate"
+            sentences.append(f"Ladder: adding {', '.join(added)} takes the held-out RMS "
+                             f"{path}; the final model is {verdict}.")
+        elif not last.adequate:
+            sentences.append("Ladder: no candidate effect is significant, so nothing was "
+                             "added.")
+    return tuple(sentences)

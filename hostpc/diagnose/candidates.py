@@ -1,0 +1,284 @@
+"""Which built-in (or plugin) effect is missing? Fit the model with each candidate added and
+rank the candidates by the evidence the data give for it.
+
+Evidence is measured with the noise level profiled out, so a wrong overall scale of the
+stated covariances does not matter (n = scalar residual rows, k = free parameters, i.e. the
+ones the fit could identify: unidentifiable geometry parameters cost nothing):
+
+- ``delta_bic_full``: BIC(with the effect) - BIC(current), ``BIC = n ln(chi2 / n) + k ln n``.
+- ``delta_bic`` (the ranking): the same for the effect's best subset of parameters, chosen by
+  forward selection with the extended BIC (Chen & Chen 2008), which adds
+  ``2 ln C(K, k)`` for picking k of its K parameters. An effect with many parameters of which
+  the data need few (one joint's transmission harmonic, one link's length) then competes
+  fairly with a small effect; with nothing selected it is 0.
+- ``p_value``: F-test of the chi-square drop, ``F = (dchi2 / dk) / (chi2_new / dof_new)``,
+  for the whole effect and for its selected subset (Bonferroni over the C(K, k) subsets),
+  the smaller of the two doubled. A candidate is significant when ``p_value`` is below
+  ``alpha`` divided by the number of candidates tried (Bonferroni).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy import stats
+
+from hostpc.diagnose.adequacy import held_out_residuals
+from hostpc.errors import InputError
+from hostpc.fit import FitResult, solve
+from hostpc.fit.solver import Loss, evaluate, levenberg_marquardt
+from hostpc.model.effect import Effect
+from hostpc.model.problem import Problem, build_problem
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One effect tried on top of the current model.
+
+    delta_bic: extended BIC of its best parameter subset minus the current model's (negative
+    is better; the ranking); delta_bic_full: the BIC change with all its parameters;
+    selected: the parameters of that subset; delta_chi2: the chi-square drop with all its
+    parameters; added_parameters: free parameters it added; rms, max, cv_rms: in-sample and
+    held-out residual norms with it (m); chi2_dof with it; p_value: see the module doc;
+    significant: p_value below the corrected threshold; strongest: its most telling
+    parameter (the first selected, else the largest |value / sigma|) and its value / sigma;
+    fit: the fit with it added (not serialised).
+    """
+
+    effect: str
+    delta_bic: float
+    delta_bic_full: float
+    selected: tuple[str, ...]
+    delta_chi2: float
+    added_parameters: int
+    rms: float
+    max: float
+    cv_rms: float | None
+    cv_folds: int
+    chi2_dof: float
+    p_value: float
+    significant: bool
+    strongest: tuple[str, float] | None
+    fit: FitResult
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "effect": self.effect,
+            "delta_bic": _finite(self.delta_bic),
+            "rms": self.rms,
+            "cv_rms": _finite(self.cv_rms),
+            "max": self.max,
+            "chi2_dof": _finite(self.chi2_dof),
+            "delta_bic_full": _finite(self.delta_bic_full),
+            "selected": list(self.selected),
+            "delta_chi2": _finite(self.delta_chi2),
+            "added_parameters": self.added_parameters,
+            "p_value": _finite(self.p_value),
+            "significant": self.significant,
+            "strongest_parameter": None if self.strongest is None else self.strongest[0],
+            "strongest_z": None if self.strongest is None else _finite(self.strongest[1]),
+            "cv_folds": self.cv_folds,
+        }
+
+
+@dataclass(frozen=True)
+class SkippedCandidate:
+    """An effect that could not be tried on this dataset, and why (e.g. no mass data)."""
+
+    effect: str
+    reason: str
+
+
+def _finite(value: float | None) -> float | None:
+    return None if value is None or not math.isfinite(value) else float(value)
+
+
+def free_count(result: FitResult) -> int:
+    return int(np.count_nonzero(~result.fixed))
+
+
+def bic(result: FitResult) -> float:
+    """n ln(chi2 / n) + k ln(n) with n scalar rows and k free parameters."""
+    n_rows = result.residuals_whitened.size
+    chi2 = max(result.chi2, 1e-300)
+    return float(n_rows * math.log(chi2 / n_rows) + free_count(result) * math.log(n_rows))
+
+
+def f_test(base: FitResult, extended: FitResult) -> tuple[float, float, int]:
+    """(delta chi2, p-value, added free parameters) of the extended model against base."""
+    added = free_count(extended) - free_count(base)
+    delta = base.chi2 - extended.chi2
+    if added <= 0 or extended.dof <= 0 or delta <= 0:
+        return delta, 1.0, max(added, 0)
+    statistic = (delta / added) / (extended.chi2 / extended.dof)
+    return delta, float(stats.f.sf(statistic, added, extended.dof)), added
+
+
+def candidate_effects(problem: Problem, registry: Mapping[str, type[Effect]],
+                      only: Sequence[str] | None = None) -> list[str]:
+    """Names of the effects that could be added: not in the model, not a frame, and applying
+    to the dataset's method. ``only`` restricts (and orders) the list."""
+    names = list(registry) if only is None else list(only)
+    chosen = []
+    for name in names:
+        if name not in registry:
+            known = ", ".join(sorted(registry))
+            raise InputError(f"candidate effect {name!r} is unknown; known effects: {known}")
+        cls = registry[name]
+        if name in problem.effect_names or cls.hook == "frame":
+            continue
+        if cls.methods is not None and problem.method not in cls.methods:
+            continue
+        chosen.append(name)
+    return chosen
+
+
+def extend_problem(problem: Problem, effect: Effect) -> Problem:
+    """The problem with one more effect (raises EffectError/InputError if it cannot apply)."""
+    instances = [t.effect for t in problem.terms] + [effect]
+    return build_problem(problem.dataset, [e.name for e in instances],
+                         plugins=problem.plugins, effect_instances=instances)
+
+
+def warm_start(base: FitResult, problem: Problem) -> np.ndarray:
+    """The base fit's values placed in the extended layout (new parameters at zero)."""
+    values = dict(zip(base.names, base.x, strict=True))
+    return np.array([values.get(name, 0.0) for name in problem.layout.names])
+
+
+def with_held_out(result: FitResult, folds: int) -> FitResult:
+    """The fit with its cross-validated RMS filled in (from ``held_out_residuals``)."""
+    held = held_out_residuals(result.problem, result.x, ~result.fixed, folds)
+    if held is None:
+        return result
+    return replace(result, cv_rms=held.rms, cv_folds=folds)
+
+
+def _strongest(result: FitResult, effect: str, selected: tuple[str, ...]
+               ) -> tuple[str, float] | None:
+    span = result.problem.layout.effect_slices[effect]
+    best: tuple[str, float] | None = None
+    for k in range(span.start, span.stop):
+        if result.fixed[k] or not np.isfinite(result.std[k]) or result.std[k] <= 0:
+            continue
+        z = float(result.x[k] / result.std[k])
+        if selected and result.names[k] == selected[0]:
+            return (result.names[k], z)
+        if best is None or abs(z) > abs(best[1]):
+            best = (result.names[k], z)
+    return best
+
+
+def _log_choose(n: int, k: int) -> float:
+    return math.lgamma(n + 1) - math.lgamma(k + 1) - math.lgamma(n - k + 1)
+
+
+def select_subset(base: FitResult, extended: FitResult, x0: np.ndarray
+                  ) -> tuple[list[int], float]:
+    """Forward selection of the new effect's parameters by the extended BIC, linearised at
+    the current solution x0 (in the extended layout). Returns the chosen parameter indices
+    (extended layout) and the extended BIC penalty of choosing them."""
+    problem = extended.problem
+    n_base = base.x.size
+    free = ~extended.fixed
+    new = [k for k in range(n_base, free.size) if free[k]]
+    if not new:
+        return [], 0.0
+    evaluation = evaluate(problem, x0)
+    J = evaluation.jacobian
+    assert J is not None
+    r = evaluation.whitened.ravel()
+    B = J[:, :n_base][:, free[:n_base]]
+    basis = np.linalg.qr(B)[0] if B.shape[1] else np.zeros((r.size, 0))
+    C = J[:, new]
+    sizes = np.maximum(np.linalg.norm(C, axis=0), 1e-300)
+    C = C - basis @ (basis.T @ C)
+    e = r - basis @ (basis.T @ r)
+    n_rows = r.size
+    chi2 = float(e @ e)
+    n_new = len(new)
+    chosen: list[int] = []
+    score = n_rows * math.log(max(chi2, 1e-300) / n_rows)
+    while len(chosen) < n_new:
+        norms = np.linalg.norm(C, axis=0)
+        usable = norms > 1e-6 * sizes
+        usable[chosen] = False
+        if not np.any(usable):
+            break
+        gains = np.where(usable, (C.T @ e) ** 2 / np.maximum(norms**2, 1e-300), -1.0)
+        pick = int(np.argmax(gains))
+        k = len(chosen) + 1
+        trial_chi2 = max(chi2 - float(gains[pick]), 1e-300)
+        trial = (n_rows * math.log(trial_chi2 / n_rows) + k * math.log(n_rows)
+                 + 2.0 * _log_choose(n_new, k))
+        previous = (score + (k - 1) * math.log(n_rows) + 2.0 * _log_choose(n_new, k - 1))
+        if trial >= previous:
+            break
+        u = C[:, pick] / norms[pick]
+        C = C - np.outer(u, u @ C)
+        e = e - u * (u @ e)
+        chi2 = trial_chi2
+        score = n_rows * math.log(chi2 / n_rows)
+        chosen.append(pick)
+    indices = [new[c] for c in chosen]
+    return indices, (len(indices) * math.log(n_rows) + 2.0 * _log_choose(n_new, len(indices)))
+
+
+def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
+                  threshold: float) -> Candidate:
+    """Fit the base model plus ``effect``, warm-started at the base solution; find the
+    subset of its parameters the data need and the evidence for it."""
+    problem = extend_problem(base.problem, effect)
+    x0 = warm_start(base, problem)
+    extended = solve(problem, x0=x0, loss=loss, cv_folds=0, max_iterations=50)
+    extended = with_held_out(extended, cv_folds)
+    delta_chi2, p_full, added = f_test(base, extended)
+    chosen, penalty = select_subset(base, extended, x0)
+    n_rows = base.residuals_whitened.size
+    delta_bic = 0.0
+    p_subset = 1.0
+    if chosen:
+        free = np.zeros(problem.layout.size, dtype=bool)
+        free[: base.x.size] = ~extended.fixed[: base.x.size]
+        free[chosen] = True
+        outcome = levenberg_marquardt(problem, x0, free, loss=loss, max_iterations=50)
+        chi2_subset = float(np.sum(outcome.evaluation.whitened**2))
+        delta_bic = (n_rows * math.log(max(chi2_subset, 1e-300) / max(base.chi2, 1e-300))
+                     + penalty - 0.0)
+        dof_subset = n_rows - int(np.count_nonzero(free))
+        drop = base.chi2 - chi2_subset
+        if drop > 0 and dof_subset > 0:
+            statistic = (drop / len(chosen)) / (chi2_subset / dof_subset)
+            n_new = int(np.count_nonzero(~extended.fixed[base.x.size:]))
+            p_subset = min(1.0, float(stats.f.sf(statistic, len(chosen), dof_subset))
+                           * math.exp(_log_choose(n_new, len(chosen))))
+    p_value = min(1.0, 2.0 * min(p_full, p_subset))
+    selected = tuple(problem.layout.names[k] for k in chosen)
+    return Candidate(
+        effect=effect.name, delta_bic=delta_bic, delta_bic_full=bic(extended) - bic(base),
+        selected=selected, delta_chi2=delta_chi2, added_parameters=added, rms=extended.rms,
+        max=extended.max, cv_rms=extended.cv_rms, cv_folds=extended.cv_folds,
+        chi2_dof=extended.chi2_dof, p_value=p_value, significant=bool(p_value < threshold),
+        strongest=_strongest(extended, effect.name, selected), fit=extended,
+    )
+
+
+def rank_candidates(base: FitResult, registry: Mapping[str, type[Effect]],
+                    names: Sequence[str], *, alpha: float, cv_folds: int, loss: Loss
+                    ) -> tuple[tuple[Candidate, ...], tuple[SkippedCandidate, ...]]:
+    """Try every named candidate; return them best first (significant ones, then by delta
+    BIC) and the ones that could not be tried."""
+    threshold = alpha / max(len(names), 1)
+    tried: list[Candidate] = []
+    skipped: list[SkippedCandidate] = []
+    for name in names:
+        try:
+            tried.append(try_candidate(base, registry[name](), cv_folds=cv_folds, loss=loss,
+                                       threshold=threshold))
+        except InputError as exc:
+            skipped.append(SkippedCandidate(name, str(exc)))
+    tried.sort(key=lambda c: (not c.significant, c.delta_bic, c.delta_bic_full))
+    return tuple(tried), tuple(skipped)

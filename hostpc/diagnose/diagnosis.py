@@ -1,0 +1,213 @@
+"""The frozen values a diagnosis returns, and their JSON form (``Diagnosis.to_dict``).
+
+JSON is in SI units (metres, radians) like every saved result; mm appear only in the CLI's
+text and in the report. Names of effects, parameters and variables are exactly those of the
+dataset contract (``q3``, ``tau2``, ``approach1``, ``t``, ``depth``, ``extra.NAME``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hostpc.diagnose.adequacy import Adequacy, HeldOut
+from hostpc.diagnose.candidates import Candidate, SkippedCandidate
+from hostpc.diagnose.interactions import Interaction
+from hostpc.diagnose.residual_analysis import ResidualAnalysis
+from hostpc.fit import FitResult
+
+FORMAT = "zerocal-diagnosis/1"
+JSON_INTERACTIONS = 25
+
+
+def finite(value: float | None) -> float | None:
+    """JSON-safe float: None for None, NaN and infinities."""
+    return None if value is None or not math.isfinite(value) else float(value)
+
+
+@dataclass(frozen=True)
+class ModelCheck:
+    """One model checked: its fit, held-out residuals, verdict, candidates and interactions.
+
+    candidates: best first; skipped: effects that could not be tried; interactions: best
+    first; n_interaction_tests: how many (parameter, variable) pairs were tested.
+    """
+
+    fit: FitResult
+    held_out: HeldOut | None
+    adequacy: Adequacy
+    candidates: tuple[Candidate, ...]
+    skipped: tuple[SkippedCandidate, ...]
+    interactions: tuple[Interaction, ...]
+    n_interaction_tests: int
+
+    @property
+    def effects(self) -> tuple[str, ...]:
+        return self.fit.problem.effect_names
+
+    @property
+    def best_candidate(self) -> Candidate | None:
+        """The best significant candidate, or None."""
+        return next((c for c in self.candidates if c.significant), None)
+
+    @property
+    def significant_interactions(self) -> tuple[Interaction, ...]:
+        return tuple(i for i in self.interactions if i.significant)
+
+
+@dataclass(frozen=True)
+class LadderStep:
+    """One rung of the ladder: the model, what was added to reach it (None for the start),
+    and its in-sample and held-out residual norms (m), the held-out whitened RMS per scalar
+    row (1 at the stated noise level), chi2/dof and verdict."""
+
+    step: int
+    effects: tuple[str, ...]
+    added: str | None
+    rms: float
+    max: float
+    cv_rms: float | None
+    cv_max: float | None
+    cv_whitened_rms: float | None
+    chi2_dof: float
+    delta_bic: float | None
+    free_parameters: int
+    adequate: bool
+    check: ModelCheck
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "step": self.step, "effects": list(self.effects), "added": self.added,
+            "rms": self.rms, "max": self.max, "cv_rms": finite(self.cv_rms),
+            "cv_max": finite(self.cv_max), "cv_whitened_rms": finite(self.cv_whitened_rms),
+            "chi2_dof": finite(self.chi2_dof),
+            "delta_bic": finite(self.delta_bic), "free_parameters": self.free_parameters,
+            "adequate": self.adequate,
+        }
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """Everything ``diagnose`` found about one dataset and model.
+
+    check: the current model's check; residuals: its residual analysis; ladder: the nested
+    models fitted with ``ladder=True`` (else None); advice: plain sentences, most important
+    first; alpha: the family-wise significance of every test; source: the dataset's path
+    (for the commands in the advice), if known.
+    """
+
+    check: ModelCheck
+    residuals: ResidualAnalysis
+    ladder: tuple[LadderStep, ...] | None
+    advice: tuple[str, ...]
+    alpha: float
+    source: str | None
+    plugins: tuple[str, ...]
+
+    # the headline numbers of the current model ------------------------------------------
+    @property
+    def fit(self) -> FitResult:
+        return self.check.fit
+
+    @property
+    def adequate(self) -> bool:
+        return self.check.adequacy.adequate
+
+    @property
+    def rms(self) -> float:
+        return self.check.adequacy.rms
+
+    @property
+    def max(self) -> float:
+        return self.check.adequacy.max
+
+    @property
+    def chi2_dof(self) -> float:
+        return self.check.adequacy.chi2_dof
+
+    @property
+    def cv_rms(self) -> float | None:
+        return self.check.adequacy.cv_rms
+
+    @property
+    def candidates(self) -> tuple[Candidate, ...]:
+        return self.check.candidates
+
+    @property
+    def interactions(self) -> tuple[Interaction, ...]:
+        return self.check.interactions
+
+    @property
+    def final(self) -> ModelCheck:
+        """The last model of the ladder (the current model without a ladder)."""
+        return self.ladder[-1].check if self.ladder else self.check
+
+    def to_dict(self, max_interactions: int = JSON_INTERACTIONS) -> dict[str, Any]:
+        """One JSON document (see docs/diagnostics.md for the schema)."""
+        check = self.check
+        a = check.adequacy
+        fit = check.fit
+        shown = [i for i in check.interactions[:max_interactions]]
+        shown += [i for i in check.interactions[max_interactions:] if i.significant]
+        held = check.held_out
+        document: dict[str, Any] = {
+            "format": FORMAT,
+            "source": self.source,
+            "method": fit.problem.method,
+            "units": {"length": "m", "angle": "rad"},
+            "n_samples": int(fit.residuals_raw.shape[0]),
+            "measurement_size": int(fit.residuals_raw.shape[1]),
+            "effects": list(check.effects),
+            "plugins": list(self.plugins),
+            "alpha": self.alpha,
+            "adequate": a.adequate,
+            "reasons": list(a.reasons),
+            "rms": a.rms,
+            "max": a.max,
+            "cv_rms": finite(a.cv_rms),
+            "cv_max": finite(a.cv_max),
+            "cv_whitened_rms": finite(a.cv_whitened_rms),
+            "cv_folds": a.cv_folds,
+            "chi2": a.chi2,
+            "dof": a.dof,
+            "chi2_dof": finite(a.chi2_dof),
+            "chi2_band": [finite(a.chi2_band[0]), finite(a.chi2_band[1])],
+            "chi2_p_value": finite(a.p_value),
+            "noise": {"scale": finite(a.noise_scale), "rms": finite(a.noise_rms),
+                      "expected_rms": finite(a.expected_noise_rms)},
+            "candidates": [c.to_dict() for c in check.candidates],
+            "skipped_candidates": [{"effect": s.effect, "reason": s.reason}
+                                   for s in check.skipped],
+            "interactions": [i.to_dict() for i in shown],
+            "n_interaction_tests": check.n_interaction_tests,
+            "residuals": {
+                "norm": [float(v) for v in self.residuals.norms],
+                "whitened_norm": [float(v) for v in self.residuals.whitened_norms],
+                "raw": fit.residuals_raw.tolist(),
+                "whitened": fit.residuals_whitened.tolist(),
+                "held_out_norm": None if held is None else [float(v) for v in held.norms],
+                "worst": [{"index": w.index, "norm": w.norm, "whitened_norm": w.whitened_norm,
+                           "raw": list(w.raw)} for w in self.residuals.worst],
+                "patterns": [
+                    {"variable": p.variable, "chi2": p.chi2, "dof": p.dof,
+                     "p_value": p.p_value, "significant": p.significant,
+                     "centres": [finite(v) for v in p.centres],
+                     "counts": [int(c) for c in p.counts],
+                     "mean_raw": p.mean_raw.tolist(),
+                     "mean_whitened": p.mean_whitened.tolist()}
+                    for p in self.residuals.patterns
+                ],
+            },
+            "fit": fit.to_dict(),
+            "advice": list(self.advice),
+        }
+        if self.ladder is not None:
+            document["ladder"] = [step.to_dict() for step in self.ladder]
+        return document
+
+
+def free_parameters(fit: FitResult) -> int:
+    return int(np.count_nonzero(~fit.fixed))

@@ -1,0 +1,167 @@
+"""Effect-agnostic search: which parameter varies with which variable?
+
+A score (added-variable) test on the current fit. For model parameter k with whitened
+Jacobian column J_k (N*m,) and a recorded variable v, the hypothesis "parameter k varies
+with v" adds the columns ``J_k * f(v)`` with f = the centred variable, and for joint angles
+also sin v and cos v (one harmonic). The already-fitted columns are projected out; the
+statistic is the chi-square drop the added columns would buy at first order,
+``s = |Q_z^T r|^2`` (Q_z an orthonormal basis of the projected columns, r the whitened
+residuals), turned into an F-test against the residual variance (so a wrong overall noise
+scale does not matter). ``score`` is -log10 of its p-value; significance is Bonferroni
+corrected over all (parameter, variable) pairs tested.
+
+The parameters tested are those of the model plus, when the model has no ``geometry``
+effect, the DH/MDH table deltas (named ``geometry.<name>``), so a drifting link length is
+found even before geometry is modelled. Parameters are columns of the Jacobian, so this
+works for any effect, method and measurement size.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from hostpc.diagnose.residual_analysis import is_angle, usable_variables
+from hostpc.fit import FitResult
+from hostpc.fit.solver import evaluate
+from hostpc.model.effects import Geometry
+from hostpc.model.problem import build_problem
+
+RANK_TOLERANCE = 1e-6
+
+
+@dataclass(frozen=True)
+class Interaction:
+    """"``parameter`` varies with ``variable``": score = -log10(p), chi2 = the statistic
+    (first-order chi-square drop), dof = columns tested, p_value, significant,
+    basis: "linear" or "linear+harmonic"; fitted: whether the parameter is in the model."""
+
+    parameter: str
+    variable: str
+    score: float
+    chi2: float
+    dof: int
+    p_value: float
+    significant: bool
+    basis: str
+    fitted: bool
+
+    @property
+    def sentence(self) -> str:
+        return f"{self.parameter} varies with {self.variable}"
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "parameter": self.parameter, "variable": self.variable, "score": self.score,
+            "chi2": self.chi2, "dof": self.dof, "p_value": self.p_value,
+            "significant": self.significant, "basis": self.basis, "fitted": self.fitted,
+        }
+
+
+def modulators(name: str, values: np.ndarray) -> tuple[np.ndarray, str]:
+    """(N, g) functions of one variable that a parameter may vary with, and their name."""
+    centred = values - values.mean()
+    scale = float(np.std(centred)) or 1.0
+    columns = [centred / scale]
+    if is_angle(name):
+        for function in (np.sin, np.cos):
+            column = function(values)
+            columns.append(column - column.mean())
+        return np.stack(columns, axis=1), "linear+harmonic"
+    return np.stack(columns, axis=1), "linear"
+
+
+def _geometry_columns(result: FitResult) -> tuple[list[str], np.ndarray] | None:
+    """Whitened Jacobian columns of the DH/MDH deltas at the fit, if geometry is not fitted."""
+    problem = result.problem
+    if "geometry" in problem.effect_names or problem.method not in ("stereo_target",
+                                                                    "sphere_probe"):
+        return None
+    instances = [t.effect for t in problem.terms] + [Geometry()]
+    extended = build_problem(problem.dataset, [e.name for e in instances],
+                             plugins=problem.plugins, effect_instances=instances)
+    x = np.concatenate([result.x, np.zeros(extended.layout.size - result.x.size)])
+    J = evaluate(extended, x).jacobian
+    assert J is not None
+    span = extended.layout.effect_slices["geometry"]
+    columns = J[:, span]
+    # a table delta the model already spans (d1 is target.z) would only repeat that name
+    J_free = J[:, : result.x.size][:, ~result.fixed]
+    Q = np.linalg.qr(J_free)[0] if J_free.shape[1] else np.zeros((J.shape[0], 0))
+    outside = np.linalg.norm(columns - Q @ (Q.T @ columns), axis=0)
+    keep = outside > 1e-6 * np.maximum(np.linalg.norm(columns, axis=0), 1e-300)
+    names = [n for n, k in zip(extended.layout.names[span], keep, strict=True) if k]
+    return names, columns[:, keep]
+
+
+def search_interactions(result: FitResult, variables: Mapping[str, np.ndarray], alpha: float,
+                        include_geometry: bool = True) -> tuple[tuple[Interaction, ...], int]:
+    """Every (parameter, variable) pair scored, best first; and the number of tests."""
+    problem = result.problem
+    evaluation = evaluate(problem, result.x)
+    J = evaluation.jacobian
+    assert J is not None
+    n_samples, m = problem.measured.shape
+    row_weight = np.repeat(np.sqrt(result.weights), m)
+    r = evaluation.whitened.ravel() * row_weight
+    names = list(problem.layout.names)
+    fitted = [True] * len(names)
+    columns = J
+    if include_geometry:
+        extra = _geometry_columns(result)
+        if extra is not None:
+            names += extra[0]
+            fitted += [False] * len(extra[0])
+            columns = np.concatenate([J, extra[1]], axis=1)
+    columns = columns * row_weight[:, None]
+    J_free = J[:, ~result.fixed] * row_weight[:, None]
+    Q = np.linalg.qr(J_free)[0] if J_free.shape[1] else np.zeros((r.size, 0))
+    chi2 = float(r @ r)
+    dof_fit = r.size - J_free.shape[1]
+    norms = np.linalg.norm(columns, axis=0)
+    alive = norms > 1e-12 * max(float(norms.max(initial=0.0)), 1e-300)
+    usable = usable_variables(variables)
+    pairs: list[tuple[str, str, float, int, str, bool]] = []
+    for variable, values in usable.items():
+        F, basis = modulators(variable, values)
+        F_rows = np.repeat(F, m, axis=0)  # (N*m, g)
+        for k in np.flatnonzero(alive):
+            Z = columns[:, k:k + 1] * F_rows
+            size = float(np.linalg.norm(Z))
+            Z = Z - Q @ (Q.T @ Z)
+            statistic, rank = _statistic(Z, size, r)
+            pairs.append((names[k], variable, statistic, rank, basis, fitted[k]))
+    n_tests = len(pairs)
+    threshold = alpha / max(n_tests, 1)
+    statistic = np.array([p[2] for p in pairs])
+    rank = np.array([p[3] for p in pairs])
+    testable = (rank > 0) & (dof_fit - rank > 0)
+    safe_rank = np.maximum(rank, 1)
+    remaining = np.maximum(chi2 - statistic, 1e-300) / np.maximum(dof_fit - safe_rank, 1)
+    log_p = np.where(testable, stats.f.logsf(statistic / safe_rank / remaining, safe_rank,
+                                             np.maximum(dof_fit - safe_rank, 1)), 0.0)
+    log_p = np.where(np.isfinite(log_p), log_p, -300.0 * math.log(10.0))
+    found = [
+        Interaction(parameter, variable, float(-lp / math.log(10.0)) + 0.0, float(s), int(g),
+                    float(math.exp(lp)), bool(math.exp(lp) < threshold), basis, is_fitted)
+        for (parameter, variable, s, g, basis, is_fitted), lp in zip(pairs, log_p, strict=True)
+    ]
+    found.sort(key=lambda i: (-i.score, i.parameter, i.variable))
+    return tuple(found), n_tests
+
+
+def _statistic(Z: np.ndarray, size: float, r: np.ndarray) -> tuple[float, int]:
+    """(first-order chi-square drop, rank) of the projected added columns Z (rows, g) for
+    the residuals r; size is the norm of Z before projection (directions that projection
+    all but removed are rounding noise, not evidence)."""
+    if Z.size == 0 or size <= 0.0:
+        return 0.0, 0
+    U, s, _ = np.linalg.svd(Z, full_matrices=False)
+    rank = int(np.sum(s > RANK_TOLERANCE * size))
+    if rank == 0:
+        return 0.0, 0
+    return float(np.sum((U[:, :rank].T @ r) ** 2)), rank

@@ -1,0 +1,154 @@
+"""Where does the model fail? Per-sample residuals, the worst samples, and the residuals
+binned against every recorded or derived variable of the dataset contract.
+
+A pattern is a number: for each variable the samples are split into quantile bins, and the
+mean whitened residual of each bin is tested against zero (sum over bins of n_b |mean_b|^2
+is chi-square with bins x m degrees of freedom if the residuals are pure noise).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+ANGLE_VARIABLE = re.compile(r"(^|\.)q\d+$")
+DEFAULT_BINS = 6
+WORST_COUNT = 10
+
+
+def is_angle(variable: str) -> bool:
+    """True for joint-angle variables (``q3``, ``left.q3``): they get harmonic modulators."""
+    return bool(ANGLE_VARIABLE.search(variable))
+
+
+def analysis_variables(variables: Mapping[str, np.ndarray], measured: np.ndarray,
+                       raw: np.ndarray) -> dict[str, np.ndarray]:
+    """The dataset's variables for residual analysis, with ``depth`` taken from the model's
+    prediction (measured - residual) instead of the measurement: a regressor that carries
+    the measurement's own noise correlates with the residuals and fakes a pattern.
+
+    measured, raw: (N, m) measurements and residuals; depth is the sensor z (m = 3).
+    """
+    chosen = dict(variables)
+    if "depth" in chosen and measured.shape[1] == 3:
+        chosen["depth"] = measured[:, 2] - raw[:, 2]
+    return chosen
+
+
+def usable_variables(variables: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The variables that vary over the samples and are finite everywhere, in contract
+    order (as the model context lists them)."""
+    usable = {}
+    for name, values in variables.items():
+        values = np.asarray(values, dtype=float)
+        if not np.all(np.isfinite(values)):
+            continue
+        if np.ptp(values) <= 1e-12 * max(1.0, float(np.max(np.abs(values)))):
+            continue
+        usable[name] = values
+    return usable
+
+
+@dataclass(frozen=True)
+class SampleResidual:
+    """One sample: index, raw residual norm (m), whitened norm, and its raw residual (m,)."""
+
+    index: int
+    norm: float
+    whitened_norm: float
+    raw: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class VariablePattern:
+    """Residuals binned against one variable.
+
+    edges: (B+1,) bin edges in the variable's unit; centres, counts: (B,); mean_raw: (B, m)
+    mean raw residual per bin (m); mean_whitened: (B, m); chi2, dof, p_value: the test of
+    all bin means against zero; significant: p_value below the corrected threshold.
+    """
+
+    variable: str
+    edges: np.ndarray
+    centres: np.ndarray
+    counts: np.ndarray
+    mean_raw: np.ndarray
+    mean_whitened: np.ndarray
+    chi2: float
+    dof: int
+    p_value: float
+    significant: bool
+
+
+@dataclass(frozen=True)
+class ResidualAnalysis:
+    """norms: (N,) raw residual norms (m); whitened_norms: (N,); worst: the largest whitened
+    residuals first; patterns: one per variable, most significant first; threshold: the
+    per-test p-value threshold (alpha over the number of variables)."""
+
+    norms: np.ndarray
+    whitened_norms: np.ndarray
+    worst: tuple[SampleResidual, ...]
+    patterns: tuple[VariablePattern, ...]
+    threshold: float
+
+
+def _bins(values: np.ndarray, n_bins: int) -> tuple[np.ndarray, np.ndarray]:
+    """Quantile bin edges and the bin index of every value (discrete values: one bin each)."""
+    distinct = np.unique(values)
+    if distinct.size <= n_bins:
+        edges = np.concatenate([distinct[:1], (distinct[:-1] + distinct[1:]) / 2, distinct[-1:]])
+        index = np.searchsorted(distinct, values)
+        return edges, index
+    edges = np.unique(np.quantile(values, np.linspace(0.0, 1.0, n_bins + 1)))
+    index = np.clip(np.searchsorted(edges, values, side="right") - 1, 0, edges.size - 2)
+    return edges, index
+
+
+def bin_pattern(variable: str, values: np.ndarray, raw: np.ndarray, whitened: np.ndarray,
+                n_bins: int, threshold: float) -> VariablePattern:
+    """Bin the residuals (N, m) against one variable (N,) and test the bin means."""
+    edges, index = _bins(values, n_bins)
+    n_used = edges.size - 1
+    m = raw.shape[1]
+    counts = np.bincount(index, minlength=n_used).astype(float)
+    keep = counts > 0
+    sums_raw = np.stack([np.bincount(index, raw[:, k], n_used) for k in range(m)], axis=1)
+    sums_white = np.stack([np.bincount(index, whitened[:, k], n_used) for k in range(m)], axis=1)
+    safe = np.where(keep, counts, 1.0)[:, None]
+    mean_raw = sums_raw / safe
+    mean_white = sums_white / safe
+    chi2 = float(np.sum(counts[:, None] * mean_white**2))
+    dof = int(np.count_nonzero(keep) * m)
+    p_value = float(stats.chi2.sf(chi2, dof)) if dof else 1.0
+    centres = np.array([values[index == b].mean() if keep[b] else np.nan for b in range(n_used)])
+    return VariablePattern(variable, edges, centres, counts.astype(int), mean_raw, mean_white,
+                           chi2, dof, p_value, bool(p_value < threshold))
+
+
+def analyse_residuals(raw: np.ndarray, whitened: np.ndarray,
+                      variables: Mapping[str, np.ndarray], alpha: float,
+                      n_bins: int = DEFAULT_BINS, worst_count: int = WORST_COUNT
+                      ) -> ResidualAnalysis:
+    """Per-sample norms, the worst samples and the binned pattern of every variable.
+
+    raw, whitened: (N, m) residuals (measured - predicted) of the fitted model.
+    """
+    norms = np.linalg.norm(raw, axis=1)
+    whitened_norms = np.linalg.norm(whitened, axis=1)
+    order = np.argsort(-whitened_norms)[:worst_count]
+    worst = tuple(
+        SampleResidual(int(i), float(norms[i]), float(whitened_norms[i]),
+                       tuple(float(v) for v in raw[i]))
+        for i in order
+    )
+    usable = usable_variables(variables)
+    threshold = alpha / max(len(usable), 1)
+    patterns = [bin_pattern(name, values, raw, whitened, n_bins, threshold)
+                for name, values in usable.items()]
+    patterns.sort(key=lambda p: p.p_value)
+    return ResidualAnalysis(norms, whitened_norms, worst, tuple(patterns), threshold)

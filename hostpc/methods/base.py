@@ -1,0 +1,247 @@
+"""The interface between a measurement method and the shared calibration runner.
+
+A method is one module with one `Method` subclass. It knows its sensor and nothing of the
+procedure around it:
+
+    prepare(robot, progress)        sensor set-up before any pose (stereo_target: the rig,
+                                    calibrated from chessboard captures unless given);
+                                    persist what it made in `run_dir` so resume never redoes it
+    candidates(state, rng)          a large pool of reachable joint poses (N_c, n) from which
+                                    the planner picks the informative ones
+    design_dataset(q)               a Dataset at poses q with predicted measurements and their
+                                    expected covariances (nominal model): the planner's and the
+                                    identifiability check's Jacobian comes from it
+    acquire(robot, phase, index, q, q_from)
+                                    drive to one pose and measure: a SampleRecord with a sample
+                                    in dataset-file form, or skipped with the reason
+    dataset_document(records)       the journaled samples as a `zerocal-dataset/1` document
+
+The runner (`hostpc.methods.runner`) owns everything else: reading the controller's state
+and offsets, planning (`hostpc.methods.planning`), the identifiability check, the journal
+and resume, the fit, the guarded push, verification, the result document and the report.
+Methods never print; they report through the `Progress` they are given.
+
+Units: SI and radians (docs/conventions.md); q arrays (N, n) in the controller's frame.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from abc import ABC, abstractmethod
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar, Literal, Protocol
+
+import numpy as np
+
+from hostpc.dataset import Dataset
+from hostpc.methods.cell import Cell
+from hostpc.robots.base import RobotAdapter, RobotState
+
+Phase = Literal["fit", "verify"]
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """What the user asked for; recorded in the run folder so a resume uses the same.
+
+    n_poses / n_verify: fit poses and fresh verification poses; seed: of the candidate pool
+    and every random choice; effects: the fit's effect spec (None: default model);
+    speed: motion speed, fraction of max; push: write the compensated offsets;
+    force: allow corrections beyond max_correction_deg; verify_factor: pass if the verify
+    RMS <= verify_factor x the expected noise RMS; criterion: planner criterion ("D" or
+    "random"); n_candidates: size of the candidate pool; options: method-specific
+    settings (e.g. stereo_target "depth": "triangulate" | "sgbm").
+    """
+
+    method: str
+    n_poses: int = 60
+    n_verify: int = 10
+    seed: int = 0
+    effects: str | None = None
+    plugins: tuple[str, ...] = ()
+    loss: str = "linear"
+    cv_folds: int = 5
+    speed: float = 0.5
+    push: bool = True
+    force: bool = False
+    max_correction_deg: float = 2.0
+    verify_factor: float = 1.5
+    criterion: str = "D"
+    n_candidates: int = 1500
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        data = dataclasses.asdict(self)
+        data["plugins"] = list(self.plugins)
+        data["options"] = dict(self.options)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> RunSettings:
+        """Inverse of to_dict (unknown keys ignored, so old run folders stay readable)."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        values = {k: v for k, v in data.items() if k in names}
+        values["plugins"] = tuple(values.get("plugins", ()))
+        values["options"] = dict(values.get("options", {}))
+        return cls(**values)
+
+
+@dataclass(frozen=True)
+class Plan:
+    """The poses of a run, fixed at the start and recorded in the run folder.
+
+    q: (N, n) fit poses in visiting order; q_verify: (K, n) verification poses (none of
+    them a fit pose); info: what the planner reports (criterion, pool size, predicted
+    joint-offset sigmas, structural null directions) as JSON-ready values.
+    """
+
+    q: np.ndarray
+    q_verify: np.ndarray
+    info: Mapping[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (radians)."""
+        return {"q": self.q.tolist(), "q_verify": self.q_verify.tolist(), "info": dict(self.info)}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Plan:
+        """Inverse of to_dict."""
+        n = len(data["q"][0]) if data["q"] else len(data["q_verify"][0])
+        q = np.asarray(data["q"], dtype=float).reshape(-1, n)
+        q_verify = np.asarray(data["q_verify"], dtype=float).reshape(-1, n)
+        return cls(q=q, q_verify=q_verify, info=dict(data.get("info", {})))
+
+
+@dataclass(frozen=True)
+class SampleRecord:
+    """One pose's outcome, as journaled.
+
+    phase / index: which plan pose; ok: measured; sample: the sample in dataset-file form
+    (SI units; stereo_target: q, p, cov, t, approach, uv); reason: why it was skipped;
+    q_end: (n,) where the robot is after this pose (for the next pose's approach signs).
+    """
+
+    phase: Phase
+    index: int
+    ok: bool
+    sample: Mapping[str, Any] | None = None
+    reason: str | None = None
+    q_end: Sequence[float] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (one journal line)."""
+        return {
+            "event": "sample",
+            "phase": self.phase,
+            "index": self.index,
+            "status": "ok" if self.ok else "skipped",
+            "sample": dict(self.sample) if self.sample is not None else None,
+            "reason": self.reason,
+            "q_end": list(self.q_end) if self.q_end is not None else None,
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> SampleRecord:
+        """Inverse of to_dict."""
+        return cls(
+            phase=data["phase"],
+            index=int(data["index"]),
+            ok=data["status"] == "ok",
+            sample=data.get("sample"),
+            reason=data.get("reason"),
+            q_end=data.get("q_end"),
+        )
+
+
+class Progress(Protocol):
+    """Where the runner and methods report progress (the CLI draws it on stderr)."""
+
+    def stage(self, name: str, total: int | None = None) -> None:
+        """A new stage begins (`total` steps, or None if unknown)."""
+
+    def advance(self, done: int, note: str = "") -> None:
+        """`done` steps of the current stage are finished."""
+
+    def message(self, text: str) -> None:
+        """A line worth keeping (a warning, a skipped pose, a decision)."""
+
+    def close(self) -> None:
+        """The run is over (clear the updating line)."""
+
+
+class NullProgress:
+    """A Progress that reports nothing (library use, tests)."""
+
+    def stage(self, name: str, total: int | None = None) -> None:
+        """Ignored."""
+
+    def advance(self, done: int, note: str = "") -> None:
+        """Ignored."""
+
+    def message(self, text: str) -> None:
+        """Ignored."""
+
+    def close(self) -> None:
+        """Ignored."""
+
+
+def approach_signs(q_from: np.ndarray | None, q_to: np.ndarray) -> list[float]:
+    """(n,) sign of each joint's last motion into q_to (+1 where it did not move, or no
+    previous pose): the `approach` context of a sample."""
+    if q_from is None:
+        return [1.0] * int(np.size(q_to))
+    signs = np.sign(np.asarray(q_to, float) - np.asarray(q_from, float))
+    return [float(s) if s != 0 else 1.0 for s in signs]
+
+
+class Method(ABC):
+    """A measurement method (see the module docstring). One instance per run.
+
+    settings: the run's settings; cell: the nominal cell; run_dir: the run folder, where
+    the method keeps what `prepare` made (e.g. `rig.json`).
+    """
+
+    name: ClassVar[str]
+    """The dataset `method` this produces (stereo_target, sphere_probe, dual_loop)."""
+
+    def __init__(self, settings: RunSettings, cell: Cell, run_dir: Path) -> None:
+        self.settings = settings
+        self.cell = cell
+        self.run_dir = Path(run_dir)
+
+    def check_inputs(self) -> None:
+        """Validate method inputs that need no robot (files given on the command line);
+        raise InputError. Called before connecting. The default checks nothing."""
+        return None
+
+    @abstractmethod
+    async def prepare(self, robot: RobotAdapter, progress: Progress) -> None:
+        """Sensor set-up before the first pose; persist results in run_dir (resumable)."""
+
+    @abstractmethod
+    def candidates(self, state: RobotState, rng: np.random.Generator) -> np.ndarray:
+        """(N_c, n) reachable candidate poses within the controller's limits."""
+
+    @abstractmethod
+    def design_dataset(self, q: np.ndarray) -> Dataset:
+        """A dataset at poses q (N, n) with nominal predicted measurements and expected
+        covariances, for Jacobians (planning, identifiability). Not a measurement."""
+
+    @abstractmethod
+    async def acquire(
+        self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
+        q_from: np.ndarray | None,
+    ) -> SampleRecord:
+        """Drive to q (n,) and measure. q_from: where the robot is (None if unknown).
+        A failed detection is a skipped record; a lost link raises ConnectionFailed."""
+
+    @abstractmethod
+    def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+        """The samples (dataset-file form, in order) as a `zerocal-dataset/1` document."""
+
+    def describe(self) -> dict[str, Any]:
+        """JSON-ready facts about the method's set-up for the result document."""
+        return {}

@@ -1,0 +1,184 @@
+"""The run folder's journal: nothing measured is ever lost, nothing is measured twice.
+
+Files in the run folder DIR:
+
+- `run.json`   the run's header, rewritten atomically (temp file + fsync + rename) as
+               stages complete: format tag, robot address and driver, settings, seed,
+               cell, the controller's state and offsets at the start, and the plan once it
+               exists. A resume reads everything from here.
+- `journal.jsonl`
+               append-only, one JSON object per line, each line flushed and fsync'ed before
+               the next pose: `{"event": "sample", "phase": "fit"|"verify", "index": i,
+               "status": "ok"|"skipped", "sample": {...}, "reason": ...}` and the other
+               events of the run (`push`, `note`). Samples are keyed by (phase, index): a
+               record already present is never replaced, so a resume neither repeats nor
+               loses a pose. A torn last line (power cut mid-write) is ignored on reading
+               and cut off before the next append.
+
+Everything is in SI units and radians.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+from hostpc.errors import InputError
+from hostpc.methods.base import SampleRecord
+
+RUN_FORMAT = "zerocal-run/1"
+RUN_FILE = "run.json"
+JOURNAL_FILE = "journal.jsonl"
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    """Write JSON to `path` atomically (temp file in the same folder, fsync, rename)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = json.dumps(data, indent=2, allow_nan=False) + "\n"
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}-", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(text)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+class Journal:
+    """The journal of one run folder (see the module docstring)."""
+
+    def __init__(self, run_dir: str | Path) -> None:
+        self.run_dir = Path(run_dir)
+        self.run_path = self.run_dir / RUN_FILE
+        self.journal_path = self.run_dir / JOURNAL_FILE
+        self._samples: dict[tuple[str, int], SampleRecord] = {}
+        self._events: list[dict[str, Any]] = []
+        self._loaded = False
+
+    # ------------------------------------------------------------------ header
+
+    @property
+    def exists(self) -> bool:
+        """True if the folder holds a run header."""
+        return self.run_path.is_file()
+
+    def read_header(self) -> dict[str, Any]:
+        """The run header; InputError naming the folder if it is missing or broken."""
+        try:
+            data = json.loads(self.run_path.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise InputError(f"{self.run_dir}: not a calibration run folder "
+                             f"(no {RUN_FILE})") from None
+        except (OSError, ValueError) as exc:
+            raise InputError(f"{self.run_path}: cannot read ({exc})") from None
+        if not isinstance(data, dict) or data.get("format") != RUN_FORMAT:
+            raise InputError(f"{self.run_path}: not a {RUN_FORMAT} header")
+        return data
+
+    def write_header(self, header: Mapping[str, Any]) -> None:
+        """Write (or rewrite) the run header atomically."""
+        write_json_atomic(self.run_path, {"format": RUN_FORMAT, **header})
+
+    # ------------------------------------------------------------------ records
+
+    def _lines(self) -> Iterator[tuple[int, int, bool, dict[str, Any] | None]]:
+        """(line number, byte offset where the line starts, is last line, parsed object or
+        None if unreadable) per line."""
+        try:
+            data = self.journal_path.read_bytes()
+        except FileNotFoundError:
+            return
+        lines = data.splitlines(keepends=True)
+        offset = 0
+        for number, raw in enumerate(lines, start=1):
+            obj: Any = None
+            if raw.endswith(b"\n"):
+                try:
+                    obj = json.loads(raw)
+                except ValueError:
+                    obj = None
+            yield number, offset, number == len(lines), obj if isinstance(obj, dict) else None
+            offset += len(raw)
+
+    def load(self) -> None:
+        """Read the journal. A torn LAST line (cut mid-write) is removed; a broken line
+        before the end is an InputError (the journal is not silently shortened)."""
+        self._samples.clear()
+        self._events.clear()
+        for number, start, last, obj in self._lines():
+            if obj is None:
+                if not last:
+                    raise InputError(f"{self.journal_path}: line {number} is not a JSON "
+                                     "object; repair or remove it to resume")
+                with open(self.journal_path, "r+b") as handle:  # drop the torn tail
+                    handle.truncate(start)
+                    handle.flush()
+                    os.fsync(handle.fileno())
+                break
+            if obj.get("event") == "sample":
+                record = SampleRecord.from_dict(obj)
+                self._samples.setdefault((record.phase, record.index), record)
+            else:
+                self._events.append(obj)
+        self._loaded = True
+
+    def _ensure_loaded(self) -> None:
+        if not self._loaded:
+            self.load()
+
+    def _append(self, obj: Mapping[str, Any]) -> None:
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        line = json.dumps(obj, allow_nan=False, separators=(",", ":")) + "\n"
+        with open(self.journal_path, "a", encoding="utf-8") as handle:
+            handle.write(line)
+            handle.flush()
+            os.fsync(handle.fileno())
+
+    def record(self, record: SampleRecord) -> bool:
+        """Append a sample record; False (nothing written) if that pose is already there."""
+        self._ensure_loaded()
+        key = (record.phase, record.index)
+        if key in self._samples:
+            return False
+        self._append(record.to_dict())
+        self._samples[key] = record
+        return True
+
+    def event(self, kind: str, **fields: Any) -> None:
+        """Append another event (`push`, `note`, ...)."""
+        self._ensure_loaded()
+        obj = {"event": kind, **fields}
+        self._append(obj)
+        self._events.append(obj)
+
+    def has(self, phase: str, index: int) -> bool:
+        """True if pose (phase, index) is journaled (measured or skipped)."""
+        self._ensure_loaded()
+        return (phase, index) in self._samples
+
+    def records(self, phase: str) -> list[SampleRecord]:
+        """The records of a phase, by pose index."""
+        self._ensure_loaded()
+        return sorted((r for (p, _), r in self._samples.items() if p == phase),
+                      key=lambda r: r.index)
+
+    def events(self, kind: str) -> list[dict[str, Any]]:
+        """The non-sample events of one kind, in order."""
+        self._ensure_loaded()
+        return [e for e in self._events if e.get("event") == kind]
+
+    def last_q(self) -> list[float] | None:
+        """Where the robot was after the last journaled pose (None if none)."""
+        self._ensure_loaded()
+        last: list[float] | None = None
+        for _, _, _, obj in self._lines():
+            if obj and obj.get("event") == "sample" and obj.get("q_end") is not None:
+                last = obj["q_end"]
+        return last

@@ -1,0 +1,282 @@
+"""Pose planning: pick informative poses from a large candidate pool, before moving.
+
+Pure numerics (no robot, no I/O). The method supplies a pool of reachable candidate poses
+and a design dataset (nominal predicted measurements with their expected covariances); the
+model's whitened Jacobian at each candidate, `A_k = W_k dy/dx` (m x P per pose), is the
+information a pose adds: `M = sum_k A_k^T A_k`.
+
+- Structural gauge: directions no pose of the pool can see (e.g. joint 1 against an
+  estimated target point, joint 6 against an estimated camera mount) are found once on the
+  whole pool with `hostpc.fit.analyse` and left out of the selection; they are reported,
+  and the fit holds them at nominal (never pushed).
+- Selection (criterion "D"): greedy D-optimal design. Starting from a small ridge, each
+  step adds the candidate with the largest `log det(I + A_k M^-1 A_k^T)` (the gain in
+  `log det M`), updating `M^-1` by the Woodbury identity; columns are normalised over the
+  pool so the ridge is unit-free. Greedy D-optimal is nested: the first k poses of a plan
+  of N are the plan of k. Criterion "random": a seeded random subset (the baseline).
+- Identifiability check of the plan: `analyse` on the plan's Jacobian; directions that the
+  plan cannot separate but the pool can are a planning failure (too few or too similar
+  poses): the run stops before moving and says which parameters and what would fix it.
+- Order: nearest neighbour in joint space from the robot's current pose (shorter motions).
+- Verification poses: a seeded random choice among the candidates the plan did not use.
+
+Shapes: q (N, n) rad; A (N, m, P); sigmas in SI (rad for joint offsets).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from hostpc.dataset import Dataset
+from hostpc.fit import NullDirection, analyse
+from hostpc.kinematics import Chain, forward, invert_transform
+from hostpc.kinematics.inverse import look_at, solve_ik
+from hostpc.model.measurement import predict
+from hostpc.model.problem import build_problem
+
+CRITERIA = ("D", "random")
+DEFAULT_RIDGE = 1e-6
+
+
+@dataclass(frozen=True)
+class Design:
+    """Whitened model Jacobian of a set of poses.
+
+    A: (N, m, P) whitened Jacobian blocks; names / units: parameter names and SI units
+    (layout order); free: (P,) False for the structural gauge (fixed on the pool);
+    structural: the pool's null directions, described in words."""
+
+    A: np.ndarray
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    free: np.ndarray
+    structural: tuple[NullDirection, ...] = ()
+
+    def subset(self, indices: Sequence[int] | np.ndarray) -> Design:
+        """The design of a subset of the poses (same gauge)."""
+        return Design(self.A[np.asarray(indices, dtype=int)], self.names, self.units,
+                      self.free, self.structural)
+
+
+@dataclass(frozen=True)
+class PlanCheck:
+    """Identifiability of a plan: structural null directions (no pose can fix them),
+    deficient ones (the plan misses what the pool could see), rank of each."""
+
+    structural: tuple[NullDirection, ...]
+    deficient: tuple[NullDirection, ...]
+    plan_rank: int
+    pool_rank: int
+
+    @property
+    def ok(self) -> bool:
+        return not self.deficient
+
+
+def design_matrix(dataset: Dataset, effects: str | Iterable[str] | None,
+                  plugins: Iterable[str] = ()) -> tuple[np.ndarray, tuple[str, ...],
+                                                        tuple[str, ...]]:
+    """Whitened Jacobian blocks (N, m, P) of the model at the nominal parameters, with the
+    parameter names and units."""
+    problem = build_problem(dataset, effects, plugins=plugins)
+    _, J = predict(problem, np.zeros(problem.layout.size), jacobian=True)
+    assert J is not None
+    A = np.einsum("nij,njp->nip", problem.sqrt_information, J)
+    return A, problem.layout.names, problem.layout.units
+
+
+def make_design(A: np.ndarray, names: Sequence[str], units: Sequence[str]) -> Design:
+    """A Design whose structural gauge is found on all of A's poses (the pool)."""
+    ident = analyse(A.reshape(-1, A.shape[2]), list(names), list(units))
+    return Design(A, tuple(names), tuple(units), ~ident.fixed, ident.null_directions)
+
+
+def _normalised_free(design: Design) -> np.ndarray:
+    A = design.A[:, :, design.free]
+    scale = np.sqrt(np.mean(np.sum(A**2, axis=1), axis=0))
+    return A / np.where(scale > 0, scale, 1.0)
+
+
+def greedy_d_optimal(design: Design, n_select: int, ridge: float = DEFAULT_RIDGE,
+                     forbidden: Iterable[int] = ()) -> np.ndarray:
+    """Indices of `n_select` poses in the order greedy D-optimal design picks them."""
+    A = _normalised_free(design)
+    n_pool, m, p = A.shape
+    n_select = min(n_select, n_pool)
+    Minv = np.eye(p) / ridge
+    available = np.ones(n_pool, dtype=bool)
+    available[list(forbidden)] = False
+    eye_m = np.eye(m)
+    chosen: list[int] = []
+    for _ in range(n_select):
+        G = np.einsum("nip,pq->niq", A, Minv)              # A_k M^-1
+        S = eye_m + np.einsum("niq,njq->nij", G, A)        # I + A_k M^-1 A_k^T
+        sign, logdet = np.linalg.slogdet(S)
+        gain = np.where(available & (sign > 0), logdet, -np.inf)
+        k = int(np.argmax(gain))
+        if not np.isfinite(gain[k]):
+            break
+        chosen.append(k)
+        available[k] = False
+        Gk = G[k]                                          # (m, p) = A_k M^-1
+        Minv = Minv - Gk.T @ np.linalg.solve(S[k], Gk)
+        Minv = 0.5 * (Minv + Minv.T)
+    return np.asarray(chosen, dtype=int)
+
+
+def random_selection(n_pool: int, n_select: int, rng: np.random.Generator) -> np.ndarray:
+    """A seeded random subset (the baseline criterion)."""
+    return rng.permutation(n_pool)[: min(n_select, n_pool)]
+
+
+def select(design: Design, n_select: int, criterion: str, rng: np.random.Generator
+           ) -> np.ndarray:
+    """Indices of the selected poses by `criterion` ("D" or "random")."""
+    if criterion == "D":
+        return greedy_d_optimal(design, n_select)
+    if criterion == "random":
+        return random_selection(design.A.shape[0], n_select, rng)
+    raise ValueError(f"unknown planning criterion {criterion!r} (expected one of {CRITERIA})")
+
+
+def predicted_covariance(design: Design) -> np.ndarray:
+    """(P, P) covariance of the parameters from the design (free part; NaN where fixed
+    or where the design cannot determine them)."""
+    P = len(design.names)
+    A = design.A[:, :, design.free].reshape(-1, int(np.count_nonzero(design.free)))
+    cov = np.full((P, P), np.nan)
+    if A.shape[0] == 0:
+        return cov
+    _, s, Vt = np.linalg.svd(A, full_matrices=False)
+    if s.size == 0 or s[-1] <= s[0] * 1e-10:
+        return cov
+    free_cov = (Vt.T / s**2) @ Vt
+    index = np.flatnonzero(design.free)
+    cov[np.ix_(index, index)] = free_cov
+    return cov
+
+
+def joint_offset_sigmas(design: Design, n_joints: int) -> np.ndarray:
+    """(n,) predicted standard deviation of each joint offset (rad), NaN if unidentifiable
+    (structural gauge) or not determined by these poses."""
+    cov = predicted_covariance(design)
+    sigmas = np.full(n_joints, np.nan)
+    for j in range(n_joints):
+        name = f"joint_offsets.q{j + 1}"
+        if name in design.names:
+            k = design.names.index(name)
+            sigmas[j] = np.sqrt(cov[k, k]) if np.isfinite(cov[k, k]) else np.nan
+    return sigmas
+
+
+def check_plan(plan: Design) -> PlanCheck:
+    """Can the plan separate every parameter the pool can? (see the module docstring)."""
+    free = plan.free
+    names = [n for n, f in zip(plan.names, free, strict=True) if f]
+    units = [u for u, f in zip(plan.units, free, strict=True) if f]
+    A = plan.A[:, :, free].reshape(-1, len(names))
+    ident = analyse(A, names, units)
+    return PlanCheck(structural=plan.structural, deficient=ident.null_directions,
+                     plan_rank=ident.rank, pool_rank=len(names))
+
+
+def order_for_travel(q: np.ndarray, q_start: np.ndarray | None) -> np.ndarray:
+    """Visiting order (indices into q (N, n)): nearest neighbour by the largest joint
+    motion, starting from q_start (or from the first pose)."""
+    n_poses = q.shape[0]
+    if n_poses == 0:
+        return np.zeros(0, dtype=int)
+    remaining = list(range(n_poses))
+    current = q_start if q_start is not None else q[0]
+    order: list[int] = []
+    while remaining:
+        cost = np.max(np.abs(q[remaining] - current), axis=1)
+        k = remaining.pop(int(np.argmin(cost)))
+        order.append(k)
+        current = q[k]
+    return np.asarray(order, dtype=int)
+
+
+def look_at_candidates(
+    chain: Chain,
+    T_flange_sensor: np.ndarray,
+    target: np.ndarray,
+    normal: np.ndarray,
+    n_candidates: int,
+    rng: np.random.Generator,
+    q_seed: np.ndarray,
+    q_min: np.ndarray,
+    q_max: np.ndarray,
+    *,
+    distance: tuple[float, float] = (0.3, 0.6),
+    cone_deg: float = 40.0,
+    roll_deg: float = 180.0,
+    aim_spread: float = 0.02,
+    aim_offset: np.ndarray | None = None,
+    max_travel: float = 1.8,
+) -> np.ndarray:
+    """(N_c, n) joint poses (nominal model) from which a flange-mounted sensor looks at a
+    target point: viewpoints on a cone of half-angle `cone_deg` about the target's plate
+    normal at `distance` (m), aimed within `aim_spread` (m) of the target, rolled about the
+    line of sight by up to +-`roll_deg`. aim_offset: (3,) point in the sensor frame that
+    is aimed (e.g. the stereo pair's midpoint, so the target is centred in both cameras).
+
+    T_flange_sensor: (4, 4); target, normal: (3,) in base; q_seed: (n,) IK seed (the
+    robot's current pose); q_min, q_max: (n,) the controller's limits. Poses more than
+    `max_travel` rad from the seed on the joints between the first and the last are
+    dropped (other arm configurations); joint 1 is seeded toward each goal's azimuth.
+    Fewer than asked may come back if few are reachable.
+    """
+    normal = np.asarray(normal, float) / np.linalg.norm(normal)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(normal, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    offset = np.zeros(3) if aim_offset is None else np.asarray(aim_offset, float)
+    T_aim_sensor = np.eye(4)
+    T_aim_sensor[:3, 3] = -offset
+    T_sensor_flange = invert_transform(T_flange_sensor)
+    q_seed = np.asarray(q_seed, float)
+    q_min = np.maximum(np.asarray(q_min, float), chain.q_min)
+    q_max = np.minimum(np.asarray(q_max, float), chain.q_max)
+    seed_flange = forward(chain, q_seed[None, :]).T_base_flange[0, :3, 3]
+    seed_azimuth = np.arctan2(seed_flange[1], seed_flange[0])
+    found: list[np.ndarray] = []
+    total = 0
+    for _ in range(20):
+        if total >= n_candidates:
+            break
+        m = max(64, int(1.3 * (n_candidates - total)))
+        polar = np.radians(cone_deg) * np.sqrt(rng.uniform(0.0, 1.0, m))
+        azimuth = rng.uniform(0.0, 2 * np.pi, m)
+        direction = (np.sin(polar)[:, None] * (np.cos(azimuth)[:, None] * e1
+                                               + np.sin(azimuth)[:, None] * e2)
+                     + np.cos(polar)[:, None] * normal)
+        viewpoint = target + rng.uniform(*distance, (m, 1)) * direction
+        aim = target + rng.uniform(-aim_spread, aim_spread, (m, 3))
+        roll = np.radians(rng.uniform(-roll_deg, roll_deg, m))
+        T_base_aim = look_at(viewpoint, aim, roll)
+        goals = T_base_aim @ T_aim_sensor @ T_sensor_flange
+        # seed: the robot's own arm configuration, turned by joint 1 toward the goal and
+        # with the wrist rolled with the camera
+        seeds = q_seed + rng.normal(0.0, 0.1, (m, chain.n))
+        goal_azimuth = np.arctan2(goals[:, 1, 3], goals[:, 0, 3])
+        seeds[:, 0] = q_seed[0] + _wrap(goal_azimuth - seed_azimuth)
+        seeds[:, -1] = q_seed[-1] + roll
+        q, ok = solve_ik(chain, goals, seeds, iterations=50)
+        q = q_seed + _wrap(q - q_seed)  # the equivalent angle nearest the seed
+        within = np.all((q >= q_min) & (q <= q_max), axis=1)
+        near = np.all(np.abs(q[:, 1:-1] - q_seed[1:-1]) < max_travel, axis=1)
+        keep = q[ok & within & near]
+        found.append(keep)
+        total += keep.shape[0]
+    pool = np.concatenate(found) if found else np.zeros((0, chain.n))
+    return pool[:n_candidates]
+
+
+def _wrap(angle: np.ndarray) -> np.ndarray:
+    """Angles wrapped to [-pi, pi)."""
+    return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi

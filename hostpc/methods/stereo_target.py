@@ -1,0 +1,297 @@
+"""stereo_target: a stereo camera on the flange measures a fixed circular target.
+
+Per pose: move, capture a stereo pair, detect the dot in both images, triangulate its
+centre in the LEFT camera optical frame (`hostpc.vision.TargetMeasurer`), and record the
+sample `q` (joint angles at exposure), `p` (m), `cov` (m^2), `uv` (px), `t` (s since the
+run started) and `approach` (sign of each joint's last motion). A target the vision
+rejects is journaled as skipped with the reason.
+
+The rig: `--rig FILE` (copied into the run folder), else calibrated first from the
+controller's chessboard captures (`capture("chessboard", view)` for every view the cell's
+chessboard description lists) and saved as `rig.json` in the run folder; a resume reuses it.
+
+Dataset frames: `tool` = left camera optical frame in the flange frame (nominal mount from
+the cell), `target` = target centre in base (nominal from the cell); `known` from the cell.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from hostpc.dataset import FORMAT_TAG, Dataset, dataset_from_dict
+from hostpc.errors import ControllerError, InputError, ZerocalError
+from hostpc.kinematics import forward, get_robot, invert_transform, pose_to_transform
+from hostpc.methods.base import Method, Phase, Progress, SampleRecord, approach_signs
+from hostpc.methods.planning import look_at_candidates
+from hostpc.model.measurement import predict
+from hostpc.model.problem import build_problem
+from hostpc.robots.base import RobotAdapter, RobotState
+
+RIG_FILE = "rig.json"
+RIG_REPORT_FILE = "rig_calibration.json"
+CENTROID_SIGMA_PX = 0.05
+"""Planning noise model: pixel precision of the dot centre in each image."""
+SKIP_REASONS = ("joint_limit", "refused_fault", "invalid_argument")
+"""Controller refusals that skip one pose instead of ending the run."""
+
+
+class RigCalibrationFailed(ZerocalError):
+    """The stereo rig could not be calibrated from the chessboard captures."""
+
+    exit_code = 4
+
+
+class StereoTargetMethod(Method):
+    """See the module docstring. options: `rig` (path of a rig file), `depth`
+    ("triangulate" or "sgbm"), `distance` ([min, max] m of the viewpoints)."""
+
+    name: ClassVar[str] = "stereo_target"
+
+    def __init__(self, settings: Any, cell: Any, run_dir: Path) -> None:
+        super().__init__(settings, cell, run_dir)
+        self.rig: Any = None
+        self.rig_report: dict[str, Any] = {}
+        self._measurer: Any = None
+        self._chain = get_robot(cell.robot)
+        self._T_flange_tool = pose_to_transform(cell.tool.xyz, cell.tool.rpy)
+        self._t0: float = 0.0
+
+    # ---------------------------------------------------------------- set-up
+
+    @property
+    def rig_path(self) -> Path:
+        return self.run_dir / RIG_FILE
+
+    def set_time_origin(self, t0: float) -> None:
+        """Controller time (s) at the start of the run: sample `t` counts from here."""
+        self._t0 = float(t0)
+
+    def check_inputs(self) -> None:
+        """Load --rig now so that a bad file fails before anything moves (exit code 2)."""
+        from hostpc.vision import load_rig
+
+        rig_option = self.settings.options.get("rig")
+        if rig_option and not self.rig_path.is_file():
+            self.rig = load_rig(rig_option)
+        depth = self.settings.options.get("depth", "triangulate")
+        if depth not in ("triangulate", "sgbm"):
+            raise InputError(f"--depth {depth!r}: expected triangulate or sgbm")
+
+    async def prepare(self, robot: RobotAdapter, progress: Progress) -> None:
+        """Load the run's rig, or the --rig file, or calibrate one from chessboard views."""
+        from hostpc.vision import TargetMeasurer, load_rig, save_rig
+
+        if self.rig_path.is_file():
+            self.rig = load_rig(self.rig_path)
+            progress.message(f"rig: {self.rig_path} (from this run)")
+        elif self.settings.options.get("rig"):
+            if self.rig is None:
+                self.rig = load_rig(self.settings.options["rig"])
+            save_rig(self.rig, self.rig_path)
+            progress.message(f"rig: {self.settings.options['rig']}")
+        else:
+            self.rig = await self._calibrate_rig(robot, progress)
+            save_rig(self.rig, self.rig_path)
+        if self.cell.image_size and tuple(self.rig.image_size) != tuple(self.cell.image_size):
+            raise InputError(
+                f"rig image size {self.rig.image_size[0]}x{self.rig.image_size[1]} differs "
+                f"from the camera's {self.cell.image_size[0]}x{self.cell.image_size[1]}: "
+                "wrong --rig file?"
+            )
+        depth = self.settings.options.get("depth", "triangulate")
+        self._measurer = TargetMeasurer(self.rig, self.cell.target_radius, depth=depth)
+
+    async def _calibrate_rig(self, robot: RobotAdapter, progress: Progress) -> Any:
+        from hostpc.methods.journal import write_json_atomic
+        from hostpc.vision import ChessboardSpec, calibrate_rig
+
+        board = self.cell.chessboard
+        if not board:
+            raise InputError("no --rig given and the controller describes no chessboard to "
+                             "calibrate one; give --rig FILE")
+        n_views = int(board.get("n_views", 20))
+        progress.stage("rig calibration", n_views)
+        pairs = []
+        for view in range(n_views):
+            capture = await robot.capture("chessboard", view)
+            pairs.append((capture.left, capture.right))
+            progress.advance(view + 1, f"chessboard view {view + 1}/{n_views}")
+        spec = ChessboardSpec(int(board["cols"]), int(board["rows"]),
+                              float(board["square_size"]))
+        result = calibrate_rig(pairs, spec)
+        self.rig_report = {
+            "ok": bool(result.ok),
+            "rms_px": float(result.rms),
+            "per_view_rms_px": [float(v) for v in result.per_view_rms],
+            "used_views": [int(v) for v in result.used_views],
+            "warnings": [str(w) for w in result.warnings],
+        }
+        write_json_atomic(self.run_dir / RIG_REPORT_FILE, self.rig_report)
+        for warning in result.warnings:
+            progress.message(f"rig calibration: {warning}")
+        if not result.ok:
+            raise RigCalibrationFailed(
+                f"stereo rig calibration failed (RMS {result.rms:.3f} px, "
+                f"{len(result.used_views)} of {n_views} views usable): "
+                + ("; ".join(result.warnings) or "see rig_calibration.json")
+            )
+        progress.message(f"rig calibrated: RMS {result.rms:.3f} px from "
+                         f"{len(result.used_views)} views, baseline "
+                         f"{result.rig.baseline * 1e3:.2f} mm")
+        return result.rig
+
+    # ---------------------------------------------------------------- planning
+
+    def _right_centre(self) -> np.ndarray:
+        """(3,) right camera centre in the left camera frame (m)."""
+        return np.asarray(-self.rig.R.T @ self.rig.T, float)
+
+    def candidates(self, state: RobotState, rng: np.random.Generator) -> np.ndarray:
+        """Look-at poses around the target, kept only if the dot projects well inside both
+        images (nominal model, rig intrinsics) at a usable depth."""
+        baseline = self.rig.baseline
+        distance = self.settings.options.get("distance") or (max(0.25, 2.5 * baseline),
+                                                             max(0.5, 5.0 * baseline))
+        q = look_at_candidates(
+            self._chain, self._T_flange_tool, self.cell.target, self.cell.target_normal,
+            int(self.settings.n_candidates * 1.25), rng, state.q, state.q_min, state.q_max,
+            distance=(float(distance[0]), float(distance[1])),
+            aim_offset=0.5 * self._right_centre(),
+        )
+        if q.shape[0] == 0:
+            return q
+        visible = self.visible(q)
+        return q[visible][: self.settings.n_candidates]
+
+    def target_in_camera(self, q: np.ndarray) -> np.ndarray:
+        """(N, 3) nominal target position in the left camera frame at poses q (N, n)."""
+        T_base_tool = forward(self._chain, q).T_base_flange @ self._T_flange_tool
+        T_tool_base = invert_transform(T_base_tool)
+        return (np.einsum("nij,j->ni", T_tool_base[:, :3, :3], self.cell.target)
+                + T_tool_base[:, :3, 3])
+
+    def normal_in_camera(self, q: np.ndarray) -> np.ndarray:
+        """(3,) the target plate normal in the left camera frame at pose q (n,), nominal."""
+        T_base_tool = forward(self._chain, np.asarray(q, float)[None, :]).T_base_flange[0] \
+            @ self._T_flange_tool
+        return np.asarray(T_base_tool[:3, :3].T @ self.cell.target_normal, float)
+
+    def visible(self, q: np.ndarray) -> np.ndarray:
+        """(N,) the dot (with a margin of twice its radius) inside both images, in front."""
+        p_left = self.target_in_camera(q)
+        p_right = p_left @ self.rig.R.T + self.rig.T
+        width, height = self.rig.image_size
+        ok = np.ones(q.shape[0], dtype=bool)
+        for p, K in ((p_left, self.rig.K_left), (p_right, self.rig.K_right)):
+            z = p[:, 2]
+            front = z > 0.05
+            zs = np.where(front, z, 1.0)
+            u = K[0, 0] * p[:, 0] / zs + K[0, 2]
+            v = K[1, 1] * p[:, 1] / zs + K[1, 2]
+            margin = K[0, 0] * 2.5 * self.cell.target_radius / zs + 10.0
+            ok &= front & (u > margin) & (u < width - margin) & (v > margin) & (
+                v < height - margin)
+        return ok
+
+    def expected_covariance(self, p: np.ndarray) -> np.ndarray:
+        """(N, 3, 3) planning covariance of triangulated points p (N, 3) in the left camera
+        frame: lateral z*s/f, depth z^2*sqrt(2)*s/(f*b), s = CENTROID_SIGMA_PX."""
+        f = float(self.rig.K_left[0, 0])
+        b = self.rig.baseline
+        z = np.maximum(np.abs(p[:, 2]), 1e-3)
+        cov = np.zeros((p.shape[0], 3, 3))
+        lateral = z * CENTROID_SIGMA_PX / f
+        cov[:, 0, 0] = cov[:, 1, 1] = lateral**2
+        cov[:, 2, 2] = (z**2 * np.sqrt(2.0) * CENTROID_SIGMA_PX / (f * b)) ** 2
+        return cov
+
+    def design_dataset(self, q: np.ndarray) -> Dataset:
+        """Nominal predicted points at q (N, n) with the planning covariance."""
+        n = q.shape[0]
+        placeholder = self.dataset_document(
+            [{"q": row.tolist(), "p": [0.0, 0.0, 0.5], "sigma": 1e-4} for row in q])
+        dataset = dataset_from_dict(placeholder)
+        problem = build_problem(dataset, "joint_offsets")
+        p, _ = predict(problem, np.zeros(problem.layout.size), jacobian=False)
+        cov = self.expected_covariance(p)
+        document = self.dataset_document(
+            [{"q": q[k].tolist(), "p": p[k].tolist(), "cov": cov[k].tolist(),
+              "t": float(k)} for k in range(n)])
+        return dataset_from_dict(document)
+
+    # ---------------------------------------------------------------- acquisition
+
+    async def acquire(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
+                      q_from: np.ndarray | None) -> SampleRecord:
+        """Move to q, capture, detect and triangulate (see the module docstring)."""
+        from hostpc.transport import ControllerRefusedError
+
+        try:
+            outcome = await robot.move_joints(q, self.settings.speed)
+        except ControllerRefusedError as exc:
+            if exc.reason in SKIP_REASONS:
+                return SampleRecord(phase, index, False, reason=f"move refused: {exc.reason}",
+                                    q_end=_as_list(q_from))
+            raise
+        if not outcome.completed:
+            return SampleRecord(phase, index, False,
+                                reason=f"move stopped: {outcome.reason or 'not completed'}",
+                                q_end=outcome.q.tolist())
+        capture = await robot.capture("target")
+        if self._measurer is None:
+            raise ControllerError("stereo_target: prepare() was not run")
+        observation = self._measurer.measure(capture.left, capture.right,
+                                             normal_hint=self.normal_in_camera(capture.q))
+        p = getattr(observation, "p", None)
+        if p is None:
+            reason = getattr(observation, "reason", "no observation")
+            return SampleRecord(phase, index, False, reason=f"target rejected: {reason}",
+                                q_end=outcome.q.tolist())
+        sample: dict[str, Any] = {
+            "q": [float(v) for v in capture.q],
+            "p": [float(v) for v in np.asarray(p, float)],
+            "cov": np.asarray(observation.cov, float).tolist(),
+            "t": float(capture.t) - self._t0,
+            "approach": approach_signs(q_from, capture.q),
+        }
+        uv = getattr(observation, "uv", None)
+        if uv is not None:
+            sample["uv"] = np.asarray(uv, float).tolist()
+        return SampleRecord(phase, index, True, sample=sample, q_end=outcome.q.tolist())
+
+    # ---------------------------------------------------------------- dataset
+
+    def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+        """A `zerocal-dataset/1` document with the cell's nominal frames and `known`."""
+        return {
+            "format": FORMAT_TAG,
+            "method": self.name,
+            "units": {"length": "m", "angle": "rad", "time": "s"},
+            "robot": {"name": self.cell.robot},
+            "frames": {
+                "tool": {"xyz": self.cell.tool.xyz.tolist(), "rpy": self.cell.tool.rpy.tolist()},
+                "target": self.cell.target.tolist(),
+            },
+            "known": list(self.cell.known),
+            "samples": [dict(s) for s in samples],
+        }
+
+    def describe(self) -> dict[str, Any]:
+        """Rig facts for the result document."""
+        if self.rig is None:
+            return {}
+        return {
+            "rig": {"file": str(self.rig_path), "rms_px": float(self.rig.rms),
+                    "baseline_mm": self.rig.baseline * 1e3,
+                    "image_size": list(self.rig.image_size),
+                    "calibrated_in_this_run": bool(self.rig_report)},
+            "depth": self.settings.options.get("depth", "triangulate"),
+        }
+
+
+def _as_list(q: np.ndarray | None) -> list[float] | None:
+    return None if q is None else [float(v) for v in q]

@@ -1,0 +1,107 @@
+"""Open a robot adapter from the command line's `--robot` and `--driver`.
+
+    --robot HOST[:PORT]   a controller at that address (IPv6 as `[::1]:PORT`)
+    --robot sim           the simulated controller, started on 127.0.0.1 by the caller
+                          (`hostpc.robots.simulator`); this module only recognises the word
+    --driver zerocal      our protocol (default; port 47800) | ur (Universal Robots, ur_rtde)
+
+`open_robot` returns a connected `RobotAdapter`; an unreachable controller raises
+`ConnectionFailed` (CLI exit code 3), a malformed address `InputError` (exit code 2).
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from dataclasses import dataclass
+from typing import Any
+
+from hostpc.errors import InputError
+from hostpc.robots.base import RobotAdapter
+from protocol import DEFAULT_PORT
+
+DRIVERS = ("zerocal", "ur")
+DEFAULT_TOKEN = "zerocal-sim"
+"""The simulator's default token (controller_stub scenario: server.token)."""
+TOKEN_ENV = "ZEROCAL_TOKEN"
+
+
+@dataclass(frozen=True)
+class RobotAddress:
+    """Where the robot is: `sim` (start the simulator) or a host and port."""
+
+    sim: bool
+    host: str = ""
+    port: int = DEFAULT_PORT
+
+    def __str__(self) -> str:
+        if self.sim:
+            return "sim"
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"{host}:{self.port}"
+
+
+def parse_robot(text: str, default_port: int = DEFAULT_PORT) -> RobotAddress:
+    """`sim` or `HOST[:PORT]` -> RobotAddress; InputError naming the value if malformed."""
+    text = text.strip()
+    if text.lower() == "sim":
+        return RobotAddress(sim=True)
+    host, port_text = text, ""
+    if text.startswith("["):
+        host, _, rest = text[1:].partition("]")
+        port_text = rest[1:] if rest.startswith(":") else rest
+    elif text.count(":") == 1:
+        host, port_text = text.split(":")
+    if not host:
+        raise InputError(f"--robot {text!r}: no host (expected HOST[:PORT] or sim)")
+    if not port_text:
+        return RobotAddress(sim=False, host=host, port=default_port)
+    try:
+        port = int(port_text)
+    except ValueError:
+        raise InputError(f"--robot {text!r}: port {port_text!r} is not a number") from None
+    if not 0 < port < 65536:
+        raise InputError(f"--robot {text!r}: port {port} out of range 1..65535")
+    return RobotAddress(sim=False, host=host, port=port)
+
+
+def resolve_token(token: str | None) -> str:
+    """--token, else $ZEROCAL_TOKEN, else the simulator's default."""
+    return token or os.environ.get(TOKEN_ENV) or DEFAULT_TOKEN
+
+
+async def open_robot(
+    address: RobotAddress,
+    driver: str = "zerocal",
+    *,
+    token: str | None = None,
+    timeout: float = 10.0,
+    options: dict[str, Any] | None = None,
+) -> RobotAdapter:
+    """Connect to the robot at `address` with `driver`; returns an open RobotAdapter.
+
+    For `sim` the caller starts the simulator first and passes its real address.
+    Raises ConnectionFailed (unreachable), InputError (unknown driver, bad address).
+    """
+    if address.sim:
+        raise InputError("--robot sim: start the simulator first (hostpc.robots.simulator)")
+    if driver not in DRIVERS:
+        raise InputError(f"--driver {driver!r}: expected one of {', '.join(DRIVERS)}")
+    if driver == "zerocal":
+        from hostpc.robots.zerocal import ZerocalAdapter
+
+        return await ZerocalAdapter.connect(
+            address.host, address.port, token=resolve_token(token), timeout=timeout
+        )
+    # driver == "ur": the UR adapter module provides `async connect(host, port, **options)`
+    try:
+        module = importlib.import_module("hostpc.robots.ur")
+    except ModuleNotFoundError as exc:
+        raise InputError(f"--driver ur is not available: {exc}") from exc
+    connect = getattr(module, "connect", None)
+    if connect is None:
+        raise InputError("--driver ur is not available: hostpc.robots.ur has no connect()")
+    adapter: RobotAdapter = await connect(
+        address.host, address.port, timeout=timeout, token=resolve_token(token), **(options or {})
+    )
+    return adapter

@@ -1,0 +1,145 @@
+"""Helpers of the diagnostics tests: datasets with a hidden effect and its measured size.
+
+Hidden built-in effects are injected by hostpc.synthesize (by parameter name); effects that
+are in no library (defined in a test's plugin file) are injected by adding their signal to a
+synthesized dataset's measurements.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from hostpc.dataset import Dataset, RobotDescription, Samples, SphereFrame
+from hostpc.fit.solver import evaluate
+from hostpc.model.effect import Effect
+from hostpc.model.measurement import predict
+from hostpc.model.problem import Problem, build_problem
+from hostpc.model.registry import load_plugin_file
+from hostpc.synthesize import SyntheticDataset, random_truth, synthesize_stereo_target
+
+N_SAMPLES = 120
+
+
+def hidden_dataset(hidden: Mapping[str, float], seed: int, n_samples: int = N_SAMPLES
+                   ) -> SyntheticDataset:
+    """A stereo_target dataset: random zero offsets and frame errors plus ``hidden``."""
+    truth = random_truth(np.random.default_rng(50 + seed))
+    truth.update(hidden)
+    return synthesize_stereo_target(truth, seed=seed, n_samples=n_samples)
+
+
+def _truth_problem(synthetic: SyntheticDataset, extra: tuple[Effect, ...] = ()
+                   ) -> tuple[Problem, np.ndarray]:
+    names = list(synthetic.effects)
+    instances = None
+    if extra:
+        from hostpc.model.registry import available_effects, instantiate
+
+        instances = instantiate(names, available_effects()) + list(extra)
+        names += [e.name for e in extra]
+    problem = build_problem(synthetic.dataset, names, effect_instances=instances)
+    x = np.array([synthetic.truth.get(n, 0.0) for n in problem.layout.names])
+    return problem, x
+
+
+def noise_rms(synthetic: SyntheticDataset, extra: tuple[Effect, ...] = ()) -> float:
+    """RMS norm (m) of the noise actually drawn: measured minus the true model."""
+    problem, x = _truth_problem(synthetic, extra)
+    predicted, _ = predict(problem, x, jacobian=False)
+    return float(np.sqrt(np.mean(np.sum((problem.measured - predicted) ** 2, axis=1))))
+
+
+def unabsorbed_signal(dataset: Dataset, signal: np.ndarray) -> float:
+    """Whitened RMS per sample of a signal (N, m) that the default model cannot absorb
+    (projected off its Jacobian at nominal): the 'sigma' a hidden effect really shows."""
+    problem = build_problem(dataset, None)
+    whitened = np.einsum("nij,nj->ni", problem.sqrt_information, signal).ravel()
+    J = evaluate(problem, np.zeros(problem.layout.size)).jacobian
+    assert J is not None
+    U = np.linalg.svd(J, full_matrices=False)[0]
+    rest = whitened - U @ (U.T @ whitened)
+    return float(np.sqrt(np.sum(rest**2) / signal.shape[0]))
+
+
+def hidden_signal(synthetic: SyntheticDataset, hidden: Mapping[str, float]) -> np.ndarray:
+    """(N, m) change of the measurements that the hidden parameters cause."""
+    problem, x = _truth_problem(synthetic)
+    without = x.copy()
+    for k, name in enumerate(problem.layout.names):
+        if name in hidden:
+            without[k] = 0.0
+    return predict(problem, x, False)[0] - predict(problem, without, False)[0]
+
+
+def inject(synthetic: SyntheticDataset, effect: Effect, values: Mapping[str, float]
+           ) -> tuple[SyntheticDataset, np.ndarray]:
+    """Add the signal of an effect from no library to a synthesized dataset; returns the new
+    synthetic dataset (truth extended) and the signal (N, m)."""
+    problem, x = _truth_problem(synthetic)
+    extended = build_problem(synthetic.dataset, list(problem.effect_names) + [effect.name],
+                             effect_instances=[t.effect for t in problem.terms] + [effect])
+    x_extended = np.array([values.get(n, dict(zip(problem.layout.names, x, strict=True))
+                                      .get(n, 0.0)) for n in extended.layout.names])
+    signal = predict(extended, x_extended, False)[0] - predict(problem, x, False)[0]
+    samples = dataclasses.replace(synthetic.dataset.samples,
+                                  p=synthetic.dataset.samples.p + signal)
+    truth = dict(synthetic.truth)
+    truth.update(values)
+    return (SyntheticDataset(dataclasses.replace(synthetic.dataset, samples=samples), truth,
+                             synthetic.effects), signal)
+
+
+def plugin_effect(path: Path, name: str) -> Effect:
+    """An instance of the effect ``name`` defined in a plugin file."""
+    return load_plugin_file(path)[name]()
+
+
+def sphere_contact_dataset(truth: Mapping[str, float], *, n_samples: int = 60, seed: int = 0,
+                           sigma: float = 5e-6) -> Dataset:
+    """A sphere_probe dataset whose contacts lie on the sphere under ``truth`` (any effect,
+    e.g. ``trigger_latency.latency``), plus Gaussian noise of ``sigma`` on the distance.
+
+    Poses near a wrist-down home pose are moved (Newton, minimum-norm joint steps) until
+    the true model predicts exactly the contact distance R + r + noise."""
+    from hostpc.kinematics import forward, pose_to_transform
+    from hostpc.synthesize import DEFAULT_TOOL, HOME_POSES
+
+    rng = np.random.default_rng(seed)
+    home = np.array(HOME_POSES["ur5e"])
+    q = home + rng.normal(0.0, 1.0, (n_samples, 6)) * [0.25, 0.15, 0.15, 0.4, 0.4, 0.8]
+    T_home = forward(_chain(), home[None, :]).T_base_flange[0]
+    tip_home = (T_home @ pose_to_transform(DEFAULT_TOOL.xyz, DEFAULT_TOOL.rpy))[:3, 3]
+    radius, stylus = 0.0125, 0.0015
+    centre = tip_home + np.array([0.0, 0.0, -0.02])
+    samples = Samples(q=q, sigma=np.full(n_samples, sigma), group=np.arange(n_samples) // 5,
+                      speed=rng.uniform(0.005, 0.02, n_samples),
+                      t=3.0 * np.arange(1, n_samples + 1),
+                      approach=np.sign(rng.uniform(-1, 1, (n_samples, 6))))
+    dataset = Dataset(method="sphere_probe", robot=RobotDescription(name="ur5e"),
+                      frames={"tool": DEFAULT_TOOL, "sphere": SphereFrame(centre, radius)},
+                      samples=samples, probe_stylus_radius=stylus)
+    effects = list(dict.fromkeys(["joint_offsets"] + [k.split(".")[0] for k in truth]))
+    goal = radius + stylus + rng.normal(0.0, sigma, n_samples)
+    for _ in range(20):
+        problem = build_problem(dataset, effects)
+        x = np.array([truth.get(n, 0.0) for n in problem.layout.names])
+        distance, J = predict(problem, x)
+        assert J is not None
+        # d distance / d q equals d distance / d joint offset
+        dq = J[:, 0, problem.layout.effect_slices["joint_offsets"]]
+        step = (goal - distance[:, 0])[:, None] * dq / np.sum(dq**2, axis=1, keepdims=True)
+        samples = dataclasses.replace(samples, q=samples.q + step)
+        dataset = dataclasses.replace(dataset, samples=samples)
+        if np.max(np.abs(goal - distance[:, 0])) < 1e-12:
+            break
+    return dataset
+
+
+def _chain():  # type: ignore[no-untyped-def]
+    from hostpc.kinematics import get_robot
+
+    return get_robot("ur5e")

@@ -1,0 +1,145 @@
+"""`hostpc calibrate --robot sim`: the README's main job, end to end, against the truth.
+
+The simulated controller runs as a subprocess on 127.0.0.1 (real sockets); the rig is
+calibrated from its chessboard captures; 60 planned poses; the result is compared with the
+injected zero errors. Also the helpers the other calibrate tests share.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from hostpc.cli.main import main
+from hostpc.dataset import load_dataset
+from hostpc.kinematics import rpy_to_matrix
+from hostpc.robots.simulator import default_sim_scenario
+
+TOKEN = "zerocal-sim"
+
+
+def truth_rig_file(scenario: dict[str, Any], path: Path) -> Path:
+    """A rig file with the scenario's TRUE camera model (a perfectly calibrated rig), so
+    tests that are not about rig calibration skip it."""
+    from hostpc.vision import StereoRig, save_rig
+
+    cam = scenario["camera"]
+    K = np.array([[cam["fx"], 0.0, cam["cx"]], [0.0, cam["fy"], cam["cy"]], [0.0, 0.0, 1.0]])
+    R_left_right = rpy_to_matrix(np.asarray(cam["right_rpy"], float))
+    t_left_right = np.array([cam["baseline"], 0.0, 0.0])
+    rig = StereoRig(
+        image_size=(cam["image_width"], cam["image_height"]), K_left=K,
+        dist_left=np.asarray(cam["distortion"], float), K_right=K,
+        dist_right=np.asarray(cam["distortion"], float), R=R_left_right.T,
+        T=-R_left_right.T @ t_left_right, rms=0.0, n_views=0,
+    )
+    save_rig(rig, path)
+    return path
+
+
+def calibrate_rig_through_stub(scenario: dict[str, Any], workdir: Path, path: Path) -> Path:
+    """Calibrate a rig the way a user would, from the stub's chessboard captures."""
+    from hostpc.robots.simulator import SimulatedController
+    from hostpc.robots.zerocal import ZerocalAdapter
+    from hostpc.vision import ChessboardSpec, calibrate_rig, save_rig
+
+    board = scenario["chessboard"]
+
+    async def capture_all(host: str, port: int) -> list[tuple[np.ndarray, np.ndarray]]:
+        robot = await ZerocalAdapter.connect(host, port, token=TOKEN)
+        try:
+            pairs = []
+            for view in range(board["n_views"]):
+                capture = await robot.capture("chessboard", view)
+                pairs.append((capture.left.copy(), capture.right.copy()))
+            return pairs
+        finally:
+            await robot.close()
+
+    with SimulatedController(scenario, workdir) as sim:
+        pairs = asyncio.run(capture_all(sim.address.host, sim.address.port))
+    result = calibrate_rig(pairs, ChessboardSpec(board["cols"], board["rows"],
+                                                 board["square_size"]))
+    assert result.ok, result.warnings
+    save_rig(result.rig, path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def calibrated_rig(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A rig calibrated from 40 chessboard views of the default simulated camera."""
+    directory = tmp_path_factory.mktemp("rig")
+    scenario = default_sim_scenario()
+    scenario["chessboard"]["n_views"] = 40
+    return calibrate_rig_through_stub(scenario, directory / "stub", directory / "rig.json")
+
+
+def sim_scenario(**faults: Any) -> dict[str, Any]:
+    """The default `--robot sim` world, optionally with stub faults."""
+    scenario = default_sim_scenario()
+    if faults:
+        scenario["faults"] = dict(faults)
+    return scenario
+
+
+def run_cli(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
+    """`hostpc ARGS` in-process -> (exit code, stdout, stderr)."""
+    code = main(list(args))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.mark.slow
+def test_calibrate_sim_recovers_truth_and_verifies(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], calibrated_rig: Path
+) -> None:
+    out = tmp_path / "run"
+    code, stdout, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--poses", "60",
+                                   "--verify-poses", "30", "--rig", str(calibrated_rig),
+                                   "--out", str(out), "--json", "--no-report")
+    assert code == 0, stderr
+    document = json.loads(stdout)
+    assert document["robot"]["sim"] is True and document["known"] == ["target"]
+    # the truth comparison: every identifiable offset within 3 sigma and 0.01 deg
+    truth = document["truth"]
+    errors = truth["joint_offsets_error_deg"]
+    joints = document["offsets"]["joints"]
+    identified = [j for j, e in enumerate(errors) if e is not None]
+    assert identified == [0, 1, 2, 3, 4]  # q6 is not separable from the camera mount
+    for j in identified:
+        sigma = joints[j]["sigma_deg"]
+        assert abs(errors[j]) <= 0.01, (j, errors[j])
+        assert abs(errors[j]) <= 3 * sigma, (j, errors[j], sigma)
+    assert errors[5] is None and joints[5]["pushed"] is False
+    assert "unidentifiable" in joints[5]["note"]
+    # pushed: compensated offsets o + delta on the identified joints only
+    assert document["push"]["status"] == "pushed"
+    push = json.loads((out / "push.json").read_text())
+    assert push["new_offsets"][5] == push["previous_offsets"][5]
+    for j in identified:
+        assert math.degrees(push["new_offsets"][j] - push["previous_offsets"][j]) == (
+            pytest.approx(joints[j]["correction_deg"]))
+    # verification on fresh poses after the push: at the sensor's noise level
+    verify = document["verify"]
+    assert verify["n_measured"] == 30 and verify["passed"] is True
+    assert verify["rms_after_mm"] <= 1.2 * verify["noise_rms_mm"]
+    assert verify["rms_before_mm"] > 10 * verify["rms_after_mm"]
+    # files: dataset per the spec, fit, plan in run.json; verify poses are fresh
+    dataset = load_dataset(out / "dataset.json")
+    assert dataset.n_samples == 60 and dataset.method == "stereo_target"
+    assert dataset.known == ("target",)
+    fit_doc = json.loads((out / "fit.json").read_text())
+    assert fit_doc["converged"] is True
+    plan = json.loads((out / "run.json").read_text())["plan"]
+    fit_q = np.asarray(plan["q"])
+    verify_q = np.asarray(plan["q_verify"])
+    distance = np.min(np.max(np.abs(fit_q[None] - verify_q[:, None]), axis=2), axis=1)
+    assert np.all(distance > 1e-6)
+    assert (out / "summary.txt").read_text().count("truth (simulation)") == 1
+    assert "measure" in stderr  # progress on stderr, plain lines (not a TTY)

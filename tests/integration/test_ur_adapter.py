@@ -1,0 +1,98 @@
+"""hostpc's UR adapter (ur_rtde) against `controller-stub serve --ur` (a subprocess).
+
+Checks the host-side zero offsets (command = wanted - offset, report = measured + offset)
+against the simulated robot seen through the zerocal port, captures through the camera
+service, and that a move's outcome is a fresh sample at the target.
+"""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator, Iterator
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rtde_control")
+
+from hostpc.errors import ControllerError, InputError  # noqa: E402
+from hostpc.robots.ur import UrAdapter, connect_ur  # noqa: E402
+from hostpc.transport import ControllerClient  # noqa: E402
+from tests.integration.ur_stub import TOKEN, UrStub, ur_stub_process  # noqa: E402
+
+HOST = "127.0.0.1"
+
+
+@pytest.fixture(scope="module")
+def ur_stub(tmp_path_factory: pytest.TempPathFactory) -> Iterator[UrStub]:
+    """One UR stub for the module; motions take 0.3 x their simulated time."""
+    directory = tmp_path_factory.mktemp("ur_adapter")
+    with ur_stub_process(directory, {"motion": {"time_scale": 0.3}}) as stub:
+        yield stub
+
+
+@pytest.fixture
+async def adapter(ur_stub: UrStub) -> AsyncIterator[UrAdapter]:
+    robot = await connect_ur(HOST, ur_stub.host, ur_stub.port, TOKEN, timeout=10.0)
+    yield robot
+    await robot.close()
+
+
+async def stub_q(stub: UrStub) -> np.ndarray:
+    async with ControllerClient.connect(stub.host, stub.port, token=TOKEN, timeout=5.0) as client:
+        return (await client.state()).q
+
+
+async def test_state_reports_the_ur(adapter: UrAdapter, ur_stub: UrStub) -> None:
+    state = await adapter.state()
+    assert state.robot == "ur5e"
+    np.testing.assert_allclose(state.q, await stub_q(ur_stub), atol=1e-12)
+    np.testing.assert_array_equal(state.zero_offsets, np.zeros(6))
+    assert state.camera["image_width"] == 320
+    assert state.extra["offsets_applied_on_host"] is True
+    assert len(state.digital_inputs) == 16
+
+
+async def test_host_offsets_command_and_report(adapter: UrAdapter, ur_stub: UrStub) -> None:
+    offsets = np.array([0.01, -0.004, 0.003, 0.0, -0.002, 0.005])
+    previous, rollback_id = await adapter.set_offsets(offsets)
+    np.testing.assert_array_equal(previous, np.zeros(6))
+
+    start = (await adapter.state()).q
+    np.testing.assert_allclose(start, await stub_q(ur_stub) + offsets, atol=1e-12)
+
+    wanted = start + np.array([0.2, -0.1, 0.15, 0.1, -0.1, 0.2])
+    outcome = await adapter.move_joints(wanted, 0.5)
+    assert outcome.completed
+    # the robot was commanded wanted - offset ...
+    np.testing.assert_allclose(await stub_q(ur_stub), wanted - offsets, atol=1e-12)
+    # ... and the outcome is a fresh sample at the target, reported with the offset
+    np.testing.assert_allclose(outcome.q, wanted, atol=1e-9)
+
+    capture = await adapter.capture("target")
+    assert capture.left.shape == (256, 320) and capture.right.shape == (256, 320)
+    np.testing.assert_allclose(capture.q, wanted, atol=1e-12)
+
+    replaced = await adapter.rollback(rollback_id)
+    np.testing.assert_array_equal(replaced, offsets)
+    np.testing.assert_array_equal(await adapter.get_offsets(), np.zeros(6))
+    np.testing.assert_allclose((await adapter.state()).q, wanted - offsets, atol=1e-12)
+
+
+async def test_refusals(adapter: UrAdapter) -> None:
+    with pytest.raises(ControllerError, match="exceeds the limit"):
+        await adapter.set_offsets(np.array([0.5, 0, 0, 0, 0, 0]))
+    with pytest.raises(InputError):
+        await adapter.move_joints(np.zeros(5), 0.5)
+    with pytest.raises(ControllerError, match="unknown rollback"):
+        await adapter.rollback("nope")
+
+
+async def test_move_outside_limits_fails_cleanly(adapter: UrAdapter) -> None:
+    q = (await adapter.state()).q.copy()
+    q[2] = 10.0
+    outcome = await adapter.move_joints(q, 0.5)
+    assert not outcome.completed
+    assert outcome.reason in ("protective_stop", "control_script_stopped")
+    from tests.integration.ur_stub import dashboard
+
+    assert dashboard("unlock protective stop") == "Protective stop releasing"
