@@ -2,6 +2,7 @@
 
     controller-stub serve [--scenario FILE] [--host 127.0.0.1] [--port 47800]
                           [--truth-out FILE] [--modbus-port PORT] [--ur] [--log-level LEVEL]
+                          [--token TOKEN] [--modbus-writable]
 
 `serve` prints exactly `listening on HOST:PORT` (flushed) once it accepts connections; with
 `--port 0` the OS picks a free port and that line tells which. With `--modbus-port` the
@@ -11,6 +12,11 @@ robot is also served as a Universal Robots controller (RTDE 30004, dashboard 299
 port 30003 on --host; fixed ports, see docs/robots.md) and the line
 `ur on HOST (rtde 30004, dashboard 29999, script 30003)` is printed before `listening on`.
 Errors are one line on stderr.
+
+`--token` replaces the scenario's `server.token`. Binding a non-loopback `--host` while the
+token is still the public default (`zerocal-sim`) is refused (exit 2): anyone on the network
+could move the robot. The Modbus server is read-only unless `--modbus-writable` (or
+`server.modbus_writable: true` in the scenario): Modbus has no authentication at all.
 """
 
 from __future__ import annotations
@@ -47,6 +53,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--modbus-port", type=int, default=0, help="Modbus TCP port for the IO (default 0 = off)"
     )
     serve.add_argument(
+        "--modbus-writable",
+        action="store_true",
+        help="let Modbus clients write the digital outputs (default: read-only)",
+    )
+    serve.add_argument("--token", help="shared token (default: the scenario's server.token)")
+    serve.add_argument(
         "--ur",
         action="store_true",
         help="also serve the robot as a Universal Robots controller (RTDE 30004, dashboard "
@@ -66,8 +78,14 @@ async def _serve(args: argparse.Namespace) -> int:
     from controller_stub.modbus_io import ModbusIoServer
     from controller_stub.server import ControllerServer
 
-    scenario = _load_scenario(args.scenario)
+    scenario: Any = _load_scenario(args.scenario)
+    token = args.token or scenario.server.token
+    refusal = _exposure_refusal(args.host, token, scenario)
+    if refusal is not None:
+        print(f"controller-stub serve: error: {refusal}", file=sys.stderr)
+        return 2
     server = ControllerServer.from_scenario(scenario, truth_out=args.truth_out)
+    server.token = token
     modbus: ModbusIoServer | None = None
     ur: Any = None
     stop = asyncio.Event()
@@ -77,7 +95,12 @@ async def _serve(args: argparse.Namespace) -> int:
             loop.add_signal_handler(signum, stop.set)
     try:
         if args.modbus_port:
-            modbus = ModbusIoServer(server.sim, host=args.host, port=args.modbus_port)
+            modbus = ModbusIoServer(
+                server.sim,
+                host=args.host,
+                port=args.modbus_port,
+                writable=args.modbus_writable or scenario.server.modbus_writable,
+            )
             host, port = await modbus.start()
             print(f"modbus on {host}:{port}", flush=True)
         if args.ur:
@@ -104,6 +127,29 @@ async def _serve(args: argparse.Namespace) -> int:
         if modbus is not None:
             await modbus.close()
     return 0
+
+
+def _exposure_refusal(host: str, token: str, scenario: Any) -> str | None:
+    """Why serving on `host` with `token` is refused, or None: a non-loopback address with
+    the public default token would let anyone on the network move the robot."""
+    default_token = type(scenario.server).model_fields["token"].default
+    if token != default_token or _is_loopback(host):
+        return None
+    return (
+        f"--host {host} is reachable from the network and the token is the public default "
+        f"{default_token!r}; give --token (or server.token in the scenario)"
+    )
+
+
+def _is_loopback(host: str) -> bool:
+    import ipaddress
+
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False  # a host name: may resolve to anything
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -3,10 +3,15 @@
 Register map (UR-style: digital inputs start at address 0; device id: any)::
 
     discrete inputs (FC 2)    bit i   = digital input i              read only
-    coils (FC 1, 5, 15)       bit i   = digital output i             read / write
+    coils (FC 1, 5, 15)       bit i   = digital output i             read (/ write)
     input registers (FC 4)    0       = digital inputs as a bitmask (bit i = input i)
                               1       = digital outputs as a bitmask
-    holding register (FC 3/6) 0       = digital outputs as a bitmask  read / write
+    holding register (FC 3/6) 0       = digital outputs as a bitmask  read (/ write)
+
+Modbus TCP has no authentication, so the server is read-only unless built with
+`writable=True` (`controller-stub serve --modbus-writable`, or `server.modbus_writable` in
+the scenario): a coil or holding-register write is otherwise answered with the Modbus
+exception ILLEGAL_FUNCTION and changes nothing.
 
 Values are read from the simulation on every request (a device `action` refreshes the
 registers before pymodbus answers), and coil / holding-register writes go straight to
@@ -47,10 +52,20 @@ class ModbusIoServer:
 
     sim: the Simulation (digital_inputs, digital_outputs, set_digital_output).
     n_io: number of digital lines mapped (default: len(sim.digital_inputs())).
+    writable: accept coil / holding-register writes (default False: read-only).
     """
 
-    def __init__(self, sim: Any, host: str = "127.0.0.1", port: int = 0, n_io: int | None = None):
+    def __init__(
+        self,
+        sim: Any,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        n_io: int | None = None,
+        *,
+        writable: bool = False,
+    ):
         self.sim = sim
+        self.writable = writable
         self.n_io = n_io if n_io is not None else len(sim.digital_inputs())
         self._n_bit_registers = (self.n_io + 15) // 16
         bits = [False] * (16 * self._n_bit_registers)
@@ -87,6 +102,10 @@ class ModbusIoServer:
         set_values: list[int] | list[bool] | None,
     ) -> ExcCodes | None:
         """Refresh `registers` from the simulation, or apply a write to it."""
+        is_write = function_code in _WRITE_COILS or (function_code in _HOLDING and set_values)
+        if is_write and not self.writable:
+            logger.warning("modbus write fc=%d refused: read-only server", function_code)
+            return ExcCodes.ILLEGAL_FUNCTION
         try:
             inputs = [bool(v) for v in self.sim.digital_inputs()]
             outputs = [bool(v) for v in self.sim.digital_outputs()]

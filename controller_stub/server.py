@@ -7,9 +7,24 @@ handler becomes an `error` reply (`refused` with the simulation's reason for
 `SimulationRefused`, `internal` otherwise) and the server keeps serving; a client that
 breaks the framing gets an error reply and its connection closed, nobody else notices.
 
-Motions are paced in wall time: the simulation computes the move at once, the server sleeps
-`duration_s * time_scale` before replying (an `abort` ends the sleep early). One motion at
-a time for the whole controller: a second one is refused with `busy`.
+Motions are paced in wall time: the simulation plans the move (`sim.begin_move`), the
+server waits `duration_s * time_scale` and then executes it (`sim.finish_move`). An `abort`
+ends the wait early and the robot stops where it was: at the elapsed fraction of the motion,
+with only the IO edges (and a guarded contact) that came before the stop. While a motion
+runs, `get_state` reports the joint angles interpolated along the path. One motion at a time
+for the whole controller: a second one is refused with `busy`, and so are offset writes.
+(A simulation without `begin_move` moves at once and the abort only ends the wait.)
+
+Limits against slow, stalled or greedy peers (all per `ControllerServer` arguments, from
+`scenario.server`): a client must say hello within `handshake_timeout_s`, and a frame it has
+started must be complete within the same time; a session that sends nothing for
+`idle_timeout_s` while no request of its own is in flight is closed (a heartbeat keeps it
+alive); at most `max_sessions` sessions (the next client gets an error reply, then the
+connection closes); at most `max_requests_in_flight` requests per session run at once
+(beyond that the server stops reading from that client: backpressure); the server also stops
+reading while the client's unsent replies exceed `WRITE_HIGH_WATER` bytes, and drops a client
+that has not read them for `idle_timeout_s`. Until a session is authenticated its frames may
+not exceed `PRE_AUTH_MAX_FRAME_SIZE` (requests carry no attachments).
 
 Injected faults (scenario.faults) handled here: `drop_after_requests` (the request with that
 0-based index, counted over all connections, is not executed and its connection is dropped,
@@ -24,6 +39,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import json
 import logging
 import os
@@ -53,6 +69,16 @@ logger = logging.getLogger(__name__)
 DEFAULT_HOST = "127.0.0.1"
 SERVER_NAME = "controller-stub"
 READ_CHUNK = 1 << 20
+SESSION_READ_CHUNK = 64 * 1024
+"""Bytes read from a client at a time (requests are small; bounds the events per read)."""
+PRE_AUTH_MAX_FRAME_SIZE = 64 * 1024
+"""Largest frame accepted from a session that has not authenticated (bytes)."""
+WRITE_HIGH_WATER = 256 * 1024
+"""Unsent reply bytes per session above which the server stops reading from it."""
+EVENT_DROP_BYTES = 4 * WRITE_HIGH_WATER
+"""Unsent bytes above which io_edge events to a session are dropped (it does not read)."""
+CLOSE_DRAIN_S = 2.0
+"""How long a closing session waits for its last bytes (an error reply) to be sent."""
 
 
 class RequestRefusedError(Exception):
@@ -69,9 +95,10 @@ class ControllerServer:
 
     sim: a `controller_stub.simulation.Simulation` (or anything with its interface).
     token: the shared secret clients prove with HMAC. max_frame_size: largest frame
-    accepted from a client (bytes). drop_after_requests / reply_delay_s: injected faults
-    (see the module docstring). truth_out: file rewritten with `sim.truth()` as JSON at
-    start and whenever the offsets change.
+    accepted from an authenticated client (bytes). drop_after_requests / reply_delay_s:
+    injected faults (see the module docstring). truth_out: file rewritten with `sim.truth()`
+    as JSON at start and whenever the offsets change. handshake_timeout_s, idle_timeout_s
+    (s), max_sessions, max_requests_in_flight: the limits of the module docstring.
     """
 
     def __init__(
@@ -83,10 +110,19 @@ class ControllerServer:
         drop_after_requests: int | None = None,
         reply_delay_s: float = 0.0,
         truth_out: str | Path | None = None,
+        handshake_timeout_s: float = 10.0,
+        idle_timeout_s: float = 300.0,
+        max_sessions: int = 32,
+        max_requests_in_flight: int = 8,
     ) -> None:
         self.sim = sim
         self.token = token
         self.max_frame_size = max_frame_size
+        self.handshake_timeout_s = float(handshake_timeout_s)
+        self.idle_timeout_s = float(idle_timeout_s)
+        self.max_sessions = int(max_sessions)
+        self.max_requests_in_flight = max(1, int(max_requests_in_flight))
+        self.sessions_refused = 0
         self.drop_after_requests = drop_after_requests
         self.reply_delay_s = reply_delay_s
         self.truth_out = Path(truth_out) if truth_out else None
@@ -95,6 +131,8 @@ class ControllerServer:
         self._server: asyncio.Server | None = None
         self._sessions: set[_Session] = set()
         self._motion: asyncio.Future[None] | None = None
+        # the planned motion being paced: (plan, loop time at its start, wall duration s)
+        self._progress: tuple[Any, float, float] | None = None
         self._rollbacks: dict[str, list[float]] = {}
         self._rollback_counter = 0
         sim.on_io_edge = self._on_io_edge
@@ -111,6 +149,10 @@ class ControllerServer:
             drop_after_requests=scenario.faults.drop_after_requests,
             reply_delay_s=scenario.faults.reply_delay_s,
             truth_out=truth_out,
+            handshake_timeout_s=scenario.server.handshake_timeout_s,
+            idle_timeout_s=scenario.server.idle_timeout_s,
+            max_sessions=scenario.server.max_sessions,
+            max_requests_in_flight=scenario.server.max_requests_in_flight,
         )
 
     # ----------------------------------------------------------------------- lifecycle
@@ -167,12 +209,42 @@ class ControllerServer:
     # ---------------------------------------------------------------------- internals
 
     async def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        if len(self._sessions) >= self.max_sessions:
+            await self._refuse_session(reader, writer)
+            return
         session = _Session(self, reader, writer)
         self._sessions.add(session)
         try:
             await session.run()
         finally:
             self._sessions.discard(session)
+
+    async def _refuse_session(
+        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter
+    ) -> None:
+        """Session limit reached: one `busy` error reply, then close."""
+        self.sessions_refused += 1
+        peer = writer.get_extra_info("peername")
+        logger.warning("refusing %s: %d sessions already (the limit)", peer, len(self._sessions))
+        conn = Connection(Role.SERVER, token=self.token)
+        error = conn.send_error(
+            None,
+            ErrorCode.BUSY,
+            f"too many sessions: the controller serves at most {self.max_sessions}; "
+            "try again later",
+        )
+        try:
+            writer.write(error)
+            writer.write_eof()
+            # wait (briefly) for the client to close, discarding what it sends, so that
+            # closing does not reset the connection before it has read the error
+            async with asyncio.timeout(CLOSE_DRAIN_S):
+                while await reader.read(SESSION_READ_CHUNK):
+                    pass
+        except (TimeoutError, ConnectionError, OSError):
+            pass
+        finally:
+            writer.transport.abort()
 
     def count_request(self) -> bool:
         """Count one request; True if the drop fault says to drop its connection now."""
@@ -208,6 +280,32 @@ class ControllerServer:
         if self.sim.estopped:
             return "estop"
         return "moving" if self._motion is not None else "idle"
+
+    def joint_positions(self) -> np.ndarray:
+        """(n,) reported joint angles now: along the path while a planned motion runs."""
+        progress = self._progress
+        if progress is None:
+            return np.asarray(self.sim.joint_positions(), dtype=float)
+        plan, started, wall = progress
+        elapsed = asyncio.get_running_loop().time() - started
+        return np.asarray(plan.q_at(elapsed / wall if wall > 0.0 else 1.0), dtype=float)
+
+    async def execute_motion(self, plan: Any) -> Any:
+        """Pace `plan` (from `sim.begin_move`) in wall time, then finish it in the simulation:
+        at its end, or at the elapsed fraction if it was aborted (or cancelled: shutdown).
+        Returns the simulation's MoveResult / GuardedMoveResult."""
+        loop = asyncio.get_running_loop()
+        wall = max(0.0, float(plan.duration_s) * float(self.sim.time_scale))
+        started = loop.time()
+        self._progress = (plan, started, wall)
+        finished = False
+        try:
+            finished = await self.run_motion(plan.duration_s)
+        finally:
+            self._progress = None
+            fraction = 1.0 if finished or wall <= 0.0 else (loop.time() - started) / wall
+            result = self.sim.finish_move(plan, min(fraction, 1.0))
+        return result
 
     async def run_motion(self, duration_s: float) -> bool:
         """Pace a motion in wall time; False if it was aborted before the end."""
@@ -254,7 +352,7 @@ class ControllerServer:
 
 
 class _Session:
-    """One client connection: reader loop, request tasks, event pushes."""
+    """One client connection: reader loop, request tasks, event pushes (and its limits)."""
 
     def __init__(
         self, server: ControllerServer, reader: asyncio.StreamReader, writer: asyncio.StreamWriter
@@ -269,11 +367,18 @@ class _Session:
             Role.SERVER,
             token=server.token,
             max_frame_size=server.max_frame_size,
+            pre_auth_max_frame_size=PRE_AUTH_MAX_FRAME_SIZE,
             server_name=SERVER_NAME,
             robot_name=str(self.sim.robot_name),
         )
         self._tasks: set[asyncio.Task[None]] = set()
+        self._slot_freed = asyncio.Event()
+        self._write_lock = asyncio.Lock()
         self._done = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        self._handshake_deadline = loop.time() + server.handshake_timeout_s
+        self._frame_started: float | None = None  # loop time the frame in progress began
+        writer.transport.set_write_buffer_limits(high=WRITE_HIGH_WATER)
         self._handlers: dict[str, Callable[[Any], Awaitable[m._Message]]] = {
             "get_state": self._get_state,
             "read_io": self._read_io,
@@ -295,22 +400,25 @@ class _Session:
         logger.info("client %s connected", self.peer)
         try:
             while self.conn.state is not ConnectionState.CLOSED:
-                try:
-                    data = await self.reader.read(READ_CHUNK)
-                except (ConnectionError, OSError):
-                    data = b""
+                if not await self._wait_writable():
+                    break
+                data = await self._read()
+                if data is None:
+                    break
                 try:
                     events = self.conn.receive_data(data)
                 except Exception:  # a protocol-layer bug must not outlive this connection
                     logger.exception("protocol failure with %s; closing", self.peer)
                     break
+                self._note_partial_frame()
                 self._write(self.conn.data_to_send())
                 for event in events:
-                    self._dispatch(event)
-            with contextlib.suppress(ConnectionError, OSError):
-                await self.writer.drain()
+                    await self._dispatch(event)
+            with contextlib.suppress(TimeoutError, ConnectionError, OSError):
+                await asyncio.wait_for(self.writer.drain(), CLOSE_DRAIN_S)
         finally:
-            self._close_transport()
+            # a client that does not read cannot hold the transport (and its buffer) open
+            self._close_transport(abort=self.writer.transport.get_write_buffer_size() > 0)
             # Requests in flight finish (a motion keeps its pacing) but cannot reply.
             if self._tasks:
                 await asyncio.gather(*self._tasks, return_exceptions=True)
@@ -328,13 +436,93 @@ class _Session:
         self._close_transport(abort=True)
 
     def push(self, event: m._Message) -> None:
-        """Push an event if this session is authenticated."""
-        if self.conn.state is ConnectionState.READY:
-            self._write(self.conn.send(event))
+        """Push an event if this session is authenticated (dropped, with a warning, if the
+        client has not read EVENT_DROP_BYTES of earlier output)."""
+        if self.conn.state is not ConnectionState.READY or self.writer.is_closing():
+            return
+        if self.writer.transport.get_write_buffer_size() > EVENT_DROP_BYTES:
+            logger.warning("client %s does not read; dropping %s", self.peer, event.kind)
+            return
+        self._write(self.conn.send(event))
+
+    # ------------------------------------------------------------------------ limits
+
+    def _read_deadline(self) -> tuple[float, str]:
+        """(seconds to wait for the next bytes, what is overdue if they do not come)."""
+        now = asyncio.get_running_loop().time()
+        waits = [(self.server.idle_timeout_s, f"idle for {self.server.idle_timeout_s:g} s")]
+        if self.conn.state is ConnectionState.AWAITING_HELLO:
+            waits.append(
+                (
+                    self._handshake_deadline - now,
+                    f"no hello within {self.server.handshake_timeout_s:g} s",
+                )
+            )
+        if self._frame_started is not None:
+            waits.append(
+                (
+                    self._frame_started + self.server.handshake_timeout_s - now,
+                    f"frame of {self.conn.buffered}+ bytes not completed within "
+                    f"{self.server.handshake_timeout_s:g} s",
+                )
+            )
+        return min(waits)
+
+    async def _read(self) -> bytes | None:
+        """The next bytes from the client (b"" = end of stream), or None once a deadline
+        has passed (handshake, frame in progress, idle). Waiting for replies to our own
+        requests in flight is not idleness."""
+        while True:
+            timeout, overdue = self._read_deadline()
+            try:
+                return await asyncio.wait_for(
+                    self.reader.read(SESSION_READ_CHUNK), max(timeout, 0.0)
+                )
+            except TimeoutError:  # before OSError, of which it is a subclass
+                if overdue.startswith("idle") and self._tasks:
+                    continue
+                logger.warning("client %s: %s; closing", self.peer, overdue)
+                return None
+            except (ConnectionError, OSError):
+                return b""
+
+    def _note_partial_frame(self) -> None:
+        if self.conn.buffered == 0:
+            self._frame_started = None
+        elif self._frame_started is None:
+            self._frame_started = asyncio.get_running_loop().time()
+
+    async def _wait_writable(self) -> bool:
+        """Backpressure: wait while this client's unsent output is above the high-water
+        mark. False (and the transport aborted) if it has not read for idle_timeout_s, or
+        the connection is gone."""
+        try:
+            await asyncio.wait_for(self.writer.drain(), self.server.idle_timeout_s)
+        except TimeoutError:
+            logger.warning(
+                "client %s has not read its replies for %g s; closing",
+                self.peer,
+                self.server.idle_timeout_s,
+            )
+            self._close_transport(abort=True)
+            return False
+        except (ConnectionError, OSError):
+            return False
+        return True
+
+    async def _request_slot(self) -> None:
+        """Wait until fewer than max_requests_in_flight requests of this session run."""
+        while len(self._tasks) >= self.server.max_requests_in_flight:
+            self._slot_freed.clear()
+            await self._slot_freed.wait()
+
+    def _task_done(self, task: asyncio.Task[None]) -> None:
+        self._tasks.discard(task)
+        self._slot_freed.set()
 
     # ------------------------------------------------------------------------ events
 
-    def _dispatch(self, event: object) -> None:
+    async def _dispatch(self, event: object) -> None:
         if isinstance(event, m.Request):
             if self.server.count_request():
                 logger.warning(
@@ -345,9 +533,10 @@ class _Session:
                 )
                 self._close_transport(abort=True)
                 return
+            await self._request_slot()  # backpressure: no more reading until a slot frees
             task = asyncio.get_running_loop().create_task(self._serve(event))
             self._tasks.add(task)
-            task.add_done_callback(self._tasks.discard)
+            task.add_done_callback(self._task_done)
         elif isinstance(event, Rejected):
             logger.warning("client %s: %s (%s)", self.peer, event.message, event.code)
         elif isinstance(event, StateChanged):
@@ -374,16 +563,21 @@ class _Session:
             reply = _error(request, ErrorCode.INTERNAL, f"{type(exc).__name__}: {exc}")
         if self.server.reply_delay_s > 0:
             await asyncio.sleep(self.server.reply_delay_s)
-        if self.conn.state is ConnectionState.CLOSED or self.writer.is_closing():
-            return
-        try:
-            data = self.conn.send(reply)
-        except LocalProtocolError:
-            logger.exception("cannot send %s to %s", reply.kind, self.peer)
-            return
-        self._write(data)
-        with contextlib.suppress(ConnectionError, OSError):
-            await self.writer.drain()
+        # one reply at a time, each only once the output is below the high-water mark:
+        # the unsent bytes stay bounded by WRITE_HIGH_WATER plus one reply
+        async with self._write_lock:
+            if self.conn.state is ConnectionState.CLOSED or self.writer.is_closing():
+                return
+            if not await self._wait_writable():
+                return
+            if self.conn.state is ConnectionState.CLOSED or self.writer.is_closing():
+                return
+            try:
+                data = self.conn.send(reply)
+            except LocalProtocolError:
+                logger.exception("cannot send %s to %s", reply.kind, self.peer)
+                return
+            self._write(data)
 
     def _write(self, data: bytes) -> None:
         if data and not self.writer.is_closing():
@@ -406,7 +600,7 @@ class _Session:
             n_joints=int(sim.n_joints),
             mode=self.server.mode(),  # type: ignore[arg-type]
             time=float(sim.time),
-            q=_floats(sim.joint_positions()),
+            q=_floats(self.server.joint_positions()),  # along the path while moving
             zero_offsets=_floats(sim.zero_offsets()),
             q_min=_floats(q_min),
             q_max=_floats(q_max),
@@ -432,28 +626,38 @@ class _Session:
             )
         return np.asarray(q, dtype=float)
 
+    async def _run_motion(self, q_target: np.ndarray, speed: float, io_line: int | None) -> Any:
+        """Plan, pace and finish a motion (stopped part-way by an abort); the simulation's
+        MoveResult / GuardedMoveResult. A simulation without `begin_move` moves at once
+        and an abort only ends the wait (its result then says "aborted")."""
+        self.server.begin_motion()
+        if hasattr(self.sim, "begin_move"):
+            plan = self.sim.begin_move(q_target, speed, io_line)
+            return await self.server.execute_motion(plan)
+        if io_line is None:
+            result = self.sim.move_joints(q_target, speed)
+        else:
+            result = self.sim.guarded_move(q_target, speed, io_line)
+        if await self.server.run_motion(result.duration_s):
+            return result
+        if io_line is None:
+            return dataclasses.replace(result, completed=False, reason="aborted")
+        return dataclasses.replace(result, reason="aborted")
+
     async def _move_joints(self, request: m.MoveJoints) -> m.MoveDone:
         q_target = self._check_joints(request.q)
-        self.server.begin_motion()
-        result = self.sim.move_joints(q_target, request.speed)
-        finished = await self.server.run_motion(result.duration_s)
-        completed, reason = bool(result.completed), result.reason
-        if not finished and completed:
-            completed, reason = False, "aborted"
+        result = await self._run_motion(q_target, request.speed, None)
         return m.MoveDone(
             reply_to=request.id,
-            completed=completed,
-            q=_floats(self.sim.joint_positions() if reason == "aborted" else result.q),
+            completed=bool(result.completed),
+            q=_floats(result.q),
             duration_s=float(result.duration_s),
-            reason=reason,
+            reason=result.reason,
         )
 
     async def _guarded_move(self, request: m.GuardedMove) -> m.GuardedMoveDone:
         q_target = self._check_joints(request.q)
-        self.server.begin_motion()
-        result = self.sim.guarded_move(q_target, request.speed, request.io_line)
-        finished = await self.server.run_motion(result.duration_s)
-        reason = result.reason if finished else "aborted"
+        result = await self._run_motion(q_target, request.speed, request.io_line)
         return m.GuardedMoveDone(
             reply_to=request.id,
             contact=bool(result.contact),
@@ -462,8 +666,14 @@ class _Session:
             io_line=int(result.io_line),
             duration_s=float(result.duration_s),
             speed_mps=None if result.speed_mps is None else float(result.speed_mps),
-            reason=reason,
+            reason=result.reason,
         )
+
+    def _refuse_while_moving(self, what: str) -> None:
+        if self.server.mode() == "moving":
+            raise RequestRefusedError(
+                ErrorCode.BUSY, f"cannot {what} while a motion is in progress"
+            )
 
     async def _abort(self, request: m.Abort) -> m.Aborted:
         return m.Aborted(reply_to=request.id, was_moving=self.server.abort_motion())
@@ -504,6 +714,7 @@ class _Session:
 
     async def _set_offsets(self, request: m.SetOffsets) -> m.OffsetsSet:
         offsets = self._check_joints(request.offsets)
+        self._refuse_while_moving("write the zero offsets")
         previous = _floats(self.sim.set_zero_offsets(offsets))
         rollback_id = self.server.new_rollback_id(previous)
         logger.info("client %s set zero offsets (rollback id %s)", self.peer, rollback_id)
@@ -517,6 +728,7 @@ class _Session:
 
     async def _rollback(self, request: m.RollbackOffsets) -> m.OffsetsRolledBack:
         saved = self.server.rollback_offsets(request.rollback_id)
+        self._refuse_while_moving("roll back the zero offsets")
         replaced = _floats(self.sim.set_zero_offsets(np.asarray(saved, dtype=float)))
         logger.info("client %s rolled back offsets to %s", self.peer, request.rollback_id)
         self.server.write_truth()

@@ -1,8 +1,10 @@
 """The simulated controller's world: robot, truth, motion, sensors.
 
 Synchronous and free of I/O: the asyncio server (`server.py`) is a thin shell that turns
-protocol requests into calls on one `Simulation` and sleeps `duration_s * time_scale` for
-motions. Everything here is reproducible from the scenario's seed.
+protocol requests into calls on one `Simulation` and paces motions in wall time
+(`duration_s * time_scale`): it plans a motion with `begin_move`, and `finish_move` moves the
+robot at the end, or part-way if the motion was aborted. Everything here is reproducible
+from the scenario's seed.
 
 Angles are radians, lengths metres, times seconds (docs/conventions.md). "Reported" joint
 angles are what a real controller reports: `q_reported = encoder + zero_offset`. The physical
@@ -22,6 +24,8 @@ INTERFACE CONTRACT (the server depends on exactly these names):
     sim.set_digital_output(index, value) -> None
     sim.move_joints(q_target, speed) -> MoveResult            # speed: fraction of max (0, 1]
     sim.guarded_move(q_target, speed, io_line) -> GuardedMoveResult
+    sim.begin_move(q_target, speed, io_line=None) -> MotionPlan   # deferred motion (server):
+    sim.finish_move(plan, fraction=1.0) -> MoveResult | GuardedMoveResult  # stop part-way
     sim.capture_stereo(pattern="target", view=0) -> StereoFrame   # pattern: target|chessboard
     sim.camera_description() -> dict          # what the controller reports of its camera
                                                # (image size, nominal mount); never the truth
@@ -110,6 +114,67 @@ class StereoFrame:
     right: np.ndarray
     q: np.ndarray
     time: float
+
+
+@dataclass(frozen=True)
+class PathEdge:
+    """A change of the probe's digital input at path parameter s (0..1 of the whole path).
+
+    time: sim time of the change (s); q: (n,) reported angles there; emit: False for an edge
+    the controller does not see (lost-edge fault): the input changes silently.
+    """
+
+    s: float
+    value: bool
+    time: float
+    q: np.ndarray
+    emit: bool = True
+
+
+@dataclass(frozen=True)
+class GuardedContact:
+    """The contact a guarded move will latch: touch at path parameter s_contact, latch at
+    s_latch (trigger latency later), stop at s_stop. q_latched: (n,) reported angles at the
+    latch; time_latch: sim time of the latch (s); speed_mps: tip speed at the touch (m/s)."""
+
+    s_contact: float
+    s_latch: float
+    s_stop: float
+    q_latched: np.ndarray
+    time_latch: float
+    speed_mps: float
+
+
+@dataclass(frozen=True)
+class MotionPlan:
+    """A motion computed by `Simulation.begin_move` and not yet executed (`finish_move`).
+
+    The path is q(s) = q_start + s * (q_target - q_start), s in [0, 1], reported rad, over
+    path_duration_s of simulated time. Unless stopped early the motion ends at s = s_end (1,
+    or the stop after a guarded contact) after duration_s = s_end * path_duration_s; a
+    `fraction` of the motion means s = fraction * s_end. io_line: None for move_joints, the
+    guarded line otherwise. edges: input changes along the path in order; contact: the
+    guarded contact, or None.
+    """
+
+    q_start: np.ndarray
+    q_target: np.ndarray
+    t_start: float
+    path_duration_s: float
+    s_end: float
+    io_line: int | None
+    edges: tuple[PathEdge, ...]
+    contact: GuardedContact | None = None
+
+    @property
+    def duration_s(self) -> float:
+        """Simulated time of the motion if it is not stopped early (s)."""
+        return self.s_end * self.path_duration_s
+
+    def q_at(self, fraction: float) -> np.ndarray:
+        """(n,) reported angles after `fraction` (clipped to [0, 1]) of the motion."""
+        s = min(max(float(fraction), 0.0), 1.0) * self.s_end
+        return self.q_start + s * (self.q_target - self.q_start)
 
 
 OnIoEdge = Callable[[int, bool, float, np.ndarray], None]
@@ -210,6 +275,7 @@ class Simulation:
         self._guarded_count = 0
         self._rng_probe = _rng(scenario.seed, _STREAM_PROBE)
         self.on_io_edge: OnIoEdge | None = None
+        self._active_plan: MotionPlan | None = None  # begun, not yet finished
 
         cam = scenario.camera
         self.camera = CameraModel(
@@ -300,8 +366,11 @@ class Simulation:
         The encoders do not move, so the reported angles shift by (new - old) and the same
         reported command afterwards reaches a different physical pose. Refused with
         "offset_limit" if any joint would differ from the ORIGINAL offsets by more than
-        server.offset_limit_rad, "invalid_argument" for a wrong shape or non-finite values.
+        server.offset_limit_rad, "invalid_argument" for a wrong shape or non-finite values,
+        "busy" while a motion from begin_move is not finished.
         """
+        if self._active_plan is not None:
+            raise SimulationRefused("busy", "cannot change the zero offsets while moving")
         new = self._check_vector(offsets, "offsets")
         limit = self.scenario.server.offset_limit_rad
         change = np.abs(new - self._offsets_initial)
@@ -434,15 +503,76 @@ class Simulation:
         Raises SimulationRefused: "estop", "joint_limit", "refused_fault", "invalid_argument".
         The probe IO line follows contact along the path (rising/falling edges reported).
         """
+        result = self.finish_move(self.begin_move(q_target, speed))
+        assert isinstance(result, MoveResult)
+        return result
+
+    def begin_move(self, q_target: Any, speed: float, io_line: int | None = None) -> MotionPlan:
+        """Plan a motion without executing it: a joint move (io_line None, see move_joints)
+        or a guarded move until a rising edge on `io_line` (see guarded_move).
+
+        The checks, move counters, faults and the probe noise draw happen here, exactly as
+        in the immediate calls; the robot does not move (joint_positions() still reports
+        the start) until `finish_move(plan, fraction)`. One plan at a time: another
+        begin_move before finish_move is refused with "busy".
+        """
+        if self._active_plan is not None:
+            raise SimulationRefused("busy", "another motion is in progress")
+        if io_line is not None and not 0 <= int(io_line) < self._n_io:
+            raise SimulationRefused(
+                "invalid_argument", f"io_line {io_line} out of range 0..{self._n_io - 1}"
+            )
         target, duration = self._begin_motion(q_target, speed)
+        if io_line is None:
+            plan = self._plan_move(target, duration)
+        else:
+            plan = self._plan_guarded_move(target, duration, int(io_line))
+        self._active_plan = plan
+        return plan
+
+    def finish_move(
+        self, plan: MotionPlan, fraction: float = 1.0
+    ) -> MoveResult | GuardedMoveResult:
+        """Execute `plan` up to `fraction` (clipped to [0, 1]) of it; 1 = to its end.
+
+        The robot stops at q = q_start + s * (q_target - q_start), s = fraction * s_end; the
+        clock advances by s * path_duration_s; only the IO edges with s_edge <= s happen. A
+        move stopped early (fraction < 1, e.g. an abort) reports completed=False /
+        reason "aborted"; a stopped guarded move reports a contact only if the trigger
+        latched before the stop (a touch after the latch point is not reported; a touch
+        before it but not yet latched sets the input without an IO edge event). Raises
+        SimulationRefused("invalid_argument") if `plan` is not the motion in progress.
+        """
+        if plan is not self._active_plan:
+            raise SimulationRefused("invalid_argument", "finish_move: not the motion in progress")
+        self._active_plan = None
+        fraction = min(max(float(fraction), 0.0), 1.0)
+        stopped = fraction < 1.0
+        s = fraction * plan.s_end
+        for edge in plan.edges:
+            if edge.s <= s:
+                self._set_probe_input(edge.value, edge.time, edge.q, emit=edge.emit)
+        if plan.io_line is not None:
+            return self._finish_guarded(plan, s, stopped)
+        q_end = plan.q_start + s * (plan.q_target - plan.q_start) if stopped else plan.q_target
+        duration = s * plan.path_duration_s
+        self._finish_motion(plan.q_start, q_end, duration)
+        return MoveResult(
+            completed=not stopped,
+            q=q_end.copy(),
+            duration_s=duration,
+            reason="aborted" if stopped else None,
+        )
+
+    def _plan_move(self, target: np.ndarray, duration: float) -> MotionPlan:
+        """A joint move: the probe IO line follows contact along the path."""
         q_start = self._q.copy()
         t_start = self._time
-        crossings = self._path_crossings(q_start, target, duration, t_start)
-        for c in crossings:
-            q_at = q_start + c.s * (target - q_start)
-            self._set_probe_input(c.rising, t_start + c.s * duration, q_at, emit=True)
-        self._finish_motion(q_start, target, duration)
-        return MoveResult(completed=True, q=target.copy(), duration_s=duration)
+        edges = tuple(
+            PathEdge(c.s, c.rising, t_start + c.s * duration, q_start + c.s * (target - q_start))
+            for c in self._path_crossings(q_start, target, duration, t_start)
+        )
+        return MotionPlan(q_start, target, t_start, duration, 1.0, None, edges)
 
     # ------------------------------------------------------------------ probe
 
@@ -515,13 +645,15 @@ class Simulation:
         `probe_trigger_latency_s` after the true contact; the robot stops `probe.stop_time_s`
         after the latch (it keeps moving along the path until then). A lost-edge fault or no
         contact runs to the end of travel and returns contact=False. The IO edge callback
-        gets (line, True, latch time, latched q).
+        gets (line, True, latch time, latched q). Equivalent to
+        finish_move(begin_move(q_target, speed, io_line)).
         """
-        if not 0 <= int(io_line) < self._n_io:
-            raise SimulationRefused(
-                "invalid_argument", f"io_line {io_line} out of range 0..{self._n_io - 1}"
-            )
-        target, duration = self._begin_motion(q_target, speed)
+        result = self.finish_move(self.begin_move(q_target, speed, int(io_line)))
+        assert isinstance(result, GuardedMoveResult)
+        return result
+
+    def _plan_guarded_move(self, target: np.ndarray, duration: float, io_line: int) -> MotionPlan:
+        """A guarded move (see guarded_move): the edges up to the contact, and the contact."""
         index = self._guarded_count
         self._guarded_count += 1
         lose_edge = index in self.scenario.faults.lose_io_edge_indices
@@ -531,42 +663,69 @@ class Simulation:
         noise = float(self._rng_probe.normal(0.0, self.scenario.probe.repeatability_sigma))
         crossings = self._path_crossings(q_start, target, duration, t_start, extra=noise)
         latency = self.effects.probe_trigger_latency_s
+        edges: list[PathEdge] = []
         for c in crossings:
             t_c = t_start + c.s * duration
             q_c = q_start + c.s * (target - q_start)
             if not c.rising:
-                self._set_probe_input(False, t_c, q_c, emit=True)
+                edges.append(PathEdge(c.s, False, t_c, q_c))
                 continue
-            if int(io_line) != probe_line or lose_edge:
+            if io_line != probe_line or lose_edge:
                 # the edge happens on the probe line, but the guarded move does not see it
-                self._set_probe_input(True, t_c, q_c, emit=not lose_edge)
+                edges.append(PathEdge(c.s, True, t_c, q_c, emit=not lose_edge))
                 continue
             s_latch = min(1.0, c.s + latency / duration)
             s_stop = min(1.0, s_latch + self.scenario.probe.stop_time_s / duration)
-            q_latched = q_start + s_latch * (target - q_start)
-            q_stop = q_start + s_stop * (target - q_start)
-            speed_mps = self._tip_speed(q_start, target, c.s, duration)
+            contact = GuardedContact(
+                s_contact=c.s,
+                s_latch=s_latch,
+                s_stop=s_stop,
+                q_latched=q_start + s_latch * (target - q_start),
+                time_latch=t_start + s_latch * duration,
+                speed_mps=self._tip_speed(q_start, target, c.s, duration),
+            )
+            return MotionPlan(
+                q_start, target, t_start, duration, s_stop, io_line, tuple(edges), contact
+            )
+        return MotionPlan(q_start, target, t_start, duration, 1.0, io_line, tuple(edges))
+
+    def _finish_guarded(self, plan: MotionPlan, s: float, stopped: bool) -> GuardedMoveResult:
+        """The end of a guarded move stopped at path parameter s (edges already applied)."""
+        assert plan.io_line is not None
+        contact = plan.contact
+        duration = s * plan.path_duration_s
+        q_end = plan.q_start + s * (plan.q_target - plan.q_start)
+        if contact is not None and contact.s_latch <= s:
+            probe_line = self.scenario.probe.io_line
             self._inputs[probe_line] = True
             if self.on_io_edge is not None:
-                self.on_io_edge(probe_line, True, t_start + s_latch * duration, q_latched.copy())
-            self._finish_motion(q_start, q_stop, s_stop * duration)
+                self.on_io_edge(probe_line, True, contact.time_latch, contact.q_latched.copy())
+            self._finish_motion(plan.q_start, q_end, duration)
             self._update_probe_input(emit=True)
             return GuardedMoveResult(
                 contact=True,
-                q_latched=q_latched,
-                q=q_stop,
-                duration_s=s_stop * duration,
-                io_line=int(io_line),
-                speed_mps=speed_mps,
+                q_latched=contact.q_latched.copy(),
+                q=q_end,
+                duration_s=duration,
+                io_line=plan.io_line,
+                speed_mps=contact.speed_mps,
+                reason="aborted" if stopped else None,
             )
-        self._finish_motion(q_start, target, duration)
+        if contact is not None and contact.s_contact <= s:
+            # touched, but stopped before the trigger latched: no contact reported
+            q_touch = plan.q_start + contact.s_contact * (plan.q_target - plan.q_start)
+            t_touch = plan.t_start + contact.s_contact * plan.path_duration_s
+            self._set_probe_input(True, t_touch, q_touch, emit=False)
+        if not stopped:
+            q_end = plan.q_target.copy()
+        self._finish_motion(plan.q_start, q_end, duration)
         return GuardedMoveResult(
             contact=False,
             q_latched=None,
-            q=target.copy(),
+            q=q_end.copy(),
             duration_s=duration,
-            io_line=int(io_line),
-            reason="no_contact",
+            io_line=plan.io_line,
+            reason="aborted" if stopped else "no_contact",
         )
 
     def _tip_speed(

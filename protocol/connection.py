@@ -132,8 +132,10 @@ class Connection:
 
     role: CLIENT or SERVER. token: the shared secret (a client without a token gets a
     read-only session). max_frame_size: largest frame accepted from the peer (bytes);
-    larger ones are rejected and close the connection. server_name / robot_name: what a
-    server announces in hello_reply.
+    larger ones are rejected and close the connection. pre_auth_max_frame_size: a smaller
+    limit (bytes) that applies until the session is authenticated (server role: requests
+    carry no attachments, so an anonymous peer never needs big frames); None = no separate
+    limit. server_name / robot_name: what a server announces in hello_reply.
     """
 
     def __init__(
@@ -142,6 +144,7 @@ class Connection:
         *,
         token: str | None = None,
         max_frame_size: int = DEFAULT_MAX_FRAME_SIZE,
+        pre_auth_max_frame_size: int | None = None,
         server_name: str = "zerocal-controller",
         robot_name: str = "",
         client_name: str = "zerocal",
@@ -156,7 +159,11 @@ class Connection:
         self._token = token
         self._server_name = server_name
         self._client_name = client_name
-        self._decoder = FrameDecoder(max_frame_size)
+        self._max_frame_size = max_frame_size
+        initial_limit = max_frame_size
+        if pre_auth_max_frame_size is not None:
+            initial_limit = min(max_frame_size, pre_auth_max_frame_size)
+        self._decoder = FrameDecoder(initial_limit)
         self._outgoing: list[bytes] = []
         self._ids: Iterator[int] = itertools.count()
         self._client_nonce: str | None = None
@@ -182,6 +189,17 @@ class Connection:
     def authenticated(self) -> bool:
         """True once the challenge-response succeeded."""
         return self.state is ConnectionState.READY
+
+    @property
+    def max_frame_size(self) -> int:
+        """Largest frame accepted from the peer now (bytes); grows to the configured limit
+        once the session is authenticated if a pre-auth limit was given."""
+        return self._decoder.max_frame_size
+
+    @property
+    def buffered(self) -> int:
+        """Bytes received but not yet complete as a frame (a frame in progress)."""
+        return self._decoder.buffered
 
     def next_id(self) -> int:
         """A fresh request id for this connection (client role)."""
@@ -326,6 +344,8 @@ class Connection:
         next_state = TRANSITIONS.get((self.state, message.kind))
         if next_state is not None:
             self.state = next_state
+            if next_state is ConnectionState.READY:
+                self._decoder.max_frame_size = self._max_frame_size
         if isinstance(message, ErrorReply) and message.code in FATAL_CODES:
             self.state = ConnectionState.CLOSED
 
@@ -482,6 +502,8 @@ class Connection:
         next_state = TRANSITIONS.get((self.state, message.kind))
         if next_state is not None:
             self.state = next_state
+            if next_state is ConnectionState.READY:
+                self._decoder.max_frame_size = self._max_frame_size
         if isinstance(message, ErrorReply) and message.code in FATAL_CODES:
             self.state = ConnectionState.CLOSED
             self._pending.clear()

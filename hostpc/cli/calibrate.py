@@ -76,6 +76,10 @@ def register(subparsers: Any) -> None:
                         "captures through the controller)")
     parser.add_argument("--depth", choices=("triangulate", "sgbm"), default="triangulate",
                         help="stereo depth method (default triangulate)")
+    parser.add_argument("--pixel-floor", type=float, default=0.01, metavar="PX",
+                        help="systematic floor (px per image coordinate) added to each "
+                        "measured covariance for rig calibration and detection errors "
+                        "(default 0.01; 0 = image noise only)")
     parser.add_argument("--push", action=argparse.BooleanOptionalAction, default=None,
                         help="write the compensated offsets to the controller (default yes)")
     parser.add_argument("--force", action="store_true", default=None,
@@ -113,7 +117,9 @@ def _settings(args: argparse.Namespace) -> RunSettings:
         raise InputError(f"--candidates {args.candidates}: fewer than --poses + --verify-poses")
     if args.timeout <= 0:
         raise InputError(f"--timeout {args.timeout}: must be positive")
-    options: dict[str, Any] = {"depth": args.depth}
+    if args.pixel_floor < 0:
+        raise InputError(f"--pixel-floor {args.pixel_floor}: must not be negative")
+    options: dict[str, Any] = {"depth": args.depth, "pixel_floor": args.pixel_floor}
     if args.rig:
         options["rig"] = str(Path(args.rig).resolve())
     return RunSettings(

@@ -9,8 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
+from hostpc.diagnose.distributions import chi2_isf, chi2_ppf, chi2_sf
 from hostpc.fit import FitResult, fold_indices
 from hostpc.fit.solver import evaluate, levenberg_marquardt
 from hostpc.model.problem import Problem
@@ -107,8 +107,8 @@ def chi2_band(dof: int, alpha: float) -> tuple[float, float]:
     """Central interval of chi2/dof with probability 1 - alpha for dof degrees of freedom."""
     if dof <= 0:
         return (float("nan"), float("nan"))
-    low = stats.chi2.ppf(alpha / 2.0, dof) / dof
-    high = stats.chi2.isf(alpha / 2.0, dof) / dof
+    low = chi2_ppf(alpha / 2.0, dof) / dof
+    high = chi2_isf(alpha / 2.0, dof) / dof
     return (float(low), float(high))
 
 
@@ -125,7 +125,7 @@ def assess(result: FitResult, held_out: HeldOut | None, alpha: float,
     missing effect was found significant (``missing``: sentences naming what was)."""
     dof = result.dof
     chi2_dof = result.chi2_dof
-    p_value = float(stats.chi2.sf(result.chi2, dof)) if dof > 0 else float("nan")
+    p_value = chi2_sf(result.chi2, dof) if dof > 0 else float("nan")
     chi2_ok = bool(dof > 0 and p_value >= alpha / 2.0)
     m = result.residuals_raw.shape[1]
     sum_squares = float(np.sum(result.residuals_raw**2))

@@ -24,11 +24,13 @@ EFFECT_PHRASES = {
                 "table)",
     "trigger_latency": "Residuals grow with the probe's approach speed",
 }
-# which built-in effect a "parameter varies with variable" pattern is
+# which built-in effect a "parameter varies with variable" pattern is; {b}: the branch
+# prefix of a kinematic tree ("left."), {j}: the joint
+_OFFSET = re.compile(r"joint_offsets\.(?P<b>(?:\w+\.)?)q(?P<j>\d+)$")
 PATTERN_EFFECTS = (
-    (re.compile(r"joint_offsets\.q(\d+)$"), "tau{j}", "joint_compliance"),
-    (re.compile(r"joint_offsets\.q(\d+)$"), "approach{j}", "backlash"),
-    (re.compile(r"joint_offsets\.q(\d+)$"), "q{j}", "encoder_scale or transmission_harmonic"),
+    (_OFFSET, "{b}tau{j}", "joint_compliance"),
+    (_OFFSET, "{b}approach{j}", "backlash"),
+    (_OFFSET, "{b}q{j}", "encoder_scale or transmission_harmonic"),
     (re.compile(r"tool\.z$"), "depth", "depth_scale"),
     (re.compile(r".*$"), "speed", "trigger_latency"),
 )
@@ -39,8 +41,13 @@ def mm(value: float | None) -> str:
 
 
 def _joint(parameter: str | None) -> str:
-    match = re.search(r"(\d+)$", parameter or "")
-    return match.group(1) if match else "?"
+    """The joint a per-joint parameter belongs to: "c2" -> "2", "left.c2" -> "left.2",
+    "sin1_q4" -> "4"."""
+    parts = (parameter or "").split(".")[1:]  # without the effect name
+    match = re.search(r"(\d+)$", parts[-1]) if parts else None
+    if not match:
+        return "?"
+    return (parts[0] + "." if len(parts) > 1 else "") + match.group(1)
 
 
 def effects_option(check: ModelCheck, name: str) -> str:
@@ -80,8 +87,7 @@ def interaction_sentence(interaction: Interaction, check: ModelCheck) -> str:
             f"(score {interaction.score:.1f}, p = {interaction.p_value:.2g})")
     for pattern, variable, effect in PATTERN_EFFECTS:
         match = pattern.match(interaction.parameter)
-        joint = match.group(1) if match and match.groups() else ""
-        if match and interaction.variable == variable.format(j=joint):
+        if match and interaction.variable == variable.format(**match.groupdict()):
             if all(e not in check.effects for e in effect.split(" or ")):
                 return f"{head}: that is what {effect} models."
     return (f"{head}. If no built-in effect explains it, write one whose parameter makes "

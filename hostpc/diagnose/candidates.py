@@ -24,9 +24,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import stats
 
 from hostpc.diagnose.adequacy import held_out_residuals
+from hostpc.diagnose.distributions import f_sf
 from hostpc.errors import InputError
 from hostpc.fit import FitResult, solve
 from hostpc.fit.solver import Loss, evaluate, levenberg_marquardt
@@ -114,7 +114,7 @@ def f_test(base: FitResult, extended: FitResult) -> tuple[float, float, int]:
     if added <= 0 or extended.dof <= 0 or delta <= 0:
         return delta, 1.0, max(added, 0)
     statistic = (delta / added) / (extended.chi2 / extended.dof)
-    return delta, float(stats.f.sf(statistic, added, extended.dof)), added
+    return delta, float(f_sf(statistic, added, extended.dof)), added
 
 
 def candidate_effects(problem: Problem, registry: Mapping[str, type[Effect]],
@@ -253,7 +253,7 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
         if drop > 0 and dof_subset > 0:
             statistic = (drop / len(chosen)) / (chi2_subset / dof_subset)
             n_new = int(np.count_nonzero(~extended.fixed[base.x.size:]))
-            p_subset = min(1.0, float(stats.f.sf(statistic, len(chosen), dof_subset))
+            p_subset = min(1.0, float(f_sf(statistic, len(chosen), dof_subset))
                            * math.exp(_log_choose(n_new, len(chosen))))
     p_value = min(1.0, 2.0 * min(p_full, p_subset))
     selected = tuple(problem.layout.names[k] for k in chosen)

@@ -23,9 +23,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
+from hostpc.diagnose.distributions import f_logsf
 from hostpc.diagnose.residual_analysis import is_angle, usable_variables
+from hostpc.errors import InputError
 from hostpc.fit import FitResult
 from hostpc.fit.solver import evaluate
 from hostpc.model.effects import Geometry
@@ -78,12 +79,14 @@ def modulators(name: str, values: np.ndarray) -> tuple[np.ndarray, str]:
 def _geometry_columns(result: FitResult) -> tuple[list[str], np.ndarray] | None:
     """Whitened Jacobian columns of the DH/MDH deltas at the fit, if geometry is not fitted."""
     problem = result.problem
-    if "geometry" in problem.effect_names or problem.method not in ("stereo_target",
-                                                                    "sphere_probe"):
+    if "geometry" in problem.effect_names:
         return None
     instances = [t.effect for t in problem.terms] + [Geometry()]
-    extended = build_problem(problem.dataset, [e.name for e in instances],
-                             plugins=problem.plugins, effect_instances=instances)
+    try:
+        extended = build_problem(problem.dataset, [e.name for e in instances],
+                                 plugins=problem.plugins, effect_instances=instances)
+    except InputError:  # a method without a geometry effect
+        return None
     x = np.concatenate([result.x, np.zeros(extended.layout.size - result.x.size)])
     J = evaluate(extended, x).jacobian
     assert J is not None
@@ -137,13 +140,13 @@ def search_interactions(result: FitResult, variables: Mapping[str, np.ndarray], 
             pairs.append((names[k], variable, statistic, rank, basis, fitted[k]))
     n_tests = len(pairs)
     threshold = alpha / max(n_tests, 1)
-    statistic = np.array([p[2] for p in pairs])
-    rank = np.array([p[3] for p in pairs])
-    testable = (rank > 0) & (dof_fit - rank > 0)
-    safe_rank = np.maximum(rank, 1)
-    remaining = np.maximum(chi2 - statistic, 1e-300) / np.maximum(dof_fit - safe_rank, 1)
-    log_p = np.where(testable, stats.f.logsf(statistic / safe_rank / remaining, safe_rank,
-                                             np.maximum(dof_fit - safe_rank, 1)), 0.0)
+    statistics = np.array([p[2] for p in pairs])
+    ranks = np.array([p[3] for p in pairs])
+    testable = (ranks > 0) & (dof_fit - ranks > 0)
+    safe_rank = np.maximum(ranks, 1)
+    remaining = np.maximum(chi2 - statistics, 1e-300) / np.maximum(dof_fit - safe_rank, 1)
+    log_p = np.where(testable, f_logsf(statistics / safe_rank / remaining, safe_rank,
+                                       np.maximum(dof_fit - safe_rank, 1)), 0.0)
     log_p = np.where(np.isfinite(log_p), log_p, -300.0 * math.log(10.0))
     found = [
         Interaction(parameter, variable, float(-lp / math.log(10.0)) + 0.0, float(s), int(g),

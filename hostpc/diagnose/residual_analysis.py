@@ -13,7 +13,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
+
+from hostpc.diagnose.distributions import chi2_sf
 
 ANGLE_VARIABLE = re.compile(r"(^|\.)q\d+$")
 DEFAULT_BINS = 6
@@ -124,7 +125,7 @@ def bin_pattern(variable: str, values: np.ndarray, raw: np.ndarray, whitened: np
     mean_white = sums_white / safe
     chi2 = float(np.sum(counts[:, None] * mean_white**2))
     dof = int(np.count_nonzero(keep) * m)
-    p_value = float(stats.chi2.sf(chi2, dof)) if dof else 1.0
+    p_value = chi2_sf(chi2, dof) if dof else 1.0
     centres = np.array([values[index == b].mean() if keep[b] else np.nan for b in range(n_used)])
     return VariablePattern(variable, edges, centres, counts.astype(int), mean_raw, mean_white,
                            chi2, dof, p_value, bool(p_value < threshold))

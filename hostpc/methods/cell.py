@@ -33,21 +33,24 @@ import numpy as np
 from hostpc.dataset import FramePose
 from hostpc.errors import InputError
 
-FRAME_NAMES = ("tool", "target")
+FRAME_NAMES = ("tool", "target", "sphere", "base", "camera", "left_base", "right_base",
+               "left_target", "right_target")
+"""Frame names `known` may list (each method uses its own: stereo_target tool, target)."""
 
 
 @dataclass(frozen=True)
 class Cell:
-    """Nominal cell. tool: T_flange_tool nominal (left camera optical frame, m / rad);
-    target: (3,) target centre in base (m); target_normal: (3,) unit plate normal in base,
+    """Nominal cell. tool: T_flange_tool nominal (left camera optical frame, m / rad), or
+    None if not described; target: (3,) target centre in base (m) or None;
+    target_normal: (3,) unit plate normal in base,
     facing the camera side; target_radius / plate_radius: m; known: frames held fixed;
     image_size: (width, height) px or None; baseline: stereo baseline (m) or None;
     chessboard: {cols, rows, square_size, n_views} for rig calibration, or None;
     raw: the merged description (other methods read their own keys from it)."""
 
     robot: str
-    tool: FramePose
-    target: np.ndarray
+    tool: FramePose | None
+    target: np.ndarray | None
     target_normal: np.ndarray
     target_radius: float
     plate_radius: float | None = None
@@ -59,10 +62,13 @@ class Cell:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form (the cell file format; SI units)."""
+        extra = {k: v for k, v in self.raw.items() if k not in _CELL_KEYS}
         return {
+            **extra,
             "robot": self.robot,
-            "tool": {"xyz": self.tool.xyz.tolist(), "rpy": self.tool.rpy.tolist()},
-            "target": {
+            "tool": (None if self.tool is None else
+                     {"xyz": self.tool.xyz.tolist(), "rpy": self.tool.rpy.tolist()}),
+            "target": None if self.target is None else {
                 "centre": self.target.tolist(),
                 "normal": self.target_normal.tolist(),
                 "radius": self.target_radius,
@@ -75,6 +81,22 @@ class Cell:
             "chessboard": dict(self.chessboard) if self.chessboard else None,
             **({"probe": dict(self.raw["probe"])} if self.raw.get("probe") else {}),
         }
+
+
+_CELL_KEYS = frozenset({"robot", "tool", "target", "known", "image_width", "image_height",
+                        "baseline", "baseline_nominal", "chessboard",
+                        "T_flange_camera_nominal"})
+
+
+def require_camera_cell(cell: Cell) -> tuple[FramePose, np.ndarray]:
+    """(tool, target) of a camera method's cell; InputError if the cell lacks them."""
+    if cell.tool is None:
+        raise InputError("cell: no camera mount (tool / T_flange_camera_nominal) from the "
+                         "controller; give one with --cell FILE")
+    if cell.target is None:
+        raise InputError("cell: no target (target.centre) from the controller; give one "
+                         "with --cell FILE")
+    return cell.tool, cell.target
 
 
 def _merge(base: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
@@ -134,23 +156,20 @@ def build_cell(
 ) -> Cell:
     """Merge the controller's description, a cell file and --known into a Cell.
 
-    InputError naming the missing/bad key if the mount or the target is not described.
+    InputError naming the bad key; a missing mount or target leaves it None (a camera
+    method checks with `require_camera_cell`).
     """
     raw = _merge(camera_description, cell_file or {})
-    source = "the controller's camera description" + (" and --cell" if cell_file else "")
     tool_spec = raw.get("tool") or raw.get("T_flange_camera_nominal")
-    if not isinstance(tool_spec, Mapping):
-        raise InputError(f"cell: no camera mount (tool / T_flange_camera_nominal) in {source}; "
-                         "give one with --cell FILE")
-    tool = FramePose(xyz=_vector(raw, "tool.xyz", tool_spec.get("xyz")),
-                     rpy=_vector(raw, "tool.rpy", tool_spec.get("rpy", [0.0, 0.0, 0.0])))
+    tool = None
+    if isinstance(tool_spec, Mapping):
+        tool = FramePose(xyz=_vector(raw, "tool.xyz", tool_spec.get("xyz")),
+                         rpy=_vector(raw, "tool.rpy", tool_spec.get("rpy", [0.0, 0.0, 0.0])))
     target_spec = raw.get("target")
     if not isinstance(target_spec, Mapping):
-        raise InputError(f"cell: no target in {source}; give one with --cell FILE")
+        target_spec = {}
     centre = target_spec.get("centre", target_spec.get("centre_nominal"))
-    if centre is None:
-        raise InputError(f"cell: target.centre missing in {source}")
-    target = _vector(raw, "target.centre", centre)
+    target = None if centre is None else _vector(raw, "target.centre", centre)
     normal = _vector(raw, "target.normal", target_spec.get("normal", [0.0, 0.0, 1.0]))
     if np.linalg.norm(normal) < 1e-9:
         raise InputError("cell target.normal: must be non-zero")

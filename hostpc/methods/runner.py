@@ -151,7 +151,7 @@ class Runner:
 
     async def _run(self, resume: bool) -> RunOutcome:
         progress = self.progress
-        progress.stage("connect")
+        progress.stage("read controller")
         state = await self.robot.state()
         offsets = np.asarray(await self.robot.get_offsets(), float)
         truth = self.truth_reader() if self.truth_reader is not None else None

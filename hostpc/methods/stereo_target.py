@@ -26,6 +26,7 @@ from hostpc.dataset import FORMAT_TAG, Dataset, dataset_from_dict
 from hostpc.errors import ControllerError, InputError, ZerocalError
 from hostpc.kinematics import forward, get_robot, invert_transform, pose_to_transform
 from hostpc.methods.base import Method, Phase, Progress, SampleRecord, approach_signs
+from hostpc.methods.cell import require_camera_cell
 from hostpc.methods.planning import look_at_candidates
 from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem
@@ -34,7 +35,12 @@ from hostpc.robots.base import RobotAdapter, RobotState
 RIG_FILE = "rig.json"
 RIG_REPORT_FILE = "rig_calibration.json"
 CENTROID_SIGMA_PX = 0.05
-"""Planning noise model: pixel precision of the dot centre in each image."""
+"""Planning noise model: pixel precision of the dot centre in each image (conservative, a
+real camera's; the simulator's images are better)."""
+PIXEL_FLOOR_PX = 0.01
+"""Systematic floor added to every measured covariance, in px per image coordinate: the
+vision's covariance holds only the image noise, while the rig calibration and the detection
+leave errors of this order that do not average out over poses (docs/calibrate.md)."""
 SKIP_REASONS = ("joint_limit", "refused_fault", "invalid_argument")
 """Controller refusals that skip one pose instead of ending the run."""
 
@@ -47,7 +53,8 @@ class RigCalibrationFailed(ZerocalError):
 
 class StereoTargetMethod(Method):
     """See the module docstring. options: `rig` (path of a rig file), `depth`
-    ("triangulate" or "sgbm"), `distance` ([min, max] m of the viewpoints)."""
+    ("triangulate" or "sgbm"), `distance` ([min, max] m of the viewpoints), `pixel_floor`
+    (px, the systematic floor added to each measured covariance)."""
 
     name: ClassVar[str] = "stereo_target"
 
@@ -56,8 +63,10 @@ class StereoTargetMethod(Method):
         self.rig: Any = None
         self.rig_report: dict[str, Any] = {}
         self._measurer: Any = None
+        self._tool, self._target = require_camera_cell(cell)
+        tool = self._tool
         self._chain = get_robot(cell.robot)
-        self._T_flange_tool = pose_to_transform(cell.tool.xyz, cell.tool.rpy)
+        self._T_flange_tool = pose_to_transform(tool.xyz, tool.rpy)
         self._t0: float = 0.0
 
     # ---------------------------------------------------------------- set-up
@@ -122,6 +131,7 @@ class StereoTargetMethod(Method):
             progress.advance(view + 1, f"chessboard view {view + 1}/{n_views}")
         spec = ChessboardSpec(int(board["cols"]), int(board["rows"]),
                               float(board["square_size"]))
+        progress.stage("rig solve")
         result = calibrate_rig(pairs, spec)
         self.rig_report = {
             "ok": bool(result.ok),
@@ -157,7 +167,7 @@ class StereoTargetMethod(Method):
         distance = self.settings.options.get("distance") or (max(0.25, 2.5 * baseline),
                                                              max(0.5, 5.0 * baseline))
         q = look_at_candidates(
-            self._chain, self._T_flange_tool, self.cell.target, self.cell.target_normal,
+            self._chain, self._T_flange_tool, self._target, self.cell.target_normal,
             int(self.settings.n_candidates * 1.25), rng, state.q, state.q_min, state.q_max,
             distance=(float(distance[0]), float(distance[1])),
             aim_offset=0.5 * self._right_centre(),
@@ -171,7 +181,7 @@ class StereoTargetMethod(Method):
         """(N, 3) nominal target position in the left camera frame at poses q (N, n)."""
         T_base_tool = forward(self._chain, q).T_base_flange @ self._T_flange_tool
         T_tool_base = invert_transform(T_base_tool)
-        return (np.einsum("nij,j->ni", T_tool_base[:, :3, :3], self.cell.target)
+        return (np.einsum("nij,j->ni", T_tool_base[:, :3, :3], self._target)
                 + T_tool_base[:, :3, 3])
 
     def normal_in_camera(self, q: np.ndarray) -> np.ndarray:
@@ -197,17 +207,24 @@ class StereoTargetMethod(Method):
                 v < height - margin)
         return ok
 
-    def expected_covariance(self, p: np.ndarray) -> np.ndarray:
-        """(N, 3, 3) planning covariance of triangulated points p (N, 3) in the left camera
-        frame: lateral z*s/f, depth z^2*sqrt(2)*s/(f*b), s = CENTROID_SIGMA_PX."""
+    def expected_covariance(self, p: np.ndarray, sigma_px: float = CENTROID_SIGMA_PX
+                            ) -> np.ndarray:
+        """(N, 3, 3) covariance of points p (N, 3) in the left camera frame triangulated
+        from image centres with sigma_px per coordinate: lateral z*s/f, depth
+        z^2*sqrt(2)*s/(f*b) (diagonal approximation)."""
         f = float(self.rig.K_left[0, 0])
         b = self.rig.baseline
         z = np.maximum(np.abs(p[:, 2]), 1e-3)
         cov = np.zeros((p.shape[0], 3, 3))
-        lateral = z * CENTROID_SIGMA_PX / f
+        lateral = z * sigma_px / f
         cov[:, 0, 0] = cov[:, 1, 1] = lateral**2
-        cov[:, 2, 2] = (z**2 * np.sqrt(2.0) * CENTROID_SIGMA_PX / (f * b)) ** 2
+        cov[:, 2, 2] = (z**2 * np.sqrt(2.0) * sigma_px / (f * b)) ** 2
         return cov
+
+    @property
+    def pixel_floor(self) -> float:
+        """The systematic floor (px) added to measured covariances (option pixel_floor)."""
+        return float(self.settings.options.get("pixel_floor", PIXEL_FLOOR_PX))
 
     def design_dataset(self, q: np.ndarray) -> Dataset:
         """Nominal predicted points at q (N, n) with the planning covariance."""
@@ -251,10 +268,14 @@ class StereoTargetMethod(Method):
             reason = getattr(observation, "reason", "no observation")
             return SampleRecord(phase, index, False, reason=f"target rejected: {reason}",
                                 q_end=outcome.q.tolist())
+        p = np.asarray(p, float)
+        cov = np.asarray(observation.cov, float)
+        if self.pixel_floor > 0:
+            cov = cov + self.expected_covariance(p[None, :], self.pixel_floor)[0]
         sample: dict[str, Any] = {
             "q": [float(v) for v in capture.q],
-            "p": [float(v) for v in np.asarray(p, float)],
-            "cov": np.asarray(observation.cov, float).tolist(),
+            "p": [float(v) for v in p],
+            "cov": cov.tolist(),
             "t": float(capture.t) - self._t0,
             "approach": approach_signs(q_from, capture.q),
         }
@@ -273,8 +294,8 @@ class StereoTargetMethod(Method):
             "units": {"length": "m", "angle": "rad", "time": "s"},
             "robot": {"name": self.cell.robot},
             "frames": {
-                "tool": {"xyz": self.cell.tool.xyz.tolist(), "rpy": self.cell.tool.rpy.tolist()},
-                "target": self.cell.target.tolist(),
+                "tool": {"xyz": self._tool.xyz.tolist(), "rpy": self._tool.rpy.tolist()},
+                "target": self._target.tolist(),
             },
             "known": list(self.cell.known),
             "samples": [dict(s) for s in samples],
@@ -290,6 +311,7 @@ class StereoTargetMethod(Method):
                     "image_size": list(self.rig.image_size),
                     "calibrated_in_this_run": bool(self.rig_report)},
             "depth": self.settings.options.get("depth", "triangulate"),
+            "pixel_floor_px": self.pixel_floor,
         }
 
 

@@ -11,6 +11,7 @@ import base64
 import io
 import math
 from collections.abc import Sequence
+from typing import Literal
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -27,7 +28,8 @@ SIGNIFICANT = "#d62728"
 PLAIN = "#7f7f7f"
 
 
-def _figure(width: float, height: float, layout: str | None = "constrained") -> Figure:
+def _figure(width: float, height: float,
+            layout: Literal["constrained"] | None = "constrained") -> Figure:
     """A figure on its own Agg canvas. Constrained layout is slow with many axes: the grid
     of small panels places its axes itself (layout None)."""
     figure = Figure(figsize=(width, height), dpi=100, layout=layout)
@@ -176,28 +178,39 @@ def interaction_ranking(diagnosis: Diagnosis, top: int = 15) -> str:
 
 
 def ladder_chart(diagnosis: Diagnosis) -> str:
-    """In-sample and held-out RMS and held-out max per ladder step, with the noise level."""
+    """Per ladder step: in-sample and held-out RMS against the noise level (mm), the held-out
+    max (mm), and the whitened held-out RMS and chi2/dof against 1 (the stated noise)."""
     steps = diagnosis.ladder or ()
-    figure = _figure(7, 3.6)
-    axes = figure.subplots()
+    figure = _figure(12, 3.6)
+    rms_axes, max_axes, sigma_axes = figure.subplots(1, 3)
     x = np.arange(len(steps))
-    labels = [s.added or "current" for s in steps]
-    axes.plot(x, [s.rms * MM for s in steps], "o-", label="in-sample RMS")
-    axes.plot(x, [np.nan if s.cv_rms is None else s.cv_rms * MM for s in steps], "s-",
-              label="held-out RMS")
-    axes.plot(x, [np.nan if s.cv_max is None else s.cv_max * MM for s in steps], "^--",
-              label="held-out max")
-    axes.axhline(diagnosis.check.adequacy.expected_noise_rms * MM, color="black", ls=":",
-                 lw=1, label="noise level (stated)")
-    for k, step in enumerate(steps):
-        axes.annotate("adequate" if step.adequate else "not adequate", (k, step.rms * MM),
-                      textcoords="offset points", xytext=(0, -14), ha="center", fontsize=7,
-                      color="green" if step.adequate else SIGNIFICANT)
-    axes.set_xticks(x, labels, fontsize=8)
-    axes.set_ylabel("[mm]")
-    axes.set_yscale("log")
-    axes.set_title("ladder: add the best effect while the evidence holds")
-    axes.legend(fontsize=8)
+    labels = [f"{s.added or 'current'}\n({'adequate' if s.adequate else 'NOT adequate'})"
+              for s in steps]
+
+    def held(values: list[float | None]) -> list[float]:
+        return [np.nan if v is None else v for v in values]
+
+    rms_axes.plot(x, [s.rms * MM for s in steps], "o-", label="in-sample RMS")
+    rms_axes.plot(x, [v * MM for v in held([s.cv_rms for s in steps])], "s-",
+                  label="held-out RMS")
+    rms_axes.axhline(diagnosis.check.adequacy.expected_noise_rms * MM, color="black", ls=":",
+                     lw=1, label="noise level (stated)")
+    rms_axes.set_ylabel("[mm]")
+    rms_axes.set_title("RMS of the residual norm")
+    max_axes.plot(x, [s.max * MM for s in steps], "o-", label="in-sample max")
+    max_axes.plot(x, [v * MM for v in held([s.cv_max for s in steps])], "^-",
+                  label="held-out max")
+    max_axes.set_ylabel("[mm]")
+    max_axes.set_title("largest residual")
+    sigma_axes.plot(x, held([s.cv_whitened_rms for s in steps]), "s-",
+                    label="held-out, whitened RMS")
+    sigma_axes.plot(x, [s.chi2_dof for s in steps], "o-", label="chi2/dof")
+    sigma_axes.axhline(1.0, color="black", ls=":", lw=1, label="the stated noise")
+    sigma_axes.set_title("in units of the stated noise")
+    for axes in (rms_axes, max_axes, sigma_axes):
+        axes.set_xticks(x, labels, fontsize=8)
+        axes.set_xlim(-0.4, max(len(steps) - 0.6, 0.4))
+        axes.legend(fontsize=8)
     return to_data_uri(figure)
 
 

@@ -2,18 +2,22 @@
 
 from hostpc.transport.client import (
     IDEMPOTENT_KINDS,
+    MOTION_KINDS,
     ControllerClient,
+    IoEventSubscription,
+)
+from hostpc.transport.types import (
     ControllerRefusedError,
     ControllerState,
     GuardedMoveOutcome,
     IoEdgeEvent,
-    IoEventSubscription,
     IoSnapshot,
     MoveOutcome,
 )
 
 __all__ = [
     "IDEMPOTENT_KINDS",
+    "MOTION_KINDS",
     "ControllerClient",
     "ControllerRefusedError",
     "ControllerState",

@@ -5,7 +5,9 @@
         outcome = await robot.move_joints(q, speed=0.2)
         left, right, q_exposure, t = await robot.capture("target")
 
-Every request has a timeout (`RequestTimeout`). If the connection drops, requests that are
+Every request has a timeout (`RequestTimeout`); motions have their own, longer one
+(`motion_timeout`), and a motion that times out is followed by a best-effort `abort` so the
+robot does not keep moving unattended. If the connection drops, requests that are
 safe to repeat (state, get_offsets, read_io, capture, heartbeat) are re-sent on a new
 connection; a motion, an offset write, a rollback or an abort is NEVER re-sent: the caller
 gets `ConnectionFailed` and decides (the robot may or may not have executed it). A request
@@ -25,22 +27,33 @@ import logging
 import os
 import socket
 from collections.abc import AsyncIterator, Callable, Generator
-from dataclasses import dataclass
 from typing import Any, TypeVar
 
 import numpy as np
 
-from hostpc.errors import ConnectionFailed, ControllerError, ProtocolViolation, RequestTimeout
+from hostpc.errors import ConnectionFailed, ProtocolViolation, RequestTimeout
+from hostpc.transport.types import (
+    ControllerRefusedError,
+    ControllerState,
+    GuardedMoveOutcome,
+    IoEdgeEvent,
+    IoSnapshot,
+    MoveOutcome,
+)
 from protocol import DEFAULT_PORT
 from protocol import messages as m
 from protocol.connection import Connection, ConnectionState, Rejected, Role, StateChanged
-from protocol.errors import ErrorCode
+from protocol.errors import ErrorCode, LocalProtocolError
 
 logger = logging.getLogger(__name__)
 
 READ_CHUNK = 1 << 20
 IDEMPOTENT_KINDS = frozenset({"get_state", "get_offsets", "read_io", "capture", "heartbeat"})
 """Requests re-sent after a reconnection; everything else raises instead."""
+MOTION_KINDS = frozenset({"move_joints", "guarded_move"})
+"""Requests that move the robot: timed by `motion_timeout`, aborted when they time out."""
+ABORT_AFTER_TIMEOUT_S = 2.0
+"""How long the abort sent after a motion timeout may take (s)."""
 _PROTOCOL_CODES = frozenset(
     {
         ErrorCode.BAD_FRAME,
@@ -53,79 +66,6 @@ _PROTOCOL_CODES = frozenset(
 )
 
 ReplyT = TypeVar("ReplyT", bound=m.Reply)
-
-
-class ControllerRefusedError(ControllerError):
-    """The controller answered a request with an error reply.
-
-    code: the protocol `ErrorCode` value (e.g. "refused", "busy", "auth_required");
-    reason: the controller's specific reason for "refused" (e.g. "joint_limit", "estop").
-    """
-
-    def __init__(self, message: str, code: str, reason: str | None = None) -> None:
-        super().__init__(message)
-        self.code = code
-        self.reason = reason
-
-
-@dataclass(frozen=True)
-class ControllerState:
-    """Snapshot of the controller. q, zero_offsets, q_min, q_max: (n,) rad."""
-
-    robot_name: str
-    n_joints: int
-    mode: str
-    time: float
-    q: np.ndarray
-    zero_offsets: np.ndarray
-    q_min: np.ndarray
-    q_max: np.ndarray
-    digital_inputs: tuple[bool, ...]
-    digital_outputs: tuple[bool, ...]
-    camera: dict[str, Any]
-    authenticated: bool
-
-
-@dataclass(frozen=True)
-class MoveOutcome:
-    """completed, or stopped early with `reason`; q: (n,) rad where the robot stopped."""
-
-    completed: bool
-    q: np.ndarray
-    duration_s: float
-    reason: str | None
-
-
-@dataclass(frozen=True)
-class GuardedMoveOutcome:
-    """contact False = no contact at the end of travel; q_latched: (n,) rad at the edge."""
-
-    contact: bool
-    q_latched: np.ndarray | None
-    q: np.ndarray
-    io_line: int
-    duration_s: float
-    speed_mps: float | None
-    reason: str | None
-
-
-@dataclass(frozen=True)
-class IoSnapshot:
-    """Digital inputs and outputs (line 0 first) at controller time `time` (s)."""
-
-    digital_inputs: tuple[bool, ...]
-    digital_outputs: tuple[bool, ...]
-    time: float
-
-
-@dataclass(frozen=True)
-class IoEdgeEvent:
-    """A digital input changed: line, new value, controller time, (n,) latched q (rad)."""
-
-    line: int
-    value: bool
-    time: float
-    q_latched: np.ndarray
 
 
 class _LinkLostError(Exception):
@@ -147,6 +87,9 @@ class _Link:
         self.conn = conn
         self.pending: dict[int, asyncio.Future[m._Message]] = {}
         self.handshake: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        # The opener waits on a shield of the handshake; if it gave up (timeout), a later
+        # failure set here must not be reported as "Future exception was never retrieved".
+        self.handshake.add_done_callback(_retrieve_exception)
         self.closed_reason: str | None = None
         self._on_event = on_event
         self.task = asyncio.get_running_loop().create_task(self._read_loop())
@@ -228,6 +171,11 @@ class _Link:
             await self.writer.wait_closed()
 
 
+def _retrieve_exception(future: asyncio.Future[Any]) -> None:
+    if not future.cancelled():
+        future.exception()
+
+
 def _handshake_error(error: m.ErrorReply) -> Exception:
     text = f"controller refused the session: {error.message} ({error.code})"
     if error.code in _PROTOCOL_CODES:
@@ -299,9 +247,12 @@ class _Connect:
 class ControllerClient:
     """A session with a zerocal controller (see the module docstring).
 
-    token: shared secret (None = read-only session: motions and writes are refused).
-    timeout: default per-request timeout (s); connect_timeout: TCP connect + handshake (s).
-    reconnect_attempts: how often an idempotent request is re-sent after a lost link.
+    token: shared secret (None = read-only session: motions, captures and writes are
+    refused). timeout: default per-request timeout (s); motion_timeout: default timeout of
+    move_joints / guarded_move (s), which wait until the robot has stopped; on a motion
+    timeout the client sends `abort` (best effort) before raising RequestTimeout.
+    connect_timeout: TCP connect + handshake (s). reconnect_attempts: how often an
+    idempotent request is re-sent after a lost link.
     """
 
     def __init__(
@@ -311,6 +262,7 @@ class ControllerClient:
         *,
         token: str | None = None,
         timeout: float = 5.0,
+        motion_timeout: float = 120.0,
         connect_timeout: float | None = None,
         reconnect_attempts: int = 3,
         max_frame_size: int = 256 * 1024 * 1024,
@@ -320,6 +272,7 @@ class ControllerClient:
         self.port = port
         self.token = token
         self.timeout = timeout
+        self.motion_timeout = motion_timeout
         self.connect_timeout = connect_timeout if connect_timeout is not None else timeout
         self.reconnect_attempts = reconnect_attempts
         self.max_frame_size = max_frame_size
@@ -379,22 +332,32 @@ class ControllerClient:
         )
 
     async def move_joints(self, q: Any, speed: float, timeout: float | None = None) -> MoveOutcome:
-        """Move to q (n,) rad at speed (fraction of max, (0, 1]); returns when it stopped."""
+        """Move to q (n,) rad at speed (fraction of max, (0, 1]); returns when it stopped.
+
+        timeout: default `motion_timeout`; when it passes, `abort` is sent and
+        RequestTimeout raised.
+        """
         q_list = _floats(q)
         reply = await self._request(
-            lambda i: m.MoveJoints(id=i, q=q_list, speed=speed), m.MoveDone, timeout
+            lambda i: m.MoveJoints(id=i, q=q_list, speed=speed),
+            m.MoveDone,
+            self.motion_timeout if timeout is None else timeout,
         )
         return MoveOutcome(reply.completed, _array(reply.q), reply.duration_s, reply.reason)
 
     async def guarded_move(
         self, q: Any, speed: float, io_line: int, timeout: float | None = None
     ) -> GuardedMoveOutcome:
-        """Move toward q (n,) rad until a rising edge on input `io_line`."""
+        """Move toward q (n,) rad until a rising edge on input `io_line`.
+
+        timeout: default `motion_timeout`; when it passes, `abort` is sent and
+        RequestTimeout raised.
+        """
         q_list = _floats(q)
         reply = await self._request(
             lambda i: m.GuardedMove(id=i, q=q_list, speed=speed, io_line=io_line),
             m.GuardedMoveDone,
-            timeout,
+            self.motion_timeout if timeout is None else timeout,
         )
         return GuardedMoveOutcome(
             contact=reply.contact,
@@ -497,9 +460,12 @@ class ControllerClient:
                 reply = await asyncio.wait_for(future, timeout)
             except TimeoutError:
                 link.pending.pop(request.id, None)
+                stopped = ""
+                if request.kind in MOTION_KINDS:
+                    stopped = "; " + await self._abort_after_timeout(link)
                 raise RequestTimeout(
                     f"{request.kind} (request {request.id}) got no reply within {timeout} s "
-                    f"from {self.host}:{self.port}"
+                    f"from {self.host}:{self.port}{stopped}"
                 ) from None
             except _LinkLostError as exc:
                 if request.kind in IDEMPOTENT_KINDS and attempt < self.reconnect_attempts:
@@ -520,6 +486,20 @@ class ControllerClient:
             if not isinstance(reply, reply_type):
                 raise ProtocolViolation(f"{request.kind} answered by {reply.kind}")
             return reply
+
+    async def _abort_after_timeout(self, link: _Link) -> str:
+        """Best effort: stop the robot after a motion timed out; says what happened."""
+        if not link.alive:
+            return "the link is down, abort not sent"
+        try:
+            future = link.send(m.Abort(id=link.conn.next_id()))
+            reply = await asyncio.wait_for(future, ABORT_AFTER_TIMEOUT_S)
+        except (TimeoutError, _LinkLostError, OSError, LocalProtocolError) as exc:
+            logger.warning("abort after a motion timeout failed: %s", exc or type(exc).__name__)
+            return "abort sent, not confirmed"
+        if isinstance(reply, m.Aborted):
+            return "abort sent: motion stopped" if reply.was_moving else "abort sent: not moving"
+        return f"abort answered by {reply.kind}"
 
     async def _ensure_link(self) -> _Link:
         if self._link is not None and self._link.alive:
@@ -547,8 +527,9 @@ class ControllerClient:
                 f"cannot reach controller at {address}: no answer within {self.connect_timeout} s"
             ) from None
         except OSError as exc:
-            detail = os.strerror(exc.errno) if exc.errno else str(exc) or type(exc).__name__
-            raise ConnectionFailed(f"cannot reach controller at {address}: {detail}") from None
+            raise ConnectionFailed(
+                f"cannot reach controller at {address}: {_os_error_text(exc)}"
+            ) from None
         sock = writer.get_extra_info("socket")
         if sock is not None:
             with contextlib.suppress(OSError):
@@ -579,6 +560,16 @@ class ControllerClient:
         edge = IoEdgeEvent(event.line, event.value, event.time, _array(event.q_latched))
         for subscription in list(self._subscriptions):
             subscription._put(edge)
+
+
+def _os_error_text(exc: OSError) -> str:
+    """A readable cause: "Connection refused", "Name or service not known" (a DNS failure's
+    errno is a negative EAI_* code that os.strerror does not know)."""
+    if isinstance(exc, socket.gaierror):
+        return f"cannot resolve the host name ({exc.strerror or exc})"
+    if exc.errno and exc.errno > 0:
+        return os.strerror(exc.errno)
+    return str(exc) or type(exc).__name__
 
 
 def _reply_error(kind: str, error: m.ErrorReply) -> Exception:

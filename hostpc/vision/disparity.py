@@ -22,7 +22,7 @@ import numpy as np
 
 from hostpc.vision.rectification import Rectification
 
-SGBM_SIGMA_FLOOR_PX = 0.5
+SGBM_SIGMA_FLOOR_PX = 0.4
 """Floor of the disparity standard deviation of the SGBM path (px): the systematic error
 of SGBM at the edge of a textureless disk measured on the simulator (docs/vision.md)."""
 NUM_DISPARITIES = 64
@@ -60,7 +60,7 @@ def sgbm_disparity_at(
     """
     left_rect, right_rect = rect.rectify_images(left, right)
     min_disparity = int(math.floor(disparity_guess)) - NUM_DISPARITIES // 2
-    matcher = cv2.StereoSGBM_create(
+    matcher = cv2.StereoSGBM_create(  # type: ignore[attr-defined]
         minDisparity=min_disparity,
         numDisparities=NUM_DISPARITIES,
         blockSize=BLOCK_SIZE,

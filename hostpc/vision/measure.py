@@ -16,7 +16,7 @@ Perspective bias. For the current estimate of the centre C and normal n, the dis
 (`disk_image_moments`) gives in each camera the area centroid of the projected disk and the
 projection of C; their difference (up to ~0.3 px at 0.5 m for a 10 mm disk tilted 30 deg,
 ~0.7 px at 0.3 m) is subtracted from the measured centroid, and the point re-triangulated
-(two rounds; the bias is smooth in C). The normal comes from `normal_hint` if given, else
+(one round suffices: the bias is smooth in C). The normal comes from `normal_hint` if given, else
 from a fit to what the images show: the anisotropy of the disk's second moments in both
 cameras (blur-free: isotropic blur cancels in mu_xx - mu_yy and mu_xy) and the offset of
 the bright plate's centroid from the disk's (perspective shifts the plate's centroid ~25x
@@ -57,7 +57,7 @@ MIN_DEPTH, MAX_DEPTH = 0.05, 5.0
 """Plausible target depths (m)."""
 _NORMAL_STARTS = np.array([[0.0, 0.0], [0.35, 0.0], [-0.35, 0.0], [0.0, 0.35], [0.0, -0.35]])
 _FIT_SAMPLES = 32
-_FIT_ITERATIONS = 5
+_FIT_ITERATIONS = 4
 
 
 @dataclass(frozen=True, eq=False)
@@ -153,18 +153,15 @@ class TargetMeasurer:
         else:
             normal = self._estimate_normal(tri.p, blob_l, blob_r)
         centroids = np.stack([blob_l.centroid, blob_r.centroid])
-        uv = centroids.copy()
-        images: list[DiskImage] = []
-        for _ in range(2):
-            images = self._disk_images(tri.p[None, :], normal[None, :], self.target_radius)
-            uv = centroids - np.stack([images[0].bias[0], images[1].bias[0]])
-            tri = triangulate(self.rect, uv[0], uv[1])
-            rejected = self._check_geometry(tri)
-            if rejected is not None:
-                return rejected
-        # (the disk images of the last round are within ~1e-4 of the final point)
-        for name, blob, image in (("left", blob_l, images[0]), ("right", blob_r, images[1])):
-            expected = float(image.area[0])
+        # one round suffices: the bias changes by ~1e-4 px when C moves by the correction
+        images = self._disk_images(tri.p[None, :], normal[None, :], self.target_radius)
+        uv = centroids - np.stack([images[0].bias[0], images[1].bias[0]])
+        tri = triangulate(self.rect, uv[0], uv[1])
+        rejected = self._check_geometry(tri)
+        if rejected is not None:
+            return rejected
+        for name, blob, disk in (("left", blob_l, images[0]), ("right", blob_r, images[1])):
+            expected = float(disk.area[0])
             if abs(blob.area / expected - 1.0) > AREA_TOLERANCE:
                 return TargetRejected(
                     f"implausible disk size in the {name} image: {blob.area:.0f} px^2, "
@@ -268,10 +265,11 @@ class TargetMeasurer:
             Jtr = np.einsum("smi,sm->si", J, r0)
             delta = -np.linalg.solve(JtJ, Jtr[:, :, None])[:, :, 0]
             norm = np.linalg.norm(delta, axis=1, keepdims=True)
-            ab = ab + delta * np.minimum(1.0, 0.3 / np.maximum(norm, 1e-12))
+            ab = ab + delta * np.minimum(1.0, 0.6 / np.maximum(norm, 1e-12))
             ab = np.clip(ab, -3.0, 3.0)  # tilts beyond ~72 deg are rejected anyway
-        cost = np.sum(residuals(ab) ** 2, axis=1)
-        best = ab[int(np.argmin(cost))]
+        best = ab[0]
+        if len(ab) > 1:
+            best = ab[int(np.argmin(np.sum(residuals(ab) ** 2, axis=1)))]
         normal = n0 + best[0] * e1 + best[1] * e2
         return normal / np.linalg.norm(normal)
 

@@ -99,7 +99,7 @@ def _as_gray(image: np.ndarray, what: str) -> np.ndarray:
         raise InputError(f"{what}: expected a 2-D grey image, got shape {image.shape}")
     if image.dtype != np.uint8:
         if image.dtype == np.uint16:
-            image = (image >> 8).astype(np.uint8)
+            image = np.right_shift(image, 8).astype(np.uint8)
         else:
             raise InputError(f"{what}: expected uint8 pixels, got {image.dtype}")
     return np.ascontiguousarray(image)

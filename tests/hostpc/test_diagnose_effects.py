@@ -47,11 +47,14 @@ def test_hidden_builtin_effect_is_found_and_fixed(effect: str) -> None:
     assert not start.adequate
     assert fixed.added == effect and fixed.adequate
     assert effect in fixed.effects
+    # held-out error falls to the noise level: whitened (every axis by its own noise, 1 is
+    # the stated noise) and in mm against the noise actually drawn (the mm RMS is dominated
+    # by the depth noise of the far samples, so it need not fall much itself)
+    assert fixed.cv_whitened_rms is not None and start.cv_whitened_rms is not None
+    assert fixed.cv_whitened_rms < start.cv_whitened_rms
+    assert fixed.cv_whitened_rms < 1.15
     noise = noise_rms(synthetic)
-    assert fixed.cv_rms is not None and start.cv_rms is not None
-    assert fixed.cv_rms < start.cv_rms
-    assert fixed.cv_rms < 1.08 * noise, (fixed.cv_rms, noise)
-    assert fixed.cv_whitened_rms is not None and fixed.cv_whitened_rms < 1.15
+    assert fixed.cv_rms is not None and fixed.cv_rms < 1.08 * noise, (fixed.cv_rms, noise)
 
 
 def test_adding_the_effect_by_name_makes_the_model_adequate() -> None:

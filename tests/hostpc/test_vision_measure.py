@@ -312,10 +312,11 @@ def test_pixel_sigma_sets_covariance(sim: Simulation, good_pair: tuple[np.ndarra
     assert fixed.cov[2, 2] > 10 * auto.cov[2, 2]
 
 
-def test_sgbm_path_works_and_is_less_accurate(calibrated_rig: StereoRig, captures: list
-                                              ) -> None:
-    centre = TargetMeasurer(calibrated_rig, 0.01)
-    sgbm = TargetMeasurer(calibrated_rig, 0.01, depth="sgbm")
+def test_sgbm_path_works_and_is_less_accurate(sim: Simulation, captures: list) -> None:
+    """Same (true) rig for both paths, so only the depth method differs."""
+    rig = truth_rig(sim)
+    centre = TargetMeasurer(rig, 0.01)
+    sgbm = TargetMeasurer(rig, 0.01, depth="sgbm")
     centre_errors, sgbm_errors, whitened = [], [], []
     for left, right, truth, _ in captures[:5]:
         a = centre.measure(left, right)
@@ -326,6 +327,6 @@ def test_sgbm_path_works_and_is_less_accurate(calibrated_rig: StereoRig, capture
         sgbm_errors.append(b.p - truth)
         assert b.cov[2, 2] > 10 * a.cov[2, 2]
         whitened.append(abs(b.p[2] - truth[2]) / math.sqrt(b.cov[2, 2]))
-    assert _rms_mm(sgbm_errors) > 3 * _rms_mm(centre_errors)
+    assert _rms_mm(sgbm_errors) > 5 * _rms_mm(centre_errors)
     assert _rms_mm(sgbm_errors) < 10.0  # but it does measure the target
     assert max(whitened) < 4.0  # its depth sigma is not optimistic

@@ -143,3 +143,24 @@ def test_calibrate_sim_recovers_truth_and_verifies(
     assert np.all(distance > 1e-6)
     assert (out / "summary.txt").read_text().count("truth (simulation)") == 1
     assert "measure" in stderr  # progress on stderr, plain lines (not a TTY)
+
+
+@pytest.mark.slow
+def test_readme_command_calibrates_the_rig_first(tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """`hostpc calibrate --robot sim` with every default: rig from chessboard captures,
+    60 poses, push, 10 verification poses, report; the text summary on stdout."""
+    out = tmp_path / "run"
+    code, stdout, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--out", str(out))
+    assert code == 0, stderr
+    assert "rig calibrated" in stderr
+    rig_report = json.loads((out / "rig_calibration.json").read_text())
+    assert rig_report["ok"] and len(rig_report["used_views"]) >= 15
+    result = json.loads((out / "result.json").read_text())
+    errors = [e for e in result["truth"]["joint_offsets_error_deg"] if e is not None]
+    assert len(errors) == 5 and max(abs(e) for e in errors) <= 0.01
+    assert result["verify"]["passed"] and result["push"]["status"] == "pushed"
+    assert "PASS" in stdout and "truth (simulation)" in stdout
+    assert stdout.strip() == (out / "summary.txt").read_text().strip()
+    if result["files"].get("report"):
+        assert (out / "report.html").stat().st_size > 0

@@ -18,7 +18,7 @@ from tests.integration.conftest import StartStub
 @pytest.fixture
 async def served(start_stub: StartStub) -> AsyncIterator[tuple[ControllerServer, ModbusIo]]:
     server = await start_stub()
-    modbus = ModbusIoServer(server.sim, host="127.0.0.1", port=0)
+    modbus = ModbusIoServer(server.sim, host="127.0.0.1", port=0, writable=True)
     host, port = await modbus.start()
     io = await ModbusIo.connect(host, port, timeout=2.0)
     yield server, io

@@ -234,7 +234,11 @@ async def test_many_clients_at_once(stub: ControllerServer) -> None:
         async with connect(stub, token=TOKEN if index % 2 else None) as client:
             for _ in range(20):
                 await client.heartbeat()
-            await client.capture()
+            if index % 2:
+                await client.capture()
+            else:  # captures need an authenticated session
+                with pytest.raises(ControllerRefusedError, match="auth_required"):
+                    await client.capture()
             return (await client.state()).n_joints
 
     results = await asyncio.gather(*(session(i) for i in range(8)))
@@ -254,7 +258,7 @@ async def test_modbus_discrete_inputs_mirror_the_simulation(start_stub: StartStu
 
     overrides, q_start, q_end = probe_scenario()
     server = await start_stub(overrides)
-    modbus = ModbusIoServer(server.sim, host="127.0.0.1", port=0)
+    modbus = ModbusIoServer(server.sim, host="127.0.0.1", port=0, writable=True)
     host, port = await modbus.start()
     modbus_client = AsyncModbusTcpClient(host, port=port, timeout=2)
     try:
@@ -275,6 +279,26 @@ async def test_modbus_discrete_inputs_mirror_the_simulation(start_stub: StartStu
         assert server.sim.digital_outputs()[3] is True
         coils = await modbus_client.read_coils(0, count=8)
         assert coils.bits[3] is True
+    finally:
+        modbus_client.close()
+        await modbus.close()
+
+
+async def test_modbus_is_read_only_by_default(stub: ControllerServer) -> None:
+    from pymodbus.client import AsyncModbusTcpClient
+
+    from controller_stub.modbus_io import ModbusIoServer
+
+    modbus = ModbusIoServer(stub.sim, host="127.0.0.1", port=0)
+    host, port = await modbus.start()
+    modbus_client = AsyncModbusTcpClient(host, port=port, timeout=2)
+    try:
+        assert await modbus_client.connect()
+        assert (await modbus_client.write_coil(3, True)).isError()
+        assert (await modbus_client.write_register(0, 0xFF)).isError()
+        assert stub.sim.digital_outputs() == [False] * 8
+        coils = await modbus_client.read_coils(0, count=8)  # reads still work
+        assert not coils.isError() and coils.bits[:8] == [False] * 8
     finally:
         modbus_client.close()
         await modbus.close()

@@ -95,3 +95,17 @@ def test_status_unreachable_is_one_line_exit_3() -> None:
 def test_status_rejects_a_malformed_address() -> None:
     result = hostpc("status", "--robot", "127.0.0.1:notaport")
     assert result.returncode == 2 and "notaport" in result.stderr
+
+
+def test_status_against_a_silent_server_is_one_line_exit_3() -> None:
+    """A port that accepts but never answers: a handshake timeout, and nothing else on
+    stderr (no "Future exception was never retrieved")."""
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen(4)  # the kernel accepts; nobody ever reads or writes
+        port = silent.getsockname()[1]
+        result = hostpc("status", "--robot", f"127.0.0.1:{port}", "--timeout", "1")
+    assert result.returncode == 3
+    assert result.stdout == ""
+    assert result.stderr.count("\n") == 1, result.stderr
+    assert "did not complete the handshake" in result.stderr

@@ -352,6 +352,42 @@ def test_oversize_frame_gets_an_error_and_closes() -> None:
     assert client.state is ConnectionState.CLOSED
 
 
+def test_pre_auth_frame_limit_is_small_and_grows_after_auth() -> None:
+    client = Connection(Role.CLIENT, token=TOKEN)
+    server = Connection(
+        Role.SERVER, token=TOKEN, max_frame_size=1 << 20, pre_auth_max_frame_size=2048
+    )
+    assert server.max_frame_size == 2048
+    deliver(client.initiate(), server)
+    deliver(server.data_to_send(), client)
+    assert server.state is ConnectionState.AUTHENTICATING and server.max_frame_size == 2048
+    deliver(client.data_to_send(), server)  # auth
+    deliver(server.data_to_send(), client)
+    assert server.state is ConnectionState.READY and server.max_frame_size == 1 << 20
+    events = server.receive_data(
+        encode_frame(b'{"kind": "heartbeat", "id": 9, "x": "' + b"y" * 4000 + b'"}')
+    )
+    assert [e.code for e in events if isinstance(e, Rejected)] == [ErrorCode.BAD_MESSAGE]
+    assert server.state is ConnectionState.READY  # big frames are fine after auth
+
+    anonymous = Connection(Role.CLIENT, token=None)
+    server = Connection(
+        Role.SERVER, token=TOKEN, max_frame_size=1 << 20, pre_auth_max_frame_size=2048
+    )
+    deliver(anonymous.initiate(), server)
+    deliver(server.data_to_send(), anonymous)
+    events = server.receive_data(encode_frame(b"{}", [b"x" * 3000])[:8])  # the prefix is enough
+    assert [e.code for e in events if isinstance(e, Rejected)] == [ErrorCode.FRAME_TOO_LARGE]
+    assert server.state is ConnectionState.CLOSED
+
+
+def test_capture_needs_an_authenticated_session() -> None:
+    client, server = connected_pair(client_token=None)
+    events = server.receive_data(client.send(m.Capture(id=client.next_id())))
+    assert [e.code for e in events if isinstance(e, Rejected)] == [ErrorCode.AUTH_REQUIRED]
+    assert "capture" not in ALLOWED_REQUESTS[ConnectionState.AUTHENTICATING]
+
+
 def test_wrong_attachment_count_is_rejected() -> None:
     client, server = connected_pair()
     request = m.Capture(id=client.next_id())

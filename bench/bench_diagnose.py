@@ -1,0 +1,69 @@
+"""Benchmark: `hostpc diagnose --ladder` on a 120-sample stereo dataset, every candidate.
+
+Run ``python bench/bench_diagnose.py``; :func:`run` returns the figures as a dict (seconds):
+
+- ``diagnose_s``: ``hostpc.diagnose(dataset)`` (fit, 5-fold held-out, all candidates with
+  3-fold held-out RMS, the effect-agnostic search), median of ``repeats``;
+- ``ladder_s``: the same with ``ladder=True`` (here: one more model checked);
+- ``cli_ladder_s``: ``hostpc diagnose DATASET --ladder --json`` as a fresh process (includes
+  Python start-up and imports), median of ``repeats``; the budget is 3 s;
+- ``report_s``: rendering the HTML report once (matplotlib, not part of the budget).
+
+The dataset is examples/ur5e_stereo_hidden_compliance.json (compliance hidden), so the
+ladder has two steps. Small dense linear algebra: on a loaded machine OpenBLAS's threads
+compete; ``OPENBLAS_NUM_THREADS=1`` gives the steadiest figures.
+"""
+
+from __future__ import annotations
+
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "ur5e_stereo_hidden_compliance.json"
+
+
+def _median(func, repeats: int) -> float:  # type: ignore[no-untyped-def]
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        func()
+        times.append(time.perf_counter() - start)
+    return float(statistics.median(times))
+
+
+def run(repeats: int = 3, dataset: Path = EXAMPLE) -> dict[str, float]:
+    """The figures, in seconds (and the problem size)."""
+    import hostpc
+    from hostpc.report import render_html
+
+    data = hostpc.load_dataset(dataset)
+    hostpc.diagnose(data)  # warm-up: imports and caches
+    diagnose_s = _median(lambda: hostpc.diagnose(data), repeats)
+    ladder_s = _median(lambda: hostpc.diagnose(data, ladder=True), repeats)
+    diagnosis = hostpc.diagnose(data, ladder=True)
+    command = [sys.executable, "-m", "hostpc.cli.main", "diagnose", str(dataset), "--ladder",
+               "--json"]
+    cli_ladder_s = _median(lambda: subprocess.run(command, check=True, capture_output=True),
+                           repeats)
+    with tempfile.TemporaryDirectory():
+        start = time.perf_counter()
+        render_html(diagnosis)
+        report_s = time.perf_counter() - start
+    return {
+        "n_samples": float(data.n_samples),
+        "n_candidates": float(len(diagnosis.candidates)),
+        "ladder_steps": float(len(diagnosis.ladder or ())),
+        "diagnose_s": diagnose_s,
+        "ladder_s": ladder_s,
+        "cli_ladder_s": cli_ladder_s,
+        "report_s": report_s,
+    }
+
+
+if __name__ == "__main__":
+    for name, value in run().items():
+        print(f"{name:>14}: {value:.3f}")

@@ -1,0 +1,86 @@
+"""Values the zerocal transport hands to its callers (frozen dataclasses) and its error.
+
+Angles are radians (reported frame), times seconds; arrays are numpy float64 (n,).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hostpc.errors import ControllerError
+
+
+class ControllerRefusedError(ControllerError):
+    """The controller answered a request with an error reply.
+
+    code: the protocol `ErrorCode` value (e.g. "refused", "busy", "auth_required");
+    reason: the controller's specific reason for "refused" (e.g. "joint_limit", "estop").
+    """
+
+    def __init__(self, message: str, code: str, reason: str | None = None) -> None:
+        super().__init__(message)
+        self.code = code
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class ControllerState:
+    """Snapshot of the controller. q, zero_offsets, q_min, q_max: (n,) rad."""
+
+    robot_name: str
+    n_joints: int
+    mode: str
+    time: float
+    q: np.ndarray
+    zero_offsets: np.ndarray
+    q_min: np.ndarray
+    q_max: np.ndarray
+    digital_inputs: tuple[bool, ...]
+    digital_outputs: tuple[bool, ...]
+    camera: dict[str, Any]
+    authenticated: bool
+
+
+@dataclass(frozen=True)
+class MoveOutcome:
+    """completed, or stopped early with `reason`; q: (n,) rad where the robot stopped."""
+
+    completed: bool
+    q: np.ndarray
+    duration_s: float
+    reason: str | None
+
+
+@dataclass(frozen=True)
+class GuardedMoveOutcome:
+    """contact False = no contact at the end of travel; q_latched: (n,) rad at the edge."""
+
+    contact: bool
+    q_latched: np.ndarray | None
+    q: np.ndarray
+    io_line: int
+    duration_s: float
+    speed_mps: float | None
+    reason: str | None
+
+
+@dataclass(frozen=True)
+class IoSnapshot:
+    """Digital inputs and outputs (line 0 first) at controller time `time` (s)."""
+
+    digital_inputs: tuple[bool, ...]
+    digital_outputs: tuple[bool, ...]
+    time: float
+
+
+@dataclass(frozen=True)
+class IoEdgeEvent:
+    """A digital input changed: line, new value, controller time, (n,) latched q (rad)."""
+
+    line: int
+    value: bool
+    time: float
+    q_latched: np.ndarray

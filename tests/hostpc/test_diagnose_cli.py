@@ -1,0 +1,135 @@
+"""`hostpc diagnose`: the JSON contract outside users rely on, the text, errors, speed."""
+
+from __future__ import annotations
+
+import json
+import re
+import time
+from pathlib import Path
+
+import pytest
+
+import hostpc
+from hostpc.cli.main import main
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "ur5e_stereo_hidden_compliance.json"
+CONTRACT_VARIABLE = re.compile(
+    r"^((left|right|head)\.)?(q\d+|tau\d+|approach\d+)$|^(t|temperature|depth|speed)$|^extra\..+$")
+
+
+def run_json(capsys: pytest.CaptureFixture[str], *args: str) -> dict:  # type: ignore[type-arg]
+    assert main(["diagnose", str(EXAMPLE), "--json", *args]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_json_contract_with_ladder(capsys: pytest.CaptureFixture[str]) -> None:
+    document = run_json(capsys, "--ladder")
+    for key in ("rms", "max", "chi2_dof", "adequate", "candidates", "interactions", "ladder",
+                "cv_rms", "cv_max", "chi2", "dof", "chi2_band", "noise", "effects", "advice",
+                "residuals", "fit", "units"):
+        assert key in document, key
+    assert document["units"] == {"length": "m", "angle": "rad"}
+    assert document["adequate"] is False
+    assert 1e-4 < document["rms"] < 1e-3  # metres
+    candidates = document["candidates"]
+    assert candidates[0]["effect"] == "joint_compliance"
+    for c in candidates:
+        assert {"effect", "delta_bic", "rms", "cv_rms"} <= set(c)
+    assert [c["significant"] for c in candidates] == sorted(
+        (c["significant"] for c in candidates), reverse=True)
+    interactions = document["interactions"]
+    assert interactions[0] == max(interactions, key=lambda i: i["score"])
+    for i in interactions:
+        assert {"parameter", "variable", "score"} <= set(i)
+        assert CONTRACT_VARIABLE.match(i["variable"]), i["variable"]
+        assert i["parameter"].split(".")[0] in document["effects"] + ["geometry"]
+    for pattern in document["residuals"]["patterns"]:
+        assert CONTRACT_VARIABLE.match(pattern["variable"])
+    assert len(document["residuals"]["norm"]) == document["n_samples"] == 120
+    ladder = document["ladder"]
+    assert [s["added"] for s in ladder] == [None, "joint_compliance"]
+    assert ladder[0]["adequate"] is False and ladder[-1]["adequate"] is True
+    for step in ladder:
+        assert {"rms", "cv_rms", "cv_max", "chi2_dof", "adequate", "effects"} <= set(step)
+    assert document["rms"] == ladder[0]["rms"]
+
+
+def test_json_without_ladder_has_no_ladder_and_plus_effect(capsys: pytest.CaptureFixture[str]
+                                                           ) -> None:
+    document = run_json(capsys, "--effects", "+joint_compliance", "--cv-folds", "3")
+    assert "ladder" not in document
+    assert document["effects"] == ["joint_offsets", "tool", "target", "joint_compliance"]
+    assert document["adequate"] is True
+    assert document["cv_folds"] == 3
+    assert "joint_compliance" not in [c["effect"] for c in document["candidates"]]
+
+
+def test_text_output_and_report(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    report = tmp_path / "out" / "report.html"
+    assert main(["diagnose", str(EXAMPLE), "--ladder", "--report", str(report)]) == 0
+    text = capsys.readouterr().out
+    assert "verdict: NOT adequate" in text
+    assert "* joint_compliance" in text
+    assert "joint_offsets.q2 varies with tau2" in text
+    assert "--effects +joint_compliance" in text
+    assert "ladder:" in text and "report written to" in text
+    assert report.is_file() and report.read_text().startswith("<!DOCTYPE html>")
+
+
+def test_plugin_option(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    plugin = tmp_path / "my_effect.py"
+    plugin.write_text(
+        "import numpy as np\nfrom hostpc.model.effect import Effect\n\n"
+        "class Tilt(Effect):\n    name = 'tilt'\n    hook = 'joint'\n    is_linear = True\n"
+        "    def parameter_names(self, ctx):\n        return ['k']\n"
+        "    def basis(self, ctx):\n        b = np.zeros((ctx.n_samples, ctx.n_joints, 1))\n"
+        "        b[:, 1, 0] = np.cos(ctx.q_cmd[:, 1])\n        return b\n")
+    document = run_json(capsys, "--plugin", str(plugin), "--cv-folds", "0")
+    assert "tilt" in [c["effect"] for c in document["candidates"]]
+    assert document["plugins"] == [str(plugin)]
+    document = run_json(capsys, "--plugin", str(plugin), "--effects", "+tilt", "--cv-folds", "0")
+    assert "tilt" in document["effects"]
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--effects", "+no_such_effect"], "unknown effect 'no_such_effect'"),
+    (["--candidates", "nope"], "candidate effect 'nope' is unknown"),
+    (["--alpha", "2"], "alpha 2.0: must be between 0 and 1"),
+    (["--cv-folds", "-1"], "--cv-folds -1"),
+])
+def test_bad_options_exit_2(capsys: pytest.CaptureFixture[str], args: list[str],
+                            message: str) -> None:
+    assert main(["diagnose", str(EXAMPLE), *args]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_missing_dataset_exit_2(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    assert main(["diagnose", str(tmp_path / "missing.json")]) == 2
+    assert "missing.json" in capsys.readouterr().err
+
+
+def test_python_api_matches_cli(capsys: pytest.CaptureFixture[str]) -> None:
+    diagnosis = hostpc.diagnose(EXAMPLE, effects=["joint_offsets", "tool", "target"],
+                                cv_folds=0)
+    document = run_json(capsys, "--cv-folds", "0")
+    assert diagnosis.source == str(EXAMPLE)
+    assert diagnosis.rms == pytest.approx(document["rms"])
+    assert [c.effect for c in diagnosis.candidates] == [c["effect"]
+                                                        for c in document["candidates"]]
+
+
+@pytest.mark.slow
+def test_ladder_with_every_candidate_is_fast(capsys: pytest.CaptureFixture[str]) -> None:
+    """`hostpc diagnose --ladder` on 120 samples with every candidate within 3 s (best of
+    three runs after a warm-up, so other jobs on the machine do not decide it)."""
+    main(["diagnose", str(EXAMPLE), "--json", "--ladder"])  # warm: imports, caches
+    capsys.readouterr()
+    times = []
+    for _ in range(3):
+        start = time.perf_counter()
+        assert main(["diagnose", str(EXAMPLE), "--json", "--ladder"]) == 0
+        times.append(time.perf_counter() - start)
+    document = json.loads(capsys.readouterr().out.split("\n}\n")[0] + "\n}")
+    assert len(document["candidates"]) >= 6 and len(document["ladder"]) == 2
+    assert min(times) < 3.0, f"hostpc diagnose --ladder took {min(times):.2f} s"

@@ -1,0 +1,119 @@
+"""Pose planning (hostpc.methods.planning) and the stereo_target candidates: no robot."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hostpc.kinematics import get_robot
+from hostpc.methods.base import RunSettings
+from hostpc.methods.cell import build_cell
+from hostpc.methods.planning import (
+    check_plan,
+    design_matrix,
+    greedy_d_optimal,
+    joint_offset_sigmas,
+    make_design,
+    order_for_travel,
+    random_selection,
+)
+from hostpc.methods.stereo_target import StereoTargetMethod
+from hostpc.robots.base import RobotState
+
+UR5E_HOME = np.array([0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0])
+DESCRIPTION = {  # what the simulated controller reports (controller_stub camera_description)
+    "image_width": 1280, "image_height": 1024, "baseline_nominal": 0.12,
+    "T_flange_camera_nominal": {"xyz": [0.0, -0.06, 0.04], "rpy": [0.0, 0.0, 0.0]},
+    "target": {"radius": 0.01, "centre_nominal": [0.45, 0.15, 0.0], "normal": [0, 0, 1]},
+}
+
+
+def stereo_method(known: tuple[str, ...], tmp_path: Path, n_candidates: int = 600
+                  ) -> StereoTargetMethod:
+    """A stereo_target method with a nominal rig (no robot needed for planning)."""
+    from hostpc.vision import StereoRig
+
+    K = np.array([[1400.0, 0.0, 640.0], [0.0, 1400.0, 512.0], [0.0, 0.0, 1.0]])
+    rig = StereoRig(image_size=(1280, 1024), K_left=K, dist_left=np.zeros(5), K_right=K,
+                    dist_right=np.zeros(5), R=np.eye(3), T=np.array([-0.12, 0.0, 0.0]))
+    cell = build_cell(DESCRIPTION, "ur5e", known=known)
+    method = StereoTargetMethod(RunSettings(method="stereo_target", n_candidates=n_candidates),
+                                cell, tmp_path)
+    method.rig = rig
+    return method
+
+
+def home_state() -> RobotState:
+    chain = get_robot("ur5e")
+    return RobotState(q=UR5E_HOME.copy(), zero_offsets=np.zeros(6), q_min=chain.q_min,
+                      q_max=chain.q_max)
+
+
+@pytest.fixture(scope="module")
+def pool_and_design(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
+    method = stereo_method((), tmp_path_factory.mktemp("plan"))
+    pool = method.candidates(home_state(), np.random.default_rng(0))
+    A, names, units = design_matrix(method.design_dataset(pool), None)
+    return method, pool, make_design(A, names, units)
+
+
+def test_candidates_are_reachable_visible_and_within_limits(pool_and_design) -> None:  # type: ignore[no-untyped-def]
+    method, pool, _ = pool_and_design
+    chain = get_robot("ur5e")
+    assert pool.shape == (600, 6)
+    assert np.all(pool >= chain.q_min) and np.all(pool <= chain.q_max)
+    assert np.all(method.visible(pool))
+    depth = method.target_in_camera(pool)[:, 2]
+    assert depth.min() > 0.25 and depth.max() < 0.65
+    # varied orientations: the camera rolls widely about its optical axis
+    assert np.ptp(pool[:, 5]) > np.pi
+
+
+def test_structural_gauge_with_both_frames_estimated_is_q1_and_q6(pool_and_design) -> None:  # type: ignore[no-untyped-def]
+    _, _, design = pool_and_design
+    fixed = {design.names[k] for k in np.flatnonzero(~design.free)}
+    assert fixed == {"joint_offsets.q1", "joint_offsets.q6"}
+    texts = " ".join(d.description for d in design.structural)
+    assert "mark target as known" in texts and "mark tool as known" in texts
+
+
+def test_known_target_makes_q1_identifiable(tmp_path: Path) -> None:
+    method = stereo_method(("target",), tmp_path, n_candidates=200)
+    pool = method.candidates(home_state(), np.random.default_rng(1))
+    design = make_design(*design_matrix(method.design_dataset(pool), None))
+    assert {design.names[k] for k in np.flatnonzero(~design.free)} == {"joint_offsets.q6"}
+
+
+def test_d_optimal_beats_random_and_is_nested(pool_and_design) -> None:  # type: ignore[no-untyped-def]
+    _, _, design = pool_and_design
+    chosen = greedy_d_optimal(design, 30)
+    assert len(set(chosen.tolist())) == 30
+    assert np.array_equal(greedy_d_optimal(design, 12), chosen[:12])
+    planned = np.nanmax(joint_offset_sigmas(design.subset(chosen), 6))
+    rng = np.random.default_rng(2)
+    random_worst = np.median([
+        np.nanmax(joint_offset_sigmas(design.subset(random_selection(600, 30, rng)), 6))
+        for _ in range(10)])
+    assert planned < 0.6 * random_worst
+
+
+def test_check_plan_names_what_too_few_poses_cannot_separate(pool_and_design) -> None:  # type: ignore[no-untyped-def]
+    _, _, design = pool_and_design
+    good = check_plan(design.subset(greedy_d_optimal(design, 20)))
+    assert good.ok and good.plan_rank == good.pool_rank
+    bad = check_plan(design.subset(greedy_d_optimal(design, 2)))
+    assert not bad.ok and bad.plan_rank < bad.pool_rank
+    assert all("not separable" in d.description or "no effect" in d.description
+               for d in bad.deficient)
+
+
+def test_order_for_travel_is_a_permutation_starting_near_the_robot() -> None:
+    rng = np.random.default_rng(3)
+    q = rng.uniform(-1, 1, (25, 6))
+    start = q[7] + 0.01
+    order = order_for_travel(q, start)
+    assert sorted(order.tolist()) == list(range(25)) and order[0] == 7
+    travel = np.sum(np.max(np.abs(np.diff(q[order], axis=0)), axis=1))
+    assert travel < np.sum(np.max(np.abs(np.diff(q, axis=0)), axis=1))

@@ -1,0 +1,119 @@
+"""The HTML report: one self-contained file whose plots are embedded and decode, checked
+in a real headless browser (Debian's chromium) when it is installed."""
+
+from __future__ import annotations
+
+import base64
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from hostpc.diagnose import Diagnosis, diagnose
+from hostpc.report import render_html, write_report
+from tests.hostpc.diagnose_support import hidden_dataset
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu",
+                  "--disable-background-networking", "--disable-component-update",
+                  "--disable-sync", "--no-first-run"]
+IMAGE_CHECK = """<script>
+window.addEventListener('load', function () {
+  var images = Array.from(document.images);
+  var decoded = images.filter(function (i) { return i.complete && i.naturalWidth > 0; });
+  var out = document.createElement('div');
+  out.id = 'image-check';
+  out.textContent = 'decoded ' + decoded.length + ' of ' + images.length;
+  document.body.appendChild(out);
+});
+</script>"""
+
+
+@pytest.fixture(scope="module")
+def diagnosis() -> Diagnosis:
+    synthetic = hidden_dataset({"joint_compliance.c2": 2.0e-5, "joint_compliance.c3": 2.5e-5},
+                               seed=2, n_samples=60)
+    return diagnose(synthetic.dataset, ladder=True, source="hidden.json")
+
+
+@pytest.fixture(scope="module")
+def report(diagnosis: Diagnosis, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return write_report(tmp_path_factory.mktemp("report") / "sub" / "report.html", diagnosis)
+
+
+def image_sources(text: str) -> list[str]:
+    return re.findall(r'<img src="([^"]*)"', text)
+
+
+def test_report_is_self_contained_with_every_section(report: Path) -> None:
+    text = report.read_text(encoding="utf-8")
+    assert text.startswith("<!DOCTYPE html>")
+    assert not re.search(r'(src|href)="(https?:|//|file:)', text)
+    assert "<script" not in text
+    for heading in ("Is the model adequate?", "Model vs measurement", "Where does it fail?",
+                    "Which effect is missing?", "Ladder", "Parameters", "Identifiability"):
+        assert f"<h2>{heading}</h2>" in text, heading
+    assert "joint_compliance" in text and "joint_offsets.q2" in text
+    assert "NOT adequate" in text
+    sources = image_sources(text)
+    assert len(sources) >= 8  # measurement, histogram, variables, 2 rankings, ladder, rho, sv
+    for source in sources:
+        prefix = "data:image/png;base64,"
+        assert source.startswith(prefix)
+        png = base64.b64decode(source[len(prefix):], validate=True)
+        assert png.startswith(PNG_MAGIC) and len(png) > 2000
+
+
+def test_report_without_ladder_escapes_and_says_how_to_get_one(diagnosis: Diagnosis,
+                                                                report: Path) -> None:
+    from dataclasses import replace
+
+    text = render_html(replace(diagnosis, ladder=None), title="<b>run & co</b>")
+    assert "hostpc diagnose DATASET --ladder" in text
+    assert len(image_sources(text)) == len(image_sources(report.read_text())) - 1
+    assert "&lt;b&gt;run &amp; co&lt;/b&gt;" in text and "<b>run" not in text
+
+
+def _chromium() -> str | None:
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(_chromium() is None,
+                    reason="chromium is not installed (apt-get install -y chromium)")
+def test_report_renders_in_headless_chromium(report: Path, tmp_path: Path) -> None:
+    checked = tmp_path / "checked.html"
+    checked.write_text(report.read_text(encoding="utf-8").replace("</body>",
+                                                                  IMAGE_CHECK + "</body>"))
+    n_images = len(image_sources(report.read_text(encoding="utf-8")))
+    browser = _chromium()
+    assert browser is not None
+    dom = subprocess.run(
+        [browser, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'profile'}",
+         "--virtual-time-budget=10000", "--dump-dom", checked.as_uri()],
+        capture_output=True, text=True, timeout=120, check=False)
+    assert dom.returncode == 0, dom.stderr[-2000:]
+    assert f"decoded {n_images} of {n_images}" in dom.stdout, dom.stdout[-500:]
+    assert "The model is NOT adequate." in dom.stdout
+
+    screenshot = tmp_path / "shot.png"
+    shot = subprocess.run(
+        [browser, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'profile2'}",
+         "--window-size=1200,2400", f"--screenshot={screenshot}", report.as_uri()],
+        capture_output=True, text=True, timeout=120, check=False)
+    assert shot.returncode == 0 and screenshot.is_file(), shot.stderr[-2000:]
+    _assert_not_blank(screenshot)
+
+
+def _assert_not_blank(path: Path) -> None:
+    """The screenshot has many colours (plots), not one flat page."""
+    from matplotlib.image import imread
+
+    pixels = imread(path)
+    assert pixels.ndim == 3 and pixels.shape[0] > 1000
+    flat = (pixels[..., :3] * 255).astype(int).reshape(-1, 3)
+    colours = {tuple(p) for p in flat[:: max(1, flat.shape[0] // 20000)]}
+    assert len(colours) > 50
+    assert pixels[..., :3].std() > 0.05

@@ -1,0 +1,90 @@
+"""`hostpc calibrate` on bad input: one line on stderr, the documented exit code, and
+nothing lost or half-written."""
+
+from __future__ import annotations
+
+import json
+import socket
+from pathlib import Path
+
+import pytest
+
+from hostpc.robots.simulator import SimulatedController
+from tests.integration.test_calibrate_sim import TOKEN, run_cli, sim_scenario, truth_rig_file
+
+
+def _closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _error_line(stderr: str) -> str:
+    lines = stderr.strip().splitlines()
+    assert lines and lines[-1].startswith("hostpc calibrate: error: "), stderr
+    return lines[-1]
+
+
+def test_unreachable_robot_exit_3_one_line(tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run"
+    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
+    code, stdout, stderr = run_cli(capsys, "calibrate", "--robot",
+                                   f"127.0.0.1:{_closed_port()}", "--rig", str(rig),
+                                   "--out", str(out))
+    assert code == 3
+    assert "cannot reach controller" in _error_line(stderr) and stdout == ""
+    assert not (out / "run.json").exists()
+
+
+def test_bad_rig_file_exit_2_before_connecting(tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "rig.json"
+    bad.write_text(json.dumps({"format": "zerocal-stereo-rig", "version": 1}))
+    out = tmp_path / "run"
+    code, _, stderr = run_cli(capsys, "calibrate", "--robot", f"127.0.0.1:{_closed_port()}",
+                              "--rig", str(bad), "--out", str(out))
+    assert code == 2 and stderr.count("\n") == 1
+    assert str(bad) in _error_line(stderr)
+    assert not out.exists()
+    code, _, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--rig",
+                              str(tmp_path / "missing.json"), "--out", str(out))
+    assert code == 2 and "cannot read rig file" in _error_line(stderr)
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--poses", "0"], "--poses 0"),
+        (["--known", "flange"], "unknown frame 'flange'"),
+        (["--robot", "host:99999"], "out of range"),
+        (["--scenario", "x.yaml"], "--scenario needs --robot sim"),
+    ],
+)
+def test_bad_options_exit_2(args: list[str], message: str, tmp_path: Path,
+                            capsys: pytest.CaptureFixture[str]) -> None:
+    base = ["calibrate", "--robot", "127.0.0.1:1", "--out", str(tmp_path / "run")]
+    code, _, stderr = run_cli(capsys, *base, *args)
+    assert code == 2 and message in _error_line(stderr)
+
+
+def test_resume_of_a_folder_without_a_run_exit_2(tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, stderr = run_cli(capsys, "calibrate", "--resume", str(tmp_path))
+    assert code == 2 and "not a calibration run folder" in _error_line(stderr)
+
+
+def test_plan_that_cannot_separate_the_parameters_stops_before_moving(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
+    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:
+        q_start = sim.truth()["q_reported"]
+        code, _, stderr = run_cli(
+            capsys, "calibrate", "--robot", f"{sim.address.host}:{sim.address.port}",
+            "--token", TOKEN, "--rig", str(rig), "--poses", "3", "--no-report",
+            "--out", str(tmp_path / "run"))
+        assert code == 2
+        line = _error_line(stderr)
+        assert "cannot separate" in line and "not separable" in line and "--poses" in line
+        assert sim.truth()["q_reported"] == q_start  # the robot never moved
+    assert not (tmp_path / "run" / "journal.jsonl").exists()
