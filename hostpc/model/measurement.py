@@ -101,14 +101,21 @@ def _world_point_in_base(problem: Problem, x: np.ndarray, point_name: str, nomin
     return point_base, derivatives
 
 
+def _flange(problem: Problem, x: np.ndarray, jacobian: bool):  # type: ignore[no-untyped-def]
+    """Forward kinematics with the joint and geometry effects applied: the chain poses,
+    R_base_flange (N, 3, 3), t_base_flange (N, 3), and the kinematic-delta derivative with its
+    row slice (see kinematic_deltas)."""
+    delta, d_delta, rows = kinematic_deltas(problem, x, jacobian)
+    poses = forward(problem.chain, problem.context.q_cmd, delta)
+    T_bf = poses.T_base_flange
+    return poses, T_bf[:, :3, :3], T_bf[:, :3, 3], d_delta, rows
+
+
 def predict_stereo_target(problem: Problem, x: np.ndarray, jacobian: bool = True
                           ) -> tuple[np.ndarray, np.ndarray | None]:
     """Predicted target point in the sensor frame (N, 3) and d/dx (N, 3, P)."""
     chain = problem.chain
-    delta, d_delta, rows = kinematic_deltas(problem, x, jacobian)
-    poses = forward(chain, problem.context.q_cmd, delta)
-    T_bf = poses.T_base_flange
-    R_bf, t_bf = T_bf[:, :3, :3], T_bf[:, :3, 3]
+    poses, R_bf, t_bf, d_delta, rows = _flange(problem, x, jacobian)
     p_b, d_pb = _world_point_in_base(
         problem, x, "target", np.asarray(problem.dataset.frames["target"], dtype=float)
     )
@@ -180,10 +187,7 @@ def predict_sphere_probe(problem: Problem, x: np.ndarray, jacobian: bool = True
                          ) -> tuple[np.ndarray, np.ndarray | None]:
     """Predicted tip-to-centre distance (N, 1) and d/dx (N, 1, P)."""
     chain = problem.chain
-    delta, d_delta, rows = kinematic_deltas(problem, x, jacobian)
-    poses = forward(chain, problem.context.q_cmd, delta)
-    T_bf = poses.T_base_flange
-    R_bf, t_bf = T_bf[:, :3, :3], T_bf[:, :3, 3]
+    poses, R_bf, t_bf, d_delta, rows = _flange(problem, x, jacobian)
     _, t_ft, _ = _frame_pose(problem, "tool", x)
     tip = np.einsum("nij,j->ni", R_bf, t_ft) + t_bf
     sphere = problem.dataset.frames["sphere"]
