@@ -199,10 +199,10 @@ def _run_with_robot(args: argparse.Namespace, address: RobotAddress, driver: str
         return asyncio.run(_calibrate(args, address, driver, run_dir, settings, cell_file,
                                       known, (), info, progress, None, args.token))
     from hostpc.robots.simulator import (
-        SIM_DEFAULT_KNOWN,
         SimulatedController,
         default_sim_scenario,
         load_scenario_file,
+        sim_default_known,
     )
 
     sim_dir = run_dir / SIM_FOLDER
@@ -214,8 +214,9 @@ def _run_with_robot(args: argparse.Namespace, address: RobotAddress, driver: str
         scenario = load_scenario_file(scenario_file, time_scale=args.time_scale)
         default_known = ()
     else:
-        scenario = default_sim_scenario(time_scale=args.time_scale)
-        default_known = SIM_DEFAULT_KNOWN
+        method = settings.method if settings is not None else None
+        scenario = default_sim_scenario(time_scale=args.time_scale, method=method)
+        default_known = sim_default_known(method)
     token = args.token or (scenario.get("server") or {}).get("token") or resolve_token(None)
     progress.stage("start simulator")
     with SimulatedController(scenario, sim_dir) as simulator:

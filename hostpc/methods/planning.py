@@ -159,13 +159,22 @@ def predicted_covariance(design: Design) -> np.ndarray:
     return cov
 
 
+def joint_offset_names(n_joints: int, joint_labels: Sequence[str] = ()) -> list[str]:
+    """The zero-offset parameter of each of the controller's n joints, in its order:
+    `joint_offsets.q1..qn`, or with the model's joint labels of a kinematic tree (when there
+    are n of them) `joint_offsets.head.q1`, ... (docs/dual-loop.md)."""
+    labels = (list(joint_labels) if len(joint_labels) == n_joints
+              else [f"q{j + 1}" for j in range(n_joints)])
+    return [f"joint_offsets.{label}" for label in labels]
+
+
 def joint_offset_sigmas(design: Design, n_joints: int) -> np.ndarray:
     """(n,) predicted standard deviation of each joint offset (rad), NaN if unidentifiable
     (structural gauge) or not determined by these poses."""
     cov = predicted_covariance(design)
     sigmas = np.full(n_joints, np.nan)
-    for j in range(n_joints):
-        name = f"joint_offsets.q{j + 1}"
+    labels = [n.split(".", 1)[1] for n in design.names if n.startswith("joint_offsets.")]
+    for j, name in enumerate(joint_offset_names(n_joints, labels)):
         if name in design.names:
             k = design.names.index(name)
             sigmas[j] = np.sqrt(cov[k, k]) if np.isfinite(cov[k, k]) else np.nan

@@ -24,6 +24,7 @@ import numpy as np
 from hostpc.errors import InputError
 from hostpc.fit import FitResult
 from hostpc.methods.journal import write_json_atomic
+from hostpc.methods.planning import joint_offset_names
 from hostpc.robots.base import RobotAdapter
 
 PUSH_FILE = "push.json"
@@ -81,8 +82,8 @@ def plan_push(result: FitResult, old_offsets: np.ndarray,
     pushed = np.zeros(n, dtype=bool)
     notes = []
     held = {d.fixed: d for d in result.unidentifiable}
-    for j in range(n):
-        name = f"joint_offsets.q{j + 1}"
+    offset_names = joint_offset_names(n, result.problem.context.joint_labels)
+    for j, name in enumerate(offset_names):
         if name not in names:
             notes.append("not in the model (joint_offsets not fitted)")
             continue

@@ -432,6 +432,7 @@ class Runner:
             "acquisition": {
                 "n_planned": int(plan.q.shape[0]),
                 "n_measured": dataset.n_samples,
+                "n_poses_measured": sum(r.ok for r in self.journal.records("fit")),
                 "n_skipped": len(skipped),
                 "skipped": skipped,
             },
@@ -517,10 +518,13 @@ def format_summary(document: Mapping[str, Any]) -> str:
         f"zerocal calibration: {document['method']} on {robot['name']} at "
         f"{'sim (' + robot['address'] + ')' if robot.get('sim') else robot['address']}",
         f"run folder: {document['run_dir']}",
-        f"known frames: {', '.join(document['known']) or 'none (tool and target estimated)'}",
+        f"known frames: {', '.join(document['known']) or 'none (every frame estimated)'}",
         f"plan: {plan['n_poses']} poses ({plan.get('criterion', '?')}-optimal from "
         f"{plan.get('n_candidates', '?')} candidates), {plan['n_verify']} verification poses",
-        f"measured: {acq['n_measured']} of {acq['n_planned']} fit poses"
+        f"measured: {acq.get('n_poses_measured', acq['n_measured'])} of {acq['n_planned']} "
+        "fit poses"
+        + (f" ({acq['n_measured']} samples)"
+           if acq.get("n_poses_measured", acq["n_measured"]) != acq["n_measured"] else "")
         + (f", {acq['n_skipped']} skipped" if acq["n_skipped"] else ""),
         f"fit: {'converged' if fitd['converged'] else 'NOT CONVERGED'}, effects "
         f"{', '.join(fitd['effects'])}; residual RMS {fitd['rms_mm']:.4f} mm "

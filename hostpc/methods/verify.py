@@ -25,6 +25,7 @@ import numpy as np
 
 from hostpc.dataset import Dataset
 from hostpc.fit import FitResult
+from hostpc.methods.planning import joint_offset_names
 from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem
 
@@ -86,8 +87,9 @@ def evaluate_verify(result: FitResult, dataset: Dataset, pushed_delta: np.ndarra
         raise ValueError("verification model layout differs from the fit's")
     x_after = result.x.copy()
     x_before = result.x.copy()
-    for j, d in enumerate(np.asarray(pushed_delta, float)):
-        name = f"joint_offsets.q{j + 1}"
+    delta = np.asarray(pushed_delta, float)
+    offset_names = joint_offset_names(delta.size, problem.context.joint_labels)
+    for name, d in zip(offset_names, delta, strict=True):
         if name in problem.layout.names:
             k = problem.layout.index(name)
             x_after[k] = result.x[k] - d

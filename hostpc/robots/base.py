@@ -68,6 +68,26 @@ class StereoCapture:
     t: float
 
 
+@dataclass(frozen=True)
+class MeasuredTarget:
+    """One target point triangulated by the controller's own vision: chain (the kinematic
+    chain carrying it, e.g. "left"); p: (3,) m in the camera frame; cov: (3, 3) m^2."""
+
+    chain: str
+    p: np.ndarray
+    cov: np.ndarray
+
+
+@dataclass(frozen=True)
+class TargetMeasurement:
+    """Every target in view (possibly none) at joint angles q: (n,) rad, all joints, at
+    controller time t (s)."""
+
+    q: np.ndarray
+    t: float
+    targets: tuple[MeasuredTarget, ...]
+
+
 class RobotAdapter(Protocol):
     """What a measurement method may ask of a robot. Every call may raise
     hostpc.errors.ConnectionFailed, RequestTimeout or ControllerError."""
@@ -89,3 +109,17 @@ class RobotAdapter(Protocol):
     async def rollback(self, rollback_id: str) -> np.ndarray: ...
 
     async def close(self) -> None: ...
+
+
+class TargetMeasuringAdapter(RobotAdapter, Protocol):
+    """An adapter whose controller also triangulates targets itself (optional: the
+    dual_loop method needs it; check with `supports_target_measurement`)."""
+
+    async def measure_targets(self) -> TargetMeasurement:
+        """The targets the camera sees now, with the joint angles at the measurement."""
+        ...
+
+
+def supports_target_measurement(robot: object) -> bool:
+    """True if `robot` offers `measure_targets()` (a `TargetMeasuringAdapter`)."""
+    return callable(getattr(robot, "measure_targets", None))

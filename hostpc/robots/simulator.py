@@ -36,6 +36,9 @@ SIM_DEFAULT_OVERRIDES: dict[str, Any] = {
     "motion": {"time_scale": 0.0},
     "target": {"centre_error": [0.0, 0.0, 0.0]},
 }
+SIM_METHOD_SCENARIOS: dict[str, str] = {"dual_loop": "humanoid.yaml"}
+"""Methods whose `--robot sim` world is another packaged scenario (used as packaged, with
+only the motion time scale set, and nothing declared known): dual_loop's humanoid."""
 START_TIMEOUT_S = 30.0
 
 
@@ -50,21 +53,33 @@ def _merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
     return merged
 
 
-def packaged_default_scenario() -> dict[str, Any]:
-    """The stub's packaged default scenario as a plain mapping (read as data, not code)."""
-    text = (resources.files("controller_stub") / "scenarios" / "default.yaml").read_text()
+def packaged_default_scenario(name: str = "default.yaml") -> dict[str, Any]:
+    """The stub's packaged scenario `name` (default: the default scenario) as a plain
+    mapping (read as data, not code)."""
+    text = (resources.files("controller_stub") / "scenarios" / name).read_text()
     data = yaml.safe_load(text) or {}
     if not isinstance(data, dict):
         raise InputError("controller_stub default scenario is not a mapping")
     return data
 
 
-def default_sim_scenario(time_scale: float | None = None) -> dict[str, Any]:
-    """The default world of `--robot sim` (see the module docstring)."""
-    scenario = _merge(packaged_default_scenario(), SIM_DEFAULT_OVERRIDES)
+def default_sim_scenario(time_scale: float | None = None,
+                         method: str | None = None) -> dict[str, Any]:
+    """The default world of `--robot sim` (see the module docstring); for a method in
+    SIM_METHOD_SCENARIOS its own packaged scenario."""
+    packaged = SIM_METHOD_SCENARIOS.get(method or "")
+    if packaged is not None:
+        scenario = packaged_default_scenario(packaged)
+    else:
+        scenario = _merge(packaged_default_scenario(), SIM_DEFAULT_OVERRIDES)
     if time_scale is not None:
         scenario = _merge(scenario, {"motion": {"time_scale": float(time_scale)}})
     return scenario
+
+
+def sim_default_known(method: str | None = None) -> tuple[str, ...]:
+    """Frames the default simulated cell of `method` declares as measured."""
+    return () if (method or "") in SIM_METHOD_SCENARIOS else SIM_DEFAULT_KNOWN
 
 
 def load_scenario_file(path: str | Path, time_scale: float | None = 0.0) -> dict[str, Any]:

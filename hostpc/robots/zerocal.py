@@ -13,7 +13,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from hostpc.robots.base import ContactOutcome, MoveOutcome, RobotState, StereoCapture
+from hostpc.robots.base import (
+    ContactOutcome,
+    MeasuredTarget,
+    MoveOutcome,
+    RobotState,
+    StereoCapture,
+    TargetMeasurement,
+)
 from hostpc.transport import ControllerClient
 
 
@@ -73,6 +80,15 @@ class ZerocalAdapter:
         """A stereo pair (left, right (H, W) uint8) with the joint angles at exposure."""
         left, right, q, t = await self.client.capture(pattern, view)
         return StereoCapture(left=left, right=right, q=q, t=t)
+
+    async def measure_targets(self) -> TargetMeasurement:
+        """The targets the controller triangulated now (chain, p (3,) m, cov (3, 3) m^2)
+        with the joint angles q (n,) at the measurement (`measure_targets` message)."""
+        reply = await self.client.measure_targets()
+        return TargetMeasurement(
+            q=reply.q, t=reply.time,
+            targets=tuple(MeasuredTarget(chain=t.chain, p=t.p, cov=t.cov)
+                          for t in reply.targets))
 
     async def get_offsets(self) -> np.ndarray:
         """The zero offsets (n,) rad."""

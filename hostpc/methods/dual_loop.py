@@ -1,0 +1,364 @@
+"""dual_loop: a humanoid's head camera measures a target on each arm's flange.
+
+The robot is a kinematic tree (`hostpc.kinematics.humanoid`, e.g. `humanoid_upper`): a
+pan-tilt head carrying a stereo camera and two arms, one combined joint vector
+`head (2), left (7), right (7)` in the controller's order. The controller triangulates the
+targets itself and answers `measure_targets` (docs/protocol.md) with every target in view,
+each with its covariance; the method never sees images. Both loops are solved jointly by
+the shared runner (`hostpc.fit`, Mahalanobis: each point whitened by its own covariance).
+
+Per plan pose: move all 16 joints, `measure_targets`, and record one observation per arm
+whose target is in view, in dataset-file form (`chain`, `q_head`, `q_arm`, `p` (m, camera
+frame), `cov` (m^2), `t` (s since the run started), `approach` (the arm's joints)). The
+journal keeps one record per pose with `{"observations": [...]}`; `dataset_document`
+flattens them into the samples of a `zerocal-dataset/1` document. A pose with no target in
+view is journaled as skipped.
+
+Planning: candidates come from `hostpc.synthesize_dual_loop.plan_poses` (an arm pose around
+the home pose, the head aimed at that arm's target, nominal model), as combined poses with
+the other arm at its home pose, kept when the aimed target falls inside both images (the
+camera's nominal focal length, baseline and image size) and all joints are inside the
+controller's limits. The design dataset has one sample per pose (the aimed arm) with the
+expected stereo covariance: lateral `z s / f`, depth `sqrt(2) z^2 s / (f b)` for a centroid
+precision `s` (option `pixel_sigma`, default 0.15 px).
+
+Frames (docs/dual-loop.md): `camera` (`T_headend_camera`), `left_base`, `right_base`
+(`T_headbase_armbase`) and `left_target`, `right_target` (point in the flange), nominal from
+the built-in tree, overridden by the controller's description (`T_headend_camera_nominal`)
+and the `--cell` file (same names); `known` lists those held fixed. With nothing known, six
+zero offsets cannot be told apart from the frames (`head.q1`, `head.q2`, each arm's `q1` and
+`q7`): the fit holds them at nominal and the push leaves them unchanged.
+
+Units: SI and radians (docs/conventions.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from hostpc.dataset import FORMAT_TAG, Dataset, FramePose, dataset_from_dict
+from hostpc.errors import InputError
+from hostpc.kinematics.humanoid import HUMANOID_HOME, get_tree
+from hostpc.kinematics.rotations import pose_to_transform
+from hostpc.kinematics.tree import KinematicTree
+from hostpc.methods.base import Method, Phase, Progress, RunSettings, SampleRecord
+from hostpc.methods.cell import Cell
+from hostpc.model.dual_loop import ARMS, DUAL_LOOP_FRAMES
+from hostpc.model.measurement import predict
+from hostpc.model.problem import build_problem
+from hostpc.robots.base import (
+    RobotAdapter,
+    RobotState,
+    TargetMeasurement,
+    supports_target_measurement,
+)
+from hostpc.synthesize_dual_loop import nominal_frames, plan_poses
+
+PLANNING_PIXEL_SIGMA = 0.15
+"""Planning noise model: centroid precision (px per image coordinate) of the controller's
+stereo front end (the simulator's value)."""
+DEFAULT_FOCAL_PX = 1400.0
+DEFAULT_BASELINE = 0.12
+DEFAULT_IMAGE_SIZE = (1280, 1024)
+IMAGE_MARGIN_PX = 20.0
+"""A planned target must project at least this far inside both images (nominal model)."""
+SKIP_REASONS = ("joint_limit", "refused_fault", "invalid_argument")
+"""Controller refusals that skip one pose instead of ending the run."""
+POSE_FRAMES = ("camera", "left_base", "right_base")
+POINT_FRAMES = ("left_target", "right_target")
+
+
+def cell_frames(cell: Cell, tree: KinematicTree) -> dict[str, FramePose | np.ndarray]:
+    """The nominal dual_loop frames: the built-in tree's, overridden by the cell description
+    (`camera` or the controller's `T_headend_camera_nominal`, `left_base`, `right_base` as
+    `{"xyz", "rpy"}`; `left_target`, `right_target` as `[x, y, z]`; SI units)."""
+    frames = nominal_frames(tree.name)
+    raw = dict(cell.raw)
+    for name in POSE_FRAMES:
+        spec = raw.get(name)
+        if spec is None and name == "camera":
+            spec = raw.get("T_headend_camera_nominal")
+        if spec is None:
+            continue
+        if not isinstance(spec, Mapping):
+            raise InputError(f"cell {name}: expected {{\"xyz\": [..], \"rpy\": [..]}}, "
+                             f"got {spec!r}")
+        frames[name] = FramePose(xyz=_vector(spec.get("xyz"), f"{name}.xyz"),
+                                 rpy=_vector(spec.get("rpy", [0.0, 0.0, 0.0]), f"{name}.rpy"))
+    for name in POINT_FRAMES:
+        if raw.get(name) is not None:
+            frames[name] = _vector(raw[name], name)
+    return frames
+
+
+def _vector(value: Any, where: str) -> np.ndarray:
+    try:
+        array = np.asarray(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise InputError(f"cell {where}: expected 3 numbers, got {value!r}") from None
+    if array.shape != (3,) or not np.all(np.isfinite(array)):
+        raise InputError(f"cell {where}: expected 3 finite numbers, got {value!r}")
+    return array
+
+
+def tree_with_frames(tree: KinematicTree, frames: Mapping[str, FramePose | np.ndarray]
+                     ) -> KinematicTree:
+    """The tree with its dual_loop frames (and the arms' mounts) set to `frames`."""
+    transforms: dict[str, np.ndarray] = {}
+    for name in POSE_FRAMES:
+        pose = frames[name]
+        assert isinstance(pose, FramePose)
+        transforms[name] = pose_to_transform(pose.xyz, pose.rpy)
+    for name in POINT_FRAMES:
+        transforms[name] = np.asarray(frames[name], dtype=float)
+    branches = tuple(
+        dataclasses.replace(b, T_parent_base=transforms[f"{b.name}_base"])
+        if f"{b.name}_base" in transforms else b
+        for b in tree.branches)
+    return KinematicTree(name=tree.name, branches=branches, frames=transforms)
+
+
+class DualLoopMethod(Method):
+    """See the module docstring. options: `pixel_sigma` (px, the planning noise model),
+    `pixel_floor` (px per image coordinate, added to each measured covariance as for
+    stereo_target; 0 = the controller's covariance as reported)."""
+
+    name: ClassVar[str] = "dual_loop"
+
+    def __init__(self, settings: RunSettings, cell: Cell, run_dir: Path) -> None:
+        super().__init__(settings, cell, run_dir)
+        self.tree = get_tree(cell.robot)
+        self.frames = cell_frames(cell, self.tree)
+        self.planning_tree = tree_with_frames(self.tree, self.frames)
+        unknown = [k for k in cell.known if k not in DUAL_LOOP_FRAMES]
+        if unknown:
+            raise InputError(f"--known {','.join(unknown)}: not a dual_loop frame (expected "
+                             f"{', '.join(DUAL_LOOP_FRAMES)} or none)")
+        self.known = tuple(cell.known)
+        raw = dict(cell.raw)
+        self.focal_px = float(raw.get("focal_px", raw.get("focal_px_nominal",
+                                                            DEFAULT_FOCAL_PX)))
+        self.baseline = float(cell.baseline or DEFAULT_BASELINE)
+        self.image_size = tuple(cell.image_size or DEFAULT_IMAGE_SIZE)
+        self.pixel_sigma = float(settings.options.get("pixel_sigma", PLANNING_PIXEL_SIGMA))
+        self.pixel_floor = float(settings.options.get("pixel_floor", 0.0) or 0.0)
+        if not (self.focal_px > 0 and self.baseline > 0 and self.pixel_sigma > 0):
+            raise InputError("dual_loop: focal length, baseline and pixel_sigma must be "
+                             "positive")
+        self._home = np.concatenate([HUMANOID_HOME[b.name] for b in self.tree.branches])
+        self._t0 = 0.0
+
+    def set_time_origin(self, t0: float) -> None:
+        """Controller time (s) at the start of the run: sample `t` counts from here."""
+        self._t0 = float(t0)
+
+    async def prepare(self, robot: RobotAdapter, progress: Progress) -> None:
+        """Nothing to set up; the robot must triangulate targets itself."""
+        if not supports_target_measurement(robot):
+            raise InputError(f"--method dual_loop needs a controller that measures targets "
+                             f"(measure_targets); the {getattr(robot, 'driver', '?')} driver "
+                             "does not")
+        progress.message(f"dual_loop: {self.tree.name}, known frames: "
+                         f"{', '.join(self.known) or 'none'}")
+
+    # ---------------------------------------------------------------- planning
+
+    def _check_joints(self, n: int) -> None:
+        if n != self.tree.n:
+            raise InputError(f"the controller reports {n} joints, but {self.tree.name} has "
+                             f"{self.tree.n} ({', '.join(b.name for b in self.tree.branches)})")
+
+    def camera_points(self, q: np.ndarray) -> dict[str, np.ndarray]:
+        """Nominal target of each arm in the camera frame at combined poses q (N, n):
+        side -> (N, 3) m."""
+        tree = self.planning_tree
+        frames = tree.root_transforms(np.asarray(q, dtype=float))
+        T_hb_camera = frames["head"][1] @ tree.frames["camera"]
+        R, t = T_hb_camera[:, :3, :3], T_hb_camera[:, :3, 3]
+        out = {}
+        for side in ARMS:
+            T = frames[side][1]
+            p = T[:, :3, :3] @ tree.frames[f"{side}_target"] + T[:, :3, 3]
+            out[side] = np.einsum("nji,nj->ni", R, p - t)
+        return out
+
+    def visible(self, p: np.ndarray) -> np.ndarray:
+        """(N,) points p (N, 3) (camera frame) inside both images with the margin."""
+        width, height = self.image_size
+        z = p[:, 2]
+        zs = np.where(z > 0.05, z, 1.0)
+        cx, cy = (width - 1) / 2.0, (height - 1) / 2.0
+        u_left = self.focal_px * p[:, 0] / zs + cx
+        u_right = self.focal_px * (p[:, 0] - self.baseline) / zs + cx
+        v = self.focal_px * p[:, 1] / zs + cy
+        m = IMAGE_MARGIN_PX
+        ok = (z > 0.05) & (v > m) & (v < height - 1 - m)
+        for u in (u_left, u_right):
+            ok &= (u > m) & (u < width - 1 - m)
+        return np.asarray(ok)
+
+    def aimed_chain(self, q: np.ndarray) -> np.ndarray:
+        """(N,) the arm ("left"/"right") whose nominal target is nearest the optical axis
+        at poses q (N, n): the arm a plan pose observes."""
+        points = self.camera_points(q)
+        off_axis = {}
+        for side in ARMS:
+            p = points[side]
+            zs = np.where(p[:, 2] > 0.05, p[:, 2], np.nan)
+            off_axis[side] = np.nan_to_num(np.hypot(p[:, 0], p[:, 1]) / zs, nan=np.inf)
+        return np.where(off_axis["left"] <= off_axis["right"], "left", "right")
+
+    def candidates(self, state: RobotState, rng: np.random.Generator) -> np.ndarray:
+        """(N_c, n) combined poses: one arm around home, the head aimed at its target, the
+        other arm at home; the aimed target inside both images, all joints within the
+        controller's limits."""
+        self._check_joints(int(state.q.size))
+        n_wanted = int(self.settings.n_candidates)
+        n_per_arm = max(1, math.ceil(0.75 * n_wanted))  # visibility keeps about two thirds
+        try:
+            poses = plan_poses(n_per_arm, rng, tree=self.planning_tree)
+        except ValueError as exc:
+            raise InputError(f"dual_loop planning: {exc}; check the cell frames") from None
+        q = np.broadcast_to(self._home, (poses.n, self.tree.n)).copy()
+        q[:, self.tree.joint_slice("head")] = poses.q_head
+        for side in ARMS:
+            rows = poses.chain == side
+            q[np.ix_(rows, np.arange(self.tree.n)[self.tree.joint_slice(side)])] = \
+                poses.q_arm[rows]
+        points = self.camera_points(q)
+        aimed = np.array([points[str(side)][k] for k, side in enumerate(poses.chain)])
+        keep = self.visible(aimed)
+        keep &= np.all((q >= state.q_min) & (q <= state.q_max), axis=1)
+        keep &= self.aimed_chain(q) == poses.chain
+        return q[keep][:n_wanted]
+
+    def expected_covariance(self, p: np.ndarray, sigma_px: float) -> np.ndarray:
+        """(N, 3, 3) covariance of points p (N, 3) (camera frame) triangulated from image
+        centres with sigma_px per coordinate (diagonal approximation)."""
+        z = np.maximum(np.abs(p[:, 2]), 1e-3)
+        cov = np.zeros((p.shape[0], 3, 3))
+        lateral = z * sigma_px / self.focal_px
+        cov[:, 0, 0] = cov[:, 1, 1] = lateral**2
+        cov[:, 2, 2] = (z**2 * math.sqrt(2.0) * sigma_px / (self.focal_px * self.baseline)) ** 2
+        return cov
+
+    def design_dataset(self, q: np.ndarray) -> Dataset:
+        """One sample per pose q (N, n) (the aimed arm) with the nominal predicted point
+        and the planning covariance."""
+        q = np.asarray(q, dtype=float)
+        chains = self.aimed_chain(q)
+
+        def samples(p: np.ndarray, cov: np.ndarray) -> list[dict[str, Any]]:
+            return [self._sample(str(chains[k]), q[k], p[k], cov[k], float(k), None)
+                    for k in range(q.shape[0])]
+
+        placeholder = np.broadcast_to(np.array([0.0, 0.0, 0.5]), (q.shape[0], 3))
+        eye = np.broadcast_to(np.eye(3) * 1e-8, (q.shape[0], 3, 3))
+        dataset = dataset_from_dict(self.dataset_document(samples(placeholder, eye)))
+        problem = build_problem(dataset, "joint_offsets")
+        p, _ = predict(problem, np.zeros(problem.layout.size), jacobian=False)
+        cov = self.expected_covariance(p, self.pixel_sigma)
+        return dataset_from_dict(self.dataset_document(samples(p, cov)))
+
+    # ---------------------------------------------------------------- acquisition
+
+    def _sample(self, side: str, q: np.ndarray, p: np.ndarray, cov: np.ndarray, t: float,
+                q_from: np.ndarray | None) -> dict[str, Any]:
+        """One observation in dataset-file form (SI)."""
+        head = self.tree.joint_slice("head")
+        arm = self.tree.joint_slice(side)
+        sample: dict[str, Any] = {
+            "chain": side,
+            "q_head": [float(v) for v in q[head]],
+            "q_arm": [float(v) for v in q[arm]],
+            "p": [float(v) for v in p],
+            "cov": np.asarray(cov, dtype=float).tolist(),
+            "t": t,
+        }
+        if q_from is not None:
+            signs = np.sign(q[arm] - np.asarray(q_from, dtype=float)[arm])
+            sample["approach"] = [float(s) if s != 0 else 1.0 for s in signs]
+        return sample
+
+    async def acquire(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
+                      q_from: np.ndarray | None) -> SampleRecord:
+        """Move to q (n,), measure the targets in view: one observation per arm seen."""
+        from hostpc.transport import ControllerRefusedError
+
+        q_previous = None if q_from is None else [float(v) for v in q_from]
+        try:
+            outcome = await robot.move_joints(q, self.settings.speed)
+        except ControllerRefusedError as exc:
+            if exc.reason in SKIP_REASONS:
+                return SampleRecord(phase, index, False, reason=f"move refused: {exc.reason}",
+                                    q_end=q_previous)
+            raise
+        q_end = [float(v) for v in outcome.q]
+        if not outcome.completed:
+            return SampleRecord(phase, index, False,
+                                reason=f"move stopped: {outcome.reason or 'not completed'}",
+                                q_end=q_end)
+        measurement: TargetMeasurement = await robot.measure_targets()  # type: ignore[attr-defined]
+        q_seen = np.asarray(measurement.q, dtype=float)
+        self._check_joints(int(q_seen.size))
+        observations = []
+        for target in sorted(measurement.targets, key=lambda t: t.chain):
+            if target.chain not in ARMS:
+                continue
+            cov = np.asarray(target.cov, dtype=float)
+            if self.pixel_floor > 0:
+                cov = cov + self.expected_covariance(np.asarray(target.p)[None, :],
+                                                     self.pixel_floor)[0]
+            observations.append(self._sample(target.chain, q_seen, np.asarray(target.p),
+                                             cov, float(measurement.t) - self._t0, q_from))
+        if not observations:
+            return SampleRecord(phase, index, False, reason="no target in view", q_end=q_end)
+        return SampleRecord(phase, index, True, sample={"observations": observations},
+                            q_end=q_end)
+
+    # ---------------------------------------------------------------- dataset
+
+    def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+        """A `zerocal-dataset/1` dual_loop document: the journaled records' observations
+        (or plain samples) in order, the nominal frames and `known`."""
+        flat: list[dict[str, Any]] = []
+        for record in samples:
+            if "observations" in record:
+                flat.extend(dict(o) for o in record["observations"])
+            else:
+                flat.append(dict(record))
+        frames: dict[str, Any] = {}
+        for name, value in self.frames.items():
+            if isinstance(value, FramePose):
+                frames[name] = {"xyz": value.xyz.tolist(), "rpy": value.rpy.tolist()}
+            else:
+                frames[name] = np.asarray(value, dtype=float).tolist()
+        return {
+            "format": FORMAT_TAG,
+            "method": self.name,
+            "units": {"length": "m", "angle": "rad", "time": "s"},
+            "robot": {"name": self.tree.name},
+            "frames": frames,
+            "known": list(self.known),
+            "samples": flat,
+        }
+
+    def describe(self) -> dict[str, Any]:
+        """The tree, frames and camera model for the result document (SI)."""
+        document = self.dataset_document([])
+        return {"dual_loop": {
+            "tree": self.tree.name,
+            "joints": list(self.tree.joint_labels),
+            "frames": document["frames"],
+            "known": list(self.known),
+            "camera": {"focal_px": self.focal_px, "baseline": self.baseline,
+                       "image_size": list(self.image_size)},
+            "planning_pixel_sigma": self.pixel_sigma,
+            "pixel_floor": self.pixel_floor,
+        }}

@@ -1,0 +1,289 @@
+"""`hostpc calibrate --method dual_loop`: the humanoid's head camera calibrates both arms.
+
+Against the simulated humanoid (`controller_stub.humanoid`) over real loopback sockets: the
+`measure_targets` message, the whole run (`--robot sim`) compared with the stub's hidden
+truth in the fit's gauge (`hostpc.fit.stepwise.gauge_equivalent`), the held offsets, push
+and verify, `hostpc fit` / `hostpc diagnose` on the produced dataset, and a run cut by a
+dropped link and resumed.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from hostpc.dataset import load_dataset
+from hostpc.errors import InputError
+from hostpc.fit.stepwise import gauge_equivalent
+from hostpc.kinematics.rotations import matrix_to_rotvec, pose_to_transform
+from hostpc.methods.base import NullProgress, RunSettings
+from hostpc.methods.cell import build_cell
+from hostpc.methods.dual_loop import DualLoopMethod
+from hostpc.model.problem import Problem, build_problem
+from hostpc.robots.simulator import SimulatedController, default_sim_scenario, sim_default_known
+from hostpc.robots.zerocal import ZerocalAdapter
+from hostpc.synthesize_dual_loop import plan_poses
+from hostpc.transport import ControllerClient, ControllerRefusedError
+from protocol import messages as m
+from tests.integration.conftest import TOKEN, StartStub
+from tests.integration.test_calibrate_sim import run_cli
+
+SIM_TOKEN = "zerocal-sim"
+HELD = ("head.q1", "head.q2", "left.q1", "left.q7", "right.q1", "right.q7")
+"""The offsets the data cannot separate from the frames (docs/dual-loop.md)."""
+LABELS = ("head.q1", "head.q2", *(f"left.q{j}" for j in range(1, 8)),
+          *(f"right.q{j}" for j in range(1, 8)))
+
+
+def left_pose() -> np.ndarray:
+    """(16,) a combined pose with the head aimed at the left target (nominal model)."""
+    poses = plan_poses(1, np.random.default_rng(4))
+    q = np.array([0.0, -0.45, 0.1, 0.05, 0.1, -1.45, 0.0, 0.8, 0.0,
+                  -0.1, 0.05, -0.1, -1.45, 0.0, 0.8, 0.0])
+    q[0:2] = poses.q_head[0]
+    q[2:9] = poses.q_arm[0]
+    return q
+
+
+# ------------------------------------------------------------------ the message
+
+
+async def test_measure_targets_over_loopback(start_stub: StartStub) -> None:
+    server = await start_stub({"robot": "humanoid_upper"})
+    host, port = server.address
+    q = left_pose()
+    async with ControllerClient.connect(host, port, token=TOKEN, timeout=5.0) as client:
+        nothing = await client.measure_targets()  # home pose: no target in view
+        assert nothing.targets == () and nothing.q.shape == (16,)
+        await client.move_joints(q, 1.0)
+        seen = await client.measure_targets()
+    np.testing.assert_allclose(seen.q, q, atol=1e-12)
+    chains = [t.chain for t in seen.targets]
+    assert "left" in chains and len(set(chains)) == len(chains)  # the aimed one, maybe both
+    for target in seen.targets:
+        truth = server.sim.target_in_camera(target.chain)
+        assert target.p.shape == (3,) and target.cov.shape == (3, 3)
+        np.testing.assert_allclose(target.cov, target.cov.T, atol=0.0)
+        assert np.all(np.linalg.eigvalsh(target.cov) > 0)
+        # the noise is the stated one: within 5 sigma of the truth in the whitened metric
+        error = target.p - truth
+        assert float(error @ np.linalg.solve(target.cov, error)) < 25.0
+    # the adapter passes it through
+    adapter = await ZerocalAdapter.connect(host, port, token=TOKEN)
+    try:
+        measured = await adapter.measure_targets()
+        assert [t.chain for t in measured.targets] == chains
+        assert measured.q.shape == (16,)
+    finally:
+        await adapter.close()
+
+
+async def test_measure_targets_needs_auth_and_a_target_sensor(start_stub: StartStub) -> None:
+    humanoid = await start_stub({"robot": "humanoid_upper"})
+    async with ControllerClient.connect(*humanoid.address, token=None, timeout=5.0) as client:
+        with pytest.raises(ControllerRefusedError) as refused:
+            await client.measure_targets()
+        assert refused.value.code == "auth_required"
+    ur = await start_stub()
+    async with ControllerClient.connect(*ur.address, token=TOKEN, timeout=5.0) as client:
+        with pytest.raises(ControllerRefusedError) as refused:
+            await client.measure_targets()
+        assert refused.value.code == "refused" and refused.value.reason == "unsupported"
+
+
+def test_targets_measured_message_is_strict() -> None:
+    good = {"kind": "targets_measured", "reply_to": 3, "q": [0.0] * 16, "time": 1.0,
+            "targets": [{"chain": "left", "p": [0.0, 0.1, 0.5],
+                         "cov": [[1e-8, 0, 0], [0, 1e-8, 0], [0, 0, 1e-7]]}]}
+    message = m.MESSAGE_ADAPTER.validate_python(good)
+    assert isinstance(message, m.TargetsMeasured)
+    assert m.REPLY_KIND["measure_targets"] == "targets_measured"
+    for broken in (
+        {**good, "targets": [{**good["targets"][0], "cov": [[1e-8, 0, 0], [0, 1e-8, 0]]}]},
+        {**good, "targets": [{**good["targets"][0], "p": [0.0, float("nan"), 0.5]}]},
+        {**good, "targets": [{**good["targets"][0], "colour": "red"}]},
+    ):
+        with pytest.raises(ValueError):
+            m.MESSAGE_ADAPTER.validate_python(broken)
+
+
+# ------------------------------------------------------------------ the method's set-up
+
+
+def test_sim_world_of_dual_loop_is_the_humanoid() -> None:
+    scenario = default_sim_scenario(time_scale=0.0, method="dual_loop")
+    assert scenario["robot"] == "humanoid_upper" and scenario["motion"]["time_scale"] == 0.0
+    assert sim_default_known("dual_loop") == ()
+    assert default_sim_scenario()["robot"] == "ur5e" and sim_default_known() == ("target",)
+
+
+async def test_method_refuses_a_robot_without_target_measurement(tmp_path: Path) -> None:
+    cell = build_cell({}, "humanoid_upper")
+    method = DualLoopMethod(RunSettings(method="dual_loop"), cell, tmp_path)
+    with pytest.raises(InputError, match="measure_targets"):
+        await method.prepare(object(), NullProgress())  # type: ignore[arg-type]
+    with pytest.raises(InputError, match="not a dual_loop frame"):
+        DualLoopMethod(RunSettings(method="dual_loop"),
+                       build_cell({}, "humanoid_upper", known=("target",)), tmp_path)
+
+
+# ------------------------------------------------------------------ end to end
+
+
+def truth_vector(truth: Mapping[str, Any], problem: Problem) -> np.ndarray:
+    """The stub's truth file as parameters on `problem`'s layout (zero errors against the
+    offsets at the start; pose deltas t_true - t_nom, log(R_nom^T R_true); point deltas)."""
+    values: dict[str, float] = {}
+    for label, error in zip(truth["joint_order"], truth["zero_errors_initial"], strict=True):
+        values[f"joint_offsets.{label}"] = float(error)
+    frames = problem.dataset.frames
+    for name in ("camera", "left_base", "right_base"):
+        nominal = frames[name]
+        T_nom = pose_to_transform(nominal.xyz, nominal.rpy)  # type: ignore[union-attr]
+        T_true = pose_to_transform(truth[name]["xyz"], truth[name]["rpy"])
+        dt = T_true[:3, 3] - T_nom[:3, 3]
+        r = matrix_to_rotvec(T_nom[:3, :3].T @ T_true[:3, :3])
+        for k, axis in enumerate("xyz"):
+            values[f"{name}.{axis}"] = float(dt[k])
+            values[f"{name}.r{axis}"] = float(r[k])
+    for side in ("left", "right"):
+        delta = np.asarray(truth[f"{side}_target"]) - np.asarray(frames[f"{side}_target"])
+        for k, axis in enumerate("xyz"):
+            values[f"{side}_target.{axis}"] = float(delta[k])
+    return np.array([values.get(name, 0.0) for name in problem.layout.names])
+
+
+@pytest.mark.slow
+def test_calibrate_sim_dual_loop_recovers_truth_pushes_and_verifies(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run"
+    code, stdout, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--method",
+                                   "dual_loop", "--out", str(out), "--json")
+    assert code == 0, stderr
+    document = json.loads(stdout)
+    assert document["method"] == "dual_loop" and document["robot"]["sim"] is True
+    assert document["robot"]["name"] == "humanoid_upper" and document["known"] == []
+    joints = document["offsets"]["joints"]
+    assert len(joints) == 16
+
+    # the truth in the fit's gauge: identifiable offsets within 3 sigma, frames within 4
+    dataset = load_dataset(out / "dataset.json")
+    assert dataset.method == "dual_loop" and dataset.n_samples >= 60
+    assert set(dataset.samples.chain) == {"left", "right"}  # type: ignore[arg-type]
+    problem = build_problem(dataset)
+    fit_doc = json.loads((out / "fit.json").read_text())
+    parameters = fit_doc["parameters"]
+    assert list(parameters) == list(problem.layout.names)
+    fixed = np.array([parameters[n]["fixed"] for n in problem.layout.names])
+    x_fit = np.array([parameters[n]["value"] for n in problem.layout.names])
+    truth = json.loads((out / "sim" / "truth.json").read_text())
+    x_ref = gauge_equivalent(problem, truth_vector(truth, problem), fixed)
+    held = {f"joint_offsets.{label}" for label in HELD}
+    assert {n for n, f in zip(problem.layout.names, fixed, strict=True) if f} == held
+    for k, name in enumerate(problem.layout.names):
+        if fixed[k]:
+            continue
+        sigma = parameters[name]["std"]
+        limit = 3.0 if name.startswith("joint_offsets.") else 4.0
+        assert abs(x_fit[k] - x_ref[k]) <= limit * sigma, (name, x_fit[k], x_ref[k], sigma)
+
+    # the result document: the same errors for the identified offsets, none for the held
+    errors = document["truth"]["joint_offsets_error_deg"]
+    for j, label in enumerate(LABELS):
+        if label in HELD:
+            assert errors[j] is None and joints[j]["pushed"] is False
+            assert "unidentifiable" in joints[j]["note"]
+        else:
+            assert errors[j] is not None and joints[j]["pushed"] is True
+            assert abs(errors[j]) <= 3 * joints[j]["sigma_deg"], (label, errors[j])
+    described = " ".join(document["fit"]["unidentifiable"])
+    for label in HELD:
+        assert f"joint_offsets.{label}" in described
+
+    # pushed: o + delta on the identified joints only; the controller now reads true angles
+    assert document["push"]["status"] == "pushed"
+    push = json.loads((out / "push.json").read_text())
+    for j, label in enumerate(LABELS):
+        change = push["new_offsets"][j] - push["previous_offsets"][j]
+        if label in HELD:
+            assert change == 0.0
+        else:
+            assert math.degrees(change) == pytest.approx(joints[j]["correction_deg"])
+            remaining = math.degrees(truth["zero_errors"][j])  # truth after the push
+            assert abs(remaining) <= 3 * joints[j]["sigma_deg"], (label, remaining)
+
+    verify = document["verify"]
+    assert verify["passed"] is True and verify["n_measured"] >= 8
+    assert verify["rms_after_mm"] <= 1.3 * verify["noise_rms_mm"]
+    assert verify["rms_before_mm"] > 4 * verify["rms_after_mm"]
+
+    # the produced dataset goes through `hostpc fit` and `hostpc diagnose` offline
+    code, fit_out, fit_err = run_cli(capsys, "fit", "--json", "--cv-folds", "0",
+                                     str(out / "dataset.json"))
+    assert code == 0, fit_err
+    refit = json.loads(fit_out)
+    assert refit["method"] == "dual_loop" and refit["converged"] is True
+    for name in problem.layout.names:
+        assert refit["parameters"][name]["value"] == pytest.approx(
+            parameters[name]["value"], abs=1e-9)
+    code, diag_out, diag_err = run_cli(capsys, "diagnose", "--cv-folds", "2",
+                                       str(out / "dataset.json"))
+    assert code == 0, diag_err
+    assert "method dual_loop" in diag_out and "verdict:" in diag_out
+
+
+# ------------------------------------------------------------------ resume
+
+RESUME_POSES = 12
+# requests: get_state, get_offsets, then (move_joints, measure_targets) per pose: index
+# 2 + 2k is the move to pose k; the drop makes that move fail (not executed, not re-sent)
+DROP_AT_POSE = 5
+DROP_INDEX = 2 + 2 * DROP_AT_POSE
+
+
+def _calibrate(capsys: pytest.CaptureFixture[str], sim: SimulatedController,
+               out: Path) -> tuple[int, str, str]:
+    address = f"{sim.address.host}:{sim.address.port}"
+    return run_cli(capsys, "calibrate", "--robot", address, "--token", SIM_TOKEN,
+                   "--method", "dual_loop", "--poses", str(RESUME_POSES), "--verify-poses",
+                   "4", "--candidates", "400", "--seed", "5", "--no-push", "--no-report",
+                   "--cv-folds", "0", "--out", str(out))
+
+
+@pytest.mark.slow
+def test_dual_loop_run_cut_and_resumed_equals_uncut_run(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    faulty = default_sim_scenario(method="dual_loop")
+    faulty["faults"] = {"drop_after_requests": DROP_INDEX}
+    cut = tmp_path / "cut"
+    with SimulatedController(faulty, tmp_path / "stub-cut") as sim:
+        code, _, stderr = _calibrate(capsys, sim, cut)
+        assert code == 3, stderr
+        last = stderr.strip().splitlines()[-1]
+        assert "not re-sent" in last and f"--resume {cut}" in last
+        assert len((cut / "journal.jsonl").read_text().splitlines()) == DROP_AT_POSE
+        code, _, stderr = run_cli(capsys, "calibrate", "--resume", str(cut))
+        assert code == 0, stderr
+        assert "resuming" in stderr
+    uncut = tmp_path / "uncut"
+    with SimulatedController(default_sim_scenario(method="dual_loop"),
+                             tmp_path / "stub-uncut") as sim:
+        code, _, stderr = _calibrate(capsys, sim, uncut)
+        assert code == 0, stderr
+    resumed = json.loads((cut / "dataset.json").read_text())["samples"]
+    whole = json.loads((uncut / "dataset.json").read_text())["samples"]
+    assert len(resumed) == len(whole) >= RESUME_POSES
+    for index, (a, b) in enumerate(zip(resumed, whole, strict=True)):
+        assert a == b, f"sample {index} differs"
+    journal = [json.loads(line) for line in (cut / "journal.jsonl").read_text().splitlines()]
+    keys = [(r["phase"], r["index"]) for r in journal if r["event"] == "sample"]
+    assert len(keys) == len(set(keys)) == RESUME_POSES + 4
+    assert json.loads((cut / "run.json").read_text())["plan"] == json.loads(
+        (uncut / "run.json").read_text())["plan"]
+    assert json.loads((cut / "result.json").read_text())["verify"]["passed"] is True
