@@ -140,10 +140,10 @@ class ControllerServer:
     @classmethod
     def from_scenario(cls, scenario: Any, truth_out: str | Path | None = None) -> ControllerServer:
         """Build the simulation of `scenario` and a server with its token and faults."""
-        from controller_stub.simulation import Simulation
+        from controller_stub.simulation import create_simulation
 
         return cls(
-            Simulation(scenario),
+            create_simulation(scenario),
             token=scenario.server.token,
             max_frame_size=scenario.server.max_frame_bytes,
             drop_after_requests=scenario.faults.drop_after_requests,
@@ -386,6 +386,7 @@ class _Session:
             "guarded_move": self._guarded_move,
             "abort": self._abort,
             "capture": self._capture,
+            "measure_targets": self._measure_targets,
             "get_offsets": self._get_offsets,
             "set_offsets": self._set_offsets,
             "rollback_offsets": self._rollback,
@@ -708,6 +709,22 @@ class _Session:
         )
         reply.with_attachments(*payloads)
         return reply
+
+    async def _measure_targets(self, request: m.MeasureTargets) -> m.TargetsMeasured:
+        """The simulation's triangulated targets (`sim.measure_targets()`); a simulation
+        without that sensor refuses with reason `unsupported`."""
+        measure = getattr(self.sim, "measure_targets", None)
+        if measure is None:
+            raise SimulationRefused("unsupported", f"{self.sim.robot_name} has no target "
+                                    "measurement; use capture")
+        result = measure()  # during a motion: at its start pose, with that q (as capture)
+        targets = [
+            m.TargetObservation(chain=str(chain), p=_floats(seen["p"]),
+                                cov=np.asarray(seen["cov"], dtype=float).reshape(3, 3).tolist())
+            for chain, seen in result["targets"].items()
+        ]
+        return m.TargetsMeasured(reply_to=request.id, q=_floats(result["q"]),
+                                 time=float(result["time"]), targets=targets)
 
     async def _get_offsets(self, request: m.GetOffsets) -> m.Offsets:
         return m.Offsets(reply_to=request.id, offsets=_floats(self.sim.zero_offsets()))

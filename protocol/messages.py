@@ -276,6 +276,43 @@ class CaptureDone(Reply):
         return len(self.images)
 
 
+# --- measured targets (a controller with its own stereo front end) --------------------------
+
+
+Vector3 = Annotated[list[FiniteFloat], Field(min_length=3, max_length=3)]
+Matrix3 = Annotated[list[Vector3], Field(min_length=3, max_length=3)]
+
+
+class MeasureTargets(Request):
+    """Measure every target the controller's camera sees now, already triangulated.
+
+    For a controller whose vision front end delivers points instead of images (the
+    humanoid's head camera, dual_loop). Needs an authenticated session, like `capture`.
+    """
+
+    kind: Literal["measure_targets"] = "measure_targets"
+
+
+class TargetObservation(BaseModel):
+    """One triangulated target: `chain` names the kinematic chain that carries it (e.g.
+    "left", "right"); p: (3,) m in the camera (left optical) frame; cov: (3, 3) m^2."""
+
+    model_config = ConfigDict(extra="forbid")
+    chain: ShortText
+    p: Vector3
+    cov: Matrix3
+
+
+class TargetsMeasured(Reply):
+    """The visible targets (none if nothing is in view), with the joint angles at the
+    measurement: q (n,) rad, all joints of the controller; time: controller time (s)."""
+
+    kind: Literal["targets_measured"] = "targets_measured"
+    q: JointVector
+    time: FiniteFloat
+    targets: Annotated[list[TargetObservation], Field(max_length=64)]
+
+
 # --- zero offsets --------------------------------------------------------------------------
 
 
@@ -374,6 +411,8 @@ Message = Annotated[
     | Aborted
     | Capture
     | CaptureDone
+    | MeasureTargets
+    | TargetsMeasured
     | GetOffsets
     | Offsets
     | SetOffsets
@@ -400,6 +439,7 @@ REQUEST_TYPES: dict[str, type[Request]] = {
         GuardedMove,
         Abort,
         Capture,
+        MeasureTargets,
         GetOffsets,
         SetOffsets,
         RollbackOffsets,
@@ -417,6 +457,7 @@ REPLY_KIND: dict[str, str] = {
     "guarded_move": "guarded_move_done",
     "abort": "aborted",
     "capture": "capture_done",
+    "measure_targets": "targets_measured",
     "get_offsets": "offsets",
     "set_offsets": "offsets_set",
     "rollback_offsets": "offsets_rolled_back",

@@ -557,7 +557,10 @@ def format_summary(document: Mapping[str, Any]) -> str:
     verify = document.get("verify")
     if verify:
         lines.append(
-            f"verify: {verify['n_measured']} fresh poses: RMS before {verify['rms_before_mm']:.4f}"
+            (f"verify: {verify['n_planned']} fresh poses ({verify['n_measured']} samples)"
+             if verify["n_measured"] > verify["n_planned"]  # dual_loop: two targets a pose
+             else f"verify: {verify['n_measured']} fresh poses")
+            + f": RMS before {verify['rms_before_mm']:.4f}"
             f" mm (max {verify['max_before_mm']:.4f}), after {verify['rms_after_mm']:.4f} mm "
             f"(max {verify['max_after_mm']:.4f}); expected noise {verify['noise_rms_mm']:.4f} "
             f"mm, pass if RMS <= {verify['factor']:g} x noise = {verify['threshold_mm']:.4f} mm"

@@ -13,6 +13,8 @@ from hostpc.transport.types import (
     IoEdgeEvent,
     IoSnapshot,
     MoveOutcome,
+    TargetPoint,
+    TargetsMeasurement,
 )
 
 __all__ = [
@@ -26,4 +28,6 @@ __all__ = [
     "IoEventSubscription",
     "IoSnapshot",
     "MoveOutcome",
+    "TargetPoint",
+    "TargetsMeasurement",
 ]

@@ -39,6 +39,8 @@ from hostpc.transport.types import (
     IoEdgeEvent,
     IoSnapshot,
     MoveOutcome,
+    TargetPoint,
+    TargetsMeasurement,
 )
 from protocol import DEFAULT_PORT
 from protocol import messages as m
@@ -48,7 +50,9 @@ from protocol.errors import ErrorCode, LocalProtocolError
 logger = logging.getLogger(__name__)
 
 READ_CHUNK = 1 << 20
-IDEMPOTENT_KINDS = frozenset({"get_state", "get_offsets", "read_io", "capture", "heartbeat"})
+IDEMPOTENT_KINDS = frozenset(
+    {"get_state", "get_offsets", "read_io", "capture", "measure_targets", "heartbeat"}
+)
 """Requests re-sent after a reconnection; everything else raises instead."""
 MOTION_KINDS = frozenset({"move_joints", "guarded_move"})
 """Requests that move the robot: timed by `motion_timeout`, aborted when they time out."""
@@ -396,6 +400,18 @@ class ControllerClient:
                 f"capture reply has cameras {sorted(by_camera)}, not left/right"
             )
         return by_camera["left"], by_camera["right"], _array(reply.q), reply.time
+
+    async def measure_targets(self, timeout: float | None = None) -> TargetsMeasurement:
+        """The targets the controller's camera sees now, triangulated by the controller:
+        each with its chain, p (3,) m in the camera frame and cov (3, 3) m^2, and the joint
+        angles q (n,) rad at the measurement."""
+        reply = await self._request(lambda i: m.MeasureTargets(id=i), m.TargetsMeasured,
+                                    timeout)
+        targets = tuple(
+            TargetPoint(chain=t.chain, p=_array(t.p), cov=np.asarray(t.cov, dtype=float))
+            for t in reply.targets
+        )
+        return TargetsMeasurement(q=_array(reply.q), time=reply.time, targets=targets)
 
     async def read_io(self, timeout: float | None = None) -> IoSnapshot:
         """Digital inputs and outputs."""

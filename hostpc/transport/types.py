@@ -68,6 +68,26 @@ class GuardedMoveOutcome:
 
 
 @dataclass(frozen=True)
+class TargetPoint:
+    """One triangulated target: chain (the kinematic chain carrying it, e.g. "left");
+    p: (3,) m in the camera frame; cov: (3, 3) m^2."""
+
+    chain: str
+    p: np.ndarray
+    cov: np.ndarray
+
+
+@dataclass(frozen=True)
+class TargetsMeasurement:
+    """The targets the controller's camera saw (in reply order) at joint angles q (n,) rad
+    and controller time `time` (s)."""
+
+    q: np.ndarray
+    time: float
+    targets: tuple[TargetPoint, ...]
+
+
+@dataclass(frozen=True)
 class IoSnapshot:
     """Digital inputs and outputs (line 0 first) at controller time `time` (s)."""
 

@@ -59,8 +59,9 @@ async def test_measure_targets_over_loopback(start_stub: StartStub) -> None:
     host, port = server.address
     q = left_pose()
     async with ControllerClient.connect(host, port, token=TOKEN, timeout=5.0) as client:
-        nothing = await client.measure_targets()  # home pose: no target in view
-        assert nothing.targets == () and nothing.q.shape == (16,)
+        at_home = await client.measure_targets()
+        assert at_home.q.shape == (16,) and {t.chain for t in at_home.targets} <= {"left",
+                                                                                 "right"}
         await client.move_joints(q, 1.0)
         seen = await client.measure_targets()
     np.testing.assert_allclose(seen.q, q, atol=1e-12)

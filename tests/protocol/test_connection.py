@@ -72,6 +72,7 @@ def request_samples(next_id: Callable[[], int]) -> list[m.Request]:
         m.GuardedMove(id=next_id(), q=Q, speed=0.1, io_line=3),
         m.Abort(id=next_id()),
         m.Capture(id=next_id(), pattern="chessboard", view=4, encoding="png"),
+        m.MeasureTargets(id=next_id()),
         m.GetOffsets(id=next_id()),
         m.SetOffsets(id=next_id(), offsets=[0.001] * 6),
         m.RollbackOffsets(id=next_id(), rollback_id="rb-7"),
@@ -114,6 +115,18 @@ def reply_for(request: m.Request) -> m._Message:
                 m.ImageInfo(camera="right", width=4, height=2, nbytes=8),
             ],
         ).with_attachments(bytes(range(8)), bytes(range(8, 16))),
+        "measure_targets": m.TargetsMeasured(
+            reply_to=i,
+            q=Q,
+            time=3.5,
+            targets=[
+                m.TargetObservation(
+                    chain="left",
+                    p=[0.01, -0.02, 0.45],
+                    cov=[[1e-9, 0.0, 2e-10], [0.0, 1e-9, 0.0], [2e-10, 0.0, 4e-8]],
+                )
+            ],
+        ),
         "get_offsets": m.Offsets(reply_to=i, offsets=[0.002] * 6),
         "set_offsets": m.OffsetsSet(
             reply_to=i, offsets=[0.001] * 6, previous=[0.0] * 6, rollback_id="rb-1"
