@@ -28,8 +28,8 @@ import numpy as np
 from controller_stub.humanoid import HumanoidSimulation
 from controller_stub.scenario import scenario_from_dict
 from hostpc.dataset import Dataset
-from hostpc.fit import solve
-from hostpc.fit.stepwise import fit_stepwise, gauge_equivalent, identity_weighted
+from hostpc.fitting import solve
+from hostpc.fitting.stepwise import fit_stepwise, gauge_equivalent, identity_weighted
 from hostpc.kinematics.rotations import matrix_to_rotvec, pose_to_transform, rotvec_to_matrix
 from hostpc.model.measurement import predict
 from hostpc.model.problem import Problem, build_problem

@@ -22,8 +22,8 @@ from collections.abc import Callable
 import numpy as np
 from scipy.optimize import least_squares
 
-from hostpc.fit import solve
-from hostpc.fit.solver import evaluate
+from hostpc.fitting import solve
+from hostpc.fitting.solver import evaluate
 from hostpc.model.problem import build_problem
 from hostpc.synthesize import random_truth, synthesize_stereo_target
 

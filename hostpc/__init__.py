@@ -4,11 +4,33 @@
     dataset = hostpc.load_dataset("run/dataset.json")
     result = hostpc.fit(dataset, effects=["joint_offsets", "tool", "target"])
     print(result.parameters["joint_offsets.q2"])
+    diagnosis = hostpc.diagnose(dataset, ladder=True)
+
+The names below are imported on first use, so `hostpc` commands start fast and can set up
+the numeric libraries before numpy loads.
 """
 
-from hostpc.dataset import load_dataset, save_dataset
-from hostpc.diagnose import Diagnosis, diagnose
-from hostpc.fit import FitResult, fit
+from __future__ import annotations
 
-__all__ = ["load_dataset", "save_dataset", "fit", "FitResult", "diagnose", "Diagnosis"]
+import importlib
+from typing import Any
+
 __version__ = "0.1.0"
+
+_LAZY = {
+    "load_dataset": "hostpc.dataset",
+    "save_dataset": "hostpc.dataset",
+    "fit": "hostpc.fitting",
+    "FitResult": "hostpc.fitting",
+    "diagnose": "hostpc.diagnostics",
+    "Diagnosis": "hostpc.diagnostics",
+}
+__all__ = list(_LAZY)
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _LAZY:
+        raise AttributeError(f"module 'hostpc' has no attribute {name!r}")
+    value = getattr(importlib.import_module(_LAZY[name]), name)
+    globals()[name] = value
+    return value

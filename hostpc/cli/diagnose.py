@@ -8,11 +8,11 @@ import sys
 from typing import TYPE_CHECKING
 
 from hostpc.cli.fit import add_model_options
-from hostpc.diagnose.advice import mm
+from hostpc.diagnostics.advice import mm
 from hostpc.errors import InputError
 
 if TYPE_CHECKING:
-    from hostpc.diagnose import Diagnosis
+    from hostpc.diagnostics import Diagnosis
 
 TOP_INTERACTIONS = 10
 
@@ -46,7 +46,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 
 
 def run(args: argparse.Namespace) -> int:
-    from hostpc.diagnose import DEFAULT_ALPHA, diagnose
+    from hostpc.diagnostics import DEFAULT_ALPHA, diagnose
 
     if args.cv_folds < 0:
         raise InputError(f"--cv-folds {args.cv_folds}: must not be negative")

@@ -8,7 +8,7 @@ import sys
 
 from hostpc.cli.format import format_fit_summary
 from hostpc.dataset import load_dataset
-from hostpc.fit import fit
+from hostpc.fitting import fit
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]

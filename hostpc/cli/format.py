@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from hostpc.fit import FitResult
+from hostpc.fitting import FitResult
 
 DISPLAY_UNITS = {
     "rad": ("deg", math.degrees(1.0)),

@@ -7,7 +7,7 @@ information a pose adds: `M = sum_k A_k^T A_k`.
 
 - Structural gauge: directions no pose of the pool can see (e.g. joint 1 against an
   estimated target point, joint 6 against an estimated camera mount) are found once on the
-  whole pool with `hostpc.fit.analyse` and left out of the selection; they are reported,
+  whole pool with `hostpc.fitting.analyse` and left out of the selection; they are reported,
   and the fit holds them at nominal (never pushed).
 - Selection (criterion "D"): greedy D-optimal design. Starting from a small ridge, each
   step adds the candidate with the largest `log det(I + A_k M^-1 A_k^T)` (the gain in
@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hostpc.dataset import Dataset
-from hostpc.fit import NullDirection, analyse
+from hostpc.fitting import NullDirection, analyse
 from hostpc.kinematics import Chain, forward, invert_transform
 from hostpc.kinematics.inverse import look_at, solve_ik
 from hostpc.model.measurement import predict

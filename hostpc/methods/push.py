@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.errors import InputError
-from hostpc.fit import FitResult
+from hostpc.fitting import FitResult
 from hostpc.methods.journal import write_json_atomic
 from hostpc.methods.planning import joint_offset_names
 from hostpc.robots.base import RobotAdapter

@@ -32,7 +32,7 @@ import numpy as np
 
 from hostpc.dataset import Dataset, dataset_from_dict, save_dataset
 from hostpc.errors import ConnectionFailed, ControllerError, InputError, ZerocalError
-from hostpc.fit import FitResult, fit
+from hostpc.fitting import FitResult, fit
 from hostpc.methods import method_class
 from hostpc.methods.base import Method, NullProgress, Plan, Progress, RunSettings
 from hostpc.methods.cell import Cell, build_cell, cell_from_dict
@@ -375,7 +375,7 @@ class Runner:
     def _write_report(self, dataset: Dataset, settings: RunSettings) -> str | None:
         """report.html through hostpc.diagnose + hostpc.report, if both are installed."""
         try:
-            from hostpc.diagnose import diagnose
+            from hostpc.diagnostics import diagnose
             from hostpc.report import write_report  # type: ignore[attr-defined]
         except ImportError:
             return None

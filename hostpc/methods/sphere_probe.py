@@ -35,7 +35,7 @@ import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples, SphereFrame
 from hostpc.errors import InputError
-from hostpc.fit import FitResult, fit
+from hostpc.fitting import FitResult, fit
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
 from hostpc.kinematics.inverse import solve_ik
 from hostpc.methods.base import Method, Phase, Progress, RunSettings, SampleRecord

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.dataset import Dataset
-from hostpc.fit import FitResult
+from hostpc.fitting import FitResult
 from hostpc.methods.planning import joint_offset_names
 from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem

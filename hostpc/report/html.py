@@ -9,8 +9,8 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import hostpc
-from hostpc.diagnose import Diagnosis
-from hostpc.diagnose.pipeline import variables_of
+from hostpc.diagnostics import Diagnosis
+from hostpc.diagnostics.pipeline import variables_of
 from hostpc.report import plots
 
 DISPLAY = {"rad": ("deg", math.degrees(1.0)), "m": ("mm", 1e3),

@@ -17,9 +17,9 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from hostpc.diagnose import Diagnosis
-from hostpc.diagnose.residual_analysis import VariablePattern
-from hostpc.fit.identifiability import RELATIVE_RANK_TOLERANCE
+from hostpc.diagnostics import Diagnosis
+from hostpc.diagnostics.residual_analysis import VariablePattern
+from hostpc.fitting.identifiability import RELATIVE_RANK_TOLERANCE
 
 MM = 1e3
 AXIS_NAMES = {3: ("x", "y", "z"), 1: ("distance",)}

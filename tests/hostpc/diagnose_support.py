@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from hostpc.dataset import Dataset, RobotDescription, Samples, SphereFrame
-from hostpc.fit.solver import evaluate
+from hostpc.fitting.solver import evaluate
 from hostpc.model.effect import Effect
 from hostpc.model.measurement import predict
 from hostpc.model.problem import Problem, build_problem

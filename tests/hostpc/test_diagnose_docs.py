@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hostpc.diagnose import diagnose
-from hostpc.fit import fit
+from hostpc.diagnostics import diagnose
+from hostpc.fitting import fit
 from hostpc.model.registry import load_plugin_file
 from tests.hostpc.diagnose_support import hidden_dataset, inject
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hostpc.diagnose import diagnose
+from hostpc.diagnostics import diagnose
 from tests.hostpc.diagnose_support import (
     hidden_dataset,
     hidden_signal,

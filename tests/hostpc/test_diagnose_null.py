@@ -9,9 +9,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from hostpc.diagnose import DEFAULT_ALPHA, diagnose, held_out_residuals
-from hostpc.diagnose.adequacy import chi2_band
-from hostpc.fit import fit
+from hostpc.diagnostics import DEFAULT_ALPHA, diagnose, held_out_residuals
+from hostpc.diagnostics.adequacy import chi2_band
+from hostpc.fitting import fit
 from tests.hostpc.diagnose_support import hidden_dataset, noise_rms
 
 N_SEEDS = 24

@@ -6,14 +6,14 @@ from pathlib import Path
 
 import numpy as np
 
-from hostpc.diagnose.interactions import modulators, search_interactions
-from hostpc.diagnose.residual_analysis import (
+from hostpc.diagnostics.interactions import modulators, search_interactions
+from hostpc.diagnostics.residual_analysis import (
     analyse_residuals,
     analysis_variables,
     is_angle,
     usable_variables,
 )
-from hostpc.fit import fit
+from hostpc.fitting import fit
 from tests.hostpc.diagnose_support import hidden_dataset
 
 

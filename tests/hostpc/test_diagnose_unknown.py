@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from hostpc.diagnose import diagnose
+from hostpc.diagnostics import diagnose
 from tests.hostpc.diagnose_support import (
     hidden_dataset,
     inject,

@@ -7,7 +7,7 @@ import pytest
 
 from hostpc.dataset import dataset_from_dict, save_dataset
 from hostpc.errors import InputError
-from hostpc.fit import solve
+from hostpc.fitting import solve
 from hostpc.kinematics import forward, get_robot
 from hostpc.kinematics.humanoid import HUMANOID_HOME, get_tree, humanoid_upper, tree_names
 from hostpc.kinematics.tree import Branch, KinematicTree, tree_gravity_torque

@@ -16,8 +16,8 @@ from bench.bench_dual_loop import (
 )
 from controller_stub.humanoid import HumanoidSimulation
 from controller_stub.scenario import scenario_from_dict
-from hostpc.fit import solve
-from hostpc.fit.stepwise import fit_stepwise, gauge_equivalent
+from hostpc.fitting import solve
+from hostpc.fitting.stepwise import fit_stepwise, gauge_equivalent
 from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem
 from hostpc.synthesize_dual_loop import plan_poses

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hostpc.fit import fit, solve
+from hostpc.fitting import fit, solve
 from hostpc.model.problem import build_problem
 from hostpc.synthesize import random_truth, synthesize_stereo_target
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hostpc.fit.identifiability import analyse
+from hostpc.fitting.identifiability import analyse
 
 
 def jacobian_with_null(direction: np.ndarray, rows: int = 40, seed: int = 0) -> np.ndarray:

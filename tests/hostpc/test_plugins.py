@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hostpc.errors import EffectError
-from hostpc.fit import fit
+from hostpc.fitting import fit
 from hostpc.model.registry import load_plugin_file, parse_effect_list
 from hostpc.synthesize import random_truth, synthesize_stereo_target
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from hostpc.diagnose import Diagnosis, diagnose
+from hostpc.diagnostics import Diagnosis, diagnose
 from hostpc.report import render_html, write_report
 from tests.hostpc.diagnose_support import hidden_dataset
 

@@ -2,7 +2,7 @@
 
 Against the simulated humanoid (`controller_stub.humanoid`) over real loopback sockets: the
 `measure_targets` message, the whole run (`--robot sim`) compared with the stub's hidden
-truth in the fit's gauge (`hostpc.fit.stepwise.gauge_equivalent`), the held offsets, push
+truth in the fit's gauge (`hostpc.fitting.stepwise.gauge_equivalent`), the held offsets, push
 and verify, `hostpc fit` / `hostpc diagnose` on the produced dataset, and a run cut by a
 dropped link and resumed.
 """
@@ -20,7 +20,7 @@ import pytest
 
 from hostpc.dataset import load_dataset
 from hostpc.errors import InputError
-from hostpc.fit.stepwise import gauge_equivalent
+from hostpc.fitting.stepwise import gauge_equivalent
 from hostpc.kinematics.rotations import matrix_to_rotvec, pose_to_transform
 from hostpc.methods.base import NullProgress, RunSettings
 from hostpc.methods.cell import build_cell

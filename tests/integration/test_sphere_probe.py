@@ -17,7 +17,7 @@ import pytest
 
 from controller_stub.server import ControllerServer
 from hostpc.dataset import load_dataset, save_dataset
-from hostpc.fit import FitResult
+from hostpc.fitting import FitResult
 from hostpc.kinematics import get_robot, rot_z
 from hostpc.methods import sphere_probe as sp
 from hostpc.robots.zerocal import ZerocalAdapter
@@ -159,7 +159,7 @@ async def test_hidden_trigger_latency_is_found(start_stub: StartStub, tmp_path: 
     path = tmp_path / "probe.json"
     save_dataset(dataset, path)
     loaded = load_dataset(path)
-    from hostpc.diagnose.adequacy import assess
+    from hostpc.diagnostics.adequacy import assess
 
     lean = sp.solve(loaded, estimate=False)
     assert not assess(lean, None, 0.01).adequate
@@ -186,7 +186,7 @@ async def test_hidden_trigger_latency_is_found(start_stub: StartStub, tmp_path: 
 
     # and hostpc.diagnose ranks trigger_latency first (if the diagnose pipeline is there)
     try:
-        from hostpc.diagnose import diagnose
+        from hostpc.diagnostics import diagnose
     except ImportError:
         return
     diagnosis = diagnose(str(path))

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from hostpc.fit.identifiability import NullDirection
+from hostpc.fitting.identifiability import NullDirection
 from hostpc.model.problem import Problem
 
 CORRELATION_THRESHOLD = 0.9

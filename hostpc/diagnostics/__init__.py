@@ -9,12 +9,12 @@
 See docs/diagnostics.md for the walk-through and the JSON schema.
 """
 
-from hostpc.diagnose.adequacy import Adequacy, HeldOut, held_out_residuals
-from hostpc.diagnose.candidates import Candidate, SkippedCandidate
-from hostpc.diagnose.diagnosis import Diagnosis, LadderStep, ModelCheck
-from hostpc.diagnose.interactions import Interaction
-from hostpc.diagnose.pipeline import DEFAULT_ALPHA, diagnose
-from hostpc.diagnose.residual_analysis import ResidualAnalysis, VariablePattern
+from hostpc.diagnostics.adequacy import Adequacy, HeldOut, held_out_residuals
+from hostpc.diagnostics.candidates import Candidate, SkippedCandidate
+from hostpc.diagnostics.diagnosis import Diagnosis, LadderStep, ModelCheck
+from hostpc.diagnostics.interactions import Interaction
+from hostpc.diagnostics.pipeline import DEFAULT_ALPHA, diagnose
+from hostpc.diagnostics.residual_analysis import ResidualAnalysis, VariablePattern
 
 __all__ = ["diagnose", "Diagnosis", "ModelCheck", "LadderStep", "Adequacy", "HeldOut",
            "Candidate", "SkippedCandidate", "Interaction", "ResidualAnalysis",

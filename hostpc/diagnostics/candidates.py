@@ -25,11 +25,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from hostpc.diagnose.adequacy import held_out_residuals
-from hostpc.diagnose.distributions import f_sf
+from hostpc.diagnostics.adequacy import held_out_residuals
+from hostpc.diagnostics.distributions import f_sf
 from hostpc.errors import InputError
-from hostpc.fit import FitResult, solve
-from hostpc.fit.solver import Loss, evaluate, levenberg_marquardt
+from hostpc.fitting import FitResult, solve
+from hostpc.fitting.solver import Loss, evaluate, levenberg_marquardt
 from hostpc.model.effect import Effect
 from hostpc.model.problem import Problem, build_problem
 

@@ -6,10 +6,10 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 
-from hostpc.diagnose.candidates import Candidate
-from hostpc.diagnose.diagnosis import LadderStep, ModelCheck
-from hostpc.diagnose.interactions import Interaction
-from hostpc.diagnose.residual_analysis import ResidualAnalysis
+from hostpc.diagnostics.candidates import Candidate
+from hostpc.diagnostics.diagnosis import LadderStep, ModelCheck
+from hostpc.diagnostics.interactions import Interaction
+from hostpc.diagnostics.residual_analysis import ResidualAnalysis
 from hostpc.model.problem import default_effects
 
 # what the residuals follow when a built-in effect is missing; {j}: the joint

@@ -24,11 +24,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hostpc.diagnose.distributions import f_logsf
-from hostpc.diagnose.residual_analysis import is_angle, usable_variables
+from hostpc.diagnostics.distributions import f_logsf
+from hostpc.diagnostics.residual_analysis import is_angle, usable_variables
 from hostpc.errors import InputError
-from hostpc.fit import FitResult
-from hostpc.fit.solver import evaluate
+from hostpc.fitting import FitResult
+from hostpc.fitting.solver import evaluate
 from hostpc.model.effects import Geometry
 from hostpc.model.problem import build_problem
 

@@ -11,7 +11,7 @@ The camera (shared by both loops) is thus estimated from half the data, and its 
 frozen into step 2. :func:`fit_stepwise` does exactly that, on the same parameter layout as
 the joint solve (``build_problem`` of the whole dataset) and with the same gauge: in each
 step the parameters that step cannot see are held at nominal by
-:func:`hostpc.fit.identifiability.analyse` (the pan and tilt offsets and each arm's first
+:func:`hostpc.fitting.identifiability.analyse` (the pan and tilt offsets and each arm's first
 and last offsets, the frames absorbing them), so its estimates compare one to one with the
 joint solve's.
 
@@ -29,8 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from hostpc.dataset import Dataset
-from hostpc.fit.identifiability import analyse
-from hostpc.fit.solver import SolverOutcome, evaluate, levenberg_marquardt
+from hostpc.fitting.identifiability import analyse
+from hostpc.fitting.solver import SolverOutcome, evaluate, levenberg_marquardt
 from hostpc.model.measurement import predict
 from hostpc.model.problem import Problem, build_problem
 

@@ -13,11 +13,11 @@ from typing import Any
 
 import numpy as np
 
-from hostpc.diagnose.adequacy import Adequacy, HeldOut
-from hostpc.diagnose.candidates import Candidate, SkippedCandidate
-from hostpc.diagnose.interactions import Interaction
-from hostpc.diagnose.residual_analysis import ResidualAnalysis
-from hostpc.fit import FitResult
+from hostpc.diagnostics.adequacy import Adequacy, HeldOut
+from hostpc.diagnostics.candidates import Candidate, SkippedCandidate
+from hostpc.diagnostics.interactions import Interaction
+from hostpc.diagnostics.residual_analysis import ResidualAnalysis
+from hostpc.fitting import FitResult
 
 FORMAT = "zerocal-diagnosis/1"
 JSON_INTERACTIONS = 25

@@ -11,9 +11,9 @@ import numpy as np
 
 from hostpc.dataset import Dataset
 from hostpc.errors import InputError
-from hostpc.fit.identifiability import Identifiability, analyse
-from hostpc.fit.result import CORRELATION_THRESHOLD, FitResult
-from hostpc.fit.solver import Loss, evaluate, levenberg_marquardt
+from hostpc.fitting.identifiability import Identifiability, analyse
+from hostpc.fitting.result import CORRELATION_THRESHOLD, FitResult
+from hostpc.fitting.solver import Loss, evaluate, levenberg_marquardt
 from hostpc.model.problem import Problem, build_problem
 
 DEFAULT_CV_FOLDS = 5

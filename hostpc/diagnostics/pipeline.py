@@ -9,16 +9,16 @@ from pathlib import Path
 import numpy as np
 
 from hostpc.dataset import Dataset, load_dataset
-from hostpc.diagnose.adequacy import assess, held_out_residuals
-from hostpc.diagnose.advice import advise
-from hostpc.diagnose.candidates import candidate_effects, rank_candidates
-from hostpc.diagnose.diagnosis import Diagnosis, ModelCheck
-from hostpc.diagnose.interactions import search_interactions
-from hostpc.diagnose.ladder import DEFAULT_MAX_STEPS, climb
-from hostpc.diagnose.residual_analysis import analyse_residuals, analysis_variables
+from hostpc.diagnostics.adequacy import assess, held_out_residuals
+from hostpc.diagnostics.advice import advise
+from hostpc.diagnostics.candidates import candidate_effects, rank_candidates
+from hostpc.diagnostics.diagnosis import Diagnosis, ModelCheck
+from hostpc.diagnostics.interactions import search_interactions
+from hostpc.diagnostics.ladder import DEFAULT_MAX_STEPS, climb
+from hostpc.diagnostics.residual_analysis import analyse_residuals, analysis_variables
 from hostpc.errors import InputError
-from hostpc.fit import FitResult, solve
-from hostpc.fit.solver import Loss
+from hostpc.fitting import FitResult, solve
+from hostpc.fitting.solver import Loss
 from hostpc.model.effect import Effect
 from hostpc.model.problem import build_problem
 from hostpc.model.registry import available_effects

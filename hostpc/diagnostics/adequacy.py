@@ -10,9 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hostpc.diagnose.distributions import chi2_isf, chi2_ppf, chi2_sf
-from hostpc.fit import FitResult, fold_indices
-from hostpc.fit.solver import evaluate, levenberg_marquardt
+from hostpc.diagnostics.distributions import chi2_isf, chi2_ppf, chi2_sf
+from hostpc.fitting import FitResult, fold_indices
+from hostpc.fitting.solver import evaluate, levenberg_marquardt
 from hostpc.model.problem import Problem
 
 

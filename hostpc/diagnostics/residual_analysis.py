@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hostpc.diagnose.distributions import chi2_sf
+from hostpc.diagnostics.distributions import chi2_sf
 
 ANGLE_VARIABLE = re.compile(r"(^|\.)q\d+$")
 DEFAULT_BINS = 6

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from hostpc.diagnose.diagnosis import LadderStep, ModelCheck, free_parameters
-from hostpc.fit import FitResult
+from hostpc.diagnostics.diagnosis import LadderStep, ModelCheck, free_parameters
+from hostpc.fitting import FitResult
 
 DEFAULT_MAX_STEPS = 5
 
