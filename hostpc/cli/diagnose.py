@@ -4,15 +4,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from typing import TYPE_CHECKING
 
 from hostpc.cli.fit import add_model_options
-from hostpc.diagnostics.advice import mm
+from hostpc.diagnostics.advice import mm, without
 from hostpc.errors import InputError
 
 if TYPE_CHECKING:
-    from hostpc.diagnostics import Diagnosis
+    from hostpc.diagnostics import Diagnosis, LadderStep, ModelCheck
 
 TOP_INTERACTIONS = 10
 
@@ -32,10 +33,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     add_model_options(parser)
     parser.add_argument("--ladder", action="store_true",
                         help="fit the nested models, adding the best candidate while it is "
-                        "significant, and show each step")
+                        "significant and lowers the whitened held-out RMS, and show each step")
     parser.add_argument("--candidates", metavar="LIST",
                         help="comma-separated effects to try (default: every effect that "
-                        "applies)")
+                        "applies; frames such as tool are part of the model, not candidates)")
     parser.add_argument("--alpha", type=float, default=None,
                         help="family-wise significance of each family of tests "
                         "(default 0.001)")
@@ -72,12 +73,45 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _p(value: float) -> str:
-    return f"{value:.2g}"
+def _p(value: float | None) -> str:
+    return "-" if value is None or not math.isfinite(value) else f"{value:.2g}"
 
 
 def _sigma(value: float | None) -> str:
     return "-" if value is None else f"{value:.3f}"
+
+
+def cell(value: float | str | None, width: int, decimals: int = 4) -> str:
+    """A number right-aligned in ``width`` characters, at least one of them a leading space
+    so that columns never run together: fixed-point with ``decimals``, or scientific when
+    that is too wide (9186383.132 -> ' 9.19e+06'); '-' for None and NaN; text as is."""
+    if isinstance(value, str):
+        text = value
+    elif value is None or not math.isfinite(value):
+        text = "-"
+    else:
+        text = f"{value:.{decimals}f}"
+        digits = max(width - 7, 0)
+        while len(text) > width - 1 and digits >= 0:
+            text = f"{value:.{digits}e}"
+            digits -= 1
+    return " " + text.rjust(width - 1)
+
+
+def name_cell(text: str, width: int) -> str:
+    """Left-aligned text in ``width`` characters, followed by at least one space."""
+    return text.ljust(width - 1) + " "
+
+
+def _mm_cell(value: float | None, width: int = 10) -> str:
+    return cell(None if value is None else value * 1e3, width)
+
+
+def verdict_word(check: ModelCheck) -> str:
+    a = check.adequacy
+    if a.dof <= 0:
+        return "cannot judge (too few samples)"
+    return "adequate" if a.adequate else "NOT adequate"
 
 
 def format_diagnosis(diagnosis: Diagnosis) -> str:
@@ -90,51 +124,72 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
     lines = [
         f"{head}: method {fit.problem.method}, {n_samples} samples, "
         f"model {', '.join(check.effects)}",
-        f"verdict: {'adequate' if a.adequate else 'NOT adequate'}",
-        f"  chi2/dof {a.chi2_dof:.3f} (band {a.chi2_band[0]:.3f}..{a.chi2_band[1]:.3f} for "
-        f"{a.dof} dof, p = {_p(a.p_value)})",
-        f"  in-sample RMS {mm(a.rms)}, max {mm(a.max)}",
+        f"verdict: {verdict_word(check)}",
     ]
+    if a.dof > 0:
+        lines.append(f"  chi2/dof {a.chi2_dof:.3f} (band {a.chi2_band[0]:.3f}.."
+                     f"{a.chi2_band[1]:.3f} for {a.dof} dof, p = {_p(a.p_value)})")
+    else:
+        lines.append(f"  chi2/dof - ({a.dof} degrees of freedom)")
+    lines.append(f"  in-sample RMS {mm(a.rms)}, max {mm(a.max)}")
     if a.cv_rms is not None:
         lines.append(f"  held-out ({a.cv_folds}-fold) RMS {mm(a.cv_rms)}, max {mm(a.cv_max)}, "
                      f"whitened {_sigma(a.cv_whitened_rms)} sigma (1 = the stated noise)")
-    lines.append(f"  noise {mm(a.noise_rms)} per sample, corrected for the fitted parameters "
-                 f"(the stated covariances predict {mm(a.expected_noise_rms)})")
+    if a.dof > 0:
+        lines.append(f"  noise {mm(a.noise_rms)} per sample, corrected for the fitted "
+                     f"parameters (the stated covariances predict {mm(a.expected_noise_rms)});"
+                     f" whitened ratio {a.noise_scale:.3f} (1 = the stated noise)")
     for reason in a.reasons:
         lines.append(f"  - {reason}")
     worst = ", ".join(f"#{w.index} {w.whitened_norm:.2f} sigma ({mm(w.norm)})"
                       for w in diagnosis.residuals.worst[:5])
-    lines += ["", f"worst samples: {worst}", "",
-              "residuals binned against each variable (* significant):"]
+    lines += ["", f"worst samples: {worst}"]
+    if check.outliers:
+        lines.append("outliers: " + ", ".join(f"#{o.sample} {o.sigma:.3g} sigma "
+                                              f"(p = {_p(o.p_value)})" for o in check.outliers)
+                     + f"; left out below ({without(check)})")
+    lines += ["", "residuals binned against each variable (* significant):"]
     for pattern in diagnosis.residuals.patterns:
         mark = "*" if pattern.significant else " "
-        lines.append(f"  {mark} {pattern.variable:<14} chi2 {pattern.chi2:8.1f} / {pattern.dof:<3} "
-                     f"p = {_p(pattern.p_value)}")
+        lines.append(f"  {mark} {name_cell(pattern.variable, 15)}chi2"
+                     f"{cell(pattern.chi2, 10, 1)} / {pattern.dof:<3} p = {_p(pattern.p_value)}")
     lines += ["", "candidate effects (best first; * significant):",
-              f"    {'effect':<24}{'dBIC':>9}{'dBIC all':>10}{'RMS mm':>10}{'held-out':>10}"
-              f"{'chi2/dof':>10}{'p':>10}"]
+              f"    {name_cell('effect', 24)}{'dBIC':>9}{'dBIC all':>10}{'RMS mm':>10}"
+              f"{'held-out':>10}{'chi2/dof':>10}{'p':>11}"]
     for c in check.candidates:
         mark = "*" if c.significant else " "
-        held = "-" if c.cv_rms is None else f"{c.cv_rms * 1e3:.4f}"
-        lines.append(f"  {mark} {c.effect:<24}{c.delta_bic:9.1f}{c.delta_bic_full:10.1f}"
-                     f"{c.rms * 1e3:10.4f}{held:>10}{c.chi2_dof:10.3f}{_p(c.p_value):>10}")
+        lines.append(f"  {mark} {name_cell(c.effect, 24)}{cell(c.delta_bic, 9, 1)}"
+                     f"{cell(c.delta_bic_full, 10, 1)}{_mm_cell(c.rms)}{_mm_cell(c.cv_rms)}"
+                     f"{cell(c.chi2_dof, 10, 3)}"
+                     f"{cell(_p(c.p_value) if c.testable else 'untestable', 11)}")
     for s in check.skipped:
-        lines.append(f"    {s.effect:<24}skipped: {s.reason}")
+        lines.append(f"    {name_cell(s.effect, 24)}skipped: {s.reason}")
     lines += ["", f"parameter varies with variable (top {TOP_INTERACTIONS} of "
               f"{check.n_interaction_tests}; * significant):"]
     for i in check.interactions[:TOP_INTERACTIONS]:
         mark = "*" if i.significant else " "
-        lines.append(f"  {mark} {i.sentence:<44} score {i.score:6.1f}  p = {_p(i.p_value)}")
+        lines.append(f"  {mark} {name_cell(i.sentence, 45)}score{cell(i.score, 7, 1)}  "
+                     f"p = {_p(i.p_value)}")
     if diagnosis.ladder:
-        lines += ["", "ladder:",
-                  f"  {'step':<5}{'added':<24}{'RMS mm':>10}{'held-out':>10}{'max':>10}"
-                  f"{'sigma':>8}{'chi2/dof':>10}  verdict"]
-        for step in diagnosis.ladder:
-            held = "-" if step.cv_rms is None else f"{step.cv_rms * 1e3:.4f}"
-            worst_held = "-" if step.cv_max is None else f"{step.cv_max * 1e3:.4f}"
-            lines.append(f"  {step.step:<5}{step.added or '(current model)':<24}"
-                         f"{step.rms * 1e3:10.4f}{held:>10}{worst_held:>10}"
-                         f"{_sigma(step.cv_whitened_rms):>8}{step.chi2_dof:10.3f}  "
-                         f"{'adequate' if step.adequate else 'NOT adequate'}")
+        lines += ["", "ladder:" + (f" ({without(check)})" if check.outliers else ""),
+                  ladder_header()]
+        lines += [ladder_row(step) for step in diagnosis.ladder]
+        if diagnosis.ladder_stop:
+            lines.append(f"  stopped: {diagnosis.ladder_stop}")
     lines += ["", "advice:"] + [f"  - {sentence}" for sentence in diagnosis.advice]
     return "\n".join(lines)
+
+
+def ladder_header() -> str:
+    """The ladder table's header (the columns of ``ladder_row``)."""
+    return (f"  {name_cell('step', 5)}{name_cell('added', 24)}{'RMS mm':>10}{'held-out':>10}"
+            f"{'max':>10}{'sigma':>8}{'chi2/dof':>10}  verdict")
+
+
+def ladder_row(step: LadderStep) -> str:
+    """One ladder step in fixed-width columns (scientific notation where a value is too
+    wide for its column)."""
+    return (f"  {name_cell(str(step.step), 5)}{name_cell(step.added or '(current model)', 24)}"
+            f"{_mm_cell(step.rms)}{_mm_cell(step.cv_rms)}{_mm_cell(step.cv_max)}"
+            f"{cell(step.cv_whitened_rms, 8, 3)}{cell(step.chi2_dof, 10, 3)}  "
+            f"{verdict_word(step.check)}")

@@ -13,9 +13,10 @@ from hostpc.diagnostics.adequacy import Adequacy, HeldOut, held_out_residuals
 from hostpc.diagnostics.candidates import Candidate, SkippedCandidate
 from hostpc.diagnostics.diagnosis import Diagnosis, LadderStep, ModelCheck
 from hostpc.diagnostics.interactions import Interaction
+from hostpc.diagnostics.outliers import Outlier
 from hostpc.diagnostics.pipeline import DEFAULT_ALPHA, diagnose
 from hostpc.diagnostics.residual_analysis import ResidualAnalysis, VariablePattern
 
 __all__ = ["diagnose", "Diagnosis", "ModelCheck", "LadderStep", "Adequacy", "HeldOut",
-           "Candidate", "SkippedCandidate", "Interaction", "ResidualAnalysis",
+           "Candidate", "SkippedCandidate", "Interaction", "Outlier", "ResidualAnalysis",
            "VariablePattern", "held_out_residuals", "DEFAULT_ALPHA"]

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hostpc.diagnostics.distributions import chi2_isf, chi2_ppf, chi2_sf
+from hostpc.diagnostics.outliers import Outlier
 from hostpc.fitting import FitResult, fold_indices
 from hostpc.fitting.solver import evaluate, levenberg_marquardt
 from hostpc.model.problem import Problem
@@ -119,10 +120,29 @@ def expected_noise_rms(problem: Problem) -> float:
     return float(np.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2))))
 
 
+def outlier_reason(outliers: tuple[Outlier, ...], n_samples: int) -> str:
+    """The sentence that names the outliers (most significant first)."""
+    listed = ", ".join(f"#{o.sample} ({o.sigma:.3g} sigma, p = {o.p_value:.2g})"
+                       for o in outliers)
+    head = (f"sample {listed} is an outlier" if len(outliers) == 1
+            else f"samples {listed} are outliers")
+    return (f"{head} (leave-one-out residual against the noise of the other samples, "
+            f"Bonferroni over {n_samples} samples)")
+
+
+def too_few_reason(result: FitResult) -> str:
+    """The sentence for a fit that leaves no degrees of freedom."""
+    n_samples, m = result.residuals_raw.shape
+    free = int(result.residuals_raw.size - result.dof)
+    return (f"too few samples: {n_samples} samples give {n_samples * m} numbers for "
+            f"{free} fitted parameters, so no degrees of freedom are left")
+
+
 def assess(result: FitResult, held_out: HeldOut | None, alpha: float,
-           missing: tuple[str, ...] = ()) -> Adequacy:
-    """The verdict: the chi-square is inside its band (upper tail at ``alpha``) and no
-    missing effect was found significant (``missing``: sentences naming what was)."""
+           missing: tuple[str, ...] = (), outliers: tuple[Outlier, ...] = ()) -> Adequacy:
+    """The verdict: no sample is an outlier (``outliers``), the chi-square is inside its
+    band (upper tail at ``alpha``) and no missing effect was found significant
+    (``missing``: sentences naming what was). Reasons are listed in that order."""
     dof = result.dof
     chi2_dof = result.chi2_dof
     p_value = chi2_sf(result.chi2, dof) if dof > 0 else float("nan")
@@ -132,8 +152,10 @@ def assess(result: FitResult, held_out: HeldOut | None, alpha: float,
     noise_rms = float(np.sqrt(sum_squares * m / dof)) if dof > 0 else float("nan")
     band = chi2_band(dof, alpha)
     reasons: list[str] = []
+    if outliers:
+        reasons.append(outlier_reason(outliers, result.residuals_raw.shape[0]))
     if dof <= 0:
-        reasons.append("no degrees of freedom left: more samples than parameters are needed")
+        reasons.append(too_few_reason(result))
     elif not chi2_ok:
         reasons.append(f"chi2/dof {chi2_dof:.3f} is above its band "
                        f"[{band[0]:.3f}, {band[1]:.3f}] for {dof} degrees of freedom "

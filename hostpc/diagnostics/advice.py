@@ -3,6 +3,7 @@ that adds it. Lengths in mm here (human text, docs/conventions.md)."""
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Sequence
 
@@ -11,6 +12,11 @@ from hostpc.diagnostics.diagnosis import LadderStep, ModelCheck
 from hostpc.diagnostics.interactions import Interaction
 from hostpc.diagnostics.residual_analysis import ResidualAnalysis
 from hostpc.model.problem import default_effects
+
+#: fewer degrees of freedom than this: the advice says the samples are too few to judge
+FEW_DOF = 10
+#: the default folds of the held-out residuals (they need 2 samples per fold)
+DEFAULT_FOLDS = 5
 
 # what the residuals follow when a built-in effect is missing; {j}: the joint
 EFFECT_PHRASES = {
@@ -74,11 +80,79 @@ def candidate_sentence(check: ModelCheck, candidate: Candidate, source: str | No
             f" ({description})" if description else "")
     else:
         phrase = template.format(j=_joint(parameter), parameter=parameter)
-    a = check.adequacy
-    evidence = (f"delta BIC {candidate.delta_bic:.1f}, chi2/dof {a.chi2_dof:.3f} -> "
+    a = check.ranked.adequacy
+    delta_bic = "-" if candidate.delta_bic is None else f"{candidate.delta_bic:.1f}"
+    evidence = (f"delta BIC {delta_bic}, chi2/dof {a.chi2_dof:.3f} -> "
                 f"{candidate.chi2_dof:.3f}, held-out RMS {mm(a.cv_rms)} -> {mm(candidate.cv_rms)}")
+    if check.outliers:
+        evidence += f" ({without(check)})"
     return (f"{phrase}: add {candidate.effect} "
             f"({command(check, candidate.effect, source, plugins)}); {evidence}.")
+
+
+def samples_text(indices: Sequence[int]) -> str:
+    """'sample #3' or 'samples #3, #17'."""
+    listed = ", ".join(f"#{k}" for k in indices)
+    return f"sample {listed}" if len(indices) == 1 else f"samples {listed}"
+
+
+def without(check: ModelCheck) -> str:
+    """'without sample #17': what the ranking left out."""
+    return f"without {samples_text(check.excluded)}"
+
+
+def outlier_sentence(check: ModelCheck) -> str:
+    """The outliers, what to do about them, and what the rest of the diagnosis did."""
+    outliers = check.outliers
+    listed = ", ".join(f"#{o.sample} ({o.sigma:.3g} sigma)" for o in outliers)
+    one = len(outliers) == 1
+    head = (f"Sample {listed} is an outlier" if one else f"Samples {listed} are outliers")
+    measurement = "that measurement" if one else "those measurements"
+    it = "it" if one else "them"
+    loss = check.fit.loss
+    fix = (f" (the {loss} loss of this fit already down-weights {it})" if loss != "linear"
+           else ", or fit with --loss cauchy")
+    return (f"{head}: check {measurement}{fix}. The candidate effects, the effect-agnostic "
+            f"search, the binned residuals and the ladder below leave {it} out, so no effect "
+            f"is blamed for {it}.")
+
+
+def needed_samples(check: ModelCheck) -> int:
+    """Samples for three residual rows per parameter of the largest model tried (the model
+    plus its largest candidate), and for the held-out folds."""
+    m = check.fit.residuals_raw.shape[1]
+    model = check.fit.problem.layout.size
+    largest = max([model] + [c.fit.problem.layout.size for c in check.candidates])
+    return max(math.ceil(3 * largest / m), 2 * DEFAULT_FOLDS)
+
+
+def few_samples_sentence(check: ModelCheck) -> str | None:
+    """A plain statement when the samples are too few to judge the model (None if not):
+    no degrees of freedom left, fewer than FEW_DOF, or candidates that cannot be tested."""
+    a = check.adequacy
+    n_samples, m = check.fit.residuals_raw.shape
+    untestable = [c.effect for c in check.candidates if not c.testable]
+    needed = needed_samples(check)
+    if a.dof <= 0:
+        return (f"Too few samples to judge: {n_samples} samples give {n_samples * m} numbers "
+                f"for {int((~check.fit.fixed).sum())} fitted parameters, so nothing can be "
+                f"tested (no verdict, no candidate, no noise estimate). Measure at least "
+                f"{needed} samples.")
+    if a.dof >= FEW_DOF and not untestable:
+        return None
+    problems = []
+    if a.dof < FEW_DOF:
+        problems.append(f"{a.dof} degrees of freedom give a wide chi-square band "
+                        f"[{a.chi2_band[0]:.3f}, {a.chi2_band[1]:.3f}]")
+    if untestable:
+        problems.append(f"{len(untestable)} of {len(check.candidates)} candidate effects "
+                        f"cannot be tested ({', '.join(untestable)}: no degrees of freedom "
+                        f"left with them)")
+    if a.cv_rms is None and n_samples < 2 * DEFAULT_FOLDS:
+        problems.append("there are too few samples for a held-out RMS")
+    return (f"Too few samples to judge reliably ({n_samples} samples): "
+            f"{'; '.join(problems)}. The verdict is weak evidence either way; measure at "
+            f"least {needed} samples.")
 
 
 def interaction_sentence(interaction: Interaction, check: ModelCheck) -> str:
@@ -101,6 +175,9 @@ def verdict_sentence(check: ModelCheck) -> str:
     band = f"[{a.chi2_band[0]:.3f}, {a.chi2_band[1]:.3f}]"
     held = (f", held-out RMS {mm(a.cv_rms)} (in-sample {mm(a.rms)})"
             if a.cv_rms is not None else f", RMS {mm(a.rms)}")
+    if a.dof <= 0:
+        return (f"The model ({model}) cannot be judged: {'; '.join(a.reasons)}, "
+                f"RMS {mm(a.rms)}.")
     if a.adequate:
         return (f"The model ({model}) is adequate: chi2/dof {a.chi2_dof:.3f} is inside its "
                 f"band {band} and no missing effect is significant{held}.")
@@ -108,49 +185,80 @@ def verdict_sentence(check: ModelCheck) -> str:
 
 
 def noise_sentence(check: ModelCheck) -> str:
+    """The noise measured and stated, in mm per sample, and their whitened ratio.
+
+    The mm figures are RMS norms, dominated by each sample's noisiest axis; the ratio is
+    sqrt(chi2/dof), every axis of every sample in units of its own stated noise. The two
+    need not agree (an understated lateral noise barely moves the mm figure), so the ratio
+    is labelled as the whitened one."""
     a = check.adequacy
     n_free = int((~check.fit.fixed).sum())
+    if a.dof <= 0:
+        return (f"Noise: cannot be estimated with no degrees of freedom left; the stated "
+                f"covariances predict {mm(a.expected_noise_rms)} RMS per sample.")
     text = (f"Noise: {mm(a.noise_rms)} RMS per sample (corrected for {n_free} fitted "
-            f"parameters); the stated covariances predict {mm(a.expected_noise_rms)} "
-            f"(ratio {a.noise_scale:.2f}).")
+            f"parameters); the stated covariances predict {mm(a.expected_noise_rms)}. "
+            f"Whitened ratio {a.noise_scale:.2f} (measured / stated noise, every axis in "
+            f"units of its own stated noise: sqrt(chi2/dof); the mm figures are dominated by "
+            f"the noisiest axis, so their ratio can differ).")
     if a.dof > 0 and a.chi2_dof < a.chi2_band[0]:
         text += (" chi2/dof is below its band: the stated covariances are pessimistic "
                  f"(about {1 / max(a.noise_scale, 1e-9):.2f} times too large).")
     return text
 
 
+def ladder_sentences(check: ModelCheck, ladder: Sequence[LadderStep],
+                     ladder_stop: str | None) -> list[str]:
+    """What the ladder did, and why it stopped early if it did."""
+    sentences = []
+    last = ladder[-1]
+    head = f"Ladder ({without(check)})" if check.outliers else "Ladder"
+    path = " -> ".join(f"{mm(s.cv_rms if s.cv_rms is not None else s.rms)}" for s in ladder)
+    added = [s.added for s in ladder if s.added]
+    if added:
+        verdict = "adequate" if last.adequate else "still NOT adequate"
+        sentences.append(f"{head}: adding {', '.join(added)} takes the held-out RMS "
+                         f"{path}; the final model is {verdict}.")
+    elif not last.adequate and ladder_stop is None:
+        sentences.append(f"{head}: no candidate effect is significant, so nothing was "
+                         "added.")
+    if ladder_stop is not None:
+        sentences.append(f"{head} stopped: {ladder_stop}.")
+    return sentences
+
+
 def advise(check: ModelCheck, residuals: ResidualAnalysis, ladder: Sequence[LadderStep] | None,
-           source: str | None, plugins: Sequence[str]) -> tuple[str, ...]:
-    """The advice, most important first."""
-    sentences = [verdict_sentence(check), noise_sentence(check)]
+           source: str | None, plugins: Sequence[str], ladder_stop: str | None = None
+           ) -> tuple[str, ...]:
+    """The advice, most important first: outliers, then the verdict, the noise, what is
+    missing, where the residuals fail, and what the ladder did."""
+    sentences = [outlier_sentence(check)] if check.outliers else []
+    sentences += [verdict_sentence(check), noise_sentence(check)]
+    few = few_samples_sentence(check)
+    if few is not None:
+        sentences.append(few)
+    if check.adequacy.dof <= 0:
+        return tuple(sentences)
     best = check.best_candidate
     if best is not None:
         sentences.append(candidate_sentence(check, best, source, plugins))
     top = check.significant_interactions[:1]
     if top:
         sentences.append(interaction_sentence(top[0], check))
-    if not check.adequacy.adequate and best is None and not top:
+    ranked = check.ranked.adequacy
+    if not ranked.adequate and ranked.dof > 0 and best is None and not top:
         sentences.append("No candidate effect and no parameter-variable pattern is "
                          "significant: the excess is spread evenly; check the stated "
                          "covariances and the worst samples.")
     patterns = [p for p in residuals.patterns if p.significant][:3]
     if patterns:
         listed = ", ".join(f"{p.variable} (p = {p.p_value:.2g})" for p in patterns)
-        sentences.append(f"Binned residuals change significantly with {listed}.")
+        sentences.append(f"Binned residuals change significantly with {listed}"
+                         + (f" ({without(check)})." if check.outliers else "."))
     if residuals.worst:
         worst = residuals.worst[0]
         sentences.append(f"Worst sample: #{worst.index}, {mm(worst.norm)} "
                          f"({worst.whitened_norm:.2f} sigma whitened).")
     if ladder:
-        last = ladder[-1]
-        path = " -> ".join(f"{mm(s.cv_rms if s.cv_rms is not None else s.rms)}"
-                           for s in ladder)
-        added = [s.added for s in ladder if s.added]
-        if added:
-            verdict = "adequate" if last.adequate else "still NOT adequate"
-            sentences.append(f"Ladder: adding {', '.join(added)} takes the held-out RMS "
-                             f"{path}; the final model is {verdict}.")
-        elif not last.adequate:
-            sentences.append("Ladder: no candidate effect is significant, so nothing was "
-                             "added.")
+        sentences += ladder_sentences(check, ladder, ladder_stop)
     return tuple(sentences)

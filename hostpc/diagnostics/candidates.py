@@ -15,6 +15,12 @@ ones the fit could identify: unidentifiable geometry parameters cost nothing):
   for the whole effect and for its selected subset (Bonferroni over the C(K, k) subsets),
   the smaller of the two doubled. A candidate is significant when ``p_value`` is below
   ``alpha`` divided by the number of candidates tried (Bonferroni).
+
+A candidate is *not testable* when the data leave the model with it no degrees of freedom:
+the current model or the extended one (or its selected subset) has at least as many free
+parameters as scalar residual rows. Its chi-square is then ~0 and ``ln(chi2)`` runs to minus
+infinity, so its BIC and p-value mean nothing: they are None, it is never significant and it
+ranks after every testable candidate.
 """
 
 from __future__ import annotations
@@ -39,18 +45,20 @@ class Candidate:
     """One effect tried on top of the current model.
 
     delta_bic: extended BIC of its best parameter subset minus the current model's (negative
-    is better; the ranking); delta_bic_full: the BIC change with all its parameters;
+    is better; the ranking; None when not testable); delta_bic_full: the BIC change with all
+    its parameters (None when not testable);
     selected: the parameters of that subset; delta_chi2: the chi-square drop with all its
     parameters; added_parameters: free parameters it added; rms, max, cv_rms: in-sample and
     held-out residual norms with it (m); chi2_dof with it; p_value: see the module doc;
     significant: p_value below the corrected threshold; strongest: its most telling
     parameter (the first selected, else the largest |value / sigma|) and its value / sigma;
-    fit: the fit with it added (not serialised).
+    fit: the fit with it added (not serialised); testable: False when the samples leave no
+    degrees of freedom to judge it (then delta_bic, delta_bic_full and p_value are None).
     """
 
     effect: str
-    delta_bic: float
-    delta_bic_full: float
+    delta_bic: float | None
+    delta_bic_full: float | None
     selected: tuple[str, ...]
     delta_chi2: float
     added_parameters: int
@@ -59,10 +67,11 @@ class Candidate:
     cv_rms: float | None
     cv_folds: int
     chi2_dof: float
-    p_value: float
+    p_value: float | None
     significant: bool
     strongest: tuple[str, float] | None
     fit: FitResult
+    testable: bool = True
 
     def to_dict(self) -> dict[str, object]:
         return {
@@ -81,6 +90,7 @@ class Candidate:
             "strongest_parameter": None if self.strongest is None else self.strongest[0],
             "strongest_z": None if self.strongest is None else _finite(self.strongest[1]),
             "cv_folds": self.cv_folds,
+            "testable": self.testable,
         }
 
 
@@ -120,13 +130,14 @@ def f_test(base: FitResult, extended: FitResult) -> tuple[float, float, int]:
 def candidate_effects(problem: Problem, registry: Mapping[str, type[Effect]],
                       only: Sequence[str] | None = None) -> list[str]:
     """Names of the effects that could be added: not in the model, not a frame, and applying
-    to the dataset's method. ``only`` restricts (and orders) the list."""
+    to the dataset's method. ``only`` restricts (and orders) the list; naming an unknown
+    effect or a frame in it is an InputError (a frame is part of the model, chosen with
+    ``effects``, never a candidate)."""
     names = list(registry) if only is None else list(only)
+    if only is not None:
+        check_candidate_names(names, registry)
     chosen = []
     for name in names:
-        if name not in registry:
-            known = ", ".join(sorted(registry))
-            raise InputError(f"candidate effect {name!r} is unknown; known effects: {known}")
         cls = registry[name]
         if name in problem.effect_names or cls.hook == "frame":
             continue
@@ -134,6 +145,24 @@ def candidate_effects(problem: Problem, registry: Mapping[str, type[Effect]],
             continue
         chosen.append(name)
     return chosen
+
+
+def check_candidate_names(names: Sequence[str], registry: Mapping[str, type[Effect]]
+                          ) -> None:
+    """Raise one InputError naming every unknown effect and every frame among ``names``."""
+    unknown = [n for n in names if n not in registry]
+    if unknown:
+        known = ", ".join(sorted(n for n, c in registry.items() if c.hook != "frame"))
+        listed = ", ".join(repr(n) for n in unknown)
+        verb = "effect {} is" if len(unknown) == 1 else "effects {} are"
+        raise InputError(f"candidate {verb.format(listed)} unknown; known effects: {known}")
+    frames = [n for n in names if registry[n].hook == "frame"]
+    if frames:
+        listed = ", ".join(repr(n) for n in frames)
+        what = ("{} is a frame, not a candidate effect" if len(frames) == 1
+                else "{} are frames, not candidate effects").format(listed)
+        raise InputError(f"--candidates: {what}; frames are part of the model (choose them "
+                         f"with --effects): remove {listed} from the candidates")
 
 
 def extend_problem(problem: Problem, effect: Effect) -> Problem:
@@ -230,47 +259,64 @@ def select_subset(base: FitResult, extended: FitResult, x0: np.ndarray
 def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
                   threshold: float) -> Candidate:
     """Fit the base model plus ``effect``, warm-started at the base solution; find the
-    subset of its parameters the data need and the evidence for it."""
+    subset of its parameters the data need and the evidence for it (not testable, see the
+    module doc, when the samples leave no degrees of freedom)."""
     problem = extend_problem(base.problem, effect)
     x0 = warm_start(base, problem)
     extended = solve(problem, x0=x0, loss=loss, cv_folds=0, max_iterations=50)
     extended = with_held_out(extended, cv_folds)
     delta_chi2, p_full, added = f_test(base, extended)
-    chosen, penalty = select_subset(base, extended, x0)
+    testable = base.dof > 0 and extended.dof > 0
+    chosen, penalty = select_subset(base, extended, x0) if testable else ([], 0.0)
     n_rows = base.residuals_whitened.size
     delta_bic = 0.0
     p_subset = 1.0
+    dof_subset = 0
     if chosen:
         free = np.zeros(problem.layout.size, dtype=bool)
         free[: base.x.size] = ~extended.fixed[: base.x.size]
         free[chosen] = True
+        dof_subset = n_rows - int(np.count_nonzero(free))
+        testable = dof_subset > 0
+    if chosen and testable:
         outcome = levenberg_marquardt(problem, x0, free, loss=loss, max_iterations=50)
         chi2_subset = float(np.sum(outcome.evaluation.whitened**2))
         delta_bic = (n_rows * math.log(max(chi2_subset, 1e-300) / max(base.chi2, 1e-300))
                      + penalty - 0.0)
-        dof_subset = n_rows - int(np.count_nonzero(free))
         drop = base.chi2 - chi2_subset
-        if drop > 0 and dof_subset > 0:
+        if drop > 0:
             statistic = (drop / len(chosen)) / (chi2_subset / dof_subset)
             n_new = int(np.count_nonzero(~extended.fixed[base.x.size:]))
             p_subset = min(1.0, float(f_sf(statistic, len(chosen), dof_subset))
                            * math.exp(_log_choose(n_new, len(chosen))))
     p_value = min(1.0, 2.0 * min(p_full, p_subset))
-    selected = tuple(problem.layout.names[k] for k in chosen)
+    selected = tuple(problem.layout.names[k] for k in chosen) if testable else ()
     return Candidate(
-        effect=effect.name, delta_bic=delta_bic, delta_bic_full=bic(extended) - bic(base),
+        effect=effect.name, delta_bic=delta_bic if testable else None,
+        delta_bic_full=bic(extended) - bic(base) if testable else None,
         selected=selected, delta_chi2=delta_chi2, added_parameters=added, rms=extended.rms,
         max=extended.max, cv_rms=extended.cv_rms, cv_folds=extended.cv_folds,
-        chi2_dof=extended.chi2_dof, p_value=p_value, significant=bool(p_value < threshold),
+        chi2_dof=extended.chi2_dof, p_value=p_value if testable else None,
+        significant=bool(testable and p_value < threshold),
         strongest=_strongest(extended, effect.name, selected), fit=extended,
+        testable=testable,
     )
+
+
+def ranking_key(candidate: Candidate) -> tuple[bool, bool, float, float]:
+    """Best first: significant ones, then testable ones by delta BIC, then the rest."""
+    def value(v: float | None) -> float:
+        return math.inf if v is None else v
+
+    return (not candidate.significant, not candidate.testable, value(candidate.delta_bic),
+            value(candidate.delta_bic_full))
 
 
 def rank_candidates(base: FitResult, registry: Mapping[str, type[Effect]],
                     names: Sequence[str], *, alpha: float, cv_folds: int, loss: Loss
                     ) -> tuple[tuple[Candidate, ...], tuple[SkippedCandidate, ...]]:
     """Try every named candidate; return them best first (significant ones, then by delta
-    BIC) and the ones that could not be tried."""
+    BIC, the not testable ones last) and the ones that could not be tried."""
     threshold = alpha / max(len(names), 1)
     tried: list[Candidate] = []
     skipped: list[SkippedCandidate] = []
@@ -280,5 +326,5 @@ def rank_candidates(base: FitResult, registry: Mapping[str, type[Effect]],
                                        threshold=threshold))
         except InputError as exc:
             skipped.append(SkippedCandidate(name, str(exc)))
-    tried.sort(key=lambda c: (not c.significant, c.delta_bic, c.delta_bic_full))
+    tried.sort(key=ranking_key)
     return tuple(tried), tuple(skipped)

@@ -16,6 +16,7 @@ import numpy as np
 from hostpc.diagnostics.adequacy import Adequacy, HeldOut
 from hostpc.diagnostics.candidates import Candidate, SkippedCandidate
 from hostpc.diagnostics.interactions import Interaction
+from hostpc.diagnostics.outliers import Outlier
 from hostpc.diagnostics.residual_analysis import ResidualAnalysis
 from hostpc.fitting import FitResult
 
@@ -33,7 +34,10 @@ class ModelCheck:
     """One model checked: its fit, held-out residuals, verdict, candidates and interactions.
 
     candidates: best first; skipped: effects that could not be tried; interactions: best
-    first; n_interaction_tests: how many (parameter, variable) pairs were tested.
+    first; n_interaction_tests: how many (parameter, variable) pairs were tested; outliers:
+    the samples found to be outliers, most significant first; cleaned: with outliers, the
+    check of the same model fitted without them - the candidates and interactions of this
+    check are that check's (an effect is not blamed for a bad sample).
     """
 
     fit: FitResult
@@ -43,10 +47,22 @@ class ModelCheck:
     skipped: tuple[SkippedCandidate, ...]
     interactions: tuple[Interaction, ...]
     n_interaction_tests: int
+    outliers: tuple[Outlier, ...] = ()
+    cleaned: ModelCheck | None = None
 
     @property
     def effects(self) -> tuple[str, ...]:
         return self.fit.problem.effect_names
+
+    @property
+    def ranked(self) -> ModelCheck:
+        """The check the candidates were ranked on: ``cleaned`` with outliers, else this."""
+        return self.cleaned if self.cleaned is not None else self
+
+    @property
+    def excluded(self) -> tuple[int, ...]:
+        """Samples left out of the candidate ranking, the search and the ladder."""
+        return tuple(sorted(o.sample for o in self.outliers))
 
     @property
     def best_candidate(self) -> Candidate | None:
@@ -94,9 +110,11 @@ class Diagnosis:
     """Everything ``diagnose`` found about one dataset and model.
 
     check: the current model's check; residuals: its residual analysis; ladder: the nested
-    models fitted with ``ladder=True`` (else None); advice: plain sentences, most important
-    first; alpha: the family-wise significance of every test; source: the dataset's path
-    (for the commands in the advice), if known.
+    models fitted with ``ladder=True`` (else None; without the outlier samples when there
+    are outliers); advice: plain sentences, most important first; alpha: the family-wise
+    significance of every test; source: the dataset's path (for the commands in the
+    advice), if known; ladder_stop: why the ladder stopped before the model was adequate, as
+    a sentence (None when it did not, or without a ladder).
     """
 
     check: ModelCheck
@@ -106,6 +124,7 @@ class Diagnosis:
     alpha: float
     source: str | None
     plugins: tuple[str, ...]
+    ladder_stop: str | None = None
 
     # the headline numbers of the current model ------------------------------------------
     @property
@@ -141,6 +160,10 @@ class Diagnosis:
         return self.check.interactions
 
     @property
+    def outliers(self) -> tuple[Outlier, ...]:
+        return self.check.outliers
+
+    @property
     def final(self) -> ModelCheck:
         """The last model of the ladder (the current model without a ladder)."""
         return self.ladder[-1].check if self.ladder else self.check
@@ -165,6 +188,7 @@ class Diagnosis:
             "alpha": self.alpha,
             "adequate": a.adequate,
             "reasons": list(a.reasons),
+            "outliers": [o.to_dict() for o in check.outliers],
             "rms": a.rms,
             "max": a.max,
             "cv_rms": finite(a.cv_rms),

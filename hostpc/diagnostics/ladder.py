@@ -1,6 +1,13 @@
 """The ladder: fit the nested sequence of models - the current one, then with the best
-significant candidate added, and so on - until the model is adequate or the evidence for
-any further effect runs out."""
+significant candidate added, and so on - until the model is adequate, the evidence for any
+further effect runs out, or a step would predict held-out samples worse.
+
+"Worse" is judged on the whitened held-out RMS (every axis of every sample in units of its
+own stated noise, which is what the fit minimises): the RMS in mm is dominated by the
+noisiest axis (a stereo camera's depth) and may move a little either way when an effect
+that is really there is added. Without held-out residuals (``cv_folds`` 0, or too few
+samples for the folds) no step can be judged on them and the significance alone decides.
+"""
 
 from __future__ import annotations
 
@@ -22,16 +29,40 @@ def step_of(index: int, check: ModelCheck, added: str | None,
                       adequate=a.adequate, check=check)
 
 
+def held_out_worse(before: ModelCheck, after: ModelCheck) -> str | None:
+    """Why ``after`` predicts held-out samples no better than ``before`` (a sentence), or
+    None when it does better or either lacks held-out residuals."""
+    a, b = before.adequacy, after.adequacy
+    if a.cv_whitened_rms is None or b.cv_whitened_rms is None:
+        return None
+    if b.cv_whitened_rms < a.cv_whitened_rms:
+        return None
+    mm = "" if a.cv_rms is None or b.cv_rms is None else (
+        f"; held-out RMS {a.cv_rms * 1e3:.4f} mm -> {b.cv_rms * 1e3:.4f} mm")
+    return (f"the whitened held-out RMS would not fall ({a.cv_whitened_rms:.3f} -> "
+            f"{b.cv_whitened_rms:.3f} sigma{mm})")
+
+
 def climb(start: ModelCheck, check_model: Callable[[FitResult], ModelCheck],
-          max_steps: int = DEFAULT_MAX_STEPS) -> tuple[LadderStep, ...]:
+          max_steps: int = DEFAULT_MAX_STEPS) -> tuple[tuple[LadderStep, ...], str | None]:
     """The ladder from ``start``; ``check_model`` checks a fit (held-out residuals, candidates
-    not yet in it, interactions). Each step adds the best significant candidate."""
+    not yet in it, interactions). Each step adds the best significant candidate, unless the
+    model with it predicts the held-out samples no better (then the ladder stops there).
+
+    Returns the steps and, when the ladder stopped for that reason, a sentence saying which
+    effect was not added and why (else None).
+    """
     steps = [step_of(0, start, None, None)]
     check = start
     while not check.adequacy.adequate and len(steps) <= max_steps:
         best = check.best_candidate
         if best is None:
             break
-        check = check_model(best.fit)
+        extended = check_model(best.fit)
+        worse = held_out_worse(check, extended)
+        if worse is not None:
+            return tuple(steps), (f"{best.effect} is significant in-sample but was not added: "
+                                  f"{worse}")
+        check = extended
         steps.append(step_of(len(steps), check, best.effect, best.delta_bic))
-    return tuple(steps)
+    return tuple(steps), None

@@ -11,11 +11,21 @@ import numpy as np
 from hostpc.dataset import Dataset, load_dataset
 from hostpc.diagnostics.adequacy import assess, held_out_residuals
 from hostpc.diagnostics.advice import advise
-from hostpc.diagnostics.candidates import candidate_effects, rank_candidates
-from hostpc.diagnostics.diagnosis import Diagnosis, ModelCheck
-from hostpc.diagnostics.interactions import search_interactions
+from hostpc.diagnostics.candidates import (
+    Candidate,
+    candidate_effects,
+    check_candidate_names,
+    rank_candidates,
+)
+from hostpc.diagnostics.diagnosis import Diagnosis, LadderStep, ModelCheck
+from hostpc.diagnostics.interactions import Interaction, search_interactions
 from hostpc.diagnostics.ladder import DEFAULT_MAX_STEPS, climb
-from hostpc.diagnostics.residual_analysis import analyse_residuals, analysis_variables
+from hostpc.diagnostics.outliers import Outlier, find_outliers
+from hostpc.diagnostics.residual_analysis import (
+    ResidualAnalysis,
+    analyse_residuals,
+    analysis_variables,
+)
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, solve
 from hostpc.fitting.solver import Loss
@@ -38,11 +48,15 @@ def variables_of(result: FitResult) -> dict[str, np.ndarray]:
 
 
 class _Checker:
-    """Checks fitted models with fixed options (used for the start and every ladder step)."""
+    """Checks fitted models with fixed options (used for the start and every ladder step).
+
+    detect_outliers: test every sample (``outliers.find_outliers``) and, when some are
+    outliers, rank the candidates and run the search on the fit without them.
+    """
 
     def __init__(self, registry: dict[str, type[Effect]], only: Sequence[str] | None,
                  alpha: float, cv_folds: int, rank_cv_folds: int, loss: Loss,
-                 interactions: bool) -> None:
+                 interactions: bool, detect_outliers: bool = True) -> None:
         self.registry = registry
         self.only = only
         self.alpha = alpha
@@ -50,8 +64,38 @@ class _Checker:
         self.rank_cv_folds = rank_cv_folds
         self.loss = loss
         self.interactions = interactions
+        self.detect_outliers = detect_outliers
+
+    def without_outlier_detection(self) -> _Checker:
+        """The same checker, not testing for outliers (the ladder's, which climbs on data
+        already cleaned of them)."""
+        return _Checker(self.registry, self.only, self.alpha, self.cv_folds,
+                        self.rank_cv_folds, self.loss, self.interactions,
+                        detect_outliers=False)
+
+    def refit(self, result: FitResult, keep: np.ndarray) -> FitResult:
+        """The fit's model refitted on its samples ``keep``, warm-started at its solution."""
+        return solve(result.problem.subset(keep), x0=result.x, loss=self.loss, cv_folds=0)
 
     def __call__(self, result: FitResult) -> ModelCheck:
+        outliers: tuple[Outlier, ...] = ()
+        clean = result
+        if self.detect_outliers:
+            outliers, clean = find_outliers(result, self.alpha, self.refit)
+        if not outliers:
+            return self.check(result)
+        cleaned = self.check(clean)
+        held = held_out_residuals(result.problem, result.x, ~result.fixed, self.cv_folds)
+        if held is not None:
+            result = replace(result, cv_rms=held.rms, cv_folds=held.folds)
+        adequacy = assess(result, held, self.alpha,
+                          missing_sentences(cleaned.candidates, cleaned.interactions),
+                          outliers)
+        return ModelCheck(result, held, adequacy, cleaned.candidates, cleaned.skipped,
+                          cleaned.interactions, cleaned.n_interaction_tests, outliers, cleaned)
+
+    def check(self, result: FitResult) -> ModelCheck:
+        """Held-out residuals, candidates, interactions and the verdict of one fit."""
         held = held_out_residuals(result.problem, result.x, ~result.fixed, self.cv_folds)
         if held is not None:
             result = replace(result, cv_rms=held.rms, cv_folds=held.folds)
@@ -62,17 +106,39 @@ class _Checker:
             found, n_tests = search_interactions(result, variables_of(result), self.alpha)
         else:
             found, n_tests = (), 0
-        missing = []
-        best = next((c for c in candidates if c.significant), None)
-        if best is not None:
-            missing.append(f"adding {best.effect} is significant (p = {best.p_value:.2g}, "
-                           f"delta BIC {best.delta_bic:.1f})")
-        strong = [i for i in found if i.significant]
-        if strong:
-            missing.append(f"the residuals say {strong[0].sentence} "
-                           f"(p = {strong[0].p_value:.2g})")
-        adequacy = assess(result, held, self.alpha, tuple(missing))
+        adequacy = assess(result, held, self.alpha, missing_sentences(candidates, found))
         return ModelCheck(result, held, adequacy, candidates, skipped, found, n_tests)
+
+
+def missing_sentences(candidates: Sequence[Candidate], found: Sequence[Interaction]
+                      ) -> tuple[str, ...]:
+    """The reasons a model is not adequate that name what is missing: the best significant
+    candidate and the strongest significant interaction."""
+    missing = []
+    best = next((c for c in candidates if c.significant), None)
+    if best is not None:
+        missing.append(f"adding {best.effect} is significant (p = {best.p_value:.2g}, "
+                       f"delta BIC {best.delta_bic:.1f})")
+    strong = [i for i in found if i.significant]
+    if strong:
+        missing.append(f"the residuals say {strong[0].sentence} "
+                       f"(p = {strong[0].p_value:.2g})")
+    return tuple(missing)
+
+
+def residual_analysis(check: ModelCheck, alpha: float) -> ResidualAnalysis:
+    """The residual analysis of a check: per-sample norms and the worst samples of its fit;
+    the binned patterns of the fit the candidates were ranked on (without the outliers, whose
+    residuals would make every variable look patterned)."""
+    fit = check.fit
+    analysis = analyse_residuals(fit.residuals_raw, fit.residuals_whitened, variables_of(fit),
+                                 alpha)
+    if check.cleaned is None:
+        return analysis
+    clean = check.cleaned.fit
+    patterns = analyse_residuals(clean.residuals_raw, clean.residuals_whitened,
+                                 variables_of(clean), alpha)
+    return replace(analysis, patterns=patterns.patterns, threshold=patterns.threshold)
 
 
 def diagnose(
@@ -95,7 +161,8 @@ def diagnose(
     dataset: a Dataset or the path of a dataset file. effects: as for ``hostpc.fit`` (None:
     joint_offsets plus the unknown frames; ``"+joint_compliance"`` adds to that). plugins:
     Python files defining extra effects (their effects become candidates too). ladder: also
-    fit the nested models, adding the best candidate while it is significant. candidates:
+    fit the nested models, adding the best candidate while it is significant and lowers the
+    held-out whitened RMS (without the outlier samples, if any). candidates:
     the effects to try (default: every registered effect that applies). alpha: family-wise
     significance of each family of tests. cv_folds: folds of the held-out residuals (0 to
     skip); rank_cv_folds: folds of each candidate's held-out RMS. interactions: run the
@@ -110,12 +177,17 @@ def diagnose(
         raise InputError("cv_folds and rank_cv_folds must not be negative")
     plugin_paths = tuple(str(p) for p in plugins)
     registry = available_effects(plugin_paths)
+    if candidates is not None:
+        check_candidate_names(candidates, registry)
     problem = build_problem(dataset, effects, plugins=plugin_paths)
     checker = _Checker(registry, candidates, alpha, cv_folds, rank_cv_folds, loss, interactions)
     start = checker(solve(problem, loss=loss, cv_folds=0))
-    residuals = analyse_residuals(start.fit.residuals_raw, start.fit.residuals_whitened,
-                                  variables_of(start.fit), alpha)
-    steps = climb(start, checker, max_ladder_steps) if ladder else None
-    advice = advise(start, residuals, steps, source, plugin_paths)
+    residuals = residual_analysis(start, alpha)
+    steps: tuple[LadderStep, ...] | None = None
+    stop: str | None = None
+    if ladder:
+        steps, stop = climb(start.ranked, checker.without_outlier_detection(),
+                            max_ladder_steps)
+    advice = advise(start, residuals, steps, source, plugin_paths, ladder_stop=stop)
     return Diagnosis(check=start, residuals=residuals, ladder=steps, advice=advice,
-                     alpha=alpha, source=source, plugins=plugin_paths)
+                     alpha=alpha, source=source, plugins=plugin_paths, ladder_stop=stop)

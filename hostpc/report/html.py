@@ -45,8 +45,8 @@ def _num(value: float | None, digits: int = 3) -> str:
     return "-" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
 
 
-def _p(value: float) -> str:
-    return f"{value:.2g}"
+def _p(value: float | None) -> str:
+    return "-" if value is None or not math.isfinite(value) else f"{value:.2g}"
 
 
 def _display(value: float | None, unit: str) -> tuple[str, str]:
@@ -86,13 +86,18 @@ def _summary(diagnosis: Diagnosis) -> str:
         ("held-out whitened RMS [sigma]", _num(a.cv_whitened_rms)),
         ("noise per sample, corrected [mm]", _mm(a.noise_rms)),
         ("noise the covariances state [mm]", _mm(a.expected_noise_rms)),
+        ("whitened noise ratio (measured / stated)", _num(a.noise_scale)),
+        ("outliers (sample: leave-one-out sigma)",
+         ", ".join(f"#{o.sample}: {o.sigma:.3g}" for o in diagnosis.outliers) or "none"),
     ]
     return _table(("quantity", "value"), [(_e(k), _e(v)) for k, v in rows])
 
 
 def _candidates(diagnosis: Diagnosis) -> str:
     rows = [(_e(c.effect), _num(c.delta_bic, 1), _num(c.delta_bic_full, 1), _mm(c.rms),
-             _mm(c.cv_rms), _num(c.chi2_dof), _p(c.p_value), _e(", ".join(c.selected) or "-"))
+             _mm(c.cv_rms), _num(c.chi2_dof), _p(c.p_value),
+             _e(", ".join(c.selected) or "-") if c.testable
+             else "not testable: no degrees of freedom left")
             for c in diagnosis.candidates]
     rows += [(_e(s.effect), "-", "-", "-", "-", "-", "-", _e(f"skipped: {s.reason}"))
              for s in diagnosis.check.skipped]
@@ -118,7 +123,13 @@ def _ladder(diagnosis: Diagnosis) -> str:
              "adequate" if s.adequate else "NOT adequate") for s in diagnosis.ladder]
     table = _table(("step", "added", "RMS [mm]", "held-out RMS [mm]", "held-out max [mm]",
                     "held-out [sigma]", "chi2/dof", "verdict"), rows, name_columns=2)
-    return _img(plots.ladder_chart(diagnosis), "ladder chart") + table
+    notes = ""
+    if diagnosis.check.outliers:
+        excluded = ", ".join(f"#{k}" for k in diagnosis.check.excluded)
+        notes += f"<p>Fitted without the outlier samples {_e(excluded)}.</p>"
+    if diagnosis.ladder_stop:
+        notes += f"<p>Stopped: {_e(diagnosis.ladder_stop)}.</p>"
+    return _img(plots.ladder_chart(diagnosis), "ladder chart") + notes + table
 
 
 def _parameters(diagnosis: Diagnosis) -> str:
@@ -157,9 +168,11 @@ def render_html(diagnosis: Diagnosis, title: str | None = None) -> str:
     verdict_class = "good" if a.adequate else "bad"
     verdict = "adequate" if a.adequate else "NOT adequate"
     advice = "".join(f"<li>{_e(s)}</li>" for s in diagnosis.advice)
+    outliers = set(check.excluded)
     worst = _table(("sample", "|residual| [mm]", "whitened [sigma]"),
-                   [(str(w.index), _mm(w.norm), _num(w.whitened_norm, 2))
-                    for w in diagnosis.residuals.worst])
+                   [(str(w.index) + (" (outlier)" if w.index in outliers else ""), _mm(w.norm),
+                     _num(w.whitened_norm, 2)) for w in diagnosis.residuals.worst],
+                   flags=[w.index in outliers for w in diagnosis.residuals.worst])
     patterns = _table(("variable", "chi2", "dof", "p"),
                       [(_e(p.variable), _num(p.chi2, 1), str(p.dof), _p(p.p_value))
                        for p in diagnosis.residuals.patterns],

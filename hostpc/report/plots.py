@@ -82,12 +82,25 @@ def model_vs_measurement(diagnosis: Diagnosis) -> str:
     return to_data_uri(figure)
 
 
+def _inliers(diagnosis: Diagnosis) -> np.ndarray:
+    """(N,) True for the samples that are not outliers (outliers would set every scale)."""
+    keep = np.ones(diagnosis.fit.residuals_raw.shape[0], dtype=bool)
+    keep[list(diagnosis.check.excluded)] = False
+    return keep
+
+
+def _limit(values: np.ndarray, floor: float) -> float:
+    """A symmetric axis limit for the values, at least ``floor``."""
+    return max(floor, float(np.max(np.abs(values))) if values.size else floor)
+
+
 def whitened_histogram(diagnosis: Diagnosis) -> str:
-    """Whitened residuals against the unit normal they should follow."""
+    """Whitened residuals against the unit normal they should follow (the range is set by
+    the samples that are not outliers; outliers fall outside it)."""
     values = diagnosis.fit.residuals_whitened.ravel()
     figure = _figure(5.5, 3.6)
     axes = figure.subplots()
-    limit = max(4.0, float(np.max(np.abs(values))) if values.size else 4.0)
+    limit = _limit(diagnosis.fit.residuals_whitened[_inliers(diagnosis)], 4.0)
     axes.hist(values, bins=40, range=(-limit, limit), density=True, color="#9ecae1",
               label="whitened residuals")
     grid = np.linspace(-limit, limit, 200)
@@ -131,7 +144,7 @@ def residuals_vs_variables(diagnosis: Diagnosis, variables: dict[str, np.ndarray
     if patterns:
         grid[0, 0].legend(fontsize=7)
         grid[0, 0].set_ylabel("whitened residual [sigma]", fontsize=8)
-        limit = max(3.0, float(np.max(np.abs(whitened))))
+        limit = _limit(whitened[_inliers(diagnosis)], 3.0)
         grid[0, 0].set_ylim(-limit, limit)
     figure.suptitle("whitened residuals against every variable (dots: samples; lines: binned "
                     "means; red title: significant)", fontsize=10)
@@ -153,7 +166,9 @@ def candidate_ranking(diagnosis: Diagnosis) -> str:
     figure = _figure(5.5, 0.45 * max(len(candidates), 2) + 1.2)
     axes = figure.subplots()
     if candidates:
-        _barh(axes, [c.effect for c in candidates], [c.delta_bic for c in candidates],
+        _barh(axes, [c.effect if c.testable else f"{c.effect} (not testable)"
+                     for c in candidates],
+              [np.nan if c.delta_bic is None else c.delta_bic for c in candidates],
               [c.significant for c in candidates])
     axes.set_xlabel("delta BIC when added (negative: better)")
     axes.set_title("candidate effects")

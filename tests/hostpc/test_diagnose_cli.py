@@ -94,6 +94,7 @@ def test_plugin_option(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> No
 @pytest.mark.parametrize(("args", "message"), [
     (["--effects", "+no_such_effect"], "unknown effect 'no_such_effect'"),
     (["--candidates", "nope"], "candidate effect 'nope' is unknown"),
+    (["--candidates", "depth_scale,tool"], "'tool' is a frame, not a candidate effect"),
     (["--alpha", "2"], "alpha 2.0: must be between 0 and 1"),
     (["--cv-folds", "-1"], "--cv-folds -1"),
 ])

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from hostpc.diagnostics import diagnose
+from hostpc.diagnostics.outliers import Outlier
 from hostpc.fitting import fit
 from hostpc.model.registry import load_plugin_file
 from tests.hostpc.diagnose_support import hidden_dataset, inject
@@ -69,10 +70,11 @@ def test_json_schema_in_the_docs_matches_the_output() -> None:
     synthetic = hidden_dataset({}, seed=2, n_samples=40)
     document = diagnose(synthetic.dataset, ladder=True, cv_folds=0, rank_cv_folds=0).to_dict()
     assert documented == set(document)
-    for key in ("candidates", "interactions", "ladder"):
+    examples = dict(document, outliers=[Outlier(17, 8.1, 1e-12).to_dict()])
+    for key in ("candidates", "interactions", "ladder", "outliers"):
         row = re.search(rf"^\| `{key}` \|(.*)$", schema, re.M)
         assert row is not None
-        if document[key]:
-            for field in document[key][0]:
-                assert f'"{field}"' in row.group(1), (key, field)
+        assert examples[key]
+        for field in examples[key][0]:
+            assert f'"{field}"' in row.group(1), (key, field)
     assert np.isfinite(document["chi2_dof"])

@@ -25,6 +25,7 @@ def test_no_false_alarm_across_seeds() -> None:
         diagnosis = diagnose(synthetic.dataset, cv_folds=0, rank_cv_folds=0)
         significant = [c.effect for c in diagnosis.candidates if c.significant]
         significant += [i.sentence for i in diagnosis.interactions if i.significant]
+        significant += [f"outlier #{o.sample}" for o in diagnosis.outliers]
         if not diagnosis.adequate or significant:
             alarms.append((seed, diagnosis.check.adequacy.reasons, significant))
     assert not alarms
@@ -63,6 +64,7 @@ def test_understated_covariance_fails_the_chi2_but_blames_no_effect() -> None:
     assert abs(a.noise_scale - 2.0) < 0.25
     assert not any(c.significant for c in diagnosis.candidates)
     assert not any(i.significant for i in diagnosis.interactions)
+    assert diagnosis.outliers == ()  # the outlier test is scale-free too
     assert any("covariances" in sentence for sentence in diagnosis.advice)
 
 
