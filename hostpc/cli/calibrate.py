@@ -4,6 +4,9 @@
                      [--rig FILE] [--known tool,target] [--cell FILE] [--push/--no-push]
                      [--force] [--out DIR] [--json]
     hostpc calibrate --robot sim [--scenario FILE]     the simulated controller, with truth
+    hostpc calibrate --method sphere_probe [--probe-io modbus [--modbus HOST[:PORT]]]
+                                                       touch probe; contacts by the guarded
+                                                       move or by polling over Modbus
     hostpc calibrate --resume DIR [--force] [--push/--no-push] [--max-correction DEG]
                                                        continue an interrupted run (the push
                                                        options may change: they act after
@@ -16,16 +19,21 @@ stderr; the summary (or, with --json, the result document) to stdout.
 
 Exit codes: 0 done (verification passed or not run), 2 bad input, 3 controller unreachable
 or link lost (resume with --resume DIR), 4 controller refused / failed, 5 push refused by a
-guard rail, 6 verification failed. See docs/calibrate.md.
+guard rail, 6 verification of the pushed offsets failed, 130 / 143 interrupted by Ctrl-C /
+SIGTERM (resume with --resume DIR). See docs/calibrate.md.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import datetime as _dt
 import json
+import signal
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +48,34 @@ from hostpc.methods.runner import RobotInfo, Runner, RunOutcome
 from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot, resolve_token
 
 SIM_FOLDER = "sim"
+EXIT_INTERRUPTED = 130  # Ctrl-C, as a shell reports it
+EXIT_TERMINATED = 143  # SIGTERM
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C so that every `with` and `finally` block runs (the
+    simulated controller is stopped, the robot link closed)."""
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise Terminated(f"signal {signum}")
+
+
+@contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """While inside: SIGTERM raises `Terminated` (a KeyboardInterrupt). Outside the main
+    thread (no signal handlers there) it does nothing."""
+    try:
+        previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+MODBUS_PORT = 502
+"""Default Modbus TCP port of `--modbus HOST` (and of a robot without --modbus)."""
 
 
 def register(subparsers: Any) -> None:
@@ -80,14 +116,24 @@ def register(subparsers: Any) -> None:
                         help="systematic floor (px per image coordinate) added to each "
                         "measured covariance for rig calibration and detection errors "
                         "(default 0.01; 0 = image noise only)")
+    parser.add_argument("--probe-io", choices=("guarded", "modbus"), default="guarded",
+                        help="sphere_probe contacts: the controller's latched guarded move "
+                        "(default) or stepping while polling the probe line over Modbus TCP")
+    parser.add_argument("--modbus", metavar="HOST[:PORT]",
+                        help="with --probe-io modbus: the Modbus server (default: the "
+                        "robot's host, port 502; with --robot sim the simulator's)")
     parser.add_argument("--push", action=argparse.BooleanOptionalAction, default=None,
-                        help="write the compensated offsets to the controller (default yes)")
+                        help="write the compensated offsets to the controller (default yes; "
+                        "on a resume after a rollback: push again)")
     parser.add_argument("--force", action="store_true", default=None,
-                        help="push even corrections beyond --max-correction")
+                        help="push despite a guard rail (a correction beyond "
+                        "--max-correction, a fit that did not converge or does not explain "
+                        "the measurements; on a resume: push again after a rollback)")
     parser.add_argument("--max-correction", type=float, default=None, metavar="DEG",
                         help="largest correction pushed without --force (default 2 deg)")
     parser.add_argument("--verify-factor", type=float, default=None,
-                        help="verification passes if RMS <= this x expected noise (1.5)")
+                        help="verification passes if RMS <= this x the noise RMS the fit "
+                        "measured (default 1.2)")
     parser.add_argument("--speed", type=float, default=0.5, help="motion speed (0, 1]")
     parser.add_argument("--criterion", choices=("D", "random"), default="D",
                         help="pose selection (default D-optimal)")
@@ -122,12 +168,20 @@ def _settings(args: argparse.Namespace) -> RunSettings:
     options: dict[str, Any] = {"depth": args.depth, "pixel_floor": args.pixel_floor}
     if args.rig:
         options["rig"] = str(Path(args.rig).resolve())
+    if args.probe_io != "guarded":
+        if args.method != "sphere_probe":
+            raise InputError(f"--probe-io {args.probe_io}: only for --method sphere_probe")
+        options["probe_io"] = args.probe_io
+    if args.modbus:
+        if args.probe_io != "modbus":
+            raise InputError("--modbus needs --probe-io modbus")
+        options["modbus"] = args.modbus
     return RunSettings(
         method=args.method, n_poses=args.poses, n_verify=args.verify_poses, seed=args.seed,
         effects=args.effects, plugins=tuple(args.plugin), loss=args.loss,
         cv_folds=args.cv_folds, speed=args.speed, push=args.push is not False,
         force=bool(args.force), max_correction_deg=max_correction,
-        verify_factor=1.5 if args.verify_factor is None else args.verify_factor,
+        verify_factor=1.2 if args.verify_factor is None else args.verify_factor,
         criterion=args.criterion, n_candidates=args.candidates, options=options,
     )
 
@@ -166,6 +220,9 @@ def run(args: argparse.Namespace) -> int:
         address = parse_robot(args.robot)
         driver = args.driver
         settings = _settings(args)
+        if (settings.options.get("probe_io") == "modbus" and not settings.options.get("modbus")
+                and not address.sim):
+            settings = _with_option(settings, "modbus", f"{address.host}:{MODBUS_PORT}")
         _check_rig(settings)
         cell_file = load_cell_file(args.cell) if args.cell else None
         known = parse_known(args.known)
@@ -178,8 +235,18 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--scenario needs --robot sim")
     progress = StderrProgress()
     try:
-        outcome = _run_with_robot(args, address, driver, run_dir, settings, cell_file, known,
-                                  scenario_file, progress)
+        with sigterm_as_interrupt():
+            outcome = _run_with_robot(args, address, driver, run_dir, settings, cell_file,
+                                      known, scenario_file, progress)
+    except KeyboardInterrupt as exc:
+        progress.close()
+        if Journal(run_dir).exists:
+            print(f"hostpc calibrate: interrupted: continue with hostpc calibrate --resume "
+                  f"{run_dir}", file=sys.stderr)
+        else:
+            print("hostpc calibrate: interrupted before the run started (nothing to resume)",
+                  file=sys.stderr)
+        return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
     finally:
         progress.close()
     if args.json:
@@ -218,13 +285,38 @@ def _run_with_robot(args: argparse.Namespace, address: RobotAddress, driver: str
         scenario = default_sim_scenario(time_scale=args.time_scale, method=method)
         default_known = sim_default_known(method)
     token = args.token or (scenario.get("server") or {}).get("token") or resolve_token(None)
+    modbus_port, settings = _sim_modbus(settings, run_dir)
     progress.stage("start simulator")
-    with SimulatedController(scenario, sim_dir) as simulator:
+    with SimulatedController(scenario, sim_dir, modbus_port=modbus_port) as simulator:
         info = RobotInfo(address=f"{simulator.address.host}:{simulator.address.port}",
                          driver="zerocal", sim=True, scenario=str(simulator.scenario_path))
         return asyncio.run(_calibrate(args, simulator.address, "zerocal", run_dir, settings,
                                       cell_file, known, default_known, info, progress,
                                       simulator.truth, token))
+
+
+def _with_option(settings: RunSettings, key: str, value: Any) -> RunSettings:
+    """settings with one method option set."""
+    return dataclasses.replace(settings, options={**settings.options, key: value})
+
+
+def _sim_modbus(settings: RunSettings | None, run_dir: Path
+                ) -> tuple[int | None, RunSettings | None]:
+    """The simulator's Modbus port for `--probe-io modbus` (None: the run does not poll
+    over Modbus) and the settings pointing at it. A new run takes --modbus's port or a free
+    one; a resume restarts the simulator on the port its run recorded."""
+    from hostpc.methods.sphere_probe import parse_modbus_address
+    from hostpc.robots.simulator import free_local_port
+
+    options = (settings.options if settings is not None
+               else Journal(run_dir).read_header().get("settings", {}).get("options", {}))
+    if options.get("probe_io") != "modbus":
+        return None, settings
+    given = options.get("modbus")
+    port = parse_modbus_address(str(given), "127.0.0.1")[1] if given else free_local_port()
+    if settings is not None:
+        settings = _with_option(settings, "modbus", f"127.0.0.1:{port}")
+    return port, settings
 
 
 async def _calibrate(args: argparse.Namespace, address: RobotAddress, driver: str,

@@ -5,7 +5,10 @@
 
 With --run, the controller address defaults to the one the run pushed to, and if the
 controller no longer knows the rollback id (it restarted) the previous offsets saved in
-push.json are written directly. Offsets are printed in degrees.
+push.json are written directly. A push.json without a rollback id (the run stopped between
+recording its intent and the controller's answer) is settled from the controller's offsets:
+the intended new ones -> the previous ones are written; still the previous ones -> nothing
+to undo. Offsets are printed in degrees.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.errors import InputError
-from hostpc.methods.push import read_push_file, rollback
+from hostpc.methods.push import read_push_file, rollback, rollback_run
 from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot
 
 
@@ -43,15 +46,34 @@ def register(subparsers: Any) -> None:
     parser.set_defaults(func=run)
 
 
+UR_NOT_APPLICABLE = (
+    "rollback is not applicable to a UR (--driver ur): it has no writable zero offsets, so "
+    "the calibration was applied on the host for that session only and nothing on the "
+    "robot changed; to undo, stop loading the run's ur_calibration.yaml")
+
+
+def _run_driver(run_dir: Path) -> str | None:
+    """The driver recorded in a run folder's run.json (None if unreadable)."""
+    try:
+        header = json.loads((run_dir / "run.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    robot = header.get("robot") if isinstance(header, dict) else None
+    return str(robot.get("driver")) if isinstance(robot, dict) else None
+
+
 def run(args: argparse.Namespace) -> int:
     """Entry point of `hostpc rollback`; returns the exit code."""
     if bool(args.run) == bool(args.rollback_id):
         raise InputError("give exactly one of --run DIR and --id ROLLBACK_ID")
+    if args.driver == "ur" or (args.run and _run_driver(Path(args.run)) == "ur"):
+        raise InputError(UR_NOT_APPLICABLE)
     previous: np.ndarray | None = None
+    record: dict[str, Any] | None = None
     address: RobotAddress | None = parse_robot(args.robot) if args.robot else None
     if args.run:
         record = read_push_file(Path(args.run))
-        rollback_id = str(record["rollback_id"])
+        rollback_id = str(record.get("rollback_id") or "(none: push recorded as intent)")
         previous = np.asarray(record.get("previous_offsets"), float)
         if address is None and record.get("controller"):
             address = parse_robot(str(record["controller"]))
@@ -62,11 +84,11 @@ def run(args: argparse.Namespace) -> int:
     if address.sim:
         raise InputError("--robot sim: a simulated controller lives only as long as its run; "
                          "give the address of a running controller")
-    now, how = asyncio.run(_rollback(address, args, rollback_id, previous))
+    now, how = asyncio.run(_rollback(address, args, rollback_id, previous, record))
     matches = previous is None or bool(np.allclose(now, previous, rtol=0.0, atol=1e-12))
     document = {
         "controller": str(address),
-        "rollback_id": rollback_id,
+        "rollback_id": record.get("rollback_id") if record is not None else rollback_id,
         "method": how,
         "offsets_deg": [math.degrees(v) for v in now],
         "previous_offsets_deg": None if previous is None else [math.degrees(v)
@@ -76,9 +98,13 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(document, indent=2))
     else:
-        note = ("" if how == "rollback_id"
-                else " (id unknown to the controller: wrote the saved offsets)")
-        print(f"rolled back {rollback_id} on {address}{note}")
+        if how == "not_pushed":
+            print(f"nothing to roll back on {address}: the push recorded in {args.run} never "
+                  "reached the controller (it has the previous offsets)")
+        else:
+            note = {"rollback_id": "",
+                    "previous_offsets_written": " (wrote the saved previous offsets)"}[how]
+            print(f"rolled back {rollback_id} on {address}{note}")
         print("zero offsets now [deg]: " + ", ".join(
             f"J{j + 1} {math.degrees(v):+.5f}" for j, v in enumerate(now)))
         if not matches:
@@ -87,9 +113,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 async def _rollback(address: RobotAddress, args: argparse.Namespace, rollback_id: str,
-                    previous: np.ndarray | None) -> tuple[np.ndarray, str]:
+                    previous: np.ndarray | None, record: dict[str, Any] | None
+                    ) -> tuple[np.ndarray, str]:
+    """(offsets now (n,) rad, how): by the run's push record if given, else by id."""
     robot = await open_robot(address, args.driver, token=args.token, timeout=args.timeout)
     try:
+        if record is not None:
+            return await rollback_run(robot, record)
         return await rollback(robot, rollback_id, previous)
     finally:
         await robot.close()

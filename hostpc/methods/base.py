@@ -16,6 +16,14 @@ procedure around it:
                                     in dataset-file form, or skipped with the reason
     dataset_document(records)       the journaled samples as a `zerocal-dataset/1` document
 
+Optional hooks (defaults in `Method`):
+
+    default_effects()               the effect spec fitted when the user gives no --effects
+                                    (None: the dataset's default model)
+    pose_groups(pool)               candidates that must be measured together (sphere_probe:
+                                    the 5 contacts of one orientation): the planner then
+                                    selects, orders and verifies whole groups
+
 The runner (`hostpc.methods.runner`) owns everything else: reading the controller's state
 and offsets, planning (`hostpc.methods.planning`), the identifiability check, the journal
 and resume, the fit, the guarded push, verification, the result document and the report.
@@ -37,6 +45,7 @@ import numpy as np
 
 from hostpc.dataset import Dataset
 from hostpc.methods.cell import Cell
+from hostpc.methods.planning import PoseGroups
 from hostpc.robots.base import RobotAdapter, RobotState
 
 Phase = Literal["fit", "verify"]
@@ -49,8 +58,9 @@ class RunSettings:
     n_poses / n_verify: fit poses and fresh verification poses; seed: of the candidate pool
     and every random choice; effects: the fit's effect spec (None: default model);
     speed: motion speed, fraction of max; push: write the compensated offsets;
-    force: allow corrections beyond max_correction_deg; verify_factor: pass if the verify
-    RMS <= verify_factor x the expected noise RMS; criterion: planner criterion ("D" or
+    force: push despite a guard rail (correction beyond max_correction_deg, a fit that did
+    not converge or does not explain the data); verify_factor: pass if the verify RMS <=
+    verify_factor x the noise RMS the fit measured; criterion: planner criterion ("D" or
     "random"); n_candidates: size of the candidate pool; options: method-specific
     settings (e.g. stereo_target "depth": "triangulate" | "sgbm").
     """
@@ -67,7 +77,7 @@ class RunSettings:
     push: bool = True
     force: bool = False
     max_correction_deg: float = 2.0
-    verify_factor: float = 1.5
+    verify_factor: float = 1.2
     criterion: str = "D"
     n_candidates: int = 1500
     options: Mapping[str, Any] = field(default_factory=dict)
@@ -241,6 +251,16 @@ class Method(ABC):
     @abstractmethod
     def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         """The samples (dataset-file form, in order) as a `zerocal-dataset/1` document."""
+
+    def default_effects(self) -> str | None:
+        """The effect spec fitted (and planned for) when the settings give none; None: the
+        dataset's default model (joint offsets + the unknown frames)."""
+        return None
+
+    def pose_groups(self, pool: np.ndarray) -> PoseGroups | None:
+        """Groups of the candidate poses (N_c, n) that are only measured together, or None
+        (every pose stands alone). The default has none."""
+        return None
 
     def describe(self) -> dict[str, Any]:
         """JSON-ready facts about the method's set-up for the result document."""

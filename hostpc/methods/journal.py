@@ -10,7 +10,8 @@ Files in the run folder DIR:
                append-only, one JSON object per line, each line flushed and fsync'ed before
                the next pose: `{"event": "sample", "phase": "fit"|"verify", "index": i,
                "status": "ok"|"skipped", "sample": {...}, "reason": ...}` and the other
-               events of the run (`push`, `note`). Samples are keyed by (phase, index): a
+               events of the run (`push_intent` written before the controller's offsets
+               are, `push` after, `note`). Samples are keyed by (phase, index): a
                record already present is never replaced, so a resume neither repeats nor
                loses a pose. A torn last line (power cut mid-write) is ignored on reading
                and cut off before the next append.
@@ -49,6 +50,35 @@ def write_json_atomic(path: Path, data: Any) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _t_holders(sample: Mapping[str, Any] | None) -> list[Mapping[str, Any]]:
+    """The sample itself and, for a dual_loop pose record, its `observations`."""
+    if not sample:
+        return []
+    nested = sample.get("observations") or ()
+    return [sample, *(item for item in nested if isinstance(item, Mapping))]
+
+
+def sample_times(sample: Mapping[str, Any] | None) -> list[float]:
+    """The `t` values (s) of one journaled sample (dual_loop: of its observations)."""
+    return [float(item["t"]) for item in _t_holders(sample)
+            if isinstance(item.get("t"), int | float)]
+
+
+def shift_sample_t(sample: Mapping[str, Any], dt: float) -> dict[str, Any]:
+    """A copy of a journaled sample with every `t` moved by dt (s)."""
+    def moved(item: Mapping[str, Any]) -> dict[str, Any]:
+        out = dict(item)
+        if isinstance(out.get("t"), int | float):
+            out["t"] = float(out["t"]) + dt
+        return out
+
+    out = moved(sample)
+    if isinstance(sample.get("observations"), list):
+        out["observations"] = [moved(item) if isinstance(item, Mapping) else item
+                               for item in sample["observations"]]
+    return out
 
 
 class Journal:
@@ -173,6 +203,21 @@ class Journal:
         """The non-sample events of one kind, in order."""
         self._ensure_loaded()
         return [e for e in self._events if e.get("event") == kind]
+
+    def last_event(self, *kinds: str) -> dict[str, Any] | None:
+        """The last non-sample event whose kind is one of `kinds` (None if there is none):
+        e.g. `last_event("push_intent", "push")` tells an intent whose result is missing."""
+        self._ensure_loaded()
+        for event in reversed(self._events):
+            if event.get("event") in kinds:
+                return event
+        return None
+
+    def last_sample_t(self) -> float | None:
+        """The largest `t` (s) among the journaled samples (None if no sample has one)."""
+        self._ensure_loaded()
+        times = [t for record in self._samples.values() for t in sample_times(record.sample)]
+        return max(times) if times else None
 
     def last_q(self) -> list[float] | None:
         """Where the robot was after the last journaled pose (None if none)."""

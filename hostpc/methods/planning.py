@@ -19,6 +19,11 @@ information a pose adds: `M = sum_k A_k^T A_k`.
   poses): the run stops before moving and says which parameters and what would fix it.
 - Order: nearest neighbour in joint space from the robot's current pose (shorter motions).
 - Verification poses: a seeded random choice among the candidates the plan did not use.
+- Grouped candidates (`PoseGroups`, e.g. sphere_probe's 5 contacts per probe orientation):
+  selection, order and verification take whole groups. D-optimal gain of a group is
+  `log det(I + A_g M^-1 A_g^T)` with `A_g` its poses' blocks stacked (the gain in
+  `log det M` from adding the sum of the group's information); groups are visited in the
+  method's pool order (the method plans a safe visiting order of its groups).
 
 Shapes: q (N, n) rad; A (N, m, P); sigmas in SI (rad for joint offsets).
 """
@@ -100,10 +105,48 @@ def _normalised_free(design: Design) -> np.ndarray:
     return A / np.where(scale > 0, scale, 1.0)
 
 
+@dataclass(frozen=True)
+class PoseGroups:
+    """Candidate poses that are only measured together (sphere_probe: the 5 contacts of one
+    probe orientation, patent S1-S3).
+
+    labels: (N_c,) group label of each candidate pose; a group's poses are measured in
+    their pool order. min_groups: the fewest groups a plan takes (sphere_probe: 20, S6)."""
+
+    labels: np.ndarray
+    min_groups: int = 1
+
+    def members(self) -> list[np.ndarray]:
+        """Pool indices of each group's poses (ascending), groups in order of their first
+        pose in the pool."""
+        labels = np.asarray(self.labels)
+        _, first = np.unique(labels, return_index=True)
+        return [np.flatnonzero(labels == labels[i]) for i in np.sort(first)]
+
+
 def greedy_d_optimal(design: Design, n_select: int, ridge: float = DEFAULT_RIDGE,
                      forbidden: Iterable[int] = ()) -> np.ndarray:
     """Indices of `n_select` poses in the order greedy D-optimal design picks them."""
+    return _greedy_d_optimal_blocks(_normalised_free(design), n_select, ridge, forbidden)
+
+
+def greedy_d_optimal_groups(design: Design, members: Sequence[np.ndarray], n_select: int,
+                            ridge: float = DEFAULT_RIDGE) -> np.ndarray:
+    """Indices into `members` (each an index array of the design's poses) of `n_select`
+    groups in the order greedy D-optimal design picks them; a group's information is the
+    sum of its poses' (their Jacobian blocks stacked, zero rows padding smaller groups)."""
     A = _normalised_free(design)
+    _, m, p = A.shape
+    size = max((len(g) for g in members), default=0)
+    blocks = np.zeros((len(members), size * m, p))
+    for i, group in enumerate(members):
+        blocks[i, : len(group) * m] = A[np.asarray(group, dtype=int)].reshape(-1, p)
+    return _greedy_d_optimal_blocks(blocks, n_select, ridge, ())
+
+
+def _greedy_d_optimal_blocks(A: np.ndarray, n_select: int, ridge: float,
+                             forbidden: Iterable[int]) -> np.ndarray:
+    """Greedy D-optimal choice among the blocks A (N, m, p) (see the module docstring)."""
     n_pool, m, p = A.shape
     n_select = min(n_select, n_pool)
     Minv = np.eye(p) / ridge
@@ -140,6 +183,50 @@ def select(design: Design, n_select: int, criterion: str, rng: np.random.Generat
     if criterion == "random":
         return random_selection(design.A.shape[0], n_select, rng)
     raise ValueError(f"unknown planning criterion {criterion!r} (expected one of {CRITERIA})")
+
+
+def groups_to_select(groups: PoseGroups, n_poses: int) -> int:
+    """How many groups make a plan of at least `n_poses` poses (by the largest group), and
+    at least `groups.min_groups`."""
+    sizes = [len(g) for g in groups.members()]
+    largest = max(sizes, default=1)
+    return max(groups.min_groups, -(-int(n_poses) // largest))
+
+
+def select_groups(design: Design, groups: PoseGroups, n_poses: int, criterion: str,
+                  rng: np.random.Generator) -> np.ndarray:
+    """Pool indices of the whole groups selected by `criterion` ("D": greedy D-optimal over
+    groups, "random": a seeded random choice), `groups_to_select` of them, in visiting
+    order: the groups in their pool order, each group's poses in theirs."""
+    members = groups.members()
+    n_groups = min(groups_to_select(groups, n_poses), len(members))
+    if criterion == "D":
+        chosen = greedy_d_optimal_groups(design, members, n_groups)
+    elif criterion == "random":
+        chosen = rng.permutation(len(members))[:n_groups]
+    else:
+        raise ValueError(f"unknown planning criterion {criterion!r} (expected one of "
+                         f"{CRITERIA})")
+    return _concatenate([members[i] for i in sorted(int(k) for k in chosen)])
+
+
+def verify_groups(groups: PoseGroups, used: np.ndarray, n_verify: int,
+                  rng: np.random.Generator) -> np.ndarray:
+    """Pool indices of verification poses: a seeded random choice of whole groups with no
+    pose in `used`, enough for `n_verify` poses (by the largest group), in pool order."""
+    if n_verify <= 0:
+        return np.zeros(0, dtype=int)
+    used_set = {int(i) for i in used}
+    members = groups.members()
+    free = [i for i, g in enumerate(members) if not used_set.intersection(int(k) for k in g)]
+    largest = max((len(g) for g in members), default=1)
+    n_groups = min(-(-int(n_verify) // largest), len(free))
+    picked = rng.choice(np.asarray(free, dtype=int), size=n_groups, replace=False)
+    return _concatenate([members[i] for i in sorted(int(k) for k in picked)])
+
+
+def _concatenate(parts: Sequence[np.ndarray]) -> np.ndarray:
+    return (np.concatenate(parts).astype(int) if parts else np.zeros(0, dtype=int))
 
 
 def predicted_covariance(design: Design) -> np.ndarray:

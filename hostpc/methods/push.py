@@ -6,36 +6,65 @@ Compensation (docs/conventions.md): a fitted joint offset `delta_i` means
 Guard rails:
 - joints whose offset the fit holds fixed (unidentifiable: the data cannot tell it apart
   from a frame) or that are not in the model keep their offset, and the plan says why;
-- a correction larger than `max_correction_deg` (default 2 deg) on any pushed joint refuses
-  the whole push unless `force`; so does a fit that did not converge;
-- the controller's previous offsets and its rollback id are saved in the run folder
-  (`push.json`) before anything else happens, so `hostpc rollback --run DIR` can undo it.
+- the whole push is refused unless `force` if the fit did not converge, if the model does
+  not explain the measurements (chi2/dof above its chi-square band at alpha = 1e-3: the
+  band's upper edge is the chi-square upper 1e-3 quantile for the fit's dof, divided by the
+  dof; a chi2/dof below the band is no reason to refuse), or if a pushed joint's correction
+  exceeds `max_correction_deg` (default 2 deg);
+- the intent (previous and new offsets, time) is saved durably in the run folder
+  (`push.json`, status "intent", and the journal's `push_intent` event) BEFORE the
+  controller is written, then the result (status "pushed", the controller's rollback id);
+  so a push cut between the two is recognised from the controller's offsets (equal to the
+  new ones: pushed; equal to the previous ones: not pushed) and `hostpc rollback --run DIR`
+  can undo it either way.
 """
 
 from __future__ import annotations
 
+import datetime as _dt
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy import special
 
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult
-from hostpc.methods.journal import write_json_atomic
+from hostpc.methods.journal import Journal, write_json_atomic
 from hostpc.methods.planning import joint_offset_names
 from hostpc.robots.base import RobotAdapter
 
 PUSH_FILE = "push.json"
 DEFAULT_MAX_CORRECTION_DEG = 2.0
+ADEQUACY_ALPHA = 1e-3
+"""A fit whose chi2 exceeds the chi-square upper quantile at this level refuses the push."""
+OFFSET_MATCH_TOLERANCE = 1e-9  # rad: controller offsets "equal" to a recorded set
+
+
+def chi2_dof_upper(dof: int, alpha: float = ADEQUACY_ALPHA) -> float:
+    """Upper edge of the chi2/dof band of a fit with `dof` degrees of freedom: the
+    chi-square upper `alpha` quantile over dof (chi2/dof above it: the model does not
+    explain the measurements at level alpha). NaN for dof < 1."""
+    if dof < 1:
+        return math.nan
+    return float(2.0 * special.gammainccinv(dof / 2.0, alpha)) / dof
+
+
+def joint_display_name(index: int, label: str) -> str:
+    """How the human output names joint `index` (0-based): the model's label of a
+    kinematic tree's joint (`head.q1`, `left.q3`), else `J1`..`Jn`."""
+    return label if label and label != f"q{index + 1}" else f"J{index + 1}"
 
 
 @dataclass(frozen=True)
 class PushPlan:
     """old / delta / new: (n,) rad (delta zero where not pushed); sigma: (n,) rad (NaN where
     not identified); pushed: (n,) bool; notes: per joint, why it is not pushed (or "");
-    refused: why the guard rail refuses the whole push, or None."""
+    refused: why the guard rail refuses the whole push, or None; labels: the model's name
+    of each joint (`q1`.., or a kinematic tree's `head.q1`, `left.q3`, ...)."""
 
     old: np.ndarray
     delta: np.ndarray
@@ -46,11 +75,17 @@ class PushPlan:
     refused: str | None = None
     max_correction_deg: float = DEFAULT_MAX_CORRECTION_DEG
     fitted: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    labels: tuple[str, ...] = ()
 
     @property
     def anything(self) -> bool:
         """True if at least one joint would change."""
         return bool(np.any(self.pushed))
+
+    def display_names(self) -> list[str]:
+        """Per joint, the name the human output uses (see `joint_display_name`)."""
+        return [joint_display_name(j, self.labels[j] if j < len(self.labels) else "")
+                for j in range(self.old.size)]
 
     def joints(self) -> list[dict[str, Any]]:
         """Per joint, JSON-ready, in degrees (for the result document and the summary)."""
@@ -59,6 +94,7 @@ class PushPlan:
             fitted = float(self.fitted[j]) if self.fitted.size else float(self.delta[j])
             rows.append({
                 "joint": j + 1,
+                "label": self.labels[j] if j < len(self.labels) else f"q{j + 1}",
                 "old_deg": math.degrees(float(self.old[j])),
                 "correction_deg": math.degrees(fitted) if np.isfinite(self.sigma[j]) else None,
                 "sigma_deg": (math.degrees(float(self.sigma[j]))
@@ -71,9 +107,12 @@ class PushPlan:
 
 
 def plan_push(result: FitResult, old_offsets: np.ndarray,
-              max_correction_deg: float = DEFAULT_MAX_CORRECTION_DEG, force: bool = False
-              ) -> PushPlan:
-    """Decide what to push from a fit (see the module docstring); nothing is written."""
+              max_correction_deg: float = DEFAULT_MAX_CORRECTION_DEG, force: bool = False,
+              dataset_file: str = "DIR/dataset.json") -> PushPlan:
+    """Decide what to push from a fit (see the module docstring); nothing is written.
+
+    old_offsets: (n,) rad, the controller's offsets; dataset_file: the fit's dataset, named
+    in the refusal of an inadequate model (what to run `hostpc diagnose` on)."""
     old = np.asarray(old_offsets, dtype=float)
     n = old.size
     names = result.names
@@ -101,57 +140,117 @@ def plan_push(result: FitResult, old_offsets: np.ndarray,
         pushed[j] = True
         notes.append("")
     delta = np.where(pushed, fitted, 0.0)
-    refused = None
-    limit = math.radians(max_correction_deg)
-    too_big = pushed & (np.abs(delta) > limit)
-    if np.any(too_big) and not force:
-        j = int(np.argmax(np.where(too_big, np.abs(delta), 0.0)))
-        refused = (f"joint {j + 1} correction {math.degrees(delta[j]):+.4f} deg exceeds the "
-                   f"limit of {max_correction_deg:g} deg; check the cell and the data, and "
-                   "rerun with --force to push anyway")
-    elif not result.converged and not force:
-        refused = (f"the fit did not converge ({result.message}); not pushing "
-                   "(--force to push anyway)")
+    labels = tuple(name.split(".", 1)[1] for name in offset_names)
+    refused = None if force else _refusal(result, delta, pushed, labels, max_correction_deg,
+                                          dataset_file)
     return PushPlan(old=old, delta=delta, new=old + delta, sigma=sigma, pushed=pushed,
                     notes=tuple(notes), refused=refused, max_correction_deg=max_correction_deg,
-                    fitted=fitted)
+                    fitted=fitted, labels=labels)
+
+
+def _refusal(result: FitResult, delta: np.ndarray, pushed: np.ndarray,
+             labels: tuple[str, ...], max_correction_deg: float, dataset_file: str
+             ) -> str | None:
+    """Why the guard rails refuse the push (first reason that applies), or None.
+
+    delta: (n,) rad corrections, zero where not pushed; pushed: (n,) bool."""
+    if not result.converged:
+        return (f"the fit did not converge ({result.message}); not pushing "
+                "(--force to push anyway)")
+    band = chi2_dof_upper(result.dof)
+    if math.isfinite(result.chi2_dof) and math.isfinite(band) and result.chi2_dof > band:
+        return (f"the model does not explain the measurements (chi2/dof "
+                f"{result.chi2_dof:.3g} above its band {band:.3g}); run `hostpc diagnose "
+                f"{dataset_file}` and rerun with the effect it names, or push anyway "
+                "with --force")
+    too_big = pushed & (np.abs(delta) > math.radians(max_correction_deg))
+    if np.any(too_big):
+        j = int(np.argmax(np.where(too_big, np.abs(delta), 0.0)))
+        joint = labels[j] if labels[j] != f"q{j + 1}" else str(j + 1)  # head.q2, else 2
+        return (f"joint {joint} correction {math.degrees(delta[j]):+.4f} deg exceeds the "
+                f"limit of {max_correction_deg:g} deg; check the cell and the data, and "
+                "rerun with --force to push anyway")
+    return None
 
 
 @dataclass(frozen=True)
 class PushRecord:
-    """What was written: previous and new offsets (n,) rad, the controller's rollback id."""
+    """What was written: previous and new offsets (n,) rad, the controller's rollback id
+    (None for a push recovered from its intent: the id was never received), which joints
+    changed, and when (ISO 8601, UTC)."""
 
     previous: np.ndarray
     new: np.ndarray
-    rollback_id: str
+    rollback_id: str | None
     pushed: tuple[bool, ...]
+    time: str = ""
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON form (radians): the journal's `push` event and push.json."""
         return {
             "rollback_id": self.rollback_id,
             "previous_offsets": self.previous.tolist(),
             "new_offsets": self.new.tolist(),
             "pushed": list(self.pushed),
+            "time": self.time,
         }
 
 
-async def execute_push(robot: RobotAdapter, plan: PushPlan, run_dir: Path,
-                       address: str) -> PushRecord:
-    """Write plan.new to the controller and save push.json (previous offsets, rollback id).
+def _now() -> str:
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
 
-    Raises InputError if the guard rail refused the plan (callers check `plan.refused`)."""
+
+async def execute_push(robot: RobotAdapter, plan: PushPlan, run_dir: Path, address: str,
+                       journal: Journal | None = None) -> PushRecord:
+    """Write plan.new to the controller, recording the intent durably first.
+
+    Order: push.json (status "intent": previous and new offsets, time) and the journal's
+    `push_intent` event, both fsync'ed; then the controller's write; then push.json (status
+    "pushed", rollback id) and the journal's `push` event. Raises InputError if the guard
+    rail refused the plan (callers check `plan.refused`)."""
     if plan.refused:
         raise InputError(f"push refused: {plan.refused}")
+    pushed = tuple(bool(v) for v in plan.pushed)
+    intent = PushRecord(previous=plan.old.copy(), new=plan.new.copy(), rollback_id=None,
+                        pushed=pushed, time=_now())
+    write_json_atomic(run_dir / PUSH_FILE,
+                      {"controller": address, "status": "intent", **intent.to_dict()})
+    if journal is not None:
+        fields = intent.to_dict()
+        del fields["rollback_id"]
+        journal.event("push_intent", **fields)
     previous, rollback_id = await robot.set_offsets(plan.new)
     record = PushRecord(previous=np.asarray(previous, float), new=plan.new.copy(),
-                        rollback_id=str(rollback_id),
-                        pushed=tuple(bool(v) for v in plan.pushed))
-    write_json_atomic(run_dir / PUSH_FILE, {"controller": address, **record.to_dict()})
+                        rollback_id=str(rollback_id), pushed=pushed, time=_now())
+    write_json_atomic(run_dir / PUSH_FILE,
+                      {"controller": address, "status": "pushed", **record.to_dict()})
+    if journal is not None:
+        journal.event("push", **record.to_dict())
     return record
 
 
+def same_offsets(a: Any, b: Any) -> bool:
+    """True if two offset vectors (n,) rad agree to OFFSET_MATCH_TOLERANCE."""
+    a = np.asarray(a, float)
+    b = np.asarray(b, float)
+    return a.shape == b.shape and bool(np.allclose(a, b, rtol=0.0, atol=OFFSET_MATCH_TOLERANCE))
+
+
+def intent_outcome(intent: Mapping[str, Any], offsets_now: np.ndarray) -> str | None:
+    """Did a push whose result was never recorded reach the controller? From the offsets
+    the controller reports now (n,) rad: "pushed" (they are the intended new ones),
+    "not_pushed" (still the previous ones) or None (neither: changed by someone else)."""
+    if same_offsets(offsets_now, intent["new_offsets"]):
+        return "pushed"
+    if same_offsets(offsets_now, intent["previous_offsets"]):
+        return "not_pushed"
+    return None
+
+
 def read_push_file(run_dir: str | Path) -> dict[str, Any]:
-    """The push record of a run folder; InputError if the run pushed nothing."""
+    """The push record of a run folder (status "pushed" with a rollback id, or "intent":
+    written before the controller was, result unknown); InputError if the run pushed
+    nothing."""
     import json
 
     path = Path(run_dir) / PUSH_FILE
@@ -161,9 +260,37 @@ def read_push_file(run_dir: str | Path) -> dict[str, Any]:
         raise InputError(f"{run_dir}: this run pushed no offsets (no {PUSH_FILE})") from None
     except (OSError, ValueError) as exc:
         raise InputError(f"{path}: cannot read ({exc})") from None
-    if not isinstance(data, dict) or "rollback_id" not in data:
-        raise InputError(f"{path}: no rollback_id")
+    status = data.get("status", "pushed") if isinstance(data, dict) else None
+    if (status not in ("intent", "pushed")
+            or not {"previous_offsets", "new_offsets"} <= set(data)
+            or (status == "pushed" and "rollback_id" not in data)):
+        raise InputError(f"{path}: not a push record (previous_offsets, new_offsets, "
+                         "rollback_id)")
     return data
+
+
+async def rollback_run(robot: RobotAdapter, record: Mapping[str, Any]
+                       ) -> tuple[np.ndarray, str]:
+    """Undo the push recorded in a run's push.json (`read_push_file`).
+
+    With a rollback id: `rollback` (falling back to writing the previous offsets). Without
+    one (the run stopped between writing its intent and recording the result, or the push
+    was recovered on resume): the controller's offsets decide; the intended new ones ->
+    the previous ones are written ("previous_offsets_written"); still the previous ones ->
+    nothing to do ("not_pushed"). Anything else is an InputError (someone else changed
+    them). Returns (offsets now (n,) rad, how)."""
+    previous = np.asarray(record["previous_offsets"], float)
+    if record.get("rollback_id") is not None:
+        return await rollback(robot, str(record["rollback_id"]), previous)
+    now = np.asarray(await robot.get_offsets(), float)
+    outcome = intent_outcome(record, now)
+    if outcome == "not_pushed":
+        return now, "not_pushed"
+    if outcome is None:
+        raise InputError("the controller's zero offsets are neither the ones the run meant "
+                         "to write nor the ones it found; not writing anything")
+    await robot.set_offsets(previous)
+    return np.asarray(await robot.get_offsets(), float), "previous_offsets_written"
 
 
 async def rollback(robot: RobotAdapter, rollback_id: str,

@@ -15,7 +15,8 @@
 
 The runner talks to the robot only through `RobotAdapter` and to the method only through
 `Method`. Truth (simulation only) comes from a callable, read at S1, before any push.
-Exit codes beyond hostpc.errors: 5 = push refused by a guard rail, 6 = verification failed.
+Exit codes beyond hostpc.errors: 5 = push refused by a guard rail, 6 = verification of the
+pushed offsets failed (with nothing pushed the verification is a model check: reported only).
 """
 
 from __future__ import annotations
@@ -34,9 +35,9 @@ from hostpc.dataset import Dataset, dataset_from_dict, save_dataset
 from hostpc.errors import ConnectionFailed, ControllerError, InputError, ZerocalError
 from hostpc.fitting import FitResult, fit
 from hostpc.methods import method_class
-from hostpc.methods.base import Method, NullProgress, Plan, Progress, RunSettings
+from hostpc.methods.base import Method, NullProgress, Plan, Progress, RunSettings, SampleRecord
 from hostpc.methods.cell import Cell, build_cell, cell_from_dict
-from hostpc.methods.journal import Journal, write_json_atomic
+from hostpc.methods.journal import Journal, sample_times, shift_sample_t, write_json_atomic
 from hostpc.methods.planning import (
     check_plan,
     design_matrix,
@@ -44,9 +45,21 @@ from hostpc.methods.planning import (
     make_design,
     order_for_travel,
     select,
+    select_groups,
+    verify_groups,
 )
-from hostpc.methods.push import PushPlan, execute_push, plan_push
-from hostpc.methods.verify import VerifyResult, evaluate_verify, noise_rms
+from hostpc.methods.push import (
+    PUSH_FILE,
+    PushPlan,
+    PushRecord,
+    chi2_dof_upper,
+    execute_push,
+    intent_outcome,
+    joint_display_name,
+    plan_push,
+    same_offsets,
+)
+from hostpc.methods.verify import VerifyResult, evaluate_verify, measured_noise_rms, noise_rms
 from hostpc.robots.base import RobotAdapter, RobotState
 
 RESULT_FORMAT = "zerocal-calibration/1"
@@ -54,7 +67,7 @@ RESUME_OVERRIDABLE = frozenset({"push", "force", "max_correction_deg", "verify_f
 """Settings a resume may change (they act after the measurements)."""
 EXIT_PUSH_REFUSED = 5
 EXIT_VERIFY_FAILED = 6
-OFFSET_MATCH_TOLERANCE = 1e-9  # rad
+CLOCK_TOLERANCE_S = 1e-6
 
 
 class PlanningError(InputError):
@@ -126,6 +139,8 @@ class Runner:
         self.resume_overrides = dict(resume_overrides or {})
         self.journal = Journal(self.run_dir)
         self.header: dict[str, Any] = {}
+        self._last_t: float | None = None  # resume: the last journaled sample's t (s)
+        self._t_shift: float | None = None  # resume: added to new samples' t (s)
 
     # ------------------------------------------------------------------ top level
 
@@ -172,6 +187,7 @@ class Runner:
             cell = cell_from_dict(self.header["cell"])
             initial = self.header["initial"]
             self._check_resume_offsets(np.asarray(initial["zero_offsets"], float), offsets)
+            self._last_t = self.journal.last_sample_t()
             progress.message(f"resuming {self.run_dir}: "
                              f"{len(self.journal.records('fit'))} fit and "
                              f"{len(self.journal.records('verify'))} verify poses journaled")
@@ -194,7 +210,10 @@ class Runner:
 
         method = method_class(settings.method)(settings, cell, self.run_dir)
         if hasattr(method, "set_time_origin"):
-            method.set_time_origin(float(initial.get("time") or 0.0))
+            method.set_time_origin(self._time_origin(initial, state))
+        if settings.effects is None and method.default_effects() is not None:
+            # the method's own default model (sphere_probe: + trigger_latency)
+            settings = dataclasses.replace(settings, effects=method.default_effects())
         method.check_inputs()
         await method.prepare(self.robot, progress)
 
@@ -227,8 +246,9 @@ class Runner:
 
         initial_offsets = np.asarray(initial["zero_offsets"], float)
         push_plan = plan_push(result, initial_offsets, settings.max_correction_deg,
-                              settings.force)
+                              settings.force, dataset_file=str(self.run_dir / "dataset.json"))
         push_status, pushed_delta = await self._push(push_plan, settings, offsets)
+        exports = self._export_offsets(cell.robot, push_plan, push_status)
 
         verify_result: VerifyResult | None = None
         if settings.n_verify > 0 and plan.q_verify.shape[0] > 0:
@@ -243,6 +263,9 @@ class Runner:
 
         document = self._document(settings, cell, plan, method, dataset, result, push_plan,
                                   push_status, verify_result, truth)
+        if exports is not None:  # the robot keeps no offsets (UR): these files are the push
+            document["push"].update(on_controller=False, exports=exports)
+            document["files"].update({f"ur_{kind}": path for kind, path in exports.items()})
         summary = format_summary(document)
         (self.run_dir / "summary.txt").write_text(summary + "\n", encoding="utf-8")
         if self.report:
@@ -257,16 +280,55 @@ class Runner:
     # ------------------------------------------------------------------ steps
 
     def _check_resume_offsets(self, initial: np.ndarray, now: np.ndarray) -> None:
+        """A resume continues only if the controller's offsets are the run's initial ones,
+        the ones it pushed, or the ones a push cut short meant to write."""
         pushes = self.journal.events("push")
-        if np.allclose(now, initial, rtol=0.0, atol=OFFSET_MATCH_TOLERANCE):
+        if same_offsets(now, initial):
             return
-        if pushes and np.allclose(now, np.asarray(pushes[-1]["new_offsets"], float),
-                                  rtol=0.0, atol=OFFSET_MATCH_TOLERANCE):
+        if pushes and same_offsets(now, pushes[-1]["new_offsets"]):
+            return
+        last = self.journal.last_event("push_intent", "push")
+        if last is not None and last["event"] == "push_intent" and same_offsets(
+                now, last["new_offsets"]):
             return
         raise InputError(
             f"the controller's zero offsets changed since the run in {self.run_dir} started "
             f"(now {_deg_list(now)} deg, then {_deg_list(initial)} deg); the journaled "
             "samples cannot be combined with new ones: start a new run")
+
+    def _time_origin(self, initial: Mapping[str, Any], state: RobotState) -> float:
+        """The controller time (s) sample `t` counts from: the run's start; on a resume
+        whose controller clock went back (a restarted controller, e.g. a resumed `--robot
+        sim` run) moved so that the new samples' t continue from the last journaled one."""
+        t0 = float(initial.get("time") or 0.0)
+        now = state.extra.get("time")
+        if self._last_t is None or not isinstance(now, int | float) or not math.isfinite(now):
+            return t0
+        if float(now) < t0 + self._last_t - CLOCK_TOLERANCE_S:
+            origin = float(now) - self._last_t
+            self.journal.event("note", text="controller clock restarted: new samples' t "
+                               "continue from the last journaled one", last_t=self._last_t,
+                               time_origin=origin)
+            self.progress.message(f"the controller's clock restarted: sample t continues "
+                                  f"from {self._last_t:.1f} s")
+            return origin
+        return t0
+
+    def _continue_t(self, record: SampleRecord) -> SampleRecord:
+        """On a resume, keep `t` from going backwards for any method (e.g. one that times
+        samples with the host's clock): the first new sample sets the shift."""
+        times = sample_times(record.sample)
+        if self._last_t is None or not times or record.sample is None:
+            return record
+        if self._t_shift is None:
+            self._t_shift = max(0.0, self._last_t - min(times))
+            if self._t_shift > 0.0:
+                self.journal.event("note", text="sample t went backwards on resume; new "
+                                   "samples' t shifted", t_shift=self._t_shift)
+        if self._t_shift == 0.0:
+            return record
+        return dataclasses.replace(record, sample=shift_sample_t(record.sample,
+                                                                  self._t_shift))
 
     def _plan(self, method: Method, state: RobotState, settings: RunSettings) -> Plan:
         """Candidate pool, informative selection, order, verification poses, check."""
@@ -283,9 +345,13 @@ class Runner:
                                         settings.plugins)
         design = make_design(A, names, units)
         structural = design.structural
-        chosen = select(design, settings.n_poses, settings.criterion, rng)
-        order = order_for_travel(pool[chosen], state.q)
-        fit_indices = chosen[order]
+        groups = method.pose_groups(pool)
+        if groups is None:
+            chosen = select(design, settings.n_poses, settings.criterion, rng)
+            fit_indices = chosen[order_for_travel(pool[chosen], state.q)]
+        else:  # whole groups (sphere_probe: an orientation's 5 contacts), in the pool order
+            fit_indices = select_groups(design, groups, settings.n_poses, settings.criterion,
+                                        rng)
         plan_design = design.subset(fit_indices)
         check = check_plan(plan_design)
         if not check.ok:
@@ -294,12 +360,16 @@ class Runner:
                 f"the {len(fit_indices)} planned poses cannot separate the model's parameters "
                 f"(rank {check.plan_rank} of {check.pool_rank}): {lines}. Fix: more poses "
                 "(--poses), fewer effects (--effects), or a wider pose range")
-        rest = np.setdiff1d(np.arange(pool.shape[0]), fit_indices)
-        verify_indices = rng.choice(rest, size=min(settings.n_verify, rest.size), replace=False)
         q_fit = pool[fit_indices]
         last = q_fit[-1] if q_fit.shape[0] else state.q
-        verify_order = order_for_travel(pool[verify_indices], last)
-        q_verify = pool[verify_indices][verify_order]
+        if groups is None:
+            rest = np.setdiff1d(np.arange(pool.shape[0]), fit_indices)
+            verify_indices = rng.choice(rest, size=min(settings.n_verify, rest.size),
+                                        replace=False)
+            verify_indices = verify_indices[order_for_travel(pool[verify_indices], last)]
+        else:
+            verify_indices = verify_groups(groups, fit_indices, settings.n_verify, rng)
+        q_verify = pool[verify_indices]
         sigmas = joint_offset_sigmas(plan_design, state.q.size)
         info = {
             "criterion": settings.criterion,
@@ -331,6 +401,7 @@ class Runner:
             if self.journal.has(phase, index):
                 continue
             record = await method.acquire(self.robot, phase, index, q_plan[index], q_now)  # type: ignore[arg-type]
+            record = self._continue_t(record)
             self.journal.record(record)
             if record.q_end is not None:
                 q_now = np.asarray(record.q_end, float)
@@ -346,16 +417,27 @@ class Runner:
 
     async def _push(self, plan: PushPlan, settings: RunSettings, offsets_now: np.ndarray
                     ) -> tuple[str, np.ndarray]:
-        """Push (or not); returns (status, the delta now inside the controller)."""
+        """Push (or not); returns (status, the delta now inside the controller).
+
+        On a resume: a push cut short (intent journaled, no result) is settled from the
+        controller's offsets; a journaled push whose offsets are in the controller is
+        "pushed"; one the controller no longer has (rolled back) is not repeated unless the
+        resume asks for it (--push or --force): "rolled_back"."""
         progress = self.progress
+        self._settle_push_intent(offsets_now)
+        zero = np.zeros_like(plan.old)
         pushes = self.journal.events("push")
         if pushes:
-            delta = np.asarray(pushes[-1]["new_offsets"], float) - np.asarray(
-                pushes[-1]["previous_offsets"], float)
-            if np.allclose(offsets_now, np.asarray(pushes[-1]["new_offsets"], float),
-                           rtol=0.0, atol=OFFSET_MATCH_TOLERANCE):
-                return "pushed", delta
-        zero = np.zeros_like(plan.old)
+            new = np.asarray(pushes[-1]["new_offsets"], float)
+            previous = np.asarray(pushes[-1]["previous_offsets"], float)
+            if same_offsets(offsets_now, new):
+                return "pushed", new - previous
+            if same_offsets(offsets_now, previous) and not self._push_asked():
+                progress.message(
+                    f"the push journaled in {self.run_dir} was rolled back (the controller "
+                    "has its previous offsets again): not pushing again; resume with --push "
+                    "(or --force) to push again")
+                return "rolled_back", zero
         if not settings.push:
             return "disabled", zero
         if plan.refused:
@@ -364,13 +446,61 @@ class Runner:
         if not plan.anything:
             return "nothing_to_push", zero
         progress.stage("push")
-        record = await execute_push(self.robot, plan, self.run_dir, self.robot_info.address)
-        self.journal.event("push", **record.to_dict())
+        record = await execute_push(self.robot, plan, self.run_dir, self.robot_info.address,
+                                    journal=self.journal)
+        labels = plan.display_names()
         progress.message("pushed zero offsets: " + ", ".join(
-            f"J{j + 1} {math.degrees(o):+.4f}->{math.degrees(n):+.4f}"
+            f"{labels[j]} {math.degrees(o):+.4f}->{math.degrees(n):+.4f}"
             for j, (o, n) in enumerate(zip(plan.old, plan.new, strict=True)) if plan.pushed[j])
             + f" deg (rollback id {record.rollback_id})")
         return "pushed", plan.delta.copy()
+
+    def _push_asked(self) -> bool:
+        """True if this resume's command line asked for the push (--push or --force)."""
+        return (self.resume_overrides.get("push") is True
+                or self.resume_overrides.get("force") is True)
+
+    def _settle_push_intent(self, offsets_now: np.ndarray) -> None:
+        """A `push_intent` without its result (the run stopped while writing the offsets):
+        the controller's offsets say whether the write happened. Written: journal it as the
+        push (no rollback id; `hostpc rollback --run` writes the previous offsets). Not
+        written: note it and drop the intent's push.json."""
+        last = self.journal.last_event("push_intent", "push")
+        if last is None or last["event"] != "push_intent":
+            return
+        outcome = intent_outcome(last, offsets_now)
+        if outcome == "pushed":
+            record = PushRecord(previous=np.asarray(last["previous_offsets"], float),
+                                new=np.asarray(last["new_offsets"], float), rollback_id=None,
+                                pushed=tuple(bool(v) for v in last.get("pushed", ())),
+                                time=str(last.get("time", "")))
+            self.journal.event("push", **record.to_dict(), recovered=True)
+            write_json_atomic(self.run_dir / PUSH_FILE,
+                              {"controller": self.robot_info.address, "status": "pushed",
+                               **record.to_dict(), "recovered": True})
+            self.progress.message("the push cut short in the last session reached the "
+                                  "controller (it has the intended offsets): recorded as "
+                                  "pushed, without a rollback id")
+        elif outcome == "not_pushed":
+            self.journal.event("note", text="the push cut short in the last session did not "
+                               "reach the controller")
+            (self.run_dir / PUSH_FILE).unlink(missing_ok=True)
+            self.progress.message("the push cut short in the last session did not reach the "
+                                  "controller (it has the previous offsets)")
+
+    def _export_offsets(self, robot_name: str, plan: PushPlan, status: str
+                        ) -> dict[str, str] | None:
+        """For a robot that keeps no zero offsets (an adapter with `export_offsets`, the UR
+        driver) write the compensated offsets as files into the run folder: the only lasting
+        form of its push. None if the adapter writes the controller or nothing is pushed."""
+        export = getattr(self.robot, "export_offsets", None)
+        if (not callable(export) or status not in ("pushed", "disabled") or plan.refused
+                or not plan.anything):
+            return None
+        paths = export(self.run_dir, robot_name, plan.new)
+        self.progress.message("offsets exported for the robot's own software: "
+                              + ", ".join(str(path) for path in paths.values()))
+        return {kind: str(path) for kind, path in paths.items()}
 
     def _write_report(self, dataset: Dataset, settings: RunSettings) -> str | None:
         """report.html through hostpc.diagnose + hostpc.report, if both are installed."""
@@ -410,12 +540,16 @@ class Runner:
         pushes = self.journal.events("push")
         if written and pushes:
             push_doc["rollback_id"] = pushes[-1]["rollback_id"]
-            push_doc["file"] = str(self.run_dir / "push.json")
-        if verify_result is None:
-            exit_code = EXIT_PUSH_REFUSED if push_status == "refused" else 0
+            push_doc["recovered"] = bool(pushes[-1].get("recovered", False))
+            push_doc["file"] = str(self.run_dir / PUSH_FILE)
+        # with nothing pushed the verification is a model check: reported, never exit 6
+        if push_status == "refused":
+            exit_code = EXIT_PUSH_REFUSED
+        elif (verify_result is not None and verify_result.pushed
+              and not verify_result.passed):
+            exit_code = EXIT_VERIFY_FAILED
         else:
-            exit_code = (EXIT_PUSH_REFUSED if push_status == "refused"
-                         else 0 if verify_result.passed else EXIT_VERIFY_FAILED)
+            exit_code = 0
         document: dict[str, Any] = {
             "format": RESULT_FORMAT,
             "run_dir": str(self.run_dir),
@@ -442,7 +576,9 @@ class Runner:
                 "rms_mm": result.rms * 1e3,
                 "max_mm": result.max * 1e3,
                 "chi2_dof": _finite(result.chi2_dof),
-                "noise_rms_mm": noise_rms(dataset) * 1e3,
+                "chi2_dof_upper": _finite(chi2_dof_upper(result.dof)),
+                "noise_rms_mm": _finite(measured_noise_rms(result) * 1e3),
+                "stated_noise_rms_mm": _finite(noise_rms(dataset) * 1e3),
                 "cv_rms_mm": None if result.cv_rms is None else result.cv_rms * 1e3,
                 "rank": result.rank,
                 "n_parameters": len(result.names),
@@ -528,47 +664,35 @@ def format_summary(document: Mapping[str, Any]) -> str:
         + (f", {acq['n_skipped']} skipped" if acq["n_skipped"] else ""),
         f"fit: {'converged' if fitd['converged'] else 'NOT CONVERGED'}, effects "
         f"{', '.join(fitd['effects'])}; residual RMS {fitd['rms_mm']:.4f} mm "
-        f"(max {fitd['max_mm']:.4f}), expected noise RMS {fitd['noise_rms_mm']:.4f} mm, "
-        f"chi2/dof {fitd['chi2_dof'] if fitd['chi2_dof'] is None else round(fitd['chi2_dof'], 3)}",
+        f"(max {fitd['max_mm']:.4f}), measured noise RMS {_mm(fitd['noise_rms_mm'])} mm "
+        f"(stated {_mm(fitd.get('stated_noise_rms_mm'))}), chi2/dof "
+        f"{fitd['chi2_dof'] if fitd['chi2_dof'] is None else round(fitd['chi2_dof'], 3)}",
     ]
     for text in fitd["unidentifiable"]:
         lines.append(f"  unidentifiable: {text}")
     for item in acq["skipped"][:10]:
         lines.append(f"  skipped {item['phase']} pose {item['index']}: {item['reason']}")
-    lines += ["", f"  {'joint':<6}{'old [deg]':>12}{'correction':>13}{'+/- sigma':>11}"
+    rows = document["offsets"]["joints"]
+    names = [joint_display_name(j, row.get("label", "")) for j, row in enumerate(rows)]
+    width = max([6, *(len(name) + 2 for name in names)])
+    lines += ["", f"  {'joint':<{width}}{'old [deg]':>12}{'correction':>13}{'+/- sigma':>11}"
                   f"{'new [deg]':>12}  pushed"]
-    for row in document["offsets"]["joints"]:
+    for name, row in zip(names, rows, strict=True):
         corr = "-" if row["correction_deg"] is None else f"{row['correction_deg']:+.5f}"
         sig = "-" if row["sigma_deg"] is None else f"{row['sigma_deg']:.5f}"
         pushed = "yes" if row["pushed"] else ("no: " + row["note"] if row["note"] else "no")
-        lines.append(f"  {'J' + str(row['joint']):<6}{row['old_deg']:>12.5f}{corr:>13}"
+        lines.append(f"  {name:<{width}}{row['old_deg']:>12.5f}{corr:>13}"
                      f"{sig:>11}{row['new_deg']:>12.5f}  {pushed}")
-    push = document["push"]
     lines.append("")
-    if push["status"] == "pushed":
-        lines.append(f"push: written (rollback id {push.get('rollback_id')}; undo with "
-                     f"hostpc rollback --robot ADDRESS --run {document['run_dir']})")
-    elif push["status"] == "refused":
-        lines.append(f"push: REFUSED: {push['reason']}")
-    elif push["status"] == "disabled":
-        lines.append("push: not requested (--no-push); the controller is unchanged")
-    else:
-        lines.append("push: nothing to push (no identifiable joint offset)")
+    lines.append(_push_line(document))
     verify = document.get("verify")
     if verify:
-        lines.append(
-            (f"verify: {verify['n_planned']} fresh poses ({verify['n_measured']} samples)"
-             if verify["n_measured"] > verify["n_planned"]  # dual_loop: two targets a pose
-             else f"verify: {verify['n_measured']} fresh poses")
-            + f": RMS before {verify['rms_before_mm']:.4f}"
-            f" mm (max {verify['max_before_mm']:.4f}), after {verify['rms_after_mm']:.4f} mm "
-            f"(max {verify['max_after_mm']:.4f}); expected noise {verify['noise_rms_mm']:.4f} "
-            f"mm, pass if RMS <= {verify['factor']:g} x noise = {verify['threshold_mm']:.4f} mm"
-            f": {'PASS' if verify['passed'] else 'FAIL'}")
+        lines.append(_verify_line(verify))
     truth = document.get("truth")
     if truth:
         errors = ", ".join(
-            f"J{j + 1} " + ("-" if e is None else f"{e:+.5f}")
+            f"{names[j] if j < len(names) else f'J{j + 1}'} "
+            + ("-" if e is None else f"{e:+.5f}")
             for j, e in enumerate(truth["joint_offsets_error_deg"]))
         lines.append(f"truth (simulation): fitted - true [deg]: {errors}")
         inside = [w for w in truth["within_3_sigma"] if w is not None]
@@ -576,3 +700,57 @@ def format_summary(document: Mapping[str, Any]) -> str:
             lines.append(f"  {sum(inside)} of {len(inside)} identifiable offsets within 3 sigma"
                          f", largest error {truth['max_abs_error_deg']:.5f} deg")
     return "\n".join(lines)
+
+
+def _mm(value: float | None) -> str:
+    return "-" if value is None else f"{value:.4f}"
+
+
+def _push_line(document: Mapping[str, Any]) -> str:
+    """The summary's push line: what happened to the controller and how to undo it."""
+    push = document["push"]
+    status = push["status"]
+    if status == "pushed" and push.get("on_controller") is False:
+        return ("push: applied on the host for this session only (UR has no writable zero "
+                f"offsets); load {push['exports']['yaml']} in your UR/ROS setup")
+    if status == "pushed":
+        if document["robot"].get("sim"):
+            undo = "simulated controller: nothing to roll back after the run"
+        else:
+            undo = f"undo with hostpc rollback --run {document['run_dir']}"
+        rollback_id = push.get("rollback_id")
+        what = (f"rollback id {rollback_id}" if rollback_id is not None
+                else "recovered after an interruption, no rollback id")
+        return f"push: written ({what}; {undo})"
+    if status == "refused":
+        return f"push: REFUSED: {push['reason']}"
+    if status == "disabled":
+        return ("push: not requested (--no-push); the controller is unchanged"
+                + (f"; offsets for your UR/ROS setup: {push['exports']['yaml']}"
+                   if push.get("exports") else ""))
+    if status == "rolled_back":
+        return ("push: not repeated: this run's push was rolled back (the controller has its "
+                "previous offsets); resume with --push or --force to push again")
+    return "push: nothing to push (no identifiable joint offset)"
+
+
+def _verify_line(verify: Mapping[str, Any]) -> str:
+    """The summary's verification line. With nothing pushed it checks the model on fresh
+    poses (no PASS: no offsets were verified)."""
+    poses = (f"{verify['n_planned']} fresh poses ({verify['n_measured']} samples)"
+             if verify["n_measured"] > verify["n_planned"]  # dual_loop: two targets a pose
+             else f"{verify['n_measured']} fresh poses")
+    noise = (f"noise RMS the fit measured {_mm(verify['noise_rms_mm'])} mm (stated "
+             f"{_mm(verify.get('stated_noise_rms_mm'))})")
+    bound = f"{verify['factor']:g} x noise = {_mm(verify['threshold_mm'])} mm"
+    if not verify.get("pushed", True):
+        return (f"model check on fresh poses (nothing pushed): {poses}: RMS with the fitted "
+                f"model {verify['rms_after_mm']:.4f} mm (max {verify['max_after_mm']:.4f}), "
+                f"with the controller's offsets as they are {verify['rms_before_mm']:.4f} mm "
+                f"(max {verify['max_before_mm']:.4f}); {noise}; the model "
+                + ("explains" if verify["passed"] else "does NOT explain")
+                + f" them (RMS {'<=' if verify['passed'] else '>'} {bound})")
+    return (f"verify: {poses}: RMS before (old offsets) {verify['rms_before_mm']:.4f} mm "
+            f"(max {verify['max_before_mm']:.4f}), after {verify['rms_after_mm']:.4f} mm "
+            f"(max {verify['max_after_mm']:.4f}); {noise}; pass if RMS after <= {bound}: "
+            + ("PASS" if verify["passed"] else "FAIL"))

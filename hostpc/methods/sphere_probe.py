@@ -40,12 +40,27 @@ from hostpc.kinematics import Chain, forward, point_jacobian, screws
 from hostpc.kinematics.inverse import solve_ik
 from hostpc.methods.base import Method, Phase, Progress, RunSettings, SampleRecord
 from hostpc.methods.cell import Cell
+from hostpc.methods.planning import PoseGroups
 from hostpc.methods.sphere_geometry import InitialEstimate, initial_estimate
 from hostpc.robots.base import RobotAdapter, RobotState
 
 METHOD: Final = "sphere_probe"
 CONTACTS_PER_ORIENTATION = 5
 MIN_ORIENTATIONS = 20
+POOL_FACTOR = 2
+"""The candidate pool holds this many times the fit's orientations (plus the verification
+ones), so the planner has orientations to choose from."""
+DEFAULT_EFFECTS: Final = "+trigger_latency"
+"""The method's default model: joint offsets + the unknown frames + the probe's trigger
+latency (a touch-trigger probe always has one; the spread of approach speeds identifies it).
+The Modbus stepping probe reads at rest (no latency) and uses the dataset's default."""
+PROBE_IO = ("guarded", "modbus")
+"""How contacts are taken: the controller's latched guarded move, or stepping while polling
+the probe line over Modbus (``hostpc.methods.probe_modbus``)."""
+DEFAULT_MODBUS_PORT = 502
+DESIGN_JOINT_SPEED = 1.5
+"""rad/s at speed fraction 1 assumed for the planner's approach speeds (a UR's base joints;
+the controller's true maximum only scales the predicted latency sigma)."""
 
 
 # --------------------------------------------------------------------------- setup
@@ -677,18 +692,63 @@ def _setup_from_cell(cell: Any, options: dict[str, Any]) -> ProbeSetup:
                                            "latency_jitter")})
 
 
+def parse_modbus_address(text: str, default_host: str = "") -> tuple[str, int]:
+    """``HOST[:PORT]`` (or ``:PORT`` with ``default_host``) -> (host, port); the port
+    defaults to 502. InputError naming the value if malformed."""
+    value = str(text).strip()
+    host, sep, port_text = value.rpartition(":")
+    if not sep:
+        host, port_text = value, ""
+    host = host.strip("[]") or default_host
+    if not host:
+        raise InputError(f"--modbus {text!r}: no host (expected HOST[:PORT])")
+    if not port_text:
+        return host, DEFAULT_MODBUS_PORT
+    try:
+        port = int(port_text)
+    except ValueError:
+        raise InputError(f"--modbus {text!r}: port {port_text!r} is not a number") from None
+    if not 0 < port < 65536:
+        raise InputError(f"--modbus {text!r}: port {port} out of range 1..65535")
+    return host, port
+
+
+def design_speeds(chain: Chain, contacts: Sequence[PlannedContact], q: np.ndarray,
+                  tip: np.ndarray, joint_speed: float = DESIGN_JOINT_SPEED) -> np.ndarray:
+    """(N,) nominal approach speed along the contact normal (m/s, > 0 toward the centre) of
+    each planned contact at its nominal contact pose q (N, n): the guarded move's joint
+    velocity (speed fraction x ``joint_speed`` on the fastest-moving joint, as a controller
+    scales a joint move) through the nominal tip Jacobian. For the planner only."""
+    if not contacts:
+        return np.zeros(0)
+    travel = np.array([c.q_target - c.q_start for c in contacts])
+    scale = np.array([c.speed for c in contacts]) * joint_speed
+    velocity = travel * (scale / np.maximum(np.max(np.abs(travel), axis=1), 1e-300))[:, None]
+    poses = forward(chain, q)
+    T = poses.T_base_flange
+    x = np.einsum("nij,j->ni", T[:, :3, :3], tip) + T[:, :3, 3]
+    J = point_jacobian(screws(chain, poses), x)[:, :, : chain.n]
+    tip_velocity = np.einsum("nij,nj->ni", J, velocity)
+    normals = np.array([c.normal for c in contacts])
+    speed: np.ndarray = -np.sum(tip_velocity * normals, axis=1)
+    return speed
+
+
 class SphereProbeMethod(Method):
     """sphere_probe as a ``hostpc.methods.base.Method`` for the shared runner.
 
-    Every plan pose is one contact: ``candidates`` plans whole orientations (5 contacts
-    each, >= 20 orientations for the fit plus some for verification) and returns each
-    contact's nominal contact pose; the plan (hover, start and target of every contact) is
-    kept in ``run_dir/probe_plan.json`` so ``acquire`` finds a pose's contact on resume.
-    The probe set-up comes from the cell description's ``probe`` key (SI):
-    ``{"sphere_centre": [..], "sphere_radius": R, "stylus_radius": r, "tip": [..],
-    "io_line": 0, "repeatability": 1e-6}``; ``known`` may list ``sphere`` / ``tool``.
+    Every plan pose is one contact. ``candidates`` plans a pool of whole orientations
+    (``POOL_FACTOR`` x the fit's, at least 20 (S6), plus enough for verification; 5
+    contacts each, S1-S3) and returns each contact's nominal contact pose; ``pose_groups``
+    makes the runner select, order and verify whole orientations. The plan (hover, start
+    and target of every contact) is kept in ``run_dir/probe_plan.json`` so ``acquire`` finds
+    a pose's contact on resume. The probe set-up comes from the cell description's
+    ``probe`` key (SI): ``{"sphere_centre": [..], "sphere_radius": R, "stylus_radius": r,
+    "tip": [..], "io_line": 0, "repeatability": 1e-6}``; ``known`` may list ``sphere`` /
+    ``tool``. Options: ``probe_io`` ``"guarded"`` (default: the controller's latched
+    guarded move) or ``"modbus"`` (step and poll the probe line over Modbus TCP at
+    ``modbus`` ``"HOST:PORT"``, one connection per contact).
     """
-
 
     name: ClassVar[str] = METHOD
 
@@ -696,12 +756,23 @@ class SphereProbeMethod(Method):
         super().__init__(settings, cell, run_dir)
         self.options = dict(settings.options)
         self.setup = _setup_from_cell(cell, self.options)
+        self.probe_io = str(self.options.get("probe_io") or "guarded")
+        if self.probe_io not in PROBE_IO:
+            raise InputError(f"--probe-io {self.probe_io!r}: expected one of "
+                             f"{', '.join(PROBE_IO)}")
+        self.modbus: tuple[str, int] | None = None
+        if self.probe_io == "modbus":
+            if not self.options.get("modbus"):
+                raise InputError("--probe-io modbus needs the Modbus server (--modbus "
+                                 "HOST:PORT)")
+            self.modbus = parse_modbus_address(str(self.options["modbus"]))
         n_fit = max(MIN_ORIENTATIONS, math.ceil(settings.n_poses / CONTACTS_PER_ORIENTATION))
         n_verify = math.ceil(settings.n_verify / CONTACTS_PER_ORIENTATION)
-        self.config = PlanConfig(n_orientations=n_fit + n_verify, seed=settings.seed,
-                                 move_speed=float(settings.speed))
+        self.config = PlanConfig(n_orientations=POOL_FACTOR * n_fit + n_verify,
+                                 seed=settings.seed, move_speed=float(settings.speed))
         self.chain = get_robot_chain(cell.robot)
         self.plan: ProbePlan | None = None
+        self._contact_poses: np.ndarray | None = None
         self._t0 = time.monotonic()
 
     @property
@@ -711,18 +782,33 @@ class SphereProbeMethod(Method):
 
     @property
     def plan_path(self) -> Path:
+        """This run's probe plan (every orientation and contact)."""
         return self.run_dir / PLAN_FILE
 
     def check_inputs(self) -> None:
         """The set-up was validated at construction."""
 
+    def default_effects(self) -> str | None:
+        """joint offsets + the unknown frames + trigger_latency for guarded moves (latched
+        while moving); the dataset's default for the Modbus stepping probe (at rest)."""
+        return DEFAULT_EFFECTS if self.probe_io == "guarded" else None
+
     async def prepare(self, robot: RobotAdapter, progress: Progress) -> None:
-        """Reload this run's probe plan on resume; nothing else to set up."""
+        """Reload this run's probe plan on resume; with ``probe_io`` modbus, check that the
+        probe line can be read (before anything moves)."""
         import json
 
         if self.plan_path.is_file():
             self.plan = _plan_from_dict(json.loads(self.plan_path.read_text()))
             progress.message(f"probe plan: {self.plan_path} (from this run)")
+        if self.modbus is not None:
+            from hostpc.methods.probe_modbus import ModbusProbe
+
+            host, port = self.modbus
+            async with ModbusProbe(host, port, self.setup.io_line) as probe:
+                level = await probe.triggered()
+            progress.message(f"probe line: Modbus {host}:{port} discrete input "
+                             f"{self.setup.io_line} ({'high' if level else 'low'})")
 
     def candidates(self, state: RobotState, rng: np.random.Generator) -> np.ndarray:
         """(N_c, n) nominal contact poses of a freshly planned run (persisted)."""
@@ -732,25 +818,43 @@ class SphereProbeMethod(Method):
             self.plan = plan_sphere_probe(self.chain, self.setup, self.config, state.q,
                                           state.q_min, state.q_max)
             write_json_atomic(self.plan_path, _plan_to_dict(self.plan))
-        return np.array([contact_pose(c, self.config) for c in self.plan.contacts])
+        return self._poses()
+
+    def pose_groups(self, pool: np.ndarray) -> PoseGroups:
+        """The orientation of each contact of the pool: the planner takes whole
+        orientations (5 contacts, S1-S3), at least MIN_ORIENTATIONS of them (S6)."""
+        return PoseGroups(labels=np.array([self._lookup(q)[1].group for q in pool]),
+                          min_groups=MIN_ORIENTATIONS)
+
+    def _poses(self) -> np.ndarray:
+        """(N_contacts, n) nominal contact pose of every planned contact, plan order."""
+        assert self.plan is not None, "candidates() or prepare() first"
+        if self._contact_poses is None:
+            self._contact_poses = np.array([contact_pose(c, self.config)
+                                            for c in self.plan.contacts])
+        return self._contact_poses
 
     def _lookup(self, q: np.ndarray) -> tuple[PlannedOrientation, PlannedContact]:
-        assert self.plan is not None, "candidates() or prepare() first"
-        best, distance = None, math.inf
-        for orientation in self.plan.orientations:
-            for contact in orientation.contacts:
-                d = float(np.max(np.abs(contact_pose(contact, self.config) - q)))
-                if d < distance:
-                    best, distance = (orientation, contact), d
-        if best is None or distance > 1e-6:
+        poses = self._poses()
+        assert self.plan is not None
+        distance = np.max(np.abs(poses - np.asarray(q, float)[None, :]), axis=1)
+        k = int(np.argmin(distance)) if distance.size else -1
+        if k < 0 or distance[k] > 1e-6:
             raise InputError("sphere_probe: pose is not a contact of this run's probe plan")
-        return best
+        contact = self.plan.contacts[k]
+        orientation = next(o for o in self.plan.orientations if o.group == contact.group)
+        return orientation, contact
 
     def design_dataset(self, q: np.ndarray) -> Dataset:
-        """Contacts at q (N, n) on the nominal sphere, sigma = repeatability."""
-        groups = np.array([self._lookup(row)[1].group for row in q])
-        samples = Samples(q=q, sigma=np.full(q.shape[0], self.setup.repeatability),
-                          group=groups, speed=np.full(q.shape[0], 0.02))
+        """Contacts at q (N, n) on the nominal sphere, sigma = repeatability, with the
+        nominal approach speeds along the normal (``design_speeds``; 0 for the Modbus
+        stepping probe, which reads at rest)."""
+        contacts = [self._lookup(row)[1] for row in q]
+        groups = np.array([c.group for c in contacts], dtype=int)
+        speed = (design_speeds(self.chain, contacts, np.asarray(q, float), self.setup.tip)
+                 if self.probe_io == "guarded" else np.zeros(q.shape[0]))
+        samples = Samples(q=q, sigma=self.setup.contact_sigma(speed), group=groups,
+                          speed=speed)
         return Dataset(method=METHOD, robot=RobotDescription(name=self.cell.robot),
                        frames={"tool": FramePose(xyz=self.setup.tip, rpy=np.zeros(3)),
                                "sphere": SphereFrame(self.setup.sphere_centre,
@@ -758,12 +862,40 @@ class SphereProbeMethod(Method):
                        samples=samples, known=self.setup.known,
                        probe_stylus_radius=self.setup.stylus_radius)
 
+    def _check_transfer(self, q_from: np.ndarray | None,
+                        orientation: PlannedOrientation) -> None:
+        """The free move from where the robot is to this orientation's hover keeps the tip
+        off the sphere (nominal model); the planner checked moves between consecutive
+        planned orientations only, and the runner may skip some."""
+        if q_from is None:
+            return
+        q_from = np.asarray(q_from, float)
+        if np.max(np.abs(q_from - orientation.q_hover)) < 1e-9:
+            return
+        clear = path_clearance(self.chain, q_from, orientation.q_hover, self.setup.tip,
+                               self.setup.sphere_centre)
+        if clear < self.setup.contact_distance + self.config.standoff:
+            raise InputError(
+                f"the move to probe orientation {orientation.group} would pass "
+                f"{(clear - self.setup.contact_distance) * 1e3:.1f} mm from the sphere "
+                "(nominal model); move the robot away from the sphere first")
+
     async def acquire(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
                       q_from: np.ndarray | None) -> SampleRecord:
         """One contact (hover, start, guarded move, back); a missed one is skipped."""
         orientation, contact = self._lookup(np.asarray(q, float))
-        record = await probe_contact(robot, orientation, contact, self.setup, self.config,
-                                     time.monotonic() - self._t0)
+        self._check_transfer(q_from, orientation)
+        t = time.monotonic() - self._t0
+        if self.modbus is None:
+            record = await probe_contact(robot, orientation, contact, self.setup,
+                                         self.config, t)
+        else:
+            from hostpc.methods.probe_modbus import ModbusProbe, SteppedGuardedMove
+
+            host, port = self.modbus
+            async with ModbusProbe(host, port, self.setup.io_line) as probe:
+                record = await probe_contact(robot, orientation, contact, self.setup,
+                                             self.config, t, SteppedGuardedMove(robot, probe))
         q_end = orientation.q_hover.tolist()
         if not record.contact or record.q_latched is None:
             return SampleRecord(phase, index, False, q_end=q_end,
@@ -839,7 +971,10 @@ class SphereProbeMethod(Method):
                           "tip": self.setup.tip.tolist(), "io_line": self.setup.io_line,
                           "repeatability": self.setup.repeatability,
                           "known": list(self.setup.known),
-                          "orientations": self.config.n_orientations}}
+                          "candidate_orientations": self.config.n_orientations,
+                          "probe_io": self.probe_io,
+                          "modbus": (None if self.modbus is None
+                                     else f"{self.modbus[0]}:{self.modbus[1]}")}}
 
 
 def get_robot_chain(name: str) -> Chain:

@@ -5,41 +5,77 @@ port (`--port 0`; the stub prints `listening on HOST:PORT`) and writes its hidde
 file (`--truth-out`), which only the truth comparison of a simulated run reads. hostpc never
 imports the simulator's code: it talks to it over the protocol like to any controller.
 
-The default simulated world is the stub's packaged default scenario (a UR5e with random
-zero errors within +-0.5 deg and one hidden physical effect, a probe trigger latency), with
-two changes documented in docs/calibrate.md:
-- `motion.time_scale` 0: motions take no wall time (the run is fast);
-- `target.centre_error` zero: the target's position in the base frame was surveyed, so the
-  cell declares it known (`SIM_DEFAULT_KNOWN`), which makes joint 1 identifiable.
+Each method has its own default simulated world (`SIM_DEFAULTS`, documented in
+docs/calibrate.md). stereo_target and sphere_probe use the stub's packaged default scenario
+(a UR5e with random zero errors within +-0.5 deg and one hidden physical effect, a 2 ms
+probe trigger latency that only the touch probe sees) with `motion.time_scale` 0 (motions
+take no wall time) and one surveyed frame, declared known by the simulated cell:
+- stereo_target: `target.centre_error` zero, `target` known (makes joint 1 identifiable);
+- sphere_probe: `probe.sphere_centre_error` zero, `sphere` known (makes joint 1
+  identifiable).
+dual_loop uses the packaged humanoid world (`humanoid.yaml`) with nothing known.
+
+The stub's stdout (after its `listening on` line) and stderr go to `stub.log` in the
+simulator's folder, so a chatty stub can never fill a pipe and block. On Linux the stub gets
+PR_SET_PDEATHSIG (SIGTERM): if hostpc dies, even by SIGKILL, the stub is terminated too.
 """
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import json
+import os
 import queue
+import signal
+import socket
 import subprocess
 import sys
 import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import yaml
 
 from hostpc.errors import ConnectionFailed, InputError
 from hostpc.robots.connect import RobotAddress
 
-SIM_DEFAULT_KNOWN: tuple[str, ...] = ("target",)
-"""Frames the default simulated cell declares as measured (see the module docstring)."""
-SIM_DEFAULT_OVERRIDES: dict[str, Any] = {
-    "motion": {"time_scale": 0.0},
-    "target": {"centre_error": [0.0, 0.0, 0.0]},
+
+@dataclass(frozen=True)
+class SimDefault:
+    """The default simulated world of one method.
+
+    scenario: packaged scenario file of controller_stub; overrides: merged into it;
+    known: frames the simulated cell declares as measured (surveyed)."""
+
+    scenario: str = "default.yaml"
+    overrides: dict[str, Any] = field(default_factory=dict)
+    known: tuple[str, ...] = ()
+
+
+SIM_DEFAULTS: dict[str, SimDefault] = {
+    "stereo_target": SimDefault(
+        overrides={"motion": {"time_scale": 0.0}, "target": {"centre_error": [0.0, 0.0, 0.0]}},
+        known=("target",)),
+    "sphere_probe": SimDefault(
+        overrides={"motion": {"time_scale": 0.0},
+                   "probe": {"sphere_centre_error": [0.0, 0.0, 0.0]}},
+        known=("sphere",)),
+    "dual_loop": SimDefault(scenario="humanoid.yaml"),
 }
-SIM_METHOD_SCENARIOS: dict[str, str] = {"dual_loop": "humanoid.yaml"}
-"""Methods whose `--robot sim` world is another packaged scenario (used as packaged, with
-only the motion time scale set, and nothing declared known): dual_loop's humanoid."""
+"""Each method's `--robot sim` world (see the module docstring); unknown methods and None
+use stereo_target's."""
+DEFAULT_SIM_METHOD = "stereo_target"
+SIM_DEFAULT_KNOWN: tuple[str, ...] = SIM_DEFAULTS[DEFAULT_SIM_METHOD].known
+"""Frames the default (stereo_target) simulated cell declares as measured."""
+SIM_DEFAULT_OVERRIDES: dict[str, Any] = SIM_DEFAULTS[DEFAULT_SIM_METHOD].overrides
 START_TIMEOUT_S = 30.0
+STUB_LOG = "stub.log"
+PR_SET_PDEATHSIG = 1
+"""prctl option (linux/prctl.h): the signal this process gets when its parent dies."""
 
 
 def _merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
@@ -63,15 +99,17 @@ def packaged_default_scenario(name: str = "default.yaml") -> dict[str, Any]:
     return data
 
 
+def sim_default(method: str | None = None) -> SimDefault:
+    """The SimDefault of `method` (stereo_target's for None or a method without one)."""
+    return SIM_DEFAULTS.get(method or "", SIM_DEFAULTS[DEFAULT_SIM_METHOD])
+
+
 def default_sim_scenario(time_scale: float | None = None,
                          method: str | None = None) -> dict[str, Any]:
-    """The default world of `--robot sim` (see the module docstring); for a method in
-    SIM_METHOD_SCENARIOS its own packaged scenario."""
-    packaged = SIM_METHOD_SCENARIOS.get(method or "")
-    if packaged is not None:
-        scenario = packaged_default_scenario(packaged)
-    else:
-        scenario = _merge(packaged_default_scenario(), SIM_DEFAULT_OVERRIDES)
+    """The default world of `--robot sim --method METHOD` (see the module docstring), with
+    the motion time scale set to `time_scale` if given."""
+    default = sim_default(method)
+    scenario = _merge(packaged_default_scenario(default.scenario), default.overrides)
     if time_scale is not None:
         scenario = _merge(scenario, {"motion": {"time_scale": float(time_scale)}})
     return scenario
@@ -79,7 +117,7 @@ def default_sim_scenario(time_scale: float | None = None,
 
 def sim_default_known(method: str | None = None) -> tuple[str, ...]:
     """Frames the default simulated cell of `method` declares as measured."""
-    return () if (method or "") in SIM_METHOD_SCENARIOS else SIM_DEFAULT_KNOWN
+    return sim_default(method).known
 
 
 def load_scenario_file(path: str | Path, time_scale: float | None = 0.0) -> dict[str, Any]:
@@ -101,6 +139,37 @@ def load_scenario_file(path: str | Path, time_scale: float | None = 0.0) -> dict
     return data
 
 
+def free_local_port(host: str = "127.0.0.1") -> int:
+    """A TCP port that is free on `host` right now (for services such as the stub's Modbus
+    server, whose port 0 means "off"); another process may take it before it is used."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind((host, 0))
+        port: int = sock.getsockname()[1]
+    return port
+
+
+def _die_with_parent() -> Callable[[], None] | None:
+    """A preexec_fn that makes the child get SIGTERM when hostpc dies (Linux prctl
+    PR_SET_PDEATHSIG), or None where that does not exist."""
+    if not sys.platform.startswith("linux"):
+        return None
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        prctl = libc.prctl
+    except (OSError, AttributeError):
+        return None
+    parent = os.getpid()
+
+    def preexec() -> None:
+        prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+        if os.getppid() != parent:  # the parent died before prctl took effect
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    return preexec
+
+
 class SimulatedController:
     """A `controller-stub serve` subprocess on 127.0.0.1 (port chosen by the OS).
 
@@ -109,16 +178,24 @@ class SimulatedController:
             truth = sim.truth()            # the stub's hidden truth (dict), current offsets
 
     scenario: the scenario mapping (written to `workdir/scenario.json`); workdir: where the
-    scenario and `truth.json` go. `stop()` terminates only this process.
+    scenario, `truth.json` and the stub's output `stub.log` go; modbus_port: also serve the
+    digital IO over Modbus TCP on this port (read-only; None: no Modbus server). `stop()`
+    terminates only this process; the stub also ends when hostpc dies (Linux).
     """
 
-    def __init__(self, scenario: dict[str, Any], workdir: str | Path) -> None:
+    def __init__(self, scenario: dict[str, Any], workdir: str | Path,
+                 modbus_port: int | None = None) -> None:
         self.scenario = scenario
         self.workdir = Path(workdir)
         self.scenario_path = self.workdir / "scenario.json"
         self.truth_path = self.workdir / "truth.json"
+        self.log_path = self.workdir / STUB_LOG
+        self.modbus_port = modbus_port
+        self.modbus_address: RobotAddress | None = None
         self.process: subprocess.Popen[str] | None = None
         self._address: RobotAddress | None = None
+        self._log: IO[str] | None = None
+        self._pump: threading.Thread | None = None
 
     @property
     def address(self) -> RobotAddress:
@@ -136,27 +213,42 @@ class SimulatedController:
             "--scenario", str(self.scenario_path), "--host", "127.0.0.1", "--port", "0",
             "--truth-out", str(self.truth_path),
         ]  # fmt: skip
+        if self.modbus_port is not None:
+            command += ["--modbus-port", str(int(self.modbus_port))]
+        self._log = log = open(self.log_path, "a", encoding="utf-8")  # noqa: SIM115
         self.process = subprocess.Popen(
-            command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+            command, stdout=subprocess.PIPE, stderr=log, text=True,
+            start_new_session=False, preexec_fn=_die_with_parent(),  # noqa: PLW1509
         )
         lines: queue.Queue[str] = queue.Queue()
         stdout = self.process.stdout
         assert stdout is not None
 
         def pump() -> None:
-            for line in stdout:
-                lines.put(line)
+            """Copy every line to the log; hand them over until `listening on`."""
+            listening = False
+            with contextlib.suppress(ValueError, OSError):  # the log or pipe was closed
+                for line in stdout:
+                    log.write(line)
+                    log.flush()
+                    if not listening:
+                        listening = line.startswith("listening on ")
+                        lines.put(line)
             lines.put("")
 
-        threading.Thread(target=pump, daemon=True).start()
+        self._pump = threading.Thread(target=pump, name="stub-output", daemon=True)
+        self._pump.start()
         try:
             while True:
                 line = lines.get(timeout=timeout).strip()
+                if line.startswith("modbus on "):
+                    host, _, port = line[len("modbus on "):].rpartition(":")
+                    self.modbus_address = RobotAddress(sim=False, host=host, port=int(port))
                 if line.startswith("listening on "):
                     host, _, port = line[len("listening on ") :].rpartition(":")
                     self._address = RobotAddress(sim=False, host=host, port=int(port))
                     return self._address
-                if line == "" and self.process.poll() is not None:
+                if line == "":  # the stub closed its output: it is ending
                     break
         except queue.Empty:
             self.stop()
@@ -164,12 +256,28 @@ class SimulatedController:
                 f"simulated controller did not start within {timeout:.0f} s"
             ) from None
         process, self.process = self.process, None
-        returncode = process.wait(timeout=5)
-        stderr = process.stderr.read().strip() if process.stderr else ""
-        message = stderr.splitlines()[-1] if stderr else f"exit code {returncode}"
+        try:
+            returncode = process.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            returncode = process.wait(timeout=5)
+        self._close_log()
+        message = self._last_log_line() or f"exit code {returncode}"
         if returncode == 2:  # the stub's exit code for a bad scenario
             raise InputError(f"simulated controller refused the scenario: {message}")
         raise ConnectionFailed(f"simulated controller failed to start: {message}")
+
+    def _last_log_line(self) -> str:
+        try:
+            text = self.log_path.read_text(encoding="utf-8", errors="replace").strip()
+        except OSError:
+            return ""
+        return text.splitlines()[-1] if text else ""
+
+    def _close_log(self) -> None:
+        log, self._log = self._log, None
+        if log is not None:
+            log.close()
 
     def truth(self) -> dict[str, Any]:
         """The stub's hidden truth as last written (zero errors w.r.t. the CURRENT offsets)."""
@@ -184,18 +292,19 @@ class SimulatedController:
     def stop(self) -> None:
         """Terminate the stub process (only ours) and wait for it."""
         process, self.process = self.process, None
-        if process is None:
-            return
-        if process.poll() is None:
-            process.terminate()
-            try:
-                process.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait(timeout=5)
-        for stream in (process.stdout, process.stderr):
-            if stream is not None:
-                stream.close()
+        if process is not None:
+            if process.poll() is None:
+                process.terminate()
+                try:
+                    process.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    process.kill()
+                    process.wait(timeout=5)
+            if self._pump is not None:  # the pipe ends with the process
+                self._pump.join(timeout=2.0)
+            if process.stdout is not None:
+                process.stdout.close()
+        self._close_log()
 
     def __enter__(self) -> SimulatedController:
         if self._address is None:

@@ -42,6 +42,7 @@ import math
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, TypeVar
 
 import numpy as np
@@ -251,6 +252,11 @@ class UrAdapter:
     """
 
     driver = "ur"
+    offsets_on_controller = False
+    """The zero offsets live in this adapter for this session, not in the robot (module
+    docstring); `export_offsets` writes them for the software that drives the robot."""
+    EXPORT_STEM = "ur"
+    """Exports are `ur_calibration.yaml`, `ur_joints.urdf.xml`, `ur_offsets.script`."""
 
     def __init__(
         self,
@@ -467,6 +473,17 @@ class UrAdapter:
         self._offsets = new
         logger.info("UR %s: host zero offsets set to %s (robot unchanged)", self.host, new)
         return previous, rollback_id
+
+    def export_offsets(self, directory: str | Path, robot: str,
+                       offsets: np.ndarray) -> dict[str, Path]:
+        """Write `offsets` (6,) rad of robot model `robot` (e.g. `ur5e`) into `directory` as
+        the ur_description calibration yaml, URDF joints and URScript snippet
+        (`hostpc.robots.ur_export`); returns {"yaml"|"urdf"|"urscript": path}."""
+        from hostpc.kinematics import get_robot
+        from hostpc.robots.ur_export import write_exports
+
+        return write_exports(directory, get_robot(robot), self._check_offsets(offsets),
+                             stem=self.EXPORT_STEM)
 
     async def rollback(self, rollback_id: str) -> np.ndarray:
         """Restore the offsets saved under `rollback_id`; returns the replaced ones."""

@@ -247,17 +247,20 @@ def urscript_offsets(joint_offsets: np.ndarray | list[float]) -> str:
 
 
 def write_exports(
-    directory: str | Path, chain: Chain, joint_offsets: np.ndarray | list[float]
+    directory: str | Path, chain: Chain, joint_offsets: np.ndarray | list[float],
+    *, stem: str | None = None,
 ) -> dict[str, Path]:
-    """Write `<robot>_calibration.yaml`, `<robot>_joints.urdf.xml` and
-    `<robot>_offsets.script` into `directory`; returns {"yaml"|"urdf"|"urscript": path}."""
+    """Write `<stem>_calibration.yaml`, `<stem>_joints.urdf.xml` and
+    `<stem>_offsets.script` into `directory` (stem: default the robot's name, e.g. `ur5e`);
+    returns {"yaml"|"urdf"|"urscript": path}."""
     _check_offsets(chain, joint_offsets)
     folder = Path(directory)
     folder.mkdir(parents=True, exist_ok=True)
+    stem = chain.name if stem is None else stem
     paths = {
-        "yaml": folder / f"{chain.name}_calibration.yaml",
-        "urdf": folder / f"{chain.name}_joints.urdf.xml",
-        "urscript": folder / f"{chain.name}_offsets.script",
+        "yaml": folder / f"{stem}_calibration.yaml",
+        "urdf": folder / f"{stem}_joints.urdf.xml",
+        "urscript": folder / f"{stem}_offsets.script",
     }
     paths["yaml"].write_text(kinematics_yaml(chain, joint_offsets), encoding="utf-8")
     paths["urdf"].write_text(urdf_snippet(chain, joint_offsets), encoding="utf-8")

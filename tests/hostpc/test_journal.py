@@ -9,7 +9,7 @@ import pytest
 
 from hostpc.errors import InputError
 from hostpc.methods.base import SampleRecord
-from hostpc.methods.journal import Journal
+from hostpc.methods.journal import Journal, sample_times, shift_sample_t
 
 
 def ok(index: int, phase: str = "fit") -> SampleRecord:
@@ -71,3 +71,27 @@ def test_broken_line_before_the_end_is_an_error_not_a_silent_cut(tmp_path: Path)
     with pytest.raises(InputError, match="line 1"):
         Journal(tmp_path).load()
     assert path.read_text().startswith("garbage\n")  # nothing was truncated
+
+
+def test_last_event_tells_an_intent_without_its_result(tmp_path: Path) -> None:
+    journal = Journal(tmp_path)
+    journal.event("push_intent", previous_offsets=[0.0], new_offsets=[0.1], time="t0")
+    journal.event("note", text="something else")
+    again = Journal(tmp_path)
+    last = again.last_event("push_intent", "push")
+    assert last is not None and last["event"] == "push_intent"
+    again.event("push", rollback_id="rb-1", previous_offsets=[0.0], new_offsets=[0.1])
+    assert Journal(tmp_path).last_event("push_intent", "push")["event"] == "push"  # type: ignore[index]
+    assert Journal(tmp_path).last_event("missing") is None
+
+
+def test_sample_times_and_shift_reach_nested_observations(tmp_path: Path) -> None:
+    journal = Journal(tmp_path)
+    assert journal.last_sample_t() is None
+    journal.record(SampleRecord("fit", 0, True, sample={"q": [0.0], "t": 2.5}))
+    pose = {"observations": [{"chain": "left", "t": 4.0}, {"chain": "right", "t": 4.5}]}
+    journal.record(SampleRecord("fit", 1, True, sample=pose))
+    assert Journal(tmp_path).last_sample_t() == 4.5
+    assert sample_times(pose) == [4.0, 4.5]
+    moved = shift_sample_t(pose, 10.0)
+    assert sample_times(moved) == [14.0, 14.5] and sample_times(pose) == [4.0, 4.5]

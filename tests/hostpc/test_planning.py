@@ -11,6 +11,8 @@ from hostpc.kinematics import get_robot
 from hostpc.methods.base import RunSettings
 from hostpc.methods.cell import build_cell
 from hostpc.methods.planning import (
+    Design,
+    PoseGroups,
     check_plan,
     design_matrix,
     greedy_d_optimal,
@@ -18,6 +20,8 @@ from hostpc.methods.planning import (
     make_design,
     order_for_travel,
     random_selection,
+    select_groups,
+    verify_groups,
 )
 from hostpc.methods.stereo_target import StereoTargetMethod
 from hostpc.robots.base import RobotState
@@ -117,3 +121,37 @@ def test_order_for_travel_is_a_permutation_starting_near_the_robot() -> None:
     assert sorted(order.tolist()) == list(range(25)) and order[0] == 7
     travel = np.sum(np.max(np.abs(np.diff(q[order], axis=0)), axis=1))
     assert travel < np.sum(np.max(np.abs(np.diff(q, axis=0)), axis=1))
+
+
+def _grouped_design(n_groups: int = 30, size: int = 5, n_params: int = 6,
+                    seed: int = 4) -> tuple[Design, PoseGroups]:
+    """A synthetic design of n_groups groups of `size` single-row poses (1 x n_params)."""
+    rng = np.random.default_rng(seed)
+    scale = rng.uniform(0.05, 3.0, (n_groups, 1, 1, 1))  # some groups far more informative
+    A = (rng.normal(size=(n_groups, size, 1, n_params)) * scale).reshape(-1, 1, n_params)
+    names = tuple(f"p.x{k}" for k in range(n_params))
+    design = make_design(A, names, ("m",) * n_params)
+    return design, PoseGroups(labels=np.repeat(np.arange(n_groups), size), min_groups=4)
+
+
+def _logdet(design: Design, indices: np.ndarray) -> float:
+    A = design.A[indices].reshape(-1, design.A.shape[2])
+    return float(np.linalg.slogdet(A.T @ A)[1])
+
+
+def test_group_selection_takes_whole_groups_by_their_summed_information() -> None:
+    design, groups = _grouped_design()
+    rng = np.random.default_rng(0)
+    chosen = select_groups(design, groups, n_poses=12, criterion="D", rng=rng)
+    labels = groups.labels[chosen]
+    # ceil(12 / 5) = 3 groups, but at least min_groups = 4; each complete, one after another
+    assert len(set(labels.tolist())) == 4 and chosen.size == 20
+    assert np.all(np.diff(labels) >= 0) and np.all(np.bincount(labels)[np.unique(labels)] == 5)
+    # D-optimal over groups beats random whole groups
+    random = [select_groups(design, groups, 12, "random", np.random.default_rng(s))
+              for s in range(20)]
+    assert _logdet(design, chosen) > max(_logdet(design, r) for r in random)
+    # verification: whole groups the plan did not use
+    verify = verify_groups(groups, chosen, 7, rng)
+    assert verify.size == 10 and not set(groups.labels[verify]) & set(labels.tolist())
+    assert verify_groups(groups, chosen, 0, rng).size == 0

@@ -125,9 +125,15 @@ def test_calibrate_sim_recovers_truth_and_verifies(
     for j in identified:
         assert math.degrees(push["new_offsets"][j] - push["previous_offsets"][j]) == (
             pytest.approx(joints[j]["correction_deg"]))
-    # verification on fresh poses after the push: at the sensor's noise level
+    # verification on fresh poses after the push: at the sensor's noise level, the one the
+    # fit measured (the stated covariances carry the pixel floor: chi2/dof well below 1)
     verify = document["verify"]
     assert verify["n_measured"] == 30 and verify["passed"] is True
+    assert verify["kind"] == "offsets" and verify["factor"] == 1.2
+    chi2_dof = document["fit"]["chi2_dof"]
+    assert chi2_dof < 0.7
+    assert verify["noise_rms_mm"] == pytest.approx(
+        verify["stated_noise_rms_mm"] * math.sqrt(chi2_dof))
     assert verify["rms_after_mm"] <= 1.2 * verify["noise_rms_mm"]
     assert verify["rms_before_mm"] > 10 * verify["rms_after_mm"]
     # files: dataset per the spec, fit, plan in run.json; verify poses are fresh
@@ -161,6 +167,9 @@ def test_readme_command_calibrates_the_rig_first(tmp_path: Path,
     assert len(errors) == 5 and max(abs(e) for e in errors) <= 0.01
     assert result["verify"]["passed"] and result["push"]["status"] == "pushed"
     assert "PASS" in stdout and "truth (simulation)" in stdout
+    assert "verify: 10 fresh poses: RMS before (old offsets) " in stdout
+    assert "simulated controller: nothing to roll back after the run" in stdout
+    assert "hostpc rollback" not in stdout  # the simulator is gone after the run
     assert stdout.strip() == (out / "summary.txt").read_text().strip()
     if result["files"].get("report"):
         assert (out / "report.html").stat().st_size > 0

@@ -57,3 +57,48 @@ def test_ur_driver_recovers_the_offsets_like_the_protocol_driver(tmp_path: Path)
             continue
         assert row["correction_deg"] == pytest.approx(reference_row["correction_deg"], abs=1e-3)
         assert abs(row["correction_deg"] - true_deg) <= max(4 * row["sigma_deg"], 2e-3)
+
+    _check_ur_exports(tmp_path / "ur", document)
+
+
+def _check_ur_exports(run_dir: Path, document: dict[str, Any]) -> None:
+    """A UR push is host-side only: the run folder carries the offsets as the ur_description
+    calibration yaml, URDF joints and URScript, the summary says so, rollback refuses."""
+    import xml.etree.ElementTree as ET
+
+    import yaml
+
+    from hostpc.kinematics import get_robot
+    from hostpc.robots.ur_export import UR_KINEMATICS_KEYS, joint_origins
+
+    push = document["push"]
+    assert push["on_controller"] is False
+    new = np.radians([row["new_deg"] for row in document["offsets"]["joints"]])
+    assert np.any(new != 0.0)
+    origins, _ = joint_origins(get_robot(document["robot"]["name"]), new)
+
+    paths = {kind: Path(path) for kind, path in push["exports"].items()}
+    assert paths["yaml"] == run_dir / "ur_calibration.yaml"
+    kinematics = yaml.safe_load(paths["yaml"].read_text())["kinematics"]
+    for key, origin in zip(UR_KINEMATICS_KEYS, origins, strict=True):
+        got = kinematics[key]
+        np.testing.assert_allclose([got["x"], got["y"], got["z"]], origin.xyz, atol=1e-12)
+        np.testing.assert_allclose([got["roll"], got["pitch"], got["yaw"]], origin.rpy,
+                                   atol=1e-12)
+    joints = ET.parse(paths["urdf"]).getroot().findall("joint")
+    assert len(joints) == 6
+    for joint, origin in zip(joints, origins, strict=True):
+        rpy = [float(v) for v in joint.find("origin").attrib["rpy"].split()]  # type: ignore[union-attr]
+        np.testing.assert_allclose(rpy, origin.rpy, atol=1e-12)
+    script = paths["urscript"].read_text()
+    assert f"{new[1]:.9g}" in script and "def zerocal_command" in script
+
+    summary = (run_dir / "summary.txt").read_text()
+    assert ("push: applied on the host for this session only (UR has no writable zero "
+            f"offsets); load {paths['yaml']} in your UR/ROS setup") in summary
+    rollback = subprocess.run(
+        [sys.executable, "-m", "hostpc.cli.main", "rollback", "--run", str(run_dir)],
+        capture_output=True, text=True, timeout=60)
+    assert rollback.returncode == 2
+    assert rollback.stdout == "" and len(rollback.stderr.strip().splitlines()) == 1
+    assert "not applicable to a UR" in rollback.stderr
