@@ -100,8 +100,10 @@ def levenberg_marquardt(
     x = np.array(x0, dtype=float)
     free_index = np.flatnonzero(free)
     m = problem.measured.shape[1]
-    reuse = initial is not None and initial.jacobian is not None and np.array_equal(initial.x, x)
-    current = initial if reuse else evaluate(problem, x)  # type: ignore[assignment]
+    if initial is not None and initial.jacobian is not None and np.array_equal(initial.x, x):
+        current = initial
+    else:
+        current = evaluate(problem, x)
     weights = robust_weights(current.whitened, loss, loss_scale)
     cost = robust_cost(current.whitened, loss, loss_scale)
     if free_index.size == 0:

@@ -6,13 +6,15 @@ synthetic datasets and for the pose planner. Not a motion planner: no collision 
 
 from __future__ import annotations
 
+from types import ModuleType
+
 import numpy as np
 
 from hostpc.kinematics.chain import Chain
 from hostpc.kinematics.rotations import matrix_to_rotvec
 
 
-def _kinematics():  # type: ignore[no-untyped-def]
+def _kinematics() -> ModuleType:
     from hostpc import kinematics  # package top level (avoids an import cycle)
 
     return kinematics

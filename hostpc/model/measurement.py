@@ -68,10 +68,10 @@ def kinematic_deltas(problem: Problem, x: np.ndarray, jacobian: bool
 
 def _frame_pose(problem: Problem, name: str, x: np.ndarray):  # type: ignore[no-untyped-def]
     """(R, t, J_r) of a pose frame (tool or base) with its delta applied, if estimated."""
-    frame = problem.dataset.frames.get(name)
-    if frame is None:
+    if name not in problem.dataset.frames:
         T = np.eye(4)
     else:
+        frame = problem.dataset.pose(name)
         T = pose_to_transform(np.asarray(frame.xyz, float), np.asarray(frame.rpy, float))
     term = problem.term(name)
     delta = _term_params(term, x)
@@ -190,7 +190,7 @@ def predict_sphere_probe(problem: Problem, x: np.ndarray, jacobian: bool = True
     poses, R_bf, t_bf, d_delta, rows = _flange(problem, x, jacobian)
     _, t_ft, _ = _frame_pose(problem, "tool", x)
     tip = np.einsum("nij,j->ni", R_bf, t_ft) + t_bf
-    sphere = problem.dataset.frames["sphere"]
+    sphere = problem.dataset.sphere()
     c_b, d_cb = _world_point_in_base(problem, x, "sphere", np.asarray(sphere.center, float))
     diff = tip - c_b[None, :]
     distance = np.linalg.norm(diff, axis=1)

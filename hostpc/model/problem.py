@@ -113,6 +113,9 @@ def robot_chain(dataset: Dataset) -> Chain:
         return tree_of(dataset).stacked_chain()
     if robot.name is not None and robot.a is None:
         return get_robot(robot.name)
+    # the dataset layer guarantees a complete explicit table when there is no name
+    assert robot.convention is not None and robot.a is not None and robot.alpha is not None
+    assert robot.d is not None and robot.theta is not None
     return chain_from_table(
         robot.name or "explicit",
         robot.convention,
@@ -177,7 +180,7 @@ def _measurements(dataset: Dataset) -> tuple[np.ndarray, np.ndarray]:
         W = np.linalg.solve(L, eye)
         return np.asarray(samples.p, dtype=float), W
     if dataset.method == "sphere_probe":
-        sphere = dataset.frames["sphere"]
+        sphere = dataset.sphere()
         stylus = dataset.probe_stylus_radius or 0.0
         n = samples.n
         measured = np.full((n, 1), float(sphere.radius) + float(stylus))
@@ -198,7 +201,7 @@ def build_problem(
     effects: None for the default (joint_offsets + unknown frames), a list of names, or a
     spec string such as ``"joint_offsets,tool"`` or ``"+backlash"`` (added to the default).
     """
-    plugins = tuple(str(p) for p in plugins)
+    plugin_paths = tuple(str(p) for p in plugins)
     chain = robot_chain(dataset)
     if dataset.method not in FRAME_EFFECTS_BY_METHOD:
         raise InputError(f"method {dataset.method!r} is not supported by the fit yet")
@@ -212,7 +215,7 @@ def build_problem(
         )
     names = parse_effect_list(effects, default_effects(dataset))
     if effect_instances is None:
-        instances = instantiate(names, available_effects(plugins))
+        instances = instantiate(names, available_effects(plugin_paths))
     else:
         instances = list(effect_instances)
     context = _context(dataset, chain)
@@ -266,6 +269,6 @@ def build_problem(
         layout=ParameterLayout(tuple(all_names), tuple(all_units), slices),
         measured=measured,
         sqrt_information=W,
-        plugins=plugins,
+        plugins=plugin_paths,
         linear_bases=bases,
     )

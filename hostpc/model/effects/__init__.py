@@ -28,4 +28,18 @@ BUILTIN_EFFECTS = (
     *DUAL_LOOP_FRAME_EFFECTS,
 )
 
-__all__ = [cls.__name__ for cls in BUILTIN_EFFECTS] + ["BUILTIN_EFFECTS"]
+__all__ = [
+    "Backlash",
+    "BaseFrame",
+    "DepthScale",
+    "EncoderScale",
+    "Geometry",
+    "JointCompliance",
+    "JointOffsets",
+    "SphereFrame",
+    "TargetFrame",
+    "ToolFrame",
+    "TransmissionHarmonic",
+    "TriggerLatency",
+    "BUILTIN_EFFECTS",
+]
