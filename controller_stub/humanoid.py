@@ -51,6 +51,7 @@ from controller_stub.robot_model import (
     matrix_to_rpy,
 )
 from controller_stub.scenario import RandomSpec, Scenario
+from controller_stub.streams import stream_rng  # the stub's seeded streams
 
 HALF_PI = math.pi / 2
 DEG = math.pi / 180
@@ -186,8 +187,6 @@ class HumanoidSimulation:
     """
 
     def __init__(self, scenario: Scenario) -> None:
-        from controller_stub.simulation import _rng  # the stub's seeded streams
-
         self.scenario = scenario
         self.models = {"head": head_model(), "left": arm_model("left"),
                        "right": arm_model("right")}
@@ -197,11 +196,11 @@ class HumanoidSimulation:
         truth = scenario.truth
         if isinstance(truth.zero_errors, RandomSpec):
             half = math.radians(truth.zero_errors.random_deg)
-            errors = _rng(scenario.seed, 1).uniform(-half, half, n)
+            errors = stream_rng(scenario.seed, 1).uniform(-half, half, n)
         else:
             errors = np.asarray(truth.zero_errors, dtype=float)
         self._zero_error_initial: np.ndarray = errors
-        self._rng_noise = _rng(scenario.seed, 11)
+        self._rng_noise = stream_rng(scenario.seed, 11)
         self.T_headend_camera_nominal = make_transform(list(CAMERA_NOMINAL[0]),
                                                        list(CAMERA_NOMINAL[1]))
         self.T_headend_camera = self.T_headend_camera_nominal @ make_transform(

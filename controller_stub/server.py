@@ -33,61 +33,57 @@ edges and the e-stop live in the simulation.
 
 IO edges reported by the simulation are pushed as `io_edge` events to every authenticated
 session. The server binds 127.0.0.1 unless told otherwise.
+
+This module holds `ControllerServer` (accepting, the session limit, motion pacing, rollback
+ids, the truth file); one client connection is a `session.Session`, and its request handlers
+are in `handlers.py`. The limits' constants are importable from here.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import dataclasses
 import json
 import logging
 import os
-import socket
 import tempfile
-from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from controller_stub.simulation import SimulationRefused
-from protocol import messages as m
-from protocol.connection import (
-    Connection,
-    ConnectionClosed,
-    ConnectionState,
-    Rejected,
-    Role,
-    StateChanged,
+from controller_stub.handlers import RequestRefusedError, float_list, json_default
+from controller_stub.session import (
+    CLOSE_DRAIN_S,
+    EVENT_DROP_BYTES,
+    PRE_AUTH_MAX_FRAME_SIZE,
+    SERVER_NAME,
+    SESSION_READ_CHUNK,
+    WRITE_HIGH_WATER,
+    Session,
 )
-from protocol.errors import ErrorCode, LocalProtocolError
+from protocol import messages as m
+from protocol.connection import Connection, Role
+from protocol.errors import ErrorCode
 from protocol.framing import DEFAULT_MAX_FRAME_SIZE
+
+__all__ = [
+    "CLOSE_DRAIN_S",
+    "DEFAULT_HOST",
+    "EVENT_DROP_BYTES",
+    "PRE_AUTH_MAX_FRAME_SIZE",
+    "READ_CHUNK",
+    "SERVER_NAME",
+    "SESSION_READ_CHUNK",
+    "WRITE_HIGH_WATER",
+    "ControllerServer",
+    "RequestRefusedError",
+]
 
 logger = logging.getLogger(__name__)
 
 DEFAULT_HOST = "127.0.0.1"
-SERVER_NAME = "controller-stub"
 READ_CHUNK = 1 << 20
-SESSION_READ_CHUNK = 64 * 1024
-"""Bytes read from a client at a time (requests are small; bounds the events per read)."""
-PRE_AUTH_MAX_FRAME_SIZE = 64 * 1024
-"""Largest frame accepted from a session that has not authenticated (bytes)."""
-WRITE_HIGH_WATER = 256 * 1024
-"""Unsent reply bytes per session above which the server stops reading from it."""
-EVENT_DROP_BYTES = 4 * WRITE_HIGH_WATER
-"""Unsent bytes above which io_edge events to a session are dropped (it does not read)."""
-CLOSE_DRAIN_S = 2.0
-"""How long a closing session waits for its last bytes (an error reply) to be sent."""
-
-
-class RequestRefusedError(Exception):
-    """A handler refuses a request with a protocol error code (busy, unknown rollback...)."""
-
-    def __init__(self, code: ErrorCode, message: str, reason: str | None = None) -> None:
-        super().__init__(message)
-        self.code = code
-        self.reason = reason
 
 
 class ControllerServer:
@@ -129,7 +125,7 @@ class ControllerServer:
         self.requests_seen = 0
         self._dropped = False
         self._server: asyncio.Server | None = None
-        self._sessions: set[_Session] = set()
+        self._sessions: set[Session] = set()
         self._motion: asyncio.Future[None] | None = None
         # the planned motion being paced: (plan, loop time at its start, wall duration s)
         self._progress: tuple[Any, float, float] | None = None
@@ -212,7 +208,7 @@ class ControllerServer:
         if len(self._sessions) >= self.max_sessions:
             await self._refuse_session(reader, writer)
             return
-        session = _Session(self, reader, writer)
+        session = Session(self, reader, writer)
         self._sessions.add(session)
         try:
             await session.run()
@@ -258,7 +254,7 @@ class ControllerServer:
 
     def _on_io_edge(self, line: int, value: bool, time: float, q_latched: np.ndarray) -> None:
         event = m.IoEdge(
-            line=int(line), value=bool(value), time=float(time), q_latched=_floats(q_latched)
+            line=int(line), value=bool(value), time=float(time), q_latched=float_list(q_latched)
         )
         for session in list(self._sessions):
             session.push(event)
@@ -267,7 +263,7 @@ class ControllerServer:
         """Rewrite the --truth-out file atomically (no-op without one)."""
         if self.truth_out is None:
             return
-        text = json.dumps(self.sim.truth(), indent=2, default=_json_default)
+        text = json.dumps(self.sim.truth(), indent=2, default=json_default)
         directory = self.truth_out.parent
         directory.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=directory, prefix=".truth-", suffix=".json")
@@ -350,437 +346,3 @@ class ControllerServer:
                 ErrorCode.UNKNOWN_ROLLBACK, f"unknown rollback id {rollback_id!r}"
             ) from None
 
-
-class _Session:
-    """One client connection: reader loop, request tasks, event pushes (and its limits)."""
-
-    def __init__(
-        self, server: ControllerServer, reader: asyncio.StreamReader, writer: asyncio.StreamWriter
-    ) -> None:
-        self.server = server
-        self.sim = server.sim
-        self.reader = reader
-        self.writer = writer
-        peer = writer.get_extra_info("peername")
-        self.peer = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer)
-        self.conn = Connection(
-            Role.SERVER,
-            token=server.token,
-            max_frame_size=server.max_frame_size,
-            pre_auth_max_frame_size=PRE_AUTH_MAX_FRAME_SIZE,
-            server_name=SERVER_NAME,
-            robot_name=str(self.sim.robot_name),
-        )
-        self._tasks: set[asyncio.Task[None]] = set()
-        self._slot_freed = asyncio.Event()
-        self._write_lock = asyncio.Lock()
-        self._done = asyncio.Event()
-        loop = asyncio.get_running_loop()
-        self._handshake_deadline = loop.time() + server.handshake_timeout_s
-        self._frame_started: float | None = None  # loop time the frame in progress began
-        writer.transport.set_write_buffer_limits(high=WRITE_HIGH_WATER)
-        self._handlers: dict[str, Callable[[Any], Awaitable[m._Message]]] = {
-            "get_state": self._get_state,
-            "read_io": self._read_io,
-            "move_joints": self._move_joints,
-            "guarded_move": self._guarded_move,
-            "abort": self._abort,
-            "capture": self._capture,
-            "measure_targets": self._measure_targets,
-            "get_offsets": self._get_offsets,
-            "set_offsets": self._set_offsets,
-            "rollback_offsets": self._rollback,
-            "heartbeat": self._heartbeat,
-        }
-        sock = writer.get_extra_info("socket")
-        if sock is not None:
-            with contextlib.suppress(OSError):
-                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-
-    async def run(self) -> None:
-        logger.info("client %s connected", self.peer)
-        try:
-            while self.conn.state is not ConnectionState.CLOSED:
-                if not await self._wait_writable():
-                    break
-                data = await self._read()
-                if data is None:
-                    break
-                try:
-                    events = self.conn.receive_data(data)
-                except Exception:  # a protocol-layer bug must not outlive this connection
-                    logger.exception("protocol failure with %s; closing", self.peer)
-                    break
-                self._note_partial_frame()
-                self._write(self.conn.data_to_send())
-                for event in events:
-                    await self._dispatch(event)
-            with contextlib.suppress(TimeoutError, ConnectionError, OSError):
-                await asyncio.wait_for(self.writer.drain(), CLOSE_DRAIN_S)
-        finally:
-            # a client that does not read cannot hold the transport (and its buffer) open
-            self._close_transport(abort=self.writer.transport.get_write_buffer_size() > 0)
-            # Requests in flight finish (a motion keeps its pacing) but cannot reply.
-            if self._tasks:
-                await asyncio.gather(*self._tasks, return_exceptions=True)
-            logger.info("client %s disconnected", self.peer)
-            self._done.set()
-
-    async def finished(self) -> None:
-        """Wait until the session has ended."""
-        await self._done.wait()
-
-    def abort(self) -> None:
-        """Drop the connection now and cancel its requests (server shutdown)."""
-        for task in self._tasks:
-            task.cancel()
-        self._close_transport(abort=True)
-
-    def push(self, event: m._Message) -> None:
-        """Push an event if this session is authenticated (dropped, with a warning, if the
-        client has not read EVENT_DROP_BYTES of earlier output)."""
-        if self.conn.state is not ConnectionState.READY or self.writer.is_closing():
-            return
-        if self.writer.transport.get_write_buffer_size() > EVENT_DROP_BYTES:
-            logger.warning("client %s does not read; dropping %s", self.peer, event.kind)
-            return
-        self._write(self.conn.send(event))
-
-    # ------------------------------------------------------------------------ limits
-
-    def _read_deadline(self) -> tuple[float, str]:
-        """(seconds to wait for the next bytes, what is overdue if they do not come)."""
-        now = asyncio.get_running_loop().time()
-        waits = [(self.server.idle_timeout_s, f"idle for {self.server.idle_timeout_s:g} s")]
-        if self.conn.state is ConnectionState.AWAITING_HELLO:
-            waits.append(
-                (
-                    self._handshake_deadline - now,
-                    f"no hello within {self.server.handshake_timeout_s:g} s",
-                )
-            )
-        if self._frame_started is not None:
-            waits.append(
-                (
-                    self._frame_started + self.server.handshake_timeout_s - now,
-                    f"frame of {self.conn.buffered}+ bytes not completed within "
-                    f"{self.server.handshake_timeout_s:g} s",
-                )
-            )
-        return min(waits)
-
-    async def _read(self) -> bytes | None:
-        """The next bytes from the client (b"" = end of stream), or None once a deadline
-        has passed (handshake, frame in progress, idle). Waiting for replies to our own
-        requests in flight is not idleness."""
-        while True:
-            timeout, overdue = self._read_deadline()
-            try:
-                return await asyncio.wait_for(
-                    self.reader.read(SESSION_READ_CHUNK), max(timeout, 0.0)
-                )
-            except TimeoutError:  # before OSError, of which it is a subclass
-                if overdue.startswith("idle") and self._tasks:
-                    continue
-                logger.warning("client %s: %s; closing", self.peer, overdue)
-                return None
-            except (ConnectionError, OSError):
-                return b""
-
-    def _note_partial_frame(self) -> None:
-        if self.conn.buffered == 0:
-            self._frame_started = None
-        elif self._frame_started is None:
-            self._frame_started = asyncio.get_running_loop().time()
-
-    async def _wait_writable(self) -> bool:
-        """Backpressure: wait while this client's unsent output is above the high-water
-        mark. False (and the transport aborted) if it has not read for idle_timeout_s, or
-        the connection is gone."""
-        try:
-            await asyncio.wait_for(self.writer.drain(), self.server.idle_timeout_s)
-        except TimeoutError:
-            logger.warning(
-                "client %s has not read its replies for %g s; closing",
-                self.peer,
-                self.server.idle_timeout_s,
-            )
-            self._close_transport(abort=True)
-            return False
-        except (ConnectionError, OSError):
-            return False
-        return True
-
-    async def _request_slot(self) -> None:
-        """Wait until fewer than max_requests_in_flight requests of this session run."""
-        while len(self._tasks) >= self.server.max_requests_in_flight:
-            self._slot_freed.clear()
-            await self._slot_freed.wait()
-
-    def _task_done(self, task: asyncio.Task[None]) -> None:
-        self._tasks.discard(task)
-        self._slot_freed.set()
-
-    # ------------------------------------------------------------------------ events
-
-    async def _dispatch(self, event: object) -> None:
-        if isinstance(event, m.Request):
-            if self.server.count_request():
-                logger.warning(
-                    "fault: dropping %s after request %d (%s)",
-                    self.peer,
-                    self.server.requests_seen - 1,
-                    event.kind,
-                )
-                self._close_transport(abort=True)
-                return
-            await self._request_slot()  # backpressure: no more reading until a slot frees
-            task = asyncio.get_running_loop().create_task(self._serve(event))
-            self._tasks.add(task)
-            task.add_done_callback(self._task_done)
-        elif isinstance(event, Rejected):
-            logger.warning("client %s: %s (%s)", self.peer, event.message, event.code)
-        elif isinstance(event, StateChanged):
-            if event.new is ConnectionState.READY:
-                logger.info("client %s authenticated", self.peer)
-        elif isinstance(event, m.ErrorReply):
-            logger.info("client %s reports error %s: %s", self.peer, event.code, event.message)
-        elif isinstance(event, ConnectionClosed):
-            pass
-
-    async def _serve(self, request: m.Request) -> None:
-        handler = self._handlers[request.kind]
-        try:
-            reply = await handler(request)
-        except SimulationRefused as exc:
-            logger.info("refused %s from %s: %s (%s)", request.kind, self.peer, exc, exc.code)
-            reply = _error(request, ErrorCode.REFUSED, str(exc), reason=exc.code)
-        except RequestRefusedError as exc:
-            reply = _error(request, exc.code, str(exc), reason=exc.reason)
-        except asyncio.CancelledError:
-            raise
-        except Exception as exc:  # any handler failure becomes an error reply
-            logger.exception("handler %s failed for %s", request.kind, self.peer)
-            reply = _error(request, ErrorCode.INTERNAL, f"{type(exc).__name__}: {exc}")
-        if self.server.reply_delay_s > 0:
-            await asyncio.sleep(self.server.reply_delay_s)
-        # one reply at a time, each only once the output is below the high-water mark:
-        # the unsent bytes stay bounded by WRITE_HIGH_WATER plus one reply
-        async with self._write_lock:
-            if self.conn.state is ConnectionState.CLOSED or self.writer.is_closing():
-                return
-            if not await self._wait_writable():
-                return
-            if self.conn.state is ConnectionState.CLOSED or self.writer.is_closing():
-                return
-            try:
-                data = self.conn.send(reply)
-            except LocalProtocolError:
-                logger.exception("cannot send %s to %s", reply.kind, self.peer)
-                return
-            self._write(data)
-
-    def _write(self, data: bytes) -> None:
-        if data and not self.writer.is_closing():
-            self.writer.write(data)
-
-    def _close_transport(self, abort: bool = False) -> None:
-        if abort:
-            self.writer.transport.abort()
-        elif not self.writer.is_closing():
-            self.writer.close()
-
-    # ---------------------------------------------------------------------- handlers
-
-    async def _get_state(self, request: m.GetState) -> m.State:
-        sim = self.sim
-        q_min, q_max = sim.joint_limits()
-        return m.State(
-            reply_to=request.id,
-            robot_name=str(sim.robot_name),
-            n_joints=int(sim.n_joints),
-            mode=self.server.mode(),  # type: ignore[arg-type]
-            time=float(sim.time),
-            q=_floats(self.server.joint_positions()),  # along the path while moving
-            zero_offsets=_floats(sim.zero_offsets()),
-            q_min=_floats(q_min),
-            q_max=_floats(q_max),
-            digital_inputs=[bool(v) for v in sim.digital_inputs()],
-            digital_outputs=[bool(v) for v in sim.digital_outputs()],
-            camera=json.loads(json.dumps(sim.camera_description(), default=_json_default)),
-            authenticated=self.conn.authenticated,
-        )
-
-    async def _read_io(self, request: m.ReadIo) -> m.IoState:
-        return m.IoState(
-            reply_to=request.id,
-            digital_inputs=[bool(v) for v in self.sim.digital_inputs()],
-            digital_outputs=[bool(v) for v in self.sim.digital_outputs()],
-            time=float(self.sim.time),
-        )
-
-    def _check_joints(self, q: list[float]) -> np.ndarray:
-        n = int(self.sim.n_joints)
-        if len(q) != n:
-            raise RequestRefusedError(
-                ErrorCode.BAD_MESSAGE, f"expected {n} joint values, got {len(q)}"
-            )
-        return np.asarray(q, dtype=float)
-
-    async def _run_motion(self, q_target: np.ndarray, speed: float, io_line: int | None) -> Any:
-        """Plan, pace and finish a motion (stopped part-way by an abort); the simulation's
-        MoveResult / GuardedMoveResult. A simulation without `begin_move` moves at once
-        and an abort only ends the wait (its result then says "aborted")."""
-        self.server.begin_motion()
-        if hasattr(self.sim, "begin_move"):
-            plan = self.sim.begin_move(q_target, speed, io_line)
-            return await self.server.execute_motion(plan)
-        if io_line is None:
-            result = self.sim.move_joints(q_target, speed)
-        else:
-            result = self.sim.guarded_move(q_target, speed, io_line)
-        if await self.server.run_motion(result.duration_s):
-            return result
-        if io_line is None:
-            return dataclasses.replace(result, completed=False, reason="aborted")
-        return dataclasses.replace(result, reason="aborted")
-
-    async def _move_joints(self, request: m.MoveJoints) -> m.MoveDone:
-        q_target = self._check_joints(request.q)
-        result = await self._run_motion(q_target, request.speed, None)
-        return m.MoveDone(
-            reply_to=request.id,
-            completed=bool(result.completed),
-            q=_floats(result.q),
-            duration_s=float(result.duration_s),
-            reason=result.reason,
-        )
-
-    async def _guarded_move(self, request: m.GuardedMove) -> m.GuardedMoveDone:
-        q_target = self._check_joints(request.q)
-        result = await self._run_motion(q_target, request.speed, request.io_line)
-        return m.GuardedMoveDone(
-            reply_to=request.id,
-            contact=bool(result.contact),
-            q_latched=None if result.q_latched is None else _floats(result.q_latched),
-            q=_floats(result.q),
-            io_line=int(result.io_line),
-            duration_s=float(result.duration_s),
-            speed_mps=None if result.speed_mps is None else float(result.speed_mps),
-            reason=result.reason,
-        )
-
-    def _refuse_while_moving(self, what: str) -> None:
-        if self.server.mode() == "moving":
-            raise RequestRefusedError(
-                ErrorCode.BUSY, f"cannot {what} while a motion is in progress"
-            )
-
-    async def _abort(self, request: m.Abort) -> m.Aborted:
-        return m.Aborted(reply_to=request.id, was_moving=self.server.abort_motion())
-
-    async def _capture(self, request: m.Capture) -> m.CaptureDone:
-        frame = self.sim.capture_stereo(pattern=request.pattern, view=request.view)
-        infos: list[m.ImageInfo] = []
-        payloads: list[bytes | memoryview] = []
-        for camera, image in (("left", frame.left), ("right", frame.right)):
-            pixels = np.ascontiguousarray(image, dtype=np.uint8)
-            if pixels.ndim != 2:
-                raise RuntimeError(f"{camera} image has shape {pixels.shape}, expected (H, W)")
-            height, width = pixels.shape
-            payload = _encode_png(pixels) if request.encoding == "png" else pixels.reshape(-1).data
-            infos.append(
-                m.ImageInfo(
-                    camera=camera,  # type: ignore[arg-type]
-                    width=width,
-                    height=height,
-                    encoding=request.encoding,
-                    nbytes=memoryview(payload).nbytes,
-                )
-            )
-            payloads.append(payload)
-        reply = m.CaptureDone(
-            reply_to=request.id,
-            pattern=request.pattern,
-            view=request.view,
-            q=_floats(frame.q),
-            time=float(frame.time),
-            images=infos,
-        )
-        reply.with_attachments(*payloads)
-        return reply
-
-    async def _measure_targets(self, request: m.MeasureTargets) -> m.TargetsMeasured:
-        """The simulation's triangulated targets (`sim.measure_targets()`); a simulation
-        without that sensor refuses with reason `unsupported`."""
-        measure = getattr(self.sim, "measure_targets", None)
-        if measure is None:
-            raise SimulationRefused("unsupported", f"{self.sim.robot_name} has no target "
-                                    "measurement; use capture")
-        result = measure()  # during a motion: at its start pose, with that q (as capture)
-        targets = [
-            m.TargetObservation(chain=str(chain), p=_floats(seen["p"]),
-                                cov=np.asarray(seen["cov"], dtype=float).reshape(3, 3).tolist())
-            for chain, seen in result["targets"].items()
-        ]
-        return m.TargetsMeasured(reply_to=request.id, q=_floats(result["q"]),
-                                 time=float(result["time"]), targets=targets)
-
-    async def _get_offsets(self, request: m.GetOffsets) -> m.Offsets:
-        return m.Offsets(reply_to=request.id, offsets=_floats(self.sim.zero_offsets()))
-
-    async def _set_offsets(self, request: m.SetOffsets) -> m.OffsetsSet:
-        offsets = self._check_joints(request.offsets)
-        self._refuse_while_moving("write the zero offsets")
-        previous = _floats(self.sim.set_zero_offsets(offsets))
-        rollback_id = self.server.new_rollback_id(previous)
-        logger.info("client %s set zero offsets (rollback id %s)", self.peer, rollback_id)
-        self.server.write_truth()
-        return m.OffsetsSet(
-            reply_to=request.id,
-            offsets=_floats(self.sim.zero_offsets()),
-            previous=previous,
-            rollback_id=rollback_id,
-        )
-
-    async def _rollback(self, request: m.RollbackOffsets) -> m.OffsetsRolledBack:
-        saved = self.server.rollback_offsets(request.rollback_id)
-        self._refuse_while_moving("roll back the zero offsets")
-        replaced = _floats(self.sim.set_zero_offsets(np.asarray(saved, dtype=float)))
-        logger.info("client %s rolled back offsets to %s", self.peer, request.rollback_id)
-        self.server.write_truth()
-        return m.OffsetsRolledBack(
-            reply_to=request.id, offsets=_floats(self.sim.zero_offsets()), replaced=replaced
-        )
-
-    async def _heartbeat(self, request: m.Heartbeat) -> m.HeartbeatReply:
-        return m.HeartbeatReply(reply_to=request.id, time=float(self.sim.time))
-
-
-def _error(
-    request: m.Request, code: ErrorCode, message: str, reason: str | None = None
-) -> m.ErrorReply:
-    return m.ErrorReply(reply_to=request.id, code=code, message=message[:4000], reason=reason)
-
-
-def _floats(values: Any) -> list[float]:
-    return [float(v) for v in np.asarray(values, dtype=float).reshape(-1)]
-
-
-def _encode_png(pixels: np.ndarray) -> bytes:
-    import cv2
-
-    ok, buffer = cv2.imencode(".png", pixels)
-    if not ok:
-        raise RuntimeError("PNG encoding failed")
-    return buffer.tobytes()
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")

@@ -32,7 +32,7 @@ import datetime as _dt
 import json
 import signal
 import sys
-from collections.abc import Iterator
+from collections.abc import Coroutine, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -59,6 +59,37 @@ class Terminated(KeyboardInterrupt):
 
 def _raise_terminated(signum: int, frame: object) -> None:
     raise Terminated(f"signal {signum}")
+
+
+async def _cancel_on_sigterm(run: Coroutine[Any, Any, RunOutcome]) -> RunOutcome:
+    """Await `run`; a SIGTERM meanwhile cancels it at its next await and raises Terminated.
+
+    Inside the event loop a signal must not raise into whatever frame happens to run (it can
+    land in the transport's reader task and read as a lost link); the loop's own signal
+    handler cancels the main task cleanly instead, and every `finally` still runs."""
+    loop = asyncio.get_running_loop()
+    task = asyncio.current_task()
+    terminated = False
+
+    def on_sigterm() -> None:
+        nonlocal terminated
+        terminated = True
+        if task is not None:
+            task.cancel()
+
+    try:
+        loop.add_signal_handler(signal.SIGTERM, on_sigterm)
+    except (NotImplementedError, RuntimeError, ValueError):  # not the main thread
+        return await run
+    try:
+        return await run
+    except asyncio.CancelledError:
+        if terminated:
+            raise Terminated(f"signal {int(signal.SIGTERM)}") from None
+        raise
+    finally:
+        loop.remove_signal_handler(signal.SIGTERM)
+        signal.signal(signal.SIGTERM, _raise_terminated)  # back to the synchronous handler
 
 
 @contextmanager
@@ -263,8 +294,9 @@ def _run_with_robot(args: argparse.Namespace, address: RobotAddress, driver: str
                     progress: StderrProgress) -> RunOutcome:
     if not address.sim:
         info = RobotInfo(address=str(address), driver=driver, sim=False)
-        return asyncio.run(_calibrate(args, address, driver, run_dir, settings, cell_file,
-                                      known, (), info, progress, None, args.token))
+        return asyncio.run(_cancel_on_sigterm(_calibrate(
+            args, address, driver, run_dir, settings, cell_file, known, (), info, progress,
+            None, args.token)))
     from hostpc.robots.simulator import (
         SimulatedController,
         default_sim_scenario,
@@ -290,9 +322,9 @@ def _run_with_robot(args: argparse.Namespace, address: RobotAddress, driver: str
     with SimulatedController(scenario, sim_dir, modbus_port=modbus_port) as simulator:
         info = RobotInfo(address=f"{simulator.address.host}:{simulator.address.port}",
                          driver="zerocal", sim=True, scenario=str(simulator.scenario_path))
-        return asyncio.run(_calibrate(args, simulator.address, "zerocal", run_dir, settings,
-                                      cell_file, known, default_known, info, progress,
-                                      simulator.truth, token))
+        return asyncio.run(_cancel_on_sigterm(_calibrate(
+            args, simulator.address, "zerocal", run_dir, settings, cell_file, known,
+            default_known, info, progress, simulator.truth, token)))
 
 
 def _with_option(settings: RunSettings, key: str, value: Any) -> RunSettings:

@@ -1,0 +1,259 @@
+"""The request handlers of a controller-stub session: one coroutine per request kind.
+
+Each handler turns one protocol request into calls on the simulation (through the server for
+what is shared by all sessions: motion pacing, rollback ids, the truth file) and returns the
+reply. A handler refuses with `RequestRefusedError` (a protocol error code) or lets the
+simulation's `SimulationRefused` through; the session turns both into `error` replies. Joint
+angles and offsets are radians (reported frame), times seconds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from controller_stub.errors import SimulationRefused
+from protocol import messages as m
+from protocol.connection import Connection
+from protocol.errors import ErrorCode
+
+if TYPE_CHECKING:
+    from controller_stub.server import ControllerServer
+
+# the server's logger: log records keep the name they had before the server was split
+logger = logging.getLogger("controller_stub.server")
+
+Handler = Callable[[Any], Awaitable[m._Message]]
+
+
+class RequestRefusedError(Exception):
+    """A handler refuses a request with a protocol error code (busy, unknown rollback...)."""
+
+    def __init__(self, code: ErrorCode, message: str, reason: str | None = None) -> None:
+        super().__init__(message)
+        self.code = code
+        self.reason = reason
+
+
+class RequestHandlers:
+    """The request handlers of `controller_stub.session.Session`, by request kind.
+
+    The state below is created by `Session.__init__`.
+    """
+
+    server: ControllerServer
+    sim: Any
+    conn: Connection
+    peer: str
+
+    def _handler_table(self) -> dict[str, Handler]:
+        """Request kind -> bound handler."""
+        return {
+            "get_state": self._get_state,
+            "read_io": self._read_io,
+            "move_joints": self._move_joints,
+            "guarded_move": self._guarded_move,
+            "abort": self._abort,
+            "capture": self._capture,
+            "measure_targets": self._measure_targets,
+            "get_offsets": self._get_offsets,
+            "set_offsets": self._set_offsets,
+            "rollback_offsets": self._rollback,
+            "heartbeat": self._heartbeat,
+        }
+
+    async def _get_state(self, request: m.GetState) -> m.State:
+        sim = self.sim
+        q_min, q_max = sim.joint_limits()
+        return m.State(
+            reply_to=request.id,
+            robot_name=str(sim.robot_name),
+            n_joints=int(sim.n_joints),
+            mode=self.server.mode(),  # type: ignore[arg-type]
+            time=float(sim.time),
+            q=float_list(self.server.joint_positions()),  # along the path while moving
+            zero_offsets=float_list(sim.zero_offsets()),
+            q_min=float_list(q_min),
+            q_max=float_list(q_max),
+            digital_inputs=[bool(v) for v in sim.digital_inputs()],
+            digital_outputs=[bool(v) for v in sim.digital_outputs()],
+            camera=json.loads(json.dumps(sim.camera_description(), default=json_default)),
+            authenticated=self.conn.authenticated,
+        )
+
+    async def _read_io(self, request: m.ReadIo) -> m.IoState:
+        return m.IoState(
+            reply_to=request.id,
+            digital_inputs=[bool(v) for v in self.sim.digital_inputs()],
+            digital_outputs=[bool(v) for v in self.sim.digital_outputs()],
+            time=float(self.sim.time),
+        )
+
+    def _check_joints(self, q: list[float]) -> np.ndarray:
+        n = int(self.sim.n_joints)
+        if len(q) != n:
+            raise RequestRefusedError(
+                ErrorCode.BAD_MESSAGE, f"expected {n} joint values, got {len(q)}"
+            )
+        return np.asarray(q, dtype=float)
+
+    async def _run_motion(self, q_target: np.ndarray, speed: float, io_line: int | None) -> Any:
+        """Plan, pace and finish a motion (stopped part-way by an abort); the simulation's
+        MoveResult / GuardedMoveResult. A simulation without `begin_move` moves at once
+        and an abort only ends the wait (its result then says "aborted")."""
+        self.server.begin_motion()
+        if hasattr(self.sim, "begin_move"):
+            plan = self.sim.begin_move(q_target, speed, io_line)
+            return await self.server.execute_motion(plan)
+        if io_line is None:
+            result = self.sim.move_joints(q_target, speed)
+        else:
+            result = self.sim.guarded_move(q_target, speed, io_line)
+        if await self.server.run_motion(result.duration_s):
+            return result
+        if io_line is None:
+            return dataclasses.replace(result, completed=False, reason="aborted")
+        return dataclasses.replace(result, reason="aborted")
+
+    async def _move_joints(self, request: m.MoveJoints) -> m.MoveDone:
+        q_target = self._check_joints(request.q)
+        result = await self._run_motion(q_target, request.speed, None)
+        return m.MoveDone(
+            reply_to=request.id,
+            completed=bool(result.completed),
+            q=float_list(result.q),
+            duration_s=float(result.duration_s),
+            reason=result.reason,
+        )
+
+    async def _guarded_move(self, request: m.GuardedMove) -> m.GuardedMoveDone:
+        q_target = self._check_joints(request.q)
+        result = await self._run_motion(q_target, request.speed, request.io_line)
+        return m.GuardedMoveDone(
+            reply_to=request.id,
+            contact=bool(result.contact),
+            q_latched=None if result.q_latched is None else float_list(result.q_latched),
+            q=float_list(result.q),
+            io_line=int(result.io_line),
+            duration_s=float(result.duration_s),
+            speed_mps=None if result.speed_mps is None else float(result.speed_mps),
+            reason=result.reason,
+        )
+
+    def _refuse_while_moving(self, what: str) -> None:
+        if self.server.mode() == "moving":
+            raise RequestRefusedError(
+                ErrorCode.BUSY, f"cannot {what} while a motion is in progress"
+            )
+
+    async def _abort(self, request: m.Abort) -> m.Aborted:
+        return m.Aborted(reply_to=request.id, was_moving=self.server.abort_motion())
+
+    async def _capture(self, request: m.Capture) -> m.CaptureDone:
+        frame = self.sim.capture_stereo(pattern=request.pattern, view=request.view)
+        infos: list[m.ImageInfo] = []
+        payloads: list[bytes | memoryview] = []
+        for camera, image in (("left", frame.left), ("right", frame.right)):
+            pixels = np.ascontiguousarray(image, dtype=np.uint8)
+            if pixels.ndim != 2:
+                raise RuntimeError(f"{camera} image has shape {pixels.shape}, expected (H, W)")
+            height, width = pixels.shape
+            payload = _encode_png(pixels) if request.encoding == "png" else pixels.reshape(-1).data
+            infos.append(
+                m.ImageInfo(
+                    camera=camera,  # type: ignore[arg-type]
+                    width=width,
+                    height=height,
+                    encoding=request.encoding,
+                    nbytes=memoryview(payload).nbytes,
+                )
+            )
+            payloads.append(payload)
+        reply = m.CaptureDone(
+            reply_to=request.id,
+            pattern=request.pattern,
+            view=request.view,
+            q=float_list(frame.q),
+            time=float(frame.time),
+            images=infos,
+        )
+        reply.with_attachments(*payloads)
+        return reply
+
+    async def _measure_targets(self, request: m.MeasureTargets) -> m.TargetsMeasured:
+        """The simulation's triangulated targets (`sim.measure_targets()`); a simulation
+        without that sensor refuses with reason `unsupported`."""
+        measure = getattr(self.sim, "measure_targets", None)
+        if measure is None:
+            raise SimulationRefused("unsupported", f"{self.sim.robot_name} has no target "
+                                    "measurement; use capture")
+        result = measure()  # during a motion: at its start pose, with that q (as capture)
+        targets = [
+            m.TargetObservation(chain=str(chain), p=float_list(seen["p"]),
+                                cov=np.asarray(seen["cov"], dtype=float).reshape(3, 3).tolist())
+            for chain, seen in result["targets"].items()
+        ]
+        return m.TargetsMeasured(reply_to=request.id, q=float_list(result["q"]),
+                                 time=float(result["time"]), targets=targets)
+
+    async def _get_offsets(self, request: m.GetOffsets) -> m.Offsets:
+        return m.Offsets(reply_to=request.id, offsets=float_list(self.sim.zero_offsets()))
+
+    async def _set_offsets(self, request: m.SetOffsets) -> m.OffsetsSet:
+        offsets = self._check_joints(request.offsets)
+        self._refuse_while_moving("write the zero offsets")
+        previous = float_list(self.sim.set_zero_offsets(offsets))
+        rollback_id = self.server.new_rollback_id(previous)
+        logger.info("client %s set zero offsets (rollback id %s)", self.peer, rollback_id)
+        self.server.write_truth()
+        return m.OffsetsSet(
+            reply_to=request.id,
+            offsets=float_list(self.sim.zero_offsets()),
+            previous=previous,
+            rollback_id=rollback_id,
+        )
+
+    async def _rollback(self, request: m.RollbackOffsets) -> m.OffsetsRolledBack:
+        saved = self.server.rollback_offsets(request.rollback_id)
+        self._refuse_while_moving("roll back the zero offsets")
+        replaced = float_list(self.sim.set_zero_offsets(np.asarray(saved, dtype=float)))
+        logger.info("client %s rolled back offsets to %s", self.peer, request.rollback_id)
+        self.server.write_truth()
+        return m.OffsetsRolledBack(
+            reply_to=request.id, offsets=float_list(self.sim.zero_offsets()), replaced=replaced
+        )
+
+    async def _heartbeat(self, request: m.Heartbeat) -> m.HeartbeatReply:
+        return m.HeartbeatReply(reply_to=request.id, time=float(self.sim.time))
+
+
+def float_list(values: Any) -> list[float]:
+    """A flat list of Python floats from any array-like (for the wire)."""
+    return [float(v) for v in np.asarray(values, dtype=float).reshape(-1)]
+
+
+def _encode_png(pixels: np.ndarray) -> bytes:
+    import cv2
+
+    ok, buffer = cv2.imencode(".png", pixels)
+    if not ok:
+        raise RuntimeError("PNG encoding failed")
+    return buffer.tobytes()
+
+
+
+def json_default(value: Any) -> Any:
+    """`json.dumps` fallback for numpy arrays and scalars and paths."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")

@@ -1,0 +1,272 @@
+"""Reading ``zerocal-dataset/1``: parse a file, validate it and convert it to a ``Dataset``.
+
+Loading converts the file's units to SI (``units.Units``) and checks everything a fit
+relies on; a file that breaks the contract raises ``hostpc.errors.DatasetError`` with one
+line naming the file, the field and the sample index, e.g.
+``data.json: samples[3].cov: not positive definite``. The document level (format, method,
+robot, frames, known, probe) is checked here, the samples in ``reading_samples``.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hostpc.dataset import schema
+from hostpc.dataset.model import METHODS, Dataset, FramePose, RobotDescription, SphereFrame
+from hostpc.dataset.reading_samples import read_samples
+from hostpc.dataset.schema import FORMAT_TAG, FieldError, Loc, show
+from hostpc.dataset.units import Units
+from hostpc.errors import DatasetError, InputError
+
+PathLike = str | os.PathLike[str]
+
+# Frames each method knows, with their kind; all but the stereo camera model are required.
+_FRAMES: dict[str, dict[str, str]] = {
+    "stereo_target": {"tool": "pose", "target": "point", "camera": "camera_model"},
+    "sphere_probe": {"tool": "tip", "sphere": "sphere"},
+    "dual_loop": {
+        "camera": "pose",
+        "left_base": "pose",
+        "right_base": "pose",
+        "left_target": "point",
+        "right_target": "point",
+    },
+}
+_OPTIONAL_FRAMES = frozenset({"camera_model"})
+
+
+def load_dataset(path: PathLike) -> Dataset:
+    """Read and validate a dataset file, converting it to SI units.
+
+    Args:
+        path: the ``.json`` file.
+
+    Raises:
+        DatasetError: the file is missing, unreadable, not JSON, or breaks the format; the
+            one-line message names the file, the field and the sample index.
+    """
+    source = os.fspath(path)
+    try:
+        raw = Path(path).read_bytes()
+    except FileNotFoundError as exc:
+        raise DatasetError(f"{source}: file not found") from exc
+    except IsADirectoryError as exc:
+        raise DatasetError(f"{source}: is a directory, not a dataset file") from exc
+    except OSError as exc:
+        raise DatasetError(f"{source}: cannot read file ({exc.strerror or exc})") from exc
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise DatasetError(f"{source}: not UTF-8 text (byte {exc.start})") from exc
+    try:
+        document = json.loads(
+            text, parse_constant=schema.NonFinite, object_pairs_hook=schema.pairs_hook
+        )
+    except json.JSONDecodeError as exc:
+        raise DatasetError(
+            f"{source}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
+        ) from exc
+    except RecursionError as exc:
+        raise DatasetError(f"{source}: not valid JSON (nested too deeply)") from exc
+    except ValueError as exc:  # e.g. an integer literal with thousands of digits
+        raise DatasetError(f"{source}: not valid JSON ({exc})") from exc
+    return dataset_from_dict(document, source)
+
+
+def dataset_from_dict(doc: Any, source: str = "<dict>") -> Dataset:
+    """Validate a parsed document (what ``json.load`` returns) and convert it to SI.
+
+    Args:
+        doc: the document; tuples, numpy arrays and numpy scalars are accepted as well.
+        source: name used as the prefix of error messages (a file name).
+
+    Raises:
+        DatasetError: the document breaks the format (one line: source, field, sample).
+    """
+    try:
+        return _dataset_from_document(schema.normalize(doc))
+    except FieldError as exc:
+        raise DatasetError(f"{source}: {exc}") from exc
+    except RecursionError as exc:
+        raise DatasetError(f"{source}: nested too deeply") from exc
+
+
+def _dataset_from_document(doc: Any) -> Dataset:
+    """Build the dataset from a normalized document; raises FieldError."""
+    if not isinstance(doc, dict):
+        raise FieldError((), f"expected a JSON object at the top level, got {show(doc)}")
+    if "format" not in doc:
+        raise FieldError(("format",), f"required field missing (expected '{FORMAT_TAG}')")
+    if doc["format"] != FORMAT_TAG:
+        raise FieldError(("format",), f"expected '{FORMAT_TAG}', got {show(doc['format'])}")
+    if "method" not in doc:
+        raise FieldError(("method",), "required field missing")
+    method = doc["method"]
+    if method not in METHODS:
+        expected = ", ".join(f"'{m}'" for m in METHODS)
+        raise FieldError(("method",), f"unknown method {show(method)} (expected {expected})")
+
+    document: schema.DocumentSchema = schema.validate(schema.DocumentSchema, doc)
+    if not document.samples:
+        raise FieldError(("samples",), "no samples (expected at least one)")
+    units = Units(document.units)
+    robot, n_joints, robot_label = _read_robot(document.robot, method, units)
+    frames = _read_frames(document.frames, method, units)
+    known = _read_known(document.known, frames)
+    stylus_radius = _read_probe(document.probe, method, units)
+    samples = read_samples(document.samples, method, n_joints, robot_label, units)
+    extra_fields = {k: v for k, v in doc.items() if k not in schema.DOCUMENT_FIELDS}
+    return Dataset(
+        method=method,
+        robot=robot,
+        frames=frames,
+        samples=samples,
+        known=known,
+        probe_stylus_radius=stylus_radius,
+        extra_fields=extra_fields,
+    )
+
+
+def _robot_joint_count(name: str) -> int:
+    """Joint count of a built-in robot; raises FieldError for an unknown name."""
+    from hostpc.kinematics.robots import get_robot  # imported late: a sibling package
+
+    try:
+        return int(get_robot(name).n)
+    except InputError as exc:
+        message = " ".join(str(exc).split()) or f"unknown robot {show(name)}"
+        raise FieldError(("robot", "name"), message) from exc
+
+
+def _read_robot(
+    robot: schema.RobotSchema, method: str, units: Units
+) -> tuple[RobotDescription, int | None, str]:
+    """The robot description, its joint count (None if not resolved) and a label."""
+    explicit_keys = [
+        k for k in ("convention", "joints", "mass", "com") if getattr(robot, k) is not None
+    ]
+    if robot.name is not None:
+        if explicit_keys:
+            raise FieldError(
+                ("robot", explicit_keys[0]),
+                "not allowed with 'name' (give a built-in 'name' or an explicit description)",
+            )
+        if method == "dual_loop":  # a kinematic tree; the samples give the joint counts
+            return RobotDescription(name=robot.name), None, f"robot '{robot.name}'"
+        n = _robot_joint_count(robot.name)
+        return RobotDescription(name=robot.name), n, f"robot '{robot.name}'"
+    if not explicit_keys:
+        raise FieldError(
+            ("robot",), "expected 'name' (built-in robot) or 'convention' and 'joints'"
+        )
+    if method == "dual_loop":
+        raise FieldError(
+            ("robot",), "dual_loop needs a built-in robot 'name' (chains head, left, right)"
+        )
+    if robot.convention is None:
+        raise FieldError(("robot", "convention"), "required field missing ('dh' or 'mdh')")
+    if robot.joints is None:
+        raise FieldError(("robot", "joints"), "required field missing")
+    if not robot.joints:
+        raise FieldError(("robot", "joints"), "expected at least one joint")
+    n = len(robot.joints)
+    mass = com = None
+    if robot.mass is not None:
+        _check_count(("robot", "mass"), robot.mass, n, "one per joint")
+        for i, value in enumerate(robot.mass):
+            if value < 0:
+                raise FieldError(("robot", "mass", i), f"must be >= 0, got {show(value)}")
+        mass = np.asarray(robot.mass, dtype=np.float64)
+    if robot.com is not None:
+        _check_count(("robot", "com"), robot.com, n, "one per joint")
+        com = units.length(robot.com)
+    description = RobotDescription(
+        convention=robot.convention,
+        a=units.length([row.a for row in robot.joints]),
+        alpha=units.angle([row.alpha for row in robot.joints]),
+        d=units.length([row.d for row in robot.joints]),
+        theta=units.angle([row.theta for row in robot.joints]),
+        mass=mass,
+        com=com,
+    )
+    return description, n, f"the robot's {n} joints"
+
+
+def _check_count(loc: Loc, values: Sequence[Any], n: int, what: str) -> None:
+    if len(values) != n:
+        raise FieldError(loc, f"expected {n} values ({what}), got {len(values)}")
+
+
+def _read_frames(frames: dict[str, Any], method: str, units: Units) -> dict[str, Any]:
+    """The nominal frames of ``method`` in SI."""
+    kinds = _FRAMES[method]
+    for name in frames:
+        if name not in kinds:
+            expected = ", ".join(kinds)
+            raise FieldError(
+                ("frames", name), f"unknown frame for method '{method}' (expected {expected})"
+            )
+    result: dict[str, Any] = {}
+    for name, kind in kinds.items():
+        loc: Loc = ("frames", name)
+        if name not in frames:
+            if kind in _OPTIONAL_FRAMES:
+                continue
+            raise FieldError(loc, "required field missing")
+        value = frames[name]
+        if kind == "pose":
+            pose: schema.FramePoseSchema = schema.validate(schema.FramePoseSchema, value, loc)
+            result[name] = FramePose(xyz=units.length(pose.xyz), rpy=units.angle(pose.rpy))
+        elif kind == "tip":
+            tip: schema.TipFrameSchema = schema.validate(schema.TipFrameSchema, value, loc)
+            rpy = np.zeros(3) if tip.rpy is None else units.angle(tip.rpy)
+            result[name] = FramePose(xyz=units.length(tip.xyz), rpy=rpy)
+        elif kind == "point":
+            result[name] = units.length(schema.validate(schema.Vec3, value, loc))
+        elif kind == "sphere":
+            sphere: schema.SphereSchema = schema.validate(schema.SphereSchema, value, loc)
+            if sphere.radius <= 0:
+                raise FieldError((*loc, "radius"), f"must be positive, got {show(sphere.radius)}")
+            result[name] = SphereFrame(
+                center=units.length(sphere.center), radius=float(units.length(sphere.radius))
+            )
+        else:  # the stereo camera model: kept as given, not converted
+            if not isinstance(value, dict):
+                raise FieldError(loc, f"expected a JSON object, got {show(value)}")
+            result[name] = copy.deepcopy(value)
+    return result
+
+
+def _read_known(known: list[str], frames: Mapping[str, Any]) -> tuple[str, ...]:
+    seen: set[str] = set()
+    for i, name in enumerate(known):
+        if name not in frames:
+            available = ", ".join(frames)
+            raise FieldError(
+                ("known", i), f"no frame named {show(name)} in frames (frames: {available})"
+            )
+        if name in seen:
+            raise FieldError(("known", i), f"{show(name)} listed twice")
+        seen.add(name)
+    return tuple(known)
+
+
+def _read_probe(probe: schema.ProbeSchema | None, method: str, units: Units) -> float | None:
+    if method != "sphere_probe":
+        if probe is not None:
+            raise FieldError(("probe",), f"not a field of method '{method}'")
+        return None
+    if probe is None:
+        raise FieldError(("probe",), 'required field missing ({"stylus_radius": r})')
+    if probe.stylus_radius < 0:
+        raise FieldError(
+            ("probe", "stylus_radius"), f"must be >= 0, got {show(probe.stylus_radius)}"
+        )
+    return float(units.length(probe.stylus_radius))

@@ -1,0 +1,161 @@
+"""Writing ``zerocal-dataset/1``: a ``Dataset`` as a JSON document, and an atomic save.
+
+Saving writes SI units, with floats written so that they read back exactly; the document
+is validated (``reading.dataset_from_dict``) before anything is written.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import tempfile
+from typing import Any
+
+import numpy as np
+
+from hostpc.dataset.model import Dataset, FramePose, RobotDescription, Samples, SphereFrame
+from hostpc.dataset.reading import PathLike, dataset_from_dict
+from hostpc.dataset.schema import FORMAT_TAG
+from hostpc.errors import InputError
+
+_SI_UNITS = {"length": "m", "angle": "rad", "time": "s"}
+
+
+def dataset_to_dict(dataset: Dataset) -> dict[str, Any]:
+    """The JSON document of ``dataset`` in SI units (inverse of ``dataset_from_dict``).
+
+    Absent optional values (NaN, group -1) are left out; unknown top-level fields that
+    were read with the dataset are written back.
+    """
+    doc: dict[str, Any] = {
+        "format": FORMAT_TAG,
+        "method": dataset.method,
+        "units": dict(_SI_UNITS),
+        "robot": _robot_to_dict(dataset.robot),
+        "frames": {name: _frame_to_json(value) for name, value in dataset.frames.items()},
+        "known": list(dataset.known),
+    }
+    if dataset.probe_stylus_radius is not None:
+        doc["probe"] = {"stylus_radius": float(dataset.probe_stylus_radius)}
+    doc["samples"] = _samples_to_json(dataset.method, dataset.samples)
+    for key, value in dataset.extra_fields.items():
+        if key not in doc:
+            doc[key] = copy.deepcopy(value)
+    return doc
+
+
+def save_dataset(dataset: Dataset, path: PathLike) -> None:
+    """Write ``dataset`` as a JSON file in SI units (floats read back exactly).
+
+    The document is validated before writing, so a file that would not load is never
+    written; the file is replaced atomically.
+
+    Raises:
+        DatasetError: the dataset breaks the format (nothing is written).
+        InputError: the file cannot be written.
+    """
+    target = os.fspath(path)
+    doc = dataset_to_dict(dataset)
+    dataset_from_dict(doc, source=f"{target} (not written)")
+    text = _dumps(doc) + "\n"
+    directory = os.path.dirname(os.path.abspath(target))
+    try:
+        handle, temporary = tempfile.mkstemp(prefix=".zerocal-", suffix=".json.tmp", dir=directory)
+        try:
+            with os.fdopen(handle, "w", encoding="utf-8") as stream:
+                stream.write(text)
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(temporary, 0o666 & ~umask)  # mkstemp makes 0600; a dataset is shareable
+            os.replace(temporary, target)
+        except BaseException:
+            os.unlink(temporary)
+            raise
+    except OSError as exc:
+        raise InputError(f"{target}: cannot write file ({exc.strerror or exc})") from exc
+
+
+def _robot_to_dict(robot: RobotDescription) -> dict[str, Any]:
+    if robot.name is not None:
+        return {"name": robot.name}
+    assert robot.a is not None and robot.alpha is not None
+    assert robot.d is not None and robot.theta is not None
+    out: dict[str, Any] = {
+        "convention": robot.convention,
+        "joints": [
+            {"a": float(a), "alpha": float(alpha), "d": float(d), "theta": float(theta)}
+            for a, alpha, d, theta in zip(robot.a, robot.alpha, robot.d, robot.theta, strict=True)
+        ],
+    }
+    if robot.mass is not None:
+        out["mass"] = robot.mass.tolist()
+    if robot.com is not None:
+        out["com"] = robot.com.tolist()
+    return out
+
+
+def _frame_to_json(value: Any) -> Any:
+    if isinstance(value, FramePose):
+        return {"xyz": value.xyz.tolist(), "rpy": value.rpy.tolist()}
+    if isinstance(value, SphereFrame):
+        return {"center": value.center.tolist(), "radius": float(value.radius)}
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return copy.deepcopy(value)
+
+
+def _samples_to_json(method: str, samples: Samples) -> list[dict[str, Any]]:
+    out = []
+    for i in range(samples.n):
+        q_row = samples.q[i]
+        q = q_row[~np.isnan(q_row)] if method == "dual_loop" else q_row
+        sample: dict[str, Any] = {}
+        if method == "dual_loop":
+            assert samples.chain is not None and samples.q_head is not None
+            sample["chain"] = str(samples.chain[i])
+            sample["q_head"] = samples.q_head[i].tolist()
+            sample["q_arm"] = q.tolist()
+        else:
+            sample["q"] = q.tolist()
+        if samples.p is not None:
+            sample["p"] = samples.p[i].tolist()
+        if samples.cov is not None:
+            sample["cov"] = samples.cov[i].tolist()
+        if samples.sigma is not None:
+            sample["sigma"] = float(samples.sigma[i])
+        if samples.group[i] >= 0:
+            sample["group"] = int(samples.group[i])
+        for name in ("t", "temperature", "speed"):
+            value = float(getattr(samples, name)[i])
+            if np.isfinite(value):
+                sample[name] = value
+        approach = samples.approach[i, : len(q)]
+        if np.all(np.isfinite(approach)):
+            sample["approach"] = [int(v) for v in approach]
+        extra = {k: float(v[i]) for k, v in samples.extra.items() if np.isfinite(v[i])}
+        if extra:
+            sample["extra"] = extra
+        if samples.uv is not None and np.all(np.isfinite(samples.uv[i])):
+            sample["uv"] = samples.uv[i].tolist()
+        out.append(sample)
+    return out
+
+
+def _dumps(value: Any, level: int = 0) -> str:
+    """JSON with two-space indent; containers below the second level stay on one line."""
+
+    def nested(v: Any) -> bool:
+        items = v.values() if isinstance(v, dict) else v
+        return any(isinstance(x, dict | list) for x in items)
+
+    if isinstance(value, dict | list) and value and (level == 0 or (level == 1 and nested(value))):
+        pad = "  " * (level + 1)
+        if isinstance(value, dict):
+            parts = [f"{pad}{json.dumps(k)}: {_dumps(v, level + 1)}" for k, v in value.items()]
+            open_, close = "{", "}"
+        else:
+            parts = [pad + _dumps(v, level + 1) for v in value]
+            open_, close = "[", "]"
+        return open_ + "\n" + ",\n".join(parts) + "\n" + "  " * level + close
+    return json.dumps(value, ensure_ascii=False, allow_nan=False)

@@ -1,0 +1,168 @@
+"""A resumed calibration run: what its journal says about settings, offsets, push and clock.
+
+A run folder that holds a journal is resumed (`hostpc calibrate --resume`). Before anything
+moves the runner checks that the controller still has the run's offsets (or the ones the
+run pushed, or meant to push), settles a push cut short (``push_intent`` without its
+result) from the controller's offsets, and keeps the samples' time ``t`` from going
+backwards when the controller's (or the host's) clock restarted. All of it reads and
+appends to the run's `Journal`; nothing here talks to the robot.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hostpc.errors import InputError
+from hostpc.methods.base import Progress, RunSettings, SampleRecord
+from hostpc.methods.journal import Journal, sample_times, shift_sample_t, write_json_atomic
+from hostpc.methods.push import PUSH_FILE, PushRecord, intent_outcome, same_offsets
+from hostpc.robots.base import RobotState
+
+RESUME_OVERRIDABLE = frozenset({"push", "force", "max_correction_deg", "verify_factor"})
+"""Settings a resume may change (they act after the measurements)."""
+CLOCK_TOLERANCE_S = 1e-6
+
+
+def resume_settings(settings: RunSettings, overrides: Mapping[str, Any], journal: Journal,
+                    progress: Progress) -> RunSettings:
+    """The run's settings with this resume's `overrides` applied (only the
+    ``RESUME_OVERRIDABLE`` ones that are given and differ); a change is journaled."""
+    changed = {k: v for k, v in overrides.items()
+               if k in RESUME_OVERRIDABLE and v is not None
+               and getattr(settings, k) != v}
+    if changed:
+        settings = dataclasses.replace(settings, **changed)
+        journal.event("note", text="settings changed on resume", overrides=changed)
+        progress.message("resume with " + ", ".join(
+            f"{k}={v}" for k, v in changed.items()))
+    return settings
+
+
+def check_resume_offsets(journal: Journal, run_dir: Path, initial: np.ndarray,
+                         now: np.ndarray) -> None:
+    """A resume continues only if the controller's offsets are the run's initial ones,
+    the ones it pushed, or the ones a push cut short meant to write."""
+    pushes = journal.events("push")
+    if same_offsets(now, initial):
+        return
+    if pushes and same_offsets(now, pushes[-1]["new_offsets"]):
+        return
+    last = journal.last_event("push_intent", "push")
+    if last is not None and last["event"] == "push_intent" and same_offsets(
+            now, last["new_offsets"]):
+        return
+    raise InputError(
+        f"the controller's zero offsets changed since the run in {run_dir} started "
+        f"(now {_deg_list(now)} deg, then {_deg_list(initial)} deg); the journaled "
+        "samples cannot be combined with new ones: start a new run")
+
+
+class SampleClock:
+    """Keeps sample `t` continuing across a resume.
+
+    last_t: the last journaled sample's t (s), None for a new run; t_shift: added to new
+    samples' t (s), set by the first new sample of a resume.
+    """
+
+    def __init__(self, journal: Journal, progress: Progress) -> None:
+        self.journal = journal
+        self.progress = progress
+        self.last_t: float | None = None
+        self.t_shift: float | None = None
+
+    def time_origin(self, initial: Mapping[str, Any], state: RobotState) -> float:
+        """The controller time (s) sample `t` counts from: the run's start; on a resume
+        whose controller clock went back (a restarted controller, e.g. a resumed `--robot
+        sim` run) moved so that the new samples' t continue from the last journaled one."""
+        t0 = float(initial.get("time") or 0.0)
+        now = state.extra.get("time")
+        if self.last_t is None or not isinstance(now, int | float) or not math.isfinite(now):
+            return t0
+        if float(now) < t0 + self.last_t - CLOCK_TOLERANCE_S:
+            origin = float(now) - self.last_t
+            self.journal.event("note", text="controller clock restarted: new samples' t "
+                               "continue from the last journaled one", last_t=self.last_t,
+                               time_origin=origin)
+            self.progress.message(f"the controller's clock restarted: sample t continues "
+                                  f"from {self.last_t:.1f} s")
+            return origin
+        return t0
+
+    def continue_t(self, record: SampleRecord) -> SampleRecord:
+        """On a resume, keep `t` from going backwards for any method (e.g. one that times
+        samples with the host's clock): the first new sample sets the shift."""
+        times = sample_times(record.sample)
+        if self.last_t is None or not times or record.sample is None:
+            return record
+        if self.t_shift is None:
+            self.t_shift = max(0.0, self.last_t - min(times))
+            if self.t_shift > 0.0:
+                self.journal.event("note", text="sample t went backwards on resume; new "
+                                   "samples' t shifted", t_shift=self.t_shift)
+        if self.t_shift == 0.0:
+            return record
+        return dataclasses.replace(record, sample=shift_sample_t(record.sample,
+                                                                  self.t_shift))
+
+
+def settle_push_intent(journal: Journal, run_dir: Path, address: str, progress: Progress,
+                       offsets_now: np.ndarray) -> None:
+    """A `push_intent` without its result (the run stopped while writing the offsets):
+    the controller's offsets say whether the write happened. Written: journal it as the
+    push (no rollback id; `hostpc rollback --run` writes the previous offsets). Not
+    written: note it and drop the intent's push.json."""
+    last = journal.last_event("push_intent", "push")
+    if last is None or last["event"] != "push_intent":
+        return
+    outcome = intent_outcome(last, offsets_now)
+    if outcome == "pushed":
+        record = PushRecord(previous=np.asarray(last["previous_offsets"], float),
+                            new=np.asarray(last["new_offsets"], float), rollback_id=None,
+                            pushed=tuple(bool(v) for v in last.get("pushed", ())),
+                            time=str(last.get("time", "")))
+        journal.event("push", **record.to_dict(), recovered=True)
+        write_json_atomic(run_dir / PUSH_FILE,
+                          {"controller": address, "status": "pushed",
+                           **record.to_dict(), "recovered": True})
+        progress.message("the push cut short in the last session reached the "
+                         "controller (it has the intended offsets): recorded as "
+                         "pushed, without a rollback id")
+    elif outcome == "not_pushed":
+        journal.event("note", text="the push cut short in the last session did not "
+                      "reach the controller")
+        (run_dir / PUSH_FILE).unlink(missing_ok=True)
+        progress.message("the push cut short in the last session did not reach the "
+                         "controller (it has the previous offsets)")
+
+
+def journaled_push(journal: Journal, run_dir: Path, progress: Progress,
+                   offsets_now: np.ndarray, push_asked: bool, zero: np.ndarray
+                   ) -> tuple[str, np.ndarray] | None:
+    """The status of the push this run already journaled, from the controller's offsets:
+    ("pushed", the delta in the controller) if it has them; ("rolled_back", `zero`) if
+    it has the previous ones again and the resume did not ask for the push (`push_asked`:
+    --push or --force); None if there is no journaled push or it is to be pushed again."""
+    pushes = journal.events("push")
+    if not pushes:
+        return None
+    new = np.asarray(pushes[-1]["new_offsets"], float)
+    previous = np.asarray(pushes[-1]["previous_offsets"], float)
+    if same_offsets(offsets_now, new):
+        return "pushed", new - previous
+    if same_offsets(offsets_now, previous) and not push_asked:
+        progress.message(
+            f"the push journaled in {run_dir} was rolled back (the controller "
+            "has its previous offsets again): not pushing again; resume with --push "
+            "(or --force) to push again")
+        return "rolled_back", zero
+    return None
+
+
+def _deg_list(values: np.ndarray) -> str:
+    return "[" + ", ".join(f"{math.degrees(v):+.4f}" for v in values) + "]"

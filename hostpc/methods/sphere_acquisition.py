@@ -1,0 +1,151 @@
+"""sphere_probe acquisition (I/O, through a ``RobotAdapter``): driving the planned contacts.
+
+Per contact a joint move to the start pose and a guarded move toward the target (S1-S3,
+S6). A missed contact (no IO edge before the end of travel, or a lost edge) stops that move
+at the travel limit, is recorded, and the run goes on. Units SI (m, rad, s).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Awaitable, Callable, Iterable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hostpc.kinematics import Chain, forward, point_jacobian, screws
+from hostpc.methods.sphere_planning import PlannedContact, PlannedOrientation, ProbePlan
+from hostpc.methods.sphere_setup import PlanConfig, ProbeSetup
+from hostpc.robots.base import RobotAdapter
+
+
+@dataclass(frozen=True)
+class ContactRecord:
+    """One guarded move's outcome.
+
+    group, index: as planned; contact: an IO edge came before the end of travel;
+    q_latched: (n,) rad at the edge (None if missed); speed: approach speed at contact
+    (m/s; the controller's, else estimated on the nominal model); approach: (n,) sign of each
+    joint's motion into the contact; t: host time since the start of the run (s);
+    reason: why there is no contact ("no_contact", "aborted", ...); direction: (n,) unit
+    joint-space direction of the guarded move (the tip's direction of travel at contact
+    follows from it, see ``normal_speeds``); q_end: (n,) where the move stopped (at the
+    travel limit for a missed contact).
+    """
+
+    group: int
+    index: int
+    contact: bool
+    q_latched: np.ndarray | None
+    speed: float | None
+    approach: np.ndarray
+    t: float
+    reason: str | None = None
+    direction: np.ndarray | None = None
+    q_end: np.ndarray | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (journal lines)."""
+        return {
+            "group": self.group, "index": self.index, "contact": self.contact,
+            "q_latched": None if self.q_latched is None else self.q_latched.tolist(),
+            "speed": self.speed, "approach": self.approach.tolist(), "t": self.t,
+            "reason": self.reason,
+            "direction": None if self.direction is None else self.direction.tolist(),
+            "q_end": None if self.q_end is None else np.asarray(self.q_end).tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> ContactRecord:
+        q = d.get("q_latched")
+        return cls(group=int(d["group"]), index=int(d["index"]), contact=bool(d["contact"]),
+                   q_latched=None if q is None else np.asarray(q, float),
+                   speed=None if d.get("speed") is None else float(d["speed"]),
+                   approach=np.asarray(d["approach"], float), t=float(d["t"]),
+                   reason=d.get("reason"),
+                   direction=None if d.get("direction") is None
+                   else np.asarray(d["direction"], float),
+                   q_end=None if d.get("q_end") is None else np.asarray(d["q_end"], float))
+
+
+def nominal_tip_speed(chain: Chain, contact: PlannedContact, tip: np.ndarray,
+                      joint_speed: np.ndarray) -> float:
+    """Tip speed (m/s) at the start of a guarded move on the nominal model, for joint
+    velocities joint_speed (n,) rad/s along the planned line (used when the controller does
+    not report the approach speed)."""
+    poses = forward(chain, contact.q_start[None, :])
+    T = poses.T_base_flange[0]
+    x = (T[:3, :3] @ tip + T[:3, 3])[None, :]
+    J = point_jacobian(screws(chain, poses), x)[0, :, : chain.n]
+    return float(np.linalg.norm(J @ joint_speed))
+
+
+ContactCallback = Callable[[ContactRecord], Awaitable[None] | None]
+GuardedMove = Callable[[np.ndarray, float], Awaitable[Any]]
+
+
+async def acquire(robot: RobotAdapter, plan: ProbePlan, setup: ProbeSetup, config: PlanConfig,
+                  *, done: Iterable[tuple[int, int]] = (),
+                  on_contact: ContactCallback | None = None,
+                  guarded: GuardedMove | None = None,
+                  clock: Callable[[], float] = time.monotonic) -> list[ContactRecord]:
+    """Drive the plan: per contact, hover -> start -> guarded move -> start -> hover
+    (``probe_contact``); every free move was checked on the nominal model at planning.
+
+    done: (group, index) pairs already recorded (a resumed run skips them); on_contact:
+    called after every guarded move (the journal); guarded: replaces the robot's guarded
+    move, ``await guarded(q_target, speed) -> ContactOutcome`` (the Modbus path). A missed
+    contact is recorded with contact=False and the run goes on. Returns the new records.
+    """
+    skip = set(done)
+    records: list[ContactRecord] = []
+    t0 = clock()
+    for orientation in plan.orientations:
+        for contact in orientation.contacts:
+            if (contact.group, contact.index) in skip:
+                continue
+            record = await probe_contact(robot, orientation, contact, setup, config,
+                                         clock() - t0, guarded)
+            records.append(record)
+            if on_contact is not None:
+                result = on_contact(record)
+                if result is not None:
+                    await result
+    return records
+
+
+async def _move(robot: RobotAdapter, q: np.ndarray, speed: float) -> None:
+    outcome = await robot.move_joints(q, speed)
+    if not outcome.completed:
+        from hostpc.errors import ControllerError
+
+        raise ControllerError(f"move to {np.round(q, 4).tolist()} did not complete: "
+                              f"{outcome.reason}")
+
+
+async def probe_contact(robot: RobotAdapter, orientation: PlannedOrientation,
+                        contact: PlannedContact, setup: ProbeSetup, config: PlanConfig,
+                        t: float, guarded: GuardedMove | None = None) -> ContactRecord:
+    """One contact: hover -> start -> guarded move -> start -> hover (see ``acquire``)."""
+    await _move(robot, orientation.q_hover, config.move_speed)
+    await _move(robot, contact.q_start, config.move_speed)
+    if guarded is None:
+        outcome = await robot.guarded_move(contact.q_target, contact.speed, setup.io_line)
+    else:
+        outcome = await guarded(contact.q_target, contact.speed)
+    travel = contact.q_target - contact.q_start
+    approach = np.sign(travel)
+    approach[approach == 0] = 1.0
+    latched = outcome.q_latched if outcome.contact else None
+    await _move(robot, contact.q_start, config.move_speed)
+    await _move(robot, orientation.q_hover, config.move_speed)
+    return ContactRecord(
+        group=contact.group, index=contact.index,
+        contact=bool(outcome.contact and latched is not None),
+        q_latched=None if latched is None else np.asarray(latched, float),
+        speed=None if outcome.speed is None else float(outcome.speed),
+        approach=approach, t=t,
+        reason=None if outcome.contact else (outcome.reason or "no_contact"),
+        direction=travel / max(float(np.linalg.norm(travel)), 1e-300),
+        q_end=np.asarray(outcome.q, float))

@@ -1,0 +1,253 @@
+"""The result of a calibration run: the ``result.json`` document and the ``summary.txt`` text.
+
+``result_document`` gathers what a run produced (plan, acquisition, fit, offsets, push,
+verification, files) and its exit code; ``format_summary`` renders a result document as
+the human-readable summary (mm and degrees). Exit codes beyond hostpc.errors: 5 = push
+refused by a guard rail, 6 = verification of the pushed offsets failed (with nothing pushed
+the verification is a model check: reported only).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hostpc.dataset import Dataset
+from hostpc.fitting import FitResult
+from hostpc.methods.base import Method, Plan, RunSettings
+from hostpc.methods.cell import Cell
+from hostpc.methods.journal import Journal
+from hostpc.methods.push import PUSH_FILE, PushPlan, chi2_dof_upper, joint_display_name
+from hostpc.methods.verify import VerifyResult, measured_noise_rms, noise_rms
+
+RESULT_FORMAT = "zerocal-calibration/1"
+EXIT_PUSH_REFUSED = 5
+EXIT_VERIFY_FAILED = 6
+
+
+def result_document(journal: Journal, run_dir: Path, robot: Mapping[str, Any],
+                    settings: RunSettings, cell: Cell, plan: Plan, method: Method,
+                    dataset: Dataset, result: FitResult, push_plan: PushPlan,
+                    push_status: str, verify_result: VerifyResult | None,
+                    truth: dict[str, Any] | None) -> dict[str, Any]:
+    """The result document (``result.json``, format ``RESULT_FORMAT``) of a run in
+    `run_dir`: settings, plan, acquisition (skipped poses from `journal`), fit, offsets,
+    push, verification, files and the exit code; robot: ``RobotInfo.to_dict()``; truth
+    (simulation only) adds ``truth_comparison``."""
+    skipped = [{"phase": r.phase, "index": r.index, "reason": r.reason}
+               for phase in ("fit", "verify") for r in journal.records(phase)
+               if not r.ok]
+    joints = push_plan.joints()
+    written = push_status == "pushed"
+    for row in joints:
+        row["pushed"] = bool(row["pushed"] and written)
+        if not written:
+            row["new_deg"] = row["old_deg"]
+    push_doc: dict[str, Any] = {"status": push_status, "reason": push_plan.refused,
+                                "max_correction_deg": push_plan.max_correction_deg}
+    pushes = journal.events("push")
+    if written and pushes:
+        push_doc["rollback_id"] = pushes[-1]["rollback_id"]
+        push_doc["recovered"] = bool(pushes[-1].get("recovered", False))
+        push_doc["file"] = str(run_dir / PUSH_FILE)
+    # with nothing pushed the verification is a model check: reported, never exit 6
+    if push_status == "refused":
+        exit_code = EXIT_PUSH_REFUSED
+    elif (verify_result is not None and verify_result.pushed
+          and not verify_result.passed):
+        exit_code = EXIT_VERIFY_FAILED
+    else:
+        exit_code = 0
+    document: dict[str, Any] = {
+        "format": RESULT_FORMAT,
+        "run_dir": str(run_dir),
+        "robot": {**robot, "name": cell.robot},
+        "method": settings.method,
+        "settings": settings.to_dict(),
+        "known": list(cell.known),
+        "method_setup": method.describe(),
+        "plan": {
+            "n_poses": int(plan.q.shape[0]),
+            "n_verify": int(plan.q_verify.shape[0]),
+            **{k: v for k, v in plan.info.items() if k != "parameters"},
+        },
+        "acquisition": {
+            "n_planned": int(plan.q.shape[0]),
+            "n_measured": dataset.n_samples,
+            "n_poses_measured": sum(r.ok for r in journal.records("fit")),
+            "n_skipped": len(skipped),
+            "skipped": skipped,
+        },
+        "fit": {
+            "converged": result.converged,
+            "effects": list(result.problem.effect_names),
+            "rms_mm": result.rms * 1e3,
+            "max_mm": result.max * 1e3,
+            "chi2_dof": finite_or_none(result.chi2_dof),
+            "chi2_dof_upper": finite_or_none(chi2_dof_upper(result.dof)),
+            "noise_rms_mm": finite_or_none(measured_noise_rms(result) * 1e3),
+            "stated_noise_rms_mm": finite_or_none(noise_rms(dataset) * 1e3),
+            "cv_rms_mm": None if result.cv_rms is None else result.cv_rms * 1e3,
+            "rank": result.rank,
+            "n_parameters": len(result.names),
+            "unidentifiable": [d.description for d in result.unidentifiable],
+            "file": str(run_dir / "fit.json"),
+        },
+        "offsets": {"joints": joints},
+        "push": push_doc,
+        "verify": verify_result.to_dict() if verify_result is not None else None,
+        "files": {
+            "run": str(journal.run_path),
+            "journal": str(journal.journal_path),
+            "dataset": str(run_dir / "dataset.json"),
+            "fit": str(run_dir / "fit.json"),
+            "summary": str(run_dir / "summary.txt"),
+            "result": str(run_dir / "result.json"),
+        },
+        "exit_code": exit_code,
+    }
+    if truth is not None:
+        document["truth"] = truth_comparison(truth, push_plan)
+    return document
+
+
+def truth_comparison(truth: Mapping[str, Any], push_plan: PushPlan) -> dict[str, Any]:
+    """Fitted vs injected zero errors (simulation): `joint_offsets_error_deg` = fitted -
+    true per joint, None where the joint is unidentifiable; also within 3 sigma."""
+    true = np.asarray(truth.get("zero_errors", []), float)
+    errors: list[float | None] = []
+    within: list[bool | None] = []
+    for j in range(true.size):
+        if j < push_plan.sigma.size and np.isfinite(push_plan.sigma[j]):
+            e = float(push_plan.fitted[j] - true[j])
+            errors.append(math.degrees(e))
+            within.append(bool(abs(e) <= 3.0 * float(push_plan.sigma[j])))
+        else:
+            errors.append(None)
+            within.append(None)
+    finite = [abs(e) for e in errors if e is not None]
+    return {
+        "zero_errors_deg": [math.degrees(v) for v in true],
+        "joint_offsets_error_deg": errors,
+        "within_3_sigma": within,
+        "max_abs_error_deg": max(finite) if finite else None,
+    }
+
+
+def finite_or_none(value: float) -> float | None:
+    """`value`, or None if it is not finite (JSON has no inf/nan)."""
+    return value if math.isfinite(value) else None
+
+
+def format_summary(document: Mapping[str, Any]) -> str:
+    """The human-readable summary of a result document (mm and degrees)."""
+    robot = document["robot"]
+    plan, acq, fitd = document["plan"], document["acquisition"], document["fit"]
+    lines = [
+        f"zerocal calibration: {document['method']} on {robot['name']} at "
+        f"{'sim (' + robot['address'] + ')' if robot.get('sim') else robot['address']}",
+        f"run folder: {document['run_dir']}",
+        f"known frames: {', '.join(document['known']) or 'none (every frame estimated)'}",
+        f"plan: {plan['n_poses']} poses ({plan.get('criterion', '?')}-optimal from "
+        f"{plan.get('n_candidates', '?')} candidates), {plan['n_verify']} verification poses",
+        f"measured: {acq.get('n_poses_measured', acq['n_measured'])} of {acq['n_planned']} "
+        "fit poses"
+        + (f" ({acq['n_measured']} samples)"
+           if acq.get("n_poses_measured", acq["n_measured"]) != acq["n_measured"] else "")
+        + (f", {acq['n_skipped']} skipped" if acq["n_skipped"] else ""),
+        f"fit: {'converged' if fitd['converged'] else 'NOT CONVERGED'}, effects "
+        f"{', '.join(fitd['effects'])}; residual RMS {fitd['rms_mm']:.4f} mm "
+        f"(max {fitd['max_mm']:.4f}), measured noise RMS {_mm(fitd['noise_rms_mm'])} mm "
+        f"(stated {_mm(fitd.get('stated_noise_rms_mm'))}), chi2/dof "
+        f"{fitd['chi2_dof'] if fitd['chi2_dof'] is None else round(fitd['chi2_dof'], 3)}",
+    ]
+    for text in fitd["unidentifiable"]:
+        lines.append(f"  unidentifiable: {text}")
+    for item in acq["skipped"][:10]:
+        lines.append(f"  skipped {item['phase']} pose {item['index']}: {item['reason']}")
+    rows = document["offsets"]["joints"]
+    names = [joint_display_name(j, row.get("label", "")) for j, row in enumerate(rows)]
+    width = max([6, *(len(name) + 2 for name in names)])
+    lines += ["", f"  {'joint':<{width}}{'old [deg]':>12}{'correction':>13}{'+/- sigma':>11}"
+                  f"{'new [deg]':>12}  pushed"]
+    for name, row in zip(names, rows, strict=True):
+        corr = "-" if row["correction_deg"] is None else f"{row['correction_deg']:+.5f}"
+        sig = "-" if row["sigma_deg"] is None else f"{row['sigma_deg']:.5f}"
+        pushed = "yes" if row["pushed"] else ("no: " + row["note"] if row["note"] else "no")
+        lines.append(f"  {name:<{width}}{row['old_deg']:>12.5f}{corr:>13}"
+                     f"{sig:>11}{row['new_deg']:>12.5f}  {pushed}")
+    lines.append("")
+    lines.append(_push_line(document))
+    verify = document.get("verify")
+    if verify:
+        lines.append(_verify_line(verify))
+    truth = document.get("truth")
+    if truth:
+        errors = ", ".join(
+            f"{names[j] if j < len(names) else f'J{j + 1}'} "
+            + ("-" if e is None else f"{e:+.5f}")
+            for j, e in enumerate(truth["joint_offsets_error_deg"]))
+        lines.append(f"truth (simulation): fitted - true [deg]: {errors}")
+        inside = [w for w in truth["within_3_sigma"] if w is not None]
+        if inside:
+            lines.append(f"  {sum(inside)} of {len(inside)} identifiable offsets within 3 sigma"
+                         f", largest error {truth['max_abs_error_deg']:.5f} deg")
+    return "\n".join(lines)
+
+
+def _mm(value: float | None) -> str:
+    return "-" if value is None else f"{value:.4f}"
+
+
+def _push_line(document: Mapping[str, Any]) -> str:
+    """The summary's push line: what happened to the controller and how to undo it."""
+    push = document["push"]
+    status = push["status"]
+    if status == "pushed" and push.get("on_controller") is False:
+        return ("push: applied on the host for this session only (UR has no writable zero "
+                f"offsets); load {push['exports']['yaml']} in your UR/ROS setup")
+    if status == "pushed":
+        if document["robot"].get("sim"):
+            undo = "simulated controller: nothing to roll back after the run"
+        else:
+            undo = f"undo with hostpc rollback --run {document['run_dir']}"
+        rollback_id = push.get("rollback_id")
+        what = (f"rollback id {rollback_id}" if rollback_id is not None
+                else "recovered after an interruption, no rollback id")
+        return f"push: written ({what}; {undo})"
+    if status == "refused":
+        return f"push: REFUSED: {push['reason']}"
+    if status == "disabled":
+        return ("push: not requested (--no-push); the controller is unchanged"
+                + (f"; offsets for your UR/ROS setup: {push['exports']['yaml']}"
+                   if push.get("exports") else ""))
+    if status == "rolled_back":
+        return ("push: not repeated: this run's push was rolled back (the controller has its "
+                "previous offsets); resume with --push or --force to push again")
+    return "push: nothing to push (no identifiable joint offset)"
+
+
+def _verify_line(verify: Mapping[str, Any]) -> str:
+    """The summary's verification line. With nothing pushed it checks the model on fresh
+    poses (no PASS: no offsets were verified)."""
+    poses = (f"{verify['n_planned']} fresh poses ({verify['n_measured']} samples)"
+             if verify["n_measured"] > verify["n_planned"]  # dual_loop: two targets a pose
+             else f"{verify['n_measured']} fresh poses")
+    noise = (f"noise RMS the fit measured {_mm(verify['noise_rms_mm'])} mm (stated "
+             f"{_mm(verify.get('stated_noise_rms_mm'))})")
+    bound = f"{verify['factor']:g} x noise = {_mm(verify['threshold_mm'])} mm"
+    if not verify.get("pushed", True):
+        return (f"model check on fresh poses (nothing pushed): {poses}: RMS with the fitted "
+                f"model {verify['rms_after_mm']:.4f} mm (max {verify['max_after_mm']:.4f}), "
+                f"with the controller's offsets as they are {verify['rms_before_mm']:.4f} mm "
+                f"(max {verify['max_before_mm']:.4f}); {noise}; the model "
+                + ("explains" if verify["passed"] else "does NOT explain")
+                + f" them (RMS {'<=' if verify['passed'] else '>'} {bound})")
+    return (f"verify: {poses}: RMS before (old offsets) {verify['rms_before_mm']:.4f} mm "
+            f"(max {verify['max_before_mm']:.4f}), after {verify['rms_after_mm']:.4f} mm "
+            f"(max {verify['max_after_mm']:.4f}); {noise}; pass if RMS after <= {bound}: "
+            + ("PASS" if verify["passed"] else "FAIL"))
