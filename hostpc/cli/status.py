@@ -13,16 +13,12 @@ import argparse
 import asyncio
 import json
 import math
-import os
 from typing import Any
 
 from hostpc.errors import InputError
+from hostpc.robots.connect import TOKEN_ENV, parse_robot, resolve_token
 from hostpc.transport import ControllerClient, ControllerState
 from protocol import DEFAULT_PORT
-
-DEFAULT_TOKEN = "zerocal-sim"
-"""The simulator's default token (controller_stub scenario: server.token)."""
-TOKEN_ENV = "ZEROCAL_TOKEN"
 
 
 def register(subparsers: Any) -> None:
@@ -46,36 +42,13 @@ def register(subparsers: Any) -> None:
     parser.set_defaults(func=run)
 
 
-def parse_address(text: str) -> tuple[str, int]:
-    """`HOST[:PORT]` (IPv6 as `[::1]:PORT`) -> (host, port); InputError if malformed."""
-    text = text.strip()
-    host, port_text = text, ""
-    if text.startswith("["):
-        host, _, rest = text[1:].partition("]")
-        port_text = rest[1:] if rest.startswith(":") else rest
-    elif text.count(":") == 1:
-        host, port_text = text.split(":")
-    if not host:
-        raise InputError(f"--robot {text!r}: no host")
-    if not port_text:
-        return host, DEFAULT_PORT
-    try:
-        port = int(port_text)
-    except ValueError:
-        raise InputError(f"--robot {text!r}: port {port_text!r} is not a number") from None
-    if not 0 < port < 65536:
-        raise InputError(f"--robot {text!r}: port {port} out of range 1..65535")
-    return host, port
-
-
-def resolve_token(token: str | None) -> str:
-    """--token, else $ZEROCAL_TOKEN, else the simulator's default."""
-    return token or os.environ.get(TOKEN_ENV) or DEFAULT_TOKEN
-
-
 def run(args: argparse.Namespace) -> int:
     """Entry point of `hostpc status`; returns the exit code."""
-    host, port = parse_address(args.robot)
+    address = parse_robot(args.robot)
+    if address.sim:
+        raise InputError("--robot sim: status needs a running controller's HOST[:PORT] "
+                         "(start one with `controller-stub serve`)")
+    host, port = address.host, address.port
     if not args.timeout > 0:
         raise InputError(f"--timeout {args.timeout}: must be positive")
     state = asyncio.run(_fetch(host, port, resolve_token(args.token), args.timeout))
