@@ -86,12 +86,14 @@ def acquire(sim: HumanoidSimulation, poses: PlannedPoses) -> tuple[Dataset, np.n
     return make_dataset(poses.subset(index), np.array(p), np.array(cov)), index
 
 
-def truth_vector(truth: Mapping[str, Any], problem: Problem) -> np.ndarray:
+def truth_vector(truth: Mapping[str, Any], problem: Problem,
+                 zero_errors: str = "zero_errors") -> np.ndarray:
     """The stub's truth (``sim.truth()``) as hostpc parameters on ``problem``'s layout:
-    offsets = zero errors; pose deltas ``t_true - t_nom``, ``log(R_nom^T R_true)``; point
-    deltas ``p_true - p_nom``."""
+    offsets = the zero errors under key `zero_errors` (``zero_errors_initial``: against the
+    offsets at the start of a run that has since pushed); pose deltas ``t_true - t_nom``,
+    ``log(R_nom^T R_true)``; point deltas ``p_true - p_nom``."""
     values: dict[str, float] = {}
-    for label, error in zip(truth["joint_order"], truth["zero_errors"], strict=True):
+    for label, error in zip(truth["joint_order"], truth[zero_errors], strict=True):
         values[f"joint_offsets.{label}"] = float(error)
     frames = problem.dataset.frames
     for name in POSE_FRAMES:

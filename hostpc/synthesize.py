@@ -18,7 +18,7 @@ from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
 from hostpc.kinematics import get_robot, invert_transform, pose_to_transform
 from hostpc.kinematics.inverse import look_at, solve_ik
 from hostpc.model.measurement import predict
-from hostpc.model.problem import build_problem
+from hostpc.model.problem import Problem, build_problem
 
 # A pose of each built-in robot with the flange pointing down (-z of base), used as the IK seed
 HOME_POSES = {
@@ -105,6 +105,23 @@ def approach_signs(q: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return signs
 
 
+def noisy_measurements(problem: Problem, truth: Mapping[str, float],
+                       rng: np.random.Generator, noise_scale: float
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Stereo points (N, 3) predicted by `problem` with the true parameter values (names
+    absent from `truth` are zero), plus Gaussian noise drawn from each point's stereo
+    covariance (N, 3, 3), which is returned too (noise_scale 0: exact points, the covariance
+    at scale 1)."""
+    unknown = set(truth) - set(problem.layout.names)
+    if unknown:
+        raise KeyError(f"truth names parameters no effect has: {sorted(unknown)}")
+    x = np.array([truth.get(name, 0.0) for name in problem.layout.names])
+    clean, _ = predict(problem, x, jacobian=False)
+    cov = stereo_covariance(clean, noise_scale if noise_scale > 0 else 1.0)
+    noise = np.einsum("nij,nj->ni", np.linalg.cholesky(cov), rng.standard_normal(clean.shape))
+    return clean + (noise if noise_scale > 0 else 0.0), cov
+
+
 def random_truth(rng: np.random.Generator, n_joints: int = 6, *, offsets_deg: float = 0.5,
                  tool_mm: float = 2.0, tool_deg: float = 0.5, target_mm: float = 2.0
                  ) -> dict[str, float]:
@@ -152,14 +169,7 @@ def synthesize_stereo_target(
                       frames={"tool": tool, "target": target}, samples=placeholder)
     effects = tuple(dict.fromkeys(name.split(".", 1)[0] for name in truth))
     problem = build_problem(dataset, list(effects))
-    unknown = set(truth) - set(problem.layout.names)
-    if unknown:
-        raise KeyError(f"truth names parameters no effect has: {sorted(unknown)}")
-    x = np.array([truth.get(name, 0.0) for name in problem.layout.names])
-    clean, _ = predict(problem, x, jacobian=False)
-    cov = stereo_covariance(clean, noise_scale if noise_scale > 0 else 1.0)
-    noise = np.einsum("nij,nj->ni", np.linalg.cholesky(cov), rng.standard_normal(clean.shape))
-    measured = clean + (noise if noise_scale > 0 else 0.0)
+    measured, cov = noisy_measurements(problem, truth, rng, noise_scale)
     samples = Samples(q=q, p=measured, cov=cov, t=t, approach=approach, temperature=temperature)
     final = replace(dataset, samples=samples, known=tuple(known))
     return SyntheticDataset(dataset=final, truth=dict(truth), effects=effects)

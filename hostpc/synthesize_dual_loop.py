@@ -20,9 +20,8 @@ import numpy as np
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
 from hostpc.kinematics.humanoid import HUMANOID_FRAMES, HUMANOID_HOME, get_tree
 from hostpc.kinematics.tree import KinematicTree
-from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem
-from hostpc.synthesize import stereo_covariance
+from hostpc.synthesize import noisy_measurements
 
 __all__ = ["PlannedPoses", "head_look_at", "make_dataset", "nominal_frames", "plan_poses",
            "synthesize_dual_loop"]
@@ -174,11 +173,5 @@ def synthesize_dual_loop(truth: Mapping[str, float], poses: PlannedPoses, *, see
     effects = list(dict.fromkeys(["joint_offsets", *placeholder.frames,
                                   *(n.split(".", 1)[0] for n in truth)]))
     problem = build_problem(placeholder, effects)
-    unknown = set(truth) - set(problem.layout.names)
-    if unknown:
-        raise KeyError(f"truth names parameters no effect has: {sorted(unknown)}")
-    x = np.array([truth.get(name, 0.0) for name in problem.layout.names])
-    clean, _ = predict(problem, x, jacobian=False)
-    cov = stereo_covariance(clean, noise_scale if noise_scale > 0 else 1.0)
-    noise = np.einsum("nij,nj->ni", np.linalg.cholesky(cov), rng.standard_normal(clean.shape))
-    return make_dataset(poses, clean + (noise if noise_scale > 0 else 0.0), cov)
+    measured, cov = noisy_measurements(problem, truth, rng, noise_scale)
+    return make_dataset(poses, measured, cov)

@@ -16,6 +16,8 @@ import contextlib
 import logging
 from typing import Protocol
 
+from controller_stub.ur.tcp_service import TcpService
+
 logger = logging.getLogger(__name__)
 
 GREETING = "Connected: Universal Robots Dashboard Server"
@@ -128,40 +130,20 @@ def answer(robot: DashboardRobot, line: str) -> str:
     return f"could not understand: '{command}'"
 
 
-class DashboardServer:
+class DashboardServer(TcpService):
     """Serve the dashboard text protocol for one `DashboardRobot`."""
 
+    service_name = "dashboard"
+    default_port = 29999
+    read_limit = MAX_LINE
+
+
     def __init__(self, robot: DashboardRobot) -> None:
+        super().__init__()
         self.robot = robot
-        self._server: asyncio.Server | None = None
-        self._handlers: set[asyncio.Task[None]] = set()
 
-    async def start(self, host: str = "127.0.0.1", port: int = 29999) -> tuple[str, int]:
-        """Bind and accept; returns the bound (host, port)."""
-        self._server = await asyncio.start_server(
-            self._accept, host, port, reuse_address=True, limit=MAX_LINE
-        )
-        bound = self._server.sockets[0].getsockname()[:2]
-        logger.info("dashboard listening on %s:%d", *bound)
-        return bound[0], bound[1]
-
-    async def close(self) -> None:
-        """Stop accepting and drop every client."""
-        if self._server is not None:
-            self._server.close()
-        for task in list(self._handlers):
-            task.cancel()
-        for task in list(self._handlers):
-            with contextlib.suppress(BaseException):
-                await task
-        if self._server is not None:
-            with contextlib.suppress(Exception):
-                await self._server.wait_closed()
-
-    async def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        task = asyncio.current_task()
-        assert task is not None
-        self._handlers.add(task)
+    async def _serve_connection(self, reader: asyncio.StreamReader,
+                                writer: asyncio.StreamWriter) -> None:
         try:
             writer.write(f"{GREETING}\n".encode())
             await writer.drain()
@@ -179,7 +161,6 @@ class DashboardServer:
         except (ConnectionError, asyncio.CancelledError, asyncio.LimitOverrunError, ValueError):
             pass
         finally:
-            self._handlers.discard(task)
             writer.close()
             with contextlib.suppress(Exception):
                 await writer.wait_closed()

@@ -45,6 +45,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from controller_stub.ur.tcp_service import TcpService
+
 logger = logging.getLogger(__name__)
 
 HEADER = struct.Struct(">HB")
@@ -288,43 +290,23 @@ class _Session:
     streaming: asyncio.Task[None] | None = None
 
 
-class RtdeServer:
+class RtdeServer(TcpService):
     """Serve RTDE to any number of clients from one `RtdeDataSource`.
 
     source: the robot; max_stream_hz: cap of the data package rate (Hz).
     """
 
+    service_name = "rtde"
+    default_port = 30004
+
     def __init__(self, source: RtdeDataSource, *, max_stream_hz: float = 125.0) -> None:
+        super().__init__()
         self.source = source
         self.max_stream_hz = float(max_stream_hz)
-        self._server: asyncio.Server | None = None
         self._owners: dict[str, _Session] = {}
-        self._handlers: set[asyncio.Task[None]] = set()
 
-    async def start(self, host: str = "127.0.0.1", port: int = 30004) -> tuple[str, int]:
-        """Bind and accept; returns the bound (host, port)."""
-        self._server = await asyncio.start_server(self._accept, host, port, reuse_address=True)
-        bound = self._server.sockets[0].getsockname()[:2]
-        logger.info("rtde listening on %s:%d", *bound)
-        return bound[0], bound[1]
-
-    async def close(self) -> None:
-        """Stop accepting and drop every client."""
-        if self._server is not None:
-            self._server.close()
-        for task in list(self._handlers):
-            task.cancel()
-        for task in list(self._handlers):
-            with contextlib.suppress(BaseException):
-                await task
-        if self._server is not None:
-            with contextlib.suppress(Exception):
-                await self._server.wait_closed()
-
-    async def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        task = asyncio.current_task()
-        assert task is not None
-        self._handlers.add(task)
+    async def _serve_connection(self, reader: asyncio.StreamReader,
+                                writer: asyncio.StreamWriter) -> None:
         peer = writer.get_extra_info("peername")
         session = _Session(peer=str(peer))
         try:
@@ -336,7 +318,6 @@ class RtdeServer:
         except Exception:  # a broken client must not take the server down
             logger.exception("rtde client %s failed", session.peer)
         finally:
-            self._handlers.discard(task)
             await self._stop_stream(session)
             for name in session.owned:
                 if self._owners.get(name) is session:

@@ -20,6 +20,8 @@ import logging
 import re
 from typing import Protocol
 
+from controller_stub.ur.tcp_service import TcpService
+
 logger = logging.getLogger(__name__)
 
 _PROGRAM_START = re.compile(r"^(def|sec)\s+([A-Za-z_][A-Za-z0-9_]*)\s*\(\s*\)\s*:")
@@ -67,38 +69,19 @@ class ProgramSplitter:
         return programs
 
 
-class ScriptServer:
+class ScriptServer(TcpService):
     """Accept URScript on the script port and hand programs to a `ScriptRobot`."""
 
+    service_name = "script port"
+    default_port = 30003
+
+
     def __init__(self, robot: ScriptRobot) -> None:
+        super().__init__()
         self.robot = robot
-        self._server: asyncio.Server | None = None
-        self._handlers: set[asyncio.Task[None]] = set()
 
-    async def start(self, host: str = "127.0.0.1", port: int = 30003) -> tuple[str, int]:
-        """Bind and accept; returns the bound (host, port)."""
-        self._server = await asyncio.start_server(self._accept, host, port, reuse_address=True)
-        bound = self._server.sockets[0].getsockname()[:2]
-        logger.info("script port listening on %s:%d", *bound)
-        return bound[0], bound[1]
-
-    async def close(self) -> None:
-        """Stop accepting and drop every client."""
-        if self._server is not None:
-            self._server.close()
-        for task in list(self._handlers):
-            task.cancel()
-        for task in list(self._handlers):
-            with contextlib.suppress(BaseException):
-                await task
-        if self._server is not None:
-            with contextlib.suppress(Exception):
-                await self._server.wait_closed()
-
-    async def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        task = asyncio.current_task()
-        assert task is not None
-        self._handlers.add(task)
+    async def _serve_connection(self, reader: asyncio.StreamReader,
+                                writer: asyncio.StreamWriter) -> None:
         splitter = ProgramSplitter()
         try:
             while True:
@@ -113,7 +96,6 @@ class ScriptServer:
         except Exception:
             logger.exception("script port client failed")
         finally:
-            self._handlers.discard(task)
             writer.close()
             with contextlib.suppress(Exception):
                 await writer.wait_closed()

@@ -45,7 +45,7 @@ from hostpc.kinematics.rotations import pose_to_transform, skew
 from hostpc.kinematics.tree import KinematicTree, tree_gravity_torque
 from hostpc.model.effect import ModelContext
 from hostpc.model.frame_math import inverse_point_derivatives, perturbed_pose
-from hostpc.model.problem import Problem
+from hostpc.model.problem import Problem, sample_variables
 
 __all__ = [
     "ARMS",
@@ -156,15 +156,7 @@ def dual_loop_context(dataset: Dataset, chain: Chain) -> ModelContext:
         if prefix != "head" and np.any(np.isfinite(samples.approach)):
             variables[f"{prefix}.approach{number}"] = np.where(observed[:, j],
                                                               approach[:, j], np.nan)
-    for name in ("t", "temperature"):
-        values = getattr(samples, name)
-        if np.any(np.isfinite(values)):
-            variables[name] = np.asarray(values, dtype=float)
-    if samples.p is not None:
-        variables["depth"] = np.asarray(samples.p, dtype=float)[:, 2]
-    for name, values in samples.extra.items():
-        if np.any(np.isfinite(values)):
-            variables[f"extra.{name}"] = np.asarray(values, dtype=float)
+    variables.update(sample_variables(samples, ("t", "temperature")))
     return ModelContext(chain=chain, method=dataset.method, q_cmd=q_cmd, tau=tau,
                         approach=approach, variables=variables, joint_labels=labels)
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hostpc.dataset import Dataset
+from hostpc.dataset import Dataset, Samples
 from hostpc.errors import EffectError, InputError
 from hostpc.kinematics import Chain, gravity_torque
 from hostpc.kinematics.robots import chain_from_table, get_robot
@@ -134,6 +134,24 @@ def default_effects(dataset: Dataset) -> list[str]:
     return ["joint_offsets"] + [f for f in frames if f not in dataset.known]
 
 
+def sample_variables(samples: Samples, scalars: tuple[str, ...] = ("t", "temperature", "speed")
+                     ) -> dict[str, np.ndarray]:
+    """The per-sample variables every method shares, by contract name, each (N,): the
+    recorded scalars that any sample has, `depth` (the measured point's z in the sensor
+    frame, m) and `extra.NAME`."""
+    variables: dict[str, np.ndarray] = {}
+    for name in scalars:
+        values = getattr(samples, name)
+        if values is not None and np.any(np.isfinite(values)):
+            variables[name] = np.asarray(values, dtype=float)
+    if samples.p is not None:
+        variables["depth"] = np.asarray(samples.p, dtype=float)[:, 2]
+    for name, values in samples.extra.items():
+        if np.any(np.isfinite(values)):
+            variables[f"extra.{name}"] = np.asarray(values, dtype=float)
+    return variables
+
+
 def _context(dataset: Dataset, chain: Chain) -> ModelContext:
     if dataset.method == "dual_loop":
         from hostpc.model.dual_loop import dual_loop_context
@@ -155,15 +173,7 @@ def _context(dataset: Dataset, chain: Chain) -> ModelContext:
     if np.any(np.isfinite(samples.approach)):
         for j in range(chain.n):
             variables[f"approach{j + 1}"] = approach[:, j]
-    for name in ("t", "temperature", "speed"):
-        values = getattr(samples, name)
-        if values is not None and np.any(np.isfinite(values)):
-            variables[name] = np.asarray(values, dtype=float)
-    if samples.p is not None:
-        variables["depth"] = np.asarray(samples.p, dtype=float)[:, 2]
-    for name, values in samples.extra.items():
-        if np.any(np.isfinite(values)):
-            variables[f"extra.{name}"] = np.asarray(values, dtype=float)
+    variables.update(sample_variables(samples))
     return ModelContext(
         chain=chain, method=dataset.method, q_cmd=q_cmd, tau=tau, approach=approach,
         variables=variables,

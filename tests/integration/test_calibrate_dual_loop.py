@@ -18,10 +18,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+from bench.bench_dual_loop import truth_vector as bench_truth_vector
 from hostpc.dataset import load_dataset
 from hostpc.errors import InputError
 from hostpc.fitting.stepwise import gauge_equivalent
-from hostpc.kinematics.rotations import matrix_to_rotvec, pose_to_transform
 from hostpc.methods.base import NullProgress, RunSettings
 from hostpc.methods.cell import build_cell
 from hostpc.methods.dual_loop import DualLoopMethod
@@ -138,26 +138,9 @@ async def test_method_refuses_a_robot_without_target_measurement(tmp_path: Path)
 
 
 def truth_vector(truth: Mapping[str, Any], problem: Problem) -> np.ndarray:
-    """The stub's truth file as parameters on `problem`'s layout (zero errors against the
-    offsets at the start; pose deltas t_true - t_nom, log(R_nom^T R_true); point deltas)."""
-    values: dict[str, float] = {}
-    for label, error in zip(truth["joint_order"], truth["zero_errors_initial"], strict=True):
-        values[f"joint_offsets.{label}"] = float(error)
-    frames = problem.dataset.frames
-    for name in ("camera", "left_base", "right_base"):
-        nominal = frames[name]
-        T_nom = pose_to_transform(nominal.xyz, nominal.rpy)  # type: ignore[union-attr]
-        T_true = pose_to_transform(truth[name]["xyz"], truth[name]["rpy"])
-        dt = T_true[:3, 3] - T_nom[:3, 3]
-        r = matrix_to_rotvec(T_nom[:3, :3].T @ T_true[:3, :3])
-        for k, axis in enumerate("xyz"):
-            values[f"{name}.{axis}"] = float(dt[k])
-            values[f"{name}.r{axis}"] = float(r[k])
-    for side in ("left", "right"):
-        delta = np.asarray(truth[f"{side}_target"]) - np.asarray(frames[f"{side}_target"])
-        for k, axis in enumerate("xyz"):
-            values[f"{side}_target.{axis}"] = float(delta[k])
-    return np.array([values.get(name, 0.0) for name in problem.layout.names])
+    """The stub's truth file as parameters on `problem`'s layout, zero errors against the
+    offsets at the start of the run (the run pushed since)."""
+    return bench_truth_vector(truth, problem, zero_errors="zero_errors_initial")
 
 
 @pytest.mark.slow
