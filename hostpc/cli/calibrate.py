@@ -46,6 +46,12 @@ from hostpc.methods.cell import load_cell_file, parse_known
 from hostpc.methods.journal import Journal
 from hostpc.methods.runner import RobotInfo, Runner, RunOutcome
 from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot, resolve_token
+from hostpc.sensors.calibrate_options import (
+    add_sensor_options,
+    check_sensor_options,
+    open_with_sensors,
+    replay_inputs,
+)
 
 SIM_FOLDER = "sim"
 EXIT_INTERRUPTED = 130  # Ctrl-C, as a shell reports it
@@ -177,6 +183,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--resume", metavar="DIR", help="continue the run in DIR")
     parser.add_argument("--no-report", action="store_true", help="skip report.html")
     parser.add_argument("--json", action="store_true", help="print the result document")
+    add_sensor_options(parser)
     parser.set_defaults(func=run)
 
 
@@ -244,6 +251,10 @@ def run(args: argparse.Namespace) -> int:
         address = parse_robot(args.robot) if args.robot else (
             RobotAddress(sim=True) if sim else parse_robot(str(recorded.get("address", ""))))
         driver = recorded.get("driver", args.driver)
+        scenario_file = None
+    elif args.replay:  # a recorded run again, without a robot (hostpc.sensors)
+        check_sensor_options(args)
+        address, driver, settings, cell_file, known, run_dir = replay_inputs(args, _default_out)
         scenario_file = None
     else:
         if not args.robot:
@@ -357,7 +368,9 @@ async def _calibrate(args: argparse.Namespace, address: RobotAddress, driver: st
                      info: RobotInfo, progress: StderrProgress, truth: Any,
                      token: str | None) -> RunOutcome:
     progress.stage("connect")
-    robot = await open_robot(address, driver, token=token, timeout=args.timeout)
+    robot = await open_with_sensors(  # host cameras, --record, --replay (hostpc.sensors)
+        args, run_dir, settings, cell_file, known, default_known, info,
+        lambda: open_robot(address, driver, token=token, timeout=args.timeout))
     try:
         overrides = {"push": args.push, "force": args.force,
                      "max_correction_deg": args.max_correction,
