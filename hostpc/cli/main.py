@@ -23,6 +23,7 @@ import sys  # noqa: E402
 from hostpc.errors import ZerocalError  # noqa: E402
 
 COMMAND_MODULES = ("fit", "status", "diagnose", "calibrate", "rollback", "stereo_calibrate")
+COMMAND_MODULES += ("camera",)  # hostpc.sensors: serve or check the host's stereo camera
 
 
 def build_parser() -> argparse.ArgumentParser:

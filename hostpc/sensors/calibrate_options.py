@@ -106,7 +106,7 @@ async def open_with_sensors(args: argparse.Namespace, run_dir: Path, settings: A
     if getattr(args, "replay", None):
         from hostpc.sensors.recording import ReplayAdapter
 
-        return ReplayAdapter(Path(args.replay))  # type: ignore[return-value]
+        return ReplayAdapter(Path(args.replay))
     camera = None
     if getattr(args, "camera_left", None):
         from hostpc.sensors.stereo_camera import StereoCamera
@@ -123,7 +123,7 @@ async def open_with_sensors(args: argparse.Namespace, run_dir: Path, settings: A
         from hostpc.sensors.host_cameras import TIMING_FILE, HostCameraAdapter
 
         run_dir.mkdir(parents=True, exist_ok=True)
-        robot = HostCameraAdapter(robot, camera, run_dir / TIMING_FILE)  # type: ignore[assignment]
+        robot = HostCameraAdapter(robot, camera, run_dir / TIMING_FILE)
     if getattr(args, "record", None) is not None:
         from hostpc.sensors.recording import RecordingAdapter
 
@@ -136,7 +136,7 @@ async def open_with_sensors(args: argparse.Namespace, run_dir: Path, settings: A
             "cameras": None if camera is None else [s.text for s in camera.sources],
         }
         try:
-            robot = RecordingAdapter(robot, folder, header)  # type: ignore[assignment]
+            robot = RecordingAdapter(robot, folder, header)
         except BaseException:
             await robot.close()
             raise

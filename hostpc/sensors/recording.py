@@ -219,15 +219,21 @@ class ReplayAdapter:
         self.header = read_header(folder)
         self._entries: list[dict[str, Any]] = []
         try:
-            with (folder / TAPE_FILE).open(encoding="utf-8") as tape:
-                for number, line in enumerate(tape, 1):
-                    if line.strip():
-                        self._entries.append(json.loads(line))
+            lines = (folder / TAPE_FILE).read_text(encoding="utf-8").splitlines()
         except OSError:
             raise InputError(f"--replay {folder}: no {TAPE_FILE}") from None
-        except ValueError as exc:
-            raise InputError(f"--replay {folder}: {TAPE_FILE} line {number} is not valid "
-                             f"JSON ({exc})") from None
+        for number, line in enumerate(lines, 1):
+            if not line.strip():
+                continue
+            try:
+                entry = json.loads(line)
+            except ValueError as exc:
+                raise InputError(f"--replay {folder}: {TAPE_FILE} line {number} is not "
+                                 f"valid JSON ({exc})") from None
+            if not isinstance(entry, dict):
+                raise InputError(f"--replay {folder}: {TAPE_FILE} line {number} is not an "
+                                 "object")
+            self._entries.append(entry)
         self._next = 0
 
     def __getattr__(self, name: str) -> Any:

@@ -76,7 +76,12 @@ def open_source(text: str, camera: str) -> tuple[Any, CameraSource]:
     api = {"v4l2": cv2.CAP_V4L2, "gstreamer": cv2.CAP_GSTREAMER}.get(source.kind, cv2.CAP_ANY)
     if source.kind == "device":
         api = cv2.CAP_V4L2 if Path("/dev").is_dir() else cv2.CAP_ANY
-    capture = cv2.VideoCapture(source.target, api)
+    previous_level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)  # the one line below
+    try:
+        capture = cv2.VideoCapture(source.target, api)
+    finally:
+        cv2.utils.logging.setLogLevel(previous_level)
     if not capture.isOpened():
         capture.release()
         raise CameraError(f"{camera} camera: {text!r} does not open ({source.kind})")
