@@ -240,6 +240,7 @@ def _check_rig(settings: RunSettings) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of `hostpc calibrate`; returns the exit code."""
+    check_sensor_options(args)  # --camera-*, --record, --replay (hostpc.sensors)
     settings: RunSettings | None = None
     cell_file = None
     known = None
@@ -253,7 +254,6 @@ def run(args: argparse.Namespace) -> int:
         driver = recorded.get("driver", args.driver)
         scenario_file = None
     elif args.replay:  # a recorded run again, without a robot (hostpc.sensors)
-        check_sensor_options(args)
         address, driver, settings, cell_file, known, run_dir = replay_inputs(args, _default_out)
         scenario_file = None
     else:
