@@ -59,6 +59,9 @@ def _camera_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-skew", type=float, default=DEFAULT_MAX_SKEW_MS, metavar="MS",
                         help="refuse live pairs exposed further apart (default "
                         f"{DEFAULT_MAX_SKEW_MS:g} ms)")
+    parser.add_argument("--discard", type=int, metavar="N",
+                        help="pairs dropped before each capture (default 1 for live cameras, "
+                        "0 for files)")
 
 
 def _open(args: argparse.Namespace) -> Any:
@@ -66,8 +69,10 @@ def _open(args: argparse.Namespace) -> Any:
 
     if not args.max_skew > 0:
         raise InputError(f"--max-skew {args.max_skew}: must be positive")
+    if args.discard is not None and args.discard < 0:
+        raise InputError(f"--discard {args.discard}: must not be negative")
     camera = StereoCamera(args.left, args.right, exposure=args.exposure, gain=args.gain,
-                          max_skew_s=args.max_skew * 1e-3)
+                          max_skew_s=args.max_skew * 1e-3, discard=args.discard)
     for name, refused in camera.refused_controls.items():
         print(f"hostpc camera: {name} camera: backend refused {', '.join(refused)}",
               file=sys.stderr)

@@ -4,6 +4,7 @@
                                                  the controller's captures
     --exposure VALUE --gain VALUE                set where the backend allows
     --max-skew MS                                refuse a live pair whose skew exceeds MS
+    --discard N                                  pairs dropped before each capture
     --record [DIR]                               keep every call, image pair, joint reading
                                                  and timestamp (default DIR: RUN/recording)
     --replay DIR                                 run again from a recording, without a robot
@@ -40,6 +41,9 @@ def add_sensor_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--max-skew", type=float, default=DEFAULT_MAX_SKEW_MS, metavar="MS",
                        help="refuse a pair of live cameras exposed further apart than this "
                        f"(default {DEFAULT_MAX_SKEW_MS:g} ms)")
+    group.add_argument("--discard", type=int, metavar="N",
+                       help="pairs grabbed and dropped before each capture (default 1 for "
+                       "live cameras: no frame from before the robot stopped; 0 for files)")
     group.add_argument("--record", nargs="?", const="", default=None, metavar="DIR",
                        help="record every image pair with its joint readings and timestamps "
                        f"(default DIR: RUN/{RECORDING_FOLDER})")
@@ -58,6 +62,8 @@ def check_sensor_options(args: argparse.Namespace) -> None:
                              "--resume and --camera-*")
     if getattr(args, "record", None) is not None and args.resume:
         raise InputError("--record is for a new run, not a --resume")
+    if getattr(args, "discard", None) is not None and args.discard < 0:
+        raise InputError(f"--discard {args.discard}: must not be negative")
     if not args.max_skew > 0:
         raise InputError(f"--max-skew {args.max_skew}: must be positive")
 
@@ -112,7 +118,8 @@ async def open_with_sensors(args: argparse.Namespace, run_dir: Path, settings: A
         from hostpc.sensors.stereo_camera import StereoCamera
 
         camera = StereoCamera(args.camera_left, args.camera_right, exposure=args.exposure,
-                              gain=args.gain, max_skew_s=args.max_skew * 1e-3)
+                              gain=args.gain, max_skew_s=args.max_skew * 1e-3,
+                              discard=args.discard)
     try:
         robot = await open_robot()
     except BaseException:

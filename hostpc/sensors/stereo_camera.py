@@ -53,10 +53,14 @@ class StereoCamera:
     """Two open VideoCaptures. sources: (left SOURCE, right SOURCE) texts; exposure / gain
     in backend units (None: leave as is); max_skew_s: refuse a pair of live cameras whose
     |skew| exceeds it (None: no limit; files are read one after the other, their skew is
-    reported but not refused). Close with `close()` (or use as a context manager)."""
+    reported but not refused); discard: pairs grabbed and dropped before each capture, so
+    that no frame exposed before the robot stopped is used (None: 1 for live cameras, whose
+    driver may hold a frame in its buffer, 0 for files). Close with `close()` (or use as a
+    context manager)."""
 
     def __init__(self, left: str, right: str, *, exposure: float | None = None,
-                 gain: float | None = None, max_skew_s: float | None = None) -> None:
+                 gain: float | None = None, max_skew_s: float | None = None,
+                 discard: int | None = None) -> None:
         self._captures: list[Any] = []
         self.sources: list[CameraSource] = []
         self.refused_controls: dict[str, list[str]] = {}
@@ -72,6 +76,8 @@ class StereoCamera:
             self.close()
             raise
         self.max_skew_s = max_skew_s
+        live = all(source.live for source in self.sources)
+        self.discard = (1 if live else 0) if discard is None else max(0, int(discard))
         self._count = 0
         self._previous: list[np.ndarray | None] = [None, None]
         self._previous_stamp: list[float | None] = [None, None]
@@ -94,6 +100,10 @@ class StereoCamera:
 
         if len(self._captures) != 2:
             raise CameraError("stereo camera is closed")
+        for _ in range(self.discard):
+            for camera, capture in zip(CAMERAS, self._captures, strict=True):
+                if not capture.grab():
+                    raise CameraError(f"{camera} camera: no frame (capture {self._count})")
         host_times: list[float] = []
         for camera, capture in zip(CAMERAS, self._captures, strict=True):
             before = time.monotonic()

@@ -54,6 +54,15 @@ def test_sequence_pairs_are_the_written_images(tmp_path: Path) -> None:
             camera.capture()
 
 
+def test_discard_drops_pairs_before_each_capture(tmp_path: Path) -> None:
+    left, right = noise_images(4, 12), noise_images(4, 13)
+    with StereoCamera(write_sequence(tmp_path, "left", left),
+                      write_sequence(tmp_path, "right", right), discard=1) as camera:
+        assert camera.discard == 1
+        assert np.array_equal(camera.capture().left, left[1])
+        assert np.array_equal(camera.capture().right, right[3])
+
+
 def test_frozen_frame_refused(tmp_path: Path) -> None:
     left = noise_images(3, 3)
     right = noise_images(3, 4)
