@@ -51,6 +51,7 @@ from hostpc.sensors.calibrate_options import (
     check_sensor_options,
     open_with_sensors,
     replay_inputs,
+    robot_options,
 )
 
 SIM_FOLDER = "sim"
@@ -370,7 +371,8 @@ async def _calibrate(args: argparse.Namespace, address: RobotAddress, driver: st
     progress.stage("connect")
     robot = await open_with_sensors(  # host cameras, --record, --replay (hostpc.sensors)
         args, run_dir, settings, cell_file, known, default_known, info,
-        lambda: open_robot(address, driver, token=token, timeout=args.timeout))
+        lambda: open_robot(address, driver, token=token, timeout=args.timeout,
+                           options=robot_options(args, driver)))
     try:
         overrides = {"push": args.push, "force": args.force,
                      "max_correction_deg": args.max_correction,

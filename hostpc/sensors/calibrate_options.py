@@ -2,6 +2,8 @@
 
     --camera-left SOURCE --camera-right SOURCE   cameras on the host (sources.py) instead of
                                                  the controller's captures
+    --camera-service HOST:PORT                   --driver ur: where `hostpc camera serve`
+                                                 runs (default: the robot's host, 47800)
     --exposure VALUE --gain VALUE                set where the backend allows
     --max-skew MS                                refuse a live pair whose skew exceeds MS
     --discard N                                  pairs dropped before each capture
@@ -35,6 +37,9 @@ def add_sensor_options(parser: argparse.ArgumentParser) -> None:
                        help="left camera on this host: device index, /dev/videoN, GStreamer "
                        "pipeline, video file or image sequence (left_%%04d.png)")
     group.add_argument("--camera-right", metavar="SOURCE", help="right camera (as --camera-left)")
+    group.add_argument("--camera-service", metavar="HOST:PORT",
+                       help="with --driver ur: the camera service (`hostpc camera serve`) to "
+                       "fetch captures from (default: the robot's host, port 47800)")
     group.add_argument("--exposure", type=float, metavar="VALUE",
                        help="camera exposure in backend units (V4L2: 100 us steps)")
     group.add_argument("--gain", type=float, metavar="VALUE", help="camera gain (backend units)")
@@ -62,6 +67,8 @@ def check_sensor_options(args: argparse.Namespace) -> None:
                              "--resume and --camera-*")
     if getattr(args, "record", None) is not None and args.resume:
         raise InputError("--record is for a new run, not a --resume")
+    if getattr(args, "camera_service", None) and (left or args.driver != "ur"):
+        raise InputError("--camera-service is for --driver ur without --camera-left/right")
     if getattr(args, "discard", None) is not None and args.discard < 0:
         raise InputError(f"--discard {args.discard}: must not be negative")
     if not args.max_skew > 0:
@@ -98,6 +105,16 @@ def replay_inputs(args: argparse.Namespace, default_out: Callable[[str], Path]
     address = RobotAddress(sim=False, host=f"replay:{folder}", port=0)
     return address, "replay", settings, cell_file, None if known is None else tuple(known), \
         run_dir
+
+
+def robot_options(args: argparse.Namespace, driver: str) -> dict[str, Any] | None:
+    """Driver options: where the UR driver gets its captures (none with host cameras)."""
+    if driver != "ur":
+        return None
+    if getattr(args, "camera_left", None):
+        return {"camera": "none"}
+    service = getattr(args, "camera_service", None)
+    return {"camera": service} if service else None
 
 
 async def open_with_sensors(args: argparse.Namespace, run_dir: Path, settings: Any,
