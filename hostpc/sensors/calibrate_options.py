@@ -67,12 +67,13 @@ def check_sensor_options(args: argparse.Namespace) -> None:
                              "--resume and --camera-*")
     if getattr(args, "record", None) is not None and args.resume:
         raise InputError("--record is for a new run, not a --resume")
-    if getattr(args, "camera_service", None) and (left or args.driver != "ur"):
+    if getattr(args, "camera_service", None) and (left or getattr(args, "driver", "") != "ur"):
         raise InputError("--camera-service is for --driver ur without --camera-left/right")
     if getattr(args, "discard", None) is not None and args.discard < 0:
         raise InputError(f"--discard {args.discard}: must not be negative")
-    if not args.max_skew > 0:
-        raise InputError(f"--max-skew {args.max_skew}: must be positive")
+    max_skew = getattr(args, "max_skew", DEFAULT_MAX_SKEW_MS)
+    if not max_skew > 0:
+        raise InputError(f"--max-skew {max_skew}: must be positive")
 
 
 def replay_inputs(args: argparse.Namespace, default_out: Callable[[str], Path]
