@@ -123,12 +123,11 @@ class StereoCamera:
             stamps.append(float(capture.get(cv2.CAP_PROP_POS_MSEC)) / 1000.0)
         for k, camera in enumerate(CAMERAS):
             self._check_fresh(k, camera, images[k], stamps[k])
-        if all(s.live for s in self.sources) and stamps[0] > 0 and stamps[1] > 0:  # V4L2
-
+        live = all(s.live for s in self.sources)
+        if live and stamps[0] > 0 and stamps[1] > 0:  # V4L2 buffer times, one kernel clock
             skew = stamps[1] - stamps[0]
         else:
             skew = host_times[1] - host_times[0]
-        live = all(s.live for s in self.sources)
         if live and self.max_skew_s is not None and abs(skew) > self.max_skew_s:
             raise CameraError(f"stereo skew {skew * 1e3:.2f} ms at capture {self._count} "
                               f"exceeds the budget {self.max_skew_s * 1e3:.2f} ms")
