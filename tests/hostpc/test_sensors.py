@@ -54,6 +54,41 @@ def test_sequence_pairs_are_the_written_images(tmp_path: Path) -> None:
             camera.capture()
 
 
+def write_video(path: Path, images: list[np.ndarray]) -> Path:
+    """A lossless (FFV1) grey video of `images` at 10 fps."""
+    height, width = images[0].shape
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), 10.0, (width, height),
+                             False)
+    if not writer.isOpened():
+        pytest.skip("this OpenCV cannot write FFV1 video")
+    for image in images:
+        writer.write(image)
+    writer.release()
+    return path
+
+
+def test_video_files_pair_exactly_with_media_timestamps(tmp_path: Path) -> None:
+    left, right = noise_images(3, 14), noise_images(3, 15)
+    with StereoCamera(str(write_video(tmp_path / "left.mkv", left)),
+                      str(write_video(tmp_path / "right.mkv", right))) as camera:
+        assert camera.refused_controls == {}
+        stamps = []
+        for k in range(3):
+            pair = camera.capture()
+            assert np.array_equal(pair.left, left[k]) and np.array_equal(pair.right, right[k])
+            stamps.append(pair.stamp_left)
+        assert stamps == pytest.approx([0.0, 0.1, 0.2])
+
+
+def test_controls_a_file_backend_refuses_are_reported(tmp_path: Path) -> None:
+    with StereoCamera(write_sequence(tmp_path, "left", noise_images(2, 16)),
+                      write_sequence(tmp_path, "right", noise_images(2, 17)),
+                      exposure=100.0, gain=2.0) as camera:
+        assert camera.refused_controls == {"left": ["exposure", "gain"],
+                                           "right": ["exposure", "gain"]}
+        camera.capture()
+
+
 def test_discard_drops_pairs_before_each_capture(tmp_path: Path) -> None:
     left, right = noise_images(4, 12), noise_images(4, 13)
     with StereoCamera(write_sequence(tmp_path, "left", left),
