@@ -99,3 +99,18 @@ def test_replay_with_other_settings_diverges_in_one_line(recorded: Path, tmp_pat
     errors = [line for line in err.splitlines() if not line.startswith("[")
               and not line.startswith(("plan:", "note:", "rig"))]
     assert len(errors) == 1 and "but the recording holds" in errors[0], err
+
+
+def test_frozen_camera_stops_calibrate_in_one_line(tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    from tests.hostpc.test_sensors import noise_images, write_sequence
+
+    left = noise_images(3, 31)
+    left[1] = left[0].copy()  # the left camera freezes on the second capture
+    code = main([*RUN_ARGS, "--out", str(tmp_path / "run"),
+                 "--camera-left", write_sequence(tmp_path, "left", left),
+                 "--camera-right", write_sequence(tmp_path, "right", noise_images(3, 32))])
+    err = capsys.readouterr().err
+    assert code == 3
+    errors = [line for line in err.splitlines() if line.startswith("hostpc calibrate: error")]
+    assert len(errors) == 1 and "left camera: frozen frame (capture 1" in errors[0], err
