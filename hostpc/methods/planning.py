@@ -17,8 +17,9 @@ information a pose adds: `M = sum_k A_k^T A_k`.
 - Identifiability check of the plan: `analyse` on the plan's Jacobian; directions that the
   plan cannot separate but the pool can are a planning failure (too few or too similar
   poses): the run stops before moving and says which parameters and what would fix it.
-- Order: a tour from the robot's current pose (`tour.py`: nearest neighbour + 2-opt on
-  the joint move time), never longer than the selection order.
+- Order: nearest neighbour in joint space from the robot's current pose; with a target
+  sigma a tour (`tour.py`: nearest neighbour + 2-opt on the joint move time), never longer
+  than the selection order nor than nearest neighbour.
 - Target sigma (`poses_for_target_sigma`): the fewest leading poses of the (nested) greedy
   selection whose predicted sigma of every identifiable joint offset reaches a target.
 - Verification poses: a seeded random choice among the candidates the plan did not use.
@@ -42,7 +43,7 @@ from hostpc.dataset import Dataset
 from hostpc.fitting import NullDirection, analyse
 from hostpc.kinematics import Chain, forward, invert_transform
 from hostpc.kinematics.inverse import look_at, solve_ik
-from hostpc.methods.tour import plan_tour
+from hostpc.methods.tour import nearest_neighbour, plan_tour
 from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem
 
@@ -284,11 +285,15 @@ def check_plan(plan: Design) -> PlanCheck:
 
 
 def order_for_travel(q: np.ndarray, q_start: np.ndarray | None,
-                     joint_speed: np.ndarray | None = None) -> np.ndarray:
-    """Visiting order (indices into q (N, n)): a short tour from q_start (or from the first
-    pose), nearest neighbour improved by 2-opt with move time max_i |dq_i| / v_i
-    (`hostpc.methods.tour`); never longer than q's own order."""
-    return plan_tour(q, q_start, joint_speed)
+                     joint_speed: np.ndarray | None = None, *, tour: bool = False
+                     ) -> np.ndarray:
+    """Visiting order (indices into q (N, n)) from q_start (or from the first pose):
+    nearest neighbour by the move time max_i |dq_i| / v_i; with `tour`, nearest neighbour
+    improved by 2-opt (`hostpc.methods.tour`), never longer than q's own order nor than
+    nearest neighbour."""
+    if tour:
+        return plan_tour(q, q_start, joint_speed)
+    return nearest_neighbour(q, q_start, joint_speed)
 
 
 def poses_for_target_sigma(design: Design, order: np.ndarray, target_sigma: float,

@@ -314,7 +314,8 @@ class Runner:
                                                 math.radians(settings.target_sigma_deg),
                                                 state.q.size, min_poses=3)
                 chosen = chosen if needed is None else chosen[:needed]
-            fit_indices = chosen[order_for_travel(pool[chosen], state.q)]
+            fit_indices = chosen[order_for_travel(pool[chosen], state.q,
+                                                  tour=settings.target_sigma_deg is not None)]
         else:  # whole groups (sphere_probe: an orientation's 5 contacts), in the pool order
             fit_indices = select_groups(design, groups, settings.n_poses, settings.criterion,
                                         rng)
