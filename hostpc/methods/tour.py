@@ -32,7 +32,7 @@ def move_times(q_from: np.ndarray, q_to: np.ndarray,
     dq = np.abs(np.asarray(q_to, float) - np.asarray(q_from, float))
     if joint_speed is not None:
         dq = dq / np.asarray(joint_speed, float)
-    return np.max(dq, axis=-1)
+    return np.asarray(np.max(dq, axis=-1))
 
 
 def path_time(q: np.ndarray, q_start: np.ndarray | None = None,
