@@ -148,18 +148,20 @@ def peak():
 out = {"n": n, "base_mb": peak()}
 t = time.perf_counter(); dataset = hostpc.load_dataset(path)
 out["load_s"] = time.perf_counter() - t; out["load_peak_mb"] = peak()
+print(json.dumps(out), flush=True)
 t = time.perf_counter(); json.load(open(path))
 out["json_load_s"] = time.perf_counter() - t
 t, c = time.perf_counter(), time.process_time(); result = hostpc.fit(dataset)
 out["fit_s"] = time.perf_counter() - t; out["fit_cpu_s"] = time.process_time() - c
 out["fit_peak_mb"] = peak()
+print(json.dumps(out), flush=True)
 t = time.perf_counter(); hostpc.diagnose(dataset)
 out["diagnose_s"] = time.perf_counter() - t; out["diagnose_peak_mb"] = peak()
 print(json.dumps(out))
 """
 
 
-def scaling(sizes: tuple[int, ...] = SCALING, timeout_s: float = 1800.0
+def scaling(sizes: tuple[int, ...] = SCALING, timeout_s: float = 3600.0
             ) -> list[dict[str, Any]]:
     """Section 2: one subprocess per N (synthesis and the file write are not timed)."""
     rows = []
@@ -170,8 +172,11 @@ def scaling(sizes: tuple[int, ...] = SCALING, timeout_s: float = 1800.0
                     [sys.executable, "-c", _SCALING_CHILD, str(n), str(Path(tmp) / "d.json"),
                      str(ROOT)], capture_output=True, text=True, timeout=timeout_s,
                     env=_env(), check=False)
-            except subprocess.TimeoutExpired:
-                rows.append({"n": n, "error": f"over {timeout_s:.0f} s"})
+            except subprocess.TimeoutExpired as exc:  # keep the steps that finished
+                text = exc.stdout.decode() if isinstance(exc.stdout, bytes) else exc.stdout
+                lines = (text or "").strip().splitlines()
+                row = json.loads(lines[-1]) if lines else {"n": n}
+                rows.append({**row, "error": f"stopped after {timeout_s:.0f} s"})
                 continue
         if done.returncode != 0:
             lines = done.stderr.strip().splitlines()
@@ -239,13 +244,13 @@ def print_tables(figures: dict[str, Any]) -> None:
     print(f"{'N':>7} {'load s':>8} {'json s':>7} {'fit s':>7} {'fit cpu':>8} {'diag s':>8} "
           f"{'MB load':>8} {'MB fit':>8} {'MB diag':>8}")
     for row in figures["scaling"]:
-        if "error" in row:
-            print(f"{row['n']:>7} failed: {row['error']}")
-            continue
-        print(f"{row['n']:>7} {row['load_s']:>8.2f} {row['json_load_s']:>7.2f} "
-              f"{row['fit_s']:>7.2f} {row['fit_cpu_s']:>8.2f} {row['diagnose_s']:>8.2f} "
-              f"{row['load_peak_mb']:>8.0f} {row['fit_peak_mb']:>8.0f} "
-              f"{row['diagnose_peak_mb']:>8.0f}")
+        cells = [f"{row[k]:>{w}.{d}f}" if isinstance(row.get(k), float) else f"{'-':>{w}}"
+                 for k, w, d in (("load_s", 8, 2), ("json_load_s", 7, 2), ("fit_s", 7, 2),
+                                 ("fit_cpu_s", 8, 2), ("diagnose_s", 8, 2),
+                                 ("load_peak_mb", 8, 0), ("fit_peak_mb", 8, 0),
+                                 ("diagnose_peak_mb", 8, 0))]
+        print(f"{row['n']:>7} " + " ".join(cells)
+              + (f"  ({row['error']})" if "error" in row else ""))
     print("\nrobot time of `hostpc calibrate --robot sim` (simulated clock, s)")
     print(f"{'method':<38} {'poses':>6} {'rig':>6} {'measure':>8} {'verify':>7} {'total':>7} "
           f"{'worst sigma deg':>16} {'wall s':>7}")
