@@ -83,8 +83,8 @@ def _migrate_0_to_1(connection: Connection) -> None:
 
 def _migrate_1_to_2(connection: Connection) -> None:
     # version 2: runs are looked up per robot in time order (history, drift)
-    sa.Index("ix_runs_serial_started", runs_table.c.serial, runs_table.c.started_at).create(
-        connection)
+    # (plain DDL: an sa.Index on runs_table would attach itself to the table description)
+    connection.exec_driver_sql("CREATE INDEX ix_runs_serial_started ON runs (serial, started_at)")
 
 
 MIGRATIONS: tuple[Callable[[Connection], None], ...] = (_migrate_0_to_1, _migrate_1_to_2)
