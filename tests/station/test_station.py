@@ -192,3 +192,58 @@ def test_a_restarted_station_resumes_the_interrupted_run(
         runs = archive.runs()
     assert [r["serial"] for r in runs] == ["SN-RESTART"]
     assert not (runs_dir / "current.json").exists()
+
+
+CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu",
+                  "--disable-background-networking", "--disable-component-update",
+                  "--disable-sync", "--no-first-run"]
+
+
+@pytest.mark.slow
+def test_live_page_shows_state_and_verdicts_in_chromium(tmp_path: Path, fast_rig: Path) -> None:
+    import shutil
+    import urllib.request
+
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    if browser is None:
+        if os.environ.get("ZEROCAL_REQUIRE_BROWSER"):
+            pytest.fail("chromium is not installed but ZEROCAL_REQUIRE_BROWSER is set")
+        pytest.skip("chromium is not installed (apt-get install -y chromium)")
+    modbus, http = _free_port(), _free_port()
+    config = {"station": "eol-page", "robot": "sim", "known": "target", "poses": 10,
+              "verify_poses": 3, "calibrate_args": ["--rig", str(fast_rig)],
+              "db": f"sqlite:///{tmp_path / 'archive.db'}", "runs_dir": str(tmp_path / "runs"),
+              "modbus": {"host": "127.0.0.1", "port": modbus}, "http": f"127.0.0.1:{http}"}
+    path = tmp_path / "station.yaml"
+    path.write_text(yaml.safe_dump(config))
+    process = StationProcess(path, tmp_path / "station.log")
+    process.start()
+    try:
+        plc = Plc(modbus)
+        for serial in ("SN-PAGE-1", "SN-PAGE-2"):
+            plc.start(serial)
+            plc.wait_state({reg.State.PASS, reg.State.FAIL, reg.State.ERROR}, 300)
+            if serial == "SN-PAGE-1":
+                plc.command(reg.Command.ACKNOWLEDGE)
+                plc.wait_state({reg.State.IDLE}, 10)
+        plc.close()
+        url = f"http://127.0.0.1:{http}/"
+        state = json.loads(urllib.request.urlopen(url + "api/state", timeout=10).read())
+        assert state["state"] == "PASS" and state["serial"] == "SN-PAGE-2"
+        png = urllib.request.urlopen(url + "drift/SN-PAGE-1.png", timeout=30).read()
+        assert png.startswith(b"\x89PNG")
+        dom = subprocess.run([browser, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'p1'}",
+                              "--virtual-time-budget=5000", "--dump-dom", url],
+                             capture_output=True, text=True, timeout=120)
+        assert dom.returncode == 0, dom.stderr[-2000:]
+        assert 'id="state" class="PASS">PASS<' in dom.stdout, dom.stdout[-3000:]
+        assert "SN-PAGE-1" in dom.stdout and "SN-PAGE-2" in dom.stdout
+        shot = tmp_path / "station-page.png"
+        subprocess.run([browser, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'p2'}",
+                        "--virtual-time-budget=5000", "--window-size=1000,1100",
+                        f"--screenshot={shot}", url], capture_output=True, timeout=120)
+        assert shot.is_file() and shot.stat().st_size > 10_000
+        if os.environ.get("ZEROCAL_KEEP_SCREENSHOT"):
+            shutil.copy(shot, os.environ["ZEROCAL_KEEP_SCREENSHOT"])
+    finally:
+        assert process.stop() == 0
