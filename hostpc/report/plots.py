@@ -271,5 +271,6 @@ def singular_values(diagnosis: Diagnosis) -> str:
     axes.hline(RELATIVE_RANK_TOLERANCE, SIGNIFICANT, 1.0, "4 3")
     axes.frame(f"identifiability: rank {diagnosis.fit.rank} of {values.size}", "index",
                "relative singular value")
-    axes.legend([("singular values", COLOURS[0]), ("rank tolerance", SIGNIFICANT)])
+    axes.legend([("singular values", COLOURS[0]), ("rank tolerance", SIGNIFICANT)],
+                corner="bottom left")
     return canvas.render()

@@ -212,13 +212,15 @@ class Axes:
 
     def legend(self, entries: Sequence[tuple[str, str]], font: float = 9.0,
                corner: str = "right") -> None:
-        """(label, colour) entries in a box at the top left or right of the plot area."""
+        """(label, colour) entries in a box in a corner of the plot area: "right", "left"
+        (top) or "bottom right", "bottom left"."""
         if not entries:
             return
         width = 22 + 0.56 * font * max(len(label) for label, _ in entries)
-        x = self.left + self.width - width - 4 if corner == "right" else self.left + 4
-        y = self.top + 4
         height = len(entries) * (font + 4) + 4
+        x = self.left + self.width - width - 4 if corner.endswith("right") else self.left + 4
+        y = (self.top + self.height - height - 4 if corner.startswith("bottom")
+             else self.top + 4)
         parts = [f'<rect x="{_f(x)}" y="{_f(y)}" width="{_f(width)}" height="{_f(height)}" '
                  f'fill="white" fill-opacity="0.85" stroke="#ccc"/>']
         for k, (label, colour) in enumerate(entries):
