@@ -100,7 +100,8 @@ class Axes:
     def py(self, y: Sequence[float] | np.ndarray) -> np.ndarray:
         """y data -> pixels inside the viewport (up is up)."""
         lo, hi = self._ty(np.asarray(self.ylim, dtype=float))
-        return self.height - (self._ty(np.asarray(y, dtype=float)) - lo) / (hi - lo) * self.height
+        fraction = (self._ty(np.asarray(y, dtype=float)) - lo) / (hi - lo)
+        return np.asarray(self.height - fraction * self.height, dtype=float)
 
     # ---------------------------------------------------------------- marks
 
@@ -203,7 +204,7 @@ class Axes:
                               f'text-anchor="middle" transform="rotate(-90 {_f(x)} {_f(y)})">'
                               f"{_e(ylabel)}</text>")
 
-    def category_labels(self, labels: Sequence[str], positions: Sequence[float],
+    def category_labels(self, labels: Sequence[str], positions: Sequence[float] | np.ndarray,
                         font: float = 9.0) -> None:
         """Labels left of the plot area at the y data positions (horizontal bars)."""
         for label, p in zip(labels, self.py(positions), strict=True):

@@ -129,3 +129,28 @@ def _assert_not_blank(path: Path) -> None:
     colours = {tuple(p) for p in flat[:: max(1, flat.shape[0] // 20000)]}
     assert len(colours) > 50
     assert pixels[..., :3].std() > 0.05
+
+
+def test_svg_axes_ticks_and_gaps() -> None:
+    """Round ticks; NaN breaks a line and drops a point; data outside the limits is clipped
+    by the nested viewport, never drawn over the labels."""
+    from hostpc.report.svg import Canvas, limits, nice_ticks, tick_label
+
+    assert nice_ticks(0.0, 1.0) == pytest.approx([0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
+    assert nice_ticks(-0.013, 0.021, 4) == pytest.approx([-0.01, 0.0, 0.01, 0.02])
+    assert [tick_label(v, 0.2) for v in (0.4, 0.0, 1e-5)] == ["0.4", "0", "1e-05"]
+    assert limits([1.0, float("nan"), 3.0], pad=0.0) == (1.0, 3.0)
+    assert limits([2.0, 2.0])[0] < 2.0 < limits([2.0, 2.0])[1]
+    canvas = Canvas(200, 100, "t")
+    axes = canvas.axes(30, 10, 160, 70, (0.0, 4.0), (0.0, 1.0))
+    axes.line([0, 1, 2, 3, 4], [0.1, 0.2, float("nan"), 0.4, 0.5], "red")
+    axes.points([0, 1, 2], [0.5, float("nan"), 0.5], "blue")
+    axes.frame("title", "x", "y")
+    svg = canvas.render()
+    root = ET.fromstring(svg)
+    paths = [p.get("d", "") for p in root.iter(f"{SVG}path")]
+    line = next(d for d in paths if "L" in d)
+    assert line.count("M") == 2  # the NaN splits it
+    dots = next(d for d in paths if d.endswith("h0") and d.count("M") == 2)
+    assert dots.startswith("M0.0 35.0h0")  # (0, 0.5) in the 160 x 70 viewport
+    assert root.find(f"{SVG}svg").get("width") == "160.0"  # type: ignore[union-attr]
