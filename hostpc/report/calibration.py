@@ -40,8 +40,8 @@ VERIFY_ROWS = (
     ("tolerance_mm", "task-space tolerance [mm]", "tol"),
     ("rms_before_mm", "RMS with the old offsets [mm]", "f4"),
     ("max_before_mm", "max with the old offsets [mm]", "f4"),
-    ("rms_after_mm", "RMS with the new offsets [mm]", "f4"),
-    ("max_after_mm", "max with the new offsets [mm]", "f4"),
+    ("rms_after_mm", "RMS with the fitted offsets [mm]", "f4"),
+    ("max_after_mm", "max with the fitted offsets [mm]", "f4"),
     ("noise_rms_mm", "noise RMS the fit measured [mm]", "f4"),
     ("stated_noise_rms_mm", "noise RMS the covariances state [mm]", "f4"),
     ("factor", "pass if RMS after <= factor x noise: factor", "g4"),
@@ -129,7 +129,7 @@ def offsets_table(result: Document) -> str:
               "pushed"]
     if truth:
         header += ["true zero error [deg]", "fitted - true [deg]", "within 3 sigma"]
-    rows, flags = [], []
+    rows = []
     for j, row in enumerate(rows_in):
         def deg(key: str, signed: bool = False, source: Mapping[str, Any] = row) -> str:
             value = source.get(key)
@@ -139,20 +139,18 @@ def offsets_table(result: Document) -> str:
             "no: " + row["note"] if row.get("note") else "no")
         cells = [escape(joint_name(j, row.get("label", ""))), deg("old_deg"),
                  deg("correction_deg", True), deg("sigma_deg"), deg("new_deg"), escape(pushed)]
-        flag = False
         if truth:
             true = _at(truth.get("zero_errors_deg"), j)
             error = _at(truth.get("joint_offsets_error_deg"), j)
             inside = _at(truth.get("within_3_sigma"), j)
             cells += ["-" if true is None else f"{true:+.5f}",
                       "-" if error is None else f"{error:+.5f}",
-                      "-" if inside is None else ("yes" if inside else "NO")]
-            flag = inside is False
+                      "-" if inside is None else
+                      ("yes" if inside else '<span class="significant">NO</span>')]
         rows.append(cells)
-        flags.append(flag)
     if not rows:
         return "<p>This result holds no offsets.</p>"
-    return table(header, rows, flags=flags, table_id="offsets", text_columns=(5,))
+    return table(header, rows, table_id="offsets", text_columns=(5,))
 
 
 def _at(values: Any, index: int) -> Any:

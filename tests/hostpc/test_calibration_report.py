@@ -91,7 +91,7 @@ def test_verdict_offsets_and_truth_read_back() -> None:
     assert float(rows[4]["fitted - true [deg]"]) == pytest.approx(-4e-4)
     assert report.texts["truth-summary"].startswith("4 of 5 identifiable zero offsets")
     verification = dict(report.tables["verification"][1:])  # type: ignore[arg-type]
-    assert verification["RMS with the new offsets [mm]"] == "0.0103"
+    assert verification["RMS with the fitted offsets [mm]"] == "0.0103"
 
 
 def test_new_verification_statistic_and_fail() -> None:
