@@ -152,7 +152,7 @@ def _barh(label: str, title: str, xlabel: str, labels: Sequence[str],
     axes.frame(title, xlabel, yticks=False)
     if line is not None:
         axes.vline(line, SIGNIFICANT, 1.0, "4 3")
-        axes.legend([("significance", SIGNIFICANT)])
+        axes.legend([("significance", SIGNIFICANT)], corner="bottom right")
     axes.category_labels(labels, positions)
     return canvas.render()
 
@@ -202,7 +202,8 @@ def ladder_chart(diagnosis: Diagnosis) -> str:
     canvas = Canvas(1140, 330, "ladder: error at each step")
     for k, (title, series, reference, reference_label) in enumerate(panels):
         everything = np.concatenate([v for _, v in series])
-        ylim = limits(everything, 0.1, include=[] if reference is None else [reference])
+        low, high = limits(everything, 0.1, include=[] if reference is None else [reference])
+        ylim = (low, high + 0.45 * (high - low))  # headroom: the legend sits above the data
         axes = canvas.axes(60 + k * 375, 28, 320, 230, (-0.4, max(len(steps) - 0.6, 0.4)), ylim)
         entries = []
         for c, (name, values) in enumerate(series):
