@@ -46,7 +46,12 @@ VERIFY_ROWS = (
     ("stated_noise_rms_mm", "noise RMS the covariances state [mm]", "f4"),
     ("factor", "pass if RMS after <= factor x noise: factor", "g4"),
     ("threshold_mm", "that bound [mm]", "f4"),
+    ("reason", "why it failed", "text"),
 )
+# keys shown only when their twin is absent (the chi-square verify holds both)
+TWINS = {"rms_mm": "rms_after_mm", "n_planned": "n_poses"}
+# the RMS rule of older versions: its keys describe the verdict only without a statistic
+RMS_RULE_KEYS = ("factor", "threshold_mm", "noise_rms_mm")
 
 
 def _value(value: Any, kind: str) -> str | None:
@@ -54,7 +59,7 @@ def _value(value: Any, kind: str) -> str | None:
     if value is None:
         return "none set" if kind == "tol" else None
     if kind == "text":
-        return escape(value)
+        return escape(value) if str(value) else None
     if kind == "int":
         return str(int(value))
     if kind == "p":
@@ -165,7 +170,9 @@ def verification_section(result: Document) -> str:
                 "(<code>--verify-poses 0</code>, or the run ended before them).</p>")
     rows = []
     for key, label, kind in VERIFY_ROWS:
-        if key not in verify:
+        if key not in verify or TWINS.get(key) in verify:
+            continue
+        if key in RMS_RULE_KEYS and "statistic" in verify:
             continue
         text = _value(verify[key], kind)
         if text is not None:

@@ -96,9 +96,13 @@ def test_verdict_offsets_and_truth_read_back() -> None:
 
 def test_new_verification_statistic_and_fail() -> None:
     result = document()
-    result["verify"] = {"verdict": "FAIL", "statistic": 41.7, "dof": 30, "p_value": 0.0004,
-                        "alpha": 0.01, "rms_mm": 0.031, "tolerance_mm": None, "n_poses": 10,
-                        "pushed": True}
+    result["verify"] = {  # as hostpc.methods.verify writes it since the chi-square test
+        "verdict": "FAIL", "statistic": 41.7, "dof": 30, "p_value": 0.0004, "alpha": 0.01,
+        "rms_mm": 0.031, "tolerance_mm": None, "n_poses": 10, "n_planned": 10,
+        "n_measured": 10, "rms_before_mm": 4.2, "max_before_mm": 5.1, "rms_after_mm": 0.031,
+        "max_after_mm": 0.05, "stated_noise_rms_mm": 0.025, "factor": 1.2,
+        "reason": "p = 0.0004 < alpha = 0.01", "passed": False, "pushed": True,
+        "kind": "offsets"}
     result["exit_code"] = 6
     report = read(result)
     assert report.texts["verdict"].startswith("FAIL: the pushed offsets failed verification")
@@ -109,8 +113,11 @@ def test_new_verification_statistic_and_fail() -> None:
     assert float(rows["p-value (a statistic this large if the offsets are right)"]) == 0.0004
     assert rows["false-FAIL rate (alpha)"] == "0.01"
     assert rows["task-space tolerance [mm]"] == "none set"
-    result["verify"]["verdict"] = "PASS"
-    result["verify"]["tolerance_mm"] = 0.05
+    assert rows["why it failed"] == "p = 0.0004 < alpha = 0.01"
+    assert rows["RMS with the fitted offsets [mm]"] == "0.0310"
+    assert "RMS after the push [mm]" not in rows and "poses planned" not in rows  # twins
+    assert not any(label.startswith("pass if RMS after") for label in rows)  # old rule
+    result["verify"].update(verdict="PASS", tolerance_mm=0.05, reason="", passed=True)
     result["exit_code"] = 0
     report = read(result)
     assert report.texts["verdict"].startswith("PASS")
