@@ -66,7 +66,10 @@ def effects_option(check: ModelCheck, name: str) -> str:
 
 
 def command(check: ModelCheck, name: str, source: str | None, plugins: Sequence[str]) -> str:
-    parts = ["hostpc diagnose", source or "DATASET", "--effects", effects_option(check, name)]
+    """The command that diagnoses the model with ``name`` added; without a dataset file
+    (a Dataset given from Python) only its options, never a placeholder."""
+    parts = ["hostpc diagnose", source] if source else []
+    parts += ["--effects", effects_option(check, name)]
     parts += [f"--plugin {p}" for p in plugins]
     return " ".join(parts)
 

@@ -82,6 +82,11 @@ def test_report_without_ladder_escapes_and_says_how_to_get_one(diagnosis: Diagno
     assert "hostpc diagnose hidden.json --ladder" in text
     anonymous = render_html(replace(diagnosis, ladder=None, source=None))
     assert "DATASET" not in anonymous and "--ladder</code> on this dataset" in anonymous
+    from hostpc.diagnostics.advice import command
+
+    assert command(diagnosis.check, "backlash", None, []) == "--effects +backlash"
+    assert command(diagnosis.check, "backlash", "d.json", ["p.py"]) == (
+        "hostpc diagnose d.json --effects +backlash --plugin p.py")
     assert len(image_sources(text)) == len(image_sources(report.read_text())) - 1
     assert "&lt;b&gt;run &amp; co&lt;/b&gt;" in text and "<b>run" not in text
 
