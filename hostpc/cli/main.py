@@ -29,6 +29,7 @@ COMMAND_MODULES = (
     "calibrate",
     "rollback",
     "stereo_calibrate",
+    "report",  # hostpc.report: re-render a run's report offline
     "camera",  # hostpc.sensors: serve or check the host's stereo camera
     "station",  # hostpc.station: the end-of-line station service
     "history",  # hostpc.archive: archived runs and drift
