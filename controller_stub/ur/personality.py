@@ -13,14 +13,16 @@ personality can run per host. The personality runs in the stub's own process: ur
 constructors hold the Python GIL while they wait for the controller, so a stub in the same
 interpreter as ur_rtde deadlocks.
 
-State shown to RTDE clients (docs/robots.md has the table): `actual_q` / `target_q` are the
-simulation's reported angles (interpolated in wall time while a paced move runs),
-`actual_digital_input_bits` bit i = simulated digital input i (the probe line is input
-`probe.io_line`), `actual_digital_output_bits` bit i = output i, standard digital outputs
-0..7 write simulated outputs 0..7 and configurable outputs 0..7 write outputs 8..15 where
-they exist. Motions of the control script go through the zerocal server's motion pacing
-(`ControllerServer.begin_motion` / `run_motion`), so one motion at a time holds across both
-interfaces and the zerocal `abort` also stops a UR move.
+State shown to RTDE clients (docs/robots.md has the table), cycle by cycle like a real
+controller (`paced_motion.py`: a 2 ms cycle, one RTDE package carries the angles and inputs of
+one cycle): `actual_q` / `target_q` are the simulation's reported angles (along the path while
+a paced move runs), `actual_digital_input_bits` bit i = simulated digital input i (the probe
+line is input `probe.io_line`; it rises along an asynchronous movej when the stylus touches
+the sphere, after the probe's trigger latency), `actual_digital_output_bits` bit i = output
+i, standard digital outputs 0..7 write simulated outputs 0..7 and configurable outputs 0..7
+write outputs 8..15 where they exist. Motions run through the simulation's begin_move /
+finish_move, so a stopj ends one where it was (docs/ur-probe.md); one motion at a time holds
+across both interfaces (a zerocal move meanwhile is refused "busy").
 """
 
 from __future__ import annotations
@@ -32,7 +34,6 @@ import math
 import re
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -41,6 +42,7 @@ from controller_stub.robot_model import forward
 from controller_stub.simulation import SimulationRefused
 from controller_stub.ur.control_script import ControlScript
 from controller_stub.ur.dashboard import DashboardServer
+from controller_stub.ur.paced_motion import PacedMotion, cycle_start
 from controller_stub.ur.rtde_server import N_REGISTERS, RtdeServer, output_type, register_field
 from controller_stub.ur.script_server import ScriptServer
 
@@ -89,21 +91,6 @@ def _rotation_vector(R: np.ndarray) -> np.ndarray:
     return axis / (2.0 * math.sin(angle)) * angle
 
 
-@dataclass(frozen=True)
-class _Motion:
-    """A paced motion in progress: q (6,) from q_start to q_end over `wall_s` seconds."""
-
-    q_start: np.ndarray
-    q_end: np.ndarray
-    t_start: float
-    wall_s: float
-
-    def fraction(self, now: float) -> float:
-        if self.wall_s <= 0.0:
-            return 1.0
-        return min(1.0, max(0.0, (now - self.t_start) / self.wall_s))
-
-
 class UrPersonality:
     """Serve one `Simulation` as a Universal Robots controller (RTDE, dashboard, script).
 
@@ -119,7 +106,7 @@ class UrPersonality:
         *,
         controller_version: tuple[int, int, int, int] = CONTROLLER_VERSION,
         serial_number: str = SERIAL_NUMBER,
-        max_stream_hz: float = 125.0,
+        max_stream_hz: float = 500.0,
     ) -> None:
         if sim.n_joints != 6:
             raise ValueError(f"the UR personality needs a 6-joint robot, {sim.robot_name} has "
@@ -142,7 +129,8 @@ class UrPersonality:
         self._program_name = ""
         self._program: asyncio.Task[None] | None = None
         self._protective_stop = False
-        self._motion: _Motion | None = None
+        self._motion: PacedMotion | None = None
+        self._stop = asyncio.Event()
         self._t0 = time.monotonic()
         self._rtde = RtdeServer(self, max_stream_hz=max_stream_hz)
         self._dashboard = DashboardServer(self)
@@ -201,20 +189,29 @@ class UrPersonality:
         logger.warning("protective stop: %s", reason)
         self._protective_stop = True
 
-    def displayed_q(self) -> np.ndarray:
-        """(6,) reported angles, interpolated while a paced motion runs."""
+    def displayed_q(self, now: float | None = None) -> np.ndarray:
+        """(6,) reported angles of the controller cycle at wall time `now` (default: now)."""
         motion = self._motion
         if motion is None:
             return np.asarray(self.sim.joint_positions(), float)
-        s = motion.fraction(time.monotonic())
-        return motion.q_start + s * (motion.q_end - motion.q_start)
+        return motion.q_at(time.monotonic() if now is None else now)
 
-    def displayed_qd(self) -> np.ndarray:
+    def displayed_qd(self, now: float | None = None) -> np.ndarray:
         """(6,) joint speeds (rad/s) of the paced motion, zeros at rest."""
         motion = self._motion
-        if motion is None or motion.wall_s <= 0.0 or motion.fraction(time.monotonic()) >= 1.0:
+        if motion is None:
             return np.zeros(6)
-        return (motion.q_end - motion.q_start) / motion.wall_s
+        return motion.qd_at(time.monotonic() if now is None else now)
+
+    def displayed_inputs(self, now: float | None = None) -> list[bool]:
+        """Digital inputs of the cycle at `now`: the probe line follows the paced motion."""
+        inputs = list(self.sim.digital_inputs())
+        motion = self._motion
+        if motion is not None and 0 <= motion.probe_line < len(inputs):
+            line = motion.probe_line
+            when = time.monotonic() if now is None else now
+            inputs[line] = motion.probe_level(when, inputs[line])
+        return inputs
 
     def tcp_pose(self, q: np.ndarray | None = None) -> list[float]:
         """UR pose [x, y, z, rx, ry, rz] of the flange (nominal model, reported angles)."""
@@ -226,18 +223,19 @@ class UrPersonality:
 
     def output_values(self, names: Sequence[str]) -> list[Any]:
         """Current values of the named RTDE outputs (see rtde_server.OUTPUT_TYPES)."""
-        q = self.displayed_q()
-        return [self._output(name, q) for name in names]
+        now = time.monotonic()  # one controller cycle for the whole package
+        q = self.displayed_q(now)
+        return [self._output(name, q, now) for name in names]
 
-    def _output(self, name: str, q: np.ndarray) -> Any:
+    def _output(self, name: str, q: np.ndarray, now: float) -> Any:
         if name in ("actual_q", "target_q"):
             return tuple(q.tolist())
         if name in ("actual_qd", "target_qd"):
-            return tuple(self.displayed_qd().tolist())
+            return tuple(self.displayed_qd(now).tolist())
         if name == "timestamp":
-            return time.monotonic() - self._t0
+            return cycle_start(now, self._t0)
         if name == "actual_digital_input_bits":
-            return _mask(self.sim.digital_inputs())
+            return _mask(self.displayed_inputs(now))
         if name == "actual_digital_output_bits":
             return _mask(self.sim.digital_outputs()) | (self.tool_outputs & 0x3) << 16
         if name == "runtime_state":
@@ -387,13 +385,23 @@ class UrPersonality:
 
     # ------------------------------------------------------------------ motion
 
-    async def move_joints(self, q_target: np.ndarray, velocity: float) -> tuple[bool, str | None]:
-        """A movej to q_target (6,) reported rad at joint `velocity` (rad/s).
+    async def move_joints(
+        self, q_target: np.ndarray, velocity: float, *, watch_probe: bool = False
+    ) -> tuple[bool, str | None]:
+        """A movej to q_target (6,) reported rad at joint `velocity` (rad/s), paced cycle by
+        cycle (`PacedMotion`) until its end or `stop_motion`.
 
         The speed fraction handed to the simulation is velocity over the slowest joint's
-        maximum speed (clipped to (0, 1]). Returns (completed, reason): reason "busy" (a
-        zerocal motion runs), "aborted" (stopped early), or the simulation's refusal code
-        ("joint_limit", "estop", ...) which also raises a protective stop.
+        maximum speed (clipped to (0, 1]). watch_probe (an asynchronous movej, which a host
+        watches over RTDE to stop it on the probe input): planned as the simulation's guarded
+        move on the probe line (the probe's trigger latency and repeatability, the contact
+        and the stop point past it: a move nobody stops ends there, stylus overtravelled) and
+        paced in real time (one cycle per 2 ms, so a 500 Hz RTDE client sees every cycle);
+        otherwise paced by the scenario's time_scale. Returns (completed, reason): reason
+        "busy" (another motion runs), "stopped" (stop_motion, or the program ended),
+        "contact" (a watched move that reached its stop point past the contact), or the
+        simulation's refusal code ("joint_limit", "estop", ...) which also raises a
+        protective stop.
         """
         from controller_stub.server import RequestRefusedError
 
@@ -401,24 +409,44 @@ class UrPersonality:
         fraction = float(np.clip(velocity / max_speed, 1e-3, 1.0)) * max(self.speed_slider, 1e-3)
         if self._protective_stop or self.emergency_stopped():
             return False, "estop" if self.emergency_stopped() else "protective_stop"
+        probe_line = int(self.sim.scenario.probe.io_line)
         try:
             if self.server is not None:
                 self.server.begin_motion()
-            q_start = np.asarray(self.sim.joint_positions(), float)
-            result = self.sim.move_joints(np.asarray(q_target, float), min(fraction, 1.0))
+            plan = self.sim.begin_move(np.asarray(q_target, float), min(fraction, 1.0),
+                                       probe_line if watch_probe else None)
         except RequestRefusedError:
             return False, "busy"
         except SimulationRefused as exc:
+            if exc.code == "busy":
+                return False, "busy"
             self.protective_stop(f"movej refused: {exc}")
             return False, exc.code
-        wall = float(result.duration_s) * float(self.sim.time_scale)
-        self._motion = _Motion(q_start, np.asarray(result.q, float), time.monotonic(), wall)
+        pace = max(1.0, float(self.sim.time_scale)) if watch_probe else float(self.sim.time_scale)
+        motion = PacedMotion(plan, time.monotonic(), pace, self._t0, probe_line)
+        self._motion = motion
+        self._stop = asyncio.Event()
+        fraction_done = 1.0
         try:
-            if self.server is not None:
-                finished = await self.server.run_motion(result.duration_s)
-            else:
-                await asyncio.sleep(wall)
-                finished = True
+            if motion.wall_s > 0.0:
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(self._stop.wait(), motion.wall_s)
         finally:
+            # stopped, cancelled (program ended) or at its end: it ends at the cycle reached
+            now = time.monotonic()
+            if motion.wall_s > 0.0 and not motion.finished(now):
+                fraction_done = motion.fraction_at(now)
             self._motion = None
-        return (True, None) if finished else (False, "aborted")
+            result = self.sim.finish_move(plan, fraction_done)
+        if fraction_done < 1.0:
+            return False, "stopped"
+        if plan.contact is not None:
+            return False, "contact" if getattr(result, "contact", False) else "no_contact"
+        return True, None
+
+    def stop_motion(self) -> bool:
+        """stopj / stopl: end the paced motion at the cycle it has reached; True if one ran."""
+        if self._motion is None:
+            return False
+        self._stop.set()
+        return True

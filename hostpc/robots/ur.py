@@ -1,7 +1,11 @@
 """RobotAdapter for Universal Robots through the ur_rtde library (`--driver ur`).
 
-    RTDEReceiveInterface   joint angles (getActualQ), digital IO bits, timestamps
-    RTDEControlInterface   moveJ / stopJ (ur_rtde uploads its control script to 30003)
+    RTDEReceiveInterface   joint angles (getActualQ), digital IO bits, timestamps (500 Hz
+                           on e-Series, 125 Hz on CB3)
+    RTDEControlInterface   moveJ / stopJ (ur_rtde uploads its control script to 30003);
+                           guarded moves for the touch probe are an asynchronous moveJ
+                           watched sample by sample and stopped on the input edge
+                           (`guarded_move`, docs/ur-probe.md)
     RTDEIOInterface        standard digital outputs
     ControllerClient       stereo captures from the camera service (zerocal protocol,
                            `--camera HOST:PORT`, default the robot's host, port 47800)
@@ -67,6 +71,37 @@ MAX_OFFSET_RAD = math.radians(5.0)
 """Largest host zero offset accepted by set_offsets (a bigger one is a fitting error)."""
 N_DIGITAL_IO = 16
 """Standard (0-7) and configurable (8-15) digital IO, bit i of the RTDE IO bit words."""
+STOP_DECELERATION = 10.0
+"""rad/s^2 of the stopJ after a probe edge (UR's hardest regular stop is ~40)."""
+POLL_INTERVAL_S = 0.0005
+"""Pause between two RTDE samples read by a guarded move (a 500 Hz stream: 2 ms)."""
+
+
+def rtde_frequency(controller_version: tuple[int, ...]) -> float:
+    """The RTDE rate ur_rtde uses: 500 Hz on e-Series (controller 5.x), else 125 Hz."""
+    return 500.0 if controller_version[0] >= 5 else 125.0
+
+
+@dataclass(frozen=True)
+class LatchTiming:
+    """The timing of one probe contact, as measured by the UR guarded move.
+
+    edge_window_s: controller time between the last sample with the input low and the first
+    with it high (one sample period unless samples were missed); sample_period_s: the
+    smallest sample spacing seen during the move; stop_command_s: host time from seeing the
+    edge to stopJ returning; overtravel_rad: largest joint travel from the edge sample to
+    standstill.
+    """
+
+    edge_window_s: float
+    sample_period_s: float
+    stop_command_s: float
+    overtravel_rad: float
+
+    @property
+    def missed_samples(self) -> int:
+        """Samples the host did not read inside the edge window."""
+        return max(0, round(self.edge_window_s / max(self.sample_period_s, 1e-9)) - 1)
 
 T = TypeVar("T")
 
@@ -282,6 +317,9 @@ class UrAdapter:
         self._rollback_counter = 0
         self._motion_lock = asyncio.Lock()
         self.q_min, self.q_max = _limits(info.robot_name)
+        self.rtde_frequency = rtde_frequency(info.controller_version)
+        self.latches: list[LatchTiming] = []
+        """Timing of every probe contact of this session (guarded_move)."""
 
     @property
     def address(self) -> str:
@@ -299,13 +337,19 @@ class UrAdapter:
             raise ControllerError(f"UR {self.host}: {name} failed: {exc}") from exc
 
     def _sample(self) -> tuple[float, np.ndarray, int, int]:
-        """(timestamp, actual q (6,), input bits, output bits) from the receive interface."""
-        return (
-            float(self.receive.getTimestamp()),
-            np.asarray(self.receive.getActualQ(), float),
-            int(self.receive.getActualDigitalInputBits()),
-            int(self.receive.getActualDigitalOutputBits()),
-        )
+        """(timestamp, actual q (6,), input bits, output bits) of ONE RTDE package: read
+        again if the receive thread stored a newer package between the getters."""
+        for _ in range(10):
+            stamp = float(self.receive.getTimestamp())
+            sample = (
+                stamp,
+                np.asarray(self.receive.getActualQ(), float),
+                int(self.receive.getActualDigitalInputBits()),
+                int(self.receive.getActualDigitalOutputBits()),
+            )
+            if float(self.receive.getTimestamp()) == stamp:
+                return sample
+        return sample
 
     async def _fresh_q(self, after: float, target: np.ndarray | None) -> np.ndarray:
         """Measured q (6,) from a sample newer than timestamp `after` (and at `target` within
@@ -368,6 +412,12 @@ class UrAdapter:
         if self.camera is not None:
             camera_state = await self.camera.state()
             camera = dict(camera_state.camera)
+            if isinstance(camera.get("probe"), dict):
+                # this driver latches the probe from RTDE samples: at least their spread
+                probe = dict(camera["probe"])
+                probe["latency_jitter"] = max(float(probe.get("latency_jitter") or 0.0),
+                                              self.latch_jitter_s)
+                camera["probe"] = probe
         return RobotState(
             q=q + self._offsets,
             zero_offsets=self._offsets.copy(),
@@ -404,19 +454,28 @@ class UrAdapter:
         return MoveOutcome(completed=True, q=measured + self._offsets)
 
     async def guarded_move(self, q: np.ndarray, speed: float, io_line: int) -> ContactOutcome:
-        """Asynchronous moveJ toward q (6,) polling digital input `io_line` over RTDE; on a
-        rising edge the angles of that sample are latched and the robot stopped (stopJ).
+        """Asynchronous moveJ toward q (6,) watching digital input `io_line` in every RTDE
+        sample; at its rising edge the robot is stopped (stopJ) and the joint angles at the
+        edge latched (docs/ur-probe.md).
 
-        The latch is only as good as the RTDE sample period (2 ms at 500 Hz) plus the
-        detection delay; prefer a controller-side latch where precision matters.
+        Each RTDE sample carries the angles and the input bits of one controller cycle, so
+        the edge lies between the last sample with the input low and the first with it
+        high: q_latched is the midpoint of those two samples' angles (the edge's expected
+        position; the constant part of the probe's latency is fitted by `trigger_latency`,
+        the uniform spread of +-half a window adds `latch_jitter_s`). The timing of every
+        contact (edge window, missed samples, host reaction, stop) is kept in
+        `self.latches` and logged.
         """
         if not 0 <= int(io_line) < N_DIGITAL_IO:
             raise InputError(f"io_line {io_line}: expected 0..{N_DIGITAL_IO - 1}")
         target = self._check_q(q) - self._offsets
         velocity = self._speed(speed)
         async with self._motion_lock:
-            _, _, inputs, _ = await self._call(self._sample)
-            previous = bool(inputs >> io_line & 1)
+            low = await self._call(self._sample)
+            if low[2] >> io_line & 1:
+                _, q_now, _, _ = low
+                return ContactOutcome(False, None, q_now + self._offsets,
+                                      reason="probe_already_triggered")
             status0 = await self._call(self.control.getAsyncOperationProgressEx)
             ok = await self._call(
                 self.control.moveJ, target.tolist(), velocity, JOINT_ACCELERATION, True
@@ -425,31 +484,62 @@ class UrAdapter:
                 reason = await self._failure_reason()
                 _, q_now, _, _ = await self._call(self._sample)
                 return ContactOutcome(False, None, q_now + self._offsets, reason=reason)
-            op_id = None
-            loop = asyncio.get_running_loop()
-            deadline = loop.time() + max(self.timeout, 60.0)
-            while True:
-                stamp, q_now, inputs, _ = await self._call(self._sample)
-                level = bool(inputs >> io_line & 1)
-                if level and not previous:
-                    await self._call(self.control.stopJ, 2.0, False)
-                    measured = await self._fresh_q(stamp, None)
-                    return ContactOutcome(
-                        True, q_now + self._offsets, measured + self._offsets
+            return await self._watch(target, io_line, low, status0)
+
+    async def _watch(self, target: np.ndarray, io_line: int,
+                     low: tuple[float, np.ndarray, int, int], status0: Any) -> ContactOutcome:
+        """The polling loop of guarded_move (motion lock held): edge -> stopJ -> latch."""
+        op_id = None
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + max(self.timeout, 60.0)
+        period = math.inf
+        while True:
+            sample = await self._call(self._sample)
+            stamp, q_now, inputs, _ = sample
+            if stamp > low[0]:
+                if inputs >> io_line & 1:
+                    seen = loop.time()
+                    await self._call(self.control.stopJ, STOP_DECELERATION, False)
+                    stopped = loop.time()
+                    q_stop = await self._fresh_q(stamp, None)
+                    window = stamp - low[0]
+                    period = min(period, window)
+                    latch = LatchTiming(
+                        edge_window_s=window,
+                        sample_period_s=period if math.isfinite(period) else window,
+                        stop_command_s=stopped - seen,
+                        overtravel_rad=float(np.max(np.abs(q_stop - q_now))),
                     )
-                previous = level
-                status = await self._call(self.control.getAsyncOperationProgressEx)
-                if op_id is None and status.operationId() != status0.operationId():
-                    op_id = status.operationId()
-                if op_id is not None and not status.isAsyncOperationRunning():
-                    measured = await self._fresh_q(stamp, target)
-                    return ContactOutcome(
-                        False, None, measured + self._offsets, reason="no_contact"
-                    )
-                if loop.time() > deadline:
-                    await self._call(self.control.stopJ, 2.0, False)
-                    raise RequestTimeout(f"UR {self.host}: guarded move did not end")
-                await asyncio.sleep(0.001)
+                    self.latches.append(latch)
+                    logger.info("UR %s: probe edge within %.1f ms (%d sample(s) missed), "
+                                "stopJ took %.1f ms, overtravel %.2e rad", self.host,
+                                1e3 * latch.edge_window_s, latch.missed_samples,
+                                1e3 * latch.stop_command_s, latch.overtravel_rad)
+                    q_latched = 0.5 * (low[1] + q_now)
+                    return ContactOutcome(True, q_latched + self._offsets,
+                                          q_stop + self._offsets)
+                period = min(period, stamp - low[0])
+                low = sample
+            status = await self._call(self.control.getAsyncOperationProgressEx)
+            if op_id is None and status.operationId() != status0.operationId():
+                op_id = status.operationId()
+            if op_id is not None and not status.isAsyncOperationRunning():
+                final = await self._call(self._sample)
+                if final[2] >> io_line & 1:  # the edge came with the last samples
+                    continue
+                measured = await self._fresh_q(final[0] - 1e-9, None)
+                return ContactOutcome(False, None, measured + self._offsets,
+                                      reason="no_contact")
+            if loop.time() > deadline:
+                await self._call(self.control.stopJ, STOP_DECELERATION, False)
+                raise RequestTimeout(f"UR {self.host}: guarded move did not end")
+            await asyncio.sleep(POLL_INTERVAL_S)
+
+    @property
+    def latch_jitter_s(self) -> float:
+        """One-sigma timing spread of a latched edge (s): the RTDE sample period / sqrt(12)
+        (the edge is uniform within one sample window)."""
+        return 1.0 / (self.rtde_frequency * math.sqrt(12.0))
 
     async def capture(self, pattern: str = "target", view: int = 0) -> StereoCapture:
         """Stereo pair from the camera service; q at exposure reported (+ host offsets)."""
@@ -564,7 +654,8 @@ async def connect_ur(
                                                 timeout=timeout)
     receive = control = io = None
     try:
-        receive = await asyncio.to_thread(rtde_receive.RTDEReceiveInterface, host)
+        receive = await asyncio.to_thread(rtde_receive.RTDEReceiveInterface, host,
+                                          rtde_frequency(info.controller_version))
         control = await asyncio.to_thread(rtde_control.RTDEControlInterface, host)
         io = await asyncio.to_thread(rtde_io.RTDEIOInterface, host)
     except RuntimeError as exc:
