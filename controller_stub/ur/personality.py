@@ -438,6 +438,11 @@ class UrPersonality:
                 fraction_done = motion.fraction_at(now)
             self._motion = None
             result = self.sim.finish_move(plan, fraction_done)
+        if plan.contact is not None:
+            logger.info("probe contact: latched q %s, edge time %.6f s, stopped %.1f ms later",
+                        np.round(plan.contact.q_latched, 9).tolist(), plan.contact.time_latch,
+                        1e3 * (fraction_done * plan.s_end - plan.contact.s_latch)
+                        * plan.path_duration_s)
         if fraction_done < 1.0:
             return False, "stopped"
         if plan.contact is not None:

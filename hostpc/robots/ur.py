@@ -517,7 +517,7 @@ class UrAdapter:
                                 1e3 * latch.stop_command_s, latch.overtravel_rad)
                     q_latched = 0.5 * (low[1] + q_now)
                     return ContactOutcome(True, q_latched + self._offsets,
-                                          q_stop + self._offsets)
+                                          q_stop + self._offsets, qd=(q_now - low[1]) / window)
                 period = min(period, stamp - low[0])
                 low = sample
             status = await self._call(self.control.getAsyncOperationProgressEx)
