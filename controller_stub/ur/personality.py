@@ -32,7 +32,6 @@ import contextlib
 import logging
 import math
 import re
-import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -42,7 +41,7 @@ from controller_stub.robot_model import forward
 from controller_stub.simulation import SimulationRefused
 from controller_stub.ur.control_script import ControlScript
 from controller_stub.ur.dashboard import DashboardServer
-from controller_stub.ur.paced_motion import PacedMotion, cycle_start
+from controller_stub.ur.paced_motion import CYCLE_S, PacedMotion
 from controller_stub.ur.rtde_server import N_REGISTERS, RtdeServer, output_type, register_field
 from controller_stub.ur.script_server import ScriptServer
 
@@ -131,7 +130,10 @@ class UrPersonality:
         self._protective_stop = False
         self._motion: PacedMotion | None = None
         self._stop = asyncio.Event()
-        self._t0 = time.monotonic()
+        self.cycle = 0
+        """The controller cycle counter (`paced_motion.py`)."""
+        self._cycle_event = asyncio.Event()
+        self._clock: asyncio.Task[None] | None = None
         self._rtde = RtdeServer(self, max_stream_hz=max_stream_hz)
         self._dashboard = DashboardServer(self)
         self._script = ScriptServer(self)
@@ -147,6 +149,7 @@ class UrPersonality:
     ) -> dict[str, tuple[str, int]]:
         """Start the three servers; returns {"rtde"|"dashboard"|"script": (host, port)}."""
         bound: dict[str, tuple[str, int]] = {}
+        self._clock = asyncio.create_task(self._run_clock())
         try:
             bound["rtde"] = await self._rtde.start(host, rtde_port)
             bound["dashboard"] = await self._dashboard.start(host, dashboard_port)
@@ -161,6 +164,29 @@ class UrPersonality:
         await self._stop_program_task()
         for server in (self._script, self._dashboard, self._rtde):
             await server.close()
+        clock, self._clock = self._clock, None
+        if clock is not None:
+            clock.cancel()
+            with contextlib.suppress(BaseException):
+                await clock
+
+    async def _run_clock(self) -> None:
+        """Advance the controller cycle every CYCLE_S of wall time (never more than one
+        cycle per wake-up: a late event loop slows the controller instead of skipping)."""
+        loop = asyncio.get_running_loop()
+        next_at = loop.time()
+        while True:
+            next_at = max(next_at + CYCLE_S, loop.time())
+            await asyncio.sleep(next_at - loop.time())
+            self.cycle += 1
+            event, self._cycle_event = self._cycle_event, asyncio.Event()
+            event.set()
+
+    async def next_cycle(self, after: int) -> int:
+        """Wait until the controller cycle is past `after`; returns the cycle."""
+        while self.cycle <= after:
+            await self._cycle_event.wait()
+        return self.cycle
 
     # ------------------------------------------------------------------ state
 
@@ -189,28 +215,27 @@ class UrPersonality:
         logger.warning("protective stop: %s", reason)
         self._protective_stop = True
 
-    def displayed_q(self, now: float | None = None) -> np.ndarray:
-        """(6,) reported angles of the controller cycle at wall time `now` (default: now)."""
+    def displayed_q(self) -> np.ndarray:
+        """(6,) reported angles of the current controller cycle (along a paced motion)."""
         motion = self._motion
         if motion is None:
             return np.asarray(self.sim.joint_positions(), float)
-        return motion.q_at(time.monotonic() if now is None else now)
+        return motion.q_at(self.cycle)
 
-    def displayed_qd(self, now: float | None = None) -> np.ndarray:
+    def displayed_qd(self) -> np.ndarray:
         """(6,) joint speeds (rad/s) of the paced motion, zeros at rest."""
         motion = self._motion
         if motion is None:
             return np.zeros(6)
-        return motion.qd_at(time.monotonic() if now is None else now)
+        return motion.qd_at(self.cycle)
 
-    def displayed_inputs(self, now: float | None = None) -> list[bool]:
-        """Digital inputs of the cycle at `now`: the probe line follows the paced motion."""
+    def displayed_inputs(self) -> list[bool]:
+        """Digital inputs of the current cycle: the probe line follows the paced motion."""
         inputs = list(self.sim.digital_inputs())
         motion = self._motion
         if motion is not None and 0 <= motion.probe_line < len(inputs):
             line = motion.probe_line
-            when = time.monotonic() if now is None else now
-            inputs[line] = motion.probe_level(when, inputs[line])
+            inputs[line] = motion.probe_level(self.cycle, inputs[line])
         return inputs
 
     def tcp_pose(self, q: np.ndarray | None = None) -> list[float]:
@@ -223,19 +248,18 @@ class UrPersonality:
 
     def output_values(self, names: Sequence[str]) -> list[Any]:
         """Current values of the named RTDE outputs (see rtde_server.OUTPUT_TYPES)."""
-        now = time.monotonic()  # one controller cycle for the whole package
-        q = self.displayed_q(now)
-        return [self._output(name, q, now) for name in names]
+        q = self.displayed_q()  # one controller cycle for the whole package
+        return [self._output(name, q) for name in names]
 
-    def _output(self, name: str, q: np.ndarray, now: float) -> Any:
+    def _output(self, name: str, q: np.ndarray) -> Any:
         if name in ("actual_q", "target_q"):
             return tuple(q.tolist())
         if name in ("actual_qd", "target_qd"):
-            return tuple(self.displayed_qd(now).tolist())
+            return tuple(self.displayed_qd().tolist())
         if name == "timestamp":
-            return cycle_start(now, self._t0)
+            return self.cycle * CYCLE_S
         if name == "actual_digital_input_bits":
-            return _mask(self.displayed_inputs(now))
+            return _mask(self.displayed_inputs())
         if name == "actual_digital_output_bits":
             return _mask(self.sim.digital_outputs()) | (self.tool_outputs & 0x3) << 16
         if name == "runtime_state":
@@ -423,19 +447,15 @@ class UrPersonality:
             self.protective_stop(f"movej refused: {exc}")
             return False, exc.code
         pace = max(1.0, float(self.sim.time_scale)) if watch_probe else float(self.sim.time_scale)
-        motion = PacedMotion(plan, time.monotonic(), pace, self._t0, probe_line)
+        motion = PacedMotion(plan, self.cycle, pace, probe_line)
         self._motion = motion
         self._stop = asyncio.Event()
-        fraction_done = 1.0
         try:
-            if motion.wall_s > 0.0:
-                with contextlib.suppress(TimeoutError):
-                    await asyncio.wait_for(self._stop.wait(), motion.wall_s)
+            while not motion.finished(self.cycle) and not self._stop.is_set():
+                await self.next_cycle(self.cycle)
         finally:
-            # stopped, cancelled (program ended) or at its end: it ends at the cycle reached
-            now = time.monotonic()
-            if motion.wall_s > 0.0 and not motion.finished(now):
-                fraction_done = motion.fraction_at(now)
+            # at its end, stopped, or cancelled (program ended): it ends at the cycle reached
+            fraction_done = motion.fraction_at(self.cycle)
             self._motion = None
             result = self.sim.finish_move(plan, fraction_done)
         if plan.contact is not None:

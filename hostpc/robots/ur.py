@@ -44,6 +44,7 @@ import contextlib
 import logging
 import math
 import struct
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -73,8 +74,12 @@ N_DIGITAL_IO = 16
 """Standard (0-7) and configurable (8-15) digital IO, bit i of the RTDE IO bit words."""
 STOP_DECELERATION = 10.0
 """rad/s^2 of the stopJ after a probe edge (UR's hardest regular stop is ~40)."""
-POLL_INTERVAL_S = 0.0005
-"""Pause between two RTDE samples read by a guarded move (a 500 Hz stream: 2 ms)."""
+POLL_INTERVAL_S = 0.0002
+"""Pause between two reads of the RTDE sample by a guarded move (a 500 Hz stream: 2 ms)."""
+MAX_LATCH_RETRIES = 2
+RETRY_SPEED = 0.3
+"""Speed fraction of the move back to the start before a retried contact."""
+"""A contact whose edge window missed samples is measured again, at most this often."""
 
 
 def rtde_frequency(controller_version: tuple[int, ...]) -> float:
@@ -90,13 +95,14 @@ class LatchTiming:
     with it high (one sample period unless samples were missed); sample_period_s: the
     smallest sample spacing seen during the move; stop_command_s: host time from seeing the
     edge to stopJ returning; overtravel_rad: largest joint travel from the edge sample to
-    standstill.
+    standstill; attempt: 0, or the retry that gave this contact.
     """
 
     edge_window_s: float
     sample_period_s: float
     stop_command_s: float
     overtravel_rad: float
+    attempt: int = 0
 
     @property
     def missed_samples(self) -> int:
@@ -260,6 +266,17 @@ async def check_controller(host: str, timeout: float = 3.0) -> UrControllerInfo:
             "teach pendant (docs/robots.md)"
         )
     return UrControllerInfo(version, polyscope, model, serial, remote)
+
+
+@dataclass(frozen=True)
+class _Watch:
+    """What the guarded move's watcher saw: edge (last low, first high sample) or None,
+    the last sample, the smallest sample spacing (s), host time of the stopJ call (s)."""
+
+    edge: tuple[tuple[float, np.ndarray, int, int], tuple[float, np.ndarray, int, int]] | None
+    last: tuple[float, np.ndarray, int, int]
+    period: float
+    stop_command_s: float
 
 
 # ---------------------------------------------------------------------- the adapter
@@ -442,15 +459,19 @@ class UrAdapter:
         target = self._check_q(q) - self._offsets
         velocity = self._speed(speed)
         async with self._motion_lock:
-            ok = await self._call(
-                self.control.moveJ, target.tolist(), velocity, JOINT_ACCELERATION, False
-            )
-            after = float(await self._call(self.receive.getTimestamp))
-            if not ok:
-                reason = await self._failure_reason()
-                measured = await self._fresh_q(after, None)
-                return MoveOutcome(completed=False, q=measured + self._offsets, reason=reason)
-            measured = await self._fresh_q(after, target)
+            return await self._move_locked(target, velocity)
+
+    async def _move_locked(self, target: np.ndarray, velocity: float) -> MoveOutcome:
+        """moveJ to the UR angles target (6,) at velocity rad/s (motion lock held)."""
+        ok = await self._call(
+            self.control.moveJ, target.tolist(), velocity, JOINT_ACCELERATION, False
+        )
+        after = float(await self._call(self.receive.getTimestamp))
+        if not ok:
+            reason = await self._failure_reason()
+            measured = await self._fresh_q(after, None)
+            return MoveOutcome(completed=False, q=measured + self._offsets, reason=reason)
+        measured = await self._fresh_q(after, target)
         return MoveOutcome(completed=True, q=measured + self._offsets)
 
     async def guarded_move(self, q: np.ndarray, speed: float, io_line: int) -> ContactOutcome:
@@ -462,78 +483,92 @@ class UrAdapter:
         the edge lies between the last sample with the input low and the first with it
         high: q_latched is the midpoint of those two samples' angles (the edge's expected
         position; the constant part of the probe's latency is fitted by `trigger_latency`,
-        the uniform spread of +-half a window adds `latch_jitter_s`). The timing of every
-        contact (edge window, missed samples, host reaction, stop) is kept in
-        `self.latches` and logged.
+        the uniform spread of +-half a window adds `latch_jitter_s`). The samples are read
+        by one worker thread for the whole move (no event-loop round trip per sample). A
+        contact whose edge window spans more than one sample period (samples the host did
+        not read in time) is measured again from the start, up to MAX_LATCH_RETRIES times.
+        The timing of every contact is kept in `self.latches` and logged.
         """
         if not 0 <= int(io_line) < N_DIGITAL_IO:
             raise InputError(f"io_line {io_line}: expected 0..{N_DIGITAL_IO - 1}")
         target = self._check_q(q) - self._offsets
         velocity = self._speed(speed)
         async with self._motion_lock:
-            low = await self._call(self._sample)
-            if low[2] >> io_line & 1:
-                _, q_now, _, _ = low
-                return ContactOutcome(False, None, q_now + self._offsets,
-                                      reason="probe_already_triggered")
-            status0 = await self._call(self.control.getAsyncOperationProgressEx)
-            ok = await self._call(
-                self.control.moveJ, target.tolist(), velocity, JOINT_ACCELERATION, True
-            )
-            if not ok:
-                reason = await self._failure_reason()
-                _, q_now, _, _ = await self._call(self._sample)
-                return ContactOutcome(False, None, q_now + self._offsets, reason=reason)
-            return await self._watch(target, io_line, low, status0)
+            start = await self._call(self._sample)
+            for attempt in range(MAX_LATCH_RETRIES + 1):
+                if start[2] >> io_line & 1:
+                    return ContactOutcome(False, None, start[1] + self._offsets,
+                                          reason="probe_already_triggered")
+                ok = await self._call(
+                    self.control.moveJ, target.tolist(), velocity, JOINT_ACCELERATION, True
+                )
+                if not ok:
+                    reason = await self._failure_reason()
+                    _, q_now, _, _ = await self._call(self._sample)
+                    return ContactOutcome(False, None, q_now + self._offsets, reason=reason)
+                watch = await self._call(self._watch, io_line, start)
+                if watch.edge is None:
+                    measured = await self._fresh_q(watch.last[0] - 1e-9, None)
+                    return ContactOutcome(False, None, measured + self._offsets,
+                                          reason="no_contact")
+                low, high = watch.edge
+                q_stop = await self._fresh_q(high[0], None)
+                latch = LatchTiming(
+                    edge_window_s=high[0] - low[0],
+                    sample_period_s=watch.period,
+                    stop_command_s=watch.stop_command_s,
+                    overtravel_rad=float(np.max(np.abs(q_stop - high[1]))),
+                    attempt=attempt,
+                )
+                self.latches.append(latch)
+                logger.info("UR %s: probe edge within %.1f ms (%d sample(s) missed), stopJ "
+                            "took %.1f ms, overtravel %.2e rad", self.host,
+                            1e3 * latch.edge_window_s, latch.missed_samples,
+                            1e3 * latch.stop_command_s, latch.overtravel_rad)
+                if latch.missed_samples == 0 or attempt == MAX_LATCH_RETRIES:
+                    break
+                back = await self._move_locked(start[1], RETRY_SPEED * MAX_JOINT_SPEED)
+                if not back.completed:
+                    break
+                start = await self._call(self._sample)
+            q_latched = 0.5 * (low[1] + high[1])
+            return ContactOutcome(True, q_latched + self._offsets, q_stop + self._offsets,
+                                  qd=(high[1] - low[1]) / latch.edge_window_s)
 
-    async def _watch(self, target: np.ndarray, io_line: int,
-                     low: tuple[float, np.ndarray, int, int], status0: Any) -> ContactOutcome:
-        """The polling loop of guarded_move (motion lock held): edge -> stopJ -> latch."""
-        op_id = None
-        loop = asyncio.get_running_loop()
-        deadline = loop.time() + max(self.timeout, 60.0)
+    def _watch(self, io_line: int, start: tuple[float, np.ndarray, int, int]) -> _Watch:
+        """Blocking (a worker thread): read every new RTDE sample of the asynchronous move
+        until the input rises (stopJ at once) or the move ends."""
+        low = start
         period = math.inf
+        deadline = time.monotonic() + max(self.timeout, 60.0)
+        next_status = 0.0
+        started = False
+        op0 = self.control.getAsyncOperationProgressEx().operationId()
         while True:
-            sample = await self._call(self._sample)
-            stamp, q_now, inputs, _ = sample
-            if stamp > low[0]:
-                if inputs >> io_line & 1:
-                    seen = loop.time()
-                    await self._call(self.control.stopJ, STOP_DECELERATION, False)
-                    stopped = loop.time()
-                    q_stop = await self._fresh_q(stamp, None)
-                    window = stamp - low[0]
-                    period = min(period, window)
-                    latch = LatchTiming(
-                        edge_window_s=window,
-                        sample_period_s=period if math.isfinite(period) else window,
-                        stop_command_s=stopped - seen,
-                        overtravel_rad=float(np.max(np.abs(q_stop - q_now))),
-                    )
-                    self.latches.append(latch)
-                    logger.info("UR %s: probe edge within %.1f ms (%d sample(s) missed), "
-                                "stopJ took %.1f ms, overtravel %.2e rad", self.host,
-                                1e3 * latch.edge_window_s, latch.missed_samples,
-                                1e3 * latch.stop_command_s, latch.overtravel_rad)
-                    q_latched = 0.5 * (low[1] + q_now)
-                    return ContactOutcome(True, q_latched + self._offsets,
-                                          q_stop + self._offsets, qd=(q_now - low[1]) / window)
-                period = min(period, stamp - low[0])
+            sample = self._sample()
+            if sample[0] > low[0]:
+                if sample[2] >> io_line & 1:
+                    seen = time.monotonic()
+                    self.control.stopJ(STOP_DECELERATION, False)
+                    return _Watch((low, sample), sample, min(period, sample[0] - low[0]),
+                                  time.monotonic() - seen)
+                if low is not start:
+                    period = min(period, sample[0] - low[0])
                 low = sample
-            status = await self._call(self.control.getAsyncOperationProgressEx)
-            if op_id is None and status.operationId() != status0.operationId():
-                op_id = status.operationId()
-            if op_id is not None and not status.isAsyncOperationRunning():
-                final = await self._call(self._sample)
-                if final[2] >> io_line & 1:  # the edge came with the last samples
-                    continue
-                measured = await self._fresh_q(final[0] - 1e-9, None)
-                return ContactOutcome(False, None, measured + self._offsets,
-                                      reason="no_contact")
-            if loop.time() > deadline:
-                await self._call(self.control.stopJ, STOP_DECELERATION, False)
-                raise RequestTimeout(f"UR {self.host}: guarded move did not end")
-            await asyncio.sleep(POLL_INTERVAL_S)
+            now = time.monotonic()
+            if now >= next_status:  # the move's end, checked every few cycles
+                next_status = now + 0.005
+                status = self.control.getAsyncOperationProgressEx()
+                started = started or status.operationId() != op0
+                if started and not status.isAsyncOperationRunning():
+                    final = self._sample()
+                    if not final[2] >> io_line & 1:
+                        return _Watch(None, final, period, 0.0)
+                    continue  # the edge came with the last samples
+            if now > deadline:
+                self.control.stopJ(STOP_DECELERATION, False)
+                raise RuntimeError("guarded move did not end")
+            time.sleep(POLL_INTERVAL_S)
 
     @property
     def latch_jitter_s(self) -> float:
