@@ -620,8 +620,27 @@ class UrAdapter:
         self._offsets = saved.copy()
         return replaced
 
+    def latch_summary(self) -> str | None:
+        """One line on the probe latches of this session (None without contacts)."""
+        if not self.latches:
+            return None
+        window = np.array([latch.edge_window_s for latch in self.latches])
+        stop = np.array([latch.stop_command_s for latch in self.latches])
+        retried = sum(1 for latch in self.latches if latch.attempt > 0)  # repeated contacts
+        return (
+            f"UR probe latch: {len(self.latches)} edges, window median "
+            f"{1e3 * np.median(window):.1f} ms (max {1e3 * window.max():.1f} ms, "
+            f"{retried} retries), latch jitter "
+            f"{1e3 * self.latch_jitter_s:.2f} ms, stopJ median {1e3 * np.median(stop):.1f} ms, "
+            f"overtravel max {max(latch.overtravel_rad for latch in self.latches):.2e} rad"
+        )
+
     async def close(self) -> None:
-        """Stop the control script and disconnect every interface."""
+        """Report the probe latch timing (a warning-level line, so it is always shown),
+        stop the control script and disconnect every interface."""
+        summary = self.latch_summary()
+        if summary is not None:
+            logger.warning("%s", summary)
         for name, call in (
             ("stopScript", getattr(self.control, "stopScript", None)),
             ("control.disconnect", getattr(self.control, "disconnect", None)),
