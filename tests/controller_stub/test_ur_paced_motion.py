@@ -44,7 +44,7 @@ def test_the_probe_input_rises_at_the_latch_point_and_follows_path_edges() -> No
     assert motion.probe_level(18, False)
     assert motion.fraction_at(18) == pytest.approx(0.36 / 0.45)
     assert not motion.finished(22) and motion.finished(23)  # s_end 0.45 = 22.5 cycles
-    falling = PathEdge(0.1, False, 0.01, 0.1 * Q1)
+    falling = PathEdge(0.09, False, 0.009, 0.09 * Q1)
     leaving = PacedMotion(_plan(0.1, edges=(falling,)), start_cycle=0, wall_per_sim=1.0,
                           probe_line=0)
     assert leaving.probe_level(4, True) and not leaving.probe_level(5, True)
