@@ -63,14 +63,15 @@ class PacedMotion:
     def q_at(self, cycle: int) -> np.ndarray:
         """(n,) reported joint angles at `cycle`."""
         plan = self.plan
-        return plan.q_start + self.s_at(cycle) * (plan.q_target - plan.q_start)
+        return np.asarray(plan.q_start + self.s_at(cycle) * (plan.q_target - plan.q_start))
 
     def qd_at(self, cycle: int) -> np.ndarray:
         """(n,) joint speeds (rad per controller second) at `cycle`; zeros at the end."""
         plan = self.plan
         if self.finished(cycle) or self.wall_per_sim <= 0.0 or plan.path_duration_s <= 0.0:
             return np.zeros_like(plan.q_start)
-        return (plan.q_target - plan.q_start) / (plan.path_duration_s * self.wall_per_sim)
+        speed = (plan.q_target - plan.q_start) / (plan.path_duration_s * self.wall_per_sim)
+        return np.asarray(speed)
 
     def probe_level(self, cycle: int, level_at_start: bool) -> bool:
         """The probe input's level at `cycle`: edges along the path (a watched plan's
