@@ -35,7 +35,8 @@ JOINT_ACCELERATION = 1.4
 N_DIGITAL_IO = 16
 """Standard (0-7) and configurable (8-15) digital IO, bit i of the RTDE IO bit words."""
 STOP_DECELERATION = 10.0
-"""rad/s^2 of the stopJ after a probe edge (UR's hardest regular stop is ~40)."""
+"""rad/s^2 of the stopJ after a probe edge (ur_rtde's default is 2.0; a harder stop shortens
+the overtravel)."""
 POLL_INTERVAL_S = 0.0002
 """Pause between two reads of the RTDE sample by a guarded move (a 500 Hz stream: 2 ms)."""
 MAX_LATCH_RETRIES = 3
