@@ -23,8 +23,10 @@ Its main loop, which this class reproduces cycle by cycle (2 ms)::
         elif not executing: keep_running = process(cmd); executing = True
                             (process ends with signal_done unless cmd == 255)
 
-Emulated commands: movej (1, synchronous and async), movel_fk (4, executed as a joint move:
-same end pose, joint-space path), stopl / stopj (33, 34: end an async move), stop script
+Emulated commands: movej (1, synchronous and async; an async movej moves in real time
+with the probe input following the path, so a host can stop it on the input edge), movel_fk
+(4, executed as a joint move: same end pose, joint-space path), stopl / stopj (33, 34: end
+an async move at the controller cycle reached), stop script
 (255), protective stop (31), get step time (26), is steady (47), joints within safety
 limits (37), forward kinematics at the current pose (43), get TCP offset (40, zero), and as
 no-ops the settings that do not change the simulated robot (zero_ftsensor 8, set_payload 17,
@@ -205,25 +207,28 @@ class ControlScript:
         await self._stop_async_move()
         if not is_async:
             completed, reason = await self.robot.move_joints(q, velocity)
-            if not completed and reason != "aborted":
+            if not completed and reason != "stopped":
                 raise ScriptStopped(f"movej refused: {reason}")
             return
         self._write_async_progress(0)
         self._async_move = asyncio.create_task(self._run_async_move(q, velocity))
 
     async def _run_async_move(self, q: np.ndarray, velocity: float) -> None:
+        """An asynchronous movej: paced in real time with the probe input following the
+        path, until its end, a stopj / stopl, or the stop point past a probe contact."""
         try:
-            completed, reason = await self.robot.move_joints(q, velocity)
-            if not completed and reason != "aborted":
+            completed, reason = await self.robot.move_joints(q, velocity, watch_probe=True)
+            if not completed and reason not in ("stopped", "contact", "no_contact"):
                 self._async_fault = reason
         finally:
             self._write_async_progress(-1)
 
     async def _stop_async_move(self) -> None:
+        """stopj / stopl: the motion ends at the controller cycle it has reached."""
         task, self._async_move = self._async_move, None
         if task is not None and not task.done():
-            task.cancel()
+            self.robot.stop_motion()
             try:
-                await task
-            except asyncio.CancelledError:
+                await asyncio.wait_for(task, 1.0)
+            except (asyncio.CancelledError, TimeoutError):
                 pass

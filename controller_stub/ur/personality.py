@@ -13,14 +13,16 @@ personality can run per host. The personality runs in the stub's own process: ur
 constructors hold the Python GIL while they wait for the controller, so a stub in the same
 interpreter as ur_rtde deadlocks.
 
-State shown to RTDE clients (docs/robots.md has the table): `actual_q` / `target_q` are the
-simulation's reported angles (interpolated in wall time while a paced move runs),
-`actual_digital_input_bits` bit i = simulated digital input i (the probe line is input
-`probe.io_line`), `actual_digital_output_bits` bit i = output i, standard digital outputs
-0..7 write simulated outputs 0..7 and configurable outputs 0..7 write outputs 8..15 where
-they exist. Motions of the control script go through the zerocal server's motion pacing
-(`ControllerServer.begin_motion` / `run_motion`), so one motion at a time holds across both
-interfaces and the zerocal `abort` also stops a UR move.
+State shown to RTDE clients (docs/robots.md has the table), cycle by cycle like a real
+controller (`paced_motion.py`: a 2 ms cycle, one RTDE package carries the angles and inputs of
+one cycle): `actual_q` / `target_q` are the simulation's reported angles (along the path while
+a paced move runs), `actual_digital_input_bits` bit i = simulated digital input i (the probe
+line is input `probe.io_line`; it rises along an asynchronous movej when the stylus touches
+the sphere, after the probe's trigger latency), `actual_digital_output_bits` bit i = output
+i, standard digital outputs 0..7 write simulated outputs 0..7 and configurable outputs 0..7
+write outputs 8..15 where they exist. Motions run through the simulation's begin_move /
+finish_move, so a stopj ends one where it was (docs/ur-probe.md); one motion at a time holds
+across both interfaces (a zerocal move meanwhile is refused "busy").
 """
 
 from __future__ import annotations
@@ -30,9 +32,7 @@ import contextlib
 import logging
 import math
 import re
-import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -41,6 +41,7 @@ from controller_stub.robot_model import forward
 from controller_stub.simulation import SimulationRefused
 from controller_stub.ur.control_script import ControlScript
 from controller_stub.ur.dashboard import DashboardServer
+from controller_stub.ur.paced_motion import CYCLE_S, PacedMotion
 from controller_stub.ur.rtde_server import N_REGISTERS, RtdeServer, output_type, register_field
 from controller_stub.ur.script_server import ScriptServer
 
@@ -89,21 +90,6 @@ def _rotation_vector(R: np.ndarray) -> np.ndarray:
     return axis / (2.0 * math.sin(angle)) * angle
 
 
-@dataclass(frozen=True)
-class _Motion:
-    """A paced motion in progress: q (6,) from q_start to q_end over `wall_s` seconds."""
-
-    q_start: np.ndarray
-    q_end: np.ndarray
-    t_start: float
-    wall_s: float
-
-    def fraction(self, now: float) -> float:
-        if self.wall_s <= 0.0:
-            return 1.0
-        return min(1.0, max(0.0, (now - self.t_start) / self.wall_s))
-
-
 class UrPersonality:
     """Serve one `Simulation` as a Universal Robots controller (RTDE, dashboard, script).
 
@@ -119,7 +105,7 @@ class UrPersonality:
         *,
         controller_version: tuple[int, int, int, int] = CONTROLLER_VERSION,
         serial_number: str = SERIAL_NUMBER,
-        max_stream_hz: float = 125.0,
+        max_stream_hz: float = 500.0,
     ) -> None:
         if sim.n_joints != 6:
             raise ValueError(f"the UR personality needs a 6-joint robot, {sim.robot_name} has "
@@ -142,8 +128,12 @@ class UrPersonality:
         self._program_name = ""
         self._program: asyncio.Task[None] | None = None
         self._protective_stop = False
-        self._motion: _Motion | None = None
-        self._t0 = time.monotonic()
+        self._motion: PacedMotion | None = None
+        self._stop = asyncio.Event()
+        self.cycle = 0
+        """The controller cycle counter (`paced_motion.py`)."""
+        self._cycle_event = asyncio.Event()
+        self._clock: asyncio.Task[None] | None = None
         self._rtde = RtdeServer(self, max_stream_hz=max_stream_hz)
         self._dashboard = DashboardServer(self)
         self._script = ScriptServer(self)
@@ -159,6 +149,7 @@ class UrPersonality:
     ) -> dict[str, tuple[str, int]]:
         """Start the three servers; returns {"rtde"|"dashboard"|"script": (host, port)}."""
         bound: dict[str, tuple[str, int]] = {}
+        self._clock = asyncio.create_task(self._run_clock())
         try:
             bound["rtde"] = await self._rtde.start(host, rtde_port)
             bound["dashboard"] = await self._dashboard.start(host, dashboard_port)
@@ -173,6 +164,29 @@ class UrPersonality:
         await self._stop_program_task()
         for server in (self._script, self._dashboard, self._rtde):
             await server.close()
+        clock, self._clock = self._clock, None
+        if clock is not None:
+            clock.cancel()
+            with contextlib.suppress(BaseException):
+                await clock
+
+    async def _run_clock(self) -> None:
+        """Advance the controller cycle every CYCLE_S of wall time (never more than one
+        cycle per wake-up: a late event loop slows the controller instead of skipping)."""
+        loop = asyncio.get_running_loop()
+        next_at = loop.time()
+        while True:
+            next_at = max(next_at + CYCLE_S, loop.time())
+            await asyncio.sleep(next_at - loop.time())
+            self.cycle += 1
+            event, self._cycle_event = self._cycle_event, asyncio.Event()
+            event.set()
+
+    async def next_cycle(self, after: int) -> int:
+        """Wait until the controller cycle is past `after`; returns the cycle."""
+        while self.cycle <= after:
+            await self._cycle_event.wait()
+        return self.cycle
 
     # ------------------------------------------------------------------ state
 
@@ -202,19 +216,27 @@ class UrPersonality:
         self._protective_stop = True
 
     def displayed_q(self) -> np.ndarray:
-        """(6,) reported angles, interpolated while a paced motion runs."""
+        """(6,) reported angles of the current controller cycle (along a paced motion)."""
         motion = self._motion
         if motion is None:
             return np.asarray(self.sim.joint_positions(), float)
-        s = motion.fraction(time.monotonic())
-        return motion.q_start + s * (motion.q_end - motion.q_start)
+        return motion.q_at(self.cycle)
 
     def displayed_qd(self) -> np.ndarray:
         """(6,) joint speeds (rad/s) of the paced motion, zeros at rest."""
         motion = self._motion
-        if motion is None or motion.wall_s <= 0.0 or motion.fraction(time.monotonic()) >= 1.0:
+        if motion is None:
             return np.zeros(6)
-        return (motion.q_end - motion.q_start) / motion.wall_s
+        return motion.qd_at(self.cycle)
+
+    def displayed_inputs(self) -> list[bool]:
+        """Digital inputs of the current cycle: the probe line follows the paced motion."""
+        inputs = list(self.sim.digital_inputs())
+        motion = self._motion
+        if motion is not None and 0 <= motion.probe_line < len(inputs):
+            line = motion.probe_line
+            inputs[line] = motion.probe_level(self.cycle, inputs[line])
+        return inputs
 
     def tcp_pose(self, q: np.ndarray | None = None) -> list[float]:
         """UR pose [x, y, z, rx, ry, rz] of the flange (nominal model, reported angles)."""
@@ -226,7 +248,7 @@ class UrPersonality:
 
     def output_values(self, names: Sequence[str]) -> list[Any]:
         """Current values of the named RTDE outputs (see rtde_server.OUTPUT_TYPES)."""
-        q = self.displayed_q()
+        q = self.displayed_q()  # one controller cycle for the whole package
         return [self._output(name, q) for name in names]
 
     def _output(self, name: str, q: np.ndarray) -> Any:
@@ -235,9 +257,9 @@ class UrPersonality:
         if name in ("actual_qd", "target_qd"):
             return tuple(self.displayed_qd().tolist())
         if name == "timestamp":
-            return time.monotonic() - self._t0
+            return self.cycle * CYCLE_S
         if name == "actual_digital_input_bits":
-            return _mask(self.sim.digital_inputs())
+            return _mask(self.displayed_inputs())
         if name == "actual_digital_output_bits":
             return _mask(self.sim.digital_outputs()) | (self.tool_outputs & 0x3) << 16
         if name == "runtime_state":
@@ -387,13 +409,23 @@ class UrPersonality:
 
     # ------------------------------------------------------------------ motion
 
-    async def move_joints(self, q_target: np.ndarray, velocity: float) -> tuple[bool, str | None]:
-        """A movej to q_target (6,) reported rad at joint `velocity` (rad/s).
+    async def move_joints(
+        self, q_target: np.ndarray, velocity: float, *, watch_probe: bool = False
+    ) -> tuple[bool, str | None]:
+        """A movej to q_target (6,) reported rad at joint `velocity` (rad/s), paced cycle by
+        cycle (`PacedMotion`) until its end or `stop_motion`.
 
         The speed fraction handed to the simulation is velocity over the slowest joint's
-        maximum speed (clipped to (0, 1]). Returns (completed, reason): reason "busy" (a
-        zerocal motion runs), "aborted" (stopped early), or the simulation's refusal code
-        ("joint_limit", "estop", ...) which also raises a protective stop.
+        maximum speed (clipped to (0, 1]). watch_probe (an asynchronous movej, which a host
+        watches over RTDE to stop it on the probe input): planned as the simulation's guarded
+        move on the probe line (the probe's trigger latency and repeatability, the contact
+        and the stop point past it: a move nobody stops ends there, stylus overtravelled) and
+        paced in real time (one cycle per 2 ms, so a 500 Hz RTDE client sees every cycle);
+        otherwise paced by the scenario's time_scale. Returns (completed, reason): reason
+        "busy" (another motion runs), "stopped" (stop_motion, or the program ended),
+        "contact" (a watched move that reached its stop point past the contact), or the
+        simulation's refusal code ("joint_limit", "estop", ...) which also raises a
+        protective stop.
         """
         from controller_stub.server import RequestRefusedError
 
@@ -401,24 +433,45 @@ class UrPersonality:
         fraction = float(np.clip(velocity / max_speed, 1e-3, 1.0)) * max(self.speed_slider, 1e-3)
         if self._protective_stop or self.emergency_stopped():
             return False, "estop" if self.emergency_stopped() else "protective_stop"
+        probe_line = int(self.sim.scenario.probe.io_line)
         try:
             if self.server is not None:
                 self.server.begin_motion()
-            q_start = np.asarray(self.sim.joint_positions(), float)
-            result = self.sim.move_joints(np.asarray(q_target, float), min(fraction, 1.0))
+            plan = self.sim.begin_move(np.asarray(q_target, float), min(fraction, 1.0),
+                                       probe_line if watch_probe else None)
         except RequestRefusedError:
             return False, "busy"
         except SimulationRefused as exc:
+            if exc.code == "busy":
+                return False, "busy"
             self.protective_stop(f"movej refused: {exc}")
             return False, exc.code
-        wall = float(result.duration_s) * float(self.sim.time_scale)
-        self._motion = _Motion(q_start, np.asarray(result.q, float), time.monotonic(), wall)
+        pace = max(1.0, float(self.sim.time_scale)) if watch_probe else float(self.sim.time_scale)
+        motion = PacedMotion(plan, self.cycle, pace, probe_line)
+        self._motion = motion
+        self._stop = asyncio.Event()
         try:
-            if self.server is not None:
-                finished = await self.server.run_motion(result.duration_s)
-            else:
-                await asyncio.sleep(wall)
-                finished = True
+            while not motion.finished(self.cycle) and not self._stop.is_set():
+                await self.next_cycle(self.cycle)
         finally:
+            # at its end, stopped, or cancelled (program ended): it ends at the cycle reached
+            fraction_done = motion.fraction_at(self.cycle)
             self._motion = None
-        return (True, None) if finished else (False, "aborted")
+            result = self.sim.finish_move(plan, fraction_done)
+        if plan.contact is not None:
+            logger.info("probe contact: latched q %s, edge time %.6f s, stopped %.1f ms later",
+                        np.round(plan.contact.q_latched, 9).tolist(), plan.contact.time_latch,
+                        1e3 * (fraction_done * plan.s_end - plan.contact.s_latch)
+                        * plan.path_duration_s)
+        if fraction_done < 1.0:
+            return False, "stopped"
+        if plan.contact is not None:
+            return False, "contact" if getattr(result, "contact", False) else "no_contact"
+        return True, None
+
+    def stop_motion(self) -> bool:
+        """stopj / stopl: end the paced motion at the cycle it has reached; True if one ran."""
+        if self._motion is None:
+            return False
+        self._stop.set()
+        return True

@@ -27,8 +27,10 @@ VECTOR3D, `joint_mode` VECTOR6INT32).
 Input recipe fields are owned by the connection that set them up while it lives; another
 connection asking for the same field gets `IN_USE` (as on a real controller). Only protocol
 version 2 is accepted (ur_rtde always asks for 2). Data packages are streamed at the
-requested frequency but at most `max_stream_hz` (default 125 Hz); a client that does not read
-gets packages dropped, never an unbounded buffer.
+requested frequency but at most `max_stream_hz` (default 125 Hz), on the source's controller
+cycles (500 Hz: every cycle, 125 Hz: every 4th), so every package carries one whole cycle and
+none is skipped when the host is slow; a client that does not read gets packages dropped,
+never an unbounded buffer.
 
 The server knows nothing of robots: a `RtdeDataSource` (the UR personality) supplies output
 values by name and receives input values.
@@ -270,6 +272,15 @@ class RtdeDataSource(Protocol):
         """Values written by a client's data package (one recipe, name -> value)."""
         ...
 
+    async def next_cycle(self, after: int) -> int:
+        """Wait for the controller cycle after cycle `after`; returns its number (a source
+        without a cycle clock sleeps one 2 ms period and returns after + 1)."""
+        ...
+
+
+CONTROLLER_HZ = 500.0
+"""The controller cycle rate the stream is divided from."""
+
 
 @dataclass
 class _Recipe:
@@ -429,15 +440,15 @@ class RtdeServer(TcpService):
     async def _stream(self, session: _Session, writer: asyncio.StreamWriter) -> None:
         recipe = session.output
         assert recipe is not None
-        period = 1.0 / min(session.frequency, self.max_stream_hz)
-        loop = asyncio.get_running_loop()
-        next_at = loop.time()
+        # one package every `every` controller cycles: each package is one cycle's state
+        rate = min(session.frequency, self.max_stream_hz)
+        every = max(1, round(CONTROLLER_HZ / rate))
+        cycle = await self.source.next_cycle(-1)
         while not writer.is_closing():
-            if writer.transport.get_write_buffer_size() < MAX_WRITE_BUFFER:
+            if cycle % every == 0 and writer.transport.get_write_buffer_size() < MAX_WRITE_BUFFER:
                 values = self.source.output_values(recipe.names)
                 writer.write(pack(DATA_PACKAGE, b"\x01" + pack_values(recipe.types, values)))
-            next_at = max(next_at + period, loop.time())
-            await asyncio.sleep(next_at - loop.time())
+            cycle = await self.source.next_cycle(cycle)
 
     async def _stop_stream(self, session: _Session) -> None:
         task, session.streaming = session.streaming, None

@@ -37,6 +37,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from hostpc.cli.archive_options import add_archive_options, archive_run
 from hostpc.cli.fit import add_model_options
 from hostpc.cli.progress import StderrProgress
 from hostpc.errors import InputError
@@ -184,6 +185,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--time-scale", type=float, default=0.0,
                         help="with --robot sim: wall seconds per simulated second (default 0)")
     parser.add_argument("--out", metavar="DIR", help="run folder (default ./zerocal-runs/...)")
+    add_archive_options(parser, read=False)
     parser.add_argument("--resume", metavar="DIR", help="continue the run in DIR")
     parser.add_argument("--no-report", action="store_true", help="skip report.html")
     parser.add_argument("--json", action="store_true", help="print the result document")
@@ -303,6 +305,7 @@ def run(args: argparse.Namespace) -> int:
         sys.stdout.write("\n")
     else:
         print(outcome.summary)
+    archive_run(args, run_dir, outcome.exit_code)
     return outcome.exit_code
 
 

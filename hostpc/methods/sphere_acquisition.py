@@ -81,6 +81,16 @@ def nominal_tip_speed(chain: Chain, contact: PlannedContact, tip: np.ndarray,
     return float(np.linalg.norm(J @ joint_speed))
 
 
+def tip_speed_at(chain: Chain, q: np.ndarray, tip: np.ndarray, qd: np.ndarray) -> float:
+    """Tip speed (m/s) on the nominal model at joint angles q (n,) rad moving at joint
+    velocities qd (n,) rad/s (a controller that measures qd but does not know the tip)."""
+    poses = forward(chain, np.asarray(q, float)[None, :])
+    T = poses.T_base_flange[0]
+    x = (T[:3, :3] @ tip + T[:3, 3])[None, :]
+    J = point_jacobian(screws(chain, poses), x)[0, :, : chain.n]
+    return float(np.linalg.norm(J @ np.asarray(qd, float)))
+
+
 ContactCallback = Callable[[ContactRecord], Awaitable[None] | None]
 GuardedMove = Callable[[np.ndarray, float], Awaitable[Any]]
 
@@ -126,8 +136,12 @@ async def _move(robot: RobotAdapter, q: np.ndarray, speed: float) -> None:
 
 async def probe_contact(robot: RobotAdapter, orientation: PlannedOrientation,
                         contact: PlannedContact, setup: ProbeSetup, config: PlanConfig,
-                        t: float, guarded: GuardedMove | None = None) -> ContactRecord:
-    """One contact: hover -> start -> guarded move -> start -> hover (see ``acquire``)."""
+                        t: float, guarded: GuardedMove | None = None,
+                        chain: Chain | None = None) -> ContactRecord:
+    """One contact: hover -> start -> guarded move -> start -> hover (see ``acquire``).
+
+    chain: the nominal model, to turn the joint velocities a controller measured at the
+    edge (``ContactOutcome.qd``) into the tip speed when it does not report that itself."""
     await _move(robot, orientation.q_hover, config.move_speed)
     await _move(robot, contact.q_start, config.move_speed)
     if guarded is None:
@@ -138,14 +152,17 @@ async def probe_contact(robot: RobotAdapter, orientation: PlannedOrientation,
     approach = np.sign(travel)
     approach[approach == 0] = 1.0
     latched = outcome.q_latched if outcome.contact else None
+    speed = None if outcome.speed is None else float(outcome.speed)
+    qd = getattr(outcome, "qd", None)
+    if speed is None and latched is not None and qd is not None and chain is not None:
+        speed = tip_speed_at(chain, np.asarray(latched, float), setup.tip, qd)
     await _move(robot, contact.q_start, config.move_speed)
     await _move(robot, orientation.q_hover, config.move_speed)
     return ContactRecord(
         group=contact.group, index=contact.index,
         contact=bool(outcome.contact and latched is not None),
         q_latched=None if latched is None else np.asarray(latched, float),
-        speed=None if outcome.speed is None else float(outcome.speed),
-        approach=approach, t=t,
+        speed=speed, approach=approach, t=t,
         reason=None if outcome.contact else (outcome.reason or "no_contact"),
         direction=travel / max(float(np.linalg.norm(travel)), 1e-300),
         q_end=np.asarray(outcome.q, float))

@@ -305,7 +305,7 @@ class SphereProbeMethod(Method):
         t = time.monotonic() - self._t0
         if self.modbus is None:
             record = await probe_contact(robot, orientation, contact, self.setup,
-                                         self.config, t)
+                                         self.config, t, chain=self.chain)
         else:
             from hostpc.methods.probe_modbus import ModbusProbe, SteppedGuardedMove
 

@@ -48,13 +48,16 @@ class MoveOutcome:
 class ContactOutcome:
     """A guarded move: contact (IO edge before the end of travel), q_latched: (n,) angles
     latched at the edge or None, q: (n,) where it stopped, speed: approach speed at the
-    contact (m/s) if the controller reports it."""
+    contact (m/s) if the controller reports it; qd: (n,) joint velocities at the edge (rad/s)
+    if measured (a controller that does not know the probe tip: the method computes the
+    tip speed from them)."""
 
     contact: bool
     q_latched: np.ndarray | None
     q: np.ndarray
     speed: float | None = None
     reason: str | None = None
+    qd: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,11 @@
 """RobotAdapter for Universal Robots through the ur_rtde library (`--driver ur`).
 
-    RTDEReceiveInterface   joint angles (getActualQ), digital IO bits, timestamps
-    RTDEControlInterface   moveJ / stopJ (ur_rtde uploads its control script to 30003)
+    RTDEReceiveInterface   joint angles (getActualQ), digital IO bits, timestamps (500 Hz
+                           on e-Series, 125 Hz on CB3)
+    RTDEControlInterface   moveJ / stopJ (ur_rtde uploads its control script to 30003);
+                           guarded moves for the touch probe are an asynchronous moveJ
+                           watched sample by sample and stopped on the input edge
+                           (`guarded_move`, docs/ur-probe.md)
     RTDEIOInterface        standard digital outputs
     ControllerClient       stereo captures from the camera service (zerocal protocol,
                            `--camera HOST:PORT`, default the robot's host, port 47800)
@@ -48,7 +52,15 @@ from typing import Any, TypeVar
 import numpy as np
 
 from hostpc.errors import ConnectionFailed, ControllerError, InputError, RequestTimeout
-from hostpc.robots.base import ContactOutcome, MoveOutcome, RobotState, StereoCapture
+from hostpc.robots.base import MoveOutcome, RobotState, StereoCapture
+from hostpc.robots.ur_guarded import (  # noqa: F401 (constants re-exported)
+    JOINT_ACCELERATION,
+    MAX_JOINT_SPEED,
+    N_DIGITAL_IO,
+    LatchTiming,
+    UrGuardedMoveMixin,
+    rtde_frequency,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -57,17 +69,10 @@ DASHBOARD_PORT = 29999
 SCRIPT_PORT = 30003
 CAMERA_PORT = 47800
 RTDE_PROTOCOL_VERSION = 2
-MAX_JOINT_SPEED = 3.14
-"""rad/s; ur_rtde's UR_JOINT_VELOCITY_MAX, `speed` 1.0 maps to it."""
-JOINT_ACCELERATION = 1.4
-"""rad/s^2, UR's default movej acceleration."""
 SETTLE_TOLERANCE_RAD = 1e-3
 SETTLE_TIMEOUT_S = 2.0
 MAX_OFFSET_RAD = math.radians(5.0)
 """Largest host zero offset accepted by set_offsets (a bigger one is a fitting error)."""
-N_DIGITAL_IO = 16
-"""Standard (0-7) and configurable (8-15) digital IO, bit i of the RTDE IO bit words."""
-
 T = TypeVar("T")
 
 
@@ -244,7 +249,7 @@ def _bits(word: int, n: int) -> tuple[bool, ...]:
     return tuple(bool(int(word) >> i & 1) for i in range(n))
 
 
-class UrAdapter:
+class UrAdapter(UrGuardedMoveMixin):
     """A `RobotAdapter` over ur_rtde's three interfaces (+ a camera client).
 
     The ur_rtde objects are created by `connect_ur`; tests may pass fakes. offsets: the
@@ -282,6 +287,9 @@ class UrAdapter:
         self._rollback_counter = 0
         self._motion_lock = asyncio.Lock()
         self.q_min, self.q_max = _limits(info.robot_name)
+        self.rtde_frequency = rtde_frequency(info.controller_version)
+        self.latches: list[LatchTiming] = []
+        """Timing of every probe contact of this session (guarded_move)."""
 
     @property
     def address(self) -> str:
@@ -299,13 +307,19 @@ class UrAdapter:
             raise ControllerError(f"UR {self.host}: {name} failed: {exc}") from exc
 
     def _sample(self) -> tuple[float, np.ndarray, int, int]:
-        """(timestamp, actual q (6,), input bits, output bits) from the receive interface."""
-        return (
-            float(self.receive.getTimestamp()),
-            np.asarray(self.receive.getActualQ(), float),
-            int(self.receive.getActualDigitalInputBits()),
-            int(self.receive.getActualDigitalOutputBits()),
-        )
+        """(timestamp, actual q (6,), input bits, output bits) of ONE RTDE package: read
+        again if the receive thread stored a newer package between the getters."""
+        for _ in range(10):
+            stamp = float(self.receive.getTimestamp())
+            sample = (
+                stamp,
+                np.asarray(self.receive.getActualQ(), float),
+                int(self.receive.getActualDigitalInputBits()),
+                int(self.receive.getActualDigitalOutputBits()),
+            )
+            if float(self.receive.getTimestamp()) == stamp:
+                return sample
+        return sample
 
     async def _fresh_q(self, after: float, target: np.ndarray | None) -> np.ndarray:
         """Measured q (6,) from a sample newer than timestamp `after` (and at `target` within
@@ -368,6 +382,12 @@ class UrAdapter:
         if self.camera is not None:
             camera_state = await self.camera.state()
             camera = dict(camera_state.camera)
+            if isinstance(camera.get("probe"), dict):
+                # this driver latches the probe from RTDE samples: at least their spread
+                probe = dict(camera["probe"])
+                probe["latency_jitter"] = max(float(probe.get("latency_jitter") or 0.0),
+                                              self.latch_jitter_s)
+                camera["probe"] = probe
         return RobotState(
             q=q + self._offsets,
             zero_offsets=self._offsets.copy(),
@@ -392,64 +412,20 @@ class UrAdapter:
         target = self._check_q(q) - self._offsets
         velocity = self._speed(speed)
         async with self._motion_lock:
-            ok = await self._call(
-                self.control.moveJ, target.tolist(), velocity, JOINT_ACCELERATION, False
-            )
-            after = float(await self._call(self.receive.getTimestamp))
-            if not ok:
-                reason = await self._failure_reason()
-                measured = await self._fresh_q(after, None)
-                return MoveOutcome(completed=False, q=measured + self._offsets, reason=reason)
-            measured = await self._fresh_q(after, target)
+            return await self._move_locked(target, velocity)
+
+    async def _move_locked(self, target: np.ndarray, velocity: float) -> MoveOutcome:
+        """moveJ to the UR angles target (6,) at velocity rad/s (motion lock held)."""
+        ok = await self._call(
+            self.control.moveJ, target.tolist(), velocity, JOINT_ACCELERATION, False
+        )
+        after = float(await self._call(self.receive.getTimestamp))
+        if not ok:
+            reason = await self._failure_reason()
+            measured = await self._fresh_q(after, None)
+            return MoveOutcome(completed=False, q=measured + self._offsets, reason=reason)
+        measured = await self._fresh_q(after, target)
         return MoveOutcome(completed=True, q=measured + self._offsets)
-
-    async def guarded_move(self, q: np.ndarray, speed: float, io_line: int) -> ContactOutcome:
-        """Asynchronous moveJ toward q (6,) polling digital input `io_line` over RTDE; on a
-        rising edge the angles of that sample are latched and the robot stopped (stopJ).
-
-        The latch is only as good as the RTDE sample period (2 ms at 500 Hz) plus the
-        detection delay; prefer a controller-side latch where precision matters.
-        """
-        if not 0 <= int(io_line) < N_DIGITAL_IO:
-            raise InputError(f"io_line {io_line}: expected 0..{N_DIGITAL_IO - 1}")
-        target = self._check_q(q) - self._offsets
-        velocity = self._speed(speed)
-        async with self._motion_lock:
-            _, _, inputs, _ = await self._call(self._sample)
-            previous = bool(inputs >> io_line & 1)
-            status0 = await self._call(self.control.getAsyncOperationProgressEx)
-            ok = await self._call(
-                self.control.moveJ, target.tolist(), velocity, JOINT_ACCELERATION, True
-            )
-            if not ok:
-                reason = await self._failure_reason()
-                _, q_now, _, _ = await self._call(self._sample)
-                return ContactOutcome(False, None, q_now + self._offsets, reason=reason)
-            op_id = None
-            loop = asyncio.get_running_loop()
-            deadline = loop.time() + max(self.timeout, 60.0)
-            while True:
-                stamp, q_now, inputs, _ = await self._call(self._sample)
-                level = bool(inputs >> io_line & 1)
-                if level and not previous:
-                    await self._call(self.control.stopJ, 2.0, False)
-                    measured = await self._fresh_q(stamp, None)
-                    return ContactOutcome(
-                        True, q_now + self._offsets, measured + self._offsets
-                    )
-                previous = level
-                status = await self._call(self.control.getAsyncOperationProgressEx)
-                if op_id is None and status.operationId() != status0.operationId():
-                    op_id = status.operationId()
-                if op_id is not None and not status.isAsyncOperationRunning():
-                    measured = await self._fresh_q(stamp, target)
-                    return ContactOutcome(
-                        False, None, measured + self._offsets, reason="no_contact"
-                    )
-                if loop.time() > deadline:
-                    await self._call(self.control.stopJ, 2.0, False)
-                    raise RequestTimeout(f"UR {self.host}: guarded move did not end")
-                await asyncio.sleep(0.001)
 
     async def capture(self, pattern: str = "target", view: int = 0) -> StereoCapture:
         """Stereo pair from the camera service; q at exposure reported (+ host offsets)."""
@@ -498,7 +474,11 @@ class UrAdapter:
         return replaced
 
     async def close(self) -> None:
-        """Stop the control script and disconnect every interface."""
+        """Report the probe latch timing (a warning-level line, so it is always shown),
+        stop the control script and disconnect every interface."""
+        summary = self.latch_summary()
+        if summary is not None:
+            logger.warning("%s", summary)
         for name, call in (
             ("stopScript", getattr(self.control, "stopScript", None)),
             ("control.disconnect", getattr(self.control, "disconnect", None)),
@@ -566,7 +546,8 @@ async def connect_ur(
                                                 timeout=timeout)
     receive = control = io = None
     try:
-        receive = await asyncio.to_thread(rtde_receive.RTDEReceiveInterface, host)
+        receive = await asyncio.to_thread(rtde_receive.RTDEReceiveInterface, host,
+                                          rtde_frequency(info.controller_version))
         control = await asyncio.to_thread(rtde_control.RTDEControlInterface, host)
         io = await asyncio.to_thread(rtde_io.RTDEIOInterface, host)
     except RuntimeError as exc:

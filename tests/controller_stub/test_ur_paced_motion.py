@@ -1,0 +1,50 @@
+"""The UR personality's cycle-by-cycle view of a motion plan (controller_stub/ur/paced_motion)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from controller_stub.motion import GuardedContact, MotionPlan, PathEdge
+from controller_stub.ur.paced_motion import CYCLE_S, PacedMotion
+
+Q0 = np.zeros(6)
+Q1 = np.array([0.2, -0.1, 0.0, 0.05, 0.0, 0.0])
+
+
+def _plan(duration: float = 0.1, contact: GuardedContact | None = None,
+          edges: tuple[PathEdge, ...] = (), s_end: float = 1.0) -> MotionPlan:
+    return MotionPlan(Q0, Q1, 0.0, duration, s_end, 0 if contact else None, edges, contact)
+
+
+def test_the_path_advances_one_cycle_at_a_time_in_controller_time() -> None:
+    motion = PacedMotion(_plan(0.1), start_cycle=100, wall_per_sim=1.0, probe_line=0)
+    assert motion.s_at(100) == 0.0 and motion.s_at(90) == 0.0
+    assert motion.s_at(105) == pytest.approx(5 * CYCLE_S / 0.1)
+    np.testing.assert_allclose(motion.q_at(110), 0.2 * Q1)
+    np.testing.assert_allclose(motion.qd_at(110), Q1 / 0.1)
+    assert not motion.finished(149) and motion.finished(150)
+    np.testing.assert_allclose(motion.q_at(500), Q1)
+    np.testing.assert_allclose(motion.qd_at(500), 0.0)
+    # a slower clock (time_scale 2): half the path per cycle
+    slow = PacedMotion(_plan(0.1), start_cycle=0, wall_per_sim=2.0, probe_line=0)
+    assert slow.s_at(10) == pytest.approx(0.5 * motion.s_at(110))
+    # time_scale 0: at the end at once
+    instant = PacedMotion(_plan(0.1), start_cycle=0, wall_per_sim=0.0, probe_line=0)
+    assert instant.finished(0) and instant.fraction_at(0) == 1.0
+
+
+def test_the_probe_input_rises_at_the_latch_point_and_follows_path_edges() -> None:
+    contact = GuardedContact(s_contact=0.30, s_latch=0.35, s_stop=0.45,
+                             q_latched=0.35 * Q1, time_latch=0.035, speed_mps=0.01)
+    motion = PacedMotion(_plan(0.1, contact, s_end=0.45), start_cycle=0, wall_per_sim=1.0,
+                         probe_line=0)
+    # cycle k shows s = 0.02 k: low through 0.34 (touching, not yet latched), high from 0.36
+    assert not motion.probe_level(17, False)
+    assert motion.probe_level(18, False)
+    assert motion.fraction_at(18) == pytest.approx(0.36 / 0.45)
+    assert not motion.finished(22) and motion.finished(23)  # s_end 0.45 = 22.5 cycles
+    falling = PathEdge(0.09, False, 0.009, 0.09 * Q1)
+    leaving = PacedMotion(_plan(0.1, edges=(falling,)), start_cycle=0, wall_per_sim=1.0,
+                          probe_line=0)
+    assert leaving.probe_level(4, True) and not leaving.probe_level(5, True)

@@ -1,0 +1,139 @@
+"""The UR guarded move's latch (hostpc/robots/ur_guarded.py) against a scripted stand-in for
+ur_rtde's receive / control interfaces (no sockets): a controller that advances one cycle
+every PERIOD_S of wall time, moves at constant joint speed and raises the probe input at a
+known cycle. The real library against the stub is tested in
+tests/integration/test_ur_probe.py."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from hostpc.robots.ur import UrAdapter, UrControllerInfo
+
+PERIOD_S = 0.02
+"""A slow controller cycle, so the watcher thread reads every sample even on a busy host."""
+SPEED = np.array([0.1, -0.05, 0.0, 0.02, 0.0, 0.0])
+"""rad per controller second."""
+
+
+@dataclass
+class _Status:
+    op: int
+    running: bool
+
+    def operationId(self) -> int:  # noqa: N802 (ur_rtde's name)
+        return self.op
+
+    def isAsyncOperationRunning(self) -> bool:  # noqa: N802
+        return self.running
+
+
+class ScriptedUr:
+    """receive + control of a controller whose input rises `edge_after` cycles into a move;
+    hide_cycle_before_edge: the sample of the cycle before the edge is never shown."""
+
+    def __init__(self, edge_after: int = 7, hide_cycle_before_edge: bool = False) -> None:
+        self.t0 = time.monotonic()
+        self.edge_after = edge_after
+        self.hide = hide_cycle_before_edge
+        self.lock = threading.Lock()
+        self.start: int | None = None
+        self.stop: int | None = None
+        self.base = np.zeros(6)
+        self.op = 0
+        self.moves = 0
+
+    def _cycle(self) -> int:
+        cycle = int((time.monotonic() - self.t0) / PERIOD_S)
+        if self.hide and self.start is not None and cycle == self.start + self.edge_after - 1:
+            cycle -= 1
+        return cycle
+
+    def _state(self, cycle: int) -> tuple[np.ndarray, int]:
+        with self.lock:
+            if self.start is None:
+                return self.base.copy(), 0
+            end = cycle if self.stop is None else min(cycle, self.stop)
+            moved = max(0, end - self.start)
+            return self.base + SPEED * moved * PERIOD_S, int(moved >= self.edge_after)
+
+    # receive
+    def getTimestamp(self) -> float:  # noqa: N802
+        return self._cycle() * PERIOD_S
+
+    def getActualQ(self) -> list[float]:  # noqa: N802
+        return self._state(self._cycle())[0].tolist()
+
+    def getActualDigitalInputBits(self) -> int:  # noqa: N802
+        return self._state(self._cycle())[1]
+
+    def getActualDigitalOutputBits(self) -> int:  # noqa: N802
+        return 0
+
+    # control
+    def moveJ(self, q: list[float], speed: float, acceleration: float,  # noqa: N802
+              asynchronous: bool = False) -> bool:
+        with self.lock:
+            if self.start is not None:  # a new move starts where the last one stopped
+                end = self._cycle() if self.stop is None else self.stop
+                self.base = self.base + SPEED * max(0, end - self.start) * PERIOD_S
+            if not asynchronous:  # a move back: instantly at the target
+                self.base, self.start, self.stop = np.asarray(q, float), None, None
+                return True
+            self.start, self.stop = self._cycle(), None
+            self.op += 1
+            self.moves += 1
+        return True
+
+    def stopJ(self, deceleration: float, asynchronous: bool = False) -> None:  # noqa: N802
+        with self.lock:
+            self.stop = self._cycle() + 1
+
+    def getAsyncOperationProgressEx(self) -> _Status:  # noqa: N802
+        return _Status(self.op, self.start is not None and self.stop is None)
+
+
+def _adapter(ur: ScriptedUr) -> UrAdapter:
+    info = UrControllerInfo((5, 11, 1, 0), "URSoftware 5.11", "UR5", "", True)
+    return UrAdapter("127.0.0.1", info, ur, ur, io=None, timeout=5.0)
+
+
+def test_the_latch_is_the_midpoint_of_the_edge_window_and_the_robot_stops() -> None:
+    ur = ScriptedUr(edge_after=7)
+    adapter = _adapter(ur)
+    outcome = asyncio.run(adapter.guarded_move(np.full(6, 0.5), 0.05, 0))
+    assert outcome.contact and outcome.q_latched is not None and outcome.qd is not None
+    # the input rose between cycles 6 and 7 of the move: the latch is at 6.5 cycles
+    np.testing.assert_allclose(outcome.q_latched, SPEED * 6.5 * PERIOD_S, atol=1e-12)
+    np.testing.assert_allclose(outcome.qd, SPEED, rtol=1e-9)
+    latch = adapter.latches[-1]
+    assert latch.edge_window_s == pytest.approx(PERIOD_S)
+    assert latch.missed_samples == 0 and latch.attempt == 0
+    assert np.max(np.abs(outcome.q - outcome.q_latched)) < 0.05  # stopped soon after
+    assert adapter.latch_jitter_s == pytest.approx(1 / (500 * np.sqrt(12)))
+    assert "1 edges" in (adapter.latch_summary() or "")
+
+
+def test_a_window_that_missed_samples_is_measured_again_then_reported_missed() -> None:
+    ur = ScriptedUr(edge_after=7, hide_cycle_before_edge=True)
+    adapter = _adapter(ur)
+    outcome = asyncio.run(adapter.guarded_move(np.full(6, 0.5), 0.05, 0))
+    assert not outcome.contact and outcome.q_latched is None
+    assert outcome.reason == "edge_window_missed_samples"
+    assert ur.moves == 4  # MAX_LATCH_RETRIES + 1 attempts
+    assert [latch.missed_samples for latch in adapter.latches] == [1, 1, 1, 1]
+
+
+def test_an_input_already_high_refuses_to_move() -> None:
+    ur = ScriptedUr(edge_after=0)
+    ur.start = ur._cycle()  # a move long ago left the probe pressed
+    ur.stop = ur.start
+    adapter = _adapter(ur)
+    outcome = asyncio.run(adapter.guarded_move(np.full(6, 0.5), 0.05, 0))
+    assert not outcome.contact and outcome.reason == "probe_already_triggered"
