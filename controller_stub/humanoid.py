@@ -360,9 +360,11 @@ class HumanoidSimulation:
                                     "outside its limits")
         duration = float(np.max(np.abs(target - self._q) / (speed * self._max_speed)))
         self._q = target.copy()
-        self._time += duration
+        settle = float(self.scenario.motion.settle_s) if duration > 0.0 else 0.0
+        self._time += duration + settle  # robot time: the motion, then the settling
         self._moves += 1
-        return MoveResult(completed=True, q=target.copy(), duration_s=duration)
+        return MoveResult(completed=True, q=target.copy(), duration_s=duration,
+                          settle_s=settle)
 
     def guarded_move(self, q_target: Any, speed: float, io_line: int) -> Any:
         from controller_stub.simulation import SimulationRefused
@@ -414,7 +416,9 @@ class HumanoidSimulation:
                 continue
             p, cov = self.stereo.measure(p_true, self._rng_noise)
             targets[side] = {"p": p, "cov": cov}
-        return {"q": self._q.copy(), "time": self._time, "targets": targets}
+        measured = {"q": self._q.copy(), "time": self._time, "targets": targets}
+        self._time += float(self.scenario.motion.capture_s)  # one stereo capture
+        return measured
 
     def capture_stereo(self, pattern: str = "target", view: int = 0) -> Any:
         from controller_stub.simulation import SimulationRefused
