@@ -8,10 +8,10 @@ and the captures, for the phases that use the robot:
 - `measure`: the fit poses;
 - `verify`: the fresh verification poses.
 
-Each phase is timed by the controller's own clock when it reports one (`RobotState.extra
-["time"]`: the simulator's clock, which charges motion, settle and capture time, see
-docs/simulator.md), else by the host's monotonic clock (a real robot is busy for the wall
-time of the phase). Each timed phase is journaled (`{"event": "robot_time", "phase": ...,
+Each phase is timed (one clock reading at its end) by the controller's own clock when it
+reports one (`RobotState.extra["time"]`: the simulator's clock, which charges motion,
+settle and capture time, see docs/simulator.md), else by the host's monotonic clock (a
+real robot is busy for the wall time of the phase). Each timed phase is journaled (`{"event": "robot_time", "phase": ...,
 "seconds": ..., "clock": "controller"|"host"}`), so a resumed run adds the time of every
 session; a phase cut short by an interruption loses that session's part of it.
 
@@ -27,7 +27,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from hostpc.methods.journal import Journal
-from hostpc.robots.base import RobotAdapter
+from hostpc.robots.base import RobotAdapter, RobotState
 
 PHASES = ("rig", "measure", "verify")
 
@@ -42,24 +42,36 @@ async def robot_clock(robot: RobotAdapter) -> tuple[float, str]:
 
 
 class RobotTimer:
-    """Times the phases of one session of a run and journals them (module docstring)."""
+    """Times the phases of one session of a run and journals them (module docstring).
 
-    def __init__(self, robot: RobotAdapter, journal: Journal) -> None:
+    The controller's clock is read once per phase end (one `state` request each): a phase
+    runs from the previous reading (the run's first `state`, then the last phase end), so
+    nothing happens to the controller's clock between phases but the fit and the push,
+    which do not advance a simulated clock. With the host's clock (free to read) `begin`
+    restarts the count, so the fit's time is not the robot's."""
+
+    def __init__(self, robot: RobotAdapter, journal: Journal, state: RobotState) -> None:
         self.robot = robot
         self.journal = journal
-        self._started: dict[str, tuple[float, str]] = {}
+        now = state.extra.get("time") if isinstance(state.extra, Mapping) else None
+        if isinstance(now, int | float) and math.isfinite(now):
+            self._last, self._clock = float(now), "controller"
+        else:
+            self._last, self._clock = time.monotonic(), "host"
 
-    async def start(self, phase: str) -> None:
-        """Read the clock at the start of `phase`."""
-        self._started[phase] = await robot_clock(self.robot)
+    def begin(self) -> None:
+        """A phase starts now (the host's clock only; the controller's is not read)."""
+        if self._clock == "host":
+            self._last = time.monotonic()
 
-    async def stop(self, phase: str) -> float:
-        """Read the clock at the end of `phase` and journal its robot time (s)."""
-        t0, clock = self._started.pop(phase)
-        t1, clock_now = await robot_clock(self.robot)
-        if clock_now != clock:  # the controller's clock vanished mid-phase: nothing sure
+    async def end(self, phase: str) -> float:
+        """A phase ends: read the clock, journal the phase's robot time (s)."""
+        now, clock = await robot_clock(self.robot)
+        last, self._last = self._last, now
+        if clock != self._clock:  # the controller's clock vanished: nothing sure
+            self._clock = clock
             return 0.0
-        seconds = max(0.0, t1 - t0)
+        seconds = max(0.0, now - last)
         if seconds > 0.0:
             self.journal.event("robot_time", phase=phase, seconds=seconds, clock=clock)
         return seconds

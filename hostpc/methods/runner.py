@@ -219,10 +219,9 @@ class Runner:
             # the method's own default model (sphere_probe: + trigger_latency)
             settings = dataclasses.replace(settings, effects=method.default_effects())
         method.check_inputs()
-        timer = RobotTimer(self.robot, self.journal)  # robot time per phase (robot_time.py)
-        await timer.start("rig")
+        timer = RobotTimer(self.robot, self.journal, state)  # robot time (robot_time.py)
         await method.prepare(self.robot, progress)
-        await timer.stop("rig")
+        await timer.end("rig")
 
         if "plan" in self.header:
             plan = Plan.from_dict(self.header["plan"])
@@ -235,9 +234,9 @@ class Runner:
 
         q_from = self.journal.last_q()
         q_now = np.asarray(q_from, float) if q_from is not None else state.q
-        await timer.start("measure")
+        timer.begin()
         q_now = await self._acquire(method, "fit", plan.q, q_now)
-        await timer.stop("measure")
+        await timer.end("measure")
 
         dataset = self._dataset(method, "fit")
         if dataset.n_samples < 3:
@@ -261,9 +260,9 @@ class Runner:
 
         verify_result: VerifyResult | None = None
         if settings.n_verify > 0 and plan.q_verify.shape[0] > 0:
-            await timer.start("verify")
+            timer.begin()
             await self._acquire(method, "verify", plan.q_verify, q_now)
-            await timer.stop("verify")
+            await timer.end("verify")
             verify_dataset = self._dataset(method, "verify")
             if verify_dataset.n_samples > 0:
                 save_dataset(verify_dataset, self.run_dir / "verify_dataset.json")
