@@ -11,9 +11,10 @@ and the captures, for the phases that use the robot:
 Each phase is timed (one clock reading at its end) by the controller's own clock when it
 reports one (`RobotState.extra["time"]`: the simulator's clock, which charges motion,
 settle and capture time, see docs/simulator.md), else by the host's monotonic clock (a
-real robot is busy for the wall time of the phase). Each timed phase is journaled (`{"event": "robot_time", "phase": ...,
-"seconds": ..., "clock": "controller"|"host"}`), so a resumed run adds the time of every
-session; a phase cut short by an interruption loses that session's part of it.
+real robot is busy for the wall time of the phase). Each timed phase is journaled
+(`{"event": "robot_time", "phase": ..., "seconds": ..., "clock": "controller"|"host"}`),
+so a resumed run adds the time of every session; a phase cut short by an interruption
+loses that session's part of it.
 
 `robot_time_document(journal)` is result.json's `robot_time_s`: seconds per phase and
 `total` (their sum), with the clock used.
