@@ -171,8 +171,12 @@ class ProbeSchema(_Strict):
     stylus_radius: float
 
 
-class SampleSchema(_Strict):
-    """One sample, all methods together; ``io`` checks which fields a method needs."""
+class SampleSchema(BaseModel):
+    """One sample, all built-in methods together; the measurement kind checks which fields
+    its method needs. Fields a plugin's kind declares arrive as extra fields (checked by
+    that kind; any other extra field is an error)."""
+
+    model_config = ConfigDict(strict=True, extra="allow", frozen=True)
 
     q: list[float] | None = None
     chain: Literal["left", "right"] | None = None
