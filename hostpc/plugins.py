@@ -11,7 +11,7 @@ from __future__ import annotations
 import importlib.util
 import inspect
 import sys
-from functools import lru_cache
+from functools import cache
 from importlib.metadata import entry_points
 from pathlib import Path
 from types import ModuleType
@@ -52,7 +52,7 @@ def classes_defined_in(module: ModuleType, base: type) -> list[type[Any]]:
             and "name" in obj.__dict__]
 
 
-@lru_cache(maxsize=None)
+@cache
 def entry_point_objects(group: str) -> tuple[tuple[str, Any], ...]:
     """(entry name, loaded object) of every entry point in ``group``; scanned once."""
     found = []

@@ -65,7 +65,8 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
     assert start.jacobian is not None
     finite = bool(np.all(np.isfinite(start.jacobian)) and np.all(np.isfinite(start.whitened)))
     if finite:
-        ident = analyse(start.jacobian, layout.names, layout.units)
+        ident = analyse(start.jacobian, layout.names, layout.units,
+                        frames=problem.frame_names)
     else:  # reported through the solver's "failed" status; nothing can be analysed
         ident = Identifiability(0, np.zeros(layout.size), math.nan,
                                 np.zeros(layout.size, dtype=bool), ())
