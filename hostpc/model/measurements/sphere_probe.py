@@ -83,7 +83,9 @@ class SphereProbe(SphereProbeFile, MeasurementModel):
         chain = get_robot("ur5e")
         q = example_poses(chain, UR5E_HOME, 30, rng, spread=0.3)
         centre = point_ahead(chain, UR5E_HOME, EXAMPLE_TOOL_XYZ, EXAMPLE_TOOL_RPY, 0.0)
-        samples = Samples(q=q, sigma=np.full(q.shape[0], 5e-6), group=np.arange(30) // 5)
+        samples = Samples(q=q, sigma=np.full(q.shape[0], 5e-6), group=np.arange(30) // 5,
+                          speed=rng.uniform(0.005, 0.02, 30),
+                          approach=rng.choice([-1.0, 1.0], q.shape))
         tool = FramePose(xyz=EXAMPLE_TOOL_XYZ, rpy=np.zeros(3))
         return Dataset(method=cls.name, robot=RobotDescription(name="ur5e"),
                        frames={"tool": tool, "sphere": SphereFrame(centre, 0.0125)},

@@ -83,4 +83,6 @@ class StereoTarget(StereoTargetFile, MeasurementModel):
         tool = FramePose(xyz=EXAMPLE_TOOL_XYZ, rpy=EXAMPLE_TOOL_RPY)
         return Dataset(method=cls.name, robot=RobotDescription(name="ur5e"),
                        frames={"tool": tool, "target": target},
-                       samples=Samples(q=q, p=np.zeros((q.shape[0], 3)), cov=cov))
+                       samples=Samples(q=q, p=np.zeros((q.shape[0], 3)), cov=cov,
+                                       t=np.arange(q.shape[0], dtype=float),
+                                       approach=rng.choice([-1.0, 1.0], q.shape)))
