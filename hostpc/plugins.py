@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib.util
 import inspect
+import os
 import sys
 from functools import cache
 from importlib.metadata import entry_points
@@ -22,7 +23,7 @@ from hostpc.errors import EffectError
 _MODULES: dict[str, ModuleType] = {}
 
 
-def import_plugin_file(path: str | Path) -> ModuleType:
+def import_plugin_file(path: str | os.PathLike[str]) -> ModuleType:
     """Import a Python file once (cached by its resolved path); EffectError in one line."""
     path = Path(path)
     if not path.is_file():

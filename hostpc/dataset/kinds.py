@@ -10,8 +10,8 @@ define one or more ``MeasurementModel`` subclasses next to its effects.
 from __future__ import annotations
 
 import inspect
+import os
 from collections.abc import Iterable
-from pathlib import Path
 
 from hostpc.dataset.builtin_kinds import BUILTIN_KINDS
 from hostpc.dataset.kind import FRAME_KINDS, MeasurementKind
@@ -43,7 +43,7 @@ def entry_point_kinds() -> dict[str, type[MeasurementKind]]:
     return found
 
 
-def plugin_file_kinds(path: str | Path) -> dict[str, type[MeasurementKind]]:
+def plugin_file_kinds(path: str | os.PathLike[str]) -> dict[str, type[MeasurementKind]]:
     """The measurement models a plugin file defines, by name (maybe none)."""
     module = import_plugin_file(path)
     found: dict[str, type[MeasurementKind]] = {}
@@ -53,7 +53,7 @@ def plugin_file_kinds(path: str | Path) -> dict[str, type[MeasurementKind]]:
     return found
 
 
-def measurement_kinds(plugins: Iterable[str | Path] = (),
+def measurement_kinds(plugins: Iterable[str | os.PathLike[str]] = (),
                       builtins: Iterable[type[MeasurementKind]] = BUILTIN_KINDS
                       ) -> dict[str, type[MeasurementKind]]:
     """Name -> class: built-ins, then entry points, then plugin files; a plugin may not
