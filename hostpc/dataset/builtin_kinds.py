@@ -163,7 +163,3 @@ class DualLoopFile(PointSampleKind):
                                "q_head": samples.q_head[index].tolist(), "q_arm": q.tolist()}
         self.write_point(samples, index, out)
         return out, len(q)
-
-
-BUILTIN_KINDS: tuple[type[MeasurementKind], ...] = (StereoTargetFile, SphereProbeFile,
-                                                    DualLoopFile)

@@ -107,6 +107,9 @@ def read_point_covariance(sample: schema.SampleSchema, loc: Loc, units: Units) -
     if sample.cov is not None and sample.sigma is not None:
         raise FieldError((*loc, "sigma"), "give either 'cov' or 'sigma', not both")
     if sample.cov is not None:
+        if len(sample.cov) != 3:
+            raise FieldError((*loc, "cov"), "expected a 3x3 matrix (3 lists of 3 numbers), "
+                             f"got a {len(sample.cov)}x{len(sample.cov)} matrix")
         cov = units.area(sample.cov)
     elif sample.sigma is not None:
         sigma_m = float(units.length(positive((*loc, "sigma"), sample.sigma)))
@@ -191,8 +194,9 @@ class MeasurementKind:
                                      for v in column])
         return {"fields": fields}
 
-    def check_samples(self, samples: Samples) -> None:
-        """Checks across samples (after reading); raise FieldError. Default: none."""
+    def check_samples(self, samples: Samples, frames: Mapping[str, Any]) -> None:
+        """Checks across samples and against the frames (after reading); raise FieldError.
+        Default: none."""
 
     # writing ------------------------------------------------------------------------
     def write_sample(self, samples: Samples, index: int) -> tuple[dict[str, Any], int]:

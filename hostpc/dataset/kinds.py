@@ -13,12 +13,15 @@ import inspect
 import os
 from collections.abc import Iterable
 
-from hostpc.dataset.builtin_kinds import BUILTIN_KINDS
+from hostpc.dataset.builtin_kinds import DualLoopFile, SphereProbeFile, StereoTargetFile
 from hostpc.dataset.kind import FRAME_KINDS, MeasurementKind
+from hostpc.dataset.world_kinds import WorldPointFile, WorldPoseFile
 from hostpc.errors import EffectError
 from hostpc.plugins import classes_defined_in, entry_point_objects, import_plugin_file
 
 ENTRY_POINT_GROUP = "zerocal.measurements"
+BUILTIN_KINDS: tuple[type[MeasurementKind], ...] = (
+    StereoTargetFile, SphereProbeFile, DualLoopFile, WorldPointFile, WorldPoseFile)
 
 
 def check_kind_class(cls: type[MeasurementKind], origin: str) -> None:

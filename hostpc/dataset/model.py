@@ -26,7 +26,8 @@ StrArray = NDArray[np.str_]
 
 #: the built-in methods; a plugin's measurement model adds its own name
 Method = str
-METHODS: tuple[str, ...] = ("stereo_target", "sphere_probe", "dual_loop")
+METHODS: tuple[str, ...] = ("stereo_target", "sphere_probe", "dual_loop", "world_point",
+                            "world_pose")
 
 
 def _frozen(value: ArrayLike, dtype: Any = np.float64) -> NDArray[Any]:

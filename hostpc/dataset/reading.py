@@ -113,7 +113,7 @@ def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]])
     frames = _read_frames(document.frames, kind, units)
     known = _read_known(document.known, frames)
     stylus_radius = _read_probe(document.probe, kind, units)
-    samples = read_samples(document.samples, kind, n_joints, robot_label, units)
+    samples = read_samples(document.samples, kind, n_joints, robot_label, units, frames)
     extra_fields = {k: v for k, v in doc.items() if k not in schema.DOCUMENT_FIELDS}
     return Dataset(
         method=method,

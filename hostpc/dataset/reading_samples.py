@@ -9,6 +9,7 @@ sample index and field; ``reading`` turns it into a ``DatasetError``.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -37,6 +38,7 @@ def read_samples(
     n_joints: int | None,
     robot_label: str,
     units: Units,
+    frames: Mapping[str, Any] | None = None,
 ) -> Samples:
     """Check every sample against ``kind`` and build the arrays in SI."""
     columns = Columns(len(samples))
@@ -80,7 +82,7 @@ def read_samples(
         extra={k: columns.floats("extra." + k, np.asarray) for k in extra_names},
         **kind.samples_arguments(columns, units),
     )
-    kind.check_samples(result)
+    kind.check_samples(result, frames or {})
     return result
 
 

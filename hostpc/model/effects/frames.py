@@ -21,7 +21,8 @@ class _FrameEffect(Effect):
         return list(ctx.frame_parameters.get(self.name, self.parameters))
 
     def parameter_units(self, ctx: ModelContext) -> Sequence[str]:
-        return ["rad" if name.startswith("r") else "m" for name in self.parameter_names(ctx)]
+        return ["rad" if name.rsplit(".", 1)[-1].startswith("r") else "m"
+                for name in self.parameter_names(ctx)]
 
 
 class ToolFrame(_FrameEffect):

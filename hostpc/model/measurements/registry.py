@@ -17,10 +17,13 @@ from hostpc.model.measurements.base import MeasurementModel
 from hostpc.model.measurements.dual_loop import DualLoop
 from hostpc.model.measurements.sphere_probe import SphereProbe
 from hostpc.model.measurements.stereo_target import StereoTarget
+from hostpc.model.measurements.world_point import WorldPoint
+from hostpc.model.measurements.world_pose import WorldPose
 
 __all__ = ["BUILTIN_MODELS", "ENTRY_POINT_GROUP", "measurement_model", "measurement_models"]
 
-BUILTIN_MODELS: tuple[type[MeasurementModel], ...] = (StereoTarget, SphereProbe, DualLoop)
+BUILTIN_MODELS: tuple[type[MeasurementModel], ...] = (StereoTarget, SphereProbe, DualLoop,
+                                                      WorldPoint, WorldPose)
 
 
 def measurement_models(plugins: Iterable[str | Path] = ()) -> dict[str, type[MeasurementModel]]:
