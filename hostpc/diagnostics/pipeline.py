@@ -132,7 +132,7 @@ def residual_analysis(check: ModelCheck, alpha: float) -> ResidualAnalysis:
     residuals would make every variable look patterned)."""
     fit = check.fit
     analysis = analyse_residuals(fit.residuals_raw, fit.residuals_whitened, variables_of(fit),
-                                 alpha)
+                                 alpha, length_columns=fit.problem.length_columns)
     if check.cleaned is None:
         return analysis
     clean = check.cleaned.fit

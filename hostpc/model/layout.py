@@ -89,6 +89,16 @@ class Problem:
         """The frames this problem estimates (its frame effects)."""
         return tuple(t.effect.name for t in self.terms if t.effect.hook == "frame")
 
+    @property
+    def length_columns(self) -> np.ndarray:
+        """Indices of the measurement components that are lengths (m): the ones residual
+        norms in metres are taken over."""
+        m = self.measured.shape[1]
+        units = None if self.model is None else self.model.residual_units
+        if units is None:
+            return np.arange(m)
+        return np.array([k for k, unit in enumerate(units) if unit == "m"], dtype=int)
+
     def term(self, name: str) -> EffectTerm | None:
         for term in self.terms:
             if term.effect.name == name:

@@ -48,6 +48,9 @@ class MeasurementModel(MeasurementKind):
     frame_effects: ClassVar[Mapping[str, tuple[str, ...]]] = {}
     default_frames: ClassVar[tuple[str, ...]] = ()
     measurement_size: ClassVar[int] = 3
+    #: SI unit of each measurement component; None: all lengths (m). RMS and max residual
+    #: norms in m are taken over the length components only (world_pose: x, y, z).
+    residual_units: ClassVar[tuple[str, ...] | None] = None
 
     # the robot and the context ----------------------------------------------------------
     def chain(self, dataset: Dataset) -> Chain:

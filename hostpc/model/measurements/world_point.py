@@ -82,9 +82,12 @@ class WorldPoint(WorldPointFile, MeasurementModel):
         measured = np.asarray(dataset.samples.p, dtype=float)
         cov = np.asarray(dataset.samples.cov, dtype=float)
         mask = np.asarray(dataset.samples.fields["mask"], dtype=bool)
-        # unmeasured axes: unit variance on a residual that is zero by construction
+        # an unmeasured axis: its residual is zero by construction (see predict); it gets
+        # the mean variance of the sample's measured axes, so the stated noise stays sane
+        measured_variance = np.einsum("nii->ni", cov) * mask
+        fill = measured_variance.sum(axis=1) / mask.sum(axis=1)
         cov = np.where(mask[:, :, None] & mask[:, None, :], cov, 0.0)
-        cov = cov + np.einsum("ni,ij->nij", (~mask).astype(float), np.eye(3))
+        cov = cov + np.einsum("ni,ij->nij", (~mask) * fill[:, None], np.eye(3))
         L = np.linalg.cholesky(cov)
         W = np.linalg.solve(L, np.broadcast_to(np.eye(3), cov.shape))
         return measured, W

@@ -63,6 +63,7 @@ class WorldPose(WorldPoseFile, MeasurementModel):
     frame_effects = {"world": POSE, "tool": POSE}
     default_frames = ("world", "tool")
     measurement_size = 6
+    residual_units = ("m", "m", "m", "rad", "rad", "rad")
 
     def context(self, dataset: Dataset, chain: Chain) -> ModelContext:
         return serial_context(dataset, chain, self.frame_parameters(dataset),
