@@ -185,3 +185,15 @@ def test_a_stereo_sample_with_a_6x6_covariance_is_refused() -> None:
     doc["samples"][0]["cov"] = (np.eye(6) * 1e-8).tolist()
     with pytest.raises(DatasetError, match=r"samples\[0\]\.cov: expected a 3x3 matrix"):
         dataset_from_dict(doc)
+
+
+def test_the_world_point_example_in_the_format_docs_loads() -> None:
+    import json
+    import re
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "dataset-format.md").read_text()
+    blocks = [b for b in re.findall(r"```json\n(.*?)```", text, re.S) if "world_point" in b]
+    dataset = dataset_from_dict(json.loads(blocks[0]))
+    assert list(dataset.samples.fields["marker"]) == ["a", "b"]
+    assert np.allclose(dataset.frames["markers"]["b"], [-0.02, 0.06, 0.05])
+    assert np.array_equal(dataset.samples.fields["mask"][1], [1.0, 1.0, 0.0])
