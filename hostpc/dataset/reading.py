@@ -26,6 +26,7 @@ from hostpc.dataset.reading_samples import read_samples
 from hostpc.dataset.schema import FORMAT_TAG, FieldError, Loc, show
 from hostpc.dataset.units import Units
 from hostpc.errors import DatasetError, InputError
+from hostpc.kinematics.robots import get_robot
 
 PathLike = str | os.PathLike[str]
 
@@ -128,8 +129,6 @@ def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]])
 
 def _robot_joint_count(name: str) -> int:
     """Joint count of a built-in robot; raises FieldError for an unknown name."""
-    from hostpc.kinematics.robots import get_robot  # imported late: a sibling package
-
     try:
         return int(get_robot(name).n)
     except InputError as exc:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
@@ -18,8 +18,24 @@ from hostpc.dataset import Dataset
 from hostpc.kinematics import Chain
 from hostpc.model.effect import EffectTerm, ModelContext
 
-if TYPE_CHECKING:  # the model's predict takes a Problem: a type-only reference
-    from hostpc.model.measurements.base import MeasurementModel
+
+class MeasurementPredictor(Protocol):
+    """What a problem needs of its measurement model (``MeasurementModel`` provides it;
+    declared here so that this module does not depend on the models, which depend on it)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def measurement_size(self) -> int: ...
+
+    @property
+    def residual_units(self) -> tuple[str, ...] | None: ...
+
+    def frame_parameters(self, dataset: Dataset) -> Mapping[str, tuple[str, ...]]: ...
+
+    def predict(self, problem: Problem, x: np.ndarray, jacobian: bool = True
+                ) -> tuple[np.ndarray, np.ndarray | None]: ...
 
 
 @dataclass(frozen=True)
@@ -68,14 +84,14 @@ class Problem:
     #: per term: the constant basis of a linear joint/geometry effect (delta = basis @ p),
     #: computed once, or None
     linear_bases: tuple[np.ndarray | None, ...] = field(default=())
-    model: MeasurementModel | None = None
+    model: MeasurementPredictor | None = None
 
     @property
     def method(self) -> str:
         return self.dataset.method
 
     @property
-    def measurement(self) -> MeasurementModel:
+    def measurement(self) -> MeasurementPredictor:
         """The measurement model (always set by ``build_problem``)."""
         assert self.model is not None, "build the problem with build_problem"
         return self.model

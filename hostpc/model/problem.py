@@ -18,7 +18,7 @@ from hostpc.model.context import sample_variables
 from hostpc.model.contract import check_effect
 from hostpc.model.effect import Effect, EffectTerm, ModelContext
 from hostpc.model.effects.frames import frame_effect
-from hostpc.model.layout import ParameterLayout, Problem
+from hostpc.model.layout import MeasurementPredictor, ParameterLayout, Problem
 from hostpc.model.measurements.base import MeasurementModel
 from hostpc.model.measurements.registry import measurement_model
 from hostpc.model.registry import (
@@ -54,7 +54,7 @@ def _registry_with_frames(model: MeasurementModel, dataset: Dataset,
     return registry
 
 
-def _terms(model: MeasurementModel, dataset: Dataset, context: ModelContext,
+def _terms(model: MeasurementPredictor, dataset: Dataset, context: ModelContext,
            instances: Sequence[Effect]) -> tuple[tuple[EffectTerm, ...], ParameterLayout]:
     """Check each effect against the model and the dataset and lay out the vector."""
     allowed_frames = tuple(model.frame_parameters(dataset))
