@@ -197,3 +197,19 @@ def test_the_world_point_example_in_the_format_docs_loads() -> None:
     assert list(dataset.samples.fields["marker"]) == ["a", "b"]
     assert np.allclose(dataset.frames["markers"]["b"], [-0.02, 0.06, 0.05])
     assert np.array_equal(dataset.samples.fields["mask"][1], [1.0, 1.0, 0.0])
+
+
+@pytest.mark.parametrize("model", [WorldPoint, WorldPose])
+def test_diagnose_with_every_candidate_and_the_ladder(model: Any) -> None:
+    from hostpc.diagnostics import diagnose
+
+    rng = np.random.default_rng(10)
+    example = model.example(rng)
+    dataset = measured_at(example, random_truth(build_problem(example), rng), rng)
+    found = diagnose(dataset, ladder=True, cv_folds=3, rank_cv_folds=0)
+    tried = {c.effect for c in found.candidates}
+    assert {"geometry", "joint_compliance", "backlash", "encoder_scale"} <= tried
+    assert found.adequate and found.ladder is not None
+    assert "depth" not in found.check.fit.problem.context.variables
+    document = found.to_dict()
+    assert document["fit"]["method"] == model.name
