@@ -7,7 +7,7 @@ Run ``python bench/bench_diagnose.py``; :func:`run` returns the figures as a dic
 - ``ladder_s``: the same with ``ladder=True`` (here: one more model checked);
 - ``cli_ladder_s``: ``hostpc diagnose DATASET --ladder --json`` as a fresh process (includes
   Python start-up and imports), median of ``repeats``; the budget is 3 s;
-- ``report_s``: rendering the HTML report once (matplotlib, not part of the budget).
+- ``report_s``: rendering the HTML report once (inline SVG; bench_report.py has its figures).
 
 The dataset is examples/ur5e_stereo_hidden_compliance.json (compliance hidden), so the
 ladder has two steps. Small dense linear algebra: on a loaded machine OpenBLAS's threads

@@ -37,6 +37,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from hostpc.cli.archive_options import add_archive_options, archive_run
 from hostpc.cli.fit import add_model_options
 from hostpc.cli.progress import StderrProgress
 from hostpc.errors import InputError
@@ -46,6 +47,13 @@ from hostpc.methods.cell import load_cell_file, parse_known
 from hostpc.methods.journal import Journal
 from hostpc.methods.runner import RobotInfo, Runner, RunOutcome
 from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot, resolve_token
+from hostpc.sensors.calibrate_options import (
+    add_sensor_options,
+    check_sensor_options,
+    open_with_sensors,
+    replay_inputs,
+    robot_options,
+)
 
 SIM_FOLDER = "sim"
 EXIT_INTERRUPTED = 130  # Ctrl-C, as a shell reports it
@@ -174,9 +182,11 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--time-scale", type=float, default=0.0,
                         help="with --robot sim: wall seconds per simulated second (default 0)")
     parser.add_argument("--out", metavar="DIR", help="run folder (default ./zerocal-runs/...)")
+    add_archive_options(parser, read=False)
     parser.add_argument("--resume", metavar="DIR", help="continue the run in DIR")
     parser.add_argument("--no-report", action="store_true", help="skip report.html")
     parser.add_argument("--json", action="store_true", help="print the result document")
+    add_sensor_options(parser)
     parser.set_defaults(func=run)
 
 
@@ -233,6 +243,7 @@ def _check_rig(settings: RunSettings) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of `hostpc calibrate`; returns the exit code."""
+    check_sensor_options(args)  # --camera-*, --record, --replay (hostpc.sensors)
     settings: RunSettings | None = None
     cell_file = None
     known = None
@@ -244,6 +255,9 @@ def run(args: argparse.Namespace) -> int:
         address = parse_robot(args.robot) if args.robot else (
             RobotAddress(sim=True) if sim else parse_robot(str(recorded.get("address", ""))))
         driver = recorded.get("driver", args.driver)
+        scenario_file = None
+    elif args.replay:  # a recorded run again, without a robot (hostpc.sensors)
+        address, driver, settings, cell_file, known, run_dir = replay_inputs(args, _default_out)
         scenario_file = None
     else:
         if not args.robot:
@@ -285,6 +299,7 @@ def run(args: argparse.Namespace) -> int:
         sys.stdout.write("\n")
     else:
         print(outcome.summary)
+    archive_run(args, run_dir, outcome.exit_code)
     return outcome.exit_code
 
 
@@ -357,7 +372,10 @@ async def _calibrate(args: argparse.Namespace, address: RobotAddress, driver: st
                      info: RobotInfo, progress: StderrProgress, truth: Any,
                      token: str | None) -> RunOutcome:
     progress.stage("connect")
-    robot = await open_robot(address, driver, token=token, timeout=args.timeout)
+    robot = await open_with_sensors(  # host cameras, --record, --replay (hostpc.sensors)
+        args, run_dir, settings, cell_file, known, default_known, info,
+        lambda: open_robot(address, driver, token=token, timeout=args.timeout,
+                           options=robot_options(args, driver)))
     try:
         overrides = {"push": args.push, "force": args.force,
                      "max_correction_deg": args.max_correction,

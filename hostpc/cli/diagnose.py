@@ -1,4 +1,11 @@
-"""`hostpc diagnose DATASET`: is the model adequate, where does it fail, what is missing."""
+"""`hostpc diagnose DATASET`: is the model adequate, where does it fail, what is missing.
+
+Exit codes (a CI job can gate on them, like grep's): ``EXIT_ADEQUATE`` 0 the model named
+by ``--effects`` is adequate; ``EXIT_NOT_ADEQUATE`` 1 it is not, or the samples are too
+few to judge it (the ladder's last step never changes this: it is advice); ``EXIT_ERROR`` 2
+bad input (a missing or malformed dataset, an unknown effect, a bad option). Every error
+of hostpc ends as exit 2 here, so 1 always means "ran, and the model failed".
+"""
 
 from __future__ import annotations
 
@@ -10,12 +17,15 @@ from typing import TYPE_CHECKING
 
 from hostpc.cli.fit import add_model_options
 from hostpc.diagnostics.advice import mm, without
-from hostpc.errors import InputError
+from hostpc.errors import InputError, ZerocalError
 
 if TYPE_CHECKING:
     from hostpc.diagnostics import Diagnosis, LadderStep, ModelCheck
 
 TOP_INTERACTIONS = 10
+EXIT_ADEQUATE = 0
+EXIT_NOT_ADEQUATE = 1
+EXIT_ERROR = 2
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -26,7 +36,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
             "Fit the model to a dataset, judge whether it is adequate (chi-square against its "
             "band, held-out RMS), show where it fails (residuals against every recorded "
             "variable), rank the effects that could be missing, and search for any parameter "
-            "that varies with any variable. See docs/diagnostics.md."
+            "that varies with any variable. Exit code: 0 adequate, 1 not adequate (or too "
+            "few samples to judge), 2 bad input. See docs/diagnostics.md."
         ),
     )
     parser.add_argument("dataset", help="dataset file (zerocal-dataset/1 JSON)")
@@ -47,6 +58,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 
 
 def run(args: argparse.Namespace) -> int:
+    """Diagnose, print, and return EXIT_ADEQUATE or EXIT_NOT_ADEQUATE; any hostpc error
+    leaves as an InputError (exit EXIT_ERROR) so that 1 never means a failure to run."""
+    try:
+        return _run(args)
+    except InputError:
+        raise
+    except ZerocalError as exc:
+        raise InputError(str(exc)) from exc
+
+
+def _run(args: argparse.Namespace) -> int:
     from hostpc.diagnostics import DEFAULT_ALPHA, diagnose
 
     if args.cv_folds < 0:
@@ -62,7 +84,11 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         from hostpc.report import write_report
 
-        write_report(args.report, diagnosis)
+        try:
+            write_report(args.report, diagnosis)
+        except OSError as exc:
+            raise InputError(f"--report {args.report}: cannot write it "
+                             f"({exc.strerror or exc})") from exc
     if args.json:
         json.dump(diagnosis.to_dict(), sys.stdout, indent=2, allow_nan=False)
         sys.stdout.write("\n")
@@ -70,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
         print(format_diagnosis(diagnosis))
         if args.report:
             print(f"\nreport written to {args.report}")
-    return 0
+    return EXIT_ADEQUATE if diagnosis.adequate else EXIT_NOT_ADEQUATE
 
 
 def _p(value: float | None) -> str:

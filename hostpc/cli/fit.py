@@ -6,8 +6,10 @@ import argparse
 import json
 import sys
 
+from hostpc.cli.archive_options import add_archive_options, dataset_from_archive
 from hostpc.cli.format import format_fit_summary
 from hostpc.dataset import load_dataset
+from hostpc.errors import InputError
 from hostpc.fitting import fit
 
 
@@ -20,8 +22,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
             "model is joint_offsets plus every frame the dataset does not mark as known."
         ),
     )
-    parser.add_argument("dataset", help="dataset file (zerocal-dataset/1 JSON)")
+    parser.add_argument("dataset", nargs="?",
+                        help="dataset file (zerocal-dataset/1 JSON); or --db URL --run ID")
     add_model_options(parser)
+    add_archive_options(parser, read=True)
     parser.add_argument("--json", action="store_true", help="print one JSON document")
     parser.set_defaults(func=run)
 
@@ -43,6 +47,14 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.db or args.run is not None:
+        if args.dataset:
+            raise InputError("give a dataset file or --db URL --run ID, not both")
+        if not args.db:
+            raise InputError("--run needs --db URL")
+        args.dataset = dataset_from_archive(args)
+    elif not args.dataset:
+        raise InputError("a dataset file is required (or --db URL --run ID)")
     dataset = load_dataset(args.dataset, plugins=args.plugin)
     result = fit(dataset, args.effects, plugins=args.plugin, loss=args.loss,
                  cv_folds=args.cv_folds)

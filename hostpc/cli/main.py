@@ -22,7 +22,18 @@ import sys  # noqa: E402
 
 from hostpc.errors import ZerocalError  # noqa: E402
 
-COMMAND_MODULES = ("fit", "status", "diagnose", "calibrate", "rollback", "stereo_calibrate")
+COMMAND_MODULES = (
+    "fit",
+    "status",
+    "diagnose",
+    "calibrate",
+    "rollback",
+    "stereo_calibrate",
+    "report",  # hostpc.report: re-render a run's report offline
+    "camera",  # hostpc.sensors: serve or check the host's stereo camera
+    "station",  # hostpc.station: the end-of-line station service
+    "history",  # hostpc.archive: archived runs and drift
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

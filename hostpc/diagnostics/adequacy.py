@@ -1,5 +1,11 @@
 """Is the model adequate? Chi-square against its band, the noise level, held-out residuals.
 
+One chi-square rule serves every verdict (``hostpc diagnose``, the push guard rail of
+``hostpc calibrate``, the report): a fit explains its measurements when the upper-tail
+probability of a chi-square as large as its own is at least ``ADEQUACY_P_MIN``
+(``chi2_adequate``), i.e. when chi2/dof is at most ``chi2_dof_upper(dof)``. A chi2/dof
+below the band is no sign of a missing effect (the stated covariances are pessimistic).
+
 All lengths in metres (SI); the CLI and the report convert to mm. ``m`` is the size of one
 measurement (3 for a stereo point, 1 for a probe contact distance).
 """
@@ -15,6 +21,9 @@ from hostpc.diagnostics.outliers import Outlier
 from hostpc.fitting import FitResult, fold_indices
 from hostpc.fitting.solver import evaluate, levenberg_marquardt
 from hostpc.model.problem import Problem
+
+ADEQUACY_P_MIN = 1e-3
+"""A fit is adequate (chi-square test) when P(chi2 this large | model right) >= this."""
 
 
 @dataclass(frozen=True)
@@ -78,8 +87,9 @@ def held_out_residuals(problem: Problem, x: np.ndarray, free: np.ndarray, folds:
 class Adequacy:
     """The verdict on one fitted model.
 
-    chi2, dof, chi2_dof: of the whitened residuals; chi2_band: (low, high) central interval
-    of chi2/dof expected for dof degrees of freedom at the significance ``alpha``;
+    chi2, dof, chi2_dof: of the whitened residuals; chi2_band: (low, high) edges of chi2/dof
+    for dof degrees of freedom, each leaving ``alpha`` in its tail (``chi2_band``); chi2_ok:
+    ``chi2_adequate`` (chi2/dof at most the upper edge);
     p_value: upper-tail probability of a chi2 this large if the model and the stated
     covariances were right; noise_scale: sqrt(chi2/dof), the measured noise relative to the
     stated one (corrected for the parameters fitted); noise_rms: the RMS residual norm
@@ -108,13 +118,33 @@ class Adequacy:
     reasons: tuple[str, ...]
 
 
-def chi2_band(dof: int, alpha: float) -> tuple[float, float]:
-    """Central interval of chi2/dof with probability 1 - alpha for dof degrees of freedom."""
+def chi2_band(dof: int, p_min: float = ADEQUACY_P_MIN) -> tuple[float, float]:
+    """The band of chi2/dof for dof degrees of freedom: each edge leaves ``p_min`` in its
+    tail, so the upper edge is ``chi2_dof_upper(dof, p_min)``. NaN for dof < 1."""
     if dof <= 0:
         return (float("nan"), float("nan"))
-    low = chi2_ppf(alpha / 2.0, dof) / dof
-    high = chi2_isf(alpha / 2.0, dof) / dof
-    return (float(low), float(high))
+    return (float(chi2_ppf(p_min, dof) / dof), chi2_dof_upper(dof, p_min))
+
+
+def chi2_dof_upper(dof: int, p_min: float = ADEQUACY_P_MIN) -> float:
+    """Upper edge of the chi2/dof band: the chi-square upper ``p_min`` quantile over dof
+    (a larger chi2/dof: the model does not explain the measurements). NaN for dof < 1."""
+    if dof <= 0:
+        return float("nan")
+    return float(chi2_isf(p_min, dof) / dof)
+
+
+def chi2_p_value(chi2: float, dof: int) -> float:
+    """P(a chi-square with dof degrees of freedom >= chi2); NaN for dof < 1."""
+    return chi2_sf(chi2, dof) if dof > 0 else float("nan")
+
+
+def chi2_adequate(chi2: float, dof: int, p_min: float = ADEQUACY_P_MIN) -> bool:
+    """THE chi-square rule (diagnose, push, report): True when dof >= 1 and the upper-tail
+    p-value of ``chi2`` is at least ``p_min``. A small chi2 passes (pessimistic covariances
+    are not a missing effect); no degrees of freedom: False (nothing can be judged)."""
+    p_value = chi2_p_value(chi2, dof)
+    return bool(dof > 0 and p_value >= p_min)
 
 
 def expected_noise_rms(problem: Problem) -> float:
@@ -143,15 +173,16 @@ def too_few_reason(result: FitResult) -> str:
             f"{free} fitted parameters, so no degrees of freedom are left")
 
 
-def assess(result: FitResult, held_out: HeldOut | None, alpha: float,
+def assess(result: FitResult, held_out: HeldOut | None, alpha: float = ADEQUACY_P_MIN,
            missing: tuple[str, ...] = (), outliers: tuple[Outlier, ...] = ()) -> Adequacy:
-    """The verdict: no sample is an outlier (``outliers``), the chi-square is inside its
-    band (upper tail at ``alpha``) and no missing effect was found significant
-    (``missing``: sentences naming what was). Reasons are listed in that order."""
+    """The verdict: no sample is an outlier (``outliers``), the chi-square passes
+    ``chi2_adequate`` at ``alpha`` (by default ``ADEQUACY_P_MIN``, the push's threshold;
+    ``hostpc diagnose --alpha`` changes it for the diagnosis only) and no missing effect was
+    found significant (``missing``: sentences naming what was). Reasons in that order."""
     dof = result.dof
     chi2_dof = result.chi2_dof
-    p_value = chi2_sf(result.chi2, dof) if dof > 0 else float("nan")
-    chi2_ok = bool(dof > 0 and p_value >= alpha / 2.0)
+    p_value = chi2_p_value(result.chi2, dof)
+    chi2_ok = chi2_adequate(result.chi2, dof, alpha)
     m = result.residuals_raw.shape[1]
     sum_squares = float(np.sum(result.residuals_raw[:, result.problem.length_columns]**2))
     noise_rms = float(np.sqrt(sum_squares * m / dof)) if dof > 0 else float("nan")

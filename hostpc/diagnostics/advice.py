@@ -7,6 +7,7 @@ import math
 import re
 from collections.abc import Sequence
 
+from hostpc.diagnostics.adequacy import Adequacy
 from hostpc.diagnostics.candidates import Candidate
 from hostpc.diagnostics.diagnosis import LadderStep, ModelCheck
 from hostpc.diagnostics.interactions import Interaction
@@ -65,7 +66,10 @@ def effects_option(check: ModelCheck, name: str) -> str:
 
 
 def command(check: ModelCheck, name: str, source: str | None, plugins: Sequence[str]) -> str:
-    parts = ["hostpc diagnose", source or "DATASET", "--effects", effects_option(check, name)]
+    """The command that diagnoses the model with ``name`` added; without a dataset file
+    (a Dataset given from Python) only its options, never a placeholder."""
+    parts = ["hostpc diagnose", source] if source else []
+    parts += ["--effects", effects_option(check, name)]
     parts += [f"--plugin {p}" for p in plugins]
     return " ".join(parts)
 
@@ -169,6 +173,16 @@ def interaction_sentence(interaction: Interaction, check: ModelCheck) -> str:
             f"add it with --plugin FILE --effects +NAME.")
 
 
+def chi2_position(adequacy: Adequacy) -> str:
+    """Where chi2/dof lies against its band, in words that agree with the noise sentence:
+    "inside its band", "below its band" (pessimistic covariances: still adequate) or
+    "above its band"."""
+    low, high = adequacy.chi2_band
+    if adequacy.chi2_dof < low:
+        return "below its band"
+    return "above its band" if adequacy.chi2_dof > high else "inside its band"
+
+
 def verdict_sentence(check: ModelCheck) -> str:
     a = check.adequacy
     model = ", ".join(check.effects)
@@ -179,8 +193,8 @@ def verdict_sentence(check: ModelCheck) -> str:
         return (f"The model ({model}) cannot be judged: {'; '.join(a.reasons)}, "
                 f"RMS {mm(a.rms)}.")
     if a.adequate:
-        return (f"The model ({model}) is adequate: chi2/dof {a.chi2_dof:.3f} is inside its "
-                f"band {band} and no missing effect is significant{held}.")
+        return (f"The model ({model}) is adequate: chi2/dof {a.chi2_dof:.3f} is "
+                f"{chi2_position(a)} {band} and no missing effect is significant{held}.")
     return f"The model ({model}) is NOT adequate: {'; '.join(a.reasons)}{held}."
 
 
@@ -201,7 +215,7 @@ def noise_sentence(check: ModelCheck) -> str:
             f"Whitened ratio {a.noise_scale:.2f} (measured / stated noise, every axis in "
             f"units of its own stated noise: sqrt(chi2/dof); the mm figures are dominated by "
             f"the noisiest axis, so their ratio can differ).")
-    if a.dof > 0 and a.chi2_dof < a.chi2_band[0]:
+    if chi2_position(a) == "below its band":
         text += (" chi2/dof is below its band: the stated covariances are pessimistic "
                  f"(about {1 / max(a.noise_scale, 1e-9):.2f} times too large).")
     return text

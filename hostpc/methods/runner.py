@@ -272,7 +272,7 @@ class Runner:
         summary = format_summary(document)
         (self.run_dir / "summary.txt").write_text(summary + "\n", encoding="utf-8")
         if self.report:
-            report_file = self._write_report(dataset, settings)
+            report_file = self._write_report(dataset, settings, document, truth)
             if report_file:
                 document["files"]["report"] = report_file
         write_json_atomic(self.run_dir / "result.json", document)
@@ -419,11 +419,12 @@ class Runner:
                               + ", ".join(str(path) for path in paths.values()))
         return {kind: str(path) for kind, path in paths.items()}
 
-    def _write_report(self, dataset: Dataset, settings: RunSettings) -> str | None:
-        """report.html through hostpc.diagnose + hostpc.report, if both are installed."""
+    def _write_report(self, dataset: Dataset, settings: RunSettings,
+                      document: dict[str, Any], truth: dict[str, Any] | None) -> str | None:
+        """report.html (the result, then the diagnosis) through hostpc.report."""
         try:
             from hostpc.diagnostics import diagnose
-            from hostpc.report import write_report  # type: ignore[attr-defined]
+            from hostpc.report import write_calibration_report
         except ImportError:
             return None
         self.progress.stage("report")
@@ -431,7 +432,7 @@ class Runner:
         try:
             diagnosis = diagnose(dataset, settings.effects, plugins=settings.plugins,
                                  source=str(self.run_dir / "dataset.json"))
-            write_report(path, diagnosis)
+            write_calibration_report(path, document, diagnosis, truth)
         except Exception as exc:  # the report is an extra: never lose a run over it
             self.progress.message(f"report not written: {type(exc).__name__}: {exc}")
             return None

@@ -1,78 +1,32 @@
-"""One self-contained HTML file of a diagnosis: every plot embedded as a base64 PNG, no
-external scripts, styles or fonts, so it opens anywhere (and can be archived with a run)."""
+"""One self-contained HTML file of a diagnosis: every figure inline SVG, no external
+scripts, styles or fonts, so it opens anywhere (and can be archived with a run).
+
+``diagnosis_body`` is the diagnosis as HTML sections (also the second half of a
+calibration's report, hostpc.report.calibration); ``render_html`` the page of it alone."""
 
 from __future__ import annotations
 
-import html
-import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import hostpc
 from hostpc.diagnostics import Diagnosis
 from hostpc.diagnostics.pipeline import variables_of
 from hostpc.report import plots
-
-DISPLAY = {"rad": ("deg", math.degrees(1.0)), "m": ("mm", 1e3),
-           "rad/(N m)": ("deg/(N m)", math.degrees(1.0)), "1": ("ppm", 1e6)}
-
-STYLE = """
-body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1200px;
-       color: #222; line-height: 1.4; padding: 0 1em; }
-h1 { font-size: 1.6em; } h2 { border-bottom: 1px solid #ccc; padding-bottom: 0.2em; }
-table { border-collapse: collapse; margin: 0.5em 0 1em; font-size: 0.9em; }
-th, td { border: 1px solid #ddd; padding: 0.25em 0.6em; text-align: right; }
-th { background: #f4f4f4; } td.name, th.name { text-align: left; font-family: monospace; }
-.verdict { padding: 0.8em 1em; border-radius: 6px; font-size: 1.1em; font-weight: bold; }
-.good { background: #e5f5e0; border: 1px solid #74c476; }
-.bad { background: #fee0d2; border: 1px solid #fb6a4a; }
-.significant { color: #c00; font-weight: bold; }
-img { max-width: 100%; height: auto; display: block; margin: 0.5em 0; }
-.row { display: flex; flex-wrap: wrap; gap: 1em; align-items: flex-start; }
-code { background: #f4f4f4; padding: 0 0.2em; }
-"""
+from hostpc.report.effect_sizes import effect_sizes
+from hostpc.report.markup import escape as _e
+from hostpc.report.markup import figure, page
+from hostpc.report.markup import mm as _mm
+from hostpc.report.markup import num as _num
+from hostpc.report.markup import p_value as _p
+from hostpc.report.markup import table as _table
 
 
-def _e(value: object) -> str:
-    return html.escape(str(value))
-
-
-def _mm(value: float | None) -> str:
-    return "-" if value is None or not math.isfinite(value) else f"{value * 1e3:.4f}"
-
-
-def _num(value: float | None, digits: int = 3) -> str:
-    return "-" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
-
-
-def _p(value: float | None) -> str:
-    return "-" if value is None or not math.isfinite(value) else f"{value:.2g}"
-
-
-def _display(value: float | None, unit: str) -> tuple[str, str]:
-    shown, factor = DISPLAY.get(unit, (unit, 1.0))
-    if value is None or not math.isfinite(value):
-        return "-", shown
-    return f"{value * factor:+.5g}", shown
-
-
-def _table(header: Sequence[str], rows: Iterable[Sequence[str]], name_columns: int = 1,
-           flags: Iterable[bool] | None = None) -> str:
-    """An HTML table; cells are already escaped; the first name_columns are left-aligned."""
-    head = "".join(f'<th class="name">{h}</th>' if k < name_columns else f"<th>{h}</th>"
-                   for k, h in enumerate(header))
-    body = []
-    flag_list = list(flags) if flags is not None else None
-    for r, row in enumerate(rows):
-        cls = ' class="significant"' if flag_list and flag_list[r] else ""
-        cells = "".join(f'<td class="name">{c}</td>' if k < name_columns else f"<td>{c}</td>"
-                        for k, c in enumerate(row))
-        body.append(f"<tr{cls}>{cells}</tr>")
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
-
-
-def _img(uri: str, alt: str) -> str:
-    return f'<img src="{uri}" alt="{_e(alt)}">'
+def _img(svg: str, alt: str) -> str:
+    """An inline figure (``alt`` is carried by the SVG's own title)."""
+    del alt
+    return figure(svg)
 
 
 def _summary(diagnosis: Diagnosis) -> str:
@@ -116,8 +70,10 @@ def _interactions(diagnosis: Diagnosis, top: int = 15) -> str:
 
 def _ladder(diagnosis: Diagnosis) -> str:
     if not diagnosis.ladder:
-        return ("<p>Run <code>hostpc diagnose DATASET --ladder</code> to fit the nested models "
-                "and watch the error fall.</p>")
+        where = (f"<code>hostpc diagnose {_e(diagnosis.source)} --ladder</code>"
+                 if diagnosis.source else "<code>hostpc diagnose</code> with "
+                 "<code>--ladder</code> on this dataset")
+        return f"<p>Run {where} to fit the nested models and watch the error fall.</p>"
     rows = [(str(s.step), _e(s.added or "(current model)"), _mm(s.rms), _mm(s.cv_rms),
              _mm(s.cv_max), _num(s.cv_whitened_rms), _num(s.chi2_dof),
              "adequate" if s.adequate else "NOT adequate") for s in diagnosis.ladder]
@@ -132,19 +88,14 @@ def _ladder(diagnosis: Diagnosis) -> str:
     return _img(plots.ladder_chart(diagnosis), "ladder chart") + notes + table
 
 
-def _parameters(diagnosis: Diagnosis) -> str:
-    rows = []
-    for p in diagnosis.fit.parameters.values():
-        value, unit = _display(p.value, p.unit)
-        sigma = "fixed" if p.fixed else _display(p.std, p.unit)[0].lstrip("+")
-        rows.append((_e(p.name), value, sigma, _e(unit)))
-    table = _table(("parameter", "value", "sigma", "unit"), rows)
+def _parameters(diagnosis: Diagnosis, truth: Mapping[str, Any] | None,
+                skip: Sequence[str]) -> str:
     correlations = diagnosis.fit.correlations
     listed = "".join(f"<li><code>{_e(a)}</code> ~ <code>{_e(b)}</code>: {rho:+.3f}</li>"
                      for a, b, rho in correlations[:20])
     strong = (f"<p>Strong correlations (|rho| &gt; 0.9):</p><ul>{listed}</ul>" if listed
               else "<p>No correlation above 0.9.</p>")
-    return (f'<div class="row"><div>{table}</div><div>'
+    return (f'<div class="row"><div>{effect_sizes(diagnosis.fit, truth, skip)}</div><div>'
             f'{_img(plots.correlation_matrix(diagnosis), "correlation matrix")}'
             f"{strong}</div></div>")
 
@@ -159,12 +110,15 @@ def _identifiability(diagnosis: Diagnosis) -> str:
             f'{_img(plots.singular_values(diagnosis), "singular values")}')
 
 
-def render_html(diagnosis: Diagnosis, title: str | None = None) -> str:
-    """The report as one HTML string."""
+def diagnosis_body(diagnosis: Diagnosis, truth: Mapping[str, Any] | None = None,
+                   skip_parameters: Sequence[str] = ()) -> str:
+    """The diagnosis as HTML sections (no page shell): the model's verdict, advice,
+    adequacy, residual views, candidates, ladder, parameters (effect sizes; against
+    ``truth`` for a simulated run, without the effects in ``skip_parameters``) and
+    identifiability."""
     check = diagnosis.check
     fit = diagnosis.fit
     a = check.adequacy
-    title = title or f"zerocal diagnosis: {diagnosis.source or 'dataset'}"
     verdict_class = "good" if a.adequate else "bad"
     verdict = "adequate" if a.adequate else "NOT adequate"
     advice = "".join(f"<li>{_e(s)}</li>" for s in diagnosis.advice)
@@ -178,12 +132,13 @@ def render_html(diagnosis: Diagnosis, title: str | None = None) -> str:
                        for p in diagnosis.residuals.patterns],
                       flags=[p.significant for p in diagnosis.residuals.patterns])
     variables = variables_of(fit)
+    skipped = (" (joint offsets: in the offsets table above)"
+               if "joint_offsets" in skip_parameters else "")
     sections = [
-        f"<h1>{_e(title)}</h1>",
         f"<p>Method <code>{_e(fit.problem.method)}</code>, {fit.residuals_raw.shape[0]} "
         f"samples, model <code>{_e(', '.join(check.effects))}</code>, significance "
         f"{diagnosis.alpha:g} per family of tests. zerocal {_e(hostpc.__version__)}.</p>",
-        f'<div class="verdict {verdict_class}">The model is {verdict}.</div>',
+        f'<div class="verdict {verdict_class}" id="model-verdict">The model is {verdict}.</div>',
         f"<h2>Advice</h2><ol>{advice}</ol>",
         f"<h2>Is the model adequate?</h2>{_summary(diagnosis)}",
         "<h2>Model vs measurement</h2>",
@@ -202,18 +157,25 @@ def render_html(diagnosis: Diagnosis, title: str | None = None) -> str:
         f'<div class="row">{_img(plots.interaction_ranking(diagnosis), "interactions")}'
         f"<div>{_interactions(diagnosis)}</div></div>",
         f"<h2>Ladder</h2>{_ladder(diagnosis)}",
-        f"<h2>Parameters</h2>{_parameters(diagnosis)}",
+        f"<h2>Parameters: effect sizes{skipped}</h2>"
+        f"{_parameters(diagnosis, truth, skip_parameters)}",
         f"<h2>Identifiability</h2>{_identifiability(diagnosis)}",
     ]
-    body = "\n".join(sections)
-    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
-            f"<title>{_e(title)}</title><style>{STYLE}</style></head>\n"
-            f"<body>\n{body}\n</body></html>\n")
+    return "\n".join(sections)
 
 
-def write_report(path: str | Path, diagnosis: Diagnosis, title: str | None = None) -> Path:
+def render_html(diagnosis: Diagnosis, title: str | None = None,
+                truth: Mapping[str, Any] | None = None) -> str:
+    """The report of a diagnosis as one HTML string; ``truth``: a simulator's truth dict,
+    to compare the effect sizes with (hostpc.report.effect_sizes)."""
+    title = title or f"zerocal diagnosis: {diagnosis.source or 'dataset'}"
+    return page(title, f"<h1>{_e(title)}</h1>\n" + diagnosis_body(diagnosis, truth))
+
+
+def write_report(path: str | Path, diagnosis: Diagnosis, title: str | None = None,
+                 truth: Mapping[str, Any] | None = None) -> Path:
     """Write the self-contained HTML report of a diagnosis to ``path``; returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(render_html(diagnosis, title), encoding="utf-8")
+    path.write_text(render_html(diagnosis, title, truth), encoding="utf-8")
     return path

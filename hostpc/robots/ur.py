@@ -456,6 +456,8 @@ class UrAdapter:
         if self.camera is None:
             raise ControllerError("UR driver: no camera service configured (--camera HOST:PORT)")
         left, right, q, t = await self.camera.capture(pattern, view)
+        if len(q) == 0:  # a camera service without joints (hostpc camera serve): our q, t
+            t, q, _, _ = await self._call(self._sample)
         return StereoCapture(left=left, right=right, q=np.asarray(q, float) + self._offsets, t=t)
 
     async def get_offsets(self) -> np.ndarray:

@@ -18,8 +18,11 @@ CONTRACT_VARIABLE = re.compile(
 
 
 def run_json(capsys: pytest.CaptureFixture[str], *args: str) -> dict:  # type: ignore[type-arg]
-    assert main(["diagnose", str(EXAMPLE), "--json", *args]) == 0
-    return json.loads(capsys.readouterr().out)
+    """The --json document; the exit code says the verdict (0 adequate, 1 not)."""
+    code = main(["diagnose", str(EXAMPLE), "--json", *args])
+    document = json.loads(capsys.readouterr().out)
+    assert code == (0 if document["adequate"] else 1)
+    return document
 
 
 def test_json_contract_with_ladder(capsys: pytest.CaptureFixture[str]) -> None:
@@ -66,7 +69,7 @@ def test_json_without_ladder_has_no_ladder_and_plus_effect(capsys: pytest.Captur
 
 def test_text_output_and_report(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     report = tmp_path / "out" / "report.html"
-    assert main(["diagnose", str(EXAMPLE), "--ladder", "--report", str(report)]) == 0
+    assert main(["diagnose", str(EXAMPLE), "--ladder", "--report", str(report)]) == 1
     text = capsys.readouterr().out
     assert "verdict: NOT adequate" in text
     assert "* joint_compliance" in text
@@ -129,8 +132,29 @@ def test_ladder_with_every_candidate_is_fast(capsys: pytest.CaptureFixture[str])
     times = []
     for _ in range(3):
         start = time.perf_counter()
-        assert main(["diagnose", str(EXAMPLE), "--json", "--ladder"]) == 0
+        assert main(["diagnose", str(EXAMPLE), "--json", "--ladder"]) == 1  # not adequate
         times.append(time.perf_counter() - start)
     document = json.loads(capsys.readouterr().out.split("\n}\n")[0] + "\n}")
     assert len(document["candidates"]) >= 6 and len(document["ladder"]) == 2
     assert min(times) < 3.0, f"hostpc diagnose --ladder took {min(times):.2f} s"
+
+
+def test_exit_codes_a_ci_job_can_gate_on(capsys: pytest.CaptureFixture[str],
+                                          tmp_path: Path) -> None:
+    """0 adequate, 1 not adequate (the model named, whatever the ladder finds), 2 bad input:
+    a broken file, an unwritable report; never a traceback."""
+    fast = ["--cv-folds", "0"]
+    assert main(["diagnose", str(EXAMPLE), "--effects", "+joint_compliance", *fast]) == 0
+    assert "verdict: adequate" in capsys.readouterr().out
+    assert main(["diagnose", str(EXAMPLE), *fast]) == 1
+    assert "verdict: NOT adequate" in capsys.readouterr().out
+    assert main(["diagnose", str(EXAMPLE), "--ladder", "--json", *fast]) == 1
+    assert json.loads(capsys.readouterr().out)["ladder"][-1]["adequate"] is True
+    broken = tmp_path / "broken.json"
+    broken.write_text('{"format": "zerocal-dataset/1", "samples": [')
+    assert main(["diagnose", str(broken)]) == 2
+    assert "broken.json" in capsys.readouterr().err
+    assert main(["diagnose", str(EXAMPLE), "--effects", "+joint_compliance", *fast,
+                 "--report", str(tmp_path)]) == 2  # a folder, not a file
+    err = capsys.readouterr().err
+    assert "--report" in err and "Traceback" not in err

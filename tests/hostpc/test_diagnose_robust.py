@@ -67,7 +67,7 @@ def test_gross_outlier_neither_hides_nor_fakes_an_effect(capsys: pytest.CaptureF
     bad = shifted(load_dataset(EXAMPLE), 10, np.array([0.0, 0.0, 10.0]))
     path = tmp_path / "bad.json"
     save_dataset(bad, path)
-    assert main(["diagnose", str(path), "--ladder", "--json"]) == 0
+    assert main(["diagnose", str(path), "--ladder", "--json"]) == 1  # not adequate
     document = json.loads(capsys.readouterr().out)
     assert [o["sample"] for o in document["outliers"]] == [10]
     assert document["adequate"] is False
@@ -142,8 +142,9 @@ def test_very_few_samples(n_samples: int, capsys: pytest.CaptureFixture[str],
     traceback, and a plain statement that the samples are too few."""
     path = tmp_path / "few.json"
     save_dataset(hidden_dataset({}, seed=3, n_samples=n_samples).dataset, path)
-    assert main(["diagnose", str(path), "--ladder", "--json"]) == 0
+    code = main(["diagnose", str(path), "--ladder", "--json"])
     document = json.loads(capsys.readouterr().out)
+    assert code == (0 if document["adequate"] else 1)
     candidates = document["candidates"]
     untestable = [c for c in candidates if not c["testable"]]
     assert untestable, "5 samples cannot test every candidate"
@@ -154,7 +155,7 @@ def test_very_few_samples(n_samples: int, capsys: pytest.CaptureFixture[str],
     assert testable == sorted(testable, reverse=True)  # not testable ones last
     assert all(c["delta_bic"] > -100 for c in candidates if c["testable"])
     assert any(s.startswith("Too few samples to judge") for s in document["advice"])
-    assert main(["diagnose", str(path), "--ladder"]) == 0
+    assert main(["diagnose", str(path), "--ladder"]) == code
     text = capsys.readouterr().out
     assert "untestable" in text and "Traceback" not in text
     if n_samples == 3:  # no degrees of freedom left at all

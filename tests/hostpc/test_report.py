@@ -1,13 +1,13 @@
-"""The HTML report: one self-contained file whose plots are embedded and decode, checked
-in a real headless browser (Debian's chromium) when it is installed."""
+"""The HTML report: one self-contained file whose figures are inline SVG that parse and
+draw, checked in a real headless browser (Debian's chromium) when it is installed."""
 
 from __future__ import annotations
 
-import base64
 import os
 import re
 import shutil
 import subprocess
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
@@ -16,17 +16,20 @@ from hostpc.diagnostics import Diagnosis, diagnose
 from hostpc.report import render_html, write_report
 from tests.hostpc.diagnose_support import hidden_dataset
 
-PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+SVG = "{http://www.w3.org/2000/svg}"
 CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu",
                   "--disable-background-networking", "--disable-component-update",
                   "--disable-sync", "--no-first-run"]
 IMAGE_CHECK = """<script>
 window.addEventListener('load', function () {
-  var images = Array.from(document.images);
-  var decoded = images.filter(function (i) { return i.complete && i.naturalWidth > 0; });
+  var figures = Array.from(document.querySelectorAll('svg.plot'));
+  var drawn = figures.filter(function (f) {
+    var box = f.getBoundingClientRect();
+    return box.width > 100 && box.height > 100 && f.querySelectorAll('path, rect').length > 2;
+  });
   var out = document.createElement('div');
   out.id = 'image-check';
-  out.textContent = 'decoded ' + decoded.length + ' of ' + images.length;
+  out.textContent = 'decoded ' + drawn.length + ' of ' + figures.length;
   document.body.appendChild(out);
 });
 </script>"""
@@ -45,7 +48,9 @@ def report(diagnosis: Diagnosis, tmp_path_factory: pytest.TempPathFactory) -> Pa
 
 
 def image_sources(text: str) -> list[str]:
-    return re.findall(r'<img src="([^"]*)"', text)
+    """The inline SVG figures of a report."""
+    return re.findall(r'<svg xmlns="http://www.w3.org/2000/svg" class="plot".*?</svg>'
+                      r'(?=</figure>)', text, re.S)
 
 
 def test_report_is_self_contained_with_every_section(report: Path) -> None:
@@ -54,17 +59,19 @@ def test_report_is_self_contained_with_every_section(report: Path) -> None:
     assert not re.search(r'(src|href)="(https?:|//|file:)', text)
     assert "<script" not in text
     for heading in ("Is the model adequate?", "Model vs measurement", "Where does it fail?",
-                    "Which effect is missing?", "Ladder", "Parameters", "Identifiability"):
+                    "Which effect is missing?", "Ladder", "Parameters: effect sizes",
+                    "Identifiability"):
         assert f"<h2>{heading}</h2>" in text, heading
     assert "joint_compliance" in text and "joint_offsets.q2" in text
     assert "NOT adequate" in text
+    assert "<img" not in text and "DATASET" not in text
     sources = image_sources(text)
-    assert len(sources) >= 8  # measurement, histogram, variables, 2 rankings, ladder, rho, sv
+    assert len(sources) == 8  # measurement, histogram, variables, 2 rankings, ladder, rho, sv
     for source in sources:
-        prefix = "data:image/png;base64,"
-        assert source.startswith(prefix)
-        png = base64.b64decode(source[len(prefix):], validate=True)
-        assert png.startswith(PNG_MAGIC) and len(png) > 2000
+        root = ET.fromstring(source)  # well-formed XML, or this raises
+        assert root.tag == f"{SVG}svg" and root.get("aria-label")
+        marks = root.findall(f".//{SVG}path") + root.findall(f".//{SVG}rect")
+        assert len(marks) >= 3 and len(source) > 2000
 
 
 def test_report_without_ladder_escapes_and_says_how_to_get_one(diagnosis: Diagnosis,
@@ -72,7 +79,14 @@ def test_report_without_ladder_escapes_and_says_how_to_get_one(diagnosis: Diagno
     from dataclasses import replace
 
     text = render_html(replace(diagnosis, ladder=None), title="<b>run & co</b>")
-    assert "hostpc diagnose DATASET --ladder" in text
+    assert "hostpc diagnose hidden.json --ladder" in text
+    anonymous = render_html(replace(diagnosis, ladder=None, source=None))
+    assert "DATASET" not in anonymous and "--ladder</code> on this dataset" in anonymous
+    from hostpc.diagnostics.advice import command
+
+    assert command(diagnosis.check, "backlash", None, []) == "--effects +backlash"
+    assert command(diagnosis.check, "backlash", "d.json", ["p.py"]) == (
+        "hostpc diagnose d.json --effects +backlash --plugin p.py")
     assert len(image_sources(text)) == len(image_sources(report.read_text())) - 1
     assert "&lt;b&gt;run &amp; co&lt;/b&gt;" in text and "<b>run" not in text
 
@@ -120,3 +134,28 @@ def _assert_not_blank(path: Path) -> None:
     colours = {tuple(p) for p in flat[:: max(1, flat.shape[0] // 20000)]}
     assert len(colours) > 50
     assert pixels[..., :3].std() > 0.05
+
+
+def test_svg_axes_ticks_and_gaps() -> None:
+    """Round ticks; NaN breaks a line and drops a point; data outside the limits is clipped
+    by the nested viewport, never drawn over the labels."""
+    from hostpc.report.svg import Canvas, limits, nice_ticks, tick_label
+
+    assert nice_ticks(0.0, 1.0) == pytest.approx([0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
+    assert nice_ticks(-0.013, 0.021, 4) == pytest.approx([-0.01, 0.0, 0.01, 0.02])
+    assert [tick_label(v, 0.2) for v in (0.4, 0.0, 1e-5)] == ["0.4", "0", "1e-05"]
+    assert limits([1.0, float("nan"), 3.0], pad=0.0) == (1.0, 3.0)
+    assert limits([2.0, 2.0])[0] < 2.0 < limits([2.0, 2.0])[1]
+    canvas = Canvas(200, 100, "t")
+    axes = canvas.axes(30, 10, 160, 70, (0.0, 4.0), (0.0, 1.0))
+    axes.line([0, 1, 2, 3, 4], [0.1, 0.2, float("nan"), 0.4, 0.5], "red")
+    axes.points([0, 1, 2], [0.5, float("nan"), 0.5], "blue")
+    axes.frame("title", "x", "y")
+    svg = canvas.render()
+    root = ET.fromstring(svg)
+    paths = [p.get("d", "") for p in root.iter(f"{SVG}path")]
+    line = next(d for d in paths if "L" in d)
+    assert line.count("M") == 2  # the NaN splits it
+    dots = next(d for d in paths if d.endswith("h0") and d.count("M") == 2)
+    assert dots.startswith("M0.0 35.0h0")  # (0, 0.5) in the 160 x 70 viewport
+    assert root.find(f"{SVG}svg").get("width") == "160.0"  # type: ignore[union-attr]

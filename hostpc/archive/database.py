@@ -1,0 +1,276 @@
+"""The results archive in a real database: SQLite (a file, the embedded default) or
+PostgreSQL (one archive shared by many stations).
+
+URLs: `sqlite:///PATH` (relative) or `sqlite:////ABS/PATH`, and
+`postgresql://USER@HOST[:PORT]/DB` (driver psycopg 3; a password comes from the
+environment, PGPASSWORD or ~/.pgpass, never from the command line).
+
+Built on SQLAlchemy Core: one schema description serves both databases, it pools and
+retries connections, and its dialects handle the SQL differences (autoincrement, JSON
+text, timestamps), which hand-written SQL for two databases would repeat.
+
+Schema versioning: table `zerocal_schema` holds the applied version; `MIGRATIONS[k]` takes
+the schema from version k to k+1; `open_archive` applies the missing ones inside one
+transaction under a lock (PostgreSQL advisory lock; SQLite's write lock), so stations that
+start together migrate once.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from datetime import UTC, datetime
+from typing import Any
+
+import sqlalchemy as sa
+from sqlalchemy.engine import Connection, Engine
+
+from hostpc.archive.records import JointOffset, RunRecord
+from hostpc.errors import InputError, ZerocalError
+
+
+class ArchiveError(ZerocalError):
+    """The archive database cannot be reached or refused a write."""
+
+    exit_code = 3
+
+
+metadata = sa.MetaData()
+
+schema_table = sa.Table("zerocal_schema", metadata,
+                        sa.Column("version", sa.Integer, nullable=False))
+
+runs_table = sa.Table(
+    "runs", metadata,
+    sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
+    sa.Column("run_uid", sa.String(64), nullable=False, unique=True),
+    sa.Column("serial", sa.String(64), nullable=False, index=True),
+    sa.Column("model", sa.String(64), nullable=False),
+    sa.Column("station", sa.String(64), nullable=False),
+    sa.Column("started_at", sa.DateTime(timezone=True), nullable=False),
+    sa.Column("archived_at", sa.DateTime(timezone=True), nullable=False),
+    sa.Column("method", sa.String(32), nullable=False),
+    sa.Column("effects", sa.Text, nullable=False),
+    sa.Column("verdict", sa.String(16), nullable=False),
+    sa.Column("exit_code", sa.Integer, nullable=False),
+    sa.Column("push_status", sa.String(32), nullable=False),
+    sa.Column("largest_correction_deg", sa.Float, nullable=True),
+    sa.Column("software_version", sa.String(32), nullable=False),
+    sa.Column("run_dir", sa.Text, nullable=False),
+    sa.Column("result_json", sa.Text, nullable=False),
+    sa.Column("dataset_json", sa.Text, nullable=True),
+)
+
+offsets_table = sa.Table(
+    "run_offsets", metadata,
+    sa.Column("run_id", sa.Integer, sa.ForeignKey("runs.id", ondelete="CASCADE"),
+              nullable=False, index=True),
+    sa.Column("joint", sa.Integer, nullable=False),
+    sa.Column("label", sa.String(32), nullable=False),
+    sa.Column("old_deg", sa.Float, nullable=True),
+    sa.Column("correction_deg", sa.Float, nullable=True),
+    sa.Column("sigma_deg", sa.Float, nullable=True),
+    sa.Column("new_deg", sa.Float, nullable=True),
+    sa.Column("pushed", sa.Boolean, nullable=False),
+)
+
+
+def _migrate_0_to_1(connection: Connection) -> None:
+    runs_table.create(connection)
+    offsets_table.create(connection)
+
+
+def _migrate_1_to_2(connection: Connection) -> None:
+    # version 2: runs are looked up per robot in time order (history, drift)
+    # (plain DDL: an sa.Index on runs_table would attach itself to the table description)
+    connection.exec_driver_sql("CREATE INDEX ix_runs_serial_started ON runs (serial, started_at)")
+
+
+MIGRATIONS: tuple[Callable[[Connection], None], ...] = (_migrate_0_to_1, _migrate_1_to_2)
+SCHEMA_VERSION = len(MIGRATIONS)
+_ADVISORY_LOCK_KEY = 4_711_042  # arbitrary, constant: "zerocal archive migration"
+
+
+def _engine(url: str) -> Engine:
+    if url.startswith("sqlite:"):
+        # several stations may write one file: wait for the lock instead of failing
+        engine = sa.create_engine(url, connect_args={"timeout": 60})
+
+        @sa.event.listens_for(engine, "connect")
+        def _pragmas(dbapi_connection: Any, _record: Any) -> None:
+            dbapi_connection.isolation_level = None  # SQLAlchemy emits BEGIN itself
+            cursor = dbapi_connection.cursor()
+            cursor.execute("PRAGMA journal_mode=WAL")
+            cursor.execute("PRAGMA foreign_keys=ON")
+            cursor.close()
+
+        @sa.event.listens_for(engine, "begin")
+        def _begin(connection: Connection) -> None:
+            # take the write lock at the start of each transaction: concurrent writers
+            # (stations, the migration) queue instead of failing mid-transaction
+            connection.exec_driver_sql("BEGIN IMMEDIATE")
+        return engine
+    if url.startswith(("postgresql://", "postgres://", "postgresql+psycopg://")):
+        scheme, rest = url.split("://", 1)
+        return sa.create_engine(f"postgresql+psycopg://{rest}", pool_pre_ping=True)
+    raise InputError(f"--db {url}: expected sqlite:///PATH or postgresql://USER@HOST/DB")
+
+
+def _current_version(connection: Connection) -> int:
+    if not sa.inspect(connection).has_table("zerocal_schema"):
+        return 0
+    version = connection.execute(sa.select(schema_table.c.version)).scalar()
+    return int(version or 0)
+
+
+def _migrate(engine: Engine) -> None:
+    with engine.begin() as connection:
+        if engine.dialect.name == "postgresql":
+            connection.execute(sa.text("SELECT pg_advisory_xact_lock(:key)"),
+                               {"key": _ADVISORY_LOCK_KEY})
+        schema_table.create(connection, checkfirst=True)
+        version = _current_version(connection)
+        if version > SCHEMA_VERSION:
+            raise ArchiveError(f"archive schema version {version} is newer than this zerocal "
+                               f"({SCHEMA_VERSION}): upgrade zerocal")
+        for step in MIGRATIONS[version:]:
+            step(connection)
+        if version == 0 and not connection.execute(sa.select(schema_table)).first():
+            connection.execute(schema_table.insert().values(version=SCHEMA_VERSION))
+        elif version != SCHEMA_VERSION:
+            connection.execute(schema_table.update().values(version=SCHEMA_VERSION))
+
+
+def _offset_rows(run_id: int, offsets: tuple[JointOffset, ...]) -> list[dict[str, Any]]:
+    return [{"run_id": run_id, "joint": o.joint, "label": o.label, "old_deg": o.old_deg,
+             "correction_deg": o.correction_deg, "sigma_deg": o.sigma_deg,
+             "new_deg": o.new_deg, "pushed": o.pushed} for o in offsets]
+
+
+def _as_utc(value: datetime) -> datetime:
+    return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
+
+
+class Archive:
+    """An open archive. `add` stores a run (idempotent by run_uid); `runs` lists runs as
+    plain dicts in time order; `run` returns one with its dataset and result."""
+
+    def __init__(self, engine: Engine, url: str):
+        self.engine = engine
+        self.url = url
+
+    def add(self, record: RunRecord) -> int:
+        """Store `record`; returns its archive id. A record whose run_uid is already stored
+        is not stored twice (its existing id is returned)."""
+        values = {
+            "run_uid": record.run_uid, "serial": record.serial, "model": record.model,
+            "station": record.station, "started_at": _as_utc(record.started_at),
+            "archived_at": datetime.now(UTC), "method": record.method,
+            "effects": json.dumps(list(record.effects)), "verdict": record.verdict,
+            "exit_code": record.exit_code, "push_status": record.push_status,
+            "largest_correction_deg": record.largest_correction_deg,
+            "software_version": record.software_version, "run_dir": record.run_dir,
+            "result_json": json.dumps(record.result, allow_nan=True),
+            "dataset_json": None if record.dataset is None else json.dumps(record.dataset),
+        }
+        try:
+            with self.engine.begin() as connection:
+                existing = connection.execute(sa.select(runs_table.c.id).where(
+                    runs_table.c.run_uid == record.run_uid)).scalar()
+                if existing is not None:
+                    return int(existing)
+                run_id = int(connection.execute(runs_table.insert().values(**values))
+                             .inserted_primary_key[0])
+                if record.offsets:
+                    connection.execute(offsets_table.insert(),
+                                       _offset_rows(run_id, record.offsets))
+                return run_id
+        except sa.exc.IntegrityError:  # a concurrent writer stored the same uid first
+            with self.engine.connect() as connection:
+                existing = connection.execute(sa.select(runs_table.c.id).where(
+                    runs_table.c.run_uid == record.run_uid)).scalar()
+            if existing is None:
+                raise
+            return int(existing)
+        except sa.exc.SQLAlchemyError as exc:
+            raise ArchiveError(f"archive {self.url}: cannot store run "
+                               f"({_first_line(exc)})") from None
+
+    def runs(self, serial: str | None = None) -> list[dict[str, Any]]:
+        """Every run (of one robot if `serial`), oldest first, with its per-joint offsets
+        under "offsets" (no dataset or result document: see `run`)."""
+        query = sa.select(*[c for c in runs_table.c
+                            if c.name not in ("result_json", "dataset_json")])
+        if serial is not None:
+            query = query.where(runs_table.c.serial == serial)
+        query = query.order_by(runs_table.c.started_at, runs_table.c.id)
+        try:
+            with self.engine.connect() as connection:
+                rows = [dict(r._mapping) for r in connection.execute(query)]
+                ids = [r["id"] for r in rows]
+                offsets: dict[int, list[dict[str, Any]]] = {i: [] for i in ids}
+                if ids:
+                    for o in connection.execute(sa.select(offsets_table).where(
+                            offsets_table.c.run_id.in_(ids)).order_by(offsets_table.c.joint)):
+                        entry = dict(o._mapping)
+                        offsets[entry.pop("run_id")].append(entry)
+        except sa.exc.SQLAlchemyError as exc:
+            raise ArchiveError(f"archive {self.url}: cannot read ({_first_line(exc)})") from None
+        for row in rows:
+            row["effects"] = json.loads(row["effects"])
+            row["started_at"] = _as_utc(row["started_at"]).isoformat()
+            row["archived_at"] = _as_utc(row["archived_at"]).isoformat()
+            row["offsets"] = offsets[row["id"]]
+        return rows
+
+    def run(self, run_id: int) -> dict[str, Any]:
+        """One run with its whole result document ("result") and dataset ("dataset")."""
+        try:
+            with self.engine.connect() as connection:
+                row = connection.execute(sa.select(runs_table).where(
+                    runs_table.c.id == run_id)).first()
+        except sa.exc.SQLAlchemyError as exc:
+            raise ArchiveError(f"archive {self.url}: cannot read ({_first_line(exc)})") from None
+        if row is None:
+            raise InputError(f"--run {run_id}: no such run in the archive {self.url}")
+        entry = dict(row._mapping)
+        entry["result"] = json.loads(entry.pop("result_json"))
+        dataset = entry.pop("dataset_json")
+        entry["dataset"] = None if dataset is None else json.loads(dataset)
+        entry["effects"] = json.loads(entry["effects"])
+        return entry
+
+    def close(self) -> None:
+        self.engine.dispose()
+
+    def __enter__(self) -> Archive:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(getattr(exc, "orig", None) or exc)
+    return text.strip().splitlines()[0] if text.strip() else type(exc).__name__
+
+
+def open_archive(url: str) -> Archive:
+    """Connect to the archive at `url`, creating or migrating its schema."""
+    engine = _engine(url)
+    try:
+        _migrate(engine)
+    except sa.exc.SQLAlchemyError as exc:
+        engine.dispose()
+        raise ArchiveError(f"archive {url}: cannot open ({_first_line(exc)})") from None
+    return Archive(engine, url)
+
+
+@contextmanager
+def archive_at(url: str) -> Iterator[Archive]:
+    archive = open_archive(url)
+    try:
+        yield archive
+    finally:
+        archive.close()

@@ -1,0 +1,104 @@
+"""The archive's history as a self-contained HTML page: the fleet (last verdict per robot,
+robots whose zeros move most), drift findings, and per robot its zeros over time with
+their sigmas (a plot per robot, drift marked in red)."""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+from typing import Any
+
+from hostpc.archive.drift import DriftFinding, fleet_summary, zero_series
+
+
+def drift_plot_png(runs: list[dict[str, Any]], findings: list[DriftFinding]) -> bytes:
+    """One robot's zero of each joint over its calibrations (deg, change from the first
+    calibration, error bars = 1 sigma); joints with a drift finding are drawn in red."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    series = zero_series(runs)
+    drifting = {f.label for f in findings}
+    labels = sorted(series, key=lambda s: (len(s), s))
+    figure, axes = plt.subplots(max(1, len(labels)), 1, figsize=(7, 1.3 + 1.25 * len(labels)),
+                                sharex=True, squeeze=False)
+    run_index = {int(run["id"]): i + 1 for i, run in enumerate(runs)}
+    for axis, label in zip(axes[:, 0], labels, strict=False):
+        points = series[label]
+        x = [run_index[p[0]] for p in points]
+        base = points[0][2]
+        y = [(p[2] - base) * 1000.0 for p in points]
+        err = [0.0 if p[3] is None else p[3] * 1000.0 for p in points]
+        colour = "tab:red" if label in drifting else "tab:blue"
+        axis.errorbar(x, y, yerr=err, marker="o", color=colour, capsize=3, lw=1.2)
+        axis.set_ylabel(f"{label}\n[mdeg]", fontsize=8)
+        axis.grid(alpha=0.3)
+        axis.tick_params(labelsize=8)
+    axes[-1, 0].set_xlabel("calibration #", fontsize=9)
+    if runs:
+        figure.suptitle(f"zero offsets of {runs[0]['serial']} (change since first "
+                        f"calibration)", fontsize=10)
+    figure.tight_layout()
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=80)
+    plt.close(figure)
+    return buffer.getvalue()
+
+
+def _table(rows: list[dict[str, Any]], columns: list[tuple[str, str]]) -> str:
+    head = "".join(f"<th>{html.escape(title)}</th>" for _, title in columns)
+    body = []
+    for row in rows:
+        cells = []
+        for key, _ in columns:
+            value = row.get(key, "")
+            text = f"{value:.4f}" if isinstance(value, float) else str(value)
+            css = f' class="{html.escape(text)}"' if key in ("verdict", "last_verdict") else ""
+            cells.append(f"<td{css}>{html.escape(text)}</td>")
+        body.append("<tr>" + "".join(cells) + "</tr>")
+    return f"<table><tr>{head}</tr>{''.join(body)}</table>"
+
+
+STYLE = """body{font-family:sans-serif;margin:2em;max-width:60em}
+table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #bbb;padding:3px 8px;
+font-size:90%}th{background:#eee}.PASS{color:#070;font-weight:bold}.FAIL,.ERROR{color:#b00;
+font-weight:bold}.alarm{color:#b00}"""
+
+
+def history_html(runs: list[dict[str, Any]], findings: list[DriftFinding],
+                 robot: str | None = None) -> str:
+    """The history page for `runs` (all robots, or the one named `robot`)."""
+    title = f"zerocal history: {robot}" if robot else "zerocal history: fleet"
+    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}"
+             f"</title><style>{STYLE}</style></head><body><h1>{html.escape(title)}</h1>"]
+    parts.append("<h2>Fleet: last verdict per robot, largest zero move first</h2>")
+    parts.append(_table(fleet_summary(runs), [
+        ("serial", "robot"), ("model", "model"), ("runs", "runs"),
+        ("last_verdict", "last verdict"), ("last_run", "last run"),
+        ("largest_zero_move_deg", "largest zero move [deg]")]))
+    parts.append("<h2>Drift alarms</h2>")
+    if findings:
+        parts.append("<ul>" + "".join(
+            f"<li class='alarm'>DRIFT {html.escape(f.serial)} {html.escape(f.label)}: "
+            f"{html.escape(f.reason)} (runs {f.from_run} &rarr; {f.to_run})</li>"
+            for f in findings) + "</ul>")
+    else:
+        parts.append("<p>none: no joint zero moved beyond its threshold or uncertainty.</p>")
+    parts.append("<h2>Runs</h2>")
+    parts.append(_table(runs, [("id", "id"), ("serial", "robot"), ("started_at", "started"),
+                               ("station", "station"), ("method", "method"),
+                               ("verdict", "verdict"), ("push_status", "push"),
+                               ("largest_correction_deg", "largest correction [deg]")]))
+    by_robot: dict[str, list[dict[str, Any]]] = {}
+    for run in runs:
+        by_robot.setdefault(str(run["serial"]), []).append(run)
+    for serial, robot_runs in by_robot.items():
+        robot_findings = [f for f in findings if f.serial == serial]
+        png = base64.b64encode(drift_plot_png(robot_runs, robot_findings)).decode()
+        parts.append(f"<h2>Robot {html.escape(serial)}</h2><img alt='zero offsets of "
+                     f"{html.escape(serial)}' src='data:image/png;base64,{png}'>")
+    parts.append("</body></html>")
+    return "\n".join(parts)

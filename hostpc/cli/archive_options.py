@@ -1,0 +1,49 @@
+"""`--db URL` for commands that archive a run or read one back (calibrate, fit)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+
+def add_archive_options(parser: argparse.ArgumentParser, *, read: bool) -> None:
+    parser.add_argument("--db", metavar="URL",
+                        help="results archive: sqlite:///PATH or postgresql://USER@HOST/DB")
+    if read:
+        parser.add_argument("--run", type=int, metavar="ID",
+                            help="with --db: refit the dataset of this archived run")
+    else:
+        parser.add_argument("--robot-serial", metavar="SERIAL",
+                            help="with --db: the robot's serial number (default: its address)")
+
+
+def archive_run(args: argparse.Namespace, run_dir: Path, exit_code: int) -> None:
+    """Archive the run in `run_dir` when `--db` was given; says so on stderr."""
+    if not getattr(args, "db", None) or not (run_dir / "result.json").exists():
+        return
+    from hostpc.archive import open_archive, record_from_run
+
+    serial = args.robot_serial or str(args.robot or "unknown")
+    with open_archive(args.db) as archive:
+        run_id = archive.add(record_from_run(run_dir, serial=serial, exit_code=exit_code))
+    print(f"archived as run {run_id} in {args.db}", file=sys.stderr)
+
+
+def dataset_from_archive(args: argparse.Namespace) -> str:
+    """The dataset of archived run `--run` written to a temporary file; returns its path."""
+    from hostpc.archive import open_archive
+    from hostpc.errors import InputError
+
+    if args.run is None:
+        raise InputError("--db needs --run ID (the archived run to refit)")
+    with open_archive(args.db) as archive:
+        entry = archive.run(args.run)
+    if entry["dataset"] is None:
+        raise InputError(f"--run {args.run}: the archived run has no dataset")
+    folder = Path(tempfile.mkdtemp(prefix="zerocal-archived-"))
+    path = folder / f"run-{args.run}-dataset.json"
+    path.write_text(json.dumps(entry["dataset"]))
+    return str(path)

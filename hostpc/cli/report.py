@@ -1,0 +1,74 @@
+"""`hostpc report RUN`: (re)write a calibration run's report.html from its files, offline.
+
+Reads RUN/result.json (the verdict, offsets, verification, truth comparison), diagnoses
+RUN/dataset.json with the run's model (effects, plugins, loss as recorded in the result's
+settings) and, for a simulated run, reads RUN/sim/truth.json for the effect sizes. Works on
+runs of older versions too: what their result lacks is left out of the report.
+Exit codes: 0 written; 2 bad input (no run folder, no or malformed result.json, a report
+path that cannot be written).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from hostpc.errors import InputError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    parser = subparsers.add_parser(
+        "report",
+        help="write a calibration run's report.html again from its files (no robot)",
+        description=("Render RUN/report.html from RUN/result.json and RUN/dataset.json: the "
+                     "verdict, offsets table, verification and (simulated runs) the truth "
+                     "comparison, then the diagnosis. See docs/diagnostics.md."),
+    )
+    parser.add_argument("run", help="run folder of `hostpc calibrate` (holds result.json)")
+    parser.add_argument("--out", metavar="FILE.html",
+                        help="where to write (default RUN/report.html)")
+    parser.add_argument("--no-diagnosis", action="store_true",
+                        help="only the result (skip diagnosing the dataset)")
+    parser.set_defaults(func=run)
+
+
+def read_json(path: Path, what: str) -> dict[str, Any]:
+    """A JSON object from ``path``; InputError naming the file otherwise."""
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"{path}: no {what} here") from None
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path}: cannot read the {what}: {exc}") from exc
+    if not isinstance(document, dict):
+        raise InputError(f"{path}: the {what} is not a JSON object")
+    return document
+
+
+def run(args: argparse.Namespace) -> int:
+    from hostpc.report import write_calibration_report
+
+    folder = Path(args.run)
+    if not folder.is_dir():
+        raise InputError(f"{folder}: not a run folder")
+    result = read_json(folder / "result.json", "result document (result.json)")
+    diagnosis = None
+    dataset = folder / "dataset.json"
+    if not args.no_diagnosis and dataset.is_file():
+        from hostpc.diagnostics import diagnose
+
+        settings = result.get("settings") or {}
+        effects = (result.get("fit") or {}).get("effects") or settings.get("effects")
+        diagnosis = diagnose(dataset, effects, plugins=settings.get("plugins") or [],
+                             loss=settings.get("loss") or "linear", source=str(dataset))
+    truth_file = folder / "sim" / "truth.json"
+    truth = read_json(truth_file, "simulator truth") if truth_file.is_file() else None
+    out = Path(args.out) if args.out else folder / "report.html"
+    try:
+        write_calibration_report(out, result, diagnosis, truth)
+    except OSError as exc:
+        raise InputError(f"{out}: cannot write the report ({exc.strerror or exc})") from exc
+    print(f"report written to {out}")
+    return 0

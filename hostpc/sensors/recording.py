@@ -1,0 +1,304 @@
+"""Record a run's robot traffic and images (`--record DIR`) and replay it (`--replay DIR`).
+
+A recording is a folder:
+
+    recording.json     {"format": "zerocal-recording/1", "settings", "cell_file", "known",
+                        "default_known", "robot", "measure_targets"}: what the run was asked
+    tape.jsonl         one line per robot call in order: {"n", "call", "args", "result"} or
+                       {"n", "call", "args", "error": {"type", "message", "code", "reason"}};
+                       a capture's result names its frame and timing, not the pixels
+    left_%04d.png      the raw image pairs, frame k of every capture in order (lossless
+    right_%04d.png     PNG, so the folder is also an image-sequence camera source)
+
+`RecordingAdapter` wraps any RobotAdapter and writes that tape as the run goes.
+`ReplayAdapter` answers the same calls from the tape, so `hostpc calibrate --replay DIR`
+runs the whole pipeline (rig calibration, detection, fit, diagnose) without a robot and
+reaches the same dataset to the last digit: floats go through JSON as their shortest
+round-trip text and images through PNG bit for bit. A replay that asks for something the
+tape does not hold next (another pose, another call) stops with `ReplayDiverged`.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hostpc.errors import ConnectionFailed, ControllerError, InputError, RequestTimeout
+from hostpc.robots.base import (
+    ContactOutcome,
+    MeasuredTarget,
+    MoveOutcome,
+    RobotAdapter,
+    RobotState,
+    StereoCapture,
+    TargetMeasurement,
+)
+
+RECORDING_FORMAT = "zerocal-recording/1"
+HEADER_FILE = "recording.json"
+TAPE_FILE = "tape.jsonl"
+IMAGE_PATTERN = "{camera}_{index:04d}.png"
+
+
+class ReplayDiverged(InputError):
+    """The replayed run asked for something the recording does not hold next."""
+
+
+def _floats(values: Any) -> list[float]:
+    return [float(v) for v in np.asarray(values, float).reshape(-1)]
+
+
+def _array(values: Any) -> np.ndarray:
+    return np.asarray(values, dtype=float)
+
+
+def _state_to_json(s: RobotState) -> dict[str, Any]:
+    return {"q": _floats(s.q), "zero_offsets": _floats(s.zero_offsets),
+            "q_min": _floats(s.q_min), "q_max": _floats(s.q_max),
+            "digital_inputs": [bool(b) for b in s.digital_inputs],
+            "digital_outputs": [bool(b) for b in s.digital_outputs],
+            "camera": s.camera, "robot": s.robot, "extra": s.extra}
+
+
+def _state_from_json(d: Mapping[str, Any]) -> RobotState:
+    return RobotState(q=_array(d["q"]), zero_offsets=_array(d["zero_offsets"]),
+                      q_min=_array(d["q_min"]), q_max=_array(d["q_max"]),
+                      digital_inputs=tuple(d["digital_inputs"]),
+                      digital_outputs=tuple(d["digital_outputs"]), camera=dict(d["camera"]),
+                      robot=str(d["robot"]), extra=dict(d["extra"]))
+
+
+def _error_to_json(exc: BaseException) -> dict[str, Any]:
+    return {"type": type(exc).__name__, "message": str(exc),
+            "code": getattr(exc, "code", None), "reason": getattr(exc, "reason", None)}
+
+
+def _error_from_json(d: Mapping[str, Any]) -> BaseException:
+    from hostpc.transport import ControllerRefusedError
+
+    kind, message = d.get("type"), str(d.get("message", ""))
+    if kind == "ControllerRefusedError" or d.get("code"):
+        return ControllerRefusedError(message, str(d.get("code") or "refused"), d.get("reason"))
+    for cls in (RequestTimeout, ConnectionFailed):
+        if kind == cls.__name__:
+            return cls(message)
+    return ControllerError(f"{kind}: {message}")
+
+
+class RecordingAdapter:
+    """Wraps `robot`; every call and its answer go to the recording in `folder`.
+    header: the run's inputs (recording.json). Images are written as PNG as they come."""
+
+    def __init__(self, robot: RobotAdapter, folder: Path, header: Mapping[str, Any]) -> None:
+        folder.mkdir(parents=True, exist_ok=True)
+        if (folder / TAPE_FILE).exists():
+            raise InputError(f"--record {folder}: already holds a recording")
+        self.robot = robot
+        self.folder = folder
+        self._n = 0
+        self._frames = 0
+        document = {"format": RECORDING_FORMAT, **header,
+                    "measure_targets": callable(getattr(robot, "measure_targets", None))}
+        (folder / HEADER_FILE).write_text(json.dumps(document, indent=2) + "\n",
+                                          encoding="utf-8")
+        self._tape = (folder / TAPE_FILE).open("a", encoding="utf-8")
+
+    def __getattr__(self, name: str) -> Any:
+        robot = self.__dict__["robot"]
+        if name == "measure_targets" and callable(getattr(robot, name, None)):
+            return self._measure_targets
+        return getattr(robot, name)
+
+    def _write(self, entry: dict[str, Any]) -> None:
+        entry = {"n": self._n, **entry, "wall": time.time()}
+        self._n += 1
+        self._tape.write(json.dumps(entry, allow_nan=False) + "\n")
+        self._tape.flush()
+
+    async def _call(self, call: str, args: dict[str, Any], run: Callable[[], Any],
+                    encode: Callable[[Any], Any]) -> Any:
+        try:
+            result = await run()
+        except (ControllerError, ConnectionFailed) as exc:
+            self._write({"call": call, "args": args, "error": _error_to_json(exc)})
+            raise
+        self._write({"call": call, "args": args, "result": encode(result)})
+        return result
+
+    async def state(self) -> RobotState:
+        return await self._call("state", {}, self.robot.state, _state_to_json)  # type: ignore[no-any-return]
+
+    async def move_joints(self, q: np.ndarray, speed: float) -> MoveOutcome:
+        return await self._call(  # type: ignore[no-any-return]
+            "move_joints", {"q": _floats(q), "speed": float(speed)},
+            lambda: self.robot.move_joints(q, speed),
+            lambda o: {"completed": o.completed, "q": _floats(o.q), "reason": o.reason})
+
+    async def guarded_move(self, q: np.ndarray, speed: float, io_line: int) -> ContactOutcome:
+        return await self._call(  # type: ignore[no-any-return]
+            "guarded_move", {"q": _floats(q), "speed": float(speed), "io_line": int(io_line)},
+            lambda: self.robot.guarded_move(q, speed, io_line),
+            lambda o: {"contact": o.contact, "q": _floats(o.q), "reason": o.reason,
+                       "q_latched": None if o.q_latched is None else _floats(o.q_latched),
+                       "speed": None if o.speed is None else float(o.speed)})
+
+    async def capture(self, pattern: str = "target", view: int = 0) -> StereoCapture:
+        return await self._call(  # type: ignore[no-any-return]
+            "capture", {"pattern": pattern, "view": int(view)},
+            lambda: self.robot.capture(pattern, view), self._save_capture)
+
+    def _save_capture(self, c: StereoCapture) -> dict[str, Any]:
+        import cv2
+
+        frame = self._frames
+        for camera, image in (("left", c.left), ("right", c.right)):
+            path = self.folder / IMAGE_PATTERN.format(camera=camera, index=frame)
+            if not cv2.imwrite(str(path), np.ascontiguousarray(image)):
+                raise InputError(f"--record {self.folder}: cannot write {path.name}")
+        self._frames += 1
+        result: dict[str, Any] = {"frame": frame, "q": _floats(c.q), "t": float(c.t)}
+        timing = getattr(self.robot, "last_timing", None)  # host cameras: stamps and skew
+        if isinstance(timing, dict):
+            result["timing"] = timing
+        return result
+
+    async def _measure_targets(self) -> TargetMeasurement:
+        return await self._call(  # type: ignore[no-any-return]
+            "measure_targets", {}, self.robot.measure_targets,  # type: ignore[attr-defined]
+            lambda m: {"q": _floats(m.q), "t": float(m.t), "targets": [
+                {"chain": t.chain, "p": _floats(t.p), "cov": np.asarray(t.cov, float).tolist()}
+                for t in m.targets]})
+
+    async def get_offsets(self) -> np.ndarray:
+        return await self._call("get_offsets", {}, self.robot.get_offsets, _floats)  # type: ignore[no-any-return]
+
+    async def set_offsets(self, offsets: np.ndarray) -> tuple[np.ndarray, str]:
+        return await self._call(  # type: ignore[no-any-return]
+            "set_offsets", {"offsets": _floats(offsets)},
+            lambda: self.robot.set_offsets(offsets),
+            lambda r: {"previous": _floats(r[0]), "rollback_id": str(r[1])})
+
+    async def rollback(self, rollback_id: str) -> np.ndarray:
+        return await self._call("rollback", {"rollback_id": rollback_id},  # type: ignore[no-any-return]
+                                lambda: self.robot.rollback(rollback_id), _floats)
+
+    async def close(self) -> None:
+        try:
+            await self.robot.close()
+        finally:
+            self._tape.close()
+
+
+def read_header(folder: Path) -> dict[str, Any]:
+    """recording.json of `folder`; InputError (one line) if it is not a recording."""
+    path = folder / HEADER_FILE
+    try:
+        header = json.loads(path.read_text(encoding="utf-8"))
+    except OSError:
+        raise InputError(f"--replay {folder}: no {HEADER_FILE} (not a recording)") from None
+    except ValueError as exc:
+        raise InputError(f"--replay {folder}: {HEADER_FILE} is not valid JSON ({exc})") from None
+    if not isinstance(header, dict) or header.get("format") != RECORDING_FORMAT:
+        raise InputError(f"--replay {folder}: {HEADER_FILE} is not {RECORDING_FORMAT}")
+    return header
+
+
+class ReplayAdapter:
+    """Answers a run's robot calls from the recording in `folder` (see the module
+    docstring); nothing is moved or written anywhere but the new run folder."""
+
+    driver = "replay"
+
+    def __init__(self, folder: Path) -> None:
+        self.folder = folder
+        self.header = read_header(folder)
+        self._entries: list[dict[str, Any]] = []
+        try:
+            lines = (folder / TAPE_FILE).read_text(encoding="utf-8").splitlines()
+        except OSError:
+            raise InputError(f"--replay {folder}: no {TAPE_FILE}") from None
+        for number, line in enumerate(lines, 1):
+            if not line.strip():
+                continue
+            try:
+                entry = json.loads(line)
+            except ValueError as exc:
+                raise InputError(f"--replay {folder}: {TAPE_FILE} line {number} is not "
+                                 f"valid JSON ({exc})") from None
+            if not isinstance(entry, dict):
+                raise InputError(f"--replay {folder}: {TAPE_FILE} line {number} is not an "
+                                 "object")
+            self._entries.append(entry)
+        self._next = 0
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "measure_targets" and self.__dict__["header"].get("measure_targets"):
+            return self._measure_targets
+        raise AttributeError(name)
+
+    def _take(self, call: str, args: Mapping[str, Any]) -> Any:
+        if self._next >= len(self._entries):
+            raise ReplayDiverged(f"--replay {self.folder}: the run asks for {call} after the "
+                                 f"last of {len(self._entries)} recorded calls")
+        entry = self._entries[self._next]
+        if entry.get("call") != call or entry.get("args", {}) != dict(args):
+            raise ReplayDiverged(
+                f"--replay {self.folder}: call {self._next} is {call} {dict(args)} but the "
+                f"recording holds {entry.get('call')} {entry.get('args')} (other settings "
+                "or code than the recorded run?)")
+        self._next += 1
+        if "error" in entry:
+            raise _error_from_json(entry["error"])
+        return entry["result"]
+
+    async def state(self) -> RobotState:
+        return _state_from_json(self._take("state", {}))
+
+    async def move_joints(self, q: np.ndarray, speed: float) -> MoveOutcome:
+        r = self._take("move_joints", {"q": _floats(q), "speed": float(speed)})
+        return MoveOutcome(completed=bool(r["completed"]), q=_array(r["q"]), reason=r["reason"])
+
+    async def guarded_move(self, q: np.ndarray, speed: float, io_line: int) -> ContactOutcome:
+        r = self._take("guarded_move", {"q": _floats(q), "speed": float(speed),
+                                        "io_line": int(io_line)})
+        return ContactOutcome(contact=bool(r["contact"]), q=_array(r["q"]), reason=r["reason"],
+                              q_latched=None if r["q_latched"] is None else _array(r["q_latched"]),
+                              speed=r["speed"])
+
+    async def capture(self, pattern: str = "target", view: int = 0) -> StereoCapture:
+        import cv2
+
+        r = self._take("capture", {"pattern": pattern, "view": int(view)})
+        images = []
+        for camera in ("left", "right"):
+            path = self.folder / IMAGE_PATTERN.format(camera=camera, index=int(r["frame"]))
+            image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+            if image is None:
+                raise InputError(f"--replay {self.folder}: image {path.name} is missing or "
+                                 "unreadable")
+            images.append(image)
+        return StereoCapture(left=images[0], right=images[1], q=_array(r["q"]), t=float(r["t"]))
+
+    async def _measure_targets(self) -> TargetMeasurement:
+        r = self._take("measure_targets", {})
+        return TargetMeasurement(q=_array(r["q"]), t=float(r["t"]), targets=tuple(
+            MeasuredTarget(chain=t["chain"], p=_array(t["p"]), cov=_array(t["cov"]))
+            for t in r["targets"]))
+
+    async def get_offsets(self) -> np.ndarray:
+        return _array(self._take("get_offsets", {}))
+
+    async def set_offsets(self, offsets: np.ndarray) -> tuple[np.ndarray, str]:
+        r = self._take("set_offsets", {"offsets": _floats(offsets)})
+        return _array(r["previous"]), str(r["rollback_id"])
+
+    async def rollback(self, rollback_id: str) -> np.ndarray:
+        return _array(self._take("rollback", {"rollback_id": rollback_id}))
+
+    async def close(self) -> None:
+        return None

@@ -1,0 +1,93 @@
+"""The station config file (YAML or JSON), validated with pydantic at the file edge.
+
+    station: cell-7                  # name stored with every archived run
+    robot: 192.168.1.10              # controller address, or `sim` (a simulated robot per run)
+    method: stereo_target
+    effects: null                    # as `hostpc calibrate --effects`
+    known: null                      # as `hostpc calibrate --known`
+    poses: 60
+    verify_poses: 10
+    calibrate_args: []               # further `hostpc calibrate` options, verbatim
+    db: sqlite:///station.db         # or postgresql://USER@HOST/DB
+    runs_dir: station-runs
+    modbus: {host: 127.0.0.1, port: 5020}
+    http: null                       # e.g. 127.0.0.1:8080 for the live page
+    resume_attempts: 2               # a run whose link dropped is resumed this often
+    sim: {scenario: null, scenarios_by_serial: {}}
+
+The controller token comes from the environment (ZEROCAL_TOKEN) or `calibrate_args`'
+`--token-file`, never from this file.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from hostpc.errors import InputError
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ModbusEndpoint(_Strict):
+    host: str = "127.0.0.1"
+    port: int = Field(5020, ge=0, le=65535)
+
+
+class SimCell(_Strict):
+    """With `robot: sim`: each robot is a simulated world seeded by its serial number;
+    `scenario` is the base scenario file, `scenarios_by_serial` names a scenario per
+    serial (paths relative to the config file)."""
+
+    scenario: str | None = None
+    scenarios_by_serial: dict[str, str] = Field(default_factory=dict)
+
+
+class StationConfig(_Strict):
+    station: str = Field("station", min_length=1, max_length=64)
+    robot: str = Field(..., min_length=1)
+    driver: str = "zerocal"
+    method: str = "stereo_target"
+    effects: str | None = None
+    known: str | None = None
+    poses: int = Field(60, ge=4, le=10000)
+    verify_poses: int = Field(10, ge=0, le=1000)
+    calibrate_args: list[str] = Field(default_factory=list)
+    db: str = "sqlite:///station.db"
+    runs_dir: str = "station-runs"
+    modbus: ModbusEndpoint = ModbusEndpoint()
+    http: str | None = None
+    resume_attempts: int = Field(2, ge=0, le=10)
+    sim: SimCell = SimCell()
+    base_dir: str = "."
+
+    def path(self, value: str) -> Path:
+        """`value` relative to the config file's folder."""
+        candidate = Path(value).expanduser()
+        return candidate if candidate.is_absolute() else Path(self.base_dir) / candidate
+
+
+def load_station_config(path: str | Path, overrides: dict[str, Any] | None = None
+                        ) -> StationConfig:
+    """Read and validate a station config; `overrides` (from the command line) win."""
+    file = Path(path)
+    try:
+        data = yaml.safe_load(file.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise InputError(f"{file}: cannot read station config ({str(exc).splitlines()[0]})"
+                         ) from None
+    if not isinstance(data, dict):
+        raise InputError(f"{file}: station config must be a mapping")
+    data = {**data, **{k: v for k, v in (overrides or {}).items() if v is not None}}
+    data.setdefault("base_dir", str(file.resolve().parent))
+    try:
+        return StationConfig.model_validate(data)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first["loc"])
+        raise InputError(f"{file}: {where}: {first['msg']}") from None

@@ -1,0 +1,110 @@
+"""The station's Modbus register map (holding registers, 16 bit, 0-based addresses).
+
+The PLC writes COMMAND, SERIAL and MODEL; everything else is read-only to it. Strings are
+ASCII, two characters per register (high byte first), NUL-padded. 32-bit values span two
+registers, high word first. docs/station.md carries the same table for the PLC programmer.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+N_REGISTERS = 64
+
+COMMAND = 0            # PLC writes: 1 start, 2 abort, 3 acknowledge; the station clears it
+STATE = 1              # State below
+RESULT_CODE = 2        # `hostpc calibrate`'s exit code of the last run (0 = pass)
+HEARTBEAT = 3          # +1 every second while the station lives (wraps at 65535)
+PROGRESS = 4           # 0..100 % of the running calibration
+RUN_COUNTER = 5        # +1 per started run
+LARGEST_CORRECTION = 6  # 6-7: int32, largest pushed correction in 0.0001 deg
+VERIFY_STATISTIC = 8   # 8-9: uint32, verification statistic x 1000
+VERIFY_P_VALUE = 10    # uint16, p-value x 10000
+VERIFY_DOF = 11        # uint16, degrees of freedom of the verification test
+ARCHIVE_ID = 12        # 12-13: uint32, archive id of the last run
+SERIAL = 20            # 20-35: robot serial number, 32 ASCII characters
+SERIAL_LENGTH = 16
+MODEL = 40             # 40-55: robot model, 32 ASCII characters
+MODEL_LENGTH = 16
+
+PLC_WRITABLE = frozenset({COMMAND, *range(SERIAL, SERIAL + SERIAL_LENGTH),
+                          *range(MODEL, MODEL + MODEL_LENGTH)})
+
+
+class Command(enum.IntEnum):
+    NONE = 0
+    START = 1
+    ABORT = 2
+    ACKNOWLEDGE = 3
+
+
+class State(enum.IntEnum):
+    IDLE = 0
+    RUNNING = 1
+    PASS = 2
+    FAIL = 3
+    ERROR = 4
+
+
+# result codes beyond `hostpc calibrate`'s own exit codes (0-6, 130)
+RESULT_NO_SERIAL = 20       # start without a serial number in SERIAL
+RESULT_ABORTED = 21         # the PLC aborted the run
+RESULT_ARCHIVE_FAILED = 22  # the run finished but could not be archived
+RESULT_STATION_ERROR = 23   # the calibration could not be started at all
+
+
+def encode_text(text: str, n_registers: int) -> list[int]:
+    """ASCII text in `n_registers` registers (2 characters each, NUL-padded, cut to fit)."""
+    raw = text.encode("ascii", "replace")[: 2 * n_registers].ljust(2 * n_registers, b"\0")
+    return [raw[i] << 8 | raw[i + 1] for i in range(0, len(raw), 2)]
+
+
+def decode_text(registers: list[int]) -> str:
+    """The inverse of encode_text (stops at the first NUL; non-printable bytes dropped)."""
+    raw = b"".join(bytes([value >> 8 & 0xFF, value & 0xFF]) for value in registers)
+    raw = raw.split(b"\0", 1)[0]
+    return "".join(chr(b) for b in raw if 32 <= b < 127).strip()
+
+
+def encode_int32(value: int) -> list[int]:
+    value &= 0xFFFFFFFF
+    return [value >> 16, value & 0xFFFF]
+
+
+def decode_int32(registers: list[int]) -> int:
+    value = (registers[0] << 16) | registers[1]
+    return value - (1 << 32) if value & 0x80000000 else value
+
+
+def clamp_uint(value: float, bits: int) -> int:
+    return int(min(max(round(value), 0), (1 << bits) - 1))
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    """What the result registers show of a finished run."""
+
+    state: State
+    result_code: int
+    largest_correction_deg: float | None = None
+    verify_statistic: float | None = None
+    verify_p_value: float | None = None
+    verify_dof: int | None = None
+    archive_id: int | None = None
+
+
+def outcome_registers(outcome: RunOutcome) -> dict[int, int]:
+    """Register address -> value for a finished run's result."""
+    values = {STATE: int(outcome.state), RESULT_CODE: clamp_uint(outcome.result_code, 16)}
+    correction = outcome.largest_correction_deg
+    for address, value in zip(range(LARGEST_CORRECTION, LARGEST_CORRECTION + 2),
+                              encode_int32(0 if correction is None else round(correction * 1e4)),
+                              strict=True):
+        values[address] = value
+    statistic = clamp_uint((outcome.verify_statistic or 0.0) * 1000.0, 32)
+    values[VERIFY_STATISTIC], values[VERIFY_STATISTIC + 1] = encode_int32(statistic)
+    values[VERIFY_P_VALUE] = clamp_uint((outcome.verify_p_value or 0.0) * 1e4, 16)
+    values[VERIFY_DOF] = clamp_uint(outcome.verify_dof or 0, 16)
+    values[ARCHIVE_ID], values[ARCHIVE_ID + 1] = encode_int32(outcome.archive_id or 0)
+    return values

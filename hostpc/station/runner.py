@@ -1,0 +1,114 @@
+"""One calibration of the station, run as a `hostpc calibrate` child process.
+
+A child process keeps every failure of a run (a crash, a hung driver, memory) out of the
+long-running station, and runs exactly what a technician would run by hand: the run folder
+is an ordinary `hostpc calibrate` run, resumable with `--resume`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hashlib
+import json
+import os
+import re
+import signal
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from hostpc.station.config import StationConfig
+
+_PROGRESS = re.compile(r"\]\s+(\S+)\s+(\d+)/(\d+)")
+# progress bands of a run's phases, in percent
+_PHASES = {"rig": (0, 15), "chessboard": (0, 15), "measure": (15, 75), "pose": (15, 75),
+           "contact": (15, 75), "verify": (80, 100)}
+
+
+def seed_of(serial: str) -> int:
+    """A stable simulation seed for a robot serial (a simulated cell's robot identity)."""
+    return int.from_bytes(hashlib.sha256(serial.encode()).digest()[:4], "big") % (2**31 - 1)
+
+
+def sim_scenario(config: StationConfig, serial: str) -> dict[str, object]:
+    """The simulated world of robot `serial`: its own scenario if the config names one,
+    else the base scenario (or the packaged default) seeded by the serial."""
+    from hostpc.robots.simulator import default_sim_scenario, load_scenario_file
+
+    named = config.sim.scenarios_by_serial.get(serial)
+    if named:
+        return load_scenario_file(config.path(named))
+    if config.sim.scenario:
+        scenario = load_scenario_file(config.path(config.sim.scenario))
+    else:
+        scenario = default_sim_scenario()
+    return {**scenario, "seed": seed_of(serial)}
+
+
+def calibrate_command(config: StationConfig, run_dir: Path, serial: str,
+                      resume: bool) -> list[str]:
+    """The `hostpc calibrate` command line of one run (or of its resume)."""
+    command = [sys.executable, "-m", "hostpc.cli.main", "calibrate"]
+    if resume:
+        return [*command, "--resume", str(run_dir), "--no-report"]
+    command += ["--robot", config.robot, "--driver", config.driver, "--method", config.method,
+                "--poses", str(config.poses), "--verify-poses", str(config.verify_poses),
+                "--out", str(run_dir), "--no-report"]
+    if config.effects:
+        command += ["--effects", config.effects]
+    if config.known:
+        command += ["--known", config.known]
+    if config.robot == "sim":
+        scenario_file = run_dir.parent / ".scenarios" / f"{run_dir.name}.json"
+        scenario_file.parent.mkdir(parents=True, exist_ok=True)
+        scenario_file.write_text(json.dumps(sim_scenario(config, serial), indent=1))
+        command += ["--scenario", str(scenario_file)]
+    return [*command, *config.calibrate_args]
+
+
+@dataclass
+class ChildRun:
+    """A running `hostpc calibrate`; `progress` is 0..100, `log` its last output lines."""
+
+    process: asyncio.subprocess.Process
+    progress: int = 0
+    last_line: str = ""
+
+    def interrupt(self) -> None:
+        """Ask the run to stop at a safe point (SIGINT: the run stays resumable)."""
+        if self.process.returncode is None:
+            self.process.send_signal(signal.SIGINT)
+
+
+async def start_child(command: list[str], log_path: Path, on_progress: Callable[[int, str], None]
+                      ) -> tuple[ChildRun, asyncio.Task[int]]:
+    """Start `command`; its output goes to `log_path`; returns the child and a task that
+    finishes with its exit code."""
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    process = await asyncio.create_subprocess_exec(
+        *command, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT, env=env,
+        cwd=os.getcwd())
+    child = ChildRun(process)
+
+    async def pump() -> int:
+        assert process.stdout is not None
+        with log_path.open("ab") as log:
+            async for raw in process.stdout:
+                log.write(raw)
+                log.flush()
+                line = raw.decode(errors="replace").rstrip()
+                if line:
+                    child.last_line = line
+                match = _PROGRESS.search(line)
+                if match:
+                    phase, done, total = match.group(1), int(match.group(2)), int(match.group(3))
+                    low, high = _PHASES.get(phase, (child.progress, child.progress))
+                    if total > 0 and high > low:
+                        child.progress = max(child.progress, low + (high - low) * done // total)
+                on_progress(child.progress, child.last_line)
+        return await process.wait()
+
+    return child, asyncio.create_task(pump())
+
+

@@ -1,0 +1,258 @@
+"""The station service: the PLC's commands in, one calibration at a time, results out.
+
+States (register STATE): IDLE -> (START with a serial) -> RUNNING -> PASS | FAIL | ERROR
+-> (ACKNOWLEDGE) -> IDLE. Every run is a `hostpc calibrate` child process in its own run
+folder; its result is archived and written to the result registers; any failure is a
+result code, never a dead service. The run in progress is recorded in `current.json`
+under the runs folder, so a restarted station resumes it (`hostpc calibrate --resume`)
+before taking a new command. SIGTERM stops the station gracefully: the child is
+interrupted at a safe point and stays resumable.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import os
+import uuid
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from hostpc.archive import open_archive, record_from_run
+from hostpc.archive.database import Archive
+from hostpc.errors import ZerocalError
+from hostpc.station import registers as reg
+from hostpc.station.config import StationConfig
+from hostpc.station.plc import PlcServer
+from hostpc.station.runner import ChildRun, calibrate_command, start_child
+
+logger = logging.getLogger("hostpc.station")
+EXIT_CONNECTION = 3  # `hostpc calibrate`: the controller could not be reached / link lost
+
+
+@dataclass
+class StationStatus:
+    """What the live page and the log show of the station."""
+
+    state: str = "IDLE"
+    serial: str = ""
+    model: str = ""
+    progress: int = 0
+    last_line: str = ""
+    run_dir: str = ""
+    result_code: int | None = None
+    runs_done: int = 0
+    recent: list[dict[str, Any]] = field(default_factory=list)
+
+
+class Station:
+    def __init__(self, config: StationConfig):
+        self.config = config
+        self.runs_dir = config.path(config.runs_dir)
+        self.runs_dir.mkdir(parents=True, exist_ok=True)
+        self.current_file = self.runs_dir / "current.json"
+        self.plc = PlcServer(config.modbus.host, config.modbus.port)
+        self.status = StationStatus()
+        self.archive: Archive | None = None
+        self._child: ChildRun | None = None
+        self._stopping = asyncio.Event()
+        self._aborted = False
+
+    # -- life cycle -------------------------------------------------------------------
+    async def run(self, ready: asyncio.Event | None = None) -> None:
+        """Serve until `stop()`; resumes an interrupted run first."""
+        self.archive = await asyncio.to_thread(open_archive, self.config.db)
+        host, port = await self.plc.start()
+        self.modbus_address = (host, port)
+        self._publish_state(reg.State.IDLE)
+        heartbeat = asyncio.create_task(self._heartbeat())
+        try:
+            if ready is not None:
+                ready.set()
+            if self.current_file.exists():
+                await self._resume_interrupted()
+            while not self._stopping.is_set():
+                await self._poll_command()
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(self._stopping.wait(), 0.1)
+        finally:
+            heartbeat.cancel()
+            await self.plc.close()
+            if self.archive is not None:
+                await asyncio.to_thread(self.archive.close)
+
+    def stop(self) -> None:
+        """Graceful stop: interrupt the child at a safe point (it stays resumable)."""
+        self._stopping.set()
+        if self._child is not None:
+            self._child.interrupt()
+
+    async def _heartbeat(self) -> None:
+        while True:
+            self.plc.set(reg.HEARTBEAT, (self.plc.values[reg.HEARTBEAT] + 1) & 0xFFFF)
+            await asyncio.sleep(1.0)
+
+    def _publish_state(self, state: reg.State) -> None:
+        self.plc.set(reg.STATE, int(state))
+        self.status.state = state.name
+
+    # -- commands ---------------------------------------------------------------------
+    async def _poll_command(self) -> None:
+        command = self.plc.values[reg.COMMAND]
+        if command == reg.Command.NONE:
+            return
+        self.plc.set(reg.COMMAND, reg.Command.NONE)
+        state = reg.State(self.plc.values[reg.STATE])
+        if command == reg.Command.START and state == reg.State.IDLE:
+            await self._start_run()
+        elif command == reg.Command.ACKNOWLEDGE and state in (
+                reg.State.PASS, reg.State.FAIL, reg.State.ERROR):
+            self.plc.set_many(reg.outcome_registers(reg.RunOutcome(reg.State.IDLE, 0)))
+            self.plc.set(reg.PROGRESS, 0)
+            self._publish_state(reg.State.IDLE)
+        else:
+            logger.warning("command %d ignored in state %s", command, state.name)
+
+    async def _start_run(self) -> None:
+        serial = reg.decode_text(self.plc.values[reg.SERIAL:reg.SERIAL + reg.SERIAL_LENGTH])
+        model = reg.decode_text(self.plc.values[reg.MODEL:reg.MODEL + reg.MODEL_LENGTH])
+        if not serial:
+            self._finish(reg.RunOutcome(reg.State.ERROR, reg.RESULT_NO_SERIAL))
+            logger.error("start refused: no robot serial number in registers %d..%d",
+                         reg.SERIAL, reg.SERIAL + reg.SERIAL_LENGTH - 1)
+            return
+        stamp = datetime.now(UTC)
+        safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in serial)
+        run_dir = self.runs_dir / f"{safe}-{stamp:%Y%m%dT%H%M%S%f}"
+        current = {"run_uid": str(uuid.uuid4()), "serial": serial, "model": model,
+                   "run_dir": str(run_dir), "started_at": stamp.isoformat(), "attempts": 0}
+        self._write_current(current)
+        await self._execute(current, resume=False)
+
+    async def _resume_interrupted(self) -> None:
+        try:
+            current = json.loads(self.current_file.read_text())
+            current["serial"]
+        except (OSError, ValueError, KeyError, TypeError):
+            logger.error("%s is damaged: the interrupted run is not resumed", self.current_file)
+            self.current_file.unlink(missing_ok=True)
+            return
+        logger.info("resuming the interrupted run of %s in %s", current["serial"],
+                    current["run_dir"])
+        await self._execute(current, resume=Path(current["run_dir"]).exists())
+
+    # -- one run ----------------------------------------------------------------------
+    def _write_current(self, current: dict[str, Any]) -> None:
+        temporary = self.current_file.with_suffix(".tmp")
+        temporary.write_text(json.dumps(current, indent=1))
+        os.replace(temporary, self.current_file)
+
+    async def _execute(self, current: dict[str, Any], resume: bool) -> None:
+        serial, run_dir = current["serial"], Path(current["run_dir"])
+        self.status.serial, self.status.model = serial, current.get("model", "")
+        self.status.run_dir, self.status.progress = str(run_dir), 0
+        self.plc.set(reg.RUN_COUNTER, (self.plc.values[reg.RUN_COUNTER] + 1) & 0xFFFF)
+        self.plc.set(reg.PROGRESS, 0)
+        self._publish_state(reg.State.RUNNING)
+        self._aborted = False
+        code = await self._attempts(current, run_dir, resume)
+        if self._stopping.is_set() and not self._aborted:
+            logger.info("station stopping: run %s left resumable", run_dir)
+            return  # current.json stays: the next start resumes it
+        await self._conclude(current, run_dir, code)
+
+    async def _attempts(self, current: dict[str, Any], run_dir: Path, resume: bool) -> int:
+        while True:
+            try:
+                command = calibrate_command(self.config, run_dir, current["serial"], resume)
+            except ZerocalError as exc:
+                logger.error("run of %s cannot start: %s", current["serial"], exc)
+                return reg.RESULT_STATION_ERROR
+            log_path = (run_dir.parent / f"{run_dir.name}.log")
+            child, done = await start_child(command, log_path, self._on_progress)
+            self._child = child
+            watcher = asyncio.create_task(self._watch_abort(child))
+            try:
+                code = await done
+            finally:
+                watcher.cancel()
+                self._child = None
+            if self._aborted:
+                return reg.RESULT_ABORTED
+            if self._stopping.is_set():
+                return code
+            if code == EXIT_CONNECTION and current["attempts"] < self.config.resume_attempts \
+                    and run_dir.exists():
+                current["attempts"] += 1
+                self._write_current(current)
+                logger.warning("link lost during the run of %s: resuming (attempt %d of %d)",
+                               current["serial"], current["attempts"],
+                               self.config.resume_attempts)
+                resume = True
+                continue
+            return code
+
+    async def _watch_abort(self, child: ChildRun) -> None:
+        while True:
+            if self.plc.values[reg.COMMAND] == reg.Command.ABORT:
+                self.plc.set(reg.COMMAND, reg.Command.NONE)
+                self._aborted = True
+                logger.warning("PLC abort: interrupting the run")
+                child.interrupt()
+            await asyncio.sleep(0.05)
+
+    def _on_progress(self, progress: int, line: str) -> None:
+        self.status.progress, self.status.last_line = progress, line
+        self.plc.set(reg.PROGRESS, progress)
+
+    async def _conclude(self, current: dict[str, Any], run_dir: Path, code: int) -> None:
+        outcome_state = reg.State.ERROR
+        archive_id = None
+        record = None
+        if run_dir.exists():
+            try:
+                record = record_from_run(
+                    run_dir, serial=current["serial"], model=current.get("model", ""),
+                    station=self.config.station, exit_code=code, run_uid=current["run_uid"],
+                    started_at=datetime.fromisoformat(current["started_at"]))
+                assert self.archive is not None
+                archive_id = await asyncio.to_thread(self.archive.add, record)
+            except ZerocalError as exc:
+                logger.error("run %s not archived: %s", run_dir, exc)
+                code = code or reg.RESULT_ARCHIVE_FAILED
+        if record is not None and code != reg.RESULT_ABORTED:
+            outcome_state = {"PASS": reg.State.PASS, "FAIL": reg.State.FAIL}.get(
+                record.verdict, reg.State.ERROR if code else reg.State.PASS)
+        verify = record.verify if record is not None else {}
+        outcome = reg.RunOutcome(
+            outcome_state, code,
+            largest_correction_deg=record.largest_correction_deg if record else None,
+            verify_statistic=_number(verify.get("statistic")),
+            verify_p_value=_number(verify.get("p_value")),
+            verify_dof=int(verify.get("dof") or 0), archive_id=archive_id)
+        self._finish(outcome)
+        self.current_file.unlink(missing_ok=True)
+        self.status.runs_done += 1
+        self.status.recent = ([{"serial": current["serial"], "verdict": outcome_state.name,
+                                "result_code": code, "archive_id": archive_id,
+                                "run_dir": str(run_dir)}] + self.status.recent)[:20]
+        logger.info("run of %s: %s (result code %d, archive id %s)", current["serial"],
+                    outcome_state.name, code, archive_id)
+
+    def _finish(self, outcome: reg.RunOutcome) -> None:
+        self.plc.set_many(reg.outcome_registers(outcome))
+        self.plc.set(reg.PROGRESS, 100 if outcome.state != reg.State.ERROR else
+                     self.plc.values[reg.PROGRESS])
+        self.status.result_code = outcome.result_code
+        self._publish_state(outcome.state)
+
+
+def _number(value: Any) -> float | None:
+    try:
+        return None if value is None else float(value)
+    except (TypeError, ValueError):
+        return None

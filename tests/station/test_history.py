@@ -1,0 +1,69 @@
+"""Drift between calibrations: the pure finding rule, and `hostpc history` on a robot
+calibrated 5 times by the simulated controller with a growing drift of joint 3."""
+
+from __future__ import annotations
+
+import copy
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from hostpc.archive.drift import drift_findings, fleet_summary
+from hostpc.robots.simulator import default_sim_scenario
+from tests.station.conftest import REPO, hostpc_command
+
+
+def _run(run_id: int, serial: str, zeros: list[float], sigma: float = 1e-4) -> dict[str, object]:
+    return {"id": run_id, "serial": serial, "model": "ur5e", "verdict": "PASS",
+            "started_at": f"2026-01-0{run_id}T00:00:00+00:00",
+            "offsets": [{"label": f"q{j + 1}", "new_deg": z, "sigma_deg": sigma, "pushed": True}
+                        for j, z in enumerate(zeros)]}
+
+
+def test_drift_is_raised_on_the_joint_that_moved_and_only_there() -> None:
+    runs = [_run(1, "A", [0.1, 0.2, 0.3]), _run(2, "A", [0.1001, 0.2, 0.35]),
+            _run(3, "B", [0.0, 0.0, 0.0]), _run(4, "B", [0.0002, -0.0001, 0.0])]
+    findings = drift_findings(runs)
+    assert [(f.serial, f.label) for f in findings] == [("A", "q3")]
+    assert findings[0].moved_deg == pytest.approx(0.05)
+    # below the threshold but far beyond what the two fits' sigmas allow
+    precise = [_run(1, "C", [0.0]), _run(2, "C", [0.005])]
+    assert drift_findings(precise, threshold_deg=0.02)[0].z == pytest.approx(0.005 / 1.414e-4,
+                                                                            rel=1e-3)
+    assert drift_findings([_run(1, "D", [0.0]), _run(2, "D", [0.0003])]) == []
+    assert fleet_summary(runs)[0]["serial"] == "A"
+
+
+@pytest.mark.slow
+def test_history_raises_the_drift_alarm_on_the_drifting_joint(tmp_path: Path,
+                                                              fast_rig: Path) -> None:
+    base = default_sim_scenario()  # the default stereo cell: target surveyed (known)
+    db = f"sqlite:///{tmp_path / 'archive.db'}"
+    zeros = [-0.2, 0.15, 0.1, -0.3, 0.25, 0.0]
+    for calibration in range(5):
+        scenario = copy.deepcopy(base)
+        drifted = list(zeros)
+        drifted[2] += 0.03 * calibration ** 1.5  # joint 3 slips more each time
+        scenario["truth"]["zero_errors"] = [z * 3.141592653589793 / 180 for z in drifted]
+        path = tmp_path / f"world{calibration}.json"
+        path.write_text(json.dumps(scenario))
+        run = subprocess.run(hostpc_command(
+            "calibrate", "--robot", "sim", "--scenario", str(path), "--poses", "12",
+            "--verify-poses", "4", "--rig", str(fast_rig), "--no-report", "--known", "target",
+            "--out", str(tmp_path / f"run{calibration}"), "--db", db,
+            "--robot-serial", "UR-DRIFT"), cwd=REPO, capture_output=True, text=True,
+            timeout=300)
+        assert "archived as run" in run.stderr, run.stderr[-1500:]
+    page = tmp_path / "history.html"
+    history = subprocess.run(hostpc_command("history", "--db", db, "--robot", "UR-DRIFT",
+                                            "--json", "--html", str(page)),
+                             cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert history.returncode == 1, history.stderr  # 1 = a drift alarm
+    document = json.loads(history.stdout)
+    assert len(document["runs"]) == 5
+    assert {d["joint"] for d in document["drift"]} == {"q3"}
+    assert len(document["drift"]) >= 2  # the later, larger moves at least
+    html = page.read_text()
+    assert "DRIFT UR-DRIFT q3" in html and "data:image/png;base64," in html
