@@ -38,7 +38,8 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
         "default model, '-name' removes from it",
     )
     parser.add_argument("--plugin", action="append", default=[], metavar="FILE",
-                        help="Python file defining extra effects (repeatable)")
+                        help="Python file defining extra effects or measurement models "
+                        "(repeatable)")
     parser.add_argument("--loss", choices=("linear", "huber", "cauchy"), default="linear",
                         help="robust loss on whitened residuals (default: linear)")
     parser.add_argument("--cv-folds", type=int, default=5,
@@ -54,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         args.dataset = dataset_from_archive(args)
     elif not args.dataset:
         raise InputError("a dataset file is required (or --db URL --run ID)")
-    dataset = load_dataset(args.dataset)
+    dataset = load_dataset(args.dataset, plugins=args.plugin)
     result = fit(dataset, args.effects, plugins=args.plugin, loss=args.loss,
                  cv_folds=args.cv_folds)
     if args.json:

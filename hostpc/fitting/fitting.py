@@ -47,7 +47,7 @@ def cross_validated_rms(problem: Problem, x: np.ndarray, free: np.ndarray, folds
         outcome = levenberg_marquardt(problem.subset(train), x, free, loss=loss,
                                       loss_scale=loss_scale, max_iterations=30)
         held_out = evaluate(problem.subset(test), outcome.x, jacobian=False)
-        squared[test] = np.sum(held_out.raw**2, axis=1)
+        squared[test] = np.sum(held_out.raw[:, problem.length_columns]**2, axis=1)
     return float(np.sqrt(np.mean(squared)))
 
 
@@ -65,7 +65,8 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
     assert start.jacobian is not None
     finite = bool(np.all(np.isfinite(start.jacobian)) and np.all(np.isfinite(start.whitened)))
     if finite:
-        ident = analyse(start.jacobian, layout.names, layout.units)
+        ident = analyse(start.jacobian, layout.names, layout.units,
+                        frames=problem.frame_names)
     else:  # reported through the solver's "failed" status; nothing can be analysed
         ident = Identifiability(0, np.zeros(layout.size), math.nan,
                                 np.zeros(layout.size, dtype=bool), ())
@@ -92,7 +93,7 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
             if abs(rho) > CORRELATION_THRESHOLD:
                 correlations.append((layout.names[i], layout.names[j], float(rho)))
     correlations.sort(key=lambda c: -abs(c[2]))
-    norms = np.linalg.norm(final.raw, axis=1)
+    norms = np.linalg.norm(final.raw[:, problem.length_columns], axis=1)
     n_rows = final.whitened.size
     cv = (cross_validated_rms(problem, outcome.x, free, cv_folds, loss, loss_scale)
           if outcome.converged else None)
