@@ -22,7 +22,8 @@ import sys  # noqa: E402
 
 from hostpc.errors import ZerocalError  # noqa: E402
 
-COMMAND_MODULES = ("fit", "status", "diagnose", "calibrate", "rollback", "stereo_calibrate")
+COMMAND_MODULES = ("fit", "status", "diagnose", "calibrate", "rollback", "stereo_calibrate",
+                   "robots", "import_csv")
 
 
 def build_parser() -> argparse.ArgumentParser:
