@@ -23,7 +23,7 @@ import sys  # noqa: E402
 from hostpc.errors import ZerocalError  # noqa: E402
 
 COMMAND_MODULES = ("fit", "status", "diagnose", "calibrate", "rollback", "stereo_calibrate",
-                   "robots", "import_csv")
+                   "robots", "import_csv", "push")
 
 
 def build_parser() -> argparse.ArgumentParser:
