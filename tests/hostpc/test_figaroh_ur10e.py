@@ -52,12 +52,17 @@ def test_figaroh_ur10e_fit_beats_the_nominal_model_held_out(figaroh_dataset):
     # joints 1 and 6 are not defined against a free world frame and a free tool frame
     held = {d.fixed for d in offsets.unidentifiable}
     assert {"joint_offsets.q1", "joint_offsets.q6"} <= held
-    assert offsets.cv_rms < nominal.cv_rms
-    assert geometry.cv_rms < nominal.cv_rms
+    # the real robot's zero offsets are small (within 2 sigma: offsets alone do not beat
+    # the nominal model held out); its geometry is not: with it the held-out error drops
+    # by about a fifth (measured 11.5 -> 9.0, mixed m / rad norm; docs/metrology.md)
+    assert geometry.cv_rms < 0.9 * nominal.cv_rms
+    assert geometry.chi2_dof < nominal.chi2_dof
 
 
 @needs_world_pose
 def test_figaroh_ur10e_diagnoses(figaroh_dataset, capsys):
     assert main(["diagnose", str(figaroh_dataset)]) == 0
     out = capsys.readouterr().out
-    assert out.strip()
+    assert "NOT adequate" in out  # joint offsets + frames do not explain the real poses
+    candidates = out.split("candidate effects", 1)[1].splitlines()[2]
+    assert candidates.split()[:2] == ["*", "geometry"]  # ... the geometry does
