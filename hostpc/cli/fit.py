@@ -7,6 +7,7 @@ import json
 import sys
 
 from hostpc.cli.format import format_fit_summary
+from hostpc.cli.robots import add_robot_override, load_dataset_with_robot, robot_document
 from hostpc.dataset import load_dataset
 from hostpc.fitting import fit
 
@@ -22,6 +23,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     )
     parser.add_argument("dataset", help="dataset file (zerocal-dataset/1 JSON)")
     add_model_options(parser)
+    add_robot_override(parser)
     parser.add_argument("--json", action="store_true", help="print one JSON document")
     parser.set_defaults(func=run)
 
@@ -42,7 +44,9 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    dataset = load_dataset(args.dataset)
+    robot = robot_document(args)
+    dataset = (load_dataset(args.dataset) if robot is None
+               else load_dataset_with_robot(args.dataset, robot))
     result = fit(dataset, args.effects, plugins=args.plugin, loss=args.loss,
                  cv_folds=args.cv_folds)
     if args.json:

@@ -89,3 +89,48 @@ def run(args: argparse.Namespace) -> int:
         print(f"{r['joint']:5d} {r['type']:>9s} {r['a_mm']:9.2f} {r['alpha_deg']:9.3f} "
               f"{r['d_mm']:9.2f} {r['theta_deg']:9.3f} {mass:>8s}")
     return 0
+
+
+def add_robot_override(parser: argparse.ArgumentParser) -> None:
+    """`--robot NAME|FILE.urdf [--base-link L --tip-link L]`: fit a dataset with another
+    robot than the one it names (`hostpc fit`)."""
+    parser.add_argument("--robot", metavar="NAME|FILE.urdf",
+                        help="use this robot instead of the dataset's: a built-in name or a "
+                        "URDF file (with --base-link and --tip-link)")
+    parser.add_argument("--base-link", help="URDF: the chain's base link")
+    parser.add_argument("--tip-link", help="URDF: the chain's tip link (the flange)")
+
+
+def robot_document(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The dataset `robot` object the override options name (None: no override)."""
+    robot = getattr(args, "robot", None)
+    if not robot:
+        if getattr(args, "base_link", None) or getattr(args, "tip_link", None):
+            raise InputError("--base-link / --tip-link: only with --robot FILE.urdf")
+        return None
+    chain = resolve_chain(robot, args.base_link, args.tip_link)  # checks it now: exit 2
+    if robot.lower().endswith(".urdf"):
+        from pathlib import Path
+
+        return {"urdf": str(Path(robot).resolve()), "base_link": args.base_link,
+                "tip_link": args.tip_link, "_n": chain.n}
+    return {"name": robot, "_n": chain.n}
+
+
+def load_dataset_with_robot(path: str, robot: dict[str, Any], **options: Any) -> Any:
+    """Read the dataset file at `path` with its `robot` replaced by `robot` (from
+    `robot_document`); DatasetError naming the file for a bad file or a joint-count
+    mismatch. `options` pass through to `dataset_from_dict`."""
+    from pathlib import Path
+
+    from hostpc.dataset import dataset_from_dict, load_dataset
+    from hostpc.errors import DatasetError
+
+    load_dataset(path)  # the file as it is: readable, valid JSON, a valid dataset
+    document = json.loads(Path(path).read_text(encoding="utf-8-sig"))
+    replacement = {k: v for k, v in robot.items() if not k.startswith("_")}
+    q = [s.get("q") for s in document.get("samples", []) if isinstance(s, dict)]
+    if q and isinstance(q[0], list) and len(q[0]) != robot["_n"]:
+        raise DatasetError(f"{path}: --robot has {robot['_n']} joints, the samples "
+                           f"{len(q[0])}")
+    return dataset_from_dict({**document, "robot": replacement}, str(path), **options)
