@@ -75,7 +75,8 @@ def spherical_noise(p_world: np.ndarray, sigma_distance: float, sigma_angle: flo
     r = float(np.linalg.norm(p_world))
     u = p_world / max(r, 1e-9)
     radial = np.outer(u, u)
-    return sigma_distance**2 * radial + (r * sigma_angle) ** 2 * (np.eye(3) - radial)
+    cov: np.ndarray = sigma_distance**2 * radial + (r * sigma_angle) ** 2 * (np.eye(3) - radial)
+    return cov
 
 
 class Tracker:
@@ -92,7 +93,8 @@ class Tracker:
     def reflector_true(self, name: str) -> np.ndarray:
         """(3,) the real reflector centre in the flange frame (m)."""
         r = self.spec.reflectors[name]
-        return np.asarray(r.position, float) + np.asarray(r.error, float)
+        position: np.ndarray = np.asarray(r.position, float) + np.asarray(r.error, float)
+        return position
 
     def measure(self, T_base_flange: np.ndarray) -> tuple[dict[str, dict[str, Any]], list[str]]:
         """Measure every reflector at the true flange pose ``T_base_flange`` (4, 4).

@@ -83,12 +83,12 @@ def _robot(args: argparse.Namespace, output: Path) -> tuple[dict[str, Any], Chai
 
 
 def run(args: argparse.Namespace) -> int:
-    for option, value, table in (("--length-unit", args.length_unit, LENGTH_UNITS),
+    for option, value, units in (("--length-unit", args.length_unit, LENGTH_UNITS),
                                  ("--angle-unit", args.angle_unit, ANGLE_UNITS),
                                  ("--joint-unit", args.joint_unit, ANGLE_UNITS)):
-        if value not in table:
+        if value not in units:
             raise InputError(f"{option}: unknown unit {value!r} (expected one of "
-                             f"{', '.join(table)})")
+                             f"{', '.join(units)})")
     for option, value in (("--sigma", args.sigma), ("--sigma-angle", args.sigma_angle)):
         if value is not None and not value > 0:
             raise InputError(f"{option}: must be positive, got {value}")

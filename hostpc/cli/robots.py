@@ -62,8 +62,9 @@ def _describe(chain: Chain) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     if args.robot is None:
-        entries = [{"name": n, "joints": get_robot(n).n, "convention": get_robot(n).convention,
-                    "kind": "chain"} for n in names()]
+        entries: list[dict[str, Any]] = [
+            {"name": n, "joints": get_robot(n).n, "convention": get_robot(n).convention,
+             "kind": "chain"} for n in names()]
         entries += [{"name": n, "joints": get_tree(n).n, "convention": None, "kind": "tree",
                      "chains": list(get_tree(n).names)} for n in tree_names()]
         if args.json:

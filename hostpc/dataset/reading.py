@@ -128,6 +128,7 @@ def _dataset_from_document(doc: Any, base_dir: PathLike | None = None) -> Datase
     if not document.samples:
         raise FieldError(("samples",), "no samples (expected at least one)")
     units = Units(document.units)
+    n_joints: int | None
     if document.robot.urdf is not None:  # extension A (hostpc.kinematics.urdf)
         robot, n_joints, robot_label = read_urdf_robot(document.robot, method, base_dir)
     else:

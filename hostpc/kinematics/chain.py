@@ -163,6 +163,7 @@ class Chain:
     @property
     def has_mounts(self) -> bool:
         """True when the base or flange mount is not the identity."""
+        assert self.T_base_link0 is not None and self.T_link_flange is not None
         return not (
             np.array_equal(self.T_base_link0, np.eye(4))
             and np.array_equal(self.T_link_flange, np.eye(4))

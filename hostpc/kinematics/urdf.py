@@ -16,7 +16,8 @@ screws, gravity, and every effect (joint offsets, the geometry effect's ``d, a, 
 and Hayati ``beta`` per joint) then work on URDF robots unchanged; the geometry effect's
 parameters are the minimal (identifiable) set of deltas of each joint's origin, and the
 fit names any remaining unidentifiable combination. Link masses and centres of mass come
-from the ``inertial`` tags (links fixed to a moving link are merged into it).
+from the ``inertial`` tags (links fixed to a moving link, on the chain or off it, such as a
+wrist camera, are merged into it).
 
 The parser is ``xml.etree`` from the standard library: the kinematic subset of URDF is
 small, and the PyPI parsers either pull a mesh stack (yourdfpy needs ``trimesh[easy]``) or
@@ -132,9 +133,10 @@ def parse_urdf(text: str, source: str = "URDF") -> UrdfRobot:
         parent, child = joint.find("parent"), joint.find("child")
         if not name or parent is None or child is None:
             raise InputError(f"{where}: needs a name, <parent link=...> and <child link=...>")
-        axis = np.array(_floats(None if joint.find("axis") is None
-                                else joint.find("axis").get("xyz"),  # type: ignore[union-attr]
-                                3, f"{where} axis", [1.0, 0.0, 0.0]))
+        axis_element = joint.find("axis")
+        axis_text = None if axis_element is None else axis_element.get("xyz")
+        axis: FloatArray = np.array(_floats(axis_text, 3, f"{where} axis", [1.0, 0.0, 0.0]),
+                                    dtype=np.float64)
         norm = float(np.linalg.norm(axis))
         if kind in _MOVABLE and norm < 1e-12:
             raise InputError(f"{where} axis: zero vector")
@@ -244,6 +246,7 @@ def chain_from_urdf(robot: UrdfRobot, base_link: str, tip_link: str,
         if owner >= 0:
             link_owner[joint.child] = owner
     T_base_tip = T
+    _attach_fixed_links(robot, link_owner, link_pose)
     axes = [F[:3, :3] @ j.axis for F, j in zip(joint_frames, movable, strict=True)]
     points = [F[:3, 3] for F in joint_frames]
     n = len(movable)
@@ -276,6 +279,21 @@ def chain_from_urdf(robot: UrdfRobot, base_link: str, tip_link: str,
         mass=mass, com=com, joint_types=[_MOVABLE[j.type] for j in movable],
         T_base_link0=frames[0], T_link_flange=np.linalg.solve(frames[-1], T_base_tip),
     )
+
+
+def _attach_fixed_links(robot: UrdfRobot, link_owner: dict[str, int],
+                        link_pose: dict[str, FloatArray]) -> None:
+    """Add the links fixed (by chains of fixed joints) to a moving body off the path, such
+    as a camera on the wrist or a tool past tip_link, to that body (in place, at q = 0)."""
+    fixed = [j for j in robot.joints.values() if j.type == "fixed"]
+    added = True
+    while added:
+        added = False
+        for joint in fixed:
+            if joint.parent in link_owner and joint.child not in link_owner:
+                link_owner[joint.child] = link_owner[joint.parent]
+                link_pose[joint.child] = link_pose[joint.parent] @ joint.origin
+                added = True
 
 
 def _mass_model(robot: UrdfRobot, link_owner: dict[str, int],

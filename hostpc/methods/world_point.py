@@ -62,7 +62,8 @@ def spherical_covariance(p: np.ndarray, sigma_distance: float, sigma_angle: floa
     u = p / np.maximum(r, 1e-9)[:, None]
     radial = u[:, :, None] * u[:, None, :]
     across = (r * sigma_angle) ** 2
-    return sigma_distance**2 * radial + across[:, None, None] * (np.eye(3) - radial)
+    cov: np.ndarray = sigma_distance**2 * radial + across[:, None, None] * (np.eye(3) - radial)
+    return cov
 
 
 class WorldPointMethod(Method):

@@ -65,6 +65,12 @@ def test_urdf_chain_matches_the_product_of_urdf_transforms(arm7):
         np.testing.assert_allclose(T[k], _urdf_fk(q[k]), atol=1e-12)
 
 
+def test_urdf_mass_model_merges_fixed_links(arm7):
+    # wrist3 has no inertial: the flange (0.3 kg) is fixed to it; camera_link (0.5 kg) is
+    # fixed to wrist2 off the chain and is carried by joint 5's body
+    np.testing.assert_allclose(arm7.mass, [6.0, 4.0, 8.0, 3.5, 1.2, 1.5, 0.3])
+
+
 def test_urdf_limits_and_parallel_axes(arm7):
     assert arm7.q_min[0] == 0.0 and arm7.q_max[0] == 0.5
     assert arm7.hayati[3]  # joints 2 and 3 are parallel: row 4's Hayati beta (MDH)
