@@ -62,6 +62,7 @@ class RequestHandlers:
             "abort": self._abort,
             "capture": self._capture,
             "measure_targets": self._measure_targets,
+            "measure_tracker": self._measure_tracker,
             "get_offsets": self._get_offsets,
             "set_offsets": self._set_offsets,
             "rollback_offsets": self._rollback,
@@ -201,6 +202,23 @@ class RequestHandlers:
         ]
         return m.TargetsMeasured(reply_to=request.id, q=float_list(result["q"]),
                                  time=float(result["time"]), targets=targets)
+
+    async def _measure_tracker(self, request: m.MeasureTracker) -> m.TrackerMeasured:
+        """The laser tracker's reflectors (`sim.measure_tracker()`, controller_stub/tracker.py);
+        a simulation without a tracker refuses with reason `unsupported`."""
+        measure = getattr(self.sim, "measure_tracker", None)
+        if measure is None:
+            raise SimulationRefused("unsupported", f"{self.sim.robot_name} has no tracker")
+        result = measure()
+        reflectors = [
+            m.ReflectorObservation(name=str(name), p=float_list(seen["p"]),
+                                   cov=np.asarray(seen["cov"], dtype=float).reshape(3, 3).tolist())
+            for name, seen in result["seen"].items()
+        ]
+        return m.TrackerMeasured(reply_to=request.id, q=float_list(result["q"]),
+                                 time=float(result["time"]), reflectors=reflectors,
+                                 lost=[str(n) for n in result["lost"]],
+                                 description=json.loads(json.dumps(result["description"])))
 
     async def _get_offsets(self, request: m.GetOffsets) -> m.Offsets:
         return m.Offsets(reply_to=request.id, offsets=float_list(self.sim.zero_offsets()))

@@ -19,6 +19,8 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from controller_stub.tracker import TrackerSpec
+
 RobotName = Literal["ur5e", "ur10e", "industrial6", "humanoid_upper"]
 
 ROBOT_JOINTS: dict[str, int] = {"ur5e": 6, "ur10e": 6, "industrial6": 6,
@@ -265,6 +267,7 @@ class Scenario(_Model):
     server: ServerSpec = ServerSpec()
     faults: FaultSpec = FaultSpec()
     humanoid: HumanoidSpec = HumanoidSpec()
+    tracker: TrackerSpec = TrackerSpec()  # the laser tracker (controller_stub/tracker.py)
 
     @model_validator(mode="after")
     def _check_lengths(self) -> Scenario:

@@ -8,6 +8,7 @@ import sys
 
 from hostpc.cli.archive_options import add_archive_options, dataset_from_archive
 from hostpc.cli.format import format_fit_summary
+from hostpc.cli.robots import add_robot_override, load_dataset_with_robot, robot_document
 from hostpc.dataset import load_dataset
 from hostpc.errors import InputError
 from hostpc.fitting import fit
@@ -26,6 +27,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="dataset file (zerocal-dataset/1 JSON); or --db URL --run ID")
     add_model_options(parser)
     add_archive_options(parser, read=True)
+    add_robot_override(parser)
     parser.add_argument("--json", action="store_true", help="print one JSON document")
     parser.set_defaults(func=run)
 
@@ -55,7 +57,9 @@ def run(args: argparse.Namespace) -> int:
         args.dataset = dataset_from_archive(args)
     elif not args.dataset:
         raise InputError("a dataset file is required (or --db URL --run ID)")
-    dataset = load_dataset(args.dataset, plugins=args.plugin)
+    robot = robot_document(args)
+    dataset = (load_dataset(args.dataset, plugins=args.plugin) if robot is None
+               else load_dataset_with_robot(args.dataset, robot, plugins=args.plugin))
     result = fit(dataset, args.effects, plugins=args.plugin, loss=args.loss,
                  cv_folds=args.cv_folds)
     if args.json:

@@ -33,6 +33,9 @@ COMMAND_MODULES = (
     "camera",  # hostpc.sensors: serve or check the host's stereo camera
     "station",  # hostpc.station: the end-of-line station service
     "history",  # hostpc.archive: archived runs and drift
+    "robots",  # hostpc.kinematics: built-in robots and URDF chains
+    "import_csv",  # hostpc.importing: metrology CSV -> dataset
+    "push",  # push the offsets of an offline fit
 )
 
 

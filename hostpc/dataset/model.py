@@ -148,9 +148,21 @@ class RobotDescription:
     theta: FloatArray | None = None
     mass: FloatArray | None = None
     com: FloatArray | None = None
+    #: extension A: per-joint "revolute" / "prismatic" of an explicit table (None: revolute)
+    joint_types: tuple[str, ...] | None = None
+    #: extension A: a URDF robot (absolute path) and its chain's end links
+    urdf: str | None = None
+    base_link: str | None = None
+    tip_link: str | None = None
 
     def __post_init__(self) -> None:
         explicit = (self.a, self.alpha, self.d, self.theta)
+        if self.urdf is not None:
+            if self.name is not None or any(v is not None for v in explicit):
+                raise ValueError("RobotDescription: a URDF robot has no name or table")
+            if not self.base_link or not self.tip_link:
+                raise ValueError("RobotDescription: a URDF robot needs base_link and tip_link")
+            return
         if self.name is not None:
             if self.convention is not None or any(v is not None for v in explicit):
                 raise ValueError("RobotDescription: give a name or an explicit table, not both")

@@ -10,6 +10,7 @@ robot, frames, known, probe) is checked here, the samples in ``reading_samples``
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import os
 from collections.abc import Iterable, Mapping, Sequence
@@ -21,7 +22,7 @@ import numpy as np
 from hostpc.dataset import schema
 from hostpc.dataset.kind import MeasurementKind
 from hostpc.dataset.kinds import measurement_kinds
-from hostpc.dataset.model import Dataset, FramePose, RobotDescription, SphereFrame
+from hostpc.dataset.model import Dataset, FramePose, RobotDescription, Samples, SphereFrame
 from hostpc.dataset.reading_samples import read_samples
 from hostpc.dataset.schema import FORMAT_TAG, FieldError, Loc, show
 from hostpc.dataset.units import Units
@@ -66,31 +67,35 @@ def load_dataset(path: PathLike, plugins: Iterable[str | os.PathLike[str]] = ())
         raise DatasetError(f"{source}: not valid JSON (nested too deeply)") from exc
     except ValueError as exc:  # e.g. an integer literal with thousands of digits
         raise DatasetError(f"{source}: not valid JSON ({exc})") from exc
-    return dataset_from_dict(document, source, plugins)
+    return dataset_from_dict(document, source, plugins, base_dir=Path(path).parent)
 
 
 def dataset_from_dict(doc: Any, source: str = "<dict>",
-                      plugins: Iterable[str | os.PathLike[str]] = ()) -> Dataset:
+                      plugins: Iterable[str | os.PathLike[str]] = (),
+                      base_dir: PathLike | None = None) -> Dataset:
     """Validate a parsed document (what ``json.load`` returns) and convert it to SI.
 
     Args:
         doc: the document; tuples, numpy arrays and numpy scalars are accepted as well.
         source: name used as the prefix of error messages (a file name).
         plugins: Python files that may define measurement models.
+        base_dir: directory a relative ``robot.urdf`` path is resolved against (default:
+            the working directory).
 
     Raises:
         DatasetError: the document breaks the format (one line: source, field, sample).
     """
     kinds = measurement_kinds(plugins)
     try:
-        return _dataset_from_document(schema.normalize(doc), kinds)
+        return _dataset_from_document(schema.normalize(doc), kinds, base_dir)
     except FieldError as exc:
         raise DatasetError(f"{source}: {exc}") from exc
     except RecursionError as exc:
         raise DatasetError(f"{source}: nested too deeply") from exc
 
 
-def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]]) -> Dataset:
+def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]],
+                           base_dir: PathLike | None = None) -> Dataset:
     """Build the dataset from a normalized document; raises FieldError."""
     if not isinstance(doc, dict):
         raise FieldError((), f"expected a JSON object at the top level, got {show(doc)}")
@@ -110,11 +115,15 @@ def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]])
     if not document.samples:
         raise FieldError(("samples",), "no samples (expected at least one)")
     units = Units(document.units)
-    robot, n_joints, robot_label = _read_robot(document.robot, kind, units)
+    if document.robot.urdf is not None:  # extension A (hostpc.kinematics.urdf)
+        robot, n_joints, robot_label = read_urdf_robot(document.robot, method, base_dir)
+    else:
+        robot, n_joints, robot_label = _read_robot(document.robot, kind, units)
     frames = _read_frames(document.frames, kind, units)
     known = _read_known(document.known, frames)
     stylus_radius = _read_probe(document.probe, kind, units)
     samples = read_samples(document.samples, kind, n_joints, robot_label, units, frames)
+    samples = prismatic_q_to_length(samples, robot, units)
     extra_fields = {k: v for k, v in doc.items() if k not in schema.DOCUMENT_FIELDS}
     return Dataset(
         method=method,
@@ -125,6 +134,50 @@ def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]])
         probe_stylus_radius=stylus_radius,
         extra_fields=extra_fields,
     )
+
+
+def read_urdf_robot(robot: schema.RobotSchema, method: str, base_dir: PathLike | None
+                    ) -> tuple[RobotDescription, int, str]:
+    """Extension A: ``{"urdf": PATH, "base_link", "tip_link"}``, PATH relative to the file."""
+    from hostpc.kinematics.urdf import load_urdf_chain  # imported late: a sibling package
+
+    for key in ("name", "convention", "joints", "mass", "com"):
+        if getattr(robot, key) is not None:
+            raise FieldError(("robot", key), "not allowed with 'urdf'")
+    if method == "dual_loop":
+        raise FieldError(("robot", "urdf"), "dual_loop needs a built-in robot 'name'")
+    for key in ("base_link", "tip_link"):
+        if not getattr(robot, key):
+            raise FieldError(("robot", key), "required with 'urdf'")
+    assert robot.urdf is not None and robot.base_link and robot.tip_link
+    path = Path(base_dir or ".") / robot.urdf
+    try:
+        n = load_urdf_chain(path, robot.base_link, robot.tip_link).n
+    except InputError as exc:
+        raise FieldError(("robot", "urdf"), " ".join(str(exc).split())) from exc
+    description = RobotDescription(urdf=os.fspath(path.resolve()), base_link=robot.base_link,
+                                   tip_link=robot.tip_link)
+    return description, n, f"the URDF chain's {n} joints"
+
+
+def prismatic_q_to_length(samples: Samples, robot: RobotDescription, units: Units) -> Samples:
+    """Extension A: prismatic joints' ``q`` is a length; reading converted it as an angle."""
+    if robot.urdf is not None:
+        from hostpc.kinematics.urdf import load_urdf_chain
+
+        assert robot.base_link and robot.tip_link
+        prismatic = load_urdf_chain(robot.urdf, robot.base_link, robot.tip_link).prismatic
+    elif robot.joint_types is not None:
+        prismatic = np.array([kind == "prismatic" for kind in robot.joint_types])
+    else:
+        return samples
+    assert prismatic is not None
+    if not prismatic.any():
+        return samples
+    q = np.array(samples.q, dtype=np.float64)
+    raw = np.rad2deg(q[:, prismatic]) if units.units.angle == "deg" else q[:, prismatic]
+    q[:, prismatic] = units.length(raw)
+    return dataclasses.replace(samples, q=q)
 
 
 def _robot_joint_count(name: str) -> int:
@@ -186,6 +239,8 @@ def _read_robot(
         theta=units.angle([row.theta for row in robot.joints]),
         mass=mass,
         com=com,
+        joint_types=(tuple(row.type for row in robot.joints)
+                     if any(row.type != "revolute" for row in robot.joints) else None),
     )
     return description, n, f"the robot's {n} joints"
 

@@ -153,6 +153,7 @@ class JointRowSchema(_Strict):
     alpha: float
     d: float
     theta: float
+    type: Literal["revolute", "prismatic"] = "revolute"  # extension A: prismatic q adds to d
 
 
 class RobotSchema(_Strict):
@@ -163,6 +164,9 @@ class RobotSchema(_Strict):
     joints: list[JointRowSchema] | None = None
     mass: list[float] | None = None
     com: list[Vec3] | None = None
+    urdf: str | None = None  # extension A: a URDF file, relative to the dataset file
+    base_link: str | None = None
+    tip_link: str | None = None
 
 
 class FramePoseSchema(_Strict):

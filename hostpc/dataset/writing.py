@@ -88,6 +88,8 @@ def save_dataset(dataset: Dataset, path: PathLike,
 def _robot_to_dict(robot: RobotDescription) -> dict[str, Any]:
     if robot.name is not None:
         return {"name": robot.name}
+    if robot.urdf is not None:  # extension A; written as an absolute path
+        return {"urdf": robot.urdf, "base_link": robot.base_link, "tip_link": robot.tip_link}
     assert robot.a is not None and robot.alpha is not None
     assert robot.d is not None and robot.theta is not None
     out: dict[str, Any] = {
@@ -97,6 +99,9 @@ def _robot_to_dict(robot: RobotDescription) -> dict[str, Any]:
             for a, alpha, d, theta in zip(robot.a, robot.alpha, robot.d, robot.theta, strict=True)
         ],
     }
+    if robot.joint_types is not None:
+        for row, kind in zip(out["joints"], robot.joint_types, strict=True):
+            row["type"] = kind
     if robot.mass is not None:
         out["mass"] = robot.mass.tolist()
     if robot.com is not None:

@@ -21,6 +21,11 @@ def serial_chain(dataset: Dataset) -> Chain:
     robot = dataset.robot
     if robot.name is not None and robot.a is None:
         return get_robot(robot.name)
+    if robot.urdf is not None:  # extension A: a URDF chain (hostpc.kinematics.urdf)
+        from hostpc.kinematics.urdf import load_urdf_chain
+
+        assert robot.base_link is not None and robot.tip_link is not None
+        return load_urdf_chain(robot.urdf, robot.base_link, robot.tip_link)
     # the dataset layer guarantees a complete explicit table when there is no name
     assert robot.convention is not None and robot.a is not None and robot.alpha is not None
     assert robot.d is not None and robot.theta is not None
@@ -33,6 +38,7 @@ def serial_chain(dataset: Dataset) -> Chain:
         robot.theta,
         mass=robot.mass,
         com=robot.com,
+        joint_types=robot.joint_types,
     )
 
 

@@ -65,6 +65,10 @@ SIM_DEFAULTS: dict[str, SimDefault] = {
                    "probe": {"sphere_centre_error": [0.0, 0.0, 0.0]}},
         known=("sphere",)),
     "dual_loop": SimDefault(scenario="humanoid.yaml"),
+    # a laser tracker with a surveyed registration and a dowel-pinned reflector nest
+    # (controller_stub/tracker.py): both frames known, so every joint's zero is defined
+    "world_point": SimDefault(overrides={"motion": {"time_scale": 0.0}},
+                              known=("world", "markers")),
 }
 """Each method's `--robot sim` world (see the module docstring); unknown methods and None
 use stereo_target's."""
