@@ -13,6 +13,7 @@ from hostpc.dataset import Dataset
 from hostpc.errors import InputError
 from hostpc.fitting.identifiability import Identifiability, analyse
 from hostpc.fitting.result import CORRELATION_THRESHOLD, FitResult
+from hostpc.fitting.shared_errors import added_parameter_covariance
 from hostpc.fitting.solver import Loss, evaluate, levenberg_marquardt
 from hostpc.model.problem import Problem, build_problem
 
@@ -80,6 +81,10 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
     covariance = np.zeros((layout.size, layout.size))
     if np.any(free) and np.all(np.isfinite(J_free)):
         covariance[np.ix_(free, free)] = _covariance(J_free)
+        shared = added_parameter_covariance(problem, J_free, covariance[np.ix_(free, free)],
+                                            row_weight)
+        if shared is not None:  # the rig's calibration error, shared by all samples
+            covariance[np.ix_(free, free)] += shared
     elif np.any(free):
         covariance[np.ix_(free, free)] = np.nan
     std = np.sqrt(np.diag(covariance))

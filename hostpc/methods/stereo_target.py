@@ -62,6 +62,7 @@ class StereoTargetMethod(Method):
         super().__init__(settings, cell, run_dir)
         self.rig: Any = None
         self.rig_report: dict[str, Any] = {}
+        self.rig_plan: dict[str, Any] = {}
         self._measurer: Any = None
         self._tool, self._target = require_camera_cell(cell)
         tool = self._tool
@@ -117,20 +118,40 @@ class StereoTargetMethod(Method):
     async def _calibrate_rig(self, robot: RobotAdapter, progress: Progress) -> Any:
         from hostpc.methods.journal import write_json_atomic
         from hostpc.vision import ChessboardSpec, calibrate_rig
+        from hostpc.vision.rig_calibration import as_gray, find_chessboard
+        from hostpc.vision.rig_planning import CoveragePlanner
 
         board = self.cell.chessboard
         if not board:
             raise InputError("no --rig given and the controller describes no chessboard to "
                              "calibrate one; give --rig FILE")
         n_views = int(board.get("n_views", 20))
-        progress.stage("rig calibration", n_views)
-        pairs = []
-        for view in range(n_views):
-            capture = await robot.capture("chessboard", view)
-            pairs.append((capture.left, capture.right))
-            progress.advance(view + 1, f"chessboard view {view + 1}/{n_views}")
+        max_views = max(n_views, int(board.get("max_views", n_views)))
         spec = ChessboardSpec(int(board["cols"]), int(board["rows"]),
                               float(board["square_size"]))
+        progress.stage("rig calibration", n_views)
+        pairs, planner = [], None
+        for view in range(max_views):
+            if planner is not None and planner.done():
+                break
+            capture = await robot.capture("chessboard", view)
+            left, right = as_gray(capture.left, "left"), as_gray(capture.right, "right")
+            if planner is None:
+                planner = CoveragePlanner(n_views, (left.shape[1], left.shape[0]))
+            if planner.offer(view, find_chessboard(left, spec), find_chessboard(right, spec)):
+                pairs.append((left, right))
+            covered = min(planner.coverage)
+            progress.advance(min(len(pairs), n_views),
+                             f"chessboard view {view + 1}: {len(pairs)} kept, "
+                             f"coverage {100 * covered:.0f}%")
+        assert planner is not None
+        self.rig_plan = {"views_kept": list(planner.kept),
+                         "views_rejected": [[v, r] for v, r in planner.rejected],
+                         "coverage": list(planner.coverage)}
+        if not pairs:
+            raise RigCalibrationFailed(
+                f"stereo rig calibration failed: the chessboard was found in none of the "
+                f"{len(planner.rejected)} views")
         progress.stage("rig solve")
         result = calibrate_rig(pairs, spec)
         self.rig_report = {
@@ -139,6 +160,8 @@ class StereoTargetMethod(Method):
             "per_view_rms_px": [float(v) for v in result.per_view_rms],
             "used_views": [int(v) for v in result.used_views],
             "warnings": [str(w) for w in result.warnings],
+            "corner_sigma_px": result.corner_sigma_px,
+            "plan": self.rig_plan,
         }
         write_json_atomic(self.run_dir / RIG_REPORT_FILE, self.rig_report)
         for warning in result.warnings:
@@ -146,7 +169,7 @@ class StereoTargetMethod(Method):
         if not result.ok:
             raise RigCalibrationFailed(
                 f"stereo rig calibration failed (RMS {result.rms:.3f} px, "
-                f"{len(result.used_views)} of {n_views} views usable): "
+                f"{len(result.used_views)} of {len(pairs)} views usable): "
                 + ("; ".join(result.warnings) or "see rig_calibration.json")
             )
         progress.message(f"rig calibrated: RMS {result.rms:.3f} px from "
@@ -299,7 +322,17 @@ class StereoTargetMethod(Method):
             },
             "known": list(self.cell.known),
             "samples": [dict(s) for s in samples],
+            **self._rig_uncertainty(),
         }
+
+    def _rig_uncertainty(self) -> dict[str, Any]:
+        """The dataset's `rig_uncertainty` block (the rig and its calibration covariance,
+        hostpc.fitting.shared_errors), or nothing for a rig without a covariance."""
+        if self.rig is None or getattr(self.rig, "covariance", None) is None:
+            return {}
+        from hostpc.vision.rig_uncertainty import uncertainty_document
+
+        return {"rig_uncertainty": uncertainty_document(self.rig, self.rig.covariance)}
 
     def describe(self) -> dict[str, Any]:
         """Rig facts for the result document."""
