@@ -9,6 +9,7 @@ import sys
 from hostpc.cli.format import format_fit_summary
 from hostpc.dataset import load_dataset
 from hostpc.fitting import fit
+from hostpc.fitting.priors import with_constraints
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -22,6 +23,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     )
     parser.add_argument("dataset", help="dataset file (zerocal-dataset/1 JSON)")
     add_model_options(parser)
+    add_constraint_options(parser)
     parser.add_argument("--json", action="store_true", help="print one JSON document")
     parser.set_defaults(func=run)
 
@@ -41,8 +43,18 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
                         help="folds of the cross-validated RMS (0 to skip; default 5)")
 
 
+def add_constraint_options(parser: argparse.ArgumentParser) -> None:
+    """--prior, --hold: shared with diagnose (hostpc.fitting.priors)."""
+    parser.add_argument("--prior", action="append", default=[], metavar="NAME=VALUE+-SIGMA",
+                        help="a parameter known to within a tolerance, units as printed "
+                        "(e.g. tool.x=0.045+-0.0005m, joint_offsets.q1=0+-0.01deg); "
+                        "repeatable")
+    parser.add_argument("--hold", action="append", default=[], metavar="NAME[,NAME...]",
+                        help="parameters kept at their nominal value by the fit")
+
+
 def run(args: argparse.Namespace) -> int:
-    dataset = load_dataset(args.dataset)
+    dataset = with_constraints(load_dataset(args.dataset), args.prior, args.hold)
     result = fit(dataset, args.effects, plugins=args.plugin, loss=args.loss,
                  cv_folds=args.cv_folds)
     if args.json:
