@@ -37,10 +37,13 @@ RIG_REPORT_FILE = "rig_calibration.json"
 CENTROID_SIGMA_PX = 0.05
 """Planning noise model: pixel precision of the dot centre in each image (conservative, a
 real camera's; the simulator's images are better)."""
-PIXEL_FLOOR_PX = 0.01
-"""Systematic floor added to every measured covariance, in px per image coordinate: the
-vision's covariance holds only the image noise, while the rig calibration and the detection
-leave errors of this order that do not average out over poses (docs/calibrate.md)."""
+PIXEL_FLOOR_PX = 0.003
+"""Floor added to every measured covariance, in px per image coordinate: the vision's
+covariance holds only the pixel noise of the dot's centroid, the detection leaves a little
+more (chi2/dof ~1.1 with it against the simulator). It was 0.01 px while the centres carried
+the nominal normal's perspective-bias error, which the second pass now removes
+(hostpc.methods.stereo_refinement); the rig's own error enters as a shared error
+(hostpc.fitting.shared_errors). See docs/vision.md section 3."""
 SKIP_REASONS = ("joint_limit", "refused_fault", "invalid_argument")
 """Controller refusals that skip one pose instead of ending the run."""
 
@@ -63,6 +66,7 @@ class StereoTargetMethod(Method):
         self.rig: Any = None
         self.rig_report: dict[str, Any] = {}
         self.rig_plan: dict[str, Any] = {}
+        self._refinement_model: Any = None
         self._measurer: Any = None
         self._tool, self._target = require_camera_cell(cell)
         tool = self._tool
@@ -310,8 +314,10 @@ class StereoTargetMethod(Method):
     # ---------------------------------------------------------------- dataset
 
     def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-        """A `zerocal-dataset/1` document with the cell's nominal frames and `known`."""
-        return {
+        """A `zerocal-dataset/1` document with the cell's nominal frames and `known`; the
+        disk centres re-corrected with the normals of a preliminary fit when the samples
+        carry `uv` (hostpc.methods.stereo_refinement)."""
+        document = {
             "format": FORMAT_TAG,
             "method": self.name,
             "units": {"length": "m", "angle": "rad", "time": "s"},
@@ -324,6 +330,25 @@ class StereoTargetMethod(Method):
             "samples": [dict(s) for s in samples],
             **self._rig_uncertainty(),
         }
+        return self._refined(document)
+
+    def _refined(self, document: dict[str, Any]) -> dict[str, Any]:
+        """The document with its centres re-corrected by fitted normals (or as it was)."""
+        samples = document["samples"]
+        if self.rig is None or not samples or any("uv" not in s for s in samples):
+            return document
+        from hostpc.dataset import dataset_to_dict
+        from hostpc.methods.stereo_refinement import refine_dataset
+
+        dataset, self._refinement_model = refine_dataset(
+            dataset_from_dict(document), self.rig, self.cell.target_radius,
+            self.cell.target_normal, self._refinement_model)
+        refined = dataset_to_dict(dataset)
+        for before, after in zip(samples, refined["samples"], strict=True):
+            for key, value in before.items():  # keep fields the dataset layer does not read
+                after.setdefault(key, value)
+        return refined
+
 
     def _rig_uncertainty(self) -> dict[str, Any]:
         """The dataset's `rig_uncertainty` block (the rig and its calibration covariance,
