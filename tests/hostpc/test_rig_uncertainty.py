@@ -80,17 +80,20 @@ def _synthetic_views(rig: StereoRig, rng: np.random.Generator, n_views: int = 14
     return lefts, rights, poses
 
 
+@pytest.mark.slow
 def test_chessboard_covariance_is_honest_for_white_corner_noise() -> None:
     """Over repeated synthetic calibrations with 0.05 px corner noise, the rig errors'
-    Mahalanobis distance under the predicted covariance averages the 24 it should."""
+    Mahalanobis distance under the predicted covariance averages the 24 it should (the
+    derivatives and the view-pose marginalisation are right)."""
     truth = _rig()
     rng = np.random.default_rng(3)
-    lefts, rights, _ = _synthetic_views(truth, rng)
+    lefts, rights, _ = _synthetic_views(truth, rng, n_views=10)
     obj = [BOARD.object_points().reshape(-1, 1, 3)] * len(lefts)
     size = truth.image_size
+    # a tight tolerance: the solver must reach the noisy optimum from the truth it starts at
     criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 100, 1e-10)
     distances, sigmas = [], []
-    for _ in range(16):
+    for _ in range(8):
         noisy_l = [(u + rng.normal(0, 0.05, u.shape)).astype(np.float32).reshape(-1, 1, 2)
                    for u in lefts]
         noisy_r = [(u + rng.normal(0, 0.05, u.shape)).astype(np.float32).reshape(-1, 1, 2)
@@ -109,8 +112,8 @@ def test_chessboard_covariance_is_honest_for_white_corner_noise() -> None:
         distances.append(float(delta @ np.linalg.solve(cov, delta)))
         sigmas.append(sigma)
     assert np.mean(sigmas) == pytest.approx(0.05, rel=0.1)
-    # mean of 16 chi-square(24) draws: 24 +- 2.5 (1 sigma)
-    assert 17.0 < np.mean(distances) < 32.0, distances
+    # mean of 8 chi-square(24) draws: 24 +- 2.4 (1 sigma)
+    assert 16.0 < np.mean(distances) < 33.0, distances
 
 
 def test_point_sensitivity_against_baseline_scaling() -> None:
