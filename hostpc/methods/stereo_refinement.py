@@ -25,7 +25,8 @@ from hostpc.model.measurement import predict
 from hostpc.model.problem import Problem, build_problem
 
 MIN_SAMPLES = 20
-"""Fewer samples than this are not refined by their own fit (a verify set uses the fit's)."""
+"""Fewer samples than this (a verify set) are left as measured: their own fit would be poor,
+and after a push the nominal normals are right while the fit's model is not."""
 _EPS = 1e-3
 
 

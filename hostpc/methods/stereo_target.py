@@ -67,7 +67,6 @@ class StereoTargetMethod(Method):
         self.rig: Any = None
         self.rig_report: dict[str, Any] = {}
         self.rig_plan: dict[str, Any] = {}
-        self._refinement_model: Any = None
         self._measurer: Any = None
         self._tool, self._target = require_camera_cell(cell)
         tool = self._tool
@@ -341,9 +340,10 @@ class StereoTargetMethod(Method):
         from hostpc.dataset import dataset_to_dict
         from hostpc.methods.stereo_refinement import refine_dataset
 
-        dataset, self._refinement_model = refine_dataset(
-            dataset_from_dict(document), self.rig, self.cell.target_radius,
-            self.cell.target_normal, self._refinement_model)
+        # each set by its own preliminary fit; a small (verify) set is left as measured: after
+        # a push its nominal normals are already right, and the fit's model would be wrong
+        dataset, _ = refine_dataset(dataset_from_dict(document), self.rig,
+                                    self.cell.target_radius, self.cell.target_normal)
         refined = dataset_to_dict(dataset)
         for before, after in zip(samples, refined["samples"], strict=True):
             for key, value in before.items():  # keep fields the dataset layer does not read
