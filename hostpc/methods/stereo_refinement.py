@@ -40,8 +40,8 @@ def model_normals(problem: Problem, x: np.ndarray, target_normal: np.ndarray) ->
     moved = build_problem(shifted, list(problem.effect_names), plugins=problem.plugins)
     p0, _ = predict(problem, x, jacobian=False)
     p1, _ = predict(moved, x, jacobian=False)
-    n = (p1 - p0) / _EPS
-    return n / np.linalg.norm(n, axis=1, keepdims=True)
+    n = np.asarray(p1 - p0, float) / _EPS
+    return np.asarray(n / np.linalg.norm(n, axis=1, keepdims=True), float)
 
 
 def refine_dataset(dataset: Dataset, rig: Any, target_radius: float,
@@ -73,6 +73,8 @@ def refine_dataset(dataset: Dataset, rig: Any, target_radius: float,
         return dataset, fitted
     nominal = model_normals(problem, np.zeros_like(x), target_normal)
     better = model_normals(problem, x, target_normal)
-    uv, p = recorrect_centres(rig, target_radius, samples.uv, samples.p, nominal, better)
+    uv_measured = np.asarray(samples.uv, float)
+    uv, p = recorrect_centres(rig, target_radius, uv_measured, np.asarray(samples.p, float),
+                              nominal, better)
     refined = dataclasses.replace(samples, uv=uv, p=p)
     return dataclasses.replace(dataset, samples=refined), fitted

@@ -52,7 +52,7 @@ def _dist5(dist: np.ndarray) -> np.ndarray:
 
 def rig_vector(rig: StereoRig) -> np.ndarray:
     """(24,) the rig's parameters in `RIG_PARAMETERS` order (rotation part zero)."""
-    parts = []
+    parts: list[Any] = []
     for K, dist in ((rig.K_left, rig.dist_left), (rig.K_right, rig.dist_right)):
         parts.append([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
         parts.append(_dist5(dist))

@@ -165,7 +165,7 @@ def test_shared_rig_error_matches_refits_with_a_perturbed_rig(stereo_poses) -> N
         p = np.array([triangulate(rect, u[0], u[1]).p for u in plain.samples.uv])
         refit = fit(dataclasses.replace(plain, samples=dataclasses.replace(plain.samples, p=p)),
                     cv_folds=0)
-        A.append((refit.x - base.x))  # per one sigma of this rig parameter
+        A.append(refit.x - base.x)  # per one sigma of this rig parameter
     A = np.array(A).T
     expected = base.covariance + A @ A.T
     free = ~base.fixed
