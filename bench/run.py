@@ -2,6 +2,7 @@
 
     python bench/run.py            # all
     python bench/run.py fit render # only those whose module name contains a word given
+    python bench/run.py sigma_mc   # slow, optional (OPTIONAL = True): only when named
 
 Each bench module has `run() -> dict` and prints its own table when run alone; this runner
 calls each module's `main()` if it has one, else prints `run()`'s figures. Figures go in
@@ -23,6 +24,8 @@ def main(argv: list[str]) -> int:
     modules = sorted(p for p in HERE.glob("bench_*.py"))
     if argv:
         modules = [p for p in modules if any(word in p.stem for word in argv)]
+    else:  # slow, optional benches (OPTIONAL = True) run only when asked for by name
+        modules = [p for p in modules if "\nOPTIONAL = True" not in p.read_text()]
     sys.path.insert(0, str(HERE.parent))
     failed = []
     for path in modules:

@@ -12,6 +12,7 @@ from hostpc.cli.robots import add_robot_override, load_dataset_with_robot, robot
 from hostpc.dataset import load_dataset
 from hostpc.errors import InputError
 from hostpc.fitting import fit
+from hostpc.fitting.priors import with_constraints
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -26,6 +27,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("dataset", nargs="?",
                         help="dataset file (zerocal-dataset/1 JSON); or --db URL --run ID")
     add_model_options(parser)
+    add_constraint_options(parser)
     add_archive_options(parser, read=True)
     add_robot_override(parser)
     parser.add_argument("--json", action="store_true", help="print one JSON document")
@@ -48,6 +50,16 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
                         help="folds of the cross-validated RMS (0 to skip; default 5)")
 
 
+def add_constraint_options(parser: argparse.ArgumentParser) -> None:
+    """--prior, --hold: shared with diagnose (hostpc.fitting.priors)."""
+    parser.add_argument("--prior", action="append", default=[], metavar="NAME=VALUE+-SIGMA",
+                        help="a parameter known to within a tolerance, units as printed "
+                        "(e.g. tool.x=0.045+-0.0005m, joint_offsets.q1=0+-0.01deg); "
+                        "repeatable")
+    parser.add_argument("--hold", action="append", default=[], metavar="NAME[,NAME...]",
+                        help="parameters kept at their nominal value by the fit")
+
+
 def run(args: argparse.Namespace) -> int:
     if args.db or args.run is not None:
         if args.dataset:
@@ -60,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
     robot = robot_document(args)
     dataset = (load_dataset(args.dataset, plugins=args.plugin) if robot is None
                else load_dataset_with_robot(args.dataset, robot, plugins=args.plugin))
+    dataset = with_constraints(dataset, args.prior, args.hold)
     result = fit(dataset, args.effects, plugins=args.plugin, loss=args.loss,
                  cv_folds=args.cv_folds)
     if args.json:
