@@ -24,12 +24,10 @@ parameter's SI unit. An unknown name or a unit that does not fit raises InputErr
 
 from __future__ import annotations
 
-from collections.abc import Collection
-
 import dataclasses
 import math
 import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
