@@ -20,7 +20,7 @@ import argparse  # noqa: E402
 import importlib  # noqa: E402
 import sys  # noqa: E402
 
-from hostpc.errors import ZerocalError  # noqa: E402
+from hostpc.errors import InputError, ZerocalError  # noqa: E402
 
 COMMAND_MODULES = ("fit", "status", "diagnose", "calibrate", "rollback", "stereo_calibrate")
 
@@ -40,7 +40,30 @@ def build_parser() -> argparse.ArgumentParser:
                 continue  # command not built yet
             raise
         module.register(subparsers)
+    _add_token_file_options(subparsers)
     return parser
+
+
+def _add_token_file_options(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Every command with --token also takes --token-file (read in `main`)."""
+    for command in subparsers.choices.values():
+        options = {o for action in command._actions for o in action.option_strings}
+        if "--token" in options and "--token-file" not in options:
+            command.add_argument("--token-file", metavar="FILE",
+                                 help="read the shared token from FILE (mode 0600)")
+
+
+def _token_from_options(args: argparse.Namespace) -> None:
+    """--token-file -> args.token; a warning for a token given on the command line."""
+    from hostpc.robots.connect import TOKEN_ON_COMMAND_LINE_WARNING, read_token_file
+
+    token_file = getattr(args, "token_file", None)
+    if getattr(args, "token", None) is not None:
+        if token_file is not None:
+            raise InputError("--token and --token-file: give one of them")
+        print(f"hostpc {args.command}: {TOKEN_ON_COMMAND_LINE_WARNING}", file=sys.stderr)
+    elif token_file is not None:
+        args.token = read_token_file(token_file)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -50,6 +73,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        _token_from_options(args)
         return int(args.func(args))
     except ZerocalError as exc:
         if args.debug:
