@@ -7,6 +7,7 @@ import json
 import sys
 
 from hostpc.cli.format import format_fit_summary
+from hostpc.cli.numbers import CV_FOLDS
 from hostpc.dataset import load_dataset
 from hostpc.fitting import fit
 
@@ -37,8 +38,9 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
                         help="Python file defining extra effects (repeatable)")
     parser.add_argument("--loss", choices=("linear", "huber", "cauchy"), default="linear",
                         help="robust loss on whitened residuals (default: linear)")
-    parser.add_argument("--cv-folds", type=int, default=5,
-                        help="folds of the cross-validated RMS (0 to skip; default 5)")
+    parser.add_argument("--cv-folds", type=CV_FOLDS, default=5,
+                        help="folds of the cross-validated RMS (0 to skip, else 2..1000; "
+                        "default 5)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -19,14 +19,23 @@ for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import importlib  # noqa: E402
 import sys  # noqa: E402
+import typing  # noqa: E402
+import warnings  # noqa: E402
 
 from hostpc.errors import InputError, ZerocalError  # noqa: E402
 
 COMMAND_MODULES = ("fit", "status", "diagnose", "calibrate", "rollback", "stereo_calibrate")
 
 
+class _OneLineErrors(argparse.ArgumentParser):
+    """Bad options are one line on stderr (no usage block) and exit code 2."""
+
+    def error(self, message: str) -> typing.NoReturn:
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _OneLineErrors(
         prog="hostpc",
         description="zerocal host: calibrate robot joint zero offsets, fit and diagnose datasets.",
     )
@@ -68,13 +77,19 @@ def _token_from_options(args: argparse.Namespace) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # a bad option (one line already printed) or --help
+        return exc.code if isinstance(exc.code, int) else 2
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
     try:
         _token_from_options(args)
-        return int(args.func(args))
+        with warnings.catch_warnings():
+            if not args.debug:  # numpy's overflow/invalid warnings are not for the user
+                warnings.simplefilter("ignore", RuntimeWarning)
+            return int(args.func(args))
     except ZerocalError as exc:
         if args.debug:
             raise

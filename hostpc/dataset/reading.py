@@ -13,12 +13,11 @@ import copy
 import json
 import os
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from hostpc.dataset import schema
+from hostpc.dataset import schema, validation
 from hostpc.dataset.model import METHODS, Dataset, FramePose, RobotDescription, SphereFrame
 from hostpc.dataset.reading_samples import read_samples
 from hostpc.dataset.schema import FORMAT_TAG, FieldError, Loc, show
@@ -53,14 +52,7 @@ def load_dataset(path: PathLike) -> Dataset:
             one-line message names the file, the field and the sample index.
     """
     source = os.fspath(path)
-    try:
-        raw = Path(path).read_bytes()
-    except FileNotFoundError as exc:
-        raise DatasetError(f"{source}: file not found") from exc
-    except IsADirectoryError as exc:
-        raise DatasetError(f"{source}: is a directory, not a dataset file") from exc
-    except OSError as exc:
-        raise DatasetError(f"{source}: cannot read file ({exc.strerror or exc})") from exc
+    raw = validation.read_dataset_bytes(path)  # size limit; devices refused
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -91,7 +83,7 @@ def dataset_from_dict(doc: Any, source: str = "<dict>") -> Dataset:
         DatasetError: the document breaks the format (one line: source, field, sample).
     """
     try:
-        return _dataset_from_document(schema.normalize(doc))
+        return validation.check_dataset(_dataset_from_document(schema.normalize(doc)), source)
     except FieldError as exc:
         raise DatasetError(f"{source}: {exc}") from exc
     except RecursionError as exc:
