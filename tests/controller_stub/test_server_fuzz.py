@@ -391,3 +391,13 @@ def test_deep_nesting_is_a_bad_message_not_a_crash(running_stub: ThreadedStub, d
     errors = [r for r in replies if isinstance(r, m.ErrorReply)]
     assert [e.code for e in errors] == ["bad_message"] and "nests deeper" in errors[0].message
     assert running_stub.unhandled == []
+
+
+@pytest.mark.parametrize("speed", [1e-300, 5e-324, 0.0009])
+def test_motions_too_slow_to_end_are_refused(running_stub: ThreadedStub, speed: float) -> None:
+    """A speed of 1e-300 once overflowed the simulated clock and broke every later reply."""
+    request = m.MoveJoints(id=8, q=[0.1] * 6, speed=speed)
+    replies = exchange(running_stub.address, encode_frame(request.model_dump_json().encode()))
+    (error,) = [r for r in replies if isinstance(r, m.ErrorReply)]
+    assert error.code == "refused" and error.reason == "speed"
+    assert running_stub.unhandled == []
