@@ -152,7 +152,7 @@ TOKEN_ENV = "ZEROCAL_TOKEN"
 def _resolve_token(args: argparse.Namespace, scenario: Any) -> str:
     """--token, else --token-file, else $ZEROCAL_TOKEN, else the scenario's; ValueError
     (one line) for an empty token or a token file others can read."""
-    if args.token is not None:
+    if args.token is not None and args.token.strip():
         print(
             "controller-stub serve: warning: --token is visible to every user of this machine "
             f"(ps); prefer --token-file or ${TOKEN_ENV}",
@@ -160,6 +160,8 @@ def _resolve_token(args: argparse.Namespace, scenario: Any) -> str:
         )
         token: str = args.token
         source = "--token"
+    elif args.token is not None:
+        token, source = args.token, "--token"
     elif args.token_file is not None:
         token, source = read_token_file(args.token_file), f"--token-file {args.token_file}"
     elif os.environ.get(TOKEN_ENV) is not None:

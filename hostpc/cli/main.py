@@ -70,6 +70,8 @@ def _token_from_options(args: argparse.Namespace) -> None:
     if getattr(args, "token", None) is not None:
         if token_file is not None:
             raise InputError("--token and --token-file: give one of them")
+        if not args.token.strip():
+            raise InputError("--token: the token is empty")
         print(f"hostpc {args.command}: {TOKEN_ON_COMMAND_LINE_WARNING}", file=sys.stderr)
     elif token_file is not None:
         args.token = read_token_file(token_file)

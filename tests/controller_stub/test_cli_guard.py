@@ -50,6 +50,7 @@ def test_an_empty_token_is_refused_at_start(
     scenario = tmp_path / "empty-token.yaml"
     scenario.write_text("server:\n  token: ''\n")
     assert "token" in serve_error(capsys, "--scenario", str(scenario))
+    assert "--token: the token is empty" in serve_error(capsys, "--token", "")
     monkeypatch.setenv("ZEROCAL_TOKEN", "  ")
     assert "$ZEROCAL_TOKEN: the token is empty" in serve_error(capsys)
 

@@ -64,6 +64,8 @@ def test_hostpc_token_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     assert main(["status", "--robot", robot, "--token", SECRET, "--timeout", "1"]) == 3
     err = capsys.readouterr().err
     assert "warning: --token is visible" in err and SECRET not in err
+    assert main(["status", "--robot", robot, "--token", ""]) == 2
+    assert "--token: the token is empty" in capsys.readouterr().err
     assert main(["rollback", "--robot", robot, "--token", "a", "--token-file",
                  str(token_file), "--id", "rb-1"]) == 2
     assert "give one of them" in capsys.readouterr().err
