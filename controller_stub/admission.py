@@ -11,10 +11,13 @@ Two policies of the controller stub against hostile peers, kept apart from the s
   so does `forget_after_s` without failures.
 - `SessionSlots`: sessions in accept order, the unauthenticated ones apart. A new
   connection always gets a slot: if the unauthenticated ones are at their cap, or all slots
-  are taken, the oldest unauthenticated session is evicted. Only when every slot is held by
-  an authenticated session is the newcomer refused. An authenticated operator therefore
-  always gets in, however many anonymous peers hold connections open (they also have to
-  authenticate within the handshake deadline or be closed).
+  are taken, an unauthenticated session is evicted: one from the peer address that holds
+  the most unauthenticated sessions, preferring those that loiter (made requests other
+  than hello and auth before authenticating: an operator authenticates at once), the
+  oldest first. Only when every slot is held by an authenticated session is the newcomer
+  refused. An operator with the token therefore gets in however many anonymous peers hold
+  connections open (they also have to authenticate within the handshake deadline or be
+  closed).
 
 Times are seconds of a monotonic clock, passed in (no clock here: the server passes the
 event loop's time).
@@ -22,6 +25,7 @@ event loop's time).
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Hashable, Iterator
 from dataclasses import dataclass, field
 from typing import Generic, TypeVar
@@ -105,7 +109,8 @@ class SessionSlots(Generic[T]):
     max_sessions: int
     max_unauthenticated: int
     _all: dict[T, None] = field(default_factory=dict)
-    _unauthenticated: dict[T, None] = field(default_factory=dict)
+    _unauthenticated: dict[T, str] = field(default_factory=dict)  # session -> peer address
+    _loitering: set[T] = field(default_factory=set)
 
     def __len__(self) -> int:
         return len(self._all)
@@ -118,28 +123,45 @@ class SessionSlots(Generic[T]):
         """Sessions not yet authenticated."""
         return len(self._unauthenticated)
 
-    def admit(self, session: T) -> tuple[bool, list[T]]:
-        """Make room for `session`: (admitted, the sessions to evict for it, oldest first).
-        Evicted sessions are no longer counted; the caller closes them."""
+    def admit(self, session: T, address: str = "") -> tuple[bool, list[T]]:
+        """Make room for `session` from peer `address`: (admitted, the sessions to evict for
+        it). Evicted sessions are no longer counted; the caller closes them."""
         evicted: list[T] = []
         while self._unauthenticated and (
             len(self._unauthenticated) >= self.max_unauthenticated
             or len(self._all) >= self.max_sessions
         ):
-            oldest = next(iter(self._unauthenticated))
-            self.remove(oldest)
-            evicted.append(oldest)
+            victim = self._victim()
+            self.remove(victim)
+            evicted.append(victim)
         if len(self._all) >= self.max_sessions:
             return False, evicted
         self._all[session] = None
-        self._unauthenticated[session] = None
+        self._unauthenticated[session] = address
         return True, evicted
+
+    def _victim(self) -> T:
+        """The unauthenticated session to evict: from the address holding the most, a
+        loiterer before the others, the oldest first."""
+        per_address = Counter(self._unauthenticated.values())
+        ranked = (
+            (-per_address[address], session not in self._loitering, age, session)
+            for age, (session, address) in enumerate(self._unauthenticated.items())
+        )
+        return min(ranked, key=lambda rank: rank[:3])[3]
+
+    def loitering(self, session: T) -> None:
+        """`session` made a request other than hello/auth before authenticating."""
+        if session in self._unauthenticated:
+            self._loitering.add(session)
 
     def authenticated(self, session: T) -> None:
         """`session` proved the token: it is no longer evictable."""
         self._unauthenticated.pop(session, None)
+        self._loitering.discard(session)
 
     def remove(self, session: T) -> None:
         """`session` ended (or was evicted)."""
         self._all.pop(session, None)
         self._unauthenticated.pop(session, None)
+        self._loitering.discard(session)

@@ -22,8 +22,9 @@ gets that long for its reads), and a frame it has started must be complete withi
 time; a session that sends nothing for `idle_timeout_s` while no request of its own is in
 flight is closed (a heartbeat keeps it alive); at most `max_sessions` sessions, of which at
 most `max_unauthenticated_sessions` not yet authenticated: a newcomer evicts the oldest
-unauthenticated session (an error reply `busy`, then close), so an operator with the token
-always gets in; only when every slot holds an authenticated session is the newcomer
+unauthenticated session (an error reply `busy`, then close; from the address holding the
+most, loiterers first: `controller_stub.admission.SessionSlots`), so an operator with the
+token always gets in; only when every slot holds an authenticated session is the newcomer
 refused (an error reply, then the connection closes). Failed authentications slow down
 every later session from the same peer address (`controller_stub.admission.AuthThrottle`);
 at most `max_requests_in_flight` requests per session run at once (beyond that the server
@@ -231,7 +232,7 @@ class ControllerServer:
                 f"too many failed authentications from {session.host}; try again later",
             )
             return
-        admitted, evicted = self._sessions.admit(session)
+        admitted, evicted = self._sessions.admit(session, session.host)
         for old in evicted:
             self.sessions_evicted += 1
             old.evict(f"evicted for a newer connection: at most "
@@ -257,6 +258,10 @@ class ControllerServer:
         """`session` proved the token: it keeps its slot; its address is trusted again."""
         self._sessions.authenticated(session)
         self.auth_throttle.succeeded(session.host)
+
+    def session_loitering(self, session: Session) -> None:
+        """`session` made a request before authenticating: evicted before the others."""
+        self._sessions.loitering(session)
 
     def authentication_failed(self, session: Session) -> None:
         """`session` sent a wrong proof: slow down its address."""

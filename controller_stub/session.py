@@ -232,6 +232,8 @@ class Session(RequestHandlers):
 
     async def _dispatch(self, event: object) -> None:
         if isinstance(event, m.Request):
+            if self.conn.state is not ConnectionState.READY:
+                self.server.session_loitering(self)
             if self.server.count_request():
                 logger.warning(
                     "fault: dropping %s after request %d (%s)",

@@ -39,6 +39,24 @@ def test_a_newcomer_evicts_the_oldest_unauthenticated_session() -> None:
     assert sorted(slots) == ["a", "c", "e", "f"] and slots.unauthenticated == 0
 
 
+def test_eviction_takes_the_crowding_address_and_loiterers_first() -> None:
+    slots: SessionSlots[str] = SessionSlots(max_sessions=10, max_unauthenticated=3)
+    slots.admit("operator", "10.0.0.5")
+    slots.admit("bot1", "10.0.0.9")
+    slots.admit("bot2", "10.0.0.9")
+    assert slots.admit("bot3", "10.0.0.9") == (True, ["bot1"])  # the crowding address
+    slots.loitering("bot3")  # a heartbeat before authenticating
+    assert slots.admit("bot4", "10.0.0.5") == (True, ["bot3"])  # loiterer before the oldest
+    same: SessionSlots[str] = SessionSlots(max_sessions=10, max_unauthenticated=3)
+    for name in ("a", "operator", "b"):
+        same.admit(name, "127.0.0.1")
+    same.loitering("a")
+    same.loitering("b")
+    assert same.admit("c", "127.0.0.1") == (True, ["a"])
+    assert same.admit("d", "127.0.0.1") == (True, ["b"])  # the operator is kept
+    assert same.admit("e", "127.0.0.1") == (True, ["operator"])  # no loiterer left: oldest
+
+
 def test_failed_authentications_grow_the_delay_per_address() -> None:
     throttle = AuthThrottle(base_delay_s=0.1, max_delay_s=2.0, max_wait_s=5.0)
     assert throttle.reserve("10.0.0.1", 0.0) == 0.0
