@@ -92,6 +92,8 @@ logger = logging.getLogger(__name__)
 
 DEFAULT_HOST = "127.0.0.1"
 READ_CHUNK = 1 << 20
+REFUSAL_LOG_INTERVAL_S = 10.0
+"""Refused sessions are logged once per reason in this interval (s), with a count."""
 
 
 class ControllerServer:
@@ -140,6 +142,7 @@ class ControllerServer:
         self.requests_seen = 0
         self._dropped = False
         self._server: asyncio.Server | None = None
+        self._refusals_logged: dict[str, tuple[float, int]] = {}  # why -> (logged at, since)
         self._sessions: SessionSlots[Session] = SessionSlots(
             self.max_sessions, self.max_unauthenticated_sessions
         )
@@ -267,13 +270,26 @@ class ControllerServer:
         """`session` sent a wrong proof: slow down its address."""
         self.auth_throttle.failed(session.host, self._now())
 
+    def _log_refusal(self, peer: object, why: str) -> None:
+        """One warning per reason every REFUSAL_LOG_INTERVAL_S (with the count of those not
+        logged since), so that a peer hammering the server cannot flood the log."""
+        now = self._now()
+        last, suppressed = self._refusals_logged.get(why, (-REFUSAL_LOG_INTERVAL_S, 0))
+        if now - last < REFUSAL_LOG_INTERVAL_S:
+            self._refusals_logged[why] = (last, suppressed + 1)
+            return
+        if len(self._refusals_logged) > 1024:
+            self._refusals_logged.clear()
+        self._refusals_logged[why] = (now, 0)
+        more = f" ({suppressed} more refused for this since the last report)" if suppressed else ""
+        logger.warning("refusing %s: %s%s", peer, why, more)
+
     async def _refuse_session(
         self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, why: str
     ) -> None:
         """No session for this client: one `busy` error reply, then close."""
         self.sessions_refused += 1
-        peer = writer.get_extra_info("peername")
-        logger.warning("refusing %s: %s", peer, why)
+        self._log_refusal(writer.get_extra_info("peername"), why)
         conn = Connection(Role.SERVER, token=self.token)
         error = conn.send_error(None, ErrorCode.BUSY, why)
         try:

@@ -146,3 +146,14 @@ async def test_wrong_tokens_slow_the_address_down_and_the_right_one_resets(
         assert server.auth_throttle.failures("127.0.0.1", now) == 0
     finally:
         await operator.close()
+
+
+async def test_refusals_are_logged_once_per_interval_with_a_count(
+    start_server: StartServer, caplog: pytest.LogCaptureFixture
+) -> None:
+    server = await start_server()
+    with caplog.at_level("WARNING", logger="controller_stub.server"):
+        for port in range(1000):
+            server._log_refusal(("10.0.0.9", port), "too many failed authentications")
+    refusals = [r for r in caplog.records if "refusing" in r.getMessage()]
+    assert len(refusals) == 1  # a hammering peer cannot flood the log
