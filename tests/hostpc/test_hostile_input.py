@@ -123,6 +123,8 @@ def test_files_above_the_size_limit_are_refused(
     (["fit", str(EXAMPLE), "--cv-folds", "1"], "--cv-folds: expected 0 or an integer from 2"),
     (["fit", str(EXAMPLE), "--cv-folds", "nan"], "--cv-folds: expected 0 or an integer"),
     (["diagnose", str(EXAMPLE), "--cv-folds", "-3"], "--cv-folds: expected 0 or an integer"),
+    (["diagnose", str(EXAMPLE), "--alpha", "nan"], "alpha nan: must be between 0 and 1"),
+    (["diagnose", str(EXAMPLE), "--alpha", "inf"], "alpha inf: must be between 0 and 1"),
     (["status", "--timeout", "nan"], "--timeout: expected a finite number > 0"),
     (["status", "--timeout", "inf"], "--timeout: expected a finite number > 0"),
     (["status", "--timeout", "-1"], "--timeout: expected a finite number > 0"),
