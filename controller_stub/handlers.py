@@ -31,6 +31,10 @@ logger = logging.getLogger("controller_stub.server")
 
 Handler = Callable[[Any], Awaitable[m._Message]]
 
+MIN_MOTION_SPEED = 1e-3
+"""Slowest speed fraction a motion may ask for: slower ones are refused (reason "speed"),
+so that no request can make a motion last practically forever (or overflow the clock)."""
+
 
 class RequestRefusedError(Exception):
     """A handler refuses a request with a protocol error code (busy, unknown rollback...)."""
@@ -108,6 +112,13 @@ class RequestHandlers:
         """Plan, pace and finish a motion (stopped part-way by an abort); the simulation's
         MoveResult / GuardedMoveResult. A simulation without `begin_move` moves at once
         and an abort only ends the wait (its result then says "aborted")."""
+        if not speed >= MIN_MOTION_SPEED:
+            raise RequestRefusedError(
+                ErrorCode.REFUSED,
+                f"speed {speed:g} is below the slowest this controller moves "
+                f"({MIN_MOTION_SPEED:g} of the maximum)",
+                reason="speed",
+            )
         self.server.begin_motion()
         if hasattr(self.sim, "begin_move"):
             plan = self.sim.begin_move(q_target, speed, io_line)

@@ -217,10 +217,11 @@ class GuardedMoveDone(Reply):
 
 
 class Abort(Request):
-    """Stop the motion in progress (any client's). Allowed before auth: stopping is safe."""
+    """Stop the motion in progress (any client's). Needs an authenticated session: an
+    anonymous peer must not be able to stop a calibration (the operator's own session and
+    the controller's e-stop remain the safety stop)."""
 
     kind: Literal["abort"] = "abort"
-    read_only: ClassVar[bool] = True
 
 
 class Aborted(Reply):

@@ -8,6 +8,7 @@ import sys
 
 from hostpc.cli.archive_options import add_archive_options, dataset_from_archive
 from hostpc.cli.format import format_fit_summary
+from hostpc.cli.numbers import CV_FOLDS
 from hostpc.cli.robots import add_robot_override, load_dataset_with_robot, robot_document
 from hostpc.dataset import load_dataset
 from hostpc.errors import InputError
@@ -46,8 +47,9 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
                         "(repeatable)")
     parser.add_argument("--loss", choices=("linear", "huber", "cauchy"), default="linear",
                         help="robust loss on whitened residuals (default: linear)")
-    parser.add_argument("--cv-folds", type=int, default=5,
-                        help="folds of the cross-validated RMS (0 to skip; default 5)")
+    parser.add_argument("--cv-folds", type=CV_FOLDS, default=5,
+                        help="folds of the cross-validated RMS (0 to skip, else 2..1000; "
+                        "default 5)")
 
 
 def add_constraint_options(parser: argparse.ArgumentParser) -> None:

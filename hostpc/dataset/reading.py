@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from hostpc.dataset import schema
+from hostpc.dataset import schema, validation
 from hostpc.dataset.kind import MeasurementKind
 from hostpc.dataset.kinds import measurement_kinds
 from hostpc.dataset.model import Dataset, FramePose, RobotDescription, Samples, SphereFrame
@@ -43,14 +43,7 @@ def load_dataset(path: PathLike, plugins: Iterable[str | os.PathLike[str]] = ())
             one-line message names the file, the field and the sample index.
     """
     source = os.fspath(path)
-    try:
-        raw = Path(path).read_bytes()
-    except FileNotFoundError as exc:
-        raise DatasetError(f"{source}: file not found") from exc
-    except IsADirectoryError as exc:
-        raise DatasetError(f"{source}: is a directory, not a dataset file") from exc
-    except OSError as exc:
-        raise DatasetError(f"{source}: cannot read file ({exc.strerror or exc})") from exc
+    raw = validation.read_dataset_bytes(path)  # size limit; devices refused
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -87,7 +80,8 @@ def dataset_from_dict(doc: Any, source: str = "<dict>",
     """
     kinds = measurement_kinds(plugins)
     try:
-        return _dataset_from_document(schema.normalize(doc), kinds, base_dir)
+        return validation.check_dataset(
+            _dataset_from_document(schema.normalize(doc), kinds, base_dir), source)
     except FieldError as exc:
         raise DatasetError(f"{source}: {exc}") from exc
     except RecursionError as exc:

@@ -98,7 +98,7 @@ def test_plugin_option(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> No
     (["--candidates", "nope"], "candidate effect 'nope' is unknown"),
     (["--candidates", "depth_scale,tool"], "'tool' is a frame, not a candidate effect"),
     (["--alpha", "2"], "alpha 2.0: must be between 0 and 1"),
-    (["--cv-folds", "-1"], "--cv-folds -1"),
+    (["--cv-folds", "-1"], "--cv-folds: expected 0 or an integer from 2 to 1000, got '-1'"),
 ])
 def test_bad_options_exit_2(capsys: pytest.CaptureFixture[str], args: list[str],
                             message: str) -> None:
