@@ -4,6 +4,7 @@
                                               # lacks numpy & co. on a fresh machine)
     .venv/bin/python bench/run.py fit render # only those whose module name contains a word
     .venv/bin/python bench/run.py --quick    # shorter runs where a bench offers them
+    .venv/bin/python bench/run.py sigma_mc   # slow, optional (OPTIONAL = True): only when named
 
 Each bench module has `run() -> dict` and prints its own table when run alone; this runner
 calls each module's `main()` if it has one (`--quick` is passed to a `main(argv)`), else
@@ -28,6 +29,8 @@ def main(argv: list[str]) -> int:
     modules = sorted(p for p in HERE.glob("bench_*.py"))
     if argv:
         modules = [p for p in modules if any(word in p.stem for word in argv)]
+    else:  # slow, optional benches (OPTIONAL = True) run only when asked for by name
+        modules = [p for p in modules if "\nOPTIONAL = True" not in p.read_text()]
     sys.path.insert(0, str(HERE.parent))
     failed = []
     for path in modules:
@@ -39,8 +42,9 @@ def main(argv: list[str]) -> int:
         try:
             spec.loader.exec_module(module)
             if hasattr(module, "main"):
+                own = [f for f in flags if f in path.read_text()]  # flags it knows
                 result = (module.main() if module.main.__code__.co_argcount == 0
-                          else module.main(flags))
+                          else module.main(own))
                 if isinstance(result, int) and result != 0:
                     failed.append(path.stem)
             else:

@@ -25,6 +25,12 @@ from controller_stub.render import (
 from controller_stub.scenario import Scenario
 from controller_stub.streams import STREAM_LEFT, STREAM_RIGHT, STREAM_VIEWS, stream_rng
 
+STREAM_EXTRA_VIEWS = 16
+"""Random stream of the extra chessboard views (apart from streams.py's, so that adding them
+changed no other draw)."""
+EXTRA_VIEW_FACTOR = 3
+"""Extra chessboard views offered beyond `n_views`, as a multiple of it."""
+
 
 @dataclass(frozen=True)
 class StereoFrame:
@@ -50,6 +56,7 @@ class StereoCameraMixin:
     disk_pattern: DiskPattern
     board_pattern: ChessboardPattern
     _board_views: np.ndarray | None
+    _extra_board_views: np.ndarray | None = None
     _renderers: tuple[Renderer, Renderer] | None
     _q: np.ndarray
     _time: float
@@ -96,6 +103,24 @@ class StereoCameraMixin:
             )
         return self._board_views.copy()
 
+    def extra_chessboard_poses(self) -> np.ndarray:
+        """(EXTRA_VIEW_FACTOR * n_views, 4, 4) further board poses, aimed anywhere in the
+        image (centre 5-95 %), from their own random stream: views `n_views` and up, which a
+        host asks for to complete its coverage or replace a rejected view."""
+        if self._extra_board_views is None:
+            board = self.scenario.chessboard
+            self._extra_board_views = chessboard_views(
+                self.camera,
+                self.T_left_right,
+                self.board_pattern,
+                EXTRA_VIEW_FACTOR * board.n_views,
+                (board.distance_min, board.distance_max),
+                math.radians(board.max_tilt_deg),
+                stream_rng(self.scenario.seed, STREAM_EXTRA_VIEWS),
+                centre_range=(0.05, 0.95),
+            )
+        return self._extra_board_views.copy()
+
     def chessboard_corners(self) -> np.ndarray:
         """(rows*cols, 3) inner corners in the board frame (m), row-major."""
         return self.board_pattern.corners()
@@ -117,11 +142,13 @@ class StereoCameraMixin:
             right = right_r.render_disk(T_right_left @ T_left_target, self.disk_pattern)
         elif pattern == "chessboard":
             n_views = self.scenario.chessboard.n_views
-            if not (isinstance(view, int) and 0 <= view < n_views):
+            max_views = (1 + EXTRA_VIEW_FACTOR) * n_views
+            if not (isinstance(view, int) and 0 <= view < max_views):
                 raise SimulationRefused(
-                    "invalid_argument", f"chessboard view {view!r} not in 0..{n_views - 1}"
+                    "invalid_argument", f"chessboard view {view!r} not in 0..{max_views - 1}"
                 )
-            T_left_board = self.chessboard_poses()[view]
+            T_left_board = (self.chessboard_poses()[view] if view < n_views
+                            else self.extra_chessboard_poses()[view - n_views])
             left = left_r.render_chessboard(T_left_board, self.board_pattern)
             right = right_r.render_chessboard(T_right_left @ T_left_board, self.board_pattern)
         else:
@@ -150,6 +177,7 @@ class StereoCameraMixin:
                 "rows": board.rows,
                 "square_size": board.square_size,
                 "n_views": board.n_views,
+                "max_views": (1 + EXTRA_VIEW_FACTOR) * board.n_views,
             },
             "probe": {
                 "tip_nominal": list(sc.probe.tip),

@@ -2,7 +2,7 @@
 
     controller-stub serve [--scenario FILE] [--host 127.0.0.1] [--port 47800]
                           [--truth-out FILE] [--modbus-port PORT] [--ur] [--log-level LEVEL]
-                          [--token TOKEN] [--modbus-writable]
+                          [--token-file FILE] [--modbus-writable]
 
 `serve` prints exactly `listening on HOST:PORT` (flushed) once it accepts connections; with
 `--port 0` the OS picks a free port and that line tells which. With `--modbus-port` the
@@ -13,9 +13,12 @@ port 30003 on --host; fixed ports, see docs/robots.md) and the line
 `ur on HOST (rtde 30004, dashboard 29999, script 30003)` is printed before `listening on`.
 Errors are one line on stderr.
 
-`--token` replaces the scenario's `server.token`. Binding a non-loopback `--host` while the
-token is still the public default (`zerocal-sim`) is refused (exit 2): anyone on the network
-could move the robot. The Modbus server is read-only unless `--modbus-writable` (or
+The token: `--token-file FILE` (a file readable by its owner only, mode 0600; its first
+line), else `$ZEROCAL_TOKEN`, else the scenario's `server.token`. `--token TOKEN` still works
+but warns: a command line is visible to every user of the machine (`ps`). An empty token is
+refused (exit 2), and so is binding a non-loopback `--host` while the token is still the
+public default (`zerocal-sim`): anyone on the network could move the robot. The Modbus
+server is read-only unless `--modbus-writable` (or
 `server.modbus_writable: true` in the scenario): Modbus has no authentication at all.
 """
 
@@ -25,7 +28,9 @@ import argparse
 import asyncio
 import contextlib
 import logging
+import os
 import signal
+import stat
 import sys
 from pathlib import Path
 from typing import Any
@@ -57,7 +62,15 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="let Modbus clients write the digital outputs (default: read-only)",
     )
-    serve.add_argument("--token", help="shared token (default: the scenario's server.token)")
+    serve.add_argument(
+        "--token-file",
+        type=Path,
+        help="file holding the shared token (mode 0600; default: $ZEROCAL_TOKEN, else the "
+        "scenario's server.token)",
+    )
+    serve.add_argument(
+        "--token", help="shared token (discouraged: visible in the process list; warns)"
+    )
     serve.add_argument(
         "--ur",
         action="store_true",
@@ -79,7 +92,11 @@ async def _serve(args: argparse.Namespace) -> int:
     from controller_stub.server import ControllerServer
 
     scenario: Any = _load_scenario(args.scenario)
-    token = args.token or scenario.server.token
+    try:
+        token = _resolve_token(args, scenario)
+    except ValueError as exc:
+        print(f"controller-stub serve: error: {exc}", file=sys.stderr)
+        return 2
     refusal = _exposure_refusal(args.host, token, scenario)
     if refusal is not None:
         print(f"controller-stub serve: error: {refusal}", file=sys.stderr)
@@ -129,6 +146,58 @@ async def _serve(args: argparse.Namespace) -> int:
     return 0
 
 
+TOKEN_ENV = "ZEROCAL_TOKEN"
+
+
+def _resolve_token(args: argparse.Namespace, scenario: Any) -> str:
+    """--token, else --token-file, else $ZEROCAL_TOKEN, else the scenario's; ValueError
+    (one line) for an empty token or a token file others can read."""
+    if args.token is not None and args.token.strip():
+        print(
+            "controller-stub serve: warning: --token is visible to every user of this machine "
+            f"(ps); prefer --token-file or ${TOKEN_ENV}",
+            file=sys.stderr,
+        )
+        token: str = args.token
+        source = "--token"
+    elif args.token is not None:
+        token, source = args.token, "--token"
+    elif args.token_file is not None:
+        token, source = read_token_file(args.token_file), f"--token-file {args.token_file}"
+    elif os.environ.get(TOKEN_ENV) is not None:
+        token, source = os.environ[TOKEN_ENV], f"${TOKEN_ENV}"
+    else:
+        token, source = scenario.server.token, "server.token"
+    if not token.strip():
+        raise ValueError(f"{source}: the token is empty")
+    return token
+
+
+def read_token_file(path: Path) -> str:
+    """The token in `path` (its first line, stripped); ValueError if the file cannot be read,
+    is not a regular file, is readable by group or others, or is empty."""
+    try:
+        info = path.stat()
+    except OSError as exc:
+        raise ValueError(f"--token-file {path}: cannot read ({exc.strerror})") from None
+    if not stat.S_ISREG(info.st_mode):
+        raise ValueError(f"--token-file {path}: not a regular file")
+    if info.st_mode & 0o077:
+        raise ValueError(
+            f"--token-file {path}: readable by others (mode {stat.S_IMODE(info.st_mode):04o}); "
+            f"chmod 600 {path}"
+        )
+    try:
+        with path.open(encoding="utf-8") as handle:
+            first = handle.readline(4096)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"--token-file {path}: cannot read ({exc})") from None
+    token = first.strip()
+    if not token:
+        raise ValueError(f"--token-file {path}: the token is empty")
+    return token
+
+
 def _exposure_refusal(host: str, token: str, scenario: Any) -> str | None:
     """Why serving on `host` with `token` is refused, or None: a non-loopback address with
     the public default token would let anyone on the network move the robot."""
@@ -137,7 +206,8 @@ def _exposure_refusal(host: str, token: str, scenario: Any) -> str | None:
         return None
     return (
         f"--host {host} is reachable from the network and the token is the public default "
-        f"{default_token!r}; give --token (or server.token in the scenario)"
+        f"{default_token!r}; give another with --token-file (or ${TOKEN_ENV}, or server.token "
+        "in the scenario)"
     )
 
 

@@ -31,6 +31,10 @@ logger = logging.getLogger("controller_stub.server")
 
 Handler = Callable[[Any], Awaitable[m._Message]]
 
+MIN_MOTION_SPEED = 1e-3
+"""Slowest speed fraction a motion may ask for: slower ones are refused (reason "speed"),
+so that no request can make a motion last practically forever (or overflow the clock)."""
+
 
 class RequestRefusedError(Exception):
     """A handler refuses a request with a protocol error code (busy, unknown rollback...)."""
@@ -62,6 +66,7 @@ class RequestHandlers:
             "abort": self._abort,
             "capture": self._capture,
             "measure_targets": self._measure_targets,
+            "measure_tracker": self._measure_tracker,
             "get_offsets": self._get_offsets,
             "set_offsets": self._set_offsets,
             "rollback_offsets": self._rollback,
@@ -107,6 +112,13 @@ class RequestHandlers:
         """Plan, pace and finish a motion (stopped part-way by an abort); the simulation's
         MoveResult / GuardedMoveResult. A simulation without `begin_move` moves at once
         and an abort only ends the wait (its result then says "aborted")."""
+        if not speed >= MIN_MOTION_SPEED:
+            raise RequestRefusedError(
+                ErrorCode.REFUSED,
+                f"speed {speed:g} is below the slowest this controller moves "
+                f"({MIN_MOTION_SPEED:g} of the maximum)",
+                reason="speed",
+            )
         self.server.begin_motion()
         if hasattr(self.sim, "begin_move"):
             plan = self.sim.begin_move(q_target, speed, io_line)
@@ -201,6 +213,23 @@ class RequestHandlers:
         ]
         return m.TargetsMeasured(reply_to=request.id, q=float_list(result["q"]),
                                  time=float(result["time"]), targets=targets)
+
+    async def _measure_tracker(self, request: m.MeasureTracker) -> m.TrackerMeasured:
+        """The laser tracker's reflectors (`sim.measure_tracker()`, controller_stub/tracker.py);
+        a simulation without a tracker refuses with reason `unsupported`."""
+        measure = getattr(self.sim, "measure_tracker", None)
+        if measure is None:
+            raise SimulationRefused("unsupported", f"{self.sim.robot_name} has no tracker")
+        result = measure()
+        reflectors = [
+            m.ReflectorObservation(name=str(name), p=float_list(seen["p"]),
+                                   cov=np.asarray(seen["cov"], dtype=float).reshape(3, 3).tolist())
+            for name, seen in result["seen"].items()
+        ]
+        return m.TrackerMeasured(reply_to=request.id, q=float_list(result["q"]),
+                                 time=float(result["time"]), reflectors=reflectors,
+                                 lost=[str(n) for n in result["lost"]],
+                                 description=json.loads(json.dumps(result["description"])))
 
     async def _get_offsets(self, request: m.GetOffsets) -> m.Offsets:
         return m.Offsets(reply_to=request.id, offsets=float_list(self.sim.zero_offsets()))

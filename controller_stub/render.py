@@ -379,11 +379,13 @@ def chessboard_views(
     max_tilt_rad: float,
     rng: np.random.Generator,
     border_px: float = 12.0,
+    centre_range: tuple[float, float] = (0.2, 0.8),
 ) -> np.ndarray:
     """(n_views, 4, 4) board poses T_leftcamera_board with the whole board (incl. margin)
     inside both images, distance of the board centre 0.3-0.8 m (distance_range), tilted up
     to max_tilt_rad about a random in-plane axis, rolled freely about the normal by up to
-    +-30 deg around the upright orientation. Drawn from `rng` by rejection."""
+    +-30 deg around the upright orientation, its centre aimed at a pixel drawn within
+    `centre_range` (fractions of the image size). Drawn from `rng` by rejection."""
     u_min, u_max, v_min, v_max = pattern.outline()
     centre = np.array([0.5 * (u_min + u_max), 0.5 * (v_min + v_max), 0.0])
     k = np.linspace(0.0, 1.0, 9)
@@ -408,8 +410,8 @@ def chessboard_views(
         tilt = rng.uniform(0.0, max_tilt_rad)
         axis_angle = rng.uniform(0.0, 2 * math.pi)
         roll = rng.uniform(-math.pi / 6, math.pi / 6)
-        px = rng.uniform(0.2, 0.8) * camera.width
-        py = rng.uniform(0.2, 0.8) * camera.height
+        px = rng.uniform(*centre_range) * camera.width
+        py = rng.uniform(*centre_range) * camera.height
         # board facing the camera: board z along camera +z (board behind its printed side)
         axis = np.array([math.cos(axis_angle), math.sin(axis_angle), 0.0])
         R_tilt = cv2.Rodrigues(axis * tilt)[0]

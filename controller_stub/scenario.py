@@ -19,6 +19,8 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from controller_stub.tracker import TrackerSpec
+
 RobotName = Literal["ur5e", "ur10e", "industrial6", "humanoid_upper"]
 
 ROBOT_JOINTS: dict[str, int] = {"ur5e": 6, "ur10e": 6, "industrial6": 6,
@@ -203,22 +205,25 @@ class ServerSpec(_Model):
     """Server settings (used by server.py / modbus_io.py).
 
     max_frame_bytes: largest frame from an authenticated client (before auth: 64 KiB).
-    handshake_timeout_s: a client must say hello, and finish any frame it starts, within
-    this time (s). idle_timeout_s: a session that sends nothing for this long (no request
-    of its own in flight) is closed (s). max_sessions: concurrent sessions; more are refused.
+    token: the shared secret (not empty). handshake_timeout_s: a client must say hello and
+    authenticate, and finish any frame it starts, within this time (s). idle_timeout_s: a
+    session that sends nothing for this long (no request of its own in flight) is closed
+    (s). max_sessions: concurrent sessions, of which at most max_unauthenticated_sessions
+    unauthenticated (a newcomer evicts the oldest of those).
     max_requests_in_flight: per session; beyond it the server stops reading that client.
     modbus_writable: Modbus clients may write coils / holding registers (default read-only).
     """
 
-    token: str = "zerocal-sim"
+    token: Annotated[str, Field(min_length=1)] = "zerocal-sim"
     max_frame_bytes: Annotated[int, Field(ge=1024)] = 64 * 1024 * 1024
     offset_limit_rad: Annotated[float, Field(gt=0.0)] = math.radians(5.0)
     modbus_port: Annotated[int, Field(ge=0, le=65535)] = 5020
     n_digital_io: Annotated[int, Field(ge=1, le=64)] = 8
     initial_offsets: list[float] | None = None
-    handshake_timeout_s: Annotated[float, Field(gt=0.0)] = 10.0
+    handshake_timeout_s: Annotated[float, Field(gt=0.0)] = 5.0
     idle_timeout_s: Annotated[float, Field(gt=0.0)] = 300.0
     max_sessions: Annotated[int, Field(ge=1)] = 32
+    max_unauthenticated_sessions: Annotated[int, Field(ge=1)] = 16
     max_requests_in_flight: Annotated[int, Field(ge=1)] = 8
     modbus_writable: bool = False
 
@@ -271,6 +276,7 @@ class Scenario(_Model):
     server: ServerSpec = ServerSpec()
     faults: FaultSpec = FaultSpec()
     humanoid: HumanoidSpec = HumanoidSpec()
+    tracker: TrackerSpec = TrackerSpec()  # the laser tracker (controller_stub/tracker.py)
 
     @model_validator(mode="after")
     def _check_lengths(self) -> Scenario:

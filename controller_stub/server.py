@@ -15,15 +15,22 @@ runs, `get_state` reports the joint angles interpolated along the path. One moti
 for the whole controller: a second one is refused with `busy`, and so are offset writes.
 (A simulation without `begin_move` moves at once and the abort only ends the wait.)
 
-Limits against slow, stalled or greedy peers (all per `ControllerServer` arguments, from
-`scenario.server`): a client must say hello within `handshake_timeout_s`, and a frame it has
-started must be complete within the same time; a session that sends nothing for
-`idle_timeout_s` while no request of its own is in flight is closed (a heartbeat keeps it
-alive); at most `max_sessions` sessions (the next client gets an error reply, then the
-connection closes); at most `max_requests_in_flight` requests per session run at once
-(beyond that the server stops reading from that client: backpressure); the server also stops
-reading while the client's unsent replies exceed `WRITE_HIGH_WATER` bytes, and drops a client
-that has not read them for `idle_timeout_s`. Until a session is authenticated its frames may
+Limits against slow, stalled, greedy or hostile peers (all per `ControllerServer`
+arguments, from `scenario.server`): a client must say hello AND authenticate within
+`handshake_timeout_s` of connecting (heartbeats do not extend it; a session without a token
+gets that long for its reads), and a frame it has started must be complete within the same
+time; a session that sends nothing for `idle_timeout_s` while no request of its own is in
+flight is closed (a heartbeat keeps it alive); at most `max_sessions` sessions, of which at
+most `max_unauthenticated_sessions` not yet authenticated: a newcomer evicts the oldest
+unauthenticated session (an error reply `busy`, then close; from the address holding the
+most, loiterers first: `controller_stub.admission.SessionSlots`), so an operator with the
+token always gets in; only when every slot holds an authenticated session is the newcomer
+refused (an error reply, then the connection closes). Failed authentications slow down
+every later session from the same peer address (`controller_stub.admission.AuthThrottle`);
+at most `max_requests_in_flight` requests per session run at once (beyond that the server
+stops reading from that client: backpressure); the server also stops reading while the
+client's unsent replies exceed `WRITE_HIGH_WATER` bytes, and drops a client that has not
+read them for `idle_timeout_s`. Until a session is authenticated its frames may
 not exceed `PRE_AUTH_MAX_FRAME_SIZE` (requests carry no attachments).
 
 Injected faults (scenario.faults) handled here: `drop_after_requests` (the request with that
@@ -52,6 +59,7 @@ from typing import Any
 
 import numpy as np
 
+from controller_stub.admission import AuthThrottle, SessionSlots
 from controller_stub.handlers import RequestRefusedError, float_list, json_default
 from controller_stub.session import (
     CLOSE_DRAIN_S,
@@ -84,6 +92,8 @@ logger = logging.getLogger(__name__)
 
 DEFAULT_HOST = "127.0.0.1"
 READ_CHUNK = 1 << 20
+REFUSAL_LOG_INTERVAL_S = 10.0
+"""Refused sessions are logged once per reason in this interval (s), with a count."""
 
 
 class ControllerServer:
@@ -94,7 +104,8 @@ class ControllerServer:
     accepted from an authenticated client (bytes). drop_after_requests / reply_delay_s:
     injected faults (see the module docstring). truth_out: file rewritten with `sim.truth()`
     as JSON at start and whenever the offsets change. handshake_timeout_s, idle_timeout_s
-    (s), max_sessions, max_requests_in_flight: the limits of the module docstring.
+    (s), max_sessions, max_unauthenticated_sessions, max_requests_in_flight: the limits of
+    the module docstring.
     """
 
     def __init__(
@@ -106,17 +117,23 @@ class ControllerServer:
         drop_after_requests: int | None = None,
         reply_delay_s: float = 0.0,
         truth_out: str | Path | None = None,
-        handshake_timeout_s: float = 10.0,
+        handshake_timeout_s: float = 5.0,
         idle_timeout_s: float = 300.0,
         max_sessions: int = 32,
+        max_unauthenticated_sessions: int = 16,
         max_requests_in_flight: int = 8,
     ) -> None:
+        if not token:
+            raise ValueError("the controller needs a non-empty token")
         self.sim = sim
         self.token = token
         self.max_frame_size = max_frame_size
         self.handshake_timeout_s = float(handshake_timeout_s)
         self.idle_timeout_s = float(idle_timeout_s)
         self.max_sessions = int(max_sessions)
+        self.max_unauthenticated_sessions = max(1, int(max_unauthenticated_sessions))
+        self.sessions_evicted = 0
+        self.auth_throttle = AuthThrottle(max_wait_s=self.handshake_timeout_s / 2)
         self.max_requests_in_flight = max(1, int(max_requests_in_flight))
         self.sessions_refused = 0
         self.drop_after_requests = drop_after_requests
@@ -125,7 +142,10 @@ class ControllerServer:
         self.requests_seen = 0
         self._dropped = False
         self._server: asyncio.Server | None = None
-        self._sessions: set[Session] = set()
+        self._refusals_logged: dict[str, tuple[float, int]] = {}  # why -> (logged at, since)
+        self._sessions: SessionSlots[Session] = SessionSlots(
+            self.max_sessions, self.max_unauthenticated_sessions
+        )
         self._motion: asyncio.Future[None] | None = None
         # the planned motion being paced: (plan, loop time at its start, wall duration s)
         self._progress: tuple[Any, float, float] | None = None
@@ -148,6 +168,7 @@ class ControllerServer:
             handshake_timeout_s=scenario.server.handshake_timeout_s,
             idle_timeout_s=scenario.server.idle_timeout_s,
             max_sessions=scenario.server.max_sessions,
+            max_unauthenticated_sessions=scenario.server.max_unauthenticated_sessions,
             max_requests_in_flight=scenario.server.max_requests_in_flight,
         )
 
@@ -181,9 +202,9 @@ class ControllerServer:
         """Stop accepting, drop every session and cancel their requests."""
         if self._server is not None:
             self._server.close()
-        for session in list(self._sessions):
+        for session in self._sessions:
             session.abort()
-        for session in list(self._sessions):
+        for session in self._sessions:
             await session.finished()
         if self._server is not None:
             with contextlib.suppress(Exception):
@@ -205,30 +226,72 @@ class ControllerServer:
     # ---------------------------------------------------------------------- internals
 
     async def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        if len(self._sessions) >= self.max_sessions:
-            await self._refuse_session(reader, writer)
-            return
         session = Session(self, reader, writer)
-        self._sessions.add(session)
+        wait = self.auth_throttle.reserve(session.host, self._now())
+        if wait is None:
+            await self._refuse_session(
+                reader,
+                writer,
+                f"too many failed authentications from {session.host}; try again later",
+            )
+            return
+        admitted, evicted = self._sessions.admit(session, session.host)
+        for old in evicted:
+            self.sessions_evicted += 1
+            old.evict(f"evicted for a newer connection: at most "
+                      f"{self.max_unauthenticated_sessions} sessions may be unauthenticated "
+                      f"(and {self.max_sessions} in all)")
+        if not admitted:
+            await self._refuse_session(
+                reader,
+                writer,
+                f"too many sessions: the controller serves at most {self.max_sessions}; "
+                "try again later",
+            )
+            return
         try:
-            await session.run()
+            await session.run(wait)
         finally:
-            self._sessions.discard(session)
+            self._sessions.remove(session)
+
+    def _now(self) -> float:
+        return asyncio.get_running_loop().time()
+
+    def session_authenticated(self, session: Session) -> None:
+        """`session` proved the token: it keeps its slot; its address is trusted again."""
+        self._sessions.authenticated(session)
+        self.auth_throttle.succeeded(session.host)
+
+    def session_loitering(self, session: Session) -> None:
+        """`session` made a request before authenticating: evicted before the others."""
+        self._sessions.loitering(session)
+
+    def authentication_failed(self, session: Session) -> None:
+        """`session` sent a wrong proof: slow down its address."""
+        self.auth_throttle.failed(session.host, self._now())
+
+    def _log_refusal(self, peer: object, why: str) -> None:
+        """One warning per reason every REFUSAL_LOG_INTERVAL_S (with the count of those not
+        logged since), so that a peer hammering the server cannot flood the log."""
+        now = self._now()
+        last, suppressed = self._refusals_logged.get(why, (-REFUSAL_LOG_INTERVAL_S, 0))
+        if now - last < REFUSAL_LOG_INTERVAL_S:
+            self._refusals_logged[why] = (last, suppressed + 1)
+            return
+        if len(self._refusals_logged) > 1024:
+            self._refusals_logged.clear()
+        self._refusals_logged[why] = (now, 0)
+        more = f" ({suppressed} more refused for this since the last report)" if suppressed else ""
+        logger.warning("refusing %s: %s%s", peer, why, more)
 
     async def _refuse_session(
-        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter
+        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, why: str
     ) -> None:
-        """Session limit reached: one `busy` error reply, then close."""
+        """No session for this client: one `busy` error reply, then close."""
         self.sessions_refused += 1
-        peer = writer.get_extra_info("peername")
-        logger.warning("refusing %s: %d sessions already (the limit)", peer, len(self._sessions))
+        self._log_refusal(writer.get_extra_info("peername"), why)
         conn = Connection(Role.SERVER, token=self.token)
-        error = conn.send_error(
-            None,
-            ErrorCode.BUSY,
-            f"too many sessions: the controller serves at most {self.max_sessions}; "
-            "try again later",
-        )
+        error = conn.send_error(None, ErrorCode.BUSY, why)
         try:
             writer.write(error)
             writer.write_eof()
@@ -256,7 +319,7 @@ class ControllerServer:
         event = m.IoEdge(
             line=int(line), value=bool(value), time=float(time), q_latched=float_list(q_latched)
         )
-        for session in list(self._sessions):
+        for session in self._sessions:
             session.push(event)
 
     def write_truth(self) -> None:

@@ -3,9 +3,10 @@
 A session feeds the client's bytes to a sans-IO `protocol.Connection`, runs every accepted
 request as its own task (at most `max_requests_in_flight` at once: beyond that it stops
 reading), turns any handler failure into an `error` reply, and pushes `io_edge` events once
-authenticated. It closes a client that does not say hello or finish a frame within
-`handshake_timeout_s`, that is idle for `idle_timeout_s`, or that does not read its replies;
-see `controller_stub.server` for the limits as a whole.
+authenticated. It closes a client that does not say hello and authenticate, or finish a
+frame, within `handshake_timeout_s`, that is idle for `idle_timeout_s`, or that does not read
+its replies; the server may evict it while it is unauthenticated. See
+`controller_stub.server` for the limits as a whole.
 """
 
 from __future__ import annotations
@@ -60,6 +61,8 @@ class Session(RequestHandlers):
         self.writer = writer
         peer = writer.get_extra_info("peername")
         self.peer = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer)
+        self.host = str(peer[0]) if isinstance(peer, tuple) else str(peer)
+        """The peer's address without the port (what failed authentications are counted by)."""
         self.conn = Connection(
             Role.SERVER,
             token=server.token,
@@ -72,6 +75,7 @@ class Session(RequestHandlers):
         self._slot_freed = asyncio.Event()
         self._write_lock = asyncio.Lock()
         self._done = asyncio.Event()
+        self._evicted = False
         loop = asyncio.get_running_loop()
         self._handshake_deadline = loop.time() + server.handshake_timeout_s
         self._frame_started: float | None = None  # loop time the frame in progress began
@@ -82,10 +86,14 @@ class Session(RequestHandlers):
             with contextlib.suppress(OSError):
                 sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
-    async def run(self) -> None:
+    async def run(self, wait_s: float = 0.0) -> None:
+        """Serve the client until it leaves or is closed; first wait `wait_s` (the auth
+        throttle's turn of this peer address; the handshake deadline keeps running)."""
         logger.info("client %s connected", self.peer)
         try:
-            while self.conn.state is not ConnectionState.CLOSED:
+            if wait_s > 0.0:
+                await asyncio.sleep(wait_s)
+            while self.conn.state is not ConnectionState.CLOSED and not self._evicted:
                 if not await self._wait_writable():
                     break
                 data = await self._read()
@@ -115,6 +123,17 @@ class Session(RequestHandlers):
         """Wait until the session has ended."""
         await self._done.wait()
 
+    def evict(self, why: str) -> None:
+        """Close this (unauthenticated) session to make room: a `busy` error, then close."""
+        self._evicted = True
+        logger.info("client %s: %s", self.peer, why)
+        if self.conn.state is not ConnectionState.CLOSED and not self.writer.is_closing():
+            with contextlib.suppress(LocalProtocolError):
+                self._write(self.conn.send_error(None, ErrorCode.BUSY, why))
+        for task in self._tasks:
+            task.cancel()
+        self._close_transport()
+
     def abort(self) -> None:
         """Drop the connection now and cancel its requests (server shutdown)."""
         for task in self._tasks:
@@ -137,11 +156,12 @@ class Session(RequestHandlers):
         """(seconds to wait for the next bytes, what is overdue if they do not come)."""
         now = asyncio.get_running_loop().time()
         waits = [(self.server.idle_timeout_s, f"idle for {self.server.idle_timeout_s:g} s")]
-        if self.conn.state is ConnectionState.AWAITING_HELLO:
+        if self.conn.state is not ConnectionState.READY:
+            said = "no hello" if self.conn.state is ConnectionState.AWAITING_HELLO else "no auth"
             waits.append(
                 (
                     self._handshake_deadline - now,
-                    f"no hello within {self.server.handshake_timeout_s:g} s",
+                    f"{said} within {self.server.handshake_timeout_s:g} s",
                 )
             )
         if self._frame_started is not None:
@@ -165,6 +185,8 @@ class Session(RequestHandlers):
                     self.reader.read(SESSION_READ_CHUNK), max(timeout, 0.0)
                 )
             except TimeoutError:  # before OSError, of which it is a subclass
+                if self._evicted:
+                    return None
                 if overdue.startswith("idle") and self._tasks:
                     continue
                 logger.warning("client %s: %s; closing", self.peer, overdue)
@@ -210,6 +232,8 @@ class Session(RequestHandlers):
 
     async def _dispatch(self, event: object) -> None:
         if isinstance(event, m.Request):
+            if self.conn.state is not ConnectionState.READY:
+                self.server.session_loitering(self)
             if self.server.count_request():
                 logger.warning(
                     "fault: dropping %s after request %d (%s)",
@@ -225,9 +249,12 @@ class Session(RequestHandlers):
             task.add_done_callback(self._task_done)
         elif isinstance(event, Rejected):
             logger.warning("client %s: %s (%s)", self.peer, event.message, event.code)
+            if event.code is ErrorCode.AUTH_FAILED:
+                self.server.authentication_failed(self)
         elif isinstance(event, StateChanged):
             if event.new is ConnectionState.READY:
                 logger.info("client %s authenticated", self.peer)
+                self.server.session_authenticated(self)
         elif isinstance(event, m.ErrorReply):
             logger.info("client %s reports error %s: %s", self.peer, event.code, event.message)
         elif isinstance(event, ConnectionClosed):

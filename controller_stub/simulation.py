@@ -38,6 +38,7 @@ INTERFACE CONTRACT (the server depends on exactly these names):
     sim.offset_history() -> list[(id, (n,))]   # every offset set held, id 0 = original
     sim.rollback(id) -> (n,) previous offsets  # restore a history entry (SimulationRefused)
     sim.truth() -> dict                        # JSON-serialisable; for --truth-out only
+    sim.measure_tracker() -> dict              # optional: the laser tracker (tracker.py)
     sim.on_io_edge: Callable[[int, bool, float, (n,)], None] | None
                                                # set by the server; called for each IO edge
                                                # (line, new value, sim time, latched q)
@@ -69,6 +70,7 @@ from controller_stub.render import CameraModel, ChessboardPattern, DiskPattern, 
 from controller_stub.robot_model import get_robot, make_transform, matrix_to_rpy
 from controller_stub.scenario import RandomSpec, Scenario
 from controller_stub.streams import STREAM_PROBE, STREAM_TRUTH, stream_rng
+from controller_stub.tracker import TrackerMixin
 
 __all__ = [
     "GuardedContact",
@@ -113,7 +115,7 @@ def create_simulation(scenario: Scenario) -> Any:
     return Simulation(scenario)
 
 
-class Simulation(MotionMixin, GuardedMoveMixin, StereoCameraMixin):
+class Simulation(MotionMixin, GuardedMoveMixin, StereoCameraMixin, TrackerMixin):
     """The simulated controller's world. See the module docstring for the contract.
 
     State: the encoder positions (as reported angles and the current zero offsets), the
@@ -406,4 +408,5 @@ class Simulation(MotionMixin, GuardedMoveMixin, StereoCameraMixin):
             },
             "effects": self.effects.as_dict(),
             "link_length_deltas_now": {"d": delta_d.tolist(), "a": delta_a.tolist()},
+            "tracker": self.tracker.truth(),
         }

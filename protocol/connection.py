@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 from enum import StrEnum
@@ -54,6 +55,11 @@ from protocol.messages import (
     Request,
     _Message,
 )
+
+MAX_JSON_DEPTH = 32
+"""Deepest nesting of arrays/objects accepted in a header (the protocol's messages nest at
+most a few levels); deeper headers are answered with `bad_message` before any JSON parser
+recurses into them."""
 
 
 class Role(StrEnum):
@@ -367,8 +373,15 @@ class Connection:
             return self._reject(exc, getattr(message, "id", None))
 
     def _parse(self, frame: Frame) -> _Message:
+        depth = json_nesting_depth(frame.header, MAX_JSON_DEPTH)
+        if depth > MAX_JSON_DEPTH:
+            raise RemoteProtocolError(
+                ErrorCode.BAD_MESSAGE,
+                f"header nests deeper than {MAX_JSON_DEPTH} levels of arrays/objects",
+            )
         try:
-            message: _Message = MESSAGE_ADAPTER.validate_json(frame.header)
+            # strict: the wire's JSON types are the schema's (no "2" for 2, no "0.1" for 0.1)
+            message: _Message = MESSAGE_ADAPTER.validate_json(frame.header, strict=True)
         except ValidationError as exc:
             raise _validation_error(exc) from None
         if len(frame.attachments) != message.expected_attachments():
@@ -547,11 +560,34 @@ def _validation_error(exc: ValidationError) -> RemoteProtocolError:
     return RemoteProtocolError(ErrorCode.BAD_MESSAGE, f"{location}: {error['msg']}")
 
 
+_JSON_STRUCTURE = re.compile(rb'"(?:[^"\\]|\\.)*"|[\[\]{}]', re.DOTALL)
+"""A JSON string (skipped: brackets inside it do not count) or a bracket."""
+
+
+def json_nesting_depth(text: bytes, stop_above: int | None = None) -> int:
+    """Deepest nesting of arrays/objects in JSON `text` (no parsing, no recursion; a scan
+    that stops as soon as the depth exceeds `stop_above`)."""
+    depth = deepest = 0
+    for match in _JSON_STRUCTURE.finditer(text):
+        token = match.group()
+        if token in (b"[", b"{"):
+            depth += 1
+            if depth > deepest:
+                deepest = depth
+                if stop_above is not None and deepest > stop_above:
+                    break
+        elif token in (b"]", b"}"):
+            depth -= 1
+    return deepest
+
+
 def _find_id(header: bytes) -> int | None:
     """Best effort: the request id of an unparseable message, so the error can name it."""
+    if json_nesting_depth(header, MAX_JSON_DEPTH) > MAX_JSON_DEPTH:
+        return None
     try:
         document: Any = json.loads(header)
-    except (ValueError, UnicodeDecodeError):
+    except (ValueError, UnicodeDecodeError, RecursionError):
         return None
     if isinstance(document, dict):
         value = document.get("id")

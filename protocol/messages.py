@@ -217,10 +217,11 @@ class GuardedMoveDone(Reply):
 
 
 class Abort(Request):
-    """Stop the motion in progress (any client's). Allowed before auth: stopping is safe."""
+    """Stop the motion in progress (any client's). Needs an authenticated session: an
+    anonymous peer must not be able to stop a calibration (the operator's own session and
+    the controller's e-stop remain the safety stop)."""
 
     kind: Literal["abort"] = "abort"
-    read_only: ClassVar[bool] = True
 
 
 class Aborted(Reply):
@@ -311,6 +312,44 @@ class TargetsMeasured(Reply):
     q: JointVector
     time: FiniteFloat
     targets: Annotated[list[TargetObservation], Field(max_length=64)]
+
+
+# --- laser tracker (world_point) ----------------------------------------------------------
+
+
+class MeasureTracker(Request):
+    """Measure every reflector on the flange with the cell's laser tracker, now.
+
+    Needs an authenticated session, like `capture`. A controller without a tracker refuses
+    with reason `unsupported`.
+    """
+
+    kind: Literal["measure_tracker"] = "measure_tracker"
+
+
+class ReflectorObservation(BaseModel):
+    """One reflector measured by the tracker: name; p: (3,) m in the tracker (world)
+    frame; cov: (3, 3) m^2."""
+
+    model_config = ConfigDict(extra="forbid")
+    name: ShortText
+    p: Vector3
+    cov: Matrix3
+
+
+class TrackerMeasured(Reply):
+    """The reflectors in the tracker's view, the names of those whose beam is lost (line of
+    sight outside their acceptance cone), the joint angles q (n,) rad at the measurement,
+    controller time (s), and the tracker's nominal description (`world_base` {xyz, rpy}
+    registration of the robot base, `reflectors` name -> (3,) nominal flange position,
+    `axes`, `acceptance_deg`, `sigma_distance` m, `sigma_angle` rad)."""
+
+    kind: Literal["tracker_measured"] = "tracker_measured"
+    q: JointVector
+    time: FiniteFloat
+    reflectors: Annotated[list[ReflectorObservation], Field(max_length=64)]
+    lost: Annotated[list[ShortText], Field(max_length=64)] = []
+    description: dict[str, Any] = {}
 
 
 # --- zero offsets --------------------------------------------------------------------------
@@ -413,6 +452,8 @@ Message = Annotated[
     | CaptureDone
     | MeasureTargets
     | TargetsMeasured
+    | MeasureTracker
+    | TrackerMeasured
     | GetOffsets
     | Offsets
     | SetOffsets
@@ -440,6 +481,7 @@ REQUEST_TYPES: dict[str, type[Request]] = {
         Abort,
         Capture,
         MeasureTargets,
+        MeasureTracker,
         GetOffsets,
         SetOffsets,
         RollbackOffsets,
@@ -458,6 +500,7 @@ REPLY_KIND: dict[str, str] = {
     "abort": "aborted",
     "capture": "capture_done",
     "measure_targets": "targets_measured",
+    "measure_tracker": "tracker_measured",
     "get_offsets": "offsets",
     "set_offsets": "offsets_set",
     "rollback_offsets": "offsets_rolled_back",

@@ -13,9 +13,9 @@ import argparse
 import json
 import math
 import sys
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
-from hostpc.cli.fit import add_model_options
+from hostpc.cli.fit import add_constraint_options, add_model_options
 from hostpc.diagnostics.advice import mm, without
 from hostpc.errors import InputError, ZerocalError
 
@@ -42,6 +42,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     )
     parser.add_argument("dataset", help="dataset file (zerocal-dataset/1 JSON)")
     add_model_options(parser)
+    add_constraint_options(parser)
     parser.add_argument("--ladder", action="store_true",
                         help="fit the nested models, adding the best candidate while it is "
                         "significant and lowers the whitened held-out RMS, and show each step")
@@ -76,8 +77,14 @@ def _run(args: argparse.Namespace) -> int:
     candidates = None
     if args.candidates:
         candidates = [c.strip() for c in args.candidates.split(",") if c.strip()]
+    source: Any = args.dataset
+    if args.prior or args.hold:
+        from hostpc.dataset import load_dataset
+        from hostpc.fitting.priors import with_constraints
+
+        source = with_constraints(load_dataset(args.dataset), args.prior, args.hold)
     diagnosis = diagnose(
-        args.dataset, args.effects, plugins=args.plugin, ladder=args.ladder,
+        source, args.effects, plugins=args.plugin, ladder=args.ladder,
         candidates=candidates, alpha=DEFAULT_ALPHA if args.alpha is None else args.alpha,
         cv_folds=args.cv_folds, loss=args.loss,
     )

@@ -19,8 +19,10 @@ for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import importlib  # noqa: E402
 import sys  # noqa: E402
+import typing  # noqa: E402
+import warnings  # noqa: E402
 
-from hostpc.errors import ZerocalError  # noqa: E402
+from hostpc.errors import InputError, ZerocalError  # noqa: E402
 
 COMMAND_MODULES = (
     "fit",
@@ -33,11 +35,21 @@ COMMAND_MODULES = (
     "camera",  # hostpc.sensors: serve or check the host's stereo camera
     "station",  # hostpc.station: the end-of-line station service
     "history",  # hostpc.archive: archived runs and drift
+    "robots",  # hostpc.kinematics: built-in robots and URDF chains
+    "import_csv",  # hostpc.importing: metrology CSV -> dataset
+    "push",  # push the offsets of an offline fit
 )
 
 
+class _OneLineErrors(argparse.ArgumentParser):
+    """Bad options are one line on stderr (no usage block) and exit code 2."""
+
+    def error(self, message: str) -> typing.NoReturn:
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _OneLineErrors(
         prog="hostpc",
         description="zerocal host: calibrate robot joint zero offsets, fit and diagnose datasets.",
     )
@@ -51,17 +63,49 @@ def build_parser() -> argparse.ArgumentParser:
                 continue  # command not built yet
             raise
         module.register(subparsers)
+    _add_token_file_options(subparsers)
     return parser
+
+
+def _add_token_file_options(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Every command with --token also takes --token-file (read in `main`)."""
+    for command in subparsers.choices.values():
+        options = {o for action in command._actions for o in action.option_strings}
+        if "--token" in options and "--token-file" not in options:
+            command.add_argument("--token-file", metavar="FILE",
+                                 help="read the shared token from FILE (mode 0600)")
+
+
+def _token_from_options(args: argparse.Namespace) -> None:
+    """--token-file -> args.token; a warning for a token given on the command line."""
+    from hostpc.robots.connect import TOKEN_ON_COMMAND_LINE_WARNING, read_token_file
+
+    token_file = getattr(args, "token_file", None)
+    if getattr(args, "token", None) is not None:
+        if token_file is not None:
+            raise InputError("--token and --token-file: give one of them")
+        if not args.token.strip():
+            raise InputError("--token: the token is empty")
+        print(f"hostpc {args.command}: {TOKEN_ON_COMMAND_LINE_WARNING}", file=sys.stderr)
+    elif token_file is not None:
+        args.token = read_token_file(token_file)
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # a bad option (one line already printed) or --help
+        return exc.code if isinstance(exc.code, int) else 2
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
     try:
-        return int(args.func(args))
+        _token_from_options(args)
+        with warnings.catch_warnings():
+            if not args.debug:  # numpy's overflow/invalid warnings are not for the user
+                warnings.simplefilter("ignore", RuntimeWarning)
+            return int(args.func(args))
     except ZerocalError as exc:
         if args.debug:
             raise

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.cli.numbers import TIMEOUT_S
 from hostpc.errors import InputError
 from hostpc.methods.push import read_push_file, rollback, rollback_run
 from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot
@@ -41,7 +42,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--id", dest="rollback_id", help="the controller's rollback id")
     parser.add_argument("--token", help="shared token (default: $ZEROCAL_TOKEN, else the "
                         "simulator's default)")
-    parser.add_argument("--timeout", type=float, default=10.0, help="seconds per request")
+    parser.add_argument("--timeout", type=TIMEOUT_S, default=10.0, help="seconds per request")
     parser.add_argument("--json", action="store_true", help="print JSON")
     parser.set_defaults(func=run)
 

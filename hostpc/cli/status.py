@@ -15,6 +15,7 @@ import json
 import math
 from typing import Any
 
+from hostpc.cli.numbers import TIMEOUT_S
 from hostpc.errors import InputError
 from hostpc.robots.connect import TOKEN_ENV, parse_robot, resolve_token
 from hostpc.transport import ControllerClient, ControllerState
@@ -38,7 +39,7 @@ def register(subparsers: Any) -> None:
         "--token", help=f"shared token (default: ${TOKEN_ENV}, else the simulator's default)"
     )
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    parser.add_argument("--timeout", type=float, default=5.0, help="seconds per request")
+    parser.add_argument("--timeout", type=TIMEOUT_S, default=5.0, help="seconds per request")
     parser.set_defaults(func=run)
 
 

@@ -24,8 +24,10 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 StrArray = NDArray[np.str_]
 
-Method = Literal["stereo_target", "sphere_probe", "dual_loop"]
-METHODS: tuple[str, ...] = ("stereo_target", "sphere_probe", "dual_loop")
+#: the built-in methods; a plugin's measurement model adds its own name
+Method = str
+METHODS: tuple[str, ...] = ("stereo_target", "sphere_probe", "dual_loop", "world_point",
+                            "world_pose")
 
 
 def _frozen(value: ArrayLike, dtype: Any = np.float64) -> NDArray[Any]:
@@ -146,9 +148,21 @@ class RobotDescription:
     theta: FloatArray | None = None
     mass: FloatArray | None = None
     com: FloatArray | None = None
+    #: extension A: per-joint "revolute" / "prismatic" of an explicit table (None: revolute)
+    joint_types: tuple[str, ...] | None = None
+    #: extension A: a URDF robot (absolute path) and its chain's end links
+    urdf: str | None = None
+    base_link: str | None = None
+    tip_link: str | None = None
 
     def __post_init__(self) -> None:
         explicit = (self.a, self.alpha, self.d, self.theta)
+        if self.urdf is not None:
+            if self.name is not None or any(v is not None for v in explicit):
+                raise ValueError("RobotDescription: a URDF robot has no name or table")
+            if not self.base_link or not self.tip_link:
+                raise ValueError("RobotDescription: a URDF robot needs base_link and tip_link")
+            return
         if self.name is not None:
             if self.convention is not None or any(v is not None for v in explicit):
                 raise ValueError("RobotDescription: give a name or an explicit table, not both")
@@ -209,6 +223,8 @@ class Samples:
         uv: (N, 2, 2) pixel centres ``[[uL, vL], [uR, vR]]``, px, or None.
         chain: (N,) ``"left"``/``"right"``: the arm observed (``dual_loop``), else None.
         q_head: (N, n_head) head joint angles, rad (``dual_loop``), else None.
+        fields: the fields a measurement kind declares for itself (a plugin's, world_point's
+            ``marker``), by name, each with N rows, SI; NaN where an optional one is absent.
     """
 
     q: FloatArray
@@ -224,6 +240,7 @@ class Samples:
     uv: FloatArray | None = None
     chain: StrArray | None = None
     q_head: FloatArray | None = None
+    fields: Mapping[str, NDArray[Any]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         q = _frozen(self.q)
@@ -263,6 +280,15 @@ class Samples:
             _check_shape(f"Samples.extra[{key!r}]", array, (n_samples,))
             extra[str(key)] = array
         object.__setattr__(self, "extra", MappingProxyType(extra))
+        own = {}
+        for key, value in self.fields.items():
+            array = np.array(value, copy=True)
+            array.setflags(write=False)
+            if array.ndim == 0 or array.shape[0] != n_samples:
+                raise ValueError(f"Samples.fields[{key!r}]: expected {n_samples} rows, "
+                                 f"got shape {array.shape}")
+            own[str(key)] = array
+        object.__setattr__(self, "fields", MappingProxyType(own))
 
     @property
     def n(self) -> int:
@@ -300,6 +326,7 @@ class Samples:
             uv=pick(self.uv),
             chain=pick(self.chain),
             q_head=pick(self.q_head),
+            fields={k: v[index] for k, v in self.fields.items()},
         )
 
     __eq__ = _dataclass_eq
@@ -310,7 +337,8 @@ class Dataset:
     """One calibration dataset in SI units (the value of a ``zerocal-dataset/1`` file).
 
     Attributes:
-        method: ``"stereo_target"``, ``"sphere_probe"`` or ``"dual_loop"``.
+        method: the measurement model's name: ``"stereo_target"``, ``"sphere_probe"``,
+            ``"dual_loop"``, or a plugin's (``hostpc.model.measurements``).
         robot: the robot description.
         frames: nominal frames by name. ``FramePose`` for ``tool`` and, for dual_loop,
             ``camera``, ``left_base``, ``right_base``; a (3,) point (m) for ``target``
@@ -332,8 +360,8 @@ class Dataset:
     extra_fields: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if self.method not in METHODS:
-            raise ValueError(f"Dataset.method: unknown method {self.method!r}")
+        if not isinstance(self.method, str) or not self.method.isidentifier():
+            raise ValueError(f"Dataset.method: not a method name: {self.method!r}")
         frames: dict[str, Any] = {}
         for name, value in self.frames.items():
             if isinstance(value, FramePose | SphereFrame | dict):

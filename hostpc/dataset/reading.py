@@ -10,57 +10,40 @@ robot, frames, known, probe) is checked here, the samples in ``reading_samples``
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from hostpc.dataset import schema
-from hostpc.dataset.model import METHODS, Dataset, FramePose, RobotDescription, SphereFrame
+from hostpc.dataset import schema, validation
+from hostpc.dataset.kind import MeasurementKind
+from hostpc.dataset.kinds import measurement_kinds
+from hostpc.dataset.model import Dataset, FramePose, RobotDescription, Samples, SphereFrame
 from hostpc.dataset.reading_samples import read_samples
 from hostpc.dataset.schema import FORMAT_TAG, FieldError, Loc, show
 from hostpc.dataset.units import Units
 from hostpc.errors import DatasetError, InputError
+from hostpc.kinematics.robots import get_robot
 
 PathLike = str | os.PathLike[str]
 
-# Frames each method knows, with their kind; all but the stereo camera model are required.
-_FRAMES: dict[str, dict[str, str]] = {
-    "stereo_target": {"tool": "pose", "target": "point", "camera": "camera_model"},
-    "sphere_probe": {"tool": "tip", "sphere": "sphere"},
-    "dual_loop": {
-        "camera": "pose",
-        "left_base": "pose",
-        "right_base": "pose",
-        "left_target": "point",
-        "right_target": "point",
-    },
-}
-_OPTIONAL_FRAMES = frozenset({"camera_model"})
-
-
-def load_dataset(path: PathLike) -> Dataset:
+def load_dataset(path: PathLike, plugins: Iterable[str | os.PathLike[str]] = ()) -> Dataset:
     """Read and validate a dataset file, converting it to SI units.
 
     Args:
         path: the ``.json`` file.
+        plugins: Python files that may define measurement models (``--plugin``).
 
     Raises:
         DatasetError: the file is missing, unreadable, not JSON, or breaks the format; the
             one-line message names the file, the field and the sample index.
     """
     source = os.fspath(path)
-    try:
-        raw = Path(path).read_bytes()
-    except FileNotFoundError as exc:
-        raise DatasetError(f"{source}: file not found") from exc
-    except IsADirectoryError as exc:
-        raise DatasetError(f"{source}: is a directory, not a dataset file") from exc
-    except OSError as exc:
-        raise DatasetError(f"{source}: cannot read file ({exc.strerror or exc})") from exc
+    raw = validation.read_dataset_bytes(path)  # size limit; devices refused
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -77,28 +60,36 @@ def load_dataset(path: PathLike) -> Dataset:
         raise DatasetError(f"{source}: not valid JSON (nested too deeply)") from exc
     except ValueError as exc:  # e.g. an integer literal with thousands of digits
         raise DatasetError(f"{source}: not valid JSON ({exc})") from exc
-    return dataset_from_dict(document, source)
+    return dataset_from_dict(document, source, plugins, base_dir=Path(path).parent)
 
 
-def dataset_from_dict(doc: Any, source: str = "<dict>") -> Dataset:
+def dataset_from_dict(doc: Any, source: str = "<dict>",
+                      plugins: Iterable[str | os.PathLike[str]] = (),
+                      base_dir: PathLike | None = None) -> Dataset:
     """Validate a parsed document (what ``json.load`` returns) and convert it to SI.
 
     Args:
         doc: the document; tuples, numpy arrays and numpy scalars are accepted as well.
         source: name used as the prefix of error messages (a file name).
+        plugins: Python files that may define measurement models.
+        base_dir: directory a relative ``robot.urdf`` path is resolved against (default:
+            the working directory).
 
     Raises:
         DatasetError: the document breaks the format (one line: source, field, sample).
     """
+    kinds = measurement_kinds(plugins)
     try:
-        return _dataset_from_document(schema.normalize(doc))
+        return validation.check_dataset(
+            _dataset_from_document(schema.normalize(doc), kinds, base_dir), source)
     except FieldError as exc:
         raise DatasetError(f"{source}: {exc}") from exc
     except RecursionError as exc:
         raise DatasetError(f"{source}: nested too deeply") from exc
 
 
-def _dataset_from_document(doc: Any) -> Dataset:
+def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]],
+                           base_dir: PathLike | None = None) -> Dataset:
     """Build the dataset from a normalized document; raises FieldError."""
     if not isinstance(doc, dict):
         raise FieldError((), f"expected a JSON object at the top level, got {show(doc)}")
@@ -109,19 +100,24 @@ def _dataset_from_document(doc: Any) -> Dataset:
     if "method" not in doc:
         raise FieldError(("method",), "required field missing")
     method = doc["method"]
-    if method not in METHODS:
-        expected = ", ".join(f"'{m}'" for m in METHODS)
+    if not isinstance(method, str) or method not in kinds:
+        expected = ", ".join(f"'{m}'" for m in kinds)
         raise FieldError(("method",), f"unknown method {show(method)} (expected {expected})")
+    kind = kinds[method]()
 
     document: schema.DocumentSchema = schema.validate(schema.DocumentSchema, doc)
     if not document.samples:
         raise FieldError(("samples",), "no samples (expected at least one)")
     units = Units(document.units)
-    robot, n_joints, robot_label = _read_robot(document.robot, method, units)
-    frames = _read_frames(document.frames, method, units)
+    if document.robot.urdf is not None:  # extension A (hostpc.kinematics.urdf)
+        robot, n_joints, robot_label = read_urdf_robot(document.robot, method, base_dir)
+    else:
+        robot, n_joints, robot_label = _read_robot(document.robot, kind, units)
+    frames = _read_frames(document.frames, kind, units)
     known = _read_known(document.known, frames)
-    stylus_radius = _read_probe(document.probe, method, units)
-    samples = read_samples(document.samples, method, n_joints, robot_label, units)
+    stylus_radius = _read_probe(document.probe, kind, units)
+    samples = read_samples(document.samples, kind, n_joints, robot_label, units, frames)
+    samples = prismatic_q_to_length(samples, robot, units)
     extra_fields = {k: v for k, v in doc.items() if k not in schema.DOCUMENT_FIELDS}
     return Dataset(
         method=method,
@@ -134,10 +130,52 @@ def _dataset_from_document(doc: Any) -> Dataset:
     )
 
 
+def read_urdf_robot(robot: schema.RobotSchema, method: str, base_dir: PathLike | None
+                    ) -> tuple[RobotDescription, int, str]:
+    """Extension A: ``{"urdf": PATH, "base_link", "tip_link"}``, PATH relative to the file."""
+    from hostpc.kinematics.urdf import load_urdf_chain  # imported late: a sibling package
+
+    for key in ("name", "convention", "joints", "mass", "com"):
+        if getattr(robot, key) is not None:
+            raise FieldError(("robot", key), "not allowed with 'urdf'")
+    if method == "dual_loop":
+        raise FieldError(("robot", "urdf"), "dual_loop needs a built-in robot 'name'")
+    for key in ("base_link", "tip_link"):
+        if not getattr(robot, key):
+            raise FieldError(("robot", key), "required with 'urdf'")
+    assert robot.urdf is not None and robot.base_link and robot.tip_link
+    path = Path(base_dir or ".") / robot.urdf
+    try:
+        n = load_urdf_chain(path, robot.base_link, robot.tip_link).n
+    except InputError as exc:
+        raise FieldError(("robot", "urdf"), " ".join(str(exc).split())) from exc
+    description = RobotDescription(urdf=os.fspath(path.resolve()), base_link=robot.base_link,
+                                   tip_link=robot.tip_link)
+    return description, n, f"the URDF chain's {n} joints"
+
+
+def prismatic_q_to_length(samples: Samples, robot: RobotDescription, units: Units) -> Samples:
+    """Extension A: prismatic joints' ``q`` is a length; reading converted it as an angle."""
+    if robot.urdf is not None:
+        from hostpc.kinematics.urdf import load_urdf_chain
+
+        assert robot.base_link and robot.tip_link
+        prismatic = load_urdf_chain(robot.urdf, robot.base_link, robot.tip_link).prismatic
+    elif robot.joint_types is not None:
+        prismatic = np.array([kind == "prismatic" for kind in robot.joint_types])
+    else:
+        return samples
+    assert prismatic is not None
+    if not prismatic.any():
+        return samples
+    q = np.array(samples.q, dtype=np.float64)
+    raw = np.rad2deg(q[:, prismatic]) if units.units.angle == "deg" else q[:, prismatic]
+    q[:, prismatic] = units.length(raw)
+    return dataclasses.replace(samples, q=q)
+
+
 def _robot_joint_count(name: str) -> int:
     """Joint count of a built-in robot; raises FieldError for an unknown name."""
-    from hostpc.kinematics.robots import get_robot  # imported late: a sibling package
-
     try:
         return int(get_robot(name).n)
     except InputError as exc:
@@ -146,7 +184,7 @@ def _robot_joint_count(name: str) -> int:
 
 
 def _read_robot(
-    robot: schema.RobotSchema, method: str, units: Units
+    robot: schema.RobotSchema, kind: MeasurementKind, units: Units
 ) -> tuple[RobotDescription, int | None, str]:
     """The robot description, its joint count (None if not resolved) and a label."""
     explicit_keys = [
@@ -158,7 +196,7 @@ def _read_robot(
                 ("robot", explicit_keys[0]),
                 "not allowed with 'name' (give a built-in 'name' or an explicit description)",
             )
-        if method == "dual_loop":  # a kinematic tree; the samples give the joint counts
+        if kind.robot_tree:  # a kinematic tree; the samples give the joint counts
             return RobotDescription(name=robot.name), None, f"robot '{robot.name}'"
         n = _robot_joint_count(robot.name)
         return RobotDescription(name=robot.name), n, f"robot '{robot.name}'"
@@ -166,9 +204,9 @@ def _read_robot(
         raise FieldError(
             ("robot",), "expected 'name' (built-in robot) or 'convention' and 'joints'"
         )
-    if method == "dual_loop":
+    if kind.robot_tree:
         raise FieldError(
-            ("robot",), "dual_loop needs a built-in robot 'name' (chains head, left, right)"
+            ("robot",), f"{kind.name} needs a built-in robot 'name' (chains head, left, right)"
         )
     if robot.convention is None:
         raise FieldError(("robot", "convention"), "required field missing ('dh' or 'mdh')")
@@ -195,6 +233,8 @@ def _read_robot(
         theta=units.angle([row.theta for row in robot.joints]),
         mass=mass,
         com=com,
+        joint_types=(tuple(row.type for row in robot.joints)
+                     if any(row.type != "revolute" for row in robot.joints) else None),
     )
     return description, n, f"the robot's {n} joints"
 
@@ -204,20 +244,22 @@ def _check_count(loc: Loc, values: Sequence[Any], n: int, what: str) -> None:
         raise FieldError(loc, f"expected {n} values ({what}), got {len(values)}")
 
 
-def _read_frames(frames: dict[str, Any], method: str, units: Units) -> dict[str, Any]:
+def _read_frames(frames: dict[str, Any], method: MeasurementKind, units: Units
+                 ) -> dict[str, Any]:
     """The nominal frames of ``method`` in SI."""
-    kinds = _FRAMES[method]
+    kinds = method.frames
     for name in frames:
         if name not in kinds:
             expected = ", ".join(kinds)
             raise FieldError(
-                ("frames", name), f"unknown frame for method '{method}' (expected {expected})"
+                ("frames", name),
+                f"unknown frame for method '{method.name}' (expected {expected})",
             )
     result: dict[str, Any] = {}
     for name, kind in kinds.items():
         loc: Loc = ("frames", name)
         if name not in frames:
-            if kind in _OPTIONAL_FRAMES:
+            if name in method.optional_frames:
                 continue
             raise FieldError(loc, "required field missing")
         value = frames[name]
@@ -230,6 +272,11 @@ def _read_frames(frames: dict[str, Any], method: str, units: Units) -> dict[str,
             result[name] = FramePose(xyz=units.length(tip.xyz), rpy=rpy)
         elif kind == "point":
             result[name] = units.length(schema.validate(schema.Vec3, value, loc))
+        elif kind == "points":
+            points: dict[str, Any] = schema.validate(dict[str, schema.Vec3], value, loc)
+            if not points:
+                raise FieldError(loc, "expected at least one named point")
+            result[name] = {key: units.length(point) for key, point in points.items()}
         elif kind == "sphere":
             sphere: schema.SphereSchema = schema.validate(schema.SphereSchema, value, loc)
             if sphere.radius <= 0:
@@ -258,10 +305,11 @@ def _read_known(known: list[str], frames: Mapping[str, Any]) -> tuple[str, ...]:
     return tuple(known)
 
 
-def _read_probe(probe: schema.ProbeSchema | None, method: str, units: Units) -> float | None:
-    if method != "sphere_probe":
+def _read_probe(probe: schema.ProbeSchema | None, kind: MeasurementKind, units: Units
+                ) -> float | None:
+    if not kind.uses_probe:
         if probe is not None:
-            raise FieldError(("probe",), f"not a field of method '{method}'")
+            raise FieldError(("probe",), f"not a field of method '{kind.name}'")
         return None
     if probe is None:
         raise FieldError(("probe",), 'required field missing ({"stylus_radius": r})')

@@ -107,10 +107,31 @@ def _matrix(rows: int, cols: int) -> BeforeValidator:
     return BeforeValidator(check)
 
 
+def _square(*sizes: int) -> BeforeValidator:
+    """Validator: a square matrix of one of ``sizes`` (the message names the first)."""
+
+    def check(value: Any) -> Any:
+        if isinstance(value, list) and (
+            len(value) not in sizes
+            or not all(isinstance(row, list) and len(row) == len(value) for row in value)
+        ):
+            n = sizes[0]
+            raise PydanticCustomError(
+                "wrong_shape",
+                "expected a {rows}x{cols} matrix ({rows} lists of {cols} numbers), got {got}",
+                {"rows": n, "cols": n, "got": show(value)},
+            )
+        return value
+
+    return BeforeValidator(check)
+
+
 Vec2 = Annotated[list[float], _length(2)]
 Vec3 = Annotated[list[float], _length(3)]
 Mat3 = Annotated[list[Vec3], _matrix(3, 3)]
 Mat2 = Annotated[list[Vec2], _matrix(2, 2)]
+#: a 3x3 covariance, or world_pose's 6x6 (the kind checks which it needs)
+Covariance = Annotated[list[list[float]], _square(3, 6)]
 
 
 class _Strict(BaseModel):
@@ -132,6 +153,7 @@ class JointRowSchema(_Strict):
     alpha: float
     d: float
     theta: float
+    type: Literal["revolute", "prismatic"] = "revolute"  # extension A: prismatic q adds to d
 
 
 class RobotSchema(_Strict):
@@ -142,6 +164,9 @@ class RobotSchema(_Strict):
     joints: list[JointRowSchema] | None = None
     mass: list[float] | None = None
     com: list[Vec3] | None = None
+    urdf: str | None = None  # extension A: a URDF file, relative to the dataset file
+    base_link: str | None = None
+    tip_link: str | None = None
 
 
 class FramePoseSchema(_Strict):
@@ -171,15 +196,19 @@ class ProbeSchema(_Strict):
     stylus_radius: float
 
 
-class SampleSchema(_Strict):
-    """One sample, all methods together; ``io`` checks which fields a method needs."""
+class SampleSchema(BaseModel):
+    """One sample, all built-in methods together; the measurement kind checks which fields
+    its method needs. Fields a plugin's kind declares arrive as extra fields (checked by
+    that kind; any other extra field is an error)."""
+
+    model_config = ConfigDict(strict=True, extra="allow", frozen=True)
 
     q: list[float] | None = None
     chain: Literal["left", "right"] | None = None
     q_head: list[float] | None = None
     q_arm: list[float] | None = None
     p: Vec3 | None = None
-    cov: Mat3 | None = None
+    cov: Covariance | None = None
     sigma: float | None = None
     group: Annotated[int, Field(ge=0, lt=2**31)] | None = None
     t: float | None = None

@@ -10,10 +10,13 @@ import copy
 import json
 import os
 import tempfile
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
 
+from hostpc.dataset.kind import MeasurementKind
+from hostpc.dataset.kinds import measurement_kinds
 from hostpc.dataset.model import Dataset, FramePose, RobotDescription, Samples, SphereFrame
 from hostpc.dataset.reading import PathLike, dataset_from_dict
 from hostpc.dataset.schema import FORMAT_TAG
@@ -22,7 +25,8 @@ from hostpc.errors import InputError
 _SI_UNITS = {"length": "m", "angle": "rad", "time": "s"}
 
 
-def dataset_to_dict(dataset: Dataset) -> dict[str, Any]:
+def dataset_to_dict(dataset: Dataset, plugins: Iterable[str | os.PathLike[str]] = ()
+                    ) -> dict[str, Any]:
     """The JSON document of ``dataset`` in SI units (inverse of ``dataset_from_dict``).
 
     Absent optional values (NaN, group -1) are left out; unknown top-level fields that
@@ -38,14 +42,19 @@ def dataset_to_dict(dataset: Dataset) -> dict[str, Any]:
     }
     if dataset.probe_stylus_radius is not None:
         doc["probe"] = {"stylus_radius": float(dataset.probe_stylus_radius)}
-    doc["samples"] = _samples_to_json(dataset.method, dataset.samples)
+    kinds = measurement_kinds(plugins)
+    if dataset.method not in kinds:
+        raise InputError(f"method {dataset.method!r}: no measurement model of that name "
+                         "(load its plugin)")
+    doc["samples"] = _samples_to_json(kinds[dataset.method](), dataset.samples)
     for key, value in dataset.extra_fields.items():
         if key not in doc:
             doc[key] = copy.deepcopy(value)
     return doc
 
 
-def save_dataset(dataset: Dataset, path: PathLike) -> None:
+def save_dataset(dataset: Dataset, path: PathLike,
+                 plugins: Iterable[str | os.PathLike[str]] = ()) -> None:
     """Write ``dataset`` as a JSON file in SI units (floats read back exactly).
 
     The document is validated before writing, so a file that would not load is never
@@ -56,8 +65,8 @@ def save_dataset(dataset: Dataset, path: PathLike) -> None:
         InputError: the file cannot be written.
     """
     target = os.fspath(path)
-    doc = dataset_to_dict(dataset)
-    dataset_from_dict(doc, source=f"{target} (not written)")
+    doc = dataset_to_dict(dataset, plugins)
+    dataset_from_dict(doc, source=f"{target} (not written)", plugins=plugins)
     text = _dumps(doc) + "\n"
     directory = os.path.dirname(os.path.abspath(target))
     try:
@@ -79,6 +88,8 @@ def save_dataset(dataset: Dataset, path: PathLike) -> None:
 def _robot_to_dict(robot: RobotDescription) -> dict[str, Any]:
     if robot.name is not None:
         return {"name": robot.name}
+    if robot.urdf is not None:  # extension A; written as an absolute path
+        return {"urdf": robot.urdf, "base_link": robot.base_link, "tip_link": robot.tip_link}
     assert robot.a is not None and robot.alpha is not None
     assert robot.d is not None and robot.theta is not None
     out: dict[str, Any] = {
@@ -88,6 +99,9 @@ def _robot_to_dict(robot: RobotDescription) -> dict[str, Any]:
             for a, alpha, d, theta in zip(robot.a, robot.alpha, robot.d, robot.theta, strict=True)
         ],
     }
+    if robot.joint_types is not None:
+        for row, kind in zip(out["joints"], robot.joint_types, strict=True):
+            row["type"] = kind
     if robot.mass is not None:
         out["mass"] = robot.mass.tolist()
     if robot.com is not None:
@@ -102,35 +116,20 @@ def _frame_to_json(value: Any) -> Any:
         return {"center": value.center.tolist(), "radius": float(value.radius)}
     if isinstance(value, np.ndarray):
         return value.tolist()
+    if isinstance(value, dict) and all(isinstance(v, np.ndarray) for v in value.values()):
+        return {k: v.tolist() for k, v in value.items()}  # named points
     return copy.deepcopy(value)
 
 
-def _samples_to_json(method: str, samples: Samples) -> list[dict[str, Any]]:
+def _samples_to_json(kind: MeasurementKind, samples: Samples) -> list[dict[str, Any]]:
     out = []
     for i in range(samples.n):
-        q_row = samples.q[i]
-        q = q_row[~np.isnan(q_row)] if method == "dual_loop" else q_row
-        sample: dict[str, Any] = {}
-        if method == "dual_loop":
-            assert samples.chain is not None and samples.q_head is not None
-            sample["chain"] = str(samples.chain[i])
-            sample["q_head"] = samples.q_head[i].tolist()
-            sample["q_arm"] = q.tolist()
-        else:
-            sample["q"] = q.tolist()
-        if samples.p is not None:
-            sample["p"] = samples.p[i].tolist()
-        if samples.cov is not None:
-            sample["cov"] = samples.cov[i].tolist()
-        if samples.sigma is not None:
-            sample["sigma"] = float(samples.sigma[i])
-        if samples.group[i] >= 0:
-            sample["group"] = int(samples.group[i])
+        sample, n_joints = kind.write_sample(samples, i)
         for name in ("t", "temperature", "speed"):
             value = float(getattr(samples, name)[i])
             if np.isfinite(value):
                 sample[name] = value
-        approach = samples.approach[i, : len(q)]
+        approach = samples.approach[i, :n_joints]
         if np.all(np.isfinite(approach)):
             sample["approach"] = [int(v) for v in approach]
         extra = {k: float(v[i]) for k, v in samples.extra.items() if np.isfinite(v[i])}

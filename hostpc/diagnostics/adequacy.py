@@ -36,11 +36,14 @@ class HeldOut:
     raw: np.ndarray
     whitened: np.ndarray
     folds: int
+    #: the components that are lengths (the norms in m are taken over them); None: all
+    length_columns: np.ndarray | None = None
 
     @property
     def norms(self) -> np.ndarray:
         """(N,) norm of each held-out residual (m)."""
-        return np.linalg.norm(self.raw, axis=1)
+        raw = self.raw if self.length_columns is None else self.raw[:, self.length_columns]
+        return np.linalg.norm(raw, axis=1)
 
     @property
     def rms(self) -> float:
@@ -76,7 +79,8 @@ def held_out_residuals(problem: Problem, x: np.ndarray, free: np.ndarray, folds:
         held = evaluate(problem.subset(test), outcome.x, jacobian=False)
         raw[test] = held.raw
         whitened[test] = held.whitened
-    return HeldOut(raw=raw, whitened=whitened, folds=folds)
+    return HeldOut(raw=raw, whitened=whitened, folds=folds,
+                   length_columns=problem.length_columns)
 
 
 @dataclass(frozen=True)
@@ -147,7 +151,8 @@ def expected_noise_rms(problem: Problem) -> float:
     """RMS residual norm (m) the stated covariances predict: sqrt(mean trace(cov))."""
     W = problem.sqrt_information
     cov = np.linalg.inv(np.einsum("nji,njk->nik", W, W))  # (W^T W)^-1
-    return float(np.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2))))
+    lengths = problem.length_columns
+    return float(np.sqrt(np.mean(np.sum(cov[:, lengths, lengths], axis=1))))
 
 
 def outlier_reason(outliers: tuple[Outlier, ...], n_samples: int) -> str:
@@ -179,7 +184,7 @@ def assess(result: FitResult, held_out: HeldOut | None, alpha: float = ADEQUACY_
     p_value = chi2_p_value(result.chi2, dof)
     chi2_ok = chi2_adequate(result.chi2, dof, alpha)
     m = result.residuals_raw.shape[1]
-    sum_squares = float(np.sum(result.residuals_raw**2))
+    sum_squares = float(np.sum(result.residuals_raw[:, result.problem.length_columns]**2))
     noise_rms = float(np.sqrt(sum_squares * m / dof)) if dof > 0 else float("nan")
     band = chi2_band(dof, alpha)
     reasons: list[str] = []

@@ -37,7 +37,8 @@ from hostpc.errors import InputError
 from hostpc.fitting import FitResult, solve
 from hostpc.fitting.solver import Loss, evaluate, levenberg_marquardt
 from hostpc.model.effect import Effect
-from hostpc.model.problem import Problem, build_problem
+from hostpc.model.layout import Problem
+from hostpc.model.problem import extend_problem as extend_with_effects
 
 
 @dataclass(frozen=True)
@@ -166,10 +167,9 @@ def check_candidate_names(names: Sequence[str], registry: Mapping[str, type[Effe
 
 
 def extend_problem(problem: Problem, effect: Effect) -> Problem:
-    """The problem with one more effect (raises EffectError/InputError if it cannot apply)."""
-    instances = [t.effect for t in problem.terms] + [effect]
-    return build_problem(problem.dataset, [e.name for e in instances],
-                         plugins=problem.plugins, effect_instances=instances)
+    """The problem with one more effect, reusing its built context (raises
+    EffectError/InputError if it cannot apply)."""
+    return extend_with_effects(problem, [effect])
 
 
 def warm_start(base: FitResult, problem: Problem) -> np.ndarray:

@@ -30,7 +30,7 @@ from hostpc.errors import InputError
 from hostpc.fitting import FitResult
 from hostpc.fitting.solver import evaluate
 from hostpc.model.effects import Geometry
-from hostpc.model.problem import build_problem
+from hostpc.model.problem import extend_problem
 
 RANK_TOLERANCE = 1e-6
 
@@ -81,10 +81,8 @@ def _geometry_columns(result: FitResult) -> tuple[list[str], np.ndarray] | None:
     problem = result.problem
     if "geometry" in problem.effect_names:
         return None
-    instances = [t.effect for t in problem.terms] + [Geometry()]
     try:
-        extended = build_problem(problem.dataset, [e.name for e in instances],
-                                 plugins=problem.plugins, effect_instances=instances)
+        extended = extend_problem(problem, [Geometry()])
     except InputError:  # a method without a geometry effect
         return None
     x = np.concatenate([result.x, np.zeros(extended.layout.size - result.x.size)])

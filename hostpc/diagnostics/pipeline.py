@@ -132,7 +132,7 @@ def residual_analysis(check: ModelCheck, alpha: float) -> ResidualAnalysis:
     residuals would make every variable look patterned)."""
     fit = check.fit
     analysis = analyse_residuals(fit.residuals_raw, fit.residuals_whitened, variables_of(fit),
-                                 alpha)
+                                 alpha, length_columns=fit.problem.length_columns)
     if check.cleaned is None:
         return analysis
     clean = check.cleaned.fit
@@ -168,14 +168,14 @@ def diagnose(
     skip); rank_cv_folds: folds of each candidate's held-out RMS. interactions: run the
     effect-agnostic search. source: the dataset's path, used in the suggested commands.
     """
+    plugin_paths = tuple(str(p) for p in plugins)
     if isinstance(dataset, str | Path):
         source = source or str(dataset)
-        dataset = load_dataset(dataset)
+        dataset = load_dataset(dataset, plugins=plugin_paths)
     if not 0.0 < alpha < 1.0:
         raise InputError(f"alpha {alpha}: must be between 0 and 1")
     if cv_folds < 0 or rank_cv_folds < 0:
         raise InputError("cv_folds and rank_cv_folds must not be negative")
-    plugin_paths = tuple(str(p) for p in plugins)
     registry = available_effects(plugin_paths)
     if candidates is not None:
         check_candidate_names(candidates, registry)

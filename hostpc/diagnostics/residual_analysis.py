@@ -133,13 +133,14 @@ def bin_pattern(variable: str, values: np.ndarray, raw: np.ndarray, whitened: np
 
 def analyse_residuals(raw: np.ndarray, whitened: np.ndarray,
                       variables: Mapping[str, np.ndarray], alpha: float,
-                      n_bins: int = DEFAULT_BINS, worst_count: int = WORST_COUNT
-                      ) -> ResidualAnalysis:
+                      n_bins: int = DEFAULT_BINS, worst_count: int = WORST_COUNT,
+                      length_columns: np.ndarray | None = None) -> ResidualAnalysis:
     """Per-sample norms, the worst samples and the binned pattern of every variable.
 
-    raw, whitened: (N, m) residuals (measured - predicted) of the fitted model.
+    raw, whitened: (N, m) residuals (measured - predicted) of the fitted model;
+    length_columns: the components that are lengths (the norms in m; None: all).
     """
-    norms = np.linalg.norm(raw, axis=1)
+    norms = np.linalg.norm(raw if length_columns is None else raw[:, length_columns], axis=1)
     whitened_norms = np.linalg.norm(whitened, axis=1)
     order = np.argsort(-whitened_norms)[:worst_count]
     worst = tuple(

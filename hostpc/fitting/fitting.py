@@ -11,8 +11,14 @@ import numpy as np
 
 from hostpc.dataset import Dataset
 from hostpc.errors import InputError
-from hostpc.fitting.identifiability import Identifiability, analyse
+from hostpc.fitting.identifiability import Identifiability
+from hostpc.fitting.priors import (
+    analyse_with_constraints,
+    problem_constraints,
+    with_constraints,
+)
 from hostpc.fitting.result import CORRELATION_THRESHOLD, FitResult
+from hostpc.fitting.shared_errors import added_parameter_covariance
 from hostpc.fitting.solver import Loss, evaluate, levenberg_marquardt
 from hostpc.model.problem import Problem, build_problem
 
@@ -47,7 +53,7 @@ def cross_validated_rms(problem: Problem, x: np.ndarray, free: np.ndarray, folds
         outcome = levenberg_marquardt(problem.subset(train), x, free, loss=loss,
                                       loss_scale=loss_scale, max_iterations=30)
         held_out = evaluate(problem.subset(test), outcome.x, jacobian=False)
-        squared[test] = np.sum(held_out.raw**2, axis=1)
+        squared[test] = np.sum(held_out.raw[:, problem.length_columns]**2, axis=1)
     return float(np.sqrt(np.mean(squared)))
 
 
@@ -63,9 +69,15 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
         raise InputError(f"x0 must have {layout.size} values, got {x_start.shape}")
     start = evaluate(problem, x_start)
     assert start.jacobian is not None
+    constraints = problem_constraints(problem)  # priors and holds by name (priors.py)
+    prior_rows = (constraints.jacobian(layout.size) if constraints is not None
+                  else np.zeros((0, layout.size)))
     finite = bool(np.all(np.isfinite(start.jacobian)) and np.all(np.isfinite(start.whitened)))
-    if finite:
-        ident = analyse(start.jacobian, layout.names, layout.units)
+    prior_notes: list[str] = []
+    if finite:  # a prior is a row like any measurement: it can make a direction identifiable
+        ident, prior_notes = analyse_with_constraints(start.jacobian, layout.names,
+                                                      layout.units, constraints,
+                                                      frames=problem.frame_names)
     else:  # reported through the solver's "failed" status; nothing can be analysed
         ident = Identifiability(0, np.zeros(layout.size), math.nan,
                                 np.zeros(layout.size, dtype=bool), ())
@@ -77,9 +89,14 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
     m = problem.measured.shape[1]
     row_weight = np.repeat(np.sqrt(outcome.weights), m)
     J_free = final.jacobian[:, free] * row_weight[:, None]
+    J_free_priors = np.vstack([J_free, prior_rows[:, free]])
     covariance = np.zeros((layout.size, layout.size))
     if np.any(free) and np.all(np.isfinite(J_free)):
-        covariance[np.ix_(free, free)] = _covariance(J_free)
+        covariance[np.ix_(free, free)] = _covariance(J_free_priors)
+        shared = added_parameter_covariance(problem, J_free, covariance[np.ix_(free, free)],
+                                            row_weight)
+        if shared is not None:  # the rig's calibration error, shared by all samples
+            covariance[np.ix_(free, free)] += shared
     elif np.any(free):
         covariance[np.ix_(free, free)] = np.nan
     std = np.sqrt(np.diag(covariance))
@@ -92,7 +109,7 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
             if abs(rho) > CORRELATION_THRESHOLD:
                 correlations.append((layout.names[i], layout.names[j], float(rho)))
     correlations.sort(key=lambda c: -abs(c[2]))
-    norms = np.linalg.norm(final.raw, axis=1)
+    norms = np.linalg.norm(final.raw[:, problem.length_columns], axis=1)
     n_rows = final.whitened.size
     cv = (cross_validated_rms(problem, outcome.x, free, cv_folds, loss, loss_scale)
           if outcome.converged else None)
@@ -108,7 +125,7 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
         rms=float(np.sqrt(np.mean(norms**2))),
         max=float(np.max(norms)) if norms.size else 0.0,
         chi2=float(np.sum(final.whitened**2)),
-        dof=int(n_rows - np.count_nonzero(free)),
+        dof=int(n_rows + prior_rows.shape[0] - np.count_nonzero(free)),
         rank=ident.rank,
         singular_values=ident.singular_values,
         condition_number=ident.condition_number,
@@ -116,7 +133,7 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
         correlations=tuple(correlations),
         converged=outcome.converged,
         iterations=outcome.iterations,
-        message=outcome.message,
+        message="; ".join([outcome.message, *prior_notes]),
         cv_rms=cv,
         cv_folds=cv_folds if cv is not None else 0,
         loss=loss,
@@ -124,13 +141,17 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
 
 
 def fit(dataset: Dataset, effects: str | Iterable[str] | None = None, *,
-        plugins: Iterable[str | Path] = (), **options: object) -> FitResult:
+        plugins: Iterable[str | Path] = (), priors: object = None, hold: object = None,
+        **options: object) -> FitResult:
     """Fit an error model to a dataset.
 
     effects: None for the default model (joint_offsets plus every frame not marked known),
     a list of effect names, or a spec string (``"joint_offsets,tool"``, ``"+backlash"``).
     plugins: Python files defining extra effects. options: see ``solve`` (loss, loss_scale,
-    cv_folds, max_iterations, x0).
+    cv_folds, max_iterations, x0). priors: ["tool.x=0.045+-0.0005m", ...] or
+    {"tool.x": {"value": 0.045, "sigma": 0.0005, "unit": "m"}}; hold: parameter names kept
+    at their start value (both added to the dataset's own; hostpc.fitting.priors).
     """
+    dataset = with_constraints(dataset, priors, hold)  # type: ignore[arg-type]
     problem = build_problem(dataset, effects, plugins=plugins)
     return solve(problem, **options)  # type: ignore[arg-type]

@@ -13,7 +13,7 @@ frame absorbs what cannot be told apart and no unobservable zero offset is ever 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,15 +61,15 @@ class Identifiability:
     null_directions: tuple[NullDirection, ...]
 
 
-def _priority(name: str) -> int:
+def _priority(name: str, frames: Collection[str] = FRAME_EFFECTS) -> int:
     effect = name.split(".", 1)[0]
     if effect in FIX_PRIORITY:
         return FIX_PRIORITY[effect]
-    return 0 if effect in FRAME_EFFECTS else 1
+    return 0 if effect in frames else 1
 
 
-def _describe(names: Sequence[str], units: Sequence[str], fixed: int, vector: np.ndarray
-              ) -> NullDirection:
+def _describe(names: Sequence[str], units: Sequence[str], fixed: int, vector: np.ndarray,
+              frame_names: Collection[str] = FRAME_EFFECTS) -> NullDirection:
     order = [fixed] + [k for k in np.argsort(-np.abs(vector)) if k != fixed]
     participants = [k for k in order if k == fixed or abs(vector[k]) > 1e-3 * abs(vector[fixed])]
     coefficients = tuple(float(vector[k] / vector[fixed]) for k in participants)
@@ -80,7 +80,7 @@ def _describe(names: Sequence[str], units: Sequence[str], fixed: int, vector: np
             f"{coefficients[i]:+.3g} {units[participants[i]]}/{units[fixed]} {names[k]}"
             for i, k in enumerate(participants[1:5], start=1)
         )
-        frames = sorted({names[k].split(".")[0] for k in participants[1:]} & set(FRAME_EFFECTS))
+        frames = sorted({names[k].split(".")[0] for k in participants[1:]} & set(frame_names))
         advice = (f"; to determine it, mark {' or '.join(frames)} as known or add a reference"
                   if frames else "; add poses or a reference that separate them")
         text = (f"{names[fixed]} and {listed} are not separable (changing {names[fixed]} by 1 "
@@ -92,8 +92,13 @@ def _describe(names: Sequence[str], units: Sequence[str], fixed: int, vector: np
 
 
 def analyse(jacobian: np.ndarray, names: Sequence[str], units: Sequence[str],
-            tolerance: float = RELATIVE_RANK_TOLERANCE) -> Identifiability:
-    """Rank, null directions and the gauge (fixed mask) for a whitened Jacobian (M, P)."""
+            tolerance: float = RELATIVE_RANK_TOLERANCE,
+            frames: Collection[str] | None = None) -> Identifiability:
+    """Rank, null directions and the gauge (fixed mask) for a whitened Jacobian (M, P).
+
+    frames: the effects that are frames (held last; default: the built-in methods' frames;
+    a fit passes its problem's own)."""
+    frame_names: Collection[str] = FRAME_EFFECTS if frames is None else frames
     n_params = jacobian.shape[1]
     norms = np.linalg.norm(jacobian, axis=0)
     dead = norms <= 1e-12 * max(float(norms.max(initial=0.0)), 1e-300)
@@ -113,7 +118,7 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], units: Sequence[str],
         participation = np.linalg.norm(null_basis, axis=1)
         # prefer by priority only among parameters that take a real part in the null space
         strong = participation >= 0.1 * participation.max()
-        priority = np.array([_priority(n) for n in names], dtype=float)
+        priority = np.array([_priority(n, frame_names) for n in names], dtype=float)
         weight = np.where(strong, 10.0**priority, 1e-3)
         _, _, pivots = scipy.linalg.qr(null_basis.T * weight[None, :], pivoting=True)
         chosen = list(pivots[: null_basis.shape[1]])
@@ -129,7 +134,8 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], units: Sequence[str],
         physical = combos / scale[:, None]
         for column, index in enumerate(chosen):
             fixed[index] = True
-            directions.append(_describe(names, units, int(index), physical[:, column]))
+            directions.append(_describe(names, units, int(index), physical[:, column],
+                                        frame_names))
     free = ~fixed
     if not np.any(fixed):
         s_free = s_full

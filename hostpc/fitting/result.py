@@ -104,8 +104,8 @@ class FitResult:
 
     @property
     def residual_norms(self) -> np.ndarray:
-        """(N,) norm of each sample's raw residual (m)."""
-        return np.linalg.norm(self.residuals_raw, axis=1)
+        """(N,) norm of each sample's raw residual (m; its length components)."""
+        return np.linalg.norm(self.residuals_raw[:, self.problem.length_columns], axis=1)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON document (SI units and radians) with the keys of the CLI's --json."""

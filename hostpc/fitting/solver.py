@@ -12,6 +12,7 @@ from typing import Literal
 
 import numpy as np
 
+from hostpc.fitting.priors import Constraints, problem_constraints
 from hostpc.model.measurement import predict
 from hostpc.model.problem import Problem
 
@@ -98,6 +99,9 @@ def levenberg_marquardt(
     and Nielsen's damping update.
     """
     x = np.array(x0, dtype=float)
+    constraints = problem_constraints(problem)  # priors (extra residuals) and holds
+    if constraints is not None:
+        free = np.asarray(free, bool) & ~constraints.held
     free_index = np.flatnonzero(free)
     m = problem.measured.shape[1]
     if initial is not None and initial.jacobian is not None and np.array_equal(initial.x, x):
@@ -105,7 +109,7 @@ def levenberg_marquardt(
     else:
         current = evaluate(problem, x)
     weights = robust_weights(current.whitened, loss, loss_scale)
-    cost = robust_cost(current.whitened, loss, loss_scale)
+    cost = robust_cost(current.whitened, loss, loss_scale) + _prior_cost(constraints, x)
     if free_index.size == 0:
         return SolverOutcome(x, current, weights, True, 0, "nothing to fit", cost)
     # residuals below this are rounding noise of the predictions: an exact fit
@@ -127,6 +131,10 @@ def levenberg_marquardt(
             break
         A = J.T @ J
         g = J.T @ r
+        if constraints is not None and constraints.index.size:
+            J_prior = constraints.jacobian(x.size)[:, free_index]
+            A = A + J_prior.T @ J_prior
+            g = g + J_prior.T @ constraints.residuals(x)
         diag = np.maximum(np.diag(A), 1e-30)
         # converged when even an undamped Gauss-Newton step would gain (almost) nothing
         try:
@@ -151,7 +159,8 @@ def levenberg_marquardt(
             x_trial = x.copy()
             x_trial[free_index] += step
             trial = evaluate(problem, x_trial)
-            trial_cost = robust_cost(trial.whitened, loss, loss_scale)
+            trial_cost = (robust_cost(trial.whitened, loss, loss_scale)
+                          + _prior_cost(constraints, x_trial))
             actual_gain = cost - trial_cost
             if actual_gain > 0.0 and np.isfinite(trial_cost):
                 rho = actual_gain / max(predicted_gain, 1e-300)
@@ -170,9 +179,14 @@ def levenberg_marquardt(
             break
         x, current, cost = x_trial, trial, trial_cost
         weights = robust_weights(current.whitened, loss, loss_scale)
-        cost = robust_cost(current.whitened, loss, loss_scale)
+        cost = robust_cost(current.whitened, loss, loss_scale) + _prior_cost(constraints, x)
         small = np.linalg.norm(step) <= step_tolerance * (np.linalg.norm(x) + step_tolerance)
         if small and mu < 1.0:  # a tiny step that damping did not force: at the minimum
             message, converged = "converged: step below tolerance", True
             break
     return SolverOutcome(x, current, weights, converged, iterations, message, cost)
+
+
+def _prior_cost(constraints: Constraints | None, x: np.ndarray) -> float:
+    """0.5 * sum of squared whitened prior residuals (0 without priors)."""
+    return 0.0 if constraints is None else constraints.cost(x)

@@ -73,7 +73,7 @@ def _free_in(problem: Problem, x: np.ndarray, candidates: np.ndarray) -> np.ndar
     index = np.flatnonzero(candidates)
     layout = problem.layout
     ident = analyse(J[:, index], [layout.names[k] for k in index],
-                    [layout.units[k] for k in index])
+                    [layout.units[k] for k in index], frames=problem.frame_names)
     free = np.zeros(layout.size, dtype=bool)
     free[index[~ident.fixed]] = True
     return free
@@ -100,8 +100,7 @@ def fit_stepwise(dataset: Dataset, effects: str | Iterable[str] | None = None, *
     estimated = np.zeros(problem.layout.size, dtype=bool)
     for side in ("left", "right"):
         rows = np.flatnonzero(chain == side)
-        step = build_problem(dataset.with_samples(dataset.samples.subset(rows)),
-                             [t.effect.name for t in problem.terms])
+        step = problem.subset(rows)
         if unweighted:
             step = identity_weighted(step)
         candidates = _step_mask(problem.layout.names, STEP_PARAMETERS[side])

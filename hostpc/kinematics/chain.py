@@ -3,6 +3,14 @@
 The equations and the layout of the kinematic parameter vector are in
 ``docs/conventions.md`` ("DH and MDH"): per pose, ``5n`` entries grouped by kind,
 ``theta (n), d (n), a (n), alpha (n), beta (n)``, each group joint 1..n.
+
+A joint is revolute (``q`` adds to ``theta``) or prismatic (``q`` adds to ``d``). The first
+``n`` entries of the kinematic vector are always the *joint-variable* slots (what a joint
+offset moves): for a prismatic joint the ``theta`` slot holds the length delta of its joint
+variable and the ``d`` slot holds the delta of its fixed rotation about the joint axis
+(conventions.md, "Prismatic joints"). A chain may also carry fixed mounts before the first
+and after the last table row (``T_base_link0``, ``T_link_flange``), as a robot read from a
+URDF file does; both are the identity for a plain table.
 """
 
 from __future__ import annotations
@@ -60,7 +68,8 @@ def _frozen_array(
 
 @dataclass(frozen=True, eq=False)
 class Chain:
-    """A serial revolute chain in standard (``"dh"``) or modified (``"mdh"``) DH form.
+    """A serial chain (revolute and prismatic joints) in standard (``"dh"``) or modified
+    (``"mdh"``) DH form.
 
     All arrays are converted to read-only numpy arrays on construction; shapes are checked
     and a wrong one raises :class:`hostpc.errors.InputError` naming the field.
@@ -81,6 +90,12 @@ class Chain:
         mass: link masses (kg), shape ``(n,)``, or None when unknown.
         com: centre of mass of each link ``j`` in link frame ``j`` (m), shape ``(n, 3)``,
             or None when unknown.
+        prismatic: shape ``(n,)`` bool; True for a prismatic joint (``q`` in m adds to
+            ``d``). None on construction means all revolute; stored as an array.
+        T_base_link0: fixed pose of table frame 0 in the robot's base frame, ``(4, 4)``;
+            None on construction means the identity.
+        T_link_flange: fixed pose of the flange in table frame ``n``, ``(4, 4)``; None on
+            construction means the identity.
     """
 
     name: str
@@ -95,6 +110,9 @@ class Chain:
     q_max: FloatArray
     mass: FloatArray | None = None
     com: FloatArray | None = None
+    prismatic: BoolArray | None = None
+    T_base_link0: FloatArray | None = None
+    T_link_flange: FloatArray | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -120,12 +138,46 @@ class Chain:
             object.__setattr__(self, "mass", mass)
         if self.com is not None:
             object.__setattr__(self, "com", _frozen_array(self.com, "com", (n, 3), float))
+        prismatic = np.zeros(n, dtype=bool) if self.prismatic is None else self.prismatic
+        object.__setattr__(self, "prismatic", _frozen_array(prismatic, "prismatic", (n,), bool))
+        for field in ("T_base_link0", "T_link_flange"):
+            value = getattr(self, field)
+            T = _frozen_array(np.eye(4) if value is None else value, field, (4, 4), float)
+            if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0]) or not np.allclose(
+                T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-9
+            ):
+                raise InputError(f"{field}: not a rigid transform")
+            object.__setattr__(self, field, T)
 
     @property
     def n(self) -> int:
         """Number of joints."""
         return int(self.a.shape[0])
 
+    @property
+    def joint_is_prismatic(self) -> BoolArray:
+        """``(n,)`` bool: True for prismatic joints (never None after construction)."""
+        assert self.prismatic is not None
+        return self.prismatic
+
+    @property
+    def has_mounts(self) -> bool:
+        """True when the base or flange mount is not the identity."""
+        assert self.T_base_link0 is not None and self.T_link_flange is not None
+        return not (
+            np.array_equal(self.T_base_link0, np.eye(4))
+            and np.array_equal(self.T_link_flange, np.eye(4))
+        )
+
+    def joint_units(self) -> list[str]:
+        """Unit of each joint variable and its zero offset: ``"rad"`` or ``"m"``."""
+        return ["m" if p else "rad" for p in self.joint_is_prismatic]
+
     def kin_vector(self) -> FloatArray:
-        """Nominal kinematic parameters ``[theta, d, a, alpha, beta]``, shape ``(5n,)``."""
-        return np.concatenate([self.theta, self.d, self.a, self.alpha, self.beta])
+        """Nominal kinematic parameters ``[theta, d, a, alpha, beta]``, shape ``(5n,)``.
+
+        The first two groups are the joint-variable slot and the other one of (theta, d),
+        as in the module docstring: for a prismatic joint ``d`` comes first."""
+        slot1 = np.where(self.joint_is_prismatic, self.d, self.theta)
+        slot2 = np.where(self.joint_is_prismatic, self.theta, self.d)
+        return np.concatenate([slot1, slot2, self.a, self.alpha, self.beta])

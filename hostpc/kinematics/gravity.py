@@ -4,7 +4,8 @@
 
 With the outboard mass ``M_i = sum_{j >= i} m_j`` and first moment
 ``S_i = sum_{j >= i} m_j c_j`` this is ``tau_i = z_i . ((S_i - M_i o_i) x g)``, computed for
-all joints at once with suffix sums.
+all joints at once with suffix sums. For a prismatic joint ``tau_i`` is the gravity force
+along its axis, ``z_i . (M_i g)`` (N).
 """
 
 from __future__ import annotations
@@ -53,4 +54,8 @@ def gravity_torque(
     z, o = joint_axes(poses)
     lever = S - M[:, None] * o  # (N, n, 3)
     tau: FloatArray = np.einsum("nki,nki->nk", z, np.cross(lever, GRAVITY))
+    prismatic = chain.joint_is_prismatic
+    if prismatic.any():  # a prismatic joint carries a force along its axis (N)
+        force = M[None, :, None] * GRAVITY  # (1, n, 3)
+        tau[:, prismatic] = np.einsum("nki,nki->nk", z[:, prismatic], force[:, prismatic])
     return tau

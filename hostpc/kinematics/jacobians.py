@@ -20,6 +20,10 @@ MDH row ``i``, ``Rx(al) Ry(b) Tx(a) Rz(t) Tz(d)``:
 - ``alpha_i``: rotation about ``x_{i-1}`` through ``o_{i-1}``
 - ``beta_i``: rotation about ``cos(al) y_{i-1} + sin(al) z_{i-1}`` through ``o_{i-1}``
 
+For a prismatic joint the ``theta`` slot is its joint variable (a translation along the
+joint axis) and the ``d`` slot its fixed rotation about that axis: the two screws swap.
+A chain's base mount is already in the link frames; its flange mount moves nothing.
+
 ``x_i, y_i, z_i, o_i`` are the axes and origin of link frame ``i`` in base; ``t, al, b`` the
 effective row angles. ``x'`` (DH) is link ``i``'s x axis before the Hayati ``Ry(b)``; the MDH
 ``a`` direction is link ``i``'s x axis before ``Rz(t)``.
@@ -131,6 +135,15 @@ def screws(chain: Chain, poses: ChainPoses) -> KinematicScrews:
     is_rotation = np.ones(5 * n, dtype=bool)
     is_rotation[d_s] = False
     is_rotation[a_s] = False
+    prismatic = np.flatnonzero(chain.joint_is_prismatic)
+    if prismatic.size:
+        # Both slots share the joint axis z; the joint slot translates along it and the d
+        # slot turns about it, through the point the theta screw uses.
+        joint_cols, d_cols = prismatic, n + prismatic
+        point[:, d_cols] = point[:, joint_cols]
+        point[:, joint_cols] = 0.0
+        is_rotation[joint_cols] = False
+        is_rotation[d_cols] = True
     return KinematicScrews(
         axis=axis.transpose(2, 1, 0), point=point.transpose(2, 1, 0), is_rotation=is_rotation
     )

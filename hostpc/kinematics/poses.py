@@ -14,6 +14,11 @@ fixed factor ``F`` (DH: ``Tz(d) Tx(a) Rx(alpha) Ry(beta)``; MDH: ``Rx(alpha) Ry(
 Tx(a)``); when ``F`` is the same for all poses (``kin_delta`` None, ``(5n,)``, or
 ``(N, 5n)`` differing between poses only in its theta rows) it is applied with one small
 matrix product per joint. The only Python loop runs over the joints.
+
+A prismatic joint (``chain.prismatic``) adds its joint variable ``q_i + dtheta_i`` (m) as a
+translation ``Tz`` next to ``Tz(d)``, and its fixed rotation about the axis is
+``theta_i + dd_i`` (the two slots swap roles, ``chain.py``). A chain with mounts starts at
+``T_base_link0`` and its flange is ``T_base_link_n @ T_link_flange``.
 """
 
 from __future__ import annotations
@@ -45,6 +50,7 @@ class ChainPoses:
         cos_alpha, sin_alpha: of the effective ``alpha_i``, shape ``(N, n)`` (a broadcast
             view when the twist does not vary per pose).
         cos_beta, sin_beta: of the effective ``beta_i``, shape ``(N, n)`` (idem).
+        T_link_flange: the chain's fixed flange mount, ``(4, 4)``, or None (identity).
     """
 
     convention: str
@@ -55,6 +61,7 @@ class ChainPoses:
     sin_alpha: FloatArray
     cos_beta: FloatArray
     sin_beta: FloatArray
+    T_link_flange: FloatArray | None = None
 
     @property
     def n(self) -> int:
@@ -63,8 +70,12 @@ class ChainPoses:
 
     @property
     def T_base_flange(self) -> FloatArray:
-        """Flange poses in base, shape ``(N, 4, 4)``."""
-        return self.T_base_link[:, -1]
+        """Flange poses in base, shape ``(N, 4, 4)``: the last link frame, times the
+        flange mount when the chain has one."""
+        if self.T_link_flange is None:
+            return self.T_base_link[:, -1]
+        flange: FloatArray = self.T_base_link[:, -1] @ self.T_link_flange
+        return flange
 
 
 def check_q(chain: Chain, q: ArrayLike, name: str = "q") -> FloatArray:
@@ -144,7 +155,22 @@ def forward(chain: Chain, q: ArrayLike, kin_delta: ArrayLike | None = None) -> C
 
     # Row values joint-first: theta is (n, N); d, a, alpha, beta are (n,) when shared by
     # all poses and (n, N) when they vary per pose.
-    theta = chain.theta[:, None] + q.T
+    prismatic = chain.joint_is_prismatic
+    any_prismatic = bool(prismatic.any())
+    if any_prismatic and delta is not None:
+        # Move the joint-variable slot of prismatic joints to a translation ``slide`` and
+        # their d slot (the fixed rotation about the axis) into theta: after the swap below
+        # the delta reads as for a revolute table, with a zero d delta on prismatic rows.
+        delta = delta.copy()
+        joint_slot = delta[..., :n][..., prismatic].copy()
+        delta[..., :n][..., prismatic] = delta[..., n:2 * n][..., prismatic]
+        delta[..., n:2 * n][..., prismatic] = joint_slot
+        slide_delta = np.where(prismatic[:, None], np.atleast_2d(delta[..., n:2 * n]).T, 0.0)
+        delta[..., n:2 * n][..., prismatic] = 0.0
+    else:
+        slide_delta = np.zeros((n, 1))
+    slide = np.where(prismatic[:, None], q.T + slide_delta, 0.0)  # (n, N), m
+    theta = chain.theta[:, None] + np.where(prismatic[:, None], 0.0, q.T)
     fixed_delta: FloatArray | None = None  # d, a, alpha, beta deltas: (4, n) or (4, n, N)
     if delta is not None and delta.ndim == 1:
         theta += delta[:n, None]
@@ -177,7 +203,8 @@ def forward(chain: Chain, q: ArrayLike, kin_delta: ArrayLike | None = None) -> C
     Tc = np.empty((n + 1, 4, 4, N))  # Tc[i, row, col, pose]
     Tc[:, 3, :3] = 0.0
     Tc[:, 3, 3] = 1.0
-    Tc[0, :3] = np.eye(4)[:3, :, None]
+    assert chain.T_base_link0 is not None
+    Tc[0, :3] = chain.T_base_link0[:3, :, None]
     work = np.empty((3, 4, N))
     for i in range(n):
         prev, nxt = Tc[i, :3], Tc[i + 1, :3]  # (3, 4, N): rows 0..2 of T_base_link_i
@@ -189,6 +216,8 @@ def forward(chain: Chain, q: ArrayLike, kin_delta: ArrayLike | None = None) -> C
             np.multiply(prev[:, 1], c, out=work[:, 1])
             work[:, 1] -= prev[:, 0] * s
             work[:, 2:] = prev[:, 2:]
+            if prismatic[i]:
+                work[:, 3] += work[:, 2] * slide[i]
             _times_fixed(work, F, F_T, i, out=nxt)
         else:
             # work = T_{i} F_i; then T_{i+1} = work Rz(theta) Tz(d).
@@ -198,7 +227,7 @@ def forward(chain: Chain, q: ArrayLike, kin_delta: ArrayLike | None = None) -> C
             np.multiply(work[:, 1], c, out=nxt[:, 1])
             nxt[:, 1] -= work[:, 0] * s
             nxt[:, 2] = work[:, 2]
-            np.multiply(work[:, 2], d[i], out=nxt[:, 3])
+            np.multiply(work[:, 2], d[i] + slide[i] if prismatic[i] else d[i], out=nxt[:, 3])
             nxt[:, 3] += work[:, 3]
 
     shape = (N, n)
@@ -211,6 +240,7 @@ def forward(chain: Chain, q: ArrayLike, kin_delta: ArrayLike | None = None) -> C
         sin_alpha=np.broadcast_to(sa.T if per_pose else sa, shape),
         cos_beta=np.broadcast_to(cb.T if per_pose else cb, shape),
         sin_beta=np.broadcast_to(sb.T if per_pose else sb, shape),
+        T_link_flange=chain.T_link_flange if chain.has_mounts else None,
     )
 
 

@@ -6,7 +6,7 @@ Every built-in robot cites the source of its numbers in its docstring. Units are
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Literal
 
 import numpy as np
@@ -15,7 +15,10 @@ from numpy.typing import ArrayLike, NDArray
 from hostpc.errors import InputError
 from hostpc.kinematics.chain import Chain
 
-__all__ = ["PARALLEL_TOL", "chain_from_table", "get_robot", "names"]
+__all__ = ["JOINT_TYPES", "PARALLEL_TOL", "chain_from_table", "get_robot", "names"]
+
+JOINT_TYPES: tuple[str, ...] = ("revolute", "prismatic")
+"""Joint types of an explicit table row."""
 
 PARALLEL_TOL = 0.01
 """Two consecutive joint axes count as near-parallel when ``|sin(alpha)|`` is below this
@@ -50,6 +53,9 @@ def chain_from_table(
     q_max: ArrayLike | None = None,
     mass: ArrayLike | None = None,
     com: ArrayLike | None = None,
+    joint_types: Sequence[str] | None = None,
+    T_base_link0: ArrayLike | None = None,
+    T_link_flange: ArrayLike | None = None,
 ) -> Chain:
     """Build a :class:`Chain` from a DH or MDH table (conventions.md, "DH and MDH").
 
@@ -64,6 +70,10 @@ def chain_from_table(
         q_min, q_max: joint limits (rad), shape ``(n,)``; default ``-2 pi`` and ``2 pi``.
         mass: link masses (kg), shape ``(n,)``, or None.
         com: centre of mass of link ``j`` in link frame ``j`` (m), shape ``(n, 3)``, or None.
+        joint_types: ``"revolute"`` (default) or ``"prismatic"`` per joint, or None (all
+            revolute). A prismatic joint's ``q`` (m) adds to ``d``; ``theta`` stays fixed.
+        T_base_link0, T_link_flange: fixed mounts before the first and after the last row,
+            ``(4, 4)`` each, or None (identity).
 
     Returns:
         The chain; wrong shapes raise :class:`hostpc.errors.InputError` naming the field.
@@ -77,6 +87,17 @@ def chain_from_table(
     alpha_arr = np.asarray(alpha, dtype=np.float64)
     if alpha_arr.shape != (n,):
         raise InputError(f"alpha: expected shape ({n},), got {alpha_arr.shape}")
+    prismatic = None
+    if joint_types is not None:
+        types = list(joint_types)
+        if len(types) != n:
+            raise InputError(f"joint_types: expected {n} entries, got {len(types)}")
+        for i, kind in enumerate(types):
+            if kind not in JOINT_TYPES:
+                raise InputError(
+                    f"joint_types: joint {i + 1} has type {kind!r}; expected one of {JOINT_TYPES}"
+                )
+        prismatic = np.array([kind == "prismatic" for kind in types])
     return Chain(
         name=name,
         convention=convention,
@@ -90,6 +111,9 @@ def chain_from_table(
         q_max=np.full(n, 2.0 * np.pi) if q_max is None else np.asarray(q_max, dtype=float),
         mass=None if mass is None else np.asarray(mass, dtype=np.float64),
         com=None if com is None else np.asarray(com, dtype=np.float64),
+        prismatic=prismatic,
+        T_base_link0=None if T_base_link0 is None else np.asarray(T_base_link0, float),
+        T_link_flange=None if T_link_flange is None else np.asarray(T_link_flange, float),
     )
 
 

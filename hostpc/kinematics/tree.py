@@ -170,6 +170,7 @@ class KinematicTree:
             hayati=cat("hayati").astype(bool),
             q_min=cat("q_min"),
             q_max=cat("q_max"),
+            prismatic=cat("prismatic").astype(bool),
         )
 
     # ------------------------------------------------------------------ kinematics

@@ -17,6 +17,7 @@ METHOD_CLASSES: dict[str, str] = {
     "stereo_target": "hostpc.methods.stereo_target:StereoTargetMethod",
     "sphere_probe": "hostpc.methods.sphere_probe:SphereProbeMethod",
     "dual_loop": "hostpc.methods.dual_loop:DualLoopMethod",
+    "world_point": "hostpc.methods.world_point:WorldPointMethod",
 }
 
 

@@ -34,7 +34,7 @@ from hostpc.dataset import FramePose
 from hostpc.errors import InputError
 
 FRAME_NAMES = ("tool", "target", "sphere", "base", "camera", "left_base", "right_base",
-               "left_target", "right_target")
+               "left_target", "right_target", "world", "markers")
 """Frame names `known` may list (each method uses its own: stereo_target tool, target)."""
 
 

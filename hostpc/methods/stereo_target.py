@@ -38,9 +38,13 @@ CENTROID_SIGMA_PX = 0.05
 """Planning noise model: pixel precision of the dot centre in each image (conservative, a
 real camera's; the simulator's images are better)."""
 PIXEL_FLOOR_PX = 0.01
-"""Systematic floor added to every measured covariance, in px per image coordinate: the
-vision's covariance holds only the image noise, while the rig calibration and the detection
-leave errors of this order that do not average out over poses (docs/calibrate.md)."""
+"""Floor added to every measured covariance, in px per image coordinate (independent per
+sample): the vision's covariance holds only the pixel noise of the dot's centroid. With the
+second pass (hostpc.methods.stereo_refinement) and the rig's shared error
+(hostpc.fitting.shared_errors) the reported joint sigmas are conservative at 0.01 (MSE /
+sigma^2 0.14-0.51 against the simulator) and honest for joints 2-4 at 0.003, but at 0.003
+the rig calibration's own error (larger than its covariance says) lifts chi2/dof above the
+push band in a third of the simulated worlds; docs/vision.md section 3.3."""
 SKIP_REASONS = ("joint_limit", "refused_fault", "invalid_argument")
 """Controller refusals that skip one pose instead of ending the run."""
 
@@ -62,6 +66,7 @@ class StereoTargetMethod(Method):
         super().__init__(settings, cell, run_dir)
         self.rig: Any = None
         self.rig_report: dict[str, Any] = {}
+        self.rig_plan: dict[str, Any] = {}
         self._measurer: Any = None
         self._tool, self._target = require_camera_cell(cell)
         tool = self._tool
@@ -117,20 +122,40 @@ class StereoTargetMethod(Method):
     async def _calibrate_rig(self, robot: RobotAdapter, progress: Progress) -> Any:
         from hostpc.methods.journal import write_json_atomic
         from hostpc.vision import ChessboardSpec, calibrate_rig
+        from hostpc.vision.rig_calibration import as_gray, find_chessboard
+        from hostpc.vision.rig_planning import CoveragePlanner
 
         board = self.cell.chessboard
         if not board:
             raise InputError("no --rig given and the controller describes no chessboard to "
                              "calibrate one; give --rig FILE")
         n_views = int(board.get("n_views", 20))
-        progress.stage("rig calibration", n_views)
-        pairs = []
-        for view in range(n_views):
-            capture = await robot.capture("chessboard", view)
-            pairs.append((capture.left, capture.right))
-            progress.advance(view + 1, f"chessboard view {view + 1}/{n_views}")
+        max_views = max(n_views, int(board.get("max_views", n_views)))
         spec = ChessboardSpec(int(board["cols"]), int(board["rows"]),
                               float(board["square_size"]))
+        progress.stage("rig calibration", n_views)
+        pairs, planner = [], None
+        for view in range(max_views):
+            if planner is not None and planner.done():
+                break
+            capture = await robot.capture("chessboard", view)
+            left, right = as_gray(capture.left, "left"), as_gray(capture.right, "right")
+            if planner is None:
+                planner = CoveragePlanner(n_views, (left.shape[1], left.shape[0]))
+            if planner.offer(view, find_chessboard(left, spec), find_chessboard(right, spec)):
+                pairs.append((left, right))
+            covered = min(planner.coverage)
+            progress.advance(min(len(pairs), n_views),
+                             f"chessboard view {view + 1}: {len(pairs)} kept, "
+                             f"coverage {100 * covered:.0f}%")
+        assert planner is not None
+        self.rig_plan = {"views_kept": list(planner.kept),
+                         "views_rejected": [[v, r] for v, r in planner.rejected],
+                         "coverage": list(planner.coverage)}
+        if not pairs:
+            raise RigCalibrationFailed(
+                f"stereo rig calibration failed: the chessboard was found in none of the "
+                f"{len(planner.rejected)} views")
         progress.stage("rig solve")
         result = calibrate_rig(pairs, spec)
         self.rig_report = {
@@ -139,6 +164,8 @@ class StereoTargetMethod(Method):
             "per_view_rms_px": [float(v) for v in result.per_view_rms],
             "used_views": [int(v) for v in result.used_views],
             "warnings": [str(w) for w in result.warnings],
+            "corner_sigma_px": result.corner_sigma_px,
+            "plan": self.rig_plan,
         }
         write_json_atomic(self.run_dir / RIG_REPORT_FILE, self.rig_report)
         for warning in result.warnings:
@@ -146,7 +173,7 @@ class StereoTargetMethod(Method):
         if not result.ok:
             raise RigCalibrationFailed(
                 f"stereo rig calibration failed (RMS {result.rms:.3f} px, "
-                f"{len(result.used_views)} of {n_views} views usable): "
+                f"{len(result.used_views)} of {len(pairs)} views usable): "
                 + ("; ".join(result.warnings) or "see rig_calibration.json")
             )
         progress.message(f"rig calibrated: RMS {result.rms:.3f} px from "
@@ -287,8 +314,10 @@ class StereoTargetMethod(Method):
     # ---------------------------------------------------------------- dataset
 
     def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-        """A `zerocal-dataset/1` document with the cell's nominal frames and `known`."""
-        return {
+        """A `zerocal-dataset/1` document with the cell's nominal frames and `known`; the
+        disk centres re-corrected with the normals of a preliminary fit when the samples
+        carry `uv` (hostpc.methods.stereo_refinement)."""
+        document = {
             "format": FORMAT_TAG,
             "method": self.name,
             "units": {"length": "m", "angle": "rad", "time": "s"},
@@ -299,7 +328,37 @@ class StereoTargetMethod(Method):
             },
             "known": list(self.cell.known),
             "samples": [dict(s) for s in samples],
+            **self._rig_uncertainty(),
         }
+        return self._refined(document)
+
+    def _refined(self, document: dict[str, Any]) -> dict[str, Any]:
+        """The document with its centres re-corrected by fitted normals (or as it was)."""
+        samples = document["samples"]
+        if self.rig is None or not samples or any("uv" not in s for s in samples):
+            return document
+        from hostpc.dataset import dataset_to_dict
+        from hostpc.methods.stereo_refinement import refine_dataset
+
+        # each set by its own preliminary fit; a small (verify) set is left as measured: after
+        # a push its nominal normals are already right, and the fit's model would be wrong
+        dataset, _ = refine_dataset(dataset_from_dict(document), self.rig,
+                                    self.cell.target_radius, self.cell.target_normal)
+        refined = dataset_to_dict(dataset)
+        for before, after in zip(samples, refined["samples"], strict=True):
+            for key, value in before.items():  # keep fields the dataset layer does not read
+                after.setdefault(key, value)
+        return refined
+
+
+    def _rig_uncertainty(self) -> dict[str, Any]:
+        """The dataset's `rig_uncertainty` block (the rig and its calibration covariance,
+        hostpc.fitting.shared_errors), or nothing for a rig without a covariance."""
+        if self.rig is None or getattr(self.rig, "covariance", None) is None:
+            return {}
+        from hostpc.vision.rig_uncertainty import uncertainty_document
+
+        return {"rig_uncertainty": uncertainty_document(self.rig, self.rig.covariance)}
 
     def describe(self) -> dict[str, Any]:
         """Rig facts for the result document."""

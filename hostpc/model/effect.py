@@ -19,7 +19,7 @@ A linear joint or geometry effect only has to give its ``basis``: ``delta = basi
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import ClassVar, Literal
 
 import numpy as np
@@ -49,11 +49,20 @@ class ModelContext:
     #: name of each column of q_cmd: ("q1", ..., "qn"), or for a kinematic tree
     #: ("head.q1", "head.q2", "left.q1", ...)
     joint_labels: tuple[str, ...] = ()
+    #: parameter names of each frame the measurement model estimates, by frame name
+    #: (e.g. sphere_probe's tool is a point: ("x", "y", "z"))
+    frame_parameters: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.joint_labels:
             labels = tuple(f"q{i + 1}" for i in range(self.q_cmd.shape[1]))
             object.__setattr__(self, "joint_labels", labels)
+
+    def subset(self, indices: np.ndarray) -> ModelContext:
+        """The same context on the samples at ``indices`` (a view for cross-validation)."""
+        return replace(self, q_cmd=self.q_cmd[indices], tau=self.tau[indices],
+                       approach=self.approach[indices],
+                       variables={k: v[indices] for k, v in self.variables.items()})
 
     def per_joint_names(self, letter: str) -> list[str]:
         """Per-joint parameter names: "c" -> ["c1", ..] (or ["left.c1", ..] on a tree)."""

@@ -7,16 +7,15 @@ entry-point group ``zerocal.effects`` (``name = "module:Class"``).
 
 from __future__ import annotations
 
-import importlib.util
 import inspect
-import sys
 from collections.abc import Iterable, Mapping
-from importlib.metadata import entry_points
 from pathlib import Path
 
+from hostpc.dataset.kind import MeasurementKind
 from hostpc.errors import EffectError
 from hostpc.model.effect import Effect
 from hostpc.model.effects import BUILTIN_EFFECTS
+from hostpc.plugins import classes_defined_in, entry_point_objects, import_plugin_file
 
 ENTRY_POINT_GROUP = "zerocal.effects"
 VALID_HOOKS = ("joint", "geometry", "sensor", "frame")
@@ -39,42 +38,28 @@ def _check_effect_class(cls: type[Effect], origin: str) -> None:
 
 
 def load_plugin_file(path: str | Path) -> dict[str, type[Effect]]:
-    """Import a Python file and return the Effect subclasses it defines, by name."""
-    path = Path(path)
-    if not path.is_file():
-        raise EffectError(f"plugin {path}: no such file")
-    module_name = f"zerocal_plugin_{path.stem}_{abs(hash(str(path.resolve())))}"
-    spec = importlib.util.spec_from_file_location(module_name, path)
-    if spec is None or spec.loader is None:
-        raise EffectError(f"plugin {path}: not a Python file")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[module_name] = module
-    try:
-        spec.loader.exec_module(module)
-    except Exception as exc:  # a user's file may fail in any way: report it in one line
-        sys.modules.pop(module_name, None)
-        raise EffectError(f"plugin {path}: failed to import: {type(exc).__name__}: {exc}") from exc
+    """Import a Python file (once) and return the Effect subclasses it defines, by name.
+
+    A file may define measurement models instead of (or besides) effects; a file that
+    defines neither is an error."""
+    module = import_plugin_file(path)
     found: dict[str, type[Effect]] = {}
-    for _, obj in inspect.getmembers(module, inspect.isclass):
-        if issubclass(obj, Effect) and obj.__module__ == module_name and "name" in obj.__dict__:
-            _check_effect_class(obj, f"plugin {path}")
-            found[obj.name] = obj
-    if not found:
+    for cls in classes_defined_in(module, Effect):
+        _check_effect_class(cls, f"plugin {path}")
+        found[cls.name] = cls
+    if not found and not classes_defined_in(module, MeasurementKind):
         raise EffectError(f"plugin {path}: defines no Effect subclass with a `name`")
     return found
 
 
 def entry_point_effects() -> dict[str, type[Effect]]:
-    """Effects published by installed packages under the `zerocal.effects` group."""
+    """Effects published by installed packages under the `zerocal.effects` group (the scan
+    runs once per process)."""
     found: dict[str, type[Effect]] = {}
-    for entry in entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            cls = entry.load()
-        except Exception as exc:
-            raise EffectError(f"entry point {entry.name}: failed to load: {exc}") from exc
+    for entry_name, cls in entry_point_objects(ENTRY_POINT_GROUP):
         if not (inspect.isclass(cls) and issubclass(cls, Effect)):
-            raise EffectError(f"entry point {entry.name}: {cls!r} is not an Effect subclass")
-        _check_effect_class(cls, f"entry point {entry.name}")
+            raise EffectError(f"entry point {entry_name}: {cls!r} is not an Effect subclass")
+        _check_effect_class(cls, f"entry point {entry_name}")
         found[cls.name] = cls
     return found
 

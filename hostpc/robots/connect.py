@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import importlib
 import os
+import stat
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from hostpc.errors import InputError
@@ -55,6 +57,8 @@ def parse_robot(text: str, default_port: int = DEFAULT_PORT) -> RobotAddress:
     if not host:
         raise InputError(f"--robot {text!r}: no host (expected HOST[:PORT] or sim)")
     if not port_text:
+        if text.endswith(":"):
+            raise InputError(f"--robot {text!r}: no port after ':' (expected HOST[:PORT])")
         return RobotAddress(sim=False, host=host, port=default_port)
     try:
         port = int(port_text)
@@ -66,8 +70,42 @@ def parse_robot(text: str, default_port: int = DEFAULT_PORT) -> RobotAddress:
 
 
 def resolve_token(token: str | None) -> str:
-    """--token, else $ZEROCAL_TOKEN, else the simulator's default."""
+    """--token (or the token read from --token-file), else $ZEROCAL_TOKEN, else the
+    simulator's default."""
     return token or os.environ.get(TOKEN_ENV) or DEFAULT_TOKEN
+
+
+TOKEN_ON_COMMAND_LINE_WARNING = (
+    "warning: --token is visible to every user of this machine (ps); "
+    f"prefer --token-file FILE (mode 0600) or ${TOKEN_ENV}"
+)
+
+
+def read_token_file(path: str | Path) -> str:
+    """The token in `path` (its first line, stripped). InputError naming the file if it
+    cannot be read, is not a regular file, is readable by group or others (it must be mode
+    0600 or stricter), or is empty."""
+    path = Path(path)
+    try:
+        info = path.stat()
+    except OSError as exc:
+        raise InputError(f"--token-file {path}: cannot read ({exc.strerror})") from None
+    if not stat.S_ISREG(info.st_mode):
+        raise InputError(f"--token-file {path}: not a regular file")
+    if info.st_mode & 0o077:
+        raise InputError(
+            f"--token-file {path}: readable by others (mode {stat.S_IMODE(info.st_mode):04o}); "
+            f"chmod 600 {path}"
+        )
+    try:
+        with path.open(encoding="utf-8") as handle:
+            first = handle.readline(4096)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"--token-file {path}: cannot read ({exc})") from None
+    token = first.strip()
+    if not token:
+        raise InputError(f"--token-file {path}: the token is empty")
+    return token
 
 
 async def open_robot(

@@ -15,6 +15,9 @@ take no wall time) and one surveyed frame, declared known by the simulated cell:
   identifiable).
 dual_loop uses the packaged humanoid world (`humanoid.yaml`) with nothing known.
 
+The token never touches the run folder or the process list: `scenario.json` is written
+without `server.token`, and the stub gets the token in its environment ($ZEROCAL_TOKEN).
+
 The stub's stdout (after its `listening on` line) and stderr go to `stub.log` in the
 simulator's folder, so a chatty stub can never fill a pipe and block. On Linux the stub gets
 PR_SET_PDEATHSIG (SIGTERM): if hostpc dies, even by SIGKILL, the stub is terminated too.
@@ -41,7 +44,7 @@ from typing import IO, Any
 import yaml
 
 from hostpc.errors import ConnectionFailed, InputError
-from hostpc.robots.connect import RobotAddress
+from hostpc.robots.connect import TOKEN_ENV, RobotAddress, resolve_token
 
 
 @dataclass(frozen=True)
@@ -65,6 +68,10 @@ SIM_DEFAULTS: dict[str, SimDefault] = {
                    "probe": {"sphere_centre_error": [0.0, 0.0, 0.0]}},
         known=("sphere",)),
     "dual_loop": SimDefault(scenario="humanoid.yaml"),
+    # a laser tracker with a surveyed registration and a dowel-pinned reflector nest
+    # (controller_stub/tracker.py): both frames known, so every joint's zero is defined
+    "world_point": SimDefault(overrides={"motion": {"time_scale": 0.0}},
+                              known=("world", "markers")),
 }
 """Each method's `--robot sim` world (see the module docstring); unknown methods and None
 use stereo_target's."""
@@ -139,6 +146,14 @@ def load_scenario_file(path: str | Path, time_scale: float | None = 0.0) -> dict
     return data
 
 
+def _without_token(scenario: dict[str, Any]) -> dict[str, Any]:
+    """A copy of `scenario` without `server.token` (what may be written to a run folder)."""
+    server = scenario.get("server")
+    if not isinstance(server, dict) or "token" not in server:
+        return scenario
+    return {**scenario, "server": {k: v for k, v in server.items() if k != "token"}}
+
+
 def free_local_port(host: str = "127.0.0.1") -> int:
     """A TCP port that is free on `host` right now (for services such as the stub's Modbus
     server, whose port 0 means "off"); another process may take it before it is used."""
@@ -177,14 +192,20 @@ class SimulatedController:
             address = sim.address          # RobotAddress(host, port)
             truth = sim.truth()            # the stub's hidden truth (dict), current offsets
 
-    scenario: the scenario mapping (written to `workdir/scenario.json`); workdir: where the
-    scenario, `truth.json` and the stub's output `stub.log` go; modbus_port: also serve the
-    digital IO over Modbus TCP on this port (read-only; None: no Modbus server). `stop()`
-    terminates only this process; the stub also ends when hostpc dies (Linux).
+    scenario: the scenario mapping (written to `workdir/scenario.json` without its
+    `server.token`); workdir: where the scenario, `truth.json` and the stub's output
+    `stub.log` go; modbus_port: also serve the digital IO over Modbus TCP on this port
+    (read-only; None: no Modbus server); token: the stub's token (default: the scenario's
+    `server.token`, else $ZEROCAL_TOKEN, else the simulator's default), handed to the stub
+    in its environment. `stop()` terminates only this process; the stub also ends when
+    hostpc dies (Linux).
     """
 
     def __init__(self, scenario: dict[str, Any], workdir: str | Path,
-                 modbus_port: int | None = None) -> None:
+                 modbus_port: int | None = None, token: str | None = None) -> None:
+        server = scenario.get("server")
+        scenario_token = server.get("token") if isinstance(server, dict) else None
+        self.token = token or (str(scenario_token) if scenario_token else resolve_token(None))
         self.scenario = scenario
         self.workdir = Path(workdir)
         self.scenario_path = self.workdir / "scenario.json"
@@ -207,7 +228,7 @@ class SimulatedController:
     def start(self, timeout: float = START_TIMEOUT_S) -> RobotAddress:
         """Start the stub and wait for its `listening on HOST:PORT` line."""
         self.workdir.mkdir(parents=True, exist_ok=True)
-        self.scenario_path.write_text(json.dumps(self.scenario, indent=2) + "\n")
+        self.scenario_path.write_text(json.dumps(_without_token(self.scenario), indent=2) + "\n")
         command = [
             sys.executable, "-m", "controller_stub", "serve",
             "--scenario", str(self.scenario_path), "--host", "127.0.0.1", "--port", "0",
@@ -218,6 +239,7 @@ class SimulatedController:
         self._log = log = open(self.log_path, "a", encoding="utf-8")  # noqa: SIM115
         self.process = subprocess.Popen(
             command, stdout=subprocess.PIPE, stderr=log, text=True,
+            env={**os.environ, TOKEN_ENV: self.token},
             start_new_session=False, preexec_fn=_die_with_parent(),  # noqa: PLW1509
         )
         lines: queue.Queue[str] = queue.Queue()

@@ -21,7 +21,7 @@ from hostpc.robots.base import (
     StereoCapture,
     TargetMeasurement,
 )
-from hostpc.transport import ControllerClient
+from hostpc.transport import ControllerClient, TrackerReading
 
 
 class ZerocalAdapter:
@@ -89,6 +89,10 @@ class ZerocalAdapter:
             q=reply.q, t=reply.time,
             targets=tuple(MeasuredTarget(chain=t.chain, p=t.p, cov=t.cov)
                           for t in reply.targets))
+
+    async def measure_tracker(self) -> TrackerReading:
+        """The cell's laser tracker reading (hostpc.transport.TrackerReading)."""
+        return await self.client.measure_tracker()
 
     async def get_offsets(self) -> np.ndarray:
         """The zero offsets (n,) rad."""

@@ -15,6 +15,7 @@ from hostpc.transport.types import (
     MoveOutcome,
     TargetPoint,
     TargetsMeasurement,
+    TrackerReading,
 )
 
 __all__ = [
@@ -30,4 +31,5 @@ __all__ = [
     "MoveOutcome",
     "TargetPoint",
     "TargetsMeasurement",
+    "TrackerReading",
 ]

@@ -41,6 +41,7 @@ from hostpc.transport.types import (
     MoveOutcome,
     TargetPoint,
     TargetsMeasurement,
+    TrackerReading,
 )
 from protocol import DEFAULT_PORT
 from protocol import messages as m
@@ -51,7 +52,8 @@ logger = logging.getLogger(__name__)
 
 READ_CHUNK = 1 << 20
 IDEMPOTENT_KINDS = frozenset(
-    {"get_state", "get_offsets", "read_io", "capture", "measure_targets", "heartbeat"}
+    {"get_state", "get_offsets", "read_io", "capture", "measure_targets", "measure_tracker",
+     "heartbeat"}
 )
 """Requests re-sent after a reconnection; everything else raises instead."""
 MOTION_KINDS = frozenset({"move_joints", "guarded_move"})
@@ -412,6 +414,17 @@ class ControllerClient:
             for t in reply.targets
         )
         return TargetsMeasurement(q=_array(reply.q), time=reply.time, targets=targets)
+
+    async def measure_tracker(self, timeout: float | None = None) -> TrackerReading:
+        """The cell's laser tracker now: each reflector's point (3,) m in the tracker frame
+        and covariance (3, 3) m^2, the lost ones, q (n,) rad and the tracker's nominal
+        description (`measure_tracker`, docs/protocol.md)."""
+        reply = await self._request(lambda i: m.MeasureTracker(id=i), m.TrackerMeasured,
+                                    timeout)
+        points = {r.name: (_array(r.p), np.asarray(r.cov, dtype=float))
+                  for r in reply.reflectors}
+        return TrackerReading(q=_array(reply.q), time=reply.time, points=points,
+                              lost=tuple(reply.lost), description=dict(reply.description))
 
     async def read_io(self, timeout: float | None = None) -> IoSnapshot:
         """Digital inputs and outputs."""

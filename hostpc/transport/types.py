@@ -104,3 +104,17 @@ class IoEdgeEvent:
     value: bool
     time: float
     q_latched: np.ndarray
+
+
+@dataclass(frozen=True)
+class TrackerReading:
+    """A laser tracker reading (`measure_tracker`): q (n,) rad at the measurement; time (s);
+    points: reflector name -> ((3,) m in the tracker (world) frame, (3, 3) m^2 covariance);
+    lost: reflectors whose beam is lost; description: the tracker's nominal facts
+    (docs/protocol.md)."""
+
+    q: np.ndarray
+    time: float
+    points: dict[str, tuple[np.ndarray, np.ndarray]]
+    lost: tuple[str, ...]
+    description: dict[str, Any]

@@ -51,6 +51,9 @@ class StereoRig:
     dist_left, dist_right: (k,) OpenCV distortion coefficients (k1, k2, p1, p2, k3[, ...]).
     R: (3, 3), T: (3,) m, x_right = R @ x_left + T (OpenCV stereoCalibrate).
     rms: reprojection RMS of the calibration (px); n_views: chessboard views used.
+    covariance: (24, 24) covariance of the rig parameters from its calibration, in the order
+    of `hostpc.vision.rig_uncertainty.RIG_PARAMETERS`, or None (unknown: a rig file without
+    it). It is not part of the fingerprint.
 
     Arrays are stored read-only; equality is identity (use `fingerprint()` to compare).
     """
@@ -64,6 +67,7 @@ class StereoRig:
     T: np.ndarray
     rms: float = 0.0
     n_views: int = 0
+    covariance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         w, h = (int(v) for v in self.image_size)
@@ -82,6 +86,11 @@ class StereoRig:
             raise ValueError("R: not a rotation matrix (det != 1)")
         if np.linalg.norm(self.T) <= 0.0:
             raise ValueError("T: zero baseline")
+        if self.covariance is not None:
+            cov = _frozen(self.covariance, (24, 24), "covariance")
+            if not np.allclose(cov, cov.T, rtol=1e-9, atol=0.0) or np.any(np.diag(cov) < 0):
+                raise ValueError("covariance: not a symmetric positive semi-definite matrix")
+            object.__setattr__(self, "covariance", cov)
         object.__setattr__(self, "rms", float(self.rms))
         object.__setattr__(self, "n_views", int(self.n_views))
 
@@ -119,6 +128,7 @@ class StereoRig:
             "T": self.T.tolist(),
             "rms": self.rms,
             "n_views": self.n_views,
+            **({} if self.covariance is None else {"covariance": self.covariance.tolist()}),
         }
 
 
@@ -152,6 +162,11 @@ def rig_from_dict(data: Any, source: str = "<rig>") -> StereoRig:
             raise InputError(f"{source}: {name}: expected a number, got {value!r}")
         fields[name] = value
     fields["image_size"] = (int(size[0]), int(size[1]))
+    if data.get("covariance") is not None:
+        try:
+            fields["covariance"] = np.asarray(data["covariance"], dtype=float)
+        except (TypeError, ValueError):
+            raise InputError(f"{source}: covariance: not a numeric array") from None
     try:
         return StereoRig(**fields)
     except ValueError as exc:

@@ -14,6 +14,7 @@ Image pairs on disk (`load_image_pairs`): a folder of `left_<id>.<ext>` and
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from dataclasses import dataclass
@@ -24,13 +25,14 @@ import numpy as np
 
 from hostpc.errors import InputError
 from hostpc.vision.rig import StereoRig
+from hostpc.vision.rig_planning import MIN_COVERAGE
+from hostpc.vision.rig_planning import coverage as coverage_of
+from hostpc.vision.rig_uncertainty import chessboard_rig_covariance
 
 MAX_RMS_PX = 0.5
 """A calibration with a larger reprojection RMS (px) is flagged as poor."""
 MIN_VIEWS = 8
 """Fewer usable views than this is flagged as poor."""
-MIN_COVERAGE = 0.5
-"""Fraction of an 8x8 grid of image cells the board must have covered in each camera."""
 MIN_TILT_SPREAD_DEG = 10.0
 """Largest board tilt among the views below this: focal length poorly determined."""
 OUTLIER_VIEW_RMS_PX = 1.0
@@ -73,6 +75,8 @@ class RigCalibration:
     per_view_rms: RMS (px) of each used view (mean of left and right);
     used_views: indices into the input pairs that entered the fit;
     skipped_views: (index, reason) of the pairs that did not;
+    corner_sigma_px: the corner noise the fit's residuals show (px); the rig's parameter
+    covariance from this fit is `rig.covariance` (hostpc.vision.rig_uncertainty);
     warnings: why the calibration should not be trusted (empty if fine).
     """
 
@@ -82,6 +86,7 @@ class RigCalibration:
     used_views: list[int]
     warnings: tuple[str, ...]
     skipped_views: tuple[tuple[int, str], ...] = ()
+    corner_sigma_px: float | None = None
 
     @property
     def ok(self) -> bool:
@@ -89,7 +94,7 @@ class RigCalibration:
         return not self.warnings
 
 
-def _as_gray(image: np.ndarray, what: str) -> np.ndarray:
+def as_gray(image: np.ndarray, what: str) -> np.ndarray:
     """A 2-D uint8 view of `image` (colour converted); InputError for anything else."""
     image = np.asarray(image)
     if image.ndim == 3 and image.shape[2] in (3, 4):
@@ -139,22 +144,6 @@ def find_chessboard(image: np.ndarray, board: ChessboardSpec) -> np.ndarray | No
     return refined.reshape(-1, 2)
 
 
-def _coverage(corner_sets: list[np.ndarray], size: tuple[int, int], cells: int = 8) -> float:
-    """Fraction of a cells x cells grid over the image touched by any board's convex hull."""
-    w, h = size
-    mask = np.zeros((h // 4 + 1, w // 4 + 1), np.uint8)
-    for corners in corner_sets:
-        hull = cv2.convexHull((corners / 4.0).astype(np.int32))
-        cv2.fillConvexPoly(mask, hull, 1)
-    hit = 0
-    for gy in range(cells):
-        for gx in range(cells):
-            y0, y1 = gy * mask.shape[0] // cells, (gy + 1) * mask.shape[0] // cells
-            x0, x1 = gx * mask.shape[1] // cells, (gx + 1) * mask.shape[1] // cells
-            hit += bool(mask[y0:y1, x0:x1].any())
-    return hit / float(cells * cells)
-
-
 def calibrate_rig(
     pairs: list[tuple[np.ndarray, np.ndarray]], board: ChessboardSpec
 ) -> RigCalibration:
@@ -176,8 +165,8 @@ def calibrate_rig(
     for k, pair in enumerate(pairs):
         if len(pair) != 2:
             raise InputError(f"pair {k}: expected (left, right) images")
-        left = _as_gray(pair[0], f"pair {k} left image")
-        right = _as_gray(pair[1], f"pair {k} right image")
+        left = as_gray(pair[0], f"pair {k} left image")
+        right = as_gray(pair[1], f"pair {k} right image")
         if left.shape != right.shape:
             raise InputError(f"pair {k}: left {left.shape} and right {right.shape} differ in size")
         this_size = (left.shape[1], left.shape[0])
@@ -218,6 +207,9 @@ def calibrate_rig(
     per_view = out[-1]  # (n_views, 2) RMS of the left and right image of each view
     per_view_rms = [float(v) for v in np.mean(np.asarray(per_view).reshape(-1, 2), axis=1)]
     rig = StereoRig(size, K1, d1.ravel(), K2, d2.ravel(), R, T.ravel(), float(rms), len(used))
+    covariance, corner_sigma = chessboard_rig_covariance(
+        rig, board.object_points(), left_pts, right_pts, out[9], out[10])
+    rig = dataclasses.replace(rig, covariance=covariance)
 
     warnings: list[str] = []
     if rms > MAX_RMS_PX:
@@ -225,7 +217,7 @@ def calibrate_rig(
     if len(used) < MIN_VIEWS:
         warnings.append(f"only {len(used)} usable views (need at least {MIN_VIEWS})")
     for name, pts in (("left", left_pts), ("right", right_pts)):
-        coverage = _coverage([p.reshape(-1, 2) for p in pts], size)
+        coverage = coverage_of([p.reshape(-1, 2) for p in pts], size)
         if coverage < MIN_COVERAGE:
             warnings.append(
                 f"poor coverage: the board covered {100 * coverage:.0f}% of the {name} image "
@@ -249,6 +241,7 @@ def calibrate_rig(
         used_views=used,
         warnings=tuple(warnings),
         skipped_views=tuple(skipped),
+        corner_sigma_px=corner_sigma,
     )
 
 

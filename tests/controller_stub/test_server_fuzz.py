@@ -166,7 +166,64 @@ def valid_request_frame(kind: str) -> bytes:
     return encode_frame(samples[kind].model_dump_json().encode())
 
 
+def nested(depth: int, opener: str) -> str:
+    closer = "]" if opener == "[" else "}"
+    inner = "1" if opener == "[" else ""
+    if opener == "{":
+        return '{"a":' * depth + "1" + "}" * depth
+    return opener * depth + inner + closer * depth
+
+
+deep_headers = st.tuples(
+    st.sampled_from(ALL_KINDS), st.integers(33, 100_000), st.sampled_from(["[", "{"]),
+    st.sampled_from(["id", "q", "offsets", "camera", "extra"]),
+).map(
+    lambda t: (
+        "deep nesting",
+        encode_frame(f'{{"kind":"{t[0]}","id":1,"{t[3]}":{nested(t[1], t[2])}}}'.encode()),
+    )
+)
+
+WRONG_TYPES = ["\"2\"", "\"0.1\"", "2.0", "true", "null", "[]", "{}", "\"\""]
+wrong_types = st.tuples(
+    st.sampled_from(["move_joints", "set_offsets", "guarded_move", "capture", "get_state"]),
+    st.sampled_from(["id", "q", "offsets", "speed", "io_line", "view", "q.0", "offsets.0"]),
+    st.sampled_from(WRONG_TYPES),
+).map(lambda t: ("wrong type", encode_frame(wrong_type_header(*t).encode())))
+
+HUGE = ["1e308", "-1e308", "1e400", "-1e400", "1" + "0" * 400, "5e-324", "-0.0",
+        "9007199254740993", "18446744073709551616", "NaN", "Infinity"]
+huge_numbers = st.tuples(
+    st.sampled_from(["move_joints", "set_offsets", "guarded_move", "capture"]),
+    st.sampled_from(["id", "q.0", "offsets.0", "speed", "io_line", "view"]),
+    st.sampled_from(HUGE),
+).map(lambda t: ("huge number", encode_frame(wrong_type_header(*t).encode())))
+
+
+def wrong_type_header(kind: str, field: str, value: str) -> str:
+    """A valid request of `kind` for a 6-joint robot with `field` (or element 0 of a list
+    field, "q.0") replaced by the raw JSON `value`."""
+    fields = {"id": "5", "q": "[0.1,0.1,0.1,0.1,0.1,0.1]", "offsets": "[0,0,0,0,0,0]",
+              "speed": "0.5", "io_line": "0", "view": "0"}
+    wanted = {"move_joints": ["id", "q", "speed"], "set_offsets": ["id", "offsets"],
+              "guarded_move": ["id", "q", "speed", "io_line"], "capture": ["id", "view"],
+              "get_state": ["id"]}[kind]
+    name, _, index = field.partition(".")
+    parts = [f'"kind":"{kind}"']
+    for key in wanted:
+        text = fields[key]
+        if key == name:
+            text = f"[{value},0,0,0,0,0]" if index else value
+        parts.append(f'"{key}":{text}')
+    if name not in wanted:
+        parts.append(f'"{name}":{value}')
+    return "{" + ",".join(parts) + "}"
+
+
 payloads = st.one_of(
+    deep_headers,
+    wrong_types,
+    huge_numbers,
     st.binary(max_size=600).map(lambda b: ("random bytes", b)),
     st.tuples(
         st.sampled_from(["get_state", "move_joints", "capture", "set_offsets"]),
@@ -280,3 +337,67 @@ def test_stalled_half_frame_does_not_block_others(
         assert good_client.heartbeat() >= 0.0
     finally:
         stalled.close()
+
+
+def exchange(address: tuple[str, int], frame: bytes) -> list[m._Message]:
+    """Authenticate, send `frame`, then a heartbeat; every message received until its reply."""
+    client = BlockingClient(address)
+    try:
+        client.sock.sendall(frame)
+        client.sock.sendall(client.conn.send(m.Heartbeat(id=99)))
+        received: list[m._Message] = []
+        while not any(getattr(e, "reply_to", None) == 99 for e in received):
+            received += [e for e in client._pump() if isinstance(e, m._Message)]
+        return received
+    finally:
+        client.close()
+
+
+@pytest.mark.parametrize(
+    ("kind", "field", "value"),
+    [
+        ("get_state", "id", '"2"'),
+        ("move_joints", "id", "2.0"),
+        ("move_joints", "q.0", '"0.1"'),
+        ("move_joints", "speed", '"0.5"'),
+        ("move_joints", "speed", "true"),
+        ("set_offsets", "offsets.0", '"0.001"'),
+        ("set_offsets", "offsets", '"[0,0,0,0,0,0]"'),
+        ("guarded_move", "io_line", '"0"'),
+        ("guarded_move", "io_line", "0.0"),
+        ("capture", "view", "true"),
+        ("move_joints", "q.0", "1e400"),
+        ("set_offsets", "offsets.0", "1" + "0" * 400),
+        ("move_joints", "id", "18446744073709551616"),
+    ],
+)
+def test_wrong_json_types_and_huge_numbers_are_bad_messages(
+    running_stub: ThreadedStub, kind: str, field: str, value: str
+) -> None:
+    """No coercion ("2" is not 2, "0.1" is not 0.1, true is not 1): as docs/protocol.md says."""
+    header = wrong_type_header(kind, field, value).encode()
+    replies = exchange(running_stub.address, encode_frame(header))
+    errors = [r for r in replies if isinstance(r, m.ErrorReply)]
+    assert [e.code for e in errors] == ["bad_message"], replies
+    assert not any(r.kind in ("move_done", "offsets_set", "state", "capture_done")
+                   for r in replies)
+    assert running_stub.unhandled == []
+
+
+@pytest.mark.parametrize("depth", [33, 1000, 30_000])
+def test_deep_nesting_is_a_bad_message_not_a_crash(running_stub: ThreadedStub, depth: int) -> None:
+    header = f'{{"kind":"get_state","id":7,"x":{nested(depth, "[")}}}'.encode()
+    replies = exchange(running_stub.address, encode_frame(header))
+    errors = [r for r in replies if isinstance(r, m.ErrorReply)]
+    assert [e.code for e in errors] == ["bad_message"] and "nests deeper" in errors[0].message
+    assert running_stub.unhandled == []
+
+
+@pytest.mark.parametrize("speed", [1e-300, 5e-324, 0.0009])
+def test_motions_too_slow_to_end_are_refused(running_stub: ThreadedStub, speed: float) -> None:
+    """A speed of 1e-300 once overflowed the simulated clock and broke every later reply."""
+    request = m.MoveJoints(id=8, q=[0.1] * 6, speed=speed)
+    replies = exchange(running_stub.address, encode_frame(request.model_dump_json().encode()))
+    (error,) = [r for r in replies if isinstance(r, m.ErrorReply)]
+    assert error.code == "refused" and error.reason == "speed"
+    assert running_stub.unhandled == []

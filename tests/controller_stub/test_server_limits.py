@@ -93,7 +93,27 @@ async def test_a_client_that_never_says_hello_is_closed(start_server: StartServe
         writer.close()
 
 
-@pytest.mark.parametrize("prelude", ["nothing", "hello", "authenticated"])
+async def test_an_unauthenticated_session_is_closed_at_the_deadline_despite_heartbeats(
+    start_server: StartServer,
+) -> None:
+    server = await start_server(handshake_timeout_s=0.5)
+    client = await hello_only(server)
+    try:
+        started = time.monotonic()
+        replies = 0
+        while not client.conn.closed and time.monotonic() - started < 2.0:
+            client.writer.write(client.conn.send(m.Heartbeat(id=client.conn.next_id())))
+            replies += sum(e.kind == "heartbeat_reply" for e in await client.pump()
+                           if isinstance(e, m.HeartbeatReply))
+            await asyncio.sleep(0.05)
+        assert client.conn.closed and replies >= 3  # heartbeats answered, then closed
+        assert 0.4 < time.monotonic() - started < 1.5
+        await assert_well_behaved_client_works(server)  # authenticated in time: served
+    finally:
+        await client.close()
+
+
+@pytest.mark.parametrize("prelude", ["nothing", "authenticated"])
 async def test_a_declared_length_that_never_completes_is_closed_after_the_deadline(
     start_server: StartServer, prelude: str
 ) -> None:
@@ -106,7 +126,7 @@ async def test_a_declared_length_that_never_completes_is_closed_after_the_deadli
         )
         reader, writer = client.reader, client.writer
     try:
-        await asyncio.sleep(0.4)  # past the hello deadline: a session past hello stays open
+        await asyncio.sleep(0.4)  # past the auth deadline: an authenticated session stays open
         frame = encode_frame(m.Heartbeat(id=77).model_dump_json().encode())
         writer.write(frame[:12])  # the prefix declares the whole frame; the rest never comes
         received, took = await closed_within(reader, 3.0)

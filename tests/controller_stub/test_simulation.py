@@ -270,5 +270,10 @@ def test_digital_outputs_and_io_range(make_sim: MakeSim) -> None:
 def test_unknown_pattern_and_view_refused(default_sim: Simulation) -> None:
     with pytest.raises(SimulationRefused):
         default_sim.capture_stereo("plaid")
+    # n_views planned views, then 3 x n_views extra views (aimed anywhere) for coverage
+    max_views = default_sim.camera_description()["chessboard"]["max_views"]
+    assert max_views == 4 * default_sim.scenario.chessboard.n_views
+    extra = default_sim.capture_stereo("chessboard", view=20)
+    assert extra.left.shape == (1024, 1280)
     with pytest.raises(SimulationRefused):
-        default_sim.capture_stereo("chessboard", view=20)
+        default_sim.capture_stereo("chessboard", view=max_views)

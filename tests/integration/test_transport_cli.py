@@ -74,7 +74,7 @@ def test_status_json_with_token_from_environment(served: tuple[str, int, Path]) 
 
 def test_status_wrong_token_is_one_line_exit_4(served: tuple[str, int, Path]) -> None:
     host, port, _ = served
-    result = hostpc("status", "--robot", f"{host}:{port}", "--token", "nope")
+    result = hostpc("status", "--robot", f"{host}:{port}", env={"ZEROCAL_TOKEN": "nope"})
     assert result.returncode == 4
     assert result.stderr.count("\n") == 1 and "auth_failed" in result.stderr
 

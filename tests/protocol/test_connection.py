@@ -73,6 +73,7 @@ def request_samples(next_id: Callable[[], int]) -> list[m.Request]:
         m.Abort(id=next_id()),
         m.Capture(id=next_id(), pattern="chessboard", view=4, encoding="png"),
         m.MeasureTargets(id=next_id()),
+        m.MeasureTracker(id=next_id()),
         m.GetOffsets(id=next_id()),
         m.SetOffsets(id=next_id(), offsets=[0.001] * 6),
         m.RollbackOffsets(id=next_id(), rollback_id="rb-7"),
@@ -126,6 +127,12 @@ def reply_for(request: m.Request) -> m._Message:
                     cov=[[1e-9, 0.0, 2e-10], [0.0, 1e-9, 0.0], [2e-10, 0.0, 4e-8]],
                 )
             ],
+        ),
+        "measure_tracker": m.TrackerMeasured(
+            reply_to=i, q=Q, time=3.6, lost=["smr2"],
+            reflectors=[m.ReflectorObservation(name="smr1", p=[2.1, 0.4, 0.3],
+                                               cov=[[1e-10, 0, 0], [0, 1e-10, 0], [0, 0, 1e-10]])],
+            description={"acceptance_deg": 55.0, "reflectors": {"smr1": [0.0, 0.0, 0.05]}},
         ),
         "get_offsets": m.Offsets(reply_to=i, offsets=[0.002] * 6),
         "set_offsets": m.OffsetsSet(

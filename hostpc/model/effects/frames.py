@@ -1,5 +1,5 @@
 """Frame effects: the unknown frames of a method. Their math lives in the measurement
-models (hostpc.model.measurement); here they only declare their parameters."""
+models (hostpc.model.measurements); here they only declare their parameters."""
 
 from __future__ import annotations
 
@@ -17,24 +17,22 @@ class _FrameEffect(Effect):
     parameters: ClassVar[tuple[str, ...]] = POSE_PARAMETERS
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
-        return list(self.parameters)
+        """The measurement model may say how its frame is parametrised (a point-only tool)."""
+        return list(ctx.frame_parameters.get(self.name, self.parameters))
 
     def parameter_units(self, ctx: ModelContext) -> Sequence[str]:
-        return ["rad" if name.startswith("r") else "m" for name in self.parameter_names(ctx)]
+        return ["rad" if name.rsplit(".", 1)[-1].startswith("r") else "m"
+                for name in self.parameter_names(ctx)]
 
 
 class ToolFrame(_FrameEffect):
     """Sensor frame in the flange frame: T_flange_tool = T_nom @ [exp([r]x), t].
 
-    For sphere_probe only the stylus tip position matters (x, y, z)."""
+    For sphere_probe only the stylus tip position matters (x, y, z): its measurement model
+    says so (``MeasurementModel.frame_parameters``)."""
 
     name = "tool"
     description = "sensor (camera or stylus tip) frame on the flange"
-
-    def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
-        if ctx.method == "sphere_probe":
-            return list(POINT_PARAMETERS)
-        return list(POSE_PARAMETERS)
 
 
 class BaseFrame(_FrameEffect):
@@ -58,3 +56,11 @@ class SphereFrame(_FrameEffect):
     name = "sphere"
     description = "reference sphere centre"
     parameters = POINT_PARAMETERS
+
+
+def frame_effect(name: str, parameters: tuple[str, ...]) -> type[_FrameEffect]:
+    """A frame effect class for a frame a measurement model declares that has no built-in
+    effect of its own (a plugin's frame, world_point's markers)."""
+    return type(f"Frame_{name}", (_FrameEffect,), {
+        "name": name, "parameters": parameters,
+        "description": f"frame {name!r} of its measurement model"})

@@ -7,6 +7,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from hostpc.errors import EffectError
 from hostpc.model.effect import Effect, Hook, ModelContext
 
 
@@ -53,8 +54,6 @@ class JointCompliance(_LinearJointEffect):
 
     def basis(self, ctx: ModelContext) -> np.ndarray:
         if not np.all(np.isfinite(ctx.tau)):
-            from hostpc.errors import EffectError
-
             raise EffectError(
                 f"joint_compliance needs link masses, but robot {ctx.chain.name!r} has none"
             )

@@ -7,6 +7,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from hostpc.errors import EffectError
 from hostpc.model.effect import Effect, Hook, ModelContext
 
 
@@ -54,8 +55,6 @@ class TriggerLatency(Effect):
 
     def _speed(self, ctx: ModelContext) -> np.ndarray:
         if "speed" not in ctx.variables:
-            from hostpc.errors import EffectError
-
             raise EffectError("trigger_latency needs the approach `speed` of every contact")
         return ctx.variables["speed"]
 

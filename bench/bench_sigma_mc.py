@@ -1,0 +1,170 @@
+"""Is the reported sigma honest against the simulator? A Monte Carlo over simulated worlds.
+
+For each method and each world seed k, run the whole procedure against the simulated
+controller (`hostpc calibrate --robot sim --scenario <the method's default world, seed k>
+--no-push`), read the fitted joint offsets' errors against the simulator's hidden truth
+(`result.json` "truth") and their reported sigma (`fit.json`), and print per joint
+
+    ratio = mean over worlds of (error / sigma)^2
+
+with a 95 % interval (if the sigma is honest, n * ratio follows chi-square with n degrees of
+freedom, so 40 worlds allow 0.6-1.5 around 1). Each world is a new seed: new zero errors,
+new camera mount error, new rig-calibration views, new noise. Failed runs are counted.
+
+    python bench/bench_sigma_mc.py [--worlds 40] [--methods stereo_target,sphere_probe,dual_loop]
+                                   [--first-seed 1] [--keep DIR] [--json OUT]
+
+Slow (about 7-10 s per world and method): `bench/run.py` runs it only when asked by name
+(`python bench/run.py sigma_mc`), with 8 worlds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from scipy import stats
+
+ROOT = Path(__file__).resolve().parent.parent
+METHODS = ("stereo_target", "sphere_probe", "dual_loop")
+OPTIONAL = True
+"""bench/run.py skips this module unless its name is asked for (slow)."""
+
+
+def world(method: str, seed: int) -> tuple[dict[str, Any], list[str]]:
+    """The method's default simulated world with `seed`, and its extra calibrate options."""
+    name = "humanoid.yaml" if method == "dual_loop" else "default.yaml"
+    text = (ROOT / "controller_stub" / "scenarios" / name).read_text()
+    scenario = yaml.safe_load(text)
+    scenario["seed"] = int(seed)
+    scenario.setdefault("motion", {})["time_scale"] = 0.0
+    if method == "stereo_target":
+        scenario["target"]["centre_error"] = [0.0, 0.0, 0.0]
+        return scenario, ["--known", "target"]
+    if method == "sphere_probe":
+        scenario["probe"]["sphere_centre_error"] = [0.0, 0.0, 0.0]
+        return scenario, ["--known", "sphere"]
+    return scenario, []
+
+
+def run_world(method: str, seed: int, folder: Path) -> dict[str, Any]:
+    """One calibration; {"errors": [...] rad or None, "sigmas": [...] rad} or {"failed": msg}."""
+    scenario, options = world(method, seed)
+    scenario_path = folder / f"{method}_{seed}.yaml"
+    scenario_path.write_text(yaml.safe_dump(scenario))
+    out = folder / f"{method}_{seed}"
+    command = [sys.executable, "-m", "hostpc.cli.main", "calibrate", "--robot", "sim",
+               "--method", method, "--scenario", str(scenario_path), "--no-push",
+               "--out", str(out), *options]
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, check=False)
+    result_path, fit_path = out / "result.json", out / "fit.json"
+    if not (result_path.is_file() and fit_path.is_file()):
+        last = (done.stderr.strip().splitlines() or ["no output"])[-1]
+        return {"failed": f"exit {done.returncode}: {last}"}
+    truth = json.loads(result_path.read_text()).get("truth") or {}
+    errors_deg = truth.get("joint_offsets_error_deg")
+    if errors_deg is None:
+        return {"failed": "no truth comparison in result.json"}
+    parameters = json.loads(fit_path.read_text())["parameters"]
+    errors, sigmas, names = [], [], []
+    for name, entry in parameters.items():
+        if not name.startswith("joint_offsets."):
+            continue
+        names.append(name.split(".", 1)[1])
+        sigmas.append(math.nan if entry.get("std") is None else float(entry["std"]))
+    for value in errors_deg[: len(names)]:
+        errors.append(math.nan if value is None else math.radians(float(value)))
+    return {"names": names, "errors": errors, "sigmas": sigmas}
+
+
+def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Per joint: worlds, ratio mean((e/s)^2), its 95 % chi-square interval, mean error/sigma."""
+    good = [r for r in runs if "errors" in r]
+    if not good:
+        return {"worlds": 0, "failed": len(runs), "joints": {}}
+    names = good[0]["names"]
+    joints: dict[str, Any] = {}
+    for j, name in enumerate(names):
+        z = np.array([r["errors"][j] / r["sigmas"][j] for r in good
+                      if j < len(r["errors"]) and math.isfinite(r["errors"][j])
+                      and math.isfinite(r["sigmas"][j]) and r["sigmas"][j] > 0])
+        if z.size == 0:
+            joints[name] = {"worlds": 0}
+            continue
+        n = z.size
+        ratio = float(np.mean(z**2))
+        joints[name] = {
+            "worlds": n,
+            "ratio": ratio,
+            "ci95": [n * ratio / float(stats.chi2.ppf(0.975, n)),
+                     n * ratio / float(stats.chi2.ppf(0.025, n))],
+            "mean_z": float(np.mean(z)),
+        }
+    failures = [r["failed"] for r in runs if "failed" in r]
+    return {"worlds": len(good), "failed": len(failures), "failures": failures[:5],
+            "joints": joints}
+
+
+def run(worlds: int = 8, methods: tuple[str, ...] = METHODS, first_seed: int = 1,
+        keep: Path | None = None) -> dict[str, Any]:
+    """The Monte Carlo; returns {method: summary} (see `summarise`)."""
+    out: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory(prefix="zerocal-sigma-mc-") as tmp:
+        folder = keep or Path(tmp)
+        folder.mkdir(parents=True, exist_ok=True)
+        for method in methods:
+            runs = []
+            for seed in range(first_seed, first_seed + worlds):
+                runs.append(run_world(method, seed, folder))
+                status = runs[-1].get("failed", "ok")
+                print(f"  {method} world {seed}: {status}", file=sys.stderr, flush=True)
+            out[method] = summarise(runs)
+    return out
+
+
+def print_table(figures: dict[str, Any]) -> None:
+    for method, summary in figures.items():
+        print(f"{method}: {summary['worlds']} worlds, {summary['failed']} failed")
+        for failure in summary.get("failures", []):
+            print(f"  failed: {failure}")
+        print("  joint  worlds  MSE/sigma^2  95% interval    mean error/sigma")
+        for name, j in summary["joints"].items():
+            if not j.get("worlds"):
+                print(f"  {name:5s}  {0:6d}  (not identifiable)")
+                continue
+            lo, hi = j["ci95"]
+            print(f"  {name:5s}  {j['worlds']:6d}  {j['ratio']:11.2f}  {lo:5.2f} - {hi:5.2f}"
+                  f"    {j['mean_z']:+.2f}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--worlds", type=int, default=8)
+    parser.add_argument("--methods", default=",".join(METHODS))
+    parser.add_argument("--first-seed", type=int, default=1)
+    parser.add_argument("--keep", type=Path, default=None, help="keep the run folders here")
+    parser.add_argument("--json", type=Path, default=None, help="write the figures here")
+    args = parser.parse_args(argv)
+    if args.worlds < 1:
+        parser.error("--worlds: expected at least 1")
+    methods = tuple(m for m in args.methods.split(",") if m)
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        parser.error(f"--methods: unknown {', '.join(unknown)} (expected {', '.join(METHODS)})")
+    figures = run(args.worlds, methods, args.first_seed, args.keep)
+    print_table(figures)
+    if args.json:
+        args.json.write_text(json.dumps(figures, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

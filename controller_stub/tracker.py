@@ -1,0 +1,187 @@
+"""A simulated laser tracker: reflectors (SMRs) on the flange, measured in the tracker's frame.
+
+The tracker stands in the cell; its own frame is the `world` frame of the world_point
+method. It measures each reflector's centre in spherical coordinates (distance by its
+absolute distance meter, azimuth and elevation by its angle encoders), so its noise is
+anisotropic: ``sigma_distance`` (m) along the line of sight and ``sigma_angle`` (rad) times
+the distance across it. A reflector accepts the beam only inside a cone about its opening
+axis (``acceptance_deg`` half-angle): past it the tracker loses the beam and reports the
+reflector as lost. Robot self-occlusion is not modelled.
+
+Truth: ``T_world_base`` (where the robot base really is in the tracker frame) and each
+reflector's true position in the flange are the nominal values plus the scenario's errors;
+the tracker software reports only the nominal ones (its registration and the nest
+positions), as a real tracker's job file would. Everything random comes from the
+simulation's seed.
+
+Shapes: a flange pose is ``(4, 4)`` (base frame); points ``(3,)`` m; covariances
+``(3, 3)`` m^2. Never imports hostpc.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from controller_stub.robot_model import make_transform
+
+__all__ = ["PoseSpec", "ReflectorSpec", "TrackerSpec", "spherical_noise", "Tracker"]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class PoseSpec(_Model):
+    """A pose as xyz (m) and roll-pitch-yaw (rad)."""
+
+    xyz: list[float] = Field(default=[0.0, 0.0, 0.0], min_length=3, max_length=3)
+    rpy: list[float] = Field(default=[0.0, 0.0, 0.0], min_length=3, max_length=3)
+
+
+class ReflectorSpec(_Model):
+    """One reflector: nominal centre in the flange frame (m), the error of the real one,
+    and its opening axis in the flange frame."""
+
+    position: list[float] = Field(min_length=3, max_length=3)
+    error: list[float] = Field(default=[0.0, 0.0, 0.0], min_length=3, max_length=3)
+    axis: list[float] = Field(default=[0.0, 0.0, 1.0], min_length=3, max_length=3)
+
+
+class TrackerSpec(_Model):
+    """The scenario's `tracker` section (defaults: a tracker 2.4 m from the base).
+
+    world_base: nominal pose of the robot base in the tracker frame (the registration);
+    world_base_error: the real base differs from it by this (applied on the right);
+    reflectors: name -> reflector; sigma_distance (m), sigma_angle (rad): 1-sigma noise;
+    acceptance_deg: half-angle of each reflector's acceptance cone."""
+
+    world_base: PoseSpec = PoseSpec(xyz=[2.2, 0.9, -0.35], rpy=[0.0, 0.0, 2.7])
+    world_base_error: PoseSpec = PoseSpec()
+    reflectors: dict[str, ReflectorSpec] = Field(
+        default_factory=lambda: {"smr1": ReflectorSpec(position=[0.03, -0.02, 0.06])})
+    sigma_distance: float = Field(default=8e-6, ge=0.0)
+    sigma_angle: float = Field(default=4e-6, ge=0.0)
+    acceptance_deg: float = Field(default=55.0, gt=0.0, le=90.0)
+
+
+def spherical_noise(p_world: np.ndarray, sigma_distance: float, sigma_angle: float
+                    ) -> np.ndarray:
+    """(3, 3) covariance of a point ``p_world`` (3,) measured by distance + two angles: the
+    radial variance ``sigma_distance^2`` and the transverse ``(r sigma_angle)^2``."""
+    r = float(np.linalg.norm(p_world))
+    u = p_world / max(r, 1e-9)
+    radial = np.outer(u, u)
+    cov: np.ndarray = sigma_distance**2 * radial + (r * sigma_angle) ** 2 * (np.eye(3) - radial)
+    return cov
+
+
+class Tracker:
+    """The tracker of one simulation (see the module docstring)."""
+
+    def __init__(self, spec: TrackerSpec, rng: np.random.Generator) -> None:
+        self.spec = spec
+        self.rng = rng
+        self.T_world_base_nominal = make_transform(spec.world_base.xyz, spec.world_base.rpy)
+        self.T_world_base = self.T_world_base_nominal @ make_transform(
+            spec.world_base_error.xyz, spec.world_base_error.rpy)
+        self.cos_acceptance = math.cos(math.radians(spec.acceptance_deg))
+
+    def reflector_true(self, name: str) -> np.ndarray:
+        """(3,) the real reflector centre in the flange frame (m)."""
+        r = self.spec.reflectors[name]
+        position: np.ndarray = np.asarray(r.position, float) + np.asarray(r.error, float)
+        return position
+
+    def measure(self, T_base_flange: np.ndarray) -> tuple[dict[str, dict[str, Any]], list[str]]:
+        """Measure every reflector at the true flange pose ``T_base_flange`` (4, 4).
+
+        Returns ``(seen, lost)``: name -> {"p": (3,) m, "cov": (3, 3) m^2} in the tracker
+        frame, and the names of reflectors whose beam is lost (outside their cone)."""
+        T_world_flange = self.T_world_base @ T_base_flange
+        seen: dict[str, dict[str, Any]] = {}
+        lost: list[str] = []
+        for name, spec in self.spec.reflectors.items():
+            p = T_world_flange[:3, :3] @ self.reflector_true(name) + T_world_flange[:3, 3]
+            axis = T_world_flange[:3, :3] @ np.asarray(spec.axis, float)
+            axis /= np.linalg.norm(axis)
+            to_tracker = -p / max(float(np.linalg.norm(p)), 1e-9)
+            if float(axis @ to_tracker) < self.cos_acceptance:
+                lost.append(name)
+                continue
+            seen[name] = self._noisy(p)
+        return seen, lost
+
+    def _noisy(self, p: np.ndarray) -> dict[str, Any]:
+        r = float(np.linalg.norm(p))
+        azimuth = math.atan2(p[1], p[0])
+        elevation = math.asin(p[2] / r)
+        r += self.rng.normal(0.0, self.spec.sigma_distance)
+        azimuth += self.rng.normal(0.0, self.spec.sigma_angle)
+        elevation += self.rng.normal(0.0, self.spec.sigma_angle)
+        measured = r * np.array([math.cos(elevation) * math.cos(azimuth),
+                                 math.cos(elevation) * math.sin(azimuth),
+                                 math.sin(elevation)])
+        return {"p": measured,
+                "cov": spherical_noise(measured, self.spec.sigma_distance,
+                                       self.spec.sigma_angle)}
+
+    def description(self) -> dict[str, Any]:
+        """What the tracker software reports: the nominal registration and nest positions,
+        the reflector axes, the acceptance cone and the noise model (never the truth)."""
+        spec = self.spec
+        return {
+            "world_base": {"xyz": list(spec.world_base.xyz), "rpy": list(spec.world_base.rpy)},
+            "reflectors": {n: list(r.position) for n, r in spec.reflectors.items()},
+            "axes": {n: list(r.axis) for n, r in spec.reflectors.items()},
+            "acceptance_deg": spec.acceptance_deg,
+            "sigma_distance": spec.sigma_distance,
+            "sigma_angle": spec.sigma_angle,
+        }
+
+    def truth(self) -> dict[str, Any]:
+        """The hidden truth (for --truth-out and tests)."""
+        from controller_stub.robot_model import matrix_to_rpy
+
+        return {
+            "T_world_base": {"xyz": self.T_world_base[:3, 3].tolist(),
+                             "rpy": matrix_to_rpy(self.T_world_base[:3, :3]).tolist()},
+            "reflectors": {n: self.reflector_true(n).tolist() for n in self.spec.reflectors},
+        }
+
+
+class TrackerMixin:
+    """`measure_tracker()` for the Simulation (needs `scenario`, `flange_pose()`, `_q`,
+    `_time` and a seed)."""
+
+    scenario: Any
+    _q: np.ndarray
+    _time: float
+    _tracker: Tracker | None = None
+
+    def flange_pose(self) -> np.ndarray:  # provided by Simulation
+        raise NotImplementedError
+
+    @property
+    def tracker(self) -> Tracker:
+        """The cell's tracker, built on first use from the scenario's `tracker` section."""
+        if self._tracker is None:
+            from controller_stub.streams import stream_rng
+
+            spec = getattr(self.scenario, "tracker", None) or TrackerSpec()
+            self._tracker = Tracker(spec, stream_rng(self.scenario.seed, STREAM_TRACKER))
+        return self._tracker
+
+    def measure_tracker(self) -> dict[str, Any]:
+        """Measure every reflector now: {"q": (n,) reported, "time": s, "seen": name ->
+        {"p", "cov"}, "lost": [names], "description": the tracker's nominal facts}."""
+        seen, lost = self.tracker.measure(self.flange_pose())
+        return {"q": self._q.copy(), "time": float(self._time), "seen": seen, "lost": lost,
+                "description": self.tracker.description()}
+
+
+STREAM_TRACKER = 7101
+"""Random stream of the tracker's noise (distinct from the other streams' ids)."""

@@ -1,0 +1,122 @@
+"""`hostpc import`: write a dataset file from a metrology CSV export (laser tracker, mocap).
+
+    hostpc import poses.csv --method world_pose --robot ur10e \\
+        --columns "q=shoulder_pan_joint:wrist_3_joint,x=x1,y=y1,z=z1,\\
+                   roll=phix1,pitch=phiy1,yaw=phiz1" -o poses.json
+
+    hostpc import tracker.csv --method world_point --robot arm.urdf \\
+        --base-link base_link --tip-link tool0 \\
+        --columns "q1=J1,q2=J2,...,x=X,y=Y,z=Z,marker=SMR" --length-unit mm --joint-unit deg
+
+The column mapping is described in ``hostpc.importing.csv_import`` and docs/metrology.md.
+The output is SI (m, rad). A bad CSV (a mapped column missing from the header, text in a
+number, a missing joint value, an unknown unit in a header) gets one line naming the row
+and the column, and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from hostpc.errors import InputError
+from hostpc.importing.csv_import import (
+    ANGLE_UNITS,
+    LENGTH_UNITS,
+    ImportOptions,
+    build_document,
+    parse_column_map,
+    read_csv_rows,
+)
+from hostpc.importing.frame_guess import with_guessed_frames
+from hostpc.kinematics import Chain
+
+
+def register(subparsers: Any) -> None:
+    """Add the `import` subcommand."""
+    parser = subparsers.add_parser(
+        "import",
+        help="write a dataset from a metrology CSV (world_point, world_pose)",
+        description="Read a CSV of joint values and world-frame measurements (laser "
+        "tracker, motion capture) and write a zerocal dataset file.",
+    )
+    parser.add_argument("csv", metavar="CSV", help="the CSV file (first row: column names)")
+    parser.add_argument("--method", required=True, choices=("world_point", "world_pose"))
+    parser.add_argument("--robot", required=True, metavar="NAME|FILE.urdf",
+                        help="a built-in robot (hostpc robots) or a URDF file")
+    parser.add_argument("--base-link", help="URDF: the chain's base link")
+    parser.add_argument("--tip-link", help="URDF: the chain's tip link (the flange)")
+    parser.add_argument("--columns", required=True, metavar="MAP",
+                        help="KEY=COLUMN pairs: q1..qN (or q=FIRST:LAST), x, y, z, "
+                        "roll/pitch/yaw or qw/qx/qy/qz or rx/ry/rz, marker, t, sigma")
+    parser.add_argument("--length-unit", default="m", help=f"{'/'.join(LENGTH_UNITS)}")
+    parser.add_argument("--angle-unit", default="rad",
+                        help=f"orientation columns: {'/'.join(ANGLE_UNITS)}")
+    parser.add_argument("--joint-unit", default="rad",
+                        help="revolute joint columns (prismatic use --length-unit)")
+    parser.add_argument("--sigma", type=float, default=None,
+                        help="position sigma, length unit (default 0.1 mm)")
+    parser.add_argument("--sigma-angle", type=float, default=None,
+                        help="orientation sigma, angle unit (default 1 mrad)")
+    parser.add_argument("--known", default="", help="comma-separated frames to hold "
+                        "(world, markers, tool)")
+    parser.add_argument("--no-guess", action="store_true",
+                        help="leave the nominal world and tool/marker frames at zero instead "
+                        "of estimating them from the data (hostpc.importing.frame_guess)")
+    parser.add_argument("-o", "--output", required=True, help="dataset file to write")
+    parser.set_defaults(func=run)
+
+
+def _robot(args: argparse.Namespace, output: Path) -> tuple[dict[str, Any], Chain]:
+    """The dataset's robot object and its chain."""
+    from hostpc.cli.robots import resolve_chain
+
+    chain = resolve_chain(args.robot, args.base_link, args.tip_link)
+    if args.robot.lower().endswith(".urdf"):
+        relative = os.path.relpath(Path(args.robot).resolve(), output.resolve().parent)
+        return {"urdf": relative, "base_link": args.base_link,
+                "tip_link": args.tip_link}, chain
+    return {"name": args.robot}, chain
+
+
+def run(args: argparse.Namespace) -> int:
+    for option, value, units in (("--length-unit", args.length_unit, LENGTH_UNITS),
+                                 ("--angle-unit", args.angle_unit, ANGLE_UNITS),
+                                 ("--joint-unit", args.joint_unit, ANGLE_UNITS)):
+        if value not in units:
+            raise InputError(f"{option}: unknown unit {value!r} (expected one of "
+                             f"{', '.join(units)})")
+    for option, value in (("--sigma", args.sigma), ("--sigma-angle", args.sigma_angle)):
+        if value is not None and not value > 0:
+            raise InputError(f"{option}: must be positive, got {value}")
+    output = Path(args.output)
+    robot, chain = _robot(args, output)
+    prismatic = tuple(bool(p) for p in chain.joint_is_prismatic)
+    try:
+        text = Path(args.csv).read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{args.csv}: cannot read ({getattr(exc, 'strerror', None) or exc})"
+                         ) from None
+    table = read_csv_rows(text, args.csv)
+    mapping = parse_column_map(args.columns, table.columns, len(prismatic), args.method,
+                               args.csv)
+    sigma = args.sigma if args.sigma is not None else 1e-4 / LENGTH_UNITS[args.length_unit]
+    options = ImportOptions(
+        method=args.method, robot=robot, prismatic=prismatic, length_unit=args.length_unit,
+        angle_unit=args.angle_unit, joint_unit=args.joint_unit, sigma=sigma,
+        sigma_angle=args.sigma_angle,
+        known=tuple(k.strip() for k in args.known.split(",") if k.strip()),
+    )
+    document = build_document(table, mapping, options)
+    if not args.no_guess:
+        document = with_guessed_frames(document, chain)
+    try:
+        output.write_text(json.dumps(document, indent=1) + "\n", encoding="utf-8")
+    except OSError as exc:
+        raise InputError(f"{output}: cannot write ({exc.strerror or exc})") from None
+    print(f"wrote {output}: {len(document['samples'])} samples, method {args.method}, "
+          f"robot {robot.get('name') or robot.get('urdf')}")
+    return 0

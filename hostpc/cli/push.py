@@ -1,0 +1,138 @@
+"""`hostpc push FIT.json --robot HOST[:PORT]`: push the zero offsets of an offline fit.
+
+    hostpc fit tracker.json --json > fit.json
+    hostpc push fit.json --robot 10.0.0.5 [--out DIR] [--dry-run] [--force]
+    hostpc rollback --run DIR                       # undo it
+
+The guard rails, the journal and the rollback are calibrate's (hostpc.methods.push,
+hostpc.methods.offline_push): joints the fit held are left unchanged; the push is refused
+(exit 4) if the fit did not converge, does not explain its data, or a correction exceeds
+--max-correction degrees, unless --force. The intent is written to DIR/push.json before
+the controller is, so `hostpc rollback --run DIR` can always undo it. Offsets are printed
+in degrees.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import datetime as _dt
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hostpc.errors import InputError, ZerocalError
+from hostpc.methods.journal import Journal
+from hostpc.methods.offline_push import SavedFit, load_saved_fit
+from hostpc.methods.push import DEFAULT_MAX_CORRECTION_DEG, PushPlan, execute_push, plan_push
+from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot
+
+
+class PushRefused(ZerocalError):
+    """A guard rail refused the push (the message says which and how to override)."""
+
+    exit_code = 4
+
+
+def register(subparsers: Any) -> None:
+    """Add the `push` subcommand."""
+    parser = subparsers.add_parser(
+        "push",
+        help="push the zero offsets of an offline fit (hostpc fit --json) to a controller",
+        description="Write the compensated zero offsets of a saved fit to a controller, with "
+        "calibrate's guard rails, journal and rollback.",
+    )
+    parser.add_argument("fit", metavar="FIT.json", help="output of `hostpc fit DATASET --json`")
+    parser.add_argument("--robot", required=True, metavar="HOST[:PORT]",
+                        help="controller address")
+    parser.add_argument("--driver", choices=DRIVERS, default="zerocal")
+    parser.add_argument("--token", help="shared token (default: $ZEROCAL_TOKEN, else the "
+                        "simulator's default)")
+    parser.add_argument("--timeout", type=float, default=10.0, help="seconds per request")
+    parser.add_argument("--out", metavar="DIR", help="push folder (journal, push.json); "
+                        "default zerocal-runs/STAMP-push")
+    parser.add_argument("--max-correction", type=float, default=DEFAULT_MAX_CORRECTION_DEG,
+                        metavar="DEG", help="refuse corrections larger than this (degrees)")
+    parser.add_argument("--force", action="store_true", help="push despite a guard rail")
+    parser.add_argument("--dry-run", action="store_true", help="plan only; write nothing")
+    parser.add_argument("--json", action="store_true", help="print JSON")
+    parser.set_defaults(func=run)
+
+
+def _default_out() -> Path:
+    stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
+    return Path("zerocal-runs") / f"{stamp}-push"
+
+
+def run(args: argparse.Namespace) -> int:
+    saved = load_saved_fit(args.fit)
+    address = parse_robot(args.robot)
+    if address.sim:
+        raise InputError("--robot sim: a simulated controller lives only as long as its run; "
+                         "give the address of a running controller")
+    if not (args.max_correction > 0):
+        raise InputError(f"--max-correction: must be positive, got {args.max_correction}")
+    run_dir = Path(args.out) if args.out else _default_out()
+    plan, record = asyncio.run(_push(args, saved, address, run_dir))
+    document = {
+        "fit": str(args.fit),
+        "controller": str(address),
+        "dry_run": bool(args.dry_run),
+        "status": ("refused" if plan.refused else "planned" if args.dry_run else "pushed"),
+        "refused": plan.refused,
+        "joints": plan.joints(),
+        "run_dir": None if args.dry_run else str(run_dir),
+        "rollback_id": None if record is None else record.rollback_id,
+    }
+    if args.json:
+        print(json.dumps(document, indent=2, default=float))
+    else:
+        _print_plan(plan, args, address, run_dir, record)
+    if plan.refused:
+        raise PushRefused(f"push refused: {plan.refused}")
+    return 0
+
+
+def _print_plan(plan: PushPlan, args: argparse.Namespace, address: RobotAddress,
+                run_dir: Path, record: Any) -> None:
+    print(f"{'joint':>5s} {'old deg':>11s} {'correction':>11s} {'sigma':>9s} {'new deg':>11s}")
+    for j in range(plan.old.size):
+        sigma = (f"{math.degrees(plan.sigma[j]):9.5f}" if np.isfinite(plan.sigma[j])
+                 else f"{'-':>9s}")
+        note = f"  ({plan.notes[j]})" if plan.notes[j] else ""
+        print(f"J{j + 1:<4d} {math.degrees(plan.old[j]):11.5f} "
+              f"{math.degrees(plan.delta[j]):+11.5f} {sigma} "
+              f"{math.degrees(plan.new[j]):11.5f}{note}")
+    if plan.refused:
+        return
+    if args.dry_run:
+        print(f"dry run: nothing written to {address}")
+    else:
+        print(f"pushed to {address} (rollback id {record.rollback_id}); undo with "
+              f"`hostpc rollback --run {run_dir}`")
+
+
+async def _push(args: argparse.Namespace, saved: SavedFit, address: RobotAddress,
+                run_dir: Path) -> tuple[PushPlan, Any]:
+    robot = await open_robot(address, args.driver, token=args.token, timeout=args.timeout)
+    try:
+        offsets = np.asarray(await robot.get_offsets(), float)
+        n_fit = len(saved.joint_offsets())
+        if n_fit != offsets.size:
+            raise InputError(f"{args.fit}: the fit has {n_fit} joint offsets, the controller "
+                             f"at {address} has {offsets.size} joints")
+        plan = plan_push(saved, offsets, args.max_correction,  # type: ignore[arg-type]
+                         force=args.force, dataset_file="the fit's dataset")
+        if plan.refused or args.dry_run:
+            return plan, None
+        run_dir.mkdir(parents=True, exist_ok=True)
+        journal = Journal(run_dir)
+        journal.write_header({"kind": "offline_push", "fit": str(Path(args.fit).resolve()),
+                              "robot": {"address": str(address), "driver": args.driver}})
+        record = await execute_push(robot, plan, run_dir, str(address), journal)
+        return plan, record
+    finally:
+        await robot.close()

@@ -1,0 +1,137 @@
+"""`hostpc robots`: list the built-in robots, or describe one (or a URDF chain).
+
+    hostpc robots                                  # names, joint counts, conventions
+    hostpc robots --robot ur10e                    # its table, in mm and degrees
+    hostpc robots --robot arm.urdf --base-link base_link --tip-link tool0
+
+A URDF chain is shown as the exact MDH table zerocal converts it to (hostpc.kinematics.urdf),
+with each joint's type (revolute or prismatic) and its mass, if the file gives one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from typing import Any
+
+from hostpc.errors import InputError
+from hostpc.kinematics import Chain, get_robot, names
+from hostpc.kinematics.humanoid import get_tree, tree_names
+
+
+def register(subparsers: Any) -> None:
+    """Add the `robots` subcommand."""
+    parser = subparsers.add_parser(
+        "robots",
+        help="list the built-in robots or describe one",
+        description="List the built-in robots, or print one robot's kinematic table "
+        "(a built-in name, or a URDF file with --base-link and --tip-link).",
+    )
+    parser.add_argument("--robot", metavar="NAME|FILE.urdf", help="robot to describe")
+    parser.add_argument("--base-link", help="URDF: the chain's base link")
+    parser.add_argument("--tip-link", help="URDF: the chain's tip link (the flange)")
+    parser.add_argument("--json", action="store_true", help="print JSON instead of text")
+    parser.set_defaults(func=run)
+
+
+def resolve_chain(robot: str, base_link: str | None, tip_link: str | None) -> Chain:
+    """A built-in robot by name, or a URDF file's chain (both links required)."""
+    if robot.lower().endswith(".urdf"):
+        if not base_link or not tip_link:
+            raise InputError(f"--robot {robot}: a URDF robot needs --base-link and --tip-link")
+        from hostpc.kinematics.urdf import load_urdf_chain
+
+        return load_urdf_chain(robot, base_link, tip_link)
+    return get_robot(robot)
+
+
+def _describe(chain: Chain) -> dict[str, Any]:
+    rows = []
+    for i in range(chain.n):
+        kind = "prismatic" if chain.joint_is_prismatic[i] else "revolute"
+        rows.append({
+            "joint": i + 1, "type": kind,
+            "a_mm": chain.a[i] * 1e3, "alpha_deg": math.degrees(chain.alpha[i]),
+            "d_mm": chain.d[i] * 1e3, "theta_deg": math.degrees(chain.theta[i]),
+            "mass_kg": None if chain.mass is None else float(chain.mass[i]),
+        })
+    return {"name": chain.name, "convention": chain.convention, "joints": rows,
+            "mounts": chain.has_mounts}
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.robot is None:
+        entries: list[dict[str, Any]] = [
+            {"name": n, "joints": get_robot(n).n, "convention": get_robot(n).convention,
+             "kind": "chain"} for n in names()]
+        entries += [{"name": n, "joints": get_tree(n).n, "convention": None, "kind": "tree",
+                     "chains": list(get_tree(n).names)} for n in tree_names()]
+        if args.json:
+            print(json.dumps(entries, indent=2))
+            return 0
+        for e in entries:
+            detail = (f"{e['joints']} joints, {e['convention'].upper()}" if e["kind"] == "chain"
+                      else f"kinematic tree: {', '.join(e['chains'])} ({e['joints']} joints)")
+            print(f"{e['name']:16s} {detail}")
+        print("Any other robot: an explicit DH/MDH table in the dataset, or a URDF file "
+              "(--robot FILE.urdf --base-link NAME --tip-link NAME).")
+        return 0
+    description = _describe(resolve_chain(args.robot, args.base_link, args.tip_link))
+    if args.json:
+        print(json.dumps(description, indent=2))
+        return 0
+    print(f"{description['name']} ({description['convention'].upper()}"
+          f"{', with base and flange mounts' if description['mounts'] else ''})")
+    print(f"{'joint':>5s} {'type':>9s} {'a mm':>9s} {'alpha deg':>9s} {'d mm':>9s} "
+          f"{'theta deg':>9s} {'mass kg':>8s}")
+    for r in description["joints"]:
+        mass = "-" if r["mass_kg"] is None else f"{r['mass_kg']:.3f}"
+        print(f"{r['joint']:5d} {r['type']:>9s} {r['a_mm']:9.2f} {r['alpha_deg']:9.3f} "
+              f"{r['d_mm']:9.2f} {r['theta_deg']:9.3f} {mass:>8s}")
+    return 0
+
+
+def add_robot_override(parser: argparse.ArgumentParser) -> None:
+    """`--robot NAME|FILE.urdf [--base-link L --tip-link L]`: fit a dataset with another
+    robot than the one it names (`hostpc fit`)."""
+    parser.add_argument("--robot", metavar="NAME|FILE.urdf",
+                        help="use this robot instead of the dataset's: a built-in name or a "
+                        "URDF file (with --base-link and --tip-link)")
+    parser.add_argument("--base-link", help="URDF: the chain's base link")
+    parser.add_argument("--tip-link", help="URDF: the chain's tip link (the flange)")
+
+
+def robot_document(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The dataset `robot` object the override options name (None: no override)."""
+    robot = getattr(args, "robot", None)
+    if not robot:
+        if getattr(args, "base_link", None) or getattr(args, "tip_link", None):
+            raise InputError("--base-link / --tip-link: only with --robot FILE.urdf")
+        return None
+    chain = resolve_chain(robot, args.base_link, args.tip_link)  # checks it now: exit 2
+    if robot.lower().endswith(".urdf"):
+        from pathlib import Path
+
+        return {"urdf": str(Path(robot).resolve()), "base_link": args.base_link,
+                "tip_link": args.tip_link, "_n": chain.n}
+    return {"name": robot, "_n": chain.n}
+
+
+def load_dataset_with_robot(path: str, robot: dict[str, Any], **options: Any) -> Any:
+    """Read the dataset file at `path` with its `robot` replaced by `robot` (from
+    `robot_document`); DatasetError naming the file for a bad file or a joint-count
+    mismatch. `options` pass through to `dataset_from_dict`."""
+    from pathlib import Path
+
+    from hostpc.dataset import dataset_from_dict, load_dataset
+    from hostpc.errors import DatasetError
+
+    load_dataset(path)  # the file as it is: readable, valid JSON, a valid dataset
+    document = json.loads(Path(path).read_text(encoding="utf-8-sig"))
+    replacement = {k: v for k, v in robot.items() if not k.startswith("_")}
+    q = [s.get("q") for s in document.get("samples", []) if isinstance(s, dict)]
+    if q and isinstance(q[0], list) and len(q[0]) != robot["_n"]:
+        raise DatasetError(f"{path}: --robot has {robot['_n']} joints, the samples "
+                           f"{len(q[0])}")
+    return dataset_from_dict({**document, "robot": replacement}, str(path), **options)

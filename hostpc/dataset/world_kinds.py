@@ -1,0 +1,174 @@
+"""The file faces of world_point and world_pose (shared/spec/dataset-format.md, extension A):
+an instrument fixed in the cell (laser tracker, motion capture, CMM) measures a point or a
+frame fixed to the flange in its own frame, ``world``.
+
+world_point samples: ``q``, ``marker`` (a name of ``frames.markers``; may be omitted when
+there is one marker), ``p`` (world frame), ``cov`` or ``sigma``, optional ``mask`` (which
+world axes were measured). In ``Samples``: ``p``, ``cov`` and ``fields["marker"]`` (N,)
+names, ``fields["mask"]`` (N, 3) of 0/1.
+
+world_pose samples: ``q``, ``p``, ``rpy`` (orientation of the measured frame in the world
+frame), ``cov`` (6x6 over x, y, z and the world-frame rotation vector of the orientation
+error; file units) or ``sigma`` and ``sigma_angle``. In ``Samples``: ``p``,
+``fields["rpy"]`` (N, 3) rad and ``fields["pose_cov"]`` (N, 6, 6) SI (m^2, m rad, rad^2).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from hostpc.dataset import schema
+from hostpc.dataset.builtin_kinds import PointSampleKind
+from hostpc.dataset.kind import (
+    Columns,
+    check_covariance,
+    check_joint_count,
+    positive,
+    require,
+    sample_value,
+)
+from hostpc.dataset.model import Samples
+from hostpc.dataset.schema import FieldError, Loc, show
+from hostpc.dataset.units import Units
+
+
+def _read_q(sample: schema.SampleSchema, loc: Loc, n_joints: int | None, label: str
+            ) -> list[float]:
+    q = require(sample, loc, "q")
+    assert n_joints is not None
+    check_joint_count((*loc, "q"), q, n_joints, label)
+    return list(q)
+
+
+class WorldPointFile(PointSampleKind):
+    """A point fixed to the flange (reflector, marker) measured in the instrument's frame."""
+
+    name = "world_point"
+    frames = {"world": "pose", "markers": "points"}
+    sample_fields = {"p": "length", "cov": "area", "sigma": "length", "marker": "1",
+                     "mask": "1"}
+    optional_fields = frozenset({"cov", "sigma", "marker", "mask"})
+    sample_hints = {"q_arm": " (use 'q')", "uv": " (a world-frame point has no pixels)"}
+
+    def accepted_fields(self) -> frozenset[str]:
+        return super().accepted_fields() - {"uv"}
+
+    def read_sample(self, sample: schema.SampleSchema, loc: Loc, columns: Columns,
+                    n_joints: int | None, robot_label: str, units: Units) -> list[float]:
+        q = _read_q(sample, loc, n_joints, robot_label)
+        self.read_point(sample, loc, columns, units)
+        index = int(loc[1])
+        marker = sample_value(sample, "marker")
+        if marker is not None:
+            columns.put("marker", index, schema.validate(str, marker, (*loc, "marker")))
+        mask = sample_value(sample, "mask")
+        if mask is not None:
+            values = schema.validate(schema.Vec3, mask, (*loc, "mask"))
+            for j, flag in enumerate(values):
+                if flag not in (0.0, 1.0):
+                    raise FieldError((*loc, "mask", j), f"expected 0 or 1, got {show(flag)}")
+            if not any(values):
+                raise FieldError((*loc, "mask"), "no axis measured (at least one 1)")
+            columns.put("mask", index, values)
+        return q
+
+    def samples_arguments(self, columns: Columns, units: Units) -> dict[str, Any]:
+        arguments = self.point_arguments(columns, units)
+        arguments.pop("uv")
+        markers = columns.values.get("marker", [None] * columns.n_samples)
+        masks = columns.values.get("mask", [None] * columns.n_samples)
+        arguments["fields"] = {
+            "marker": np.asarray(["" if m is None else m for m in markers], dtype=np.str_),
+            "mask": np.asarray([[1.0, 1.0, 1.0] if m is None else m for m in masks]),
+        }
+        return arguments
+
+    def check_samples(self, samples: Samples, frames: Mapping[str, Any]) -> None:
+        """Every sample names a marker of ``frames.markers`` (or there is only one)."""
+        names = list(frames.get("markers", {}))
+        for i, marker in enumerate(samples.fields["marker"]):
+            if not marker and len(names) != 1:
+                raise FieldError(("samples", i, "marker"), "required field missing (there "
+                                 f"are {len(names)} markers: {', '.join(names)})")
+            if marker and marker not in names:
+                raise FieldError(("samples", i, "marker"),
+                                 f"no marker {show(str(marker))} in frames.markers "
+                                 f"(markers: {', '.join(names)})")
+
+    def write_sample(self, samples: Samples, index: int) -> tuple[dict[str, Any], int]:
+        out: dict[str, Any] = {"q": samples.q[index].tolist()}
+        marker = str(samples.fields["marker"][index]) if "marker" in samples.fields else ""
+        if marker:
+            out["marker"] = marker
+        self.write_point(samples, index, out)
+        if "mask" in samples.fields and not np.all(samples.fields["mask"][index] == 1.0):
+            out["mask"] = [int(v) for v in samples.fields["mask"][index]]
+        return out, samples.q.shape[1]
+
+
+class WorldPoseFile(PointSampleKind):
+    """A frame fixed to the flange measured in full (position and orientation)."""
+
+    name = "world_pose"
+    frames = {"world": "pose", "tool": "pose"}
+    sample_fields = {"p": "length", "rpy": "angle", "cov": "area", "sigma": "length",
+                     "sigma_angle": "angle"}
+    optional_fields = frozenset({"cov", "sigma", "sigma_angle"})
+    sample_hints = {"q_arm": " (use 'q')", "uv": " (a world-frame pose has no pixels)"}
+
+    def accepted_fields(self) -> frozenset[str]:
+        return super().accepted_fields() - {"uv"}
+
+    def read_sample(self, sample: schema.SampleSchema, loc: Loc, columns: Columns,
+                    n_joints: int | None, robot_label: str, units: Units) -> list[float]:
+        q = _read_q(sample, loc, n_joints, robot_label)
+        index = int(loc[1])
+        columns.put("p", index, require(sample, loc, "p"))
+        rpy = schema.validate(schema.Vec3, require(sample, loc, "rpy"), (*loc, "rpy"))
+        columns.put("rpy", index, units.angle(rpy))
+        columns.put("pose_cov", index, self._covariance(sample, loc, units))
+        return q
+
+    @staticmethod
+    def _covariance(sample: schema.SampleSchema, loc: Loc, units: Units) -> np.ndarray:
+        """The 6x6 pose covariance in SI from ``cov`` or ``sigma`` + ``sigma_angle``."""
+        sigma_angle = sample_value(sample, "sigma_angle")
+        given_sigma = sample.sigma is not None or sigma_angle is not None
+        if sample.cov is not None and given_sigma:
+            raise FieldError((*loc, "sigma"), "give either 'cov' or 'sigma' and 'sigma_angle', "
+                             "not both")
+        if sample.cov is not None:
+            if len(sample.cov) != 6:
+                raise FieldError((*loc, "cov"), "expected a 6x6 matrix (x, y, z, rx, ry, rz), "
+                                 f"got a {len(sample.cov)}x{len(sample.cov)} matrix")
+            scale = np.array([float(units.length(1.0))] * 3 + [float(units.angle(1.0))] * 3)
+            cov = np.asarray(sample.cov, dtype=float) * np.outer(scale, scale)
+            check_covariance((*loc, "cov"), cov)
+            return cov
+        if sample.sigma is None or sigma_angle is None:
+            missing = "sigma" if sample.sigma is None else "sigma_angle"
+            if not given_sigma:
+                missing = "cov"
+            raise FieldError((*loc, missing),
+                             "required field missing (or give 'sigma' and 'sigma_angle')"
+                             if missing == "cov" else "required field missing")
+        sigma = float(units.length(positive((*loc, "sigma"), sample.sigma)))
+        angle = schema.validate(float, sigma_angle, (*loc, "sigma_angle"))
+        sigma_a = float(units.angle(positive((*loc, "sigma_angle"), angle)))
+        cov = np.diag([sigma**2] * 3 + [sigma_a**2] * 3)
+        check_covariance((*loc, "sigma"), cov)
+        return cov
+
+    def samples_arguments(self, columns: Columns, units: Units) -> dict[str, Any]:
+        return {"p": units.length(columns.values["p"]),
+                "fields": {"rpy": np.asarray(columns.values["rpy"], dtype=float),
+                           "pose_cov": np.asarray(columns.values["pose_cov"], dtype=float)}}
+
+    def write_sample(self, samples: Samples, index: int) -> tuple[dict[str, Any], int]:
+        assert samples.p is not None
+        return ({"q": samples.q[index].tolist(), "p": samples.p[index].tolist(),
+                 "rpy": samples.fields["rpy"][index].tolist(),
+                 "cov": samples.fields["pose_cov"][index].tolist()}, samples.q.shape[1])

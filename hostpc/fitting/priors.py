@@ -1,0 +1,241 @@
+"""Priors and holds on named parameters.
+
+A PRIOR says a parameter is known to within a tolerance: `tool.x=0.045+-0.0005m` (a camera
+mount from a CAD drawing), `joint_offsets.q1=0+-0.01deg`. It enters the fit as one more
+residual, whitened by its sigma: (x_i - value) / sigma. It is an observation like any other:
+it adds a row to the Jacobian, so it can make a direction identifiable that the measurements
+alone leave free (the identifiability analysis sees the prior rows), and it enters the
+covariance.
+
+A HOLD keeps a parameter at its start value (the nominal, zero delta): the solver never moves
+it, so after the fit it is bit-identical to the start.
+
+Where they come from (all end up in the dataset's top-level `priors` and `hold` fields, which
+the fit reads from the problem's dataset):
+- the dataset file: `"priors": ["tool.x=0.045+-0.0005m", ...]` or
+  `{"tool.x": {"value": 0.045, "sigma": 0.0005, "unit": "m"}}` (unit optional: SI),
+  `"hold": ["tool.rz", ...]`;
+- the CLI: `--prior NAME=VALUE+-SIGMA[UNIT]` (repeatable), `--hold NAME[,NAME...]`;
+- Python: `hostpc.fit(dataset, priors=[...] or {...}, hold=[...])`.
+
+Units as printed: m, mm, um for lengths; rad, mrad, urad, deg for angles; none means the
+parameter's SI unit. An unknown name or a unit that does not fit raises InputError (one line).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from collections.abc import Collection, Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hostpc.errors import InputError
+
+_SCALE = {"m": ("m", 1.0), "mm": ("m", 1e-3), "um": ("m", 1e-6),
+          "rad": ("rad", 1.0), "mrad": ("rad", 1e-3), "urad": ("rad", 1e-6),
+          "deg": ("rad", math.pi / 180.0)}
+_NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+_PRIOR = re.compile(rf"^\s*([A-Za-z_][\w.]*)\s*=\s*({_NUMBER})\s*(?:\+-|±|\+/-)\s*({_NUMBER})"
+                    r"\s*([A-Za-z]*)\s*$")
+
+
+@dataclass(frozen=True)
+class Prior:
+    """name: parameter name; value and sigma in the parameter's SI unit (sigma > 0)."""
+
+    name: str
+    value: float
+    sigma: float
+
+
+@dataclass(frozen=True)
+class Constraints:
+    """The priors and holds of a problem, resolved against its parameter layout.
+
+    index: (K,) parameter index of each prior; value, sigma: (K,) SI; held: (P,) bool."""
+
+    priors: tuple[Prior, ...]
+    index: np.ndarray
+    value: np.ndarray
+    sigma: np.ndarray
+    held: np.ndarray
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        """(K,) whitened prior residuals (x_i - value) / sigma."""
+        return (np.asarray(x)[self.index] - self.value) / self.sigma
+
+    def jacobian(self, size: int) -> np.ndarray:
+        """(K, P) derivative of the whitened prior residuals by x."""
+        J = np.zeros((self.index.size, size))
+        J[np.arange(self.index.size), self.index] = 1.0 / self.sigma
+        return J
+
+    def cost(self, x: np.ndarray) -> float:
+        """0.5 * sum of squared whitened prior residuals."""
+        r = self.residuals(x)
+        return float(0.5 * r @ r)
+
+
+def _convert(name: str, number: float, unit: str, param_unit: str, what: str) -> float:
+    if not unit:
+        return number
+    if unit == param_unit:
+        return number
+    if unit not in _SCALE or _SCALE[unit][0] != param_unit:
+        raise InputError(f"prior {name}: unit {unit!r} does not fit the parameter's unit "
+                         f"{param_unit!r} ({what})")
+    return number * _SCALE[unit][1]
+
+
+def parse_prior(text: str, units: Mapping[str, str]) -> Prior:
+    """`NAME=VALUE+-SIGMA[UNIT]` -> Prior in SI. units: parameter name -> SI unit."""
+    match = _PRIOR.match(str(text))
+    if not match:
+        raise InputError(f"prior {text!r}: expected NAME=VALUE+-SIGMA[UNIT], e.g. "
+                         "tool.x=0.045+-0.0005m")
+    name, value, sigma, unit = match.groups()
+    return make_prior(name, float(value), float(sigma), unit, units)
+
+
+def make_prior(name: str, value: float, sigma: float, unit: str,
+               units: Mapping[str, str]) -> Prior:
+    """A Prior from its parts (value, sigma in `unit`, '' for SI), checked against units."""
+    if name not in units:
+        known = ", ".join(sorted(units)) or "none"
+        raise InputError(f"prior {name}: unknown parameter (this model has: {known})")
+    value = _convert(name, value, unit, units[name], "value")
+    sigma = _convert(name, sigma, unit, units[name], "sigma")
+    if not (math.isfinite(value) and math.isfinite(sigma) and sigma > 0.0):
+        raise InputError(f"prior {name}: value must be finite and sigma positive")
+    return Prior(name, value, sigma)
+
+
+def _prior_entries(raw: Any) -> list[Any]:
+    """The dataset's `priors` as a list of strings or (name, mapping) pairs."""
+    if raw is None:
+        return []
+    if isinstance(raw, str):
+        return [raw]
+    if isinstance(raw, Mapping):
+        return list(raw.items())
+    if isinstance(raw, list | tuple):
+        return list(raw)
+    raise InputError("priors: expected a list of NAME=VALUE+-SIGMA strings or a mapping")
+
+
+def hold_names(raw: Any) -> list[str]:
+    """The names of `hold` (a list, or comma-separated strings)."""
+    if raw is None:
+        return []
+    items = [raw] if isinstance(raw, str) else raw
+    if not isinstance(items, list | tuple):
+        raise InputError("hold: expected a list of parameter names")
+    names: list[str] = []
+    for item in items:
+        if not isinstance(item, str):
+            raise InputError(f"hold: expected parameter names, got {item!r}")
+        names += [n.strip() for n in item.split(",") if n.strip()]
+    return names
+
+
+def constraints_for(extra_fields: Mapping[str, Any], names: tuple[str, ...],
+                    units: tuple[str, ...]) -> Constraints | None:
+    """Resolve a dataset's `priors`/`hold` against a layout; None if it has neither."""
+    raw_priors, raw_hold = extra_fields.get("priors"), extra_fields.get("hold")
+    if not raw_priors and not raw_hold:
+        return None
+    unit_of = dict(zip(names, units, strict=True))
+    priors: list[Prior] = []
+    for entry in _prior_entries(raw_priors):
+        if isinstance(entry, str):
+            priors.append(parse_prior(entry, unit_of))
+        elif isinstance(entry, tuple) and isinstance(entry[1], Mapping):
+            spec = entry[1]
+            try:
+                value, sigma = float(spec["value"]), float(spec["sigma"])
+            except (KeyError, TypeError, ValueError):
+                raise InputError(f"prior {entry[0]}: expected value and sigma numbers") from None
+            priors.append(make_prior(str(entry[0]), value, sigma, str(spec.get("unit", "")),
+                                     unit_of))
+        else:
+            raise InputError(f"prior {entry!r}: expected NAME=VALUE+-SIGMA")
+    held = np.zeros(len(names), dtype=bool)
+    for name in hold_names(raw_hold):
+        if name not in unit_of:
+            raise InputError(f"hold {name}: unknown parameter (this model has: "
+                             f"{', '.join(names)})")
+        held[names.index(name)] = True
+    index = np.array([names.index(p.name) for p in priors], dtype=int)
+    return Constraints(tuple(priors), index, np.array([p.value for p in priors], float),
+                       np.array([p.sigma for p in priors], float), held)
+
+
+def problem_constraints(problem: Any) -> Constraints | None:
+    """The constraints of a built problem (from its dataset), or None."""
+    return constraints_for(problem.dataset.extra_fields, tuple(problem.layout.names),
+                           tuple(problem.layout.units))
+
+
+def with_constraints(dataset: Any, priors: Iterable[str] | Mapping[str, Any] | None = None,
+                     hold: Iterable[str] | str | None = None) -> Any:
+    """A copy of `dataset` whose `priors`/`hold` also hold these (added to the file's)."""
+    if not priors and not hold:
+        return dataset
+    extra = dict(dataset.extra_fields)
+    if priors:
+        old = _prior_entries(extra.get("priors"))
+        new = _prior_entries(priors if not isinstance(priors, str) else [priors])
+        extra["priors"] = _flatten([e if isinstance(e, str) else {e[0]: e[1]}
+                                    for e in old + new])
+    if hold:
+        extra["hold"] = hold_names(extra.get("hold")) + hold_names(
+            [hold] if isinstance(hold, str) else list(hold))
+    return dataclasses.replace(dataset, extra_fields=extra)
+
+
+def _flatten(entries: list[Any]) -> list[str]:
+    """Strings stay a list; mappings are turned into strings in SI (so both mix)."""
+    out: list[str] = []
+    for e in entries:
+        if isinstance(e, str):
+            out.append(e)
+        else:
+            for name, spec in e.items():
+                unit = spec.get("unit", "") if isinstance(spec, Mapping) else ""
+                out.append(f"{name}={float(spec['value'])!r}+-{float(spec['sigma'])!r}{unit}")
+    return out
+
+
+def analyse_with_constraints(jacobian: np.ndarray, names: tuple[str, ...],
+                             units: tuple[str, ...], constraints: Constraints | None,
+                             frames: Collection[str] | None = None) -> tuple[Any, list[str]]:
+    """Identifiability of the whitened Jacobian (N*m, P) with the prior rows stacked under it
+    and the held columns left out (held parameters count as fixed), and a note for every
+    direction the measurements alone cannot see but the priors make identifiable."""
+    from hostpc.fitting.identifiability import Identifiability, analyse
+
+    if constraints is None:
+        return analyse(jacobian, names, units, frames=frames), []
+    prior_rows = constraints.jacobian(len(names))
+    keep = ~constraints.held
+    kept_names = tuple(n for n, k in zip(names, keep, strict=True) if k)
+    kept_units = tuple(u for u, k in zip(units, keep, strict=True) if k)
+    with_priors = analyse(np.vstack([jacobian, prior_rows])[:, keep], kept_names, kept_units,
+                          frames=frames)
+    notes: list[str] = []
+    if constraints.index.size:
+        without = analyse(jacobian[:, keep], kept_names, kept_units, frames=frames)
+        resolved = len(without.null_directions) - len(with_priors.null_directions)
+        if resolved > 0:
+            named = ", ".join(sorted({p.name for p in constraints.priors}))
+            notes.append(f"the prior(s) on {named} make {resolved} direction(s) identifiable "
+                         "that the measurements alone cannot separate")
+    fixed = constraints.held.copy()
+    fixed[np.flatnonzero(keep)] = with_priors.fixed
+    return Identifiability(with_priors.rank, with_priors.singular_values,
+                           with_priors.condition_number, fixed,
+                           with_priors.null_directions), notes

@@ -1,0 +1,96 @@
+"""Errors shared by every sample: the stereo rig's calibration error, in the fit's covariance.
+
+Each sample's `cov` holds the noise of that sample only. The rig used to triangulate every
+point was itself estimated (from chessboard views) and errs by some delta with covariance
+S (24 x 24, `hostpc.vision.rig_uncertainty`). That delta moves every measured point by
+D_i @ delta (D_i = dp_i/drig, (3, 24)), the SAME delta for all samples: the measurement
+errors are correlated across samples and do not average out.
+
+The fit's estimator is unchanged (weighted by the per-sample covariances); its covariance is
+the sandwich for the full, correlated measurement covariance. To first order the estimate
+moves by dx = A @ delta, A = (J^T W J)^-1 J^T W D (whitened: A = Cov @ Jw^T @ Dw), so
+
+    Cov(x) = Cov_noise + A @ S @ A^T.
+
+Which documents carry it: a dataset with a top-level `rig_uncertainty` block
+({"rig": <rig file document>, "parameters": [...], "covariance": 24 x 24}) and per-sample
+`uv` (the raw pixel centres the points were triangulated from). Written by the stereo_target
+method when its rig has a calibration covariance (docs/vision.md section 3).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections import OrderedDict
+from typing import Any
+
+import numpy as np
+
+from hostpc.model.problem import Problem
+
+BLOCK = "rig_uncertainty"
+_CACHE: OrderedDict[str, np.ndarray] = OrderedDict()
+_CACHE_SIZE = 16
+
+
+def _sensitivity(block: Any, uv: np.ndarray) -> np.ndarray | None:
+    """(N, 3, 24) dp/drig for the samples' uv (cached: candidate fits reuse it)."""
+    from hostpc.errors import InputError
+    from hostpc.vision.rig import rig_from_dict
+    from hostpc.vision.rig_uncertainty import point_sensitivity
+
+    digest = hashlib.sha1(np.ascontiguousarray(uv).tobytes())
+    digest.update(repr(block.get("rig")).encode())
+    key = digest.hexdigest()
+    if key in _CACHE:
+        _CACHE.move_to_end(key)
+        return _CACHE[key]
+    try:
+        rig = rig_from_dict(block.get("rig"), f"dataset {BLOCK}.rig")
+    except InputError:
+        return None
+    value = point_sensitivity(rig, uv)
+    _CACHE[key] = value
+    while len(_CACHE) > _CACHE_SIZE:
+        _CACHE.popitem(last=False)
+    return value
+
+
+def shared_covariance(problem: Problem) -> tuple[np.ndarray, np.ndarray] | None:
+    """(D (N, m, K) raw sensitivity of the measurements, S (K, K)) of the problem's shared
+    error, or None if its dataset declares none (or cannot: no uv, wrong shapes)."""
+    block = problem.dataset.extra_fields.get(BLOCK)
+    if not isinstance(block, dict):
+        return None
+    uv = getattr(problem.dataset.samples, "uv", None)
+    if uv is None or problem.measured.shape[1] != 3:
+        return None
+    try:
+        S = np.asarray(block.get("covariance"), dtype=float)
+    except (TypeError, ValueError):
+        return None
+    D = _sensitivity(block, np.asarray(uv, float))
+    if D is None or S.ndim != 2 or S.shape != (D.shape[2], D.shape[2]):
+        return None
+    if not (np.all(np.isfinite(S)) and np.all(np.isfinite(D))):
+        return None
+    return D, S
+
+
+def added_parameter_covariance(problem: Problem, jacobian_free: np.ndarray,
+                               covariance_free: np.ndarray, row_weight: np.ndarray
+                               ) -> np.ndarray | None:
+    """(F, F) covariance the shared error adds to the free parameters, or None.
+
+    jacobian_free: (N*m, F) whitened (and robust-weighted) Jacobian of the free parameters;
+    covariance_free: (F, F) their noise covariance; row_weight: (N*m,) robust weights'
+    square roots applied to the rows."""
+    shared = shared_covariance(problem)
+    if shared is None:
+        return None
+    D, S = shared
+    W = problem.sqrt_information  # (N, m, m)
+    D_whitened = np.einsum("nij,njk->nik", W, D).reshape(-1, D.shape[2]) * row_weight[:, None]
+    A = covariance_free @ (jacobian_free.T @ D_whitened)
+    added = A @ S @ A.T
+    return 0.5 * (added + added.T)

@@ -1,0 +1,1 @@
+"""Importers: turn what metrology software exports into zerocal datasets (pure functions)."""

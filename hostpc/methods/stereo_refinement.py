@@ -1,0 +1,80 @@
+"""stereo_target: the second pass that re-corrects the disk centres with fitted normals.
+
+At acquisition the perspective bias of each disk centre is removed with the NOMINAL plate
+normal (`StereoTargetMethod.normal_in_camera`), which the zero errors and the camera mount
+error tilt by ~0.5 deg; that leaves a pose-dependent error that does not average out
+(`hostpc.vision.centre_refinement`). When the fit dataset is built, a preliminary fit (the
+dataset's default model) gives better normals; the centres are re-corrected with them and
+re-triangulated, and the dataset keeps the refined `p` and `uv` (the covariances are those of
+the measurement: the correction moves a centre by ~0.01 px, it does not change its noise).
+
+The fitted model's normal at pose i is read off the model itself: the prediction of the
+target shifted by eps along its base-frame normal, minus that of the target
+(R_camera_base @ n_base * eps), so no frame algebra is repeated here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from hostpc.dataset import Dataset
+from hostpc.model.measurement import predict
+from hostpc.model.problem import Problem, build_problem
+
+MIN_SAMPLES = 20
+"""Fewer samples than this (a verify set) are left as measured: their own fit would be poor,
+and after a push the nominal normals are right while the fit's model is not."""
+_EPS = 1e-3
+
+
+def model_normals(problem: Problem, x: np.ndarray, target_normal: np.ndarray) -> np.ndarray:
+    """(N, 3) the target plate normal in the camera frame at every sample, by the model of
+    `problem` at parameters x (P,); target_normal: (3,) unit normal in the base frame."""
+    dataset = problem.dataset
+    target = np.asarray(dataset.frames["target"], float)
+    shifted = dataclasses.replace(
+        dataset, frames={**dict(dataset.frames), "target": target + _EPS * target_normal})
+    moved = build_problem(shifted, list(problem.effect_names), plugins=problem.plugins)
+    p0, _ = predict(problem, x, jacobian=False)
+    p1, _ = predict(moved, x, jacobian=False)
+    n = np.asarray(p1 - p0, float) / _EPS
+    return np.asarray(n / np.linalg.norm(n, axis=1, keepdims=True), float)
+
+
+def refine_dataset(dataset: Dataset, rig: Any, target_radius: float,
+                   target_normal: np.ndarray, fitted: tuple[tuple[str, ...], np.ndarray] | None
+                   = None) -> tuple[Dataset, tuple[tuple[str, ...], np.ndarray] | None]:
+    """(the dataset with re-corrected p and uv, the model used: (effects, x)).
+
+    fitted: a model from an earlier refinement (effects, x) to use instead of fitting this
+    dataset (which needs MIN_SAMPLES samples); returned unchanged when nothing can be done
+    (no uv, too few samples and no model, a fit that does not converge)."""
+    from hostpc.fitting import solve
+    from hostpc.vision.centre_refinement import recorrect_centres
+
+    samples = dataset.samples
+    if samples.uv is None or len(samples.q) == 0 or "target" not in dataset.frames:
+        return dataset, fitted
+    target_normal = np.asarray(target_normal, float) / np.linalg.norm(target_normal)
+    if fitted is None:
+        if len(samples.q) < MIN_SAMPLES:
+            return dataset, None
+        problem = build_problem(dataset)
+        result = solve(problem, cv_folds=0)
+        if not result.converged:
+            return dataset, None
+        fitted = (problem.effect_names, np.asarray(result.x, float))
+    effects, x = fitted
+    problem = build_problem(dataset, list(effects))
+    if problem.layout.size != x.size:
+        return dataset, fitted
+    nominal = model_normals(problem, np.zeros_like(x), target_normal)
+    better = model_normals(problem, x, target_normal)
+    uv_measured = np.asarray(samples.uv, float)
+    uv, p = recorrect_centres(rig, target_radius, uv_measured, np.asarray(samples.p, float),
+                              nominal, better)
+    refined = dataclasses.replace(samples, uv=uv, p=p)
+    return dataclasses.replace(dataset, samples=refined), fitted

@@ -1,0 +1,89 @@
+"""What a model may read about a serial robot's samples: its chain and its ModelContext.
+
+The default of every measurement model on a serial robot (a tree, such as dual_loop's,
+builds its own); computed once per problem, including the gravity torques.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from hostpc.dataset import Dataset, Samples
+from hostpc.kinematics import Chain, gravity_torque
+from hostpc.kinematics.robots import chain_from_table, get_robot
+from hostpc.model.effect import ModelContext
+
+
+def serial_chain(dataset: Dataset) -> Chain:
+    """The nominal chain of the dataset's robot (built-in by name, or explicit table)."""
+    robot = dataset.robot
+    if robot.name is not None and robot.a is None:
+        return get_robot(robot.name)
+    if robot.urdf is not None:  # extension A: a URDF chain (hostpc.kinematics.urdf)
+        from hostpc.kinematics.urdf import load_urdf_chain
+
+        assert robot.base_link is not None and robot.tip_link is not None
+        return load_urdf_chain(robot.urdf, robot.base_link, robot.tip_link)
+    # the dataset layer guarantees a complete explicit table when there is no name
+    assert robot.convention is not None and robot.a is not None and robot.alpha is not None
+    assert robot.d is not None and robot.theta is not None
+    return chain_from_table(
+        robot.name or "explicit",
+        robot.convention,
+        robot.a,
+        robot.alpha,
+        robot.d,
+        robot.theta,
+        mass=robot.mass,
+        com=robot.com,
+        joint_types=robot.joint_types,
+    )
+
+
+def sample_variables(samples: Samples, scalars: tuple[str, ...] = ("t", "temperature", "speed")
+                     ) -> dict[str, np.ndarray]:
+    """The per-sample variables every method shares, by contract name, each (N,): the
+    recorded scalars that any sample has, `depth` (the measured point's z in the sensor
+    frame, m) and `extra.NAME`."""
+    variables: dict[str, np.ndarray] = {}
+    for name in scalars:
+        values = getattr(samples, name)
+        if values is not None and np.any(np.isfinite(values)):
+            variables[name] = np.asarray(values, dtype=float)
+    if samples.p is not None:
+        variables["depth"] = np.asarray(samples.p, dtype=float)[:, 2]
+    for name, values in samples.extra.items():
+        if np.any(np.isfinite(values)):
+            variables[f"extra.{name}"] = np.asarray(values, dtype=float)
+    return variables
+
+
+def serial_context(dataset: Dataset, chain: Chain,
+                   frame_parameters: Mapping[str, tuple[str, ...]] | None = None,
+                   variables: Mapping[str, np.ndarray] | None = None) -> ModelContext:
+    """The ModelContext of a serial robot's samples: q_cmd, gravity torques (NaN without
+    mass data), approach signs and the contract variables (``q1``, ``tau1``,
+    ``approach1``, ... and ``sample_variables``, or the given ``variables`` instead)."""
+    samples = dataset.samples
+    q_cmd = np.asarray(samples.q, dtype=float)
+    if chain.mass is not None and chain.com is not None:
+        tau = gravity_torque(chain, q_cmd)
+    else:
+        tau = np.full_like(q_cmd, np.nan)
+    approach = np.nan_to_num(np.asarray(samples.approach, dtype=float), nan=0.0)
+    named: dict[str, np.ndarray] = {}
+    for j in range(chain.n):
+        named[f"q{j + 1}"] = q_cmd[:, j]
+    if np.all(np.isfinite(tau)):
+        for j in range(chain.n):
+            named[f"tau{j + 1}"] = tau[:, j]
+    if np.any(np.isfinite(samples.approach)):
+        for j in range(chain.n):
+            named[f"approach{j + 1}"] = approach[:, j]
+    named.update(sample_variables(samples) if variables is None else variables)
+    return ModelContext(
+        chain=chain, method=dataset.method, q_cmd=q_cmd, tau=tau, approach=approach,
+        variables=named, frame_parameters=dict(frame_parameters or {}),
+    )

@@ -1,0 +1,135 @@
+"""A built calibration problem as a value: the parameter layout and everything a fit needs.
+
+``hostpc.model.problem.build_problem`` makes one from a dataset; cross-validation folds
+(``Problem.subset``) and candidate effects (``hostpc.model.problem.extend_problem``) are
+views and extensions of it that reuse its context, gravity torques and whitening instead
+of building again from the dataset.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Protocol
+
+import numpy as np
+
+from hostpc.dataset import Dataset
+from hostpc.kinematics import Chain
+from hostpc.model.effect import EffectTerm, ModelContext
+
+
+class MeasurementPredictor(Protocol):
+    """What a problem needs of its measurement model (``MeasurementModel`` provides it;
+    declared here so that this module does not depend on the models, which depend on it)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def measurement_size(self) -> int: ...
+
+    @property
+    def residual_units(self) -> tuple[str, ...] | None: ...
+
+    def frame_parameters(self, dataset: Dataset) -> Mapping[str, tuple[str, ...]]: ...
+
+    def predict(self, problem: Problem, x: np.ndarray, jacobian: bool = True
+                ) -> tuple[np.ndarray, np.ndarray | None]: ...
+
+
+@dataclass(frozen=True)
+class ParameterLayout:
+    """Which slice of the parameter vector is which parameter.
+
+    names: full names ``<effect>.<name>`` in vector order; units: SI unit of each;
+    effect_slices: effect name -> slice.
+    """
+
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    effect_slices: Mapping[str, slice]
+
+    @property
+    def size(self) -> int:
+        return len(self.names)
+
+    def index(self, name: str) -> int:
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise KeyError(f"no parameter {name!r} in this model") from None
+
+    def effect_of(self, index: int) -> str:
+        return self.names[index].split(".", 1)[0]
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Everything a fit needs; constant during the fit.
+
+    measured: (N, m) measurements; sqrt_information: (N, m, m) whitening matrices W with
+    W^T W = cov^-1, so whitened residuals are W @ (measured - predicted). model: the
+    measurement model that predicts them (``hostpc.model.measurements``).
+    """
+
+    dataset: Dataset
+    chain: Chain
+    context: ModelContext
+    terms: tuple[EffectTerm, ...]
+    layout: ParameterLayout
+    measured: np.ndarray
+    sqrt_information: np.ndarray
+    plugins: tuple[str, ...] = field(default=())
+    #: per term: the constant basis of a linear joint/geometry effect (delta = basis @ p),
+    #: computed once, or None
+    linear_bases: tuple[np.ndarray | None, ...] = field(default=())
+    model: MeasurementPredictor | None = None
+
+    @property
+    def method(self) -> str:
+        return self.dataset.method
+
+    @property
+    def measurement(self) -> MeasurementPredictor:
+        """The measurement model (always set by ``build_problem``)."""
+        assert self.model is not None, "build the problem with build_problem"
+        return self.model
+
+    @property
+    def effect_names(self) -> tuple[str, ...]:
+        return tuple(term.effect.name for term in self.terms)
+
+    @property
+    def frame_names(self) -> tuple[str, ...]:
+        """The frames this problem estimates (its frame effects)."""
+        return tuple(t.effect.name for t in self.terms if t.effect.hook == "frame")
+
+    @property
+    def length_columns(self) -> np.ndarray:
+        """Indices of the measurement components that are lengths (m): the ones residual
+        norms in metres are taken over."""
+        m = self.measured.shape[1]
+        units = None if self.model is None else self.model.residual_units
+        if units is None:
+            return np.arange(m)
+        return np.array([k for k, unit in enumerate(units) if unit == "m"], dtype=int)
+
+    def term(self, name: str) -> EffectTerm | None:
+        for term in self.terms:
+            if term.effect.name == name:
+                return term
+        return None
+
+    def subset(self, indices: np.ndarray) -> Problem:
+        """The same model on a subset of the samples (for cross-validation): a view that
+        takes the rows of the built context, whitening and linear bases, no rebuild."""
+        index = np.atleast_1d(np.asarray(indices))
+        return replace(
+            self,
+            dataset=self.dataset.with_samples(self.dataset.samples.subset(index)),
+            context=self.context.subset(index),
+            measured=self.measured[index],
+            sqrt_information=self.sqrt_information[index],
+            linear_bases=tuple(None if b is None else b[index] for b in self.linear_bases),
+        )

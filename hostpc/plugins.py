@@ -1,0 +1,65 @@
+"""Loading user plugins: Python files given on the command line, and entry points.
+
+Both plugin points (effects, ``hostpc.model.registry``; measurement models,
+``hostpc.model.measurements.registry``) load through here, so a file named twice is imported
+once and the entry-point scan (slow: it reads every installed distribution's metadata) runs
+once per process and group.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import inspect
+import os
+import sys
+from functools import cache
+from importlib.metadata import entry_points
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+from hostpc.errors import EffectError
+
+_MODULES: dict[str, ModuleType] = {}
+
+
+def import_plugin_file(path: str | os.PathLike[str]) -> ModuleType:
+    """Import a Python file once (cached by its resolved path); EffectError in one line."""
+    path = Path(path)
+    if not path.is_file():
+        raise EffectError(f"plugin {path}: no such file")
+    key = str(path.resolve())
+    if key in _MODULES:
+        return _MODULES[key]
+    module_name = f"zerocal_plugin_{path.stem}_{abs(hash(key))}"
+    spec = importlib.util.spec_from_file_location(module_name, path)
+    if spec is None or spec.loader is None:
+        raise EffectError(f"plugin {path}: not a Python file")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[module_name] = module
+    try:
+        spec.loader.exec_module(module)
+    except Exception as exc:  # a user's file may fail in any way: report it in one line
+        sys.modules.pop(module_name, None)
+        raise EffectError(f"plugin {path}: failed to import: {type(exc).__name__}: {exc}") from exc
+    _MODULES[key] = module
+    return module
+
+
+def classes_defined_in(module: ModuleType, base: type) -> list[type[Any]]:
+    """The subclasses of ``base`` that ``module`` itself defines and that set ``name``."""
+    return [obj for _, obj in inspect.getmembers(module, inspect.isclass)
+            if issubclass(obj, base) and obj.__module__ == module.__name__
+            and "name" in obj.__dict__]
+
+
+@cache
+def entry_point_objects(group: str) -> tuple[tuple[str, Any], ...]:
+    """(entry name, loaded object) of every entry point in ``group``; scanned once."""
+    found = []
+    for entry in entry_points(group=group):
+        try:
+            found.append((entry.name, entry.load()))
+        except Exception as exc:
+            raise EffectError(f"entry point {entry.name}: failed to load: {exc}") from exc
+    return tuple(found)

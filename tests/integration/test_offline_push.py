@@ -1,0 +1,86 @@
+"""`hostpc push FIT.json`: an offline fit's offsets pushed with calibrate's guard rails,
+journal and rollback, against the simulated controller (subprocess, loopback)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hostpc.fitting import fit
+from hostpc.robots.simulator import SimulatedController
+from hostpc.synthesize import random_truth, synthesize_stereo_target
+from tests.integration.test_calibrate_sim import TOKEN, run_cli, sim_scenario
+
+
+def _offsets(sim: SimulatedController) -> np.ndarray:
+    return np.asarray(sim.truth()["zero_offsets"], float)
+
+
+@pytest.fixture(scope="module")
+def fit_file(tmp_path_factory, stereo_poses) -> tuple[Path, dict[str, float]]:
+    """A noise-free offline fit with free frames: q1 and q6 are held (unidentifiable)."""
+    truth = random_truth(np.random.default_rng(5))
+    data = synthesize_stereo_target(truth, q=stereo_poses, noise_scale=0.0)
+    result = fit(data.dataset, cv_folds=0)
+    path = tmp_path_factory.mktemp("fit") / "fit.json"
+    path.write_text(json.dumps(result.to_dict()))
+    return path, {name: result.value(name) for name in result.names}
+
+
+def test_push_offline_fit_guard_rail_dry_run_push_and_rollback(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], fit_file) -> None:
+    path, fitted = fit_file
+    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:
+        address = f"{sim.address.host}:{sim.address.port}"
+        before = _offsets(sim)
+        out = tmp_path / "push"
+        # guard rail: a correction above the limit refuses the whole push (exit 4)
+        code, stdout, stderr = run_cli(capsys, "push", str(path), "--robot", address,
+                                       "--token", TOKEN, "--max-correction", "0.01",
+                                       "--out", str(out))
+        assert code == 4 and "exceeds the limit of 0.01 deg" in stderr
+        assert np.array_equal(_offsets(sim), before) and not out.exists()
+        # dry run: the plan, nothing written
+        code, stdout, stderr = run_cli(capsys, "push", str(path), "--robot", address,
+                                       "--token", TOKEN, "--dry-run", "--json")
+        assert code == 0, stderr
+        plan = json.loads(stdout)
+        assert plan["status"] == "planned" and np.array_equal(_offsets(sim), before)
+        # push: q2..q5 move by the fitted offsets, the held q1 and q6 stay
+        code, stdout, stderr = run_cli(capsys, "push", str(path), "--robot", address,
+                                       "--token", TOKEN, "--out", str(out))
+        assert code == 0, stderr
+        assert "hostpc rollback --run" in stdout
+        after = _offsets(sim)
+        for j in range(6):
+            expected = fitted[f"joint_offsets.q{j + 1}"] if j in (1, 2, 3, 4) else 0.0
+            assert after[j] - before[j] == pytest.approx(expected, abs=1e-12), j
+        assert "unidentifiable" in stdout
+        push = json.loads((out / "push.json").read_text())
+        assert push["status"] == "pushed" and push["previous_offsets"] == before.tolist()
+        assert [e["event"] for e in map(json.loads, (out / "journal.jsonl").read_text()
+                                        .splitlines())] == ["push_intent", "push"]
+        # rollback by the push folder, as for a calibration run
+        code, stdout, stderr = run_cli(capsys, "rollback", "--run", str(out), "--token", TOKEN)
+        assert code == 0, stderr
+        assert np.array_equal(_offsets(sim), before)
+        assert math.isfinite(after[1])
+
+
+@pytest.mark.parametrize(("content", "message"), [
+    ("{", "not valid JSON"),
+    ('{"parameters": {}}', "no 'converged'"),
+    ('{"parameters": {"tool.x": {"value": 0.1}}, "converged": true, "chi2": 1, "dof": 3}',
+     "no joint_offsets"),
+    ('{"parameters": {"joint_offsets.q1": {"value": "x"}}, "converged": true, "chi2": 1,'
+     ' "dof": 3}', "joint_offsets.q1.value"),
+])
+def test_bad_fit_file_is_one_line(tmp_path, capsys, content, message) -> None:
+    path = tmp_path / "fit.json"
+    path.write_text(content)
+    code, _, stderr = run_cli(capsys, "push", str(path), "--robot", "127.0.0.1:1")
+    assert code == 2 and message in stderr and len(stderr.strip().splitlines()) == 1
