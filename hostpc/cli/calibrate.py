@@ -30,12 +30,14 @@ import asyncio
 import dataclasses
 import datetime as _dt
 import json
+import math
 import signal
 import sys
-from collections.abc import Coroutine, Iterator
+import types
+from collections.abc import Callable, Coroutine, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from hostpc.cli.fit import add_model_options
 from hostpc.cli.progress import StderrProgress
@@ -126,11 +128,11 @@ def register(subparsers: Any) -> None:
                         help="robot driver (default zerocal)")
     parser.add_argument("--token", help="shared token (default: $ZEROCAL_TOKEN, else the "
                         "simulator's default)")
-    parser.add_argument("--timeout", type=float, default=10.0, help="seconds per request")
+    parser.add_argument("--timeout", type=_positive, default=10.0, help="seconds per request")
     parser.add_argument("--method", choices=tuple(METHOD_CLASSES), default="stereo_target",
                         help="measurement method (default stereo_target)")
-    parser.add_argument("--poses", type=int, default=60, help="fit poses (default 60)")
-    parser.add_argument("--verify-poses", type=int, default=10,
+    parser.add_argument("--poses", type=_count(1), default=60, help="fit poses (default 60)")
+    parser.add_argument("--verify-poses", type=_count(0), default=10,
                         help="fresh verification poses after the push (default 10; 0 = none)")
     parser.add_argument("--seed", type=int, default=0, help="planning seed (default 0)")
     add_model_options(parser)
@@ -143,7 +145,7 @@ def register(subparsers: Any) -> None:
                         "captures through the controller)")
     parser.add_argument("--depth", choices=("triangulate", "sgbm"), default="triangulate",
                         help="stereo depth method (default triangulate)")
-    parser.add_argument("--pixel-floor", type=float, default=0.01, metavar="PX",
+    parser.add_argument("--pixel-floor", type=_non_negative, default=0.01, metavar="PX",
                         help="systematic floor (px per image coordinate) added to each "
                         "measured covariance for rig calibration and detection errors "
                         "(default 0.01; 0 = image noise only)")
@@ -160,24 +162,90 @@ def register(subparsers: Any) -> None:
                         help="push despite a guard rail (a correction beyond "
                         "--max-correction, a fit that did not converge or does not explain "
                         "the measurements; on a resume: push again after a rollback)")
-    parser.add_argument("--max-correction", type=float, default=None, metavar="DEG",
+    parser.add_argument("--max-correction", type=_positive, default=None, metavar="DEG",
                         help="largest correction pushed without --force (default 2 deg)")
-    parser.add_argument("--verify-factor", type=float, default=None,
-                        help="verification passes if RMS <= this x the noise RMS the fit "
-                        "measured (default 1.2)")
-    parser.add_argument("--speed", type=float, default=0.5, help="motion speed (0, 1]")
+    parser.add_argument("--verify-alpha", type=_probability, default=None, metavar="P",
+                        help="false-FAIL rate of the verification's chi-square test "
+                        "(default 0.01; docs/calibrate.md)")
+    parser.add_argument("--verify-tolerance", type=_positive, default=None, metavar="MM",
+                        help="station tolerance: verification also FAILs if the RMS after "
+                        "the push exceeds MM (default: none)")
+    parser.add_argument("--verify-factor", type=_positive, default=None, metavar="F",
+                        help="the verification test takes the measurement noise as F x the "
+                        "stated noise (default 1)")
+    parser.add_argument("--speed", type=_speed, default=0.5, help="motion speed (0, 1]")
     parser.add_argument("--criterion", choices=("D", "random"), default="D",
                         help="pose selection (default D-optimal)")
-    parser.add_argument("--candidates", type=int, default=1500,
+    parser.add_argument("--candidates", type=_count(1), default=1500,
                         help="candidate pool size of the planner (default 1500)")
     parser.add_argument("--scenario", metavar="FILE", help="with --robot sim: scenario file")
-    parser.add_argument("--time-scale", type=float, default=0.0,
+    parser.add_argument("--time-scale", type=_non_negative, default=0.0,
                         help="with --robot sim: wall seconds per simulated second (default 0)")
     parser.add_argument("--out", metavar="DIR", help="run folder (default ./zerocal-runs/...)")
     parser.add_argument("--resume", metavar="DIR", help="continue the run in DIR")
     parser.add_argument("--no-report", action="store_true", help="skip report.html")
     parser.add_argument("--json", action="store_true", help="print the result document")
     parser.set_defaults(func=run)
+    parser.error = types.MethodType(_one_line_error, parser)  # type: ignore[method-assign]
+
+
+# ---------------------------------------------------------------- option values
+# Every numeric option is checked by the parser: finite and in range, else one line, exit 2.
+
+def _one_line_error(parser: argparse.ArgumentParser, message: str) -> NoReturn:
+    """A bad option: one line on stderr, exit 2 (no usage block)."""
+    parser.exit(2, f"hostpc calibrate: error: {message}\n")
+
+
+def _finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a finite number")
+    return value
+
+
+def _positive(text: str) -> float:
+    value = _finite(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be positive")
+    return value
+
+
+def _non_negative(text: str) -> float:
+    value = _finite(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: must not be negative")
+    return value
+
+
+def _probability(text: str) -> float:
+    value = _finite(text)
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be in (0, 1)")
+    return value
+
+
+def _speed(text: str) -> float:
+    value = _finite(text)
+    if not 0.0 < value <= 1.0:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be in (0, 1]")
+    return value
+
+
+def _count(minimum: int) -> Callable[[str], int]:
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"{text!r}: must be at least {minimum}")
+        return value
+    parse.__name__ = "count"
+    return parse
 
 
 def _settings(args: argparse.Namespace) -> RunSettings:
@@ -212,7 +280,9 @@ def _settings(args: argparse.Namespace) -> RunSettings:
         effects=args.effects, plugins=tuple(args.plugin), loss=args.loss,
         cv_folds=args.cv_folds, speed=args.speed, push=args.push is not False,
         force=bool(args.force), max_correction_deg=max_correction,
-        verify_factor=1.2 if args.verify_factor is None else args.verify_factor,
+        verify_factor=1.0 if args.verify_factor is None else args.verify_factor,
+        verify_alpha=0.01 if args.verify_alpha is None else args.verify_alpha,
+        verify_tolerance_mm=args.verify_tolerance,
         criterion=args.criterion, n_candidates=args.candidates, options=options,
     )
 
@@ -361,7 +431,9 @@ async def _calibrate(args: argparse.Namespace, address: RobotAddress, driver: st
     try:
         overrides = {"push": args.push, "force": args.force,
                      "max_correction_deg": args.max_correction,
-                     "verify_factor": args.verify_factor}
+                     "verify_factor": args.verify_factor,
+                     "verify_alpha": args.verify_alpha,
+                     "verify_tolerance_mm": args.verify_tolerance}
         runner = Runner(robot, run_dir, robot_info=info, settings=settings,
                         cell_file=cell_file, known=known, default_known=default_known,
                         progress=progress, truth=truth, report=not args.no_report,

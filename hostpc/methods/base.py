@@ -59,9 +59,10 @@ class RunSettings:
     and every random choice; effects: the fit's effect spec (None: default model);
     speed: motion speed, fraction of max; push: write the compensated offsets;
     force: push despite a guard rail (correction beyond max_correction_deg, a fit that did
-    not converge or does not explain the data); verify_factor: pass if the verify RMS <=
-    verify_factor x the noise RMS the fit measured; criterion: planner criterion ("D" or
-    "random"); n_candidates: size of the candidate pool; options: method-specific
+    not converge or does not explain the data); verify_alpha: the verification's false-FAIL
+    rate; verify_tolerance_mm: a station's RMS tolerance (mm) or None; verify_factor: the
+    verification test's noise = this x the stated noise (verify.py); criterion: planner
+    criterion ("D" or "random"); n_candidates: size of the candidate pool; options: method-specific
     settings (e.g. stereo_target "depth": "triangulate" | "sgbm").
     """
 
@@ -77,7 +78,9 @@ class RunSettings:
     push: bool = True
     force: bool = False
     max_correction_deg: float = 2.0
-    verify_factor: float = 1.2
+    verify_factor: float = 1.0
+    verify_alpha: float = 0.01
+    verify_tolerance_mm: float | None = None
     criterion: str = "D"
     n_candidates: int = 1500
     options: Mapping[str, Any] = field(default_factory=dict)

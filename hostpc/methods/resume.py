@@ -24,7 +24,8 @@ from hostpc.methods.journal import Journal, sample_times, shift_sample_t, write_
 from hostpc.methods.push import PUSH_FILE, PushRecord, intent_outcome, same_offsets
 from hostpc.robots.base import RobotState
 
-RESUME_OVERRIDABLE = frozenset({"push", "force", "max_correction_deg", "verify_factor"})
+RESUME_OVERRIDABLE = frozenset({"push", "force", "max_correction_deg", "verify_factor",
+                                "verify_alpha", "verify_tolerance_mm"})
 """Settings a resume may change (they act after the measurements)."""
 CLOCK_TOLERANCE_S = 1e-6
 

@@ -258,9 +258,13 @@ class Runner:
             verify_dataset = self._dataset(method, "verify")
             if verify_dataset.n_samples > 0:
                 save_dataset(verify_dataset, self.run_dir / "verify_dataset.json")
+                tolerance = (None if settings.verify_tolerance_mm is None
+                             else settings.verify_tolerance_mm * 1e-3)
                 verify_result = evaluate_verify(result, verify_dataset, pushed_delta,
                                                 plan.q_verify.shape[0],
-                                                settings.verify_factor)
+                                                alpha=settings.verify_alpha,
+                                                tolerance=tolerance,
+                                                factor=settings.verify_factor)
                 write_json_atomic(self.run_dir / "verify.json", verify_result.to_dict())
 
         document = result_document(self.journal, self.run_dir, self.robot_info.to_dict(),
