@@ -86,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
                          "give the address of a running controller")
     now, how = asyncio.run(_rollback(address, args, rollback_id, previous, record))
     matches = previous is None or bool(np.allclose(now, previous, rtol=0.0, atol=1e-12))
+    if args.run and how != "not_pushed":
+        _journal_rollback(Path(args.run), now, how, str(address))
     document = {
         "controller": str(address),
         "rollback_id": record.get("rollback_id") if record is not None else rollback_id,
@@ -123,3 +125,17 @@ async def _rollback(address: RobotAddress, args: argparse.Namespace, rollback_id
         return await rollback(robot, rollback_id, previous)
     finally:
         await robot.close()
+
+
+def _journal_rollback(run_dir: Path, now: np.ndarray, how: str, controller: str) -> None:
+    """Record the rollback in the run's journal, so that `hostpc calibrate --resume` says
+    "rolled back" (and only then: previous offsets without this event mean a lost push)."""
+    import datetime as _dt
+
+    from hostpc.methods.journal import Journal
+
+    journal = Journal(run_dir)
+    if journal.exists:
+        journal.event("rollback", how=how, controller=controller,
+                      offsets=[float(v) for v in now],
+                      time=_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"))
