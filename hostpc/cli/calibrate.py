@@ -31,6 +31,7 @@ import dataclasses
 import datetime as _dt
 import json
 import math
+import shutil
 import signal
 import sys
 import types
@@ -39,6 +40,11 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, NoReturn
 
+from hostpc.cli.calibrate_checks import (
+    check_known_frames,
+    check_model_options,
+    check_out_folder,
+)
 from hostpc.cli.fit import add_model_options
 from hostpc.cli.progress import StderrProgress
 from hostpc.errors import InputError
@@ -315,6 +321,8 @@ def run(args: argparse.Namespace) -> int:
             RobotAddress(sim=True) if sim else parse_robot(str(recorded.get("address", ""))))
         driver = recorded.get("driver", args.driver)
         scenario_file = None
+        if args.effects is not None or args.plugin:
+            check_model_options(args.effects, tuple(args.plugin))
     else:
         if not args.robot:
             raise InputError("--robot HOST[:PORT] or --robot sim is required (or --resume DIR)")
@@ -327,14 +335,15 @@ def run(args: argparse.Namespace) -> int:
         _check_rig(settings)
         cell_file = load_cell_file(args.cell) if args.cell else None
         known = parse_known(args.known)
+        check_known_frames(settings.method, known)
+        check_model_options(settings.effects, settings.plugins)
         run_dir = Path(args.out) if args.out else _default_out(settings.method)
-        if Journal(run_dir).exists:
-            raise InputError(f"--out {run_dir}: already holds a run; continue it with "
-                             f"--resume {run_dir} or choose another folder")
+        check_out_folder(run_dir)
         scenario_file = args.scenario
     if args.scenario and not address.sim:
         raise InputError("--scenario needs --robot sim")
     progress = StderrProgress()
+    created = not run_dir.exists()
     try:
         with sigterm_as_interrupt():
             outcome = _run_with_robot(args, address, driver, run_dir, settings, cell_file,
@@ -348,6 +357,10 @@ def run(args: argparse.Namespace) -> int:
             print("hostpc calibrate: interrupted before the run started (nothing to resume)",
                   file=sys.stderr)
         return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
+    except BaseException:
+        if created and not Journal(run_dir).exists:  # failed before the run started
+            shutil.rmtree(run_dir, ignore_errors=True)
+        raise
     finally:
         progress.close()
     if args.json:
@@ -433,7 +446,9 @@ async def _calibrate(args: argparse.Namespace, address: RobotAddress, driver: st
                      "max_correction_deg": args.max_correction,
                      "verify_factor": args.verify_factor,
                      "verify_alpha": args.verify_alpha,
-                     "verify_tolerance_mm": args.verify_tolerance}
+                     "verify_tolerance_mm": args.verify_tolerance,
+                     "effects": args.effects,
+                     "plugins": tuple(args.plugin) or None}
         runner = Runner(robot, run_dir, robot_info=info, settings=settings,
                         cell_file=cell_file, known=known, default_known=default_known,
                         progress=progress, truth=truth, report=not args.no_report,

@@ -158,11 +158,25 @@ class SampleRecord:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> SampleRecord:
-        """Inverse of to_dict."""
+        """Inverse of to_dict; ValueError naming the field if `data` is not a record."""
+        phase, index, status = data.get("phase"), data.get("index"), data.get("status")
+        if phase not in ("fit", "verify"):
+            raise ValueError(f"phase {phase!r} is not 'fit' or 'verify'")
+        if not isinstance(index, int) or isinstance(index, bool) or index < 0:
+            raise ValueError(f"index {index!r} is not a non-negative integer")
+        if status not in ("ok", "skipped"):
+            raise ValueError(f"status {status!r} is not 'ok' or 'skipped'")
+        sample = data.get("sample")
+        if status == "ok" and not isinstance(sample, Mapping):
+            raise ValueError("a measured record has no sample object")
+        q_end = data.get("q_end")
+        if q_end is not None and not (isinstance(q_end, list) and all(
+                isinstance(v, int | float) and not isinstance(v, bool) for v in q_end)):
+            raise ValueError(f"q_end {str(q_end)[:40]!r} is not a list of numbers")
         return cls(
-            phase=data["phase"],
-            index=int(data["index"]),
-            ok=data["status"] == "ok",
+            phase=phase,
+            index=index,
+            ok=status == "ok",
             sample=data.get("sample"),
             reason=data.get("reason"),
             q_end=data.get("q_end"),

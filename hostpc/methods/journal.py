@@ -81,6 +81,37 @@ def shift_sample_t(sample: Mapping[str, Any], dt: float) -> dict[str, Any]:
     return out
 
 
+_OFFSET_FIELDS = {
+    "push": ("previous_offsets", "new_offsets"),
+    "push_intent": ("previous_offsets", "new_offsets"),
+    "verify_start": ("offsets", "pushed_delta"),
+    "verify": ("offsets",),
+    "result": ("offsets",),
+    "rollback": ("offsets",),
+}
+
+
+def _numbers(value: Any) -> bool:
+    return isinstance(value, list) and all(
+        isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+
+
+def _event_problem(obj: Mapping[str, Any]) -> str:
+    """Why a journaled event cannot be used ("" if it can): the events resume reads must
+    carry their offsets as lists of numbers (and a verify round its integer indices)."""
+    kind = obj.get("event")
+    if not isinstance(kind, str):
+        return f"event {kind!r} is not a name"
+    for name in _OFFSET_FIELDS.get(kind, ()):
+        if not _numbers(obj.get(name)):
+            return f"{kind} event: {name} is not a list of numbers"
+    if kind == "verify_start" and not all(
+            isinstance(obj.get(k), int) and not isinstance(obj.get(k), bool)
+            for k in ("round", "first")):
+        return "verify_start event: round and first must be integers"
+    return ""
+
+
 class Journal:
     """The journal of one run folder (see the module docstring)."""
 
@@ -132,7 +163,7 @@ class Journal:
             if raw.endswith(b"\n"):
                 try:
                     obj = json.loads(raw)
-                except ValueError:
+                except (ValueError, RecursionError):
                     obj = None
             yield number, offset, number == len(lines), obj if isinstance(obj, dict) else None
             offset += len(raw)
@@ -153,9 +184,17 @@ class Journal:
                     os.fsync(handle.fileno())
                 break
             if obj.get("event") == "sample":
-                record = SampleRecord.from_dict(obj)
+                try:
+                    record = SampleRecord.from_dict(obj)
+                except ValueError as exc:
+                    raise InputError(f"{self.journal_path}: line {number}: not a sample "
+                                     f"record ({exc}); repair or remove it to resume") from None
                 self._samples.setdefault((record.phase, record.index), record)
             else:
+                problem = _event_problem(obj)
+                if problem:
+                    raise InputError(f"{self.journal_path}: line {number}: {problem}; "
+                                     "repair or remove it to resume")
                 self._events.append(obj)
         self._loaded = True
 

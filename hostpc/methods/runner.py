@@ -219,7 +219,6 @@ class Runner:
                 "cell": cell.to_dict(),
                 "initial": initial,
             }
-            self.journal.write_header(self.header)
 
         method = method_class(settings.method)(settings, cell, self.run_dir)
         if hasattr(method, "set_time_origin"):
@@ -228,6 +227,8 @@ class Runner:
             # the method's own default model (sphere_probe: + trigger_latency)
             settings = dataclasses.replace(settings, effects=method.default_effects())
         method.check_inputs()
+        if not resume:  # the run exists from here on (a failed check leaves nothing)
+            self.journal.write_header(self.header)
         await method.prepare(self.robot, progress)
 
         if "plan" in self.header:

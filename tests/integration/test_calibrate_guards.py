@@ -136,9 +136,11 @@ def test_push_intent_is_journaled_first_and_settled_on_resume(
         np.testing.assert_allclose(_offsets(sim), intended, rtol=0, atol=1e-12)
 
         # a push whose write reached the controller but whose result was never recorded
+        # (the run stopped before its push result: no push event, no result written)
         lines = (out / "journal.jsonl").read_text().splitlines(keepends=True)
-        assert json.loads(lines[-1])["event"] == "push"
-        (out / "journal.jsonl").write_text("".join(lines[:-1]))
+        assert [json.loads(line)["event"] for line in lines[-2:]] == ["push", "result"]
+        (out / "journal.jsonl").write_text("".join(lines[:-2]))
+        (out / "result.json").unlink()
         record = json.loads((out / "push.json").read_text())
         (out / "push.json").write_text(json.dumps({**record, "status": "intent",
                                                    "rollback_id": None}))
