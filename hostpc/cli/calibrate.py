@@ -314,7 +314,9 @@ def run(args: argparse.Namespace) -> int:
     known = None
     if args.resume:
         run_dir = Path(args.resume)
-        header = Journal(run_dir).read_header()
+        journal = Journal(run_dir)
+        header = journal.read_header()
+        journal.load()  # a damaged journal line: one line, exit 2, before connecting
         recorded = header.get("robot", {})
         sim = bool(recorded.get("sim"))
         address = parse_robot(args.robot) if args.robot else (

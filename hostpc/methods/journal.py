@@ -13,7 +13,8 @@ Files in the run folder DIR:
                events of the run (`push_intent` written before the controller's offsets
                are, `push` after, `note`). Samples are keyed by (phase, index): a
                record already present is never replaced, so a resume neither repeats nor
-               loses a pose. A torn last line (power cut mid-write) is ignored on reading
+               loses a pose (a pose journaled as skipped may be measured again: the later record
+               replaces it). A torn last line (power cut mid-write) is ignored on reading
                and cut off before the next append.
 
 Everything is in SI units and radians.
@@ -189,7 +190,9 @@ class Journal:
                 except ValueError as exc:
                     raise InputError(f"{self.journal_path}: line {number}: not a sample "
                                      f"record ({exc}); repair or remove it to resume") from None
-                self._samples.setdefault((record.phase, record.index), record)
+                key = (record.phase, record.index)
+                if key not in self._samples or not self._samples[key].ok:
+                    self._samples[key] = record  # a skipped pose measured again later
             else:
                 problem = _event_problem(obj)
                 if problem:
@@ -211,10 +214,12 @@ class Journal:
             os.fsync(handle.fileno())
 
     def record(self, record: SampleRecord) -> bool:
-        """Append a sample record; False (nothing written) if that pose is already there."""
+        """Append a sample record; False (nothing written) if that pose is already measured.
+        A pose journaled as skipped may be recorded again (measured again on a resume):
+        the later record replaces it."""
         self._ensure_loaded()
         key = (record.phase, record.index)
-        if key in self._samples:
+        if key in self._samples and self._samples[key].ok:
             return False
         self._append(record.to_dict())
         self._samples[key] = record
@@ -226,6 +231,11 @@ class Journal:
         obj = {"event": kind, **fields}
         self._append(obj)
         self._events.append(obj)
+
+    def get(self, phase: str, index: int) -> SampleRecord | None:
+        """The record of pose (phase, index), or None."""
+        self._ensure_loaded()
+        return self._samples.get((phase, index))
 
     def has(self, phase: str, index: int) -> bool:
         """True if pose (phase, index) is journaled (measured or skipped)."""

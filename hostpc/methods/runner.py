@@ -48,7 +48,13 @@ from hostpc.methods.base import (
 )
 from hostpc.methods.cell import build_cell, cell_from_dict
 from hostpc.methods.journal import Journal, write_json_atomic
-from hostpc.methods.push import PushPlan, execute_push, plan_push, same_offsets
+from hostpc.methods.push import (
+    PushPlan,
+    execute_push,
+    export_offsets,
+    plan_push,
+    same_offsets,
+)
 from hostpc.methods.refusals import MAX_POSE_ATTEMPTS, RunStopped, refusal_text, stopped
 from hostpc.methods.resume import (
     CLOCK_TOLERANCE_S,
@@ -245,6 +251,10 @@ class Runner:
         q_now = await self._acquire(method, "fit", plan.q, q_now)
 
         dataset = self._dataset(method, "fit")
+        if dataset.n_samples < 3 and any(stopped(r) for r in self.journal.records("fit")):
+            raise RunStopped(f"measurement stopped: only {dataset.n_samples} of "
+                             f"{plan.q.shape[0]} fit poses measured, moves were stopped "
+                             "(aborted) again and again")
         if dataset.n_samples < 3:
             raise ZerocalError(f"only {dataset.n_samples} of {plan.q.shape[0]} poses measured; "
                                "nothing to fit (see the skipped reasons in journal.jsonl)")
@@ -262,7 +272,8 @@ class Runner:
         push_plan = plan_push(result, initial_offsets, settings.max_correction_deg,
                               settings.force, dataset_file=str(self.run_dir / "dataset.json"))
         push_status, pushed_delta, offsets = await self._push(push_plan, settings, offsets)
-        exports = self._export_offsets(cell.robot, push_plan, push_status)
+        exports = export_offsets(self.robot, self.run_dir, cell.robot, push_plan,
+                                 push_status, progress)
 
         verify_result: VerifyResult | None = None
         if (settings.n_verify > 0 and plan.q_verify.shape[0] > 0
@@ -305,8 +316,10 @@ class Runner:
         progress.advance(done)
         for pose in range(total):
             index = first + pose
-            if self.journal.has(phase, index):
-                continue
+            journaled = self.journal.get(phase, index)
+            if journaled is not None and (journaled.ok or not stopped(journaled)
+                                          or (phase == "fit" and self._pushed_ever())):
+                continue  # measured, or skipped for good (fit poses: never after a push)
             for attempt in range(1, MAX_POSE_ATTEMPTS + 1):
                 record = await method.acquire(self.robot, phase, index, q_plan[pose], q_now)  # type: ignore[arg-type]
                 if record.q_end is not None:
@@ -399,6 +412,10 @@ class Runner:
             + f" deg (rollback id {record.rollback_id})")
         return "pushed", plan.delta.copy(), plan.new.copy()
 
+    def _pushed_ever(self) -> bool:
+        """True if this run ever wrote (or meant to write) the controller's offsets."""
+        return self.journal.last_event("push_intent", "push") is not None
+
     def _push_asked(self) -> bool:
         """True if this resume's command line asked for the push (--push or --force)."""
         return (self.resume_overrides.get("push") is True
@@ -409,20 +426,6 @@ class Runner:
         acts after the measurements: push, force, limits, verification, model)."""
         return any(value not in (None, False, [], ())
                    for value in self.resume_overrides.values())
-
-    def _export_offsets(self, robot_name: str, plan: PushPlan, status: str
-                        ) -> dict[str, str] | None:
-        """For a robot that keeps no zero offsets (an adapter with `export_offsets`, the UR
-        driver) write the compensated offsets as files into the run folder: the only lasting
-        form of its push. None if the adapter writes the controller or nothing is pushed."""
-        export = getattr(self.robot, "export_offsets", None)
-        if (not callable(export) or status not in ("pushed", "disabled") or plan.refused
-                or not plan.anything):
-            return None
-        paths = export(self.run_dir, robot_name, plan.new)
-        self.progress.message("offsets exported for the robot's own software: "
-                              + ", ".join(str(path) for path in paths.values()))
-        return {kind: str(path) for kind, path in paths.items()}
 
     def _write_report(self, dataset: Dataset, settings: RunSettings) -> str | None:
         """report.html through hostpc.diagnose + hostpc.report, if both are installed."""
