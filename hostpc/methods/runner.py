@@ -250,14 +250,15 @@ class Runner:
         q_now = np.asarray(q_from, float) if q_from is not None else state.q
         q_now = await self._acquire(method, "fit", plan.q, q_now)
 
-        dataset = self._dataset(method, "fit")
-        if dataset.n_samples < 3 and any(stopped(r) for r in self.journal.records("fit")):
-            raise RunStopped(f"measurement stopped: only {dataset.n_samples} of "
-                             f"{plan.q.shape[0]} fit poses measured, moves were stopped "
-                             "(aborted) again and again")
-        if dataset.n_samples < 3:
-            raise ZerocalError(f"only {dataset.n_samples} of {plan.q.shape[0]} poses measured; "
+        n_measured = sum(r.ok for r in self.journal.records("fit"))
+        if n_measured < 3 and any(stopped(r) for r in self.journal.records("fit")):
+            raise RunStopped(f"measurement stopped: only {n_measured} of {plan.q.shape[0]} fit "
+                             "poses measured, their moves were stopped (aborted) again and "
+                             "again")
+        if n_measured < 3:
+            raise ZerocalError(f"only {n_measured} of {plan.q.shape[0]} poses measured; "
                                "nothing to fit (see the skipped reasons in journal.jsonl)")
+        dataset = self._dataset(method, "fit")
         save_dataset(dataset, self.run_dir / "dataset.json")
 
         progress.stage("fit")
@@ -353,8 +354,8 @@ class Runner:
         n_verify = plan.q_verify.shape[0]
         number, first = verify_round(self.journal, offsets, pushed_delta, n_verify)
         await self._acquire(method, "verify", plan.q_verify, q_now, first)
-        verify_dataset = self._dataset(method, "verify", first, first + n_verify)
-        if verify_dataset.n_samples == 0:
+        if not any(r.ok for r in self.journal.records("verify")
+                   if first <= r.index < first + n_verify):
             reasons = sorted({str(r.reason) for r in self.journal.records("verify")
                               if first <= r.index < first + n_verify})
             self.journal.event("verify_lost", round=number)
@@ -363,6 +364,7 @@ class Runner:
             raise VerifyLost(f"verification lost: all {n_verify} verification poses were "
                              f"skipped ({'; '.join(reasons)}); {state}; measure them again "
                              f"with: hostpc calibrate --resume {self.run_dir}")
+        verify_dataset = self._dataset(method, "verify", first, first + n_verify)
         save_dataset(verify_dataset, self.run_dir / "verify_dataset.json")
         tolerance = (None if settings.verify_tolerance_mm is None
                      else settings.verify_tolerance_mm * 1e-3)
