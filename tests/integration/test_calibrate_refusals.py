@@ -135,3 +135,16 @@ def test_abort_storm_exit_4_then_resume_measures_every_pose(
         assert "measured: 16 of 16 fit poses" in stdout and "PASS" in stdout
     journal = Journal(out)
     assert [r.index for r in journal.records("fit") if r.ok] == list(range(16))
+
+
+def test_wrong_token_exit_4_one_line(tmp_path: Path,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
+    out = tmp_path / "run"
+    with SimulatedController(sim_scenario(), tmp_path / "s") as sim:
+        code, _, stderr = run_cli(capsys, "calibrate", "--robot",
+                                  f"{sim.address.host}:{sim.address.port}", "--token", "wrong",
+                                  "--rig", str(rig), "--out", str(out))
+    line = _error_line(stderr)
+    assert code == 4 and "auth" in line
+    assert not out.exists()
