@@ -192,7 +192,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--no-report", action="store_true", help="skip report.html")
     parser.add_argument("--json", action="store_true", help="print the result document")
     parser.set_defaults(func=run)
-    parser.error = types.MethodType(_one_line_error, parser)  # type: ignore[method-assign]
+    parser.error = types.MethodType(_one_line_error, parser)
 
 
 # ---------------------------------------------------------------- option values

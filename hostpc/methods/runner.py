@@ -1,26 +1,20 @@
 """The calibration procedure every method shares (`hostpc calibrate`).
 
-    S1  read the controller's state and zero offsets (a resume checks they did not change)
-        and build the nominal cell (controller description, --cell, --known)
+    S1  read the controller's state and zero offsets; build the nominal cell
     --  method.prepare (e.g. the stereo rig), persisted in the run folder
-    --  plan: candidate pool -> informative poses (planning.py) + verification poses;
-        identifiability check of the plan BEFORE moving; the plan, seed and settings go
-        into run.json
-    S2  acquire: one journaled sample per pose (journal.py); a resume skips what is there
-    S3  dataset.json (zerocal-dataset/1) from the measured fit poses
-    S4  fit (fit.json)
-    S5  guarded push (push.py): old/new shown, limit, unidentifiable joints kept
-    --  verify (verify.py): fresh poses after the push, before vs after, pass/fail
-    --  result.json, summary.txt (summary.py) and, if the diagnostics/report packages
-        exist, report.html
+    --  plan (run_plan.py): informative fit poses + verification poses, identifiability
+        checked BEFORE moving; plan, seed and settings go into run.json
+    S2  acquire: one journaled sample per pose (journal.py); an aborted move is measured
+        again (refusals.py); a resume skips what is there
+    S3  dataset.json from the measured fit poses; S4 fit (fit.json)
+    S5  guarded push (push.py); verify (verify.py): a chi-square test on fresh poses
+        measured under the pushed offsets; result.json, summary.txt (summary.py), report
 
-A resume (resume.py) checks the controller's offsets, settles a push cut short and keeps
-sample time continuing.
-
-The runner talks to the robot only through `RobotAdapter` and to the method only through
-`Method`. Truth (simulation only) comes from a callable, read at S1, before any push.
-Exit codes beyond hostpc.errors: 5 = push refused by a guard rail, 6 = verification of the
-pushed offsets failed (with nothing pushed the verification is a model check: reported only).
+A resume (resume.py) checks the controller's offsets, settles a push cut short, prints a
+finished run's stored result unchanged, and tells a lost push from a rollback. Controller
+refusals end as one `RunStopped` line with the resume hint (exit 4). Exit codes beyond
+hostpc.errors: 5 = push refused by a guard rail, 6 = verification of the pushed offsets
+failed (with nothing pushed the verification is a model check: reported only).
 """
 
 from __future__ import annotations
@@ -344,7 +338,7 @@ class Runner:
                  stop: int | None = None) -> Dataset:
         samples = [r.sample for r in self.journal.records(phase) if r.ok and r.sample
                    and first <= r.index and (stop is None or r.index < stop)]
-        return dataset_from_dict(method.dataset_document(samples))  # type: ignore[arg-type]
+        return dataset_from_dict(method.dataset_document(samples))
 
     async def _verify(self, method: Method, plan: Plan, result: FitResult,
                       settings: RunSettings, offsets: np.ndarray, pushed_delta: np.ndarray,
