@@ -192,3 +192,24 @@ def test_restarted_controller_lost_the_push(complete_run, tmp_path: Path,  # typ
         assert "push: written" in stdout and ": PASS" in stdout
         np.testing.assert_allclose(sim.truth()["zero_offsets"], push["new_offsets"], rtol=0,
                                    atol=1e-12)
+
+
+@pytest.mark.slow
+def test_rollback_warns_when_it_discards_a_later_push(complete_run, tmp_path: Path,  # type: ignore[no-untyped-def]
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    complete, _, push = complete_run
+    run = tmp_path / "run"
+    shutil.copytree(complete, run)
+    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:
+        address = f"{sim.address.host}:{sim.address.port}"
+        _set_offsets(sim, push["new_offsets"])  # this run's push (rb-1 here too)
+        later = (np.asarray(push["new_offsets"]) + 1e-4).tolist()
+        _set_offsets(sim, later)  # another host's later push
+        code, stdout, stderr = run_cli(capsys, "rollback", "--run", str(run), "--robot",
+                                       address, "--token", TOKEN)
+        assert code == 0, stderr
+        assert "discards that later push" in stderr
+        np.testing.assert_allclose(sim.truth()["zero_offsets"], push["previous_offsets"],
+                                   rtol=0, atol=1e-12)
+    rollback = _events(run)[-1]
+    assert rollback["event"] == "rollback"
