@@ -64,7 +64,10 @@ def power(seeds: int, work: Path) -> dict[str, Any]:
             for seed in range(seeds)]
     fails = sum(r.get("verdict") == "FAIL" for r in runs)
     return {"scenario": HIDDEN.name, "runs": seeds, "fails": fails,
-            "pushed": sum(r.get("push") == "pushed" for r in runs)}
+            "pushed": sum(r.get("push") == "pushed" for r in runs),
+            "max_p_value": max((r["p_value"] for r in runs if r.get("p_value") is not None),
+                               default=None),
+            "wall_s_per_run": sum(r["wall_s"] for r in runs) / max(seeds, 1)}
 
 
 def run(seeds: int = 100, methods: tuple[str, ...] = METHODS) -> dict[str, Any]:
