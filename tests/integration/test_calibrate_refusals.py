@@ -38,11 +38,16 @@ def _calibrate(capsys: pytest.CaptureFixture[str], sim: SimulatedController, rig
 
 
 @contextmanager
-def _peer(sim: SimulatedController, action: str, period: float = 0.05) -> Iterator[None]:
+def _peer(sim: SimulatedController, action: str, period: float = 0.05,
+          after: Path | None = None) -> Iterator[None]:
     """Another (authenticated) host on the same controller, in its own thread: `hold`
-    keeps a session open; `abort` sends an abort every `period` seconds."""
+    keeps a session open; `abort` sends an abort every `period` seconds (once the file
+    `after` contains a push event, if given)."""
     stop = threading.Event()
     ready = threading.Event()
+
+    def armed() -> bool:
+        return after is None or (after.is_file() and '"event":"push"' in after.read_text())
 
     async def main() -> None:
         client = await ControllerClient.connect(sim.address.host, sim.address.port,
@@ -50,7 +55,7 @@ def _peer(sim: SimulatedController, action: str, period: float = 0.05) -> Iterat
         try:
             ready.set()
             while not stop.is_set():
-                if action == "abort":
+                if action == "abort" and armed():
                     await client.abort()
                 await asyncio.sleep(period)
         finally:
@@ -148,3 +153,26 @@ def test_wrong_token_exit_4_one_line(tmp_path: Path,
     line = _error_line(stderr)
     assert code == 4 and "auth" in line
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_lost_verification_says_so_and_stays_resumable(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
+    out = tmp_path / "run"
+    with SimulatedController(_scenario(motion={"time_scale": 0.2}), tmp_path / "s") as sim:
+        with _peer(sim, "abort", after=out / "journal.jsonl"):  # a storm after the push
+            code, stdout, stderr = _calibrate(capsys, sim, rig, out, "--verify-poses", "3")
+        line = _error_line(stderr)
+        assert code == 4 and stdout == ""
+        assert line.startswith("hostpc calibrate: error: verification lost: all 3 ")
+        assert "the pushed offsets stay in the controller" in line
+        assert line.endswith(f"measure them again with: hostpc calibrate --resume {out}")
+        pushed = sim.truth()["zero_offsets"]
+        code, stdout, stderr = run_cli(capsys, "calibrate", "--resume", str(out))
+        assert code == 0, stderr
+        assert "not verified yet: verifying now on fresh poses" in stderr
+        assert "verify: 3 fresh poses" in stdout and ": PASS" in stdout
+        assert sim.truth()["zero_offsets"] == pushed  # no second push
+    rounds = Journal(out).events("verify_start")
+    assert [r["round"] for r in rounds] == [0, 1]
