@@ -161,8 +161,13 @@ class Runner:
         except ConnectionFailed as exc:
             raise ConnectionFailed(f"{exc}; {self._journaled()} continue with: hostpc "
                                    f"calibrate --resume {self.run_dir}") from exc
-        except (PushLost, VerifyLost):
-            raise  # their message says what happened and how to go on
+        except PushLost as exc:
+            if not self.robot_info.sim:
+                raise
+            raise PushLost(f"{exc} (a resumed --robot sim run restarts the simulated "
+                           "controller with its initial offsets)") from None
+        except VerifyLost:
+            raise  # its message says what happened and how to go on
         except ControllerError as exc:
             hint = (f"{self._journaled()} continue with: hostpc calibrate --resume "
                     f"{self.run_dir}" if self.journal.exists
