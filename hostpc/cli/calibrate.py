@@ -30,14 +30,22 @@ import asyncio
 import dataclasses
 import datetime as _dt
 import json
+import math
+import shutil
 import signal
 import sys
-from collections.abc import Coroutine, Iterator
+import types
+from collections.abc import Callable, Coroutine, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from hostpc.cli.archive_options import add_archive_options, archive_run
+from hostpc.cli.calibrate_checks import (
+    check_known_frames,
+    check_model_options,
+    check_out_folder,
+)
 from hostpc.cli.fit import add_model_options
 from hostpc.cli.progress import StderrProgress
 from hostpc.errors import InputError
@@ -134,11 +142,11 @@ def register(subparsers: Any) -> None:
                         help="robot driver (default zerocal)")
     parser.add_argument("--token", help="shared token (default: $ZEROCAL_TOKEN, else the "
                         "simulator's default)")
-    parser.add_argument("--timeout", type=float, default=10.0, help="seconds per request")
+    parser.add_argument("--timeout", type=_positive, default=10.0, help="seconds per request")
     parser.add_argument("--method", choices=tuple(METHOD_CLASSES), default="stereo_target",
                         help="measurement method (default stereo_target)")
-    parser.add_argument("--poses", type=int, default=60, help="fit poses (default 60)")
-    parser.add_argument("--verify-poses", type=int, default=10,
+    parser.add_argument("--poses", type=_count(1), default=60, help="fit poses (default 60)")
+    parser.add_argument("--verify-poses", type=_count(0), default=10,
                         help="fresh verification poses after the push (default 10; 0 = none)")
     parser.add_argument("--seed", type=int, default=0, help="planning seed (default 0)")
     add_model_options(parser)
@@ -151,7 +159,7 @@ def register(subparsers: Any) -> None:
                         "captures through the controller)")
     parser.add_argument("--depth", choices=("triangulate", "sgbm"), default="triangulate",
                         help="stereo depth method (default triangulate)")
-    parser.add_argument("--pixel-floor", type=float, default=0.01, metavar="PX",
+    parser.add_argument("--pixel-floor", type=_non_negative, default=0.01, metavar="PX",
                         help="systematic floor (px per image coordinate) added to each "
                         "measured covariance for rig calibration and detection errors "
                         "(default 0.01; 0 = image noise only)")
@@ -168,21 +176,27 @@ def register(subparsers: Any) -> None:
                         help="push despite a guard rail (a correction beyond "
                         "--max-correction, a fit that did not converge or does not explain "
                         "the measurements; on a resume: push again after a rollback)")
-    parser.add_argument("--max-correction", type=float, default=None, metavar="DEG",
+    parser.add_argument("--max-correction", type=_positive, default=None, metavar="DEG",
                         help="largest correction pushed without --force (default 2 deg)")
-    parser.add_argument("--verify-factor", type=float, default=None,
-                        help="verification passes if RMS <= this x the noise RMS the fit "
-                        "measured (default 1.2)")
-    parser.add_argument("--speed", type=float, default=0.5, help="motion speed (0, 1]")
+    parser.add_argument("--verify-alpha", type=_probability, default=None, metavar="P",
+                        help="false-FAIL rate of the verification's chi-square test "
+                        "(default 0.01; docs/calibrate.md)")
+    parser.add_argument("--verify-tolerance", type=_positive, default=None, metavar="MM",
+                        help="station tolerance: verification also FAILs if the RMS after "
+                        "the push exceeds MM (default: none)")
+    parser.add_argument("--verify-factor", type=_positive, default=None, metavar="F",
+                        help="the verification test takes the measurement noise as F x the "
+                        "stated noise (default 1)")
+    parser.add_argument("--speed", type=_speed, default=0.5, help="motion speed (0, 1]")
     parser.add_argument("--criterion", choices=("D", "random"), default="D",
                         help="pose selection (default D-optimal)")
-    parser.add_argument("--target-sigma", type=float, default=None, metavar="DEG",
+    parser.add_argument("--target-sigma", type=_positive, default=None, metavar="DEG",
                         help="stop adding fit poses once every identifiable joint offset's "
                         "predicted sigma is <= DEG (then --poses is the most)")
-    parser.add_argument("--candidates", type=int, default=1500,
+    parser.add_argument("--candidates", type=_count(1), default=1500,
                         help="candidate pool size of the planner (default 1500)")
     parser.add_argument("--scenario", metavar="FILE", help="with --robot sim: scenario file")
-    parser.add_argument("--time-scale", type=float, default=0.0,
+    parser.add_argument("--time-scale", type=_non_negative, default=0.0,
                         help="with --robot sim: wall seconds per simulated second (default 0)")
     parser.add_argument("--out", metavar="DIR", help="run folder (default ./zerocal-runs/...)")
     add_archive_options(parser, read=False)
@@ -191,6 +205,66 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--json", action="store_true", help="print the result document")
     add_sensor_options(parser)
     parser.set_defaults(func=run)
+    parser.error = types.MethodType(_one_line_error, parser)
+
+
+# ---------------------------------------------------------------- option values
+# Every numeric option is checked by the parser: finite and in range, else one line, exit 2.
+
+def _one_line_error(parser: argparse.ArgumentParser, message: str) -> NoReturn:
+    """A bad option: one line on stderr, exit 2 (no usage block)."""
+    parser.exit(2, f"hostpc calibrate: error: {message}\n")
+
+
+def _finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a finite number")
+    return value
+
+
+def _positive(text: str) -> float:
+    value = _finite(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be positive")
+    return value
+
+
+def _non_negative(text: str) -> float:
+    value = _finite(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: must not be negative")
+    return value
+
+
+def _probability(text: str) -> float:
+    value = _finite(text)
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be in (0, 1)")
+    return value
+
+
+def _speed(text: str) -> float:
+    value = _finite(text)
+    if not 0.0 < value <= 1.0:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be in (0, 1]")
+    return value
+
+
+def _count(minimum: int) -> Callable[[str], int]:
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"{text!r}: must be at least {minimum}")
+        return value
+    parse.__name__ = "count"
+    return parse
 
 
 def _settings(args: argparse.Namespace) -> RunSettings:
@@ -227,7 +301,9 @@ def _settings(args: argparse.Namespace) -> RunSettings:
         effects=args.effects, plugins=tuple(args.plugin), loss=args.loss,
         cv_folds=args.cv_folds, speed=args.speed, push=args.push is not False,
         force=bool(args.force), max_correction_deg=max_correction,
-        verify_factor=1.2 if args.verify_factor is None else args.verify_factor,
+        verify_factor=1.0 if args.verify_factor is None else args.verify_factor,
+        verify_alpha=0.01 if args.verify_alpha is None else args.verify_alpha,
+        verify_tolerance_mm=args.verify_tolerance,
         criterion=args.criterion, n_candidates=args.candidates, options=options,
         target_sigma_deg=args.target_sigma,
     )
@@ -255,13 +331,17 @@ def run(args: argparse.Namespace) -> int:
     known = None
     if args.resume:
         run_dir = Path(args.resume)
-        header = Journal(run_dir).read_header()
+        journal = Journal(run_dir)
+        header = journal.read_header()
+        journal.load()  # a damaged journal line: one line, exit 2, before connecting
         recorded = header.get("robot", {})
         sim = bool(recorded.get("sim"))
         address = parse_robot(args.robot) if args.robot else (
             RobotAddress(sim=True) if sim else parse_robot(str(recorded.get("address", ""))))
         driver = recorded.get("driver", args.driver)
         scenario_file = None
+        if args.effects is not None or args.plugin:
+            check_model_options(args.effects, tuple(args.plugin))
     elif args.replay:  # a recorded run again, without a robot (hostpc.sensors)
         address, driver, settings, cell_file, known, run_dir = replay_inputs(args, _default_out)
         scenario_file = None
@@ -277,14 +357,15 @@ def run(args: argparse.Namespace) -> int:
         _check_rig(settings)
         cell_file = load_cell_file(args.cell) if args.cell else None
         known = parse_known(args.known)
+        check_known_frames(settings.method, known)
+        check_model_options(settings.effects, settings.plugins)
         run_dir = Path(args.out) if args.out else _default_out(settings.method)
-        if Journal(run_dir).exists:
-            raise InputError(f"--out {run_dir}: already holds a run; continue it with "
-                             f"--resume {run_dir} or choose another folder")
+        check_out_folder(run_dir)
         scenario_file = args.scenario
     if args.scenario and not address.sim:
         raise InputError("--scenario needs --robot sim")
     progress = StderrProgress()
+    created = not run_dir.exists()
     try:
         with sigterm_as_interrupt():
             outcome = _run_with_robot(args, address, driver, run_dir, settings, cell_file,
@@ -298,6 +379,10 @@ def run(args: argparse.Namespace) -> int:
             print("hostpc calibrate: interrupted before the run started (nothing to resume)",
                   file=sys.stderr)
         return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
+    except BaseException:
+        if created and not Journal(run_dir).exists:  # failed before the run started
+            shutil.rmtree(run_dir, ignore_errors=True)
+        raise
     finally:
         progress.close()
     if args.json:
@@ -385,7 +470,11 @@ async def _calibrate(args: argparse.Namespace, address: RobotAddress, driver: st
     try:
         overrides = {"push": args.push, "force": args.force,
                      "max_correction_deg": args.max_correction,
-                     "verify_factor": args.verify_factor}
+                     "verify_factor": args.verify_factor,
+                     "verify_alpha": args.verify_alpha,
+                     "verify_tolerance_mm": args.verify_tolerance,
+                     "effects": args.effects,
+                     "plugins": tuple(args.plugin) or None}
         runner = Runner(robot, run_dir, robot_info=info, settings=settings,
                         cell_file=cell_file, known=known, default_known=default_known,
                         progress=progress, truth=truth, report=not args.no_report,

@@ -87,6 +87,8 @@ def run(args: argparse.Namespace) -> int:
                          "give the address of a running controller")
     now, how = asyncio.run(_rollback(address, args, rollback_id, previous, record))
     matches = previous is None or bool(np.allclose(now, previous, rtol=0.0, atol=1e-12))
+    if args.run and how != "not_pushed":
+        _journal_rollback(Path(args.run), now, how, str(address))
     document = {
         "controller": str(address),
         "rollback_id": record.get("rollback_id") if record is not None else rollback_id,
@@ -120,7 +122,38 @@ async def _rollback(address: RobotAddress, args: argparse.Namespace, rollback_id
     robot = await open_robot(address, args.driver, token=args.token, timeout=args.timeout)
     try:
         if record is not None:
+            _warn_later_push(np.asarray(await robot.get_offsets(), float), record)
             return await rollback_run(robot, record)
         return await rollback(robot, rollback_id, previous)
     finally:
         await robot.close()
+
+
+def _journal_rollback(run_dir: Path, now: np.ndarray, how: str, controller: str) -> None:
+    """Record the rollback in the run's journal, so that `hostpc calibrate --resume` says
+    "rolled back" (and only then: previous offsets without this event mean a lost push)."""
+    import datetime as _dt
+
+    from hostpc.methods.journal import Journal
+
+    journal = Journal(run_dir)
+    if journal.exists:
+        journal.event("rollback", how=how, controller=controller,
+                      offsets=[float(v) for v in now],
+                      time=_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"))
+
+
+def _warn_later_push(now: np.ndarray, record: dict[str, Any]) -> None:
+    """Warn (stderr) if the controller's offsets are neither the ones the run pushed nor
+    the ones it replaced: someone pushed later, and rolling back discards that push."""
+    import sys
+
+    from hostpc.methods.push import same_offsets
+
+    if record.get("rollback_id") is None:
+        return  # settled from the offsets by rollback_run, which refuses this case
+    if not (same_offsets(now, record["new_offsets"])
+            or same_offsets(now, record["previous_offsets"])):
+        print("hostpc rollback: warning: the controller's zero offsets are not the ones this "
+              "run pushed (another host pushed later?): rolling back discards that later "
+              "push", file=sys.stderr)

@@ -59,9 +59,10 @@ class RunSettings:
     and every random choice; effects: the fit's effect spec (None: default model);
     speed: motion speed, fraction of max; push: write the compensated offsets;
     force: push despite a guard rail (correction beyond max_correction_deg, a fit that did
-    not converge or does not explain the data); verify_factor: pass if the verify RMS <=
-    verify_factor x the noise RMS the fit measured; criterion: planner criterion ("D" or
-    "random"); n_candidates: size of the candidate pool; options: method-specific
+    not converge or does not explain the data); verify_alpha: the verification's false-FAIL
+    rate; verify_tolerance_mm: a station's RMS tolerance (mm) or None; verify_factor: the
+    verification test's noise = this x the stated noise (verify.py); criterion: planner
+    criterion ("D" or "random"); n_candidates: size of the candidate pool; options: method-specific
     settings (e.g. stereo_target "depth": "triangulate" | "sgbm"); target_sigma_deg: stop
     adding fit poses once every identifiable joint offset's predicted sigma is <= this
     (deg; n_poses is then the most), None: n_poses poses.
@@ -79,7 +80,9 @@ class RunSettings:
     push: bool = True
     force: bool = False
     max_correction_deg: float = 2.0
-    verify_factor: float = 1.2
+    verify_factor: float = 1.0
+    verify_alpha: float = 0.01
+    verify_tolerance_mm: float | None = None
     criterion: str = "D"
     n_candidates: int = 1500
     options: Mapping[str, Any] = field(default_factory=dict)
@@ -158,11 +161,25 @@ class SampleRecord:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> SampleRecord:
-        """Inverse of to_dict."""
+        """Inverse of to_dict; ValueError naming the field if `data` is not a record."""
+        phase, index, status = data.get("phase"), data.get("index"), data.get("status")
+        if phase not in ("fit", "verify"):
+            raise ValueError(f"phase {phase!r} is not 'fit' or 'verify'")
+        if not isinstance(index, int) or isinstance(index, bool) or index < 0:
+            raise ValueError(f"index {index!r} is not a non-negative integer")
+        if status not in ("ok", "skipped"):
+            raise ValueError(f"status {status!r} is not 'ok' or 'skipped'")
+        sample = data.get("sample")
+        if status == "ok" and not isinstance(sample, Mapping):
+            raise ValueError("a measured record has no sample object")
+        q_end = data.get("q_end")
+        if q_end is not None and not (isinstance(q_end, list) and all(
+                isinstance(v, int | float) and not isinstance(v, bool) for v in q_end)):
+            raise ValueError(f"q_end {str(q_end)[:40]!r} is not a list of numbers")
         return cls(
-            phase=data["phase"],
-            index=int(data["index"]),
-            ok=data["status"] == "ok",
+            phase=phase,
+            index=index,
+            ok=status == "ok",
             sample=data.get("sample"),
             reason=data.get("reason"),
             q_end=data.get("q_end"),

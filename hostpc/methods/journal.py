@@ -13,7 +13,8 @@ Files in the run folder DIR:
                events of the run (`push_intent` written before the controller's offsets
                are, `push` after, `note`). Samples are keyed by (phase, index): a
                record already present is never replaced, so a resume neither repeats nor
-               loses a pose. A torn last line (power cut mid-write) is ignored on reading
+               loses a pose (a pose journaled as skipped may be measured again: the later record
+               replaces it). A torn last line (power cut mid-write) is ignored on reading
                and cut off before the next append.
 
 Everything is in SI units and radians.
@@ -81,6 +82,37 @@ def shift_sample_t(sample: Mapping[str, Any], dt: float) -> dict[str, Any]:
     return out
 
 
+_OFFSET_FIELDS = {
+    "push": ("previous_offsets", "new_offsets"),
+    "push_intent": ("previous_offsets", "new_offsets"),
+    "verify_start": ("offsets", "pushed_delta"),
+    "verify": ("offsets",),
+    "result": ("offsets",),
+    "rollback": ("offsets",),
+}
+
+
+def _numbers(value: Any) -> bool:
+    return isinstance(value, list) and all(
+        isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+
+
+def _event_problem(obj: Mapping[str, Any]) -> str:
+    """Why a journaled event cannot be used ("" if it can): the events resume reads must
+    carry their offsets as lists of numbers (and a verify round its integer indices)."""
+    kind = obj.get("event")
+    if not isinstance(kind, str):
+        return f"event {kind!r} is not a name"
+    for name in _OFFSET_FIELDS.get(kind, ()):
+        if not _numbers(obj.get(name)):
+            return f"{kind} event: {name} is not a list of numbers"
+    if kind == "verify_start" and not all(
+            isinstance(obj.get(k), int) and not isinstance(obj.get(k), bool)
+            for k in ("round", "first")):
+        return "verify_start event: round and first must be integers"
+    return ""
+
+
 class Journal:
     """The journal of one run folder (see the module docstring)."""
 
@@ -132,7 +164,7 @@ class Journal:
             if raw.endswith(b"\n"):
                 try:
                     obj = json.loads(raw)
-                except ValueError:
+                except (ValueError, RecursionError):
                     obj = None
             yield number, offset, number == len(lines), obj if isinstance(obj, dict) else None
             offset += len(raw)
@@ -153,9 +185,19 @@ class Journal:
                     os.fsync(handle.fileno())
                 break
             if obj.get("event") == "sample":
-                record = SampleRecord.from_dict(obj)
-                self._samples.setdefault((record.phase, record.index), record)
+                try:
+                    record = SampleRecord.from_dict(obj)
+                except ValueError as exc:
+                    raise InputError(f"{self.journal_path}: line {number}: not a sample "
+                                     f"record ({exc}); repair or remove it to resume") from None
+                key = (record.phase, record.index)
+                if key not in self._samples or not self._samples[key].ok:
+                    self._samples[key] = record  # a skipped pose measured again later
             else:
+                problem = _event_problem(obj)
+                if problem:
+                    raise InputError(f"{self.journal_path}: line {number}: {problem}; "
+                                     "repair or remove it to resume")
                 self._events.append(obj)
         self._loaded = True
 
@@ -172,10 +214,12 @@ class Journal:
             os.fsync(handle.fileno())
 
     def record(self, record: SampleRecord) -> bool:
-        """Append a sample record; False (nothing written) if that pose is already there."""
+        """Append a sample record; False (nothing written) if that pose is already measured.
+        A pose journaled as skipped may be recorded again (measured again on a resume):
+        the later record replaces it."""
         self._ensure_loaded()
         key = (record.phase, record.index)
-        if key in self._samples:
+        if key in self._samples and self._samples[key].ok:
             return False
         self._append(record.to_dict())
         self._samples[key] = record
@@ -187,6 +231,11 @@ class Journal:
         obj = {"event": kind, **fields}
         self._append(obj)
         self._events.append(obj)
+
+    def get(self, phase: str, index: int) -> SampleRecord | None:
+        """The record of pose (phase, index), or None."""
+        self._ensure_loaded()
+        return self._samples.get((phase, index))
 
     def has(self, phase: str, index: int) -> bool:
         """True if pose (phase, index) is journaled (measured or skipped)."""

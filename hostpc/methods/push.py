@@ -39,8 +39,13 @@ from hostpc.robots.base import RobotAdapter
 
 PUSH_FILE = "push.json"
 DEFAULT_MAX_CORRECTION_DEG = 2.0
-ADEQUACY_ALPHA = 1e-3
-"""A fit whose chi2 exceeds the chi-square upper quantile at this level refuses the push."""
+try:  # one adequacy rule for push and diagnose: the threshold lives in diagnostics
+    from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN  # type: ignore[attr-defined]
+except ImportError:  # not defined there yet: the same value, under the same name
+    ADEQUACY_P_MIN = 1e-3
+ADEQUACY_ALPHA: float = ADEQUACY_P_MIN
+"""A fit whose chi2 exceeds the chi-square upper quantile at this level (chi-square p-value
+below ADEQUACY_P_MIN) refuses the push."""
 OFFSET_MATCH_TOLERANCE = 1e-9  # rad: controller offsets "equal" to a recorded set
 
 
@@ -309,3 +314,18 @@ async def rollback(robot: RobotAdapter, rollback_id: str,
             raise
     await robot.set_offsets(np.asarray(previous, float))
     return np.asarray(await robot.get_offsets(), float), "previous_offsets_written"
+
+
+def export_offsets(robot: RobotAdapter, run_dir: Path, robot_name: str, plan: PushPlan,
+                   status: str, progress: Any) -> dict[str, str] | None:
+    """For a robot that keeps no zero offsets (an adapter with `export_offsets`, the UR
+    driver) write the compensated offsets as files into the run folder: the only lasting
+    form of its push. None if the adapter writes the controller or nothing is pushed."""
+    export = getattr(robot, "export_offsets", None)
+    if (not callable(export) or status not in ("pushed", "disabled") or plan.refused
+            or not plan.anything):
+        return None
+    paths = export(run_dir, robot_name, plan.new)
+    progress.message("offsets exported for the robot's own software: "
+                     + ", ".join(str(path) for path in paths.values()))
+    return {kind: str(path) for kind, path in paths.items()}

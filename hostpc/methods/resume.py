@@ -11,6 +11,7 @@ appends to the run's `Journal`; nothing here talks to the robot.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -18,14 +19,16 @@ from typing import Any
 
 import numpy as np
 
-from hostpc.errors import InputError
+from hostpc.errors import ControllerError, InputError
 from hostpc.methods.base import Progress, RunSettings, SampleRecord
 from hostpc.methods.journal import Journal, sample_times, shift_sample_t, write_json_atomic
 from hostpc.methods.push import PUSH_FILE, PushRecord, intent_outcome, same_offsets
 from hostpc.robots.base import RobotState
 
-RESUME_OVERRIDABLE = frozenset({"push", "force", "max_correction_deg", "verify_factor"})
-"""Settings a resume may change (they act after the measurements)."""
+RESUME_OVERRIDABLE = frozenset({"push", "force", "max_correction_deg", "verify_factor",
+                                "verify_alpha", "verify_tolerance_mm", "effects", "plugins"})
+"""Settings a resume may change (they act after the measurements: a new model refits the
+measured dataset, then pushes and verifies)."""
 CLOCK_TOLERANCE_S = 1e-6
 
 
@@ -141,27 +144,117 @@ def settle_push_intent(journal: Journal, run_dir: Path, address: str, progress: 
                          "controller (it has the previous offsets)")
 
 
-def journaled_push(journal: Journal, run_dir: Path, progress: Progress,
-                   offsets_now: np.ndarray, push_asked: bool, zero: np.ndarray
-                   ) -> tuple[str, np.ndarray] | None:
-    """The status of the push this run already journaled, from the controller's offsets:
-    ("pushed", the delta in the controller) if it has them; ("rolled_back", `zero`) if
-    it has the previous ones again and the resume did not ask for the push (`push_asked`:
-    --push or --force); None if there is no journaled push or it is to be pushed again."""
+class PushLost(ControllerError):
+    """The controller no longer has the offsets this run pushed (it has its previous ones
+    again, and no rollback was journaled: it restarted, or someone wrote them)."""
+
+
+class VerifyLost(ControllerError):
+    """Every verification pose of this round was skipped: no verdict (resumable)."""
+
+
+def push_state(journal: Journal, run_dir: Path, progress: Progress, offsets_now: np.ndarray,
+               push_asked: bool, zero: np.ndarray) -> tuple[str, np.ndarray] | None:
+    """The status of the push this run already journaled, from the controller's offsets.
+
+    ("pushed", the delta in the controller) if it has the pushed offsets; ("rolled_back",
+    `zero`) if it has the previous ones and `hostpc rollback --run` journaled a rollback
+    since; PushLost if it has the previous ones without a journaled rollback; None if there
+    is no journaled push, or the resume asks for the push again (`push_asked`)."""
     pushes = journal.events("push")
     if not pushes:
         return None
     new = np.asarray(pushes[-1]["new_offsets"], float)
     previous = np.asarray(pushes[-1]["previous_offsets"], float)
     if same_offsets(offsets_now, new):
+        verified = any(same_offsets(e.get("offsets", ()), new)
+                       for e in journal.events("verify"))
+        progress.message("resume after the push: the controller has the pushed offsets; "
+                         + ("already verified" if verified
+                            else "not verified yet: verifying now on fresh poses"))
         return "pushed", new - previous
-    if same_offsets(offsets_now, previous) and not push_asked:
+    if push_asked:
+        return None
+    last = journal.last_event("push", "rollback")
+    if last is not None and last["event"] == "rollback":
         progress.message(
-            f"the push journaled in {run_dir} was rolled back (the controller "
-            "has its previous offsets again): not pushing again; resume with --push "
-            "(or --force) to push again")
+            f"the push journaled in {run_dir} was rolled back ({last.get('time', '')}, the "
+            "controller has its previous offsets again): not pushing again; resume with "
+            "--push (or --force) to push again")
         return "rolled_back", zero
-    return None
+    raise PushLost(
+        "push lost: the controller no longer has the offsets this run pushed (it has the "
+        "previous ones again and no rollback was journaled: it restarted, or someone wrote "
+        f"them); push again with: hostpc calibrate --resume {run_dir} --push")
+
+
+def verify_round(journal: Journal, offsets: np.ndarray, pushed_delta: np.ndarray,
+                 n_verify: int) -> tuple[int, int]:
+    """(round, first sample index) of the verification to measure now.
+
+    The verification poses are measured in rounds, each under one set of controller
+    offsets (journal event `verify_start`); sample indices of round r are r*K .. r*K+K-1
+    (K = n_verify, pose i % K). The last round continues if it was measured under these
+    offsets and pushed delta and is not lost (every pose skipped); else a new round starts,
+    so a verdict only ever uses poses measured after the push it judges."""
+    rounds = journal.events("verify_start")
+    if rounds:
+        last = rounds[-1]
+        first = int(last["first"])
+        records = [r for r in journal.records("verify") if first <= r.index < first + n_verify]
+        lost = len(records) == n_verify and not any(r.ok for r in records)
+        if (same_offsets(last["offsets"], offsets)
+                and same_offsets(last["pushed_delta"], pushed_delta) and not lost):
+            return int(last["round"]), first
+    used = [r.index for r in journal.records("verify")]
+    number = len(rounds) if not used else max(len(rounds), max(used) // n_verify + 1)
+    journal.event("verify_start", round=number, first=number * n_verify,
+                  offsets=[float(v) for v in offsets],
+                  pushed_delta=[float(v) for v in pushed_delta])
+    return number, number * n_verify
+
+
+def stored_result(journal: Journal, run_dir: Path, offsets_now: np.ndarray, asked: bool,
+                  progress: Progress) -> dict[str, Any] | None:
+    """The finished run's result document if this resume has nothing to do: the run wrote
+    its result (journal event `result`) under the offsets the controller has now, and the
+    resume asks for nothing new (`asked`: --push, --force, --effects, ...) or the stored
+    verdict is PASS (never overwritten). None: continue the run."""
+    final = journal.last_event("result")
+    path = run_dir / "result.json"
+    if final is None or not path.is_file() or not same_offsets(final["offsets"], offsets_now):
+        return None
+    if asked and final.get("verdict") != "PASS":
+        return None
+    try:
+        document: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    status = (document.get("push") or {}).get("status")
+    verdict = final.get("verdict")
+    if status == "pushed" and verdict is not None:
+        what = f"already pushed and verified ({verdict})"
+    else:
+        what = f"already finished (push: {status}, verification: {verdict or 'none'})"
+    note = ("; a PASS result is never overwritten: start a new run to change it"
+            if asked else "")
+    progress.message(f"{what}: the stored result follows; nothing changed{note}")
+    return document
+
+
+def archive_result(run_dir: Path) -> None:
+    """Before a resume writes a new result: keep the old result.json / summary.txt as
+    result.N.json / summary.N.txt (N = 1, 2, ...), so no verdict is ever overwritten."""
+    old = run_dir / "result.json"
+    if not old.is_file():
+        return
+    number = 1
+    while (run_dir / f"result.{number}.json").exists():
+        number += 1
+    old.rename(run_dir / f"result.{number}.json")
+    summary = run_dir / "summary.txt"
+    if summary.is_file():
+        summary.rename(run_dir / f"summary.{number}.txt")
 
 
 def _deg_list(values: np.ndarray) -> str:

@@ -1,26 +1,20 @@
 """The calibration procedure every method shares (`hostpc calibrate`).
 
-    S1  read the controller's state and zero offsets (a resume checks they did not change)
-        and build the nominal cell (controller description, --cell, --known)
+    S1  read the controller's state and zero offsets; build the nominal cell
     --  method.prepare (e.g. the stereo rig), persisted in the run folder
-    --  plan: candidate pool -> informative poses (planning.py) + verification poses;
-        identifiability check of the plan BEFORE moving; the plan, seed and settings go
-        into run.json
-    S2  acquire: one journaled sample per pose (journal.py); a resume skips what is there
-    S3  dataset.json (zerocal-dataset/1) from the measured fit poses
-    S4  fit (fit.json)
-    S5  guarded push (push.py): old/new shown, limit, unidentifiable joints kept
-    --  verify (verify.py): fresh poses after the push, before vs after, pass/fail
-    --  result.json, summary.txt (summary.py) and, if the diagnostics/report packages
-        exist, report.html
+    --  plan (run_plan.py): informative fit poses + verification poses, identifiability
+        checked BEFORE moving; plan, seed and settings go into run.json
+    S2  acquire: one journaled sample per pose (journal.py); an aborted move is measured
+        again (refusals.py); a resume skips what is there
+    S3  dataset.json from the measured fit poses; S4 fit (fit.json)
+    S5  guarded push (push.py); verify (verify.py): a chi-square test on fresh poses
+        measured under the pushed offsets; result.json, summary.txt (summary.py), report
 
-A resume (resume.py) checks the controller's offsets, settles a push cut short and keeps
-sample time continuing.
-
-The runner talks to the robot only through `RobotAdapter` and to the method only through
-`Method`. Truth (simulation only) comes from a callable, read at S1, before any push.
-Exit codes beyond hostpc.errors: 5 = push refused by a guard rail, 6 = verification of the
-pushed offsets failed (with nothing pushed the verification is a model check: reported only).
+A resume (resume.py) checks the controller's offsets, settles a push cut short, prints a
+finished run's stored result unchanged, and tells a lost push from a rollback. Controller
+refusals end as one `RunStopped` line with the resume hint (exit 4). Exit codes beyond
+hostpc.errors: 5 = push refused by a guard rail, 6 = verification of the pushed offsets
+failed (with nothing pushed the verification is a model check: reported only).
 """
 
 from __future__ import annotations
@@ -39,31 +33,39 @@ from hostpc.dataset import Dataset, dataset_from_dict, save_dataset
 from hostpc.errors import ConnectionFailed, ControllerError, InputError, ZerocalError
 from hostpc.fitting import FitResult, fit
 from hostpc.methods import method_class
-from hostpc.methods.base import Method, NullProgress, Plan, Progress, RunSettings
+from hostpc.methods.base import (
+    Method,
+    NullProgress,
+    Plan,
+    Progress,
+    RunSettings,
+)
 from hostpc.methods.cell import build_cell, cell_from_dict
 from hostpc.methods.journal import Journal, write_json_atomic
-from hostpc.methods.planning import (
-    check_plan,
-    design_matrix,
-    joint_offset_sigmas,
-    make_design,
-    order_for_travel,
-    poses_for_target_sigma,
-    select,
-    select_groups,
-    verify_groups,
+from hostpc.methods.push import (
+    PushPlan,
+    execute_push,
+    export_offsets,
+    plan_push,
+    same_offsets,
 )
-from hostpc.methods.push import PushPlan, execute_push, plan_push
+from hostpc.methods.refusals import MAX_POSE_ATTEMPTS, RunStopped, refusal_text, stopped
 from hostpc.methods.resume import (
     CLOCK_TOLERANCE_S,
     RESUME_OVERRIDABLE,
+    PushLost,
     SampleClock,
+    VerifyLost,
+    archive_result,
     check_resume_offsets,
-    journaled_push,
+    push_state,
     resume_settings,
     settle_push_intent,
+    stored_result,
+    verify_round,
 )
 from hostpc.methods.robot_time import RobotTimer
+from hostpc.methods.run_plan import PlanningError, plan_run
 from hostpc.methods.summary import (
     EXIT_PUSH_REFUSED,
     EXIT_VERIFY_FAILED,
@@ -77,14 +79,11 @@ from hostpc.methods.verify import VerifyResult, evaluate_verify
 from hostpc.robots.base import RobotAdapter, RobotState
 
 __all__ = [
-    "CLOCK_TOLERANCE_S", "EXIT_PUSH_REFUSED", "EXIT_VERIFY_FAILED", "RESULT_FORMAT",
+    "CLOCK_TOLERANCE_S", "EXIT_PUSH_REFUSED", "EXIT_VERIFY_FAILED", "MAX_POSE_ATTEMPTS",
+    "RESULT_FORMAT", "RunStopped",
     "RESUME_OVERRIDABLE", "PlanningError", "RobotInfo", "RunOutcome", "Runner",
     "format_summary", "truth_comparison",
 ]
-
-class PlanningError(InputError):
-    """The planned poses cannot separate the model's parameters (or none are reachable)."""
-
 
 @dataclass(frozen=True)
 class RobotInfo:
@@ -163,11 +162,19 @@ class Runner:
         except ConnectionFailed as exc:
             raise ConnectionFailed(f"{exc}; {self._journaled()} continue with: hostpc "
                                    f"calibrate --resume {self.run_dir}") from exc
-        except ControllerError as exc:
-            if not self.journal.exists:
+        except PushLost as exc:
+            if not self.robot_info.sim:
                 raise
-            raise type(exc)(f"{exc}; {self._journaled()} continue with: hostpc calibrate "
-                            f"--resume {self.run_dir}") from exc
+            raise PushLost(f"{exc} (a resumed --robot sim run restarts the simulated "
+                           "controller with its initial offsets)") from None
+        except VerifyLost:
+            raise  # its message says what happened and how to go on
+        except ControllerError as exc:
+            hint = (f"{self._journaled()} continue with: hostpc calibrate --resume "
+                    f"{self.run_dir}" if self.journal.exists
+                    else "nothing measured yet; rerun when the controller is ready")
+            raise RunStopped(f"{refusal_text(exc)}; {hint}", getattr(exc, "code", None),
+                             getattr(exc, "reason", None)) from exc
 
     def _journaled(self) -> str:
         if not self.journal.exists:
@@ -185,12 +192,20 @@ class Runner:
         if resume:
             self.header = self.journal.read_header()
             self.journal.load()
-            settings = resume_settings(RunSettings.from_dict(self.header["settings"]),
-                                       self.resume_overrides, self.journal, progress)
-            cell = cell_from_dict(self.header["cell"])
             initial = self.header["initial"]
             check_resume_offsets(self.journal, self.run_dir,
                                  np.asarray(initial["zero_offsets"], float), offsets)
+            settle_push_intent(self.journal, self.run_dir, self.robot_info.address, progress,
+                               offsets)
+            stored = stored_result(self.journal, self.run_dir, offsets, self._asked(),
+                                   progress)
+            if stored is not None:
+                progress.close()
+                return RunOutcome(self.run_dir, stored, format_summary(stored),
+                                  int(stored.get("exit_code", 0)))
+            settings = resume_settings(RunSettings.from_dict(self.header["settings"]),
+                                       self.resume_overrides, self.journal, progress)
+            cell = cell_from_dict(self.header["cell"])
             self._clock.last_t = self.journal.last_sample_t()
             progress.message(f"resuming {self.run_dir}: "
                              f"{len(self.journal.records('fit'))} fit and "
@@ -210,7 +225,6 @@ class Runner:
                 "cell": cell.to_dict(),
                 "initial": initial,
             }
-            self.journal.write_header(self.header)
 
         method = method_class(settings.method)(settings, cell, self.run_dir)
         if hasattr(method, "set_time_origin"):
@@ -219,14 +233,16 @@ class Runner:
             # the method's own default model (sphere_probe: + trigger_latency)
             settings = dataclasses.replace(settings, effects=method.default_effects())
         method.check_inputs()
-        timer = RobotTimer(self.robot, self.journal, state)  # robot time (robot_time.py)
+        if not resume:  # the run exists from here on (a failed check leaves nothing)
+            self.journal.write_header(self.header)
+        self._timer = RobotTimer(self.robot, self.journal, state)  # robot time (robot_time.py)
         await method.prepare(self.robot, progress)
-        await timer.end("rig")
+        await self._timer.end("rig")
 
         if "plan" in self.header:
             plan = Plan.from_dict(self.header["plan"])
         else:
-            plan = self._plan(method, state, settings)
+            plan = plan_run(method, state, settings, progress)
             self.header["plan"] = plan.to_dict()
             self.journal.write_header(self.header)
         for text in plan.info.get("structural_unidentifiable", []):
@@ -234,14 +250,19 @@ class Runner:
 
         q_from = self.journal.last_q()
         q_now = np.asarray(q_from, float) if q_from is not None else state.q
-        timer.begin()
+        self._timer.begin()
         q_now = await self._acquire(method, "fit", plan.q, q_now)
-        await timer.end("measure")
+        await self._timer.end("measure")
 
-        dataset = self._dataset(method, "fit")
-        if dataset.n_samples < 3:
-            raise ZerocalError(f"only {dataset.n_samples} of {plan.q.shape[0]} poses measured; "
+        n_measured = sum(r.ok for r in self.journal.records("fit"))
+        if n_measured < 3 and any(stopped(r) for r in self.journal.records("fit")):
+            raise RunStopped(f"measurement stopped: only {n_measured} of {plan.q.shape[0]} fit "
+                             "poses measured, their moves were stopped (aborted) again and "
+                             "again")
+        if n_measured < 3:
+            raise ZerocalError(f"only {n_measured} of {plan.q.shape[0]} poses measured; "
                                "nothing to fit (see the skipped reasons in journal.jsonl)")
+        dataset = self._dataset(method, "fit")
         save_dataset(dataset, self.run_dir / "dataset.json")
 
         progress.stage("fit")
@@ -255,21 +276,15 @@ class Runner:
         initial_offsets = np.asarray(initial["zero_offsets"], float)
         push_plan = plan_push(result, initial_offsets, settings.max_correction_deg,
                               settings.force, dataset_file=str(self.run_dir / "dataset.json"))
-        push_status, pushed_delta = await self._push(push_plan, settings, offsets)
-        exports = self._export_offsets(cell.robot, push_plan, push_status)
+        push_status, pushed_delta, offsets = await self._push(push_plan, settings, offsets)
+        exports = export_offsets(self.robot, self.run_dir, cell.robot, push_plan,
+                                 push_status, progress)
 
         verify_result: VerifyResult | None = None
-        if settings.n_verify > 0 and plan.q_verify.shape[0] > 0:
-            timer.begin()
-            await self._acquire(method, "verify", plan.q_verify, q_now)
-            await timer.end("verify")
-            verify_dataset = self._dataset(method, "verify")
-            if verify_dataset.n_samples > 0:
-                save_dataset(verify_dataset, self.run_dir / "verify_dataset.json")
-                verify_result = evaluate_verify(result, verify_dataset, pushed_delta,
-                                                plan.q_verify.shape[0],
-                                                settings.verify_factor)
-                write_json_atomic(self.run_dir / "verify.json", verify_result.to_dict())
+        if (settings.n_verify > 0 and plan.q_verify.shape[0] > 0
+                and push_status != "rolled_back"):
+            verify_result = await self._verify(method, plan, result, settings, offsets,
+                                               pushed_delta, q_now)
 
         document = result_document(self.journal, self.run_dir, self.robot_info.to_dict(),
                                    settings, cell, plan, method, dataset, result, push_plan,
@@ -278,133 +293,123 @@ class Runner:
             document["push"].update(on_controller=False, exports=exports)
             document["files"].update({f"ur_{kind}": path for kind, path in exports.items()})
         summary = format_summary(document)
+        archive_result(self.run_dir)
         (self.run_dir / "summary.txt").write_text(summary + "\n", encoding="utf-8")
         if self.report:
             report_file = self._write_report(dataset, settings, document, truth)
             if report_file:
                 document["files"]["report"] = report_file
         write_json_atomic(self.run_dir / "result.json", document)
+        self.journal.event("result", exit_code=document["exit_code"], push=push_status,
+                           verdict=None if verify_result is None else verify_result.verdict,
+                           offsets=[float(v) for v in offsets])
         progress.close()
         return RunOutcome(self.run_dir, document, summary, document["exit_code"], result,
                           dataset, verify_result, push_plan)
 
     # ------------------------------------------------------------------ steps
 
-    def _plan(self, method: Method, state: RobotState, settings: RunSettings) -> Plan:
-        """Candidate pool, informative selection, order, verification poses, check."""
-        progress = self.progress
-        progress.stage("plan")
-        rng = np.random.default_rng(settings.seed)
-        pool = method.candidates(state, rng)
-        needed = settings.n_poses + settings.n_verify
-        if pool.shape[0] < max(needed, 1):
-            raise PlanningError(
-                f"only {pool.shape[0]} reachable poses see the target (need {needed}); check "
-                "the cell (target position, camera mount) and the joint limits")
-        A, names, units = design_matrix(method.design_dataset(pool), settings.effects,
-                                        settings.plugins)
-        design = make_design(A, names, units)
-        structural = design.structural
-        groups = method.pose_groups(pool)
-        if groups is None:
-            chosen = select(design, settings.n_poses, settings.criterion, rng)
-            if settings.target_sigma_deg is not None:  # the fewest poses that reach it
-                needed = poses_for_target_sigma(design, chosen,
-                                                math.radians(settings.target_sigma_deg),
-                                                state.q.size, min_poses=3)
-                chosen = chosen if needed is None else chosen[:needed]
-            fit_indices = chosen[order_for_travel(pool[chosen], state.q,
-                                                  tour=settings.target_sigma_deg is not None)]
-        else:  # whole groups (sphere_probe: an orientation's 5 contacts), in the pool order
-            fit_indices = select_groups(design, groups, settings.n_poses, settings.criterion,
-                                        rng)
-        plan_design = design.subset(fit_indices)
-        check = check_plan(plan_design)
-        if not check.ok:
-            lines = "; ".join(d.description for d in check.deficient)
-            raise PlanningError(
-                f"the {len(fit_indices)} planned poses cannot separate the model's parameters "
-                f"(rank {check.plan_rank} of {check.pool_rank}): {lines}. Fix: more poses "
-                "(--poses), fewer effects (--effects), or a wider pose range")
-        q_fit = pool[fit_indices]
-        last = q_fit[-1] if q_fit.shape[0] else state.q
-        if groups is None:
-            rest = np.setdiff1d(np.arange(pool.shape[0]), fit_indices)
-            verify_indices = rng.choice(rest, size=min(settings.n_verify, rest.size),
-                                        replace=False)
-            verify_indices = verify_indices[order_for_travel(pool[verify_indices], last)]
-        else:
-            verify_indices = verify_groups(groups, fit_indices, settings.n_verify, rng)
-        q_verify = pool[verify_indices]
-        sigmas = joint_offset_sigmas(plan_design, state.q.size)
-        info = {
-            "criterion": settings.criterion,
-            "target_sigma_deg": settings.target_sigma_deg,
-            "n_candidates": int(pool.shape[0]),
-            "parameters": list(names),
-            "predicted_joint_sigma_deg": [None if not np.isfinite(s) else math.degrees(s)
-                                          for s in sigmas],
-            "structural_unidentifiable": [d.description for d in structural],
-            "structural_fixed": [d.fixed for d in structural],
-        }
-        progress.message(
-            f"plan: {len(fit_indices)} poses from {pool.shape[0]} candidates "
-            f"({settings.criterion}-optimal), {q_verify.shape[0]} verification poses; "
-            "predicted joint offset sigma "
-            + ", ".join("-" if not np.isfinite(s) else f"{math.degrees(s):.4f}"
-                        for s in sigmas) + " deg")
-        return Plan(q=q_fit, q_verify=q_verify, info=info)
-
     async def _acquire(self, method: Method, phase: str, q_plan: np.ndarray,
-                       q_now: np.ndarray) -> np.ndarray:
-        """Measure every planned pose of `phase` not yet journaled; returns where the
-        robot is."""
+                       q_now: np.ndarray, first: int = 0) -> np.ndarray:
+        """Measure every planned pose of `phase` not yet journaled (sample indices first ..
+        first + K - 1, pose index - first); returns where the robot is. A pose whose move
+        was stopped (an abort) is measured again, up to MAX_POSE_ATTEMPTS times."""
         progress = self.progress
         total = q_plan.shape[0]
         progress.stage("measure" if phase == "fit" else "verify", total)
-        done = len(self.journal.records(phase))
+        done = sum(first <= r.index < first + total for r in self.journal.records(phase))
         progress.advance(done)
-        for index in range(total):
-            if self.journal.has(phase, index):
-                continue
-            record = await method.acquire(self.robot, phase, index, q_plan[index], q_now)  # type: ignore[arg-type]
+        for pose in range(total):
+            index = first + pose
+            journaled = self.journal.get(phase, index)
+            if journaled is not None and (journaled.ok or not stopped(journaled)
+                                          or (phase == "fit" and self._pushed_ever())):
+                continue  # measured, or skipped for good (fit poses: never after a push)
+            for attempt in range(1, MAX_POSE_ATTEMPTS + 1):
+                record = await method.acquire(self.robot, phase, index, q_plan[pose], q_now)  # type: ignore[arg-type]
+                if record.q_end is not None:
+                    q_now = np.asarray(record.q_end, float)
+                if record.ok or not stopped(record) or attempt == MAX_POSE_ATTEMPTS:
+                    break
+                progress.message(f"{phase} pose {pose}: {record.reason}; measuring it again "
+                                 f"(attempt {attempt + 1} of {MAX_POSE_ATTEMPTS})")
+            if not record.ok and stopped(record) and MAX_POSE_ATTEMPTS > 1:
+                record = dataclasses.replace(
+                    record, reason=f"{record.reason} ({MAX_POSE_ATTEMPTS} attempts)")
             record = self._clock.continue_t(record)
             self.journal.record(record)
-            if record.q_end is not None:
-                q_now = np.asarray(record.q_end, float)
             done += 1
             if not record.ok:
-                progress.message(f"{phase} pose {index}: skipped ({record.reason})")
-            progress.advance(done, f"{phase} pose {index + 1}/{total}")
+                progress.message(f"{phase} pose {pose}: skipped ({record.reason})")
+            progress.advance(done, f"{phase} pose {pose + 1}/{total}")
         return q_now
 
-    def _dataset(self, method: Method, phase: str) -> Dataset:
-        samples = [r.sample for r in self.journal.records(phase) if r.ok and r.sample]
-        return dataset_from_dict(method.dataset_document(samples))  # type: ignore[arg-type]
+    def _dataset(self, method: Method, phase: str, first: int = 0,
+                 stop: int | None = None) -> Dataset:
+        samples = [r.sample for r in self.journal.records(phase) if r.ok and r.sample
+                   and first <= r.index and (stop is None or r.index < stop)]
+        return dataset_from_dict(method.dataset_document(samples))
+
+    async def _verify(self, method: Method, plan: Plan, result: FitResult,
+                      settings: RunSettings, offsets: np.ndarray, pushed_delta: np.ndarray,
+                      q_now: np.ndarray) -> VerifyResult:
+        """Measure this round's verification poses (all measured under `offsets`, the
+        controller's now) and test them; VerifyLost if every pose was skipped."""
+        n_verify = plan.q_verify.shape[0]
+        number, first = verify_round(self.journal, offsets, pushed_delta, n_verify)
+        self._timer.begin()
+        await self._acquire(method, "verify", plan.q_verify, q_now, first)
+        await self._timer.end("verify")
+        if not any(r.ok for r in self.journal.records("verify")
+                   if first <= r.index < first + n_verify):
+            reasons = sorted({str(r.reason) for r in self.journal.records("verify")
+                              if first <= r.index < first + n_verify})
+            self.journal.event("verify_lost", round=number)
+            state = ("the pushed offsets stay in the controller"
+                     if np.any(pushed_delta != 0.0) else "nothing was pushed")
+            raise VerifyLost(f"verification lost: all {n_verify} verification poses were "
+                             f"skipped ({'; '.join(reasons)}); {state}; measure them again "
+                             f"with: hostpc calibrate --resume {self.run_dir}")
+        verify_dataset = self._dataset(method, "verify", first, first + n_verify)
+        save_dataset(verify_dataset, self.run_dir / "verify_dataset.json")
+        tolerance = (None if settings.verify_tolerance_mm is None
+                     else settings.verify_tolerance_mm * 1e-3)
+        verify_result = evaluate_verify(result, verify_dataset, pushed_delta, n_verify,
+                                        alpha=settings.verify_alpha, tolerance=tolerance,
+                                        factor=settings.verify_factor)
+        write_json_atomic(self.run_dir / "verify.json", verify_result.to_dict())
+        self.journal.event("verify", round=number, verdict=verify_result.verdict,
+                           statistic=finite_or_none(verify_result.statistic),
+                           dof=verify_result.dof,
+                           p_value=finite_or_none(verify_result.p_value),
+                           offsets=[float(v) for v in offsets])
+        return verify_result
 
     async def _push(self, plan: PushPlan, settings: RunSettings, offsets_now: np.ndarray
-                    ) -> tuple[str, np.ndarray]:
-        """Push (or not); returns (status, the delta now inside the controller).
+                    ) -> tuple[str, np.ndarray, np.ndarray]:
+        """Push (or not); returns (status, the delta now inside the controller relative to
+        the run's initial offsets, the controller's offsets now).
 
-        On a resume: a push cut short (intent journaled, no result) is settled from the
-        controller's offsets; a journaled push whose offsets are in the controller is
-        "pushed"; one the controller no longer has (rolled back) is not repeated unless the
-        resume asks for it (--push or --force): "rolled_back"."""
+        On a resume (resume.push_state): a journaled push whose offsets the controller has
+        is "pushed" (pushed again only if the resume changed the model and the new fit's
+        offsets differ); one it no longer has is "rolled_back" if `hostpc rollback`
+        journaled it, else PushLost; --push / --force push again."""
         progress = self.progress
-        settle_push_intent(self.journal, self.run_dir, self.robot_info.address, progress,
-                           offsets_now)
         zero = np.zeros_like(plan.old)
-        journaled = journaled_push(self.journal, self.run_dir, progress, offsets_now,
-                                   self._push_asked(), zero)
-        if journaled is not None:
-            return journaled
+        journaled = push_state(self.journal, self.run_dir, progress, offsets_now,
+                               self._push_asked(), zero)
+        remodel = any(self.resume_overrides.get(k) for k in ("effects", "plugins"))
+        if journaled is not None and not (
+                remodel and journaled[0] == "pushed" and not plan.refused and plan.anything
+                and not same_offsets(plan.new, offsets_now)):
+            return journaled[0], offsets_now - plan.old, offsets_now
         if not settings.push:
-            return "disabled", zero
+            return "disabled", zero, offsets_now
         if plan.refused:
             progress.message(f"push refused: {plan.refused}")
-            return "refused", zero
+            return "refused", zero, offsets_now
         if not plan.anything:
-            return "nothing_to_push", zero
+            return "nothing_to_push", zero, offsets_now
         progress.stage("push")
         record = await execute_push(self.robot, plan, self.run_dir, self.robot_info.address,
                                     journal=self.journal)
@@ -413,30 +418,26 @@ class Runner:
             f"{labels[j]} {math.degrees(o):+.4f}->{math.degrees(n):+.4f}"
             for j, (o, n) in enumerate(zip(plan.old, plan.new, strict=True)) if plan.pushed[j])
             + f" deg (rollback id {record.rollback_id})")
-        return "pushed", plan.delta.copy()
+        return "pushed", plan.delta.copy(), plan.new.copy()
+
+    def _pushed_ever(self) -> bool:
+        """True if this run ever wrote (or meant to write) the controller's offsets."""
+        return self.journal.last_event("push_intent", "push") is not None
 
     def _push_asked(self) -> bool:
         """True if this resume's command line asked for the push (--push or --force)."""
         return (self.resume_overrides.get("push") is True
                 or self.resume_overrides.get("force") is True)
 
-    def _export_offsets(self, robot_name: str, plan: PushPlan, status: str
-                        ) -> dict[str, str] | None:
-        """For a robot that keeps no zero offsets (an adapter with `export_offsets`, the UR
-        driver) write the compensated offsets as files into the run folder: the only lasting
-        form of its push. None if the adapter writes the controller or nothing is pushed."""
-        export = getattr(self.robot, "export_offsets", None)
-        if (not callable(export) or status not in ("pushed", "disabled") or plan.refused
-                or not plan.anything):
-            return None
-        paths = export(self.run_dir, robot_name, plan.new)
-        self.progress.message("offsets exported for the robot's own software: "
-                              + ", ".join(str(path) for path in paths.values()))
-        return {kind: str(path) for kind, path in paths.items()}
+    def _asked(self) -> bool:
+        """True if this resume asks for anything beyond finishing the run (an option that
+        acts after the measurements: push, force, limits, verification, model)."""
+        return any(value not in (None, False, [], ())
+                   for value in self.resume_overrides.values())
 
     def _write_report(self, dataset: Dataset, settings: RunSettings,
                       document: dict[str, Any], truth: dict[str, Any] | None) -> str | None:
-        """report.html (the result, then the diagnosis) through hostpc.report."""
+        """report.html through hostpc.diagnose + hostpc.report, if both are installed."""
         try:
             from hostpc.diagnostics import diagnose
             from hostpc.report import write_calibration_report
@@ -464,3 +465,4 @@ def _state_dict(state: RobotState, offsets: np.ndarray) -> dict[str, Any]:
         "time": finite_or_none(float(state.extra.get("time", 0.0) or 0.0)),
         "camera": state.camera,
     }
+

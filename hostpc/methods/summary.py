@@ -237,22 +237,31 @@ def _push_line(document: Mapping[str, Any]) -> str:
 
 
 def _verify_line(verify: Mapping[str, Any]) -> str:
-    """The summary's verification line. With nothing pushed it checks the model on fresh
-    poses (no PASS: no offsets were verified)."""
+    """The summary's verification line: the chi-square test (statistic, dof, p-value, the
+    false-FAIL rate alpha) and the station tolerance. With nothing pushed it checks the model
+    on fresh poses (no PASS: no offsets were verified)."""
     poses = (f"{verify['n_planned']} fresh poses ({verify['n_measured']} samples)"
              if verify["n_measured"] > verify["n_planned"]  # dual_loop: two targets a pose
              else f"{verify['n_measured']} fresh poses")
-    noise = (f"noise RMS the fit measured {_mm(verify['noise_rms_mm'])} mm (stated "
-             f"{_mm(verify.get('stated_noise_rms_mm'))})")
-    bound = f"{verify['factor']:g} x noise = {_mm(verify['threshold_mm'])} mm"
+    p_value = verify.get("p_value")
+    test = (f"chi2 {_num(verify.get('statistic'))} on {verify.get('dof')} dof, p = "
+            f"{'-' if p_value is None else f'{p_value:.3g}'} (FAIL below alpha "
+            f"{verify.get('alpha')})")
+    tolerance = verify.get("tolerance_mm")
+    test += ("; tolerance: none" if tolerance is None
+             else f"; tolerance RMS <= {tolerance:g} mm")
+    verdict = verify.get("verdict", "PASS" if verify.get("passed") else "FAIL")
+    why = f" ({verify['reason']})" if verify.get("reason") else ""
     if not verify.get("pushed", True):
         return (f"model check on fresh poses (nothing pushed): {poses}: RMS with the fitted "
-                f"model {verify['rms_after_mm']:.4f} mm (max {verify['max_after_mm']:.4f}), "
-                f"with the controller's offsets as they are {verify['rms_before_mm']:.4f} mm "
-                f"(max {verify['max_before_mm']:.4f}); {noise}; the model "
-                + ("explains" if verify["passed"] else "does NOT explain")
-                + f" them (RMS {'<=' if verify['passed'] else '>'} {bound})")
-    return (f"verify: {poses}: RMS before (old offsets) {verify['rms_before_mm']:.4f} mm "
-            f"(max {verify['max_before_mm']:.4f}), after {verify['rms_after_mm']:.4f} mm "
-            f"(max {verify['max_after_mm']:.4f}); {noise}; pass if RMS after <= {bound}: "
-            + ("PASS" if verify["passed"] else "FAIL"))
+                f"model {_mm(verify['rms_after_mm'])} mm (max {_mm(verify['max_after_mm'])}), "
+                f"with the controller's offsets as they are {_mm(verify['rms_before_mm'])} mm; "
+                f"{test}: the model "
+                + ("explains them" if verify["passed"] else "does NOT explain them" + why))
+    return (f"verify: {poses}: RMS before (old offsets) {_mm(verify['rms_before_mm'])} mm "
+            f"(max {_mm(verify['max_before_mm'])}), after {_mm(verify['rms_after_mm'])} mm "
+            f"(max {_mm(verify['max_after_mm'])}); {test}: {verdict}{why}")
+
+
+def _num(value: float | None) -> str:
+    return "-" if value is None else f"{value:.2f}"

@@ -1,39 +1,34 @@
-"""Verification: fresh poses measured after the push, compared before vs after.
+"""Verification: fresh poses measured after the push, tested against the stated noise.
 
 The verification poses are planned at the start with the fit poses but are none of them.
-They are measured after the push (with the new offsets in the controller), then predicted
+They are measured after the push (with the new offsets in the controller) and predicted
 twice with the fitted frames and effects:
 
 - after: the model with the pushed corrections now inside the controller's angles
   (joint offset parameters `x_q - d`, d = the pushed corrections);
 - before: the old model, i.e. the controller's previous offsets and no zero correction
-  (joint offset parameters `-d`: the old controller would report `q - d` at the same
-  physical pose). With nothing pushed (`--no-push`, a refused push), d = 0: after = the
-  full fitted model, before = the fitted frames without the joint offsets; the verdict is
-  then a check of the model on fresh poses, not of any offsets.
+  (joint offset parameters `-d`). With nothing pushed (`--no-push`, a refused push),
+  d = 0: after = the full fitted model; the verdict is then a check of the model on fresh
+  poses, not of any offsets.
+
+The verdict is a chi-square test with a stated false-FAIL rate `alpha` (default 1 %):
+
+    r = measured - predicted_after                      (K samples x m, stacked: n = K m)
+    S = F^2 C + J Sigma_x J^T                           (n, n)
+    T = r^T S^-1 r  ~  chi-square(n)  if the calibration is right
+
+C: the stated measurement covariances (block diagonal, from the dataset; F = the
+`--verify-factor`, default 1: the stated noise as it is); J: (n, P) the prediction's
+Jacobian at the fitted parameters, Sigma_x: (P, P) the fit's parameter covariance (in the
+stated-noise scale, zero where a parameter is held fixed): the prediction is uncertain too,
+and that uncertainty is common to every verification pose. FAIL if the p-value
+`P(chi-square(n) >= T) < alpha`, or if a station tolerance is set (`--verify-tolerance`) and
+the RMS after exceeds it. A correct calibration fails with probability alpha (less if the
+stated covariances are conservative, as the `--pixel-floor` inflation makes them);
+docs/calibrate.md says how many verification poses detect a given model error.
 
 Residual RMS and max are over samples of the norm of the raw residual
 `measured - predicted` (m): the same metric as the fit's `rms` (`FitResult.rms`).
-
-The noise level the verdict compares with is the one the fit MEASURED, not the one the
-covariances state (they include the `--pixel-floor` inflation: chi2/dof about 0.44 in the
-default simulated run, so the stated figure is about 1.5 times the real noise):
-
-- `measured_noise_rms(fit)` = `fit_rms * sqrt(n_rows / dof)`: the fit's per-sample
-  residual-norm RMS corrected for the parameters it fitted, the noise of the fit's own
-  samples in that metric;
-- the verification samples lie at other poses (a random choice, while the fit's poses are
-  picked for information, which favours low-noise poses: in dual_loop the verification
-  samples' stated noise is 1.5 times the fit samples'). So the reference of the verdict is
-  that measured noise carried to the verification samples: their stated noise
-  `sqrt(mean trace(cov))` times the scale the fit measured for the stated covariances,
-  `sqrt(chi2/dof)`. For samples of one isotropic covariance it equals
-  `measured_noise_rms`. The scale is capped at the upper edge of the fit's chi-square band
-  (`push.chi2_dof_upper`): a larger chi2/dof is model error, not noise (and it refuses the
-  push), so it must not loosen the verdict.
-
-The stated figure is kept as secondary information. Verdict: pass if RMS after <= factor x
-measured noise RMS (default 1.2).
 """
 
 from __future__ import annotations
@@ -43,15 +38,18 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
 from hostpc.dataset import Dataset
 from hostpc.fitting import FitResult
 from hostpc.methods.planning import joint_offset_names
-from hostpc.methods.push import chi2_dof_upper
 from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem
 
-DEFAULT_VERIFY_FACTOR = 1.2
+DEFAULT_VERIFY_ALPHA = 0.01
+"""The verification's false-FAIL rate: a correct calibration FAILs this often at most."""
+DEFAULT_VERIFY_FACTOR = 1.0
+"""Measurement noise of the test = this x the stated noise (1: as stated)."""
 
 
 def noise_rms(dataset: Dataset) -> float:
@@ -77,12 +75,14 @@ def measured_noise_rms(result: FitResult) -> float:
 
 @dataclass(frozen=True)
 class VerifyResult:
-    """Before/after residual RMS and max (m); noise_rms: the noise the fit measured,
-    carried to the verification samples (m), the verdict's reference = stated_noise_rms
-    (sqrt(mean trace(cov)) of the verification samples, m) x noise_scale (sqrt(chi2/dof)
-    of the fit, capped at its band); threshold = factor x noise_rms (m) and the verdict;
-    n_planned poses / n_measured samples; pushed: False if nothing was pushed (the verdict
-    then checks the model on fresh poses, not offsets)."""
+    """The verification of a run (module doc).
+
+    rms/max before and after (m); statistic: the chi-square T, dof: its degrees of freedom
+    (scalar residuals), p_value: P(chi2(dof) >= T); alpha: the false-FAIL rate; tolerance:
+    the station's RMS tolerance (m) or None; passed: p_value >= alpha and (no tolerance or
+    rms_after <= tolerance); n_planned poses / n_measured samples; pushed: False if nothing
+    was pushed (a model check); stated_noise_rms (m): sqrt(mean trace(cov)) of the
+    verification samples; factor: the noise factor F of the test."""
 
     n_planned: int
     n_measured: int
@@ -90,28 +90,51 @@ class VerifyResult:
     max_before: float
     rms_after: float
     max_after: float
-    noise_rms: float
-    factor: float
-    threshold: float
+    statistic: float
+    dof: int
+    p_value: float
+    alpha: float
+    tolerance: float | None
     passed: bool
     stated_noise_rms: float = float("nan")
-    noise_scale: float = float("nan")
+    factor: float = DEFAULT_VERIFY_FACTOR
     pushed: bool = True
 
+    @property
+    def verdict(self) -> str:
+        return "PASS" if self.passed else "FAIL"
+
+    @property
+    def reason(self) -> str:
+        """Why it failed ("" for a pass)."""
+        reasons = []
+        if not self.p_value >= self.alpha:
+            reasons.append(f"p = {self.p_value:.3g} < alpha = {self.alpha:g}")
+        if self.tolerance is not None and not self.rms_after <= self.tolerance:
+            reasons.append(f"RMS {self.rms_after * 1e3:.4f} mm > tolerance "
+                           f"{self.tolerance * 1e3:g} mm")
+        return "; ".join(reasons)
+
     def to_dict(self) -> dict[str, Any]:
-        """JSON form in millimetres (a report value)."""
+        """JSON form in millimetres (result.json's `verify`, verify.json)."""
         return {
+            "verdict": self.verdict,
+            "statistic": _finite(self.statistic),
+            "dof": self.dof,
+            "p_value": _finite(self.p_value),
+            "alpha": self.alpha,
+            "rms_mm": _finite(self.rms_after * 1e3),
+            "tolerance_mm": None if self.tolerance is None else self.tolerance * 1e3,
+            "n_poses": self.n_planned,
             "n_planned": self.n_planned,
             "n_measured": self.n_measured,
-            "rms_before_mm": self.rms_before * 1e3,
-            "max_before_mm": self.max_before * 1e3,
-            "rms_after_mm": self.rms_after * 1e3,
-            "max_after_mm": self.max_after * 1e3,
-            "noise_rms_mm": _finite(self.noise_rms * 1e3),
+            "rms_before_mm": _finite(self.rms_before * 1e3),
+            "max_before_mm": _finite(self.max_before * 1e3),
+            "rms_after_mm": _finite(self.rms_after * 1e3),
+            "max_after_mm": _finite(self.max_after * 1e3),
             "stated_noise_rms_mm": _finite(self.stated_noise_rms * 1e3),
-            "noise_scale": _finite(self.noise_scale),
             "factor": self.factor,
-            "threshold_mm": _finite(self.threshold * 1e3),
+            "reason": self.reason,
             "passed": self.passed,
             "pushed": self.pushed,
             "kind": "offsets" if self.pushed else "model_check",
@@ -122,12 +145,34 @@ def _finite(value: float) -> float | None:
     return value if np.isfinite(value) else None
 
 
+def chi_square_statistic(residual: np.ndarray, sqrt_information: np.ndarray,
+                         jacobian: np.ndarray, covariance_x: np.ndarray,
+                         factor: float = DEFAULT_VERIFY_FACTOR) -> tuple[float, int]:
+    """T = r^T S^-1 r with S = F^2 C + J Sigma_x J^T, and its dof (module doc).
+
+    residual: (K, m) measured - predicted; sqrt_information: (K, m, m) W with
+    W^T W = C^-1 per sample; jacobian: (K, m, P) d predicted / d x; covariance_x: (P, P)
+    the fitted parameters' covariance (NaN entries count as zero). Computed in whitened
+    coordinates: S_w = F^2 I + (W J) Sigma_x (W J)^T."""
+    K, m = residual.shape
+    n = K * m
+    if n == 0:
+        return math.nan, 0
+    r_w = np.einsum("kij,kj->ki", sqrt_information, residual).reshape(n)
+    J_w = np.einsum("kij,kjp->kip", sqrt_information, jacobian).reshape(n, -1)
+    sigma_x = np.nan_to_num(np.asarray(covariance_x, float), nan=0.0)
+    S = factor**2 * np.eye(n) + J_w @ sigma_x @ J_w.T
+    return float(r_w @ np.linalg.solve(S, r_w)), n
+
+
 def evaluate_verify(result: FitResult, dataset: Dataset, pushed_delta: np.ndarray,
-                    n_planned: int, factor: float = DEFAULT_VERIFY_FACTOR) -> VerifyResult:
-    """Compare the verification measurements with the old and the new model (module doc).
+                    n_planned: int, alpha: float = DEFAULT_VERIFY_ALPHA,
+                    tolerance: float | None = None,
+                    factor: float = DEFAULT_VERIFY_FACTOR) -> VerifyResult:
+    """Test the verification measurements against the new model (module doc).
 
     pushed_delta: (n,) rad written into the controller before these measurements (all
-    zero: nothing pushed, a model check)."""
+    zero: nothing pushed, a model check); tolerance: station RMS tolerance (m) or None."""
     fitted = result.problem
     problem = build_problem(dataset, list(fitted.effect_names), plugins=fitted.plugins,
                             effect_instances=[t.effect for t in fitted.terms])
@@ -142,31 +187,30 @@ def evaluate_verify(result: FitResult, dataset: Dataset, pushed_delta: np.ndarra
             k = problem.layout.index(name)
             x_after[k] = result.x[k] - d
             x_before[k] = -d
-    norms = {}
-    for label, x in (("after", x_after), ("before", x_before)):
-        predicted, _ = predict(problem, x, jacobian=False)
-        norms[label] = np.linalg.norm(problem.measured - predicted, axis=1)
-    stated = noise_rms(dataset)
-    scale = math.sqrt(min(result.chi2_dof, chi2_dof_upper(result.dof)))
-    noise = stated * scale
+    predicted_after, jacobian = predict(problem, x_after, jacobian=True)
+    predicted_before, _ = predict(problem, x_before, jacobian=False)
+    residual = problem.measured - predicted_after
+    assert jacobian is not None
+    statistic, dof = chi_square_statistic(residual, problem.sqrt_information, jacobian,
+                                          result.covariance, factor)
+    p_value = float(stats.chi2.sf(statistic, dof)) if dof > 0 else math.nan
+    after = np.linalg.norm(residual, axis=1)
+    before = np.linalg.norm(problem.measured - predicted_before, axis=1)
 
     def rms(v: np.ndarray) -> float:
         return float(np.sqrt(np.mean(v**2))) if v.size else float("nan")
 
-    rms_after = rms(norms["after"])
-    threshold = factor * noise
+    def peak(v: np.ndarray) -> float:
+        return float(np.max(v)) if v.size else float("nan")
+
+    rms_after = rms(after)
+    passed = bool(np.isfinite(p_value) and p_value >= alpha
+                  and (tolerance is None or rms_after <= tolerance))
     return VerifyResult(
-        n_planned=n_planned,
-        n_measured=dataset.n_samples,
-        rms_before=rms(norms["before"]),
-        max_before=float(np.max(norms["before"])) if norms["before"].size else float("nan"),
-        rms_after=rms_after,
-        max_after=float(np.max(norms["after"])) if norms["after"].size else float("nan"),
-        noise_rms=noise,
-        factor=factor,
-        threshold=threshold,
-        passed=bool(np.isfinite(rms_after) and rms_after <= threshold),
-        stated_noise_rms=stated,
-        noise_scale=scale,
+        n_planned=n_planned, n_measured=dataset.n_samples,
+        rms_before=rms(before), max_before=peak(before),
+        rms_after=rms_after, max_after=peak(after),
+        statistic=statistic, dof=dof, p_value=p_value, alpha=alpha, tolerance=tolerance,
+        passed=passed, stated_noise_rms=noise_rms(dataset), factor=factor,
         pushed=bool(np.any(delta != 0.0)),
     )

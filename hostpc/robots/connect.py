@@ -56,6 +56,8 @@ def parse_robot(text: str, default_port: int = DEFAULT_PORT) -> RobotAddress:
         host, port_text = text.split(":")
     if not host:
         raise InputError(f"--robot {text!r}: no host (expected HOST[:PORT] or sim)")
+    if not port_text and text.endswith(":"):
+        raise InputError(f"--robot {text!r}: no port after ':' (expected HOST[:PORT] or sim)")
     if not port_text:
         if text.endswith(":"):
             raise InputError(f"--robot {text!r}: no port after ':' (expected HOST[:PORT])")

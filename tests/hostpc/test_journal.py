@@ -95,3 +95,17 @@ def test_sample_times_and_shift_reach_nested_observations(tmp_path: Path) -> Non
     assert sample_times(pose) == [4.0, 4.5]
     moved = shift_sample_t(pose, 10.0)
     assert sample_times(moved) == [14.0, 14.5] and sample_times(pose) == [4.0, 4.5]
+
+
+def test_a_skipped_pose_may_be_measured_again_a_measured_one_not(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from hostpc.methods.base import SampleRecord
+    from hostpc.methods.journal import Journal
+
+    journal = Journal(tmp_path)
+    assert journal.record(SampleRecord("fit", 0, False, reason="move stopped: aborted"))
+    assert journal.record(SampleRecord("fit", 0, True, sample={"q": [0.0]}))
+    assert not journal.record(SampleRecord("fit", 0, True, sample={"q": [1.0]}))
+    again = Journal(tmp_path)
+    again.load()
+    (record,) = again.records("fit")
+    assert record.ok and record.sample == {"q": [0.0]}

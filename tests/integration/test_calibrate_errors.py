@@ -55,7 +55,17 @@ def test_bad_rig_file_exit_2_before_connecting(tmp_path: Path,
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--poses", "0"], "--poses 0"),
+        (["--poses", "0"], "argument --poses: '0': must be at least 1"),
+        (["--max-correction", "inf"], "argument --max-correction: 'inf': must be a finite"),
+        (["--verify-factor", "nan"], "argument --verify-factor: 'nan': must be a finite"),
+        (["--verify-factor", "-1"], "argument --verify-factor: '-1': must be positive"),
+        (["--pixel-floor", "nan"], "argument --pixel-floor: 'nan': must be a finite"),
+        (["--verify-alpha", "1"], "argument --verify-alpha: '1': must be in (0, 1)"),
+        (["--verify-tolerance", "0"], "argument --verify-tolerance: '0': must be positive"),
+        (["--robot", "127.0.0.1:"], "no port after ':'"),
+        (["--effects", "+nonsense"], "unknown effect 'nonsense'"),
+        (["--method", "sphere_probe", "--known", "target"],
+         "target is not a sphere_probe frame"),
         (["--known", "flange"], "unknown frame 'flange'"),
         (["--robot", "host:99999"], "out of range"),
         (["--scenario", "x.yaml"], "--scenario needs --robot sim"),
@@ -64,8 +74,44 @@ def test_bad_rig_file_exit_2_before_connecting(tmp_path: Path,
 def test_bad_options_exit_2(args: list[str], message: str, tmp_path: Path,
                             capsys: pytest.CaptureFixture[str]) -> None:
     base = ["calibrate", "--robot", "127.0.0.1:1", "--out", str(tmp_path / "run")]
-    code, _, stderr = run_cli(capsys, *base, *args)
-    assert code == 2 and message in _error_line(stderr)
+    try:
+        code, _, stderr = run_cli(capsys, *base, *args)
+    except SystemExit as exc:  # the argument parser's own check: one line, exit 2
+        code, stderr = int(exc.code or 0), capsys.readouterr().err
+    assert code == 2 and message in _error_line(stderr) and stderr.count("\n") == 1
+    assert not (tmp_path / "run").exists()
+
+
+def test_out_naming_a_file_exit_2_before_connecting(tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    for out in (afile, afile / "run"):
+        code, _, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--out", str(out))
+        assert code == 2 and stderr.count("\n") == 1
+        assert f"{afile} is a file, not a folder" in _error_line(stderr)
+    assert afile.read_text() == "x"
+
+
+@pytest.mark.parametrize("line, message", [
+    ('{"event":"sample"}', "phase None is not 'fit' or 'verify'"),
+    ('{"event":"sample","phase":"fit","index":"x","status":"ok","sample":{}}',
+     "index 'x' is not a non-negative integer"),
+    ('{"event":"push","previous_offsets":"a","new_offsets":[0]}',
+     "push event: previous_offsets is not a list of numbers"),
+])
+def test_damaged_journal_line_exit_2_one_line(line: str, message: str, tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "run.json").write_text(json.dumps({"format": "zerocal-run/1", "robot": {
+        "address": f"127.0.0.1:{_closed_port()}", "sim": False}}))
+    (run / "journal.jsonl").write_text(line + "\n" + '{"event":"note"}\n')
+    code, _, stderr = run_cli(capsys, "calibrate", "--resume", str(run))
+    # unreachable controller (3) or the damaged line (2): the journal is read first
+    assert code == 2, stderr
+    assert "line 1" in _error_line(stderr) and message in _error_line(stderr)
+    assert stderr.count("\n") == 1
 
 
 def test_resume_of_a_folder_without_a_run_exit_2(tmp_path: Path,

@@ -125,16 +125,12 @@ def test_calibrate_sim_recovers_truth_and_verifies(
     for j in identified:
         assert math.degrees(push["new_offsets"][j] - push["previous_offsets"][j]) == (
             pytest.approx(joints[j]["correction_deg"]))
-    # verification on fresh poses after the push: at the sensor's noise level, the one the
-    # fit measured (the stated covariances carry the pixel floor: chi2/dof well below 1)
+    # verification on fresh poses after the push: the chi-square test at alpha 1 % passes
     verify = document["verify"]
     assert verify["n_measured"] == 30 and verify["passed"] is True
-    assert verify["kind"] == "offsets" and verify["factor"] == 1.2
-    chi2_dof = document["fit"]["chi2_dof"]
-    assert chi2_dof < 0.7
-    assert verify["noise_rms_mm"] == pytest.approx(
-        verify["stated_noise_rms_mm"] * math.sqrt(chi2_dof))
-    assert verify["rms_after_mm"] <= 1.2 * verify["noise_rms_mm"]
+    assert verify["kind"] == "offsets" and verify["verdict"] == "PASS"
+    assert verify["dof"] == 90 and verify["alpha"] == 0.01
+    assert verify["p_value"] >= 0.01 and verify["rms_mm"] == verify["rms_after_mm"]
     assert verify["rms_before_mm"] > 10 * verify["rms_after_mm"]
     # files: dataset per the spec, fit, plan in run.json; verify poses are fresh
     dataset = load_dataset(out / "dataset.json")

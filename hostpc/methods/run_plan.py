@@ -1,0 +1,94 @@
+"""The plan of a calibration run: candidate pool, informative fit poses in travel order,
+verification poses (none of them a fit pose), and the identifiability check BEFORE anything
+moves. Pure numerics apart from the progress messages."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hostpc.errors import InputError
+from hostpc.methods.base import Method, Plan, Progress, RunSettings
+from hostpc.methods.planning import (
+    check_plan,
+    design_matrix,
+    joint_offset_sigmas,
+    make_design,
+    order_for_travel,
+    poses_for_target_sigma,
+    select,
+    select_groups,
+    verify_groups,
+)
+from hostpc.robots.base import RobotState
+
+
+class PlanningError(InputError):
+    """The planned poses cannot separate the model's parameters (or none are reachable)."""
+
+
+def plan_run(method: Method, state: RobotState, settings: RunSettings, progress: Progress
+             ) -> Plan:
+    """Candidate pool, informative selection, order, verification poses, check."""
+    progress.stage("plan")
+    rng = np.random.default_rng(settings.seed)
+    pool = method.candidates(state, rng)
+    needed = settings.n_poses + settings.n_verify
+    if pool.shape[0] < max(needed, 1):
+        raise PlanningError(
+            f"only {pool.shape[0]} reachable poses see the target (need {needed}); check "
+            "the cell (target position, camera mount) and the joint limits")
+    A, names, units = design_matrix(method.design_dataset(pool), settings.effects,
+                                    settings.plugins)
+    design = make_design(A, names, units)
+    structural = design.structural
+    groups = method.pose_groups(pool)
+    if groups is None:
+        chosen = select(design, settings.n_poses, settings.criterion, rng)
+        if settings.target_sigma_deg is not None:  # the fewest poses that reach it
+            enough = poses_for_target_sigma(design, chosen,
+                                            math.radians(settings.target_sigma_deg),
+                                            state.q.size, min_poses=3)
+            chosen = chosen if enough is None else chosen[:enough]
+        fit_indices = chosen[order_for_travel(pool[chosen], state.q,
+                                              tour=settings.target_sigma_deg is not None)]
+    else:  # whole groups (sphere_probe: an orientation's 5 contacts), in the pool order
+        fit_indices = select_groups(design, groups, settings.n_poses, settings.criterion,
+                                    rng)
+    plan_design = design.subset(fit_indices)
+    check = check_plan(plan_design)
+    if not check.ok:
+        lines = "; ".join(d.description for d in check.deficient)
+        raise PlanningError(
+            f"the {len(fit_indices)} planned poses cannot separate the model's parameters "
+            f"(rank {check.plan_rank} of {check.pool_rank}): {lines}. Fix: more poses "
+            "(--poses), fewer effects (--effects), or a wider pose range")
+    q_fit = pool[fit_indices]
+    last = q_fit[-1] if q_fit.shape[0] else state.q
+    if groups is None:
+        rest = np.setdiff1d(np.arange(pool.shape[0]), fit_indices)
+        verify_indices = rng.choice(rest, size=min(settings.n_verify, rest.size),
+                                    replace=False)
+        verify_indices = verify_indices[order_for_travel(pool[verify_indices], last)]
+    else:
+        verify_indices = verify_groups(groups, fit_indices, settings.n_verify, rng)
+    q_verify = pool[verify_indices]
+    sigmas = joint_offset_sigmas(plan_design, state.q.size)
+    info = {
+        "criterion": settings.criterion,
+        "target_sigma_deg": settings.target_sigma_deg,
+        "n_candidates": int(pool.shape[0]),
+        "parameters": list(names),
+        "predicted_joint_sigma_deg": [None if not np.isfinite(s) else math.degrees(s)
+                                      for s in sigmas],
+        "structural_unidentifiable": [d.description for d in structural],
+        "structural_fixed": [d.fixed for d in structural],
+    }
+    progress.message(
+        f"plan: {len(fit_indices)} poses from {pool.shape[0]} candidates "
+        f"({settings.criterion}-optimal), {q_verify.shape[0]} verification poses; "
+        "predicted joint offset sigma "
+        + ", ".join("-" if not np.isfinite(s) else f"{math.degrees(s):.4f}"
+                    for s in sigmas) + " deg")
+    return Plan(q=q_fit, q_verify=q_verify, info=info)

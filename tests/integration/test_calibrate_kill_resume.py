@@ -1,0 +1,215 @@
+"""A calibration stopped at any phase resumes to a verdict that matches the controller's
+true state (issue 11, "Done when"): no sample lost or duplicated, no double push.
+
+One complete run against a simulated controller gives the journal; each case below is the
+run folder as it stood when the host (or the controller) died in one phase: its journal cut
+after that phase's last durable line, and a controller in the state that phase leaves
+behind (the run's initial offsets, or the pushed ones). The resume must then say exactly
+what happened, and finish.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hostpc.methods.journal import Journal
+from hostpc.robots.simulator import SimulatedController
+from hostpc.transport import ControllerClient
+from tests.integration.test_calibrate_sim import TOKEN, run_cli, sim_scenario, truth_rig_file
+
+N_FIT, N_VERIFY = 16, 4
+RESULT_FILES = ("result.json", "summary.txt", "verify.json", "verify_dataset.json",
+                "dataset.json", "fit.json", "push.json")
+
+
+def _events(run: Path) -> list[dict]:  # type: ignore[type-arg]
+    return [json.loads(line) for line in (run / "journal.jsonl").read_text().splitlines()]
+
+
+def _set_offsets(sim: SimulatedController, offsets: list[float]) -> None:
+    async def write() -> None:
+        client = await ControllerClient.connect(sim.address.host, sim.address.port,
+                                                token=TOKEN)
+        try:
+            await client.set_offsets(np.asarray(offsets))
+        finally:
+            await client.close()
+
+    asyncio.run(write())
+
+
+def _cut(complete: Path, run: Path, n_lines: int) -> None:
+    """The run folder as it was when the journal held its first n_lines lines."""
+    shutil.copytree(complete, run)
+    lines = (complete / "journal.jsonl").read_text().splitlines(keepends=True)[:n_lines]
+    (run / "journal.jsonl").write_text("".join(lines))
+    kinds = [json.loads(line)["event"] for line in lines]
+    for name in RESULT_FILES:
+        if name == "push.json" and "push_intent" in kinds:
+            continue
+        (run / name).unlink(missing_ok=True)
+
+
+@pytest.fixture(scope="module")
+def complete_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, dict]:  # type: ignore[type-arg]
+    base = tmp_path_factory.mktemp("complete")
+    rig = truth_rig_file(sim_scenario(), base / "rig.json")
+    run = base / "run"
+    with SimulatedController(sim_scenario(), base / "stub") as sim:
+        code = _cli(sim, "--rig", str(rig), "--poses", str(N_FIT), "--verify-poses",
+                    str(N_VERIFY), "--out", str(run))
+        assert code == 0
+    push = next(e for e in _events(run) if e["event"] == "push")
+    return run, rig, push
+
+
+def _cli(sim: SimulatedController, *args: str) -> int:
+    from hostpc.cli.main import main
+
+    return main(["calibrate", "--robot", f"{sim.address.host}:{sim.address.port}",
+                 "--token", TOKEN, "--cv-folds", "0", "--no-report", *args])
+
+
+def _line_after(run: Path, kind: str, nth: int = 1) -> int:
+    """Number of journal lines up to and including the nth event of `kind`."""
+    seen = 0
+    for number, event in enumerate(_events(run), start=1):
+        if event["event"] == kind:
+            seen += 1
+            if seen == nth:
+                return number
+    raise AssertionError(f"no {kind} #{nth}")
+
+
+# phase -> (journal lines kept, controller has the pushed offsets, expected resume message)
+PHASES = {
+    "planning": (lambda run: 0, False, "resuming"),
+    "capture": (lambda run: 7, False, "resuming"),
+    "fit / before push": (lambda run: N_FIT, False, "resuming"),
+    "mid push, write lost": (lambda run: _line_after(run, "push_intent"), False,
+                             "did not reach the controller"),
+    "mid push, write done": (lambda run: _line_after(run, "push_intent"), True,
+                             "reached the controller"),
+    "after push": (lambda run: _line_after(run, "push"), True,
+                   "not verified yet: verifying now on fresh poses"),
+    "mid verify": (lambda run: _line_after(run, "verify_start") + 2, True,
+                   "not verified yet: verifying now on fresh poses"),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("phase", list(PHASES))
+def test_resume_after_a_stop_in_each_phase(phase: str, complete_run, tmp_path: Path,  # type: ignore[no-untyped-def]
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    complete, _, push = complete_run
+    keep, pushed, message = PHASES[phase]
+    run = tmp_path / "run"
+    _cut(complete, run, keep(complete))
+    intents_before = sum(e["event"] == "push_intent" for e in _events(run))
+    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:
+        if pushed:
+            _set_offsets(sim, push["new_offsets"])
+        capsys.readouterr()
+        code, stdout, stderr = run_cli(capsys, "calibrate", "--resume", str(run),
+                                       "--robot", f"{sim.address.host}:{sim.address.port}",
+                                       "--token", TOKEN)
+        offsets = sim.truth()["zero_offsets"]
+        remaining = np.asarray(sim.truth()["zero_errors"])
+    assert code == 0, stderr
+    assert message in stderr
+    # the verdict matches the controller: it has the pushed offsets (the ones pushed
+    # before the stop, if it came after the push), and they are right
+    events = _events(run)
+    new = [e for e in events if e["event"] == "push"][-1]["new_offsets"]
+    np.testing.assert_allclose(offsets, new, rtol=0, atol=1e-12)
+    if intents_before:
+        np.testing.assert_allclose(new, push["new_offsets"], rtol=0, atol=1e-12)
+    assert "push: written" in stdout and "verify:" in stdout and ": PASS" in stdout
+    assert np.all(np.abs(np.degrees(remaining[1:5])) < 0.002)  # J1, J6: not identifiable
+    # no double push: the controller written once (an intent that never reached it is
+    # settled as not pushed, then pushed: its one write)
+    assert sum(e["event"] == "push" for e in events) == 1
+    if pushed:
+        assert sum(e["event"] == "push_intent" for e in events) == intents_before
+    # no sample lost or duplicated: each fit pose once; each verify pose once in its round
+    journal = Journal(run)
+    fit_lines = [e for e in events if e["event"] == "sample" and e["phase"] == "fit"]
+    assert sorted(e["index"] for e in fit_lines) == list(range(N_FIT))
+    verify_lines = [e["index"] for e in events if e["event"] == "sample"
+                    and e["phase"] == "verify"]
+    assert len(verify_lines) == len(set(verify_lines))
+    rounds = [e for e in events if e["event"] == "verify_start"]
+    first = rounds[-1]["first"]
+    assert [r.index for r in journal.records("verify")
+            if first <= r.index < first + N_VERIFY] == list(range(first, first + N_VERIFY))
+    np.testing.assert_allclose(rounds[-1]["offsets"], new, rtol=0, atol=1e-12)
+
+
+@pytest.mark.slow
+def test_finished_run_is_printed_unchanged(complete_run, tmp_path: Path,  # type: ignore[no-untyped-def]
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    complete, _, push = complete_run
+    run = tmp_path / "run"
+    shutil.copytree(complete, run)
+    before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:
+        _set_offsets(sim, push["new_offsets"])
+        for extra in ((), ("--max-correction", "1", "--force")):
+            code, stdout, stderr = run_cli(
+                capsys, "calibrate", "--resume", str(run), "--robot",
+                f"{sim.address.host}:{sim.address.port}", "--token", TOKEN, *extra)
+            assert code == 0, stderr
+            assert "already pushed and verified (PASS)" in stderr
+            assert stdout.strip() == before["summary.txt"].decode().strip()
+    after = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+    assert after == before  # nothing changed: no file, not even the journal
+
+
+@pytest.mark.slow
+def test_restarted_controller_lost_the_push(complete_run, tmp_path: Path,  # type: ignore[no-untyped-def]
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    complete, _, push = complete_run
+    run = tmp_path / "run"
+    _cut(complete, run, _line_after(complete, "push"))
+    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:  # initial offsets
+        address = f"{sim.address.host}:{sim.address.port}"
+        code, stdout, stderr = run_cli(capsys, "calibrate", "--resume", str(run), "--robot",
+                                       address, "--token", TOKEN)
+        assert code == 4 and stdout == ""
+        line = stderr.strip().splitlines()[-1]
+        assert line.startswith("hostpc calibrate: error: push lost: ")
+        assert f"hostpc calibrate --resume {run} --push" in line
+        assert "rolled back" not in stderr
+        code, stdout, stderr = run_cli(capsys, "calibrate", "--resume", str(run), "--robot",
+                                       address, "--token", TOKEN, "--push")
+        assert code == 0, stderr
+        assert "push: written" in stdout and ": PASS" in stdout
+        np.testing.assert_allclose(sim.truth()["zero_offsets"], push["new_offsets"], rtol=0,
+                                   atol=1e-12)
+
+
+@pytest.mark.slow
+def test_rollback_warns_when_it_discards_a_later_push(complete_run, tmp_path: Path,  # type: ignore[no-untyped-def]
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    complete, _, push = complete_run
+    run = tmp_path / "run"
+    shutil.copytree(complete, run)
+    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:
+        address = f"{sim.address.host}:{sim.address.port}"
+        _set_offsets(sim, push["new_offsets"])  # this run's push (rb-1 here too)
+        later = (np.asarray(push["new_offsets"]) + 1e-4).tolist()
+        _set_offsets(sim, later)  # another host's later push
+        code, stdout, stderr = run_cli(capsys, "rollback", "--run", str(run), "--robot",
+                                       address, "--token", TOKEN)
+        assert code == 0, stderr
+        assert "discards that later push" in stderr
+        np.testing.assert_allclose(sim.truth()["zero_offsets"], push["previous_offsets"],
+                                   rtol=0, atol=1e-12)
+    rollback = _events(run)[-1]
+    assert rollback["event"] == "rollback"

@@ -1,0 +1,178 @@
+"""Controller refusals end a calibration with one line naming them, exit code 4 and (once
+something is journaled) the resume hint; never a traceback (issue 11: estop, busy,
+offset_limit, an abort storm). An aborted pose is measured again a bounded number of times
+and a resume measures the poses a storm skipped."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from hostpc.methods.journal import Journal
+from hostpc.methods.refusals import MAX_POSE_ATTEMPTS
+from hostpc.robots.simulator import SimulatedController
+from hostpc.transport import ControllerClient
+from tests.integration.test_calibrate_sim import TOKEN, run_cli, sim_scenario, truth_rig_file
+
+POSES = "16"
+
+
+def _error_line(stderr: str) -> str:
+    lines = stderr.strip().splitlines()
+    assert lines and lines[-1].startswith("hostpc calibrate: error: "), stderr
+    assert stderr.count("error:") == 1 and "Traceback" not in stderr, stderr
+    return lines[-1]
+
+
+def _calibrate(capsys: pytest.CaptureFixture[str], sim: SimulatedController, rig: Path,
+               out: Path, *extra: str) -> tuple[int, str, str]:
+    return run_cli(capsys, "calibrate", "--robot", f"{sim.address.host}:{sim.address.port}",
+                   "--token", TOKEN, "--rig", str(rig), "--poses", POSES, "--cv-folds", "0",
+                   "--no-report", "--out", str(out), *extra)
+
+
+@contextmanager
+def _peer(sim: SimulatedController, action: str, period: float = 0.05,
+          after: Path | None = None) -> Iterator[None]:
+    """Another (authenticated) host on the same controller, in its own thread: `hold`
+    keeps a session open; `abort` sends an abort every `period` seconds (once the file
+    `after` contains a push event, if given)."""
+    stop = threading.Event()
+    ready = threading.Event()
+
+    def armed() -> bool:
+        return after is None or (after.is_file() and '"event":"push"' in after.read_text())
+
+    async def main() -> None:
+        client = await ControllerClient.connect(sim.address.host, sim.address.port,
+                                                token=TOKEN)
+        try:
+            ready.set()
+            while not stop.is_set():
+                if action == "abort" and armed():
+                    await client.abort()
+                await asyncio.sleep(period)
+        finally:
+            await client.close()
+
+    thread = threading.Thread(target=asyncio.run, args=(main(),), daemon=True)
+    thread.start()
+    assert ready.wait(10)
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join(10)
+
+
+def _scenario(**changes: Any) -> dict[str, Any]:
+    scenario = sim_scenario(**changes.pop("faults", {}))
+    for section, values in changes.items():
+        scenario.setdefault(section, {}).update(values)
+    return scenario
+
+
+def test_estop_exit_4_one_line_with_resume_hint(tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
+    out = tmp_path / "run"
+    with SimulatedController(_scenario(faults={"estop_after_moves": 5}), tmp_path / "s") as sim:
+        code, stdout, stderr = _calibrate(capsys, sim, rig, out, "--verify-poses", "0")
+    line = _error_line(stderr)
+    assert code == 4 and stdout == ""
+    assert line.startswith("hostpc calibrate: error: controller refused (estop): ")
+    assert line.endswith(f"continue with: hostpc calibrate --resume {out}")
+    assert "5 poses journaled" in line
+
+
+def test_offset_limit_exit_4_and_nothing_half_pushed(tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
+    out = tmp_path / "run"
+    with SimulatedController(_scenario(server={"offset_limit_rad": 1e-4}),
+                             tmp_path / "s") as sim:
+        before = sim.truth()["zero_offsets"]
+        code, _, stderr = _calibrate(capsys, sim, rig, out, "--verify-poses", "0")
+        line = _error_line(stderr)
+        assert code == 4 and "controller refused (offset_limit): " in line
+        assert f"--resume {out}" in line
+        assert sim.truth()["zero_offsets"] == before
+        # the resume settles the intent (not pushed) and is refused again, the same way
+        code, _, stderr = run_cli(capsys, "calibrate", "--resume", str(out))
+        assert code == 4 and "did not reach the controller" in stderr
+        assert "controller refused (offset_limit): " in _error_line(stderr)
+
+
+def test_busy_controller_exit_4_one_line(tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
+    out = tmp_path / "run"
+    with SimulatedController(_scenario(server={"max_sessions": 1}), tmp_path / "s") as sim:
+        with _peer(sim, "hold"):
+            code, _, stderr = _calibrate(capsys, sim, rig, out)
+    line = _error_line(stderr)
+    assert code == 4 and "busy" in line and "too many sessions" in line
+    assert not out.exists()  # nothing started: no run folder
+
+
+@pytest.mark.slow
+def test_abort_storm_exit_4_then_resume_measures_every_pose(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
+    out = tmp_path / "run"
+    with SimulatedController(_scenario(motion={"time_scale": 0.5}), tmp_path / "s") as sim:
+        with _peer(sim, "abort"):
+            code, _, stderr = _calibrate(capsys, sim, rig, out, "--verify-poses", "4")
+        line = _error_line(stderr)
+        assert code == 4, line
+        assert "measurement stopped" in line and f"--resume {out}" in line
+        assert f"(attempt {MAX_POSE_ATTEMPTS} of {MAX_POSE_ATTEMPTS})" in stderr
+        assert f"aborted ({MAX_POSE_ATTEMPTS} attempts)" in stderr
+        # the storm is over: the resume measures the aborted poses, each once
+        code, stdout, stderr = run_cli(capsys, "calibrate", "--resume", str(out))
+        assert code == 0, stderr
+        assert "measured: 16 of 16 fit poses" in stdout and "PASS" in stdout
+    journal = Journal(out)
+    assert [r.index for r in journal.records("fit") if r.ok] == list(range(16))
+
+
+def test_wrong_token_exit_4_one_line(tmp_path: Path,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
+    out = tmp_path / "run"
+    with SimulatedController(sim_scenario(), tmp_path / "s") as sim:
+        code, _, stderr = run_cli(capsys, "calibrate", "--robot",
+                                  f"{sim.address.host}:{sim.address.port}", "--token", "wrong",
+                                  "--rig", str(rig), "--out", str(out))
+    line = _error_line(stderr)
+    assert code == 4 and "auth" in line
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_lost_verification_says_so_and_stays_resumable(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
+    out = tmp_path / "run"
+    with SimulatedController(_scenario(motion={"time_scale": 0.2}), tmp_path / "s") as sim:
+        with _peer(sim, "abort", after=out / "journal.jsonl"):  # a storm after the push
+            code, stdout, stderr = _calibrate(capsys, sim, rig, out, "--verify-poses", "3")
+        line = _error_line(stderr)
+        assert code == 4 and stdout == ""
+        assert line.startswith("hostpc calibrate: error: verification lost: all 3 ")
+        assert "the pushed offsets stay in the controller" in line
+        assert line.endswith(f"measure them again with: hostpc calibrate --resume {out}")
+        pushed = sim.truth()["zero_offsets"]
+        code, stdout, stderr = run_cli(capsys, "calibrate", "--resume", str(out))
+        assert code == 0, stderr
+        assert "not verified yet: verifying now on fresh poses" in stderr
+        assert "verify: 3 fresh poses" in stdout and ": PASS" in stdout
+        assert sim.truth()["zero_offsets"] == pushed  # no second push
+    rounds = Journal(out).events("verify_start")
+    assert [r["round"] for r in rounds] == [0, 1]
