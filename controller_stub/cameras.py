@@ -131,6 +131,8 @@ class StereoCameraMixin:
         pattern "target": the circular target seen from the robot's physical pose.
         pattern "chessboard": the `view`-th chessboard pose (relative to the left camera,
         independent of the robot). Raises SimulationRefused("invalid_argument") otherwise.
+        The frame is stamped at the start of the exposure; the clock then advances by the
+        scenario's `motion.capture_s` (robot time spent standing still for the capture).
         """
         T_right_left = np.linalg.inv(self.T_left_right)
         left_r, right_r = self.renderers()
@@ -151,7 +153,9 @@ class StereoCameraMixin:
             right = right_r.render_chessboard(T_right_left @ T_left_board, self.board_pattern)
         else:
             raise SimulationRefused("invalid_argument", f"unknown pattern {pattern!r}")
-        return StereoFrame(left=left, right=right, q=self._q.copy(), time=self._time)
+        frame = StereoFrame(left=left, right=right, q=self._q.copy(), time=self._time)
+        self._time += float(self.scenario.motion.capture_s)  # exposure + readout
+        return frame
 
     def camera_description(self) -> dict[str, Any]:
         """What the controller reports about its camera: never the hidden truth."""

@@ -130,7 +130,9 @@ class ControllerState:
 
     @property
     def time(self) -> float:
-        """Simulated clock (s); advances only by motion durations."""
+        """Simulated clock (s): robot time. Advances by motion durations, by the settling
+        after each completed joint move (`motion.settle_s`) and by each stereo capture
+        (`motion.capture_s`)."""
         return self._time
 
     @property

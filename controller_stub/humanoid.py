@@ -261,7 +261,8 @@ class HumanoidSimulation(ControllerState):
 
     def finish_move(self, plan: MotionPlan, fraction: float = 1.0) -> MoveResult:
         """Execute `plan` up to `fraction` (clipped to [0, 1]) of it: the robot stops there
-        and a move stopped early reports completed=False / reason "aborted"."""
+        and a move stopped early reports completed=False / reason "aborted". A completed
+        move that went somewhere is followed by the settling time (`motion.settle_s`)."""
         if plan is not self._active_plan:
             raise SimulationRefused("invalid_argument", "finish_move: not the motion in progress")
         self._active_plan = None
@@ -269,11 +270,12 @@ class HumanoidSimulation(ControllerState):
         stopped = fraction < 1.0
         q_end = plan.q_at(fraction)
         duration = fraction * plan.duration_s
+        settle = float(self.scenario.motion.settle_s) if duration > 0.0 and not stopped else 0.0
         self._q = q_end.copy()
-        self._time += duration
+        self._time += duration + settle  # robot time: the motion, then the settling
         self._moves += 1
         return MoveResult(completed=not stopped, q=q_end, duration_s=duration,
-                          reason="aborted" if stopped else None)
+                          reason="aborted" if stopped else None, settle_s=settle)
 
     def move_joints(self, q_target: Any, speed: float) -> MoveResult:
         """Move to q_target (16,) reported rad at `speed` (fraction of max joint speed)."""
@@ -325,7 +327,9 @@ class HumanoidSimulation(ControllerState):
                 continue
             p, cov = self.stereo.measure(p_true, self._rng_noise)
             targets[side] = {"p": p, "cov": cov}
-        return {"q": self._q.copy(), "time": self._time, "targets": targets}
+        measured = {"q": self._q.copy(), "time": self._time, "targets": targets}
+        self._time += float(self.scenario.motion.capture_s)  # one stereo capture
+        return measured
 
     def capture_stereo(self, pattern: str = "target", view: int = 0) -> Any:
         raise SimulationRefused("unsupported", "humanoid_upper serves measure_targets, not "

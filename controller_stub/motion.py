@@ -29,12 +29,16 @@ class MoveResult:
     completed: True if the target was reached; False with `reason` (code) if aborted.
     q: (n,) reported joint angles where the robot stopped.
     duration_s: simulated motion time (the server sleeps duration_s * time_scale).
+    settle_s: simulated settling time charged after the motion (scenario motion.settle_s
+    for a completed move that went somewhere, else 0); the clock advanced by
+    duration_s + settle_s.
     """
 
     completed: bool
     q: np.ndarray
     duration_s: float
     reason: str | None = None
+    settle_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -253,12 +257,22 @@ class MotionMixin:
         q_end = plan.q_start + s * (plan.q_target - plan.q_start) if stopped else plan.q_target
         duration = s * plan.path_duration_s
         self._finish_motion(plan.q_start, q_end, duration)
+        settle = self.settle_time(duration, stopped)
+        self._time += settle
         return MoveResult(
             completed=not stopped,
             q=q_end.copy(),
             duration_s=duration,
             reason="aborted" if stopped else None,
+            settle_s=settle,
         )
+
+    def settle_time(self, duration: float, stopped: bool) -> float:
+        """Settling time (s) after a joint move: the scenario's `motion.settle_s` once the
+        robot arrived somewhere new; none for an aborted or a zero-length move."""
+        if stopped or duration <= 0.0:
+            return 0.0
+        return float(self.scenario.motion.settle_s)
 
     def _plan_move(self, target: np.ndarray, duration: float) -> MotionPlan:
         """A joint move: the probe IO line follows contact along the path."""

@@ -184,6 +184,10 @@ class MotionSpec(_Model):
     max_joint_speed: rad/s, a scalar or per joint (default per robot).
     time_scale: wall seconds per simulated second (0 = instantaneous).
     initial_q: (n,) reported start pose (default per robot).
+    settle_s: simulated time the robot stands still after a completed joint move before it
+    is measured (vibrations die out; a guarded move latches in motion and has none).
+    capture_s: simulated time of one stereo capture (exposure and readout of the pair).
+    Both advance the simulated clock (robot time), not the wall-time pacing of motions.
     """
 
     q_min: list[float] | None = None
@@ -193,6 +197,8 @@ class MotionSpec(_Model):
     ) = None
     time_scale: NonNegative = 0.0
     initial_q: list[float] | None = None
+    settle_s: NonNegative = 0.3
+    capture_s: NonNegative = 0.1
 
 
 class ServerSpec(_Model):

@@ -7,7 +7,8 @@
     diagnosis = hostpc.diagnose(dataset, ladder=True)
 
 The names below are imported on first use, so `hostpc` commands start fast and can set up
-the numeric libraries before numpy loads.
+the numeric libraries before numpy loads. `hostpc.fit` and `hostpc.diagnose` use one BLAS
+thread for small problems (hostpc/threads.py).
 """
 
 from __future__ import annotations
@@ -26,11 +27,16 @@ _LAZY = {
     "Diagnosis": "hostpc.diagnostics",
 }
 __all__ = list(_LAZY)
+_BLAS_LIMITED = ("fit", "diagnose")
 
 
 def __getattr__(name: str) -> Any:
     if name not in _LAZY:
         raise AttributeError(f"module 'hostpc' has no attribute {name!r}")
     value = getattr(importlib.import_module(_LAZY[name]), name)
+    if name in _BLAS_LIMITED:  # one BLAS thread for small problems (hostpc/threads.py)
+        from hostpc.threads import limited_for_small_problems
+
+        value = limited_for_small_problems(value)
     globals()[name] = value
     return value

@@ -176,6 +176,9 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--speed", type=float, default=0.5, help="motion speed (0, 1]")
     parser.add_argument("--criterion", choices=("D", "random"), default="D",
                         help="pose selection (default D-optimal)")
+    parser.add_argument("--target-sigma", type=float, default=None, metavar="DEG",
+                        help="stop adding fit poses once every identifiable joint offset's "
+                        "predicted sigma is <= DEG (then --poses is the most)")
     parser.add_argument("--candidates", type=int, default=1500,
                         help="candidate pool size of the planner (default 1500)")
     parser.add_argument("--scenario", metavar="FILE", help="with --robot sim: scenario file")
@@ -202,6 +205,8 @@ def _settings(args: argparse.Namespace) -> RunSettings:
         raise InputError(f"--max-correction {args.max_correction}: must be positive")
     if args.candidates < args.poses + args.verify_poses:
         raise InputError(f"--candidates {args.candidates}: fewer than --poses + --verify-poses")
+    if args.target_sigma is not None and not args.target_sigma > 0:
+        raise InputError(f"--target-sigma {args.target_sigma}: must be positive")
     if args.timeout <= 0:
         raise InputError(f"--timeout {args.timeout}: must be positive")
     if args.pixel_floor < 0:
@@ -224,6 +229,7 @@ def _settings(args: argparse.Namespace) -> RunSettings:
         force=bool(args.force), max_correction_deg=max_correction,
         verify_factor=1.2 if args.verify_factor is None else args.verify_factor,
         criterion=args.criterion, n_candidates=args.candidates, options=options,
+        target_sigma_deg=args.target_sigma,
     )
 
 

@@ -62,7 +62,9 @@ class RunSettings:
     not converge or does not explain the data); verify_factor: pass if the verify RMS <=
     verify_factor x the noise RMS the fit measured; criterion: planner criterion ("D" or
     "random"); n_candidates: size of the candidate pool; options: method-specific
-    settings (e.g. stereo_target "depth": "triangulate" | "sgbm").
+    settings (e.g. stereo_target "depth": "triangulate" | "sgbm"); target_sigma_deg: stop
+    adding fit poses once every identifiable joint offset's predicted sigma is <= this
+    (deg; n_poses is then the most), None: n_poses poses.
     """
 
     method: str
@@ -81,6 +83,7 @@ class RunSettings:
     criterion: str = "D"
     n_candidates: int = 1500
     options: Mapping[str, Any] = field(default_factory=dict)
+    target_sigma_deg: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form."""

@@ -17,7 +17,11 @@ information a pose adds: `M = sum_k A_k^T A_k`.
 - Identifiability check of the plan: `analyse` on the plan's Jacobian; directions that the
   plan cannot separate but the pool can are a planning failure (too few or too similar
   poses): the run stops before moving and says which parameters and what would fix it.
-- Order: nearest neighbour in joint space from the robot's current pose (shorter motions).
+- Order: nearest neighbour in joint space from the robot's current pose; with a target
+  sigma a tour (`tour.py`: nearest neighbour + 2-opt on the joint move time), never longer
+  than the selection order nor than nearest neighbour.
+- Target sigma (`poses_for_target_sigma`): the fewest leading poses of the (nested) greedy
+  selection whose predicted sigma of every identifiable joint offset reaches a target.
 - Verification poses: a seeded random choice among the candidates the plan did not use.
 - Grouped candidates (`PoseGroups`, e.g. sphere_probe's 5 contacts per probe orientation):
   selection, order and verification take whole groups. D-optimal gain of a group is
@@ -39,6 +43,7 @@ from hostpc.dataset import Dataset
 from hostpc.fitting import NullDirection, analyse
 from hostpc.kinematics import Chain, forward, invert_transform
 from hostpc.kinematics.inverse import look_at, solve_ik
+from hostpc.methods.tour import nearest_neighbour, plan_tour
 from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem
 
@@ -279,21 +284,44 @@ def check_plan(plan: Design) -> PlanCheck:
                      plan_rank=ident.rank, pool_rank=len(names))
 
 
-def order_for_travel(q: np.ndarray, q_start: np.ndarray | None) -> np.ndarray:
-    """Visiting order (indices into q (N, n)): nearest neighbour by the largest joint
-    motion, starting from q_start (or from the first pose)."""
-    n_poses = q.shape[0]
-    if n_poses == 0:
-        return np.zeros(0, dtype=int)
-    remaining = list(range(n_poses))
-    current = q_start if q_start is not None else q[0]
-    order: list[int] = []
-    while remaining:
-        cost = np.max(np.abs(q[remaining] - current), axis=1)
-        k = remaining.pop(int(np.argmin(cost)))
-        order.append(k)
-        current = q[k]
-    return np.asarray(order, dtype=int)
+def order_for_travel(q: np.ndarray, q_start: np.ndarray | None,
+                     joint_speed: np.ndarray | None = None, *, tour: bool = False
+                     ) -> np.ndarray:
+    """Visiting order (indices into q (N, n)) from q_start (or from the first pose):
+    nearest neighbour by the move time max_i |dq_i| / v_i; with `tour`, nearest neighbour
+    improved by 2-opt (`hostpc.methods.tour`), never longer than q's own order nor than
+    nearest neighbour."""
+    if tour:
+        return plan_tour(q, q_start, joint_speed)
+    return nearest_neighbour(q, q_start, joint_speed)
+
+
+def poses_for_target_sigma(design: Design, order: np.ndarray, target_sigma: float,
+                           n_joints: int, min_poses: int = 1) -> int | None:
+    """The fewest leading poses of `order` (a nested selection, e.g. greedy D-optimal)
+    whose predicted standard deviation of every identifiable joint offset (not in the
+    pool's structural gauge) is <= target_sigma (rad); at least `min_poses`. None if all
+    of `order` does not reach it. Adding a pose never raises a predicted sigma, so the
+    count is found by bisection."""
+    order = np.asarray(order, dtype=int)
+    labels = [n.split(".", 1)[1] for n in design.names if n.startswith("joint_offsets.")]
+    wanted = [j for j, name in enumerate(joint_offset_names(n_joints, labels))
+              if name in design.names and design.free[design.names.index(name)]]
+
+    def reached(count: int) -> bool:
+        sigmas = joint_offset_sigmas(design.subset(order[:count]), n_joints)[wanted]
+        return bool(np.all(np.isfinite(sigmas)) and np.all(sigmas <= target_sigma))
+
+    low, high = max(1, min(int(min_poses), order.size)), order.size
+    if high == 0 or not reached(high):
+        return None
+    while low < high:
+        middle = (low + high) // 2
+        if reached(middle):
+            high = middle
+        else:
+            low = middle + 1
+    return low
 
 
 def look_at_candidates(

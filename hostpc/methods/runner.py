@@ -48,6 +48,7 @@ from hostpc.methods.planning import (
     joint_offset_sigmas,
     make_design,
     order_for_travel,
+    poses_for_target_sigma,
     select,
     select_groups,
     verify_groups,
@@ -62,6 +63,7 @@ from hostpc.methods.resume import (
     resume_settings,
     settle_push_intent,
 )
+from hostpc.methods.robot_time import RobotTimer
 from hostpc.methods.summary import (
     EXIT_PUSH_REFUSED,
     EXIT_VERIFY_FAILED,
@@ -217,7 +219,9 @@ class Runner:
             # the method's own default model (sphere_probe: + trigger_latency)
             settings = dataclasses.replace(settings, effects=method.default_effects())
         method.check_inputs()
+        timer = RobotTimer(self.robot, self.journal, state)  # robot time (robot_time.py)
         await method.prepare(self.robot, progress)
+        await timer.end("rig")
 
         if "plan" in self.header:
             plan = Plan.from_dict(self.header["plan"])
@@ -230,7 +234,9 @@ class Runner:
 
         q_from = self.journal.last_q()
         q_now = np.asarray(q_from, float) if q_from is not None else state.q
+        timer.begin()
         q_now = await self._acquire(method, "fit", plan.q, q_now)
+        await timer.end("measure")
 
         dataset = self._dataset(method, "fit")
         if dataset.n_samples < 3:
@@ -254,7 +260,9 @@ class Runner:
 
         verify_result: VerifyResult | None = None
         if settings.n_verify > 0 and plan.q_verify.shape[0] > 0:
+            timer.begin()
             await self._acquire(method, "verify", plan.q_verify, q_now)
+            await timer.end("verify")
             verify_dataset = self._dataset(method, "verify")
             if verify_dataset.n_samples > 0:
                 save_dataset(verify_dataset, self.run_dir / "verify_dataset.json")
@@ -300,7 +308,13 @@ class Runner:
         groups = method.pose_groups(pool)
         if groups is None:
             chosen = select(design, settings.n_poses, settings.criterion, rng)
-            fit_indices = chosen[order_for_travel(pool[chosen], state.q)]
+            if settings.target_sigma_deg is not None:  # the fewest poses that reach it
+                needed = poses_for_target_sigma(design, chosen,
+                                                math.radians(settings.target_sigma_deg),
+                                                state.q.size, min_poses=3)
+                chosen = chosen if needed is None else chosen[:needed]
+            fit_indices = chosen[order_for_travel(pool[chosen], state.q,
+                                                  tour=settings.target_sigma_deg is not None)]
         else:  # whole groups (sphere_probe: an orientation's 5 contacts), in the pool order
             fit_indices = select_groups(design, groups, settings.n_poses, settings.criterion,
                                         rng)
@@ -325,6 +339,7 @@ class Runner:
         sigmas = joint_offset_sigmas(plan_design, state.q.size)
         info = {
             "criterion": settings.criterion,
+            "target_sigma_deg": settings.target_sigma_deg,
             "n_candidates": int(pool.shape[0]),
             "parameters": list(names),
             "predicted_joint_sigma_deg": [None if not np.isfinite(s) else math.degrees(s)

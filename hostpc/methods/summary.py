@@ -22,6 +22,7 @@ from hostpc.methods.base import Method, Plan, RunSettings
 from hostpc.methods.cell import Cell
 from hostpc.methods.journal import Journal
 from hostpc.methods.push import PUSH_FILE, PushPlan, chi2_dof_upper, joint_display_name
+from hostpc.methods.robot_time import format_robot_time, robot_time_document
 from hostpc.methods.verify import VerifyResult, measured_noise_rms, noise_rms
 
 RESULT_FORMAT = "zerocal-calibration/1"
@@ -100,6 +101,7 @@ def result_document(journal: Journal, run_dir: Path, robot: Mapping[str, Any],
         "offsets": {"joints": joints},
         "push": push_doc,
         "verify": verify_result.to_dict() if verify_result is not None else None,
+        "robot_time_s": robot_time_document(journal),
         "files": {
             "run": str(journal.run_path),
             "journal": str(journal.journal_path),
@@ -167,6 +169,9 @@ def format_summary(document: Mapping[str, Any]) -> str:
     ]
     for text in fitd["unidentifiable"]:
         lines.append(f"  unidentifiable: {text}")
+    robot_time = format_robot_time(document)
+    if robot_time:
+        lines.append(robot_time)
     for item in acq["skipped"][:10]:
         lines.append(f"  skipped {item['phase']} pose {item['index']}: {item['reason']}")
     rows = document["offsets"]["joints"]

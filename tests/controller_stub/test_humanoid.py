@@ -89,8 +89,12 @@ def test_create_simulation_serves_the_humanoid(sim: HumanoidSimulation) -> None:
 def test_measure_targets_at_home_sees_both_targets(sim: HumanoidSimulation) -> None:
     q = HOME.copy()
     q[1] = -0.75  # tilt down to the hands
-    sim.move_joints(q, 1.0)
+    moved = sim.move_joints(q, 1.0)
+    assert moved.settle_s == 0.3  # robot time: motion, settling, then the capture
+    assert sim.time == pytest.approx(moved.duration_s + 0.3)
     reading = sim.measure_targets()
+    assert reading["time"] == pytest.approx(moved.duration_s + 0.3)
+    assert sim.time == pytest.approx(moved.duration_s + 0.4)
     assert set(reading["targets"]) == {"left", "right"}
     for side, seen in reading["targets"].items():
         truth = sim.target_in_camera(side)

@@ -25,8 +25,36 @@ def test_motion_duration_and_clock(make_sim: MakeSim) -> None:
     expected = float(np.max(np.abs(target - q0) / (0.5 * sim.max_joint_speed())))
     assert result.completed
     assert result.duration_s == pytest.approx(expected, rel=1e-12)
-    assert sim.time == pytest.approx(expected, rel=1e-12)
+    # robot time: the motion, then the settling before the robot may be measured
+    assert result.settle_s == sim.scenario.motion.settle_s == 0.3
+    assert sim.time == pytest.approx(expected + 0.3, rel=1e-12)
     np.testing.assert_array_equal(sim.joint_positions(), target)
+
+
+def test_settle_and_capture_time_charged_to_the_clock(make_sim: MakeSim) -> None:
+    sim = make_sim(truth={"zero_errors": [0.0] * 6},
+                   motion={"settle_s": 0.5, "capture_s": 0.25})
+    q0 = sim.joint_positions()
+    target = q0 + np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.4])
+    motion = sim.motion_duration(q0, target, 1.0)
+    sim.move_joints(target, 1.0)
+    assert sim.time == pytest.approx(motion + 0.5, rel=1e-12)
+    still = sim.move_joints(target, 1.0)  # already there: no motion, nothing to settle
+    assert still.duration_s == 0.0 and still.settle_s == 0.0
+    t_before = sim.time
+    frame = sim.capture_stereo("target")
+    assert frame.time == t_before  # stamped at the exposure's start
+    assert sim.time == pytest.approx(t_before + 0.25, rel=1e-12)
+    sim.capture_stereo("chessboard", 0)  # the robot waits for rig captures too
+    assert sim.time == pytest.approx(t_before + 0.5, rel=1e-12)
+
+
+def test_aborted_move_charges_no_settling(make_sim: MakeSim) -> None:
+    sim = make_sim(truth={"zero_errors": [0.0] * 6})
+    plan = sim.begin_move(sim.joint_positions() + 0.3, 1.0)
+    result = sim.finish_move(plan, 0.5)
+    assert not result.completed and result.settle_s == 0.0  # type: ignore[union-attr]
+    assert sim.time == pytest.approx(result.duration_s, rel=1e-12)
 
 
 def test_joint_limit_and_bad_arguments_refused(make_sim: MakeSim) -> None:

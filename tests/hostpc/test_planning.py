@@ -19,11 +19,13 @@ from hostpc.methods.planning import (
     joint_offset_sigmas,
     make_design,
     order_for_travel,
+    poses_for_target_sigma,
     random_selection,
     select_groups,
     verify_groups,
 )
 from hostpc.methods.stereo_target import StereoTargetMethod
+from hostpc.methods.tour import move_times, nearest_neighbour, path_time, plan_tour
 from hostpc.robots.base import RobotState
 
 UR5E_HOME = np.array([0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0])
@@ -155,3 +157,94 @@ def test_group_selection_takes_whole_groups_by_their_summed_information() -> Non
     verify = verify_groups(groups, chosen, 7, rng)
     assert verify.size == 10 and not set(groups.labels[verify]) & set(labels.tolist())
     assert verify_groups(groups, chosen, 0, rng).size == 0
+
+
+# ---------------------------------------------------------------- tours and target sigma
+
+
+def _all_reversals_time(q: np.ndarray, order: np.ndarray, start: np.ndarray) -> float:
+    """The shortest path time over every single segment reversal of `order`."""
+    best = np.inf
+    for i in range(len(order)):
+        for j in range(i + 1, len(order)):
+            trial = order.copy()
+            trial[i:j + 1] = trial[i:j + 1][::-1]
+            best = min(best, path_time(q[trial], start))
+    return float(best)
+
+
+def test_tour_is_a_permutation_never_longer_than_selection_order_or_nearest_neighbour(
+) -> None:
+    rng = np.random.default_rng(5)
+    for trial in range(20):
+        n = int(rng.integers(1, 40))
+        q = rng.uniform(-2, 2, (n, 6))
+        start = rng.uniform(-2, 2, 6) if trial % 2 else None
+        speed = rng.uniform(0.5, 3.0, 6) if trial % 3 else None
+        tour = plan_tour(q, start, speed)
+        assert sorted(tour.tolist()) == list(range(n))
+        t_tour = path_time(q[tour], start, speed)
+        assert t_tour <= path_time(q, start, speed) + 1e-12
+        assert t_tour <= path_time(q[nearest_neighbour(q, start, speed)], start, speed) + 1e-12
+        if start is None:
+            assert tour[0] == 0  # without a start pose the first pose stays first
+
+
+def test_tour_is_a_two_opt_local_optimum_and_much_shorter_than_random_order() -> None:
+    rng = np.random.default_rng(6)
+    q = rng.uniform(-2, 2, (14, 6))
+    start = np.zeros(6)
+    tour = plan_tour(q, start)
+    assert path_time(q[tour], start) <= _all_reversals_time(q, tour, start) + 1e-9
+    assert path_time(q[tour], start) < 0.8 * path_time(q, start)
+
+
+def test_move_time_is_the_slowest_joint_at_its_own_speed() -> None:
+    q_from, q_to = np.zeros(3), np.array([0.3, -1.0, 0.5])
+    assert move_times(q_from, q_to) == pytest.approx(1.0)
+    assert move_times(q_from, q_to, np.array([0.1, 2.0, 1.0])) == pytest.approx(3.0)
+
+
+def test_planned_tour_from_home_beats_the_selection_order(pool_and_design) -> None:  # type: ignore[no-untyped-def]
+    _, pool, design = pool_and_design
+    chosen = greedy_d_optimal(design, 40)
+    tour = order_for_travel(pool[chosen], UR5E_HOME, tour=True)
+    assert sorted(tour.tolist()) == list(range(40))
+    assert (path_time(pool[chosen][tour], UR5E_HOME)
+            < 0.7 * path_time(pool[chosen], UR5E_HOME))
+
+
+def test_target_sigma_stop_takes_the_fewest_poses_and_the_fit_delivers_it(
+        pool_and_design) -> None:  # type: ignore[no-untyped-def]
+    from hostpc.dataset import dataset_from_dict
+    from hostpc.fitting import fit
+    from hostpc.model.measurement import predict
+    from hostpc.model.problem import build_problem
+
+    method, pool, design = pool_and_design
+    target = np.radians(0.01)
+    chosen = greedy_d_optimal(design, 60)
+    count = poses_for_target_sigma(design, chosen, target, 6, min_poses=3)
+    assert count is not None and 3 < count < 60
+    identifiable = [1, 2, 3, 4]  # q1 and q6: structural gauge with both frames estimated
+    sigmas = joint_offset_sigmas(design.subset(chosen[:count]), 6)
+    assert np.all(sigmas[identifiable] <= target)
+    assert np.isnan(sigmas[0]) and np.isnan(sigmas[5])
+    fewer = joint_offset_sigmas(design.subset(chosen[:count - 1]), 6)[identifiable]
+    assert not np.all(fewer <= target)  # one pose fewer does not reach it
+    assert poses_for_target_sigma(design, chosen[:count - 1], target, 6) is None
+    # the fit of those poses, measured with the planned noise, has the promised sigmas
+    q = pool[chosen[:count]]
+    placeholder = build_problem(method.design_dataset(q), "joint_offsets")
+    p, _ = predict(placeholder, np.zeros(placeholder.layout.size), jacobian=False)
+    cov = method.expected_covariance(p)
+    noise = np.random.default_rng(7).normal(size=(count, 3))
+    measured = p + np.einsum("nij,nj->ni", np.linalg.cholesky(cov), noise)
+    document = method.dataset_document([
+        {"q": q[k].tolist(), "p": measured[k].tolist(), "cov": cov[k].tolist(),
+         "t": float(k)} for k in range(count)])
+    result = fit(dataset_from_dict(document), None, cv_folds=0)
+    assert result.converged
+    fitted = np.array([result.sigma(f"joint_offsets.q{j + 1}") for j in identifiable])
+    np.testing.assert_allclose(fitted, sigmas[identifiable], rtol=0.05)
+    assert np.all(fitted <= 1.05 * target)

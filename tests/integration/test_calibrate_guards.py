@@ -138,7 +138,8 @@ def test_push_intent_is_journaled_first_and_settled_on_resume(
     out = tmp_path / "run"
     # requests: get_state, get_offsets, (move, capture) per pose, then set_offsets: dropped
     # (not executed, the link cut) -> the run stops after journaling its intent
-    scenario = sim_scenario(drop_after_requests=2 + 2 * poses)
+    # + 2: the robot-time clock readings (get_state) after the rig and after the poses
+    scenario = sim_scenario(drop_after_requests=4 + 2 * poses)
     with SimulatedController(scenario, tmp_path / "stub") as sim:
         address = f"{sim.address.host}:{sim.address.port}"
         before = _offsets(sim)

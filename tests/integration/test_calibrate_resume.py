@@ -20,7 +20,7 @@ POSES = 16
 # requests: get_state, get_offsets, then (move, capture) per pose: index 2 + 2k is the move
 # to pose k; the drop makes that move fail (not executed, not re-sent)
 DROP_AT_POSE = 7
-DROP_INDEX = 2 + 2 * DROP_AT_POSE
+DROP_INDEX = 3 + 2 * DROP_AT_POSE  # + 1: the robot-time clock reading after the rig
 
 
 def _calibrate(capsys: pytest.CaptureFixture[str], sim: SimulatedController, rig: Path,

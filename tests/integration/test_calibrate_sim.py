@@ -149,6 +149,12 @@ def test_calibrate_sim_recovers_truth_and_verifies(
     assert np.all(distance > 1e-6)
     assert (out / "summary.txt").read_text().count("truth (simulation)") == 1
     assert "measure" in stderr  # progress on stderr, plain lines (not a TTY)
+    # robot time from the simulator's clock: motion + 0.3 s settle + 0.1 s capture a pose
+    robot_time = document["robot_time_s"]
+    assert robot_time["clock"] == "controller" and robot_time["rig"] == 0.0  # rig given
+    assert robot_time["measure"] > 60 * 0.4 and robot_time["verify"] > 30 * 0.4
+    assert robot_time["total"] == pytest.approx(robot_time["measure"] + robot_time["verify"])
+    assert "robot time: " in (out / "summary.txt").read_text()
 
 
 @pytest.mark.slow

@@ -1,0 +1,104 @@
+"""Robot time: how long a calibration keeps the robot busy, per phase.
+
+Robot time is what the robot spends on the run: motion, settling before each measurement
+and the captures, for the phases that use the robot:
+
+- `rig`: the method's preparation (stereo_target: the chessboard views of the rig
+  calibration; nothing on a resume that reloads the rig);
+- `measure`: the fit poses;
+- `verify`: the fresh verification poses.
+
+Each phase is timed (one clock reading at its end) by the controller's own clock when it
+reports one (`RobotState.extra["time"]`: the simulator's clock, which charges motion,
+settle and capture time, see docs/simulator.md), else by the host's monotonic clock (a
+real robot is busy for the wall time of the phase). Each timed phase is journaled
+(`{"event": "robot_time", "phase": ..., "seconds": ..., "clock": "controller"|"host"}`),
+so a resumed run adds the time of every session; a phase cut short by an interruption
+loses that session's part of it.
+
+`robot_time_document(journal)` is result.json's `robot_time_s`: seconds per phase and
+`total` (their sum), with the clock used.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping
+from typing import Any
+
+from hostpc.methods.journal import Journal
+from hostpc.robots.base import RobotAdapter, RobotState
+
+PHASES = ("rig", "measure", "verify")
+
+
+async def robot_clock(robot: RobotAdapter) -> tuple[float, str]:
+    """(now in s, "controller") from the controller's clock, else (monotonic, "host")."""
+    state = await robot.state()
+    now = state.extra.get("time") if isinstance(state.extra, Mapping) else None
+    if isinstance(now, int | float) and math.isfinite(now):
+        return float(now), "controller"
+    return time.monotonic(), "host"
+
+
+class RobotTimer:
+    """Times the phases of one session of a run and journals them (module docstring).
+
+    The controller's clock is read once per phase end (one `state` request each): a phase
+    runs from the previous reading (the run's first `state`, then the last phase end), so
+    nothing happens to the controller's clock between phases but the fit and the push,
+    which do not advance a simulated clock. With the host's clock (free to read) `begin`
+    restarts the count, so the fit's time is not the robot's."""
+
+    def __init__(self, robot: RobotAdapter, journal: Journal, state: RobotState) -> None:
+        self.robot = robot
+        self.journal = journal
+        now = state.extra.get("time") if isinstance(state.extra, Mapping) else None
+        if isinstance(now, int | float) and math.isfinite(now):
+            self._last, self._clock = float(now), "controller"
+        else:
+            self._last, self._clock = time.monotonic(), "host"
+
+    def begin(self) -> None:
+        """A phase starts now (the host's clock only; the controller's is not read)."""
+        if self._clock == "host":
+            self._last = time.monotonic()
+
+    async def end(self, phase: str) -> float:
+        """A phase ends: read the clock, journal the phase's robot time (s)."""
+        now, clock = await robot_clock(self.robot)
+        last, self._last = self._last, now
+        if clock != self._clock:  # the controller's clock vanished: nothing sure
+            self._clock = clock
+            return 0.0
+        seconds = max(0.0, now - last)
+        if seconds > 0.0:
+            self.journal.event("robot_time", phase=phase, seconds=seconds, clock=clock)
+        return seconds
+
+
+def robot_time_document(journal: Journal) -> dict[str, Any]:
+    """result.json's `robot_time_s`: {"rig", "measure", "verify", "total"} in s (summed
+    over the run's sessions) and "clock" ("controller", "host", "mixed" or None)."""
+    seconds = dict.fromkeys(PHASES, 0.0)
+    clocks: set[str] = set()
+    for event in journal.events("robot_time"):
+        phase = event.get("phase")
+        value = event.get("seconds")
+        if phase in seconds and isinstance(value, int | float) and math.isfinite(value):
+            seconds[phase] += float(value)
+            clocks.add(str(event.get("clock", "controller")))
+    clock = None if not clocks else (clocks.pop() if len(clocks) == 1 else "mixed")
+    return {**seconds, "total": sum(seconds.values()), "clock": clock}
+
+
+def format_robot_time(document: Mapping[str, Any]) -> str | None:
+    """The summary's robot time line, or None if the document has no robot time."""
+    rt = document.get("robot_time_s")
+    if not rt:
+        return None
+    source = {"controller": "controller clock", "host": "wall time on the host",
+              "mixed": "controller and host clocks"}.get(str(rt.get("clock")), "not measured")
+    return (f"robot time: {rt['total']:.1f} s (rig {rt['rig']:.1f}, measure "
+            f"{rt['measure']:.1f}, verify {rt['verify']:.1f}; {source})")

@@ -1,0 +1,112 @@
+"""Tours: the visiting order of planned poses that shortens the robot's travel time.
+
+Pure numerics (no robot, no I/O). A joint move to the next pose takes as long as its slowest
+joint: `t(a, b) = max_i |b_i - a_i| / v_i` (v_i the joint's speed, rad/s; only ratios
+matter, so equal speeds give the largest joint motion in rad). A tour is an open path that
+starts at the robot's current pose and visits every planned pose once; its cost is the sum
+of the moves' times. The travelling-salesman problem behind it is hard, and a good tour is
+enough:
+
+1. start from the shorter of the nearest-neighbour path and the given (selection) order;
+2. improve it by 2-opt (reverse the segment between two moves when that shortens the path,
+   the first pose stays attached to the start) until no reversal helps.
+
+So a tour is never longer than the selection order nor than nearest neighbour. The cost
+is symmetric, so reversing a segment leaves its inner moves unchanged and a reversal's gain
+is computed from the two moves it replaces.
+
+Shapes: q (N, n) rad; q_start (n,) rad; joint_speed (n,) rad/s (or None: all equal).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+MAX_PASSES = 50
+
+
+def move_times(q_from: np.ndarray, q_to: np.ndarray,
+               joint_speed: np.ndarray | None = None) -> np.ndarray:
+    """Times of joint moves q_from[k] -> q_to[k] ((..., n) each, broadcast) as
+    max_i |dq_i| / v_i; with joint_speed None, the largest joint motion (rad)."""
+    dq = np.abs(np.asarray(q_to, float) - np.asarray(q_from, float))
+    if joint_speed is not None:
+        dq = dq / np.asarray(joint_speed, float)
+    return np.asarray(np.max(dq, axis=-1))
+
+
+def path_time(q: np.ndarray, q_start: np.ndarray | None = None,
+              joint_speed: np.ndarray | None = None) -> float:
+    """Travel time (s; rad with equal speeds) of visiting q (N, n) in its order from
+    q_start (none: from the first pose)."""
+    q = np.asarray(q, float)
+    if q.shape[0] == 0:
+        return 0.0
+    path = q if q_start is None else np.vstack([np.asarray(q_start, float)[None, :], q])
+    return float(np.sum(move_times(path[:-1], path[1:], joint_speed)))
+
+
+def nearest_neighbour(q: np.ndarray, q_start: np.ndarray | None,
+                      joint_speed: np.ndarray | None = None) -> np.ndarray:
+    """Indices into q (N, n): always move to the nearest unvisited pose, from q_start (or
+    from the first pose)."""
+    n_poses = q.shape[0]
+    if n_poses == 0:
+        return np.zeros(0, dtype=int)
+    remaining = list(range(n_poses))
+    current = q_start if q_start is not None else q[0]
+    order: list[int] = []
+    while remaining:
+        cost = move_times(current, q[remaining], joint_speed)
+        k = remaining.pop(int(np.argmin(cost)))
+        order.append(k)
+        current = q[k]
+    return np.asarray(order, dtype=int)
+
+
+def two_opt(q: np.ndarray, order: np.ndarray, q_start: np.ndarray | None,
+            joint_speed: np.ndarray | None = None) -> np.ndarray:
+    """`order` (indices into q) improved by 2-opt segment reversals until none shortens
+    the open path from q_start (with q_start None the first pose of `order` stays first)."""
+    order = np.asarray(order, dtype=int).copy()
+    if order.size < 3 and q_start is None:
+        return order
+    head = np.asarray(q_start if q_start is not None else q[order[0]], float)
+    body = order if q_start is not None else order[1:]
+    fixed = 0 if q_start is not None else 1
+    nodes = np.vstack([head[None, :], q[body]])  # node 0 is the fixed start
+    D = move_times(nodes[:, None, :], nodes[None, :, :], joint_speed)
+    path = np.arange(nodes.shape[0])
+    m = path.size
+    for _ in range(MAX_PASSES):
+        improved = False
+        for i in range(1, m - 1):
+            # reverse path[i..j]: moves (i-1 -> i) and (j -> j+1) become (i-1 -> j), (i -> j+1)
+            a, b = path[i - 1], path[i]
+            c = path[i + 1:]
+            removed = D[a, b] + np.append(D[c[:-1], c[1:]], 0.0)
+            added = D[a, c] + np.append(D[b, c[1:]], 0.0)
+            gain = removed - added
+            k = int(np.argmax(gain))
+            if gain[k] > 1e-12 * max(float(removed[k]), 1e-12):
+                j = i + 1 + k
+                path[i:j + 1] = path[i:j + 1][::-1].copy()
+                improved = True
+        if not improved:
+            break
+    tour = body[path[1:] - 1]
+    return tour if fixed == 0 else np.concatenate([order[:1], tour])
+
+
+def plan_tour(q: np.ndarray, q_start: np.ndarray | None,
+              joint_speed: np.ndarray | None = None) -> np.ndarray:
+    """Visiting order (indices into q (N, n)) of a short tour from q_start (see the module
+    docstring): never longer than the given order nor than nearest neighbour."""
+    q = np.asarray(q, float)
+    n_poses = q.shape[0]
+    if n_poses == 0:
+        return np.zeros(0, dtype=int)
+    given = np.arange(n_poses)
+    greedy = nearest_neighbour(q, q_start, joint_speed)
+    start = min((given, greedy), key=lambda o: path_time(q[o], q_start, joint_speed))
+    return two_opt(q, start, q_start, joint_speed)
