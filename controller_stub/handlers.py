@@ -9,22 +9,20 @@ angles and offsets are radians (reported frame), times seconds.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import logging
 from collections.abc import Awaitable, Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
+from controller_stub.controller_state import SimulatedController
 from controller_stub.errors import SimulationRefused
+from controller_stub.motion import GuardedMoveResult, MotionPlan, MoveResult
 from protocol import messages as m
 from protocol.connection import Connection
 from protocol.errors import ErrorCode
-
-if TYPE_CHECKING:
-    from controller_stub.server import ControllerServer
 
 # the server's logger: log records keep the name they had before the server was split
 logger = logging.getLogger("controller_stub.server")
@@ -45,14 +43,30 @@ class RequestRefusedError(Exception):
         self.reason = reason
 
 
+class MotionHost(Protocol):
+    """What the handlers use of the server (`controller_stub.server.ControllerServer`):
+    the state shared by all sessions (motion pacing, mode, the truth file)."""
+
+    def mode(self) -> str: ...
+    def joint_positions(self) -> np.ndarray: ...
+    def begin_motion(self) -> None: ...
+    async def execute_motion(self, plan: MotionPlan) -> MoveResult | GuardedMoveResult: ...
+    def abort_motion(self) -> bool: ...
+    def write_truth(self) -> None: ...
+
+
+ROLLBACK_ID_PREFIX = "rb-"
+"""A rollback id names a write in the simulation's offset history: "rb-<history id>"."""
+
+
 class RequestHandlers:
     """The request handlers of `controller_stub.session.Session`, by request kind.
 
     The state below is created by `Session.__init__`.
     """
 
-    server: ControllerServer
-    sim: Any
+    server: MotionHost
+    sim: SimulatedController
     conn: Connection
     peer: str
 
@@ -108,10 +122,11 @@ class RequestHandlers:
             )
         return np.asarray(q, dtype=float)
 
-    async def _run_motion(self, q_target: np.ndarray, speed: float, io_line: int | None) -> Any:
+    async def _run_motion(
+        self, q_target: np.ndarray, speed: float, io_line: int | None
+    ) -> MoveResult | GuardedMoveResult:
         """Plan, pace and finish a motion (stopped part-way by an abort); the simulation's
-        MoveResult / GuardedMoveResult. A simulation without `begin_move` moves at once
-        and an abort only ends the wait (its result then says "aborted")."""
+        MoveResult / GuardedMoveResult."""
         if not speed >= MIN_MOTION_SPEED:
             raise RequestRefusedError(
                 ErrorCode.REFUSED,
@@ -120,22 +135,13 @@ class RequestHandlers:
                 reason="speed",
             )
         self.server.begin_motion()
-        if hasattr(self.sim, "begin_move"):
-            plan = self.sim.begin_move(q_target, speed, io_line)
-            return await self.server.execute_motion(plan)
-        if io_line is None:
-            result = self.sim.move_joints(q_target, speed)
-        else:
-            result = self.sim.guarded_move(q_target, speed, io_line)
-        if await self.server.run_motion(result.duration_s):
-            return result
-        if io_line is None:
-            return dataclasses.replace(result, completed=False, reason="aborted")
-        return dataclasses.replace(result, reason="aborted")
+        plan = self.sim.begin_move(q_target, speed, io_line)
+        return await self.server.execute_motion(plan)
 
     async def _move_joints(self, request: m.MoveJoints) -> m.MoveDone:
         q_target = self._check_joints(request.q)
         result = await self._run_motion(q_target, request.speed, None)
+        assert isinstance(result, MoveResult)
         return m.MoveDone(
             reply_to=request.id,
             completed=bool(result.completed),
@@ -147,6 +153,7 @@ class RequestHandlers:
     async def _guarded_move(self, request: m.GuardedMove) -> m.GuardedMoveDone:
         q_target = self._check_joints(request.q)
         result = await self._run_motion(q_target, request.speed, request.io_line)
+        assert isinstance(result, GuardedMoveResult)
         return m.GuardedMoveDone(
             reply_to=request.id,
             contact=bool(result.contact),
@@ -238,7 +245,7 @@ class RequestHandlers:
         offsets = self._check_joints(request.offsets)
         self._refuse_while_moving("write the zero offsets")
         previous = float_list(self.sim.set_zero_offsets(offsets))
-        rollback_id = self.server.new_rollback_id(previous)
+        rollback_id = f"{ROLLBACK_ID_PREFIX}{self.sim.last_history_id}"
         logger.info("client %s set zero offsets (rollback id %s)", self.peer, rollback_id)
         self.server.write_truth()
         return m.OffsetsSet(
@@ -249,13 +256,25 @@ class RequestHandlers:
         )
 
     async def _rollback(self, request: m.RollbackOffsets) -> m.OffsetsRolledBack:
-        saved = self.server.rollback_offsets(request.rollback_id)
+        history_id = self._written_history_id(request.rollback_id)
         self._refuse_while_moving("roll back the zero offsets")
-        replaced = float_list(self.sim.set_zero_offsets(np.asarray(saved, dtype=float)))
+        replaced = float_list(self.sim.undo_write(history_id))
         logger.info("client %s rolled back offsets to %s", self.peer, request.rollback_id)
         self.server.write_truth()
         return m.OffsetsRolledBack(
             reply_to=request.id, offsets=float_list(self.sim.zero_offsets()), replaced=replaced
+        )
+
+    def _written_history_id(self, rollback_id: str) -> int:
+        """The offset-history id of the write `rollback_id` names (one that can be undone);
+        RequestRefusedError(UNKNOWN_ROLLBACK) otherwise."""
+        digits = rollback_id.removeprefix(ROLLBACK_ID_PREFIX)
+        if rollback_id.startswith(ROLLBACK_ID_PREFIX) and digits.isascii() and digits.isdigit():
+            history_id = int(digits)
+            if history_id > 0 and any(i == history_id for i, _ in self.sim.offset_history()):
+                return history_id
+        raise RequestRefusedError(
+            ErrorCode.UNKNOWN_ROLLBACK, f"unknown rollback id {rollback_id!r}"
         )
 
     async def _heartbeat(self, request: m.Heartbeat) -> m.HeartbeatReply:

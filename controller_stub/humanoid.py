@@ -43,6 +43,9 @@ from typing import Any
 
 import numpy as np
 
+from controller_stub.controller_state import ControllerState
+from controller_stub.errors import SimulationRefused
+from controller_stub.motion import GuardedMoveResult, MotionPlan, MoveResult
 from controller_stub.robot_model import (
     LengthSite,
     RobotModel,
@@ -178,20 +181,20 @@ class StereoTriangulator:
         return p, cov
 
 
-class HumanoidSimulation:
+class HumanoidSimulation(ControllerState):
     """The simulated humanoid controller: the Simulation contract over the combined joint
     vector (head 2, left 7, right 7; reported angles, rad) plus :meth:`measure_targets`.
+    Offsets, their history, limits, IO, e-stop and the busy check are the shared
+    :class:`~controller_stub.controller_state.ControllerState`.
 
     Motion is ideal (no hidden joint-space physics): the physical angle is the reported one
     plus the current zero error.
     """
 
     def __init__(self, scenario: Scenario) -> None:
-        self.scenario = scenario
         self.models = {"head": head_model(), "left": arm_model("left"),
                        "right": arm_model("right")}
         n = sum(N_JOINTS.values())
-        self._n = n
         spec = scenario.humanoid
         truth = scenario.truth
         if isinstance(truth.zero_errors, RandomSpec):
@@ -199,7 +202,19 @@ class HumanoidSimulation:
             errors = stream_rng(scenario.seed, 1).uniform(-half, half, n)
         else:
             errors = np.asarray(truth.zero_errors, dtype=float)
-        self._zero_error_initial: np.ndarray = errors
+        motion = scenario.motion
+        model_min = np.concatenate([self.models[c].q_min for c in CHAINS])
+        model_max = np.concatenate([self.models[c].q_max for c in CHAINS])
+        speeds = np.concatenate([self.models[c].max_speed for c in CHAINS])
+        super().__init__(
+            scenario,
+            zero_errors=errors,
+            q_min=np.asarray(motion.q_min if motion.q_min is not None else model_min),
+            q_max=np.asarray(motion.q_max if motion.q_max is not None else model_max),
+            max_speed=(speeds if motion.max_joint_speed is None else
+                       np.broadcast_to(np.asarray(motion.max_joint_speed, float), (n,)).copy()),
+            start=motion.initial_q if motion.initial_q is not None else HOME,
+        )
         self._rng_noise = stream_rng(scenario.seed, 11)
         self.T_headend_camera_nominal = make_transform(list(CAMERA_NOMINAL[0]),
                                                        list(CAMERA_NOMINAL[1]))
@@ -217,158 +232,56 @@ class HumanoidSimulation:
                               for s in ARMS}
         self.stereo = StereoTriangulator(spec.focal_px, spec.baseline, spec.image_width,
                                          spec.image_height, spec.pixel_sigma)
-        motion = scenario.motion
-        model_min = np.concatenate([self.models[c].q_min for c in CHAINS])
-        model_max = np.concatenate([self.models[c].q_max for c in CHAINS])
-        self._q_min = np.asarray(motion.q_min if motion.q_min is not None else model_min, float)
-        self._q_max = np.asarray(motion.q_max if motion.q_max is not None else model_max, float)
-        speeds = np.concatenate([self.models[c].max_speed for c in CHAINS])
-        self._max_speed = (speeds if motion.max_joint_speed is None else
-                           np.broadcast_to(np.asarray(motion.max_joint_speed, float), (n,)).copy())
-        server = scenario.server
-        self._offsets_initial = (np.zeros(n) if server.initial_offsets is None
-                                 else np.asarray(server.initial_offsets, float))
-        self._offsets: np.ndarray = self._offsets_initial.copy()
-        self._history: list[tuple[int, np.ndarray]] = [(0, self._offsets.copy())]
-        self._next_history_id = 1
-        start = motion.initial_q if motion.initial_q is not None else HOME
-        self._q: np.ndarray = np.clip(np.asarray(start, float), self._q_min, self._q_max)
-        self._time = 0.0
-        self._n_io = server.n_digital_io
-        self._outputs = [False] * self._n_io
-        self._estopped = False
         self._moves = 0
-        self.on_io_edge = None
-
-    # ------------------------------------------------------------------ simple state
 
     @property
     def robot_name(self) -> str:
         return "humanoid_upper"
 
-    @property
-    def n_joints(self) -> int:
-        return self._n
-
-    @property
-    def time(self) -> float:
-        return self._time
-
-    @property
-    def time_scale(self) -> float:
-        return float(self.scenario.motion.time_scale)
-
-    @property
-    def estopped(self) -> bool:
-        return self._estopped
-
-    def estop(self) -> None:
-        self._estopped = True
-
-    def reset_estop(self) -> None:
-        self._estopped = False
-
-    def joint_positions(self) -> np.ndarray:
-        """(16,) reported angles (rad): head 1-2, left 1-7, right 1-7."""
-        return self._q.copy()
-
-    def joint_limits(self) -> tuple[np.ndarray, np.ndarray]:
-        return self._q_min.copy(), self._q_max.copy()
-
-    def max_joint_speed(self) -> np.ndarray:
-        return self._max_speed.copy()
-
-    def digital_inputs(self) -> list[bool]:
-        return [False] * self._n_io
-
-    def digital_outputs(self) -> list[bool]:
-        return list(self._outputs)
-
-    def set_digital_output(self, index: int, value: bool) -> None:
-        from controller_stub.simulation import SimulationRefused
-
-        if not 0 <= int(index) < self._n_io:
-            raise SimulationRefused("invalid_argument", f"digital output {index} out of range")
-        self._outputs[int(index)] = bool(value)
-
-    # ------------------------------------------------------------------ zero offsets
-
-    def zero_offsets(self) -> np.ndarray:
-        return self._offsets.copy()
-
-    def current_zero_errors(self) -> np.ndarray:
-        """(16,) rad: q_physical - q_reported with the current offsets."""
-        errors: np.ndarray = self._zero_error_initial + self._offsets_initial - self._offsets
-        return errors
-
-    def set_zero_offsets(self, offsets: Any) -> np.ndarray:
-        """Write new offsets (16,); refused beyond server.offset_limit_rad from the original."""
-        from controller_stub.simulation import SimulationRefused
-
-        new = self._vector(offsets, "offsets")
-        change = np.abs(new - self._offsets_initial)
-        limit = self.scenario.server.offset_limit_rad
-        if np.any(change > limit):
-            i = int(np.argmax(change))
-            raise SimulationRefused("offset_limit", f"joint {i + 1}: offset change "
-                                    f"{math.degrees(change[i]):.3f} deg exceeds the limit")
-        previous = self._offsets.copy()
-        self._q = self._q + (new - self._offsets)
-        self._offsets = new
-        self._history.append((self._next_history_id, new.copy()))
-        self._next_history_id += 1
-        return previous
-
-    def offset_history(self) -> list[tuple[int, np.ndarray]]:
-        return [(i, o.copy()) for i, o in self._history]
-
-    def rollback(self, history_id: int) -> np.ndarray:
-        from controller_stub.simulation import SimulationRefused
-
-        for i, offsets in self._history:
-            if i == history_id:
-                return self.set_zero_offsets(offsets)
-        raise SimulationRefused("unknown_history_id", f"no offset history entry {history_id}")
-
     # ------------------------------------------------------------------ motion
 
-    def _vector(self, values: Any, name: str) -> np.ndarray:
-        from controller_stub.simulation import SimulationRefused
-
-        try:
-            v = np.asarray(values, dtype=float).reshape(-1)
-        except (TypeError, ValueError):
-            raise SimulationRefused("invalid_argument", f"{name}: not numbers") from None
-        if v.shape != (self._n,) or not np.all(np.isfinite(v)):
-            raise SimulationRefused("invalid_argument",
-                                    f"{name}: expected {self._n} finite values")
-        return v
-
-    def move_joints(self, q_target: Any, speed: float) -> Any:
-        """Move to q_target (16,) reported rad at `speed` (fraction of max joint speed)."""
-        from controller_stub.simulation import MoveResult, SimulationRefused
-
+    def begin_move(self, q_target: Any, speed: float, io_line: int | None = None) -> MotionPlan:
+        """Plan a straight joint-space move to q_target (16,) reported rad at `speed`
+        (fraction of max joint speed); nothing moves until :meth:`finish_move`. Refused:
+        "busy" (a motion is in progress), "estop", "invalid_argument", "joint_limit",
+        "unsupported" for a guarded move (no touch probe)."""
+        self._refuse_if_busy()
+        if io_line is not None:
+            raise SimulationRefused("unsupported", "the humanoid has no touch probe")
         if self._estopped:
             raise SimulationRefused("estop", "emergency stop is active")
-        target = self._vector(q_target, "q_target")
+        target = self._check_vector(q_target, "q_target")
         if not 0.0 < float(speed) <= 1.0:
             raise SimulationRefused("invalid_argument", f"speed {speed} not in (0, 1]")
-        outside = (target < self._q_min) | (target > self._q_max)
-        if np.any(outside):
-            i = int(np.argmax(outside))
-            raise SimulationRefused("joint_limit", f"joint {i + 1}: target {target[i]:.6f} rad "
-                                    "outside its limits")
+        self._check_joint_limits(target)
         duration = float(np.max(np.abs(target - self._q) / (speed * self._max_speed)))
-        self._q = target.copy()
-        settle = float(self.scenario.motion.settle_s) if duration > 0.0 else 0.0
+        plan = MotionPlan(self._q.copy(), target, self._time, duration, 1.0, None, ())
+        self._active_plan = plan
+        return plan
+
+    def finish_move(self, plan: MotionPlan, fraction: float = 1.0) -> MoveResult:
+        """Execute `plan` up to `fraction` (clipped to [0, 1]) of it: the robot stops there
+        and a move stopped early reports completed=False / reason "aborted". A completed
+        move that went somewhere is followed by the settling time (`motion.settle_s`)."""
+        if plan is not self._active_plan:
+            raise SimulationRefused("invalid_argument", "finish_move: not the motion in progress")
+        self._active_plan = None
+        fraction = min(max(float(fraction), 0.0), 1.0)
+        stopped = fraction < 1.0
+        q_end = plan.q_at(fraction)
+        duration = fraction * plan.duration_s
+        settle = float(self.scenario.motion.settle_s) if duration > 0.0 and not stopped else 0.0
+        self._q = q_end.copy()
         self._time += duration + settle  # robot time: the motion, then the settling
         self._moves += 1
-        return MoveResult(completed=True, q=target.copy(), duration_s=duration,
-                          settle_s=settle)
+        return MoveResult(completed=not stopped, q=q_end, duration_s=duration,
+                          reason="aborted" if stopped else None, settle_s=settle)
 
-    def guarded_move(self, q_target: Any, speed: float, io_line: int) -> Any:
-        from controller_stub.simulation import SimulationRefused
+    def move_joints(self, q_target: Any, speed: float) -> MoveResult:
+        """Move to q_target (16,) reported rad at `speed` (fraction of max joint speed)."""
+        return self.finish_move(self.begin_move(q_target, speed))
 
+    def guarded_move(self, q_target: Any, speed: float, io_line: int) -> GuardedMoveResult:
         raise SimulationRefused("unsupported", "the humanoid has no touch probe")
 
     # ------------------------------------------------------------------ truth views
@@ -405,8 +318,6 @@ class HumanoidSimulation:
 
         Returns ``{"q": (16,) reported angles, "time": s, "targets": {side: {"p": (3,) m,
         "cov": (3, 3) m^2}}}`` with an entry only for each visible target."""
-        from controller_stub.simulation import SimulationRefused
-
         if self._estopped:
             raise SimulationRefused("estop", "emergency stop is active")
         targets: dict[str, dict[str, np.ndarray]] = {}
@@ -421,8 +332,6 @@ class HumanoidSimulation:
         return measured
 
     def capture_stereo(self, pattern: str = "target", view: int = 0) -> Any:
-        from controller_stub.simulation import SimulationRefused
-
         raise SimulationRefused("unsupported", "humanoid_upper serves measure_targets, not "
                                 "images")
 

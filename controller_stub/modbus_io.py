@@ -22,11 +22,12 @@ with `ModbusTcpServer`), not the deprecated `ModbusServerContext` datastores.
 from __future__ import annotations
 
 import logging
-from typing import Any
 
 from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
+
+from controller_stub.controller_state import SimulatedController
 
 logger = logging.getLogger(__name__)
 
@@ -57,7 +58,7 @@ class ModbusIoServer:
 
     def __init__(
         self,
-        sim: Any,
+        sim: SimulatedController,
         host: str = "127.0.0.1",
         port: int = 0,
         n_io: int | None = None,

@@ -13,7 +13,6 @@ ends the wait early and the robot stops where it was: at the elapsed fraction of
 with only the IO edges (and a guarded contact) that came before the stop. While a motion
 runs, `get_state` reports the joint angles interpolated along the path. One motion at a time
 for the whole controller: a second one is refused with `busy`, and so are offset writes.
-(A simulation without `begin_move` moves at once and the abort only ends the wait.)
 
 Limits against slow, stalled, greedy or hostile peers (all per `ControllerServer`
 arguments, from `scenario.server`): a client must say hello AND authenticate within
@@ -55,12 +54,14 @@ import logging
 import os
 import tempfile
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from controller_stub.admission import AuthThrottle, SessionSlots
+from controller_stub.controller_state import SimulatedController
 from controller_stub.handlers import RequestRefusedError, float_list, json_default
+from controller_stub.motion import GuardedMoveResult, MotionPlan, MoveResult
+from controller_stub.scenario import Scenario
 from controller_stub.session import (
     CLOSE_DRAIN_S,
     EVENT_DROP_BYTES,
@@ -70,6 +71,7 @@ from controller_stub.session import (
     WRITE_HIGH_WATER,
     Session,
 )
+from controller_stub.simulation import create_simulation
 from protocol import messages as m
 from protocol.connection import Connection, Role
 from protocol.errors import ErrorCode
@@ -99,7 +101,7 @@ REFUSAL_LOG_INTERVAL_S = 10.0
 class ControllerServer:
     """Serve one simulation to many clients over the zerocal protocol.
 
-    sim: a `controller_stub.simulation.Simulation` (or anything with its interface).
+    sim: a simulated controller (`controller_stub.controller_state.SimulatedController`).
     token: the shared secret clients prove with HMAC. max_frame_size: largest frame
     accepted from an authenticated client (bytes). drop_after_requests / reply_delay_s:
     injected faults (see the module docstring). truth_out: file rewritten with `sim.truth()`
@@ -110,7 +112,7 @@ class ControllerServer:
 
     def __init__(
         self,
-        sim: Any,
+        sim: SimulatedController,
         *,
         token: str,
         max_frame_size: int = DEFAULT_MAX_FRAME_SIZE,
@@ -148,16 +150,14 @@ class ControllerServer:
         )
         self._motion: asyncio.Future[None] | None = None
         # the planned motion being paced: (plan, loop time at its start, wall duration s)
-        self._progress: tuple[Any, float, float] | None = None
-        self._rollbacks: dict[str, list[float]] = {}
-        self._rollback_counter = 0
+        self._progress: tuple[MotionPlan, float, float] | None = None
         sim.on_io_edge = self._on_io_edge
 
     @classmethod
-    def from_scenario(cls, scenario: Any, truth_out: str | Path | None = None) -> ControllerServer:
+    def from_scenario(
+        cls, scenario: Scenario, truth_out: str | Path | None = None
+    ) -> ControllerServer:
         """Build the simulation of `scenario` and a server with its token and faults."""
-        from controller_stub.simulation import create_simulation
-
         return cls(
             create_simulation(scenario),
             token=scenario.server.token,
@@ -349,7 +349,7 @@ class ControllerServer:
         elapsed = asyncio.get_running_loop().time() - started
         return np.asarray(plan.q_at(elapsed / wall if wall > 0.0 else 1.0), dtype=float)
 
-    async def execute_motion(self, plan: Any) -> Any:
+    async def execute_motion(self, plan: MotionPlan) -> MoveResult | GuardedMoveResult:
         """Pace `plan` (from `sim.begin_move`) in wall time, then finish it in the simulation:
         at its end, or at the elapsed fraction if it was aborted (or cancelled: shutdown).
         Returns the simulation's MoveResult / GuardedMoveResult."""
@@ -392,20 +392,3 @@ class ControllerServer:
             return False
         self._motion.set_result(None)
         return True
-
-    def new_rollback_id(self, previous: list[float]) -> str:
-        """Remember `previous` offsets under a fresh rollback id."""
-        self._rollback_counter += 1
-        rollback_id = f"rb-{self._rollback_counter}"
-        self._rollbacks[rollback_id] = previous
-        return rollback_id
-
-    def rollback_offsets(self, rollback_id: str) -> list[float]:
-        """The offsets saved under `rollback_id`; RequestRefusedError if unknown."""
-        try:
-            return self._rollbacks[rollback_id]
-        except KeyError:
-            raise RequestRefusedError(
-                ErrorCode.UNKNOWN_ROLLBACK, f"unknown rollback id {rollback_id!r}"
-            ) from None
-

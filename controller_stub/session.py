@@ -15,10 +15,11 @@ import asyncio
 import contextlib
 import logging
 import socket
-from typing import TYPE_CHECKING
+from typing import Protocol
 
+from controller_stub.controller_state import SimulatedController
 from controller_stub.errors import SimulationRefused
-from controller_stub.handlers import RequestHandlers, RequestRefusedError
+from controller_stub.handlers import MotionHost, RequestHandlers, RequestRefusedError
 from protocol import messages as m
 from protocol.connection import (
     Connection,
@@ -29,9 +30,6 @@ from protocol.connection import (
     StateChanged,
 )
 from protocol.errors import ErrorCode, LocalProtocolError
-
-if TYPE_CHECKING:
-    from controller_stub.server import ControllerServer
 
 # the server's logger: log records keep the name they had before the server was split
 logger = logging.getLogger("controller_stub.server")
@@ -49,11 +47,32 @@ CLOSE_DRAIN_S = 2.0
 """How long a closing session waits for its last bytes (an error reply) to be sent."""
 
 
+class SessionHost(MotionHost, Protocol):
+    """What a session uses of the server (`controller_stub.server.ControllerServer`): the
+    simulation, the token, the limits, the fault counters and the admission bookkeeping."""
+
+    sim: SimulatedController
+    token: str
+    max_frame_size: int
+    handshake_timeout_s: float
+    idle_timeout_s: float
+    max_requests_in_flight: int
+    reply_delay_s: float
+    requests_seen: int
+
+    def count_request(self) -> bool: ...
+    def session_authenticated(self, session: Session) -> None: ...
+    def session_loitering(self, session: Session) -> None: ...
+    def authentication_failed(self, session: Session) -> None: ...
+
+
 class Session(RequestHandlers):
     """One client connection: reader loop, request tasks, event pushes (and its limits)."""
 
+    server: SessionHost
+
     def __init__(
-        self, server: ControllerServer, reader: asyncio.StreamReader, writer: asyncio.StreamWriter
+        self, server: SessionHost, reader: asyncio.StreamReader, writer: asyncio.StreamWriter
     ) -> None:
         self.server = server
         self.sim = server.sim
@@ -279,11 +298,7 @@ class Session(RequestHandlers):
         # one reply at a time, each only once the output is below the high-water mark:
         # the unsent bytes stay bounded by WRITE_HIGH_WATER plus one reply
         async with self._write_lock:
-            if self.conn.state is ConnectionState.CLOSED or self.writer.is_closing():
-                return
-            if not await self._wait_writable():
-                return
-            if self.conn.state is ConnectionState.CLOSED or self.writer.is_closing():
+            if self._closed() or not await self._wait_writable() or self._closed():
                 return
             try:
                 data = self.conn.send(reply)
@@ -291,6 +306,10 @@ class Session(RequestHandlers):
                 logger.exception("cannot send %s to %s", reply.kind, self.peer)
                 return
             self._write(data)
+
+    def _closed(self) -> bool:
+        """True once the connection or its transport is closed (no more replies)."""
+        return self.conn.state is ConnectionState.CLOSED or self.writer.is_closing()
 
     def _write(self, data: bytes) -> None:
         if data and not self.writer.is_closing():

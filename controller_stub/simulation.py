@@ -11,10 +11,12 @@ angles are what a real controller reports: `q_reported = encoder + zero_offset`.
 angle differs from the reported one by the injected zero error and by the hidden effects.
 The simulation never imports hostpc: it has its own forward model (`robot_model.py`).
 
-`Simulation` holds the world state (offsets and their history, IO, physics views, truth); its
-behaviour comes one concept per module: joint moves and motion plans (`motion.py`), guarded
-moves and the probe input (`guarded.py`), the stereo camera (`cameras.py`). The names of the
-contract are importable from here.
+`Simulation` holds the world state (physics views, truth; the offsets and their history, IO,
+limits, clock and the busy check it shares with every simulated controller come from
+`controller_state.ControllerState`, whose `SimulatedController` protocol is this contract in
+types); its behaviour comes one concept per module: joint moves and motion plans
+(`motion.py`), guarded moves and the probe input (`guarded.py`), the stereo camera
+(`cameras.py`). The names of the contract are importable from here.
 
 INTERFACE CONTRACT (the server depends on exactly these names):
 
@@ -37,6 +39,9 @@ INTERFACE CONTRACT (the server depends on exactly these names):
     sim.estop() -> None ; sim.reset_estop() -> None ; sim.estopped -> bool
     sim.offset_history() -> list[(id, (n,))]   # every offset set held, id 0 = original
     sim.rollback(id) -> (n,) previous offsets  # restore a history entry (SimulationRefused)
+    sim.last_history_id -> int                 # the entry held now
+    sim.undo_write(id) -> (n,) replaced offsets  # restore the entry before write `id`
+    sim.busy -> bool                           # a begun motion is not finished
     sim.truth() -> dict                        # JSON-serialisable; for --truth-out only
     sim.measure_tracker() -> dict              # optional: the laser tracker (tracker.py)
     sim.on_io_edge: Callable[[int, bool, float, (n,)], None] | None
@@ -48,15 +53,16 @@ INTERFACE CONTRACT (the server depends on exactly these names):
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from controller_stub import probe as probe_mod
 from controller_stub.cameras import StereoCameraMixin, StereoFrame
+from controller_stub.controller_state import ControllerState, OnIoEdge, SimulatedController
 from controller_stub.errors import SimulationRefused
 from controller_stub.guarded import GuardedMoveMixin
+from controller_stub.humanoid import HumanoidSimulation
 from controller_stub.motion import (
     GuardedContact,
     GuardedMoveResult,
@@ -79,14 +85,12 @@ __all__ = [
     "MoveResult",
     "OnIoEdge",
     "PathEdge",
+    "SimulatedController",
     "Simulation",
     "SimulationRefused",
     "StereoFrame",
     "create_simulation",
 ]
-
-OnIoEdge = Callable[[int, bool, float, np.ndarray], None]
-
 
 def _plane_frame(origin: np.ndarray, normal: np.ndarray) -> np.ndarray:
     """(4, 4) frame at `origin` whose z axis is `normal` (x chosen orthogonal, deterministic)."""
@@ -104,18 +108,18 @@ def _pose_dict(T: np.ndarray) -> dict[str, list[float]]:
     return {"xyz": T[:3, 3].tolist(), "rpy": matrix_to_rpy(T[:3, :3]).tolist()}
 
 
-def create_simulation(scenario: Scenario) -> Any:
+def create_simulation(scenario: Scenario) -> SimulatedController:
     """The simulation of `scenario`: a `Simulation`, or for robot "humanoid_upper" a
     `controller_stub.humanoid.HumanoidSimulation` (the same contract over the combined
     16-joint vector, plus `measure_targets()`)."""
     if scenario.robot == "humanoid_upper":
-        from controller_stub.humanoid import HumanoidSimulation
-
         return HumanoidSimulation(scenario)
     return Simulation(scenario)
 
 
-class Simulation(MotionMixin, GuardedMoveMixin, StereoCameraMixin, TrackerMixin):
+class Simulation(
+    MotionMixin, GuardedMoveMixin, StereoCameraMixin, TrackerMixin, ControllerState
+):
     """The simulated controller's world. See the module docstring for the contract.
 
     State: the encoder positions (as reported angles and the current zero offsets), the
@@ -124,59 +128,37 @@ class Simulation(MotionMixin, GuardedMoveMixin, StereoCameraMixin, TrackerMixin)
     """
 
     def __init__(self, scenario: Scenario) -> None:
-        self.scenario = scenario
         self.model = get_robot(scenario.robot)
         n = self.model.n_joints
-        self._n = n
         truth = scenario.truth
         rng_truth = stream_rng(scenario.seed, STREAM_TRUTH)
         if isinstance(truth.zero_errors, RandomSpec):
             half = math.radians(truth.zero_errors.random_deg)
-            self._zero_error_initial = rng_truth.uniform(-half, half, n)
+            zero_errors = rng_truth.uniform(-half, half, n)
         else:
-            self._zero_error_initial = np.asarray(truth.zero_errors, dtype=float)
+            zero_errors = np.asarray(truth.zero_errors, dtype=float)
         self.effects = HiddenEffects.from_spec(truth, n)
         self.physics = Physics(self.model, self.effects)
 
         motion = scenario.motion
-        self._q_min = np.asarray(
-            motion.q_min if motion.q_min is not None else self.model.q_min, float
-        )
-        self._q_max = np.asarray(
-            motion.q_max if motion.q_max is not None else self.model.q_max, float
-        )
         if motion.max_joint_speed is None:
-            self._max_speed = self.model.max_speed.astype(float)
+            max_speed = self.model.max_speed.astype(float)
         else:
-            self._max_speed = np.broadcast_to(
-                np.asarray(motion.max_joint_speed, float), (n,)
-            ).copy()
-
-        server = scenario.server
-        self._offsets_initial = (
-            np.zeros(n)
-            if server.initial_offsets is None
-            else np.asarray(server.initial_offsets, float)
+            max_speed = np.broadcast_to(np.asarray(motion.max_joint_speed, float), (n,)).copy()
+        super().__init__(
+            scenario,
+            zero_errors=zero_errors,
+            q_min=np.asarray(motion.q_min if motion.q_min is not None else self.model.q_min),
+            q_max=np.asarray(motion.q_max if motion.q_max is not None else self.model.q_max),
+            max_speed=max_speed,
+            start=motion.initial_q if motion.initial_q is not None else self.model.home,
         )
-        self._offsets = self._offsets_initial.copy()
-        self._history: list[tuple[int, np.ndarray]] = [(0, self._offsets.copy())]
-        self._next_history_id = 1
-        start = motion.initial_q if motion.initial_q is not None else self.model.home
-        self._q = np.clip(np.asarray(start, float), self._q_min, self._q_max)
         self._approach = np.ones(n)
-        self._time = 0.0
-
-        self._n_io = server.n_digital_io
-        self._inputs = [False] * self._n_io
-        self._outputs = [False] * self._n_io
-        self._estopped = False
         self._estop_fault_fired = False
         self._move_count = 0
         self._completed_moves = 0
         self._guarded_count = 0
         self._rng_probe = stream_rng(scenario.seed, STREAM_PROBE)
-        self.on_io_edge: OnIoEdge | None = None
-        self._active_plan: MotionPlan | None = None  # begun, not yet finished
 
         cam = scenario.camera
         self.camera = CameraModel(
@@ -220,113 +202,6 @@ class Simulation(MotionMixin, GuardedMoveMixin, StereoCameraMixin, TrackerMixin)
     def robot_name(self) -> str:
         return self.model.name
 
-    @property
-    def n_joints(self) -> int:
-        return self._n
-
-    @property
-    def time(self) -> float:
-        """Simulated clock (s): robot time. Advances by motion durations, by the settling
-        after each completed joint move (`motion.settle_s`) and by each stereo capture
-        (`motion.capture_s`)."""
-        return self._time
-
-    @property
-    def time_scale(self) -> float:
-        return float(self.scenario.motion.time_scale)
-
-    @property
-    def estopped(self) -> bool:
-        return self._estopped
-
-    def joint_positions(self) -> np.ndarray:
-        """(n,) reported joint angles (rad)."""
-        return self._q.copy()
-
-    def joint_limits(self) -> tuple[np.ndarray, np.ndarray]:
-        """((n,), (n,)) lower and upper limits in the reported frame (rad)."""
-        return self._q_min.copy(), self._q_max.copy()
-
-    def max_joint_speed(self) -> np.ndarray:
-        """(n,) maximum joint speeds (rad/s)."""
-        return self._max_speed.copy()
-
-    def zero_offsets(self) -> np.ndarray:
-        """(n,) current controller zero offsets (rad): q_reported = encoder + offset."""
-        return self._offsets.copy()
-
-    def estop(self) -> None:
-        self._estopped = True
-
-    def reset_estop(self) -> None:
-        self._estopped = False
-
-    # ------------------------------------------------------------------ zero offsets
-
-    def set_zero_offsets(self, offsets: np.ndarray | list[float]) -> np.ndarray:
-        """Write new zero offsets (n,) rad; returns the previous ones.
-
-        The encoders do not move, so the reported angles shift by (new - old) and the same
-        reported command afterwards reaches a different physical pose. Refused with
-        "offset_limit" if any joint would differ from the ORIGINAL offsets by more than
-        server.offset_limit_rad, "invalid_argument" for a wrong shape or non-finite values,
-        "busy" while a motion from begin_move is not finished.
-        """
-        if self._active_plan is not None:
-            raise SimulationRefused("busy", "cannot change the zero offsets while moving")
-        new = self._check_vector(offsets, "offsets")
-        limit = self.scenario.server.offset_limit_rad
-        change = np.abs(new - self._offsets_initial)
-        if np.any(change > limit):
-            i = int(np.argmax(change))
-            raise SimulationRefused(
-                "offset_limit",
-                f"joint {i + 1}: offset change {math.degrees(change[i]):.3f} deg from the "
-                f"original exceeds the limit {math.degrees(limit):.3f} deg",
-            )
-        previous = self._offsets.copy()
-        self._q = self._q + (new - self._offsets)
-        self._offsets = new
-        self._history.append((self._next_history_id, new.copy()))
-        self._next_history_id += 1
-        return previous
-
-    def offset_history(self) -> list[tuple[int, np.ndarray]]:
-        """Every offset set the controller has held, oldest first: (id, (n,) offsets).
-
-        id 0 is the original set; every successful set_zero_offsets / rollback appends one.
-        """
-        return [(i, o.copy()) for i, o in self._history]
-
-    def rollback(self, history_id: int) -> np.ndarray:
-        """Restore the offsets recorded under `history_id`; returns the previous offsets.
-
-        Raises SimulationRefused("unknown_history_id") for an id never recorded.
-        """
-        for i, offsets in self._history:
-            if i == history_id:
-                return self.set_zero_offsets(offsets)
-        raise SimulationRefused("unknown_history_id", f"no offset history entry {history_id}")
-
-    def current_zero_errors(self) -> np.ndarray:
-        """(n,) rad: constant part of q_phys - q_reported with the CURRENT offsets."""
-        return self._zero_error_initial + self._offsets_initial - self._offsets
-
-    # ------------------------------------------------------------------ IO
-
-    def digital_inputs(self) -> list[bool]:
-        return list(self._inputs)
-
-    def digital_outputs(self) -> list[bool]:
-        return list(self._outputs)
-
-    def set_digital_output(self, index: int, value: bool) -> None:
-        if not 0 <= int(index) < self._n_io:
-            raise SimulationRefused(
-                "invalid_argument", f"digital output {index} out of range 0..{self._n_io - 1}"
-            )
-        self._outputs[int(index)] = bool(value)
-
     # ------------------------------------------------------------------ physics views
 
     def physical_angles(self, q_reported: np.ndarray | None = None) -> np.ndarray:
@@ -348,21 +223,6 @@ class Simulation(MotionMixin, GuardedMoveMixin, StereoCameraMixin, TrackerMixin)
     def tip_position(self) -> np.ndarray:
         """(3,) true stylus tip centre in base (m) at the current pose."""
         return probe_mod.tip_positions(self.flange_pose()[None], self.tip_flange)[0]
-
-    # ------------------------------------------------------------------ argument checks
-
-    def _check_vector(self, values: Any, name: str) -> np.ndarray:
-        try:
-            v = np.asarray(values, dtype=float).reshape(-1)
-        except (TypeError, ValueError):
-            raise SimulationRefused("invalid_argument", f"{name}: not a numeric vector") from None
-        if v.shape != (self._n,):
-            raise SimulationRefused(
-                "invalid_argument", f"{name}: expected {self._n} values, got {v.size}"
-            )
-        if not np.all(np.isfinite(v)):
-            raise SimulationRefused("invalid_argument", f"{name}: non-finite value")
-        return v
 
     # ------------------------------------------------------------------ truth
 

@@ -159,9 +159,9 @@ def synthesize_stereo_target(
     if q is None:
         q = look_at_poses(robot, tool, target, n_samples, rng)
     n_samples = q.shape[0]
-    t = seconds_per_pose * np.arange(1, n_samples + 1)
+    t = np.asarray(seconds_per_pose * np.arange(1, n_samples + 1), dtype=np.float64)
     approach = approach_signs(q, rng)
-    temperature = 21.0 + 0.002 * t
+    temperature = np.asarray(21.0 + 0.002 * t, dtype=np.float64)
     placeholder = Samples(q=q, p=np.zeros((n_samples, 3)),
                           cov=np.broadcast_to(np.eye(3) * 1e-8, (n_samples, 3, 3)),
                           t=t, approach=approach, temperature=temperature)

@@ -41,14 +41,34 @@ from __future__ import annotations
 import asyncio
 import logging
 import re
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from controller_stub.ur.personality import UrPersonality
+from controller_stub.controller_state import SimulatedController
 
 logger = logging.getLogger(__name__)
+
+
+class ScriptedRobot(Protocol):
+    """What the control script uses of the UR controller it runs on
+    (`controller_stub.ur.personality.UrPersonality`): its registers, motions and stops."""
+
+    input_int: list[int]
+    input_double: list[float]
+    output_int: list[int]
+    output_double: list[float]
+
+    @property
+    def sim(self) -> SimulatedController: ...
+    @property
+    def moving(self) -> bool: ...
+    def protective_stop(self, reason: str) -> None: ...
+    def tcp_pose(self, q: np.ndarray | None = None) -> list[float]: ...
+    async def move_joints(
+        self, q_target: np.ndarray, velocity: float, *, watch_probe: bool = False
+    ) -> tuple[bool, str | None]: ...
+    def stop_motion(self) -> bool: ...
 
 CYCLE_S = 0.002
 READY, DONE = 1, 2
@@ -97,7 +117,7 @@ class ControlScript:
 
     name = "rtde_control"
 
-    def __init__(self, robot: UrPersonality, text: str) -> None:
+    def __init__(self, robot: ScriptedRobot, text: str) -> None:
         self.robot = robot
         self.offset = register_offset(text)
         self._async_move: asyncio.Task[None] | None = None

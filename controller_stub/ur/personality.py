@@ -37,8 +37,11 @@ from typing import Any
 
 import numpy as np
 
+from controller_stub.controller_state import SimulatedController
+from controller_stub.errors import SimulationRefused
 from controller_stub.robot_model import forward
-from controller_stub.simulation import SimulationRefused
+from controller_stub.server import ControllerServer
+from controller_stub.simulation import Simulation
 from controller_stub.ur.control_script import ControlScript
 from controller_stub.ur.dashboard import DashboardServer
 from controller_stub.ur.paced_motion import CYCLE_S, PacedMotion
@@ -100,14 +103,14 @@ class UrPersonality:
 
     def __init__(
         self,
-        sim: Any,
-        server: Any | None = None,
+        sim: SimulatedController,
+        server: ControllerServer | None = None,
         *,
         controller_version: tuple[int, int, int, int] = CONTROLLER_VERSION,
         serial_number: str = SERIAL_NUMBER,
         max_stream_hz: float = 500.0,
     ) -> None:
-        if sim.n_joints != 6:
+        if sim.n_joints != 6 or not isinstance(sim, Simulation):
             raise ValueError(f"the UR personality needs a 6-joint robot, {sim.robot_name} has "
                              f"{sim.n_joints}")
         self.sim = sim

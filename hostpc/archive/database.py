@@ -180,8 +180,9 @@ class Archive:
                     runs_table.c.run_uid == record.run_uid)).scalar()
                 if existing is not None:
                     return int(existing)
-                run_id = int(connection.execute(runs_table.insert().values(**values))
-                             .inserted_primary_key[0])
+                key = connection.execute(runs_table.insert().values(**values)).inserted_primary_key
+                assert key is not None  # an insert's result has its primary key
+                run_id = int(key[0])
                 if record.offsets:
                     connection.execute(offsets_table.insert(),
                                        _offset_rows(run_id, record.offsets))

@@ -54,8 +54,8 @@ import numpy as np
 
 from hostpc.errors import InputError
 from hostpc.kinematics.chain import Chain
-from hostpc.kinematics.robots import chain_from_table
 from hostpc.kinematics.rotations import matrix_to_rpy, pose_to_transform, rot_z
+from hostpc.kinematics.tables import chain_from_table
 from hostpc.kinematics.tree import Branch, KinematicTree
 
 __all__ = ["HUMANOID_FRAMES", "HUMANOID_HOME", "get_tree", "humanoid_upper", "tree_names"]

@@ -36,8 +36,8 @@ from numpy.typing import NDArray
 
 from hostpc.errors import InputError
 from hostpc.kinematics.chain import Chain
-from hostpc.kinematics.robots import chain_from_table
 from hostpc.kinematics.rotations import pose_to_transform
+from hostpc.kinematics.tables import chain_from_table
 
 __all__ = ["UrdfJoint", "UrdfRobot", "chain_from_urdf", "load_urdf_chain", "parse_urdf"]
 

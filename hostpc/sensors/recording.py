@@ -131,16 +131,16 @@ class RecordingAdapter:
         return result
 
     async def state(self) -> RobotState:
-        return await self._call("state", {}, self.robot.state, _state_to_json)  # type: ignore[no-any-return]
+        return await self._call("state", {}, self.robot.state, _state_to_json)
 
     async def move_joints(self, q: np.ndarray, speed: float) -> MoveOutcome:
-        return await self._call(  # type: ignore[no-any-return]
+        return await self._call(
             "move_joints", {"q": _floats(q), "speed": float(speed)},
             lambda: self.robot.move_joints(q, speed),
             lambda o: {"completed": o.completed, "q": _floats(o.q), "reason": o.reason})
 
     async def guarded_move(self, q: np.ndarray, speed: float, io_line: int) -> ContactOutcome:
-        return await self._call(  # type: ignore[no-any-return]
+        return await self._call(
             "guarded_move", {"q": _floats(q), "speed": float(speed), "io_line": int(io_line)},
             lambda: self.robot.guarded_move(q, speed, io_line),
             lambda o: {"contact": o.contact, "q": _floats(o.q), "reason": o.reason,
@@ -148,7 +148,7 @@ class RecordingAdapter:
                        "speed": None if o.speed is None else float(o.speed)})
 
     async def capture(self, pattern: str = "target", view: int = 0) -> StereoCapture:
-        return await self._call(  # type: ignore[no-any-return]
+        return await self._call(
             "capture", {"pattern": pattern, "view": int(view)},
             lambda: self.robot.capture(pattern, view), self._save_capture)
 
@@ -168,23 +168,23 @@ class RecordingAdapter:
         return result
 
     async def _measure_targets(self) -> TargetMeasurement:
-        return await self._call(  # type: ignore[no-any-return]
+        return await self._call(
             "measure_targets", {}, self.robot.measure_targets,  # type: ignore[attr-defined]
             lambda m: {"q": _floats(m.q), "t": float(m.t), "targets": [
                 {"chain": t.chain, "p": _floats(t.p), "cov": np.asarray(t.cov, float).tolist()}
                 for t in m.targets]})
 
     async def get_offsets(self) -> np.ndarray:
-        return await self._call("get_offsets", {}, self.robot.get_offsets, _floats)  # type: ignore[no-any-return]
+        return await self._call("get_offsets", {}, self.robot.get_offsets, _floats)
 
     async def set_offsets(self, offsets: np.ndarray) -> tuple[np.ndarray, str]:
-        return await self._call(  # type: ignore[no-any-return]
+        return await self._call(
             "set_offsets", {"offsets": _floats(offsets)},
             lambda: self.robot.set_offsets(offsets),
             lambda r: {"previous": _floats(r[0]), "rollback_id": str(r[1])})
 
     async def rollback(self, rollback_id: str) -> np.ndarray:
-        return await self._call("rollback", {"rollback_id": rollback_id},  # type: ignore[no-any-return]
+        return await self._call("rollback", {"rollback_id": rollback_id},
                                 lambda: self.robot.rollback(rollback_id), _floats)
 
     async def close(self) -> None:

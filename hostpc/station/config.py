@@ -36,7 +36,7 @@ class _Strict(BaseModel):
 
 class ModbusEndpoint(_Strict):
     host: str = "127.0.0.1"
-    port: int = Field(5020, ge=0, le=65535)
+    port: int = Field(default=5020, ge=0, le=65535)
 
 
 class SimCell(_Strict):

@@ -1,0 +1,290 @@
+"""What every simulated controller shares: its contract, and the state behind it held once.
+
+`SimulatedController` is the typed contract the server, the request handlers, the sessions,
+the Modbus IO server and the UR personality are written against (the arm `Simulation` and
+the `HumanoidSimulation` both satisfy it). `ControllerState` is the one implementation of
+the parts they share: the reported joint angles and their limits, the zero offsets with
+their history and rollback, the digital IO, the e-stop, the simulated clock and the "busy
+while moving" refusal. A simulation subclasses it and adds its motion, sensors and truth.
+
+Angles are radians (reported frame: `q_reported = encoder + zero_offset`), times seconds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any, Protocol
+
+import numpy as np
+
+from controller_stub.errors import SimulationRefused
+from controller_stub.motion import GuardedMoveResult, MotionPlan, MoveResult
+from controller_stub.scenario import Scenario
+
+__all__ = ["ControllerState", "OnIoEdge", "SimulatedController"]
+
+OnIoEdge = Callable[[int, bool, float, np.ndarray], None]
+"""Called for each IO edge the controller reports: (line, new value, sim time, latched q)."""
+
+
+class SimulatedController(Protocol):
+    """The contract of a simulated controller (see controller_stub/simulation.py's docstring).
+
+    Optional sensors (`measure_targets`, `measure_tracker`) are not part of it: the
+    handlers look them up and refuse with "unsupported" where a simulation has none.
+    """
+
+    scenario: Scenario
+    on_io_edge: OnIoEdge | None
+
+    @property
+    def robot_name(self) -> str: ...
+    @property
+    def n_joints(self) -> int: ...
+    @property
+    def time(self) -> float: ...
+    @property
+    def time_scale(self) -> float: ...
+    @property
+    def estopped(self) -> bool: ...
+    @property
+    def busy(self) -> bool: ...
+
+    def joint_positions(self) -> np.ndarray: ...
+    def joint_limits(self) -> tuple[np.ndarray, np.ndarray]: ...
+    def max_joint_speed(self) -> np.ndarray: ...
+    def zero_offsets(self) -> np.ndarray: ...
+    def set_zero_offsets(self, offsets: Any) -> np.ndarray: ...
+    def offset_history(self) -> list[tuple[int, np.ndarray]]: ...
+    @property
+    def last_history_id(self) -> int: ...
+    def rollback(self, history_id: int) -> np.ndarray: ...
+    def undo_write(self, history_id: int) -> np.ndarray: ...
+    def digital_inputs(self) -> list[bool]: ...
+    def digital_outputs(self) -> list[bool]: ...
+    def set_digital_output(self, index: int, value: bool) -> None: ...
+    def estop(self) -> None: ...
+    def reset_estop(self) -> None: ...
+    def move_joints(self, q_target: Any, speed: float) -> MoveResult: ...
+    def guarded_move(self, q_target: Any, speed: float, io_line: int) -> GuardedMoveResult: ...
+    def begin_move(self, q_target: Any, speed: float, io_line: int | None = None) -> MotionPlan:
+        ...
+    def finish_move(
+        self, plan: MotionPlan, fraction: float = 1.0
+    ) -> MoveResult | GuardedMoveResult: ...
+    def capture_stereo(self, pattern: str = "target", view: int = 0) -> Any: ...
+    def camera_description(self) -> dict[str, Any]: ...
+    def truth(self) -> dict[str, Any]: ...
+
+
+class ControllerState:
+    """The state every simulated controller holds, and the behaviour on it that they share.
+
+    scenario: the scenario (server limits, IO count, initial offsets, motion limits).
+    zero_errors: (n,) the hidden zero errors with the original offsets (rad).
+    q_min, q_max: (n,) joint limits in the reported frame (rad); max_speed: (n,) rad/s.
+    start: (n,) initial reported angles (clipped into the limits).
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        *,
+        zero_errors: np.ndarray,
+        q_min: np.ndarray,
+        q_max: np.ndarray,
+        max_speed: np.ndarray,
+        start: Any,
+    ) -> None:
+        self.scenario = scenario
+        self._q_min = np.asarray(q_min, dtype=float)
+        self._q_max = np.asarray(q_max, dtype=float)
+        n = self._q_min.size
+        self._n = n
+        self._zero_error_initial = np.asarray(zero_errors, dtype=float)
+        self._max_speed = np.asarray(max_speed, dtype=float)
+        server = scenario.server
+        self._offsets_initial = (
+            np.zeros(n)
+            if server.initial_offsets is None
+            else np.asarray(server.initial_offsets, float)
+        )
+        self._offsets = self._offsets_initial.copy()
+        self._history: list[tuple[int, np.ndarray]] = [(0, self._offsets.copy())]
+        self._next_history_id = 1
+        self._q = np.clip(np.asarray(start, float), self._q_min, self._q_max)
+        self._time = 0.0
+        self._n_io = server.n_digital_io
+        self._inputs = [False] * self._n_io
+        self._outputs = [False] * self._n_io
+        self._estopped = False
+        self.on_io_edge: OnIoEdge | None = None
+        self._active_plan: MotionPlan | None = None  # begun, not yet finished
+
+    # ------------------------------------------------------------------ simple state
+
+    @property
+    def n_joints(self) -> int:
+        return self._n
+
+    @property
+    def time(self) -> float:
+        """Simulated clock (s): robot time. Advances by motion durations, by the settling
+        after each completed joint move (`motion.settle_s`) and by each stereo capture
+        (`motion.capture_s`)."""
+        return self._time
+
+    @property
+    def time_scale(self) -> float:
+        """Wall seconds per simulated second of motion."""
+        return float(self.scenario.motion.time_scale)
+
+    @property
+    def estopped(self) -> bool:
+        return self._estopped
+
+    @property
+    def busy(self) -> bool:
+        """True while a motion from begin_move is not finished."""
+        return self._active_plan is not None
+
+    def estop(self) -> None:
+        self._estopped = True
+
+    def reset_estop(self) -> None:
+        self._estopped = False
+
+    def joint_positions(self) -> np.ndarray:
+        """(n,) reported joint angles (rad)."""
+        return self._q.copy()
+
+    def joint_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """((n,), (n,)) lower and upper limits in the reported frame (rad)."""
+        return self._q_min.copy(), self._q_max.copy()
+
+    def max_joint_speed(self) -> np.ndarray:
+        """(n,) maximum joint speeds (rad/s)."""
+        return self._max_speed.copy()
+
+    # ------------------------------------------------------------------ zero offsets
+
+    def zero_offsets(self) -> np.ndarray:
+        """(n,) current controller zero offsets (rad): q_reported = encoder + offset."""
+        return self._offsets.copy()
+
+    def current_zero_errors(self) -> np.ndarray:
+        """(n,) rad: constant part of q_phys - q_reported with the CURRENT offsets."""
+        errors: np.ndarray = self._zero_error_initial + self._offsets_initial - self._offsets
+        return errors
+
+    def set_zero_offsets(self, offsets: Any) -> np.ndarray:
+        """Write new zero offsets (n,) rad; returns the previous ones.
+
+        The encoders do not move, so the reported angles shift by (new - old) and the same
+        reported command afterwards reaches a different physical pose. Refused with
+        "offset_limit" if any joint would differ from the ORIGINAL offsets by more than
+        server.offset_limit_rad, "invalid_argument" for a wrong shape or non-finite values,
+        "busy" while a motion from begin_move is not finished.
+        """
+        if self.busy:
+            raise SimulationRefused("busy", "cannot change the zero offsets while moving")
+        new = self._check_vector(offsets, "offsets")
+        limit = self.scenario.server.offset_limit_rad
+        change = np.abs(new - self._offsets_initial)
+        if np.any(change > limit):
+            i = int(np.argmax(change))
+            raise SimulationRefused(
+                "offset_limit",
+                f"joint {i + 1}: offset change {math.degrees(change[i]):.3f} deg from the "
+                f"original exceeds the limit {math.degrees(limit):.3f} deg",
+            )
+        previous = self._offsets.copy()
+        self._q = self._q + (new - self._offsets)
+        self._offsets = new
+        self._history.append((self._next_history_id, new.copy()))
+        self._next_history_id += 1
+        return previous
+
+    def offset_history(self) -> list[tuple[int, np.ndarray]]:
+        """Every offset set the controller has held, oldest first: (id, (n,) offsets).
+
+        id 0 is the original set; every successful set_zero_offsets / rollback appends one.
+        This is the controller's one rollback history: the server's rollback ids name its
+        entries (`undo_write`).
+        """
+        return [(i, o.copy()) for i, o in self._history]
+
+    @property
+    def last_history_id(self) -> int:
+        """The id of the offset set held now (the newest history entry)."""
+        return self._history[-1][0]
+
+    def rollback(self, history_id: int) -> np.ndarray:
+        """Restore the offsets recorded under `history_id`; returns the previous offsets.
+
+        Raises SimulationRefused("unknown_history_id") for an id never recorded.
+        """
+        return self.set_zero_offsets(self._history[self._history_index(history_id)][1])
+
+    def undo_write(self, history_id: int) -> np.ndarray:
+        """Restore the offsets held just before the write recorded as `history_id`; returns
+        the offsets replaced. Raises SimulationRefused("unknown_history_id") for an id never
+        recorded or for the original set (id 0: no write before it)."""
+        index = self._history_index(history_id)
+        if index == 0:
+            raise SimulationRefused("unknown_history_id", "the original offsets undo nothing")
+        return self.set_zero_offsets(self._history[index - 1][1])
+
+    def _history_index(self, history_id: int) -> int:
+        for index, (i, _) in enumerate(self._history):
+            if i == history_id:
+                return index
+        raise SimulationRefused("unknown_history_id", f"no offset history entry {history_id}")
+
+    # ------------------------------------------------------------------ IO
+
+    def digital_inputs(self) -> list[bool]:
+        return list(self._inputs)
+
+    def digital_outputs(self) -> list[bool]:
+        return list(self._outputs)
+
+    def set_digital_output(self, index: int, value: bool) -> None:
+        if not 0 <= int(index) < self._n_io:
+            raise SimulationRefused(
+                "invalid_argument", f"digital output {index} out of range 0..{self._n_io - 1}"
+            )
+        self._outputs[int(index)] = bool(value)
+
+    # ------------------------------------------------------------------ argument checks
+
+    def _check_vector(self, values: Any, name: str) -> np.ndarray:
+        """(n,) finite float vector from `values`, or SimulationRefused("invalid_argument")."""
+        try:
+            v = np.asarray(values, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise SimulationRefused("invalid_argument", f"{name}: not a numeric vector") from None
+        if v.shape != (self._n,):
+            raise SimulationRefused(
+                "invalid_argument", f"{name}: expected {self._n} values, got {v.size}"
+            )
+        if not np.all(np.isfinite(v)):
+            raise SimulationRefused("invalid_argument", f"{name}: non-finite value")
+        return v
+
+    def _check_joint_limits(self, target: np.ndarray) -> None:
+        """SimulationRefused("joint_limit") if `target` (n,) is outside the joint limits."""
+        outside = (target < self._q_min) | (target > self._q_max)
+        if np.any(outside):
+            i = int(np.argmax(outside))
+            raise SimulationRefused(
+                "joint_limit",
+                f"joint {i + 1}: target {target[i]:.6f} rad outside "
+                f"[{self._q_min[i]:.6f}, {self._q_max[i]:.6f}]",
+            )
+
+    def _refuse_if_busy(self) -> None:
+        """SimulationRefused("busy") while a motion from begin_move is not finished."""
+        if self.busy:
+            raise SimulationRefused("busy", "another motion is in progress")
