@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 from scipy import special
 
+from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult
 from hostpc.methods.journal import Journal, write_json_atomic
@@ -39,10 +40,7 @@ from hostpc.robots.base import RobotAdapter
 
 PUSH_FILE = "push.json"
 DEFAULT_MAX_CORRECTION_DEG = 2.0
-try:  # one adequacy rule for push and diagnose: the threshold lives in diagnostics
-    from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN  # type: ignore[attr-defined]
-except ImportError:  # not defined there yet: the same value, under the same name
-    ADEQUACY_P_MIN = 1e-3
+# one adequacy rule for push and diagnose: the threshold lives in diagnostics
 ADEQUACY_ALPHA: float = ADEQUACY_P_MIN
 """A fit whose chi2 exceeds the chi-square upper quantile at this level (chi-square p-value
 below ADEQUACY_P_MIN) refuses the push."""
