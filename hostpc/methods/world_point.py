@@ -91,7 +91,7 @@ class WorldPointMethod(Method):
         """Read the tracker's description (kept in the run folder for a resume)."""
         import json
 
-        from hostpc.methods.journal import write_json_atomic
+        from hostpc.calibrate.journal import write_json_atomic
 
         if self.tracker_path.is_file():
             self._description = json.loads(self.tracker_path.read_text(encoding="utf-8"))
