@@ -55,8 +55,8 @@ def _design(known: tuple[str, ...], n_candidates: int, seed: int) -> Any:
     from hostpc.kinematics import get_robot
     from hostpc.methods.base import RunSettings
     from hostpc.methods.cell import build_cell
-    from hostpc.methods.planning import design_matrix, make_design
     from hostpc.methods.stereo_target import StereoTargetMethod
+    from hostpc.planning.design import design_matrix, make_design
     from hostpc.robots.base import RobotState
     from hostpc.robots.simulator import default_sim_scenario
     from hostpc.vision import StereoRig
@@ -88,7 +88,7 @@ def _design(known: tuple[str, ...], n_candidates: int, seed: int) -> Any:
 
 
 def _worst_sigma_deg(design: Any, indices: np.ndarray) -> float:
-    from hostpc.methods.planning import joint_offset_sigmas
+    from hostpc.planning.design import joint_offset_sigmas
 
     sigmas = joint_offset_sigmas(design.subset(indices), 6)
     identifiable = [k for k in range(6) if design.free[design.names.index(
@@ -114,7 +114,7 @@ def _poses_needed(design: Any, order: np.ndarray) -> int | None:
 def planner_vs_random(known: tuple[str, ...] = ("target",), n_candidates: int = 1500,
                       seed: int = 0) -> dict[str, Any]:
     """Poses needed for the target sigma: planner vs random poses from the same pool."""
-    from hostpc.methods.planning import greedy_d_optimal
+    from hostpc.planning.design import greedy_d_optimal
 
     design = _design(known, n_candidates, seed)
     n_pool = design.A.shape[0]

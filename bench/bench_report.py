@@ -43,7 +43,7 @@ def _median(func, repeats: int) -> float:  # type: ignore[no-untyped-def]
 
 
 def result_document(fit: Any) -> dict[str, Any]:
-    """A result document shaped like hostpc.methods.summary's, from a fit."""
+    """A result document shaped like hostpc.calibrate.summary's, from a fit."""
     joints = []
     for j, name in enumerate(n for n in fit.names if n.startswith("joint_offsets.")):
         p = fit.parameters[name]

@@ -21,8 +21,8 @@ from controller_stub.modbus_io import ModbusIoServer
 from controller_stub.scenario import scenario_from_dict
 from controller_stub.server import ControllerServer
 from hostpc.kinematics import get_robot
-from hostpc.methods import sphere_probe as sp
-from hostpc.methods.probe_modbus import ModbusProbe, SteppedGuardedMove
+from hostpc.methods.sphere_probe import method as sp
+from hostpc.methods.sphere_probe.probe_modbus import ModbusProbe, SteppedGuardedMove
 from hostpc.robots.zerocal import ZerocalAdapter
 
 TOKEN = "bench-token"

@@ -40,6 +40,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, NoReturn
 
+from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.runner import RobotInfo, Runner, RunOutcome
 from hostpc.cli.archive_options import add_archive_options, archive_run
 from hostpc.cli.calibrate_checks import (
     check_known_frames,
@@ -52,8 +54,6 @@ from hostpc.errors import InputError
 from hostpc.methods import METHOD_CLASSES
 from hostpc.methods.base import RunSettings
 from hostpc.methods.cell import load_cell_file, parse_known
-from hostpc.methods.journal import Journal
-from hostpc.methods.runner import RobotInfo, Runner, RunOutcome
 from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot, resolve_token
 from hostpc.sensors.calibrate_options import (
     add_sensor_options,
@@ -443,7 +443,7 @@ def _sim_modbus(settings: RunSettings | None, run_dir: Path
     """The simulator's Modbus port for `--probe-io modbus` (None: the run does not poll
     over Modbus) and the settings pointing at it. A new run takes --modbus's port or a free
     one; a resume restarts the simulator on the port its run recorded."""
-    from hostpc.methods.sphere_probe import parse_modbus_address
+    from hostpc.methods.sphere_probe.method import parse_modbus_address
     from hostpc.robots.simulator import free_local_port
 
     options = (settings.options if settings is not None

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from hostpc.calibrate.journal import Journal
 from hostpc.errors import EffectError, InputError
-from hostpc.methods.journal import Journal
 
 KNOWN_FRAMES: dict[str, tuple[str, ...]] = {
     "stereo_target": ("tool", "target"),

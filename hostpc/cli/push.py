@@ -4,8 +4,8 @@
     hostpc push fit.json --robot 10.0.0.5 [--out DIR] [--dry-run] [--force]
     hostpc rollback --run DIR                       # undo it
 
-The guard rails, the journal and the rollback are calibrate's (hostpc.methods.push,
-hostpc.methods.offline_push): joints the fit held are left unchanged; the push is refused
+The guard rails, the journal and the rollback are calibrate's (hostpc.calibrate.push,
+hostpc.calibrate.offline_push): joints the fit held are left unchanged; the push is refused
 (exit 4) if the fit did not converge, does not explain its data, or a correction exceeds
 --max-correction degrees, unless --force. The intent is written to DIR/push.json before
 the controller is, so `hostpc rollback --run DIR` can always undo it. Offsets are printed
@@ -24,10 +24,10 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.offline_push import SavedFit, load_saved_fit
+from hostpc.calibrate.push import DEFAULT_MAX_CORRECTION_DEG, PushPlan, execute_push, plan_push
 from hostpc.errors import InputError, ZerocalError
-from hostpc.methods.journal import Journal
-from hostpc.methods.offline_push import SavedFit, load_saved_fit
-from hostpc.methods.push import DEFAULT_MAX_CORRECTION_DEG, PushPlan, execute_push, plan_push
 from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot
 
 

@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.calibrate.push import read_push_file, rollback, rollback_run
 from hostpc.cli.numbers import TIMEOUT_S
 from hostpc.errors import InputError
-from hostpc.methods.push import read_push_file, rollback, rollback_run
 from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot
 
 
@@ -134,7 +134,7 @@ def _journal_rollback(run_dir: Path, now: np.ndarray, how: str, controller: str)
     "rolled back" (and only then: previous offsets without this event mean a lost push)."""
     import datetime as _dt
 
-    from hostpc.methods.journal import Journal
+    from hostpc.calibrate.journal import Journal
 
     journal = Journal(run_dir)
     if journal.exists:
@@ -148,7 +148,7 @@ def _warn_later_push(now: np.ndarray, record: dict[str, Any]) -> None:
     the ones it replaced: someone pushed later, and rolling back discards that push."""
     import sys
 
-    from hostpc.methods.push import same_offsets
+    from hostpc.calibrate.push import same_offsets
 
     if record.get("rollback_id") is None:
         return  # settled from the offsets by rollback_run, which refuses this case

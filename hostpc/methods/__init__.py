@@ -1,7 +1,7 @@
 """Measurement methods and the shared calibration procedure.
 
 A method is one module with one `hostpc.methods.base.Method` subclass (plan candidates,
-acquire one sample per pose, build the dataset); `hostpc.methods.runner` runs every method
+acquire one sample per pose, build the dataset); `hostpc.calibrate.runner` runs every method
 through the same procedure (journal, resume, planning, fit, guarded push, verify, report).
 A new method registers here by name -> "module:Class" (imported on first use).
 """
@@ -15,7 +15,7 @@ from hostpc.methods.base import Method
 
 METHOD_CLASSES: dict[str, str] = {
     "stereo_target": "hostpc.methods.stereo_target:StereoTargetMethod",
-    "sphere_probe": "hostpc.methods.sphere_probe:SphereProbeMethod",
+    "sphere_probe": "hostpc.methods.sphere_probe.method:SphereProbeMethod",
     "dual_loop": "hostpc.methods.dual_loop:DualLoopMethod",
     "world_point": "hostpc.methods.world_point:WorldPointMethod",
 }

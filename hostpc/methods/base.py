@@ -24,8 +24,8 @@ Optional hooks (defaults in `Method`):
                                     the 5 contacts of one orientation): the planner then
                                     selects, orders and verifies whole groups
 
-The runner (`hostpc.methods.runner`) owns everything else: reading the controller's state
-and offsets, planning (`hostpc.methods.planning`), the identifiability check, the journal
+The runner (`hostpc.calibrate.runner`) owns everything else: reading the controller's state
+and offsets, planning (`hostpc.planning.design`), the identifiability check, the journal
 and resume, the fit, the guarded push, verification, the result document and the report.
 Methods never print; they report through the `Progress` they are given.
 
@@ -45,7 +45,7 @@ import numpy as np
 
 from hostpc.dataset import Dataset
 from hostpc.methods.cell import Cell
-from hostpc.methods.planning import PoseGroups
+from hostpc.planning.design import PoseGroups
 from hostpc.robots.base import RobotAdapter, RobotState
 
 Phase = Literal["fit", "verify"]

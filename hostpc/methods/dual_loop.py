@@ -14,7 +14,7 @@ journal keeps one record per pose with `{"observations": [...]}`; `dataset_docum
 flattens them into the samples of a `zerocal-dataset/1` document. A pose with no target in
 view is journaled as skipped.
 
-Planning: candidates come from `hostpc.synthesize_dual_loop.plan_poses` (an arm pose around
+Planning: candidates come from `hostpc.planning.dual_loop_poses.plan_poses` (an arm pose around
 the home pose, the head aimed at that arm's target, nominal model), as combined poses with
 the other arm at its home pose, kept when the aimed target falls inside both images (the
 camera's nominal focal length, baseline and image size) and all joints are inside the
@@ -52,13 +52,13 @@ from hostpc.methods.cell import Cell
 from hostpc.model.dual_loop import ARMS, DUAL_LOOP_FRAMES
 from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem
+from hostpc.planning.dual_loop_poses import nominal_frames, plan_poses
 from hostpc.robots.base import (
     RobotAdapter,
     RobotState,
     TargetMeasurement,
     supports_target_measurement,
 )
-from hostpc.synthesize_dual_loop import nominal_frames, plan_poses
 
 PLANNING_PIXEL_SIGMA = 0.15
 """Planning noise model: centroid precision (px per image coordinate) of the controller's

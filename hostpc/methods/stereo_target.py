@@ -24,12 +24,13 @@ import numpy as np
 
 from hostpc.dataset import FORMAT_TAG, Dataset, dataset_from_dict
 from hostpc.errors import ControllerError, InputError, ZerocalError
+from hostpc.files import write_json_atomic
 from hostpc.kinematics import forward, get_robot, invert_transform, pose_to_transform
 from hostpc.methods.base import Method, Phase, Progress, SampleRecord, approach_signs
 from hostpc.methods.cell import require_camera_cell
-from hostpc.methods.planning import look_at_candidates
 from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem
+from hostpc.planning.design import look_at_candidates
 from hostpc.robots.base import RobotAdapter, RobotState
 
 RIG_FILE = "rig.json"
@@ -120,7 +121,6 @@ class StereoTargetMethod(Method):
         self._measurer = TargetMeasurer(self.rig, self.cell.target_radius, depth=depth)
 
     async def _calibrate_rig(self, robot: RobotAdapter, progress: Progress) -> Any:
-        from hostpc.methods.journal import write_json_atomic
         from hostpc.vision import ChessboardSpec, calibrate_rig
         from hostpc.vision.rig_calibration import as_gray, find_chessboard
         from hostpc.vision.rig_planning import CoveragePlanner

@@ -28,6 +28,7 @@ import numpy as np
 
 from hostpc.dataset import FORMAT_TAG, Dataset, dataset_from_dict
 from hostpc.errors import ControllerError, InputError
+from hostpc.files import write_json_atomic
 from hostpc.kinematics import forward, get_robot, pose_to_transform
 from hostpc.methods.base import Method, Phase, Progress, SampleRecord, approach_signs
 from hostpc.robots.base import RobotAdapter, RobotState
@@ -91,7 +92,6 @@ class WorldPointMethod(Method):
         """Read the tracker's description (kept in the run folder for a resume)."""
         import json
 
-        from hostpc.methods.journal import write_json_atomic
 
         if self.tracker_path.is_file():
             self._description = json.loads(self.tracker_path.read_text(encoding="utf-8"))

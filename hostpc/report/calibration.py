@@ -1,6 +1,6 @@
 """The report of a calibration run (``RUN/report.html``): the result first, then the diagnosis.
 
-Read from the run's result document (``result.json``, hostpc.methods.summary), in this order:
+Read from the run's result document (``result.json``, hostpc.calibrate.summary), in this order:
 the verdict (PASS / FAIL, pushed or not and why), the offsets table (joint, old, correction,
 sigma, new, pushed; for a simulated run also the true zero error and fitted - true), the
 verification statistic, the comparison with the simulator's truth, a short account of the

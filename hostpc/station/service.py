@@ -15,7 +15,6 @@ import asyncio
 import contextlib
 import json
 import logging
-import os
 import uuid
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -25,6 +24,7 @@ from typing import Any
 from hostpc.archive import open_archive, record_from_run
 from hostpc.archive.database import Archive
 from hostpc.errors import ZerocalError
+from hostpc.files import write_json_atomic
 from hostpc.station import registers as reg
 from hostpc.station.config import StationConfig
 from hostpc.station.plc import PlcServer
@@ -147,9 +147,7 @@ class Station:
 
     # -- one run ----------------------------------------------------------------------
     def _write_current(self, current: dict[str, Any]) -> None:
-        temporary = self.current_file.with_suffix(".tmp")
-        temporary.write_text(json.dumps(current, indent=1))
-        os.replace(temporary, self.current_file)
+        write_json_atomic(self.current_file, current)
 
     async def _execute(self, current: dict[str, Any], resume: bool) -> None:
         serial, run_dir = current["serial"], Path(current["run_dir"])

@@ -30,7 +30,7 @@ def joint(j: int, old: float, correction: float | None, sigma: float | None,
 
 
 def document() -> dict[str, Any]:
-    """A result document as hostpc.methods.summary writes it (a simulated, pushed run whose
+    """A result document as hostpc.calibrate.summary writes it (a simulated, pushed run whose
     verification passed by the RMS rule of older versions)."""
     corrections = [-0.16803, 0.11176, 0.00770, -0.34386, 0.30408]
     joints = [joint(j, 0.01 * j, c, 1e-4 * (j + 1)) for j, c in enumerate(corrections)]
@@ -96,7 +96,7 @@ def test_verdict_offsets_and_truth_read_back() -> None:
 
 def test_new_verification_statistic_and_fail() -> None:
     result = document()
-    result["verify"] = {  # as hostpc.methods.verify writes it since the chi-square test
+    result["verify"] = {  # as hostpc.calibrate.verify writes it since the chi-square test
         "verdict": "FAIL", "statistic": 41.7, "dof": 30, "p_value": 0.0004, "alpha": 0.01,
         "rms_mm": 0.031, "tolerance_mm": None, "n_poses": 10, "n_planned": 10,
         "n_measured": 10, "rms_before_mm": 4.2, "max_before_mm": 5.1, "rms_after_mm": 0.031,

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
+from hostpc.calibrate.journal import Journal, sample_times, shift_sample_t
 from hostpc.errors import InputError
 from hostpc.methods.base import SampleRecord
-from hostpc.methods.journal import Journal, sample_times, shift_sample_t
 
 
 def ok(index: int, phase: str = "fit") -> SampleRecord:
@@ -98,8 +98,8 @@ def test_sample_times_and_shift_reach_nested_observations(tmp_path: Path) -> Non
 
 
 def test_a_skipped_pose_may_be_measured_again_a_measured_one_not(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from hostpc.calibrate.journal import Journal
     from hostpc.methods.base import SampleRecord
-    from hostpc.methods.journal import Journal
 
     journal = Journal(tmp_path)
     assert journal.record(SampleRecord("fit", 0, False, reason="move stopped: aborted"))

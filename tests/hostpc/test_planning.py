@@ -1,4 +1,4 @@
-"""Pose planning (hostpc.methods.planning) and the stereo_target candidates: no robot."""
+"""Pose planning (hostpc.planning.design) and the stereo_target candidates: no robot."""
 
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ import pytest
 from hostpc.kinematics import get_robot
 from hostpc.methods.base import RunSettings
 from hostpc.methods.cell import build_cell
-from hostpc.methods.planning import (
+from hostpc.methods.stereo_target import StereoTargetMethod
+from hostpc.planning.design import (
     Design,
     PoseGroups,
     check_plan,
@@ -24,8 +25,7 @@ from hostpc.methods.planning import (
     select_groups,
     verify_groups,
 )
-from hostpc.methods.stereo_target import StereoTargetMethod
-from hostpc.methods.tour import move_times, nearest_neighbour, path_time, plan_tour
+from hostpc.planning.tour import move_times, nearest_neighbour, path_time, plan_tour
 from hostpc.robots.base import RobotState
 
 UR5E_HOME = np.array([0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0])

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.resume import PushLost, push_state, verify_round
 from hostpc.methods.base import NullProgress, SampleRecord
-from hostpc.methods.journal import Journal
-from hostpc.methods.resume import PushLost, push_state, verify_round
 
 K = 3
 OLD = np.zeros(6)

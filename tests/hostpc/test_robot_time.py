@@ -1,4 +1,4 @@
-"""Robot time per phase (hostpc.methods.robot_time): journaled, summed over sessions."""
+"""Robot time per phase (hostpc.calibrate.robot_time): journaled, summed over sessions."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from hostpc.methods.journal import Journal
-from hostpc.methods.robot_time import format_robot_time, robot_time_document
+from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.robot_time import format_robot_time, robot_time_document
 
 
 def test_robot_time_sums_every_session_per_phase(tmp_path: Path) -> None:

@@ -1,4 +1,4 @@
-"""Closed-form sphere_probe estimates (hostpc.methods.sphere_geometry)."""
+"""Closed-form sphere_probe estimates (hostpc.planning.sphere_geometry)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hostpc.kinematics import rotvec_to_matrix
-from hostpc.methods.sphere_geometry import (
+from hostpc.planning.sphere_geometry import (
     SphereFitError,
     fit_sphere,
     initial_estimate,

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from hostpc.calibrate.verify import chi_square_statistic, evaluate_verify
 from hostpc.fitting import fit
-from hostpc.methods.verify import chi_square_statistic, evaluate_verify
 from hostpc.synthesize import synthesize_stereo_target
 
 OFFSETS = {f"joint_offsets.q{j}": 0.002 * (-1) ** j for j in range(1, 7)}

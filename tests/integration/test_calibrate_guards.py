@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hostpc.calibrate.push import chi2_dof_upper, plan_push
 from hostpc.fitting import fit
-from hostpc.methods.push import chi2_dof_upper, plan_push
 from hostpc.robots.simulator import SimulatedController, load_scenario_file
 from hostpc.synthesize import synthesize_stereo_target
 from tests.integration.test_calibrate_sim import TOKEN, run_cli, sim_scenario, truth_rig_file

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hostpc.methods.journal import Journal
+from hostpc.calibrate.journal import Journal
 from hostpc.robots.simulator import SimulatedController
 from hostpc.transport import ControllerClient
 from tests.integration.test_calibrate_sim import TOKEN, run_cli, sim_scenario, truth_rig_file

@@ -14,8 +14,8 @@ from typing import Any
 
 import pytest
 
-from hostpc.methods.journal import Journal
-from hostpc.methods.refusals import MAX_POSE_ATTEMPTS
+from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.refusals import MAX_POSE_ATTEMPTS
 from hostpc.robots.simulator import SimulatedController
 from hostpc.transport import ControllerClient
 from tests.integration.test_calibrate_sim import TOKEN, run_cli, sim_scenario, truth_rig_file

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hostpc.calibrate.runner import RobotInfo, Runner
 from hostpc.methods.base import RunSettings
-from hostpc.methods.runner import RobotInfo, Runner
 from hostpc.robots.zerocal import ZerocalAdapter
 from tests.integration.conftest import TOKEN, StartStub
 

@@ -42,9 +42,9 @@ from scipy import stats
 
 from hostpc.dataset import Dataset
 from hostpc.fitting import FitResult
-from hostpc.methods.planning import joint_offset_names
 from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem
+from hostpc.planning.design import joint_offset_names
 
 DEFAULT_VERIFY_ALPHA = 0.01
 """The verification's false-FAIL rate: a correct calibration FAILs this often at most."""

@@ -20,7 +20,7 @@ import numpy as np
 from hostpc.errors import InputError
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
 from hostpc.kinematics.inverse import solve_ik
-from hostpc.methods.sphere_setup import CONTACTS_PER_ORIENTATION, PlanConfig, ProbeSetup
+from hostpc.planning.sphere_setup import CONTACTS_PER_ORIENTATION, PlanConfig, ProbeSetup
 
 DESIGN_JOINT_SPEED = 1.5
 """rad/s at speed fraction 1 assumed for the planner's approach speeds (a UR's base joints;

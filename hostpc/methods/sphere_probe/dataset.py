@@ -19,9 +19,9 @@ from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples, Sphere
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, fit
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
-from hostpc.methods.sphere_acquisition import ContactRecord
-from hostpc.methods.sphere_geometry import InitialEstimate, initial_estimate
-from hostpc.methods.sphere_setup import METHOD, ProbeSetup
+from hostpc.methods.sphere_probe.acquisition import ContactRecord
+from hostpc.planning.sphere_geometry import InitialEstimate, initial_estimate
+from hostpc.planning.sphere_setup import METHOD, ProbeSetup
 
 
 def build_dataset(robot_name: str, setup: ProbeSetup, records: Sequence[ContactRecord],

@@ -1,6 +1,6 @@
 """Push the zero offsets of an offline fit (`hostpc fit DATASET --json > FIT.json`).
 
-The same guard rails, journal and rollback as `hostpc calibrate` (hostpc.methods.push):
+The same guard rails, journal and rollback as `hostpc calibrate` (hostpc.calibrate.push):
 `plan_push` decides from the saved fit what to write (held joints left unchanged; the
 whole push refused if the fit did not converge, does not explain its data, or a correction
 exceeds the limit, unless forced), `execute_push` records the intent durably in the push

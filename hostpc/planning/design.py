@@ -43,9 +43,9 @@ from hostpc.dataset import Dataset
 from hostpc.fitting import NullDirection, analyse
 from hostpc.kinematics import Chain, forward, invert_transform
 from hostpc.kinematics.inverse import look_at, solve_ik
-from hostpc.methods.tour import nearest_neighbour, plan_tour
 from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem
+from hostpc.planning.tour import nearest_neighbour, plan_tour
 
 CRITERIA = ("D", "random")
 DEFAULT_RIDGE = 1e-6
@@ -289,7 +289,7 @@ def order_for_travel(q: np.ndarray, q_start: np.ndarray | None,
                      ) -> np.ndarray:
     """Visiting order (indices into q (N, n)) from q_start (or from the first pose):
     nearest neighbour by the move time max_i |dq_i| / v_i; with `tour`, nearest neighbour
-    improved by 2-opt (`hostpc.methods.tour`), never longer than q's own order nor than
+    improved by 2-opt (`hostpc.planning.tour`), never longer than q's own order nor than
     nearest neighbour."""
     if tour:
         return plan_tour(q, q_start, joint_speed)

@@ -40,11 +40,11 @@ import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples, SphereFrame
 from hostpc.errors import InputError
+from hostpc.files import write_json_atomic
 from hostpc.kinematics import Chain
 from hostpc.methods.base import Method, Phase, Progress, RunSettings, SampleRecord
 from hostpc.methods.cell import Cell
-from hostpc.methods.planning import PoseGroups
-from hostpc.methods.sphere_acquisition import (
+from hostpc.methods.sphere_probe.acquisition import (
     ContactCallback,
     ContactRecord,
     GuardedMove,
@@ -52,7 +52,7 @@ from hostpc.methods.sphere_acquisition import (
     nominal_tip_speed,
     probe_contact,
 )
-from hostpc.methods.sphere_dataset import (
+from hostpc.methods.sphere_probe.dataset import (
     build_dataset,
     frames_from_result,
     normal_speeds,
@@ -60,7 +60,8 @@ from hostpc.methods.sphere_dataset import (
     solve,
     with_initial_estimate,
 )
-from hostpc.methods.sphere_planning import (
+from hostpc.planning.design import PoseGroups
+from hostpc.planning.sphere_contacts import (
     DESIGN_JOINT_SPEED,
     PlannedContact,
     PlannedOrientation,
@@ -73,9 +74,9 @@ from hostpc.methods.sphere_planning import (
     plan_sphere_probe,
     tip_positions,
 )
-from hostpc.methods.sphere_planning import plan_from_dict as _plan_from_dict
-from hostpc.methods.sphere_planning import plan_to_dict as _plan_to_dict
-from hostpc.methods.sphere_setup import (
+from hostpc.planning.sphere_contacts import plan_from_dict as _plan_from_dict
+from hostpc.planning.sphere_contacts import plan_to_dict as _plan_to_dict
+from hostpc.planning.sphere_setup import (
     CONTACTS_PER_ORIENTATION,
     METHOD,
     MIN_ORIENTATIONS,
@@ -104,7 +105,7 @@ latency (a touch-trigger probe always has one; the spread of approach speeds ide
 The Modbus stepping probe reads at rest (no latency) and uses the dataset's default."""
 PROBE_IO = ("guarded", "modbus")
 """How contacts are taken: the controller's latched guarded move, or stepping while polling
-the probe line over Modbus (``hostpc.methods.probe_modbus``)."""
+the probe line over Modbus (``hostpc.methods.sphere_probe.probe_modbus``)."""
 DEFAULT_MODBUS_PORT = 502
 
 PLAN_FILE = "probe_plan.json"
@@ -219,7 +220,7 @@ class SphereProbeMethod(Method):
             self.plan = _plan_from_dict(json.loads(self.plan_path.read_text()))
             progress.message(f"probe plan: {self.plan_path} (from this run)")
         if self.modbus is not None:
-            from hostpc.methods.probe_modbus import ModbusProbe
+            from hostpc.methods.sphere_probe.probe_modbus import ModbusProbe
 
             host, port = self.modbus
             async with ModbusProbe(host, port, self.setup.io_line) as probe:
@@ -229,7 +230,6 @@ class SphereProbeMethod(Method):
 
     def candidates(self, state: RobotState, rng: np.random.Generator) -> np.ndarray:
         """(N_c, n) nominal contact poses of a freshly planned run (persisted)."""
-        from hostpc.methods.journal import write_json_atomic
 
         if self.plan is None:
             self.plan = plan_sphere_probe(self.chain, self.setup, self.config, state.q,
@@ -307,7 +307,7 @@ class SphereProbeMethod(Method):
             record = await probe_contact(robot, orientation, contact, self.setup,
                                          self.config, t, chain=self.chain)
         else:
-            from hostpc.methods.probe_modbus import ModbusProbe, SteppedGuardedMove
+            from hostpc.methods.sphere_probe.probe_modbus import ModbusProbe, SteppedGuardedMove
 
             host, port = self.modbus
             async with ModbusProbe(host, port, self.setup.io_line) as probe:
@@ -335,7 +335,7 @@ class SphereProbeMethod(Method):
         and approach speeds along the contact normal (falls back to the nominal frames and
         tip speeds when the samples cannot support the estimate, e.g. a few verify ones)."""
         from hostpc.dataset.io import dataset_to_dict
-        from hostpc.methods.sphere_geometry import SphereFitError
+        from hostpc.planning.sphere_geometry import SphereFitError
 
         contacts = {(c.group, c.index): c for c in (self.plan.contacts if self.plan else [])}
         records = []
@@ -356,7 +356,6 @@ class SphereProbeMethod(Method):
         import hashlib
         import json
 
-        from hostpc.methods.journal import write_json_atomic
 
         digest = hashlib.sha256(
             json.dumps([list(s["q"]) for s in samples]).encode()).hexdigest()

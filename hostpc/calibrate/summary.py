@@ -16,14 +16,14 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.push import PUSH_FILE, PushPlan, chi2_dof_upper, joint_display_name
+from hostpc.calibrate.robot_time import format_robot_time, robot_time_document
+from hostpc.calibrate.verify import VerifyResult, measured_noise_rms, noise_rms
 from hostpc.dataset import Dataset
 from hostpc.fitting import FitResult
 from hostpc.methods.base import Method, Plan, RunSettings
 from hostpc.methods.cell import Cell
-from hostpc.methods.journal import Journal
-from hostpc.methods.push import PUSH_FILE, PushPlan, chi2_dof_upper, joint_display_name
-from hostpc.methods.robot_time import format_robot_time, robot_time_document
-from hostpc.methods.verify import VerifyResult, measured_noise_rms, noise_rms
 
 RESULT_FORMAT = "zerocal-calibration/1"
 EXIT_PUSH_REFUSED = 5

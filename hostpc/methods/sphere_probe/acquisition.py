@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
-from hostpc.methods.sphere_planning import PlannedContact, PlannedOrientation, ProbePlan
-from hostpc.methods.sphere_setup import PlanConfig, ProbeSetup
+from hostpc.planning.sphere_contacts import PlannedContact, PlannedOrientation, ProbePlan
+from hostpc.planning.sphere_setup import PlanConfig, ProbeSetup
 from hostpc.robots.base import RobotAdapter
 
 

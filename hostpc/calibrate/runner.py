@@ -29,28 +29,16 @@ from typing import Any
 
 import numpy as np
 
-from hostpc.dataset import Dataset, dataset_from_dict, save_dataset
-from hostpc.errors import ConnectionFailed, ControllerError, InputError, ZerocalError
-from hostpc.fitting import FitResult, fit
-from hostpc.methods import method_class
-from hostpc.methods.base import (
-    Method,
-    NullProgress,
-    Plan,
-    Progress,
-    RunSettings,
-)
-from hostpc.methods.cell import build_cell, cell_from_dict
-from hostpc.methods.journal import Journal, write_json_atomic
-from hostpc.methods.push import (
+from hostpc.calibrate.journal import Journal, write_json_atomic
+from hostpc.calibrate.push import (
     PushPlan,
     execute_push,
     export_offsets,
     plan_push,
     same_offsets,
 )
-from hostpc.methods.refusals import MAX_POSE_ATTEMPTS, RunStopped, refusal_text, stopped
-from hostpc.methods.resume import (
+from hostpc.calibrate.refusals import MAX_POSE_ATTEMPTS, RunStopped, refusal_text, stopped
+from hostpc.calibrate.resume import (
     CLOCK_TOLERANCE_S,
     RESUME_OVERRIDABLE,
     PushLost,
@@ -64,9 +52,10 @@ from hostpc.methods.resume import (
     stored_result,
     verify_round,
 )
-from hostpc.methods.robot_time import RobotTimer
-from hostpc.methods.run_plan import PlanningError, plan_run
-from hostpc.methods.summary import (
+from hostpc.calibrate.robot_time import RobotTimer
+from hostpc.calibrate.run_plan import PlanningError, plan_run
+from hostpc.calibrate.run_report import write_run_report
+from hostpc.calibrate.summary import (
     EXIT_PUSH_REFUSED,
     EXIT_VERIFY_FAILED,
     RESULT_FORMAT,
@@ -75,7 +64,19 @@ from hostpc.methods.summary import (
     result_document,
     truth_comparison,
 )
-from hostpc.methods.verify import VerifyResult, evaluate_verify
+from hostpc.calibrate.verify import VerifyResult, evaluate_verify
+from hostpc.dataset import Dataset, dataset_from_dict, save_dataset
+from hostpc.errors import ConnectionFailed, ControllerError, InputError, ZerocalError
+from hostpc.fitting import FitResult, fit
+from hostpc.methods import method_class
+from hostpc.methods.base import (
+    Method,
+    NullProgress,
+    Plan,
+    Progress,
+    RunSettings,
+)
+from hostpc.methods.cell import build_cell, cell_from_dict
 from hostpc.robots.base import RobotAdapter, RobotState
 
 __all__ = [
@@ -296,7 +297,8 @@ class Runner:
         archive_result(self.run_dir)
         (self.run_dir / "summary.txt").write_text(summary + "\n", encoding="utf-8")
         if self.report:
-            report_file = self._write_report(dataset, settings, document, truth)
+            report_file = write_run_report(self.run_dir, dataset, settings, document, truth,
+                                           self.progress)
             if report_file:
                 document["files"]["report"] = report_file
         write_json_atomic(self.run_dir / "result.json", document)
@@ -434,25 +436,6 @@ class Runner:
         acts after the measurements: push, force, limits, verification, model)."""
         return any(value not in (None, False, [], ())
                    for value in self.resume_overrides.values())
-
-    def _write_report(self, dataset: Dataset, settings: RunSettings,
-                      document: dict[str, Any], truth: dict[str, Any] | None) -> str | None:
-        """report.html through hostpc.diagnose + hostpc.report, if both are installed."""
-        try:
-            from hostpc.diagnostics import diagnose
-            from hostpc.report import write_calibration_report
-        except ImportError:
-            return None
-        self.progress.stage("report")
-        path = self.run_dir / "report.html"
-        try:
-            diagnosis = diagnose(dataset, settings.effects, plugins=settings.plugins,
-                                 source=str(self.run_dir / "dataset.json"))
-            write_calibration_report(path, document, diagnosis, truth)
-        except Exception as exc:  # the report is an extra: never lose a run over it
-            self.progress.message(f"report not written: {type(exc).__name__}: {exc}")
-            return None
-        return str(path)
 
 
 def _state_dict(state: RobotState, offsets: np.ndarray) -> dict[str, Any]:

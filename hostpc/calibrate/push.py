@@ -31,11 +31,11 @@ from typing import Any
 import numpy as np
 from scipy import special
 
+from hostpc.calibrate.journal import Journal, write_json_atomic
 from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult
-from hostpc.methods.journal import Journal, write_json_atomic
-from hostpc.methods.planning import joint_offset_names
+from hostpc.planning.design import joint_offset_names
 from hostpc.robots.base import RobotAdapter
 
 PUSH_FILE = "push.json"

@@ -27,7 +27,7 @@ import time
 from collections.abc import Mapping
 from typing import Any
 
-from hostpc.methods.journal import Journal
+from hostpc.calibrate.journal import Journal
 from hostpc.robots.base import RobotAdapter, RobotState
 
 PHASES = ("rig", "measure", "verify")

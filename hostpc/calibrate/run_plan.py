@@ -10,7 +10,7 @@ import numpy as np
 
 from hostpc.errors import InputError
 from hostpc.methods.base import Method, Plan, Progress, RunSettings
-from hostpc.methods.planning import (
+from hostpc.planning.design import (
     check_plan,
     design_matrix,
     joint_offset_sigmas,

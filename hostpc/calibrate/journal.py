@@ -24,33 +24,17 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
 from hostpc.errors import InputError
+from hostpc.files import write_json_atomic as write_json_atomic  # re-exported
 from hostpc.methods.base import SampleRecord
 
 RUN_FORMAT = "zerocal-run/1"
 RUN_FILE = "run.json"
 JOURNAL_FILE = "journal.jsonl"
-
-
-def write_json_atomic(path: Path, data: Any) -> None:
-    """Write JSON to `path` atomically (temp file in the same folder, fsync, rename)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(data, indent=2, allow_nan=False) + "\n"
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}-", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def _t_holders(sample: Mapping[str, Any] | None) -> list[Mapping[str, Any]]:
