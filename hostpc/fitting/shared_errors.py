@@ -77,20 +77,45 @@ def shared_covariance(problem: Problem) -> tuple[np.ndarray, np.ndarray] | None:
     return D, S
 
 
+def residual_scale(jacobian_free: np.ndarray, D_whitened: np.ndarray, S: np.ndarray,
+                   residuals: np.ndarray) -> float:
+    """How much larger the shared error is than S says, from the fit's own residuals (>= 1).
+
+    The whitened residuals r = P (e + Dw delta) (P: projector off the Jacobian's columns)
+    have E[r^T r] = dof + k trace(P Dw S Dw^T P) when Cov(delta) = k S. The method-of-moments
+    estimate k = (chi2 - dof) / trace(...) is clipped below at 1: a fit whose residuals
+    show no excess keeps the rig's own covariance, never less."""
+    rows, free = jacobian_free.shape
+    dof = rows - free
+    if dof <= 0 or not np.all(np.isfinite(residuals)):
+        return 1.0
+    Q, _ = np.linalg.qr(jacobian_free)
+    PD = D_whitened - Q @ (Q.T @ D_whitened)
+    trace = float(np.einsum("ij,jk,ik->", PD, S, PD))
+    if not trace > 0:
+        return 1.0
+    chi2 = float(residuals @ residuals)
+    return max(1.0, (chi2 - dof) / trace)
+
+
 def added_parameter_covariance(problem: Problem, jacobian_free: np.ndarray,
-                               covariance_free: np.ndarray, row_weight: np.ndarray
-                               ) -> np.ndarray | None:
+                               covariance_free: np.ndarray, row_weight: np.ndarray,
+                               residuals: np.ndarray | None = None) -> np.ndarray | None:
     """(F, F) covariance the shared error adds to the free parameters, or None.
 
     jacobian_free: (N*m, F) whitened (and robust-weighted) Jacobian of the free parameters;
     covariance_free: (F, F) their noise covariance; row_weight: (N*m,) robust weights'
-    square roots applied to the rows."""
+    square roots applied to the rows; residuals: (N*m,) the fit's whitened residuals (robust
+    weights applied): when given, S is scaled by `residual_scale` (the excess of the
+    residuals over their noise-only expectation, attributed to the shared error)."""
     shared = shared_covariance(problem)
     if shared is None:
         return None
     D, S = shared
     W = problem.sqrt_information  # (N, m, m)
     D_whitened = np.einsum("nij,njk->nik", W, D).reshape(-1, D.shape[2]) * row_weight[:, None]
+    if residuals is not None:
+        S = S * residual_scale(jacobian_free, D_whitened, S, np.ravel(residuals))
     A = covariance_free @ (jacobian_free.T @ D_whitened)
     added = A @ S @ A.T
     return 0.5 * (added + added.T)
