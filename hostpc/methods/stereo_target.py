@@ -358,7 +358,8 @@ class StereoTargetMethod(Method):
             return {}
         from hostpc.vision.rig_uncertainty import uncertainty_document
 
-        return {"rig_uncertainty": uncertainty_document(self.rig, self.rig.covariance)}
+        return {"rig_uncertainty": uncertainty_document(self.rig, self.rig.covariance,
+                                                        self.pixel_floor)}
 
     def describe(self) -> dict[str, Any]:
         """Rig facts for the result document."""
