@@ -12,7 +12,7 @@ freedom, so 40 worlds allow 0.6-1.5 around 1). Each world is a new seed: new zer
 new camera mount error, new rig-calibration views, new noise. Failed runs are counted.
 
     python bench/bench_sigma_mc.py [--worlds 40] [--methods stereo_target,sphere_probe,dual_loop]
-                                   [--first-seed 1] [--keep DIR] [--json OUT]
+                                   [--first-seed 1] [--keep DIR [--reuse]] [--json OUT]
 
 Slow (about 7-10 s per world and method): `bench/run.py` runs it only when asked by name
 (`python bench/run.py sigma_mc`), with 8 worlds.
@@ -55,20 +55,22 @@ def world(method: str, seed: int) -> tuple[dict[str, Any], list[str]]:
     return scenario, []
 
 
-def run_world(method: str, seed: int, folder: Path) -> dict[str, Any]:
-    """One calibration; {"errors": [...] rad or None, "sigmas": [...] rad} or {"failed": msg}."""
-    scenario, options = world(method, seed)
-    scenario_path = folder / f"{method}_{seed}.yaml"
-    scenario_path.write_text(yaml.safe_dump(scenario))
+def run_world(method: str, seed: int, folder: Path, reuse: bool = False) -> dict[str, Any]:
+    """One calibration; {"errors": [...] rad or None, "sigmas": [...] rad} or {"failed": msg}.
+    reuse: read a finished run already in `folder` instead of running it again."""
     out = folder / f"{method}_{seed}"
-    command = [sys.executable, "-m", "hostpc.cli.main", "calibrate", "--robot", "sim",
-               "--method", method, "--scenario", str(scenario_path), "--no-push",
-               "--out", str(out), *options]
-    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, check=False)
     result_path, fit_path = out / "result.json", out / "fit.json"
-    if not (result_path.is_file() and fit_path.is_file()):
-        last = (done.stderr.strip().splitlines() or ["no output"])[-1]
-        return {"failed": f"exit {done.returncode}: {last}"}
+    if not (reuse and result_path.is_file() and fit_path.is_file()):
+        scenario, options = world(method, seed)
+        scenario_path = folder / f"{method}_{seed}.yaml"
+        scenario_path.write_text(yaml.safe_dump(scenario))
+        command = [sys.executable, "-m", "hostpc.cli.main", "calibrate", "--robot", "sim",
+                   "--method", method, "--scenario", str(scenario_path), "--no-push",
+                   "--out", str(out), *options]
+        done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, check=False)
+        if not (result_path.is_file() and fit_path.is_file()):
+            last = (done.stderr.strip().splitlines() or ["no output"])[-1]
+            return {"failed": f"exit {done.returncode}: {last}"}
     truth = json.loads(result_path.read_text()).get("truth") or {}
     errors_deg = truth.get("joint_offsets_error_deg")
     if errors_deg is None:
@@ -114,7 +116,7 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def run(worlds: int = 8, methods: tuple[str, ...] = METHODS, first_seed: int = 1,
-        keep: Path | None = None) -> dict[str, Any]:
+        keep: Path | None = None, reuse: bool = False) -> dict[str, Any]:
     """The Monte Carlo; returns {method: summary} (see `summarise`)."""
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory(prefix="zerocal-sigma-mc-") as tmp:
@@ -123,7 +125,7 @@ def run(worlds: int = 8, methods: tuple[str, ...] = METHODS, first_seed: int = 1
         for method in methods:
             runs = []
             for seed in range(first_seed, first_seed + worlds):
-                runs.append(run_world(method, seed, folder))
+                runs.append(run_world(method, seed, folder, reuse and keep is not None))
                 status = runs[-1].get("failed", "ok")
                 print(f"  {method} world {seed}: {status}", file=sys.stderr, flush=True)
             out[method] = summarise(runs)
@@ -152,6 +154,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--first-seed", type=int, default=1)
     parser.add_argument("--keep", type=Path, default=None, help="keep the run folders here")
     parser.add_argument("--json", type=Path, default=None, help="write the figures here")
+    parser.add_argument("--reuse", action="store_true",
+                        help="with --keep: read runs already finished there instead of rerunning")
     args = parser.parse_args(argv)
     if args.worlds < 1:
         parser.error("--worlds: expected at least 1")
@@ -159,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
         parser.error(f"--methods: unknown {', '.join(unknown)} (expected {', '.join(METHODS)})")
-    figures = run(args.worlds, methods, args.first_seed, args.keep)
+    figures = run(args.worlds, methods, args.first_seed, args.keep, args.reuse)
     print_table(figures)
     if args.json:
         args.json.write_text(json.dumps(figures, indent=2) + "\n")

@@ -186,5 +186,7 @@ class StereoCameraMixin:
                 "sphere_radius": sc.probe.sphere_radius,
                 "io_line": sc.probe.io_line,
                 "repeatability": sc.probe.repeatability_sigma,
+                # the simulated latch comes a fixed latency after the contact: no jitter
+                "latency_jitter": 0.0,
             },
         }

@@ -77,20 +77,89 @@ def shared_covariance(problem: Problem) -> tuple[np.ndarray, np.ndarray] | None:
     return D, S
 
 
+def residual_scale(jacobian_free: np.ndarray, D_whitened: np.ndarray, S: np.ndarray,
+                   residuals: np.ndarray, expected_noise: float | None = None) -> float:
+    """How much larger the shared error is than S says, from the fit's own residuals (>= 1).
+
+    The whitened residuals r = P (e + Dw delta) (P: projector off the Jacobian's columns)
+    have E[r^T r] = dof + k trace(P Dw S Dw^T P) when Cov(delta) = k S. The method-of-moments
+    estimate k = (chi2 - dof) / trace(...) is clipped below at 1: a fit whose residuals
+    show no excess keeps the rig's own covariance, never less. expected_noise replaces dof
+    when the whitening includes more than the noise (a pixel floor: see below)."""
+    rows, free = jacobian_free.shape
+    dof = rows - free
+    if dof <= 0 or not np.all(np.isfinite(residuals)):
+        return 1.0
+    Q, _ = np.linalg.qr(jacobian_free)
+    PD = D_whitened - Q @ (Q.T @ D_whitened)
+    trace = float(np.einsum("ij,jk,ik->", PD, S, PD))
+    if not trace > 0:
+        return 1.0
+    chi2 = float(residuals @ residuals)
+    noise = float(dof) if expected_noise is None else expected_noise
+    return max(1.0, (chi2 - noise) / trace)
+
+
+def floor_covariance(problem: Problem, block: Any) -> np.ndarray | None:
+    """(N, 3, 3) the per-sample `pixel_floor_px` part of the samples' covariance (the
+    diagonal lateral z s/f, depth z^2 sqrt(2) s/(f b) model of stereo_target), or None if the
+    block declares no floor."""
+    try:
+        floor = float(block.get("pixel_floor_px") or 0.0)
+        rig = block.get("rig") or {}
+        fx = float(rig["K_left"][0][0])
+        baseline = float(np.linalg.norm(np.asarray(rig["T"], float)))
+    except (TypeError, ValueError, KeyError, IndexError):
+        return None
+    if not (floor > 0 and fx > 0 and baseline > 0):
+        return None
+    z = np.maximum(np.abs(np.asarray(problem.measured, float)[:, 2]), 1e-3)
+    cov = np.zeros((z.size, 3, 3))
+    cov[:, 0, 0] = cov[:, 1, 1] = (z * floor / fx) ** 2
+    cov[:, 2, 2] = (z**2 * np.sqrt(2.0) * floor / (fx * baseline)) ** 2
+    return cov
+
+
 def added_parameter_covariance(problem: Problem, jacobian_free: np.ndarray,
-                               covariance_free: np.ndarray, row_weight: np.ndarray
-                               ) -> np.ndarray | None:
-    """(F, F) covariance the shared error adds to the free parameters, or None.
+                               covariance_free: np.ndarray, row_weight: np.ndarray,
+                               residuals: np.ndarray | None = None) -> np.ndarray | None:
+    """(F, F) what the shared error changes in the free parameters' covariance, or None.
 
     jacobian_free: (N*m, F) whitened (and robust-weighted) Jacobian of the free parameters;
     covariance_free: (F, F) their noise covariance; row_weight: (N*m,) robust weights'
-    square roots applied to the rows."""
+    square roots applied to the rows; residuals: (N*m,) the fit's whitened residuals (robust
+    weights applied): when given, S is scaled by `residual_scale` (the excess of the
+    residuals over their noise-only expectation, attributed to the shared error).
+
+    When the block declares a `pixel_floor_px` (a floor the method added to each sample's
+    covariance to stand for the shared error in the weights and in chi2), the floor is a
+    weighting only: the covariance is the sandwich for the samples' noise without the floor
+    plus the (scaled) shared error, and the returned change can be negative."""
     shared = shared_covariance(problem)
     if shared is None:
         return None
     D, S = shared
     W = problem.sqrt_information  # (N, m, m)
     D_whitened = np.einsum("nij,njk->nik", W, D).reshape(-1, D.shape[2]) * row_weight[:, None]
+    floor = floor_covariance(problem, problem.dataset.extra_fields.get(BLOCK))
+    change = np.zeros_like(covariance_free)
+    expected_noise = None
+    if floor is not None:
+        # whitened noise without the floor: M_i = I - W_i F_i W_i^T (weights on the rows)
+        M = np.eye(W.shape[1])[None] - np.einsum("nij,njk,nlk->nil", W, floor, W)
+        weight = row_weight.reshape(W.shape[0], W.shape[1])
+        M = weight[:, :, None] * M * weight[:, None, :]
+        J3 = jacobian_free.reshape(W.shape[0], W.shape[1], -1)
+        meat = np.einsum("nif,nij,njg->fg", J3, M, J3)
+        change += covariance_free @ meat @ covariance_free - covariance_free
+        Q, _ = np.linalg.qr(jacobian_free)
+        Q3 = Q.reshape(W.shape[0], W.shape[1], -1)
+        # E[r^T r] of the noise: trace(P M P) = trace(M) - trace(Q^T M Q)
+        expected_noise = float(np.trace(M, axis1=1, axis2=2).sum()
+                               - np.einsum("nif,nij,njf->", Q3, M, Q3))
+    if residuals is not None:
+        S = S * residual_scale(jacobian_free, D_whitened, S, np.ravel(residuals),
+                               expected_noise)
     A = covariance_free @ (jacobian_free.T @ D_whitened)
-    added = A @ S @ A.T
-    return 0.5 * (added + added.T)
+    change += A @ S @ A.T
+    return 0.5 * (change + change.T)

@@ -40,12 +40,10 @@ CENTROID_SIGMA_PX = 0.05
 real camera's; the simulator's images are better)."""
 PIXEL_FLOOR_PX = 0.01
 """Floor added to every measured covariance, in px per image coordinate (independent per
-sample): the vision's covariance holds only the pixel noise of the dot's centroid. With the
-second pass (hostpc.methods.stereo_refinement) and the rig's shared error
-(hostpc.fitting.shared_errors) the reported joint sigmas are conservative at 0.01 (MSE /
-sigma^2 0.14-0.51 against the simulator) and honest for joints 2-4 at 0.003, but at 0.003
-the rig calibration's own error (larger than its covariance says) lifts chi2/dof above the
-push band in a third of the simulated worlds; docs/vision.md section 3.3."""
+sample): a weighting, and what the push's chi2/dof band sees. The reported covariance takes
+it back out (the dataset's `rig_uncertainty` block declares it; hostpc.fitting.shared_errors
+reports the sandwich for the pixel noise plus the rig's shared error, scaled by the fit's
+residuals): docs/vision.md section 3.3."""
 SKIP_REASONS = ("joint_limit", "refused_fault", "invalid_argument")
 """Controller refusals that skip one pose instead of ending the run."""
 
@@ -358,7 +356,8 @@ class StereoTargetMethod(Method):
             return {}
         from hostpc.vision.rig_uncertainty import uncertainty_document
 
-        return {"rig_uncertainty": uncertainty_document(self.rig, self.rig.covariance)}
+        return {"rig_uncertainty": uncertainty_document(self.rig, self.rig.covariance,
+                                                        self.pixel_floor)}
 
     def describe(self) -> dict[str, Any]:
         """Rig facts for the result document."""

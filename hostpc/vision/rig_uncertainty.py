@@ -169,7 +169,13 @@ def point_sensitivity(rig: StereoRig, uv: np.ndarray) -> np.ndarray:
     return out
 
 
-def uncertainty_document(rig: StereoRig, covariance: np.ndarray) -> dict[str, Any]:
-    """The dataset's `rig_uncertainty` block: the rig, its parameter names and covariance."""
-    return {"rig": rig.to_dict(), "parameters": list(RIG_PARAMETERS),
-            "covariance": np.asarray(covariance, float).tolist()}
+def uncertainty_document(rig: StereoRig, covariance: np.ndarray,
+                         pixel_floor_px: float = 0.0) -> dict[str, Any]:
+    """The dataset's `rig_uncertainty` block: the rig, its parameter names and covariance,
+    and the pixel floor the samples' covariances include (a weighting the fit's covariance
+    takes back out: hostpc.fitting.shared_errors)."""
+    document: dict[str, Any] = {"rig": rig.to_dict(), "parameters": list(RIG_PARAMETERS),
+                                "covariance": np.asarray(covariance, float).tolist()}
+    if pixel_floor_px > 0:
+        document["pixel_floor_px"] = float(pixel_floor_px)
+    return document

@@ -265,3 +265,34 @@ def test_planned_views_pass_the_coverage_check(world: str) -> None:
     result = calibrate_rig(pairs, spec)
     assert result.ok, result.warnings
     assert result.rig.covariance is not None and result.corner_sigma_px < 0.1
+
+
+def test_declared_pixel_floor_is_a_weighting_not_a_reported_noise(stereo_poses) -> None:  # type: ignore[no-untyped-def]
+    """A floor added to the samples' covariances and declared in the block leaves the reported
+    covariance that of the noise alone (the sandwich for the floor-weighted estimator: within
+    a few % of the unfloored fit's), where an undeclared floor inflates it."""
+    rig = _rig()
+    cov = np.zeros((N_RIG, N_RIG))
+    cov[0, 0] = 0.5**2
+    _, with_rig = _dataset_with_rig(rig, cov, stereo_poses)
+    document = dataset_to_dict(with_rig)
+    p = np.array([s["p"] for s in document["samples"]])
+    depth_var = np.mean([s["cov"][2][2] for s in document["samples"]])
+    fx, baseline = rig.K_left[0, 0], rig.baseline
+    z = np.abs(p[:, 2])
+    floor_px = float(np.sqrt(depth_var / np.mean((z**2 * np.sqrt(2.0) / (fx * baseline)) ** 2)))
+    for sample, zi in zip(document["samples"], z, strict=True):
+        c = np.array(sample["cov"])
+        c[0, 0] += (zi * floor_px / fx) ** 2
+        c[1, 1] += (zi * floor_px / fx) ** 2
+        c[2, 2] += (zi**2 * np.sqrt(2.0) * floor_px / (fx * baseline)) ** 2
+        sample["cov"] = c.tolist()
+    undeclared = fit(dataset_from_dict(document), cv_folds=0)
+    document["rig_uncertainty"] = uncertainty_document(rig, cov, floor_px)
+    declared = fit(dataset_from_dict(document), cv_folds=0)
+    reference = fit(with_rig, cv_folds=0)
+    free = ~reference.fixed
+    np.testing.assert_array_equal(declared.x, undeclared.x)  # the weighting is the same
+    ratio = declared.std[free] / reference.std[free]
+    assert np.all(ratio > 0.999) and np.all(ratio < 1.1), ratio  # sandwich >= optimal
+    assert np.mean(undeclared.std[free] / reference.std[free]) > 1.2
