@@ -46,8 +46,8 @@ def cross_validated_rms(problem: Problem, x: np.ndarray, free: np.ndarray, folds
 
     With the linear loss and the full fit's ``evaluation`` (Jacobian at the solution), each
     fold's fit is the exact linearised leave-fold-out update (``_leave_out_steps``): no
-    refit, no new Jacobian; the held-out residuals are predicted by the full model at the
-    updated parameters. Otherwise (a robust loss, whose weights a refit changes) each fold is
+    refit, no new Jacobian, no new prediction (the held-out residuals move to first order
+    too). Otherwise (a robust loss, whose weights a refit changes) each fold is
     refitted, starting from the full fit's solution (it is a perturbation of it)."""
     n_samples = problem.measured.shape[0]
     if folds < 2 or n_samples < 2 * folds:
@@ -59,14 +59,27 @@ def cross_validated_rms(problem: Problem, x: np.ndarray, free: np.ndarray, folds
     squared = np.empty(n_samples)
     for test, step in zip(fold_sets, steps, strict=True):
         if step is not None:
-            x_fold = x + step
+            assert evaluation is not None
+            raw = _moved_residuals(problem, evaluation, test, step)
         else:
             train = np.setdiff1d(np.arange(n_samples), test)
             x_fold = levenberg_marquardt(problem.subset(train), x, free, loss=loss,
                                          loss_scale=loss_scale, max_iterations=30).x
-        held_out = evaluate(problem.subset(test), x_fold, jacobian=False)
-        squared[test] = np.sum(held_out.raw[:, problem.length_columns]**2, axis=1)
+            raw = evaluate(problem.subset(test), x_fold, jacobian=False).raw
+        squared[test] = np.sum(raw[:, problem.length_columns]**2, axis=1)
     return float(np.sqrt(np.mean(squared)))
+
+
+def _moved_residuals(problem: Problem, evaluation: Evaluation, test: np.ndarray,
+                     step: np.ndarray) -> np.ndarray:
+    """Raw residuals of the samples ``test`` after the parameters move by ``step``, to first
+    order: raw + W^-1 (J step) (J: whitened Jacobian, W: whitening), no new prediction."""
+    assert evaluation.jacobian is not None
+    m = problem.measured.shape[1]
+    rows = (test[:, None] * m + np.arange(m)).ravel()
+    change = (evaluation.jacobian[rows] @ step).reshape(test.size, m)
+    raw_change = np.linalg.solve(problem.sqrt_information[test], change[:, :, None])[:, :, 0]
+    return evaluation.raw[test] + raw_change
 
 
 def _leave_out_steps(problem: Problem, evaluation: Evaluation, free: np.ndarray,
