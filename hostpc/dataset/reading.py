@@ -130,6 +130,7 @@ def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]],
     if not document.samples and columnar_samples is None:
         raise FieldError(("samples",), "no samples (expected at least one)")
     units = Units(document.units)
+    n_joints: int | None
     if document.robot.urdf is not None:  # extension A (hostpc.kinematics.urdf)
         robot, n_joints, robot_label = read_urdf_robot(document.robot, method, base_dir)
     else:
