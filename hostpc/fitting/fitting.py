@@ -42,44 +42,67 @@ def _covariance(J_free: np.ndarray) -> np.ndarray:
 def cross_validated_rms(problem: Problem, x: np.ndarray, free: np.ndarray, folds: int,
                         loss: Loss, loss_scale: float,
                         evaluation: Evaluation | None = None) -> float | None:
-    """RMS over all samples of the residual norm, each predicted by a fit that did not see it.
+    """RMS over all samples of the residual norm, each predicted by a fit that did not see it
+    (``held_out_by_fold``)."""
+    held = held_out_by_fold(problem, x, free, folds, loss=loss, loss_scale=loss_scale,
+                            evaluation=evaluation)
+    if held is None:
+        return None
+    raw, _ = held
+    return float(np.sqrt(np.mean(np.sum(raw[:, problem.length_columns]**2, axis=1))))
 
-    With the linear loss and the full fit's ``evaluation`` (Jacobian at the solution), each
-    fold's fit is the exact linearised leave-fold-out update (``_leave_out_steps``): no
-    refit, no new Jacobian, no new prediction (the held-out residuals move to first order
-    too). Otherwise (a robust loss, whose weights a refit changes) each fold is
-    refitted, starting from the full fit's solution (it is a perturbation of it)."""
-    n_samples = problem.measured.shape[0]
+
+def held_out_by_fold(problem: Problem, x: np.ndarray, free: np.ndarray, folds: int, *,
+                     loss: Loss = "linear", loss_scale: float = 3.0,
+                     evaluation: Evaluation | None = None, max_iterations: int = 30
+                     ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Raw and whitened residuals (N, m) of every sample, each predicted by the fit of the
+    folds that do not hold it (``fold_indices``); None with too few samples for ``folds``.
+
+    With the linear loss each fold's fit is the exact linearised leave-fold-out update of
+    the solution ``x`` (``_leave_out_steps``; ``evaluation``: the Jacobian at ``x``, computed
+    if not given): no refit, no new Jacobian, and the held-out residuals move to first order
+    with it (``_moved_residuals``), no new prediction. Otherwise (a robust loss, whose
+    weights a refit changes) each fold is refitted starting from ``x`` (it is a
+    perturbation of it), as is a fold whose remaining samples do not determine the
+    parameters."""
+    n_samples, m = problem.measured.shape
     if folds < 2 or n_samples < 2 * folds:
         return None
     fold_sets = fold_indices(n_samples, folds)
     steps: list[np.ndarray | None] = [None] * folds
-    if loss == "linear" and evaluation is not None and evaluation.jacobian is not None:
+    if loss == "linear":
+        if evaluation is None or evaluation.jacobian is None or not np.array_equal(
+                evaluation.x, x):
+            evaluation = evaluate(problem, x)
         steps = _leave_out_steps(problem, evaluation, free, fold_sets)
-    squared = np.empty(n_samples)
+    raw = np.empty((n_samples, m))
+    whitened = np.empty((n_samples, m))
     for test, step in zip(fold_sets, steps, strict=True):
         if step is not None:
             assert evaluation is not None
-            raw = _moved_residuals(problem, evaluation, test, step)
+            raw[test], whitened[test] = _moved_residuals(problem, evaluation, test, step)
         else:
             train = np.setdiff1d(np.arange(n_samples), test)
             x_fold = levenberg_marquardt(problem.subset(train), x, free, loss=loss,
-                                         loss_scale=loss_scale, max_iterations=30).x
-            raw = evaluate(problem.subset(test), x_fold, jacobian=False).raw
-        squared[test] = np.sum(raw[:, problem.length_columns]**2, axis=1)
-    return float(np.sqrt(np.mean(squared)))
+                                         loss_scale=loss_scale,
+                                         max_iterations=max_iterations).x
+            held = evaluate(problem.subset(test), x_fold, jacobian=False)
+            raw[test], whitened[test] = held.raw, held.whitened
+    return raw, whitened
 
 
 def _moved_residuals(problem: Problem, evaluation: Evaluation, test: np.ndarray,
-                     step: np.ndarray) -> np.ndarray:
-    """Raw residuals of the samples ``test`` after the parameters move by ``step``, to first
-    order: raw + W^-1 (J step) (J: whitened Jacobian, W: whitening), no new prediction."""
+                     step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Raw and whitened residuals of the samples ``test`` after the parameters move by
+    ``step``, to first order: whitened + J step, raw + W^-1 (J step) (J: whitened
+    Jacobian, W: whitening), no new prediction."""
     assert evaluation.jacobian is not None
     m = problem.measured.shape[1]
     rows = (test[:, None] * m + np.arange(m)).ravel()
     change = (evaluation.jacobian[rows] @ step).reshape(test.size, m)
     raw_change = np.linalg.solve(problem.sqrt_information[test], change[:, :, None])[:, :, 0]
-    return evaluation.raw[test] + raw_change
+    return evaluation.raw[test] + raw_change, evaluation.whitened[test] + change
 
 
 def _leave_out_steps(problem: Problem, evaluation: Evaluation, free: np.ndarray,
