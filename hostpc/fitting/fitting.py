@@ -137,12 +137,15 @@ def _leave_out_steps(problem: Problem, evaluation: Evaluation, free: np.ndarray,
         J_fold = J[rows]
         A_train = A - J_fold.T @ J_fold
         g_train = g - J_fold.T @ r[rows]
+        # Jacobi scaling: parameters in m and rad, conditioning judged without the units
+        scale = 1.0 / np.sqrt(np.maximum(np.diag(A_train), 1e-300))
+        scaled = A_train * scale[:, None] * scale[None, :]
         try:
-            reduced = -np.linalg.solve(A_train, g_train)
+            reduced = -scale * np.linalg.solve(scaled, scale * g_train)
         except np.linalg.LinAlgError:
             steps.append(None)
             continue
-        if not np.all(np.isfinite(reduced)) or _ill_conditioned(A_train):
+        if not np.all(np.isfinite(reduced)) or _ill_conditioned(scaled):
             steps.append(None)
             continue
         step = np.zeros(x.size)
