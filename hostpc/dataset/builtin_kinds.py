@@ -75,6 +75,11 @@ class StereoTargetFile(PointSampleKind):
     def samples_arguments(self, columns: Columns, units: Units) -> dict[str, Any]:
         return self.point_arguments(columns, units)
 
+    def read_columns(self, table: Any, units: Units) -> dict[str, Any] | None:
+        from hostpc.dataset.reading_columns import point_columns
+
+        return dict(point_columns(table, units))
+
     def write_sample(self, samples: Samples, index: int) -> tuple[dict[str, Any], int]:
         out: dict[str, Any] = {"q": samples.q[index].tolist()}
         self.write_point(samples, index, out)
@@ -104,6 +109,12 @@ class SphereProbeFile(MeasurementKind):
 
     def samples_arguments(self, columns: Columns, units: Units) -> dict[str, Any]:
         return {"sigma": units.length(columns.values["sigma"])}
+
+    def read_columns(self, table: Any, units: Units) -> dict[str, Any] | None:
+        if "group" in table.names or "sigma" not in table.names:
+            return None
+        sigma = table.numbers("sigma", list[float], ())
+        return {"sigma": units.length(sigma)} if np.all(sigma > 0) else None
 
     def write_sample(self, samples: Samples, index: int) -> tuple[dict[str, Any], int]:
         out: dict[str, Any] = {"q": samples.q[index].tolist()}

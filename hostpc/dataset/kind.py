@@ -43,7 +43,10 @@ class Columns:
         self.state: dict[str, Any] = {}
 
     def put(self, name: str, index: int, value: Any) -> None:
-        self.values.setdefault(name, [None] * self.n_samples)[index] = value
+        column = self.values.get(name)
+        if column is None:  # not setdefault: that would build an N-list on every call
+            column = self.values[name] = [None] * self.n_samples
+        column[index] = value
 
     def given(self, name: str) -> bool:
         return name in self.values
@@ -176,6 +179,13 @@ class MeasurementKind:
                 raise FieldError((*loc, name), "out of range after unit conversion")
             columns.put(f"field.{name}", sample_index(loc), number)
         return list(q)
+
+    def read_columns(self, table: Any, units: Units) -> dict[str, Any] | None:
+        """The fast path (``hostpc.dataset.reading_columns``): ``samples_arguments`` for
+        every sample at once from ``table`` (a ``SampleTable``: one list per field), or None
+        to have the samples read one by one. Raise ``reading_columns.NotColumnar`` where a
+        check fails (the slow path then names the sample). Default: None."""
+        return None
 
     def samples_arguments(self, columns: Columns, units: Units) -> dict[str, Any]:
         """Keyword arguments of ``Samples`` for this kind's fields (besides q and context).

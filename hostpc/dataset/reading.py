@@ -23,6 +23,7 @@ from hostpc.dataset import schema, validation
 from hostpc.dataset.kind import MeasurementKind
 from hostpc.dataset.kinds import measurement_kinds
 from hostpc.dataset.model import Dataset, FramePose, RobotDescription, Samples, SphereFrame
+from hostpc.dataset.reading_columns import NotColumnar, read_columns
 from hostpc.dataset.reading_samples import read_samples
 from hostpc.dataset.schema import FORMAT_TAG, FieldError, Loc, show
 from hostpc.dataset.units import Units
@@ -80,17 +81,37 @@ def dataset_from_dict(doc: Any, source: str = "<dict>",
     """
     kinds = measurement_kinds(plugins)
     try:
-        return validation.check_dataset(
-            _dataset_from_document(schema.normalize(doc), kinds, base_dir), source)
+        dataset = _columnar_dataset(doc, kinds, base_dir)
+        if dataset is None:  # read sample by sample: the error names the first bad sample
+            dataset = _dataset_from_document(schema.normalize(doc), kinds, base_dir)
+        return validation.check_dataset(dataset, source)
     except FieldError as exc:
         raise DatasetError(f"{source}: {exc}") from exc
     except RecursionError as exc:
         raise DatasetError(f"{source}: nested too deeply") from exc
 
 
+def _columnar_dataset(doc: Any, kinds: Mapping[str, type[MeasurementKind]],
+                      base_dir: PathLike | None) -> Dataset | None:
+    """The dataset read by whole columns (``reading_columns``), or None where the file
+    needs the sample-by-sample reader (any error, any irregular sample)."""
+    if not (type(doc) is dict and type(doc.get("samples")) is list and doc["samples"]):
+        return None
+    try:
+        head = schema.normalize({key: value for key, value in doc.items() if key != "samples"})
+        return _dataset_from_document({**head, "samples": []}, kinds, base_dir,
+                                      columnar_samples=doc["samples"])
+    except (FieldError, NotColumnar, RecursionError):
+        return None
+
+
 def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]],
-                           base_dir: PathLike | None = None) -> Dataset:
-    """Build the dataset from a normalized document; raises FieldError."""
+                           base_dir: PathLike | None = None,
+                           columnar_samples: list[Any] | None = None) -> Dataset:
+    """Build the dataset from a normalized document; raises FieldError.
+
+    With ``columnar_samples`` (the raw samples; ``doc`` holds none), the samples are read by
+    columns, and NotColumnar is raised where they cannot be."""
     if not isinstance(doc, dict):
         raise FieldError((), f"expected a JSON object at the top level, got {show(doc)}")
     if "format" not in doc:
@@ -106,7 +127,7 @@ def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]],
     kind = kinds[method]()
 
     document: schema.DocumentSchema = schema.validate(schema.DocumentSchema, doc)
-    if not document.samples:
+    if not document.samples and columnar_samples is None:
         raise FieldError(("samples",), "no samples (expected at least one)")
     units = Units(document.units)
     n_joints: int | None
@@ -117,7 +138,14 @@ def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]],
     frames = _read_frames(document.frames, kind, units)
     known = _read_known(document.known, frames)
     stylus_radius = _read_probe(document.probe, kind, units)
-    samples = read_samples(document.samples, kind, n_joints, robot_label, units, frames)
+    if columnar_samples is not None:
+        fast = read_columns(columnar_samples, kind, n_joints, units)
+        if fast is None:
+            raise NotColumnar
+        kind.check_samples(fast, frames)
+        samples = fast
+    else:
+        samples = read_samples(document.samples, kind, n_joints, robot_label, units, frames)
     samples = prismatic_q_to_length(samples, robot, units)
     extra_fields = {k: v for k, v in doc.items() if k not in schema.DOCUMENT_FIELDS}
     return Dataset(

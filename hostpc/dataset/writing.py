@@ -23,6 +23,8 @@ from hostpc.dataset.schema import FORMAT_TAG
 from hostpc.errors import InputError
 
 _SI_UNITS = {"length": "m", "angle": "rad", "time": "s"}
+#: one encoder for every value (``json.dumps`` with options builds a new one per call)
+_ENCODER = json.JSONEncoder(ensure_ascii=False, allow_nan=False)
 
 
 def dataset_to_dict(dataset: Dataset, plugins: Iterable[str | os.PathLike[str]] = ()
@@ -122,21 +124,36 @@ def _frame_to_json(value: Any) -> Any:
 
 
 def _samples_to_json(kind: MeasurementKind, samples: Samples) -> list[dict[str, Any]]:
+    """Every sample as JSON: the kind's own fields, then the context fields. The context
+    is converted column by column (one finiteness test and one ``tolist`` per array, not
+    per sample)."""
+    context = []
+    for name in ("t", "temperature", "speed"):
+        values = np.asarray(getattr(samples, name), dtype=float)
+        context.append((name, values.tolist(), np.isfinite(values).tolist()))
+    extras = [(key, np.asarray(v, dtype=float).tolist(), np.isfinite(v).tolist())
+              for key, v in samples.extra.items()]
+    approach_finite = np.isfinite(samples.approach)
+    approach = np.where(approach_finite, samples.approach, 0).astype(np.int64).tolist()
+    # approach of sample i is written if its first n_joints values are all finite
+    finite_prefix = np.cumprod(approach_finite, axis=1).sum(axis=1).tolist()
+    uv_rows = uv_finite = None
+    if samples.uv is not None:
+        uv_rows = samples.uv.tolist()
+        uv_finite = np.all(np.isfinite(samples.uv), axis=(1, 2)).tolist()
     out = []
     for i in range(samples.n):
         sample, n_joints = kind.write_sample(samples, i)
-        for name in ("t", "temperature", "speed"):
-            value = float(getattr(samples, name)[i])
-            if np.isfinite(value):
-                sample[name] = value
-        approach = samples.approach[i, :n_joints]
-        if np.all(np.isfinite(approach)):
-            sample["approach"] = [int(v) for v in approach]
-        extra = {k: float(v[i]) for k, v in samples.extra.items() if np.isfinite(v[i])}
+        for name, values, finite in context:
+            if finite[i]:
+                sample[name] = values[i]
+        if finite_prefix[i] >= n_joints:
+            sample["approach"] = approach[i][:n_joints]
+        extra = {key: values[i] for key, values, finite in extras if finite[i]}
         if extra:
             sample["extra"] = extra
-        if samples.uv is not None and np.all(np.isfinite(samples.uv[i])):
-            sample["uv"] = samples.uv[i].tolist()
+        if uv_rows is not None and uv_finite is not None and uv_finite[i]:
+            sample["uv"] = uv_rows[i]
         out.append(sample)
     return out
 
@@ -157,4 +174,4 @@ def _dumps(value: Any, level: int = 0) -> str:
             parts = [pad + _dumps(v, level + 1) for v in value]
             open_, close = "[", "]"
         return open_ + "\n" + ",\n".join(parts) + "\n" + "  " * level + close
-    return json.dumps(value, ensure_ascii=False, allow_nan=False)
+    return _ENCODER.encode(value)

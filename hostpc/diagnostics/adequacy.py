@@ -18,8 +18,8 @@ import numpy as np
 
 from hostpc.diagnostics.distributions import chi2_isf, chi2_ppf, chi2_sf
 from hostpc.diagnostics.outliers import Outlier
-from hostpc.fitting import FitResult, fold_indices
-from hostpc.fitting.solver import evaluate, levenberg_marquardt
+from hostpc.fitting import FitResult
+from hostpc.fitting.fitting import held_out_by_fold
 from hostpc.model.problem import Problem
 
 ADEQUACY_P_MIN = 1e-3
@@ -61,24 +61,16 @@ class HeldOut:
 
 def held_out_residuals(problem: Problem, x: np.ndarray, free: np.ndarray, folds: int,
                        max_iterations: int = 30) -> HeldOut | None:
-    """k-fold held-out residuals, each fold's fit warm-started at the full fit's x.
+    """k-fold held-out residuals: each fold's fit is the linearised leave-fold-out update
+    of the full fit's x (``hostpc.fitting.fitting.held_out_by_fold``).
 
-    Same folds and solver as ``hostpc.fit`` (so the RMS equals ``FitResult.cv_rms`` for a
-    linear loss); None when there are too few samples for ``folds`` folds.
+    Same folds and computation as ``hostpc.fit`` (so the RMS equals ``FitResult.cv_rms`` for
+    a linear loss); None when there are too few samples for ``folds`` folds.
     """
-    n_samples, m = problem.measured.shape
-    if folds < 2 or n_samples < 2 * folds:
+    held = held_out_by_fold(problem, x, free, folds, max_iterations=max_iterations)
+    if held is None:
         return None
-    raw = np.empty((n_samples, m))
-    whitened = np.empty((n_samples, m))
-    everyone = np.arange(n_samples)
-    for test in fold_indices(n_samples, folds):
-        train = np.setdiff1d(everyone, test)
-        outcome = levenberg_marquardt(problem.subset(train), x, free,
-                                      max_iterations=max_iterations)
-        held = evaluate(problem.subset(test), outcome.x, jacobian=False)
-        raw[test] = held.raw
-        whitened[test] = held.whitened
+    raw, whitened = held
     return HeldOut(raw=raw, whitened=whitened, folds=folds,
                    length_columns=problem.length_columns)
 

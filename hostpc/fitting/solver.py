@@ -44,8 +44,41 @@ class SolverOutcome:
     cost: float
 
 
+#: samples per chunk of a large problem's Jacobian evaluation: a model's intermediates (the
+#: per-pose derivative of the kinematic deltas, (N, 5n, P)) stay bounded (~35 MB at P = 34)
+#: instead of growing with N; problems up to twice this are evaluated in one piece
+CHUNK_SAMPLES = 8192
+
+
 def evaluate(problem: Problem, x: np.ndarray, jacobian: bool = True) -> Evaluation:
-    """Raw and whitened residuals at x, and d(whitened)/dx flattened to (N*m, P)."""
+    """Raw and whitened residuals at x, and d(whitened)/dx flattened to (N*m, P).
+
+    A large problem (N > 2 * CHUNK_SAMPLES) with a Jacobian is evaluated in chunks of
+    samples (``Problem.subset``: a view of the built rows), so that a measurement model's
+    per-pose intermediates never exist for all N at once; every prediction depends on its
+    own sample only, so the result is the same."""
+    n_samples = problem.measured.shape[0]
+    if jacobian and n_samples > 2 * CHUNK_SAMPLES:
+        return _evaluate_in_chunks(problem, x)
+    return _evaluate(problem, x, jacobian)
+
+
+def _evaluate_in_chunks(problem: Problem, x: np.ndarray) -> Evaluation:
+    n_samples, m = problem.measured.shape
+    raw = np.empty((n_samples, m))
+    whitened = np.empty((n_samples, m))
+    J = np.empty((n_samples * m, x.size))
+    for start in range(0, n_samples, CHUNK_SAMPLES):
+        stop = min(start + CHUNK_SAMPLES, n_samples)
+        part = _evaluate(problem.subset(np.arange(start, stop)), x, True)
+        raw[start:stop] = part.raw
+        whitened[start:stop] = part.whitened
+        assert part.jacobian is not None
+        J[start * m:stop * m] = part.jacobian
+    return Evaluation(x=x, raw=raw, whitened=whitened, jacobian=J)
+
+
+def _evaluate(problem: Problem, x: np.ndarray, jacobian: bool) -> Evaluation:
     predicted, d_predicted = predict(problem, x, jacobian)
     raw = problem.measured - predicted
     W = problem.sqrt_information

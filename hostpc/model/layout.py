@@ -131,5 +131,15 @@ class Problem:
             context=self.context.subset(index),
             measured=self.measured[index],
             sqrt_information=self.sqrt_information[index],
-            linear_bases=tuple(None if b is None else b[index] for b in self.linear_bases),
+            linear_bases=tuple(None if b is None else _rows(b, index)
+                               for b in self.linear_bases),
         )
+
+
+def _rows(basis: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """Rows ``index`` of a per-sample basis; one shared by all samples (stride 0) stays a
+    view of its one matrix."""
+    if basis.ndim == 3 and basis.strides[0] == 0:
+        rows = np.arange(basis.shape[0])[index]
+        return np.broadcast_to(basis[0], (rows.shape[0],) + basis.shape[1:])
+    return basis[index]

@@ -98,12 +98,21 @@ def _terms(model: MeasurementPredictor, dataset: Dataset, context: ModelContext,
 
 def _linear_bases(terms: Iterable[EffectTerm], context: ModelContext
                   ) -> tuple[np.ndarray | None, ...]:
-    """Per term: the constant basis of a linear joint/geometry effect, else None."""
+    """Per term: the constant basis of a linear joint/geometry effect, else None. A basis
+    the same for every sample (a broadcast view, as the geometry effect's) stays one: a
+    (k, P) matrix seen N times, not an (N, k, P) copy (456 MB at 100k poses)."""
     return tuple(
-        np.ascontiguousarray(term.effect.basis(context))
+        _compact(term.effect.basis(context))
         if term.effect.is_linear and term.effect.hook in ("joint", "geometry") else None
         for term in terms
     )
+
+
+def _compact(basis: np.ndarray) -> np.ndarray:
+    basis = np.asarray(basis)
+    if basis.ndim == 3 and basis.shape[0] > 1 and basis.strides[0] == 0:
+        return np.broadcast_to(np.ascontiguousarray(basis[0]), basis.shape)
+    return np.ascontiguousarray(basis)
 
 
 def build_problem(

@@ -29,6 +29,7 @@ from hostpc.model.measurements.terms import (
     apply_sensor_effects,
     flange,
     frame_pose,
+    screw_rows,
     world_point_in_base,
 )
 
@@ -61,7 +62,8 @@ class StereoTarget(StereoTargetFile, MeasurementModel):
         # kinematic parameters: moving the flange by a screw moves the fixed target point the
         # opposite way in the flange frame: dp_f = -R_bf^T (w x (p_b - c)) or -R_bf^T v
         S = screws(chain, poses)
-        d_pb_world_dkin = point_jacobian(S, np.broadcast_to(p_b, (n_samples, 3)))[:, :, rows]
+        d_pb_world_dkin = point_jacobian(screw_rows(S, rows),
+                                         np.broadcast_to(p_b, (n_samples, 3)))
         A = R_ft.T @ R_bf_T  # (N, 3, 3): d y / d p_b  (and -d y / d (flange motion))
         J -= (A @ d_pb_world_dkin) @ d_delta
         for name, d_pb_term in d_pb.items():

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from hostpc.kinematics import forward
+from hostpc.kinematics.jacobians import KinematicScrews
 from hostpc.kinematics.poses import ChainPoses
 from hostpc.kinematics.rotations import pose_to_transform
 from hostpc.model.effect import EffectTerm, numeric_jacobian
@@ -18,7 +19,7 @@ from hostpc.model.frame_math import inverse_point_derivatives, perturbed_pose
 from hostpc.model.layout import Problem
 
 __all__ = ["apply_sensor_effects", "flange", "frame_pose", "kinematic_deltas",
-           "world_point_in_base"]
+           "screw_rows", "world_point_in_base"]
 
 
 def _term_params(term: EffectTerm | None, x: np.ndarray) -> np.ndarray | None:
@@ -60,6 +61,13 @@ def kinematic_deltas(problem: Problem, x: np.ndarray, jacobian: bool
         if d_delta is not None:
             d_delta[:, target, term.slice] += J
     return delta, d_delta, rows
+
+
+def screw_rows(screws: KinematicScrews, rows: slice) -> KinematicScrews:
+    """The screws of the kinematic-delta rows ``rows`` only (see kinematic_deltas), so that
+    a point Jacobian is computed for the n theta rows of an offsets fit, not all 5n."""
+    return KinematicScrews(axis=screws.axis[:, rows], point=screws.point[:, rows],
+                           is_rotation=screws.is_rotation[rows])
 
 
 def frame_pose(problem: Problem, name: str, x: np.ndarray
