@@ -30,6 +30,9 @@ EFFECT_PHRASES = {
     "geometry": "Residuals follow the link geometry ({parameter} differs from the nominal "
                 "table)",
     "trigger_latency": "Residuals grow with the probe's approach speed",
+    "joint_coupling": "Residuals follow a neighbouring joint's angle (joint {j}'s angle error "
+                      "is proportional to it)",
+    "thermal_expansion": "Residuals drift with the temperature (or the time since the start)",
 }
 # which built-in effect a "parameter varies with variable" pattern is; {b}: the branch
 # prefix of a kinematic tree ("left."), {j}: the joint
@@ -40,7 +43,23 @@ PATTERN_EFFECTS = (
     (_OFFSET, "{b}q{j}", "encoder_scale or transmission_harmonic"),
     (re.compile(r"tool\.z$"), "depth", "depth_scale"),
     (re.compile(r".*$"), "speed", "trigger_latency"),
+    (re.compile(r"geometry\.[ad]\d+$"), "temperature", "thermal_expansion"),
+    (re.compile(r"geometry\.[ad]\d+$"), "t", "thermal_expansion"),
 )
+
+
+def pattern_effect(parameter: str, variable: str) -> str | None:
+    """The built-in effect(s) a "parameter varies with variable" pattern is, or None."""
+    for pattern, template, effect in PATTERN_EFFECTS:
+        match = pattern.match(parameter)
+        if match and variable == template.format(**match.groupdict()):
+            return effect
+    offset = _OFFSET.match(parameter)
+    if offset:  # a joint's zero moving with a neighbouring joint's angle
+        b, j = offset.group("b"), int(offset.group("j"))
+        if variable in (f"{b}q{j - 1}", f"{b}q{j + 1}"):
+            return "joint_coupling"
+    return None
 
 
 def mm(value: float | None) -> str:
@@ -163,11 +182,9 @@ def interaction_sentence(interaction: Interaction, check: ModelCheck) -> str:
     """"X varies with Y", what that is, and what to do about it."""
     head = (f"The effect-agnostic search finds: {interaction.sentence} "
             f"(score {interaction.score:.1f}, p = {interaction.p_value:.2g})")
-    for pattern, variable, effect in PATTERN_EFFECTS:
-        match = pattern.match(interaction.parameter)
-        if match and interaction.variable == variable.format(**match.groupdict()):
-            if all(e not in check.effects for e in effect.split(" or ")):
-                return f"{head}: that is what {effect} models."
+    effect = pattern_effect(interaction.parameter, interaction.variable)
+    if effect is not None and all(e not in check.effects for e in effect.split(" or ")):
+        return f"{head}: that is what {effect} models."
     return (f"{head}. If no built-in effect explains it, write one whose parameter makes "
             f"{interaction.parameter} depend on {interaction.variable} (docs/effects.md) and "
             f"add it with --plugin FILE --effects +NAME.")

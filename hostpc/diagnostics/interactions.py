@@ -64,16 +64,25 @@ class Interaction:
 
 
 def modulators(name: str, values: np.ndarray) -> tuple[np.ndarray, str]:
-    """(N, g) functions of one variable that a parameter may vary with, and their name."""
-    centred = values - values.mean()
+    """(N, g) functions of one variable that a parameter may vary with, and their name.
+
+    Where the variable is not defined (NaN: the other arm's samples of a per-chain variable)
+    the functions are 0: the parameter is tested for varying on the samples that have it;
+    the functions are centred over those samples."""
+    defined = np.isfinite(values)
+    present = values[defined]
+    centred = present - present.mean()
     scale = float(np.std(centred)) or 1.0
     columns = [centred / scale]
+    basis = "linear"
     if is_angle(name):
         for function in (np.sin, np.cos):
-            column = function(values)
+            column = function(present)
             columns.append(column - column.mean())
-        return np.stack(columns, axis=1), "linear+harmonic"
-    return np.stack(columns, axis=1), "linear"
+        basis = "linear+harmonic"
+    F = np.zeros((values.size, len(columns)))
+    F[defined] = np.stack(columns, axis=1)
+    return F, basis
 
 
 def _geometry_columns(result: FitResult) -> tuple[list[str], np.ndarray] | None:
