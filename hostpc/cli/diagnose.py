@@ -186,7 +186,7 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
         mark = "*" if pattern.significant else " "
         lines.append(f"  {mark} {name_cell(pattern.variable, 15)}chi2"
                      f"{cell(pattern.chi2, 10, 1)} / {pattern.dof:<3} p = {_p(pattern.p_value)}")
-    lines += ["", "candidate effects (best first; * significant):",
+    lines += ["", "candidate effects (best first; * significant and better held out):",
               f"    {name_cell('effect', 24)}{'dBIC':>9}{'dBIC all':>10}{'RMS mm':>10}"
               f"{'held-out':>10}{'chi2/dof':>10}{'p':>11}"]
     for c in check.candidates:
@@ -195,6 +195,8 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
                      f"{cell(c.delta_bic_full, 10, 1)}{_mm_cell(c.rms)}{_mm_cell(c.cv_rms)}"
                      f"{cell(c.chi2_dof, 10, 3)}"
                      f"{cell(_p(c.p_value) if c.testable else 'untestable', 11)}")
+        if c.not_taken is not None and c.not_taken.startswith(("significant", "adding")):
+            lines.append(f"      not taken: {c.not_taken}")
     for s in check.skipped:
         lines.append(f"    {name_cell(s.effect, 24)}skipped: {s.reason}")
     lines += ["", f"parameter varies with variable (top {TOP_INTERACTIONS} of "

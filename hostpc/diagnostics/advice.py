@@ -273,11 +273,16 @@ def advise(check: ModelCheck, residuals: ResidualAnalysis, ladder: Sequence[Ladd
     best = check.best_candidate
     if best is not None:
         sentences.append(candidate_sentence(check, best, source, plugins))
+    costly = check.costly_candidate
+    if costly is not None and costly.not_taken is not None:
+        sentences.append(f"{costly.effect} is significant (p = {costly.p_value:.2g}) but "
+                         f"{costly.not_taken}.")
     top = check.significant_interactions[:1]
     if top:
         sentences.append(interaction_sentence(top[0], check))
     ranked = check.ranked.adequacy
-    if not ranked.adequate and ranked.dof > 0 and best is None and not top:
+    if not ranked.adequate and ranked.dof > 0 and best is None and costly is None \
+            and not top:
         sentences.append("No candidate effect and no parameter-variable pattern is "
                          "significant: the excess is spread evenly; check the stated "
                          "covariances and the worst samples.")

@@ -66,8 +66,14 @@ class ModelCheck:
 
     @property
     def best_candidate(self) -> Candidate | None:
-        """The best significant candidate, or None."""
-        return next((c for c in self.candidates if c.significant), None)
+        """The best significant candidate that costs no identifiable parameter, or None."""
+        return next((c for c in self.candidates if c.taken), None)
+
+    @property
+    def costly_candidate(self) -> Candidate | None:
+        """The best significant candidate that makes an identifiable parameter
+        unidentifiable (never taken silently), or None."""
+        return next((c for c in self.candidates if c.significant and c.unidentifiable), None)
 
     @property
     def significant_interactions(self) -> tuple[Interaction, ...]:

@@ -49,14 +49,21 @@ def climb(start: ModelCheck, check_model: Callable[[FitResult], ModelCheck],
     not yet in it, interactions). Each step adds the best significant candidate, unless the
     model with it predicts the held-out samples no better (then the ladder stops there).
 
-    Returns the steps and, when the ladder stopped for that reason, a sentence saying which
-    effect was not added and why (else None).
+    A candidate that would make an identifiable parameter unidentifiable is never taken:
+    when it is the only significant one the ladder stops and says so.
+
+    Returns the steps and, when the ladder stopped for one of these reasons, a sentence
+    saying which effect was not added and why (else None).
     """
     steps = [step_of(0, start, None, None)]
     check = start
     while not check.adequacy.adequate and len(steps) <= max_steps:
         best = check.best_candidate
         if best is None:
+            costly = check.costly_candidate
+            if costly is not None and costly.not_taken is not None:
+                return tuple(steps), (f"{costly.effect} is significant but was not added: "
+                                      f"{costly.not_taken}")
             break
         extended = check_model(best.fit)
         worse = held_out_worse(check, extended)
