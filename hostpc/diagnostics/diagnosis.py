@@ -170,6 +170,13 @@ class Diagnosis:
         return self.check.outliers
 
     @property
+    def generated_effects(self) -> dict[str, str]:
+        """Plugin source of each effect the ladder generated and added, by effect name."""
+        from hostpc.diagnostics.auto_effects import generated_sources
+
+        return generated_sources([t.effect for t in self.final.fit.problem.terms])
+
+    @property
     def final(self) -> ModelCheck:
         """The last model of the ladder (the current model without a ladder)."""
         return self.ladder[-1].check if self.ladder else self.check
@@ -236,6 +243,7 @@ class Diagnosis:
         }
         if self.ladder is not None:
             document["ladder"] = [step.to_dict() for step in self.ladder]
+            document["generated_effects"] = list(self.generated_effects)
         return document
 
 
