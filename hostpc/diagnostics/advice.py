@@ -12,6 +12,8 @@ from hostpc.diagnostics.candidates import Candidate
 from hostpc.diagnostics.diagnosis import LadderStep, ModelCheck
 from hostpc.diagnostics.interactions import Interaction
 from hostpc.diagnostics.residual_analysis import ResidualAnalysis
+from hostpc.model.effect import ModelContext
+from hostpc.model.effects.coupling import JointCoupling
 from hostpc.model.problem import default_effects
 
 #: fewer degrees of freedom than this: the advice says the samples are too few to judge
@@ -48,8 +50,10 @@ PATTERN_EFFECTS = (
 )
 
 
-def pattern_effect(parameter: str, variable: str) -> str | None:
-    """The built-in effect(s) a "parameter varies with variable" pattern is, or None."""
+def pattern_effect(parameter: str, variable: str, context: ModelContext | None = None
+                   ) -> str | None:
+    """The built-in effect(s) a "parameter varies with variable" pattern is, or None (a
+    neighbour's angle is joint_coupling only for the pairs it has on ``context``'s robot)."""
     for pattern, template, effect in PATTERN_EFFECTS:
         match = pattern.match(parameter)
         if match and variable == template.format(**match.groupdict()):
@@ -57,8 +61,10 @@ def pattern_effect(parameter: str, variable: str) -> str | None:
     offset = _OFFSET.match(parameter)
     if offset:  # a joint's zero moving with a neighbouring joint's angle
         b, j = offset.group("b"), int(offset.group("j"))
-        if variable in (f"{b}q{j - 1}", f"{b}q{j + 1}"):
-            return "joint_coupling"
+        for i in (j - 1, j + 1):
+            if variable == f"{b}q{i}" and (context is None or f"{b}k{j}_{i}" in
+                                           JointCoupling().parameter_names(context)):
+                return "joint_coupling"
     return None
 
 
@@ -182,7 +188,8 @@ def interaction_sentence(interaction: Interaction, check: ModelCheck) -> str:
     """"X varies with Y", what that is, and what to do about it."""
     head = (f"The effect-agnostic search finds: {interaction.sentence} "
             f"(score {interaction.score:.1f}, p = {interaction.p_value:.2g})")
-    effect = pattern_effect(interaction.parameter, interaction.variable)
+    effect = pattern_effect(interaction.parameter, interaction.variable,
+                            check.fit.problem.context)
     if effect is not None and all(e not in check.effects for e in effect.split(" or ")):
         return f"{head}: that is what {effect} models."
     return (f"{head}. If no built-in effect explains it, write one whose parameter makes "

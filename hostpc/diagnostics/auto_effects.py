@@ -22,7 +22,7 @@ import numpy as np
 
 from hostpc.diagnostics.advice import pattern_effect
 from hostpc.diagnostics.interactions import Interaction
-from hostpc.model.effect import Effect
+from hostpc.model.effect import Effect, ModelContext
 
 _OFFSET = re.compile(r"joint_offsets\.(?P<label>(?:\w+\.)?q\d+)$")
 _GEOMETRY = re.compile(r"geometry\.(?P<kind>d|a|alpha|beta)(?P<joint>\d+)$")
@@ -154,14 +154,15 @@ def generated_sources(effects: list[Effect]) -> dict[str, str]:
             if hasattr(type(e), "plugin_source")}
 
 
-def unexplained(interactions: tuple[Interaction, ...], tried: set[str]) -> list[Interaction]:
+def unexplained(interactions: tuple[Interaction, ...], tried: set[str],
+                context: ModelContext | None = None) -> list[Interaction]:
     """The significant patterns that no built-in effect among the candidates ``tried`` (not
     yet in the model) models, best first."""
     found = []
     for interaction in interactions:
         if not interaction.significant:
             continue
-        built_in = pattern_effect(interaction.parameter, interaction.variable)
+        built_in = pattern_effect(interaction.parameter, interaction.variable, context)
         if built_in is not None and any(e in tried for e in built_in.split(" or ")):
             continue
         found.append(interaction)

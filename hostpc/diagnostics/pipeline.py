@@ -119,7 +119,8 @@ class _Checker:
         models, fitted as a candidate, when it is significant; else None."""
         variables = variables_of(check.fit)
         tried = {c.effect for c in check.candidates}
-        for interaction in unexplained(check.interactions, tried)[:MAX_PROPOSALS]:
+        context = check.fit.problem.context
+        for interaction in unexplained(check.interactions, tried, context)[:MAX_PROPOSALS]:
             generated = generate(interaction, variables[interaction.variable])
             if generated is None or generated.name in check.effects:
                 continue

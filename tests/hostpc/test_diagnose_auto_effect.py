@@ -14,7 +14,6 @@ from hostpc.dataset import load_dataset, save_dataset
 from hostpc.diagnostics import diagnose
 from hostpc.fitting import fit
 from hostpc.model.effect import Effect, ModelContext
-from hostpc.synthesize_dual_loop import plan_poses, synthesize_dual_loop
 from tests.hostpc.diagnose_support import hidden_dataset, inject
 
 DRIFT = 1.5e-6  # rad per second: joint 3's zero creeps during the run
@@ -73,14 +72,3 @@ def test_write_plugins_needs_the_ladder(tmp_path: Path,
     save_dataset(hidden_dataset({}, seed=1, n_samples=30).dataset, path)
     assert main(["diagnose", str(path), "--write-plugins", str(tmp_path / "p")]) == 2
     assert "--write-plugins needs --ladder" in capsys.readouterr().err
-
-
-def test_left_elbow_coupling_closed_by_a_generated_effect() -> None:
-    """Without the built-in joint_coupling among the candidates, the ladder builds
-    "joint_offsets.left.q4 linear in left.q3" itself and the model becomes adequate."""
-    dataset = synthesize_dual_loop({"joint_coupling.left.k4_3": 4e-3},
-                                   plan_poses(50, np.random.default_rng(1)), seed=2)
-    diagnosis = diagnose(dataset, ladder=True, candidates=["encoder_scale", "backlash"])
-    assert diagnosis.ladder is not None
-    assert [s.added for s in diagnosis.ladder] == [None, "left_q4_with_left_q3"]
-    assert diagnosis.ladder[-1].adequate

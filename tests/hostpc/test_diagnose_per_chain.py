@@ -13,13 +13,14 @@ from hostpc.diagnostics.pipeline import variables_of
 from hostpc.diagnostics.residual_analysis import analyse_residuals, usable_variables
 from hostpc.fitting import fit
 from hostpc.synthesize_dual_loop import plan_poses, synthesize_dual_loop
+from tests.hostpc.diagnose_support import coupled_dual_loop
 
 HIDDEN = {"joint_coupling.left.k4_3": 4e-3}  # the left elbow reads off by 4e-3 rad per rad
 
 
 @pytest.fixture(scope="module")
 def coupled() -> Dataset:
-    return synthesize_dual_loop(HIDDEN, plan_poses(50, np.random.default_rng(1)), seed=2)
+    return coupled_dual_loop(HIDDEN)
 
 
 def test_per_chain_variables_are_kept_with_their_missing_samples() -> None:
@@ -48,11 +49,23 @@ def test_hidden_left_elbow_coupling_is_found_on_the_left_samples(coupled: Datase
     assert left_q3.counts.sum() == np.count_nonzero(coupled.samples.chain == "left")
 
 
-def test_ladder_adds_the_coupling_and_is_adequate(coupled: Dataset) -> None:
+def test_elbow_coupling_is_closed_by_a_generated_effect(coupled: Dataset) -> None:
+    """No built-in effect couples the elbow: the ladder builds "joint_offsets.left.q4 linear
+    in left.q3" itself (auto_effects) and the model becomes adequate."""
     diagnosis = hostpc.diagnose(coupled, ladder=True,
                                 candidates=["joint_coupling", "encoder_scale", "backlash"])
-    assert not diagnosis.adequate
+    assert not diagnosis.adequate and diagnosis.ladder is not None
+    assert [s.added for s in diagnosis.ladder] == [None, "left_q4_with_left_q3"]
+    assert diagnosis.ladder[-1].adequate
+
+
+def test_wrist_coupling_in_one_arm_is_the_built_in_effect() -> None:
+    dataset = synthesize_dual_loop({"joint_coupling.left.k6_5": 2e-2},
+                                   plan_poses(50, np.random.default_rng(1)), seed=2)
+    diagnosis = hostpc.diagnose(dataset, ladder=True,
+                                candidates=["joint_coupling", "encoder_scale", "backlash"])
     assert diagnosis.candidates[0].effect == "joint_coupling"
+    assert diagnosis.candidates[0].selected[0] == "joint_coupling.left.k6_5"
     assert diagnosis.ladder is not None
     assert [s.added for s in diagnosis.ladder] == [None, "joint_coupling"]
     assert diagnosis.ladder[-1].adequate
