@@ -59,6 +59,8 @@ def pattern_effect(parameter: str, variable: str, context: ModelContext | None =
         if match and variable == template.format(**match.groupdict()):
             return effect
     offset = _OFFSET.match(parameter)
+    if offset and re.fullmatch(rf"{re.escape(offset.group('b'))}tau\d+", variable):
+        return "joint_compliance"  # the gravity torques of the joints move together
     if offset:  # a joint's zero moving with a neighbouring joint's angle
         b, j = offset.group("b"), int(offset.group("j"))
         for i in (j - 1, j + 1):

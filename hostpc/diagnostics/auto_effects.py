@@ -156,14 +156,16 @@ def generated_sources(effects: list[Effect]) -> dict[str, str]:
 
 def unexplained(interactions: tuple[Interaction, ...], tried: set[str],
                 context: ModelContext | None = None) -> list[Interaction]:
-    """The significant patterns that no built-in effect among the candidates ``tried`` (not
-    yet in the model) models, best first."""
+    """The significant patterns, best first, stronger than any pattern that a built-in
+    effect among the candidates ``tried`` (not yet in the model) models: when the search's
+    strongest finding is what a built-in effect models, that effect is the answer (the
+    weaker patterns are often its echoes) and nothing is generated."""
     found = []
     for interaction in interactions:
         if not interaction.significant:
-            continue
+            break
         built_in = pattern_effect(interaction.parameter, interaction.variable, context)
         if built_in is not None and any(e in tried for e in built_in.split(" or ")):
-            continue
+            break
         found.append(interaction)
     return found

@@ -205,11 +205,18 @@ def with_held_out(result: FitResult, folds: int) -> tuple[FitResult, float | Non
     return replace(result, cv_rms=held.rms, cv_folds=folds), held.whitened_rms
 
 
+COSTLESS_EFFECTS = ("geometry",)
+"""Effects whose parameters may be traded without a word: the DH/MDH deltas are many, the
+data identify a varying subset of them, and none is a correction that is pushed."""
+
+
 def lost_parameters(base: FitResult, extended: FitResult) -> tuple[str, ...]:
-    """Parameters free (identifiable) in ``base`` that ``extended`` holds fixed."""
+    """Parameters free (identifiable) in ``base`` that ``extended`` holds fixed (leaving out
+    those of COSTLESS_EFFECTS)."""
     held = {name for name, fixed in zip(extended.names, extended.fixed, strict=True) if fixed}
     return tuple(name for name, fixed in zip(base.names, base.fixed, strict=True)
-                 if not fixed and name in held)
+                 if not fixed and name in held
+                 and name.split(".", 1)[0] not in COSTLESS_EFFECTS)
 
 
 _OFFSET_NAME = re.compile(r"joint_offsets\.(?P<branch>(?:\w+\.)?)q(?P<joint>\d+)$")
