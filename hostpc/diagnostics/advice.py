@@ -58,9 +58,13 @@ def pattern_effect(parameter: str, variable: str, context: ModelContext | None =
         match = pattern.match(parameter)
         if match and variable == template.format(**match.groupdict()):
             return effect
+    # any parameter moving with a gravity torque or an approach direction: what the
+    # compliance and the backlash of some joint do (they show in many parameters at once)
+    if re.fullmatch(r"(\w+\.)?tau\d+", variable):
+        return "joint_compliance"
+    if re.fullmatch(r"(\w+\.)?approach\d+", variable):
+        return "backlash"
     offset = _OFFSET.match(parameter)
-    if offset and re.fullmatch(rf"{re.escape(offset.group('b'))}tau\d+", variable):
-        return "joint_compliance"  # the gravity torques of the joints move together
     if offset:  # a joint's zero moving with a neighbouring joint's angle
         b, j = offset.group("b"), int(offset.group("j"))
         for i in (j - 1, j + 1):
