@@ -4,7 +4,6 @@ sizes are within 3 sigma of the truth, and the zero offsets end closer to the tr
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from hostpc.diagnostics import diagnose
