@@ -145,19 +145,22 @@ def search_interactions(result: FitResult, variables: Mapping[str, np.ndarray], 
     for variable, values in usable.items():
         F, basis = modulators(variable, values)
         F_rows = np.repeat(F, m, axis=0)  # (N*m, g)
-        spans: list[tuple[np.ndarray, int]] = []  # projected bases already listed, by pair
+        spans: list[tuple[np.ndarray, int, float]] = []  # listed bases, pair, statistic
         for k in np.flatnonzero(alive):
             Z = columns[:, k:k + 1] * F_rows
             size = float(np.linalg.norm(Z))
             Z = Z - Q @ (Q.T @ Z)
             statistic, rank, U = _statistic(Z, size, r)
-            same = next((index for basis_u, index in spans if _same_span(basis_u, U)), None)
+            # the same space gives the same statistic: compare spans only then (cheap)
+            same = next((index for basis_u, index, other in spans
+                         if abs(other - statistic) <= 1e-8 * max(statistic, 1e-12)
+                         and _same_span(basis_u, U)), None)
             if same is not None:  # one indistinguishable combination: one entry
                 entry = pairs[same]
                 pairs[same] = entry[:6] + (entry[6] + (names[k],),)
                 continue
             if U is not None:
-                spans.append((U, len(pairs)))
+                spans.append((U, len(pairs), statistic))
             pairs.append((names[k], variable, statistic, rank, basis, fitted[k], ()))
     n_tests = len(pairs)
     threshold = alpha / max(n_tests, 1)
