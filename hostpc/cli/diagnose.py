@@ -13,6 +13,7 @@ import argparse
 import json
 import math
 import sys
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from hostpc.cli.fit import add_constraint_options, add_model_options
@@ -52,6 +53,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--alpha", type=float, default=None,
                         help="family-wise significance of each family of tests "
                         "(default 0.001)")
+    parser.add_argument("--write-plugins", metavar="DIR",
+                        help="with --ladder: write every effect the ladder generated from a "
+                        "'parameter varies with variable' pattern as a plugin file DIR/NAME.py "
+                        "(load it with --plugin)")
     parser.add_argument("--json", action="store_true", help="print one JSON document")
     parser.add_argument("--report", metavar="FILE.html",
                         help="also write a self-contained HTML report")
@@ -96,6 +101,7 @@ def _run(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise InputError(f"--report {args.report}: cannot write it "
                              f"({exc.strerror or exc})") from exc
+    written = write_plugins(args.write_plugins, diagnosis) if args.write_plugins else []
     if args.json:
         json.dump(diagnosis.to_dict(), sys.stdout, indent=2, allow_nan=False)
         sys.stdout.write("\n")
@@ -103,7 +109,28 @@ def _run(args: argparse.Namespace) -> int:
         print(format_diagnosis(diagnosis))
         if args.report:
             print(f"\nreport written to {args.report}")
+        for path in written:
+            print(f"plugin written to {path} (load it with --plugin {path} --effects "
+                  f"+{path.stem})")
     return EXIT_ADEQUATE if diagnosis.adequate else EXIT_NOT_ADEQUATE
+
+
+def write_plugins(directory: str, diagnosis: Diagnosis) -> list[Path]:
+    """Write each generated effect of the ladder as DIR/NAME.py; the paths written."""
+    if diagnosis.ladder is None:
+        raise InputError("--write-plugins needs --ladder (the ladder generates the effects)")
+    target = Path(directory)
+    written = []
+    try:
+        target.mkdir(parents=True, exist_ok=True)
+        for name, source in diagnosis.generated_effects.items():
+            path = target / f"{name}.py"
+            path.write_text(source, encoding="utf-8")
+            written.append(path)
+    except OSError as exc:
+        raise InputError(f"--write-plugins {directory}: cannot write it "
+                         f"({exc.strerror or exc})") from exc
+    return written
 
 
 def _p(value: float | None) -> str:
@@ -186,7 +213,7 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
         mark = "*" if pattern.significant else " "
         lines.append(f"  {mark} {name_cell(pattern.variable, 15)}chi2"
                      f"{cell(pattern.chi2, 10, 1)} / {pattern.dof:<3} p = {_p(pattern.p_value)}")
-    lines += ["", "candidate effects (best first; * significant):",
+    lines += ["", "candidate effects (best first; * significant and better held out):",
               f"    {name_cell('effect', 24)}{'dBIC':>9}{'dBIC all':>10}{'RMS mm':>10}"
               f"{'held-out':>10}{'chi2/dof':>10}{'p':>11}"]
     for c in check.candidates:
@@ -195,6 +222,8 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
                      f"{cell(c.delta_bic_full, 10, 1)}{_mm_cell(c.rms)}{_mm_cell(c.cv_rms)}"
                      f"{cell(c.chi2_dof, 10, 3)}"
                      f"{cell(_p(c.p_value) if c.testable else 'untestable', 11)}")
+        if c.not_taken is not None and c.not_taken.startswith(("significant", "adding")):
+            lines.append(f"      not taken: {c.not_taken}")
     for s in check.skipped:
         lines.append(f"    {name_cell(s.effect, 24)}skipped: {s.reason}")
     lines += ["", f"parameter varies with variable (top {TOP_INTERACTIONS} of "

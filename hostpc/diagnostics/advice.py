@@ -11,6 +11,7 @@ from hostpc.diagnostics.adequacy import Adequacy
 from hostpc.diagnostics.candidates import Candidate
 from hostpc.diagnostics.diagnosis import LadderStep, ModelCheck
 from hostpc.diagnostics.interactions import Interaction
+from hostpc.diagnostics.patterns import pattern_effect
 from hostpc.diagnostics.residual_analysis import ResidualAnalysis
 from hostpc.model.problem import default_effects
 
@@ -30,17 +31,10 @@ EFFECT_PHRASES = {
     "geometry": "Residuals follow the link geometry ({parameter} differs from the nominal "
                 "table)",
     "trigger_latency": "Residuals grow with the probe's approach speed",
+    "joint_coupling": "Residuals follow a neighbouring joint's angle (joint {j}'s angle error "
+                      "is proportional to it)",
+    "thermal_expansion": "Residuals drift with the temperature (or the time since the start)",
 }
-# which built-in effect a "parameter varies with variable" pattern is; {b}: the branch
-# prefix of a kinematic tree ("left."), {j}: the joint
-_OFFSET = re.compile(r"joint_offsets\.(?P<b>(?:\w+\.)?)q(?P<j>\d+)$")
-PATTERN_EFFECTS = (
-    (_OFFSET, "{b}tau{j}", "joint_compliance"),
-    (_OFFSET, "{b}approach{j}", "backlash"),
-    (_OFFSET, "{b}q{j}", "encoder_scale or transmission_harmonic"),
-    (re.compile(r"tool\.z$"), "depth", "depth_scale"),
-    (re.compile(r".*$"), "speed", "trigger_latency"),
-)
 
 
 def mm(value: float | None) -> str:
@@ -163,11 +157,10 @@ def interaction_sentence(interaction: Interaction, check: ModelCheck) -> str:
     """"X varies with Y", what that is, and what to do about it."""
     head = (f"The effect-agnostic search finds: {interaction.sentence} "
             f"(score {interaction.score:.1f}, p = {interaction.p_value:.2g})")
-    for pattern, variable, effect in PATTERN_EFFECTS:
-        match = pattern.match(interaction.parameter)
-        if match and interaction.variable == variable.format(**match.groupdict()):
-            if all(e not in check.effects for e in effect.split(" or ")):
-                return f"{head}: that is what {effect} models."
+    effect = pattern_effect(interaction.parameter, interaction.variable,
+                            check.fit.problem.context)
+    if effect is not None and all(e not in check.effects for e in effect.split(" or ")):
+        return f"{head}: that is what {effect} models."
     return (f"{head}. If no built-in effect explains it, write one whose parameter makes "
             f"{interaction.parameter} depend on {interaction.variable} (docs/effects.md) and "
             f"add it with --plugin FILE --effects +NAME.")
@@ -256,11 +249,16 @@ def advise(check: ModelCheck, residuals: ResidualAnalysis, ladder: Sequence[Ladd
     best = check.best_candidate
     if best is not None:
         sentences.append(candidate_sentence(check, best, source, plugins))
+    costly = check.costly_candidate
+    if costly is not None and costly.not_taken is not None:
+        sentences.append(f"{costly.effect} is significant (p = {costly.p_value:.2g}) but "
+                         f"{costly.not_taken}.")
     top = check.significant_interactions[:1]
     if top:
         sentences.append(interaction_sentence(top[0], check))
     ranked = check.ranked.adequacy
-    if not ranked.adequate and ranked.dof > 0 and best is None and not top:
+    if not ranked.adequate and ranked.dof > 0 and best is None and costly is None \
+            and not top:
         sentences.append("No candidate effect and no parameter-variable pattern is "
                          "significant: the excess is spread evenly; check the stated "
                          "covariances and the worst samples.")

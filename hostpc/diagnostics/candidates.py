@@ -14,7 +14,13 @@ ones the fit could identify: unidentifiable geometry parameters cost nothing):
 - ``p_value``: F-test of the chi-square drop, ``F = (dchi2 / dk) / (chi2_new / dof_new)``,
   for the whole effect and for its selected subset (Bonferroni over the C(K, k) subsets),
   the smaller of the two doubled. A candidate is significant when ``p_value`` is below
-  ``alpha`` divided by the number of candidates tried (Bonferroni).
+  ``alpha`` divided by the number of candidates tried (Bonferroni) *and* the model with it
+  predicts held-out samples better (lower whitened held-out RMS, same folds as the current
+  model's; without held-out residuals the p-value alone decides).
+- ``unidentifiable``: parameters the current model identifies that the model with the
+  candidate cannot (the fit holds them at nominal): adding backlash to probe data whose
+  joint 4 always arrives from one side hides joint 4's offset in the backlash. Such a
+  candidate is never taken silently: ``not_taken`` says why, and the ladder skips it.
 
 A candidate is *not testable* when the data leave the model with it no degrees of freedom:
 the current model or the extended one (or its selected subset) has at least as many free
@@ -26,6 +32,7 @@ ranks after every testable candidate.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
@@ -73,6 +80,14 @@ class Candidate:
     strongest: tuple[str, float] | None
     fit: FitResult
     testable: bool = True
+    cv_whitened_rms: float | None = None
+    unidentifiable: tuple[str, ...] = ()
+    not_taken: str | None = None
+
+    @property
+    def taken(self) -> bool:
+        """Whether the ladder would add it: significant and no identifiable parameter lost."""
+        return self.significant and not self.unidentifiable
 
     def to_dict(self) -> dict[str, object]:
         return {
@@ -92,6 +107,9 @@ class Candidate:
             "strongest_z": None if self.strongest is None else _finite(self.strongest[1]),
             "cv_folds": self.cv_folds,
             "testable": self.testable,
+            "cv_whitened_rms": _finite(self.cv_whitened_rms),
+            "unidentifiable": list(self.unidentifiable),
+            "not_taken": self.not_taken,
         }
 
 
@@ -178,12 +196,72 @@ def warm_start(base: FitResult, problem: Problem) -> np.ndarray:
     return np.array([values.get(name, 0.0) for name in problem.layout.names])
 
 
-def with_held_out(result: FitResult, folds: int) -> FitResult:
-    """The fit with its cross-validated RMS filled in (from ``held_out_residuals``)."""
+def with_held_out(result: FitResult, folds: int) -> tuple[FitResult, float | None]:
+    """The fit with its cross-validated RMS filled in (from ``held_out_residuals``), and its
+    whitened held-out RMS (None without held-out residuals)."""
     held = held_out_residuals(result.problem, result.x, ~result.fixed, folds)
     if held is None:
-        return result
-    return replace(result, cv_rms=held.rms, cv_folds=folds)
+        return result, None
+    return replace(result, cv_rms=held.rms, cv_folds=folds), held.whitened_rms
+
+
+COSTLESS_EFFECTS = ("geometry",)
+"""Effects whose parameters may be traded without a word: the DH/MDH deltas are many, the
+data identify a varying subset of them, and none is a correction that is pushed."""
+
+
+def lost_parameters(base: FitResult, extended: FitResult) -> tuple[str, ...]:
+    """Parameters free (identifiable) in ``base`` that ``extended`` holds fixed (leaving out
+    those of COSTLESS_EFFECTS)."""
+    held = {name for name, fixed in zip(extended.names, extended.fixed, strict=True) if fixed}
+    return tuple(name for name, fixed in zip(base.names, base.fixed, strict=True)
+                 if not fixed and name in held
+                 and name.split(".", 1)[0] not in COSTLESS_EFFECTS)
+
+
+_OFFSET_NAME = re.compile(r"joint_offsets\.(?P<branch>(?:\w+\.)?)q(?P<joint>\d+)$")
+
+
+def remedy(effect: str, lost: Sequence[str], effect_names: Sequence[str]) -> str:
+    """What to do when adding ``effect`` makes ``lost`` unidentifiable (a sentence part);
+    effect_names: the effect's parameter names (full), to name the one each trades with."""
+    joints, partners = [], []
+    for name in lost:
+        match = _OFFSET_NAME.match(name)
+        if not match:
+            continue
+        joints.append(match.group("branch") + match.group("joint"))
+        own = re.compile(rf"{re.escape(effect)}\.{re.escape(match.group('branch'))}"
+                         rf"[a-z]+{match.group('joint')}$")
+        partners += [n for n in effect_names if own.match(n)]
+    plural = "s" if len(joints) > 1 else ""
+    if effect == "backlash" and joints:
+        how = f"approach joint{plural} {', '.join(joints)} from both sides in the measured poses"
+    elif joints:
+        how = f"vary joint{plural} {', '.join(joints)} more widely"
+    else:
+        how = "vary the poses so the data can tell them apart"
+    held = ",".join(partners) if partners else f"{effect}.NAME"
+    return (f"adding {effect} makes {', '.join(lost)} unidentifiable: {how}, or add it with "
+            f"--hold {held} (or a --prior on it)")
+
+
+def not_taken_reason(candidate: Candidate, p_significant: bool, threshold: float,
+                     base_cv: float | None) -> str | None:
+    """Why a candidate is not taken (a sentence part), or None when it is."""
+    if not candidate.testable:
+        return "too few samples to test it"
+    if not p_significant:
+        return f"not significant (p = {candidate.p_value:.2g}, threshold {threshold:.2g})"
+    if candidate.cv_whitened_rms is not None and base_cv is not None \
+            and candidate.cv_whitened_rms >= base_cv:
+        return (f"significant in-sample (p = {candidate.p_value:.2g}) but predicts held-out "
+                f"samples worse ({base_cv:.3f} -> {candidate.cv_whitened_rms:.3f} sigma)")
+    if candidate.unidentifiable:
+        span = candidate.fit.problem.layout.effect_slices[candidate.effect]
+        return remedy(candidate.effect, candidate.unidentifiable,
+                      list(candidate.fit.names[span]))
+    return None
 
 
 def _strongest(result: FitResult, effect: str, selected: tuple[str, ...]
@@ -257,14 +335,14 @@ def select_subset(base: FitResult, extended: FitResult, x0: np.ndarray
 
 
 def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
-                  threshold: float) -> Candidate:
+                  threshold: float, base_cv: float | None = None) -> Candidate:
     """Fit the base model plus ``effect``, warm-started at the base solution; find the
     subset of its parameters the data need and the evidence for it (not testable, see the
     module doc, when the samples leave no degrees of freedom)."""
     problem = extend_problem(base.problem, effect)
     x0 = warm_start(base, problem)
     extended = solve(problem, x0=x0, loss=loss, cv_folds=0, max_iterations=50)
-    extended = with_held_out(extended, cv_folds)
+    extended, cv_whitened = with_held_out(extended, cv_folds)
     delta_chi2, p_full, added = f_test(base, extended)
     testable = base.dof > 0 and extended.dof > 0
     chosen, penalty = select_subset(base, extended, x0) if testable else ([], 0.0)
@@ -291,16 +369,21 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
                            * math.exp(_log_choose(n_new, len(chosen))))
     p_value = min(1.0, 2.0 * min(p_full, p_subset))
     selected = tuple(problem.layout.names[k] for k in chosen) if testable else ()
-    return Candidate(
+    p_significant = bool(testable and p_value < threshold)
+    held_out_better = (cv_whitened is None or base_cv is None or cv_whitened < base_cv)
+    candidate = Candidate(
         effect=effect.name, delta_bic=delta_bic if testable else None,
         delta_bic_full=bic(extended) - bic(base) if testable else None,
         selected=selected, delta_chi2=delta_chi2, added_parameters=added, rms=extended.rms,
         max=extended.max, cv_rms=extended.cv_rms, cv_folds=extended.cv_folds,
         chi2_dof=extended.chi2_dof, p_value=p_value if testable else None,
-        significant=bool(testable and p_value < threshold),
+        significant=p_significant and held_out_better,
         strongest=_strongest(extended, effect.name, selected), fit=extended,
-        testable=testable,
+        testable=testable, cv_whitened_rms=cv_whitened,
+        unidentifiable=lost_parameters(base, extended),
     )
+    return replace(candidate, not_taken=not_taken_reason(candidate, p_significant, threshold,
+                                                         base_cv))
 
 
 def ranking_key(candidate: Candidate) -> tuple[bool, bool, float, float]:
@@ -318,12 +401,15 @@ def rank_candidates(base: FitResult, registry: Mapping[str, type[Effect]],
     """Try every named candidate; return them best first (significant ones, then by delta
     BIC, the not testable ones last) and the ones that could not be tried."""
     threshold = alpha / max(len(names), 1)
+    base_held = held_out_residuals(base.problem, base.x, ~base.fixed, cv_folds) \
+        if names else None
+    base_cv = None if base_held is None else base_held.whitened_rms
     tried: list[Candidate] = []
     skipped: list[SkippedCandidate] = []
     for name in names:
         try:
             tried.append(try_candidate(base, registry[name](), cv_folds=cv_folds, loss=loss,
-                                       threshold=threshold))
+                                       threshold=threshold, base_cv=base_cv))
         except InputError as exc:
             skipped.append(SkippedCandidate(name, str(exc)))
     tried.sort(key=ranking_key)

@@ -66,8 +66,14 @@ class ModelCheck:
 
     @property
     def best_candidate(self) -> Candidate | None:
-        """The best significant candidate, or None."""
-        return next((c for c in self.candidates if c.significant), None)
+        """The best significant candidate that costs no identifiable parameter, or None."""
+        return next((c for c in self.candidates if c.taken), None)
+
+    @property
+    def costly_candidate(self) -> Candidate | None:
+        """The best significant candidate that makes an identifiable parameter
+        unidentifiable (never taken silently), or None."""
+        return next((c for c in self.candidates if c.significant and c.unidentifiable), None)
 
     @property
     def significant_interactions(self) -> tuple[Interaction, ...]:
@@ -164,6 +170,13 @@ class Diagnosis:
         return self.check.outliers
 
     @property
+    def generated_effects(self) -> dict[str, str]:
+        """Plugin source of each effect the ladder generated and added, by effect name."""
+        from hostpc.diagnostics.auto_effects import generated_sources
+
+        return generated_sources([t.effect for t in self.final.fit.problem.terms])
+
+    @property
     def final(self) -> ModelCheck:
         """The last model of the ladder (the current model without a ladder)."""
         return self.ladder[-1].check if self.ladder else self.check
@@ -230,6 +243,7 @@ class Diagnosis:
         }
         if self.ladder is not None:
             document["ladder"] = [step.to_dict() for step in self.ladder]
+            document["generated_effects"] = list(self.generated_effects)
         return document
 
 

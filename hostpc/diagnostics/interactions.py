@@ -50,9 +50,13 @@ class Interaction:
     significant: bool
     basis: str
     fitted: bool
+    equivalent: tuple[str, ...] = ()
 
     @property
     def sentence(self) -> str:
+        if self.equivalent:
+            return (f"{self.parameter} (or equally {', '.join(self.equivalent)}) varies with "
+                    f"{self.variable}")
         return f"{self.parameter} varies with {self.variable}"
 
     def to_dict(self) -> dict[str, object]:
@@ -60,20 +64,30 @@ class Interaction:
             "parameter": self.parameter, "variable": self.variable, "score": self.score,
             "chi2": self.chi2, "dof": self.dof, "p_value": self.p_value,
             "significant": self.significant, "basis": self.basis, "fitted": self.fitted,
+            "equivalent": list(self.equivalent),
         }
 
 
 def modulators(name: str, values: np.ndarray) -> tuple[np.ndarray, str]:
-    """(N, g) functions of one variable that a parameter may vary with, and their name."""
-    centred = values - values.mean()
+    """(N, g) functions of one variable that a parameter may vary with, and their name.
+
+    Where the variable is not defined (NaN: the other arm's samples of a per-chain variable)
+    the functions are 0: the parameter is tested for varying on the samples that have it;
+    the functions are centred over those samples."""
+    defined = np.isfinite(values)
+    present = values[defined]
+    centred = present - present.mean()
     scale = float(np.std(centred)) or 1.0
     columns = [centred / scale]
+    basis = "linear"
     if is_angle(name):
         for function in (np.sin, np.cos):
-            column = function(values)
+            column = function(present)
             columns.append(column - column.mean())
-        return np.stack(columns, axis=1), "linear+harmonic"
-    return np.stack(columns, axis=1), "linear"
+        basis = "linear+harmonic"
+    F = np.zeros((values.size, len(columns)))
+    F[defined] = np.stack(columns, axis=1)
+    return F, basis
 
 
 def _geometry_columns(result: FitResult) -> tuple[list[str], np.ndarray] | None:
@@ -125,17 +139,29 @@ def search_interactions(result: FitResult, variables: Mapping[str, np.ndarray], 
     dof_fit = r.size - J_free.shape[1]
     norms = np.linalg.norm(columns, axis=0)
     alive = norms > 1e-12 * max(float(norms.max(initial=0.0)), 1e-300)
+    alive[: result.fixed.size] &= ~result.fixed  # held (unidentifiable) parameters: not tested
     usable = usable_variables(variables)
-    pairs: list[tuple[str, str, float, int, str, bool]] = []
+    pairs: list[tuple[str, str, float, int, str, bool, tuple[str, ...]]] = []
     for variable, values in usable.items():
         F, basis = modulators(variable, values)
         F_rows = np.repeat(F, m, axis=0)  # (N*m, g)
+        spans: list[tuple[np.ndarray, int, float]] = []  # listed bases, pair, statistic
         for k in np.flatnonzero(alive):
             Z = columns[:, k:k + 1] * F_rows
             size = float(np.linalg.norm(Z))
             Z = Z - Q @ (Q.T @ Z)
-            statistic, rank = _statistic(Z, size, r)
-            pairs.append((names[k], variable, statistic, rank, basis, fitted[k]))
+            statistic, rank, U = _statistic(Z, size, r)
+            # the same space gives the same statistic: compare spans only then (cheap)
+            same = next((index for basis_u, index, other in spans
+                         if abs(other - statistic) <= 1e-8 * max(statistic, 1e-12)
+                         and _same_span(basis_u, U)), None)
+            if same is not None:  # one indistinguishable combination: one entry
+                entry = pairs[same]
+                pairs[same] = entry[:6] + (entry[6] + (names[k],),)
+                continue
+            if U is not None:
+                spans.append((U, len(pairs), statistic))
+            pairs.append((names[k], variable, statistic, rank, basis, fitted[k], ()))
     n_tests = len(pairs)
     threshold = alpha / max(n_tests, 1)
     statistics = np.array([p[2] for p in pairs])
@@ -148,21 +174,33 @@ def search_interactions(result: FitResult, variables: Mapping[str, np.ndarray], 
     log_p = np.where(np.isfinite(log_p), log_p, -300.0 * math.log(10.0))
     found = [
         Interaction(parameter, variable, float(-lp / math.log(10.0)) + 0.0, float(s), int(g),
-                    float(math.exp(lp)), bool(math.exp(lp) < threshold), basis, is_fitted)
-        for (parameter, variable, s, g, basis, is_fitted), lp in zip(pairs, log_p, strict=True)
+                    float(math.exp(lp)), bool(math.exp(lp) < threshold), basis, is_fitted,
+                    equivalent)
+        for (parameter, variable, s, g, basis, is_fitted, equivalent), lp
+        in zip(pairs, log_p, strict=True)
     ]
     found.sort(key=lambda i: (-i.score, i.parameter, i.variable))
     return tuple(found), n_tests
 
 
-def _statistic(Z: np.ndarray, size: float, r: np.ndarray) -> tuple[float, int]:
-    """(first-order chi-square drop, rank) of the projected added columns Z (rows, g) for
-    the residuals r; size is the norm of Z before projection (directions that projection
-    all but removed are rounding noise, not evidence)."""
+def _statistic(Z: np.ndarray, size: float, r: np.ndarray
+               ) -> tuple[float, int, np.ndarray | None]:
+    """(first-order chi-square drop, rank, orthonormal basis) of the projected added columns
+    Z (rows, g) for the residuals r; size is the norm of Z before projection (directions
+    that projection all but removed are rounding noise, not evidence)."""
     if Z.size == 0 or size <= 0.0:
-        return 0.0, 0
+        return 0.0, 0, None
     U, s, _ = np.linalg.svd(Z, full_matrices=False)
     rank = int(np.sum(s > RANK_TOLERANCE * size))
     if rank == 0:
-        return 0.0, 0
-    return float(np.sum((U[:, :rank].T @ r) ** 2)), rank
+        return 0.0, 0, None
+    basis = U[:, :rank]
+    return float(np.sum((basis.T @ r) ** 2)), rank, basis
+
+
+def _same_span(a: np.ndarray, b: np.ndarray | None, tolerance: float = 1e-6) -> bool:
+    """Whether two orthonormal bases span the same space: the two hypotheses cannot be told
+    apart by any data of this design (one combination of parameters)."""
+    if b is None or a.shape[1] != b.shape[1]:
+        return False
+    return bool(np.linalg.norm(b - a @ (a.T @ b)) < tolerance * np.sqrt(b.shape[1]))

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from hostpc.diagnostics.candidates import Candidate
 from hostpc.diagnostics.diagnosis import LadderStep, ModelCheck, free_parameters
 from hostpc.fitting import FitResult
 
@@ -43,20 +44,39 @@ def held_out_worse(before: ModelCheck, after: ModelCheck) -> str | None:
             f"{b.cv_whitened_rms:.3f} sigma{mm})")
 
 
+def _bic(candidate: Candidate) -> float:
+    return 0.0 if candidate.delta_bic is None else candidate.delta_bic
+
+
 def climb(start: ModelCheck, check_model: Callable[[FitResult], ModelCheck],
-          max_steps: int = DEFAULT_MAX_STEPS) -> tuple[tuple[LadderStep, ...], str | None]:
+          max_steps: int = DEFAULT_MAX_STEPS,
+          propose: Callable[[ModelCheck], Candidate | None] | None = None,
+          ) -> tuple[tuple[LadderStep, ...], str | None]:
     """The ladder from ``start``; ``check_model`` checks a fit (held-out residuals, candidates
     not yet in it, interactions). Each step adds the best significant candidate, unless the
     model with it predicts the held-out samples no better (then the ladder stops there).
 
-    Returns the steps and, when the ladder stopped for that reason, a sentence saying which
-    effect was not added and why (else None).
+    ``propose`` (if given) may offer one more candidate: the interaction effect the search
+    suggests (``auto_effects``); it is taken instead of the best built-in candidate when its
+    delta BIC is lower, and must win on held-out samples too.
+    A candidate that would make an identifiable parameter unidentifiable is never taken:
+    when it is the only significant one the ladder stops and says so.
+
+    Returns the steps and, when the ladder stopped for one of these reasons, a sentence
+    saying which effect was not added and why (else None).
     """
     steps = [step_of(0, start, None, None)]
     check = start
     while not check.adequacy.adequate and len(steps) <= max_steps:
         best = check.best_candidate
+        proposal = propose(check) if propose is not None else None
+        if proposal is not None and (best is None or _bic(proposal) < _bic(best)):
+            best = proposal
         if best is None:
+            costly = check.costly_candidate
+            if costly is not None and costly.not_taken is not None:
+                return tuple(steps), (f"{costly.effect} is significant but was not added: "
+                                      f"{costly.not_taken}")
             break
         extended = check_model(best.fit)
         worse = held_out_worse(check, extended)

@@ -11,11 +11,13 @@ import numpy as np
 from hostpc.dataset import Dataset, load_dataset
 from hostpc.diagnostics.adequacy import assess, held_out_residuals
 from hostpc.diagnostics.advice import advise
+from hostpc.diagnostics.auto_effects import generate, unexplained
 from hostpc.diagnostics.candidates import (
     Candidate,
     candidate_effects,
     check_candidate_names,
     rank_candidates,
+    try_candidate,
 )
 from hostpc.diagnostics.diagnosis import Diagnosis, LadderStep, ModelCheck
 from hostpc.diagnostics.interactions import Interaction, search_interactions
@@ -39,6 +41,8 @@ DEFAULT_ALPHA = 1e-3
 DEFAULT_CV_FOLDS = 5
 #: folds of the held-out RMS of each candidate while ranking (the ladder uses cv_folds)
 DEFAULT_RANK_CV_FOLDS = 3
+#: significant unexplained patterns the ladder turns into effects and tries, per step
+MAX_PROPOSALS = 3
 
 
 def variables_of(result: FitResult) -> dict[str, np.ndarray]:
@@ -110,6 +114,26 @@ class _Checker:
         return ModelCheck(result, held, adequacy, candidates, skipped, found, n_tests)
 
 
+    def propose(self, check: ModelCheck) -> Candidate | None:
+        """The interaction effect of the strongest significant pattern no built-in effect
+        models, fitted as a candidate, when it is significant; else None."""
+        variables = variables_of(check.fit)
+        tried = {c.effect for c in check.candidates}
+        context = check.fit.problem.context
+        for interaction in unexplained(check.interactions, tried, context)[:MAX_PROPOSALS]:
+            generated = generate(interaction, variables[interaction.variable])
+            if generated is None or generated.name in check.effects:
+                continue
+            try:
+                candidate = try_candidate(check.fit, generated.effect_class(),
+                                          cv_folds=0, loss=self.loss, threshold=self.alpha)
+            except InputError:
+                continue
+            if candidate.taken:
+                return candidate
+        return None
+
+
 def missing_sentences(candidates: Sequence[Candidate], found: Sequence[Interaction]
                       ) -> tuple[str, ...]:
     """The reasons a model is not adequate that name what is missing: the best significant
@@ -155,6 +179,7 @@ def diagnose(
     interactions: bool = True,
     max_ladder_steps: int = DEFAULT_MAX_STEPS,
     source: str | None = None,
+    auto_effects: bool = True,
 ) -> Diagnosis:
     """Fit the model to the dataset and diagnose it.
 
@@ -167,6 +192,9 @@ def diagnose(
     significance of each family of tests. cv_folds: folds of the held-out residuals (0 to
     skip); rank_cv_folds: folds of each candidate's held-out RMS. interactions: run the
     effect-agnostic search. source: the dataset's path, used in the suggested commands.
+    auto_effects: let the ladder build the interaction effect of a significant pattern no
+    built-in effect models (``auto_effects``; ``Diagnosis.generated_effects`` holds their
+    plugin sources).
     """
     plugin_paths = tuple(str(p) for p in plugins)
     if isinstance(dataset, str | Path):
@@ -186,8 +214,9 @@ def diagnose(
     steps: tuple[LadderStep, ...] | None = None
     stop: str | None = None
     if ladder:
-        steps, stop = climb(start.ranked, checker.without_outlier_detection(),
-                            max_ladder_steps)
+        climber = checker.without_outlier_detection()
+        steps, stop = climb(start.ranked, climber, max_ladder_steps,
+                            propose=climber.propose if auto_effects else None)
     advice = advise(start, residuals, steps, source, plugin_paths, ladder_stop=stop)
     return Diagnosis(check=start, residuals=residuals, ladder=steps, advice=advice,
                      alpha=alpha, source=source, plugins=plugin_paths, ladder_stop=stop)

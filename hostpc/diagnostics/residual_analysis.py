@@ -40,15 +40,29 @@ def analysis_variables(variables: Mapping[str, np.ndarray], measured: np.ndarray
     return chosen
 
 
-def usable_variables(variables: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """The variables that vary over the samples and are finite everywhere, in contract
-    order (as the model context lists them)."""
+MIN_DEFINED_SAMPLES = 8
+"""A variable defined (finite) on fewer samples than this is not tested."""
+
+
+def usable_variables(variables: Mapping[str, np.ndarray],
+                     min_defined: int = MIN_DEFINED_SAMPLES) -> dict[str, np.ndarray]:
+    """The variables to test, in contract order (as the model context lists them).
+
+    A variable is tested on the samples where it is defined (finite): a per-chain variable
+    of a two-arm dataset (``left.q3`` is NaN on the right arm's samples) is tested on its own
+    arm's samples. It is kept when it is defined on at least ``min_defined`` samples (and on
+    all of them when there are fewer) and varies there. The values keep their NaNs: callers
+    restrict to ``np.isfinite(values)``.
+    """
     usable = {}
     for name, values in variables.items():
         values = np.asarray(values, dtype=float)
-        if not np.all(np.isfinite(values)):
+        defined = np.isfinite(values)
+        count = int(np.count_nonzero(defined))
+        if count < min(min_defined, values.size) or count < 2:
             continue
-        if np.ptp(values) <= 1e-12 * max(1.0, float(np.max(np.abs(values)))):
+        present = values[defined]
+        if np.ptp(present) <= 1e-12 * max(1.0, float(np.max(np.abs(present)))):
             continue
         usable[name] = values
     return usable
@@ -112,7 +126,11 @@ def _bins(values: np.ndarray, n_bins: int) -> tuple[np.ndarray, np.ndarray]:
 
 def bin_pattern(variable: str, values: np.ndarray, raw: np.ndarray, whitened: np.ndarray,
                 n_bins: int, threshold: float) -> VariablePattern:
-    """Bin the residuals (N, m) against one variable (N,) and test the bin means."""
+    """Bin the residuals (N, m) against one variable (N,) and test the bin means, on the
+    samples where the variable is defined (finite)."""
+    defined = np.isfinite(values)
+    if not np.all(defined):
+        values, raw, whitened = values[defined], raw[defined], whitened[defined]
     edges, index = _bins(values, n_bins)
     n_used = edges.size - 1
     m = raw.shape[1]

@@ -51,13 +51,15 @@ def _candidates(diagnosis: Diagnosis) -> str:
     rows = [(_e(c.effect), _num(c.delta_bic, 1), _num(c.delta_bic_full, 1), _mm(c.rms),
              _mm(c.cv_rms), _num(c.chi2_dof), _p(c.p_value),
              _e(", ".join(c.selected) or "-") if c.testable
-             else "not testable: no degrees of freedom left")
+             else "not testable: no degrees of freedom left",
+             _e(c.not_taken or "taken") if c.testable else "-")
             for c in diagnosis.candidates]
-    rows += [(_e(s.effect), "-", "-", "-", "-", "-", "-", _e(f"skipped: {s.reason}"))
+    rows += [(_e(s.effect), "-", "-", "-", "-", "-", "-", _e(f"skipped: {s.reason}"), "-")
              for s in diagnosis.check.skipped]
     flags = [c.significant for c in diagnosis.candidates] + [False] * len(diagnosis.check.skipped)
     return _table(("effect", "delta BIC", "delta BIC (all)", "RMS [mm]", "held-out [mm]",
-                   "chi2/dof", "p", "parameters the data need"), rows, flags=flags)
+                   "chi2/dof", "p", "parameters the data need", "why not taken"), rows,
+                  flags=flags)
 
 
 def _interactions(diagnosis: Diagnosis, top: int = 15) -> str:

@@ -143,3 +143,23 @@ def _chain():  # type: ignore[no-untyped-def]
     from hostpc.kinematics import get_robot
 
     return get_robot("ur5e")
+
+
+def coupled_dual_loop(truth: Mapping[str, float], n_per_arm: int = 50, seed: int = 2
+                      ) -> Dataset:
+    """A dual_loop dataset (hostpc's own model) with a hidden coupling of any neighbouring
+    joints, ``joint_coupling.left.k4_3`` (the built-in effect couples only the wrist)."""
+    from hostpc.model.effects import JointCoupling
+    from hostpc.model.registry import available_effects, instantiate
+    from hostpc.synthesize import noisy_measurements
+    from hostpc.synthesize_dual_loop import make_dataset, plan_poses
+
+    poses = plan_poses(n_per_arm, np.random.default_rng(seed - 1))
+    placeholder = make_dataset(poses, np.zeros((poses.n, 3)),
+                               np.broadcast_to(np.eye(3) * 1e-8, (poses.n, 3, 3)))
+    names = ["joint_offsets", *placeholder.frames]
+    instances = instantiate(names, available_effects()) + [JointCoupling("all")]
+    problem = build_problem(placeholder, names + ["joint_coupling"],
+                            effect_instances=instances)
+    measured, cov = noisy_measurements(problem, truth, np.random.default_rng(seed), 1.0)
+    return make_dataset(poses, measured, cov)

@@ -1,5 +1,6 @@
 """Built-in physical effects. The registry (hostpc.model.registry) lists them by name."""
 
+from hostpc.model.effects.coupling import JointCoupling
 from hostpc.model.effects.dual_loop_frames import DUAL_LOOP_FRAME_EFFECTS
 from hostpc.model.effects.frames import BaseFrame, SphereFrame, TargetFrame, ToolFrame
 from hostpc.model.effects.geometry import Geometry
@@ -11,6 +12,7 @@ from hostpc.model.effects.joint_space import (
     TransmissionHarmonic,
 )
 from hostpc.model.effects.sensor import DepthScale, TriggerLatency
+from hostpc.model.effects.thermal import ThermalExpansion
 
 BUILTIN_EFFECTS = (
     JointOffsets,
@@ -25,6 +27,8 @@ BUILTIN_EFFECTS = (
     Backlash,
     DepthScale,
     TriggerLatency,
+    JointCoupling,
+    ThermalExpansion,
     *DUAL_LOOP_FRAME_EFFECTS,
 )
 
@@ -35,9 +39,11 @@ __all__ = [
     "EncoderScale",
     "Geometry",
     "JointCompliance",
+    "JointCoupling",
     "JointOffsets",
     "SphereFrame",
     "TargetFrame",
+    "ThermalExpansion",
     "ToolFrame",
     "TransmissionHarmonic",
     "TriggerLatency",
