@@ -12,6 +12,8 @@ import math
 import sys
 from pathlib import Path
 
+from hostpc.errors import InputError
+
 
 def _positive(text: str) -> float:
     try:
@@ -51,7 +53,10 @@ def run(args: argparse.Namespace) -> int:
     findings = drift_findings(runs, args.threshold or DEFAULT_THRESHOLD_DEG,
                               args.z_limit or DEFAULT_Z_LIMIT)
     if args.html:
-        Path(args.html).write_text(history_html(runs, findings, args.robot))
+        try:
+            Path(args.html).write_text(history_html(runs, findings, args.robot))
+        except OSError as exc:
+            raise InputError(f"--html {args.html}: cannot write ({exc.strerror})") from None
     if args.json:
         json.dump({"runs": runs, "drift": [f.as_dict() for f in findings],
                    "fleet": fleet_summary(runs)}, sys.stdout, indent=1, default=str)

@@ -64,7 +64,7 @@ async def _serve(args: argparse.Namespace) -> int:
     host, port = station.modbus_address
     print(f"hostpc station {config.station}: PLC registers on {host}:{port}"
           + (f", page on http://{http[0]}:{http[1]}/" if http else "")
-          + f", archive {config.db}", flush=True)
+          + f", archive {config.database_url()}", flush=True)
     try:
         await task
     finally:

@@ -13,6 +13,7 @@ from hostpc.diagnostics.diagnosis import LadderStep, ModelCheck
 from hostpc.diagnostics.interactions import Interaction
 from hostpc.diagnostics.patterns import pattern_effect
 from hostpc.diagnostics.residual_analysis import ResidualAnalysis
+from hostpc.errors import InputError
 from hostpc.model.problem import default_effects
 
 #: fewer degrees of freedom than this: the advice says the samples are too few to judge
@@ -54,7 +55,11 @@ def _joint(parameter: str | None) -> str:
 def effects_option(check: ModelCheck, name: str) -> str:
     """The --effects value that gives the current model plus ``name``."""
     current = list(check.effects)
-    if current == default_effects(check.fit.problem.dataset):
+    try:
+        defaults = default_effects(check.fit.problem.dataset)
+    except InputError:  # a plugin's measurement model: name the whole model explicitly
+        defaults = None
+    if current == defaults:
         return f"+{name}"
     return ",".join(current + [name])
 

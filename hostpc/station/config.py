@@ -66,6 +66,13 @@ class StationConfig(_Strict):
     sim: SimCell = SimCell()
     base_dir: str = "."
 
+    def database_url(self) -> str:
+        """`db` with a relative SQLite path taken relative to the config file's folder."""
+        prefix = "sqlite:///"
+        if self.db.startswith(prefix) and not self.db.startswith(prefix + "/"):
+            return prefix + str(self.path(self.db[len(prefix):]).resolve())
+        return self.db
+
     def path(self, value: str) -> Path:
         """`value` relative to the config file's folder."""
         candidate = Path(value).expanduser()

@@ -65,7 +65,7 @@ class Station:
     # -- life cycle -------------------------------------------------------------------
     async def run(self, ready: asyncio.Event | None = None) -> None:
         """Serve until `stop()`; resumes an interrupted run first."""
-        self.archive = await asyncio.to_thread(open_archive, self.config.db)
+        self.archive = await asyncio.to_thread(open_archive, self.config.database_url())
         host, port = await self.plc.start()
         self.modbus_address = (host, port)
         self._publish_state(reg.State.IDLE)

@@ -64,3 +64,19 @@ def test_doc_model_fit_names_what_one_plate_cannot_identify(plugin: str) -> None
     result = solve(replace(problem, measured=clean), cv_folds=0)
     assert result.converged and result.unidentifiable
     assert all(d.description for d in result.unidentifiable)
+
+
+def test_doc_commands_fit_and_diagnose_with_the_plugin(plugin: str, tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """The doc's two commands run: `hostpc fit` and `hostpc diagnose --ladder` with --plugin
+    (diagnose once failed naming the default model of a plugin's method)."""
+    from hostpc.cli.main import main
+    from hostpc.dataset import save_dataset
+
+    dataset = measurement_models([plugin])["plane_contact"].example(np.random.default_rng(1))
+    plate = tmp_path / "plate.json"
+    save_dataset(dataset, plate, plugins=[plugin])
+    assert main(["fit", str(plate), "--plugin", plugin]) == 0
+    assert main(["diagnose", str(plate), "--plugin", plugin, "--ladder"]) in (0, 1)
+    out = capsys.readouterr().out
+    assert "--plugin" in out  # the suggested commands carry the plugin

@@ -67,3 +67,24 @@ def test_history_raises_the_drift_alarm_on_the_drifting_joint(tmp_path: Path,
     assert len(document["drift"]) >= 2  # the later, larger moves at least
     html = page.read_text()
     assert "DRIFT UR-DRIFT q3" in html and "data:image/png;base64," in html
+
+
+def test_history_html_to_a_bad_path_is_one_line_exit_2(tmp_path: Path) -> None:
+    db = f"sqlite:///{tmp_path / 'archive.db'}"
+    for target in (tmp_path / "missing" / "h.html", tmp_path):
+        run = subprocess.run(hostpc_command("history", "--db", db, "--html", str(target)),
+                             cwd=REPO, capture_output=True, text=True, timeout=120)
+        assert run.returncode == 2 and run.stderr.count("\n") == 1, run.stderr
+        assert "cannot write" in run.stderr
+
+
+def test_a_relative_sqlite_archive_is_beside_the_config_file(tmp_path: Path) -> None:
+    from hostpc.station.config import load_station_config
+
+    config_file = tmp_path / "cell" / "station.yaml"
+    config_file.parent.mkdir()
+    config_file.write_text("robot: sim\ndb: sqlite:///station.db\n")
+    config = load_station_config(config_file)
+    assert config.database_url() == f"sqlite:///{(tmp_path / 'cell' / 'station.db').resolve()}"
+    absolute = load_station_config(config_file, {"db": "sqlite:////var/x.db"})
+    assert absolute.database_url() == "sqlite:////var/x.db"
