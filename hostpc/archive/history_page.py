@@ -19,6 +19,7 @@ def drift_plot_png(runs: list[dict[str, Any]], findings: list[DriftFinding]) -> 
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     series = zero_series(runs)
     drifting = {f.label for f in findings}
@@ -38,6 +39,7 @@ def drift_plot_png(runs: list[dict[str, Any]], findings: list[DriftFinding]) -> 
         axis.grid(alpha=0.3)
         axis.tick_params(labelsize=8)
     axes[-1, 0].set_xlabel("calibration #", fontsize=9)
+    axes[-1, 0].xaxis.set_major_locator(MaxNLocator(integer=True))
     if runs:
         figure.suptitle(f"zero offsets of {runs[0]['serial']} (change since first "
                         f"calibration)", fontsize=10)
