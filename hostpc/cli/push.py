@@ -6,9 +6,9 @@
 
 The guard rails, the journal and the rollback are calibrate's (hostpc.calibrate.push,
 hostpc.calibrate.offline_push): joints the fit held are left unchanged; the push is refused
-(exit 4) if the fit did not converge, does not explain its data, or a correction exceeds
---max-correction degrees, unless --force. The intent is written to DIR/push.json before
-the controller is, so `hostpc rollback --run DIR` can always undo it. Offsets are printed
+(exit 5, as `hostpc calibrate`; 4 is a controller's refusal) if the fit did not converge,
+does not explain its data, or a correction exceeds --max-correction degrees, unless --force.
+The intent is written to DIR/push.json before the controller is, so `hostpc rollback --run DIR` can always undo it. Offsets are printed
 in degrees.
 """
 
@@ -27,14 +27,18 @@ import numpy as np
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.offline_push import SavedFit, load_saved_fit
 from hostpc.calibrate.push import DEFAULT_MAX_CORRECTION_DEG, PushPlan, execute_push, plan_push
+from hostpc.calibrate.summary import EXIT_PUSH_REFUSED
 from hostpc.errors import InputError, ZerocalError
 from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot
 
 
 class PushRefused(ZerocalError):
-    """A guard rail refused the push (the message says which and how to override)."""
+    """A guard rail refused the push (the message says which and how to override).
 
-    exit_code = 4
+    Exit 5, as a refused push in `hostpc calibrate` (EXIT_PUSH_REFUSED); 4 stays for a
+    controller refusing a request."""
+
+    exit_code = EXIT_PUSH_REFUSED
 
 
 def register(subparsers: Any) -> None:

@@ -38,11 +38,11 @@ def test_push_offline_fit_guard_rail_dry_run_push_and_rollback(
         address = f"{sim.address.host}:{sim.address.port}"
         before = _offsets(sim)
         out = tmp_path / "push"
-        # guard rail: a correction above the limit refuses the whole push (exit 4)
+        # guard rail: a correction above the limit refuses the whole push (exit 5, as calibrate)
         code, stdout, stderr = run_cli(capsys, "push", str(path), "--robot", address,
                                        "--token", TOKEN, "--max-correction", "0.01",
                                        "--out", str(out))
-        assert code == 4 and "exceeds the limit of 0.01 deg" in stderr
+        assert code == 5 and "exceeds the limit of 0.01 deg" in stderr
         assert np.array_equal(_offsets(sim), before) and not out.exists()
         # dry run: the plan, nothing written
         code, stdout, stderr = run_cli(capsys, "push", str(path), "--robot", address,
