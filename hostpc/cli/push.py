@@ -8,8 +8,8 @@ The guard rails, the journal and the rollback are calibrate's (hostpc.calibrate.
 hostpc.calibrate.offline_push): joints the fit held are left unchanged; the push is refused
 (exit 5, as `hostpc calibrate`; 4 is a controller's refusal) if the fit did not converge,
 does not explain its data, or a correction exceeds --max-correction degrees, unless --force.
-The intent is written to DIR/push.json before the controller is, so `hostpc rollback --run DIR` can always undo it. Offsets are printed
-in degrees.
+The intent is written to DIR/push.json before the controller is, so
+`hostpc rollback --run DIR` can always undo it. Offsets are printed in degrees.
 """
 
 from __future__ import annotations
