@@ -39,7 +39,10 @@ def import_plugin_file(path: str | os.PathLike[str]) -> ModuleType:
     sys.modules[module_name] = module
     try:
         spec.loader.exec_module(module)
-    except Exception as exc:  # a user's file may fail in any way: report it in one line
+    except KeyboardInterrupt:
+        sys.modules.pop(module_name, None)
+        raise
+    except BaseException as exc:  # a user's file may fail in any way, even `raise SystemExit(0)`
         sys.modules.pop(module_name, None)
         raise EffectError(f"plugin {path}: failed to import: {type(exc).__name__}: {exc}") from exc
     _MODULES[key] = module

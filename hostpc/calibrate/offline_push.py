@@ -25,7 +25,7 @@ import numpy as np
 from hostpc.errors import InputError
 from hostpc.fitting.identifiability import NullDirection
 
-__all__ = ["SavedFit", "load_saved_fit"]
+__all__ = ["SavedFit", "already_pushed", "ledger_path", "load_saved_fit", "record_push"]
 
 
 @dataclass(frozen=True)
@@ -48,6 +48,7 @@ class SavedFit:
     source: str
     method: str = ""
     effects: tuple[str, ...] = ()
+    robot: str = ""  # the dataset's built-in robot name ("" if unknown: a table or URDF)
 
     @property
     def chi2_dof(self) -> float:
@@ -108,6 +109,7 @@ def saved_fit_from_dict(document: Any, source: str) -> SavedFit:
         dof=int(_number(document["dof"], f"{source}: dof")), source=source,
         method=str(document.get("method", "")),
         effects=tuple(map(str, document.get("effects", []))),
+        robot=str(document.get("robot") or ""),
     )
 
 
@@ -123,3 +125,57 @@ def load_saved_fit(path: str | Path) -> SavedFit:
     except ValueError as exc:
         raise InputError(f"{source}: not valid JSON ({exc})") from None
     return saved_fit_from_dict(document, source)
+
+
+LEDGER_SUFFIX = ".pushes.jsonl"
+SAME_OFFSETS_RAD = 1e-9
+"""Offsets closer than this (rad, every joint) are the same: a controller's round trip."""
+
+
+def ledger_path(fit_path: str | Path) -> Path:
+    """FIT.json.pushes.jsonl beside the fit: one line per offline push of this fit."""
+    fit_path = Path(fit_path)
+    return fit_path.with_name(fit_path.name + LEDGER_SUFFIX)
+
+
+def _ledger_entries(fit_path: str | Path) -> list[dict[str, Any]]:
+    path = ledger_path(fit_path)
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except FileNotFoundError:
+        return []
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    entries = []
+    for line in lines:
+        try:
+            entry = json.loads(line)
+        except ValueError:
+            continue  # a line cut by a crash: the others still count
+        if isinstance(entry, Mapping) and isinstance(entry.get("after"), list):
+            entries.append(dict(entry))
+    return entries
+
+
+def already_pushed(fit_path: str | Path, offsets: np.ndarray) -> dict[str, Any] | None:
+    """The ledger entry whose offsets after the push equal ``offsets`` (rad), if any: the
+    controller already carries this fit's corrections, so pushing again would double them."""
+    offsets = np.asarray(offsets, float)
+    for entry in _ledger_entries(fit_path):
+        after = np.asarray(entry["after"], float)
+        if after.shape == offsets.shape and np.all(np.abs(after - offsets) <= SAME_OFFSETS_RAD):
+            return entry
+    return None
+
+
+def record_push(fit_path: str | Path, entry: Mapping[str, Any]) -> None:
+    """Append one push (controller, before, after, run_dir, time) to the fit's ledger;
+    written before the controller is, so a push cut half-way is still recorded."""
+    path = ledger_path(fit_path)
+    try:
+        with path.open("a", encoding="utf-8") as handle:
+            handle.write(json.dumps(dict(entry)) + "\n")
+            handle.flush()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write the push ledger ({exc.strerror or exc}); "
+                         "copy the fit to a writable folder") from None

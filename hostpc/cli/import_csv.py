@@ -82,6 +82,13 @@ def _robot(args: argparse.Namespace, output: Path) -> tuple[dict[str, Any], Chai
     return {"name": args.robot}, chain
 
 
+def _method_frames(method: str) -> tuple[str, ...]:
+    """The frames a dataset of ``method`` can mark known (its measurement model's)."""
+    from hostpc.model.measurements.registry import measurement_model
+
+    return tuple(measurement_model(method).default_frames)
+
+
 def run(args: argparse.Namespace) -> int:
     for option, value, units in (("--length-unit", args.length_unit, LENGTH_UNITS),
                                  ("--angle-unit", args.angle_unit, ANGLE_UNITS),
@@ -92,6 +99,12 @@ def run(args: argparse.Namespace) -> int:
     for option, value in (("--sigma", args.sigma), ("--sigma-angle", args.sigma_angle)):
         if value is not None and not value > 0:
             raise InputError(f"{option}: must be positive, got {value}")
+    known = tuple(k.strip() for k in args.known.split(",") if k.strip())
+    frames = _method_frames(args.method)
+    unknown = [k for k in known if k not in frames]
+    if unknown:
+        raise InputError(f"--known: {', '.join(map(repr, unknown))} is not a frame of "
+                         f"{args.method} (its frames: {', '.join(frames)})")
     output = Path(args.output)
     robot, chain = _robot(args, output)
     prismatic = tuple(bool(p) for p in chain.joint_is_prismatic)
@@ -108,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
         method=args.method, robot=robot, prismatic=prismatic, length_unit=args.length_unit,
         angle_unit=args.angle_unit, joint_unit=args.joint_unit, sigma=sigma,
         sigma_angle=args.sigma_angle,
-        known=tuple(k.strip() for k in args.known.split(",") if k.strip()),
+        known=known,
     )
     document = build_document(table, mapping, options)
     if not args.no_guess:

@@ -6,10 +6,12 @@
 
 The guard rails, the journal and the rollback are calibrate's (hostpc.calibrate.push,
 hostpc.calibrate.offline_push): joints the fit held are left unchanged; the push is refused
-(exit 4) if the fit did not converge, does not explain its data, or a correction exceeds
---max-correction degrees, unless --force. The intent is written to DIR/push.json before
-the controller is, so `hostpc rollback --run DIR` can always undo it. Offsets are printed
-in degrees.
+(exit 5, as `hostpc calibrate`; 4 is a controller's refusal) if the fit did not converge,
+does not explain its data, a correction exceeds --max-correction degrees, the controller is
+another robot than the fit's dataset, or it already carries this fit (the ledger
+FIT.json.pushes.jsonl beside the fit, hostpc.calibrate.offline_push), unless --force.
+The intent is written to DIR/push.json before the controller is, so
+`hostpc rollback --run DIR` can always undo it. Offsets are printed in degrees.
 """
 
 from __future__ import annotations
@@ -25,16 +27,26 @@ from typing import Any
 import numpy as np
 
 from hostpc.calibrate.journal import Journal
-from hostpc.calibrate.offline_push import SavedFit, load_saved_fit
+from hostpc.calibrate.offline_push import (
+    SavedFit,
+    already_pushed,
+    ledger_path,
+    load_saved_fit,
+    record_push,
+)
 from hostpc.calibrate.push import DEFAULT_MAX_CORRECTION_DEG, PushPlan, execute_push, plan_push
+from hostpc.calibrate.summary import EXIT_PUSH_REFUSED
 from hostpc.errors import InputError, ZerocalError
 from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot
 
 
 class PushRefused(ZerocalError):
-    """A guard rail refused the push (the message says which and how to override)."""
+    """A guard rail refused the push (the message says which and how to override).
 
-    exit_code = 4
+    Exit 5, as a refused push in `hostpc calibrate` (EXIT_PUSH_REFUSED); 4 stays for a
+    controller refusing a request."""
+
+    exit_code = EXIT_PUSH_REFUSED
 
 
 def register(subparsers: Any) -> None:
@@ -124,6 +136,8 @@ async def _push(args: argparse.Namespace, saved: SavedFit, address: RobotAddress
         if n_fit != offsets.size:
             raise InputError(f"{args.fit}: the fit has {n_fit} joint offsets, the controller "
                              f"at {address} has {offsets.size} joints")
+        if not args.force:
+            await _check_same_robot_and_not_pushed(robot, saved, args.fit, address, offsets)
         plan = plan_push(saved, offsets, args.max_correction,  # type: ignore[arg-type]
                          force=args.force, dataset_file="the fit's dataset")
         if plan.refused or args.dry_run:
@@ -132,7 +146,29 @@ async def _push(args: argparse.Namespace, saved: SavedFit, address: RobotAddress
         journal = Journal(run_dir)
         journal.write_header({"kind": "offline_push", "fit": str(Path(args.fit).resolve()),
                               "robot": {"address": str(address), "driver": args.driver}})
+        record_push(args.fit, {
+            "controller": str(address), "run_dir": str(run_dir.resolve()),
+            "time": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+            "before": plan.old.tolist(), "after": plan.new.tolist()})
         record = await execute_push(robot, plan, run_dir, str(address), journal)
         return plan, record
     finally:
         await robot.close()
+
+
+async def _check_same_robot_and_not_pushed(robot: Any, saved: SavedFit, fit: str,
+                                           address: RobotAddress, offsets: np.ndarray) -> None:
+    """Guard rails of an offline push (PushRefused, exit 5, unless --force): the controller
+    is the robot the fit's dataset was measured on, and does not already carry this fit."""
+    state = await robot.state()
+    controller_robot = str(getattr(state, "robot", "") or "")
+    if saved.robot and controller_robot and saved.robot.lower() != controller_robot.lower():
+        raise PushRefused(f"push refused: {fit} was measured on a {saved.robot}, the controller "
+                          f"at {address} is a {controller_robot}; use --force to push anyway")
+    entry = already_pushed(fit, offsets)
+    if entry is not None:
+        raise PushRefused(
+            f"push refused: the controller at {address} already carries this fit (pushed to "
+            f"{entry.get('controller', '?')} at {entry.get('time', '?')}, "
+            f"{ledger_path(fit)}); pushing again would double the corrections; roll back with "
+            f"`hostpc rollback --run {entry.get('run_dir', 'DIR')}` or use --force")

@@ -19,7 +19,9 @@ the fit reads from the problem's dataset):
 - Python: `hostpc.fit(dataset, priors=[...] or {...}, hold=[...])`.
 
 Units as printed: m, mm, um for lengths; rad, mrad, urad, deg for angles; none means the
-parameter's SI unit. An unknown name or a unit that does not fit raises InputError (one line).
+parameter's SI unit. An unknown name or a unit that does not fit raises InputError (one line),
+as do a value outside the dataset's physical ranges (|m| <= 100, |rad| <= 100), a sigma not
+finite or below 1e-12 (SI), and a parameter both held and given a prior.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.dataset.validation import MAX_ABS_CONTEXT, MAX_ANGLE_RAD, MAX_POSITION_M
 from hostpc.errors import InputError
 
 _SCALE = {"m": ("m", 1.0), "mm": ("m", 1e-3), "um": ("m", 1e-6),
@@ -80,6 +83,14 @@ class Constraints:
         return float(0.5 * r @ r)
 
 
+MIN_PRIOR_SIGMA = 1e-12
+"""Smallest prior sigma (in the parameter's SI unit): below it the whitened residual
+overflows the solver's precision; hold the parameter instead."""
+_PRIOR_LIMIT = {"m": MAX_POSITION_M, "rad": MAX_ANGLE_RAD}
+"""Largest |value| (and sigma) of a prior per SI unit: the dataset's physical ranges
+(hostpc.dataset.validation); other units get MAX_ABS_CONTEXT."""
+
+
 def _convert(name: str, number: float, unit: str, param_unit: str, what: str) -> float:
     if not unit:
         return number
@@ -111,6 +122,14 @@ def make_prior(name: str, value: float, sigma: float, unit: str,
     sigma = _convert(name, sigma, unit, units[name], "sigma")
     if not (math.isfinite(value) and math.isfinite(sigma) and sigma > 0.0):
         raise InputError(f"prior {name}: value must be finite and sigma positive")
+    unit = units[name]
+    limit = _PRIOR_LIMIT.get(unit, MAX_ABS_CONTEXT)
+    if abs(value) > limit:
+        raise InputError(f"prior {name}: value {value:.6g} {unit} is outside the physical "
+                         f"range (|value| <= {limit:g} {unit})")
+    if not MIN_PRIOR_SIGMA <= sigma <= limit:
+        raise InputError(f"prior {name}: sigma {sigma:.6g} {unit} is outside "
+                         f"[{MIN_PRIOR_SIGMA:g}, {limit:g}] {unit}")
     return Prior(name, value, sigma)
 
 
@@ -164,10 +183,14 @@ def constraints_for(extra_fields: Mapping[str, Any], names: tuple[str, ...],
         else:
             raise InputError(f"prior {entry!r}: expected NAME=VALUE+-SIGMA")
     held = np.zeros(len(names), dtype=bool)
+    given_prior = {p.name for p in priors}
     for name in hold_names(raw_hold):
         if name not in unit_of:
             raise InputError(f"hold {name}: unknown parameter (this model has: "
                              f"{', '.join(names)})")
+        if name in given_prior:
+            raise InputError(f"{name} is both held and given a prior: a held parameter "
+                             "stays at its nominal, so drop one of the two")
         held[names.index(name)] = True
     index = np.array([names.index(p.name) for p in priors], dtype=int)
     return Constraints(tuple(priors), index, np.array([p.value for p in priors], float),

@@ -115,6 +115,8 @@ class FitResult:
 
         return {
             "method": self.problem.method,
+            "robot": getattr(getattr(getattr(self.problem, "dataset", None), "robot", None),
+                             "name", None),
             "effects": list(self.problem.effect_names),
             "parameters": {
                 p.name: {"value": p.value, "std": finite(p.std), "unit": p.unit,

@@ -101,6 +101,13 @@ def parse_column_map(spec: str, header: Sequence[str], n_joints: int, method: st
     """Parse ``--columns`` against the CSV header; InputError naming the offending pair."""
     joints: dict[int, str] = {}
     fields: dict[str, str] = {}
+    given: dict[str, str] = {}  # key -> the pair that gave it (q=A:B gives q1..qN)
+
+    def claim(key: str, raw: str) -> None:
+        if key in given:
+            raise InputError(f"--columns: {key} is given twice ({given[key]!r} and {raw!r})")
+        given[key] = raw
+
     for raw in (part.strip() for part in spec.split(",")):
         if not raw:
             continue
@@ -113,10 +120,17 @@ def parse_column_map(spec: str, header: Sequence[str], n_joints: int, method: st
                 raise InputError(f"--columns: q={column} must be FIRST:LAST of two header "
                                  f"columns (columns: {', '.join(header)})")
             start, stop = header.index(first), header.index(last)
+            if stop < start:
+                raise InputError(f"--columns: q={column}: the range is reversed ({first!r} "
+                                 f"comes after {last!r} in the header); write q={last}:{first} "
+                                 "or list q1=..,qN=.. to map joints out of header order")
             for k, name in enumerate(header[start:stop + 1]):
+                claim(f"q{k + 1}", raw)
                 joints[k + 1] = name
             continue
         joint = re.fullmatch(r"q(\d+)", key)
+        if joint or key in _SINGLE_KEYS:
+            claim(f"q{int(joint.group(1))}" if joint else key, raw)
         if joint:
             joints[int(joint.group(1))] = column
         elif key in _SINGLE_KEYS:

@@ -117,6 +117,9 @@ BAD = [
     ("missing joint", None, ["row 6", "'J5'", "missing value"]),
     ("unknown unit", None, ["row 1", "'Y'", "unknown unit 'furlong'"]),
     ("joint not mapped", "q1=J1,q2=J2,q3=J3,q4=J4,q5=J5,x=X,y=Y,z=Z", ["missing q6"]),
+    ("duplicate key", "q=J1:J6,x=X,y=Y,z=Z,x=Y", ["x is given twice", "'x=X'", "'x=Y'"]),
+    ("joint twice", "q=J1:J6,q2=J3,x=X,y=Y,z=Z", ["q2 is given twice"]),
+    ("reversed range", "q=J6:J1,x=X,y=Y,z=Z", ["q=J6:J1", "reversed", "q=J1:J6"]),
 ]
 
 
@@ -144,6 +147,20 @@ def test_each_bad_csv_is_one_line_and_exit_2(tmp_path, capsys, case, columns, fr
     for fragment in fragments:
         assert fragment in err, err
     assert not (tmp_path / "out.json").exists()
+
+
+def test_known_must_name_frames_of_the_method(tmp_path, capsys):
+    csv_path = tmp_path / "t.csv"
+    _world_point_csv(csv_path)
+    args = [csv_path, "--method", "world_point", "--robot", "ur5e",
+            "--columns", "q=J1:J6,x=X,y=Y,z=Z,marker=SMR", "-o", tmp_path / "o.json"]
+    code, _, err = _run(capsys, *args, "--known", "bogus")
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "--known: 'bogus' is not a frame of world_point" in err and "world, markers" in err
+    assert not (tmp_path / "o.json").exists()
+    code, _, err = _run(capsys, *args, "--known", "markers")
+    assert code == 0, err
+    assert json.loads((tmp_path / "o.json").read_text())["known"] == ["markers"]
 
 
 def test_bad_options_are_one_line(tmp_path, capsys):

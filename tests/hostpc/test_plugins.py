@@ -69,6 +69,7 @@ def test_plugin_effect_is_loaded_and_fitted(tmp_path: Path, stereo_poses) -> Non
     ("from hostpc.model.effect import Effect\nclass A(Effect):\n    name = 'a'\n"
      "    hook = 'nowhere'\n", "has hook 'nowhere'"),
     ("def broken(:\n", "failed to import: SyntaxError"),
+    ("raise SystemExit(0)", "failed to import: SystemExit: 0"),
 ])
 def test_bad_plugins_raise_one_line(tmp_path: Path, source: str, message: str) -> None:
     plugin = tmp_path / "bad.py"
@@ -133,3 +134,16 @@ def test_plugin_not_zero_at_zero_is_refused(tmp_path: Path) -> None:
 
     with pytest.raises(EffectError, match="nominal model"):
         fit(load_dataset(data), "+wrong", plugins=[plugin])
+
+
+def test_plugin_raising_system_exit_is_one_line_exit_2_in_the_cli(tmp_path: Path) -> None:
+    """`raise SystemExit(0)` in a plugin used to end `hostpc fit` with exit 0, no output."""
+    import subprocess
+    import sys
+    plugin = tmp_path / "evil.py"
+    plugin.write_text("raise SystemExit(0)\n")
+    dataset = Path(__file__).resolve().parents[2] / "examples" / "ur5e_stereo_known_frames.json"
+    run = subprocess.run([sys.executable, "-m", "hostpc.cli.main", "fit", str(dataset),
+                          "--plugin", str(plugin)], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2 and "evil.py" in run.stderr and "SystemExit" in run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1

@@ -38,6 +38,11 @@ def test_parse_units_as_printed() -> None:
     ("tool.x=0+-0m", "sigma positive"),
     ("tool.x=0+-1mm+", "expected NAME=VALUE"),
     ("tool.x 0.1", "expected NAME=VALUE"),
+    ("tool.x=1e308+-1e-308m", "outside the physical range"),
+    ("tool.x=1e3+-1m", "outside the physical range"),
+    ("joint_offsets.q1=0+-1e-308deg", "sigma .* is outside"),
+    ("tool.x=0+-1e300m", "sigma .* is outside"),
+    ("effect.k=1e300+-1", "outside the physical range"),
 ])
 def test_parse_errors_are_input_errors(text: str, message: str) -> None:
     with pytest.raises(InputError, match=message):
@@ -111,7 +116,10 @@ def test_dataset_file_priors_and_hold(exact_data, tmp_path: Path,  # type: ignor
 
 
 @pytest.mark.parametrize("option", [["--prior", "tool.q=0+-1m"], ["--hold", "nope"],
-                                    ["--prior", "tool.x=1+-2deg"], ["--prior", "garbage"]])
+                                    ["--prior", "tool.x=1+-2deg"], ["--prior", "garbage"],
+                                    ["--prior", "tool.x=1e308+-1e-308m"],
+                                    ["--hold", "joint_offsets.q1",
+                                     "--prior", "joint_offsets.q1=0.5+-0.01deg"]])
 def test_cli_bad_prior_or_hold_one_line_exit_2(exact_data, tmp_path: Path, option: list[str],  # type: ignore[no-untyped-def]
                                                capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "d.json"
@@ -121,6 +129,8 @@ def test_cli_bad_prior_or_hold_one_line_exit_2(exact_data, tmp_path: Path, optio
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1, err
         assert "Traceback" not in err
+        if "--hold" in option and "--prior" in option:
+            assert "joint_offsets.q1 is both held and given a prior" in err
 
 
 def test_with_constraints_keeps_the_dataset_otherwise(exact_data) -> None:  # type: ignore[no-untyped-def]

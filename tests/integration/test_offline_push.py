@@ -38,11 +38,11 @@ def test_push_offline_fit_guard_rail_dry_run_push_and_rollback(
         address = f"{sim.address.host}:{sim.address.port}"
         before = _offsets(sim)
         out = tmp_path / "push"
-        # guard rail: a correction above the limit refuses the whole push (exit 4)
+        # guard rail: a correction above the limit refuses the whole push (exit 5, as calibrate)
         code, stdout, stderr = run_cli(capsys, "push", str(path), "--robot", address,
                                        "--token", TOKEN, "--max-correction", "0.01",
                                        "--out", str(out))
-        assert code == 4 and "exceeds the limit of 0.01 deg" in stderr
+        assert code == 5 and "exceeds the limit of 0.01 deg" in stderr
         assert np.array_equal(_offsets(sim), before) and not out.exists()
         # dry run: the plan, nothing written
         code, stdout, stderr = run_cli(capsys, "push", str(path), "--robot", address,
@@ -64,11 +64,44 @@ def test_push_offline_fit_guard_rail_dry_run_push_and_rollback(
         assert push["status"] == "pushed" and push["previous_offsets"] == before.tolist()
         assert [e["event"] for e in map(json.loads, (out / "journal.jsonl").read_text()
                                         .splitlines())] == ["push_intent", "push"]
+        # the same fit again: the ledger beside the fit says this controller carries it
+        code, stdout, stderr = run_cli(capsys, "push", str(path), "--robot", address,
+                                       "--token", TOKEN, "--out", str(tmp_path / "again"))
+        assert code == 5 and "already carries this fit" in stderr, stderr
+        assert len([line for line in stderr.strip().splitlines() if "warning" not in line]) == 1
+        assert np.array_equal(_offsets(sim), after) and not (tmp_path / "again").exists()
+        ledger = [json.loads(line) for line in
+                  Path(str(path) + ".pushes.jsonl").read_text().splitlines()]
+        assert ledger[-1]["controller"] == address and ledger[-1]["before"] == before.tolist()
         # rollback by the push folder, as for a calibration run
         code, stdout, stderr = run_cli(capsys, "rollback", "--run", str(out), "--token", TOKEN)
         assert code == 0, stderr
         assert np.array_equal(_offsets(sim), before)
         assert math.isfinite(after[1])
+        # rolled back, the fit may be pushed again (a dry run is enough to show it)
+        code, stdout, stderr = run_cli(capsys, "push", str(path), "--robot", address,
+                                       "--token", TOKEN, "--dry-run")
+        assert code == 0, stderr
+
+
+def test_push_refuses_a_fit_of_another_robot(tmp_path: Path, capsys, fit_file) -> None:
+    path, _ = fit_file
+    document = json.loads(path.read_text())
+    assert document["robot"]  # the fit records its dataset's robot
+    document["robot"] = "some_other_robot"
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps(document))
+    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:
+        address = f"{sim.address.host}:{sim.address.port}"
+        before = _offsets(sim)
+        code, _, stderr = run_cli(capsys, "push", str(other), "--robot", address,
+                                  "--token", TOKEN, "--out", str(tmp_path / "p"))
+        assert code == 5 and "measured on a some_other_robot" in stderr, stderr
+        assert len([line for line in stderr.strip().splitlines() if "warning" not in line]) == 1
+        assert np.array_equal(_offsets(sim), before)
+        code, _, stderr = run_cli(capsys, "push", str(other), "--robot", address,
+                                  "--token", TOKEN, "--dry-run", "--force")
+        assert code == 0, stderr
 
 
 @pytest.mark.parametrize(("content", "message"), [
