@@ -41,7 +41,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from hostpc.calibrate.journal import Journal
-from hostpc.calibrate.runner import RobotInfo, Runner, RunOutcome
+from hostpc.calibrate.runner import PlanningError, RobotInfo, Runner, RunOutcome
 from hostpc.cli.archive_options import add_archive_options, archive_run
 from hostpc.cli.calibrate_checks import (
     check_known_frames,
@@ -379,6 +379,11 @@ def run(args: argparse.Namespace) -> int:
             print("hostpc calibrate: interrupted before the run started (nothing to resume)",
                   file=sys.stderr)
         return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
+    except PlanningError as exc:
+        if created and not Journal(run_dir).records("fit"):  # nothing measured: no run
+            shutil.rmtree(run_dir, ignore_errors=True)
+            raise PlanningError(f"{exc} (nothing was measured: {run_dir} removed)") from None
+        raise
     except BaseException:
         if created and not Journal(run_dir).exists:  # failed before the run started
             shutil.rmtree(run_dir, ignore_errors=True)
