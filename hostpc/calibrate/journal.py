@@ -246,6 +246,16 @@ class Journal:
                 return event
         return None
 
+    def last_position(self, *kinds: str) -> int:
+        """The position (among the non-sample events, in journal order) of the last event
+        whose kind is one of `kinds`; -1 if there is none. Tells which of two events came
+        later, e.g. a `verify_start` before or after the last `push`."""
+        self._ensure_loaded()
+        for position in range(len(self._events) - 1, -1, -1):
+            if self._events[position].get("event") in kinds:
+                return position
+        return -1
+
     def last_sample_t(self) -> float | None:
         """The largest `t` (s) among the journaled samples (None if no sample has one)."""
         self._ensure_loaded()

@@ -195,10 +195,12 @@ def verify_round(journal: Journal, offsets: np.ndarray, pushed_delta: np.ndarray
     The verification poses are measured in rounds, each under one set of controller
     offsets (journal event `verify_start`); sample indices of round r are r*K .. r*K+K-1
     (K = n_verify, pose i % K). The last round continues if it was measured under these
-    offsets and pushed delta and is not lost (every pose skipped); else a new round starts,
-    so a verdict only ever uses poses measured after the push it judges."""
+    offsets and pushed delta, started after the journal's latest push (a push again of the
+    same offsets, e.g. after a restarted controller lost them, starts a new round) and is
+    not lost (every pose skipped); else a new round starts, so a verdict only ever uses
+    poses measured after the push it judges."""
     rounds = journal.events("verify_start")
-    if rounds:
+    if rounds and journal.last_position("verify_start") > journal.last_position("push"):
         last = rounds[-1]
         first = int(last["first"])
         records = [r for r in journal.records("verify") if first <= r.index < first + n_verify]

@@ -215,6 +215,9 @@ def _push_line(document: Mapping[str, Any]) -> str:
     if status == "pushed" and push.get("on_controller") is False:
         return ("push: applied on the host for this session only (UR has no writable zero "
                 f"offsets); load {push['exports']['yaml']} in your UR/ROS setup")
+    if status == "pushed" and document["robot"].get("driver") == "replay":
+        return ("push: replayed from the recording (nothing written to a robot; the "
+                "recorded run's push is what reached its controller)")
     if status == "pushed":
         if document["robot"].get("sim"):
             undo = "simulated controller: nothing to roll back after the run"
@@ -245,8 +248,7 @@ def _verify_line(verify: Mapping[str, Any]) -> str:
              else f"{verify['n_measured']} fresh poses")
     p_value = verify.get("p_value")
     test = (f"chi2 {_num(verify.get('statistic'))} on {verify.get('dof')} dof, p = "
-            f"{'-' if p_value is None else f'{p_value:.3g}'} (FAIL below alpha "
-            f"{verify.get('alpha')})")
+            f"{_p_value(p_value)} (FAIL if p < alpha = {verify.get('alpha')})")
     tolerance = verify.get("tolerance_mm")
     test += ("; tolerance: none" if tolerance is None
              else f"; tolerance RMS <= {tolerance:g} mm")
@@ -261,6 +263,16 @@ def _verify_line(verify: Mapping[str, Any]) -> str:
     return (f"verify: {poses}: RMS before (old offsets) {_mm(verify['rms_before_mm'])} mm "
             f"(max {_mm(verify['max_before_mm'])}), after {_mm(verify['rms_after_mm'])} mm "
             f"(max {_mm(verify['max_after_mm'])}); {test}: {verdict}{why}")
+
+
+def _p_value(p: float | None) -> str:
+    """A p-value to 3 digits that never rounds up to a bare 1 (or down to 0)."""
+    if p is None:
+        return "-"
+    text = f"{p:.3g}"
+    if text == "1" and p < 1.0:
+        return "> 0.999"
+    return text if float(text) > 0.0 or p == 0.0 else f"{p:.1e}"
 
 
 def _num(value: float | None) -> str:

@@ -41,7 +41,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from hostpc.calibrate.journal import Journal
-from hostpc.calibrate.runner import RobotInfo, Runner, RunOutcome
+from hostpc.calibrate.runner import PlanningError, RobotInfo, Runner, RunOutcome
 from hostpc.cli.archive_options import add_archive_options, archive_run
 from hostpc.cli.calibrate_checks import (
     check_known_frames,
@@ -57,6 +57,7 @@ from hostpc.methods.cell import load_cell_file, parse_known
 from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot, resolve_token
 from hostpc.sensors.calibrate_options import (
     add_sensor_options,
+    check_replay_options,
     check_sensor_options,
     open_with_sensors,
     replay_inputs,
@@ -204,7 +205,9 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--no-report", action="store_true", help="skip report.html")
     parser.add_argument("--json", action="store_true", help="print the result document")
     add_sensor_options(parser)
-    parser.set_defaults(func=run)
+    parser.set_defaults(func=run, option_defaults={  # a --replay refuses changed options
+        a.dest: ("/".join(a.option_strings), a.default) for a in parser._actions
+        if a.option_strings})
     parser.error = types.MethodType(_one_line_error, parser)
 
 
@@ -343,6 +346,7 @@ def run(args: argparse.Namespace) -> int:
         if args.effects is not None or args.plugin:
             check_model_options(args.effects, tuple(args.plugin))
     elif args.replay:  # a recorded run again, without a robot (hostpc.sensors)
+        check_replay_options(args, getattr(args, "option_defaults", {}))
         address, driver, settings, cell_file, known, run_dir = replay_inputs(args, _default_out)
         scenario_file = None
     else:
@@ -379,6 +383,11 @@ def run(args: argparse.Namespace) -> int:
             print("hostpc calibrate: interrupted before the run started (nothing to resume)",
                   file=sys.stderr)
         return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
+    except PlanningError as exc:
+        if created and not Journal(run_dir).records("fit"):  # nothing measured: no run
+            shutil.rmtree(run_dir, ignore_errors=True)
+            raise PlanningError(f"{exc} (nothing was measured: {run_dir} removed)") from None
+        raise
     except BaseException:
         if created and not Journal(run_dir).exists:  # failed before the run started
             shutil.rmtree(run_dir, ignore_errors=True)

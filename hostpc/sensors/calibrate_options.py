@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -74,6 +74,26 @@ def check_sensor_options(args: argparse.Namespace) -> None:
     max_skew = getattr(args, "max_skew", DEFAULT_MAX_SKEW_MS)
     if not max_skew > 0:
         raise InputError(f"--max-skew {max_skew}: must be positive")
+
+
+REPLAY_FIXED = frozenset({
+    "method", "poses", "verify_poses", "seed", "known", "cell", "rig", "depth", "pixel_floor",
+    "probe_io", "modbus", "push", "force", "max_correction", "verify_alpha",
+    "verify_tolerance", "verify_factor", "speed", "criterion", "target_sigma", "candidates",
+    "scenario", "effects", "plugin", "loss", "cv_folds", "prior", "hold"})
+"""Options a replay may not be given: it plans, measures, fits and pushes exactly as the
+recorded run did (its settings come from the recording)."""
+
+
+def check_replay_options(args: argparse.Namespace,
+                         defaults: Mapping[str, tuple[str, Any]]) -> None:
+    """One line (exit code 2) if a --replay is given an option that would change the
+    recorded run. defaults: option dest -> (its flag, its parser default)."""
+    given = [flag for dest, (flag, default) in defaults.items()
+             if dest in REPLAY_FIXED and getattr(args, dest, default) != default]
+    if given:
+        raise InputError(f"--replay runs exactly as recorded (its settings come from the "
+                         f"recording): drop {', '.join(given)}")
 
 
 def replay_inputs(args: argparse.Namespace, default_out: Callable[[str], Path]

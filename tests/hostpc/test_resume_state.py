@@ -47,3 +47,18 @@ def test_push_state_tells_pushed_rolled_back_and_lost(tmp_path: Path) -> None:
     journal.event("rollback", how="rollback_id", controller="c", offsets=OLD.tolist(),
                   time="t")
     assert push_state(journal, tmp_path, progress, OLD, False, zero)[0] == "rolled_back"  # type: ignore[index]
+
+
+def test_a_push_again_of_the_same_offsets_starts_a_new_verify_round(tmp_path: Path) -> None:
+    """A restarted controller lost the push; `--resume --push` writes the same offsets
+    again: the verdict must not reuse the poses measured after the first push."""
+    journal = Journal(tmp_path)
+    push = {"rollback_id": "rb-1", "previous_offsets": OLD.tolist(),
+            "new_offsets": NEW.tolist(), "pushed": [True] * 6, "time": "t"}
+    journal.event("push", **push)
+    assert verify_round(journal, NEW, NEW - OLD, K) == (0, 0)
+    for index in range(K - 1):  # measured, then the host was killed
+        journal.record(SampleRecord("verify", index, True, sample={"q": [0.0]}))
+    assert verify_round(journal, NEW, NEW - OLD, K) == (0, 0)  # no new push: continue
+    journal.event("push", **push)  # pushed again (same offsets, same delta)
+    assert verify_round(Journal(tmp_path), NEW, NEW - OLD, K) == (1, K)

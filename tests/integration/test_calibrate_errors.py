@@ -133,4 +133,5 @@ def test_plan_that_cannot_separate_the_parameters_stops_before_moving(
         line = _error_line(stderr)
         assert "cannot separate" in line and "not separable" in line and "--poses" in line
         assert sim.truth()["q_reported"] == q_start  # the robot never moved
-    assert not (tmp_path / "run" / "journal.jsonl").exists()
+        assert "removed" in line
+    assert not (tmp_path / "run").exists()  # so `--out run --poses 20` may start it again

@@ -114,3 +114,15 @@ def test_frozen_camera_stops_calibrate_in_one_line(tmp_path: Path,
     assert code == 3
     errors = [line for line in err.splitlines() if line.startswith("hostpc calibrate: error")]
     assert len(errors) == 1 and "left camera: frozen frame (capture 1" in errors[0], err
+
+
+def test_replay_refuses_options_that_change_the_recorded_run(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["calibrate", "--replay", str(tmp_path / "recording"), "--out",
+                 str(tmp_path / "rep"), "--poses", "25", "--effects", "+backlash",
+                 "--no-report"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert "exactly as recorded" in err[0] and "--poses" in err[0] and "--effects" in err[0]
+    assert "--out" not in err[0].split("drop", 1)[1]  # --out and --no-report are fine
+    assert not (tmp_path / "rep").exists()
