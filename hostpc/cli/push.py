@@ -139,7 +139,7 @@ async def _push(args: argparse.Namespace, saved: SavedFit, address: RobotAddress
         if not args.force:
             await _check_same_robot_and_not_pushed(robot, saved, args.fit, address, offsets)
         plan = plan_push(saved, offsets, args.max_correction,  # type: ignore[arg-type]
-                         force=args.force, dataset_file="the fit's dataset")
+                         force=args.force, dataset_file=_dataset_file(args.fit))
         if plan.refused or args.dry_run:
             return plan, None
         run_dir.mkdir(parents=True, exist_ok=True)
@@ -172,3 +172,10 @@ async def _check_same_robot_and_not_pushed(robot: Any, saved: SavedFit, fit: str
             f"{entry.get('controller', '?')} at {entry.get('time', '?')}, "
             f"{ledger_path(fit)}); pushing again would double the corrections; roll back with "
             f"`hostpc rollback --run {entry.get('run_dir', 'DIR')}` or use --force")
+
+
+def _dataset_file(fit_file: str) -> str:
+    """The dataset to diagnose for a refused push: the one beside the fit (a run folder's
+    dataset.json), else the fit's own `dataset` file name when it records one."""
+    beside = Path(fit_file).parent / "dataset.json"
+    return str(beside) if beside.exists() else "DATASET (the dataset the fit was made from)"
