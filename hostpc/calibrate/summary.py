@@ -247,8 +247,10 @@ def _verify_line(verify: Mapping[str, Any]) -> str:
              if verify["n_measured"] > verify["n_planned"]  # dual_loop: two targets a pose
              else f"{verify['n_measured']} fresh poses")
     p_value = verify.get("p_value")
-    test = (f"chi2 {_num(verify.get('statistic'))} on {verify.get('dof')} dof, p = "
-            f"{_p_value(p_value)} (FAIL if p < alpha = {verify.get('alpha')})")
+    p_text = _p_value(p_value)
+    test = (f"chi2 {_num(verify.get('statistic'))} on {verify.get('dof')} dof, p "
+            f"{p_text if p_text.startswith('>') else '= ' + p_text} "
+            f"(FAIL if p < alpha = {verify.get('alpha')})")
     tolerance = verify.get("tolerance_mm")
     test += ("; tolerance: none" if tolerance is None
              else f"; tolerance RMS <= {tolerance:g} mm")

@@ -17,7 +17,7 @@ def _verify(p_value: float) -> dict[str, Any]:
 
 def test_the_verify_line_states_the_fail_rule_and_never_rounds_p_to_1() -> None:
     line = _verify_line(_verify(0.99962))
-    assert "p = > 0.999 (FAIL if p < alpha = 0.01)" in line and line.endswith(": PASS")
+    assert "p > 0.999 (FAIL if p < alpha = 0.01)" in line and line.endswith(": PASS")
     assert "FAIL below" not in line and "p = 1 " not in line
     assert "p = 0.997 (FAIL if p < alpha = 0.01)" in _verify_line(_verify(0.9971))
 
