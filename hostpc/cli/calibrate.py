@@ -30,12 +30,11 @@ import asyncio
 import dataclasses
 import datetime as _dt
 import json
-import math
 import shutil
 import signal
 import sys
 import types
-from collections.abc import Callable, Coroutine, Iterator
+from collections.abc import Coroutine, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, NoReturn
@@ -49,6 +48,7 @@ from hostpc.cli.calibrate_checks import (
     check_out_folder,
 )
 from hostpc.cli.fit import add_model_options
+from hostpc.cli.numbers import finite, integer
 from hostpc.cli.progress import StderrProgress
 from hostpc.errors import InputError
 from hostpc.methods import METHOD_CLASSES
@@ -123,6 +123,8 @@ def sigterm_as_interrupt() -> Iterator[None]:
     finally:
         signal.signal(signal.SIGTERM, previous)
 MODBUS_PORT = 502
+POSITIVE = finite(above=0.0)
+COUNT = integer(least=1)
 """Default Modbus TCP port of `--modbus HOST` (and of a robot without --modbus)."""
 
 
@@ -143,11 +145,11 @@ def register(subparsers: Any) -> None:
                         help="robot driver (default zerocal)")
     parser.add_argument("--token", help="shared token (default: $ZEROCAL_TOKEN, else the "
                         "simulator's default)")
-    parser.add_argument("--timeout", type=_positive, default=10.0, help="seconds per request")
+    parser.add_argument("--timeout", type=POSITIVE, default=10.0, help="seconds per request")
     parser.add_argument("--method", choices=tuple(METHOD_CLASSES), default="stereo_target",
                         help="measurement method (default stereo_target)")
-    parser.add_argument("--poses", type=_count(1), default=60, help="fit poses (default 60)")
-    parser.add_argument("--verify-poses", type=_count(0), default=10,
+    parser.add_argument("--poses", type=COUNT, default=60, help="fit poses (default 60)")
+    parser.add_argument("--verify-poses", type=integer(least=0), default=10,
                         help="fresh verification poses after the push (default 10; 0 = none)")
     parser.add_argument("--seed", type=int, default=0, help="planning seed (default 0)")
     add_model_options(parser)
@@ -160,7 +162,7 @@ def register(subparsers: Any) -> None:
                         "captures through the controller)")
     parser.add_argument("--depth", choices=("triangulate", "sgbm"), default="triangulate",
                         help="stereo depth method (default triangulate)")
-    parser.add_argument("--pixel-floor", type=_non_negative, default=0.01, metavar="PX",
+    parser.add_argument("--pixel-floor", type=finite(least=0.0), default=0.01, metavar="PX",
                         help="systematic floor (px per image coordinate) added to each "
                         "measured covariance for rig calibration and detection errors "
                         "(default 0.01; 0 = image noise only)")
@@ -177,27 +179,29 @@ def register(subparsers: Any) -> None:
                         help="push despite a guard rail (a correction beyond "
                         "--max-correction, a fit that did not converge or does not explain "
                         "the measurements; on a resume: push again after a rollback)")
-    parser.add_argument("--max-correction", type=_positive, default=None, metavar="DEG",
+    parser.add_argument("--max-correction", type=POSITIVE, default=None, metavar="DEG",
                         help="largest correction pushed without --force (default 2 deg)")
-    parser.add_argument("--verify-alpha", type=_probability, default=None, metavar="P",
+    parser.add_argument("--verify-alpha", type=finite(above=0.0, below=1.0), default=None,
+                        metavar="P",
                         help="false-FAIL rate of the verification's chi-square test "
                         "(default 0.01; docs/calibrate.md)")
-    parser.add_argument("--verify-tolerance", type=_positive, default=None, metavar="MM",
+    parser.add_argument("--verify-tolerance", type=POSITIVE, default=None, metavar="MM",
                         help="station tolerance: verification also FAILs if the RMS after "
                         "the push exceeds MM (default: none)")
-    parser.add_argument("--verify-factor", type=_positive, default=None, metavar="F",
+    parser.add_argument("--verify-factor", type=POSITIVE, default=None, metavar="F",
                         help="the verification test takes the measurement noise as F x the "
                         "stated noise (default 1)")
-    parser.add_argument("--speed", type=_speed, default=0.5, help="motion speed (0, 1]")
+    parser.add_argument("--speed", type=finite(above=0.0, most=1.0), default=0.5,
+                        help="motion speed (0, 1]")
     parser.add_argument("--criterion", choices=("D", "random"), default="D",
                         help="pose selection (default D-optimal)")
-    parser.add_argument("--target-sigma", type=_positive, default=None, metavar="DEG",
+    parser.add_argument("--target-sigma", type=POSITIVE, default=None, metavar="DEG",
                         help="stop adding fit poses once every identifiable joint offset's "
                         "predicted sigma is <= DEG (then --poses is the most)")
-    parser.add_argument("--candidates", type=_count(1), default=1500,
+    parser.add_argument("--candidates", type=COUNT, default=1500,
                         help="candidate pool size of the planner (default 1500)")
     parser.add_argument("--scenario", metavar="FILE", help="with --robot sim: scenario file")
-    parser.add_argument("--time-scale", type=_non_negative, default=0.0,
+    parser.add_argument("--time-scale", type=finite(least=0.0), default=0.0,
                         help="with --robot sim: wall seconds per simulated second (default 0)")
     parser.add_argument("--out", metavar="DIR", help="run folder (default ./zerocal-runs/...)")
     add_archive_options(parser, read=False)
@@ -217,57 +221,6 @@ def register(subparsers: Any) -> None:
 def _one_line_error(parser: argparse.ArgumentParser, message: str) -> NoReturn:
     """A bad option: one line on stderr, exit 2 (no usage block)."""
     parser.exit(2, f"hostpc calibrate: error: {message}\n")
-
-
-def _finite(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"{text!r}: must be a finite number")
-    return value
-
-
-def _positive(text: str) -> float:
-    value = _finite(text)
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: must be positive")
-    return value
-
-
-def _non_negative(text: str) -> float:
-    value = _finite(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: must not be negative")
-    return value
-
-
-def _probability(text: str) -> float:
-    value = _finite(text)
-    if not 0.0 < value < 1.0:
-        raise argparse.ArgumentTypeError(f"{text!r}: must be in (0, 1)")
-    return value
-
-
-def _speed(text: str) -> float:
-    value = _finite(text)
-    if not 0.0 < value <= 1.0:
-        raise argparse.ArgumentTypeError(f"{text!r}: must be in (0, 1]")
-    return value
-
-
-def _count(minimum: int) -> Callable[[str], int]:
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"{text!r}: must be at least {minimum}")
-        return value
-    parse.__name__ = "count"
-    return parse
 
 
 def _settings(args: argparse.Namespace) -> RunSettings:

@@ -8,21 +8,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
 
+from hostpc.cli.numbers import finite
 from hostpc.errors import InputError
-
-
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
-    return value
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -33,9 +23,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--db", required=True, metavar="URL",
                         help="sqlite:///PATH or postgresql://USER@HOST/DB")
     parser.add_argument("--robot", metavar="SERIAL", help="only this robot")
-    parser.add_argument("--threshold", type=_positive, default=None, metavar="DEG",
+    parser.add_argument("--threshold", type=finite(above=0.0), default=None, metavar="DEG",
                         help="drift alarm when a zero moved more than this (default 0.02 deg)")
-    parser.add_argument("--z-limit", type=_positive, default=None, metavar="Z",
+    parser.add_argument("--z-limit", type=finite(above=0.0), default=None, metavar="Z",
                         help="... or more than Z sigma of the two fits (default 6)")
     parser.add_argument("--json", action="store_true",
                         help='print {"runs": [...], "drift": [...], "fleet": [...]}')
