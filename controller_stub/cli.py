@@ -30,12 +30,12 @@ import contextlib
 import logging
 import os
 import signal
-import stat
 import sys
 from pathlib import Path
 from typing import Any
 
 from protocol import DEFAULT_PORT
+from protocol.auth import read_token_file
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -170,31 +170,6 @@ def _resolve_token(args: argparse.Namespace, scenario: Any) -> str:
         token, source = scenario.server.token, "server.token"
     if not token.strip():
         raise ValueError(f"{source}: the token is empty")
-    return token
-
-
-def read_token_file(path: Path) -> str:
-    """The token in `path` (its first line, stripped); ValueError if the file cannot be read,
-    is not a regular file, is readable by group or others, or is empty."""
-    try:
-        info = path.stat()
-    except OSError as exc:
-        raise ValueError(f"--token-file {path}: cannot read ({exc.strerror})") from None
-    if not stat.S_ISREG(info.st_mode):
-        raise ValueError(f"--token-file {path}: not a regular file")
-    if info.st_mode & 0o077:
-        raise ValueError(
-            f"--token-file {path}: readable by others (mode {stat.S_IMODE(info.st_mode):04o}); "
-            f"chmod 600 {path}"
-        )
-    try:
-        with path.open(encoding="utf-8") as handle:
-            first = handle.readline(4096)
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ValueError(f"--token-file {path}: cannot read ({exc})") from None
-    token = first.strip()
-    if not token:
-        raise ValueError(f"--token-file {path}: the token is empty")
     return token
 
 

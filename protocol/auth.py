@@ -16,6 +16,8 @@ from __future__ import annotations
 import hashlib
 import hmac
 import secrets
+import stat
+from pathlib import Path
 
 _CONTEXT = b"zerocal-auth-v1"
 NONCE_BYTES = 16
@@ -46,3 +48,29 @@ def server_proof(token: str, server_nonce: str, client_nonce: str) -> str:
 def proofs_match(expected: str, received: str) -> bool:
     """Constant-time comparison of two hex proofs."""
     return hmac.compare_digest(expected.encode("ascii"), received.encode("ascii"))
+
+
+def read_token_file(path: Path) -> str:
+    """The shared token in `path` (its first line, stripped), for every command that takes
+    `--token-file`; ValueError (one line, naming the file) if it cannot be read, is not a
+    regular file, is readable by group or others (mode 0600 or stricter), or is empty."""
+    try:
+        info = path.stat()
+    except OSError as exc:
+        raise ValueError(f"--token-file {path}: cannot read ({exc.strerror})") from None
+    if not stat.S_ISREG(info.st_mode):
+        raise ValueError(f"--token-file {path}: not a regular file")
+    if info.st_mode & 0o077:
+        raise ValueError(
+            f"--token-file {path}: readable by others (mode {stat.S_IMODE(info.st_mode):04o}); "
+            f"chmod 600 {path}"
+        )
+    try:
+        with path.open(encoding="utf-8") as handle:
+            first = handle.readline(4096)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"--token-file {path}: cannot read ({exc})") from None
+    token = first.strip()
+    if not token:
+        raise ValueError(f"--token-file {path}: the token is empty")
+    return token

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import importlib
 import os
-import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -21,6 +20,7 @@ from typing import Any
 from hostpc.errors import InputError
 from hostpc.robots.base import RobotAdapter
 from protocol import DEFAULT_PORT
+from protocol.auth import read_token_file as auth_token_file
 
 DRIVERS = ("zerocal", "ur")
 DEFAULT_TOKEN = "zerocal-sim"
@@ -87,27 +87,10 @@ def read_token_file(path: str | Path) -> str:
     """The token in `path` (its first line, stripped). InputError naming the file if it
     cannot be read, is not a regular file, is readable by group or others (it must be mode
     0600 or stricter), or is empty."""
-    path = Path(path)
     try:
-        info = path.stat()
-    except OSError as exc:
-        raise InputError(f"--token-file {path}: cannot read ({exc.strerror})") from None
-    if not stat.S_ISREG(info.st_mode):
-        raise InputError(f"--token-file {path}: not a regular file")
-    if info.st_mode & 0o077:
-        raise InputError(
-            f"--token-file {path}: readable by others (mode {stat.S_IMODE(info.st_mode):04o}); "
-            f"chmod 600 {path}"
-        )
-    try:
-        with path.open(encoding="utf-8") as handle:
-            first = handle.readline(4096)
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"--token-file {path}: cannot read ({exc})") from None
-    token = first.strip()
-    if not token:
-        raise InputError(f"--token-file {path}: the token is empty")
-    return token
+        return auth_token_file(Path(path))
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
 
 
 async def open_robot(
