@@ -6,11 +6,7 @@ No I/O, no clock, no asyncio (the h11 pattern). The driver feeds received bytes 
 replies the connection produced on its own (handshake answers, error replies to malformed
 input). When `state` becomes `CLOSED` the driver flushes `data_to_send()` and closes.
 
-States (docs/protocol.md, "State machine")::
-
-    AWAITING_HELLO --hello_reply--> AUTHENTICATING --auth_reply--> READY
-          |                               |                          |
-          +------ fatal error / end of stream (any state) -----------+--> CLOSED
+States and the events reported: `protocol.session_states`.
 
 The handshake is run by the connection itself: a client `Connection` sends `hello` from
 `initiate()`, checks the server's version and, if it holds a token, answers the challenge
@@ -21,14 +17,7 @@ answers both; the application only ever sees requests it is allowed to execute.
 from __future__ import annotations
 
 import itertools
-import json
-import re
 from collections.abc import Iterator
-from dataclasses import dataclass
-from enum import StrEnum
-from typing import Any
-
-from pydantic import ValidationError
 
 from protocol import auth
 from protocol.errors import (
@@ -39,13 +28,13 @@ from protocol.errors import (
     RemoteProtocolError,
 )
 from protocol.framing import DEFAULT_MAX_FRAME_SIZE, Frame, FrameDecoder, encode_frame
+from protocol.header_parsing import MAX_JSON_DEPTH as MAX_JSON_DEPTH
+from protocol.header_parsing import _find_id, parse_frame
+from protocol.header_parsing import json_nesting_depth as json_nesting_depth
 from protocol.messages import (
     EVENT_KINDS,
-    MESSAGE_ADAPTER,
     PROTOCOL_VERSION,
-    READ_ONLY_KINDS,
     REPLY_KIND,
-    REQUEST_TYPES,
     Auth,
     AuthReply,
     ErrorReply,
@@ -55,82 +44,17 @@ from protocol.messages import (
     Request,
     _Message,
 )
-
-MAX_JSON_DEPTH = 32
-"""Deepest nesting of arrays/objects accepted in a header (the protocol's messages nest at
-most a few levels); deeper headers are answered with `bad_message` before any JSON parser
-recurses into them."""
-
-
-class Role(StrEnum):
-    """Which end of the connection this object is."""
-
-    CLIENT = "client"
-    SERVER = "server"
-
-
-class ConnectionState(StrEnum):
-    """Session state, the same on both ends once each has seen the same messages."""
-
-    AWAITING_HELLO = "awaiting_hello"
-    AUTHENTICATING = "authenticating"
-    READY = "ready"
-    CLOSED = "closed"
-
-
-S = ConnectionState
-
-TRANSITIONS: dict[tuple[ConnectionState, str], ConnectionState] = {
-    (S.AWAITING_HELLO, "hello_reply"): S.AUTHENTICATING,
-    (S.AUTHENTICATING, "auth_reply"): S.READY,
-}
-"""(state, kind of the message passing) -> next state. The server applies it when it sends
-the message, the client when it receives it. Fatal errors and end of stream go to CLOSED."""
-
-ALLOWED_REQUESTS: dict[ConnectionState, frozenset[str]] = {
-    S.AWAITING_HELLO: frozenset({"hello"}),
-    S.AUTHENTICATING: READ_ONLY_KINDS | {"auth"},
-    S.READY: frozenset(REQUEST_TYPES) - {"hello", "auth"},
-    S.CLOSED: frozenset(),
-}
-"""Requests the server executes in each state (it refuses the rest with an error code)."""
-
-REFUSAL_CODE: dict[ConnectionState, ErrorCode] = {
-    S.AWAITING_HELLO: ErrorCode.UNEXPECTED_MESSAGE,
-    S.AUTHENTICATING: ErrorCode.AUTH_REQUIRED,
-    S.READY: ErrorCode.UNEXPECTED_MESSAGE,
-}
-"""The code of the error reply to a request that is not allowed in a state (except that a
-repeated hello or auth is always `unexpected_message`)."""
-
-
-@dataclass(frozen=True)
-class StateChanged:
-    """Event: the session moved from `old` to `new` (e.g. authenticated, closed)."""
-
-    old: ConnectionState
-    new: ConnectionState
-
-
-@dataclass(frozen=True)
-class Rejected:
-    """Event: the peer sent something invalid. A server has queued an error reply for it.
-
-    fatal: the connection is now CLOSED (flush `data_to_send()`, then close the socket).
-    """
-
-    code: ErrorCode
-    message: str
-    reply_to: int | None
-    fatal: bool
-
-
-@dataclass(frozen=True)
-class ConnectionClosed:
-    """Event: the peer ended the stream."""
-
-
-Event = _Message | StateChanged | Rejected | ConnectionClosed
+from protocol.session_states import ALLOWED_REQUESTS as ALLOWED_REQUESTS
+from protocol.session_states import REFUSAL_CODE as REFUSAL_CODE
+from protocol.session_states import TRANSITIONS as TRANSITIONS
+from protocol.session_states import ConnectionClosed as ConnectionClosed
+from protocol.session_states import ConnectionState as ConnectionState
+from protocol.session_states import Event as Event
+from protocol.session_states import Rejected as Rejected
+from protocol.session_states import Role as Role
+from protocol.session_states import S as S
+from protocol.session_states import StateChanged as StateChanged
+from protocol.session_states import refusal_text
 
 
 class Connection:
@@ -362,7 +286,7 @@ class Connection:
 
     def _receive_frame(self, frame: Frame) -> list[Event]:
         try:
-            message = self._parse(frame)
+            message = parse_frame(frame)
         except RemoteProtocolError as exc:
             return self._reject(exc, _find_id(frame.header))
         try:
@@ -371,28 +295,6 @@ class Connection:
             return self._client_received(message)
         except RemoteProtocolError as exc:
             return self._reject(exc, getattr(message, "id", None))
-
-    def _parse(self, frame: Frame) -> _Message:
-        depth = json_nesting_depth(frame.header, MAX_JSON_DEPTH)
-        if depth > MAX_JSON_DEPTH:
-            raise RemoteProtocolError(
-                ErrorCode.BAD_MESSAGE,
-                f"header nests deeper than {MAX_JSON_DEPTH} levels of arrays/objects",
-            )
-        try:
-            # strict: the wire's JSON types are the schema's (no "2" for 2, no "0.1" for 0.1)
-            message: _Message = MESSAGE_ADAPTER.validate_json(frame.header, strict=True)
-        except ValidationError as exc:
-            raise _validation_error(exc) from None
-        if len(frame.attachments) != message.expected_attachments():
-            raise RemoteProtocolError(
-                ErrorCode.BAD_MESSAGE,
-                f"{message.kind} needs {message.expected_attachments()} attachments, "
-                f"frame has {len(frame.attachments)}",
-            )
-        if frame.attachments:
-            message.with_attachments(*frame.attachments)
-        return message
 
     def _server_received(self, message: _Message) -> list[Event]:
         if isinstance(message, ErrorReply):
@@ -409,7 +311,7 @@ class Connection:
             code = REFUSAL_CODE[self.state]
             if message.kind in ("hello", "auth") and self.state is not S.AWAITING_HELLO:
                 code = ErrorCode.UNEXPECTED_MESSAGE
-            raise RemoteProtocolError(code, _refusal_text(message.kind, self.state, code))
+            raise RemoteProtocolError(code, refusal_text(message.kind, self.state, code))
         self._pending[message.id] = message.kind
         old = self.state
         if isinstance(message, Hello):
@@ -544,61 +446,3 @@ class Connection:
         self.state = ConnectionState.CLOSED
         self._pending.clear()
         return [StateChanged(old, ConnectionState.CLOSED)]
-
-
-def _validation_error(exc: ValidationError) -> RemoteProtocolError:
-    """Map a pydantic failure on a received header to a protocol error code."""
-    error = exc.errors(include_url=False)[0]
-    if error["type"] == "union_tag_invalid":
-        kind = (error.get("ctx") or {}).get("tag", "?")
-        return RemoteProtocolError(ErrorCode.UNKNOWN_KIND, f"unknown message kind {kind!r}")
-    if error["type"] in ("json_invalid", "json_type"):
-        return RemoteProtocolError(
-            ErrorCode.BAD_MESSAGE, f"header is not valid JSON: {error['msg']}"
-        )
-    location = ".".join(str(part) for part in error["loc"][1:]) or "<header>"
-    return RemoteProtocolError(ErrorCode.BAD_MESSAGE, f"{location}: {error['msg']}")
-
-
-_JSON_STRUCTURE = re.compile(rb'"(?:[^"\\]|\\.)*"|[\[\]{}]', re.DOTALL)
-"""A JSON string (skipped: brackets inside it do not count) or a bracket."""
-
-
-def json_nesting_depth(text: bytes, stop_above: int | None = None) -> int:
-    """Deepest nesting of arrays/objects in JSON `text` (no parsing, no recursion; a scan
-    that stops as soon as the depth exceeds `stop_above`)."""
-    depth = deepest = 0
-    for match in _JSON_STRUCTURE.finditer(text):
-        token = match.group()
-        if token in (b"[", b"{"):
-            depth += 1
-            if depth > deepest:
-                deepest = depth
-                if stop_above is not None and deepest > stop_above:
-                    break
-        elif token in (b"]", b"}"):
-            depth -= 1
-    return deepest
-
-
-def _find_id(header: bytes) -> int | None:
-    """Best effort: the request id of an unparseable message, so the error can name it."""
-    if json_nesting_depth(header, MAX_JSON_DEPTH) > MAX_JSON_DEPTH:
-        return None
-    try:
-        document: Any = json.loads(header)
-    except (ValueError, UnicodeDecodeError, RecursionError):
-        return None
-    if isinstance(document, dict):
-        value = document.get("id")
-        if type(value) is int and 0 <= value <= 2**53:
-            return value
-    return None
-
-
-def _refusal_text(kind: str, state: ConnectionState, code: ErrorCode) -> str:
-    if code is ErrorCode.AUTH_REQUIRED:
-        return f"{kind} needs an authenticated session (send auth with the shared token)"
-    if state is S.AWAITING_HELLO:
-        return f"{kind} before hello: the first message must be hello"
-    return f"{kind} is not allowed in state {state}"

@@ -14,62 +14,83 @@ from __future__ import annotations
 
 from typing import Annotated, Any, ClassVar, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, TypeAdapter
+from pydantic import Field, TypeAdapter
 
-PROTOCOL_VERSION = 1
-"""Version negotiated by hello; a peer with another version is refused (version_mismatch)."""
-
-FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
-JointVector = Annotated[list[FiniteFloat], Field(max_length=64)]
-"""(n,) joint angles or offsets, radians, joint 1 first."""
-RequestId = Annotated[int, Field(ge=0, le=2**53)]
-Nonce = Annotated[str, Field(pattern=r"^[0-9a-f]{32,128}$")]
-Digest = Annotated[str, Field(pattern=r"^[0-9a-f]{64}$")]
-ShortText = Annotated[str, Field(max_length=200)]
-Text = Annotated[str, Field(max_length=4000)]
-Bits = Annotated[list[bool], Field(max_length=1024)]
-Pattern = Literal["target", "chessboard"]
-ImageEncoding = Literal["raw", "png"]
-
-
-class _Message(BaseModel):
-    """Base of every message: unknown fields are refused; attachments ride alongside."""
-
-    model_config = ConfigDict(extra="forbid")
-    kind: str
-    _attachments: tuple[bytes | memoryview, ...] = PrivateAttr(default=())
-
-    @property
-    def attachments(self) -> tuple[bytes | memoryview, ...]:
-        """Binary attachments sent in the same frame (empty for most messages)."""
-        return self._attachments
-
-    def with_attachments(self, *attachments: bytes | memoryview) -> _Message:
-        """Attach binary payloads (not copied); returns self for chaining."""
-        self._attachments = tuple(attachments)
-        return self
-
-    def expected_attachments(self) -> int:
-        """How many attachments a frame carrying this message must have."""
-        return 0
-
-
-class Request(_Message):
-    """A client-to-server message that expects exactly one reply naming its `id`."""
-
-    id: RequestId
-    read_only: ClassVar[bool] = False
-    """True if the request is allowed before auth: a cheap read that neither moves the robot
-    nor writes state (`capture` is a read but not cheap, so it needs auth)."""
-
-
-class Reply(_Message):
-    """A server-to-client answer to the request whose id is `reply_to`."""
-
-    reply_to: RequestId
-
-
-# --- handshake -----------------------------------------------------------------------------
+from protocol.measurement_messages import (
+    Capture as Capture,
+)
+from protocol.measurement_messages import (
+    CaptureDone as CaptureDone,
+)
+from protocol.measurement_messages import (
+    ImageInfo as ImageInfo,
+)
+from protocol.measurement_messages import (
+    Matrix3 as Matrix3,
+)
+from protocol.measurement_messages import (
+    MeasureTargets as MeasureTargets,
+)
+from protocol.measurement_messages import (
+    MeasureTracker as MeasureTracker,
+)
+from protocol.measurement_messages import (
+    ReflectorObservation as ReflectorObservation,
+)
+from protocol.measurement_messages import (
+    TargetObservation as TargetObservation,
+)
+from protocol.measurement_messages import (
+    TargetsMeasured as TargetsMeasured,
+)
+from protocol.measurement_messages import (
+    TrackerMeasured as TrackerMeasured,
+)
+from protocol.measurement_messages import (
+    Vector3 as Vector3,
+)
+from protocol.message_base import (
+    PROTOCOL_VERSION as PROTOCOL_VERSION,
+)
+from protocol.message_base import (
+    Bits as Bits,
+)
+from protocol.message_base import (
+    Digest as Digest,
+)
+from protocol.message_base import (
+    FiniteFloat as FiniteFloat,
+)
+from protocol.message_base import (
+    ImageEncoding as ImageEncoding,
+)
+from protocol.message_base import (
+    JointVector as JointVector,
+)
+from protocol.message_base import (
+    Nonce as Nonce,
+)
+from protocol.message_base import (
+    Pattern as Pattern,
+)
+from protocol.message_base import (
+    Reply as Reply,
+)
+from protocol.message_base import (
+    Request as Request,
+)
+from protocol.message_base import (
+    RequestId as RequestId,
+)
+from protocol.message_base import (
+    ShortText as ShortText,
+)
+from protocol.message_base import (
+    Text as Text,
+)
+from protocol.message_base import (
+    _Message as _Message,
+)
 
 
 class Hello(Request):
@@ -229,130 +250,6 @@ class Aborted(Reply):
 
     kind: Literal["aborted"] = "aborted"
     was_moving: bool
-
-
-# --- camera --------------------------------------------------------------------------------
-
-
-class Capture(Request):
-    """Expose the stereo pair: pattern "target" or "chessboard" (view index for the latter).
-
-    Needs an authenticated session: rendering and sending megabytes of pixels is the most
-    expensive thing a controller does, so it is not offered to anonymous peers.
-    """
-
-    kind: Literal["capture"] = "capture"
-    pattern: Pattern = "target"
-    view: Annotated[int, Field(ge=0)] = 0
-    encoding: ImageEncoding = "raw"
-
-
-class ImageInfo(BaseModel):
-    """How to read one image attachment: raw is row-major uint8 (height, width); png is PNG."""
-
-    model_config = ConfigDict(extra="forbid")
-    camera: Literal["left", "right"]
-    width: Annotated[int, Field(ge=1, le=65535)]
-    height: Annotated[int, Field(ge=1, le=65535)]
-    dtype: Literal["uint8"] = "uint8"
-    encoding: ImageEncoding = "raw"
-    nbytes: Annotated[int, Field(ge=0)]
-
-
-class CaptureDone(Reply):
-    """A stereo pair: `images` describes the attachments (left, right), in order.
-
-    q: (n,) reported joint angles at the exposure (rad); time: sim time of the exposure (s).
-    """
-
-    kind: Literal["capture_done"] = "capture_done"
-    pattern: Pattern
-    view: int
-    q: JointVector
-    time: FiniteFloat
-    images: Annotated[list[ImageInfo], Field(min_length=2, max_length=2)]
-
-    def expected_attachments(self) -> int:
-        """One attachment per image."""
-        return len(self.images)
-
-
-# --- measured targets (a controller with its own stereo front end) --------------------------
-
-
-Vector3 = Annotated[list[FiniteFloat], Field(min_length=3, max_length=3)]
-Matrix3 = Annotated[list[Vector3], Field(min_length=3, max_length=3)]
-
-
-class MeasureTargets(Request):
-    """Measure every target the controller's camera sees now, already triangulated.
-
-    For a controller whose vision front end delivers points instead of images (the
-    humanoid's head camera, dual_loop). Needs an authenticated session, like `capture`.
-    """
-
-    kind: Literal["measure_targets"] = "measure_targets"
-
-
-class TargetObservation(BaseModel):
-    """One triangulated target: `chain` names the kinematic chain that carries it (e.g.
-    "left", "right"); p: (3,) m in the camera (left optical) frame; cov: (3, 3) m^2."""
-
-    model_config = ConfigDict(extra="forbid")
-    chain: ShortText
-    p: Vector3
-    cov: Matrix3
-
-
-class TargetsMeasured(Reply):
-    """The visible targets (none if nothing is in view), with the joint angles at the
-    measurement: q (n,) rad, all joints of the controller; time: controller time (s)."""
-
-    kind: Literal["targets_measured"] = "targets_measured"
-    q: JointVector
-    time: FiniteFloat
-    targets: Annotated[list[TargetObservation], Field(max_length=64)]
-
-
-# --- laser tracker (world_point) ----------------------------------------------------------
-
-
-class MeasureTracker(Request):
-    """Measure every reflector on the flange with the cell's laser tracker, now.
-
-    Needs an authenticated session, like `capture`. A controller without a tracker refuses
-    with reason `unsupported`.
-    """
-
-    kind: Literal["measure_tracker"] = "measure_tracker"
-
-
-class ReflectorObservation(BaseModel):
-    """One reflector measured by the tracker: name; p: (3,) m in the tracker (world)
-    frame; cov: (3, 3) m^2."""
-
-    model_config = ConfigDict(extra="forbid")
-    name: ShortText
-    p: Vector3
-    cov: Matrix3
-
-
-class TrackerMeasured(Reply):
-    """The reflectors in the tracker's view, the names of those whose beam is lost (line of
-    sight outside their acceptance cone), the joint angles q (n,) rad at the measurement,
-    controller time (s), and the tracker's nominal description (`world_base` {xyz, rpy}
-    registration of the robot base, `reflectors` name -> (3,) nominal flange position,
-    `axes`, `acceptance_deg`, `sigma_distance` m, `sigma_angle` rad)."""
-
-    kind: Literal["tracker_measured"] = "tracker_measured"
-    q: JointVector
-    time: FiniteFloat
-    reflectors: Annotated[list[ReflectorObservation], Field(max_length=64)]
-    lost: Annotated[list[ShortText], Field(max_length=64)] = []
-    description: dict[str, Any] = {}
-
-
-# --- zero offsets --------------------------------------------------------------------------
 
 
 class GetOffsets(Request):

@@ -24,16 +24,19 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import os
 import socket
-from collections.abc import AsyncIterator, Callable, Generator
+from collections.abc import Callable, Generator
 from typing import Any, TypeVar
 
 import numpy as np
 
 from hostpc.errors import ConnectionFailed, ProtocolViolation, RequestTimeout
+from hostpc.transport.error_mapping import _os_error_text, _reply_error
+from hostpc.transport.io_events import IoEventSubscription as IoEventSubscription
+from hostpc.transport.link import READ_CHUNK as READ_CHUNK
+from hostpc.transport.link import _Link, _LinkLostError
+from hostpc.transport.reply_values import _array, _decode_image, _floats
 from hostpc.transport.types import (
-    ControllerRefusedError,
     ControllerState,
     GuardedMoveOutcome,
     IoEdgeEvent,
@@ -45,12 +48,11 @@ from hostpc.transport.types import (
 )
 from protocol import DEFAULT_PORT
 from protocol import messages as m
-from protocol.connection import Connection, ConnectionState, Rejected, Role, StateChanged
-from protocol.errors import ErrorCode, LocalProtocolError
+from protocol.connection import Connection, Role
+from protocol.errors import LocalProtocolError
 
 logger = logging.getLogger(__name__)
 
-READ_CHUNK = 1 << 20
 IDEMPOTENT_KINDS = frozenset(
     {"get_state", "get_offsets", "read_io", "capture", "measure_targets", "measure_tracker",
      "heartbeat"}
@@ -60,174 +62,8 @@ MOTION_KINDS = frozenset({"move_joints", "guarded_move"})
 """Requests that move the robot: timed by `motion_timeout`, aborted when they time out."""
 ABORT_AFTER_TIMEOUT_S = 2.0
 """How long the abort sent after a motion timeout may take (s)."""
-_PROTOCOL_CODES = frozenset(
-    {
-        ErrorCode.BAD_FRAME,
-        ErrorCode.FRAME_TOO_LARGE,
-        ErrorCode.BAD_MESSAGE,
-        ErrorCode.UNKNOWN_KIND,
-        ErrorCode.UNEXPECTED_MESSAGE,
-        ErrorCode.VERSION_MISMATCH,
-    }
-)
 
 ReplyT = TypeVar("ReplyT", bound=m.Reply)
-
-
-class _LinkLostError(Exception):
-    """The TCP connection ended while a request was in flight."""
-
-
-class _Link:
-    """One TCP connection: the sans-IO Connection, the reader task, pending replies."""
-
-    def __init__(
-        self,
-        reader: asyncio.StreamReader,
-        writer: asyncio.StreamWriter,
-        conn: Connection,
-        on_event: Callable[[m.IoEdge], None],
-    ) -> None:
-        self.reader = reader
-        self.writer = writer
-        self.conn = conn
-        self.pending: dict[int, asyncio.Future[m._Message]] = {}
-        self.handshake: asyncio.Future[None] = asyncio.get_running_loop().create_future()
-        # The opener waits on a shield of the handshake; if it gave up (timeout), a later
-        # failure set here must not be reported as "Future exception was never retrieved".
-        self.handshake.add_done_callback(_retrieve_exception)
-        self.closed_reason: str | None = None
-        self._on_event = on_event
-        self.task = asyncio.get_running_loop().create_task(self._read_loop())
-
-    @property
-    def alive(self) -> bool:
-        return self.closed_reason is None and self.conn.state is not ConnectionState.CLOSED
-
-    def send(self, request: m.Request) -> asyncio.Future[m._Message]:
-        data = self.conn.send(request)
-        future: asyncio.Future[m._Message] = asyncio.get_running_loop().create_future()
-        self.pending[request.id] = future
-        self.writer.write(data)
-        return future
-
-    async def _read_loop(self) -> None:
-        reason = "connection closed by the controller"
-        try:
-            while True:
-                try:
-                    data = await self.reader.read(READ_CHUNK)
-                except (ConnectionError, OSError) as exc:
-                    reason = f"connection lost ({exc})"
-                    data = b""
-                events = self.conn.receive_data(data)
-                outgoing = self.conn.data_to_send()
-                if outgoing:
-                    self.writer.write(outgoing)
-                for event in events:
-                    self._dispatch(event)
-                if self.conn.state is ConnectionState.CLOSED:
-                    break
-        finally:
-            self._lost(reason)
-
-    def _dispatch(self, event: object) -> None:
-        if isinstance(event, m.IoEdge):
-            self._on_event(event)
-        elif isinstance(event, (m.Reply, m.ErrorReply)):
-            future = self.pending.pop(event.reply_to, None) if event.reply_to is not None else None
-            if future is not None:
-                if not future.done():
-                    future.set_result(event)
-            elif isinstance(event, m.ErrorReply) and not self.handshake.done():
-                self.handshake.set_exception(_handshake_error(event))
-            elif isinstance(event, m.ErrorReply):
-                logger.warning("controller error %s: %s", event.code, event.message)
-        elif isinstance(event, StateChanged):
-            ready = ConnectionState.READY if self.conn.has_token else ConnectionState.AUTHENTICATING
-            if event.new is ready and not self.handshake.done():
-                self.handshake.set_result(None)
-        elif isinstance(event, Rejected):
-            logger.warning("controller broke the protocol: %s (%s)", event.message, event.code)
-            error = ProtocolViolation(f"controller sent an invalid message: {event.message}")
-            if not self.handshake.done():
-                self.handshake.set_exception(error)
-            future = self.pending.pop(event.reply_to, None) if event.reply_to is not None else None
-            if future is not None and not future.done():
-                future.set_exception(error)
-
-    def _lost(self, reason: str) -> None:
-        if self.closed_reason is None:
-            self.closed_reason = reason
-        if not self.handshake.done():
-            self.handshake.set_exception(ConnectionFailed(f"handshake failed: {reason}"))
-        for future in self.pending.values():
-            if not future.done():
-                future.set_exception(_LinkLostError(reason))
-        self.pending.clear()
-        if not self.writer.is_closing():
-            self.writer.close()
-
-    async def close(self) -> None:
-        self.task.cancel()
-        with contextlib.suppress(asyncio.CancelledError, Exception):
-            await self.task
-        self._lost("closed by the client")
-        with contextlib.suppress(Exception):
-            await self.writer.wait_closed()
-
-
-def _retrieve_exception(future: asyncio.Future[Any]) -> None:
-    if not future.cancelled():
-        future.exception()
-
-
-def _handshake_error(error: m.ErrorReply) -> Exception:
-    text = f"controller refused the session: {error.message} ({error.code})"
-    if error.code in _PROTOCOL_CODES:
-        return ProtocolViolation(text)
-    return ControllerRefusedError(text, error.code, error.reason)
-
-
-class IoEventSubscription:
-    """IO edge events pushed by the controller, in order, from subscription on.
-
-    Use as an async iterator or call `get(timeout)`; `close()` (or leaving an `async with`)
-    unsubscribes. Events arrive only on an authenticated session.
-    """
-
-    def __init__(self, client: ControllerClient, maxsize: int) -> None:
-        self._client = client
-        self.queue: asyncio.Queue[IoEdgeEvent] = asyncio.Queue(maxsize)
-
-    def _put(self, event: IoEdgeEvent) -> None:
-        try:
-            self.queue.put_nowait(event)
-        except asyncio.QueueFull:
-            logger.warning("IO event queue full; dropping edge on line %d", event.line)
-
-    async def get(self, timeout: float | None = None) -> IoEdgeEvent:
-        """The next event; RequestTimeout if none arrives within `timeout` seconds."""
-        try:
-            return await asyncio.wait_for(self.queue.get(), timeout)
-        except TimeoutError:
-            raise RequestTimeout(f"no IO edge event within {timeout} s") from None
-
-    def close(self) -> None:
-        """Stop receiving events."""
-        self._client._subscriptions.discard(self)
-
-    def __aiter__(self) -> AsyncIterator[IoEdgeEvent]:
-        return self
-
-    async def __anext__(self) -> IoEdgeEvent:
-        return await self.queue.get()
-
-    async def __aenter__(self) -> IoEventSubscription:
-        return self
-
-    async def __aexit__(self, *exc_info: object) -> None:
-        self.close()
 
 
 class _Connect:
@@ -589,51 +425,3 @@ class ControllerClient:
         edge = IoEdgeEvent(event.line, event.value, event.time, _array(event.q_latched))
         for subscription in list(self._subscriptions):
             subscription._put(edge)
-
-
-def _os_error_text(exc: OSError) -> str:
-    """A readable cause: "Connection refused", "Name or service not known" (a DNS failure's
-    errno is a negative EAI_* code that os.strerror does not know)."""
-    if isinstance(exc, socket.gaierror):
-        return f"cannot resolve the host name ({exc.strerror or exc})"
-    if exc.errno and exc.errno > 0:
-        return os.strerror(exc.errno)
-    return str(exc) or type(exc).__name__
-
-
-def _reply_error(kind: str, error: m.ErrorReply) -> Exception:
-    reason = f", reason {error.reason}" if error.reason else ""
-    text = f"controller rejected {kind}: {error.message} (code {error.code}{reason})"
-    if error.code in _PROTOCOL_CODES:
-        return ProtocolViolation(text)
-    return ControllerRefusedError(text, error.code, error.reason)
-
-
-def _array(values: list[float]) -> np.ndarray:
-    return np.asarray(values, dtype=float)
-
-
-def _floats(values: Any) -> list[float]:
-    return [float(v) for v in np.asarray(values, dtype=float).reshape(-1)]
-
-
-def _decode_image(info: m.ImageInfo, data: bytes | memoryview) -> np.ndarray:
-    if info.encoding == "png":
-        import cv2
-
-        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-        if image is None:
-            raise ProtocolViolation(f"{info.camera} image: PNG cannot be decoded")
-    else:
-        expected = info.width * info.height
-        if memoryview(data).nbytes != expected:
-            raise ProtocolViolation(
-                f"{info.camera} image: {memoryview(data).nbytes} bytes, expected {expected}"
-            )
-        image = np.frombuffer(data, dtype=np.uint8).reshape(info.height, info.width)
-    if image.shape != (info.height, info.width):
-        raise ProtocolViolation(
-            f"{info.camera} image has shape {image.shape}, header says "
-            f"({info.height}, {info.width})"
-        )
-    return image

@@ -1,0 +1,66 @@
+"""`IoEventSubscription`: the IO edge events a controller pushes, queued for one consumer.
+
+Created by `ControllerClient.subscribe_io()`; the client fans each `io_edge` out to every
+open subscription. A full queue drops the edge with a warning (the controller is never
+slowed down by a slow consumer).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import AsyncIterator
+from typing import Protocol
+
+from hostpc.errors import RequestTimeout
+from hostpc.transport.types import IoEdgeEvent
+
+# the client's logger: log records keep the name they had before the client was split
+logger = logging.getLogger("hostpc.transport.client")
+
+
+class _SubscriptionOwner(Protocol):
+    """What a subscription needs of its client (the `ControllerClient`)."""
+
+    _subscriptions: set[IoEventSubscription]
+
+
+class IoEventSubscription:
+    """IO edge events pushed by the controller, in order, from subscription on.
+
+    Use as an async iterator or call `get(timeout)`; `close()` (or leaving an `async with`)
+    unsubscribes. Events arrive only on an authenticated session.
+    """
+
+    def __init__(self, client: _SubscriptionOwner, maxsize: int) -> None:
+        self._client = client
+        self.queue: asyncio.Queue[IoEdgeEvent] = asyncio.Queue(maxsize)
+
+    def _put(self, event: IoEdgeEvent) -> None:
+        try:
+            self.queue.put_nowait(event)
+        except asyncio.QueueFull:
+            logger.warning("IO event queue full; dropping edge on line %d", event.line)
+
+    async def get(self, timeout: float | None = None) -> IoEdgeEvent:
+        """The next event; RequestTimeout if none arrives within `timeout` seconds."""
+        try:
+            return await asyncio.wait_for(self.queue.get(), timeout)
+        except TimeoutError:
+            raise RequestTimeout(f"no IO edge event within {timeout} s") from None
+
+    def close(self) -> None:
+        """Stop receiving events."""
+        self._client._subscriptions.discard(self)
+
+    def __aiter__(self) -> AsyncIterator[IoEdgeEvent]:
+        return self
+
+    async def __anext__(self) -> IoEdgeEvent:
+        return await self.queue.get()
+
+    async def __aenter__(self) -> IoEventSubscription:
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        self.close()
