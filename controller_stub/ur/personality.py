@@ -45,7 +45,8 @@ from controller_stub.simulation import Simulation
 from controller_stub.ur.control_script import ControlScript
 from controller_stub.ur.dashboard import DashboardServer
 from controller_stub.ur.paced_motion import CYCLE_S, PacedMotion
-from controller_stub.ur.rtde_server import N_REGISTERS, RtdeServer, output_type, register_field
+from controller_stub.ur.rtde_server import RtdeServer
+from controller_stub.ur.rtde_wire import N_REGISTERS, output_type, register_field
 from controller_stub.ur.script_server import ScriptServer
 
 logger = logging.getLogger(__name__)
