@@ -39,7 +39,6 @@ def _mask(bits: list[bool]) -> int:
     return sum(1 << i for i, bit in enumerate(bits) if bit)
 
 
-
 class UrRtdeValuesMixin:
     """output_values / apply_inputs of `UrPersonality` (the RTDE data source)."""
 
