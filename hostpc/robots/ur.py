@@ -14,10 +14,10 @@ Two hazards of ur_rtde shape this module (both measured):
 1. Its constructors hold the Python GIL while they wait for the controller, so a peer that
    accepts a TCP connection and never answers freezes the whole interpreter, event loop
    included. `connect_ur` therefore first talks to the controller with plain asyncio under
-   a timeout: an RTDE protocol-version request and controller-version request on 30004, the
-   dashboard greeting and queries on 29999, a TCP connect to 30003. Only a controller that
-   answered all three gets a ur_rtde interface. Every ur_rtde call runs in a worker thread
-   (`asyncio.to_thread`), never on the event loop.
+   a timeout (`ur_precheck.py`): an RTDE protocol-version request and controller-version
+   request on 30004, the dashboard greeting and queries on 29999, a TCP connect to 30003.
+   Only a controller that answered all three gets a ur_rtde interface. Every ur_rtde call
+   runs in a worker thread (`asyncio.to_thread`), never on the event loop.
 2. Right after `moveJ` returns, the receive interface may still hold a sample from before
    the end of the motion. `move_joints` therefore waits for a sample whose RTDE timestamp
    is newer than the one held when moveJ returned and that is at the target (within
@@ -32,7 +32,7 @@ them ON THE HOST. With the host offsets `o` (n,) rad (zero at connect unless giv
 which is exactly docs/conventions.md's controller zero offset (`q_cmd = encoder + o`) with the
 UR's own calibrated angle in the role of the encoder: a fitted `joint_offsets.qi = delta_i`
 (`q_true = q_cmd + delta`) is applied by `set_offsets(o + delta)`, after which the adapter
-reports true angles. The offsets live in this adapter (and in the files
+reports true angles (`ur_offsets.py`). The offsets live in this adapter (and in the files
 `hostpc.robots.ur_export` writes for ROS / URScript users); the robot itself is unchanged,
 and other software driving it must load the exported files to benefit.
 """
@@ -43,17 +43,14 @@ import asyncio
 import contextlib
 import logging
 import math
-import struct
 from collections.abc import Callable
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, TypeVar
 
 import numpy as np
 
 from hostpc.errors import ConnectionFailed, ControllerError, InputError, RequestTimeout
 from hostpc.robots.base import MoveOutcome, RobotState, StereoCapture
-from hostpc.robots.ur_guarded import (  # noqa: F401 (constants re-exported)
+from hostpc.robots.ur_guarded import (
     JOINT_ACCELERATION,
     MAX_JOINT_SPEED,
     N_DIGITAL_IO,
@@ -61,175 +58,33 @@ from hostpc.robots.ur_guarded import (  # noqa: F401 (constants re-exported)
     UrGuardedMoveMixin,
     rtde_frequency,
 )
+from hostpc.robots.ur_offsets import MAX_OFFSET_RAD, UrOffsetsMixin
+from hostpc.robots.ur_precheck import (
+    DASHBOARD_PORT,
+    RTDE_PORT,
+    RTDE_PROTOCOL_VERSION,
+    SCRIPT_PORT,
+    UrControllerInfo,
+    check_controller,
+    probe_dashboard,
+    probe_port,
+    probe_rtde,
+)
 
 logger = logging.getLogger(__name__)
 
-RTDE_PORT = 30004
-DASHBOARD_PORT = 29999
-SCRIPT_PORT = 30003
+__all__ = [  # constants, pre-checks and offsets of the sibling modules are re-exported
+    "CAMERA_PORT", "DASHBOARD_PORT", "JOINT_ACCELERATION", "MAX_JOINT_SPEED", "MAX_OFFSET_RAD",
+    "N_DIGITAL_IO", "RTDE_PORT", "RTDE_PROTOCOL_VERSION", "SCRIPT_PORT", "SETTLE_TIMEOUT_S",
+    "SETTLE_TOLERANCE_RAD", "LatchTiming", "UrAdapter", "UrControllerInfo", "check_controller",
+    "connect", "connect_ur", "parse_camera", "probe_dashboard", "probe_port", "probe_rtde",
+    "rtde_frequency",
+]
+
 CAMERA_PORT = 47800
-RTDE_PROTOCOL_VERSION = 2
 SETTLE_TOLERANCE_RAD = 1e-3
 SETTLE_TIMEOUT_S = 2.0
-MAX_OFFSET_RAD = math.radians(5.0)
-"""Largest host zero offset accepted by set_offsets (a bigger one is a fitting error)."""
 T = TypeVar("T")
-
-
-@dataclass(frozen=True)
-class UrControllerInfo:
-    """What the asyncio pre-check learned: versions, model, serial, remote control."""
-
-    controller_version: tuple[int, int, int, int]
-    polyscope: str
-    robot_model: str
-    serial_number: str
-    remote_control: bool | None
-
-    @property
-    def robot_name(self) -> str:
-        """zerocal robot name (`ur5e`, `ur10e`, ... for e-Series, `ur5`, ... for CB3)."""
-        model = self.robot_model.strip().lower()
-        if not model.startswith("ur"):
-            return model or "ur"
-        if self.controller_version[0] >= 5 and model[-1].isdigit() and model not in (
-            "ur20", "ur30", "ur8long", "ur15", "ur18"
-        ):
-            return model + "e"
-        return model
-
-
-# ---------------------------------------------------------------------- asyncio pre-checks
-
-
-def _package(kind: str, payload: bytes = b"") -> bytes:
-    return struct.pack(">HB", 3 + len(payload), ord(kind)) + payload
-
-
-async def _read_package(reader: asyncio.StreamReader) -> tuple[int, bytes]:
-    size, kind = struct.unpack(">HB", await reader.readexactly(3))
-    if size < 3:
-        raise ValueError(f"RTDE package size {size} < 3")
-    return kind, await reader.readexactly(size - 3)
-
-
-async def _open(host: str, port: int, timeout: float, what: str) -> tuple[
-    asyncio.StreamReader, asyncio.StreamWriter
-]:
-    try:
-        return await asyncio.wait_for(asyncio.open_connection(host, port), timeout)
-    except TimeoutError as exc:
-        raise ConnectionFailed(
-            f"UR {what} {host}:{port}: no connection within {timeout:.1f} s"
-        ) from exc
-    except OSError as exc:
-        raise ConnectionFailed(f"UR {what} {host}:{port}: cannot connect: {exc}") from exc
-
-
-async def _close(writer: asyncio.StreamWriter) -> None:
-    writer.close()
-    with contextlib.suppress(Exception):
-        await writer.wait_closed()
-
-
-async def probe_rtde(
-    host: str, port: int = RTDE_PORT, timeout: float = 3.0
-) -> tuple[int, int, int, int]:
-    """Check that `host:port` speaks RTDE: protocol version 2, then the controller version.
-
-    Pure asyncio with a timeout, so a peer that accepts and stays silent cannot freeze the
-    interpreter (ur_rtde's constructors would). Returns (major, minor, bugfix, build).
-    Raises ConnectionFailed with the reason.
-    """
-    reader, writer = await _open(host, port, timeout, "RTDE")
-    try:
-        async with asyncio.timeout(timeout):
-            writer.write(_package("V", struct.pack(">H", RTDE_PROTOCOL_VERSION)))
-            await writer.drain()
-            kind, body = await _read_package(reader)
-            if kind != ord("V") or not body or not body[0]:
-                raise ConnectionFailed(
-                    f"UR RTDE {host}:{port}: the controller refused RTDE protocol version "
-                    f"{RTDE_PROTOCOL_VERSION} (reply type {kind}, {body[:4]!r})"
-                )
-            writer.write(_package("v"))
-            await writer.drain()
-            kind, body = await _read_package(reader)
-            if kind != ord("v") or len(body) < 16:
-                raise ConnectionFailed(
-                    f"UR RTDE {host}:{port}: bad controller-version reply (type {kind})"
-                )
-            major, minor, bugfix, build = struct.unpack(">4I", body[:16])
-            return major, minor, bugfix, build
-    except TimeoutError as exc:
-        raise ConnectionFailed(
-            f"UR RTDE {host}:{port}: the peer accepted the connection but did not answer the "
-            f"RTDE protocol-version request within {timeout:.1f} s (is it a UR controller with "
-            "RTDE enabled?); no ur_rtde interface was created"
-        ) from exc
-    except (asyncio.IncompleteReadError, ConnectionError, ValueError) as exc:
-        raise ConnectionFailed(f"UR RTDE {host}:{port}: connection broken: {exc}") from exc
-    finally:
-        await _close(writer)
-
-
-async def probe_dashboard(
-    host: str, port: int = DASHBOARD_PORT, timeout: float = 3.0
-) -> tuple[str, str, str, bool | None]:
-    """Greeting and (PolyScope version, robot model, serial number, in remote control) from
-    the dashboard server, in asyncio under `timeout`. ConnectionFailed if it does not answer.
-    """
-    reader, writer = await _open(host, port, timeout, "dashboard")
-
-    async def ask(command: str) -> str:
-        writer.write(f"{command}\n".encode())
-        await writer.drain()
-        return (await reader.readline()).decode(errors="replace").strip()
-
-    try:
-        async with asyncio.timeout(timeout):
-            greeting = (await reader.readline()).decode(errors="replace").strip()
-            if "dashboard" not in greeting.lower():
-                raise ConnectionFailed(
-                    f"UR dashboard {host}:{port}: unexpected greeting {greeting!r}"
-                )
-            polyscope = await ask("PolyscopeVersion")
-            model = await ask("get robot model")
-            serial = await ask("get serial number")
-            remote_text = (await ask("is in remote control")).lower()
-    except TimeoutError as exc:
-        raise ConnectionFailed(
-            f"UR dashboard {host}:{port}: no answer within {timeout:.1f} s"
-        ) from exc
-    except (asyncio.IncompleteReadError, ConnectionError) as exc:
-        raise ConnectionFailed(f"UR dashboard {host}:{port}: connection broken: {exc}") from exc
-    finally:
-        await _close(writer)
-    remote = True if "true" in remote_text else False if "false" in remote_text else None
-    if model.lower().startswith("could not understand"):
-        model = ""
-    if not serial.isdigit():
-        serial = ""
-    return polyscope, model, serial, remote
-
-
-async def probe_port(host: str, port: int, timeout: float, what: str) -> None:
-    """TCP connect to `host:port` under `timeout`; ConnectionFailed otherwise."""
-    _, writer = await _open(host, port, timeout, what)
-    await _close(writer)
-
-
-async def check_controller(host: str, timeout: float = 3.0) -> UrControllerInfo:
-    """All asyncio pre-checks of a UR controller (RTDE, dashboard, script port)."""
-    version = await probe_rtde(host, RTDE_PORT, timeout)
-    polyscope, model, serial, remote = await probe_dashboard(host, DASHBOARD_PORT, timeout)
-    await probe_port(host, SCRIPT_PORT, timeout, "script port")
-    if remote is False:
-        raise ConnectionFailed(
-            f"UR {host}: the robot is in local control; switch it to remote control on the "
-            "teach pendant (docs/robots.md)"
-        )
-    return UrControllerInfo(version, polyscope, model, serial, remote)
 
 
 # ---------------------------------------------------------------------- the adapter
@@ -249,7 +104,7 @@ def _bits(word: int, n: int) -> tuple[bool, ...]:
     return tuple(bool(int(word) >> i & 1) for i in range(n))
 
 
-class UrAdapter(UrGuardedMoveMixin):
+class UrAdapter(UrOffsetsMixin, UrGuardedMoveMixin):
     """A `RobotAdapter` over ur_rtde's three interfaces (+ a camera client).
 
     The ur_rtde objects are created by `connect_ur`; tests may pass fakes. offsets: the
@@ -349,16 +204,6 @@ class UrAdapter(UrGuardedMoveMixin):
             raise InputError(f"{name}: expected 6 finite joint angles (rad), got {values.tolist()}")
         return values
 
-    def _check_offsets(self, offsets: np.ndarray | list[float]) -> np.ndarray:
-        values = self._check_q(offsets, "offsets")
-        if np.any(np.abs(values) > MAX_OFFSET_RAD):
-            i = int(np.argmax(np.abs(values)))
-            raise ControllerError(
-                f"UR host offsets: joint {i + 1} offset {math.degrees(values[i]):.3f} deg "
-                f"exceeds the limit {math.degrees(MAX_OFFSET_RAD):.1f} deg"
-            )
-        return values
-
     def _speed(self, speed: float) -> float:
         if not 0.0 < float(speed) <= 1.0:
             raise InputError(f"speed {speed!r}: expected a fraction in (0, 1]")
@@ -435,43 +280,6 @@ class UrAdapter(UrGuardedMoveMixin):
         if len(q) == 0:  # a camera service without joints (hostpc camera serve): our q, t
             t, q, _, _ = await self._call(self._sample)
         return StereoCapture(left=left, right=right, q=np.asarray(q, float) + self._offsets, t=t)
-
-    async def get_offsets(self) -> np.ndarray:
-        """The host zero offsets (6,) rad (the UR's own calibration is not readable)."""
-        return self._offsets.copy()
-
-    async def set_offsets(self, offsets: np.ndarray) -> tuple[np.ndarray, str]:
-        """Replace the host zero offsets (nothing is written to the robot); returns
-        (previous offsets, rollback id)."""
-        new = self._check_offsets(offsets)
-        previous = self._offsets.copy()
-        self._rollback_counter += 1
-        rollback_id = f"ur-host-{self._rollback_counter}"
-        self._rollbacks[rollback_id] = previous
-        self._offsets = new
-        logger.info("UR %s: host zero offsets set to %s (robot unchanged)", self.host, new)
-        return previous, rollback_id
-
-    def export_offsets(self, directory: str | Path, robot: str,
-                       offsets: np.ndarray) -> dict[str, Path]:
-        """Write `offsets` (6,) rad of robot model `robot` (e.g. `ur5e`) into `directory` as
-        the ur_description calibration yaml, URDF joints and URScript snippet
-        (`hostpc.robots.ur_export`); returns {"yaml"|"urdf"|"urscript": path}."""
-        from hostpc.kinematics import get_robot
-        from hostpc.robots.ur_export import write_exports
-
-        return write_exports(directory, get_robot(robot), self._check_offsets(offsets),
-                             stem=self.EXPORT_STEM)
-
-    async def rollback(self, rollback_id: str) -> np.ndarray:
-        """Restore the offsets saved under `rollback_id`; returns the replaced ones."""
-        try:
-            saved = self._rollbacks[rollback_id]
-        except KeyError:
-            raise ControllerError(f"UR host offsets: unknown rollback id {rollback_id!r}") from None
-        replaced = self._offsets.copy()
-        self._offsets = saved.copy()
-        return replaced
 
     async def close(self) -> None:
         """Report the probe latch timing (a warning-level line, so it is always shown),
