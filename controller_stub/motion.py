@@ -130,8 +130,6 @@ class MotionMixin:
 
     scenario: Scenario
     _q: np.ndarray
-    _q_min: np.ndarray
-    _q_max: np.ndarray
     _max_speed: np.ndarray
     _approach: np.ndarray
     _time: float
@@ -145,6 +143,7 @@ class MotionMixin:
     if TYPE_CHECKING:  # provided by Simulation and GuardedMoveMixin
 
         def _check_vector(self, values: Any, name: str) -> np.ndarray: ...
+        def _check_joint_limits(self, target: np.ndarray) -> None: ...
         def _path_crossings(
             self,
             q_start: np.ndarray,
@@ -172,14 +171,7 @@ class MotionMixin:
         self._move_count += 1
         if index in self.scenario.faults.refuse_move_indices:
             raise SimulationRefused("refused_fault", f"move {index} refused (injected fault)")
-        outside = (target < self._q_min) | (target > self._q_max)
-        if np.any(outside):
-            i = int(np.argmax(outside))
-            raise SimulationRefused(
-                "joint_limit",
-                f"joint {i + 1}: target {target[i]:.6f} rad outside "
-                f"[{self._q_min[i]:.6f}, {self._q_max[i]:.6f}]",
-            )
+        self._check_joint_limits(target)
         return target, self.motion_duration(self._q, target, float(speed))
 
     def motion_duration(self, q_from: np.ndarray, q_to: np.ndarray, speed: float) -> float:
