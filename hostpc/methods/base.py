@@ -46,9 +46,11 @@ import numpy as np
 from hostpc.dataset import Dataset
 from hostpc.methods.cell import Cell
 from hostpc.planning.design import PoseGroups
-from hostpc.robots.base import RobotAdapter, RobotState
+from hostpc.robots.base import MoveOutcome, RobotAdapter, RobotState
 
 Phase = Literal["fit", "verify"]
+SKIP_REASONS = ("joint_limit", "refused_fault", "invalid_argument")
+"""Controller refusals of a move that skip that one pose (the run goes on)."""
 
 
 @dataclass(frozen=True)
@@ -285,3 +287,25 @@ class Method(ABC):
     def describe(self) -> dict[str, Any]:
         """JSON-ready facts about the method's set-up for the result document."""
         return {}
+
+
+async def move_or_skip(robot: RobotAdapter, speed: float, phase: Phase, index: int,
+                       q: np.ndarray, q_from: np.ndarray | None) -> MoveOutcome | SampleRecord:
+    """Move to q (n,) rad; the MoveOutcome of a completed move, else the SampleRecord of a
+    skipped pose: the controller refused the move for one of SKIP_REASONS (q_end: where the
+    robot was, `q_from`) or the move stopped early (q_end: where it stopped). Any other
+    refusal is raised."""
+    from hostpc.transport import ControllerRefusedError  # the I/O layer, loaded on first move
+
+    try:
+        outcome = await robot.move_joints(q, speed)
+    except ControllerRefusedError as exc:
+        if exc.reason in SKIP_REASONS:
+            return SampleRecord(phase, index, False, reason=f"move refused: {exc.reason}",
+                                q_end=None if q_from is None else [float(v) for v in q_from])
+        raise
+    if not outcome.completed:
+        return SampleRecord(phase, index, False,
+                            reason=f"move stopped: {outcome.reason or 'not completed'}",
+                            q_end=[float(v) for v in outcome.q])
+    return outcome

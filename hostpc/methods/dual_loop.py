@@ -47,7 +47,14 @@ from hostpc.errors import InputError
 from hostpc.kinematics.humanoid import HUMANOID_HOME, get_tree
 from hostpc.kinematics.rotations import pose_to_transform
 from hostpc.kinematics.tree import KinematicTree
-from hostpc.methods.base import Method, Phase, Progress, RunSettings, SampleRecord
+from hostpc.methods.base import (
+    Method,
+    Phase,
+    Progress,
+    RunSettings,
+    SampleRecord,
+    move_or_skip,
+)
 from hostpc.methods.cell import Cell
 from hostpc.model.dual_loop import ARMS, DUAL_LOOP_FRAMES
 from hostpc.model.measurement import predict
@@ -68,7 +75,6 @@ DEFAULT_BASELINE = 0.12
 DEFAULT_IMAGE_SIZE = (1280, 1024)
 IMAGE_MARGIN_PX = 20.0
 """A planned target must project at least this far inside both images (nominal model)."""
-SKIP_REASONS = ("joint_limit", "refused_fault", "invalid_argument")
 """Controller refusals that skip one pose instead of ending the run."""
 POSE_FRAMES = ("camera", "left_base", "right_base")
 POINT_FRAMES = ("left_target", "right_target")
@@ -289,21 +295,10 @@ class DualLoopMethod(Method):
     async def acquire(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
                       q_from: np.ndarray | None) -> SampleRecord:
         """Move to q (n,), measure the targets in view: one observation per arm seen."""
-        from hostpc.transport import ControllerRefusedError
-
-        q_previous = None if q_from is None else [float(v) for v in q_from]
-        try:
-            outcome = await robot.move_joints(q, self.settings.speed)
-        except ControllerRefusedError as exc:
-            if exc.reason in SKIP_REASONS:
-                return SampleRecord(phase, index, False, reason=f"move refused: {exc.reason}",
-                                    q_end=q_previous)
-            raise
+        outcome = await move_or_skip(robot, self.settings.speed, phase, index, q, q_from)
+        if isinstance(outcome, SampleRecord):
+            return outcome
         q_end = [float(v) for v in outcome.q]
-        if not outcome.completed:
-            return SampleRecord(phase, index, False,
-                                reason=f"move stopped: {outcome.reason or 'not completed'}",
-                                q_end=q_end)
         measurement: TargetMeasurement = await robot.measure_targets()  # type: ignore[attr-defined]
         q_seen = np.asarray(measurement.q, dtype=float)
         self._check_joints(int(q_seen.size))

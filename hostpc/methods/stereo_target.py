@@ -26,7 +26,14 @@ from hostpc.dataset import FORMAT_TAG, Dataset, dataset_from_dict
 from hostpc.errors import ControllerError, InputError, ZerocalError
 from hostpc.files import write_json_atomic
 from hostpc.kinematics import forward, get_robot, invert_transform, pose_to_transform
-from hostpc.methods.base import Method, Phase, Progress, SampleRecord, approach_signs
+from hostpc.methods.base import (
+    Method,
+    Phase,
+    Progress,
+    SampleRecord,
+    approach_signs,
+    move_or_skip,
+)
 from hostpc.methods.cell import require_camera_cell
 from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem
@@ -44,7 +51,6 @@ sample): a weighting, and what the push's chi2/dof band sees. The reported covar
 it back out (the dataset's `rig_uncertainty` block declares it; hostpc.fitting.shared_errors
 reports the sandwich for the pixel noise plus the rig's shared error, scaled by the fit's
 residuals): docs/vision.md section 3.3."""
-SKIP_REASONS = ("joint_limit", "refused_fault", "invalid_argument")
 """Controller refusals that skip one pose instead of ending the run."""
 
 
@@ -270,19 +276,9 @@ class StereoTargetMethod(Method):
     async def acquire(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
                       q_from: np.ndarray | None) -> SampleRecord:
         """Move to q, capture, detect and triangulate (see the module docstring)."""
-        from hostpc.transport import ControllerRefusedError
-
-        try:
-            outcome = await robot.move_joints(q, self.settings.speed)
-        except ControllerRefusedError as exc:
-            if exc.reason in SKIP_REASONS:
-                return SampleRecord(phase, index, False, reason=f"move refused: {exc.reason}",
-                                    q_end=_as_list(q_from))
-            raise
-        if not outcome.completed:
-            return SampleRecord(phase, index, False,
-                                reason=f"move stopped: {outcome.reason or 'not completed'}",
-                                q_end=outcome.q.tolist())
+        outcome = await move_or_skip(robot, self.settings.speed, phase, index, q, q_from)
+        if isinstance(outcome, SampleRecord):
+            return outcome
         capture = await robot.capture("target")
         if self._measurer is None:
             raise ControllerError("stereo_target: prepare() was not run")
@@ -371,7 +367,3 @@ class StereoTargetMethod(Method):
             "depth": self.settings.options.get("depth", "triangulate"),
             "pixel_floor_px": self.pixel_floor,
         }
-
-
-def _as_list(q: np.ndarray | None) -> list[float] | None:
-    return None if q is None else [float(v) for v in q]

@@ -30,14 +30,20 @@ from hostpc.dataset import FORMAT_TAG, Dataset, dataset_from_dict
 from hostpc.errors import ControllerError, InputError
 from hostpc.files import write_json_atomic
 from hostpc.kinematics import forward, get_robot, pose_to_transform
-from hostpc.methods.base import Method, Phase, Progress, SampleRecord, approach_signs
+from hostpc.methods.base import (
+    Method,
+    Phase,
+    Progress,
+    SampleRecord,
+    approach_signs,
+    move_or_skip,
+)
 from hostpc.robots.base import RobotAdapter, RobotState
 
 TRACKER_FILE = "tracker.json"
 LOS_MARGIN_DEG = 10.0
 """Candidates keep the reflector this far inside its acceptance cone (nominal model), so
 the real robot's small errors never lose the beam at a planned pose."""
-SKIP_REASONS = ("joint_limit", "refused_fault", "invalid_argument")
 
 
 def identifiable_offsets(n_joints: int, known: Sequence[str]) -> tuple[list[int], list[str]]:
@@ -194,19 +200,9 @@ class WorldPointMethod(Method):
     async def acquire(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
                       q_from: np.ndarray | None) -> SampleRecord:
         """Move to q and read the tracker (see the module docstring)."""
-        from hostpc.transport import ControllerRefusedError
-
-        try:
-            outcome = await robot.move_joints(q, self.settings.speed)
-        except ControllerRefusedError as exc:
-            if exc.reason in SKIP_REASONS:
-                return SampleRecord(phase, index, False, reason=f"move refused: {exc.reason}",
-                                    q_end=None if q_from is None else list(map(float, q_from)))
-            raise
-        if not outcome.completed:
-            return SampleRecord(phase, index, False,
-                                reason=f"move stopped: {outcome.reason or 'not completed'}",
-                                q_end=outcome.q.tolist())
+        outcome = await move_or_skip(robot, self.settings.speed, phase, index, q, q_from)
+        if isinstance(outcome, SampleRecord):
+            return outcome
         reading = await robot.measure_tracker()  # type: ignore[attr-defined]
         names = list(self.markers())
         wanted = names[max(int(self._visible_marker(np.asarray(q)[None])[0]), 0)]
