@@ -152,8 +152,41 @@ def parse_urdf(text: str, source: str = "URDF") -> UrdfRobot:
             origin=_origin(joint, where), axis=axis / max(norm, 1e-300),
             lower=lower, upper=upper,
         )
+    _check_tree(links, joints, source)
     return UrdfRobot(name=root.get("name") or "urdf", joints=joints, inertials=inertials,
                      links=tuple(links))
+
+
+def _check_tree(links: list[str], joints: dict[str, UrdfJoint], source: str) -> None:
+    """A URDF robot is a tree: unique link names, every joint between declared links, each
+    link the child of at most one joint, and no loop (URDF cannot express closed chains)."""
+    seen: set[str] = set()
+    for link in links:
+        if link in seen:
+            raise InputError(f"{source}: link {link!r} is declared twice")
+        seen.add(link)
+    parent_joint: dict[str, str] = {}
+    for joint in joints.values():
+        for role, link in (("parent", joint.parent), ("child", joint.child)):
+            if link not in seen:
+                raise InputError(f"{source}: joint {joint.name!r} {role} link {link!r} is not "
+                                 "a declared <link>")
+        if joint.parent == joint.child:
+            raise InputError(f"{source}: joint {joint.name!r} joins link {joint.child!r} to "
+                             "itself")
+        if joint.child in parent_joint:
+            raise InputError(f"{source}: link {joint.child!r} is the child of two joints "
+                             f"({parent_joint[joint.child]!r} and {joint.name!r}); a URDF "
+                             "robot must be a tree")
+        parent_joint[joint.child] = joint.name
+    parent_of = {j.child: j.parent for j in joints.values()}
+    for start in parent_of:
+        link, steps = start, 0
+        while link in parent_of:
+            link, steps = parent_of[link], steps + 1
+            if steps > len(parent_of):
+                raise InputError(f"{source}: the joints form a loop through link {start!r}; "
+                                 "a URDF robot must be a tree")
 
 
 def _path(robot: UrdfRobot, base_link: str, tip_link: str, source: str) -> list[UrdfJoint]:

@@ -158,6 +158,24 @@ def test_gravity_torque_is_minus_the_gradient_of_potential_energy(arm7):
      '<parent link="a"/><child link="b"/></joint></robot>', "does not hang from"),
     ('<robot><link name="a"/><link name="b"/><joint name="j" type="revolute"><parent link="a"/>'
      '<child link="b"/><axis xyz="0 0 0"/></joint></robot>', "zero vector"),
+    ('<robot><link name="a"/><link name="b"/><link name="c"/>'
+     '<joint name="j1" type="revolute"><parent link="a"/><child link="b"/></joint>'
+     '<joint name="j2" type="revolute"><parent link="b"/><child link="c"/></joint>'
+     '<joint name="j3" type="revolute"><parent link="c"/><child link="b"/></joint></robot>',
+     "child of two joints"),
+    ('<robot><link name="a"/><link name="b"/><link name="c"/>'
+     '<joint name="j1" type="revolute"><parent link="a"/><child link="b"/></joint>'
+     '<joint name="j2" type="revolute"><parent link="c"/><child link="c"/></joint></robot>',
+     "to itself"),
+    ('<robot><link name="a"/><link name="b"/><link name="c"/><link name="d"/>'
+     '<joint name="j1" type="revolute"><parent link="a"/><child link="b"/></joint>'
+     '<joint name="j2" type="revolute"><parent link="c"/><child link="d"/></joint>'
+     '<joint name="j3" type="revolute"><parent link="d"/><child link="c"/></joint></robot>',
+     "form a loop"),
+    ('<robot><link name="a"/><link name="b"/>'
+     '<joint name="j" type="revolute"><parent link="a"/><child link="ghost"/></joint></robot>',
+     "not a declared"),
+    ('<robot><link name="a"/><link name="b"/><link name="a"/></robot>', "declared twice"),
 ])
 def test_broken_urdf_gets_one_clear_error(text, message):
     with pytest.raises(InputError, match=message):
