@@ -106,6 +106,10 @@ class Effect:
     #: methods the effect applies to (None: all). A sensor effect acts on the method's
     #: measurement: (N, 3) points for stereo_target, (N, 1) distances for sphere_probe.
     methods: ClassVar[tuple[str, ...] | None] = None
+    #: the effect depends on the direction each joint last moved (``ctx.approach``):
+    #: the planners then reach every joint from both sides (hostpc.planning.approach), so
+    #: the effect and the joint's zero offset can be told apart
+    approach_dependent: ClassVar[bool] = False
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         """Local parameter names (without the ``<effect>.`` prefix)."""

@@ -1,0 +1,103 @@
+"""hostpc.planning.approach: every joint reached from both sides when the model has an
+approach-dependent effect (backlash), and nothing changed when it has none."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hostpc.kinematics import forward, get_robot
+from hostpc.planning.approach import (
+    MAX_TURN,
+    approach_dependent_effects,
+    balance_guarded_moves,
+    balance_probe_plan,
+    reversed_target,
+    travel_signs,
+    unbalanced_joints,
+    via_points,
+)
+from hostpc.planning.sphere_contacts import ProbePlan, plan_sphere_probe, tip_positions
+from hostpc.planning.sphere_setup import PlanConfig, ProbeSetup
+
+WRIST_DOWN = np.array([0.0, -1.9, 1.9, -1.6, -1.5708, 0.0])
+
+
+@pytest.fixture(scope="module")
+def probe() -> tuple[ProbePlan, ProbeSetup]:
+    setup = ProbeSetup(sphere_centre=np.array([0.45, -0.15, 0.05]), sphere_radius=0.0125,
+                       stylus_radius=0.0015, tip=np.array([0.0, 0.0, 0.12]))
+    plan = plan_sphere_probe(get_robot("ur5e"), setup, PlanConfig(n_orientations=12),
+                             WRIST_DOWN)
+    return plan, setup
+
+
+@pytest.mark.parametrize(("spec", "expected"), [
+    (None, []), ("+trigger_latency", []), ("+backlash", ["backlash"]),
+    ("joint_offsets,backlash", ["backlash"]), ("-backlash", []),
+    (["joint_offsets", "+backlash"], ["backlash"]), ("+no_such_effect", []),
+])
+def test_the_approach_dependent_effects_of_a_model_spec(spec: object,
+                                                         expected: list[str]) -> None:
+    assert approach_dependent_effects(spec) == expected  # type: ignore[arg-type]
+
+
+def test_signs_and_balance() -> None:
+    signs = travel_signs(np.zeros((4, 3)), np.array([[1, 0, -1], [1, -1, -1], [1, -1, 1],
+                                                      [-1, 1, -1]], dtype=float))
+    np.testing.assert_array_equal(signs[0], [1, 1, -1])  # not moving counts as +
+    np.testing.assert_array_equal(unbalanced_joints(signs), [True, False, True])
+
+
+def test_a_reversed_guarded_move_ends_at_the_same_tip(probe: tuple[ProbePlan, ProbeSetup]
+                                                      ) -> None:
+    plan, setup = probe
+    chain = get_robot("ur5e")
+    contacts = plan.contacts
+    q_start = np.array([c.q_start for c in contacts])
+    q_target = np.array([c.q_target for c in contacts])
+    assert np.all(travel_signs(q_start, q_target)[:, 3] < 0)  # joint 4: one way only
+    reversed_q = reversed_target(chain, q_start[0], q_target[0], setup.tip, [3])
+    assert reversed_q is not None
+    assert travel_signs(q_start[:1], reversed_q[None])[0, 3] > 0
+    np.testing.assert_allclose(tip_positions(chain, reversed_q, setup.tip),
+                               tip_positions(chain, q_target[0], setup.tip), atol=1e-6)
+    R = forward(chain, np.stack([q_target[0], reversed_q])).T_base_flange[:, :3, :3]
+    assert np.arccos(np.clip((np.trace(R[0].T @ R[1]) - 1) / 2, -1, 1)) <= MAX_TURN
+
+    balanced = balance_guarded_moves(chain, q_start, q_target, setup.tip)
+    share = np.mean(travel_signs(q_start, balanced) > 0, axis=0)
+    assert 0.3 < share[3] < 0.7
+    np.testing.assert_allclose(tip_positions(chain, balanced, setup.tip),
+                               tip_positions(chain, q_target, setup.tip), atol=1e-6)
+
+
+def test_the_plan_changes_only_with_an_approach_dependent_effect(
+        probe: tuple[ProbePlan, ProbeSetup]) -> None:
+    plan, setup = probe
+    chain = get_robot("ur5e")
+    assert balance_probe_plan(plan, chain, setup.tip, "+trigger_latency") is plan
+    assert balance_probe_plan(plan, chain, setup.tip, None) is plan
+    balanced = balance_probe_plan(plan, chain, setup.tip, "+trigger_latency,+backlash")
+    assert len(balanced.contacts) == len(plan.contacts)
+    for old, new in zip(plan.contacts, balanced.contacts, strict=True):
+        assert (old.group, old.index, old.speed) == (new.group, new.index, new.speed)
+        np.testing.assert_array_equal(old.q_start, new.q_start)
+    assert sum(not np.array_equal(o.q_target, n.q_target)
+               for o, n in zip(plan.contacts, balanced.contacts, strict=True)) > 10
+
+
+def test_via_points_bring_a_one_way_joint_in_from_both_sides() -> None:
+    q = np.zeros((10, 3))
+    q[:, 0] = np.linspace(0.0, 0.9, 10)  # joint 1 always moves in +
+    q[:, 1] = np.tile([0.2, -0.2], 5)    # joints 2 and 3 alternate: balanced already
+    q[:, 2] = np.tile([-0.1, 0.1], 5)
+    via = via_points(q, np.zeros(3), step=0.05)
+    rows = ~np.isnan(via[:, 0])
+    assert 3 <= np.count_nonzero(rows) <= 6
+    np.testing.assert_allclose(via[rows, 0], q[rows, 0] + 0.05)
+    np.testing.assert_array_equal(via[rows, 1:], q[rows, 1:])  # other joints untouched
+    signs = travel_signs(np.vstack([np.zeros(3), q[:-1]]), q)
+    signs[rows, 0] = -1.0  # the last move into those poses comes from the via-point
+    assert not unbalanced_joints(signs)[0]
+    assert np.all(np.isnan(via_points(q[:, 1:], None)))  # nothing one-sided: no via-point
