@@ -28,8 +28,9 @@ Units: rad, m; q arrays (N, n) as in docs/conventions.md.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +48,13 @@ MIN_REVERSAL = 2e-3
 MAX_PATH_CHANGE = 1e-3
 """m: the tip's path at mid-move may move this far from the planned move's (a joint-space
 line curves in space; reversing a joint that others must make up for curves it more)."""
+WARMUP_SAMPLES = 8
+"""Free moves: a joint is judged one-sided only after this many samples..."""
+ONE_SIDED_P = 0.01
+"""... and when so few arrivals from its rarer side are this improbable for a tour that
+comes from either side at random (two-sided binomial p-value)."""
+VIA_STEP = 0.05
+"""rad: how far past a pose a via-point takes a joint that should arrive the other way."""
 MAX_TURN = 0.1
 """rad: the tool may end this much turned from the planned target (the stylus meets the
 sphere at a slightly different angle; a ball stylus does not mind a few degrees)."""
@@ -173,31 +181,79 @@ def balance_guarded_moves(chain: Chain, q_start: np.ndarray, q_target: np.ndarra
     return targets
 
 
-def via_points(q_tour: np.ndarray, q_start: np.ndarray | None,
-               joints: Sequence[int] | None = None, step: float = 0.05,
-               min_share: float = MIN_SHARE) -> np.ndarray:
-    """Via-points (N, n) for free moves through poses q_tour (N, n) in tour order from
-    q_start (n,): NaN rows where the pose is reached directly, else a pose ``step`` rad
-    past it on the side its unbalanced joints should now arrive from (the other joints
-    as at the pose). Each unbalanced joint of ``joints`` (None: all) gets every other pose
-    of its common direction (alternations differ per joint)."""
-    q_tour = np.asarray(q_tour, float)
-    n_poses, n = q_tour.shape
-    previous = np.vstack([q_tour[:1] if q_start is None else np.asarray(q_start, float)[None],
-                          q_tour[:-1]])
-    signs = travel_signs(previous, q_tour)
-    candidates = np.zeros(n, dtype=bool)
-    candidates[list(range(n) if joints is None else joints)] = True
-    via = np.full((n_poses, n), np.nan)
-    for order, j in enumerate(np.flatnonzero(unbalanced_joints(signs, min_share)
-                                             & candidates)):
-        common = 1.0 if np.mean(signs[:, j] > 0) >= 0.5 else -1.0
-        rows = np.flatnonzero(signs[:, j] == common)
-        chosen = rows[(np.arange(rows.size) // 2**order) % 2 == 0]
-        empty = np.isnan(via[chosen, 0])
-        via[chosen[empty]] = q_tour[chosen[empty]]
-        via[chosen, j] = q_tour[chosen, j] + common * step  # arrive moving -common
-    return via
+def one_sided_p(rare: int, total: int) -> float:
+    """Two-sided binomial p-value of ``rare`` or fewer arrivals from one side in ``total``
+    samples, if either side were equally likely."""
+    tail = sum(math.comb(total, k) for k in range(rare + 1)) / 2.0**total
+    return min(1.0, 2.0 * tail)
+
+
+@dataclass(frozen=True)
+class ApproachTally:
+    """The approach directions recorded so far in a run of free moves: positive (n,) how
+    many samples each joint reached moving in +, total the samples, flagged (n,) the joints
+    found one-sided (they are then balanced toward half and half)."""
+
+    positive: np.ndarray
+    total: int
+    flagged: np.ndarray
+
+    @classmethod
+    def empty(cls, n_joints: int) -> ApproachTally:
+        return cls(np.zeros(n_joints), 0, np.zeros(n_joints, dtype=bool))
+
+    def add(self, signs: np.ndarray, min_share: float = MIN_SHARE,
+            warmup: int = WARMUP_SAMPLES) -> ApproachTally:
+        """The tally with one more sample's recorded approach signs (n,)."""
+        positive = self.positive + (np.asarray(signs) > 0)
+        total = self.total + 1
+        flagged = self.flagged.copy()
+        if total >= warmup:
+            share = positive / total
+            rare = np.minimum(positive, total - positive)
+            flagged |= (np.minimum(share, 1.0 - share) < min_share) & np.array(
+                [one_sided_p(int(k), total) < ONE_SIDED_P for k in rare])
+        return ApproachTally(positive, total, flagged)
+
+
+def via_point(tally: ApproachTally, q_from: np.ndarray | None, q: np.ndarray,
+              joints: np.ndarray | None = None, step: float = VIA_STEP,
+              q_min: np.ndarray | None = None, q_max: np.ndarray | None = None
+              ) -> np.ndarray | None:
+    """A via-point (n,) for the free move q_from -> q (n,), or None to move directly: the
+    joints the tally flagged (of ``joints``, a (n,) mask; None: all) whose direct move
+    would arrive the way they arrived more often so far go ``step`` rad past q first, so
+    they arrive the other way; the other joints move straight to q on the first leg.
+    A via-point outside [q_min, q_max] is dropped for that joint."""
+    if q_from is None or tally.total == 0:
+        return None
+    signs = travel_signs(np.asarray(q_from, float)[None], np.asarray(q, float)[None])[0]
+    majority = np.where(tally.positive * 2 >= tally.total, 1.0, -1.0)
+    reverse = tally.flagged & (signs == majority)
+    if joints is not None:
+        reverse &= joints
+    via = np.array(q, dtype=float, copy=True)
+    via[reverse] += signs[reverse] * step
+    if q_min is not None and q_max is not None:
+        outside = (via < q_min) | (via > q_max)
+        via[outside] = np.asarray(q, float)[outside]
+        reverse &= ~outside
+    return via if np.any(reverse) else None
+
+
+def approach_after(q_from: np.ndarray | None, via: np.ndarray | None, q: np.ndarray
+                   ) -> np.ndarray:
+    """(n,) recorded approach signs of q reached from q_from through via (None: directly):
+    a joint the second leg moves arrives the way that leg goes; one it does not move
+    keeps the first leg's direction."""
+    q = np.asarray(q, float)
+    if q_from is None:
+        return np.ones(q.size)
+    if via is None:
+        return travel_signs(np.asarray(q_from, float)[None], q[None])[0]
+    first = travel_signs(np.asarray(q_from, float)[None], np.asarray(via, float)[None])[0]
+    second = np.sign(q - via)
+    return np.where(second != 0, second, first)
 
 
 def balance_probe_plan(plan: ProbePlan, chain: Chain, tip: np.ndarray,

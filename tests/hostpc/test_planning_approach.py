@@ -9,13 +9,15 @@ import pytest
 from hostpc.kinematics import forward, get_robot
 from hostpc.planning.approach import (
     MAX_TURN,
+    ApproachTally,
+    approach_after,
     approach_dependent_effects,
     balance_guarded_moves,
     balance_probe_plan,
     reversed_target,
     travel_signs,
     unbalanced_joints,
-    via_points,
+    via_point,
 )
 from hostpc.planning.sphere_contacts import ProbePlan, plan_sphere_probe, tip_positions
 from hostpc.planning.sphere_setup import PlanConfig, ProbeSetup
@@ -87,17 +89,56 @@ def test_the_plan_changes_only_with_an_approach_dependent_effect(
                for o, n in zip(plan.contacts, balanced.contacts, strict=True)) > 10
 
 
+def run_tour(q: np.ndarray, joints: np.ndarray | None = None
+             ) -> tuple[np.ndarray, int]:
+    """The recorded approach signs (N, n) of free moves through q (N, n) in order, balanced
+    online with via-points as the stereo_target method does; and how many via-points."""
+    tally = ApproachTally.empty(q.shape[1])
+    q_from: np.ndarray | None = None
+    signs, vias = [], 0
+    for pose in q:
+        via = via_point(tally, q_from, pose, joints)
+        vias += via is not None
+        recorded = approach_after(q_from, via, pose)
+        tally = tally.add(recorded)
+        signs.append(recorded)
+        q_from = pose
+    return np.array(signs), vias
+
+
 def test_via_points_bring_a_one_way_joint_in_from_both_sides() -> None:
-    q = np.zeros((10, 3))
-    q[:, 0] = np.linspace(0.0, 0.9, 10)  # joint 1 always moves in +
-    q[:, 1] = np.tile([0.2, -0.2], 5)    # joints 2 and 3 alternate: balanced already
-    q[:, 2] = np.tile([-0.1, 0.1], 5)
-    via = via_points(q, np.zeros(3), step=0.05)
-    rows = ~np.isnan(via[:, 0])
-    assert 3 <= np.count_nonzero(rows) <= 6
-    np.testing.assert_allclose(via[rows, 0], q[rows, 0] + 0.05)
-    np.testing.assert_array_equal(via[rows, 1:], q[rows, 1:])  # other joints untouched
-    signs = travel_signs(np.vstack([np.zeros(3), q[:-1]]), q)
-    signs[rows, 0] = -1.0  # the last move into those poses comes from the via-point
-    assert not unbalanced_joints(signs)[0]
-    assert np.all(np.isnan(via_points(q[:, 1:], None)))  # nothing one-sided: no via-point
+    q = np.zeros((40, 3))
+    q[:, 0] = np.linspace(0.0, 0.9, 40)  # joint 1 always moves in +
+    q[:, 1] = np.tile([0.2, -0.2], 20)   # joints 2 and 3 alternate: balanced already
+    q[:, 2] = np.tile([-0.1, 0.1], 20)
+    plain = travel_signs(np.vstack([q[:1], q[:-1]]), q)
+    assert unbalanced_joints(plain).tolist() == [True, False, False]
+    signs, vias = run_tour(q)
+    share = np.mean(signs > 0, axis=0)
+    assert 0.4 <= share[0] <= 0.6 and 10 <= vias <= 25
+    np.testing.assert_allclose(share[1:], np.mean(plain[:, 1:] > 0, axis=0), atol=0.05)
+    _, vias = run_tour(q, joints=np.array([False, True, True]))  # joint 1 not asked for
+    assert vias == 0
+
+
+def test_a_via_point_goes_past_the_pose_and_keeps_to_the_limits() -> None:
+    tally = ApproachTally.empty(2)
+    for _ in range(8):
+        tally = tally.add(np.array([1.0, -1.0]))
+    assert tally.flagged.tolist() == [True, True]
+    q_from, q = np.array([0.0, 0.5]), np.array([0.3, 0.2])  # joint 1 +, joint 2 -
+    via = via_point(tally, q_from, q, step=0.05)
+    assert via is not None
+    np.testing.assert_allclose(via, [0.35, 0.15])
+    np.testing.assert_array_equal(approach_after(q_from, via, q), [-1.0, 1.0])
+    limited = via_point(tally, q_from, q, step=0.05, q_min=np.array([-1.0, 0.18]),
+                        q_max=np.array([0.32, 1.0]))
+    assert limited is None  # both would leave the limits: move directly
+    assert via_point(ApproachTally.empty(2), q_from, q) is None
+
+
+def test_a_balanced_random_tour_gets_no_via_point() -> None:
+    rng = np.random.default_rng(4)
+    q = rng.uniform(-1.0, 1.0, (60, 6))
+    _, vias = run_tour(q)
+    assert vias == 0
