@@ -107,3 +107,29 @@ def test_nothing_is_flagged_on_clean_tracker_data(seed: int) -> None:
     assert diagnosis.check.adequacy.adequate
     assert not any(p.significant for p in diagnosis.residuals.patterns)
     assert not any(i.significant for i in diagnosis.check.interactions)
+
+
+def lobing_dataset(seed: int, group_error: float) -> Dataset:
+    """sphere_probe contacts (12 probe orientations of 5) where the probe of orientation 3
+    triggers ``group_error`` m late (touch-probe lobing): its contacts are that much
+    closer to the sphere centre than the model says."""
+    dataset = sphere_contact_dataset({}, seed=seed)
+    problem = build_problem(dataset)
+    _, J = predict(problem, np.zeros(problem.layout.size))
+    assert J is not None
+    dq = J[:, 0, problem.layout.effect_slices["joint_offsets"]]
+    rows = np.asarray(dataset.samples.group) == 3
+    step = np.zeros_like(dataset.samples.q)
+    step[rows] = group_error * dq[rows] / np.sum(dq[rows] ** 2, axis=1, keepdims=True)
+    return replace(dataset, samples=replace(dataset.samples, q=dataset.samples.q + step))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_one_probe_orientation_off_is_named_by_its_group(seed: int) -> None:
+    found = hostpc.diagnose(lobing_dataset(seed, 2e-5))
+    pattern = next(p for p in found.residuals.patterns if p.variable == "probe_group")
+    assert pattern.significant and pattern.strongest_level is not None
+    assert pattern.strongest_level[0] == "3"
+    assert "the samples of probe_group 3 are off by" in " ".join(found.advice)
+    clean = hostpc.diagnose(lobing_dataset(seed, 0.0))
+    assert not any(p.significant for p in clean.residuals.patterns)
