@@ -26,23 +26,16 @@ from hostpc.dataset import FORMAT_TAG, Dataset, dataset_from_dict
 from hostpc.errors import ControllerError, InputError, ZerocalError
 from hostpc.files import write_json_atomic
 from hostpc.kinematics import forward, get_robot, invert_transform, pose_to_transform
+from hostpc.methods.approach_moves import ApproachMoves
 from hostpc.methods.base import (
     Method,
     Phase,
     Progress,
     SampleRecord,
-    approach_signs,
-    move_or_skip,
 )
 from hostpc.methods.cell import require_camera_cell
 from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem
-from hostpc.planning.approach import (
-    ApproachTally,
-    approach_after,
-    approach_dependent_effects,
-    via_point,
-)
 from hostpc.planning.design import look_at_candidates
 from hostpc.robots.base import RobotAdapter, RobotState
 
@@ -84,10 +77,9 @@ class StereoTargetMethod(Method):
         self._chain = get_robot(cell.robot)
         self._T_flange_tool = pose_to_transform(tool.xyz, tool.rpy)
         self._t0: float = 0.0
-        # backlash in the model: each joint arrives from both sides (planning/approach.py)
-        self._approach = (ApproachTally.empty(self._chain.n)
-                          if approach_dependent_effects(settings.effects, settings.plugins)
-                          else None)
+        # an approach-dependent effect (backlash) in the model: each joint arrives from
+        # both sides, through via-points where needed (methods/approach_moves.py)
+        self._moves = ApproachMoves(settings, self._chain)
 
     # ---------------------------------------------------------------- set-up
 
@@ -285,16 +277,8 @@ class StereoTargetMethod(Method):
 
     async def acquire(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
                       q_from: np.ndarray | None) -> SampleRecord:
-        """Move to q (through a via-point where a joint should arrive the other way),
-        capture, detect and triangulate (see the module docstring)."""
-        via = None if self._approach is None else via_point(
-            self._approach, q_from, q, q_min=self._chain.q_min, q_max=self._chain.q_max)
-        if via is not None:
-            first = await move_or_skip(robot, self.settings.speed, phase, index, via, q_from)
-            if isinstance(first, SampleRecord):
-                return first
-        outcome = await move_or_skip(robot, self.settings.speed, phase, index, q,
-                                     q_from if via is None else via)
+        """Move to q, capture, detect and triangulate (see the module docstring)."""
+        outcome = await self._moves.move(robot, phase, index, q, q_from)
         if isinstance(outcome, SampleRecord):
             return outcome
         capture = await robot.capture("target")
@@ -316,11 +300,8 @@ class StereoTargetMethod(Method):
             "p": [float(v) for v in p],
             "cov": cov.tolist(),
             "t": float(capture.t) - self._t0,
-            "approach": (approach_signs(q_from, capture.q) if via is None
-                         else approach_after(q_from, via, capture.q).tolist()),
+            "approach": self._moves.signs(q_from, capture.q),
         }
-        if self._approach is not None:
-            self._approach = self._approach.add(np.asarray(sample["approach"]))
         uv = getattr(observation, "uv", None)
         if uv is not None:
             sample["uv"] = np.asarray(uv, float).tolist()
