@@ -3,10 +3,14 @@ approach-dependent effect (backlash), and nothing changed when it has none."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from hostpc.kinematics import forward, get_robot
+from hostpc.model.problem import build_problem
+from hostpc.model.registry import builtin_effects
 from hostpc.planning.approach import (
     MAX_TURN,
     ApproachTally,
@@ -21,6 +25,7 @@ from hostpc.planning.approach import (
 )
 from hostpc.planning.sphere_contacts import ProbePlan, plan_sphere_probe, tip_positions
 from hostpc.planning.sphere_setup import PlanConfig, ProbeSetup
+from tests.support import sphere_dataset
 
 WRIST_DOWN = np.array([0.0, -1.9, 1.9, -1.6, -1.5708, 0.0])
 
@@ -142,3 +147,30 @@ def test_a_balanced_random_tour_gets_no_via_point() -> None:
     q = rng.uniform(-1.0, 1.0, (60, 6))
     _, vias = run_tour(q)
     assert vias == 0
+
+
+@pytest.mark.parametrize("name", sorted(builtin_effects()))
+def test_an_effect_declares_approach_dependent_exactly_when_it_reads_approach(
+        name: str, noisy_stereo) -> None:  # type: ignore[no-untyped-def]
+    cls = builtin_effects()[name]
+    if cls.hook not in ("joint", "geometry", "sensor"):
+        return
+    methods = cls.methods or ("stereo_target",)
+    dataset = noisy_stereo.dataset if "stereo_target" in methods else sphere_dataset()
+    ctx = build_problem(dataset, ["joint_offsets"]).context
+    rng = np.random.default_rng(1)
+    signs = np.where(rng.uniform(size=ctx.q_cmd.shape) < 0.5, -1.0, 1.0)
+    effect = cls()
+    p = rng.uniform(-1e-3, 1e-3, len(effect.parameter_names(ctx)))
+    y = rng.uniform(0.1, 0.5, (ctx.n_samples, 3 if ctx.method == "stereo_target" else 1))
+
+    def output(approach: np.ndarray) -> np.ndarray:
+        view = replace(ctx, approach=approach)
+        if cls.hook == "joint":
+            return np.asarray(effect.joint_delta(view, p))
+        if cls.hook == "geometry":
+            return np.asarray(effect.kinematic_delta(view, p))
+        return np.asarray(effect.sensor_apply(view, p, y))
+
+    reads_approach = not np.allclose(output(signs), output(-signs), rtol=0.0, atol=0.0)
+    assert cls.approach_dependent == reads_approach
