@@ -19,9 +19,13 @@ in the plan: arrive from the other side on about half of the samples.
   moves and their start poses stay the same.
 - ``balance_probe_plan``: the sphere_probe plan for a model (unchanged without an
   approach-dependent effect).
-- ``via_points``: for free moves to poses in tour order (stereo_target, world_point): a
-  via-point just past a pose on the side the joint should arrive from, where the tour
-  would bring an unbalanced joint in from one side only.
+- ``ApproachTally``, ``via_point``, ``approach_after``: for free moves to poses in tour
+  order (stereo_target, world_point; the moves themselves: hostpc.methods.approach_moves):
+  the directions recorded so far; once a joint has arrived one way on fewer than
+  ``MIN_SHARE`` of the samples (after ``WARMUP_SAMPLES``, and unlikely by chance:
+  ``ONE_SIDED_P``), its moves that would arrive the common way go through a via-point
+  ``VIA_STEP`` past the pose until it is half and half. A tour balanced by itself gets no
+  via-point.
 
 Units: rad, m; q arrays (N, n) as in docs/conventions.md.
 """
