@@ -213,6 +213,8 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
         mark = "*" if pattern.significant else " "
         lines.append(f"  {mark} {name_cell(pattern.variable, 15)}chi2"
                      f"{cell(pattern.chi2, 10, 1)} / {pattern.dof:<3} p = {_p(pattern.p_value)}")
+        if pattern.levels and pattern.significant:
+            lines.append(f"      {pattern.sentence}")
     lines += ["", "candidate effects (best first; * significant and better held out):",
               f"    {name_cell('effect', 24)}{'dBIC':>9}{'dBIC all':>10}{'RMS mm':>10}"
               f"{'held-out':>10}{'chi2/dof':>10}{'p':>11}"]

@@ -162,8 +162,12 @@ def interaction_sentence(interaction: Interaction, check: ModelCheck) -> str:
     """"X varies with Y", what that is, and what to do about it."""
     head = (f"The effect-agnostic search finds: {interaction.sentence} "
             f"(score {interaction.score:.1f}, p = {interaction.p_value:.2g})")
-    effect = pattern_effect(interaction.parameter, interaction.variable,
-                            check.fit.problem.context)
+    context = check.fit.problem.context
+    if interaction.variable in context.categorical:
+        return (f"{head}: the samples of one {interaction.variable} disagree with the others "
+                f"(a mis-surveyed or moved {interaction.variable}, or a setup that changed "
+                f"between groups); the binned residuals name which.")
+    effect = pattern_effect(interaction.parameter, interaction.variable, context)
     if effect is not None and all(e not in check.effects for e in effect.split(" or ")):
         return f"{head}: that is what {effect} models."
     return (f"{head}. If no built-in effect explains it, write one whose parameter makes "
@@ -272,6 +276,11 @@ def advise(check: ModelCheck, residuals: ResidualAnalysis, ladder: Sequence[Ladd
         listed = ", ".join(f"{p.variable} (p = {p.p_value:.2g})" for p in patterns)
         sentences.append(f"Binned residuals change significantly with {listed}"
                          + (f" ({without(check)})." if check.outliers else "."))
+        for pattern in patterns:
+            if pattern.levels:  # a group label: say which group is off
+                sentence = pattern.sentence
+                sentences.append(f"{sentence[0].upper()}{sentence[1:]}: check that "
+                                 f"{pattern.variable}, or let the fit estimate it.")
     if residuals.worst:
         worst = residuals.worst[0]
         sentences.append(f"Worst sample: #{worst.index}, {mm(worst.norm)} "

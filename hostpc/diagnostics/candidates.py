@@ -236,7 +236,8 @@ def remedy(effect: str, lost: Sequence[str], effect_names: Sequence[str]) -> str
         partners += [n for n in effect_names if own.match(n)]
     plural = "s" if len(joints) > 1 else ""
     if effect == "backlash" and joints:
-        how = f"approach joint{plural} {', '.join(joints)} from both sides in the measured poses"
+        how = (f"approach joint{plural} {', '.join(joints)} from both sides in the measured "
+               "poses (hostpc calibrate plans that when backlash is in the model)")
     elif joints:
         how = f"vary joint{plural} {', '.join(joints)} more widely"
     else:

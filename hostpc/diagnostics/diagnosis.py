@@ -234,7 +234,8 @@ class Diagnosis:
                      "centres": [finite(v) for v in p.centres],
                      "counts": [int(c) for c in p.counts],
                      "mean_raw": p.mean_raw.tolist(),
-                     "mean_whitened": p.mean_whitened.tolist()}
+                     "mean_whitened": p.mean_whitened.tolist(),
+                     **({"levels": list(p.levels)} if p.levels else {})}
                     for p in self.residuals.patterns
                 ],
             },

@@ -3,12 +3,14 @@
 A score (added-variable) test on the current fit. For model parameter k with whitened
 Jacobian column J_k (N*m,) and a recorded variable v, the hypothesis "parameter k varies
 with v" adds the columns ``J_k * f(v)`` with f = the centred variable, and for joint angles
-also sin v and cos v (one harmonic). The already-fitted columns are projected out; the
-statistic is the chi-square drop the added columns would buy at first order,
-``s = |Q_z^T r|^2`` (Q_z an orthonormal basis of the projected columns, r the whitened
-residuals), turned into an F-test against the residual variance (so a wrong overall noise
-scale does not matter). ``score`` is -log10 of its p-value; significance is Bonferroni
-corrected over all (parameter, variable) pairs tested.
+also sin v and cos v (one harmonic); for a group label (a categorical variable such as
+``marker``) f = the centred indicator of each level ("k differs per marker"). A variable
+that exists on a group of samples only (NaN elsewhere) is tested on that group. The already-
+fitted columns are projected out; the statistic is the chi-square drop the added columns
+would buy at first order, ``s = |Q_z^T r|^2`` (Q_z an orthonormal basis of the projected
+columns, r the whitened residuals), turned into an F-test against the residual variance (so
+a wrong overall noise scale does not matter). ``score`` is -log10 of its p-value;
+significance is Bonferroni corrected over all (parameter, variable) pairs tested.
 
 The parameters tested are those of the model plus, when the model has no ``geometry``
 effect, the DH/MDH table deltas (named ``geometry.<name>``), so a drifting link length is
@@ -39,7 +41,8 @@ RANK_TOLERANCE = 1e-6
 class Interaction:
     """"``parameter`` varies with ``variable``": score = -log10(p), chi2 = the statistic
     (first-order chi-square drop), dof = columns tested, p_value, significant,
-    basis: "linear" or "linear+harmonic"; fitted: whether the parameter is in the model."""
+    basis: "linear", "linear+harmonic" or "per level" (a group label); fitted: whether
+    the parameter is in the model."""
 
     parameter: str
     variable: str
@@ -68,14 +71,21 @@ class Interaction:
         }
 
 
-def modulators(name: str, values: np.ndarray) -> tuple[np.ndarray, str]:
+def modulators(name: str, values: np.ndarray, categorical: bool = False
+               ) -> tuple[np.ndarray, str]:
     """(N, g) functions of one variable that a parameter may vary with, and their name.
 
     Where the variable is not defined (NaN: the other arm's samples of a per-chain variable)
     the functions are 0: the parameter is tested for varying on the samples that have it;
-    the functions are centred over those samples."""
+    the functions are centred over those samples. A categorical variable (level indices)
+    gives one centred indicator per level ("per level": rank levels - 1)."""
     defined = np.isfinite(values)
     present = values[defined]
+    if categorical:
+        indicators = (present[:, None] == np.unique(present)[None, :]).astype(float)
+        F = np.zeros((values.size, indicators.shape[1]))
+        F[defined] = indicators - indicators.mean(axis=0)
+        return F, "per level"
     centred = present - present.mean()
     scale = float(np.std(centred)) or 1.0
     columns = [centred / scale]
@@ -141,9 +151,10 @@ def search_interactions(result: FitResult, variables: Mapping[str, np.ndarray], 
     alive = norms > 1e-12 * max(float(norms.max(initial=0.0)), 1e-300)
     alive[: result.fixed.size] &= ~result.fixed  # held (unidentifiable) parameters: not tested
     usable = usable_variables(variables)
+    categorical = problem.context.categorical
     pairs: list[tuple[str, str, float, int, str, bool, tuple[str, ...]]] = []
     for variable, values in usable.items():
-        F, basis = modulators(variable, values)
+        F, basis = modulators(variable, values, variable in categorical)
         F_rows = np.repeat(F, m, axis=0)  # (N*m, g)
         spans: list[tuple[np.ndarray, int, float]] = []  # listed bases, pair, statistic
         for k in np.flatnonzero(alive):

@@ -121,6 +121,8 @@ class _Checker:
         tried = {c.effect for c in check.candidates}
         context = check.fit.problem.context
         for interaction in unexplained(check.interactions, tried, context)[:MAX_PROPOSALS]:
+            if interaction.variable in context.categorical:
+                continue  # a per-group difference: named in the advice, not a linear effect
             generated = generate(interaction, variables[interaction.variable])
             if generated is None or generated.name in check.effects:
                 continue
@@ -156,12 +158,14 @@ def residual_analysis(check: ModelCheck, alpha: float) -> ResidualAnalysis:
     residuals would make every variable look patterned)."""
     fit = check.fit
     analysis = analyse_residuals(fit.residuals_raw, fit.residuals_whitened, variables_of(fit),
-                                 alpha, length_columns=fit.problem.length_columns)
+                                 alpha, length_columns=fit.problem.length_columns,
+                                 categorical=fit.problem.context.categorical)
     if check.cleaned is None:
         return analysis
     clean = check.cleaned.fit
     patterns = analyse_residuals(clean.residuals_raw, clean.residuals_whitened,
-                                 variables_of(clean), alpha)
+                                 variables_of(clean), alpha,
+                                 categorical=clean.problem.context.categorical)
     return replace(analysis, patterns=patterns.patterns, threshold=patterns.threshold)
 
 

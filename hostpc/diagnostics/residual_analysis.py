@@ -4,6 +4,11 @@ binned against every recorded or derived variable of the dataset contract.
 A pattern is a number: for each variable the samples are split into quantile bins, and the
 mean whitened residual of each bin is tested against zero (sum over bins of n_b |mean_b|^2
 is chi-square with bins x m degrees of freedom if the residuals are pure noise).
+
+A variable is tested on the samples of its group only (where it is finite: ``left.q3`` on
+the left arm's samples). A categorical variable (a group label such as ``marker``: the
+model context's ``categorical``) gets one bin per level, so "the residual depends on
+marker" names the level whose mean residual is off (``VariablePattern.strongest_level``).
 """
 
 from __future__ import annotations
@@ -97,6 +102,29 @@ class VariablePattern:
     dof: int
     p_value: float
     significant: bool
+    #: level names of the bins of a categorical variable (one bin per level), else ()
+    levels: tuple[str, ...] = ()
+
+    @property
+    def strongest_level(self) -> tuple[str, np.ndarray] | None:
+        """For a categorical variable: the level whose bin contributes most to chi2, and its
+        mean raw residual (m,); None for a numeric variable."""
+        if not self.levels:
+            return None
+        contribution = self.counts * np.sum(self.mean_whitened**2, axis=1)
+        level = int(np.argmax(contribution))
+        return self.levels[level], self.mean_raw[level]
+
+    @property
+    def sentence(self) -> str:
+        """"the residual depends on V" (for a group: and which level is off, by how much;
+        the mean residual left after the fit, which absorbs part of the offset)."""
+        strongest = self.strongest_level
+        if strongest is None:
+            return f"the residual depends on {self.variable}"
+        level, mean = strongest
+        return (f"the residual depends on {self.variable}: the samples of {self.variable} "
+                f"{level} are off by {float(np.linalg.norm(mean)) * 1e3:.3g} mm on average")
 
 
 @dataclass(frozen=True)
@@ -112,10 +140,12 @@ class ResidualAnalysis:
     threshold: float
 
 
-def _bins(values: np.ndarray, n_bins: int) -> tuple[np.ndarray, np.ndarray]:
-    """Quantile bin edges and the bin index of every value (discrete values: one bin each)."""
+def _bins(values: np.ndarray, n_bins: int, categorical: bool = False
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """Quantile bin edges and the bin index of every value (discrete values, and every level
+    of a categorical variable: one bin each)."""
     distinct = np.unique(values)
-    if distinct.size <= n_bins:
+    if distinct.size <= n_bins or categorical:
         edges = np.concatenate([distinct[:1], (distinct[:-1] + distinct[1:]) / 2, distinct[-1:]])
         index = np.searchsorted(distinct, values)
         return edges, index
@@ -125,13 +155,15 @@ def _bins(values: np.ndarray, n_bins: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def bin_pattern(variable: str, values: np.ndarray, raw: np.ndarray, whitened: np.ndarray,
-                n_bins: int, threshold: float) -> VariablePattern:
+                n_bins: int, threshold: float, levels: tuple[str, ...] | None = None
+                ) -> VariablePattern:
     """Bin the residuals (N, m) against one variable (N,) and test the bin means, on the
-    samples where the variable is defined (finite)."""
+    samples where the variable is defined (finite). levels: the level names of a
+    categorical variable (values are level indices): one bin per level present."""
     defined = np.isfinite(values)
     if not np.all(defined):
         values, raw, whitened = values[defined], raw[defined], whitened[defined]
-    edges, index = _bins(values, n_bins)
+    edges, index = _bins(values, n_bins, categorical=levels is not None)
     n_used = edges.size - 1
     m = raw.shape[1]
     counts = np.bincount(index, minlength=n_used).astype(float)
@@ -145,18 +177,22 @@ def bin_pattern(variable: str, values: np.ndarray, raw: np.ndarray, whitened: np
     dof = int(np.count_nonzero(keep) * m)
     p_value = chi2_sf(chi2, dof) if dof else 1.0
     centres = np.array([values[index == b].mean() if keep[b] else np.nan for b in range(n_used)])
+    names = () if levels is None else tuple(levels[int(c)] for c in np.unique(values))
     return VariablePattern(variable, edges, centres, counts.astype(int), mean_raw, mean_white,
-                           chi2, dof, p_value, bool(p_value < threshold))
+                           chi2, dof, p_value, bool(p_value < threshold), names)
 
 
 def analyse_residuals(raw: np.ndarray, whitened: np.ndarray,
                       variables: Mapping[str, np.ndarray], alpha: float,
                       n_bins: int = DEFAULT_BINS, worst_count: int = WORST_COUNT,
-                      length_columns: np.ndarray | None = None) -> ResidualAnalysis:
+                      length_columns: np.ndarray | None = None,
+                      categorical: Mapping[str, tuple[str, ...]] | None = None
+                      ) -> ResidualAnalysis:
     """Per-sample norms, the worst samples and the binned pattern of every variable.
 
     raw, whitened: (N, m) residuals (measured - predicted) of the fitted model;
-    length_columns: the components that are lengths (the norms in m; None: all).
+    length_columns: the components that are lengths (the norms in m; None: all);
+    categorical: the group-label variables and their level names (one bin per level).
     """
     norms = np.linalg.norm(raw if length_columns is None else raw[:, length_columns], axis=1)
     whitened_norms = np.linalg.norm(whitened, axis=1)
@@ -168,7 +204,8 @@ def analyse_residuals(raw: np.ndarray, whitened: np.ndarray,
     )
     usable = usable_variables(variables)
     threshold = alpha / max(len(usable), 1)
-    patterns = [bin_pattern(name, values, raw, whitened, n_bins, threshold)
+    groups = dict(categorical or {})
+    patterns = [bin_pattern(name, values, raw, whitened, n_bins, threshold, groups.get(name))
                 for name, values in usable.items()]
     patterns.sort(key=lambda p: p.p_value)
     return ResidualAnalysis(norms, whitened_norms, worst, tuple(patterns), threshold)

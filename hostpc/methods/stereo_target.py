@@ -26,13 +26,12 @@ from hostpc.dataset import FORMAT_TAG, Dataset, dataset_from_dict
 from hostpc.errors import ControllerError, InputError, ZerocalError
 from hostpc.files import write_json_atomic
 from hostpc.kinematics import forward, get_robot, invert_transform, pose_to_transform
+from hostpc.methods.approach_moves import ApproachMoves
 from hostpc.methods.base import (
     Method,
     Phase,
     Progress,
     SampleRecord,
-    approach_signs,
-    move_or_skip,
 )
 from hostpc.methods.cell import require_camera_cell
 from hostpc.model.measurement import predict
@@ -78,6 +77,9 @@ class StereoTargetMethod(Method):
         self._chain = get_robot(cell.robot)
         self._T_flange_tool = pose_to_transform(tool.xyz, tool.rpy)
         self._t0: float = 0.0
+        # an approach-dependent effect (backlash) in the model: each joint arrives from
+        # both sides, through via-points where needed (methods/approach_moves.py)
+        self._moves = ApproachMoves(settings, self._chain)
 
     # ---------------------------------------------------------------- set-up
 
@@ -276,7 +278,7 @@ class StereoTargetMethod(Method):
     async def acquire(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
                       q_from: np.ndarray | None) -> SampleRecord:
         """Move to q, capture, detect and triangulate (see the module docstring)."""
-        outcome = await move_or_skip(robot, self.settings.speed, phase, index, q, q_from)
+        outcome = await self._moves.move(robot, phase, index, q, q_from)
         if isinstance(outcome, SampleRecord):
             return outcome
         capture = await robot.capture("target")
@@ -298,7 +300,7 @@ class StereoTargetMethod(Method):
             "p": [float(v) for v in p],
             "cov": cov.tolist(),
             "t": float(capture.t) - self._t0,
-            "approach": approach_signs(q_from, capture.q),
+            "approach": self._moves.signs(q_from, capture.q),
         }
         uv = getattr(observation, "uv", None)
         if uv is not None:

@@ -30,13 +30,12 @@ from hostpc.dataset import FORMAT_TAG, Dataset, dataset_from_dict
 from hostpc.errors import ControllerError, InputError
 from hostpc.files import write_json_atomic
 from hostpc.kinematics import forward, get_robot, pose_to_transform
+from hostpc.methods.approach_moves import ApproachMoves
 from hostpc.methods.base import (
     Method,
     Phase,
     Progress,
     SampleRecord,
-    approach_signs,
-    move_or_skip,
 )
 from hostpc.robots.base import RobotAdapter, RobotState
 
@@ -83,6 +82,9 @@ class WorldPointMethod(Method):
         self._chain = get_robot(cell.robot)
         self._description: dict[str, Any] | None = None
         self._t0 = 0.0
+        # an approach-dependent effect (backlash) in the model: each joint arrives from
+        # both sides, through via-points where needed (methods/approach_moves.py)
+        self._moves = ApproachMoves(settings, self._chain)
 
     def set_time_origin(self, t0: float) -> None:
         """Controller time (s) at the start of the run: sample `t` counts from here."""
@@ -200,7 +202,7 @@ class WorldPointMethod(Method):
     async def acquire(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
                       q_from: np.ndarray | None) -> SampleRecord:
         """Move to q and read the tracker (see the module docstring)."""
-        outcome = await move_or_skip(robot, self.settings.speed, phase, index, q, q_from)
+        outcome = await self._moves.move(robot, phase, index, q, q_from)
         if isinstance(outcome, SampleRecord):
             return outcome
         reading = await robot.measure_tracker()  # type: ignore[attr-defined]
@@ -215,7 +217,7 @@ class WorldPointMethod(Method):
         sample = {"q": [float(v) for v in reading.q], "marker": name,
                   "p": [float(v) for v in p], "cov": np.asarray(cov, float).tolist(),
                   "t": float(reading.time) - self._t0,
-                  "approach": approach_signs(q_from, reading.q)}
+                  "approach": self._moves.signs(q_from, reading.q)}
         return SampleRecord(phase, index, True, sample=sample, q_end=outcome.q.tolist())
 
     # ---------------------------------------------------------------- dataset

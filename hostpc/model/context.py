@@ -6,7 +6,7 @@ builds its own); computed once per problem, including the gravity torques.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -60,12 +60,31 @@ def sample_variables(samples: Samples, scalars: tuple[str, ...] = ("t", "tempera
     return variables
 
 
+def group_variable(labels: Sequence[object]) -> tuple[np.ndarray, tuple[str, ...]]:
+    """A categorical variable from per-sample labels (N,): (level index of each sample as
+    float (N,), NaN where the label is empty or None; the level names, in order of first
+    appearance). What a measurement model puts in ``ModelContext.variables`` and
+    ``ModelContext.categorical`` for a group of samples (a marker, an arm, a session)."""
+    levels: list[str] = []
+    codes = np.full(len(labels), np.nan)
+    for i, label in enumerate(labels):
+        if label is None or str(label) == "":
+            continue
+        name = str(label)
+        if name not in levels:
+            levels.append(name)
+        codes[i] = levels.index(name)
+    return codes, tuple(levels)
+
+
 def serial_context(dataset: Dataset, chain: Chain,
                    frame_parameters: Mapping[str, tuple[str, ...]] | None = None,
-                   variables: Mapping[str, np.ndarray] | None = None) -> ModelContext:
+                   variables: Mapping[str, np.ndarray] | None = None,
+                   categorical: Mapping[str, tuple[str, ...]] | None = None) -> ModelContext:
     """The ModelContext of a serial robot's samples: q_cmd, gravity torques (NaN without
     mass data), approach signs and the contract variables (``q1``, ``tau1``,
-    ``approach1``, ... and ``sample_variables``, or the given ``variables`` instead)."""
+    ``approach1``, ... and ``sample_variables``, or the given ``variables`` instead);
+    ``categorical``: which of the given variables are group labels, with their levels."""
     samples = dataset.samples
     q_cmd = np.asarray(samples.q, dtype=float)
     if chain.mass is not None and chain.com is not None:
@@ -86,4 +105,5 @@ def serial_context(dataset: Dataset, chain: Chain,
     return ModelContext(
         chain=chain, method=dataset.method, q_cmd=q_cmd, tau=tau, approach=approach,
         variables=named, frame_parameters=dict(frame_parameters or {}),
+        categorical=dict(categorical or {}),
     )

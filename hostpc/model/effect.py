@@ -37,7 +37,13 @@ class ModelContext:
     tau: (N, n) gravity load torque at q_cmd (N m), NaN if the robot has no mass data;
     approach: (N, n) sign of the last motion into each pose (+1/-1, 0 where unknown);
     variables: every recorded or derived variable by its contract name (``q1``, ``tau2``,
-    ``approach3``, ``t``, ``temperature``, ``speed``, ``depth``, ``extra.NAME``), each (N,).
+    ``approach3``, ``t``, ``temperature``, ``speed``, ``depth``, ``extra.NAME``), each (N,);
+    NaN on the samples a variable does not exist on (a per-group variable: ``left.q3`` on
+    the right arm's samples), which diagnostics leave out when they test it;
+    categorical: the variables that are group labels (``marker``, ``chain``,
+    ``probe_group``), name -> the level names; their values in ``variables`` are level
+    indices 0..k-1 as floats (NaN where unlabelled). Diagnostics test them per level
+    ("the residual depends on marker": one marker's mean residual is off), never as numbers.
     """
 
     chain: Chain
@@ -52,6 +58,7 @@ class ModelContext:
     #: parameter names of each frame the measurement model estimates, by frame name
     #: (e.g. sphere_probe's tool is a point: ("x", "y", "z"))
     frame_parameters: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+    categorical: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.joint_labels:
@@ -99,6 +106,10 @@ class Effect:
     #: methods the effect applies to (None: all). A sensor effect acts on the method's
     #: measurement: (N, 3) points for stereo_target, (N, 1) distances for sphere_probe.
     methods: ClassVar[tuple[str, ...] | None] = None
+    #: the effect depends on the direction each joint last moved (``ctx.approach``):
+    #: the planners then reach every joint from both sides (hostpc.planning.approach), so
+    #: the effect and the joint's zero offset can be told apart
+    approach_dependent: ClassVar[bool] = False
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         """Local parameter names (without the ``<effect>.`` prefix)."""

@@ -60,6 +60,7 @@ from hostpc.methods.sphere_probe.dataset import (
     solve,
     with_initial_estimate,
 )
+from hostpc.planning.approach import balance_probe_plan, travel_signs
 from hostpc.planning.design import PoseGroups
 from hostpc.planning.sphere_contacts import (
     DESIGN_JOINT_SPEED,
@@ -232,8 +233,12 @@ class SphereProbeMethod(Method):
         """(N_c, n) nominal contact poses of a freshly planned run (persisted)."""
 
         if self.plan is None:
-            self.plan = plan_sphere_probe(self.chain, self.setup, self.config, state.q,
-                                          state.q_min, state.q_max)
+            plan = plan_sphere_probe(self.chain, self.setup, self.config, state.q,
+                                     state.q_min, state.q_max)
+            # backlash in the model: each joint reaches its contacts from both sides
+            self.plan = balance_probe_plan(plan, self.chain, self.setup.tip,
+                                           self.settings.effects, self.settings.plugins,
+                                           state.q_min, state.q_max)
             write_json_atomic(self.plan_path, _plan_to_dict(self.plan))
         return self._poses()
 
@@ -265,13 +270,15 @@ class SphereProbeMethod(Method):
     def design_dataset(self, q: np.ndarray) -> Dataset:
         """Contacts at q (N, n) on the nominal sphere, sigma = repeatability, with the
         nominal approach speeds along the normal (``design_speeds``; 0 for the Modbus
-        stepping probe, which reads at rest)."""
+        stepping probe, which reads at rest) and the guarded moves' approach signs."""
         contacts = [self._lookup(row)[1] for row in q]
         groups = np.array([c.group for c in contacts], dtype=int)
         speed = (design_speeds(self.chain, contacts, np.asarray(q, float), self.setup.tip)
                  if self.probe_io == "guarded" else np.zeros(q.shape[0]))
+        approach = travel_signs(np.array([c.q_start for c in contacts]),
+                                np.array([c.q_target for c in contacts]))
         samples = Samples(q=q, sigma=self.setup.contact_sigma(speed), group=groups,
-                          speed=speed)
+                          speed=speed, approach=approach)
         return Dataset(method=METHOD, robot=RobotDescription(name=self.cell.robot),
                        frames={"tool": FramePose(xyz=self.setup.tip, rpy=np.zeros(3)),
                                "sphere": SphereFrame(self.setup.sphere_centre,

@@ -78,6 +78,7 @@ class Backlash(_LinearJointEffect):
 
     name = "backlash"
     unit = "rad"
+    approach_dependent = True
     description = "joint angle depends on the direction of the last motion"
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:

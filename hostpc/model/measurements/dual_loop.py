@@ -45,7 +45,7 @@ from hostpc.kinematics import Chain, forward, point_jacobian, screws
 from hostpc.kinematics.humanoid import HUMANOID_FRAMES, HUMANOID_HOME, get_tree
 from hostpc.kinematics.rotations import pose_to_transform, skew
 from hostpc.kinematics.tree import KinematicTree, tree_gravity_torque
-from hostpc.model.context import sample_variables
+from hostpc.model.context import group_variable, sample_variables
 from hostpc.model.effect import ModelContext
 from hostpc.model.frame_math import inverse_point_derivatives, perturbed_pose
 from hostpc.model.layout import Problem
@@ -136,7 +136,7 @@ def dual_loop_context(dataset: Dataset, chain: Chain,
     torso upright); ``approach``: the recorded signs in the observed arm's columns, 0
     elsewhere. Variables are named by chain: ``head.q1``, ``left.q3``, ``left.tau3``,
     ``left.approach3`` (NaN in samples of the other arm), plus ``t``, ``temperature``,
-    ``depth`` and ``extra.NAME``.
+    ``depth``, ``extra.NAME`` and the group label ``chain`` (categorical: left / right).
     """
     tree = tree_of(dataset)
     samples = dataset.samples
@@ -165,9 +165,11 @@ def dual_loop_context(dataset: Dataset, chain: Chain,
             variables[f"{prefix}.approach{number}"] = np.where(observed[:, j],
                                                               approach[:, j], np.nan)
     variables.update(sample_variables(samples, ("t", "temperature")))
+    variables["chain"], arms = group_variable(list(samples.chain))
     return ModelContext(chain=chain, method=dataset.method, q_cmd=q_cmd, tau=tau,
                         approach=approach, variables=variables, joint_labels=labels,
-                        frame_parameters=dict(frame_parameters or {}))
+                        frame_parameters=dict(frame_parameters or {}),
+                        categorical={"chain": arms})
 
 
 def _pose(problem: Problem, name: str, x: np.ndarray

@@ -12,7 +12,9 @@ import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples, SphereFrame
 from hostpc.dataset.builtin_kinds import SphereProbeFile
-from hostpc.kinematics import get_robot, point_jacobian, screws
+from hostpc.kinematics import Chain, get_robot, point_jacobian, screws
+from hostpc.model.context import group_variable, sample_variables, serial_context
+from hostpc.model.effect import ModelContext
 from hostpc.model.layout import Problem
 from hostpc.model.measurements.base import (
     EXAMPLE_TOOL_RPY,
@@ -39,6 +41,19 @@ class SphereProbe(SphereProbeFile, MeasurementModel):
     frame_effects = {"tool": POINT, "sphere": POINT, "base": POSE}
     default_frames = ("tool", "sphere")
     measurement_size = 1
+
+    def context(self, dataset: Dataset, chain: Chain) -> ModelContext:
+        """The serial context plus ``probe_group``, each contact's probe orientation as a
+        group label (a touch probe's pretravel differs by direction: lobing)."""
+        variables = sample_variables(dataset.samples)
+        group = np.asarray(dataset.samples.group)
+        categorical = {}
+        if group.size == dataset.samples.n and np.any(group >= 0):
+            codes, levels = group_variable([str(g) if g >= 0 else None for g in group])
+            variables["probe_group"] = codes
+            categorical["probe_group"] = levels
+        return serial_context(dataset, chain, self.frame_parameters(dataset), variables,
+                              categorical)
 
     def measurements(self, dataset: Dataset) -> tuple[np.ndarray, np.ndarray]:
         """Every contact measures R + r; W = 1 / sigma."""

@@ -75,8 +75,10 @@ class WorldPoint(WorldPointFile, MeasurementModel):
 
     def context(self, dataset: Dataset, chain: Chain) -> ModelContext:
         variables = world_variables(dataset)
-        variables["marker"] = marker_index(dataset)[1].astype(float)
-        return serial_context(dataset, chain, self.frame_parameters(dataset), variables)
+        names, index = marker_index(dataset)
+        variables["marker"] = index.astype(float)  # a group label: tested per marker
+        return serial_context(dataset, chain, self.frame_parameters(dataset), variables,
+                              categorical={"marker": tuple(names)})
 
     def measurements(self, dataset: Dataset) -> tuple[np.ndarray, np.ndarray]:
         measured = np.asarray(dataset.samples.p, dtype=float)
