@@ -11,6 +11,7 @@ samples for the folds) no step can be judged on them and the significance alone 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 from hostpc.diagnostics.candidates import Candidate
@@ -48,6 +49,15 @@ def _bic(candidate: Candidate) -> float:
     return 0.0 if candidate.delta_bic is None else candidate.delta_bic
 
 
+def search_penalty(check: ModelCheck) -> float:
+    """Extended-BIC cost (Chen & Chen 2008) of a generated effect: it is the one pattern
+    picked out of the search's ``n_interaction_tests``, ``2 ln n``. A built-in effect is a
+    hypothesis named before the data were seen; a generated one must beat it by this much
+    (thermal expansion and "q3's zero linear in temperature" fit warming-up data almost
+    equally well: the physical effect is taken unless the pattern is clearly better)."""
+    return 2.0 * math.log(max(check.n_interaction_tests, 1))
+
+
 def climb(start: ModelCheck, check_model: Callable[[FitResult], ModelCheck],
           max_steps: int = DEFAULT_MAX_STEPS,
           propose: Callable[[ModelCheck], Candidate | None] | None = None,
@@ -58,7 +68,7 @@ def climb(start: ModelCheck, check_model: Callable[[FitResult], ModelCheck],
 
     ``propose`` (if given) may offer one more candidate: the interaction effect the search
     suggests (``auto_effects``); it is taken instead of the best built-in candidate when its
-    delta BIC is lower, and must win on held-out samples too.
+    delta BIC plus ``search_penalty`` is lower, and must win on held-out samples too.
     A candidate that would make an identifiable parameter unidentifiable is never taken:
     when it is the only significant one the ladder stops and says so.
 
@@ -70,7 +80,8 @@ def climb(start: ModelCheck, check_model: Callable[[FitResult], ModelCheck],
     while not check.adequacy.adequate and len(steps) <= max_steps:
         best = check.best_candidate
         proposal = propose(check) if propose is not None else None
-        if proposal is not None and (best is None or _bic(proposal) < _bic(best)):
+        if proposal is not None and (
+                best is None or _bic(proposal) + search_penalty(check) < _bic(best)):
             best = proposal
         if best is None:
             costly = check.costly_candidate
