@@ -84,7 +84,8 @@ class ModelCheck:
 class LadderStep:
     """One rung of the ladder: the model, what was added to reach it (None for the start),
     and its in-sample and held-out residual norms (m), the held-out whitened RMS per scalar
-    row (1 at the stated noise level), chi2/dof and verdict."""
+    row (1 at the stated noise level), chi2/dof and verdict; removed: effects an earlier
+    step added that this step's model no longer needs (dropped after the addition)."""
 
     step: int
     effects: tuple[str, ...]
@@ -99,10 +100,20 @@ class LadderStep:
     free_parameters: int
     adequate: bool
     check: ModelCheck
+    removed: tuple[str, ...] = ()
+
+    @property
+    def change(self) -> str | None:
+        """What the step did, in words: ``backlash``, ``backlash, without encoder_scale``
+        (None for the start)."""
+        if self.added is None:
+            return None
+        return self.added + "".join(f", without {r}" for r in self.removed)
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "step": self.step, "effects": list(self.effects), "added": self.added,
+            "removed": list(self.removed),
             "rms": self.rms, "max": self.max, "cv_rms": finite(self.cv_rms),
             "cv_max": finite(self.cv_max), "cv_whitened_rms": finite(self.cv_whitened_rms),
             "chi2_dof": finite(self.chi2_dof),

@@ -22,13 +22,13 @@ DEFAULT_MAX_STEPS = 5
 
 
 def step_of(index: int, check: ModelCheck, added: str | None,
-            delta_bic: float | None) -> LadderStep:
+            delta_bic: float | None, removed: tuple[str, ...] = ()) -> LadderStep:
     a = check.adequacy
     return LadderStep(step=index, effects=check.effects, added=added, rms=a.rms, max=a.max,
                       cv_rms=a.cv_rms, cv_max=a.cv_max,
                       cv_whitened_rms=a.cv_whitened_rms, chi2_dof=a.chi2_dof,
                       delta_bic=delta_bic, free_parameters=free_parameters(check.fit),
-                      adequate=a.adequate, check=check)
+                      adequate=a.adequate, check=check, removed=removed)
 
 
 def held_out_worse(before: ModelCheck, after: ModelCheck) -> str | None:
@@ -61,6 +61,7 @@ def search_penalty(check: ModelCheck) -> float:
 def climb(start: ModelCheck, check_model: Callable[[FitResult], ModelCheck],
           max_steps: int = DEFAULT_MAX_STEPS,
           propose: Callable[[ModelCheck], Candidate | None] | None = None,
+          prune: Callable[[ModelCheck, str], tuple[FitResult, str] | None] | None = None,
           ) -> tuple[tuple[LadderStep, ...], str | None]:
     """The ladder from ``start``; ``check_model`` checks a fit (held-out residuals, candidates
     not yet in it, interactions). Each step adds the best significant candidate, unless the
@@ -71,6 +72,14 @@ def climb(start: ModelCheck, check_model: Callable[[FitResult], ModelCheck],
     delta BIC plus ``search_penalty`` is lower, and must win on held-out samples too.
     A candidate that would make an identifiable parameter unidentifiable is never taken:
     when it is the only significant one the ladder stops and says so.
+
+    ``prune`` (if given; stepwise selection, forward then backward) looks, after each
+    addition, at the effects earlier steps added (not the one just added): it returns the
+    model without one that is no longer needed (as a candidate on the model without it, it
+    would not be significant) and its name, or None. With several effects hidden at once,
+    the first pick can be a flexible effect that mimics the sum of the others (a
+    transmission harmonic standing in for compliance and backlash); once those are in, it
+    is dropped and the step records it (``LadderStep.removed``).
 
     Returns the steps and, when the ladder stopped for one of these reasons, a sentence
     saying which effect was not added and why (else None).
@@ -95,5 +104,12 @@ def climb(start: ModelCheck, check_model: Callable[[FitResult], ModelCheck],
             return tuple(steps), (f"{best.effect} is significant in-sample but was not added: "
                                   f"{worse}")
         check = extended
-        steps.append(step_of(len(steps), check, best.effect, best.delta_bic))
+        removed: list[str] = []
+        while prune is not None and len(removed) < len(check.effects):
+            dropped = prune(check, best.effect)
+            if dropped is None:
+                break
+            check = check_model(dropped[0])
+            removed.append(dropped[1])
+        steps.append(step_of(len(steps), check, best.effect, best.delta_bic, tuple(removed)))
     return tuple(steps), None
