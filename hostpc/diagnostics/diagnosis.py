@@ -21,6 +21,8 @@ from hostpc.diagnostics.residual_analysis import ResidualAnalysis
 from hostpc.fitting import FitResult
 
 FORMAT = "zerocal-diagnosis/1"
+#: delta BIC difference below which two candidates are tied (``ModelCheck.best_candidate``)
+BIC_TIE = 2.0
 JSON_INTERACTIONS = 25
 
 
@@ -66,8 +68,21 @@ class ModelCheck:
 
     @property
     def best_candidate(self) -> Candidate | None:
-        """The best significant candidate that costs no identifiable parameter, or None."""
-        return next((c for c in self.candidates if c.taken), None)
+        """The best significant candidate that costs no identifiable parameter, or None.
+
+        Candidates whose delta BIC is within ``BIC_TIE`` of the best one's are a tie (the
+        evidence between them is "not worth more than a bare mention", Kass & Raftery
+        1995): among them the one whose effect as a whole (all its parameters) fits best
+        is taken. After geometry, joint 2's compliance (c2 tau2) and encoder scale (s2 q2)
+        can fit stereo data equally well on their own; compliance of every joint fits
+        better than the scale of every joint when compliance is what is there."""
+        taken = [c for c in self.candidates if c.taken]
+        if not taken or taken[0].delta_bic is None:
+            return taken[0] if taken else None
+        best = taken[0].delta_bic
+        tied = [c for c in taken if c.delta_bic is not None and c.delta_bic - best < BIC_TIE]
+        return min(tied, key=lambda c: math.inf if c.delta_bic_full is None
+                   else c.delta_bic_full)
 
     @property
     def costly_candidate(self) -> Candidate | None:

@@ -247,3 +247,44 @@ def hidden_world_point(hidden: Mapping[str, float], seed: int, *, swing: float =
     measured = dataclasses.replace(samples, p=clean + (drawn if noise else 0.0), cov=cov)
     return SyntheticDataset(dataclasses.replace(dataset, samples=measured), truth,
                             tuple(effects))
+
+
+#: families of tests a dataset with nothing hidden can fail, each at the family-wise
+#: significance DEFAULT_ALPHA (= ADEQUACY_P_MIN for the chi-square): the chi-square band,
+#: the outlier test, the candidates (Bonferroni over them, plus the held-out gain) and the
+#: interaction search (Bonferroni over its tests). The ladder adds an effect only when one
+#: of the last two fires (a generated effect needs a significant interaction first).
+NULL_FAMILIES = 4
+
+
+def null_alarm_rate() -> float:
+    """Upper bound (union bound) of the probability that diagnose --ladder raises any alarm
+    on one dataset with nothing hidden."""
+    from hostpc.diagnostics import DEFAULT_ALPHA
+    from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN
+
+    return (NULL_FAMILIES - 1) * DEFAULT_ALPHA + ADEQUACY_P_MIN
+
+
+def allowed_alarms(n_datasets: int, rate: float, risk: float = 0.01) -> int:
+    """The fewest alarms k such that P(more than k of n | rate) < risk (binomial)."""
+    from math import comb
+
+    k = 0
+    while sum(comb(n_datasets, j) * rate**j * (1 - rate)**(n_datasets - j)
+              for j in range(k + 1, n_datasets + 1)) >= risk:
+        k += 1
+    return k
+
+
+def null_alarms(seed: int) -> list[str]:
+    """What diagnose --ladder (generated effects on) says is wrong with stereo_target data
+    with nothing hidden (seed 100 + seed; the same data as the no-false-alarm test): the
+    reasons it is not adequate and the effects the ladder adds (empty: no alarm)."""
+    import hostpc
+
+    synthetic = hidden_dataset({}, seed=100 + seed)
+    diagnosis = hostpc.diagnose(synthetic.dataset, ladder=True)
+    alarms = list(diagnosis.check.adequacy.reasons)
+    alarms += [f"ladder adds {s.added}" for s in diagnosis.ladder or () if s.added]
+    return alarms
