@@ -45,6 +45,7 @@ from hostpc.diagnostics.adequacy import held_out_residuals
 from hostpc.diagnostics.distributions import f_sf
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, solve
+from hostpc.fitting.fitting import held_out_by_fold
 from hostpc.fitting.solver import Loss, SolverOutcome, evaluate, levenberg_marquardt
 from hostpc.model.effect import Effect
 from hostpc.model.layout import Problem
@@ -394,8 +395,8 @@ def subset_held_out(problem: Problem, outcome: SolverOutcome, free: np.ndarray,
                     folds: int) -> float | None:
     """The whitened held-out RMS of the model with only the selected subset free (None
     without held-out residuals)."""
-    held = held_out_residuals(problem, outcome.x, free, folds)
-    return None if held is None else held.whitened_rms
+    held = held_out_by_fold(problem, outcome.x, free, folds, evaluation=outcome.evaluation)
+    return None if held is None else float(np.sqrt(np.mean(held[1] ** 2)))
 
 
 def _better(first: float | None, second: float | None) -> float | None:
