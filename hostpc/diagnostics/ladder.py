@@ -1,6 +1,8 @@
-"""The ladder: fit the nested sequence of models - the current one, then with the best
+"""The ladder: fit the sequence of models - the current one, then with the best
 significant candidate added, and so on - until the model is adequate, the evidence for any
-further effect runs out, or a step would predict held-out samples worse.
+further effect runs out, or a step would predict held-out samples worse. After each
+addition an effect an earlier step added that is no longer needed is dropped (stepwise
+selection), so the models are nested except where a step says what it removed.
 
 "Worse" is judged on the whitened held-out RMS (every axis of every sample in units of its
 own stated noise, which is what the fit minimises): the RMS in mm is dominated by the
