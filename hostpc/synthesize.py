@@ -148,13 +148,15 @@ def synthesize_stereo_target(
     seconds_per_pose: float = 4.0,
     q: np.ndarray | None = None,
     approach: np.ndarray | None = None,
+    temperature: np.ndarray | None = None,
 ) -> SyntheticDataset:
     """A stereo_target dataset whose measurements follow `truth` (full parameter names, SI),
     plus Gaussian noise from each sample's covariance (noise_scale 0 for exact data).
 
     The dataset carries the nominal frames; the truth's frame parameters are the errors of
     the real frames. Records t, approach and temperature context for the diagnostics
-    (``approach``: (N, n) signs to record instead of those of visiting the poses in order).
+    (``approach``: (N, n) signs to record instead of those of visiting the poses in order;
+    ``temperature``: (N,) the arm's temperature to record instead of a slow 2 mK/s rise).
     """
     rng = np.random.default_rng(seed)
     target = default_target(robot, tool) if target is None else np.asarray(target, float)
@@ -163,7 +165,8 @@ def synthesize_stereo_target(
     n_samples = q.shape[0]
     t = np.asarray(seconds_per_pose * np.arange(1, n_samples + 1), dtype=np.float64)
     approach = approach_signs(q, rng) if approach is None else np.asarray(approach, float)
-    temperature = np.asarray(21.0 + 0.002 * t, dtype=np.float64)
+    temperature = np.asarray(21.0 + 0.002 * t if temperature is None else temperature,
+                             dtype=np.float64)
     placeholder = Samples(q=q, p=np.zeros((n_samples, 3)),
                           cov=np.broadcast_to(np.eye(3) * 1e-8, (n_samples, 3, 3)),
                           t=t, approach=approach, temperature=temperature)

@@ -253,7 +253,7 @@ def ladder_header() -> str:
 def ladder_row(step: LadderStep) -> str:
     """One ladder step in fixed-width columns (scientific notation where a value is too
     wide for its column)."""
-    return (f"  {name_cell(str(step.step), 5)}{name_cell(step.added or '(current model)', 24)}"
+    return (f"  {name_cell(str(step.step), 5)}{name_cell(step.change or '(current model)', 24)}"
             f"{_mm_cell(step.rms)}{_mm_cell(step.cv_rms)}{_mm_cell(step.cv_max)}"
             f"{cell(step.cv_whitened_rms, 8, 3)}{cell(step.chi2_dof, 10, 3)}  "
             f"{verdict_word(step.check)}")

@@ -231,9 +231,13 @@ def ladder_sentences(check: ModelCheck, ladder: Sequence[LadderStep],
     head = f"Ladder ({without(check)})" if check.outliers else "Ladder"
     path = " -> ".join(f"{mm(s.cv_rms if s.cv_rms is not None else s.rms)}" for s in ladder)
     added = [s.added for s in ladder if s.added]
+    removed = [r for s in ladder for r in s.removed]
     if added:
         verdict = "adequate" if last.adequate else "still NOT adequate"
-        sentences.append(f"{head}: adding {', '.join(added)} takes the held-out RMS "
+        dropped = (f" (and dropping {', '.join(removed)} again: once the later effects were "
+                   f"in, the model no longer needed {'them' if len(removed) > 1 else 'it'})"
+                   if removed else "")
+        sentences.append(f"{head}: adding {', '.join(added)}{dropped} takes the held-out RMS "
                          f"{path}; the final model is {verdict}.")
     elif not last.adequate and ladder_stop is None:
         sentences.append(f"{head}: no candidate effect is significant, so nothing was "

@@ -16,7 +16,10 @@ ones the fit could identify: unidentifiable geometry parameters cost nothing):
   the smaller of the two doubled. A candidate is significant when ``p_value`` is below
   ``alpha`` divided by the number of candidates tried (Bonferroni) *and* the model with it
   predicts held-out samples better (lower whitened held-out RMS, same folds as the current
-  model's; without held-out residuals the p-value alone decides).
+  model's, with all its parameters or with its selected subset - the better of the two, as
+  the p-value takes the better form: an effect of six parameters the data need two of may
+  overfit a small fold while its two predict better; without held-out residuals the
+  p-value alone decides).
 - ``unidentifiable``: parameters the current model identifies that the model with the
   candidate cannot (the fit holds them at nominal): adding backlash to probe data whose
   joint 4 always arrives from one side hides joint 4's offset in the backlash. Such a
@@ -42,7 +45,8 @@ from hostpc.diagnostics.adequacy import held_out_residuals
 from hostpc.diagnostics.distributions import f_sf
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, solve
-from hostpc.fitting.solver import Loss, evaluate, levenberg_marquardt
+from hostpc.fitting.fitting import held_out_by_fold
+from hostpc.fitting.solver import Loss, SolverOutcome, evaluate, levenberg_marquardt
 from hostpc.model.effect import Effect
 from hostpc.model.layout import Problem
 from hostpc.model.problem import extend_problem as extend_with_effects
@@ -360,6 +364,7 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
     if chosen and testable:
         outcome = levenberg_marquardt(problem, x0, free, loss=loss, max_iterations=50)
         chi2_subset = float(np.sum(outcome.evaluation.whitened**2))
+        cv_whitened = _better(cv_whitened, subset_held_out(problem, outcome, free, cv_folds))
         delta_bic = (n_rows * math.log(max(chi2_subset, 1e-300) / max(base.chi2, 1e-300))
                      + penalty - 0.0)
         drop = base.chi2 - chi2_subset
@@ -385,6 +390,20 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
     )
     return replace(candidate, not_taken=not_taken_reason(candidate, p_significant, threshold,
                                                          base_cv))
+
+
+def subset_held_out(problem: Problem, outcome: SolverOutcome, free: np.ndarray,
+                    folds: int) -> float | None:
+    """The whitened held-out RMS of the model with only the selected subset free (None
+    without held-out residuals)."""
+    held = held_out_by_fold(problem, outcome.x, free, folds, evaluation=outcome.evaluation)
+    return None if held is None else float(np.sqrt(np.mean(held[1] ** 2)))
+
+
+def _better(first: float | None, second: float | None) -> float | None:
+    if first is None or second is None:
+        return first if second is None else second
+    return min(first, second)
 
 
 def ranking_key(candidate: Candidate) -> tuple[bool, bool, float, float]:

@@ -21,6 +21,8 @@ from hostpc.diagnostics.residual_analysis import ResidualAnalysis
 from hostpc.fitting import FitResult
 
 FORMAT = "zerocal-diagnosis/1"
+#: delta BIC difference below which two candidates are tied (``ModelCheck.best_candidate``)
+BIC_TIE = 2.0
 JSON_INTERACTIONS = 25
 
 
@@ -66,8 +68,21 @@ class ModelCheck:
 
     @property
     def best_candidate(self) -> Candidate | None:
-        """The best significant candidate that costs no identifiable parameter, or None."""
-        return next((c for c in self.candidates if c.taken), None)
+        """The best significant candidate that costs no identifiable parameter, or None.
+
+        Candidates whose delta BIC is within ``BIC_TIE`` of the best one's are a tie (the
+        evidence between them is "not worth more than a bare mention", Kass & Raftery
+        1995): among them the one whose effect as a whole (all its parameters) fits best
+        is taken. After geometry, joint 2's compliance (c2 tau2) and encoder scale (s2 q2)
+        can fit stereo data equally well on their own; compliance of every joint fits
+        better than the scale of every joint when compliance is what is there."""
+        taken = [c for c in self.candidates if c.taken]
+        if not taken or taken[0].delta_bic is None:
+            return taken[0] if taken else None
+        best = taken[0].delta_bic
+        tied = [c for c in taken if c.delta_bic is not None and c.delta_bic - best < BIC_TIE]
+        return min(tied, key=lambda c: math.inf if c.delta_bic_full is None
+                   else c.delta_bic_full)
 
     @property
     def costly_candidate(self) -> Candidate | None:
@@ -84,7 +99,8 @@ class ModelCheck:
 class LadderStep:
     """One rung of the ladder: the model, what was added to reach it (None for the start),
     and its in-sample and held-out residual norms (m), the held-out whitened RMS per scalar
-    row (1 at the stated noise level), chi2/dof and verdict."""
+    row (1 at the stated noise level), chi2/dof and verdict; removed: effects an earlier
+    step added that this step's model no longer needs (dropped after the addition)."""
 
     step: int
     effects: tuple[str, ...]
@@ -99,10 +115,20 @@ class LadderStep:
     free_parameters: int
     adequate: bool
     check: ModelCheck
+    removed: tuple[str, ...] = ()
+
+    @property
+    def change(self) -> str | None:
+        """What the step did, in words: ``backlash``, ``backlash, without encoder_scale``
+        (None for the start)."""
+        if self.added is None:
+            return None
+        return self.added + "".join(f", without {r}" for r in self.removed)
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "step": self.step, "effects": list(self.effects), "added": self.added,
+            "removed": list(self.removed),
             "rms": self.rms, "max": self.max, "cv_rms": finite(self.cv_rms),
             "cv_max": finite(self.cv_max), "cv_whitened_rms": finite(self.cv_whitened_rms),
             "chi2_dof": finite(self.chi2_dof),

@@ -18,6 +18,7 @@ from hostpc.diagnostics.candidates import (
     check_candidate_names,
     rank_candidates,
     try_candidate,
+    warm_start,
 )
 from hostpc.diagnostics.diagnosis import Diagnosis, LadderStep, ModelCheck
 from hostpc.diagnostics.interactions import Interaction, search_interactions
@@ -32,7 +33,8 @@ from hostpc.errors import InputError
 from hostpc.fitting import FitResult, solve
 from hostpc.fitting.solver import Loss
 from hostpc.model.effect import Effect
-from hostpc.model.problem import build_problem
+from hostpc.model.layout import Problem
+from hostpc.model.problem import build_problem, extend_problem
 from hostpc.model.registry import available_effects
 
 #: family-wise significance of each family of tests (chi-square band, candidates,
@@ -136,6 +138,35 @@ class _Checker:
         return None
 
 
+    def prune(self, check: ModelCheck, start: Problem, keep: str
+              ) -> tuple[FitResult, str] | None:
+        """The fit without the least needed effect the ladder added to ``start`` (``keep``
+        aside), and its name, when as a candidate on the model without it that effect
+        would not be significant (threshold and held-out test of the ranking); else None."""
+        added = check.fit.problem.terms[len(start.terms):]
+        least: tuple[float, FitResult, str] | None = None
+        for term in added:
+            name = term.effect.name
+            if name == keep:
+                continue
+            reduced_problem = extend_problem(start, [t.effect for t in added if t is not term])
+            reduced = solve(reduced_problem, x0=warm_start(check.fit, reduced_problem),
+                            loss=self.loss, cv_folds=0)
+            held = held_out_residuals(reduced.problem, reduced.x, ~reduced.fixed,
+                                      self.rank_cv_folds)
+            family = max(len(candidate_effects(reduced_problem, self.registry, self.only)), 1)
+            try:
+                candidate = try_candidate(reduced, term.effect, cv_folds=self.rank_cv_folds,
+                                          loss=self.loss, threshold=self.alpha / family,
+                                          base_cv=None if held is None else held.whitened_rms)
+            except InputError:
+                continue
+            p_value = 1.0 if candidate.p_value is None else candidate.p_value
+            if not candidate.significant and (least is None or p_value > least[0]):
+                least = (p_value, reduced, name)
+        return None if least is None else (least[1], least[2])
+
+
 def missing_sentences(candidates: Sequence[Candidate], found: Sequence[Interaction]
                       ) -> tuple[str, ...]:
     """The reasons a model is not adequate that name what is missing: the best significant
@@ -219,8 +250,10 @@ def diagnose(
     stop: str | None = None
     if ladder:
         climber = checker.without_outlier_detection()
+        base = start.ranked.fit.problem
         steps, stop = climb(start.ranked, climber, max_ladder_steps,
-                            propose=climber.propose if auto_effects else None)
+                            propose=climber.propose if auto_effects else None,
+                            prune=lambda check, keep: climber.prune(check, base, keep))
     advice = advise(start, residuals, steps, source, plugin_paths, ladder_stop=stop)
     return Diagnosis(check=start, residuals=residuals, ladder=steps, advice=advice,
                      alpha=alpha, source=source, plugins=plugin_paths, ladder_stop=stop)

@@ -6,7 +6,12 @@ The simulator (controller_stub, single kinematic chain) writes its hidden effect
 ``transmission_harmonic`` rows (sin q, cos q, sin 2q, cos 2q) rad, and
 ``probe_trigger_latency_s``), with the same definitions as the host's effects of those
 names (docs/effects.md), so ``joint_compliance.c2`` is compared with the second entry. An
-effect the model has and the simulator did not inject is compared with 0 (its truth).
+effect the model has and the simulator did not inject is compared with 0 (its truth): the
+simulator has no joint coupling, so ``joint_coupling.k6_5`` is compared with 0 (or with
+``effects["joint_coupling"]["k6_5"]`` where a truth names it). ``thermal_expansion.e`` is
+compared with the simulator's ``thermal_drift`` (m/s per link length) when the drift is
+the same fraction of every nominal link length (``e`` = that fraction per second) and the
+fit's driver is the time ``t`` (a drift per kelvin cannot be told from a drift per second).
 Parameters without a by-name truth (frames, geometry, kinematic trees) show "not simulated
 by name"; joint offsets are compared in the offsets table of a calibration report.
 """
@@ -18,6 +23,9 @@ import re
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
+
+from hostpc.errors import EffectError
 from hostpc.fitting import FitResult
 from hostpc.report.markup import display, escape, table
 
@@ -48,6 +56,11 @@ def true_value(truth: Mapping[str, Any] | None, name: str, n_joints: int) -> flo
         if values is None:
             return 0.0
         return float(values[joint]) if 0 <= joint < len(values) else None
+    if effect == "joint_coupling":
+        if not re.fullmatch(r"k\d+_\d+", local):
+            return None
+        coupling = effects.get("joint_coupling") or {}
+        return float(coupling.get(local, 0.0))
     if effect == "transmission_harmonic":
         match = _HARMONIC.match(local)
         if not match:
@@ -60,6 +73,42 @@ def true_value(truth: Mapping[str, Any] | None, name: str, n_joints: int) -> flo
             return None
         return float(rows[joint][HARMONIC_TERMS.index(match.group("term"))])
     return None
+
+
+PROPORTIONAL = 0.01
+"""A simulated drift counts as thermal expansion when it departs from e * (nominal lengths)
+by at most this fraction of its norm."""
+
+
+def thermal_truth(truth: Mapping[str, Any] | None, fit: FitResult) -> float | None:
+    """The true ``thermal_expansion.e`` (1/s) of a simulated run: the simulator's drift of
+    the link lengths (``thermal_drift`` d, a in m/s) as one fraction of the nominal lengths;
+    0 without a drift; None when the drift is not such a fraction, the fit's driver is a
+    recorded temperature, or the truth is another robot's."""
+    from hostpc.model.effects.thermal import thermal_driver
+
+    if not truth or "effects" not in truth:
+        return None
+    chain = fit.problem.chain
+    if len(truth.get("zero_errors", ())) != chain.n:
+        return None
+    try:
+        driver, _ = thermal_driver(fit.problem.context)
+    except EffectError:  # neither t nor temperature on every sample
+        return None
+    drift = (truth["effects"] or {}).get("thermal_drift")
+    if not drift:
+        return 0.0
+    if driver != "t":
+        return None
+    lengths = np.concatenate([np.asarray(chain.d, float), np.asarray(chain.a, float)])
+    rates = np.concatenate([np.asarray(drift.get("d", [0.0] * chain.n), float),
+                            np.asarray(drift.get("a", [0.0] * chain.n), float)])
+    if rates.shape != lengths.shape:
+        return None
+    e = float(rates @ lengths / max(float(lengths @ lengths), 1e-300))
+    departure = float(np.linalg.norm(rates - e * lengths))
+    return e if departure <= PROPORTIONAL * max(float(np.linalg.norm(rates)), 1e-300) else None
 
 
 def sigma_text(std: float | None, unit: str) -> str:
@@ -86,7 +135,8 @@ def effect_sizes(fit: FitResult, truth: Mapping[str, Any] | None = None,
         row = [escape(p.name), value, escape(sigma), escape(unit)]
         flag = False
         if truth is not None:
-            true = true_value(truth, p.name, n_joints)
+            true = (thermal_truth(truth, fit) if p.name == "thermal_expansion.e"
+                    else true_value(truth, p.name, n_joints))
             if true is None:
                 row += ["not simulated by name", "-"]
             else:

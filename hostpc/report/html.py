@@ -76,7 +76,7 @@ def _ladder(diagnosis: Diagnosis) -> str:
                  if diagnosis.source else "<code>hostpc diagnose</code> with "
                  "<code>--ladder</code> on this dataset")
         return f"<p>Run {where} to fit the nested models and watch the error fall.</p>"
-    rows = [(str(s.step), _e(s.added or "(current model)"), _mm(s.rms), _mm(s.cv_rms),
+    rows = [(str(s.step), _e(s.change or "(current model)"), _mm(s.rms), _mm(s.cv_rms),
              _mm(s.cv_max), _num(s.cv_whitened_rms), _num(s.chi2_dof),
              "adequate" if s.adequate else "NOT adequate") for s in diagnosis.ladder]
     table = _table(("step", "added", "RMS [mm]", "held-out RMS [mm]", "held-out max [mm]",

@@ -217,7 +217,7 @@ def ladder_chart(diagnosis: Diagnosis) -> str:
         for step, position in zip(steps, axes.px(x), strict=True):
             verdict = "adequate" if step.adequate else "NOT adequate"
             canvas.text(axes.left + position, axes.top + axes.height + 14,
-                        step.added or "current", 9)
+                        step.change or "current", 9)
             canvas.text(axes.left + position, axes.top + axes.height + 26, f"({verdict})", 9)
     return canvas.render()
 

@@ -163,3 +163,128 @@ def coupled_dual_loop(truth: Mapping[str, float], n_per_arm: int = 50, seed: int
                             effect_instances=instances)
     measured, cov = noisy_measurements(problem, truth, np.random.default_rng(seed), 1.0)
     return make_dataset(poses, measured, cov)
+
+
+def warm_up(n_samples: int, seconds_per_pose: float, swing: float, start: float = 21.0
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """(t, temperature) (N,) of a run during which the arm warms up by ``swing`` K: an
+    exponential approach to its working temperature with a time constant of half the run
+    (a cold arm running a shift's program: several K within the first hour)."""
+    t = seconds_per_pose * np.arange(1, n_samples + 1, dtype=float)
+    tau = t[-1] / 2.0
+    rise = (1.0 - np.exp(-t / tau)) / (1.0 - np.exp(-t[-1] / tau))
+    return t, start + swing * rise
+
+
+def warm_stereo_dataset(hidden: Mapping[str, float], seed: int, *, swing: float,
+                        seconds_per_pose: float = 30.0, n_samples: int = N_SAMPLES,
+                        noise: bool = True) -> SyntheticDataset:
+    """As ``hidden_dataset`` (same truth and poses), recorded over a run of
+    ``seconds_per_pose`` per pose while the arm warms up by ``swing`` K (``warm_up``);
+    ``noise`` False: exact measurements (same poses)."""
+    truth = random_truth(np.random.default_rng(50 + seed))
+    truth.update(hidden)
+    _, temperature = warm_up(n_samples, seconds_per_pose, swing)
+    return synthesize_stereo_target(truth, seed=seed, n_samples=n_samples,
+                                    seconds_per_pose=seconds_per_pose, temperature=temperature,
+                                    noise_scale=1.0 if noise else 0.0)
+
+
+#: a laser tracker's noise (the world_point method's defaults): 10 um along the beam,
+#: 5 urad across it
+TRACKER_SIGMA_DISTANCE = 1e-5
+TRACKER_SIGMA_ANGLE = 5e-6
+TRACKER_MARKERS = {"a": (0.05, 0.0, 0.03), "b": (-0.02, 0.06, 0.05), "c": (0.0, -0.05, 0.04)}
+
+
+def world_point_truth(rng: np.random.Generator) -> dict[str, float]:
+    """Random zero offsets (+-0.5 deg), tracker registration errors (+-2 mm, +-0.5 deg)
+    and reflector nest errors (+-1 mm) of a world_point cell."""
+    truth = {f"joint_offsets.q{i + 1}": float(np.radians(rng.uniform(-0.5, 0.5)))
+             for i in range(6)}
+    for axis in "xyz":
+        truth[f"world.{axis}"] = float(rng.uniform(-2e-3, 2e-3))
+        truth[f"world.r{axis}"] = float(np.radians(rng.uniform(-0.5, 0.5)))
+        for marker in TRACKER_MARKERS:
+            truth[f"markers.{marker}.{axis}"] = float(rng.uniform(-1e-3, 1e-3))
+    return truth
+
+
+def hidden_world_point(hidden: Mapping[str, float], seed: int, *, swing: float = 0.0,
+                       seconds_per_pose: float = 30.0, n_samples: int = N_SAMPLES,
+                       noise: bool = True) -> SyntheticDataset:
+    """A world_point dataset (a laser tracker 2 m from a ur5e following three reflectors on
+    its flange, one per pose in turn): random zero offsets and frame errors plus ``hidden``,
+    the tracker's noise drawn from each point's covariance, approach signs of visiting the
+    poses in order, and the arm warming up by ``swing`` K over the run (``warm_up``);
+    ``noise`` False: exact measurements (same poses)."""
+    from hostpc.dataset import FramePose
+    from hostpc.methods.world_point import spherical_covariance
+    from hostpc.model.measurements.base import UR5E_HOME
+    from hostpc.synthesize import approach_signs
+
+    rng = np.random.default_rng(seed)
+    truth = world_point_truth(np.random.default_rng(50 + seed))
+    truth.update(hidden)
+    q = UR5E_HOME + rng.uniform(-1.0, 1.0, (n_samples, 6)) * [0.8, 0.5, 0.5, 0.8, 0.8, 1.2]
+    t, temperature = warm_up(n_samples, seconds_per_pose, swing)
+    names = list(TRACKER_MARKERS)
+    markers = {m: np.array(v) for m, v in TRACKER_MARKERS.items()}
+    world = FramePose(xyz=np.array([1.8, -0.6, 0.3]), rpy=np.array([0.0, 0.0, 2.6]))
+    fields = {"marker": np.array([names[k % len(names)] for k in range(n_samples)]),
+              "mask": np.ones((n_samples, 3))}
+    samples = Samples(q=q, p=np.zeros((n_samples, 3)),
+                      cov=np.broadcast_to(np.eye(3) * 1e-10, (n_samples, 3, 3)), t=t,
+                      temperature=temperature, approach=approach_signs(q, rng), fields=fields)
+    dataset = Dataset(method="world_point", robot=RobotDescription(name="ur5e"),
+                      frames={"world": world, "markers": markers}, samples=samples)
+    effects = list(dict.fromkeys(name.split(".", 1)[0] for name in truth))
+    problem = build_problem(dataset, effects)
+    x = np.array([truth.get(name, 0.0) for name in problem.layout.names])
+    clean, _ = predict(problem, x, jacobian=False)
+    cov = spherical_covariance(clean, TRACKER_SIGMA_DISTANCE, TRACKER_SIGMA_ANGLE)
+    drawn = np.einsum("nij,nj->ni", np.linalg.cholesky(cov), rng.standard_normal(clean.shape))
+    measured = dataclasses.replace(samples, p=clean + (drawn if noise else 0.0), cov=cov)
+    return SyntheticDataset(dataclasses.replace(dataset, samples=measured), truth,
+                            tuple(effects))
+
+
+#: families of tests a dataset with nothing hidden can fail, each at the family-wise
+#: significance DEFAULT_ALPHA (= ADEQUACY_P_MIN for the chi-square): the chi-square band,
+#: the outlier test, the candidates (Bonferroni over them, plus the held-out gain) and the
+#: interaction search (Bonferroni over its tests). The ladder adds an effect only when one
+#: of the last two fires (a generated effect needs a significant interaction first).
+NULL_FAMILIES = 4
+
+
+def null_alarm_rate() -> float:
+    """Upper bound (union bound) of the probability that diagnose --ladder raises any alarm
+    on one dataset with nothing hidden."""
+    from hostpc.diagnostics import DEFAULT_ALPHA
+    from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN
+
+    return (NULL_FAMILIES - 1) * DEFAULT_ALPHA + ADEQUACY_P_MIN
+
+
+def allowed_alarms(n_datasets: int, rate: float, risk: float = 0.01) -> int:
+    """The fewest alarms k such that P(more than k of n | rate) < risk (binomial)."""
+    from math import comb
+
+    k = 0
+    while sum(comb(n_datasets, j) * rate**j * (1 - rate)**(n_datasets - j)
+              for j in range(k + 1, n_datasets + 1)) >= risk:
+        k += 1
+    return k
+
+
+def null_alarms(seed: int) -> list[str]:
+    """What diagnose --ladder (generated effects on) says is wrong with stereo_target data
+    with nothing hidden (seed 100 + seed; the same data as the no-false-alarm test): the
+    reasons it is not adequate and the effects the ladder adds (empty: no alarm)."""
+    import hostpc
+
+    synthetic = hidden_dataset({}, seed=100 + seed)
+    diagnosis = hostpc.diagnose(synthetic.dataset, ladder=True)
+    alarms = list(diagnosis.check.adequacy.reasons)
+    alarms += [f"ladder adds {s.added}" for s in diagnosis.ladder or () if s.added]
+    return alarms
