@@ -59,12 +59,14 @@ def test_a_flexible_first_pick_is_dropped_again() -> None:
     assert any("dropping transmission_harmonic" in a for a in outcome.diagnosis.advice)
 
 
-# seed 2 of stereo_target THREE is left out: there the true model itself, fitted to the
-# same data, puts backlash.b2 3.8 sigma from the truth (a rare noise draw, not the ladder)
-SLOW = ([("stereo_target", TWO, s) for s in (0, 2, 3, 4, 5, 6, 7)]
-        + [("stereo_target", THREE, s) for s in (0, 3, 4, 5, 6, 7)]
-        + [("world_point", TWO, s) for s in (0, 2, 3, 4, 5, 6, 7)]
-        + [("world_point", THREE, s) for s in (0, 1, 2, 3, 4, 6, 7)])
+# Two more seeds per case in CI; `python bench/bench_diagnose_multi.py` runs seeds 0-7 of
+# every case (32 runs, all end with exactly the hidden effects; docs/diagnostics.md). Seed 2
+# of stereo_target THREE fails the 3-sigma size check even for the true model fitted to the
+# same data (backlash.b2 3.8 sigma off: a noise draw, not the ladder), so it is not used here.
+SLOW = ([("stereo_target", TWO, s) for s in (0, 3)]
+        + [("stereo_target", THREE, s) for s in (0, 3)]
+        + [("world_point", TWO, s) for s in (0, 3)]
+        + [("world_point", THREE, s) for s in (0, 3)])
 
 
 @pytest.mark.slow
