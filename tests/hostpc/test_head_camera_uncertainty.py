@@ -193,3 +193,16 @@ def test_dual_loop_sigma_covers_the_head_camera_calibration_error() -> None:
     # 6-world estimate whose errors are correlated within a world allows a wide band
     assert ratio_without > 1.5, ratio_without  # the noise-only sigma does not cover it
     assert 0.4 < ratio_with < 1.5, ratio_with
+
+
+def test_target_observation_pixels_are_optional_and_checked() -> None:
+    from pydantic import ValidationError
+
+    from protocol.measurement_messages import TargetObservation
+
+    point = {"chain": "left", "p": [0.0, 0.0, 0.5], "cov": np.eye(3).tolist()}
+    assert TargetObservation(**point).uv is None
+    assert TargetObservation(**point, uv=[[1.0, 2.0], [3.0, 4.0]]).uv == [[1.0, 2.0], [3.0, 4.0]]
+    for broken in ([[1.0, 2.0, 3.0], [3.0, 4.0]], [[1.0, 2.0]], [[1.0, float("nan")], [3.0, 4.0]]):
+        with pytest.raises(ValidationError):
+            TargetObservation(**point, uv=broken)
