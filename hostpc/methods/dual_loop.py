@@ -289,6 +289,19 @@ class DualLoopMethod(Method):
         cov[:, 2, 2] = (z**2 * math.sqrt(2.0) * sigma_px / (self.focal_px * self.baseline)) ** 2
         return cov
 
+    def floor_covariance(self, p: np.ndarray) -> np.ndarray:
+        """(3, 3) the pixel floor's covariance at a point p (3,), with the calibrated focal
+        length and baseline when the controller reports its calibration (the same model
+        shared_errors.floor_covariance takes back out), else the nominal ones."""
+        if self.calibration is None:
+            return self.expected_covariance(p[None, :], self.pixel_floor)[0]
+        rig = self.calibration[0]
+        z = max(abs(float(p[2])), 1e-3)
+        fx, baseline = float(rig.K_left[0, 0]), float(np.linalg.norm(rig.T))
+        lateral = (z * self.pixel_floor / fx) ** 2
+        depth = (z**2 * math.sqrt(2.0) * self.pixel_floor / (fx * baseline)) ** 2
+        return np.diag([lateral, lateral, depth])
+
     def design_dataset(self, q: np.ndarray) -> Dataset:
         """One sample per pose q (N, n) (the aimed arm) with the nominal predicted point
         and the planning covariance."""
@@ -343,8 +356,7 @@ class DualLoopMethod(Method):
                 continue
             cov = np.asarray(target.cov, dtype=float)
             if self.pixel_floor > 0:
-                cov = cov + self.expected_covariance(np.asarray(target.p)[None, :],
-                                                     self.pixel_floor)[0]
+                cov = cov + self.floor_covariance(np.asarray(target.p))
             sample = self._sample(target.chain, q_seen, np.asarray(target.p), cov,
                                   float(measurement.t) - self._t0, q_from)
             uv = getattr(target, "uv", None)

@@ -206,3 +206,32 @@ def test_target_observation_pixels_are_optional_and_checked() -> None:
     for broken in ([[1.0, 2.0, 3.0], [3.0, 4.0]], [[1.0, 2.0]], [[1.0, float("nan")], [3.0, 4.0]]):
         with pytest.raises(ValidationError):
             TargetObservation(**point, uv=broken)
+
+
+def test_method_floor_is_the_floor_the_fit_takes_back_out(tmp_path: Any) -> None:
+    """The floor dual_loop adds to each sample (calibrated focal length and baseline) is
+    the covariance shared_errors.floor_covariance removes, for a calibration far from the
+    nominal 1400 px / 0.12 m."""
+    from hostpc.fitting.shared_errors import BLOCK, floor_covariance
+    from hostpc.methods.base import RunSettings
+    from hostpc.methods.cell import build_cell
+    from hostpc.methods.dual_loop import DualLoopMethod
+    from hostpc.model.problem import build_problem
+
+    pair = StereoTriangulator(1500.0, 0.1, 1280, 1024, 0.15, ERROR, SIGMA)
+    cell = build_cell({"calibration": pair.calibration()}, "humanoid_upper")
+    method = DualLoopMethod(RunSettings(method="dual_loop", options={"pixel_floor": 0.02}),
+                            cell, tmp_path)
+    poses = plan_poses(3, np.random.default_rng(2))
+    document, _ = world_documents(3, poses, 0.1)
+    samples = []
+    for sample in document["samples"]:
+        floor = method.floor_covariance(np.asarray(sample["p"]))
+        samples.append({**sample, "cov": (np.asarray(sample["cov"]) + floor).tolist()})
+    dataset = dataset_from_dict(method.dataset_document(samples))
+    assert dataset.extra_fields[BLOCK]["pixel_floor_px"] == 0.02
+    removed = floor_covariance(build_problem(dataset, None), dataset.extra_fields[BLOCK])
+    assert removed is not None
+    for sample, taken in zip(samples, removed, strict=True):
+        np.testing.assert_allclose(taken, method.floor_covariance(np.asarray(sample["p"])),
+                                   rtol=1e-12)
