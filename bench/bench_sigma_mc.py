@@ -12,7 +12,14 @@ freedom, so 40 worlds allow 0.6-1.5 around 1). Each world is a new seed: new zer
 new camera mount error, new rig-calibration views, new noise. Failed runs are counted.
 
     python bench/bench_sigma_mc.py [--worlds 40] [--methods stereo_target,sphere_probe,dual_loop]
-                                   [--first-seed 1] [--keep DIR [--reuse]] [--json OUT]
+                                   [--first-seed 1] [--keep DIR [--reuse [--refit]]]
+                                   [--json OUT]
+
+--reuse reads the runs already kept in DIR; --refit also fits each kept `dataset.json` again
+with the current code (`hostpc.fit`, the run's own effects) instead of reading its
+`fit.json`: the error is then the run's error plus the change of the estimate (a fit that
+changes only the reported covariance, e.g. of the shared errors, is re-analysed in seconds
+per world without running the simulator again).
 
 Slow (about 7-10 s per world and method): `bench/run.py` runs it only when asked by name
 (`python bench/run.py sigma_mc`), with 8 worlds.
@@ -55,9 +62,30 @@ def world(method: str, seed: int) -> tuple[dict[str, Any], list[str]]:
     return scenario, []
 
 
-def run_world(method: str, seed: int, folder: Path, reuse: bool = False) -> dict[str, Any]:
+def refitted(fit_path: Path, dataset_path: Path) -> dict[str, Any]:
+    """The fit.json `parameters` of the kept run, fitted again with the current code: per
+    name the std (SI) and "shift", the value's change against the run's own fit."""
+    if str(ROOT) not in sys.path:  # run as a script from anywhere
+        sys.path.insert(0, str(ROOT))
+    import hostpc
+    from hostpc.dataset import load_dataset
+
+    kept = json.loads(fit_path.read_text())
+    result = hostpc.fit(load_dataset(dataset_path), kept.get("effects"))
+    out: dict[str, Any] = {}
+    for name, entry in kept["parameters"].items():
+        estimate = result.parameters[name]
+        std = estimate.std if estimate.std is not None and math.isfinite(estimate.std) else None
+        out[name] = {"std": None if entry.get("std") is None else std,
+                     "shift": float(estimate.value) - float(entry["value"])}
+    return out
+
+
+def run_world(method: str, seed: int, folder: Path, reuse: bool = False,
+              refit: bool = False) -> dict[str, Any]:
     """One calibration; {"errors": [...] rad or None, "sigmas": [...] rad} or {"failed": msg}.
-    reuse: read a finished run already in `folder` instead of running it again."""
+    reuse: read a finished run already in `folder` instead of running it again; refit:
+    fit its dataset again with the current code (`refitted`)."""
     out = folder / f"{method}_{seed}"
     result_path, fit_path = out / "result.json", out / "fit.json"
     if not (reuse and result_path.is_file() and fit_path.is_file()):
@@ -76,14 +104,17 @@ def run_world(method: str, seed: int, folder: Path, reuse: bool = False) -> dict
     if errors_deg is None:
         return {"failed": "no truth comparison in result.json"}
     parameters = json.loads(fit_path.read_text())["parameters"]
-    errors, sigmas, names = [], [], []
+    if refit:
+        parameters = refitted(fit_path, out / "dataset.json")
+    errors, sigmas, names, shifts = [], [], [], []
     for name, entry in parameters.items():
         if not name.startswith("joint_offsets."):
             continue
         names.append(name.split(".", 1)[1])
         sigmas.append(math.nan if entry.get("std") is None else float(entry["std"]))
-    for value in errors_deg[: len(names)]:
-        errors.append(math.nan if value is None else math.radians(float(value)))
+        shifts.append(float(entry.get("shift", 0.0)))
+    for value, shift in zip(errors_deg[: len(names)], shifts, strict=False):
+        errors.append(math.nan if value is None else math.radians(float(value)) + shift)
     return {"names": names, "errors": errors, "sigmas": sigmas}
 
 
@@ -116,7 +147,7 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def run(worlds: int = 8, methods: tuple[str, ...] = METHODS, first_seed: int = 1,
-        keep: Path | None = None, reuse: bool = False) -> dict[str, Any]:
+        keep: Path | None = None, reuse: bool = False, refit: bool = False) -> dict[str, Any]:
     """The Monte Carlo; returns {method: summary} (see `summarise`)."""
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory(prefix="zerocal-sigma-mc-") as tmp:
@@ -125,7 +156,8 @@ def run(worlds: int = 8, methods: tuple[str, ...] = METHODS, first_seed: int = 1
         for method in methods:
             runs = []
             for seed in range(first_seed, first_seed + worlds):
-                runs.append(run_world(method, seed, folder, reuse and keep is not None))
+                runs.append(run_world(method, seed, folder, reuse and keep is not None,
+                                      refit and reuse and keep is not None))
                 status = runs[-1].get("failed", "ok")
                 print(f"  {method} world {seed}: {status}", file=sys.stderr, flush=True)
             out[method] = summarise(runs)
@@ -156,6 +188,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=Path, default=None, help="write the figures here")
     parser.add_argument("--reuse", action="store_true",
                         help="with --keep: read runs already finished there instead of rerunning")
+    parser.add_argument("--refit", action="store_true",
+                        help="with --reuse: fit each kept dataset again with the current code")
     args = parser.parse_args(argv)
     if args.worlds < 1:
         parser.error("--worlds: expected at least 1")
@@ -163,7 +197,9 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
         parser.error(f"--methods: unknown {', '.join(unknown)} (expected {', '.join(METHODS)})")
-    figures = run(args.worlds, methods, args.first_seed, args.keep, args.reuse)
+    if args.refit and not (args.reuse and args.keep):
+        parser.error("--refit: needs --keep DIR --reuse")
+    figures = run(args.worlds, methods, args.first_seed, args.keep, args.reuse, args.refit)
     print_table(figures)
     if args.json:
         args.json.write_text(json.dumps(figures, indent=2) + "\n")

@@ -215,7 +215,9 @@ class RequestHandlers:
         result = measure()  # during a motion: at its start pose, with that q (as capture)
         targets = [
             m.TargetObservation(chain=str(chain), p=float_list(seen["p"]),
-                                cov=np.asarray(seen["cov"], dtype=float).reshape(3, 3).tolist())
+                                cov=np.asarray(seen["cov"], dtype=float).reshape(3, 3).tolist(),
+                                uv=(None if seen.get("uv") is None else
+                                    np.asarray(seen["uv"], dtype=float).reshape(2, 2).tolist()))
             for chain, seen in result["targets"].items()
         ]
         return m.TargetsMeasured(reply_to=request.id, q=float_list(result["q"]),

@@ -62,6 +62,8 @@ DEG = math.pi / 180
 CHAINS = ("head", "left", "right")
 N_JOINTS = {"head": 2, "left": 7, "right": 7}
 ARMS = ("left", "right")
+STREAM_CALIBRATION = 12
+"""The seed's random stream of the head camera's calibration error."""
 
 # nominal frames of the design (xyz m, rpy rad)
 CAMERA_NOMINAL = ((0.02, 0.04, 0.0), (0.0, -HALF_PI, math.pi - 0.15))
@@ -130,13 +132,28 @@ def _span(chain: str) -> slice:
     raise KeyError(chain)
 
 
+CALIBRATION_PARAMETERS = ("left.fx", "left.fy", "left.cx", "left.cy",
+                          "right.fx", "right.fy", "right.cx", "right.cy", "baseline")
+# the rig-file parameter vector (24: per camera fx fy cx cy k1 k2 p1 p2 k3, then the stereo
+# rotation vector and translation T; the right camera at +baseline means T = (-b, 0, 0))
+RIG_VECTOR = tuple(f"{c}.{n}" for c in ("left", "right")
+                   for n in ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")) + (
+    "stereo.rx", "stereo.ry", "stereo.rz", "stereo.tx", "stereo.ty", "stereo.tz")
+
+
 class StereoTriangulator:
     """Rectified stereo pair: projection, pixel noise, triangulation and its covariance.
 
-    focal: px; baseline: m; width, height: px; pixel_sigma: px per image coordinate."""
+    focal: px; baseline: m; width, height: px; pixel_sigma: px per image coordinate.
+    calibration_error: (9,) what the controller's own calibration of the pair errs by, in
+    CALIBRATION_PARAMETERS order (px, m); calibration_sigma: (9,) the standard deviations its
+    calibration reports. Projection uses the true pair, triangulation the calibrated one
+    (per camera ``n = ((u - cx) / fx, (v - cy) / fy)``, ``z = b / (n_Lx - n_Rx)``,
+    ``x = n_Lx z``, ``y = (n_Ly + n_Ry) / 2 z``); the stereo rotation is exact."""
 
     def __init__(self, focal: float, baseline: float, width: int, height: int,
-                 pixel_sigma: float) -> None:
+                 pixel_sigma: float, calibration_error: np.ndarray | None = None,
+                 calibration_sigma: np.ndarray | None = None) -> None:
         self.f = float(focal)
         self.b = float(baseline)
         self.width = int(width)
@@ -144,6 +161,12 @@ class StereoTriangulator:
         self.cx = (width - 1) / 2.0
         self.cy = (height - 1) / 2.0
         self.sigma = float(pixel_sigma)
+        true = np.array([self.f, self.f, self.cx, self.cy] * 2 + [self.b])
+        self.calibration_error = (np.zeros(9) if calibration_error is None
+                                  else np.asarray(calibration_error, dtype=float))
+        self.calibrated = true + self.calibration_error
+        self.calibration_sigma = (np.zeros(9) if calibration_sigma is None
+                                  else np.asarray(calibration_sigma, dtype=float))
 
     def project(self, p: np.ndarray) -> np.ndarray:
         """(4,) pixels [uL, vL, uR, vR] of a point p (3,) in the left camera frame."""
@@ -160,25 +183,47 @@ class StereoTriangulator:
         return bool(np.all(inside_u) and np.all(inside_v))
 
     def triangulate(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Point (3,) m from pixels (4,), and the Jacobian d point / d pixels (3, 4)."""
+        """Point (3,) m from pixels (4,) with the calibrated pair, and the Jacobian
+        d point / d pixels (3, 4)."""
         uL, vL, uR, vR = uv
-        disparity = uL - uR
-        z = self.f * self.b / disparity
-        v = 0.5 * (vL + vR)
-        x = (uL - self.cx) * z / self.f
-        y = (v - self.cy) * z / self.f
-        dz = np.array([-z / disparity, 0.0, z / disparity, 0.0])
-        dx = (uL - self.cx) / self.f * dz + np.array([z / self.f, 0.0, 0.0, 0.0])
-        dy = (v - self.cy) / self.f * dz + np.array([0.0, 0.5, 0.0, 0.5]) * z / self.f
-        return np.array([x, y, z]), np.vstack([dx, dy, dz])
+        fxl, fyl, cxl, cyl, fxr, fyr, cxr, cyr, b = self.calibrated
+        nxl, nyl = (uL - cxl) / fxl, (vL - cyl) / fyl
+        nxr, nyr = (uR - cxr) / fxr, (vR - cyr) / fyr
+        disparity = nxl - nxr
+        z = b / disparity
+        ny = 0.5 * (nyl + nyr)
+        dn_dx = np.array([1.0 / fxl, 0.0, -1.0 / fxr, 0.0])  # d disparity / d pixels
+        dz = -z / disparity * dn_dx
+        dx = nxl * dz + np.array([z / fxl, 0.0, 0.0, 0.0])
+        dy = ny * dz + np.array([0.0, 0.5 / fyl, 0.0, 0.5 / fyr]) * z
+        return np.array([nxl * z, ny * z, z]), np.vstack([dx, dy, dz])
 
     def measure(self, p_true: np.ndarray, rng: np.random.Generator
-                ) -> tuple[np.ndarray, np.ndarray]:
-        """Noisy triangulated point (3,) and its covariance (3, 3) (m, m^2)."""
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Noisy triangulated point (3,), its covariance (3, 3) (m, m^2) and the noisy
+        pixels [[uL, vL], [uR, vR]] (2, 2) it was triangulated from."""
         uv = self.project(p_true) + rng.normal(0.0, self.sigma, 4)
         p, J = self.triangulate(uv)
         cov = (self.sigma**2) * J @ J.T
-        return p, cov
+        return p, cov, uv.reshape(2, 2)
+
+    def calibration(self) -> dict[str, Any]:
+        """The controller's calibration of the pair as a rig document (the host's rig-file
+        format: zerocal-stereo-rig, version 1) with its (24, 24) covariance in RIG_VECTOR
+        order (zero for distortion and the stereo rotation, which this model has exact)."""
+        fxl, fyl, cxl, cyl, fxr, fyr, cxr, cyr, b = (float(v) for v in self.calibrated)
+        rig = {"format": "zerocal-stereo-rig", "version": 1,
+               "image_size": [self.width, self.height],
+               "K_left": [[fxl, 0.0, cxl], [0.0, fyl, cyl], [0.0, 0.0, 1.0]],
+               "dist_left": [0.0] * 5,
+               "K_right": [[fxr, 0.0, cxr], [0.0, fyr, cyr], [0.0, 0.0, 1.0]],
+               "dist_right": [0.0] * 5,
+               "R": np.eye(3).tolist(), "T": [-b, 0.0, 0.0], "rms": 0.0, "n_views": 0}
+        index = [RIG_VECTOR.index(n) for n in CALIBRATION_PARAMETERS[:8]]
+        index.append(RIG_VECTOR.index("stereo.tx"))  # T_x = -b: same variance
+        covariance = np.zeros((len(RIG_VECTOR), len(RIG_VECTOR)))
+        covariance[index, index] = self.calibration_sigma**2
+        return {"rig": rig, "parameters": list(RIG_VECTOR), "covariance": covariance.tolist()}
 
 
 class HumanoidSimulation(ControllerState):
@@ -230,8 +275,13 @@ class HumanoidSimulation(ControllerState):
         target_errors = {"left": spec.left_target_error, "right": spec.right_target_error}
         self.target_flange = {s: np.asarray(TARGET_NOMINAL[s]) + np.asarray(target_errors[s])
                               for s in ARMS}
+        calibration_sigma = np.array([spec.calibration_sigma_px] * 8
+                                     + [spec.calibration_sigma_baseline])
+        calibration_error = stream_rng(scenario.seed, STREAM_CALIBRATION).normal(
+            0.0, 1.0, 9) * calibration_sigma
         self.stereo = StereoTriangulator(spec.focal_px, spec.baseline, spec.image_width,
-                                         spec.image_height, spec.pixel_sigma)
+                                         spec.image_height, spec.pixel_sigma,
+                                         calibration_error, calibration_sigma)
         self._moves = 0
 
     @property
@@ -317,7 +367,8 @@ class HumanoidSimulation(ControllerState):
         """Triangulate both targets at the current pose (see the module docstring).
 
         Returns ``{"q": (16,) reported angles, "time": s, "targets": {side: {"p": (3,) m,
-        "cov": (3, 3) m^2}}}`` with an entry only for each visible target."""
+        "cov": (3, 3) m^2, "uv": (2, 2) px}}}`` with an entry only for each visible target
+        (uv: the noisy centres [[uL, vL], [uR, vR]] it was triangulated from)."""
         if self._estopped:
             raise SimulationRefused("estop", "emergency stop is active")
         targets: dict[str, dict[str, np.ndarray]] = {}
@@ -325,8 +376,8 @@ class HumanoidSimulation(ControllerState):
             p_true = self.target_in_camera(side)
             if not self.stereo.visible(p_true):
                 continue
-            p, cov = self.stereo.measure(p_true, self._rng_noise)
-            targets[side] = {"p": p, "cov": cov}
+            p, cov, uv = self.stereo.measure(p_true, self._rng_noise)
+            targets[side] = {"p": p, "cov": cov, "uv": uv}
         measured = {"q": self._q.copy(), "time": self._time, "targets": targets}
         self._time += float(self.scenario.motion.capture_s)  # one stereo capture
         return measured
@@ -336,9 +387,11 @@ class HumanoidSimulation(ControllerState):
                                 "images")
 
     def camera_description(self) -> dict[str, Any]:
-        """What the controller reports of its head camera: nominal values only."""
+        """What the controller reports of its head camera: nominal values and its own
+        calibration of the stereo pair with that calibration's covariance."""
         spec = self.scenario.humanoid
         return {
+            "calibration": self.stereo.calibration(),
             "image_width": spec.image_width,
             "image_height": spec.image_height,
             "baseline_nominal": spec.baseline,
@@ -371,5 +424,9 @@ class HumanoidSimulation(ControllerState):
             "left_target": self.target_flange["left"].tolist(),
             "right_target": self.target_flange["right"].tolist(),
             "stereo": {"focal_px": self.stereo.f, "baseline": self.stereo.b,
-                       "pixel_sigma": self.stereo.sigma},
+                       "pixel_sigma": self.stereo.sigma,
+                       "calibration_error": dict(zip(
+                           CALIBRATION_PARAMETERS,
+                           self.stereo.calibration_error.tolist(),
+                           strict=True))},
         }

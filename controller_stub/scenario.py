@@ -245,7 +245,10 @@ class HumanoidSpec(_Model):
     humanoid.py): poses T_true = T_nom @ [R(rpy), xyz]; points p_true = p_nom + error (m,
     in the flange frame). The head camera is a rectified stereo pair (focal_px, baseline,
     principal point at the image centre) whose target centroids carry Gaussian pixel noise
-    pixel_sigma (px, each image coordinate).
+    pixel_sigma (px, each image coordinate). The controller triangulates with its own
+    calibration of that pair, which errs: each camera's fx, fy, cx, cy by Gaussian errors of
+    calibration_sigma_px and the baseline by calibration_sigma_baseline (m), drawn from the
+    seed; it reports the calibration and that covariance (0 = an exact calibration).
     """
 
     camera_error: PoseSpec = PoseSpec(xyz=[0.0015, -0.001, 0.002], rpy=[0.004, -0.003, 0.005])
@@ -260,6 +263,8 @@ class HumanoidSpec(_Model):
     image_width: Annotated[int, Field(ge=16, le=8192)] = 1280
     image_height: Annotated[int, Field(ge=16, le=8192)] = 1024
     pixel_sigma: NonNegative = 0.15
+    calibration_sigma_px: NonNegative = 0.0
+    calibration_sigma_baseline: NonNegative = 0.0
 
 
 class Scenario(_Model):

@@ -71,6 +71,8 @@ class CaptureDone(Reply):
 
 Vector3 = Annotated[list[FiniteFloat], Field(min_length=3, max_length=3)]
 Matrix3 = Annotated[list[Vector3], Field(min_length=3, max_length=3)]
+Vector2 = Annotated[list[FiniteFloat], Field(min_length=2, max_length=2)]
+Matrix2 = Annotated[list[Vector2], Field(min_length=2, max_length=2)]
 
 
 class MeasureTargets(Request):
@@ -85,12 +87,15 @@ class MeasureTargets(Request):
 
 class TargetObservation(BaseModel):
     """One triangulated target: `chain` names the kinematic chain that carries it (e.g.
-    "left", "right"); p: (3,) m in the camera (left optical) frame; cov: (3, 3) m^2."""
+    "left", "right"); p: (3,) m in the camera (left optical) frame; cov: (3, 3) m^2;
+    uv (optional): the pixel centres [[u_l, v_l], [u_r, v_r]] (px) it was triangulated from,
+    so the host can propagate the camera calibration's covariance (docs/vision.md)."""
 
     model_config = ConfigDict(extra="forbid")
     chain: ShortText
     p: Vector3
     cov: Matrix3
+    uv: Matrix2 | None = None
 
 
 class TargetsMeasured(Reply):

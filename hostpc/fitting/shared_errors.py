@@ -29,6 +29,9 @@ import numpy as np
 from hostpc.model.problem import Problem
 
 BLOCK = "rig_uncertainty"
+SIGNIFICANCE = 2.0
+"""The residual excess must exceed what the stated covariance explains by this many of its
+standard deviations before the shared covariance is scaled up (`residual_scale`)."""
 _CACHE: OrderedDict[str, np.ndarray] = OrderedDict()
 _CACHE_SIZE = 16
 
@@ -78,26 +81,51 @@ def shared_covariance(problem: Problem) -> tuple[np.ndarray, np.ndarray] | None:
 
 
 def residual_scale(jacobian_free: np.ndarray, D_whitened: np.ndarray, S: np.ndarray,
-                   residuals: np.ndarray, expected_noise: float | None = None) -> float:
+                   residuals: np.ndarray, expected_noise: float | None = None,
+                   noise_variance: float | None = None) -> float:
     """How much larger the shared error is than S says, from the fit's own residuals (>= 1).
 
     The whitened residuals r = P (e + Dw delta) (P: projector off the Jacobian's columns)
     have E[r^T r] = dof + k trace(P Dw S Dw^T P) when Cov(delta) = k S. The method-of-moments
-    estimate k = (chi2 - dof) / trace(...) is clipped below at 1: a fit whose residuals
-    show no excess keeps the rig's own covariance, never less. expected_noise replaces dof
-    when the whitening includes more than the noise (a pixel floor: see below)."""
+    estimate k = (chi2 - dof) / trace(...) is taken only when the excess is significant:
+    chi2 above its expectation under k = 1 by more than SIGNIFICANCE standard deviations
+    (Var = 2 dof + 2 trace((P Dw S Dw^T P)^2) for Gaussian errors); else k = 1, the rig's
+    own covariance, never less. (Without the gate, a chance excess of the noise in a world
+    whose S is right inflated the sigma: dual_loop's elbow offsets came out at MSE / sigma^2
+    0.6-0.7.) expected_noise, noise_variance replace dof, 2 dof when the whitening includes
+    more than the noise (a pixel floor: see below)."""
     rows, free = jacobian_free.shape
     dof = rows - free
     if dof <= 0 or not np.all(np.isfinite(residuals)):
         return 1.0
     Q, _ = np.linalg.qr(jacobian_free)
     PD = D_whitened - Q @ (Q.T @ D_whitened)
-    trace = float(np.einsum("ij,jk,ik->", PD, S, PD))
+    G = PD.T @ PD
+    GS = G @ S
+    trace = float(np.trace(GS))
     if not trace > 0:
         return 1.0
     chi2 = float(residuals @ residuals)
     noise = float(dof) if expected_noise is None else expected_noise
+    variance = (2.0 * dof if noise_variance is None else noise_variance) \
+        + 2.0 * float(np.sum(GS * GS.T))
+    if chi2 - noise - trace <= SIGNIFICANCE * np.sqrt(max(variance, 0.0)):
+        return 1.0
     return max(1.0, (chi2 - noise) / trace)
+
+
+def noise_moments(M: np.ndarray, Q3: np.ndarray) -> tuple[float, float]:
+    """Mean and variance of r^T r for r = P e, e ~ N(0, M) (M: (N, m, m) block diagonal),
+    P = I - Q Q^T the projector off the orthonormal columns Q3 ((N, m, F) per block):
+    trace(P M P) = tr M - tr Q^T M Q and 2 trace(M P M P) =
+    2 (tr M^2 - 2 tr Q^T M^2 Q + tr (Q^T M Q)^2), without forming an (Nm, Nm) matrix."""
+    M2 = np.einsum("nij,njk->nik", M, M)
+    QMQ = np.einsum("nif,nij,njg->fg", Q3, M, Q3)
+    mean = float(np.trace(M, axis1=1, axis2=2).sum() - np.trace(QMQ))
+    variance = 2.0 * float(np.einsum("nij,nji->", M, M)
+                           - 2.0 * np.einsum("nif,nij,njf->", Q3, M2, Q3)
+                           + np.sum(QMQ * QMQ.T))
+    return mean, variance
 
 
 def floor_covariance(problem: Problem, block: Any) -> np.ndarray | None:
@@ -143,7 +171,7 @@ def added_parameter_covariance(problem: Problem, jacobian_free: np.ndarray,
     D_whitened = np.einsum("nij,njk->nik", W, D).reshape(-1, D.shape[2]) * row_weight[:, None]
     floor = floor_covariance(problem, problem.dataset.extra_fields.get(BLOCK))
     change = np.zeros_like(covariance_free)
-    expected_noise = None
+    expected_noise = noise_variance = None
     if floor is not None:
         # whitened noise without the floor: M_i = I - W_i F_i W_i^T (weights on the rows)
         M = np.eye(W.shape[1])[None] - np.einsum("nij,njk,nlk->nil", W, floor, W)
@@ -153,13 +181,11 @@ def added_parameter_covariance(problem: Problem, jacobian_free: np.ndarray,
         meat = np.einsum("nif,nij,njg->fg", J3, M, J3)
         change += covariance_free @ meat @ covariance_free - covariance_free
         Q, _ = np.linalg.qr(jacobian_free)
-        Q3 = Q.reshape(W.shape[0], W.shape[1], -1)
-        # E[r^T r] of the noise: trace(P M P) = trace(M) - trace(Q^T M Q)
-        expected_noise = float(np.trace(M, axis1=1, axis2=2).sum()
-                               - np.einsum("nif,nij,njf->", Q3, M, Q3))
+        expected_noise, noise_variance = noise_moments(
+            M, Q.reshape(W.shape[0], W.shape[1], -1))
     if residuals is not None:
         S = S * residual_scale(jacobian_free, D_whitened, S, np.ravel(residuals),
-                               expected_noise)
+                               expected_noise, noise_variance)
     A = covariance_free @ (jacobian_free.T @ D_whitened)
     change += A @ S @ A.T
     return 0.5 * (change + change.T)

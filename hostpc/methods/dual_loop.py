@@ -29,6 +29,13 @@ and the `--cell` file (same names); `known` lists those held fixed. With nothing
 zero offsets cannot be told apart from the frames (`head.q1`, `head.q2`, each arm's `q1` and
 `q7`): the fit holds them at nominal and the push leaves them unchanged.
 
+Head camera calibration: a controller that reports its own calibration of the stereo pair
+(`calibration`: a rig document and its (24, 24) covariance, in the camera description or
+the `--cell` file) and each target's pixel centres (`uv`) gets that covariance propagated
+into the fit's parameter covariance, with the correlation it induces across samples: the
+dataset carries the `rig_uncertainty` block of stereo_target (hostpc.fitting.shared_errors,
+docs/vision.md section 3.4). The pixel floor is then a weighting only, as for stereo_target.
+
 Units: SI and radians (docs/conventions.md).
 """
 
@@ -130,6 +137,33 @@ def tree_with_frames(tree: KinematicTree, frames: Mapping[str, FramePose | np.nd
     return KinematicTree(name=tree.name, branches=branches, frames=transforms)
 
 
+def camera_calibration(spec: Any) -> tuple[Any, np.ndarray] | None:
+    """(StereoRig, (24, 24) covariance) of a `calibration` entry ({"rig": <rig document>,
+    "covariance": [[...]]}), None if absent; a malformed entry is one InputError line."""
+    if spec is None:
+        return None
+    from hostpc.vision.rig import rig_from_dict
+    from hostpc.vision.rig_uncertainty import N_RIG
+
+    if not isinstance(spec, Mapping):
+        raise InputError(f"camera calibration: expected {{\"rig\": .., \"covariance\": ..}}, "
+                         f"got {type(spec).__name__}")
+    rig = rig_from_dict(spec.get("rig"), "camera calibration rig")
+    try:
+        covariance = np.asarray(spec.get("covariance"), dtype=float)
+    except (TypeError, ValueError):
+        raise InputError("camera calibration covariance: not a numeric matrix") from None
+    if covariance.shape != (N_RIG, N_RIG) or not np.all(np.isfinite(covariance)):
+        raise InputError(f"camera calibration covariance: expected {N_RIG} x {N_RIG} finite "
+                         f"numbers, got shape {covariance.shape}")
+    if not np.allclose(covariance, covariance.T, rtol=1e-9, atol=0.0) or \
+            np.min(np.linalg.eigvalsh(0.5 * (covariance + covariance.T))) < \
+            -1e-9 * max(1e-300, float(np.max(np.abs(covariance)))):
+        raise InputError("camera calibration covariance: not symmetric positive "
+                         "semi-definite")
+    return rig, covariance
+
+
 class DualLoopMethod(Method):
     """See the module docstring. options: `pixel_sigma` (px, the planning noise model),
     `pixel_floor` (px per image coordinate, added to each measured covariance as for
@@ -157,6 +191,7 @@ class DualLoopMethod(Method):
         if not (self.focal_px > 0 and self.baseline > 0 and self.pixel_sigma > 0):
             raise InputError("dual_loop: focal length, baseline and pixel_sigma must be "
                              "positive")
+        self.calibration = camera_calibration(raw.get("calibration"))
         self._home = np.concatenate([HUMANOID_HOME[b.name] for b in self.tree.branches])
         self._t0 = 0.0
 
@@ -254,6 +289,19 @@ class DualLoopMethod(Method):
         cov[:, 2, 2] = (z**2 * math.sqrt(2.0) * sigma_px / (self.focal_px * self.baseline)) ** 2
         return cov
 
+    def floor_covariance(self, p: np.ndarray) -> np.ndarray:
+        """(3, 3) the pixel floor's covariance at a point p (3,), with the calibrated focal
+        length and baseline when the controller reports its calibration (the same model
+        shared_errors.floor_covariance takes back out), else the nominal ones."""
+        if self.calibration is None:
+            return self.expected_covariance(p[None, :], self.pixel_floor)[0]
+        rig = self.calibration[0]
+        z = max(abs(float(p[2])), 1e-3)
+        fx, baseline = float(rig.K_left[0, 0]), float(np.linalg.norm(rig.T))
+        lateral = (z * self.pixel_floor / fx) ** 2
+        depth = (z**2 * math.sqrt(2.0) * self.pixel_floor / (fx * baseline)) ** 2
+        return np.diag([lateral, lateral, depth])
+
     def design_dataset(self, q: np.ndarray) -> Dataset:
         """One sample per pose q (N, n) (the aimed arm) with the nominal predicted point
         and the planning covariance."""
@@ -308,10 +356,13 @@ class DualLoopMethod(Method):
                 continue
             cov = np.asarray(target.cov, dtype=float)
             if self.pixel_floor > 0:
-                cov = cov + self.expected_covariance(np.asarray(target.p)[None, :],
-                                                     self.pixel_floor)[0]
-            observations.append(self._sample(target.chain, q_seen, np.asarray(target.p),
-                                             cov, float(measurement.t) - self._t0, q_from))
+                cov = cov + self.floor_covariance(np.asarray(target.p))
+            sample = self._sample(target.chain, q_seen, np.asarray(target.p), cov,
+                                  float(measurement.t) - self._t0, q_from)
+            uv = getattr(target, "uv", None)
+            if uv is not None:
+                sample["uv"] = np.asarray(uv, dtype=float).reshape(2, 2).tolist()
+            observations.append(sample)
         if not observations:
             return SampleRecord(phase, index, False, reason="no target in view", q_end=q_end)
         return SampleRecord(phase, index, True, sample={"observations": observations},
@@ -342,7 +393,19 @@ class DualLoopMethod(Method):
             "frames": frames,
             "known": list(self.known),
             "samples": flat,
+            **self._camera_uncertainty(flat),
         }
+
+    def _camera_uncertainty(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+        """The dataset's `rig_uncertainty` block (the head camera's calibration, its
+        covariance and the pixel floor the covariances include), or nothing when the
+        controller reports no calibration or a sample has no `uv`."""
+        if self.calibration is None or not samples or any("uv" not in s for s in samples):
+            return {}
+        from hostpc.vision.rig_uncertainty import uncertainty_document
+
+        rig, covariance = self.calibration
+        return {"rig_uncertainty": uncertainty_document(rig, covariance, self.pixel_floor)}
 
     def describe(self) -> dict[str, Any]:
         """The tree, frames and camera model for the result document (SI)."""

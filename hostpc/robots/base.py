@@ -74,11 +74,14 @@ class StereoCapture:
 @dataclass(frozen=True)
 class MeasuredTarget:
     """One target point triangulated by the controller's own vision: chain (the kinematic
-    chain carrying it, e.g. "left"); p: (3,) m in the camera frame; cov: (3, 3) m^2."""
+    chain carrying it, e.g. "left"); p: (3,) m in the camera frame; cov: (3, 3) m^2; uv:
+    (2, 2) px, the pixel centres [[u_l, v_l], [u_r, v_r]] it was triangulated from (None if
+    the controller does not send them)."""
 
     chain: str
     p: np.ndarray
     cov: np.ndarray
+    uv: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

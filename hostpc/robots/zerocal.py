@@ -87,7 +87,7 @@ class ZerocalAdapter:
         reply = await self.client.measure_targets()
         return TargetMeasurement(
             q=reply.q, t=reply.time,
-            targets=tuple(MeasuredTarget(chain=t.chain, p=t.p, cov=t.cov)
+            targets=tuple(MeasuredTarget(chain=t.chain, p=t.p, cov=t.cov, uv=t.uv)
                           for t in reply.targets))
 
     async def measure_tracker(self) -> TrackerReading:

@@ -171,7 +171,8 @@ class RecordingAdapter:
         return await self._call(
             "measure_targets", {}, self.robot.measure_targets,  # type: ignore[attr-defined]
             lambda m: {"q": _floats(m.q), "t": float(m.t), "targets": [
-                {"chain": t.chain, "p": _floats(t.p), "cov": np.asarray(t.cov, float).tolist()}
+                {"chain": t.chain, "p": _floats(t.p), "cov": np.asarray(t.cov, float).tolist(),
+                 **({} if t.uv is None else {"uv": np.asarray(t.uv, float).tolist()})}
                 for t in m.targets]})
 
     async def get_offsets(self) -> np.ndarray:
@@ -287,7 +288,8 @@ class ReplayAdapter:
     async def _measure_targets(self) -> TargetMeasurement:
         r = self._take("measure_targets", {})
         return TargetMeasurement(q=_array(r["q"]), t=float(r["t"]), targets=tuple(
-            MeasuredTarget(chain=t["chain"], p=_array(t["p"]), cov=_array(t["cov"]))
+            MeasuredTarget(chain=t["chain"], p=_array(t["p"]), cov=_array(t["cov"]),
+                           uv=None if t.get("uv") is None else _array(t["uv"]))
             for t in r["targets"]))
 
     async def get_offsets(self) -> np.ndarray:

@@ -246,7 +246,8 @@ class ControllerClient:
         reply = await self._request(lambda i: m.MeasureTargets(id=i), m.TargetsMeasured,
                                     timeout)
         targets = tuple(
-            TargetPoint(chain=t.chain, p=_array(t.p), cov=np.asarray(t.cov, dtype=float))
+            TargetPoint(chain=t.chain, p=_array(t.p), cov=np.asarray(t.cov, dtype=float),
+                        uv=None if t.uv is None else np.asarray(t.uv, dtype=float))
             for t in reply.targets
         )
         return TargetsMeasurement(q=_array(reply.q), time=reply.time, targets=targets)

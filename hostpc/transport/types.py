@@ -70,11 +70,13 @@ class GuardedMoveOutcome:
 @dataclass(frozen=True)
 class TargetPoint:
     """One triangulated target: chain (the kinematic chain carrying it, e.g. "left");
-    p: (3,) m in the camera frame; cov: (3, 3) m^2."""
+    p: (3,) m in the camera frame; cov: (3, 3) m^2; uv: (2, 2) px, the pixel centres it was
+    triangulated from, if the controller sent them."""
 
     chain: str
     p: np.ndarray
     cov: np.ndarray
+    uv: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -54,7 +54,7 @@ def test_triangulation_inverts_projection_and_its_covariance_is_right() -> None:
     np.testing.assert_allclose(point, p, atol=1e-14)
     rng = np.random.default_rng(1)
     draws = np.array([stereo.measure(p, rng)[0] for _ in range(4000)])
-    _, cov = stereo.measure(p, rng)
+    _, cov, _ = stereo.measure(p, rng)
     empirical = np.cov(draws.T)
     np.testing.assert_allclose(np.sqrt(np.diag(empirical)), np.sqrt(np.diag(cov)), rtol=0.06)
     # depth noise far larger than lateral noise, x and z correlated

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from hostpc.fitting.shared_errors import residual_scale
+from hostpc.fitting.shared_errors import noise_moments, residual_scale
 
 
 def _trial(rng: np.random.Generator, k_true: float) -> float:
@@ -35,3 +36,31 @@ def test_scale_is_one_when_the_shared_covariance_is_right_or_absent() -> None:
     assert np.median(estimates) < 2.5  # noise-only excess: small, clipped at 1
     J = rng.normal(size=(50, 3))
     assert residual_scale(J, np.zeros((50, 4)), np.eye(4), rng.normal(size=50)) == 1.0
+
+
+def test_scale_stays_one_without_a_significant_excess() -> None:
+    """With the stated S right, a chance excess of the noise does not scale S up (the
+    gate): k = 1 in nearly all trials (without the gate, about half were above 1)."""
+    rng = np.random.default_rng(9)
+    estimates = np.array([_trial(rng, 1.0) for _ in range(200)])
+    assert np.mean(estimates == 1.0) > 0.9
+
+
+def test_noise_moments_equal_the_dense_traces_and_draws() -> None:
+    rng = np.random.default_rng(10)
+    n, m, f = 30, 3, 4
+    L = rng.normal(size=(n, m, m)) * 0.4
+    M = np.einsum("nij,nkj->nik", L, L) + 0.1 * np.eye(m)
+    Q, _ = np.linalg.qr(rng.normal(size=(n * m, f)))
+    mean, variance = noise_moments(M, Q.reshape(n, m, f))
+    dense = np.zeros((n * m, n * m))
+    for i in range(n):
+        dense[i * m:(i + 1) * m, i * m:(i + 1) * m] = M[i]
+    P = np.eye(n * m) - Q @ Q.T
+    assert mean == pytest.approx(np.trace(P @ dense @ P), rel=1e-10)
+    assert variance == pytest.approx(2 * np.trace(dense @ P @ dense @ P), rel=1e-10)
+    chol = np.linalg.cholesky(dense)
+    draws = P @ chol @ rng.normal(size=(n * m, 4000))
+    chi2 = np.sum(draws**2, axis=0)
+    assert np.mean(chi2) == pytest.approx(mean, rel=0.03)
+    assert np.var(chi2) == pytest.approx(variance, rel=0.12)

@@ -126,3 +126,19 @@ def test_replay_refuses_options_that_change_the_recorded_run(
     assert "exactly as recorded" in err[0] and "--poses" in err[0] and "--effects" in err[0]
     assert "--out" not in err[0].split("drop", 1)[1]  # --out and --no-report are fine
     assert not (tmp_path / "rep").exists()
+
+
+def test_dual_loop_replay_keeps_the_pixels_and_the_camera_calibration(tmp_path: Path) -> None:
+    """A recorded dual_loop run replays to the same dataset, byte for byte, with each
+    target's pixels and the head camera's calibration block (docs/vision.md 3.4)."""
+    run, out = tmp_path / "run", tmp_path / "replayed"
+    args = ("calibrate", "--robot", "sim", "--method", "dual_loop", "--poses", "12",
+            "--verify-poses", "0", "--candidates", "100", "--seed", "2", "--no-push",
+            "--no-report")
+    assert main([*args, "--out", str(run), "--record"]) == 0
+    assert main(["calibrate", "--replay", str(run / "recording"), "--out", str(out),
+                 "--no-report"]) == 0
+    assert (out / "dataset.json").read_bytes() == (run / "dataset.json").read_bytes()
+    document = json.loads((run / "dataset.json").read_text())
+    assert all(len(sample["uv"]) == 2 for sample in document["samples"])
+    assert len(document["rig_uncertainty"]["covariance"]) == 24
