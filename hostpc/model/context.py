@@ -14,10 +14,19 @@ from hostpc.dataset import Dataset, Samples
 from hostpc.kinematics import Chain, gravity_torque
 from hostpc.kinematics.robots import chain_from_table, get_robot
 from hostpc.model.effect import ModelContext
+from hostpc.model.memo import memoised
 
 
 def serial_chain(dataset: Dataset) -> Chain:
-    """The nominal chain of the dataset's robot (built-in by name, or explicit table)."""
+    """The nominal chain of the dataset's robot (built-in by name, or explicit table); built
+    once per robot description (``memo``), except from a URDF file, which is read anew."""
+    robot = dataset.robot
+    if robot.urdf is None:
+        return memoised(robot, "serial_chain", lambda: _serial_chain(dataset))
+    return _serial_chain(dataset)
+
+
+def _serial_chain(dataset: Dataset) -> Chain:
     robot = dataset.robot
     if robot.name is not None and robot.a is None:
         return get_robot(robot.name)
@@ -68,8 +77,8 @@ def serial_context(dataset: Dataset, chain: Chain,
     ``approach1``, ... and ``sample_variables``, or the given ``variables`` instead)."""
     samples = dataset.samples
     q_cmd = np.asarray(samples.q, dtype=float)
-    if chain.mass is not None and chain.com is not None:
-        tau = gravity_torque(chain, q_cmd)
+    if chain.mass is not None and chain.com is not None:  # once per samples and chain
+        tau = memoised(samples, ("gravity_torque", chain), lambda: gravity_torque(chain, q_cmd))
     else:
         tau = np.full_like(q_cmd, np.nan)
     approach = np.nan_to_num(np.asarray(samples.approach, dtype=float), nan=0.0)
