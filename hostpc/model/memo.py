@@ -18,7 +18,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-__all__ = ["memoised"]
+__all__ = ["memoised", "recall", "remember"]
 
 T = TypeVar("T")
 
@@ -50,6 +50,23 @@ def memoised(owner: object, key: Hashable, compute: Callable[[], T]) -> T:
     for array in value if isinstance(value, tuple) else (value,):
         if isinstance(array, np.ndarray):
             array.setflags(write=False)
+    remember(owner, key, value)
+    return value
+
+
+def recall(owner: object, key: Hashable) -> Any:
+    """The value last ``remember``-ed for (owner, key), or None."""
+    with _LOCK:
+        entry = _VALUES.get(id(owner))
+        if entry is None or entry[0]() is not owner:
+            return None
+        return entry[1].get(key)
+
+
+def remember(owner: object, key: Hashable, value: object) -> None:
+    """Keep ``value`` for (owner, key) in place of any earlier one (a one-value slot, e.g.
+    the latest evaluation of a problem); the caller makes it immutable."""
+    ident = id(owner)
     with _LOCK:
         entry = _VALUES.get(ident)
         if entry is None or entry[0]() is not owner:
@@ -57,4 +74,3 @@ def memoised(owner: object, key: Hashable, compute: Callable[[], T]) -> T:
             entry = (ref, {})
             _VALUES[ident] = entry
         entry[1][key] = value
-    return value

@@ -63,3 +63,19 @@ def test_another_dataset_gets_its_own_values() -> None:
     assert a.context.tau is not b.context.tau
     assert not np.array_equal(a.context.tau, b.context.tau)
     assert not np.array_equal(a.sqrt_information, b.sqrt_information)
+
+
+def test_a_problem_keeps_its_latest_evaluation_only_for_that_x() -> None:
+    from hostpc.fitting.solver import evaluate
+
+    problem = build_problem(_dataset(6))
+    x = np.zeros(problem.layout.size)
+    first = evaluate(problem, x)
+    assert evaluate(problem, x.copy()) is first
+    assert not first.jacobian.flags.writeable  # type: ignore[union-attr]
+    x[0] = 1e-4  # the caller's array changes: the kept evaluation must not match it
+    moved = evaluate(problem, x)
+    assert moved is not first
+    assert not np.array_equal(moved.whitened, first.whitened)
+    fresh = build_problem(problem.dataset)  # another problem: its own evaluations
+    assert evaluate(fresh, moved.x) is not moved
