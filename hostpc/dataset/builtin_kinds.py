@@ -166,6 +166,30 @@ class DualLoopFile(PointSampleKind):
                 "chain": np.asarray(columns.values["chain"], dtype=np.str_),
                 "q_head": units.angle(columns.values["q_head"])}
 
+    def read_columns(self, table: Any, units: Units) -> dict[str, Any] | None:
+        """Every sample at once: one head width, one arm width per chain (else the samples
+        are read one by one, which names the first that differs)."""
+        from hostpc.dataset.reading_columns import point_columns
+
+        if not {"chain", "q_head", "q_arm"} <= table.names:
+            return None
+        chain = np.asarray(table.strings("chain", ("left", "right")), dtype=np.str_)
+        q_head = table.numbers("q_head", list[list[float]], (table.width("q_head"),))
+        arms: list[tuple[np.ndarray, np.ndarray]] = []
+        for name in ("left", "right"):
+            rows = np.flatnonzero(chain == name)
+            if rows.size:
+                first = table.columns["q_arm"][rows[0]]
+                width = len(first) if type(first) is list else -1  # -1: never the shape
+                arms.append((rows, table.numbers("q_arm", list[list[float]], (width,), rows)))
+        q = np.full((table.n_samples, max(arm.shape[1] for _, arm in arms)), np.nan)
+        for rows, arm in arms:
+            if arm.shape[1] == 0:
+                return None
+            q[rows, :arm.shape[1]] = arm
+        return {**point_columns(table, units), "chain": chain,
+                "q_head": units.angle(q_head), "q": units.angle(q)}
+
     def write_sample(self, samples: Samples, index: int) -> tuple[dict[str, Any], int]:
         assert samples.chain is not None and samples.q_head is not None
         q_row = samples.q[index]

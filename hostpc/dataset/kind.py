@@ -154,6 +154,10 @@ class MeasurementKind:
     sample_hints: ClassVar[Mapping[str, str]] = {}
     uses_probe: ClassVar[bool] = False
     robot_tree: ClassVar[bool] = False
+    #: optional fields some samples of a regular file leave out (its column reader reads
+    #: them at ``SampleTable.present``); any other field varying sends the file to the
+    #: sample-by-sample reader
+    columns_may_omit: ClassVar[frozenset[str]] = frozenset()
 
     def accepted_fields(self) -> frozenset[str]:
         """Every sample field this kind accepts (its own, ``q`` and the context fields)."""
