@@ -14,7 +14,9 @@ from hostpc.dataset import schema
 from hostpc.dataset.kind import (
     Columns,
     MeasurementKind,
+    WrittenColumns,
     check_joint_count,
+    point_columns_out,
     positive,
     read_point_covariance,
     require,
@@ -85,6 +87,10 @@ class StereoTargetFile(PointSampleKind):
         self.write_point(samples, index, out)
         return out, samples.q.shape[1]
 
+    def write_columns(self, samples: Samples) -> WrittenColumns | None:
+        return WrittenColumns([("q", samples.q.tolist(), None), *point_columns_out(samples)],
+                              [samples.q.shape[1]] * samples.n)
+
 
 class SphereProbeFile(MeasurementKind):
     """Touch contacts on a reference sphere: ``|tip(q) - centre| = R + r``."""
@@ -123,6 +129,15 @@ class SphereProbeFile(MeasurementKind):
         if samples.group[index] >= 0:
             out["group"] = int(samples.group[index])
         return out, samples.q.shape[1]
+
+    def write_columns(self, samples: Samples) -> WrittenColumns | None:
+        fields: list[tuple[str, list[Any], list[bool] | None]] = [
+            ("q", samples.q.tolist(), None)]
+        if samples.sigma is not None:
+            fields.append(("sigma", np.asarray(samples.sigma, dtype=float).tolist(), None))
+        group = np.asarray(samples.group)
+        fields.append(("group", group.astype(np.int64).tolist(), (group >= 0).tolist()))
+        return WrittenColumns(fields, [samples.q.shape[1]] * samples.n)
 
 
 class DualLoopFile(PointSampleKind):
@@ -198,3 +213,13 @@ class DualLoopFile(PointSampleKind):
                                "q_head": samples.q_head[index].tolist(), "q_arm": q.tolist()}
         self.write_point(samples, index, out)
         return out, len(q)
+
+    def write_columns(self, samples: Samples) -> WrittenColumns | None:
+        assert samples.chain is not None and samples.q_head is not None
+        measured = ~np.isnan(samples.q)
+        q_arm = [[v for v, keep in zip(row, keeps, strict=True) if keep]
+                 for row, keeps in zip(samples.q.tolist(), measured.tolist(), strict=True)]
+        chain = [str(c) for c in samples.chain.tolist()]
+        return WrittenColumns([("chain", chain, None), ("q_head", samples.q_head.tolist(), None),
+                               ("q_arm", q_arm, None), *point_columns_out(samples)],
+                              measured.sum(axis=1).tolist())

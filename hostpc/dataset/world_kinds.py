@@ -24,8 +24,10 @@ from hostpc.dataset import schema
 from hostpc.dataset.builtin_kinds import PointSampleKind
 from hostpc.dataset.kind import (
     Columns,
+    WrittenColumns,
     check_covariance,
     check_joint_count,
+    point_columns_out,
     positive,
     require,
     sample_value,
@@ -127,6 +129,19 @@ class WorldPointFile(PointSampleKind):
             out["mask"] = [int(v) for v in samples.fields["mask"][index]]
         return out, samples.q.shape[1]
 
+    def write_columns(self, samples: Samples) -> WrittenColumns | None:
+        fields: list[tuple[str, list[Any], list[bool] | None]] = [
+            ("q", samples.q.tolist(), None)]
+        if "marker" in samples.fields:
+            markers = [str(m) for m in samples.fields["marker"].tolist()]
+            fields.append(("marker", markers, [bool(m) for m in markers]))
+        fields += point_columns_out(samples)
+        if "mask" in samples.fields:
+            mask = np.asarray(samples.fields["mask"])
+            fields.append(("mask", mask.astype(np.int64).tolist(),
+                           (~np.all(mask == 1.0, axis=1)).tolist()))
+        return WrittenColumns(fields, [samples.q.shape[1]] * samples.n)
+
 
 class WorldPoseFile(PointSampleKind):
     """A frame fixed to the flange measured in full (position and orientation)."""
@@ -220,3 +235,11 @@ class WorldPoseFile(PointSampleKind):
         return ({"q": samples.q[index].tolist(), "p": samples.p[index].tolist(),
                  "rpy": samples.fields["rpy"][index].tolist(),
                  "cov": samples.fields["pose_cov"][index].tolist()}, samples.q.shape[1])
+
+    def write_columns(self, samples: Samples) -> WrittenColumns | None:
+        assert samples.p is not None
+        return WrittenColumns(
+            [("q", samples.q.tolist(), None), ("p", samples.p.tolist(), None),
+             ("rpy", np.asarray(samples.fields["rpy"]).tolist(), None),
+             ("cov", np.asarray(samples.fields["pose_cov"]).tolist(), None)],
+            [samples.q.shape[1]] * samples.n)

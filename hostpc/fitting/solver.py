@@ -71,7 +71,7 @@ def evaluate(problem: Problem, x: np.ndarray, jacobian: bool = True) -> Evaluati
     if reuse:
         latest = recall(problem, "latest evaluation")
         if latest is not None and np.array_equal(latest.x, x):
-            return latest  # type: ignore[no-any-return]
+            return latest
     evaluation = _evaluate(problem, x, jacobian)
     if reuse and jacobian:
         evaluation = Evaluation(np.array(x, dtype=float), evaluation.raw, evaluation.whitened,

@@ -11,6 +11,7 @@ handed out are read-only, so no caller can change what the next build gets.
 
 from __future__ import annotations
 
+import functools
 import threading
 import weakref
 from collections.abc import Callable, Hashable
@@ -45,7 +46,8 @@ def memoised(owner: object, key: Hashable, compute: Callable[[], T]) -> T:
     with _LOCK:
         entry = _VALUES.get(ident)
         if entry is not None and entry[0]() is owner and key in entry[1]:
-            return entry[1][key]  # type: ignore[no-any-return]
+            cached: T = entry[1][key]
+            return cached
     value = compute()
     for array in value if isinstance(value, tuple) else (value,):
         if isinstance(array, np.ndarray):
@@ -70,7 +72,7 @@ def remember(owner: object, key: Hashable, value: object) -> None:
     with _LOCK:
         entry = _VALUES.get(ident)
         if entry is None or entry[0]() is not owner:
-            ref = weakref.ref(owner, lambda r, i=ident: _forget(i, r))
+            ref: weakref.ref[Any] = weakref.ref(owner, functools.partial(_forget, ident))
             entry = (ref, {})
             _VALUES[ident] = entry
         entry[1][key] = value
