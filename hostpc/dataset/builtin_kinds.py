@@ -98,6 +98,7 @@ class SphereProbeFile(MeasurementKind):
     name = "sphere_probe"
     frames = {"tool": "tip", "sphere": "sphere"}
     sample_fields = {"sigma": "length", "group": "1"}
+    columns_may_omit = frozenset({"group"})
     sample_hints = {"q_arm": " (use 'q')", "cov": " (give the contact-distance 'sigma')",
                     "p": " (a contact has no measured point)"}
     uses_probe = True
@@ -117,10 +118,18 @@ class SphereProbeFile(MeasurementKind):
         return {"sigma": units.length(columns.values["sigma"])}
 
     def read_columns(self, table: Any, units: Units) -> dict[str, Any] | None:
-        if "group" in table.names or "sigma" not in table.names:
+        if "sigma" not in table.names:
             return None
         sigma = table.numbers("sigma", list[float], ())
-        return {"sigma": units.length(sigma)} if np.all(sigma > 0) else None
+        if not np.all(sigma > 0):
+            return None
+        group = np.full(table.n_samples, -1, dtype=np.int64)
+        rows = table.present("group")  # a group index (>= 0) where the sample has one
+        values = [table.columns["group"][i] for i in rows]
+        if not all(type(v) is int and 0 <= v < 2**31 for v in values):
+            return None
+        group[rows] = values
+        return {"sigma": units.length(sigma), "group": group}
 
     def write_sample(self, samples: Samples, index: int) -> tuple[dict[str, Any], int]:
         out: dict[str, Any] = {"q": samples.q[index].tolist()}

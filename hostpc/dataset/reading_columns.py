@@ -132,7 +132,7 @@ def read_columns(samples: list[Any], kind: MeasurementKind, n_joints: int | None
     """The samples as ``Samples`` (SI), or None when they need the sample-by-sample reader.
 
     Reads the context fields every kind shares (t, temperature, speed, approach; ``extra``
-    and ``group`` send the file to the slow path) and asks the kind for its own columns
+    sends the file to the slow path; ``group`` is the kind's) and asks the kind for its own columns
     (``MeasurementKind.read_columns``). The joint angles are ``q`` (n_joints each), or the
     kind's ``q`` (SI, NaN-padded rows: a kinematic tree's arms)."""
     if not _reads_columns(type(kind)):
@@ -170,7 +170,8 @@ def read_columns(samples: list[Any], kind: MeasurementKind, n_joints: int | None
         return Samples(
             q=q, t=context["t"], temperature=context["temperature"],
             speed=context["speed"], approach=approach,
-            group=np.full(table.n_samples, -1, dtype=np.int64), extra={}, **own)
+            group=own.pop("group", np.full(table.n_samples, -1, dtype=np.int64)), extra={},
+            **own)
     except NotColumnar:
         return None
 

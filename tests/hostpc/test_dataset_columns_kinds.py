@@ -19,7 +19,7 @@ from hostpc.errors import DatasetError
 from hostpc.model.measurements.registry import measurement_model
 
 KINDS = ("stereo_target", "sphere_probe", "dual_loop", "world_point", "world_pose")
-COLUMNAR = ("stereo_target", "dual_loop", "world_point", "world_pose")
+COLUMNAR = KINDS
 
 
 def _document(method: str) -> dict[str, Any]:
@@ -108,6 +108,9 @@ def test_a_plugin_overriding_write_sample_alone_is_written_sample_by_sample() ->
     ("dual_loop", 8, "q_arm", [0.1, 0.2], "samples[8].q_arm: expected"),
     ("dual_loop", 3, "q_head", [0.1, 0.2, 0.3], "samples[3].q_head: expected"),
     ("dual_loop", 10, "sigma", 1e-4, "samples[10].sigma: give either 'cov' or 'sigma'"),
+    ("sphere_probe", 4, "group", -1, "samples[4].group: must be >= 0"),
+    ("sphere_probe", 6, "group", 1.5, "samples[6].group"),
+    ("sphere_probe", 2, "sigma", 0.0, "samples[2].sigma: must be positive"),
 ])
 def test_a_bad_sample_among_regular_ones_is_named_in_one_line(
         method: str, index: int, field: str, value: Any, message: str) -> None:
@@ -116,3 +119,13 @@ def test_a_bad_sample_among_regular_ones_is_named_in_one_line(
     with pytest.raises(DatasetError, match=re.escape(message)) as error:
         dataset_from_dict(doc, "data.json")
     assert "\n" not in str(error.value)
+
+
+def test_sphere_probe_group_given_by_some_samples_only(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    doc = _document("sphere_probe")
+    for sample in doc["samples"][::3]:
+        sample.pop("group", None)
+    fast, slow = _read_both(doc, monkeypatch)
+    assert fast is not None and fast == slow
+    assert fast.samples.group[0] == -1 and np.any(fast.samples.group >= 0)
