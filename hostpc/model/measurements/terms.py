@@ -120,7 +120,11 @@ def flange(problem: Problem, x: np.ndarray, jacobian: bool
     R_base_flange (N, 3, 3), t_base_flange (N, 3), and the kinematic-delta derivative with its
     row slice (see kinematic_deltas)."""
     delta, d_delta, rows = kinematic_deltas(problem, x, jacobian)
-    poses = forward(problem.chain, problem.context.q_cmd, delta)
+    n_joints = problem.context.q_cmd.shape[1]
+    if rows.stop == n_joints:  # joint deltas only: the joint variables move, the table not
+        poses = forward(problem.chain, problem.context.q_cmd + delta[:, :n_joints])
+    else:
+        poses = forward(problem.chain, problem.context.q_cmd, delta)
     T_bf = poses.T_base_flange
     return poses, T_bf[:, :3, :3], T_bf[:, :3, 3], d_delta, rows
 
