@@ -48,10 +48,12 @@ class SampleTable:
         names = frozenset(samples[0])
         self.partial: frozenset[str] = frozenset()
         if any(len(sample) != len(names) or sample.keys() != names for sample in samples):
-            every = frozenset.intersection(*(frozenset(sample) for sample in samples))
-            some = frozenset.union(*(frozenset(sample) for sample in samples))
-            if not some - every <= may_omit:
+            some = frozenset().union(*samples)
+            required = some - may_omit
+            if not all(sample.keys() >= required for sample in samples):
                 raise NotColumnar  # fields vary between samples: read them one by one
+            every = required | {name for name in some & may_omit
+                                if all(name in sample for sample in samples)}
             names, self.partial = every, some - every
         self.n_samples = len(samples)
         self.names = names
