@@ -178,8 +178,8 @@ def search_interactions(result: FitResult, variables: Mapping[str, np.ndarray], 
     return tuple(found), n_tests
 
 
-#: elements of the added columns of one batch of parameters (rows x parameters x g)
-BATCH_ELEMENTS = 1 << 21
+#: values of the added columns of one batch of parameters (rows x parameters x g; 4 MB)
+BATCH_ELEMENTS = 1 << 19
 
 
 def _statistics(columns: np.ndarray, tested: np.ndarray, F_rows: np.ndarray, Q: np.ndarray,
