@@ -53,8 +53,8 @@ class SolverOutcome:
 #: instead of growing with N; problems up to twice this are evaluated in one piece
 CHUNK_SAMPLES = 8192
 
-#: a problem's latest evaluation is kept if its Jacobian has at most this many values (8 MB)
-REUSE_ELEMENTS = 1 << 20
+#: a problem's latest evaluation is kept if its Jacobian has at most this many values (2 MB)
+REUSE_ELEMENTS = 1 << 18
 
 
 def evaluate(problem: Problem, x: np.ndarray, jacobian: bool = True) -> Evaluation:
