@@ -6,6 +6,7 @@ builds its own); computed once per problem, including the gravity torques.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 
 import numpy as np
@@ -18,12 +19,17 @@ from hostpc.model.memo import memoised
 
 
 def serial_chain(dataset: Dataset) -> Chain:
-    """The nominal chain of the dataset's robot (built-in by name, or explicit table); built
-    once per robot description (``memo``), except from a URDF file, which is read anew."""
+    """The nominal chain of the dataset's robot (built-in by name, explicit table or URDF);
+    built once per robot description (``memo``; a URDF file again when it changed)."""
     robot = dataset.robot
-    if robot.urdf is None:
-        return memoised(robot, "serial_chain", lambda: _serial_chain(dataset))
-    return _serial_chain(dataset)
+    key: tuple[object, ...] = ("serial_chain",)
+    if robot.urdf is not None:
+        try:
+            stat = os.stat(robot.urdf)
+        except OSError:  # the loader says what is wrong with the path
+            return _serial_chain(dataset)
+        key = ("serial_chain", stat.st_mtime_ns, stat.st_size)
+    return memoised(robot, key, lambda: _serial_chain(dataset))
 
 
 def _serial_chain(dataset: Dataset) -> Chain:

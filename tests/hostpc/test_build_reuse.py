@@ -5,6 +5,7 @@ never handed to another dataset."""
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -79,3 +80,28 @@ def test_a_problem_keeps_its_latest_evaluation_only_for_that_x() -> None:
     assert not np.array_equal(moved.whitened, first.whitened)
     fresh = build_problem(problem.dataset)  # another problem: its own evaluations
     assert evaluate(fresh, moved.x) is not moved
+
+
+def test_a_urdf_chain_is_read_once_and_again_when_the_file_changes(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    import os
+    from pathlib import Path
+
+    from hostpc.dataset import load_dataset
+    from hostpc.model.problem import robot_chain
+
+    source = Path(__file__).resolve().parents[1] / "data" / "arm7_prismatic.urdf"
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text(source.read_text())
+    document = {"format": "zerocal-dataset/1", "method": "stereo_target",
+                "robot": {"urdf": "arm.urdf", "base_link": "base_link", "tip_link": "tool0"},
+                "frames": {"tool": {"xyz": [0, 0, 0.05], "rpy": [0, 0, 0]},
+                           "target": [0.5, 0.2, 0.3]},
+                "samples": [{"q": [0.1 * i] * 7, "p": [0.0, 0.0, 0.4], "sigma": 1e-4}
+                            for i in range(5)]}
+    (tmp_path / "set.json").write_text(json.dumps(document))
+    dataset = load_dataset(tmp_path / "set.json")
+    first = robot_chain(dataset)
+    assert robot_chain(dataset) is first
+    urdf.write_text(source.read_text() + "\n")  # changed: read again
+    os.utime(urdf, ns=(1, 1))
+    assert robot_chain(dataset) is not first
