@@ -48,14 +48,27 @@ class _OneLineErrors(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every command; with ``command`` (the one on the command line), of that
+    command only if its module registers it (a command's module may import much: `hostpc
+    diagnose` need not load what `hostpc calibrate` needs), else of every command."""
+    if command is not None and command.replace("-", "_") in COMMAND_MODULES:
+        parser = _parser((command.replace("-", "_"),))
+        subparsers = next(a for a in parser._actions
+                          if isinstance(a, argparse._SubParsersAction))
+        if command in subparsers.choices:
+            return parser
+    return _parser(COMMAND_MODULES)
+
+
+def _parser(modules: tuple[str, ...]) -> argparse.ArgumentParser:
     parser = _OneLineErrors(
         prog="hostpc",
         description="zerocal host: calibrate robot joint zero offsets, fit and diagnose datasets.",
     )
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in COMMAND_MODULES:
+    for name in modules:
         try:
             module = importlib.import_module(f"hostpc.cli.{name}")
         except ModuleNotFoundError as exc:
@@ -92,7 +105,8 @@ def _token_from_options(args: argparse.Namespace) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    words = sys.argv[1:] if argv is None else argv
+    parser = build_parser(next((w for w in words if not w.startswith("-")), None))
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # a bad option (one line already printed) or --help

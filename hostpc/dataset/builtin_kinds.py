@@ -14,7 +14,9 @@ from hostpc.dataset import schema
 from hostpc.dataset.kind import (
     Columns,
     MeasurementKind,
+    WrittenColumns,
     check_joint_count,
+    point_columns_out,
     positive,
     read_point_covariance,
     require,
@@ -85,6 +87,10 @@ class StereoTargetFile(PointSampleKind):
         self.write_point(samples, index, out)
         return out, samples.q.shape[1]
 
+    def write_columns(self, samples: Samples) -> WrittenColumns | None:
+        return WrittenColumns([("q", samples.q.tolist(), None), *point_columns_out(samples)],
+                              [samples.q.shape[1]] * samples.n)
+
 
 class SphereProbeFile(MeasurementKind):
     """Touch contacts on a reference sphere: ``|tip(q) - centre| = R + r``."""
@@ -92,6 +98,7 @@ class SphereProbeFile(MeasurementKind):
     name = "sphere_probe"
     frames = {"tool": "tip", "sphere": "sphere"}
     sample_fields = {"sigma": "length", "group": "1"}
+    columns_may_omit = frozenset({"group"})
     sample_hints = {"q_arm": " (use 'q')", "cov": " (give the contact-distance 'sigma')",
                     "p": " (a contact has no measured point)"}
     uses_probe = True
@@ -111,10 +118,18 @@ class SphereProbeFile(MeasurementKind):
         return {"sigma": units.length(columns.values["sigma"])}
 
     def read_columns(self, table: Any, units: Units) -> dict[str, Any] | None:
-        if "group" in table.names or "sigma" not in table.names:
+        if "sigma" not in table.names:
             return None
         sigma = table.numbers("sigma", list[float], ())
-        return {"sigma": units.length(sigma)} if np.all(sigma > 0) else None
+        if not np.all(sigma > 0):
+            return None
+        group = np.full(table.n_samples, -1, dtype=np.int64)
+        rows = table.present("group")  # a group index (>= 0) where the sample has one
+        values = [table.columns["group"][i] for i in rows]
+        if not all(type(v) is int and 0 <= v < 2**31 for v in values):
+            return None
+        group[rows] = values
+        return {"sigma": units.length(sigma), "group": group}
 
     def write_sample(self, samples: Samples, index: int) -> tuple[dict[str, Any], int]:
         out: dict[str, Any] = {"q": samples.q[index].tolist()}
@@ -123,6 +138,15 @@ class SphereProbeFile(MeasurementKind):
         if samples.group[index] >= 0:
             out["group"] = int(samples.group[index])
         return out, samples.q.shape[1]
+
+    def write_columns(self, samples: Samples) -> WrittenColumns | None:
+        fields: list[tuple[str, list[Any], list[bool] | None]] = [
+            ("q", samples.q.tolist(), None)]
+        if samples.sigma is not None:
+            fields.append(("sigma", np.asarray(samples.sigma, dtype=float).tolist(), None))
+        group = np.asarray(samples.group)
+        fields.append(("group", group.astype(np.int64).tolist(), (group >= 0).tolist()))
+        return WrittenColumns(fields, [samples.q.shape[1]] * samples.n)
 
 
 class DualLoopFile(PointSampleKind):
@@ -166,6 +190,30 @@ class DualLoopFile(PointSampleKind):
                 "chain": np.asarray(columns.values["chain"], dtype=np.str_),
                 "q_head": units.angle(columns.values["q_head"])}
 
+    def read_columns(self, table: Any, units: Units) -> dict[str, Any] | None:
+        """Every sample at once: one head width, one arm width per chain (else the samples
+        are read one by one, which names the first that differs)."""
+        from hostpc.dataset.reading_columns import point_columns
+
+        if not {"chain", "q_head", "q_arm"} <= table.names:
+            return None
+        chain = np.asarray(table.strings("chain", ("left", "right")), dtype=np.str_)
+        q_head = table.numbers("q_head", list[list[float]], (table.width("q_head"),))
+        arms: list[tuple[np.ndarray, np.ndarray]] = []
+        for name in ("left", "right"):
+            rows = np.flatnonzero(chain == name)
+            if rows.size:
+                first = table.columns["q_arm"][rows[0]]
+                width = len(first) if type(first) is list else -1  # -1: never the shape
+                arms.append((rows, table.numbers("q_arm", list[list[float]], (width,), rows)))
+        q = np.full((table.n_samples, max(arm.shape[1] for _, arm in arms)), np.nan)
+        for rows, arm in arms:
+            if arm.shape[1] == 0:
+                return None
+            q[rows, :arm.shape[1]] = arm
+        return {**point_columns(table, units), "chain": chain,
+                "q_head": units.angle(q_head), "q": units.angle(q)}
+
     def write_sample(self, samples: Samples, index: int) -> tuple[dict[str, Any], int]:
         assert samples.chain is not None and samples.q_head is not None
         q_row = samples.q[index]
@@ -174,3 +222,13 @@ class DualLoopFile(PointSampleKind):
                                "q_head": samples.q_head[index].tolist(), "q_arm": q.tolist()}
         self.write_point(samples, index, out)
         return out, len(q)
+
+    def write_columns(self, samples: Samples) -> WrittenColumns | None:
+        assert samples.chain is not None and samples.q_head is not None
+        measured = ~np.isnan(samples.q)
+        q_arm = [[v for v, keep in zip(row, keeps, strict=True) if keep]
+                 for row, keeps in zip(samples.q.tolist(), measured.tolist(), strict=True)]
+        chain = [str(c) for c in samples.chain.tolist()]
+        return WrittenColumns([("chain", chain, None), ("q_head", samples.q_head.tolist(), None),
+                               ("q_arm", q_arm, None), *point_columns_out(samples)],
+                              measured.sum(axis=1).tolist())

@@ -154,6 +154,10 @@ class MeasurementKind:
     sample_hints: ClassVar[Mapping[str, str]] = {}
     uses_probe: ClassVar[bool] = False
     robot_tree: ClassVar[bool] = False
+    #: optional fields some samples of a regular file leave out (its column reader reads
+    #: them at ``SampleTable.present``); any other field varying sends the file to the
+    #: sample-by-sample reader
+    columns_may_omit: ClassVar[frozenset[str]] = frozenset()
 
     def accepted_fields(self) -> frozenset[str]:
         """Every sample field this kind accepts (its own, ``q`` and the context fields)."""
@@ -209,6 +213,21 @@ class MeasurementKind:
         Default: none."""
 
     # writing ------------------------------------------------------------------------
+    def write_columns(self, samples: Samples) -> WrittenColumns | None:
+        """The fast path of writing: what ``write_sample`` gives, for every sample at once
+        (``WrittenColumns``), or None to write sample by sample. Used only where the class
+        that defines it also defines ``write_sample``. The default does what the default
+        ``write_sample`` does."""
+        q = samples.q.tolist()
+        fields: list[tuple[str, list[Any], list[bool] | None]] = [("q", q, None)]
+        for name in self.sample_fields:
+            if name not in samples.fields:
+                continue
+            values = np.asarray(samples.fields[name])
+            finite = np.isfinite(values).reshape(values.shape[0], -1).all(axis=1)
+            fields.append((name, values.tolist(), finite.tolist()))
+        return WrittenColumns(fields, [samples.q.shape[1]] * samples.n)
+
     def write_sample(self, samples: Samples, index: int) -> tuple[dict[str, Any], int]:
         """This kind's fields of sample ``index`` as JSON (SI), and its joint count. The
         context fields (t, approach, ...) are written by the dataset layer after these."""
@@ -221,6 +240,32 @@ class MeasurementKind:
             if np.all(np.isfinite(value)):
                 out[name] = value.tolist()
         return out, len(q)
+
+
+class WrittenColumns:
+    """A kind's fields of every sample as JSON columns, in the order ``write_sample`` writes
+    them: (name, values (an N-list), written (an N-list of bool) or None: every sample);
+    and each sample's joint count (an N-list)."""
+
+    def __init__(self, fields: list[tuple[str, list[Any], list[bool] | None]],
+                 n_joints: list[int]) -> None:
+        self.fields = fields
+        self.n_joints = n_joints
+
+    def sample(self, index: int) -> dict[str, Any]:
+        """Sample ``index`` as ``write_sample`` gives it."""
+        return {name: values[index] for name, values, written in self.fields
+                if written is None or written[index]}
+
+
+def point_columns_out(samples: Samples) -> list[tuple[str, list[Any], list[bool] | None]]:
+    """``p`` and ``cov`` of every sample (as ``PointSampleKind.write_point``)."""
+    out: list[tuple[str, list[Any], list[bool] | None]] = []
+    if samples.p is not None:
+        out.append(("p", samples.p.tolist(), None))
+    if samples.cov is not None:
+        out.append(("cov", samples.cov.tolist(), None))
+    return out
 
 
 def sample_index(loc: Loc) -> int:

@@ -30,6 +30,9 @@ _SYMMETRY_TOLERANCE = 1e-6  # as hostpc.dataset.kind.check_covariance
 _MAX_GROUP = 2**31
 
 
+_ABSENT = object()  # a field a sample leaves out (SampleTable.partial)
+
+
 class NotColumnar(Exception):
     """The samples need the sample-by-sample reader (which names the offending sample)."""
 
@@ -37,31 +40,70 @@ class NotColumnar(Exception):
 class SampleTable:
     """The samples of a document as columns of raw JSON values, one list per field."""
 
-    def __init__(self, samples: list[Any]) -> None:
+    def __init__(self, samples: list[Any], may_omit: frozenset[str] = frozenset()) -> None:
+        """may_omit: fields that some samples may leave out (``partial``; a kind's
+        ``columns_may_omit``); any other field must be in every sample or in none."""
         if not samples or not all(type(sample) is dict for sample in samples):
             raise NotColumnar
         names = frozenset(samples[0])
+        self.partial: frozenset[str] = frozenset()
         if any(len(sample) != len(names) or sample.keys() != names for sample in samples):
-            raise NotColumnar  # fields vary between samples: read them one by one
+            some = frozenset().union(*samples)
+            required = some - may_omit
+            if not all(sample.keys() >= required for sample in samples):
+                raise NotColumnar  # fields vary between samples: read them one by one
+            every = required | {name for name in some & may_omit
+                                if all(name in sample for sample in samples)}
+            names, self.partial = every, some - every
         self.n_samples = len(samples)
         self.names = names
         self.columns: dict[str, list[Any]] = {
             name: [sample[name] for sample in samples] for name in names}
+        for name in self.partial:
+            self.columns[name] = [sample.get(name, _ABSENT) for sample in samples]
 
-    def numbers(self, name: str, kind: Any, shape: tuple[int, ...]) -> FloatArray:
-        """Field ``name`` of every sample as one float array of shape (N, *shape); strict
-        JSON numbers (no bools, no strings), finite."""
+    def present(self, name: str) -> np.ndarray:
+        """Indices of the samples that give field ``name``."""
+        if name in self.names:
+            return np.arange(self.n_samples)
+        if name not in self.partial:
+            return np.zeros(0, dtype=np.int64)
+        return np.flatnonzero([v is not _ABSENT for v in self.columns[name]])
+
+    def numbers(self, name: str, kind: Any, shape: tuple[int, ...],
+                rows: np.ndarray | None = None) -> FloatArray:
+        """Field ``name`` of every sample (or of the samples ``rows``) as one float array of
+        shape (N, *shape); strict JSON numbers (no bools, no strings), finite."""
+        column = self.columns[name]
+        if rows is not None:
+            column = [column[i] for i in rows]
         try:
-            values = schema.validate(kind, self.columns[name])
+            values = schema.validate(kind, column)
         except schema.FieldError:
             raise NotColumnar from None
         try:
             array = np.asarray(values, dtype=np.float64)
         except ValueError:  # ragged rows
             raise NotColumnar from None
-        if array.shape != (self.n_samples, *shape) or not np.all(np.isfinite(array)):
+        if array.shape != (len(column), *shape) or not np.all(np.isfinite(array)):
             raise NotColumnar
         return array
+
+    def width(self, name: str) -> int:
+        """The length of field ``name``'s list in the first sample (at least 1)."""
+        first = self.columns[name][0]
+        if type(first) is not list or not first:
+            raise NotColumnar
+        return len(first)
+
+    def strings(self, name: str, allowed: tuple[str, ...] | None = None) -> list[str]:
+        """Field ``name`` of every sample: JSON strings (of ``allowed``, if given)."""
+        column = self.columns[name]
+        if not all(type(v) is str for v in column):
+            raise NotColumnar
+        if allowed is not None and not set(column) <= set(allowed):
+            raise NotColumnar
+        return column
 
 
 def finite(array: FloatArray) -> FloatArray:
@@ -92,19 +134,25 @@ def read_columns(samples: list[Any], kind: MeasurementKind, n_joints: int | None
     """The samples as ``Samples`` (SI), or None when they need the sample-by-sample reader.
 
     Reads the context fields every kind shares (t, temperature, speed, approach; ``extra``
-    and ``group`` send the file to the slow path) and asks the kind for its own columns
-    (``MeasurementKind.read_columns``)."""
-    if n_joints is None or not _reads_columns(type(kind)):
+    sends the file to the slow path; ``group`` is the kind's) and asks the kind for its own columns
+    (``MeasurementKind.read_columns``). The joint angles are ``q`` (n_joints each), or the
+    kind's ``q`` (SI, NaN-padded rows: a kinematic tree's arms)."""
+    if not _reads_columns(type(kind)):
         return None
     try:
-        table = SampleTable(samples)
+        table = SampleTable(samples, kind.columns_may_omit)
         allowed = kind.accepted_fields()
-        if not table.names <= allowed or "extra" in table.names or "q" not in table.names:
+        if not table.names | table.partial <= allowed or "extra" in table.names:
             raise NotColumnar
-        q_file = table.numbers("q", list[list[float]], (n_joints,))
         own = kind.read_columns(table, units)
         if own is None:
             raise NotColumnar
+        q = own.pop("q", None)
+        if q is None:
+            if n_joints is None or "q" not in table.names:
+                raise NotColumnar
+            q = units.angle(table.numbers("q", list[list[float]], (n_joints,)))
+        n_joints = int(q.shape[1])
         nan = np.full(table.n_samples, np.nan)
         context: dict[str, FloatArray] = {}
         for name, convert in (("t", units.time), ("temperature", np.asarray),
@@ -116,13 +164,16 @@ def read_columns(samples: list[Any], kind: MeasurementKind, n_joints: int | None
             raise NotColumnar
         approach = np.full((table.n_samples, n_joints), np.nan)
         if "approach" in table.names:
+            if np.any(np.isnan(q)):  # rows of different lengths: one by one
+                raise NotColumnar
             approach = table.numbers("approach", list[list[float]], (n_joints,))
             if not np.all(np.abs(approach) == 1.0):
                 raise NotColumnar
         return Samples(
-            q=units.angle(q_file), t=context["t"], temperature=context["temperature"],
+            q=q, t=context["t"], temperature=context["temperature"],
             speed=context["speed"], approach=approach,
-            group=np.full(table.n_samples, -1, dtype=np.int64), extra={}, **own)
+            group=own.pop("group", np.full(table.n_samples, -1, dtype=np.int64)), extra={},
+            **own)
     except NotColumnar:
         return None
 

@@ -24,8 +24,10 @@ from hostpc.dataset import schema
 from hostpc.dataset.builtin_kinds import PointSampleKind
 from hostpc.dataset.kind import (
     Columns,
+    WrittenColumns,
     check_covariance,
     check_joint_count,
+    point_columns_out,
     positive,
     require,
     sample_value,
@@ -51,6 +53,7 @@ class WorldPointFile(PointSampleKind):
     sample_fields = {"p": "length", "cov": "area", "sigma": "length", "marker": "1",
                      "mask": "1"}
     optional_fields = frozenset({"cov", "sigma", "marker", "mask"})
+    columns_may_omit = frozenset({"mask"})
     sample_hints = {"q_arm": " (use 'q')", "uv": " (a world-frame point has no pixels)"}
 
     def accepted_fields(self) -> frozenset[str]:
@@ -86,6 +89,24 @@ class WorldPointFile(PointSampleKind):
         }
         return arguments
 
+    def read_columns(self, table: Any, units: Units) -> dict[str, Any] | None:
+        """Every sample at once (``reading_columns``): p, cov or sigma, marker, mask."""
+        from hostpc.dataset.reading_columns import NotColumnar, point_columns
+
+        arguments = dict(point_columns(table, units))
+        arguments.pop("uv")
+        n = table.n_samples
+        markers = table.strings("marker") if "marker" in table.names else [""] * n
+        mask = np.ones((n, 3))
+        rows = table.present("mask")  # written only where an axis was not measured
+        if rows.size:
+            given = table.numbers("mask", list[list[float]], (3,), rows)
+            if not (np.all((given == 0.0) | (given == 1.0)) and np.all(given.any(axis=1))):
+                raise NotColumnar
+            mask[rows] = given
+        arguments["fields"] = {"marker": np.asarray(markers, dtype=np.str_), "mask": mask}
+        return arguments
+
     def check_samples(self, samples: Samples, frames: Mapping[str, Any]) -> None:
         """Every sample names a marker of ``frames.markers`` (or there is only one)."""
         names = list(frames.get("markers", {}))
@@ -107,6 +128,19 @@ class WorldPointFile(PointSampleKind):
         if "mask" in samples.fields and not np.all(samples.fields["mask"][index] == 1.0):
             out["mask"] = [int(v) for v in samples.fields["mask"][index]]
         return out, samples.q.shape[1]
+
+    def write_columns(self, samples: Samples) -> WrittenColumns | None:
+        fields: list[tuple[str, list[Any], list[bool] | None]] = [
+            ("q", samples.q.tolist(), None)]
+        if "marker" in samples.fields:
+            markers = [str(m) for m in samples.fields["marker"].tolist()]
+            fields.append(("marker", markers, [bool(m) for m in markers]))
+        fields += point_columns_out(samples)
+        if "mask" in samples.fields:
+            mask = np.asarray(samples.fields["mask"])
+            fields.append(("mask", mask.astype(np.int64).tolist(),
+                           (~np.all(mask == 1.0, axis=1)).tolist()))
+        return WrittenColumns(fields, [samples.q.shape[1]] * samples.n)
 
 
 class WorldPoseFile(PointSampleKind):
@@ -162,6 +196,35 @@ class WorldPoseFile(PointSampleKind):
         check_covariance((*loc, "sigma"), cov)
         return cov
 
+    def read_columns(self, table: Any, units: Units) -> dict[str, Any] | None:
+        """Every sample at once (``reading_columns``): p, rpy, and cov (6x6, file units)
+        or sigma and sigma_angle."""
+        from hostpc.dataset.reading_columns import NotColumnar, checked_covariances
+
+        if not {"p", "rpy"} <= table.names:
+            return None
+        p = table.numbers("p", list[list[float]], (3,))
+        rpy = table.numbers("rpy", list[list[float]], (3,))
+        given = {"cov", "sigma", "sigma_angle"} & table.names
+        if given == {"cov"}:
+            scale = np.array([float(units.length(1.0))] * 3 + [float(units.angle(1.0))] * 3)
+            cov = table.numbers("cov", list[list[list[float]]], (6, 6)) * np.outer(scale, scale)
+        elif given == {"sigma", "sigma_angle"}:
+            sigma_file = table.numbers("sigma", list[float], ())
+            angle_file = table.numbers("sigma_angle", list[float], ())
+            if not (np.all(sigma_file > 0) and np.all(angle_file > 0)):
+                raise NotColumnar
+            sigma = np.asarray(units.length(sigma_file), dtype=np.float64)
+            sigma_a = np.asarray(units.angle(angle_file), dtype=np.float64)
+            variances = np.repeat(np.stack([sigma**2, sigma_a**2], axis=1), 3, axis=1)
+            cov = np.zeros((table.n_samples, 6, 6))
+            cov[:, np.arange(6), np.arange(6)] = variances
+        else:
+            raise NotColumnar
+        return {"p": units.length(p),
+                "fields": {"rpy": np.asarray(units.angle(rpy), dtype=float),
+                           "pose_cov": checked_covariances(cov)}}
+
     def samples_arguments(self, columns: Columns, units: Units) -> dict[str, Any]:
         return {"p": units.length(columns.values["p"]),
                 "fields": {"rpy": np.asarray(columns.values["rpy"], dtype=float),
@@ -172,3 +235,11 @@ class WorldPoseFile(PointSampleKind):
         return ({"q": samples.q[index].tolist(), "p": samples.p[index].tolist(),
                  "rpy": samples.fields["rpy"][index].tolist(),
                  "cov": samples.fields["pose_cov"][index].tolist()}, samples.q.shape[1])
+
+    def write_columns(self, samples: Samples) -> WrittenColumns | None:
+        assert samples.p is not None
+        return WrittenColumns(
+            [("q", samples.q.tolist(), None), ("p", samples.p.tolist(), None),
+             ("rpy", np.asarray(samples.fields["rpy"]).tolist(), None),
+             ("cov", np.asarray(samples.fields["pose_cov"]).tolist(), None)],
+            [samples.q.shape[1]] * samples.n)

@@ -46,7 +46,7 @@ from hostpc.diagnostics.distributions import f_sf
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, solve
 from hostpc.fitting.fitting import held_out_by_fold
-from hostpc.fitting.solver import Loss, SolverOutcome, evaluate, levenberg_marquardt
+from hostpc.fitting.solver import Evaluation, Loss, SolverOutcome, evaluate, levenberg_marquardt
 from hostpc.model.effect import Effect
 from hostpc.model.layout import Problem
 from hostpc.model.problem import extend_problem as extend_with_effects
@@ -288,18 +288,20 @@ def _log_choose(n: int, k: int) -> float:
     return math.lgamma(n + 1) - math.lgamma(k + 1) - math.lgamma(n - k + 1)
 
 
-def select_subset(base: FitResult, extended: FitResult, x0: np.ndarray
-                  ) -> tuple[list[int], float]:
+def select_subset(base: FitResult, extended: FitResult, x0: np.ndarray,
+                  evaluation: Evaluation | None = None) -> tuple[list[int], float]:
     """Forward selection of the new effect's parameters by the extended BIC, linearised at
     the current solution x0 (in the extended layout). Returns the chosen parameter indices
-    (extended layout) and the extended BIC penalty of choosing them."""
+    (extended layout) and the extended BIC penalty of choosing them. evaluation: the
+    extended problem at x0, if already evaluated."""
     problem = extended.problem
     n_base = base.x.size
     free = ~extended.fixed
     new = [k for k in range(n_base, free.size) if free[k]]
     if not new:
         return [], 0.0
-    evaluation = evaluate(problem, x0)
+    if evaluation is None or evaluation.jacobian is None:
+        evaluation = evaluate(problem, x0)
     J = evaluation.jacobian
     assert J is not None
     r = evaluation.whitened.ravel()
@@ -346,11 +348,12 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
     module doc, when the samples leave no degrees of freedom)."""
     problem = extend_problem(base.problem, effect)
     x0 = warm_start(base, problem)
-    extended = solve(problem, x0=x0, loss=loss, cv_folds=0, max_iterations=50)
+    start = evaluate(problem, x0)  # shared by the fit, the subset choice and the subset fit
+    extended = solve(problem, x0=x0, loss=loss, cv_folds=0, max_iterations=50, initial=start)
     extended, cv_whitened = with_held_out(extended, cv_folds)
     delta_chi2, p_full, added = f_test(base, extended)
     testable = base.dof > 0 and extended.dof > 0
-    chosen, penalty = select_subset(base, extended, x0) if testable else ([], 0.0)
+    chosen, penalty = select_subset(base, extended, x0, start) if testable else ([], 0.0)
     n_rows = base.residuals_whitened.size
     delta_bic = 0.0
     p_subset = 1.0
@@ -362,7 +365,8 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
         dof_subset = n_rows - int(np.count_nonzero(free))
         testable = dof_subset > 0
     if chosen and testable:
-        outcome = levenberg_marquardt(problem, x0, free, loss=loss, max_iterations=50)
+        outcome = levenberg_marquardt(problem, x0, free, loss=loss, max_iterations=50,
+                                      initial=start)
         chi2_subset = float(np.sum(outcome.evaluation.whitened**2))
         cv_whitened = _better(cv_whitened, subset_held_out(problem, outcome, free, cv_folds))
         delta_bic = (n_rows * math.log(max(chi2_subset, 1e-300) / max(base.chi2, 1e-300))

@@ -20,8 +20,9 @@ works for any effect, method and measurement size.
 
 from __future__ import annotations
 
+import bisect
 import math
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -156,22 +157,16 @@ def search_interactions(result: FitResult, variables: Mapping[str, np.ndarray], 
     for variable, values in usable.items():
         F, basis = modulators(variable, values, variable in categorical)
         F_rows = np.repeat(F, m, axis=0)  # (N*m, g)
-        spans: list[tuple[np.ndarray, int, float]] = []  # listed bases, pair, statistic
-        for k in np.flatnonzero(alive):
-            Z = columns[:, k:k + 1] * F_rows
-            size = float(np.linalg.norm(Z))
-            Z = Z - Q @ (Q.T @ Z)
-            statistic, rank, U = _statistic(Z, size, r)
-            # the same space gives the same statistic: compare spans only then (cheap)
-            same = next((index for basis_u, index, other in spans
-                         if abs(other - statistic) <= 1e-8 * max(statistic, 1e-12)
-                         and _same_span(basis_u, U)), None)
+        listed = _ListedSpans()
+        for k, (statistic, rank, U) in _statistics(columns, np.flatnonzero(alive), F_rows,
+                                                    Q, r):
+            same = listed.find(statistic, U)
             if same is not None:  # one indistinguishable combination: one entry
                 entry = pairs[same]
                 pairs[same] = entry[:6] + (entry[6] + (names[k],),)
                 continue
             if U is not None:
-                spans.append((U, len(pairs), statistic))
+                listed.add(statistic, U, len(pairs))
             pairs.append((names[k], variable, statistic, rank, basis, fitted[k], ()))
     n_tests = len(pairs)
     threshold = alpha / max(n_tests, 1)
@@ -194,19 +189,63 @@ def search_interactions(result: FitResult, variables: Mapping[str, np.ndarray], 
     return tuple(found), n_tests
 
 
-def _statistic(Z: np.ndarray, size: float, r: np.ndarray
-               ) -> tuple[float, int, np.ndarray | None]:
-    """(first-order chi-square drop, rank, orthonormal basis) of the projected added columns
-    Z (rows, g) for the residuals r; size is the norm of Z before projection (directions
-    that projection all but removed are rounding noise, not evidence)."""
-    if Z.size == 0 or size <= 0.0:
-        return 0.0, 0, None
-    U, s, _ = np.linalg.svd(Z, full_matrices=False)
-    rank = int(np.sum(s > RANK_TOLERANCE * size))
-    if rank == 0:
-        return 0.0, 0, None
-    basis = U[:, :rank]
-    return float(np.sum((basis.T @ r) ** 2)), rank, basis
+#: values of the added columns of one batch of parameters (rows x parameters x g; 4 MB)
+BATCH_ELEMENTS = 1 << 19
+
+
+def _statistics(columns: np.ndarray, tested: np.ndarray, F_rows: np.ndarray, Q: np.ndarray,
+                r: np.ndarray) -> Iterator[tuple[int, tuple[float, int, np.ndarray | None]]]:
+    """Per tested parameter k (in order): k and (first-order chi-square drop, rank,
+    orthonormal basis) of its added columns ``J_k * F`` (rows, g) with the fitted columns Q
+    projected out, for the residuals r. Directions that projection all but removed (singular
+    values below RANK_TOLERANCE times the columns' norm before projection) are rounding
+    noise, not evidence. The parameters go in batches (one projection and one stacked SVD
+    per batch of at most BATCH_ELEMENTS values: memory stays bounded in N)."""
+    n_rows, g = F_rows.shape
+    batch = max(1, BATCH_ELEMENTS // max(n_rows * g, 1))
+    for start in range(0, tested.size, batch):
+        ks = tested[start:start + batch]
+        Z = columns[:, ks, None] * F_rows[:, None, :]  # (rows, K, g)
+        sizes = np.sqrt(np.einsum("rkg,rkg->k", Z, Z))
+        flat = Z.reshape(n_rows, -1)
+        flat = flat - Q @ (Q.T @ flat)
+        if n_rows == 0 or g == 0:
+            for k in ks:
+                yield int(k), (0.0, 0, None)
+            continue
+        stacked = np.ascontiguousarray(flat.reshape(n_rows, ks.size, g).transpose(1, 0, 2))
+        U, s, _ = np.linalg.svd(stacked, full_matrices=False)  # (K, rows, g), (K, g)
+        ranks = np.sum(s > RANK_TOLERANCE * sizes[:, None], axis=1)
+        ranks[sizes <= 0.0] = 0
+        projected = np.einsum("krg,r->kg", U, r) ** 2
+        drops = np.sum(np.where(np.arange(g) < ranks[:, None], projected, 0.0), axis=1)
+        for i, k in enumerate(ks):
+            rank = int(ranks[i])
+            yield int(k), ((float(drops[i]), rank, U[i, :, :rank]) if rank else (0.0, 0, None))
+
+
+class _ListedSpans:
+    """The spans listed so far for one variable: a new one with the same statistic (to
+    1e-8) and the same span is the same hypothesis (spans compared only then: cheap)."""
+
+    def __init__(self) -> None:
+        self.statistics: list[float] = []  # sorted
+        self.entries: list[tuple[int, np.ndarray]] = []  # (pair index, basis), same order
+
+    def find(self, statistic: float, U: np.ndarray | None) -> int | None:
+        """The pair index of the first listed span equal to U's, or None."""
+        tolerance = 1e-8 * max(statistic, 1e-12)
+        low = bisect.bisect_left(self.statistics, statistic - tolerance)
+        high = bisect.bisect_right(self.statistics, statistic + tolerance)
+        for index, basis in sorted(self.entries[low:high], key=lambda e: e[0]):
+            if _same_span(basis, U):
+                return index
+        return None
+
+    def add(self, statistic: float, U: np.ndarray, index: int) -> None:
+        at = bisect.bisect_right(self.statistics, statistic)
+        self.statistics.insert(at, statistic)
+        self.entries.insert(at, (index, U))
 
 
 def _same_span(a: np.ndarray, b: np.ndarray | None, tolerance: float = 1e-6) -> bool:

@@ -163,15 +163,22 @@ def _ill_conditioned(A: np.ndarray) -> bool:
 
 def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linear",
           loss_scale: float = 3.0, cv_folds: int = DEFAULT_CV_FOLDS,
-          max_iterations: int = 100) -> FitResult:
-    """Fit a built problem and return a frozen FitResult (never raises on poor data)."""
+          max_iterations: int = 100, initial: Evaluation | None = None) -> FitResult:
+    """Fit a built problem and return a frozen FitResult (never raises on poor data).
+
+    initial: the problem already evaluated (with its Jacobian) at the start x0, if the
+    caller has it (a candidate effect's warm start): not evaluated again."""
     if cv_folds < 0 or cv_folds == 1:
         raise InputError(f"cv_folds must be 0 (no cross-validation) or at least 2, got {cv_folds}")
     layout = problem.layout
     x_start = np.zeros(layout.size) if x0 is None else np.asarray(x0, dtype=float).copy()
     if x_start.shape != (layout.size,):
         raise InputError(f"x0 must have {layout.size} values, got {x_start.shape}")
-    start = evaluate(problem, x_start)
+    if initial is not None and initial.jacobian is not None and np.array_equal(initial.x,
+                                                                                x_start):
+        start = initial
+    else:
+        start = evaluate(problem, x_start)
     assert start.jacobian is not None
     constraints = problem_constraints(problem)  # priors and holds by name (priors.py)
     prior_rows = (constraints.jacobian(layout.size) if constraints is not None

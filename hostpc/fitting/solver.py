@@ -2,7 +2,10 @@
 
 Residuals are ``r = W (measured - predicted)`` per sample (W = whitening matrix, W^T W =
 cov^-1), so the objective is the Mahalanobis distance. Only the parameters in ``free`` move;
-the others stay at their start values. Pure numpy: no I/O, no global state.
+the others stay at their start values. Pure numpy, no I/O. One cache: a small problem's
+latest evaluation with its Jacobian is kept with the problem (``hostpc.model.memo``, read-
+only arrays), since a fit, its held-out residuals, the candidate ranking and the interaction
+search each evaluate the same fit at the same x.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ import numpy as np
 
 from hostpc.fitting.priors import Constraints, problem_constraints
 from hostpc.model.measurement import predict
+from hostpc.model.memo import recall, remember
 from hostpc.model.problem import Problem
 
 Loss = Literal["linear", "huber", "cauchy"]
@@ -49,6 +53,9 @@ class SolverOutcome:
 #: instead of growing with N; problems up to twice this are evaluated in one piece
 CHUNK_SAMPLES = 8192
 
+#: a problem's latest evaluation is kept if its Jacobian has at most this many values (2 MB)
+REUSE_ELEMENTS = 1 << 18
+
 
 def evaluate(problem: Problem, x: np.ndarray, jacobian: bool = True) -> Evaluation:
     """Raw and whitened residuals at x, and d(whitened)/dx flattened to (N*m, P).
@@ -60,7 +67,20 @@ def evaluate(problem: Problem, x: np.ndarray, jacobian: bool = True) -> Evaluati
     n_samples = problem.measured.shape[0]
     if jacobian and n_samples > 2 * CHUNK_SAMPLES:
         return _evaluate_in_chunks(problem, x)
-    return _evaluate(problem, x, jacobian)
+    reuse = problem.measured.size * np.size(x) <= REUSE_ELEMENTS
+    if reuse:
+        latest = recall(problem, "latest evaluation")
+        if latest is not None and np.array_equal(latest.x, x):
+            return latest
+    evaluation = _evaluate(problem, x, jacobian)
+    if reuse and jacobian:
+        evaluation = Evaluation(np.array(x, dtype=float), evaluation.raw, evaluation.whitened,
+                                evaluation.jacobian)
+        for array in (evaluation.x, evaluation.raw, evaluation.whitened, evaluation.jacobian):
+            if array is not None:
+                array.setflags(write=False)
+        remember(problem, "latest evaluation", evaluation)
+    return evaluation
 
 
 def _evaluate_in_chunks(problem: Problem, x: np.ndarray) -> Evaluation:

@@ -9,6 +9,7 @@ from hostpc.kinematics.gravity import GRAVITY, gravity_torque
 from hostpc.kinematics.jacobians import (
     KinematicScrews,
     joint_axes,
+    joint_screws,
     point_jacobian,
     rotation_jacobian,
     screws,
@@ -41,6 +42,7 @@ __all__ = [
     "gravity_torque",
     "invert_transform",
     "joint_axes",
+    "joint_screws",
     "kin_index",
     "make_transform",
     "matrix_to_rotvec",

@@ -40,7 +40,8 @@ from hostpc.errors import InputError
 from hostpc.kinematics.chain import Chain
 from hostpc.kinematics.poses import ChainPoses
 
-__all__ = ["KinematicScrews", "joint_axes", "screws", "point_jacobian", "rotation_jacobian"]
+__all__ = ["KinematicScrews", "joint_axes", "joint_screws", "screws", "point_jacobian",
+           "rotation_jacobian"]
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -147,6 +148,26 @@ def screws(chain: Chain, poses: ChainPoses) -> KinematicScrews:
     return KinematicScrews(
         axis=axis.transpose(2, 1, 0), point=point.transpose(2, 1, 0), is_rotation=is_rotation
     )
+
+
+def joint_screws(chain: Chain, poses: ChainPoses) -> KinematicScrews:
+    """The screws of the ``n`` joint (theta) parameters only: rows ``0..n-1`` of
+    :func:`screws`, without computing the other ``4n`` (what an offsets-only fit needs).
+
+    Returns:
+        :class:`KinematicScrews` with ``axis`` and ``point`` of shape ``(N, n, 3)``.
+    """
+    if poses.n != chain.n or poses.convention != chain.convention:
+        raise InputError(
+            f"poses: computed for a {poses.n}-joint {poses.convention} chain, "
+            f"not for {chain.name!r} ({chain.n}-joint {chain.convention})"
+        )
+    axis, point = joint_axes(poses)
+    prismatic = chain.joint_is_prismatic
+    if prismatic.any():  # a prismatic joint's slot translates along its axis
+        point = point.copy()
+        point[:, prismatic] = 0.0
+    return KinematicScrews(axis=axis, point=point, is_rotation=~prismatic)
 
 
 def point_jacobian(screws: KinematicScrews, x_base: ArrayLike) -> FloatArray:

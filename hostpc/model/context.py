@@ -6,6 +6,7 @@ builds its own); computed once per problem, including the gravity torques.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -14,10 +15,24 @@ from hostpc.dataset import Dataset, Samples
 from hostpc.kinematics import Chain, gravity_torque
 from hostpc.kinematics.robots import chain_from_table, get_robot
 from hostpc.model.effect import ModelContext
+from hostpc.model.memo import memoised
 
 
 def serial_chain(dataset: Dataset) -> Chain:
-    """The nominal chain of the dataset's robot (built-in by name, or explicit table)."""
+    """The nominal chain of the dataset's robot (built-in by name, explicit table or URDF);
+    built once per robot description (``memo``; a URDF file again when it changed)."""
+    robot = dataset.robot
+    key: tuple[object, ...] = ("serial_chain",)
+    if robot.urdf is not None:
+        try:
+            stat = os.stat(robot.urdf)
+        except OSError:  # the loader says what is wrong with the path
+            return _serial_chain(dataset)
+        key = ("serial_chain", stat.st_mtime_ns, stat.st_size)
+    return memoised(robot, key, lambda: _serial_chain(dataset))
+
+
+def _serial_chain(dataset: Dataset) -> Chain:
     robot = dataset.robot
     if robot.name is not None and robot.a is None:
         return get_robot(robot.name)
@@ -87,8 +102,8 @@ def serial_context(dataset: Dataset, chain: Chain,
     ``categorical``: which of the given variables are group labels, with their levels."""
     samples = dataset.samples
     q_cmd = np.asarray(samples.q, dtype=float)
-    if chain.mass is not None and chain.com is not None:
-        tau = gravity_torque(chain, q_cmd)
+    if chain.mass is not None and chain.com is not None:  # once per samples and chain
+        tau = memoised(samples, ("gravity_torque", chain), lambda: gravity_torque(chain, q_cmd))
     else:
         tau = np.full_like(q_cmd, np.nan)
     approach = np.nan_to_num(np.asarray(samples.approach, dtype=float), nan=0.0)

@@ -12,7 +12,7 @@ import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples, SphereFrame
 from hostpc.dataset.builtin_kinds import SphereProbeFile
-from hostpc.kinematics import Chain, get_robot, point_jacobian, screws
+from hostpc.kinematics import Chain, get_robot, point_jacobian
 from hostpc.model.context import group_variable, sample_variables, serial_context
 from hostpc.model.effect import ModelContext
 from hostpc.model.layout import Problem
@@ -30,6 +30,7 @@ from hostpc.model.measurements.terms import (
     apply_sensor_effects,
     flange,
     frame_pose,
+    row_screws,
     world_point_in_base,
 )
 
@@ -82,7 +83,7 @@ class SphereProbe(SphereProbeFile, MeasurementModel):
         u = diff / distance[:, None]
         n_samples = tip.shape[0]
         J = np.zeros((n_samples, 1, x.size))
-        d_tip_dkin = point_jacobian(screws(chain, poses), tip)[:, :, rows]
+        d_tip_dkin = point_jacobian(row_screws(chain, poses, rows), tip)
         d_dist_dkin = (u[:, None, :] @ d_tip_dkin)  # (N, 1, k)
         J += d_dist_dkin @ d_delta
         tool = problem.term("tool")

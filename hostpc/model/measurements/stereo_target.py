@@ -12,7 +12,7 @@ import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
 from hostpc.dataset.builtin_kinds import StereoTargetFile
-from hostpc.kinematics import get_robot, point_jacobian, screws
+from hostpc.kinematics import get_robot, point_jacobian
 from hostpc.model.frame_math import inverse_point_derivatives
 from hostpc.model.layout import Problem
 from hostpc.model.measurements.base import (
@@ -29,7 +29,7 @@ from hostpc.model.measurements.terms import (
     apply_sensor_effects,
     flange,
     frame_pose,
-    screw_rows,
+    row_screws,
     world_point_in_base,
 )
 
@@ -61,8 +61,7 @@ class StereoTarget(StereoTargetFile, MeasurementModel):
         J = np.zeros((n_samples, 3, x.size))
         # kinematic parameters: moving the flange by a screw moves the fixed target point the
         # opposite way in the flange frame: dp_f = -R_bf^T (w x (p_b - c)) or -R_bf^T v
-        S = screws(chain, poses)
-        d_pb_world_dkin = point_jacobian(screw_rows(S, rows),
+        d_pb_world_dkin = point_jacobian(row_screws(chain, poses, rows),
                                          np.broadcast_to(p_b, (n_samples, 3)))
         A = R_ft.T @ R_bf_T  # (N, 3, 3): d y / d p_b  (and -d y / d (flange motion))
         J -= (A @ d_pb_world_dkin) @ d_delta

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from hostpc.kinematics import forward
-from hostpc.kinematics.jacobians import KinematicScrews
+from hostpc.kinematics import Chain, forward
+from hostpc.kinematics.jacobians import KinematicScrews, joint_screws, screws
 from hostpc.kinematics.poses import ChainPoses
 from hostpc.kinematics.rotations import pose_to_transform
 from hostpc.model.effect import EffectTerm, numeric_jacobian
@@ -19,7 +19,7 @@ from hostpc.model.frame_math import inverse_point_derivatives, perturbed_pose
 from hostpc.model.layout import Problem
 
 __all__ = ["apply_sensor_effects", "flange", "frame_pose", "kinematic_deltas",
-           "screw_rows", "world_point_in_base"]
+           "row_screws", "screw_rows", "world_point_in_base"]
 
 
 def _term_params(term: EffectTerm | None, x: np.ndarray) -> np.ndarray | None:
@@ -70,6 +70,14 @@ def screw_rows(screws: KinematicScrews, rows: slice) -> KinematicScrews:
                            is_rotation=screws.is_rotation[rows])
 
 
+def row_screws(chain: Chain, poses: ChainPoses, rows: slice) -> KinematicScrews:
+    """The screws of the kinematic-delta rows ``rows`` (see kinematic_deltas): for the theta
+    rows of a fit without a geometry effect only those n are computed, not all 5n."""
+    if rows.start in (0, None) and rows.stop == chain.n and rows.step in (1, None):
+        return joint_screws(chain, poses)
+    return screw_rows(screws(chain, poses), rows)
+
+
 def frame_pose(problem: Problem, name: str, x: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(R, t, J_r) of a pose frame (tool or base) with its delta applied, if estimated."""
@@ -112,7 +120,11 @@ def flange(problem: Problem, x: np.ndarray, jacobian: bool
     R_base_flange (N, 3, 3), t_base_flange (N, 3), and the kinematic-delta derivative with its
     row slice (see kinematic_deltas)."""
     delta, d_delta, rows = kinematic_deltas(problem, x, jacobian)
-    poses = forward(problem.chain, problem.context.q_cmd, delta)
+    n_joints = problem.context.q_cmd.shape[1]
+    if rows.stop == n_joints:  # joint deltas only: the joint variables move, the table not
+        poses = forward(problem.chain, problem.context.q_cmd + delta[:, :n_joints])
+    else:
+        poses = forward(problem.chain, problem.context.q_cmd, delta)
     T_bf = poses.T_base_flange
     return poses, T_bf[:, :3, :3], T_bf[:, :3, 3], d_delta, rows
 

@@ -28,13 +28,18 @@ import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
 from hostpc.dataset.world_kinds import WorldPointFile
-from hostpc.kinematics import Chain, get_robot, point_jacobian, screws
+from hostpc.kinematics import Chain, get_robot, point_jacobian
 from hostpc.kinematics.rotations import skew
 from hostpc.model.context import sample_variables, serial_context
 from hostpc.model.effect import ModelContext
 from hostpc.model.layout import Problem
 from hostpc.model.measurements.base import POSE, UR5E_HOME, MeasurementModel, example_poses
-from hostpc.model.measurements.terms import apply_sensor_effects, flange, frame_pose
+from hostpc.model.measurements.terms import (
+    apply_sensor_effects,
+    flange,
+    frame_pose,
+    row_screws,
+)
 
 __all__ = ["WorldPoint", "marker_index", "markers_of", "world_variables"]
 
@@ -114,7 +119,7 @@ class WorldPoint(WorldPointFile, MeasurementModel):
             return np.where(mask, y, problem.measured), None
         assert d_delta is not None
         J = np.zeros((y.shape[0], 3, x.size))
-        d_pb = point_jacobian(screws(problem.chain, poses), p_b)[:, :, rows]
+        d_pb = point_jacobian(row_screws(problem.chain, poses, rows), p_b)
         J += np.einsum("ij,njk->nik", R_wb, d_pb) @ d_delta
         world = problem.term("world")
         if world is not None:

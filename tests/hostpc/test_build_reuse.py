@@ -1,0 +1,107 @@
+"""What problem builds share (issue 17): the theta-only screws equal those rows of all 5n;
+the chain, gravity torques and whitening are computed once per dataset, read-only, and
+never handed to another dataset."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from hostpc.kinematics import forward, get_robot, joint_screws, screws
+from hostpc.model.problem import build_problem
+from hostpc.synthesize import random_truth, synthesize_stereo_target
+
+
+@pytest.mark.parametrize("name", ["ur5e", "industrial6"])
+def test_joint_screws_are_the_theta_rows_of_all_screws(name: str) -> None:
+    chain = get_robot(name)
+    q = np.random.default_rng(1).uniform(-2.0, 2.0, (7, chain.n))
+    poses = forward(chain, q)
+    full, joints = screws(chain, poses), joint_screws(chain, poses)
+    n = chain.n
+    np.testing.assert_array_equal(joints.axis, full.axis[:, :n])
+    np.testing.assert_array_equal(joints.point, full.point[:, :n])
+    np.testing.assert_array_equal(joints.is_rotation, full.is_rotation[:n])
+
+
+def test_joint_screws_of_a_prismatic_joint_translate() -> None:
+    ur5e = get_robot("ur5e")
+    prismatic = np.zeros(ur5e.n, dtype=bool)
+    prismatic[2] = True
+    chain = dataclasses.replace(ur5e, name="slide", prismatic=prismatic)
+    poses = forward(chain, np.random.default_rng(2).uniform(-0.5, 0.5, (5, chain.n)))
+    full, joints = screws(chain, poses), joint_screws(chain, poses)
+    np.testing.assert_array_equal(joints.point, full.point[:, :chain.n])
+    np.testing.assert_array_equal(joints.is_rotation, full.is_rotation[:chain.n])
+    assert not joints.is_rotation[2]
+
+
+def _dataset(seed: int):  # type: ignore[no-untyped-def]
+    truth = random_truth(np.random.default_rng(seed))
+    return synthesize_stereo_target(truth, n_samples=30, seed=seed).dataset
+
+
+def test_builds_of_one_dataset_share_chain_torques_and_whitening() -> None:
+    dataset = _dataset(3)
+    first = build_problem(dataset)
+    again = build_problem(dataclasses.replace(dataset, extra_fields={"note": "copy"}),
+                          "+geometry")
+    assert again.chain is first.chain
+    assert again.context.tau is first.context.tau
+    assert again.sqrt_information is first.sqrt_information
+    assert not first.context.tau.flags.writeable
+    assert not first.sqrt_information.flags.writeable
+    with pytest.raises(ValueError):
+        first.sqrt_information[0, 0, 0] = 1.0
+
+
+def test_another_dataset_gets_its_own_values() -> None:
+    one, other = _dataset(4), _dataset(5)
+    a, b = build_problem(one), build_problem(other)
+    assert a.context.tau is not b.context.tau
+    assert not np.array_equal(a.context.tau, b.context.tau)
+    assert not np.array_equal(a.sqrt_information, b.sqrt_information)
+
+
+def test_a_problem_keeps_its_latest_evaluation_only_for_that_x() -> None:
+    from hostpc.fitting.solver import evaluate
+
+    problem = build_problem(_dataset(6))
+    x = np.zeros(problem.layout.size)
+    first = evaluate(problem, x)
+    assert evaluate(problem, x.copy()) is first
+    assert not first.jacobian.flags.writeable  # type: ignore[union-attr]
+    x[0] = 1e-4  # the caller's array changes: the kept evaluation must not match it
+    moved = evaluate(problem, x)
+    assert moved is not first
+    assert not np.array_equal(moved.whitened, first.whitened)
+    fresh = build_problem(problem.dataset)  # another problem: its own evaluations
+    assert evaluate(fresh, moved.x) is not moved
+
+
+def test_a_urdf_chain_is_read_once_and_again_when_the_file_changes(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    import os
+    from pathlib import Path
+
+    from hostpc.dataset import load_dataset
+    from hostpc.model.problem import robot_chain
+
+    source = Path(__file__).resolve().parents[1] / "data" / "arm7_prismatic.urdf"
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text(source.read_text())
+    document = {"format": "zerocal-dataset/1", "method": "stereo_target",
+                "robot": {"urdf": "arm.urdf", "base_link": "base_link", "tip_link": "tool0"},
+                "frames": {"tool": {"xyz": [0, 0, 0.05], "rpy": [0, 0, 0]},
+                           "target": [0.5, 0.2, 0.3]},
+                "samples": [{"q": [0.1 * i] * 7, "p": [0.0, 0.0, 0.4], "sigma": 1e-4}
+                            for i in range(5)]}
+    (tmp_path / "set.json").write_text(json.dumps(document))
+    dataset = load_dataset(tmp_path / "set.json")
+    first = robot_chain(dataset)
+    assert robot_chain(dataset) is first
+    urdf.write_text(source.read_text() + "\n")  # changed: read again
+    os.utime(urdf, ns=(1, 1))
+    assert robot_chain(dataset) is not first
