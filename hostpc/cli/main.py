@@ -91,9 +91,11 @@ def _add_token_file_options(subparsers: argparse._SubParsersAction) -> None:  # 
 
 def _token_from_options(args: argparse.Namespace) -> None:
     """--token-file -> args.token; a warning for a token given on the command line."""
+    token_file = getattr(args, "token_file", None)
+    if getattr(args, "token", None) is None and token_file is None:
+        return  # hostpc.robots.connect imports the socket protocol: only where it is used
     from hostpc.robots.connect import TOKEN_ON_COMMAND_LINE_WARNING, read_token_file
 
-    token_file = getattr(args, "token_file", None)
     if getattr(args, "token", None) is not None:
         if token_file is not None:
             raise InputError("--token and --token-file: give one of them")
