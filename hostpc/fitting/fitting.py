@@ -3,7 +3,9 @@
 
 from __future__ import annotations
 
+import functools
 import math
+import weakref
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -78,11 +80,13 @@ def held_out_by_fold(problem: Problem, x: np.ndarray, free: np.ndarray, folds: i
         steps = _leave_out_steps(problem, evaluation, free, fold_sets)
     raw = np.empty((n_samples, m))
     whitened = np.empty((n_samples, m))
+    moved = [(test, step) for test, step in zip(fold_sets, steps, strict=True)
+             if step is not None]
+    if moved:
+        assert evaluation is not None
+        _moved_residuals(problem, evaluation, moved, raw, whitened)
     for test, step in zip(fold_sets, steps, strict=True):
-        if step is not None:
-            assert evaluation is not None
-            raw[test], whitened[test] = _moved_residuals(problem, evaluation, test, step)
-        else:
+        if step is None:
             train = np.setdiff1d(np.arange(n_samples), test)
             x_fold = levenberg_marquardt(problem.subset(train), x, free, loss=loss,
                                          loss_scale=loss_scale,
@@ -92,17 +96,26 @@ def held_out_by_fold(problem: Problem, x: np.ndarray, free: np.ndarray, folds: i
     return raw, whitened
 
 
-def _moved_residuals(problem: Problem, evaluation: Evaluation, test: np.ndarray,
-                     step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Raw and whitened residuals of the samples ``test`` after the parameters move by
-    ``step``, to first order: whitened + J step, raw + W^-1 (J step) (J: whitened
-    Jacobian, W: whitening), no new prediction."""
+def _moved_residuals(problem: Problem, evaluation: Evaluation,
+                     moved: list[tuple[np.ndarray, np.ndarray]], raw: np.ndarray,
+                     whitened: np.ndarray) -> None:
+    """Into ``raw`` and ``whitened``: per (test, step) of ``moved``, the residuals of the
+    samples ``test`` after the parameters move by ``step``, to first order: whitened + J
+    step, raw + W^-1 (J step) (J: whitened Jacobian, W: whitening), no new prediction.
+    The W^-1 solves of all folds are one batched call (each sample's solve is the same
+    LAPACK call as alone)."""
     assert evaluation.jacobian is not None
     m = problem.measured.shape[1]
-    rows = (test[:, None] * m + np.arange(m)).ravel()
-    change = (evaluation.jacobian[rows] @ step).reshape(test.size, m)
-    raw_change = np.linalg.solve(problem.sqrt_information[test], change[:, :, None])[:, :, 0]
-    return evaluation.raw[test] + raw_change, evaluation.whitened[test] + change
+    tests = np.concatenate([test for test, _ in moved])
+    change = np.empty((tests.size, m))
+    start = 0
+    for test, step in moved:
+        rows = (test[:, None] * m + np.arange(m)).ravel()
+        change[start:start + test.size] = (evaluation.jacobian[rows] @ step).reshape(test.size, m)
+        start += test.size
+    raw_change = np.linalg.solve(problem.sqrt_information[tests], change[:, :, None])[:, :, 0]
+    raw[tests] = evaluation.raw[tests] + raw_change
+    whitened[tests] = evaluation.whitened[tests] + change
 
 
 def _leave_out_steps(problem: Problem, evaluation: Evaluation, free: np.ndarray,
@@ -131,7 +144,7 @@ def _leave_out_steps(problem: Problem, evaluation: Evaluation, free: np.ndarray,
         J_prior = constraints.jacobian(x.size)[:, free_index]
         A = A + J_prior.T @ J_prior
         g = g + J_prior.T @ constraints.residuals(x)
-    steps: list[np.ndarray | None] = []
+    scales, scaled, rhs = [], [], []
     for test in fold_sets:
         rows = (test[:, None] * m + np.arange(m)).ravel()
         J_fold = J[rows]
@@ -139,25 +152,49 @@ def _leave_out_steps(problem: Problem, evaluation: Evaluation, free: np.ndarray,
         g_train = g - J_fold.T @ r[rows]
         # Jacobi scaling: parameters in m and rad, conditioning judged without the units
         scale = 1.0 / np.sqrt(np.maximum(np.diag(A_train), 1e-300))
-        scaled = A_train * scale[:, None] * scale[None, :]
-        try:
-            reduced = -scale * np.linalg.solve(scaled, scale * g_train)
-        except np.linalg.LinAlgError:
-            steps.append(None)
-            continue
-        if not np.all(np.isfinite(reduced)) or _ill_conditioned(scaled):
-            steps.append(None)
-            continue
-        step = np.zeros(x.size)
-        step[free_index] = reduced
-        steps.append(step)
-    return steps
+        scales.append(scale)
+        scaled.append(A_train * scale[:, None] * scale[None, :])
+        rhs.append(scale * g_train)
+    if free_index.size == 0:
+        return [_full_step(x.size, free_index, scale, np.zeros(0)) for scale in scales]
+    # all folds' solves and eigenvalues in one batched call each (every fold's the same
+    # LAPACK call as alone); a singular fold makes the batch fail: then fold by fold
+    try:
+        solutions = list(np.linalg.solve(np.stack(scaled), np.stack(rhs)[:, :, None])[:, :, 0])
+        eigenvalues = list(np.linalg.eigvalsh(np.stack(scaled)))
+    except np.linalg.LinAlgError:
+        return [_fold_step(x.size, free_index, scale, A_scaled, b)
+                for scale, A_scaled, b in zip(scales, scaled, rhs, strict=True)]
+    reduced = [-scale * solution for scale, solution in zip(scales, solutions, strict=True)]
+    return [_full_step(x.size, free_index, scale, step)
+            if np.all(np.isfinite(step)) and not _ill_conditioned(values) else None
+            for scale, step, values in zip(scales, reduced, eigenvalues, strict=True)]
 
 
-def _ill_conditioned(A: np.ndarray) -> bool:
-    if A.size == 0:
+def _fold_step(n_params: int, free_index: np.ndarray, scale: np.ndarray,
+               scaled: np.ndarray, rhs: np.ndarray) -> np.ndarray | None:
+    """One fold's step from its Jacobi-scaled normal equations; None where they are
+    singular or ill-conditioned."""
+    try:
+        reduced = -scale * np.linalg.solve(scaled, rhs)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.all(np.isfinite(reduced)) or _ill_conditioned(np.linalg.eigvalsh(scaled)):
+        return None
+    return _full_step(n_params, free_index, scale, reduced)
+
+
+def _full_step(n_params: int, free_index: np.ndarray, scale: np.ndarray,
+               reduced: np.ndarray) -> np.ndarray:
+    step = np.zeros(n_params)
+    step[free_index] = reduced
+    return step
+
+
+def _ill_conditioned(eigenvalues: np.ndarray) -> bool:
+    """From the ascending eigenvalues of the scaled normal matrix."""
+    if eigenvalues.size == 0:
         return False
-    eigenvalues = np.linalg.eigvalsh(A)
     return not eigenvalues[0] > 1e-12 * eigenvalues[-1]
 
 
@@ -264,5 +301,37 @@ def fit(dataset: Dataset, effects: str | Iterable[str] | None = None, *,
     at their start value (both added to the dataset's own; hostpc.fitting.priors).
     """
     dataset = with_constraints(dataset, priors, hold)  # type: ignore[arg-type]
-    problem = build_problem(dataset, effects, plugins=plugins)
+    problem = _built_problem(dataset, effects, tuple(plugins))
     return solve(problem, **options)  # type: ignore[arg-type]
+
+
+#: (id(dataset), effects) -> the problem last built for them, weakly: it lives as long as a
+#: FitResult holds it (a refit of the same dataset, as a notebook or a benchmark does, then
+#: reuses it), and never keeps a dataset alive
+_BUILT: dict[tuple[int, str | tuple[str, ...] | None], weakref.ref[Problem]] = {}
+
+
+def _built_problem(dataset: Dataset, effects: str | Iterable[str] | None,
+                   plugins: tuple[str | Path, ...]) -> Problem:
+    """``build_problem(dataset, effects)``, or the same problem built for them before and
+    still held by a result (a problem is immutable, built from the immutable dataset; with
+    plugins, whose files may change, it is always built anew)."""
+    if plugins:
+        return build_problem(dataset, effects, plugins=plugins)
+    spec = effects if effects is None or isinstance(effects, str) else tuple(effects)
+    if isinstance(spec, tuple) and not all(isinstance(name, str) for name in spec):
+        return build_problem(dataset, spec)  # its error names what is wrong
+    key = (id(dataset), spec)
+    ref = _BUILT.get(key)
+    problem = ref() if ref is not None else None
+    if problem is not None and problem.dataset is dataset:
+        return problem
+    problem = build_problem(dataset, spec)
+    _BUILT[key] = weakref.ref(problem, functools.partial(_forget_built, key))
+    return problem
+
+
+def _forget_built(key: tuple[int, str | tuple[str, ...] | None], ref: weakref.ref[Problem]
+                  ) -> None:
+    if _BUILT.get(key) is ref:
+        del _BUILT[key]

@@ -17,7 +17,7 @@ import numpy as np
 
 from hostpc.fitting.priors import Constraints, problem_constraints
 from hostpc.model.measurement import predict
-from hostpc.model.memo import recall, remember
+from hostpc.model.memo import memoised, recall, remember
 from hostpc.model.problem import Problem
 
 Loss = Literal["linear", "huber", "cauchy"]
@@ -166,8 +166,7 @@ def levenberg_marquardt(
     if free_index.size == 0:
         return SolverOutcome(x, current, weights, True, 0, "nothing to fit", cost)
     # residuals below this are rounding noise of the predictions: an exact fit
-    measured = (problem.sqrt_information @ problem.measured[:, :, None])[:, :, 0]
-    round_off_cost = 0.5 * float(np.sum(measured**2)) * (64 * np.finfo(float).eps) ** 2
+    round_off_cost = memoised(problem, "round-off cost", lambda: _round_off_cost(problem))
     mu = 1e-6
     nu = 2.0
     message = "maximum iterations reached"
@@ -176,9 +175,12 @@ def levenberg_marquardt(
     while iterations < max_iterations:
         iterations += 1
         assert current.jacobian is not None
-        row_weight = np.repeat(np.sqrt(weights), m)
-        J = current.jacobian[:, free_index] * row_weight[:, None]
-        r = current.whitened.ravel() * row_weight
+        J = current.jacobian[:, free_index]
+        r = current.whitened.ravel()
+        if loss != "linear":  # the linear loss's weights are all 1: nothing to multiply
+            row_weight = np.repeat(np.sqrt(weights), m)
+            J = J * row_weight[:, None]
+            r = r * row_weight
         if not (np.all(np.isfinite(J)) and np.all(np.isfinite(r))):
             message = "failed: the model gives non-finite residuals or derivatives"
             break
@@ -230,14 +232,20 @@ def levenberg_marquardt(
                 message = ("stalled: no step along the model's gradient decreases the cost "
                            "(an effect's Jacobian may be wrong)")
             break
-        x, current, cost = x_trial, trial, trial_cost
+        x, current, cost = x_trial, trial, trial_cost  # trial_cost: the cost at x_trial
         weights = robust_weights(current.whitened, loss, loss_scale)
-        cost = robust_cost(current.whitened, loss, loss_scale) + _prior_cost(constraints, x)
         small = np.linalg.norm(step) <= step_tolerance * (np.linalg.norm(x) + step_tolerance)
         if small and mu < 1.0:  # a tiny step that damping did not force: at the minimum
             message, converged = "converged: step below tolerance", True
             break
     return SolverOutcome(x, current, weights, converged, iterations, message, cost)
+
+
+def _round_off_cost(problem: Problem) -> float:
+    """The cost of residuals at the predictions' rounding level (64 eps of the whitened
+    measurements): below it the fit is exact."""
+    measured = (problem.sqrt_information @ problem.measured[:, :, None])[:, :, 0]
+    return 0.5 * float(np.sum(measured**2)) * (64 * np.finfo(float).eps) ** 2
 
 
 def _prior_cost(constraints: Constraints | None, x: np.ndarray) -> float:

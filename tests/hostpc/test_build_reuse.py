@@ -105,3 +105,24 @@ def test_a_urdf_chain_is_read_once_and_again_when_the_file_changes(tmp_path) -> 
     urdf.write_text(source.read_text() + "\n")  # changed: read again
     os.utime(urdf, ns=(1, 1))
     assert robot_chain(dataset) is not first
+
+
+def test_a_refit_reuses_the_problem_a_result_holds_and_gives_the_same_result() -> None:
+    from hostpc.fitting import fit
+
+    dataset = _dataset(7)
+    first = fit(dataset)
+    again = fit(dataset)
+    assert again.problem is first.problem  # held by `first`: not built again
+    for field in ("x", "std", "covariance", "residuals_whitened"):
+        np.testing.assert_array_equal(getattr(again, field), getattr(first, field))
+    assert (again.cv_rms, again.iterations, again.message) == (
+        first.cv_rms, first.iterations, first.message)
+    other = fit(dataset, ["joint_offsets"])  # other effects: their own problem
+    assert other.problem is not first.problem
+    assert fit(dataset, ["joint_offsets"]).problem is other.problem
+    del first, again
+    import gc
+
+    gc.collect()
+    assert fit(dataset).problem.dataset is dataset  # built anew once no result holds it
