@@ -17,7 +17,6 @@ from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 RELATIVE_RANK_TOLERANCE = 1e-7
 MIN_GAUGE_SPAN = 0.2
@@ -120,6 +119,8 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], units: Sequence[str],
         strong = participation >= 0.1 * participation.max()
         priority = np.array([_priority(n, frame_names) for n in names], dtype=float)
         weight = np.where(strong, 10.0**priority, 1e-3)
+        import scipy.linalg  # ~50 ms to import: only where there is a null space to pivot
+
         _, _, pivots = scipy.linalg.qr(null_basis.T * weight[None, :], pivoting=True)
         chosen = list(pivots[: null_basis.shape[1]])
         block = null_basis[chosen, :]
