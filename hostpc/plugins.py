@@ -57,10 +57,18 @@ def classes_defined_in(module: ModuleType, base: type) -> list[type[Any]]:
 
 
 @cache
+def _installed_entry_points() -> Any:
+    """Every installed entry point, of every group: the distributions' metadata read once
+    for all of hostpc's groups (each ``entry_points(group=...)`` call reads it all again).
+    Python 3.11 returns SelectableGroups, 3.12 EntryPoints: both ``.select(group=...)``."""
+    return entry_points()
+
+
+@cache
 def entry_point_objects(group: str) -> tuple[tuple[str, Any], ...]:
     """(entry name, loaded object) of every entry point in ``group``; scanned once."""
     found = []
-    for entry in entry_points(group=group):
+    for entry in _installed_entry_points().select(group=group):
         try:
             found.append((entry.name, entry.load()))
         except Exception as exc:
