@@ -236,13 +236,17 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
     assert final.jacobian is not None
     m = problem.measured.shape[1]
     row_weight = np.repeat(np.sqrt(outcome.weights), m)
-    J_free = final.jacobian[:, free] * row_weight[:, None]
-    J_free_priors = np.vstack([J_free, prior_rows[:, free]])
+    J_free = final.jacobian[:, free]
+    whitened_rows = final.whitened.ravel()
+    if loss != "linear":  # the linear loss's weights are all 1: nothing to multiply
+        J_free = J_free * row_weight[:, None]
+        whitened_rows = whitened_rows * row_weight
+    J_free_priors = np.vstack([J_free, prior_rows[:, free]]) if prior_rows.size else J_free
     covariance = np.zeros((layout.size, layout.size))
     if np.any(free) and np.all(np.isfinite(J_free)):
         covariance[np.ix_(free, free)] = _covariance(J_free_priors)
         shared = added_parameter_covariance(problem, J_free, covariance[np.ix_(free, free)],
-                                            row_weight, final.whitened.ravel() * row_weight)
+                                            row_weight, whitened_rows)
         if shared is not None:  # the rig's calibration error, shared by all samples
             covariance[np.ix_(free, free)] += shared
     elif np.any(free):

@@ -191,9 +191,10 @@ def levenberg_marquardt(
             A = A + J_prior.T @ J_prior
             g = g + J_prior.T @ constraints.residuals(x)
         diag = np.maximum(np.diag(A), 1e-30)
+        diagonal = np.diag(diag)
         # converged when even an undamped Gauss-Newton step would gain (almost) nothing
         try:
-            gauss_newton_gain = 0.5 * float(g @ np.linalg.solve(A + 1e-12 * np.diag(diag), g))
+            gauss_newton_gain = 0.5 * float(g @ np.linalg.solve(A + 1e-12 * diagonal, g))
         except np.linalg.LinAlgError:
             gauss_newton_gain = np.inf
         if cost <= round_off_cost:
@@ -205,7 +206,7 @@ def levenberg_marquardt(
         accepted = False
         while mu <= 1e16:
             try:
-                step = -np.linalg.solve(A + mu * np.diag(diag), g)
+                step = -np.linalg.solve(A + mu * diagonal, g)
             except np.linalg.LinAlgError:
                 mu *= nu
                 nu *= 2.0
