@@ -48,3 +48,28 @@ def test_linearised_folds_match_full_refits(name: str, effects: str | None) -> N
     linearised = cross_validated_rms(problem, result.x, free, 5, "linear", 3.0, final)
     assert refitted is not None and linearised is not None
     assert linearised == pytest.approx(refitted, rel=1e-5)
+
+
+def test_folds_batched_give_the_steps_of_each_fold_alone_and_none_where_singular() -> None:
+    from hostpc.fitting.solver import Evaluation
+
+    problem = build_problem(load_dataset(EXAMPLES / "ur5e_stereo.json"))
+    result = solve(problem, cv_folds=0)
+    free = ~result.fixed
+    final = evaluate(problem, result.x)
+    n, m = problem.measured.shape
+    folds = fold_indices(n, 5)
+    batched = _leave_out_steps(problem, final, free, folds)
+    for fold, step in zip(folds, batched, strict=True):
+        alone = _leave_out_steps(problem, final, free, [fold])[0]
+        assert step is not None and alone is not None
+        np.testing.assert_array_equal(step, alone)
+    # one parameter seen by fold 0 only: without that fold it is undetermined
+    assert final.jacobian is not None
+    jacobian = np.array(final.jacobian)
+    outside = np.setdiff1d(np.arange(n), folds[0])
+    jacobian[(outside[:, None] * m + np.arange(m)).ravel(), np.flatnonzero(free)[0]] = 0.0
+    degenerate = Evaluation(final.x, final.raw, final.whitened, jacobian)
+    steps = _leave_out_steps(problem, degenerate, free, folds)
+    assert steps[0] is None
+    assert all(step is not None for step in steps[1:])
