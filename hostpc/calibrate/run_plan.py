@@ -1,6 +1,11 @@
 """The plan of a calibration run: candidate pool, informative fit poses in travel order,
 verification poses (none of them a fit pose), and the identifiability check BEFORE anything
-moves. Pure numerics apart from the progress messages."""
+moves. Pure numerics apart from the progress messages.
+
+With a target sigma (stereo_target's default) the fit poses are the fewest that reach it,
+visited as a tour, and the verification poses a random draw of which the nearest are
+visited (`hostpc.planning.verify_poses`): the short-robot-time plan. Without one (`--poses
+N` alone) N poses nearest-neighbour ordered and a plain random verification choice."""
 
 from __future__ import annotations
 
@@ -21,6 +26,7 @@ from hostpc.planning.design import (
     select_groups,
     verify_groups,
 )
+from hostpc.planning.verify_poses import nearby_verify_poses
 from hostpc.robots.base import RobotState
 
 
@@ -66,7 +72,10 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
             "(--poses), fewer effects (--effects), or a wider pose range")
     q_fit = pool[fit_indices]
     last = q_fit[-1] if q_fit.shape[0] else state.q
-    if groups is None:
+    if groups is None and settings.target_sigma_deg is not None:  # short robot time
+        rest = np.setdiff1d(np.arange(pool.shape[0]), fit_indices)
+        verify_indices = nearby_verify_poses(pool, rest, last, settings.n_verify, rng)
+    elif groups is None:
         rest = np.setdiff1d(np.arange(pool.shape[0]), fit_indices)
         verify_indices = rng.choice(rest, size=min(settings.n_verify, rest.size),
                                     replace=False)

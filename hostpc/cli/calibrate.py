@@ -51,9 +51,10 @@ from hostpc.cli.fit import add_model_options
 from hostpc.cli.numbers import finite, integer
 from hostpc.cli.progress import StderrProgress
 from hostpc.errors import InputError
-from hostpc.methods import METHOD_CLASSES
+from hostpc.methods import METHOD_CLASSES, method_class
 from hostpc.methods.base import RunSettings
 from hostpc.methods.cell import load_cell_file, parse_known
+from hostpc.planning.verify_poses import verify_poses_for_power
 from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot, resolve_token
 from hostpc.sensors.calibrate_options import (
     add_sensor_options,
@@ -125,6 +126,10 @@ def sigterm_as_interrupt() -> Iterator[None]:
 MODBUS_PORT = 502
 POSITIVE = finite(above=0.0)
 COUNT = integer(least=1)
+DEFAULT_MAX_POSES = 60
+"""Fit poses without --poses: the most with a target sigma, else the count."""
+DEFAULT_VERIFY_POSES = 10
+"""Verification poses without --verify-poses and without a target sigma."""
 """Default Modbus TCP port of `--modbus HOST` (and of a robot without --modbus)."""
 
 
@@ -148,9 +153,14 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--timeout", type=POSITIVE, default=10.0, help="seconds per request")
     parser.add_argument("--method", choices=tuple(METHOD_CLASSES), default="stereo_target",
                         help="measurement method (default stereo_target)")
-    parser.add_argument("--poses", type=COUNT, default=60, help="fit poses (default 60)")
-    parser.add_argument("--verify-poses", type=integer(least=0), default=10,
-                        help="fresh verification poses after the push (default 10; 0 = none)")
+    parser.add_argument("--poses", type=COUNT, default=None,
+                        help="fit poses (default: stereo_target the fewest that reach "
+                        "--target-sigma, at most 60; other methods 60); --poses N alone "
+                        "measures exactly N")
+    parser.add_argument("--verify-poses", type=integer(least=0), default=None,
+                        help="fresh verification poses after the push (default: 4 with a "
+                        "target sigma, chosen for the chi-square test's power, else 10; "
+                        "0 = none)")
     parser.add_argument("--seed", type=int, default=0, help="planning seed (default 0)")
     add_model_options(parser)
     parser.add_argument("--known", metavar="FRAMES",
@@ -197,7 +207,8 @@ def register(subparsers: Any) -> None:
                         help="pose selection (default D-optimal)")
     parser.add_argument("--target-sigma", type=POSITIVE, default=None, metavar="DEG",
                         help="stop adding fit poses once every identifiable joint offset's "
-                        "predicted sigma is <= DEG (then --poses is the most)")
+                        "predicted sigma is <= DEG (then --poses is the most; default "
+                        "stereo_target 0.002 unless --poses is given)")
     parser.add_argument("--candidates", type=COUNT, default=1500,
                         help="candidate pool size of the planner (default 1500)")
     parser.add_argument("--scenario", metavar="FILE", help="with --robot sim: scenario file")
@@ -223,7 +234,23 @@ def _one_line_error(parser: argparse.ArgumentParser, message: str) -> NoReturn:
     parser.exit(2, f"hostpc calibrate: error: {message}\n")
 
 
+def _pose_counts(args: argparse.Namespace) -> tuple[int, int, float | None]:
+    """(fit poses, verification poses, target sigma in deg or None) from the options and
+    the method's defaults: a method with a default target sigma (stereo_target) stops at
+    it unless --poses alone asks for a fixed count; with a target sigma the verification
+    takes the poses its power needs (hostpc.planning.verify_poses), else 10."""
+    target = args.target_sigma
+    if target is None and args.poses is None:
+        target = getattr(method_class(args.method), "default_target_sigma_deg", None)
+    poses = DEFAULT_MAX_POSES if args.poses is None else args.poses
+    verify = args.verify_poses
+    if verify is None:
+        verify = verify_poses_for_power() if target is not None else DEFAULT_VERIFY_POSES
+    return poses, verify, target
+
+
 def _settings(args: argparse.Namespace) -> RunSettings:
+    args.poses, args.verify_poses, args.target_sigma = _pose_counts(args)
     if args.poses < 1:
         raise InputError(f"--poses {args.poses}: must be at least 1")
     if args.verify_poses < 0:

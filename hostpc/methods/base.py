@@ -238,6 +238,9 @@ class Method(ABC):
 
     name: ClassVar[str]
     """The dataset `method` this produces (stereo_target, sphere_probe, dual_loop)."""
+    default_target_sigma_deg: ClassVar[float | None] = None
+    """`hostpc calibrate` without --poses stops adding fit poses at this predicted joint
+    offset sigma (deg; None: a fixed pose count)."""
 
     def __init__(self, settings: RunSettings, cell: Cell, run_dir: Path) -> None:
         self.settings = settings

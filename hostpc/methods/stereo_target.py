@@ -66,6 +66,7 @@ class StereoTargetMethod(Method):
     (px, the systematic floor added to each measured covariance)."""
 
     name: ClassVar[str] = "stereo_target"
+    default_target_sigma_deg: ClassVar[float | None] = 0.002
 
     def __init__(self, settings: Any, cell: Any, run_dir: Path) -> None:
         super().__init__(settings, cell, run_dir)
