@@ -340,6 +340,9 @@ class Runner:
                     record, reason=f"{record.reason} ({MAX_POSE_ATTEMPTS} attempts)")
             record = self._clock.continue_t(record)
             self.journal.record(record)
+            # the pose's robot time, journaled with it: a session killed mid-phase keeps
+            # the time of every pose it journaled (robot_time.py)
+            await self._timer.end("measure" if phase == "fit" else "verify")
             done += 1
             if not record.ok:
                 progress.message(f"{phase} pose {pose}: skipped ({record.reason})")
