@@ -24,8 +24,9 @@ Shapes: pool (N, n) rad; q_from (n,) rad; joint_speed (n,) rad/s or None (equal 
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
+from scipy import special
 
+from hostpc.diagnostics.distributions import chi2_isf
 from hostpc.planning.tour import nearest_neighbour, plan_tour
 
 DETECTABLE_D2 = 10.0
@@ -43,7 +44,8 @@ def verify_power(n_poses: int, d2: float, alpha: float, m: int = 3) -> float:
     n = int(n_poses) * int(m)
     if n < 1:
         return 0.0
-    return float(stats.ncx2.sf(stats.chi2.isf(alpha, n), n, n_poses * d2))
+    # 1 - the non-central chi-square CDF (scipy.stats.ncx2.sf, without importing stats)
+    return float(1.0 - special.chndtr(chi2_isf(alpha, n), n, n_poses * d2))
 
 
 def verify_poses_for_power(d2: float = DETECTABLE_D2, power: float = DETECTABLE_POWER,
