@@ -4,7 +4,9 @@ moves. Pure numerics apart from the progress messages.
 
 With a target sigma (stereo_target's default) the fit poses are the fewest that reach it,
 visited as a tour, and the verification poses a random draw of which the nearest are
-visited (`hostpc.planning.verify_poses`): the short-robot-time plan. Without one (`--poses
+visited (`hostpc.planning.verify_poses`): the short-robot-time plan. The rest of the
+selection (up to --poses) is kept as `q_more`, a tour from the last fit pose, which the
+runner measures only if the fit does not explain the measurements. Without one (`--poses
 N` alone) N poses nearest-neighbour ordered and a plain random verification choice."""
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from hostpc.planning.design import (
     select_groups,
     verify_groups,
 )
+from hostpc.planning.tour import plan_tour
 from hostpc.planning.verify_poses import nearby_verify_poses
 from hostpc.robots.base import RobotState
 
@@ -50,15 +53,19 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     design = make_design(A, names, units)
     structural = design.structural
     groups = method.pose_groups(pool)
+    more = np.zeros(0, dtype=int)
     if groups is None:
         chosen = select(design, settings.n_poses, settings.criterion, rng)
         if settings.target_sigma_deg is not None:  # the fewest poses that reach it
             enough = poses_for_target_sigma(design, chosen,
                                             math.radians(settings.target_sigma_deg),
                                             state.q.size, min_poses=3)
+            more = np.zeros(0, dtype=int) if enough is None else chosen[enough:]
             chosen = chosen if enough is None else chosen[:enough]
         fit_indices = chosen[order_for_travel(pool[chosen], state.q,
                                               tour=settings.target_sigma_deg is not None)]
+        if more.size:  # measured only if the model fails (runner): a tour from the last
+            more = more[plan_tour(pool[more], pool[fit_indices[-1]])]
     else:  # whole groups (sphere_probe: an orientation's 5 contacts), in the pool order
         fit_indices = select_groups(design, groups, settings.n_poses, settings.criterion,
                                     rng)
@@ -73,7 +80,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     q_fit = pool[fit_indices]
     last = q_fit[-1] if q_fit.shape[0] else state.q
     if groups is None and settings.target_sigma_deg is not None:  # short robot time
-        rest = np.setdiff1d(np.arange(pool.shape[0]), fit_indices)
+        rest = np.setdiff1d(np.arange(pool.shape[0]), np.concatenate([fit_indices, more]))
         verify_indices = nearby_verify_poses(pool, rest, last, settings.n_verify, rng)
     elif groups is None:
         rest = np.setdiff1d(np.arange(pool.shape[0]), fit_indices)
@@ -100,4 +107,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         "predicted joint offset sigma "
         + ", ".join("-" if not np.isfinite(s) else f"{math.degrees(s):.4f}"
                     for s in sigmas) + " deg")
-    return Plan(q=q_fit, q_verify=q_verify, info=info)
+    if more.size:
+        info["more_poses"] = int(more.size)
+    return Plan(q=q_fit, q_verify=q_verify, info=info,
+                q_more=pool[more] if more.size else None)

@@ -113,16 +113,30 @@ class Plan:
 
     q: (N, n) fit poses in visiting order; q_verify: (K, n) verification poses (none of
     them a fit pose); info: what the planner reports (criterion, pool size, predicted
-    joint-offset sigmas, structural null directions) as JSON-ready values.
+    joint-offset sigmas, structural null directions) as JSON-ready values; q_more: (M, n)
+    further fit poses measured only if the fit of q does not explain its measurements (a
+    target-sigma plan: the rest of the nested selection, so diagnostics get the data to
+    see the missing effect), none of them a verification pose.
     """
 
     q: np.ndarray
     q_verify: np.ndarray
     info: Mapping[str, Any] = field(default_factory=dict)
+    q_more: np.ndarray | None = None
+
+    @property
+    def more(self) -> np.ndarray:
+        """(M, n) the further fit poses (M = 0 without any)."""
+        return (self.q_more if self.q_more is not None
+                else np.zeros((0, self.q.shape[1] if self.q.ndim == 2 else 0)))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form (radians)."""
-        return {"q": self.q.tolist(), "q_verify": self.q_verify.tolist(), "info": dict(self.info)}
+        data = {"q": self.q.tolist(), "q_verify": self.q_verify.tolist(),
+                "info": dict(self.info)}
+        if self.q_more is not None and self.q_more.shape[0]:
+            data["q_more"] = self.q_more.tolist()
+        return data
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Plan:
@@ -130,7 +144,9 @@ class Plan:
         n = len(data["q"][0]) if data["q"] else len(data["q_verify"][0])
         q = np.asarray(data["q"], dtype=float).reshape(-1, n)
         q_verify = np.asarray(data["q_verify"], dtype=float).reshape(-1, n)
-        return cls(q=q, q_verify=q_verify, info=dict(data.get("info", {})))
+        q_more = (np.asarray(data["q_more"], dtype=float).reshape(-1, n)
+                  if data.get("q_more") else None)
+        return cls(q=q, q_verify=q_verify, info=dict(data.get("info", {})), q_more=q_more)
 
 
 @dataclass(frozen=True)
