@@ -106,6 +106,33 @@ def undistort_pixels(camera: CameraModel, uv: np.ndarray, tol: float = 1e-14) ->
     return np.stack([x, y], axis=1)
 
 
+def _undistort_pixel(camera: CameraModel, u: float, v: float, tol: float = 1e-14
+                     ) -> np.ndarray:
+    """undistort_pixels for one pixel (2,), in Python floats: the same operations in the
+    same order, so the same bits, without numpy's per-call overhead (the board-view
+    sampler calls it thousands of times)."""
+    k1, k2, p1, p2, k3 = (float(c) for c in camera.distortion)
+    xd = (u - camera.cx) / camera.fx
+    yd = (v - camera.cy) / camera.fy
+    x, y = xd, yd
+    for _ in range(20):
+        x2, y2, xy = x * x, y * y, x * y
+        r2 = x2 + y2
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        d_radial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+        ex = x * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * x2) - xd
+        ey = y * radial + p1 * (r2 + 2.0 * y2) + 2.0 * p2 * xy - yd
+        jxx = radial + 2.0 * x2 * d_radial + 2.0 * p1 * y + 6.0 * p2 * x
+        jyy = radial + 2.0 * y2 * d_radial + 6.0 * p1 * y + 2.0 * p2 * x
+        jxy = 2.0 * xy * d_radial + 2.0 * p1 * x + 2.0 * p2 * y
+        det = jxx * jyy - jxy * jxy
+        x -= (jyy * ex - jxy * ey) / det
+        y -= (jxx * ey - jxy * ex) / det
+        if abs(ex) < tol and abs(ey) < tol:
+            break
+    return np.array([x, y])
+
+
 @lru_cache(maxsize=8)
 def ray_map(camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
     """Normalised ray coordinates (x, y) of every pixel centre: two (H, W) float32 arrays."""
@@ -416,7 +443,7 @@ def chessboard_views(
         axis = np.array([math.cos(axis_angle), math.sin(axis_angle), 0.0])
         R_tilt = cv2.Rodrigues(axis * tilt)[0]
         R = R_tilt @ rpy_to_matrix([0.0, 0.0, roll])
-        ray = undistort_pixels(camera, np.array([[px, py]]))[0]
+        ray = _undistort_pixel(camera, px, py)
         p_centre = dist * np.array([ray[0], ray[1], 1.0]) / math.sqrt(1 + ray @ ray)
         T = np.eye(4)
         T[:3, :3] = R

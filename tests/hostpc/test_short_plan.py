@@ -1,0 +1,79 @@
+"""The short-robot-time plan: default pose counts of `hostpc calibrate`, the verification
+pose count from the chi-square test's power, nearby fresh verification poses, and the plan's
+further poses (issue 17)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from hostpc.cli.calibrate import _pose_counts
+from hostpc.cli.main import build_parser
+from hostpc.methods.base import Plan
+from hostpc.planning.tour import path_time, plan_tour
+from hostpc.planning.verify_poses import (
+    nearby_verify_poses,
+    verify_poses_for_power,
+    verify_power,
+)
+
+
+def _counts(*options: str) -> tuple[int, int, float | None]:
+    args = build_parser().parse_args(["calibrate", "--robot", "sim", *options])
+    return _pose_counts(args)
+
+
+def test_default_pose_counts_and_the_old_behaviour_with_poses() -> None:
+    assert _counts() == (60, 4, 0.002)  # stereo_target: stop at 0.002 deg, 60 at most
+    assert _counts("--poses", "30") == (30, 10, None)  # --poses alone: exactly 30, as before
+    assert _counts("--poses", "30", "--target-sigma", "0.001") == (30, 4, 0.001)
+    assert _counts("--verify-poses", "7") == (60, 7, 0.002)
+    assert _counts("--method", "sphere_probe") == (60, 10, None)  # no default target
+
+
+@pytest.mark.parametrize(("d2", "power", "expected"), [
+    (10, 0.95, 4), (4, 0.95, 12), (2, 0.95, 37), (10, 0.80, 2), (4, 0.80, 8), (1, 0.80, 77)])
+def test_verify_pose_count_from_power_matches_the_docs_table(d2: float, power: float,
+                                                            expected: int) -> None:
+    assert verify_poses_for_power(d2, power, alpha=0.01) == expected
+    # the count is the fewest: one pose fewer has less power (scipy.stats as reference)
+    n = 3 * (expected - 1)
+    fewer = stats.ncx2.sf(stats.chi2.isf(0.01, n), n, (expected - 1) * d2)
+    assert fewer < power <= verify_power(expected, d2, 0.01)
+    assert verify_power(expected, d2, 0.01) == pytest.approx(
+        stats.ncx2.sf(stats.chi2.isf(0.01, 3 * expected), 3 * expected, expected * d2),
+        rel=1e-9)
+
+
+def test_nearby_verification_poses_are_fresh_and_shorten_the_travel() -> None:
+    rng = np.random.default_rng(3)
+    pool = rng.uniform(-np.pi, np.pi, (400, 6))
+    used = np.arange(0, 400, 7)
+    unused = np.setdiff1d(np.arange(400), used)
+    start = pool[used[-1]]
+    near, plain = [], []
+    for seed in range(30):
+        chosen = nearby_verify_poses(pool, unused, start, 4, np.random.default_rng(seed))
+        assert chosen.size == 4 == np.unique(chosen).size
+        assert not np.isin(chosen, used).any()
+        np.testing.assert_array_equal(  # seeded: the same poses again
+            chosen, nearby_verify_poses(pool, unused, start, 4, np.random.default_rng(seed)))
+        near.append(path_time(pool[chosen], start))
+        random = np.random.default_rng(seed).choice(unused, 4, replace=False)
+        plain.append(path_time(pool[random][plan_tour(pool[random], start)], start))
+    assert np.mean(near) < 0.85 * np.mean(plain)
+    # sample factor 1: a plain random choice, toured
+    one = nearby_verify_poses(pool, unused, start, 4, np.random.default_rng(0), sample_factor=1)
+    assert set(one) == set(np.random.default_rng(0).choice(unused, 4, replace=False))
+    assert nearby_verify_poses(pool, unused[:2], start, 4, rng).size == 2
+
+
+def test_plan_round_trip_with_further_poses() -> None:
+    q = np.arange(12.0).reshape(2, 6)
+    plan = Plan(q=q, q_verify=q + 1, info={"a": 1}, q_more=q + 2)
+    again = Plan.from_dict(plan.to_dict())
+    np.testing.assert_array_equal(again.more, q + 2)
+    old = Plan.from_dict({"q": q.tolist(), "q_verify": q.tolist(), "info": {}})  # old run
+    assert old.q_more is None and old.more.shape == (0, 6)
+    assert "q_more" not in Plan(q=q, q_verify=q).to_dict()
