@@ -3,8 +3,8 @@ verification poses (none of them a fit pose), and the identifiability check BEFO
 moves. Pure numerics apart from the progress messages.
 
 With a target sigma (stereo_target's default) the fit poses are the fewest that reach it,
-visited as a tour, and the verification poses a random draw of which the nearest are
-visited (`hostpc.planning.verify_poses`): the short-robot-time plan. The rest of the
+visited as a tour, and the verification poses a random choice visited as a tour from the
+last fit pose (`hostpc.planning.verify_poses`): the short-robot-time plan. The rest of the
 selection (up to --poses) is kept as `q_more`, a tour from the last fit pose, which the
 runner measures only if the fit does not explain the measurements. Without one (`--poses
 N` alone) N poses nearest-neighbour ordered and a plain random verification choice."""

@@ -13,10 +13,10 @@ T a non-central chi-square with non-centrality K d2; the power is
 Which ones (`nearby_verify_poses`): a seeded random draw of `sample_factor` x K candidates
 among those the plan did not use, of which the K nearest (a nearest-neighbour walk from the
 robot's pose after the fit poses, by the joint move time) are visited as a tour
-(`hostpc.planning.tour`). The draw keeps the poses fresh and spread over the pool (never a
-fit pose, not chosen by their measurements); the walk keeps them from sending the robot
-across its whole workspace between two poses. With sample_factor 1 it is the plain random
-choice.
+(`hostpc.planning.tour`). The draw keeps the poses fresh (never a fit pose, not chosen by
+their measurements). With sample_factor 1 (the default, SAMPLE_FACTOR) it is the plain
+random choice, toured; a larger factor shortens the travel but clusters the poses, which
+costs power against effects that vary over the workspace.
 
 Shapes: pool (N, n) rad; q_from (n,) rad; joint_speed (n,) rad/s or None (equal speeds).
 """
@@ -35,10 +35,11 @@ per pose (e.g. 1.8 stated sigmas on each of 3 coordinates; the simulator's hidde
 compliance leaves about 10-70 per pose)."""
 DETECTABLE_POWER = 0.95
 """The chance of a FAIL the default verification pose count gives for that error."""
-SAMPLE_FACTOR = 2
-"""Random candidates drawn per verification pose, of which the nearest are visited (2:
-half the travel of a plain random choice, and the hidden-compliance power kept; 5 lost it:
-docs/performance.md)."""
+SAMPLE_FACTOR = 1
+"""Random candidates drawn per verification pose, of which the nearest are visited. 1: a
+plain random choice (toured): drawing 2 or 5 per pose shortened the travel by a third to a
+half but clustered the poses, and the verification then missed the hidden compliance in
+9 of 20 forced pushes (docs/performance.md)."""
 
 
 def verify_power(n_poses: int, d2: float, alpha: float, m: int = 3) -> float:

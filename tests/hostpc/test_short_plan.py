@@ -54,18 +54,22 @@ def test_nearby_verification_poses_are_fresh_and_shorten_the_travel() -> None:
     start = pool[used[-1]]
     near, plain = [], []
     for seed in range(30):
-        chosen = nearby_verify_poses(pool, unused, start, 4, np.random.default_rng(seed))
+        chosen = nearby_verify_poses(pool, unused, start, 4, np.random.default_rng(seed),
+                                     sample_factor=3)
         assert chosen.size == 4 == np.unique(chosen).size
         assert not np.isin(chosen, used).any()
         np.testing.assert_array_equal(  # seeded: the same poses again
-            chosen, nearby_verify_poses(pool, unused, start, 4, np.random.default_rng(seed)))
+            chosen, nearby_verify_poses(pool, unused, start, 4, np.random.default_rng(seed),
+                                        sample_factor=3))
         near.append(path_time(pool[chosen], start))
         random = np.random.default_rng(seed).choice(unused, 4, replace=False)
         plain.append(path_time(pool[random][plan_tour(pool[random], start)], start))
     assert np.mean(near) < 0.85 * np.mean(plain)
-    # sample factor 1: a plain random choice, toured
-    one = nearby_verify_poses(pool, unused, start, 4, np.random.default_rng(0), sample_factor=1)
-    assert set(one) == set(np.random.default_rng(0).choice(unused, 4, replace=False))
+    # sample factor 1 (the default): a plain random choice, toured from the start
+    one = nearby_verify_poses(pool, unused, start, 4, np.random.default_rng(0))
+    random = np.random.default_rng(0).choice(unused, 4, replace=False)
+    assert set(one) == set(random)
+    assert path_time(pool[one], start) <= path_time(pool[random], start)
     assert nearby_verify_poses(pool, unused[:2], start, 4, rng).size == 2
 
 
