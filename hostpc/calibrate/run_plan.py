@@ -32,6 +32,11 @@ from hostpc.planning.tour import plan_tour
 from hostpc.planning.verify_poses import nearby_verify_poses
 from hostpc.robots.base import RobotState
 
+EXTENDED_VERIFY_POSES = 10
+"""Verification poses of a short plan that had to grow (its model failed the fit): the
+count of a fixed plan; 4 nearby-in-time poses lack the power against the unmodelled effect
+(docs/performance.md: 15 of 20 forced pushes caught with 4, 20 of 20 with 10)."""
+
 
 class PlanningError(InputError):
     """The planned poses cannot separate the model's parameters (or none are reachable)."""
@@ -79,9 +84,16 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
             "(--poses), fewer effects (--effects), or a wider pose range")
     q_fit = pool[fit_indices]
     last = q_fit[-1] if q_fit.shape[0] else state.q
+    verify_more = np.zeros(0, dtype=int)
     if groups is None and settings.target_sigma_deg is not None:  # short robot time
         rest = np.setdiff1d(np.arange(pool.shape[0]), np.concatenate([fit_indices, more]))
         verify_indices = nearby_verify_poses(pool, rest, last, settings.n_verify, rng)
+        if more.size:  # if the model fails: the verification with a fixed plan's count
+            rest = np.setdiff1d(rest, verify_indices)
+            from_pose = pool[verify_indices[-1]] if verify_indices.size else last
+            verify_more = nearby_verify_poses(
+                pool, rest, from_pose, max(0, EXTENDED_VERIFY_POSES - verify_indices.size),
+                rng)
     elif groups is None:
         rest = np.setdiff1d(np.arange(pool.shape[0]), fit_indices)
         verify_indices = rng.choice(rest, size=min(settings.n_verify, rest.size),
@@ -110,4 +122,5 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     if more.size:
         info["more_poses"] = int(more.size)
     return Plan(q=q_fit, q_verify=q_verify, info=info,
-                q_more=pool[more] if more.size else None)
+                q_more=pool[more] if more.size else None,
+                q_verify_more=pool[verify_more] if verify_more.size else None)

@@ -255,7 +255,7 @@ class Runner:
                                  push_status, progress)
 
         verify_result: VerifyResult | None = None
-        if (settings.n_verify > 0 and plan.q_verify.shape[0] > 0
+        if (settings.n_verify > 0 and self._verify_poses(plan).shape[0] > 0
                 and push_status != "rolled_back"):
             verify_result = await self._verify(method, plan, result, settings, offsets,
                                                pushed_delta, q_now)
@@ -341,10 +341,11 @@ class Runner:
                       q_now: np.ndarray) -> VerifyResult:
         """Measure this round's verification poses (all measured under `offsets`, the
         controller's now) and test them; VerifyLost if every pose was skipped."""
-        n_verify = plan.q_verify.shape[0]
+        q_verify = self._verify_poses(plan)
+        n_verify = q_verify.shape[0]
         number, first = verify_round(self.journal, offsets, pushed_delta, n_verify)
         self._timer.begin()
-        await self._acquire(method, "verify", plan.q_verify, q_now, first)
+        await self._acquire(method, "verify", q_verify, q_now, first)
         await self._timer.end("verify")
         if not any(r.ok for r in self.journal.records("verify")
                    if first <= r.index < first + n_verify):
@@ -405,6 +406,10 @@ class Runner:
             for j, (o, n) in enumerate(zip(plan.old, plan.new, strict=True)) if plan.pushed[j])
             + f" deg (rollback id {record.rollback_id})")
         return "pushed", plan.delta.copy(), plan.new.copy()
+
+    def _verify_poses(self, plan: Plan) -> np.ndarray:
+        """The plan's verification poses, with its further ones if it grew (more_poses)."""
+        return plan.verify_poses(self.journal.last_event("more_poses") is not None)
 
     def _pushed_ever(self) -> bool:
         """True if this run ever wrote (or meant to write) the controller's offsets."""

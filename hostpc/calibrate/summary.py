@@ -73,7 +73,8 @@ def result_document(journal: Journal, run_dir: Path, robot: Mapping[str, Any],
         "method_setup": method.describe(),
         "plan": {
             "n_poses": int(plan.q.shape[0]),
-            "n_verify": int(plan.q_verify.shape[0]),
+            "n_verify": int(plan.verify_poses(
+                journal.last_event("more_poses") is not None).shape[0]),
             **{k: v for k, v in plan.info.items() if k != "parameters"},
         },
         "acquisition": {

@@ -116,13 +116,16 @@ class Plan:
     joint-offset sigmas, structural null directions) as JSON-ready values; q_more: (M, n)
     further fit poses measured only if the fit of q does not explain its measurements (a
     target-sigma plan: the rest of the nested selection, so diagnostics get the data to
-    see the missing effect), none of them a verification pose.
+    see the missing effect), none of them a verification pose; q_verify_more: (L, n)
+    further verification poses, measured with q_verify when q_more was (a model that failed
+    its fit needs a verification with more power, docs/calibrate.md).
     """
 
     q: np.ndarray
     q_verify: np.ndarray
     info: Mapping[str, Any] = field(default_factory=dict)
     q_more: np.ndarray | None = None
+    q_verify_more: np.ndarray | None = None
 
     @property
     def more(self) -> np.ndarray:
@@ -130,12 +133,20 @@ class Plan:
         return (self.q_more if self.q_more is not None
                 else np.zeros((0, self.q.shape[1] if self.q.ndim == 2 else 0)))
 
+    def verify_poses(self, extended: bool) -> np.ndarray:
+        """(K, n) this run's verification poses: q_verify, and q_verify_more after the
+        plan was extended by q_more."""
+        if extended and self.q_verify_more is not None and self.q_verify_more.shape[0]:
+            return np.vstack([self.q_verify, self.q_verify_more])
+        return self.q_verify
+
     def to_dict(self) -> dict[str, Any]:
         """JSON form (radians)."""
         data = {"q": self.q.tolist(), "q_verify": self.q_verify.tolist(),
                 "info": dict(self.info)}
-        if self.q_more is not None and self.q_more.shape[0]:
-            data["q_more"] = self.q_more.tolist()
+        for key, value in (("q_more", self.q_more), ("q_verify_more", self.q_verify_more)):
+            if value is not None and value.shape[0]:
+                data[key] = value.tolist()
         return data
 
     @classmethod
@@ -144,9 +155,9 @@ class Plan:
         n = len(data["q"][0]) if data["q"] else len(data["q_verify"][0])
         q = np.asarray(data["q"], dtype=float).reshape(-1, n)
         q_verify = np.asarray(data["q_verify"], dtype=float).reshape(-1, n)
-        q_more = (np.asarray(data["q_more"], dtype=float).reshape(-1, n)
-                  if data.get("q_more") else None)
-        return cls(q=q, q_verify=q_verify, info=dict(data.get("info", {})), q_more=q_more)
+        more = {key: np.asarray(data[key], dtype=float).reshape(-1, n)
+                for key in ("q_more", "q_verify_more") if data.get(key)}
+        return cls(q=q, q_verify=q_verify, info=dict(data.get("info", {})), **more)
 
 
 @dataclass(frozen=True)
