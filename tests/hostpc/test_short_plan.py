@@ -75,9 +75,12 @@ def test_nearby_verification_poses_are_fresh_and_shorten_the_travel() -> None:
 
 def test_plan_round_trip_with_further_poses() -> None:
     q = np.arange(12.0).reshape(2, 6)
-    plan = Plan(q=q, q_verify=q + 1, info={"a": 1}, q_more=q + 2)
+    plan = Plan(q=q, q_verify=q + 1, info={"a": 1}, q_more=q + 2, q_verify_more=q + 3)
     again = Plan.from_dict(plan.to_dict())
     np.testing.assert_array_equal(again.more, q + 2)
+    np.testing.assert_array_equal(again.verify_poses(False), q + 1)
+    np.testing.assert_array_equal(again.verify_poses(True), np.vstack([q + 1, q + 3]))
     old = Plan.from_dict({"q": q.tolist(), "q_verify": q.tolist(), "info": {}})  # old run
     assert old.q_more is None and old.more.shape == (0, 6)
+    np.testing.assert_array_equal(old.verify_poses(True), q)
     assert "q_more" not in Plan(q=q, q_verify=q).to_dict()
