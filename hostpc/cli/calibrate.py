@@ -49,12 +49,12 @@ from hostpc.cli.calibrate_checks import (
 )
 from hostpc.cli.fit import add_model_options
 from hostpc.cli.numbers import finite, integer
+from hostpc.cli.pose_counts import pose_counts
 from hostpc.cli.progress import StderrProgress
 from hostpc.errors import InputError
-from hostpc.methods import METHOD_CLASSES, method_class
+from hostpc.methods import METHOD_CLASSES
 from hostpc.methods.base import RunSettings
 from hostpc.methods.cell import load_cell_file, parse_known
-from hostpc.planning.verify_poses import verify_poses_for_power
 from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot, resolve_token
 from hostpc.sensors.calibrate_options import (
     add_sensor_options,
@@ -126,10 +126,6 @@ def sigterm_as_interrupt() -> Iterator[None]:
 MODBUS_PORT = 502
 POSITIVE = finite(above=0.0)
 COUNT = integer(least=1)
-DEFAULT_MAX_POSES = 60
-"""Fit poses without --poses: the most with a target sigma, else the count."""
-DEFAULT_VERIFY_POSES = 10
-"""Verification poses without --verify-poses and without a target sigma."""
 """Default Modbus TCP port of `--modbus HOST` (and of a robot without --modbus)."""
 
 
@@ -234,23 +230,8 @@ def _one_line_error(parser: argparse.ArgumentParser, message: str) -> NoReturn:
     parser.exit(2, f"hostpc calibrate: error: {message}\n")
 
 
-def _pose_counts(args: argparse.Namespace) -> tuple[int, int, float | None]:
-    """(fit poses, verification poses, target sigma in deg or None) from the options and
-    the method's defaults: a method with a default target sigma (stereo_target) stops at
-    it unless --poses alone asks for a fixed count; with a target sigma the verification
-    takes the poses its power needs (hostpc.planning.verify_poses), else 10."""
-    target = args.target_sigma
-    if target is None and args.poses is None:
-        target = getattr(method_class(args.method), "default_target_sigma_deg", None)
-    poses = DEFAULT_MAX_POSES if args.poses is None else args.poses
-    verify = args.verify_poses
-    if verify is None:
-        verify = verify_poses_for_power() if target is not None else DEFAULT_VERIFY_POSES
-    return poses, verify, target
-
-
 def _settings(args: argparse.Namespace) -> RunSettings:
-    args.poses, args.verify_poses, args.target_sigma = _pose_counts(args)
+    args.poses, args.verify_poses, args.target_sigma = pose_counts(args)
     if args.poses < 1:
         raise InputError(f"--poses {args.poses}: must be at least 1")
     if args.verify_poses < 0:

@@ -41,7 +41,7 @@ def test_undistort_inverts_distortion() -> None:
 def test_one_pixel_undistort_is_bit_identical() -> None:
     """The board-view sampler's one-pixel path (Python floats) gives the same bits as the
     array path, so the simulated board poses did not change when it got faster."""
-    from controller_stub.render import _undistort_pixel
+    from controller_stub.board_views import _undistort_pixel
 
     rng = np.random.default_rng(2)
     for u, v in np.column_stack([rng.uniform(0, 1279, 100), rng.uniform(0, 1023, 100)]):

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from hostpc.cli.calibrate import _pose_counts
 from hostpc.cli.main import build_parser
+from hostpc.cli.pose_counts import pose_counts
 from hostpc.methods.base import Plan
 from hostpc.planning.tour import path_time, plan_tour
 from hostpc.planning.verify_poses import (
@@ -21,7 +21,7 @@ from hostpc.planning.verify_poses import (
 
 def _counts(*options: str) -> tuple[int, int, float | None]:
     args = build_parser().parse_args(["calibrate", "--robot", "sim", *options])
-    return _pose_counts(args)
+    return pose_counts(args)
 
 
 def test_default_pose_counts_and_the_old_behaviour_with_poses() -> None:
