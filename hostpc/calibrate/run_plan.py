@@ -28,7 +28,7 @@ from hostpc.planning.design import (
     select_groups,
     verify_groups,
 )
-from hostpc.planning.tour import plan_tour
+from hostpc.planning.tour import short_path
 from hostpc.planning.verify_poses import nearby_verify_poses
 from hostpc.robots.base import RobotState
 
@@ -59,6 +59,9 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     structural = design.structural
     groups = method.pose_groups(pool)
     more = np.zeros(0, dtype=int)
+    short = groups is None and settings.target_sigma_deg is not None  # short robot time
+    limits = (state.q_min, state.q_max)
+    q_more: np.ndarray | None = None
     if groups is None:
         chosen = select(design, settings.n_poses, settings.criterion, rng)
         if settings.target_sigma_deg is not None:  # the fewest poses that reach it
@@ -67,10 +70,14 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
                                             state.q.size, min_poses=3)
             more = np.zeros(0, dtype=int) if enough is None else chosen[enough:]
             chosen = chosen if enough is None else chosen[:enough]
-        fit_indices = chosen[order_for_travel(pool[chosen], state.q,
-                                              tour=settings.target_sigma_deg is not None)]
+        if short:  # a tour, full-turn joints the short way round (tour.short_path)
+            order, q_short = short_path(pool[chosen], state.q, *limits)
+            fit_indices = chosen[order]
+        else:
+            fit_indices = chosen[order_for_travel(pool[chosen], state.q)]
         if more.size:  # measured only if the model fails (runner): a tour from the last
-            more = more[plan_tour(pool[more], pool[fit_indices[-1]])]
+            order, q_more = short_path(pool[more], q_short[-1], *limits)
+            more = more[order]
     else:  # whole groups (sphere_probe: an orientation's 5 contacts), in the pool order
         fit_indices = select_groups(design, groups, settings.n_poses, settings.criterion,
                                     rng)
@@ -82,18 +89,21 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
             f"the {len(fit_indices)} planned poses cannot separate the model's parameters "
             f"(rank {check.plan_rank} of {check.pool_rank}): {lines}. Fix: more poses "
             "(--poses), fewer effects (--effects), or a wider pose range")
-    q_fit = pool[fit_indices]
+    q_fit = q_short if short else pool[fit_indices]
     last = q_fit[-1] if q_fit.shape[0] else state.q
-    verify_more = np.zeros(0, dtype=int)
-    if groups is None and settings.target_sigma_deg is not None:  # short robot time
+    q_verify_more: np.ndarray | None = None
+    if short:
         rest = np.setdiff1d(np.arange(pool.shape[0]), np.concatenate([fit_indices, more]))
         verify_indices = nearby_verify_poses(pool, rest, last, settings.n_verify, rng)
+        order, q_verify = short_path(pool[verify_indices], last, *limits)
+        verify_indices = verify_indices[order]
         if more.size:  # if the model fails: the verification with a fixed plan's count
             rest = np.setdiff1d(rest, verify_indices)
-            from_pose = pool[verify_indices[-1]] if verify_indices.size else last
-            verify_more = nearby_verify_poses(
+            from_pose = q_verify[-1] if verify_indices.size else last
+            extra = nearby_verify_poses(
                 pool, rest, from_pose, max(0, EXTENDED_VERIFY_POSES - verify_indices.size),
                 rng)
+            q_verify_more = short_path(pool[extra], from_pose, *limits)[1]
     elif groups is None:
         rest = np.setdiff1d(np.arange(pool.shape[0]), fit_indices)
         verify_indices = rng.choice(rest, size=min(settings.n_verify, rest.size),
@@ -101,7 +111,8 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         verify_indices = verify_indices[order_for_travel(pool[verify_indices], last)]
     else:
         verify_indices = verify_groups(groups, fit_indices, settings.n_verify, rng)
-    q_verify = pool[verify_indices]
+    if not short:
+        q_verify = pool[verify_indices]
     sigmas = joint_offset_sigmas(plan_design, state.q.size)
     info = {
         "criterion": settings.criterion,
@@ -121,6 +132,5 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
                     for s in sigmas) + " deg")
     if more.size:
         info["more_poses"] = int(more.size)
-    return Plan(q=q_fit, q_verify=q_verify, info=info,
-                q_more=pool[more] if more.size else None,
-                q_verify_more=pool[verify_more] if verify_more.size else None)
+    return Plan(q=q_fit, q_verify=q_verify, info=info, q_more=q_more,
+                q_verify_more=q_verify_more)
