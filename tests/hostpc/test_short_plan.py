@@ -84,3 +84,34 @@ def test_plan_round_trip_with_further_poses() -> None:
     assert old.q_more is None and old.more.shape == (0, 6)
     np.testing.assert_array_equal(old.verify_poses(True), q)
     assert "q_more" not in Plan(q=q, q_verify=q).to_dict()
+
+
+def test_full_turn_joints_go_the_short_way_within_their_limits() -> None:
+    """A joint with +-360 deg reaches a pose by any angle q + 2 pi m within its limits: the
+    short path takes the equivalent that shortens the tour, never leaves the limits, never
+    changes a pose (mod 2 pi), and is never longer than the plain tour."""
+    from hostpc.planning.tour import short_path, unwrap_path
+
+    q_min = np.radians([-360.0, -360.0, -180.0, -360.0, -360.0, -360.0])
+    q_max = -q_min
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        q = rng.uniform(-np.pi, np.pi, (8, 6))
+        start = rng.uniform(-np.pi, np.pi, 6)
+        order, path = short_path(q, start, q_min, q_max)
+        assert sorted(order) == list(range(8))
+        turns = (path - q[order]) / (2 * np.pi)
+        np.testing.assert_allclose(turns, np.round(turns), atol=1e-12)  # the same poses
+        assert np.all(turns[:, 2] == 0)  # the elbow (+-180 deg) is never turned
+        assert np.all((path >= q_min - 1e-12) & (path <= q_max + 1e-12))
+        plain = q[plan_tour(q, start)]
+        assert path_time(path, start) <= path_time(plain, start) + 1e-12
+    # +179 deg then -179 deg on joint 6: 2 deg the short way, not 358
+    q = np.zeros((2, 6))
+    q[:, 5] = np.radians([179.0, -179.0])
+    unwrapped = unwrap_path(q, np.zeros(6), q_min, q_max)
+    assert abs(np.degrees(unwrapped[1, 5] - unwrapped[0, 5])) == pytest.approx(2.0)
+    # a joint pushed against its limit winds back instead of leaving it
+    q[:, 5] = np.radians([-350.0, 170.0])
+    unwrapped = unwrap_path(q, np.radians([0, 0, 0, 0, 0, -350.0]), q_min, q_max)
+    assert np.degrees(unwrapped[1, 5]) == pytest.approx(-190.0)
