@@ -18,7 +18,12 @@
    (`resource.getrusage`, cumulative: after load, after fit, after diagnose).
 3. Robot time per method: `hostpc calibrate --robot sim --method M --no-report` as a
    subprocess; robot_time_s from its result.json (simulated clock: motion, 0.3 s settle,
-   0.1 s per capture) and the wall time; stereo_target also with --target-sigma 0.002.
+   0.1 s per capture) and the wall time; stereo_target also with --poses 60 (the old
+   default). "to sigma": rig + measure, the robot time until the offsets are fitted.
+4. Wall time of the default `hostpc calibrate --robot sim` (stereo_target, report
+   included), WALL_REPEATS runs one after another (hyperfine-like): wall and CPU seconds
+   (user + sys of the host and the simulator processes) per run, median and min.
+   `python bench/bench_api.py wall` runs this section alone.
 
 Figures are medians in ms unless stated; put them in docs/performance.md.
 """
@@ -44,11 +49,13 @@ CASES = ("offsets", "offsets+tool+target", "+geometry")
 SIZES = (120, 1000)
 SCALING = (1_000, 10_000, 100_000)
 METHODS: tuple[tuple[str, tuple[str, ...]], ...] = (
-    ("stereo_target", ()),
-    ("stereo_target", ("--target-sigma", "0.002")),
+    ("stereo_target", ()),  # the default: target sigma 0.002 deg, 4 nearby verify poses
+    ("stereo_target", ("--poses", "60")),  # the old default: 60 + 10 random
     ("sphere_probe", ()),
     ("dual_loop", ()),
 )
+WALL_REPEATS = 5
+"""Section 4: runs of the default `hostpc calibrate --robot sim` timed one after another."""
 
 
 def _datasets(n_poses: int) -> dict[str, tuple[Any, str | None]]:
@@ -224,9 +231,34 @@ def robot_time(methods: tuple[tuple[str, tuple[str, ...]], ...] = METHODS
     return rows
 
 
+def wall_time(repeats: int = WALL_REPEATS) -> dict[str, Any]:
+    """Section 4: wall and CPU seconds of the default simulated stereo calibration."""
+    import resource
+
+    walls, cpus = [], []
+    for _ in range(repeats):
+        with tempfile.TemporaryDirectory() as tmp:
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
+            start = time.perf_counter()
+            done = subprocess.run(
+                [sys.executable, "-m", "hostpc.cli.main", "calibrate", "--robot", "sim",
+                 "--out", str(Path(tmp) / "run")],
+                capture_output=True, text=True, cwd=ROOT, env=_env(), check=False)
+            walls.append(time.perf_counter() - start)
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpus.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+            if done.returncode != 0:
+                lines = done.stderr.strip().splitlines()
+                return {"error": lines[-1] if lines else f"exit {done.returncode}"}
+    return {"runs": repeats, "wall_s": walls, "cpu_s": cpus,
+            "wall_median_s": float(np.median(walls)), "wall_min_s": min(walls),
+            "cpu_median_s": float(np.median(cpus)), "cpu_min_s": min(cpus)}
+
+
 def run(quick: bool = False) -> dict[str, Any]:
     sizes = tuple(n for n in SCALING if not quick or n <= 10_000)
-    return {"api": api_versus_scipy(), "scaling": scaling(sizes), "robot_time": robot_time()}
+    return {"api": api_versus_scipy(), "scaling": scaling(sizes), "robot_time": robot_time(),
+            "wall": wall_time()}
 
 
 def print_tables(figures: dict[str, Any]) -> None:
@@ -252,8 +284,8 @@ def print_tables(figures: dict[str, Any]) -> None:
         print(f"{row['n']:>7} " + " ".join(cells)
               + (f"  ({row['error']})" if "error" in row else ""))
     print("\nrobot time of `hostpc calibrate --robot sim` (simulated clock, s)")
-    print(f"{'method':<38} {'poses':>6} {'rig':>6} {'measure':>8} {'verify':>7} {'total':>7} "
-          f"{'worst sigma deg':>16} {'wall s':>7}")
+    print(f"{'method':<38} {'poses':>6} {'rig':>6} {'measure':>8} {'to sigma':>9} "
+          f"{'verify':>7} {'total':>7} {'worst sigma deg':>16} {'wall s':>7}")
     for row in figures["robot_time"]:
         if "error" in row:
             print(f"{row['method']:<38} failed: {row['error']}")
@@ -261,14 +293,27 @@ def print_tables(figures: dict[str, Any]) -> None:
         sigma = "-" if row["worst_sigma_deg"] is None else f"{row['worst_sigma_deg']:.5f}"
         print(f"{row['method']:<38} {row['n_poses']:>3}+{row['n_verify']:<2} "
               f"{row.get('rig', 0.0):>6.1f} {row.get('measure', 0.0):>8.1f} "
+              f"{row.get('rig', 0.0) + row.get('measure', 0.0):>9.1f} "
               f"{row.get('verify', 0.0):>7.1f} {row.get('total', 0.0):>7.1f} {sigma:>16} "
               f"{row['wall_s']:>7.1f}")
+    wall = figures.get("wall")
+    if wall:
+        print("\nwall time of the default `hostpc calibrate --robot sim` (s, one run after "
+              "another)")
+        if "error" in wall:
+            print(f"failed: {wall['error']}")
+        else:
+            print(f"{wall['runs']} runs: wall median {wall['wall_median_s']:.2f} min "
+                  f"{wall['wall_min_s']:.2f}; CPU (host + simulator) median "
+                  f"{wall['cpu_median_s']:.2f} min {wall['cpu_min_s']:.2f}; wall "
+                  + ", ".join(f"{w:.2f}" for w in wall["wall_s"]))
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     quick = "--quick" in argv
-    sections = [a for a in argv if not a.startswith("--")] or ["api", "scaling", "robot"]
+    sections = ([a for a in argv if not a.startswith("--")]
+                or ["api", "scaling", "robot", "wall"])
     figures: dict[str, Any] = {"api": [], "scaling": [], "robot_time": []}
     if "api" in sections:
         figures["api"] = api_versus_scipy()
@@ -276,6 +321,8 @@ def main(argv: list[str] | None = None) -> int:
         figures["scaling"] = scaling(tuple(n for n in SCALING if not quick or n <= 10_000))
     if "robot" in sections:
         figures["robot_time"] = robot_time()
+    if "wall" in sections:
+        figures["wall"] = wall_time()
     print_tables(figures)
     return 0
 

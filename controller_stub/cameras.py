@@ -14,13 +14,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from controller_stub.board_views import chessboard_views
 from controller_stub.errors import SimulationRefused
 from controller_stub.render import (
     CameraModel,
     ChessboardPattern,
     DiskPattern,
     Renderer,
-    chessboard_views,
 )
 from controller_stub.scenario import Scenario
 from controller_stub.streams import STREAM_LEFT, STREAM_RIGHT, STREAM_VIEWS, stream_rng

@@ -26,8 +26,6 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from controller_stub.robot_model import rpy_to_matrix
-
 _NOISE_MARGIN = 128  # the noise bank is this many pixels larger than the image
 
 
@@ -364,78 +362,3 @@ class Renderer:
         patch += f32(pattern.dark_level - pattern.light_level) * dark * squares
         patch[~valid] = bg
         return self._compose(patch.astype(np.float32), box)
-
-
-# ---------------------------------------------------------------------------------------
-# chessboard views for rig calibration
-
-
-def chessboard_views(
-    camera: CameraModel,
-    T_left_right: np.ndarray,
-    pattern: ChessboardPattern,
-    n_views: int,
-    distance_range: tuple[float, float],
-    max_tilt_rad: float,
-    rng: np.random.Generator,
-    border_px: float = 12.0,
-    centre_range: tuple[float, float] = (0.2, 0.8),
-) -> np.ndarray:
-    """(n_views, 4, 4) board poses T_leftcamera_board with the whole board (incl. margin)
-    inside both images, distance of the board centre 0.3-0.8 m (distance_range), tilted up
-    to max_tilt_rad about a random in-plane axis, rolled freely about the normal by up to
-    +-30 deg around the upright orientation, its centre aimed at a pixel drawn within
-    `centre_range` (fractions of the image size). Drawn from `rng` by rejection."""
-    u_min, u_max, v_min, v_max = pattern.outline()
-    centre = np.array([0.5 * (u_min + u_max), 0.5 * (v_min + v_max), 0.0])
-    k = np.linspace(0.0, 1.0, 9)
-    outline = np.concatenate(
-        [
-            np.column_stack([u_min + (u_max - u_min) * k, np.full(9, v_min)]),
-            np.column_stack([u_min + (u_max - u_min) * k, np.full(9, v_max)]),
-            np.column_stack([np.full(9, u_min), v_min + (v_max - v_min) * k]),
-            np.column_stack([np.full(9, u_max), v_min + (v_max - v_min) * k]),
-        ]
-    )
-    outline3 = np.column_stack([outline, np.zeros(len(outline))])
-    T_right_left = np.linalg.inv(T_left_right)
-    views: list[np.ndarray] = []
-    d_lo, d_hi = distance_range
-    attempts = 0
-    while len(views) < n_views:
-        attempts += 1
-        if attempts > 200000:
-            raise ValueError("chessboard: cannot place the board inside both images")
-        dist = rng.uniform(d_lo, d_hi)  # rejection keeps the distances where the board fits
-        tilt = rng.uniform(0.0, max_tilt_rad)
-        axis_angle = rng.uniform(0.0, 2 * math.pi)
-        roll = rng.uniform(-math.pi / 6, math.pi / 6)
-        px = rng.uniform(*centre_range) * camera.width
-        py = rng.uniform(*centre_range) * camera.height
-        # board facing the camera: board z along camera +z (board behind its printed side)
-        axis = np.array([math.cos(axis_angle), math.sin(axis_angle), 0.0])
-        R_tilt = cv2.Rodrigues(axis * tilt)[0]
-        R = R_tilt @ rpy_to_matrix([0.0, 0.0, roll])
-        ray = undistort_pixels(camera, np.array([[px, py]]))[0]
-        p_centre = dist * np.array([ray[0], ray[1], 1.0]) / math.sqrt(1 + ray @ ray)
-        T = np.eye(4)
-        T[:3, :3] = R
-        T[:3, 3] = p_centre - R @ centre
-        ok = True
-        for T_cam in (T, T_right_left @ T):
-            pts = outline3 @ T_cam[:3, :3].T + T_cam[:3, 3]
-            if np.any(pts[:, 2] < 0.05):
-                ok = False
-                break
-            uv = project_points(camera, pts)
-            if (
-                uv[:, 0].min() < border_px
-                or uv[:, 1].min() < border_px
-                or uv[:, 0].max() > camera.width - 1 - border_px
-                or uv[:, 1].max() > camera.height - 1 - border_px
-            ):
-                ok = False
-                break
-        if ok:
-            views.append(T)
-    return np.stack(views)

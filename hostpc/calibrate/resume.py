@@ -221,12 +221,15 @@ def stored_result(journal: Journal, run_dir: Path, offsets_now: np.ndarray, aske
     """The finished run's result document if this resume has nothing to do: the run wrote
     its result (journal event `result`) under the offsets the controller has now, and the
     resume asks for nothing new (`asked`: --push, --force, --effects, ...) or the stored
-    verdict is PASS (never overwritten). None: continue the run."""
+    result is pushed offsets that PASSed their verification (never overwritten). A PASS of
+    a run that pushed nothing (refused, --no-push) is only a model check on a few fresh
+    poses: a resume that asks for something (the README's `--effects +joint_compliance
+    --push` after a refused push) continues. None: continue the run."""
     final = journal.last_event("result")
     path = run_dir / "result.json"
     if final is None or not path.is_file() or not same_offsets(final["offsets"], offsets_now):
         return None
-    if asked and final.get("verdict") != "PASS":
+    if asked and not (final.get("verdict") == "PASS" and final.get("push") == "pushed"):
         return None
     try:
         document: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
@@ -238,8 +241,8 @@ def stored_result(journal: Journal, run_dir: Path, offsets_now: np.ndarray, aske
         what = f"already pushed and verified ({verdict})"
     else:
         what = f"already finished (push: {status}, verification: {verdict or 'none'})"
-    note = ("; a PASS result is never overwritten: start a new run to change it"
-            if asked else "")
+    note = ("; verified pushed offsets are never overwritten: start a new run to change "
+            "them" if asked else "")
     progress.message(f"{what}: the stored result follows; nothing changed{note}")
     return document
 

@@ -8,13 +8,14 @@ and the captures, for the phases that use the robot:
 - `measure`: the fit poses;
 - `verify`: the fresh verification poses.
 
-Each phase is timed (one clock reading at its end) by the controller's own clock when it
-reports one (`RobotState.extra["time"]`: the simulator's clock, which charges motion,
-settle and capture time, see docs/simulator.md), else by the host's monotonic clock (a
-real robot is busy for the wall time of the phase). Each timed phase is journaled
-(`{"event": "robot_time", "phase": ..., "seconds": ..., "clock": "controller"|"host"}`),
-so a resumed run adds the time of every session; a phase cut short by an interruption
-loses that session's part of it.
+Each phase is timed (a clock reading after every journaled pose and at the phase's end) by
+the controller's own clock when it reports one (`RobotState.extra["time"]`: the simulator's
+clock, which charges motion, settle and capture time, see docs/simulator.md), else by the
+host's monotonic clock (a real robot is busy for the wall time of the phase). Each reading
+journals the time since the previous one (`{"event": "robot_time", "phase": ...,
+"seconds": ..., "clock": "controller"|"host"}`), right after the pose's own record, so a
+resumed run adds the time of every session, and a session killed mid-phase (kill -9, power
+cut) loses at most the pose it was measuring.
 
 `robot_time_document(journal)` is result.json's `robot_time_s`: seconds per phase and
 `total` (their sum), with the clock used.
@@ -45,11 +46,11 @@ async def robot_clock(robot: RobotAdapter) -> tuple[float, str]:
 class RobotTimer:
     """Times the phases of one session of a run and journals them (module docstring).
 
-    The controller's clock is read once per phase end (one `state` request each): a phase
-    runs from the previous reading (the run's first `state`, then the last phase end), so
-    nothing happens to the controller's clock between phases but the fit and the push,
-    which do not advance a simulated clock. With the host's clock (free to read) `begin`
-    restarts the count, so the fit's time is not the robot's."""
+    The controller's clock is read after each pose and at each phase end (one `state`
+    request each): a reading counts from the previous one (the run's first `state`, then
+    the last reading), so nothing happens to the controller's clock between phases but the
+    fit and the push, which do not advance a simulated clock. With the host's clock (free
+    to read) `begin` restarts the count, so the fit's time is not the robot's."""
 
     def __init__(self, robot: RobotAdapter, journal: Journal, state: RobotState) -> None:
         self.robot = robot
@@ -66,7 +67,8 @@ class RobotTimer:
             self._last = time.monotonic()
 
     async def end(self, phase: str) -> float:
-        """A phase ends: read the clock, journal the phase's robot time (s)."""
+        """A pose or a phase ends: read the clock, journal the phase's robot time since the
+        previous reading (s)."""
         now, clock = await robot_clock(self.robot)
         last, self._last = self._last, now
         if clock != self._clock:  # the controller's clock vanished: nothing sure

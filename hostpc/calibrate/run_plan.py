@@ -1,6 +1,13 @@
 """The plan of a calibration run: candidate pool, informative fit poses in travel order,
 verification poses (none of them a fit pose), and the identifiability check BEFORE anything
-moves. Pure numerics apart from the progress messages."""
+moves. Pure numerics apart from the progress messages.
+
+With a target sigma (stereo_target's default) the fit poses are the fewest that reach it,
+visited as a tour, and the verification poses a random choice visited as a tour from the
+last fit pose (`hostpc.planning.verify_poses`): the short-robot-time plan. The rest of the
+selection (up to --poses) is kept as `q_more`, a tour from the last fit pose, which the
+runner measures only if the fit does not explain the measurements. Without one (`--poses
+N` alone) N poses nearest-neighbour ordered and a plain random verification choice."""
 
 from __future__ import annotations
 
@@ -21,7 +28,14 @@ from hostpc.planning.design import (
     select_groups,
     verify_groups,
 )
+from hostpc.planning.tour import short_path
+from hostpc.planning.verify_poses import nearby_verify_poses
 from hostpc.robots.base import RobotState
+
+EXTENDED_VERIFY_POSES = 10
+"""Verification poses of a short plan that had to grow (its model failed the fit): the
+count of a fixed plan; 4 nearby-in-time poses lack the power against the unmodelled effect
+(docs/performance.md: 15 of 20 forced pushes caught with 4, 20 of 20 with 10)."""
 
 
 class PlanningError(InputError):
@@ -44,15 +58,26 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     design = make_design(A, names, units)
     structural = design.structural
     groups = method.pose_groups(pool)
+    more = np.zeros(0, dtype=int)
+    short = groups is None and settings.target_sigma_deg is not None  # short robot time
+    limits = (state.q_min, state.q_max)
+    q_more: np.ndarray | None = None
     if groups is None:
         chosen = select(design, settings.n_poses, settings.criterion, rng)
         if settings.target_sigma_deg is not None:  # the fewest poses that reach it
             enough = poses_for_target_sigma(design, chosen,
                                             math.radians(settings.target_sigma_deg),
                                             state.q.size, min_poses=3)
+            more = np.zeros(0, dtype=int) if enough is None else chosen[enough:]
             chosen = chosen if enough is None else chosen[:enough]
-        fit_indices = chosen[order_for_travel(pool[chosen], state.q,
-                                              tour=settings.target_sigma_deg is not None)]
+        if short:  # a tour, full-turn joints the short way round (tour.short_path)
+            order, q_short = short_path(pool[chosen], state.q, *limits)
+            fit_indices = chosen[order]
+        else:
+            fit_indices = chosen[order_for_travel(pool[chosen], state.q)]
+        if more.size:  # measured only if the model fails (runner): a tour from the last
+            order, q_more = short_path(pool[more], q_short[-1], *limits)
+            more = more[order]
     else:  # whole groups (sphere_probe: an orientation's 5 contacts), in the pool order
         fit_indices = select_groups(design, groups, settings.n_poses, settings.criterion,
                                     rng)
@@ -64,16 +89,30 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
             f"the {len(fit_indices)} planned poses cannot separate the model's parameters "
             f"(rank {check.plan_rank} of {check.pool_rank}): {lines}. Fix: more poses "
             "(--poses), fewer effects (--effects), or a wider pose range")
-    q_fit = pool[fit_indices]
+    q_fit = q_short if short else pool[fit_indices]
     last = q_fit[-1] if q_fit.shape[0] else state.q
-    if groups is None:
+    q_verify_more: np.ndarray | None = None
+    if short:
+        rest = np.setdiff1d(np.arange(pool.shape[0]), np.concatenate([fit_indices, more]))
+        verify_indices = nearby_verify_poses(pool, rest, last, settings.n_verify, rng)
+        order, q_verify = short_path(pool[verify_indices], last, *limits)
+        verify_indices = verify_indices[order]
+        if more.size:  # if the model fails: the verification with a fixed plan's count
+            rest = np.setdiff1d(rest, verify_indices)
+            from_pose = q_verify[-1] if verify_indices.size else last
+            extra = nearby_verify_poses(
+                pool, rest, from_pose, max(0, EXTENDED_VERIFY_POSES - verify_indices.size),
+                rng)
+            q_verify_more = short_path(pool[extra], from_pose, *limits)[1]
+    elif groups is None:
         rest = np.setdiff1d(np.arange(pool.shape[0]), fit_indices)
         verify_indices = rng.choice(rest, size=min(settings.n_verify, rest.size),
                                     replace=False)
         verify_indices = verify_indices[order_for_travel(pool[verify_indices], last)]
     else:
         verify_indices = verify_groups(groups, fit_indices, settings.n_verify, rng)
-    q_verify = pool[verify_indices]
+    if not short:
+        q_verify = pool[verify_indices]
     sigmas = joint_offset_sigmas(plan_design, state.q.size)
     info = {
         "criterion": settings.criterion,
@@ -91,4 +130,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         "predicted joint offset sigma "
         + ", ".join("-" if not np.isfinite(s) else f"{math.degrees(s):.4f}"
                     for s in sigmas) + " deg")
-    return Plan(q=q_fit, q_verify=q_verify, info=info)
+    if more.size:
+        info["more_poses"] = int(more.size)
+    return Plan(q=q_fit, q_verify=q_verify, info=info, q_more=q_more,
+                q_verify_more=q_verify_more)

@@ -23,13 +23,13 @@ import dataclasses
 import datetime as _dt
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from hostpc.calibrate.journal import Journal, write_json_atomic
+from hostpc.calibrate.more_poses import more_poses_reason
 from hostpc.calibrate.push import (
     PushPlan,
     execute_push,
@@ -55,6 +55,7 @@ from hostpc.calibrate.resume import (
 from hostpc.calibrate.robot_time import RobotTimer
 from hostpc.calibrate.run_plan import PlanningError, plan_run
 from hostpc.calibrate.run_report import write_run_report
+from hostpc.calibrate.run_values import RobotInfo, RunOutcome
 from hostpc.calibrate.summary import (
     EXIT_PUSH_REFUSED,
     EXIT_VERIFY_FAILED,
@@ -85,36 +86,6 @@ __all__ = [
     "RESUME_OVERRIDABLE", "PlanningError", "RobotInfo", "RunOutcome", "Runner",
     "format_summary", "truth_comparison",
 ]
-
-@dataclass(frozen=True)
-class RobotInfo:
-    """How the run reaches its robot: the address text, the driver, simulated or not, and
-    the simulated scenario file (for a resume of a simulated run)."""
-
-    address: str
-    driver: str = "zerocal"
-    sim: bool = False
-    scenario: str | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"address": self.address, "driver": self.driver, "sim": self.sim,
-                "scenario": self.scenario}
-
-
-@dataclass
-class RunOutcome:
-    """What a run produced. document: the JSON result; summary: the human text."""
-
-    run_dir: Path
-    document: dict[str, Any]
-    summary: str
-    exit_code: int
-    fit: FitResult | None = None
-    dataset: Dataset | None = None
-    verify: VerifyResult | None = None
-    push: PushPlan | None = None
-    extras: dict[str, Any] = field(default_factory=dict)
-
 
 class Runner:
     """One calibration run in `run_dir` (new, or resumed if the folder holds a run).
@@ -263,12 +234,14 @@ class Runner:
         if n_measured < 3:
             raise ZerocalError(f"only {n_measured} of {plan.q.shape[0]} poses measured; "
                                "nothing to fit (see the skipped reasons in journal.jsonl)")
-        dataset = self._dataset(method, "fit")
-        save_dataset(dataset, self.run_dir / "dataset.json")
-
-        progress.stage("fit")
-        result = fit(dataset, settings.effects, plugins=settings.plugins, loss=settings.loss,
-                     cv_folds=settings.cv_folds)
+        result, dataset = self._fit(method, settings)
+        reason = more_poses_reason(self.journal, plan, result)
+        if reason is not None:  # diagnostics need more data to see the missing effect
+            progress.message(f"{reason}: measuring {plan.more.shape[0]} more poses")
+            self._timer.begin()
+            q_now = await self._acquire(method, "fit", plan.more, q_now, plan.q.shape[0])
+            await self._timer.end("measure")
+            result, dataset = self._fit(method, settings)
         write_json_atomic(self.run_dir / "fit.json", result.to_dict())
         status = "converged" if result.converged else "NOT converged"
         progress.message(f"fit: RMS {result.rms * 1e3:.4f} mm, chi2/dof "
@@ -282,7 +255,7 @@ class Runner:
                                  push_status, progress)
 
         verify_result: VerifyResult | None = None
-        if (settings.n_verify > 0 and plan.q_verify.shape[0] > 0
+        if (settings.n_verify > 0 and self._verify_poses(plan).shape[0] > 0
                 and push_status != "rolled_back"):
             verify_result = await self._verify(method, plan, result, settings, offsets,
                                                pushed_delta, q_now)
@@ -340,11 +313,22 @@ class Runner:
                     record, reason=f"{record.reason} ({MAX_POSE_ATTEMPTS} attempts)")
             record = self._clock.continue_t(record)
             self.journal.record(record)
+            # the pose's robot time, journaled with it: a session killed mid-phase keeps
+            # the time of every pose it journaled (robot_time.py)
+            await self._timer.end("measure" if phase == "fit" else "verify")
             done += 1
             if not record.ok:
                 progress.message(f"{phase} pose {pose}: skipped ({record.reason})")
             progress.advance(done, f"{phase} pose {pose + 1}/{total}")
         return q_now
+
+    def _fit(self, method: Method, settings: RunSettings) -> tuple[FitResult, Dataset]:
+        """Fit every measured fit pose (dataset.json written first)."""
+        dataset = self._dataset(method, "fit")
+        save_dataset(dataset, self.run_dir / "dataset.json")
+        self.progress.stage("fit")
+        return fit(dataset, settings.effects, plugins=settings.plugins, loss=settings.loss,
+                   cv_folds=settings.cv_folds), dataset
 
     def _dataset(self, method: Method, phase: str, first: int = 0,
                  stop: int | None = None) -> Dataset:
@@ -357,10 +341,11 @@ class Runner:
                       q_now: np.ndarray) -> VerifyResult:
         """Measure this round's verification poses (all measured under `offsets`, the
         controller's now) and test them; VerifyLost if every pose was skipped."""
-        n_verify = plan.q_verify.shape[0]
+        q_verify = self._verify_poses(plan)
+        n_verify = q_verify.shape[0]
         number, first = verify_round(self.journal, offsets, pushed_delta, n_verify)
         self._timer.begin()
-        await self._acquire(method, "verify", plan.q_verify, q_now, first)
+        await self._acquire(method, "verify", q_verify, q_now, first)
         await self._timer.end("verify")
         if not any(r.ok for r in self.journal.records("verify")
                    if first <= r.index < first + n_verify):
@@ -421,6 +406,10 @@ class Runner:
             for j, (o, n) in enumerate(zip(plan.old, plan.new, strict=True)) if plan.pushed[j])
             + f" deg (rollback id {record.rollback_id})")
         return "pushed", plan.delta.copy(), plan.new.copy()
+
+    def _verify_poses(self, plan: Plan) -> np.ndarray:
+        """The plan's verification poses, with its further ones if it grew (more_poses)."""
+        return plan.verify_poses(self.journal.last_event("more_poses") is not None)
 
     def _pushed_ever(self) -> bool:
         """True if this run ever wrote (or meant to write) the controller's offsets."""

@@ -73,11 +73,14 @@ def result_document(journal: Journal, run_dir: Path, robot: Mapping[str, Any],
         "method_setup": method.describe(),
         "plan": {
             "n_poses": int(plan.q.shape[0]),
-            "n_verify": int(plan.q_verify.shape[0]),
+            "n_verify": int(plan.verify_poses(
+                journal.last_event("more_poses") is not None).shape[0]),
             **{k: v for k, v in plan.info.items() if k != "parameters"},
         },
         "acquisition": {
-            "n_planned": int(plan.q.shape[0]),
+            "n_planned": int(plan.q.shape[0]) + (
+                int(plan.more.shape[0]) if journal.last_event("more_poses") else 0),
+            "more_poses": (journal.last_event("more_poses") or {}).get("reason"),
             "n_measured": dataset.n_samples,
             "n_poses_measured": sum(r.ok for r in journal.records("fit")),
             "n_skipped": len(skipped),
@@ -160,7 +163,8 @@ def format_summary(document: Mapping[str, Any]) -> str:
         "fit poses"
         + (f" ({acq['n_measured']} samples)"
            if acq.get("n_poses_measured", acq["n_measured"]) != acq["n_measured"] else "")
-        + (f", {acq['n_skipped']} skipped" if acq["n_skipped"] else ""),
+        + (f", {acq['n_skipped']} skipped" if acq["n_skipped"] else "")
+        + (f" (more poses measured: {acq['more_poses']})" if acq.get("more_poses") else ""),
         f"fit: {'converged' if fitd['converged'] else 'NOT CONVERGED'}, effects "
         f"{', '.join(fitd['effects'])}; residual RMS {fitd['rms_mm']:.4f} mm "
         f"(max {fitd['max_mm']:.4f}), measured noise RMS {_mm(fitd['noise_rms_mm'])} mm "

@@ -38,9 +38,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from hostpc.dataset import Dataset
+from hostpc.diagnostics.distributions import chi2_sf
 from hostpc.fitting import FitResult
 from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem
@@ -193,7 +193,7 @@ def evaluate_verify(result: FitResult, dataset: Dataset, pushed_delta: np.ndarra
     assert jacobian is not None
     statistic, dof = chi_square_statistic(residual, problem.sqrt_information, jacobian,
                                           result.covariance, factor)
-    p_value = float(stats.chi2.sf(statistic, dof)) if dof > 0 else math.nan
+    p_value = chi2_sf(statistic, dof) if dof > 0 else math.nan
     after = np.linalg.norm(residual, axis=1)
     before = np.linalg.norm(problem.measured - predicted_before, axis=1)
 

@@ -49,6 +49,7 @@ from hostpc.cli.calibrate_checks import (
 )
 from hostpc.cli.fit import add_model_options
 from hostpc.cli.numbers import finite, integer
+from hostpc.cli.pose_counts import pose_counts
 from hostpc.cli.progress import StderrProgress
 from hostpc.errors import InputError
 from hostpc.methods import METHOD_CLASSES
@@ -148,9 +149,14 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--timeout", type=POSITIVE, default=10.0, help="seconds per request")
     parser.add_argument("--method", choices=tuple(METHOD_CLASSES), default="stereo_target",
                         help="measurement method (default stereo_target)")
-    parser.add_argument("--poses", type=COUNT, default=60, help="fit poses (default 60)")
-    parser.add_argument("--verify-poses", type=integer(least=0), default=10,
-                        help="fresh verification poses after the push (default 10; 0 = none)")
+    parser.add_argument("--poses", type=COUNT, default=None,
+                        help="fit poses (default: stereo_target the fewest that reach "
+                        "--target-sigma, at most 60; other methods 60); --poses N alone "
+                        "measures exactly N")
+    parser.add_argument("--verify-poses", type=integer(least=0), default=None,
+                        help="fresh verification poses after the push (default: 4 with a "
+                        "target sigma, chosen for the chi-square test's power, else 10; "
+                        "0 = none)")
     parser.add_argument("--seed", type=int, default=0, help="planning seed (default 0)")
     add_model_options(parser)
     parser.add_argument("--known", metavar="FRAMES",
@@ -197,7 +203,8 @@ def register(subparsers: Any) -> None:
                         help="pose selection (default D-optimal)")
     parser.add_argument("--target-sigma", type=POSITIVE, default=None, metavar="DEG",
                         help="stop adding fit poses once every identifiable joint offset's "
-                        "predicted sigma is <= DEG (then --poses is the most)")
+                        "predicted sigma is <= DEG (then --poses is the most; default "
+                        "stereo_target 0.002 unless --poses is given)")
     parser.add_argument("--candidates", type=COUNT, default=1500,
                         help="candidate pool size of the planner (default 1500)")
     parser.add_argument("--scenario", metavar="FILE", help="with --robot sim: scenario file")
@@ -224,6 +231,7 @@ def _one_line_error(parser: argparse.ArgumentParser, message: str) -> NoReturn:
 
 
 def _settings(args: argparse.Namespace) -> RunSettings:
+    args.poses, args.verify_poses, args.target_sigma = pose_counts(args)
     if args.poses < 1:
         raise InputError(f"--poses {args.poses}: must be at least 1")
     if args.verify_poses < 0:

@@ -113,16 +113,41 @@ class Plan:
 
     q: (N, n) fit poses in visiting order; q_verify: (K, n) verification poses (none of
     them a fit pose); info: what the planner reports (criterion, pool size, predicted
-    joint-offset sigmas, structural null directions) as JSON-ready values.
+    joint-offset sigmas, structural null directions) as JSON-ready values; q_more: (M, n)
+    further fit poses measured only if the fit of q does not explain its measurements (a
+    target-sigma plan: the rest of the nested selection, so diagnostics get the data to
+    see the missing effect), none of them a verification pose; q_verify_more: (L, n)
+    further verification poses, measured with q_verify when q_more was (a model that failed
+    its fit needs a verification with more power, docs/calibrate.md).
     """
 
     q: np.ndarray
     q_verify: np.ndarray
     info: Mapping[str, Any] = field(default_factory=dict)
+    q_more: np.ndarray | None = None
+    q_verify_more: np.ndarray | None = None
+
+    @property
+    def more(self) -> np.ndarray:
+        """(M, n) the further fit poses (M = 0 without any)."""
+        return (self.q_more if self.q_more is not None
+                else np.zeros((0, self.q.shape[1] if self.q.ndim == 2 else 0)))
+
+    def verify_poses(self, extended: bool) -> np.ndarray:
+        """(K, n) this run's verification poses: q_verify, and q_verify_more after the
+        plan was extended by q_more."""
+        if extended and self.q_verify_more is not None and self.q_verify_more.shape[0]:
+            return np.vstack([self.q_verify, self.q_verify_more])
+        return self.q_verify
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form (radians)."""
-        return {"q": self.q.tolist(), "q_verify": self.q_verify.tolist(), "info": dict(self.info)}
+        data = {"q": self.q.tolist(), "q_verify": self.q_verify.tolist(),
+                "info": dict(self.info)}
+        for key, value in (("q_more", self.q_more), ("q_verify_more", self.q_verify_more)):
+            if value is not None and value.shape[0]:
+                data[key] = value.tolist()
+        return data
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Plan:
@@ -130,7 +155,9 @@ class Plan:
         n = len(data["q"][0]) if data["q"] else len(data["q_verify"][0])
         q = np.asarray(data["q"], dtype=float).reshape(-1, n)
         q_verify = np.asarray(data["q_verify"], dtype=float).reshape(-1, n)
-        return cls(q=q, q_verify=q_verify, info=dict(data.get("info", {})))
+        more = {key: np.asarray(data[key], dtype=float).reshape(-1, n)
+                for key in ("q_more", "q_verify_more") if data.get(key)}
+        return cls(q=q, q_verify=q_verify, info=dict(data.get("info", {})), **more)
 
 
 @dataclass(frozen=True)
@@ -238,6 +265,9 @@ class Method(ABC):
 
     name: ClassVar[str]
     """The dataset `method` this produces (stereo_target, sphere_probe, dual_loop)."""
+    default_target_sigma_deg: ClassVar[float | None] = None
+    """`hostpc calibrate` without --poses stops adding fit poses at this predicted joint
+    offset sigma (deg; None: a fixed pose count)."""
 
     def __init__(self, settings: RunSettings, cell: Cell, run_dir: Path) -> None:
         self.settings = settings

@@ -65,6 +65,7 @@ class StereoTargetMethod(Method):
     (px, the systematic floor added to each measured covariance)."""
 
     name: ClassVar[str] = "stereo_target"
+    default_target_sigma_deg: ClassVar[float | None] = 0.002
 
     def __init__(self, settings: Any, cell: Any, run_dir: Path) -> None:
         super().__init__(settings, cell, run_dir)
@@ -140,7 +141,7 @@ class StereoTargetMethod(Method):
         spec = ChessboardSpec(int(board["cols"]), int(board["rows"]),
                               float(board["square_size"]))
         progress.stage("rig calibration", n_views)
-        pairs, planner = [], None
+        pairs, corners, planner = [], [], None
         for view in range(max_views):
             if planner is not None and planner.done():
                 break
@@ -148,8 +149,10 @@ class StereoTargetMethod(Method):
             left, right = as_gray(capture.left, "left"), as_gray(capture.right, "right")
             if planner is None:
                 planner = CoveragePlanner(n_views, (left.shape[1], left.shape[0]))
-            if planner.offer(view, find_chessboard(left, spec), find_chessboard(right, spec)):
+            found = (find_chessboard(left, spec), find_chessboard(right, spec))
+            if planner.offer(view, *found):
                 pairs.append((left, right))
+                corners.append(found)  # detected once: calibrate_rig reuses them
             covered = min(planner.coverage)
             progress.advance(min(len(pairs), n_views),
                              f"chessboard view {view + 1}: {len(pairs)} kept, "
@@ -163,7 +166,7 @@ class StereoTargetMethod(Method):
                 f"stereo rig calibration failed: the chessboard was found in none of the "
                 f"{len(planner.rejected)} views")
         progress.stage("rig solve")
-        result = calibrate_rig(pairs, spec)
+        result = calibrate_rig(pairs, spec, corners)
         self.rig_report = {
             "ok": bool(result.ok),
             "rms_px": float(result.rms),

@@ -368,6 +368,11 @@ def look_at_candidates(
     q_max = np.minimum(np.asarray(q_max, float), chain.q_max)
     seed_flange = forward(chain, q_seed[None, :]).T_base_flange[0, :3, 3]
     seed_azimuth = np.arctan2(seed_flange[1], seed_flange[0])
+    # every pose's angles are taken nearest ONE reference, the seed turned toward the
+    # target: poses that look at a target behind the robot then differ by a few degrees
+    # of joint 1, not by a full turn (+179 vs -179 deg)
+    q_reference = q_seed.copy()
+    q_reference[0] += _wrap(np.arctan2(target[1], target[0]) - seed_azimuth)
     found: list[np.ndarray] = []
     total = 0
     for _ in range(20):
@@ -391,7 +396,7 @@ def look_at_candidates(
         seeds[:, 0] = q_seed[0] + _wrap(goal_azimuth - seed_azimuth)
         seeds[:, -1] = q_seed[-1] + roll
         q, ok = solve_ik(chain, goals, seeds, iterations=50)
-        q = q_seed + _wrap(q - q_seed)  # the equivalent angle nearest the seed
+        q = q_reference + _wrap(q - q_reference)  # the equivalent angle nearest it
         within = np.all((q >= q_min) & (q <= q_max), axis=1)
         near = np.all(np.abs(q[:, 1:-1] - q_seed[1:-1]) < max_travel, axis=1)
         keep = q[ok & within & near]

@@ -15,7 +15,14 @@ So a tour is never longer than the selection order nor than nearest neighbour. T
 is symmetric, so reversing a segment leaves its inner moves unchanged and a reversal's gain
 is computed from the two moves it replaces.
 
-Shapes: q (N, n) rad; q_start (n,) rad; joint_speed (n,) rad/s (or None: all equal).
+Joints that turn more than a full turn (a UR's +-360 deg) reach a pose by any angle
+q + 2 pi m within their limits: with `periodic` (n,) bool such a joint's move is the shorter
+way round, min(|dq|, 2 pi - |dq|), and `unwrap_path` then picks, pose after pose, the
+equivalent angle nearest the previous one (within the limits), so the robot really moves
+the short way. The kinematics is 2 pi periodic, so the measurement does not change.
+
+Shapes: q (N, n) rad; q_start (n,) rad; joint_speed (n,) rad/s (or None: all equal);
+periodic (n,) bool (or None: no joint).
 """
 
 from __future__ import annotations
@@ -26,28 +33,35 @@ MAX_PASSES = 50
 
 
 def move_times(q_from: np.ndarray, q_to: np.ndarray,
-               joint_speed: np.ndarray | None = None) -> np.ndarray:
+               joint_speed: np.ndarray | None = None,
+               periodic: np.ndarray | None = None) -> np.ndarray:
     """Times of joint moves q_from[k] -> q_to[k] ((..., n) each, broadcast) as
-    max_i |dq_i| / v_i; with joint_speed None, the largest joint motion (rad)."""
+    max_i |dq_i| / v_i; with joint_speed None, the largest joint motion (rad); a periodic
+    joint's |dq| the shorter way round."""
     dq = np.abs(np.asarray(q_to, float) - np.asarray(q_from, float))
+    if periodic is not None and np.any(periodic):
+        around = np.mod(dq, 2 * np.pi)
+        dq = np.where(periodic, np.minimum(around, 2 * np.pi - around), dq)
     if joint_speed is not None:
         dq = dq / np.asarray(joint_speed, float)
     return np.asarray(np.max(dq, axis=-1))
 
 
 def path_time(q: np.ndarray, q_start: np.ndarray | None = None,
-              joint_speed: np.ndarray | None = None) -> float:
+              joint_speed: np.ndarray | None = None,
+              periodic: np.ndarray | None = None) -> float:
     """Travel time (s; rad with equal speeds) of visiting q (N, n) in its order from
     q_start (none: from the first pose)."""
     q = np.asarray(q, float)
     if q.shape[0] == 0:
         return 0.0
     path = q if q_start is None else np.vstack([np.asarray(q_start, float)[None, :], q])
-    return float(np.sum(move_times(path[:-1], path[1:], joint_speed)))
+    return float(np.sum(move_times(path[:-1], path[1:], joint_speed, periodic)))
 
 
 def nearest_neighbour(q: np.ndarray, q_start: np.ndarray | None,
-                      joint_speed: np.ndarray | None = None) -> np.ndarray:
+                      joint_speed: np.ndarray | None = None,
+                      periodic: np.ndarray | None = None) -> np.ndarray:
     """Indices into q (N, n): always move to the nearest unvisited pose, from q_start (or
     from the first pose)."""
     n_poses = q.shape[0]
@@ -57,7 +71,7 @@ def nearest_neighbour(q: np.ndarray, q_start: np.ndarray | None,
     current = q_start if q_start is not None else q[0]
     order: list[int] = []
     while remaining:
-        cost = move_times(current, q[remaining], joint_speed)
+        cost = move_times(current, q[remaining], joint_speed, periodic)
         k = remaining.pop(int(np.argmin(cost)))
         order.append(k)
         current = q[k]
@@ -65,7 +79,8 @@ def nearest_neighbour(q: np.ndarray, q_start: np.ndarray | None,
 
 
 def two_opt(q: np.ndarray, order: np.ndarray, q_start: np.ndarray | None,
-            joint_speed: np.ndarray | None = None) -> np.ndarray:
+            joint_speed: np.ndarray | None = None,
+            periodic: np.ndarray | None = None) -> np.ndarray:
     """`order` (indices into q) improved by 2-opt segment reversals until none shortens
     the open path from q_start (with q_start None the first pose of `order` stays first)."""
     order = np.asarray(order, dtype=int).copy()
@@ -75,7 +90,7 @@ def two_opt(q: np.ndarray, order: np.ndarray, q_start: np.ndarray | None,
     body = order if q_start is not None else order[1:]
     fixed = 0 if q_start is not None else 1
     nodes = np.vstack([head[None, :], q[body]])  # node 0 is the fixed start
-    D = move_times(nodes[:, None, :], nodes[None, :, :], joint_speed)
+    D = move_times(nodes[:, None, :], nodes[None, :, :], joint_speed, periodic)
     path = np.arange(nodes.shape[0])
     m = path.size
     for _ in range(MAX_PASSES):
@@ -99,7 +114,8 @@ def two_opt(q: np.ndarray, order: np.ndarray, q_start: np.ndarray | None,
 
 
 def plan_tour(q: np.ndarray, q_start: np.ndarray | None,
-              joint_speed: np.ndarray | None = None) -> np.ndarray:
+              joint_speed: np.ndarray | None = None,
+              periodic: np.ndarray | None = None) -> np.ndarray:
     """Visiting order (indices into q (N, n)) of a short tour from q_start (see the module
     docstring): never longer than the given order nor than nearest neighbour."""
     q = np.asarray(q, float)
@@ -107,6 +123,58 @@ def plan_tour(q: np.ndarray, q_start: np.ndarray | None,
     if n_poses == 0:
         return np.zeros(0, dtype=int)
     given = np.arange(n_poses)
-    greedy = nearest_neighbour(q, q_start, joint_speed)
-    start = min((given, greedy), key=lambda o: path_time(q[o], q_start, joint_speed))
-    return two_opt(q, start, q_start, joint_speed)
+    greedy = nearest_neighbour(q, q_start, joint_speed, periodic)
+    start = min((given, greedy),
+                key=lambda o: path_time(q[o], q_start, joint_speed, periodic))
+    return two_opt(q, start, q_start, joint_speed, periodic)
+
+
+def full_turn_joints(q_min: np.ndarray, q_max: np.ndarray) -> np.ndarray:
+    """(n,) bool: the joints whose limits span at least a full turn (2 pi)."""
+    return np.asarray(q_max, float) - np.asarray(q_min, float) >= 2 * np.pi
+
+
+def unwrap_path(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray, q_max: np.ndarray
+                ) -> np.ndarray:
+    """q (N, n) in visiting order with each full-turn joint's angle replaced by an
+    equivalent q + 2 pi m within [q_min, q_max]: per joint, the choice that minimises the
+    joint's total travel from q_start (dynamic programming over the 5 equivalents of each
+    pose), so a joint does not wind itself into its limit. The same poses."""
+    out = np.asarray(q, float).copy()
+    n_poses = out.shape[0]
+    if n_poses == 0:
+        return out
+    shifts = 2 * np.pi * np.arange(-2, 3)
+    for j in np.flatnonzero(full_turn_joints(q_min, q_max)):
+        options = out[:, j, None] + shifts[None, :]                     # (N, 5)
+        allowed = (options >= q_min[j]) & (options <= q_max[j])
+        allowed[~allowed.any(axis=1), 2] = True  # none within the limits: keep it as it is
+        cost = np.where(allowed[0], np.abs(options[0] - q_start[j]), np.inf)
+        choice = np.zeros((n_poses, shifts.size), dtype=int)
+        for k in range(1, n_poses):
+            step = cost[:, None] + np.abs(options[k][None, :] - options[k - 1][:, None])
+            choice[k] = np.argmin(step, axis=0)
+            cost = np.where(allowed[k], step[choice[k], np.arange(shifts.size)], np.inf)
+        best = int(np.argmin(cost))
+        for k in range(n_poses - 1, -1, -1):
+            out[k, j] = options[k, best]
+            best = choice[k, best]
+    return out
+
+
+def short_path(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray, q_max: np.ndarray,
+               joint_speed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(order (N,) into q, the poses (N, n) in that order) of the shorter of two tours from
+    q_start: the plain one, and the one that turns full-turn joints the short way round
+    (`periodic`, then `unwrap_path`), by the real move time. Never longer than the plain
+    tour."""
+    q = np.asarray(q, float)
+    plain = plan_tour(q, q_start, joint_speed)
+    periodic = full_turn_joints(q_min, q_max)
+    if not np.any(periodic) or q.shape[0] == 0:
+        return plain, q[plain]
+    around = plan_tour(q, q_start, joint_speed, periodic)
+    unwrapped = unwrap_path(q[around], q_start, q_min, q_max)
+    if path_time(unwrapped, q_start, joint_speed) < path_time(q[plain], q_start, joint_speed):
+        return around, unwrapped
+    return plain, q[plain]

@@ -145,12 +145,15 @@ def find_chessboard(image: np.ndarray, board: ChessboardSpec) -> np.ndarray | No
 
 
 def calibrate_rig(
-    pairs: list[tuple[np.ndarray, np.ndarray]], board: ChessboardSpec
+    pairs: list[tuple[np.ndarray, np.ndarray]], board: ChessboardSpec,
+    corners: list[tuple[np.ndarray | None, np.ndarray | None]] | None = None,
 ) -> RigCalibration:
     """Calibrate a stereo rig from chessboard image pairs.
 
     pairs: (left, right) grey images (H, W) uint8 of the same board pose, all the same size.
-    board: the chessboard (inner corners, square in m).
+    board: the chessboard (inner corners, square in m). corners: per pair, the corners
+    `find_chessboard` found in (left, right) (the caller detected them already, e.g. to
+    plan the views), so they are not detected twice; None: detected here.
     Returns a RigCalibration whose `warnings` say whether it can be trusted. Raises
     InputError for unusable input: no pairs, mismatched image sizes, or fewer than 3 pairs
     in which the board is found in both images.
@@ -174,8 +177,11 @@ def calibrate_rig(
             size = this_size
         elif this_size != size:
             raise InputError(f"pair {k}: image size {this_size} differs from {size} of pair 0")
-        corners_left = find_chessboard(left, board)
-        corners_right = find_chessboard(right, board)
+        if corners is not None and k < len(corners):
+            corners_left, corners_right = corners[k]
+        else:
+            corners_left = find_chessboard(left, board)
+            corners_right = find_chessboard(right, board)
         if corners_left is None or corners_right is None:
             side = "both images" if corners_left is None and corners_right is None else (
                 "the left image" if corners_left is None else "the right image"

@@ -38,6 +38,17 @@ def test_undistort_inverts_distortion() -> None:
     np.testing.assert_allclose(back, uv, atol=1e-9)
 
 
+def test_one_pixel_undistort_is_bit_identical() -> None:
+    """The board-view sampler's one-pixel path (Python floats) gives the same bits as the
+    array path, so the simulated board poses did not change when it got faster."""
+    from controller_stub.board_views import _undistort_pixel
+
+    rng = np.random.default_rng(2)
+    for u, v in np.column_stack([rng.uniform(0, 1279, 100), rng.uniform(0, 1023, 100)]):
+        expected = undistort_pixels(CAMERA, np.array([[u, v]]))[0]
+        assert np.array_equal(_undistort_pixel(CAMERA, float(u), float(v)), expected)
+
+
 def _centroid(img: np.ndarray, centre: np.ndarray, radius_px: float, plate: float) -> np.ndarray:
     """Intensity-weighted centroid of the dark dot: weights plate - I inside a window."""
     r = int(radius_px * 1.6)

@@ -92,6 +92,25 @@ def test_too_few_views_flagged(chessboard_pairs: list) -> None:
     assert result.used_views == list(range(6))
 
 
+def test_corners_detected_by_the_caller_give_the_same_rig(chessboard_pairs: list) -> None:
+    """calibrate_rig(pairs, board, corners): the caller's detections (the view planner's)
+    are used instead of detecting again, with the same result; a view without corners is
+    skipped as when detected here."""
+    from hostpc.vision.rig_calibration import find_chessboard
+
+    pairs = list(chessboard_pairs)
+    corners = [(find_chessboard(left, BOARD), find_chessboard(right, BOARD))
+               for left, right in pairs]
+    corners[2] = (None, corners[2][1])
+    detected = calibrate_rig(pairs[:2] + [(np.full_like(pairs[2][0], 120), pairs[2][1])]
+                             + pairs[3:], BOARD)
+    given = calibrate_rig(pairs, BOARD, corners)
+    assert given.used_views == detected.used_views == [0, 1, 3, 4, 5]
+    np.testing.assert_array_equal(given.rig.K_left, detected.rig.K_left)
+    np.testing.assert_array_equal(given.rig.T, detected.rig.T)
+    assert given.rms == detected.rms
+
+
 def test_bad_images_skipped_and_flagged(chessboard_pairs: list) -> None:
     blank = np.full_like(chessboard_pairs[0][0], 120)
     pairs = list(chessboard_pairs)

@@ -230,10 +230,11 @@ def test_calibrate_sim_dual_loop_recovers_truth_pushes_and_verifies(
 # ------------------------------------------------------------------ resume
 
 RESUME_POSES = 12
-# requests: get_state, get_offsets, then (move_joints, measure_targets) per pose: index
-# 2 + 2k is the move to pose k; the drop makes that move fail (not executed, not re-sent)
+# requests: get_state, get_offsets, the robot-time clock reading after the rig, then
+# (move_joints, measure_targets, clock reading) per pose: index 3 + 3k is the move to pose
+# k; the drop makes that move fail (not executed, not re-sent)
 DROP_AT_POSE = 5
-DROP_INDEX = 3 + 2 * DROP_AT_POSE  # + 1: the robot-time clock reading after the rig
+DROP_INDEX = 3 + 3 * DROP_AT_POSE
 
 
 def _calibrate(capsys: pytest.CaptureFixture[str], sim: SimulatedController,
@@ -256,7 +257,9 @@ def test_dual_loop_run_cut_and_resumed_equals_uncut_run(
         assert code == 3, stderr
         last = stderr.strip().splitlines()[-1]
         assert "not re-sent" in last and f"--resume {cut}" in last
-        assert len((cut / "journal.jsonl").read_text().splitlines()) == DROP_AT_POSE
+        events = [json.loads(line)["event"]
+                  for line in (cut / "journal.jsonl").read_text().splitlines()]
+        assert events == ["sample", "robot_time"] * DROP_AT_POSE  # each pose, its time
         code, _, stderr = run_cli(capsys, "calibrate", "--resume", str(cut))
         assert code == 0, stderr
         assert "resuming" in stderr

@@ -107,10 +107,11 @@ def test_push_intent_is_journaled_first_and_settled_on_resume(
     poses = 16
     rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
     out = tmp_path / "run"
-    # requests: get_state, get_offsets, (move, capture) per pose, then set_offsets: dropped
-    # (not executed, the link cut) -> the run stops after journaling its intent
-    # + 2: the robot-time clock readings (get_state) after the rig and after the poses
-    scenario = sim_scenario(drop_after_requests=4 + 2 * poses)
+    # requests: get_state, get_offsets, (move, capture, robot-time clock reading) per pose,
+    # then set_offsets: dropped (not executed, the link cut) -> the run stops after
+    # journaling its intent; + 2: the clock readings (get_state) after the rig and after
+    # the poses
+    scenario = sim_scenario(drop_after_requests=4 + 3 * poses)
     with SimulatedController(scenario, tmp_path / "stub") as sim:
         address = f"{sim.address.host}:{sim.address.port}"
         before = _offsets(sim)

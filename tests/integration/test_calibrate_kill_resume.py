@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.robot_time import robot_time_document
 from hostpc.robots.simulator import SimulatedController
 from hostpc.transport import ControllerClient
 from tests.integration.test_calibrate_sim import TOKEN, run_cli, sim_scenario, truth_rig_file
@@ -213,3 +214,31 @@ def test_rollback_warns_when_it_discards_a_later_push(complete_run, tmp_path: Pa
                                    rtol=0, atol=1e-12)
     rollback = _events(run)[-1]
     assert rollback["event"] == "rollback"
+
+
+@pytest.mark.slow
+def test_robot_time_of_a_killed_verify_session_is_kept(complete_run, tmp_path: Path,  # type: ignore[no-untyped-def]
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """kill -9 after two verification poses: the journal already holds their robot time
+    (each pose's time is journaled with it), and the resumed run's result adds it to the
+    resumed session's (before: only phase ends were journaled, so the killed session's
+    verification time was lost)."""
+    complete, _, push = complete_run
+    run = tmp_path / "run"
+    motion = sim_scenario().get("motion", {})
+    per_pose = float(motion.get("settle_s", 0.3)) + float(motion.get("capture_s", 0.1))
+    verify_start = _line_after(complete, "verify_start")
+    second = next(number for number, event in enumerate(_events(complete), start=1)
+                  if number > verify_start and event["event"] == "sample"
+                  and event["phase"] == "verify" and event["index"] == 1)
+    _cut(complete, run, second + 1)  # the second verification pose and the line after it
+    killed = robot_time_document(Journal(run))["verify"]
+    assert killed >= 2 * per_pose  # two settled, captured poses (and the moves to them)
+    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:
+        _set_offsets(sim, push["new_offsets"])
+        code, _, stderr = run_cli(capsys, "calibrate", "--resume", str(run), "--robot",
+                                  f"{sim.address.host}:{sim.address.port}", "--token", TOKEN)
+    assert code == 0, stderr
+    total = json.loads((run / "result.json").read_text())["robot_time_s"]
+    assert total["verify"] >= killed + (N_VERIFY - 2) * per_pose
+    assert total["total"] == pytest.approx(total["rig"] + total["measure"] + total["verify"])

@@ -17,10 +17,11 @@ from hostpc.robots.simulator import SimulatedController
 from tests.integration.test_calibrate_sim import TOKEN, run_cli, sim_scenario, truth_rig_file
 
 POSES = 16
-# requests: get_state, get_offsets, then (move, capture) per pose: index 2 + 2k is the move
-# to pose k; the drop makes that move fail (not executed, not re-sent)
+# requests: get_state, get_offsets, the robot-time clock reading after the rig, then
+# (move, capture, clock reading) per pose: index 3 + 3k is the move to pose k; the drop
+# makes that move fail (not executed, not re-sent)
 DROP_AT_POSE = 7
-DROP_INDEX = 3 + 2 * DROP_AT_POSE  # + 1: the robot-time clock reading after the rig
+DROP_INDEX = 3 + 3 * DROP_AT_POSE
 
 
 def _calibrate(capsys: pytest.CaptureFixture[str], sim: SimulatedController, rig: Path,
@@ -48,8 +49,9 @@ def test_cut_and_resumed_run_equals_uncut_run(tmp_path: Path,
         last = stderr.strip().splitlines()[-1]  # progress lines above, then one error line
         assert last.startswith("hostpc calibrate: error: ")
         assert "not re-sent" in last and f"--resume {cut}" in last
-        lines = (cut / "journal.jsonl").read_text().splitlines()
-        assert len(lines) == DROP_AT_POSE  # every pose measured before the cut is journaled
+        lines = [json.loads(line) for line in (cut / "journal.jsonl").read_text().splitlines()]
+        # every pose measured before the cut is journaled, each with its robot time
+        assert [e["event"] for e in lines] == ["sample", "robot_time"] * DROP_AT_POSE
         assert not (cut / "dataset.json").exists()
         code, stdout, stderr = run_cli(capsys, "calibrate", "--resume", str(cut))
         assert code == 0, stderr

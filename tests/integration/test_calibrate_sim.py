@@ -157,7 +157,8 @@ def test_calibrate_sim_recovers_truth_and_verifies(
 def test_readme_command_calibrates_the_rig_first(tmp_path: Path,
                                                  capsys: pytest.CaptureFixture[str]) -> None:
     """`hostpc calibrate --robot sim` with every default: rig from chessboard captures,
-    60 poses, push, 10 verification poses, report; the text summary on stdout."""
+    the fewest poses whose predicted joint offset sigma reaches 0.002 deg (a tour), push,
+    4 verification poses, report; the text summary on stdout."""
     out = tmp_path / "run"
     code, stdout, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--out", str(out))
     assert code == 0, stderr
@@ -165,11 +166,23 @@ def test_readme_command_calibrates_the_rig_first(tmp_path: Path,
     rig_report = json.loads((out / "rig_calibration.json").read_text())
     assert rig_report["ok"] and len(rig_report["used_views"]) >= 15
     result = json.loads((out / "result.json").read_text())
-    errors = [e for e in result["truth"]["joint_offsets_error_deg"] if e is not None]
-    assert len(errors) == 5 and max(abs(e) for e in errors) <= 0.01
+    assert result["settings"]["target_sigma_deg"] == 0.002
+    assert 3 <= result["plan"]["n_poses"] < 60 and result["acquisition"]["more_poses"] is None
+    predicted = [s for s in result["plan"]["predicted_joint_sigma_deg"] if s is not None]
+    assert len(predicted) == 5 and max(predicted) <= 0.002
+    # every identifiable offset: its reported sigma within the target, its error within
+    # 3 of them
+    errors = result["truth"]["joint_offsets_error_deg"]
+    joints = result["offsets"]["joints"]
+    assert [j for j, e in enumerate(errors) if e is not None] == [0, 1, 2, 3, 4]
+    for j in range(5):
+        assert joints[j]["sigma_deg"] <= 0.002, (j, joints[j]["sigma_deg"])
+        assert abs(errors[j]) <= 3 * joints[j]["sigma_deg"], (j, errors[j])
     assert result["verify"]["passed"] and result["push"]["status"] == "pushed"
     assert "PASS" in stdout and "truth (simulation)" in stdout
-    assert "verify: 10 fresh poses: RMS before (old offsets) " in stdout
+    assert "verify: 4 fresh poses: RMS before (old offsets) " in stdout
+    assert result["robot_time_s"]["clock"] == "controller"
+    assert "robot time: " in stdout
     assert "simulated controller: nothing to roll back after the run" in stdout
     assert "hostpc rollback" not in stdout  # the simulator is gone after the run
     assert stdout.strip() == (out / "summary.txt").read_text().strip()

@@ -1,0 +1,37 @@
+"""More fit poses when a short plan's model fails (the runner's diagnostics safeguard).
+
+A target-sigma plan (stereo_target's default) measures the fewest poses that reach the
+sigma: enough to fit a model that is right, too few for `hostpc diagnose` to tell which
+effect a wrong one lacks (with 7 poses the ladder names the wrong effect in the
+hidden-compliance world). So when the fit does not explain its measurements (chi2/dof
+above the push guard's band, `hostpc.calibrate.push.chi2_dof_upper`), the runner measures
+the plan's further poses (`Plan.q_more`: the rest of the nested D-optimal selection, up to
+--poses) and fits again before the push decision. The decision is journaled
+(`{"event": "more_poses", ...}`) so a resume measures the same poses.
+"""
+
+from __future__ import annotations
+
+import math
+
+from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.push import chi2_dof_upper
+from hostpc.fitting import FitResult
+from hostpc.methods.base import Plan
+
+
+def more_poses_reason(journal: Journal, plan: Plan, result: FitResult) -> str | None:
+    """Why the runner measures `plan.more` (journaled once), or None: the plan has no
+    further poses, or the fit explains its measurements and none were asked before."""
+    if plan.more.shape[0] == 0:
+        return None
+    asked = journal.last_event("more_poses")
+    if asked is not None:
+        return str(asked.get("reason", "asked before"))
+    upper = chi2_dof_upper(result.dof)
+    if not (math.isfinite(upper) and result.chi2_dof > upper):
+        return None
+    reason = (f"the model does not explain the {plan.q.shape[0]} poses (chi2/dof "
+              f"{result.chi2_dof:.3g} above its band {upper:.3g})")
+    journal.event("more_poses", reason=reason, n=int(plan.more.shape[0]))
+    return reason

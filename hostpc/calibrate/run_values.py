@@ -1,0 +1,42 @@
+"""The plain values of a calibration run: how it reaches its robot, and what it produced."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from hostpc.calibrate.push import PushPlan
+from hostpc.calibrate.verify import VerifyResult
+from hostpc.dataset import Dataset
+from hostpc.fitting import FitResult
+
+
+@dataclass(frozen=True)
+class RobotInfo:
+    """How the run reaches its robot: the address text, the driver, simulated or not, and
+    the simulated scenario file (for a resume of a simulated run)."""
+
+    address: str
+    driver: str = "zerocal"
+    sim: bool = False
+    scenario: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"address": self.address, "driver": self.driver, "sim": self.sim,
+                "scenario": self.scenario}
+
+
+@dataclass
+class RunOutcome:
+    """What a run produced. document: the JSON result; summary: the human text."""
+
+    run_dir: Path
+    document: dict[str, Any]
+    summary: str
+    exit_code: int
+    fit: FitResult | None = None
+    dataset: Dataset | None = None
+    verify: VerifyResult | None = None
+    push: PushPlan | None = None
+    extras: dict[str, Any] = field(default_factory=dict)
