@@ -20,14 +20,20 @@ from hostpc.fitting import FitResult
 from hostpc.methods.base import Plan
 
 
-def more_poses_reason(journal: Journal, plan: Plan, result: FitResult) -> str | None:
+def more_poses_reason(journal: Journal, plan: Plan, result: FitResult,
+                      pushed: bool = False) -> str | None:
     """Why the runner measures `plan.more` (journaled once), or None: the plan has no
-    further poses, or the fit explains its measurements and none were asked before."""
+    further poses, or the fit explains its measurements and none were asked before, or
+    offsets were already pushed (``pushed``): poses measured under the pushed offsets cannot
+    join a fit of poses measured under the initial ones, so a resumed run whose new model
+    fails never grows after a push (its push is refused by the model check instead)."""
     if plan.more.shape[0] == 0:
         return None
     asked = journal.last_event("more_poses")
     if asked is not None:
         return str(asked.get("reason", "asked before"))
+    if pushed:
+        return None
     upper = chi2_dof_upper(result.dof)
     if not (math.isfinite(upper) and result.chi2_dof > upper):
         return None

@@ -235,7 +235,7 @@ class Runner:
             raise ZerocalError(f"only {n_measured} of {plan.q.shape[0]} poses measured; "
                                "nothing to fit (see the skipped reasons in journal.jsonl)")
         result, dataset = self._fit(method, settings)
-        reason = more_poses_reason(self.journal, plan, result)
+        reason = more_poses_reason(self.journal, plan, result, pushed=self._pushed_ever())
         if reason is not None:  # diagnostics need more data to see the missing effect
             progress.message(f"{reason}: measuring {plan.more.shape[0]} more poses")
             self._timer.begin()
@@ -297,6 +297,8 @@ class Runner:
         for pose in range(total):
             index = first + pose
             journaled = self.journal.get(phase, index)
+            if phase == "fit" and self._pushed_ever() and journaled is None:
+                continue  # fit poses: never measured after a push (other offsets)
             if journaled is not None and (journaled.ok or not stopped(journaled)
                                           or (phase == "fit" and self._pushed_ever())):
                 continue  # measured, or skipped for good (fit poses: never after a push)

@@ -45,3 +45,27 @@ def test_resume_with_the_missing_effect_refits_pushes_and_verifies(
     assert full["truth"]["max_abs_error_deg"] < 0.5 * lean["truth"]["max_abs_error_deg"]
     # the refused run's result is kept beside the new one
     assert json.loads((run / "result.1.json").read_text())["push"]["status"] == "refused"
+
+
+@pytest.mark.slow
+def test_a_resume_after_a_push_never_measures_more_fit_poses(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The short plan grows (more fit poses) when its model fails, but never after a push:
+    poses measured under the pushed offsets would be fitted as if taken under the initial
+    ones. Session 1 fits the right model on the short plan and pushes; the resume drops
+    joint_compliance, so its model fails the chi2 band: it must refit the journaled poses
+    only (the old runner measured the plan's further poses under the pushed offsets)."""
+    rig = truth_rig_file(load_scenario_file(HIDDEN), tmp_path / "rig.json")
+    run = tmp_path / "run"
+    code, stdout, stderr = run_cli(
+        capsys, "calibrate", "--robot", "sim", "--scenario", str(HIDDEN), "--known", "target",
+        "--rig", str(rig), "--effects", "+joint_compliance", "--cv-folds", "0", "--no-report",
+        "--json", "--out", str(run))
+    first = json.loads(stdout)
+    assert first["push"]["status"] == "pushed", (code, stderr)
+    measured = _fit_lines(run)
+
+    code, stdout, stderr = run_cli(capsys, "calibrate", "--resume", str(run),
+                                   "--effects", "joint_offsets,tool", "--json")
+    assert _fit_lines(run) == measured, "fit poses measured after the push"
+    assert '"event":"more_poses"' not in (run / "journal.jsonl").read_text().replace(" ", "")
