@@ -4,13 +4,16 @@
   poses that reach it, at most --poses (default 60), unless --poses alone asks for a fixed
   count (the behaviour before the short plan: exactly N poses);
 - with a target sigma the verification takes the fewest poses whose chi-square test has
-  95 % power for an error of d2 = 10 per pose (hostpc.planning.verify_poses: 4), else 10.
+  95 % power for an error of d2 = 10 per pose at the run's --verify-alpha
+  (hostpc.planning.verify_poses: 4 at alpha 0.01, 5 at 0.001), else 10;
+- a method that plans whole groups of poses (sphere_probe) refuses --target-sigma.
 """
 
 from __future__ import annotations
 
 import argparse
 
+from hostpc.errors import InputError
 from hostpc.methods import method_class
 from hostpc.planning.verify_poses import verify_poses_for_power
 
@@ -18,6 +21,10 @@ DEFAULT_MAX_POSES = 60
 """Fit poses without --poses: the most with a target sigma, else the count."""
 DEFAULT_VERIFY_POSES = 10
 """Verification poses without --verify-poses and without a target sigma."""
+VERIFY_ALPHA = 0.01
+"""The verification's false-FAIL rate without --verify-alpha (hostpc.calibrate.verify)."""
+MEASURED_PER_POSE = 3
+"""Coordinates a target-sigma method measures per pose (stereo_target: a 3-D point)."""
 
 
 def pose_counts(args: argparse.Namespace) -> tuple[int, int, float | None]:
@@ -25,11 +32,17 @@ def pose_counts(args: argparse.Namespace) -> tuple[int, int, float | None]:
     the method's defaults: a method with a default target sigma (stereo_target) stops at
     it unless --poses alone asks for a fixed count; with a target sigma the verification
     takes the poses its power needs (hostpc.planning.verify_poses), else 10."""
+    method = method_class(args.method)
     target = args.target_sigma
+    if target is not None and getattr(method, "plans_whole_groups", False):
+        raise InputError(f"--target-sigma: {args.method} plans whole groups of poses (a probe "
+                         "orientation's contacts), not pose by pose; use --poses N")
     if target is None and args.poses is None:
-        target = getattr(method_class(args.method), "default_target_sigma_deg", None)
+        target = getattr(method, "default_target_sigma_deg", None)
     poses = DEFAULT_MAX_POSES if args.poses is None else args.poses
     verify = args.verify_poses
     if verify is None:
-        verify = verify_poses_for_power() if target is not None else DEFAULT_VERIFY_POSES
+        alpha = VERIFY_ALPHA if args.verify_alpha is None else float(args.verify_alpha)
+        verify = (verify_poses_for_power(alpha=alpha, m=MEASURED_PER_POSE)
+                  if target is not None else DEFAULT_VERIFY_POSES)
     return poses, verify, target

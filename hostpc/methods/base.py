@@ -268,6 +268,9 @@ class Method(ABC):
     default_target_sigma_deg: ClassVar[float | None] = None
     """`hostpc calibrate` without --poses stops adding fit poses at this predicted joint
     offset sigma (deg; None: a fixed pose count)."""
+    plans_whole_groups: ClassVar[bool] = False
+    """The plan takes whole groups of poses (`pose_groups`: sphere_probe's orientations of
+    5 contacts), so it has no per-pose stop at a target sigma (--target-sigma refused)."""
 
     def __init__(self, settings: RunSettings, cell: Cell, run_dir: Path) -> None:
         self.settings = settings

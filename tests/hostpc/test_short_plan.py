@@ -13,6 +13,8 @@ from hostpc.cli.pose_counts import pose_counts
 from hostpc.methods.base import Plan
 from hostpc.planning.tour import path_time, plan_tour
 from hostpc.planning.verify_poses import (
+    DETECTABLE_D2,
+    DETECTABLE_POWER,
     nearby_verify_poses,
     verify_poses_for_power,
     verify_power,
@@ -115,3 +117,21 @@ def test_full_turn_joints_go_the_short_way_within_their_limits() -> None:
     q[:, 5] = np.radians([-350.0, 170.0])
     unwrapped = unwrap_path(q, np.radians([0, 0, 0, 0, 0, -350.0]), q_min, q_max)
     assert np.degrees(unwrapped[1, 5]) == pytest.approx(-190.0)
+
+
+def test_verify_pose_count_follows_the_runs_alpha() -> None:
+    """A stricter --verify-alpha needs more poses for the same power (review finding: the
+    count was always computed at alpha 0.01, giving 0.93 power at 0.001)."""
+    assert _counts()[1] == 4
+    assert _counts("--verify-alpha", "0.001")[1] == 5
+    assert verify_power(5, DETECTABLE_D2, 0.001) >= DETECTABLE_POWER
+
+
+def test_target_sigma_on_a_method_that_plans_whole_groups_is_refused() -> None:
+    """sphere_probe plans whole probe orientations: a --target-sigma was silently ignored
+    while it still cut the verification to 4 poses (one orientation)."""
+    from hostpc.errors import InputError
+
+    with pytest.raises(InputError, match="whole groups"):
+        _counts("--method", "sphere_probe", "--target-sigma", "0.002")
+    assert _counts("--method", "sphere_probe")[1] == 10

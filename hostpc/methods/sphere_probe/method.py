@@ -170,6 +170,7 @@ class SphereProbeMethod(Method):
     """
 
     name: ClassVar[str] = METHOD
+    plans_whole_groups: ClassVar[bool] = True
 
     def __init__(self, settings: RunSettings, cell: Cell, run_dir: Path) -> None:
         super().__init__(settings, cell, run_dir)
