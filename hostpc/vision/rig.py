@@ -168,9 +168,17 @@ def rig_from_dict(data: Any, source: str = "<rig>") -> StereoRig:
         except (TypeError, ValueError):
             raise InputError(f"{source}: covariance: not a numeric array") from None
     try:
-        return StereoRig(**fields)
+        rig = StereoRig(**fields)
     except ValueError as exc:
         raise InputError(f"{source}: {exc}") from None
+    for name in ("K_left", "K_right"):
+        K = getattr(rig, name)
+        if not (np.all(np.isfinite(K)) and K[0, 0] > 0 and K[1, 1] > 0):
+            raise InputError(f"{source}: {name}: focal lengths must be positive and finite, "
+                             f"got fx {K[0, 0]}, fy {K[1, 1]}")
+    if not (np.all(np.isfinite(rig.T)) and float(np.linalg.norm(rig.T)) > 0):
+        raise InputError(f"{source}: T: the baseline must be non-zero and finite")
+    return rig
 
 
 def save_rig(rig: StereoRig, path: str | Path) -> None:

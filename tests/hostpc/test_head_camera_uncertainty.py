@@ -93,6 +93,22 @@ def test_malformed_calibration_is_one_line() -> None:
         assert "\n" not in str(info.value)
 
 
+def test_a_calibration_with_a_zero_focal_length_or_baseline_is_refused() -> None:
+    """Review finding: fx = 0 was accepted, the floor then divided by zero and the
+    calibration term was dropped without a word."""
+    good = stereo().calibration()
+    for field, value in (("K_left", 0.0), ("K_right", -1.0), ("T", 0.0)):
+        rig = dict(good["rig"])
+        if field == "T":
+            rig["T"] = [0.0, 0.0, 0.0]
+        else:
+            K = [list(row) for row in rig[field]]
+            K[0][0] = value
+            rig[field] = K
+        with pytest.raises(InputError, match=field):
+            camera_calibration({**good, "rig": rig})
+
+
 def world_documents(seed: int, poses: Any, calibration_sigma_px: float,
                     calibrated: np.ndarray | None = None) -> tuple[dict[str, Any], np.ndarray]:
     """A dual_loop dataset measured in simulated world `seed` at the planned poses (the
