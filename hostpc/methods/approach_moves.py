@@ -30,7 +30,8 @@ class ApproachMoves:
     """The approach bookkeeping of one run's free moves (see the module docstring).
 
     settings: the run's settings (``effects``, ``plugins``, ``speed``); chain: the robot,
-    whose joint limits bound the via-points."""
+    whose joint limits bound the via-points (and the controller's, once ``bound`` is told
+    them: the methods do when they plan)."""
 
     def __init__(self, settings: Any, chain: Chain) -> None:
         self.speed = float(settings.speed)
@@ -39,13 +40,21 @@ class ApproachMoves:
         self.tally = ApproachTally.empty(chain.n) if dependent else None
         self.vias = 0
         self._via: np.ndarray | None = None
+        self.q_min = np.asarray(chain.q_min, dtype=float)
+        self.q_max = np.asarray(chain.q_max, dtype=float)
+
+    def bound(self, q_min: np.ndarray, q_max: np.ndarray) -> None:
+        """Keep via-points within the controller's reported limits too (a station may
+        configure tighter limits than the robot model's)."""
+        self.q_min = np.maximum(self.q_min, np.asarray(q_min, dtype=float))
+        self.q_max = np.minimum(self.q_max, np.asarray(q_max, dtype=float))
 
     async def move(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
                    q_from: np.ndarray | None) -> MoveOutcome | SampleRecord:
         """Move to q (n,) rad, through a via-point if the tally asks for one; as
         ``move_or_skip`` (a skipped pose is its SampleRecord)."""
         self._via = None if self.tally is None else via_point(
-            self.tally, q_from, q, q_min=self.chain.q_min, q_max=self.chain.q_max)
+            self.tally, q_from, q, q_min=self.q_min, q_max=self.q_max)
         if self._via is not None:
             self.vias += 1
             first = await move_or_skip(robot, self.speed, phase, index, self._via, q_from)

@@ -199,6 +199,7 @@ class StereoTargetMethod(Method):
     def candidates(self, state: RobotState, rng: np.random.Generator) -> np.ndarray:
         """Look-at poses around the target, kept only if the dot projects well inside both
         images (nominal model, rig intrinsics) at a usable depth."""
+        self._moves.bound(state.q_min, state.q_max)
         baseline = self.rig.baseline
         distance = self.settings.options.get("distance") or (max(0.25, 2.5 * baseline),
                                                              max(0.5, 5.0 * baseline))

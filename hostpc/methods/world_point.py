@@ -165,6 +165,7 @@ class WorldPointMethod(Method):
 
     def candidates(self, state: RobotState, rng: np.random.Generator) -> np.ndarray:
         """Random poses within the limits (10 deg margin) that see a reflector."""
+        self._moves.bound(state.q_min, state.q_max)
         margin = math.radians(10.0)
         low = np.maximum(state.q_min + margin, -math.pi)
         high = np.minimum(state.q_max - margin, math.pi)
