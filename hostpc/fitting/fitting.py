@@ -319,7 +319,9 @@ def _built_problem(dataset: Dataset, effects: str | Iterable[str] | None,
                    plugins: tuple[str | Path, ...]) -> Problem:
     """``build_problem(dataset, effects)``, or the same problem built for them before and
     still held by a result (a problem is immutable, built from the immutable dataset; with
-    plugins, whose files may change, it is always built anew)."""
+    plugins, whose files may change, it is always built anew). A Dataset is a value: a
+    nested dict of it edited in place (``frames["camera"]``, ``extra_fields``) after a fit
+    is not seen by a refit of the same object; make a new one (``dataclasses.replace``)."""
     if plugins:
         return build_problem(dataset, effects, plugins=plugins)
     spec = effects if effects is None or isinstance(effects, str) else tuple(effects)
