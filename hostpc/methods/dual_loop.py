@@ -207,6 +207,11 @@ class DualLoopMethod(Method):
                              "does not")
         progress.message(f"dual_loop: {self.tree.name}, known frames: "
                          f"{', '.join(self.known) or 'none'}")
+        self._progress = progress
+        progress.message("head camera calibration: " + (
+            "reported with its covariance (its error enters the sigmas)"
+            if self.calibration is not None else
+            "not reported by the controller (the sigmas cover the pixel noise only)"))
 
     # ---------------------------------------------------------------- planning
 
@@ -400,7 +405,15 @@ class DualLoopMethod(Method):
         """The dataset's `rig_uncertainty` block (the head camera's calibration, its
         covariance and the pixel floor the covariances include), or nothing when the
         controller reports no calibration or a sample has no `uv`."""
-        if self.calibration is None or not samples or any("uv" not in s for s in samples):
+        if self.calibration is None or not samples:
+            return {}
+        missing = sum("uv" not in s for s in samples)
+        if missing:
+            progress = getattr(self, "_progress", None)
+            if progress is not None:
+                progress.message(f"head camera calibration not propagated: {missing} of "
+                                 f"{len(samples)} target observations came without pixel "
+                                 "centres (uv); the sigmas cover the pixel noise only")
             return {}
         from hostpc.vision.rig_uncertainty import uncertainty_document
 
