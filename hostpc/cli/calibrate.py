@@ -166,10 +166,8 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--rig", metavar="FILE",
                         help="calibrated stereo rig JSON (default: calibrate from chessboard "
                         "captures through the controller)")
-    parser.add_argument("--rig-coverage", type=finite(least=0.5, most=1.0), default=None,
-                        metavar="F", help="rig calibration: take chessboard views until each "
-                        "image's 8x8 grid is covered this much (default 0.5; 0.55 was the "
-                        "default before, about twice the views)")
+    parser.add_argument("--rig-coverage", type=finite(least=0.5, most=1.0), metavar="F",
+                        help="rig calibration: chessboard coverage to plan for (default 0.5)")
     parser.add_argument("--depth", choices=("triangulate", "sgbm"), default="triangulate",
                         help="stereo depth method (default triangulate)")
     parser.add_argument("--pixel-floor", type=finite(least=0.0), default=0.01, metavar="PX",
