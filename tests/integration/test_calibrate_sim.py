@@ -195,6 +195,22 @@ def test_readme_command_calibrates_the_rig_first(tmp_path: Path,
         assert (out / "report.html").stat().st_size > 0
 
 
+def test_rig_coverage_option_plans_more_views(tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """`--rig-coverage 0.55` (the old target) plans views until both images are covered
+    55 %: more captures than the default's 20 on this world (44), every kept view adding a
+    cell beyond the 20 planned ones."""
+    out = tmp_path / "run"
+    code, _, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--out", str(out),
+                              "--rig-coverage", "0.55", "--no-report", "--no-push")
+    assert code == 0, stderr
+    plan = json.loads((out / "rig_calibration.json").read_text())["plan"]
+    assert min(plan["coverage"]) >= 0.55
+    assert len(plan["views_kept"]) + len(plan["views_rejected"]) > 25
+    assert json.loads((out / "run.json").read_text())["settings"]["options"][
+        "rig_coverage"] == 0.55
+
+
 @pytest.mark.slow
 def test_all_six_offsets_with_a_measured_camera_mount_and_target(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
