@@ -166,6 +166,8 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--rig", metavar="FILE",
                         help="calibrated stereo rig JSON (default: calibrate from chessboard "
                         "captures through the controller)")
+    parser.add_argument("--rig-coverage", type=finite(least=0.5, most=1.0), metavar="F",
+                        help="rig calibration: chessboard coverage to plan for (default 0.5)")
     parser.add_argument("--depth", choices=("triangulate", "sgbm"), default="triangulate",
                         help="stereo depth method (default triangulate)")
     parser.add_argument("--pixel-floor", type=finite(least=0.0), default=0.01, metavar="PX",
@@ -252,6 +254,8 @@ def _settings(args: argparse.Namespace) -> RunSettings:
     options: dict[str, Any] = {"depth": args.depth, "pixel_floor": args.pixel_floor}
     if args.rig:
         options["rig"] = str(Path(args.rig).resolve())
+    if args.rig_coverage is not None:
+        options["rig_coverage"] = args.rig_coverage
     if args.probe_io != "guarded":
         if args.method != "sphere_probe":
             raise InputError(f"--probe-io {args.probe_io}: only for --method sphere_probe")

@@ -62,7 +62,8 @@ class RigCalibrationFailed(ZerocalError):
 class StereoTargetMethod(Method):
     """See the module docstring. options: `rig` (path of a rig file), `depth`
     ("triangulate" or "sgbm"), `distance` ([min, max] m of the viewpoints), `pixel_floor`
-    (px, the systematic floor added to each measured covariance)."""
+    (px, the systematic floor added to each measured covariance), `rig_coverage` (the
+    chessboard coverage the rig calibration plans for, rig_planning.TARGET_COVERAGE)."""
 
     name: ClassVar[str] = "stereo_target"
     default_target_sigma_deg: ClassVar[float | None] = 0.002
@@ -130,7 +131,7 @@ class StereoTargetMethod(Method):
     async def _calibrate_rig(self, robot: RobotAdapter, progress: Progress) -> Any:
         from hostpc.vision import ChessboardSpec, calibrate_rig
         from hostpc.vision.rig_calibration import as_gray, find_chessboard
-        from hostpc.vision.rig_planning import CoveragePlanner
+        from hostpc.vision.rig_planning import TARGET_COVERAGE, CoveragePlanner
 
         board = self.cell.chessboard
         if not board:
@@ -148,7 +149,8 @@ class StereoTargetMethod(Method):
             capture = await robot.capture("chessboard", view)
             left, right = as_gray(capture.left, "left"), as_gray(capture.right, "right")
             if planner is None:
-                planner = CoveragePlanner(n_views, (left.shape[1], left.shape[0]))
+                planner = CoveragePlanner(n_views, (left.shape[1], left.shape[0]), float(
+                    self.settings.options.get("rig_coverage", TARGET_COVERAGE)))
             found = (find_chessboard(left, spec), find_chessboard(right, spec))
             if planner.offer(view, *found):
                 pairs.append((left, right))

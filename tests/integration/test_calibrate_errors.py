@@ -64,6 +64,8 @@ def test_bad_rig_file_exit_2_before_connecting(tmp_path: Path,
          "argument --verify-factor: expected a finite number > 0, got '-1'"),
         (["--pixel-floor", "nan"],
          "argument --pixel-floor: expected a finite number >= 0, got 'nan'"),
+        (["--rig-coverage", "0.4"],  # below the rig calibration's own coverage check
+         "argument --rig-coverage: expected a finite number >= 0.5 and <= 1, got '0.4'"),
         (["--verify-alpha", "1"],
          "argument --verify-alpha: expected a finite number > 0 and < 1, got '1'"),
         (["--verify-tolerance", "0"],
