@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -94,7 +95,7 @@ def run_world(method: str, seed: int, folder: Path, reuse: bool = False,
         scenario_path.write_text(yaml.safe_dump(scenario))
         command = [sys.executable, "-m", "hostpc.cli.main", "calibrate", "--robot", "sim",
                    "--method", method, "--scenario", str(scenario_path), "--no-push",
-                   "--out", str(out), *options]
+                   "--out", str(out), *options, *EXTRA_OPTIONS]
         done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, check=False)
         if not (result_path.is_file() and fit_path.is_file()):
             last = (done.stderr.strip().splitlines() or ["no output"])[-1]
@@ -179,6 +180,10 @@ def print_table(figures: dict[str, Any]) -> None:
                   f"    {j['mean_z']:+.2f}")
 
 
+EXTRA_OPTIONS: list[str] = []
+"""More `hostpc calibrate` options for every run (--calibrate-args, e.g. '--poses 60')."""
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--worlds", type=int, default=8)
@@ -190,7 +195,10 @@ def main(argv: list[str] | None = None) -> int:
                         help="with --keep: read runs already finished there instead of rerunning")
     parser.add_argument("--refit", action="store_true",
                         help="with --reuse: fit each kept dataset again with the current code")
+    parser.add_argument("--calibrate-args", default="",
+                        help="more hostpc calibrate options for every run, e.g. '--poses 60'")
     args = parser.parse_args(argv)
+    EXTRA_OPTIONS[:] = shlex.split(args.calibrate_args)
     if args.worlds < 1:
         parser.error("--worlds: expected at least 1")
     methods = tuple(m for m in args.methods.split(",") if m)
