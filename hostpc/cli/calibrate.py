@@ -150,7 +150,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--method", choices=tuple(METHOD_CLASSES), default="stereo_target",
                         help="measurement method (default stereo_target)")
     parser.add_argument("--poses", type=COUNT, default=None,
-                        help="fit poses (default: stereo_target the fewest that reach "
+                        help="fit poses (default: stereo_target the fewest, >= 20, reaching "
                         "--target-sigma, at most 60; other methods 60); --poses N alone "
                         "measures exactly N")
     parser.add_argument("--verify-poses", type=integer(least=0), default=None,
