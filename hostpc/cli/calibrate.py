@@ -31,11 +31,8 @@ import dataclasses
 import datetime as _dt
 import json
 import shutil
-import signal
 import sys
 import types
-from collections.abc import Coroutine, Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -51,6 +48,13 @@ from hostpc.cli.fit import add_model_options
 from hostpc.cli.numbers import finite, integer
 from hostpc.cli.pose_counts import pose_counts
 from hostpc.cli.progress import StderrProgress
+from hostpc.cli.termination import (  # noqa: F401  (re-exported: the old import path)
+    EXIT_INTERRUPTED,
+    EXIT_TERMINATED,
+    Terminated,
+    cancel_on_sigterm,
+    sigterm_as_interrupt,
+)
 from hostpc.errors import InputError
 from hostpc.methods import METHOD_CLASSES
 from hostpc.methods.base import RunSettings
@@ -66,63 +70,6 @@ from hostpc.sensors.calibrate_options import (
 )
 
 SIM_FOLDER = "sim"
-EXIT_INTERRUPTED = 130  # Ctrl-C, as a shell reports it
-EXIT_TERMINATED = 143  # SIGTERM
-
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised like Ctrl-C so that every `with` and `finally` block runs (the
-    simulated controller is stopped, the robot link closed)."""
-
-
-def _raise_terminated(signum: int, frame: object) -> None:
-    raise Terminated(f"signal {signum}")
-
-
-async def _cancel_on_sigterm(run: Coroutine[Any, Any, RunOutcome]) -> RunOutcome:
-    """Await `run`; a SIGTERM meanwhile cancels it at its next await and raises Terminated.
-
-    Inside the event loop a signal must not raise into whatever frame happens to run (it can
-    land in the transport's reader task and read as a lost link); the loop's own signal
-    handler cancels the main task cleanly instead, and every `finally` still runs."""
-    loop = asyncio.get_running_loop()
-    task = asyncio.current_task()
-    terminated = False
-
-    def on_sigterm() -> None:
-        nonlocal terminated
-        terminated = True
-        if task is not None:
-            task.cancel()
-
-    try:
-        loop.add_signal_handler(signal.SIGTERM, on_sigterm)
-    except (NotImplementedError, RuntimeError, ValueError):  # not the main thread
-        return await run
-    try:
-        return await run
-    except asyncio.CancelledError:
-        if terminated:
-            raise Terminated(f"signal {int(signal.SIGTERM)}") from None
-        raise
-    finally:
-        loop.remove_signal_handler(signal.SIGTERM)
-        signal.signal(signal.SIGTERM, _raise_terminated)  # back to the synchronous handler
-
-
-@contextmanager
-def sigterm_as_interrupt() -> Iterator[None]:
-    """While inside: SIGTERM raises `Terminated` (a KeyboardInterrupt). Outside the main
-    thread (no signal handlers there) it does nothing."""
-    try:
-        previous = signal.signal(signal.SIGTERM, _raise_terminated)
-    except ValueError:  # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 MODBUS_PORT = 502
 POSITIVE = finite(above=0.0)
 COUNT = integer(least=1)
@@ -374,7 +321,7 @@ def _run_with_robot(args: argparse.Namespace, address: RobotAddress, driver: str
                     progress: StderrProgress) -> RunOutcome:
     if not address.sim:
         info = RobotInfo(address=str(address), driver=driver, sim=False)
-        return asyncio.run(_cancel_on_sigterm(_calibrate(
+        return asyncio.run(cancel_on_sigterm(_calibrate(
             args, address, driver, run_dir, settings, cell_file, known, (), info, progress,
             None, args.token)))
     from hostpc.robots.simulator import (
@@ -402,7 +349,7 @@ def _run_with_robot(args: argparse.Namespace, address: RobotAddress, driver: str
     with SimulatedController(scenario, sim_dir, modbus_port=modbus_port, token=token) as simulator:
         info = RobotInfo(address=f"{simulator.address.host}:{simulator.address.port}",
                          driver="zerocal", sim=True, scenario=str(simulator.scenario_path))
-        return asyncio.run(_cancel_on_sigterm(_calibrate(
+        return asyncio.run(cancel_on_sigterm(_calibrate(
             args, simulator.address, "zerocal", run_dir, settings, cell_file, known,
             default_known, info, progress, simulator.truth, token)))
 

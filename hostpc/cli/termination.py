@@ -1,0 +1,72 @@
+"""SIGTERM and Ctrl-C for long commands (`hostpc calibrate`): a SIGTERM is raised like
+Ctrl-C (`Terminated`, a KeyboardInterrupt), so every `with` and `finally` block runs (the
+simulated controller is stopped, the robot link closed); inside the event loop it cancels the
+main task instead of raising into whatever frame runs. Exit codes as a shell reports them."""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+from collections.abc import Coroutine, Iterator
+from contextlib import contextmanager
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+EXIT_INTERRUPTED = 130  # Ctrl-C, as a shell reports it
+EXIT_TERMINATED = 143  # SIGTERM
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C so that every `with` and `finally` block runs (the
+    simulated controller is stopped, the robot link closed)."""
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise Terminated(f"signal {signum}")
+
+
+async def cancel_on_sigterm(run: Coroutine[Any, Any, T]) -> T:
+    """Await `run`; a SIGTERM meanwhile cancels it at its next await and raises Terminated.
+
+    Inside the event loop a signal must not raise into whatever frame happens to run (it can
+    land in the transport's reader task and read as a lost link); the loop's own signal
+    handler cancels the main task cleanly instead, and every `finally` still runs."""
+    loop = asyncio.get_running_loop()
+    task = asyncio.current_task()
+    terminated = False
+
+    def on_sigterm() -> None:
+        nonlocal terminated
+        terminated = True
+        if task is not None:
+            task.cancel()
+
+    try:
+        loop.add_signal_handler(signal.SIGTERM, on_sigterm)
+    except (NotImplementedError, RuntimeError, ValueError):  # not the main thread
+        return await run
+    try:
+        return await run
+    except asyncio.CancelledError:
+        if terminated:
+            raise Terminated(f"signal {int(signal.SIGTERM)}") from None
+        raise
+    finally:
+        loop.remove_signal_handler(signal.SIGTERM)
+        signal.signal(signal.SIGTERM, _raise_terminated)  # back to the synchronous handler
+
+
+@contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """While inside: SIGTERM raises `Terminated` (a KeyboardInterrupt). Outside the main
+    thread (no signal handlers there) it does nothing."""
+    try:
+        previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
