@@ -21,7 +21,13 @@ from hostpc.fitting.priors import (
 )
 from hostpc.fitting.result import CORRELATION_THRESHOLD, FitResult
 from hostpc.fitting.shared_errors import added_parameter_covariance
-from hostpc.fitting.solver import Evaluation, Loss, evaluate, levenberg_marquardt
+from hostpc.fitting.solver import (
+    Evaluation,
+    Loss,
+    evaluate,
+    levenberg_marquardt,
+    normal_equations,
+)
 from hostpc.model.problem import Problem, build_problem
 
 DEFAULT_CV_FOLDS = 5
@@ -138,12 +144,7 @@ def _leave_out_steps(problem: Problem, evaluation: Evaluation, free: np.ndarray,
     m = problem.measured.shape[1]
     J = evaluation.jacobian[:, free_index]
     r = evaluation.whitened.ravel()
-    A = J.T @ J
-    g = J.T @ r
-    if constraints is not None and constraints.index.size:
-        J_prior = constraints.jacobian(x.size)[:, free_index]
-        A = A + J_prior.T @ J_prior
-        g = g + J_prior.T @ constraints.residuals(x)
+    A, g = normal_equations(J, r, constraints, x, free_index)
     scales, scaled, rhs = [], [], []
     for test in fold_sets:
         rows = (test[:, None] * m + np.arange(m)).ravel()

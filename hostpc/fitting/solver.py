@@ -184,12 +184,7 @@ def levenberg_marquardt(
         if not (np.all(np.isfinite(J)) and np.all(np.isfinite(r))):
             message = "failed: the model gives non-finite residuals or derivatives"
             break
-        A = J.T @ J
-        g = J.T @ r
-        if constraints is not None and constraints.index.size:
-            J_prior = constraints.jacobian(x.size)[:, free_index]
-            A = A + J_prior.T @ J_prior
-            g = g + J_prior.T @ constraints.residuals(x)
+        A, g = normal_equations(J, r, constraints, x, free_index)
         diag = np.maximum(np.diag(A), 1e-30)
         diagonal = np.diag(diag)
         # converged when even an undamped Gauss-Newton step would gain (almost) nothing
@@ -240,6 +235,20 @@ def levenberg_marquardt(
             message, converged = "converged: step below tolerance", True
             break
     return SolverOutcome(x, current, weights, converged, iterations, message, cost)
+
+
+def normal_equations(J: np.ndarray, r: np.ndarray, constraints: Constraints | None,
+                     x: np.ndarray, free_index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(J^T J, J^T r) of the free parameters, the prior rows of ``constraints`` at x added.
+    J: (rows, F) whitened Jacobian of the free columns; r: (rows,); x: (P,) all parameters;
+    free_index: (F,) the free columns' indices in x."""
+    A = J.T @ J
+    g = J.T @ r
+    if constraints is not None and constraints.index.size:
+        J_prior = constraints.jacobian(x.size)[:, free_index]
+        A = A + J_prior.T @ J_prior
+        g = g + J_prior.T @ constraints.residuals(x)
+    return A, g
 
 
 def _round_off_cost(problem: Problem) -> float:
