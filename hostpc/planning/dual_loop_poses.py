@@ -11,8 +11,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from hostpc.dataset import FramePose
-from hostpc.kinematics.humanoid import HUMANOID_FRAMES, HUMANOID_HOME, get_tree
+from hostpc.kinematics.humanoid import HUMANOID_HOME, get_tree
 from hostpc.kinematics.tree import KinematicTree
+from hostpc.model.measurements.dual_loop import humanoid_frames
 
 __all__ = ["PlannedPoses", "head_look_at", "nominal_frames", "plan_poses"]
 
@@ -43,14 +44,7 @@ def nominal_frames(name: str = "humanoid_upper") -> dict[str, FramePose | np.nda
     """The nominal dual_loop frames of a built-in tree, as Dataset frames."""
     if name != "humanoid_upper":
         raise ValueError(f"no nominal frames for {name!r}")
-    frames: dict[str, FramePose | np.ndarray] = {}
-    for key, value in HUMANOID_FRAMES.items():
-        if key.endswith("_target"):
-            frames[key] = np.asarray(value, dtype=float)
-        else:
-            xyz, rpy = value  # type: ignore[misc]
-            frames[key] = FramePose(xyz=np.asarray(xyz, float), rpy=np.asarray(rpy, float))
-    return frames
+    return humanoid_frames()
 
 
 def _camera_points(tree: KinematicTree, q: np.ndarray, side: str) -> np.ndarray:

@@ -266,6 +266,20 @@ def predict_dual_loop(problem: Problem, x: np.ndarray, jacobian: bool = True
     return apply_sensor_effects(problem, x, y, J)
 
 
+
+def humanoid_frames() -> dict[str, FramePose | np.ndarray]:
+    """The nominal dual_loop frames of the built-in humanoid_upper, as Dataset frames
+    (targets as points, the others as poses)."""
+    frames: dict[str, FramePose | np.ndarray] = {}
+    for key, value in HUMANOID_FRAMES.items():
+        if key.endswith("_target"):
+            frames[key] = np.asarray(value, dtype=float)
+        else:
+            xyz, rpy = value  # type: ignore[misc]
+            frames[key] = FramePose(xyz=np.asarray(xyz, float), rpy=np.asarray(rpy, float))
+    return frames
+
+
 class DualLoop(DualLoopFile, MeasurementModel):
     """A pan-tilt head camera observes a target on each arm (see the module docstring)."""
 
@@ -300,13 +314,7 @@ class DualLoop(DualLoopFile, MeasurementModel):
             rows = chain == side
             q_arm[rows] = np.asarray(HUMANOID_HOME[side]) + rng.uniform(
                 -0.3, 0.3, (int(rows.sum()), q_arm.shape[1]))
-        frames: dict[str, FramePose | np.ndarray] = {}
-        for key, value in HUMANOID_FRAMES.items():
-            if key.endswith("_target"):
-                frames[key] = np.asarray(value, dtype=float)
-            else:
-                xyz, rpy = value  # type: ignore[misc]
-                frames[key] = FramePose(xyz=np.asarray(xyz, float), rpy=np.asarray(rpy, float))
+        frames = humanoid_frames()
         cov = np.broadcast_to(np.diag([1e-8, 1e-8, 4e-8]), (n, 3, 3))
         samples = Samples(q=q_arm, p=np.zeros((n, 3)), cov=cov, chain=chain, q_head=q_head)
         return Dataset(method=cls.name, robot=RobotDescription(name="humanoid_upper"),
