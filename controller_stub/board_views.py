@@ -62,15 +62,7 @@ def chessboard_views(
     `centre_range` (fractions of the image size). Drawn from `rng` by rejection."""
     u_min, u_max, v_min, v_max = pattern.outline()
     centre = np.array([0.5 * (u_min + u_max), 0.5 * (v_min + v_max), 0.0])
-    k = np.linspace(0.0, 1.0, 9)
-    outline = np.concatenate(
-        [
-            np.column_stack([u_min + (u_max - u_min) * k, np.full(9, v_min)]),
-            np.column_stack([u_min + (u_max - u_min) * k, np.full(9, v_max)]),
-            np.column_stack([np.full(9, u_min), v_min + (v_max - v_min) * k]),
-            np.column_stack([np.full(9, u_max), v_min + (v_max - v_min) * k]),
-        ]
-    )
+    outline = pattern.outline_points(9)
     outline3 = np.column_stack([outline, np.zeros(len(outline))])
     T_right_left = np.linalg.inv(T_left_right)
     views: list[np.ndarray] = []

@@ -151,6 +151,20 @@ class ChessboardPattern:
         s = self.square
         return -2 * s, (self.cols + 1) * s, -2 * s, (self.rows + 1) * s
 
+    def outline_points(self, per_side: int) -> np.ndarray:
+        """(4 per_side, 2) points along the outline's four sides (board frame, m): bottom,
+        top, left, right, each from its start to its end corner."""
+        u_min, u_max, v_min, v_max = self.outline()
+        k = np.linspace(0.0, 1.0, per_side)
+        return np.concatenate(
+            [
+                np.column_stack([u_min + (u_max - u_min) * k, np.full(per_side, v_min)]),
+                np.column_stack([u_min + (u_max - u_min) * k, np.full(per_side, v_max)]),
+                np.column_stack([np.full(per_side, u_min), v_min + (v_max - v_min) * k]),
+                np.column_stack([np.full(per_side, u_max), v_min + (v_max - v_min) * k]),
+            ]
+        )
+
 
 def _smooth_step(signed_distance: np.ndarray, footprint: np.ndarray) -> np.ndarray:
     """Box-filtered coverage of the half-plane signed_distance > 0 (in place, float32)."""
@@ -315,15 +329,7 @@ class Renderer:
         """(H, W) uint8 image of the chessboard; T_cam_board (4, 4): board frame with the first
         inner corner at its origin, x along a row of corners, z the board normal."""
         u_min, u_max, v_min, v_max = pattern.outline()
-        k = np.linspace(0.0, 1.0, 17)
-        outline = np.concatenate(
-            [
-                np.column_stack([u_min + (u_max - u_min) * k, np.full(17, v_min)]),
-                np.column_stack([u_min + (u_max - u_min) * k, np.full(17, v_max)]),
-                np.column_stack([np.full(17, u_min), v_min + (v_max - v_min) * k]),
-                np.column_stack([np.full(17, u_max), v_min + (v_max - v_min) * k]),
-            ]
-        )
+        outline = pattern.outline_points(17)
         box = self._bbox(T_cam_board, outline)
         if box is None:
             return self.background()
