@@ -17,6 +17,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -144,6 +146,19 @@ def find_chessboard(image: np.ndarray, board: ChessboardSpec) -> np.ndarray | No
     return refined.reshape(-1, 2)
 
 
+@contextmanager
+def _opencv_single_thread() -> Iterator[None]:
+    """OpenCV on one thread while inside: its calibration sums are split across threads in a
+    varying order, which changed the rig by up to 3e-9 relative between runs of the same
+    views (a rig file, its fingerprint and every fit downstream then differed)."""
+    previous = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        yield
+    finally:
+        cv2.setNumThreads(previous)
+
+
 def calibrate_rig(
     pairs: list[tuple[np.ndarray, np.ndarray]], board: ChessboardSpec,
     corners: list[tuple[np.ndarray | None, np.ndarray | None]] | None = None,
@@ -202,13 +217,14 @@ def calibrate_rig(
             f"{ABSOLUTE_MIN_VIEWS}, better {MIN_VIEWS}+)"
         )
     obj = [board.object_points().reshape(-1, 1, 3)] * len(used)
-    _, K1, d1, rvecs, _ = cv2.calibrateCamera(obj, left_pts, size, None, None)
-    _, K2, d2, _, _ = cv2.calibrateCamera(obj, right_pts, size, None, None)
     criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 100, 1e-7)
-    out = cv2.stereoCalibrateExtended(
-        obj, left_pts, right_pts, K1, d1, K2, d2, size, np.eye(3), np.zeros((3, 1)),
-        flags=cv2.CALIB_USE_INTRINSIC_GUESS, criteria=criteria,
-    )
+    with _opencv_single_thread():  # the same views give the same rig, run after run
+        _, K1, d1, rvecs, _ = cv2.calibrateCamera(obj, left_pts, size, None, None)
+        _, K2, d2, _, _ = cv2.calibrateCamera(obj, right_pts, size, None, None)
+        out = cv2.stereoCalibrateExtended(
+            obj, left_pts, right_pts, K1, d1, K2, d2, size, np.eye(3), np.zeros((3, 1)),
+            flags=cv2.CALIB_USE_INTRINSIC_GUESS, criteria=criteria,
+        )
     rms, K1, d1, K2, d2, R, T = out[:7]
     per_view = out[-1]  # (n_views, 2) RMS of the left and right image of each view
     per_view_rms = [float(v) for v in np.mean(np.asarray(per_view).reshape(-1, 2), axis=1)]
