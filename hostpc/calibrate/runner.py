@@ -297,10 +297,8 @@ class Runner:
         for pose in range(total):
             index = first + pose
             journaled = self.journal.get(phase, index)
-            if phase == "fit" and self._pushed_ever() and journaled is None:
-                continue  # fit poses: never measured after a push (other offsets)
-            if journaled is not None and (journaled.ok or not stopped(journaled)
-                                          or (phase == "fit" and self._pushed_ever())):
+            if (journaled is not None and (journaled.ok or not stopped(journaled))
+                    or (phase == "fit" and self._pushed_ever())):
                 continue  # measured, or skipped for good (fit poses: never after a push)
             for attempt in range(1, MAX_POSE_ATTEMPTS + 1):
                 record = await method.acquire(self.robot, phase, index, q_plan[pose], q_now)  # type: ignore[arg-type]
