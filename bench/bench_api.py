@@ -35,7 +35,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -45,7 +44,8 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-CASES = ("offsets", "offsets+tool+target", "+geometry")
+from bench.harness import scipy_baseline, stereo_fit_cases, timed  # noqa: E402
+
 SIZES = (120, 1000)
 SCALING = (1_000, 10_000, 100_000)
 METHODS: tuple[tuple[str, tuple[str, ...]], ...] = (
@@ -58,66 +58,24 @@ WALL_REPEATS = 5
 """Section 4: runs of the default `hostpc calibrate --robot sim` timed one after another."""
 
 
-def _datasets(n_poses: int) -> dict[str, tuple[Any, str | None]]:
-    from hostpc.synthesize import random_truth, synthesize_stereo_target
-
-    truth = random_truth(np.random.default_rng(42))
-    offsets = {k: v for k, v in truth.items() if k.startswith("joint_offsets")}
-    known = synthesize_stereo_target(offsets, n_samples=n_poses, seed=42,
-                                     known=("tool", "target")).dataset
-    free = synthesize_stereo_target(truth, n_samples=n_poses, seed=42).dataset
-    return {"offsets": (known, None), "offsets+tool+target": (free, None),
-            "+geometry": (free, "+geometry")}
-
-
-def _scipy_fit(dataset: Any, effects: str | None, free: np.ndarray
-               ) -> Callable[[], np.ndarray]:
-    from scipy.optimize import least_squares
-
-    from hostpc.fitting.solver import evaluate
-    from hostpc.model.problem import build_problem
-
-    problem = build_problem(dataset, effects)
-    index = np.flatnonzero(free)
-
-    def residuals(v: np.ndarray) -> np.ndarray:
-        x = np.zeros(problem.layout.size)
-        x[index] = v
-        return evaluate(problem, x, jacobian=False).whitened.ravel()
-
-    def run() -> np.ndarray:
-        x = np.zeros(problem.layout.size)
-        x[index] = least_squares(residuals, np.zeros(index.size), method="lm", xtol=1e-12,
-                                 ftol=1e-12).x
-        return x
-
-    return run
-
-
-def _timed(func: Callable[[], Any]) -> tuple[float, Any]:
-    start = time.perf_counter()
-    value = func()
-    return time.perf_counter() - start, value
-
-
 def api_versus_scipy(repeats: int = 5) -> list[dict[str, Any]]:
     """Section 1: one row per (N, model)."""
     import hostpc
     from hostpc.dataset import save_dataset
+    from hostpc.model.problem import build_problem
 
     rows = []
     for n_poses in SIZES:
-        datasets = _datasets(n_poses)
-        for case in CASES:
-            dataset, effects = datasets[case]
+        datasets = stereo_fit_cases(n_poses)
+        for case, (dataset, effects) in datasets.items():
             ours = hostpc.fit(dataset, effects)  # warm-up (imports, caches)
-            baseline = _scipy_fit(dataset, effects, ~ours.fixed)
+            baseline = scipy_baseline(build_problem(dataset, effects), ~ours.fixed)
             x_scipy = baseline()
             ours_s, scipy_s = [], []
             for _ in range(repeats if n_poses <= 200 else max(2, repeats // 2)):
-                t, ours = _timed(lambda d=dataset, e=effects: hostpc.fit(d, e))
+                t, ours = timed(lambda d=dataset, e=effects: hostpc.fit(d, e))
                 ours_s.append(t)
-                t, x_scipy = _timed(baseline)
+                t, x_scipy = timed(baseline)
                 scipy_s.append(t)
             free = ~ours.fixed
             same = float(np.max(np.abs(ours.x[free] - x_scipy[free]) / ours.std[free]))
@@ -130,9 +88,9 @@ def api_versus_scipy(repeats: int = 5) -> list[dict[str, Any]]:
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "dataset.json"
             save_dataset(dataset, path)
-            load_s = [_timed(lambda p=path: hostpc.load_dataset(p))[0] for _ in range(repeats)]
+            load_s = [timed(lambda p=path: hostpc.load_dataset(p))[0] for _ in range(repeats)]
         hostpc.diagnose(dataset, ladder=True)
-        ladder_s = [_timed(lambda d=dataset: hostpc.diagnose(d, ladder=True))[0]
+        ladder_s = [timed(lambda d=dataset: hostpc.diagnose(d, ladder=True))[0]
                     for _ in range(max(2, repeats // 2))]
         rows.append({"n": n_poses, "model": "load_dataset", "ms": 1e3 * np.median(load_s)})
         rows.append({"n": n_poses, "model": "diagnose --ladder",

@@ -12,11 +12,12 @@ truth at each step (deg, and in units of its sigma). docs/diagnostics.md quotes 
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench.harness import seeds_argument  # noqa: E402
 
 OPTIONAL = True
 
@@ -39,11 +40,7 @@ def run(seeds: int = 8) -> dict[str, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=8)
-    parser.add_argument("--quick", action="store_true", help="2 seeds")
-    args = parser.parse_args(argv)
-    figures = run(2 if args.quick else args.seeds)
+    figures = run(seeds_argument(__doc__.splitlines()[0], 8, 2, argv))
     print(f"{figures['right_and_adequate']:.0f} of {figures['cases']:.0f}: the ladder ends "
           "with exactly the hidden effects and an adequate model")
     return 0

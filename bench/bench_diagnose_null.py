@@ -14,12 +14,13 @@ seed, the count and the bound; :func:`run` returns them.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench.harness import seeds_argument  # noqa: E402
 
 OPTIONAL = True
 
@@ -40,11 +41,7 @@ def run(seeds: int = 24) -> dict[str, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=24)
-    parser.add_argument("--quick", action="store_true", help="4 seeds")
-    args = parser.parse_args(argv)
-    figures = run(4 if args.quick else args.seeds)
+    figures = run(seeds_argument(__doc__.splitlines()[0], 24, 4, argv))
     print(f"{figures['alarms']:.0f} of {figures['datasets']:.0f} datasets alarmed; stated "
           f"rate <= {figures['rate_bound']:.3g} a dataset allows {figures['allowed']:.0f} "
           f"(P(more) < 1 %); {figures['seconds']:.1f} s")

@@ -16,67 +16,35 @@ is timed without cross-validation (cv_folds=0) and with the default 5 folds.
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
+import sys
+from pathlib import Path
 
 import numpy as np
-from scipy.optimize import least_squares
 
-from hostpc.fitting import solve
-from hostpc.fitting.solver import evaluate
-from hostpc.model.problem import build_problem
-from hostpc.synthesize import random_truth, synthesize_stereo_target
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository root
+
+from bench.harness import median_ms, scipy_baseline, stereo_fit_cases  # noqa: E402
+from hostpc.fitting import solve  # noqa: E402
+from hostpc.model.problem import build_problem  # noqa: E402
 
 N_POSES = 120
-
-
-def _median_ms(func: Callable[[], object], repeats: int) -> float:
-    func()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        func()
-        times.append(time.perf_counter() - start)
-    return 1e3 * float(np.median(times))
-
-
-def _scipy_baseline(problem, free: np.ndarray) -> Callable[[], np.ndarray]:  # type: ignore[no-untyped-def]
-    index = np.flatnonzero(free)
-
-    def residuals(v: np.ndarray) -> np.ndarray:
-        x = np.zeros(problem.layout.size)
-        x[index] = v
-        return evaluate(problem, x, jacobian=False).whitened.ravel()
-
-    def run() -> np.ndarray:
-        return least_squares(residuals, np.zeros(index.size), method="lm", xtol=1e-12,
-                             ftol=1e-12).x
-
-    return run
+#: the harness's case names as this bench prints them
+NAMES = {"offsets": "offsets", "offsets+tool+target": "offsets+tool+target",
+         "+geometry": "offsets+tool+target+geometry"}
 
 
 def run(repeats: int = 30) -> dict[str, dict[str, float]]:
-    truth = random_truth(np.random.default_rng(42))
-    offsets = {k: v for k, v in truth.items() if k.startswith("joint_offsets")}
-    known = synthesize_stereo_target(offsets, n_samples=N_POSES, seed=42,
-                                     known=("tool", "target")).dataset
-    free_frames = synthesize_stereo_target(truth, n_samples=N_POSES, seed=42).dataset
-    cases = {
-        "offsets": (known, None),
-        "offsets+tool+target": (free_frames, None),
-        "offsets+tool+target+geometry": (free_frames, "+geometry"),
-    }
     figures: dict[str, dict[str, float]] = {}
-    for name, (dataset, effects) in cases.items():
+    for case, (dataset, effects) in stereo_fit_cases(N_POSES).items():
         problem = build_problem(dataset, effects)
         ours = solve(problem, cv_folds=0)
-        baseline = _scipy_baseline(problem, ~ours.fixed)
-        v = baseline()
-        agreement = float(np.max(np.abs(v - ours.x[~ours.fixed])))
-        ours_ms = _median_ms(lambda p=problem: solve(p, cv_folds=0), repeats)
-        ours_cv_ms = _median_ms(lambda p=problem: solve(p), max(3, repeats // 5))
-        scipy_ms = _median_ms(baseline, max(3, repeats // 5))
-        figures[name] = {
+        baseline = scipy_baseline(problem, ~ours.fixed)
+        x_scipy = baseline()
+        agreement = float(np.max(np.abs(x_scipy - ours.x)[~ours.fixed]))
+        ours_ms = median_ms(lambda p=problem: solve(p, cv_folds=0), repeats)
+        ours_cv_ms = median_ms(lambda p=problem: solve(p), max(3, repeats // 5))
+        scipy_ms = median_ms(baseline, max(3, repeats // 5))
+        figures[NAMES[case]] = {
             "parameters": float(problem.layout.size),
             "free": float(np.count_nonzero(~ours.fixed)),
             "zerocal_ms": ours_ms,

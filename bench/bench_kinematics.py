@@ -22,29 +22,23 @@ then frees one 16 MB block and measures every case "warm".
 
 from __future__ import annotations
 
-import time
+import sys
 from collections.abc import Callable
 from functools import partial
+from pathlib import Path
 
 import numpy as np
 
-from hostpc.kinematics import forward, get_robot, point_jacobian, screws
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository root
+
+from bench.harness import median_ms  # noqa: E402
+from hostpc.kinematics import forward, get_robot, point_jacobian, screws  # noqa: E402
 
 N_POSES = 1000
 REPEATS = 300
 _WARM_BYTES = 16 * 1024 * 1024
-
-
-def _median_ms(func: Callable[[], object], repeats: int) -> float:
-    """Median wall time of ``func()`` in ms after a short warm-up."""
-    for _ in range(10):
-        func()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        func()
-        times.append(time.perf_counter() - start)
-    return 1e3 * float(np.median(times))
+WARM_UP = 10
+"""Untimed calls before each timed case."""
 
 
 def run(n_poses: int = N_POSES, repeats: int = REPEATS) -> dict[str, float]:
@@ -73,7 +67,7 @@ def run(n_poses: int = N_POSES, repeats: int = REPEATS) -> dict[str, float]:
         p = forward(chain, q)
         point_jacobian(screws(chain, p), p.T_base_flange[:, :3, 3])
 
-    result["cold_nominal_total_ms"] = _median_ms(nominal_pipeline, repeats)
+    result["cold_nominal_total_ms"] = median_ms(nominal_pipeline, repeats, WARM_UP)
     block = np.ones(_WARM_BYTES // 8)  # touched, then freed: see the module docstring
     del block
     for case, kin_delta in cases.items():
@@ -92,7 +86,7 @@ def run(n_poses: int = N_POSES, repeats: int = REPEATS) -> dict[str, float]:
             "total": pipeline,
         }
         for stage, func in stages.items():
-            result[f"{case}_{stage}_ms"] = _median_ms(func, repeats)
+            result[f"{case}_{stage}_ms"] = median_ms(func, repeats, WARM_UP)
     return result
 
 
