@@ -13,6 +13,8 @@ from __future__ import annotations
 import asyncio
 import json
 import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +24,7 @@ from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.robot_time import robot_time_document
 from hostpc.robots.simulator import SimulatedController
 from hostpc.transport import ControllerClient
+from tests.integration.calibrate_cli import resume_on, robot_args
 from tests.integration.test_calibrate_sim import TOKEN, run_cli, sim_scenario, truth_rig_file
 
 N_FIT, N_VERIFY = 16, 4
@@ -45,9 +48,13 @@ def _set_offsets(sim: SimulatedController, offsets: list[float]) -> None:
     asyncio.run(write())
 
 
-def _cut(complete: Path, run: Path, n_lines: int) -> None:
-    """The run folder as it was when the journal held its first n_lines lines."""
+def _stopped_run(complete: Path, tmp_path: Path, n_lines: int | None = None) -> Path:
+    """A copy of the complete run folder in tmp_path/run as it was when the journal held
+    its first n_lines lines (None: the whole finished run, unchanged)."""
+    run = tmp_path / "run"
     shutil.copytree(complete, run)
+    if n_lines is None:
+        return run
     lines = (complete / "journal.jsonl").read_text().splitlines(keepends=True)[:n_lines]
     (run / "journal.jsonl").write_text("".join(lines))
     kinds = [json.loads(line)["event"] for line in lines]
@@ -55,6 +62,17 @@ def _cut(complete: Path, run: Path, n_lines: int) -> None:
         if name == "push.json" and "push_intent" in kinds:
             continue
         (run / name).unlink(missing_ok=True)
+    return run
+
+
+@contextmanager
+def _controller(tmp_path: Path, offsets: list[float] | None = None
+                ) -> Iterator[SimulatedController]:
+    """A fresh simulated controller (the run's initial offsets, or ``offsets`` written)."""
+    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:
+        if offsets is not None:
+            _set_offsets(sim, offsets)
+        yield sim
 
 
 @pytest.fixture(scope="module")
@@ -73,8 +91,7 @@ def complete_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, 
 def _cli(sim: SimulatedController, *args: str) -> int:
     from hostpc.cli.main import main
 
-    return main(["calibrate", "--robot", f"{sim.address.host}:{sim.address.port}",
-                 "--token", TOKEN, "--cv-folds", "0", "--no-report", *args])
+    return main(["calibrate", *robot_args(sim), "--cv-folds", "0", "--no-report", *args])
 
 
 def _line_after(run: Path, kind: str, nth: int = 1) -> int:
@@ -110,16 +127,11 @@ def test_resume_after_a_stop_in_each_phase(phase: str, complete_run, tmp_path: P
                                            capsys: pytest.CaptureFixture[str]) -> None:
     complete, _, push = complete_run
     keep, pushed, message = PHASES[phase]
-    run = tmp_path / "run"
-    _cut(complete, run, keep(complete))
+    run = _stopped_run(complete, tmp_path, keep(complete))
     intents_before = sum(e["event"] == "push_intent" for e in _events(run))
-    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:
-        if pushed:
-            _set_offsets(sim, push["new_offsets"])
+    with _controller(tmp_path, push["new_offsets"] if pushed else None) as sim:
         capsys.readouterr()
-        code, stdout, stderr = run_cli(capsys, "calibrate", "--resume", str(run),
-                                       "--robot", f"{sim.address.host}:{sim.address.port}",
-                                       "--token", TOKEN)
+        code, stdout, stderr = resume_on(capsys, sim, run)
         offsets = sim.truth()["zero_offsets"]
         remaining = np.asarray(sim.truth()["zero_errors"])
     assert code == 0, stderr
@@ -156,15 +168,11 @@ def test_resume_after_a_stop_in_each_phase(phase: str, complete_run, tmp_path: P
 def test_finished_run_is_printed_unchanged(complete_run, tmp_path: Path,  # type: ignore[no-untyped-def]
                                            capsys: pytest.CaptureFixture[str]) -> None:
     complete, _, push = complete_run
-    run = tmp_path / "run"
-    shutil.copytree(complete, run)
+    run = _stopped_run(complete, tmp_path)
     before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
-    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:
-        _set_offsets(sim, push["new_offsets"])
+    with _controller(tmp_path, push["new_offsets"]) as sim:
         for extra in ((), ("--max-correction", "1", "--force")):
-            code, stdout, stderr = run_cli(
-                capsys, "calibrate", "--resume", str(run), "--robot",
-                f"{sim.address.host}:{sim.address.port}", "--token", TOKEN, *extra)
+            code, stdout, stderr = resume_on(capsys, sim, run, *extra)
             assert code == 0, stderr
             assert "already pushed and verified (PASS)" in stderr
             assert stdout.strip() == before["summary.txt"].decode().strip()
@@ -176,19 +184,15 @@ def test_finished_run_is_printed_unchanged(complete_run, tmp_path: Path,  # type
 def test_restarted_controller_lost_the_push(complete_run, tmp_path: Path,  # type: ignore[no-untyped-def]
                                             capsys: pytest.CaptureFixture[str]) -> None:
     complete, _, push = complete_run
-    run = tmp_path / "run"
-    _cut(complete, run, _line_after(complete, "push"))
-    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:  # initial offsets
-        address = f"{sim.address.host}:{sim.address.port}"
-        code, stdout, stderr = run_cli(capsys, "calibrate", "--resume", str(run), "--robot",
-                                       address, "--token", TOKEN)
+    run = _stopped_run(complete, tmp_path, _line_after(complete, "push"))
+    with _controller(tmp_path) as sim:  # initial offsets
+        code, stdout, stderr = resume_on(capsys, sim, run)
         assert code == 4 and stdout == ""
         line = stderr.strip().splitlines()[-1]
         assert line.startswith("hostpc calibrate: error: push lost: ")
         assert f"hostpc calibrate --resume {run} --push" in line
         assert "rolled back" not in stderr
-        code, stdout, stderr = run_cli(capsys, "calibrate", "--resume", str(run), "--robot",
-                                       address, "--token", TOKEN, "--push")
+        code, stdout, stderr = resume_on(capsys, sim, run, "--push")
         assert code == 0, stderr
         assert "push: written" in stdout and ": PASS" in stdout
         np.testing.assert_allclose(sim.truth()["zero_offsets"], push["new_offsets"], rtol=0,
@@ -199,15 +203,12 @@ def test_restarted_controller_lost_the_push(complete_run, tmp_path: Path,  # typ
 def test_rollback_warns_when_it_discards_a_later_push(complete_run, tmp_path: Path,  # type: ignore[no-untyped-def]
                                                       capsys: pytest.CaptureFixture[str]) -> None:
     complete, _, push = complete_run
-    run = tmp_path / "run"
-    shutil.copytree(complete, run)
-    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:
-        address = f"{sim.address.host}:{sim.address.port}"
-        _set_offsets(sim, push["new_offsets"])  # this run's push (rb-1 here too)
+    run = _stopped_run(complete, tmp_path)
+    with _controller(tmp_path, push["new_offsets"]) as sim:  # this run's push (rb-1 too)
         later = (np.asarray(push["new_offsets"]) + 1e-4).tolist()
         _set_offsets(sim, later)  # another host's later push
-        code, stdout, stderr = run_cli(capsys, "rollback", "--run", str(run), "--robot",
-                                       address, "--token", TOKEN)
+        code, stdout, stderr = run_cli(capsys, "rollback", "--run", str(run),
+                                       *robot_args(sim))
         assert code == 0, stderr
         assert "discards that later push" in stderr
         np.testing.assert_allclose(sim.truth()["zero_offsets"], push["previous_offsets"],
@@ -224,20 +225,17 @@ def test_robot_time_of_a_killed_verify_session_is_kept(complete_run, tmp_path: P
     resumed session's (before: only phase ends were journaled, so the killed session's
     verification time was lost)."""
     complete, _, push = complete_run
-    run = tmp_path / "run"
     motion = sim_scenario().get("motion", {})
     per_pose = float(motion.get("settle_s", 0.3)) + float(motion.get("capture_s", 0.1))
     verify_start = _line_after(complete, "verify_start")
     second = next(number for number, event in enumerate(_events(complete), start=1)
                   if number > verify_start and event["event"] == "sample"
                   and event["phase"] == "verify" and event["index"] == 1)
-    _cut(complete, run, second + 1)  # the second verification pose and the line after it
+    run = _stopped_run(complete, tmp_path, second + 1)  # the second verify pose + 1 line
     killed = robot_time_document(Journal(run))["verify"]
     assert killed >= 2 * per_pose  # two settled, captured poses (and the moves to them)
-    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:
-        _set_offsets(sim, push["new_offsets"])
-        code, _, stderr = run_cli(capsys, "calibrate", "--resume", str(run), "--robot",
-                                  f"{sim.address.host}:{sim.address.port}", "--token", TOKEN)
+    with _controller(tmp_path, push["new_offsets"]) as sim:
+        code, _, stderr = resume_on(capsys, sim, run)
     assert code == 0, stderr
     total = json.loads((run / "result.json").read_text())["robot_time_s"]
     assert total["verify"] >= killed + (N_VERIFY - 2) * per_pose

@@ -18,6 +18,7 @@ from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.refusals import MAX_POSE_ATTEMPTS
 from hostpc.robots.simulator import SimulatedController
 from hostpc.transport import ControllerClient
+from tests.integration.calibrate_cli import robot_args
 from tests.integration.test_calibrate_sim import TOKEN, run_cli, sim_scenario, truth_rig_file
 
 POSES = "16"
@@ -30,11 +31,22 @@ def _error_line(stderr: str) -> str:
     return lines[-1]
 
 
+@pytest.fixture(scope="module")
+def rig(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The simulator's true camera model as a rig file (the same for every scenario here)."""
+    return truth_rig_file(sim_scenario(), tmp_path_factory.mktemp("rig") / "rig.json")
+
+
+@pytest.fixture
+def out(tmp_path: Path) -> Path:
+    """The run folder of the test's calibration (not created yet)."""
+    return tmp_path / "run"
+
+
 def _calibrate(capsys: pytest.CaptureFixture[str], sim: SimulatedController, rig: Path,
                out: Path, *extra: str) -> tuple[int, str, str]:
-    return run_cli(capsys, "calibrate", "--robot", f"{sim.address.host}:{sim.address.port}",
-                   "--token", TOKEN, "--rig", str(rig), "--poses", POSES, "--cv-folds", "0",
-                   "--no-report", "--out", str(out), *extra)
+    return run_cli(capsys, "calibrate", *robot_args(sim), "--rig", str(rig), "--poses", POSES,
+                   "--cv-folds", "0", "--no-report", "--out", str(out), *extra)
 
 
 @contextmanager
@@ -78,10 +90,9 @@ def _scenario(**changes: Any) -> dict[str, Any]:
     return scenario
 
 
-def test_estop_exit_4_one_line_with_resume_hint(tmp_path: Path,
-                                                capsys: pytest.CaptureFixture[str]) -> None:
-    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
-    out = tmp_path / "run"
+def test_estop_exit_4_one_line_with_resume_hint(
+        tmp_path: Path, rig: Path, out: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
     with SimulatedController(_scenario(faults={"estop_after_moves": 5}), tmp_path / "s") as sim:
         code, stdout, stderr = _calibrate(capsys, sim, rig, out, "--verify-poses", "0")
     line = _error_line(stderr)
@@ -91,10 +102,9 @@ def test_estop_exit_4_one_line_with_resume_hint(tmp_path: Path,
     assert "5 poses journaled" in line
 
 
-def test_offset_limit_exit_4_and_nothing_half_pushed(tmp_path: Path,
-                                                     capsys: pytest.CaptureFixture[str]) -> None:
-    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
-    out = tmp_path / "run"
+def test_offset_limit_exit_4_and_nothing_half_pushed(
+        tmp_path: Path, rig: Path, out: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
     with SimulatedController(_scenario(server={"offset_limit_rad": 1e-4}),
                              tmp_path / "s") as sim:
         before = sim.truth()["zero_offsets"]
@@ -109,10 +119,9 @@ def test_offset_limit_exit_4_and_nothing_half_pushed(tmp_path: Path,
         assert "controller refused (offset_limit): " in _error_line(stderr)
 
 
-def test_busy_controller_exit_4_one_line(tmp_path: Path,
-                                         capsys: pytest.CaptureFixture[str]) -> None:
-    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
-    out = tmp_path / "run"
+def test_busy_controller_exit_4_one_line(
+        tmp_path: Path, rig: Path, out: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
     with SimulatedController(_scenario(server={"max_sessions": 1}), tmp_path / "s") as sim:
         with _peer(sim, "hold"):
             code, _, stderr = _calibrate(capsys, sim, rig, out)
@@ -123,9 +132,8 @@ def test_busy_controller_exit_4_one_line(tmp_path: Path,
 
 @pytest.mark.slow
 def test_abort_storm_exit_4_then_resume_measures_every_pose(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
-    out = tmp_path / "run"
+        tmp_path: Path, rig: Path, out: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
     with SimulatedController(_scenario(motion={"time_scale": 0.5}), tmp_path / "s") as sim:
         with _peer(sim, "abort"):
             code, _, stderr = _calibrate(capsys, sim, rig, out, "--verify-poses", "4")
@@ -142,13 +150,11 @@ def test_abort_storm_exit_4_then_resume_measures_every_pose(
     assert [r.index for r in journal.records("fit") if r.ok] == list(range(16))
 
 
-def test_wrong_token_exit_4_one_line(tmp_path: Path,
-                                     capsys: pytest.CaptureFixture[str]) -> None:
-    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
-    out = tmp_path / "run"
+def test_wrong_token_exit_4_one_line(
+        tmp_path: Path, rig: Path, out: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
     with SimulatedController(sim_scenario(), tmp_path / "s") as sim:
-        code, _, stderr = run_cli(capsys, "calibrate", "--robot",
-                                  f"{sim.address.host}:{sim.address.port}", "--token", "wrong",
+        code, _, stderr = run_cli(capsys, "calibrate", *robot_args(sim, token="wrong"),
                                   "--rig", str(rig), "--out", str(out))
     line = _error_line(stderr)
     assert code == 4 and "auth" in line
@@ -157,9 +163,8 @@ def test_wrong_token_exit_4_one_line(tmp_path: Path,
 
 @pytest.mark.slow
 def test_lost_verification_says_so_and_stays_resumable(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
-    out = tmp_path / "run"
+        tmp_path: Path, rig: Path, out: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
     with SimulatedController(_scenario(motion={"time_scale": 0.2}), tmp_path / "s") as sim:
         with _peer(sim, "abort", after=out / "journal.jsonl"):  # a storm after the push
             code, stdout, stderr = _calibrate(capsys, sim, rig, out, "--verify-poses", "3")
