@@ -120,8 +120,11 @@ def residuals_vs_variables(diagnosis: Diagnosis, variables: dict[str, np.ndarray
     for k, pattern in enumerate(patterns):
         row, column = divmod(k, columns)
         values = np.asarray(variables[pattern.variable], dtype=float)
+        # a group label (pattern.levels): one column per level code, named by the level
+        xlim = ((float(np.nanmin(pattern.centres)) - 0.5, float(np.nanmax(pattern.centres))
+                 + 0.5) if pattern.levels else limits(values))
         axes: Axes = canvas.axes(60 + column * cell_w, 50 + row * cell_h, cell_w - 30,
-                                 cell_h - 55, limits(values), (-limit, limit))
+                                 cell_h - 55, xlim, (-limit, limit))
         for c in range(m):
             axes.points(values[every], whitened[every, c], COLOURS[c % 4], 2.5, 0.4)
             axes.line(pattern.centres, pattern.mean_whitened[:, c], COLOURS[c % 4], 1.4,
@@ -129,8 +132,11 @@ def residuals_vs_variables(diagnosis: Diagnosis, variables: dict[str, np.ndarray
         axes.hline(0.0, "black", 0.5)
         axes.frame(f"{pattern.variable}  p={pattern.p_value:.2g}",
                    title_colour=SIGNIFICANT if pattern.significant else "black",
-                   yticks=column == 0, font=10,
+                   xticks=not pattern.levels, yticks=column == 0, font=10,
                    ylabel="whitened [sigma]" if column == 0 else "")
+        if pattern.levels:
+            axes.level_labels(pattern.levels, pattern.centres,
+                              min(8.5, (cell_w - 30) / len(pattern.levels) / 4.5))
         if k == 0:
             axes.legend([(names[c], COLOURS[c % 4]) for c in range(m)])
     return canvas.render()

@@ -211,6 +211,16 @@ class Axes:
             self.outer.append(f'<text x="{_f(self.left - 4)}" y="{_f(self.top + p + font / 3)}" '
                               f'font-size="{font:g}" text-anchor="end">{_e(label)}</text>')
 
+    def level_labels(self, labels: Sequence[str], positions: Sequence[float] | np.ndarray,
+                     font: float = 9.0) -> None:
+        """Labels below the plot area at the x data positions, with their grid lines: the
+        level names of a group label (the x ticks of a categorical variable)."""
+        for label, p in zip(labels, self.px(positions), strict=True):
+            self.inner.insert(0, f'<path d="M{p:.1f} 0V{self.height:.1f}" stroke="{GRID}"/>')
+            self.outer.append(f'<text x="{_f(self.left + p)}" '
+                              f'y="{_f(self.top + self.height + font + 2)}" '
+                              f'font-size="{font:g}" text-anchor="middle">{_e(label)}</text>')
+
     def legend(self, entries: Sequence[tuple[str, str]], font: float = 9.0,
                corner: str = "right") -> None:
         """(label, colour) entries in a box in a corner of the plot area: "right", "left"
