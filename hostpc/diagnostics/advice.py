@@ -164,15 +164,44 @@ def interaction_sentence(interaction: Interaction, check: ModelCheck) -> str:
             f"(score {interaction.score:.1f}, p = {interaction.p_value:.2g})")
     context = check.fit.problem.context
     if interaction.variable in context.categorical:
-        return (f"{head}: the samples of one {interaction.variable} disagree with the others "
-                f"(a mis-surveyed or moved {interaction.variable}, or a setup that changed "
-                f"between groups); the binned residuals name which.")
+        return f"{head}: {_group_sentence(interaction)}"
     effect = pattern_effect(interaction.parameter, interaction.variable, context)
     if effect is not None and all(e not in check.effects for e in effect.split(" or ")):
         return f"{head}: that is what {effect} models."
     return (f"{head}. If no built-in effect explains it, write one whose parameter makes "
             f"{interaction.parameter} depend on {interaction.variable} (docs/effects.md) and "
             f"add it with --plugin FILE --effects +NAME.")
+
+
+def quantity(value: float, unit: str) -> str:
+    """A signed parameter change in the units of the text: mm, deg, else SI."""
+    if unit == "m":
+        return f"{value * 1e3:+.3g} mm"
+    if unit == "rad":
+        return f"{math.degrees(value):+.3g} deg"
+    return f"{value:+.3g}" + (f" {unit}" if unit else "")
+
+
+def _group_sentence(interaction: Interaction) -> str:
+    """What a "parameter differs per level" finding says: which level, by how much."""
+    group = interaction.variable
+    cause = (f"(a mis-surveyed or moved {group}, or a setup that changed between groups)")
+    shifts = interaction.level_shifts
+    if not shifts:
+        return (f"the samples of one {group} disagree with the others {cause}; the binned "
+                f"residuals name which.")
+    values = ", ".join(f"{level} {quantity(v, interaction.unit)}" for level, v in shifts)
+    per_level = (f"fitted per {group}, {interaction.parameter} would be {values} against "
+                 f"the mean of the {len(shifts)} groups")
+    if len(shifts) == 2:
+        (first, a), (second, b) = shifts
+        return (f"the samples of {group} {first} and {group} {second} disagree {cause}: "
+                f"{per_level}, a difference of {quantity(a - b, interaction.unit)} "
+                f"({first} - {second}); with two groups the data cannot say which of them "
+                f"is off.")
+    level, _ = max(shifts, key=lambda item: abs(item[1]))
+    return (f"the samples of {group} {level} disagree with the others {cause}: "
+            f"{per_level}.")
 
 
 def chi2_position(adequacy: Adequacy) -> str:

@@ -10,7 +10,9 @@ fitted columns are projected out; the statistic is the chi-square drop the added
 would buy at first order, ``s = |Q_z^T r|^2`` (Q_z an orthonormal basis of the projected
 columns, r the whitened residuals), turned into an F-test against the residual variance (so
 a wrong overall noise scale does not matter). ``score`` is -log10 of its p-value;
-significance is Bonferroni corrected over all (parameter, variable) pairs tested.
+significance is Bonferroni corrected over all (parameter, variable) pairs tested. A
+significant "per level" pair also carries the parameter's value on each level's samples
+(first order, against the mean over the levels): which group is off, and by how much.
 
 The parameters tested are those of the model plus, when the model has no ``geometry``
 effect, the DH/MDH table deltas (named ``geometry.<name>``), so a drifting link length is
@@ -22,8 +24,8 @@ from __future__ import annotations
 
 import bisect
 import math
-from collections.abc import Iterator, Mapping
-from dataclasses import dataclass
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -43,7 +45,9 @@ class Interaction:
     """"``parameter`` varies with ``variable``": score = -log10(p), chi2 = the statistic
     (first-order chi-square drop), dof = columns tested, p_value, significant,
     basis: "linear", "linear+harmonic" or "per level" (a group label); fitted: whether
-    the parameter is in the model."""
+    the parameter is in the model; unit: the parameter's SI unit; level_shifts (a
+    significant "per level" pair only): (level name, the parameter's first-order change on
+    that level's samples against the mean over the levels, in ``unit``), in level order."""
 
     parameter: str
     variable: str
@@ -55,6 +59,8 @@ class Interaction:
     basis: str
     fitted: bool
     equivalent: tuple[str, ...] = ()
+    unit: str = ""
+    level_shifts: tuple[tuple[str, float], ...] = ()
 
     @property
     def sentence(self) -> str:
@@ -68,7 +74,8 @@ class Interaction:
             "parameter": self.parameter, "variable": self.variable, "score": self.score,
             "chi2": self.chi2, "dof": self.dof, "p_value": self.p_value,
             "significant": self.significant, "basis": self.basis, "fitted": self.fitted,
-            "equivalent": list(self.equivalent),
+            "equivalent": list(self.equivalent), "unit": self.unit,
+            "level_shifts": [[level, shift] for level, shift in self.level_shifts],
         }
 
 
@@ -101,8 +108,9 @@ def modulators(name: str, values: np.ndarray, categorical: bool = False
     return F, basis
 
 
-def _geometry_columns(result: FitResult) -> tuple[list[str], np.ndarray] | None:
-    """Whitened Jacobian columns of the DH/MDH deltas at the fit, if geometry is not fitted."""
+def _geometry_columns(result: FitResult) -> tuple[list[str], list[str], np.ndarray] | None:
+    """(names, units, whitened Jacobian columns) of the DH/MDH deltas at the fit, if
+    geometry is not fitted."""
     problem = result.problem
     if "geometry" in problem.effect_names:
         return None
@@ -121,7 +129,8 @@ def _geometry_columns(result: FitResult) -> tuple[list[str], np.ndarray] | None:
     outside = np.linalg.norm(columns - Q @ (Q.T @ columns), axis=0)
     keep = outside > 1e-6 * np.maximum(np.linalg.norm(columns, axis=0), 1e-300)
     names = [n for n, k in zip(extended.layout.names[span], keep, strict=True) if k]
-    return names, columns[:, keep]
+    units = [u for u, k in zip(extended.layout.units[span], keep, strict=True) if k]
+    return names, units, columns[:, keep]
 
 
 def search_interactions(result: FitResult, variables: Mapping[str, np.ndarray], alpha: float,
@@ -135,14 +144,16 @@ def search_interactions(result: FitResult, variables: Mapping[str, np.ndarray], 
     row_weight = np.repeat(np.sqrt(result.weights), m)
     r = evaluation.whitened.ravel() * row_weight
     names = list(problem.layout.names)
+    units = list(problem.layout.units)
     fitted = [True] * len(names)
     columns = J
     if include_geometry:
         extra = _geometry_columns(result)
         if extra is not None:
             names += extra[0]
+            units += extra[1]
             fitted += [False] * len(extra[0])
-            columns = np.concatenate([J, extra[1]], axis=1)
+            columns = np.concatenate([J, extra[2]], axis=1)
     columns = columns * row_weight[:, None]
     J_free = J[:, ~result.fixed] * row_weight[:, None]
     Q = np.linalg.qr(J_free)[0] if J_free.shape[1] else np.zeros((r.size, 0))
@@ -178,15 +189,41 @@ def search_interactions(result: FitResult, variables: Mapping[str, np.ndarray], 
     log_p = np.where(testable, f_logsf(statistics / safe_rank / remaining, safe_rank,
                                        np.maximum(dof_fit - safe_rank, 1)), 0.0)
     log_p = np.where(np.isfinite(log_p), log_p, -300.0 * math.log(10.0))
+    column_of = {name: k for k, name in enumerate(names)}
     found = [
         Interaction(parameter, variable, float(-lp / math.log(10.0)) + 0.0, float(s), int(g),
                     float(math.exp(lp)), bool(math.exp(lp) < threshold), basis, is_fitted,
-                    equivalent)
+                    equivalent, units[column_of[parameter]])
         for (parameter, variable, s, g, basis, is_fitted, equivalent), lp
         in zip(pairs, log_p, strict=True)
     ]
+    for i, interaction in enumerate(found):
+        if interaction.significant and interaction.basis == "per level":
+            values = usable[interaction.variable]
+            column = columns[:, column_of[interaction.parameter]]
+            found[i] = replace(interaction, level_shifts=level_shifts(
+                column, values, categorical[interaction.variable], m, Q, r))
     found.sort(key=lambda i: (-i.score, i.parameter, i.variable))
     return tuple(found), n_tests
+
+
+def level_shifts(column: np.ndarray, codes: np.ndarray, levels: Sequence[str], m: int,
+                 Q: np.ndarray, r: np.ndarray) -> tuple[tuple[str, float], ...]:
+    """The parameter's first-order value on each level's samples, against the mean over
+    the levels: the least-squares coefficients (minimum norm, so they sum to zero) of its
+    added "per level" columns, fitted columns Q projected out.
+
+    column: the parameter's whitened Jacobian column (N*m,); codes: the level index of
+    each sample (N,), NaN where it has none; levels: the level names; m: the measurement
+    size; Q: (N*m, k) orthonormal basis of the fitted columns; r: whitened residuals
+    (N*m,). Returns (level name, change in the parameter's unit), one per level present."""
+    F, _ = modulators("", codes, categorical=True)
+    Z = column[:, None] * np.repeat(F, m, axis=0)
+    Z = Z - Q @ (Q.T @ Z)
+    coefficients = np.linalg.lstsq(Z, r, rcond=None)[0]
+    present = np.unique(codes[np.isfinite(codes)])
+    return tuple((levels[int(code)], float(c)) for code, c in
+                 zip(present, coefficients, strict=True))
 
 
 #: values of the added columns of one batch of parameters (rows x parameters x g; 4 MB)
