@@ -210,8 +210,11 @@ def search_interactions(result: FitResult, variables: Mapping[str, np.ndarray], 
 def level_shifts(column: np.ndarray, codes: np.ndarray, levels: Sequence[str], m: int,
                  Q: np.ndarray, r: np.ndarray) -> tuple[tuple[str, float], ...]:
     """The parameter's first-order value on each level's samples, against the mean over
-    the levels: the least-squares coefficients (minimum norm, so they sum to zero) of its
-    added "per level" columns, fitted columns Q projected out.
+    the levels: the least-squares change (minimum norm, so the changes sum to zero) along
+    its added "per level" columns, fitted columns Q projected out, that removes the
+    residuals. The column is d(r)/dx of r = W (measured - predicted), so that change is
+    ``-lstsq(Z, r)``: a level measured as if the parameter were larger gets a positive
+    shift.
 
     column: the parameter's whitened Jacobian column (N*m,); codes: the level index of
     each sample (N,), NaN where it has none; levels: the level names; m: the measurement
@@ -220,7 +223,7 @@ def level_shifts(column: np.ndarray, codes: np.ndarray, levels: Sequence[str], m
     F, _ = modulators("", codes, categorical=True)
     Z = column[:, None] * np.repeat(F, m, axis=0)
     Z = Z - Q @ (Q.T @ Z)
-    coefficients = np.linalg.lstsq(Z, r, rcond=None)[0]
+    coefficients = -np.linalg.lstsq(Z, r, rcond=None)[0]
     present = np.unique(codes[np.isfinite(codes)])
     return tuple((levels[int(code)], float(c)) for code, c in
                  zip(present, coefficients, strict=True))

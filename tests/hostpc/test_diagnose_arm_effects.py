@@ -14,6 +14,7 @@ import pytest
 
 import hostpc
 from hostpc.dataset import Dataset
+from hostpc.model.measurement import predict
 from hostpc.synthesize_dual_loop import plan_poses, synthesize_dual_loop
 
 OFFSETS = {"joint_offsets.left.q3": 1e-3, "joint_offsets.right.q4": -1e-3}
@@ -26,6 +27,19 @@ def _arms(truth: dict[str, float], seed: int, left_depth_bias: float = 0.0) -> D
     p = np.array(dataset.samples.p, dtype=float)
     p[dataset.samples.chain == "left", 2] += left_depth_bias
     return replace(dataset, samples=replace(dataset.samples, p=p))
+
+
+def _depth_slope(diagnosis: hostpc.Diagnosis, parameter: str) -> float:
+    """Mean derivative of the left arm's predicted depth (camera z, m) by ``parameter``
+    at the fit, by central differences of the model's predictions."""
+    fit = diagnosis.check.fit
+    k = list(fit.problem.layout.names).index(parameter)
+    step = np.zeros_like(fit.x)
+    step[k] = 1e-6
+    ahead, _ = predict(fit.problem, fit.x + step, jacobian=False)
+    behind, _ = predict(fit.problem, fit.x - step, jacobian=False)
+    left = np.asarray(fit.problem.dataset.samples.chain) == "left"
+    return float(np.mean((ahead - behind)[left, 2]) / 2e-6)
 
 
 @pytest.mark.parametrize("seed", [1])
@@ -50,7 +64,10 @@ def test_an_offset_of_one_arm_is_named_by_the_chain_group(seed: int) -> None:
     assert [level for level, _ in top.level_shifts] == ["left", "right"]
     (_, left), (_, right) = top.level_shifts
     assert top.unit == "m" and left + right == pytest.approx(0.0, abs=1e-9)
-    assert abs(left - right) == pytest.approx(DEPTH_BIAS, rel=0.25)
+    # the difference is the change of the parameter on the left arm's samples that moves
+    # their predicted depth by +DEPTH_BIAS (its sign too), judged by the model itself
+    assert (left - right) * _depth_slope(diagnosis, top.parameter) == pytest.approx(
+        DEPTH_BIAS, rel=0.25)
     advice = " ".join(diagnosis.advice)
     assert "the samples of chain left and chain right disagree" in advice
     assert f"a difference of {(left - right) * 1e3:+.3g} mm (left - right)" in advice

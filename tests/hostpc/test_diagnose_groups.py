@@ -26,9 +26,12 @@ MARKERS = {"a": np.array([0.05, 0.0, 0.03]), "b": np.array([-0.02, 0.06, 0.05]),
            "c": np.array([0.0, -0.05, 0.08])}
 
 
-def tracker_dataset(seed: int, marker_b_error: float) -> Dataset:
+def tracker_dataset(seed: int, marker_b_error: float,
+                    marker_b_shifts: dict[str, float] | None = None) -> Dataset:
     """world_point, 30 poses x 3 markers, markers known (surveyed); the true marker b sits
-    ``marker_b_error`` m off its surveyed position along the flange y axis."""
+    ``marker_b_error`` m off its surveyed position along the flange y axis, and marker b's
+    samples are measured with the parameters ``marker_b_shifts`` (name: change in its SI
+    unit) added to the truth (a setup that changed for that group)."""
     rng = np.random.default_rng(seed)
     q = np.repeat(example_poses(get_robot("ur5e"), UR5E_HOME, 30, rng, spread=0.6), 3, axis=0)
     n = q.shape[0]
@@ -49,6 +52,12 @@ def tracker_dataset(seed: int, marker_b_error: float) -> Dataset:
             x[k] = rng.uniform(-1, 1) * 0.002
     x[names.index("markers.b.y")] = marker_b_error
     y, _ = predict(problem, x, jacobian=False)
+    if marker_b_shifts:
+        shifted = x.copy()
+        for name, shift in marker_b_shifts.items():
+            shifted[names.index(name)] += shift
+        rows = samples.fields["marker"] == "b"
+        y[rows] = predict(problem, shifted, jacobian=False)[0][rows]
     measured = replace(samples, p=y + rng.normal(0, SIGMA, y.shape))
     return replace(dataset.with_samples(measured), known=("markers",))
 
@@ -99,6 +108,23 @@ def test_a_mis_surveyed_marker_is_found_and_named(seed: int) -> None:
     advice = " ".join(diagnosis.advice)
     assert "the samples of marker b are off by" in advice
     assert "the samples of marker b disagree with the others" in advice
+
+
+@pytest.mark.parametrize("shift", [5e-4, -5e-4])
+def test_the_level_shifts_are_the_parameter_change_of_that_group(shift: float) -> None:
+    """world.x off by ``shift`` on marker b's samples only: against the mean of the three
+    markers, b's world.x is +2/3 shift and a's and c's -1/3 shift (the sign of the change
+    that explains the data, not of the residuals)."""
+    diagnosis = hostpc.diagnose(tracker_dataset(0, 0.0, {"world.x": shift}))
+    top = diagnosis.check.significant_interactions[0]
+    assert (top.parameter, top.variable, top.unit) == ("world.x", "marker", "m")
+    shifts = dict(top.level_shifts)
+    assert shifts["b"] == pytest.approx(2 * shift / 3, rel=0.1)
+    assert shifts["a"] == pytest.approx(-shift / 3, rel=0.15)
+    assert shifts["c"] == pytest.approx(-shift / 3, rel=0.15)
+    advice = " ".join(diagnosis.advice)
+    assert "the samples of marker b disagree with the others" in advice
+    assert f"b {shifts['b'] * 1e3:+.3g} mm" in advice
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
