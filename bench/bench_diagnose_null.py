@@ -1,6 +1,6 @@
 """False alarms of `hostpc diagnose --ladder` on data with nothing hidden.
 
-    python bench/bench_diagnose_null.py [--seeds 24]
+    python bench/bench_diagnose_null.py [--seeds 24] [--quick]
 
 For each seed, a 120-pose stereo_target dataset (random zero offsets and frame errors, no
 hidden effect; seeds 100.. as tests/hostpc/test_diagnose_null.py) is diagnosed with the
@@ -9,7 +9,7 @@ model is said not to be adequate, or any effect the ladder adds. The stated rate
 union bound over the families of tests (chi-square band at ADEQUACY_P_MIN, outliers,
 candidates, interactions, each at the family-wise DEFAULT_ALPHA): at most 4e-3 per dataset,
 so more than 1 alarm in 24 datasets has probability < 1 % (binomial). Prints one line a
-seed, the count and the bound; :func:`run` returns them.
+seed, the count and the bound; :func:`run` returns them. ``--quick``: 4 seeds.
 """
 
 from __future__ import annotations
