@@ -135,8 +135,7 @@ def residuals_vs_variables(diagnosis: Diagnosis, variables: dict[str, np.ndarray
                    xticks=not pattern.levels, yticks=column == 0, font=10,
                    ylabel="whitened [sigma]" if column == 0 else "")
         if pattern.levels:
-            axes.level_labels(pattern.levels, pattern.centres,
-                              min(8.5, (cell_w - 30) / len(pattern.levels) / 4.5))
+            axes.level_labels(pattern.levels, pattern.centres)
         if k == 0:
             axes.legend([(names[c], COLOURS[c % 4]) for c in range(m)])
     return canvas.render()

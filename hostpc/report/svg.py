@@ -22,6 +22,11 @@ import numpy as np
 FONT = 'font-family="system-ui, sans-serif"'
 GRID = "#e6e6e6"
 INK = "#222"
+#: smallest font (px) of level names on an x axis; the width of one character and the gap
+#: between two names, in font sizes (a sans-serif digit is ~0.55 em)
+MIN_LABEL_FONT = 7.0
+LABEL_CHAR_EM = 0.6
+LABEL_GAP_EM = 0.8
 
 
 def _e(text: object) -> str:
@@ -212,14 +217,25 @@ class Axes:
                               f'font-size="{font:g}" text-anchor="end">{_e(label)}</text>')
 
     def level_labels(self, labels: Sequence[str], positions: Sequence[float] | np.ndarray,
-                     font: float = 9.0) -> None:
-        """Labels below the plot area at the x data positions, with their grid lines: the
-        level names of a group label (the x ticks of a categorical variable)."""
-        for label, p in zip(labels, self.px(positions), strict=True):
+                     font: float = 8.5, min_font: float = MIN_LABEL_FONT) -> None:
+        """Labels below the plot area at the x data positions (in order), with a grid line
+        at every position: the level names of a group label (the x ticks of a categorical
+        variable). The font shrinks from ``font`` to fit the spacing, but not below
+        ``min_font``; where even that does not fit, every k-th level is named (the first
+        always), so no two names overlap."""
+        x = self.px(positions)
+        for p in x:
             self.inner.insert(0, f'<path d="M{p:.1f} 0V{self.height:.1f}" stroke="{GRID}"/>')
+        if not len(labels):
+            return
+        spacing = max(float(np.min(np.diff(np.sort(x)))), 1e-9) if x.size > 1 else math.inf
+        em = LABEL_CHAR_EM * max(len(str(label)) for label in labels) + LABEL_GAP_EM
+        size = max(min_font, min(font, spacing / em))
+        every = max(1, math.ceil(size * em / spacing)) if math.isfinite(spacing) else 1
+        for label, p in list(zip(labels, x, strict=True))[::every]:
             self.outer.append(f'<text x="{_f(self.left + p)}" '
-                              f'y="{_f(self.top + self.height + font + 2)}" '
-                              f'font-size="{font:g}" text-anchor="middle">{_e(label)}</text>')
+                              f'y="{_f(self.top + self.height + size + 2)}" '
+                              f'font-size="{size:.3g}" text-anchor="middle">{_e(label)}</text>')
 
     def legend(self, entries: Sequence[tuple[str, str]], font: float = 9.0,
                corner: str = "right") -> None:
