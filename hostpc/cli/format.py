@@ -7,13 +7,9 @@ import math
 import numpy as np
 
 from hostpc.fitting import FitResult
+from hostpc.units import DISPLAY_UNITS
 
-DISPLAY_UNITS = {
-    "rad": ("deg", math.degrees(1.0)),
-    "m": ("mm", 1e3),
-    "rad/(N m)": ("deg/(N m)", math.degrees(1.0)),
-    "1": ("ppm", 1e6),
-}
+__all__ = ["DISPLAY_UNITS", "display", "format_fit_summary", "format_parameter_table"]
 
 
 def display(value: float | None, unit: str) -> tuple[str, str]:

@@ -15,6 +15,7 @@ from hostpc.diagnostics.patterns import pattern_effect
 from hostpc.diagnostics.residual_analysis import ResidualAnalysis
 from hostpc.errors import InputError
 from hostpc.model.problem import default_effects
+from hostpc.units import quantity
 
 #: fewer degrees of freedom than this: the advice says the samples are too few to judge
 FEW_DOF = 10
@@ -164,7 +165,7 @@ def interaction_sentence(interaction: Interaction, check: ModelCheck) -> str:
             f"(score {interaction.score:.1f}, p = {interaction.p_value:.2g})")
     context = check.fit.problem.context
     if interaction.variable in context.categorical:
-        return f"{head}: {_group_sentence(interaction)}"
+        return f"{head}: {group_sentence(interaction)}"
     effect = pattern_effect(interaction.parameter, interaction.variable, context)
     if effect is not None and all(e not in check.effects for e in effect.split(" or ")):
         return f"{head}: that is what {effect} models."
@@ -173,34 +174,44 @@ def interaction_sentence(interaction: Interaction, check: ModelCheck) -> str:
             f"add it with --plugin FILE --effects +NAME.")
 
 
-def quantity(value: float, unit: str) -> str:
-    """A signed parameter change in the units of the text: mm, deg, else SI."""
-    if unit == "m":
-        return f"{value * 1e3:+.3g} mm"
-    if unit == "rad":
-        return f"{math.degrees(value):+.3g} deg"
-    return f"{value:+.3g}" + (f" {unit}" if unit else "")
+#: a level is named as the one that is off only if its shift is this many times the
+#: runner-up's (else the levels differ together: no one of them stands out)
+STANDS_OUT = 1.5
+#: levels listed with their shift at most (the largest); the others get one bound
+LISTED_LEVELS = 8
 
 
-def _group_sentence(interaction: Interaction) -> str:
-    """What a "parameter differs per level" finding says: which level, by how much."""
+def group_sentence(interaction: Interaction) -> str:
+    """What a "parameter differs per level" finding says: which level (if one stands out:
+    |shift| at least STANDS_OUT times the runner-up's), by how much (in display units)."""
     group = interaction.variable
     cause = (f"(a mis-surveyed or moved {group}, or a setup that changed between groups)")
     shifts = interaction.level_shifts
     if not shifts:
         return (f"the samples of one {group} disagree with the others {cause}; the binned "
                 f"residuals name which.")
-    values = ", ".join(f"{level} {quantity(v, interaction.unit)}" for level, v in shifts)
+    unit = interaction.unit
+    by_size = sorted(shifts, key=lambda item: -abs(item[1]))
+    listed = set(by_size[:LISTED_LEVELS])
+    values = ", ".join(f"'{level}' {quantity(v, unit)}" for level, v in shifts
+                       if (level, v) in listed)
+    if len(shifts) > LISTED_LEVELS:
+        rest = max(abs(v) for _, v in by_size[LISTED_LEVELS:])
+        values += (f"; the other {len(shifts) - LISTED_LEVELS} {group}s within "
+                   f"{quantity(rest, unit, signed=False)}")
     per_level = (f"fitted per {group}, {interaction.parameter} would be {values} against "
                  f"the mean of the {len(shifts)} groups")
     if len(shifts) == 2:
         (first, a), (second, b) = shifts
         return (f"the samples of {group} {first} and {group} {second} disagree {cause}: "
-                f"{per_level}, a difference of {quantity(a - b, interaction.unit)} "
+                f"{per_level}, a difference of {quantity(a - b, unit)} "
                 f"({first} - {second}); with two groups the data cannot say which of them "
                 f"is off.")
-    level, _ = max(shifts, key=lambda item: abs(item[1]))
-    return (f"the samples of {group} {level} disagree with the others {cause}: "
+    (level, top), (_, runner_up) = by_size[:2]
+    if abs(top) >= STANDS_OUT * abs(runner_up):
+        return (f"the samples of {group} {level} disagree with the others {cause}: "
+                f"{per_level}.")
+    return (f"the samples of the {group}s disagree; no one {group} stands out {cause}: "
             f"{per_level}.")
 
 

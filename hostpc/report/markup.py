@@ -8,9 +8,10 @@ import html
 import math
 from collections.abc import Iterable, Sequence
 
-DISPLAY = {"rad": ("deg", math.degrees(1.0)), "m": ("mm", 1e3),
-           "rad/(N m)": ("deg/(N m)", math.degrees(1.0)), "1": ("ppm", 1e6),
-           "s": ("ms", 1e3)}
+from hostpc.units import DISPLAY_UNITS
+
+#: the display units of the CLI, and latencies in ms
+DISPLAY = {**DISPLAY_UNITS, "s": ("ms", 1e3)}
 
 STYLE = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1200px;

@@ -124,7 +124,7 @@ def test_the_level_shifts_are_the_parameter_change_of_that_group(shift: float) -
     assert shifts["c"] == pytest.approx(-shift / 3, rel=0.15)
     advice = " ".join(diagnosis.advice)
     assert "the samples of marker b disagree with the others" in advice
-    assert f"b {shifts['b'] * 1e3:+.3g} mm" in advice
+    assert f"'b' {shifts['b'] * 1e3:+.3g} mm" in advice
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
