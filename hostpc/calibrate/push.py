@@ -40,7 +40,7 @@ from hostpc.calibrate.journal import Journal, write_json_atomic
 from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult
-from hostpc.fitting.shared_chi2 import result_shared_chi2
+from hostpc.fitting.shared_errors import result_shared_chi2
 from hostpc.planning.design import joint_offset_names
 from hostpc.robots.base import RobotAdapter
 

@@ -31,28 +31,10 @@ estimated from this same chi2 and would make the test unable to fail).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
-
-from hostpc.model.problem import Problem
 
 EIGEN_TOLERANCE = 1e-12
 """Eigenvalues of S below this fraction of the largest are taken as zero (no variance)."""
-
-
-@dataclass(frozen=True)
-class SharedChi2:
-    """chi2: the statistic T (see the module docstring); dof: rows - rank of the Jacobian;
-    plain_chi2: r^T r over the same rows (without the shared error)."""
-
-    chi2: float
-    dof: int
-    plain_chi2: float
-
-    @property
-    def chi2_dof(self) -> float:
-        return self.chi2 / self.dof if self.dof > 0 else float("nan")
 
 
 def covariance_factor(S: np.ndarray) -> np.ndarray:
@@ -65,17 +47,38 @@ def covariance_factor(S: np.ndarray) -> np.ndarray:
     return vectors[:, keep] * np.sqrt(values[keep])
 
 
+def _noise_whitened(residuals: np.ndarray, jacobian: np.ndarray, shared_whitened: np.ndarray,
+                    noise_blocks: np.ndarray | None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(r (n,), J (n, F), U (n, R)) as arrays, whitened by M^(-1/2) block by block
+    (M_i = F_i F_i^T, Cholesky) when noise_blocks M (B, b, b) is given."""
+    r = np.asarray(residuals, dtype=float).ravel()
+    J = np.asarray(jacobian, dtype=float).reshape(r.size, -1)
+    U = np.asarray(shared_whitened, dtype=float).reshape(r.size, -1)
+    if noise_blocks is None:
+        return r, J, U
+    blocks = np.asarray(noise_blocks, dtype=float)
+    factor = np.linalg.cholesky(blocks)
+
+    def whiten(a: np.ndarray) -> np.ndarray:
+        shaped = a.reshape(blocks.shape[0], blocks.shape[1], -1)
+        return np.linalg.solve(factor, shaped).reshape(r.size, -1)
+
+    return whiten(r[:, None]).ravel(), whiten(J), whiten(U)
+
+
 def chi2_with_shared_error(residuals: np.ndarray, jacobian: np.ndarray,
-                           shared_whitened: np.ndarray) -> tuple[float, int]:
-    """(T, dof) of whitened residuals r (n,) against V_w = I + U U^T.
+                           shared_whitened: np.ndarray,
+                           noise_blocks: np.ndarray | None = None) -> tuple[float, int]:
+    """(T, dof) of whitened residuals r (n,) against V_w = M + U U^T.
 
     jacobian: (n, F) derivative of r by the free parameters (whitened like r);
     shared_whitened: (n, R) U = Dw L, the whitened shared-error directions (Dw = W D the
     whitened sensitivity of the measurements to the shared parameters, S = L L^T; zero rows
-    for rows without shared error, e.g. priors). dof = n - rank(jacobian)."""
-    r = np.asarray(residuals, dtype=float).ravel()
-    J = np.asarray(jacobian, dtype=float).reshape(r.size, -1)
-    U = np.asarray(shared_whitened, dtype=float).reshape(r.size, -1)
+    for rows without shared error, e.g. priors); noise_blocks: (B, b, b) with B b = n, the
+    whitened noise covariance M, block diagonal (e.g. the noise without a pixel floor the
+    whitening includes), positive definite; None: M = I. dof = n - rank(jacobian)."""
+    r, J, U = _noise_whitened(residuals, jacobian, shared_whitened, noise_blocks)
     if U.shape[1]:
         Q, s, _ = np.linalg.svd(U, full_matrices=False)
         shrink = 1.0 - 1.0 / np.sqrt(1.0 + s**2)  # V^(-1/2) = I - Q diag(shrink) Q^T
@@ -98,53 +101,61 @@ def chi2_with_shared_error(residuals: np.ndarray, jacobian: np.ndarray,
     return float(r @ r), int(r.size - rank)
 
 
-def shared_error_chi2(problem: Problem, x: np.ndarray, free: np.ndarray,
-                      weights: np.ndarray | None = None) -> SharedChi2 | None:
-    """The chi2 with the shared error inside of a fit at x (P,) with free parameters
-    free (P,) bool and robust sample weights (N,) (None: all 1), or None when the
-    problem's dataset declares no shared error (no `rig_uncertainty` block, or no uv).
+def weighted_chi2_tail(x: float, ones: int, weights: np.ndarray) -> float:
+    """P(Q > x) for Q = chi2(ones) + sum_j weights_j chi2_j(1) (independent; weights > 0):
+    the Lugannani-Rice saddlepoint approximation (accurate to a few % of the tail
+    probability in the tails, tested against draws); the normal one near the mean."""
+    from scipy import optimize, stats
 
-    Rows: the samples' whitened residuals (the weights' square roots applied) and the prior
-    rows of `--prior`; their Jacobian at x by the free parameters."""
-    from hostpc.fitting.priors import problem_constraints
-    from hostpc.fitting.shared_errors import shared_covariance
-    from hostpc.fitting.solver import evaluate
+    lam = np.concatenate([np.ones(1), np.asarray(weights, dtype=float)])
+    lam = lam[lam > 0]
+    count = np.concatenate([[float(ones)], np.ones(lam.size - 1)])
+    if ones <= 0:
+        lam, count = lam[1:], count[1:]
+    if lam.size == 0:
+        return 1.0 if x < 0 else 0.0
+    mean = float(np.sum(count * lam))
+    sd = float(np.sqrt(2.0 * np.sum(count * lam**2)))
 
-    shared = shared_covariance(problem)
-    if shared is None:
-        return None
-    D, S = shared
-    x = np.asarray(x, dtype=float)
-    free = np.asarray(free, dtype=bool)
-    evaluation = evaluate(problem, x)
-    assert evaluation.jacobian is not None
-    n, m = evaluation.whitened.shape
-    row_weight = (np.ones(n * m) if weights is None
-                  else np.repeat(np.sqrt(np.asarray(weights, dtype=float)), m))
-    r = evaluation.whitened.ravel() * row_weight
-    J = evaluation.jacobian[:, free] * row_weight[:, None]
-    L = covariance_factor(S)
-    Dw = np.einsum("nij,njk->nik", problem.sqrt_information, D).reshape(n * m, -1)
-    U = (Dw @ L) * row_weight[:, None]
-    constraints = problem_constraints(problem)
-    if constraints is not None and constraints.index.size:
-        r = np.concatenate([r, constraints.residuals(x)])
-        J = np.vstack([J, constraints.jacobian(x.size)[:, free]])
-        U = np.vstack([U, np.zeros((constraints.index.size, U.shape[1]))])
-    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J)) and np.all(np.isfinite(U))):
-        return None
-    chi2, dof = chi2_with_shared_error(r, J, U)
-    return SharedChi2(chi2=chi2, dof=dof, plain_chi2=float(r @ r))
+    def slope(t: float) -> float:  # K'(t) - x
+        return float(np.sum(count * lam / (1.0 - 2.0 * lam * t))) - x
+
+    if x <= 0:
+        return 1.0
+    if abs(x - mean) < 1e-3 * sd:
+        return float(stats.norm.sf((x - mean) / sd))
+    upper = 0.5 / float(np.max(lam)) * (1.0 - 1e-12)
+    lower = -1.0
+    while slope(lower) > 0:
+        lower *= 4.0
+    t = float(optimize.brentq(slope, lower, upper, xtol=1e-14, rtol=1e-12, maxiter=400))
+    cgf = -0.5 * float(np.sum(count * np.log1p(-2.0 * lam * t)))
+    curvature = float(np.sum(2.0 * count * lam**2 / (1.0 - 2.0 * lam * t) ** 2))
+    w = float(np.sign(t) * np.sqrt(max(2.0 * (t * x - cgf), 0.0)))
+    u = t * np.sqrt(curvature)
+    if abs(w) < 1e-6 or abs(u) < 1e-9:
+        return float(stats.norm.sf((x - mean) / sd))
+    tail = float(stats.norm.sf(w) + stats.norm.pdf(w) * (1.0 / u - 1.0 / w))
+    return min(1.0, max(0.0, tail))
 
 
-def result_shared_chi2(result: object) -> SharedChi2 | None:
-    """`shared_error_chi2` of a FitResult (None for anything else, e.g. a saved fit that
-    carries no problem, or a dataset without a shared error)."""
-    problem = getattr(result, "problem", None)
-    if not isinstance(problem, Problem):
-        return None
-    x, fixed, weights = (getattr(result, k, None) for k in ("x", "fixed", "weights"))
-    if x is None or fixed is None:
-        return None
-    return shared_error_chi2(problem, np.asarray(x), ~np.asarray(fixed, dtype=bool),
-                             None if weights is None else np.asarray(weights))
+def shared_excess(residuals: np.ndarray, jacobian: np.ndarray, shared_whitened: np.ndarray,
+                  noise_blocks: np.ndarray | None = None) -> tuple[float, int, float, float]:
+    """The residuals' plain chi-square in noise-whitened coordinates and its null law.
+
+    Whitened by M^(-1/2) (noise_blocks M, None: I) and projected off the Jacobian's
+    columns (P'), the residuals are r' = P' (e' + U' z): with the stated shared covariance
+    right, Q = r'^T r' is exactly chi2(dof - R) + sum_j (1 + mu_j) chi2(1), mu_j (R of them)
+    the eigenvalues of G = (P'U')^T (P'U'). Returns (Q, dof, trace G, P(Q' >= Q) under that
+    law): Q - dof = k' trace G estimates the shared covariance's scale minus 1
+    (`shared_errors.residual_scale`). Arguments as for `chi2_with_shared_error`."""
+    r, J, U = _noise_whitened(residuals, jacobian, shared_whitened, noise_blocks)
+    Q, _ = np.linalg.qr(J) if J.shape[1] else (np.zeros((r.size, 0)), None)
+    r = r - Q @ (Q.T @ r)
+    PU = U - Q @ (Q.T @ U)
+    mu = np.linalg.eigvalsh(PU.T @ PU) if U.shape[1] else np.zeros(0)
+    mu = mu[mu > 1e-12 * max(float(np.max(mu, initial=0.0)), 1e-300)]
+    dof = int(r.size - Q.shape[1])
+    statistic = float(r @ r)
+    tail = weighted_chi2_tail(statistic, dof - mu.size, 1.0 + mu) if dof > 0 else 1.0
+    return statistic, dof, float(np.sum(mu)), tail

@@ -12,12 +12,8 @@ from scipy import stats
 
 import hostpc
 from hostpc.dataset import dataset_from_dict
-from hostpc.fitting.shared_chi2 import (
-    chi2_with_shared_error,
-    covariance_factor,
-    result_shared_chi2,
-)
-from hostpc.fitting.shared_errors import shared_covariance
+from hostpc.fitting.shared_chi2 import chi2_with_shared_error, covariance_factor
+from hostpc.fitting.shared_errors import result_shared_chi2, shared_covariance
 from hostpc.fitting.solver import evaluate
 from hostpc.planning.dual_loop_poses import plan_poses
 from tests.hostpc.test_head_camera_uncertainty import world_documents
