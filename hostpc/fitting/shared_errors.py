@@ -122,20 +122,6 @@ def residual_scale(jacobian_free: np.ndarray, D_whitened: np.ndarray, S: np.ndar
     return max(1.0, (chi2 - dof) / trace)
 
 
-def noise_moments(M: np.ndarray, Q3: np.ndarray) -> tuple[float, float]:
-    """Mean and variance of r^T r for r = P e, e ~ N(0, M) (M: (N, m, m) block diagonal),
-    P = I - Q Q^T the projector off the orthonormal columns Q3 ((N, m, F) per block):
-    trace(P M P) = tr M - tr Q^T M Q and 2 trace(M P M P) =
-    2 (tr M^2 - 2 tr Q^T M^2 Q + tr (Q^T M Q)^2), without forming an (Nm, Nm) matrix."""
-    M2 = np.einsum("nij,njk->nik", M, M)
-    QMQ = np.einsum("nif,nij,njg->fg", Q3, M, Q3)
-    mean = float(np.trace(M, axis1=1, axis2=2).sum() - np.trace(QMQ))
-    variance = 2.0 * float(np.einsum("nij,nji->", M, M)
-                           - 2.0 * np.einsum("nif,nij,njf->", Q3, M2, Q3)
-                           + np.sum(QMQ * QMQ.T))
-    return mean, variance
-
-
 def floor_covariance(problem: Problem, block: Any) -> np.ndarray | None:
     """(N, 3, 3) the per-sample `pixel_floor_px` part of the samples' covariance (the
     diagonal lateral z s/f, depth z^2 sqrt(2) s/(f b) model of stereo_target), or None if the
