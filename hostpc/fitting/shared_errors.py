@@ -16,6 +16,10 @@ Which documents carry it: a dataset with a top-level `rig_uncertainty` block
 ({"rig": <rig file document>, "parameters": [...], "covariance": 24 x 24}) and per-sample
 `uv` (the raw pixel centres the points were triangulated from). Written by the stereo_target
 method when its rig has a calibration covariance (docs/vision.md section 3).
+
+The same block gives the fit's chi2 with the shared error inside (`shared_error_chi2`,
+`result_shared_chi2`; the algebra in hostpc.fitting.shared_chi2): the push guard's adequacy
+test (docs/vision.md 3.3).
 """
 
 from __future__ import annotations
