@@ -166,12 +166,17 @@ def adequacy_chi2(result: FitResult) -> tuple[float, bool]:
     """(chi2/dof the guard tests, True if it includes the dataset's shared error).
 
     With a `rig_uncertainty` block in the fit's dataset: the chi2 with the shared error's
-    covariance inside (`hostpc.fitting.shared_chi2`, same dof as the fit's); else (no
-    block, or a saved fit without its problem) the fit's plain chi2/dof."""
-    if result.converged:
-        full = result_shared_chi2(result)
-        if full is not None and full.dof == result.dof:
-            return full.chi2_dof, True
+    covariance inside (`hostpc.fitting.shared_chi2`, same dof as the fit's; a saved fit,
+    `offline_push.SavedFit`, carries it as `chi2_dof_with_calibration`); else the fit's
+    plain chi2/dof."""
+    if not result.converged:
+        return result.chi2_dof, False
+    saved = getattr(result, "chi2_dof_with_calibration", None)
+    if saved is not None:
+        return float(saved), True
+    full = result_shared_chi2(result)
+    if full is not None and full.dof == result.dof:
+        return full.chi2_dof, True
     return result.chi2_dof, False
 
 

@@ -44,3 +44,22 @@ def test_a_calibration_error_within_its_stated_covariance_does_not_refuse_the_pu
     without = hostpc.fit(dataset_from_dict(plain), cv_folds=0)
     assert adequacy_chi2(without) == (without.chi2_dof, False)
     assert plan_push(without, old, max_correction_deg=5.0).chi2_dof_tested is None
+
+
+def test_a_saved_fit_carries_the_chi2_the_push_tests() -> None:
+    """`hostpc fit --json` writes the chi2/dof with the calibration covariance; the offline
+    push (`hostpc push FIT.json`) tests that one, as the calibrate run does."""
+    from hostpc.calibrate.offline_push import saved_fit_from_dict
+
+    document, _ = world_documents(1, plan_poses(40, np.random.default_rng(3)), 1.0)
+    result = hostpc.fit(dataset_from_dict(document), cv_folds=0)
+    saved_document = result.to_dict()
+    tested, _ = adequacy_chi2(result)
+    assert saved_document["chi2_dof_with_calibration"] == tested
+    saved = saved_fit_from_dict(saved_document, "fit.json")
+    assert saved.chi2_dof > chi2_dof_upper(saved.dof)
+    plan = plan_push(saved, np.zeros(16), max_correction_deg=5.0)  # type: ignore[arg-type]
+    assert plan.refused is None and plan.chi2_dof_tested == tested
+    del saved_document["chi2_dof_with_calibration"]  # an older fit.json: the plain chi2
+    older = saved_fit_from_dict(saved_document, "fit.json")
+    assert plan_push(older, np.zeros(16), max_correction_deg=5.0).refused  # type: ignore[arg-type]
