@@ -25,8 +25,14 @@ Cost O(rows (K^2 + F^2)). A singular S (parameters with zero variance) is fine: 
 only its positive eigen-directions.
 
 Prior rows (`--prior`) enter as rows with no shared error; robust weights multiply the rows
-as in the fit. S is used as stated (not scaled by `shared_errors.residual_scale`, which is
-estimated from this same chi2 and would make the test unable to fail).
+as in the fit (`shared_errors.shared_error_chi2` builds the rows of a fit). S is used as
+stated (not scaled by `shared_errors.residual_scale`, which is estimated from the same
+residuals and would make the test unable to fail).
+
+`shared_excess` is the other statistic here: the plain residual chi2 in noise-whitened
+coordinates, whose exact law with S right is chi2(dof - R) + sum_j (1 + mu_j) chi2_j(1)
+(`weighted_chi2_tail`, a saddlepoint approximation): the gate of the shared error's scale.
+Pure numerics: arrays in, numbers out.
 """
 
 from __future__ import annotations
