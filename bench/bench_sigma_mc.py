@@ -8,8 +8,11 @@ controller (`hostpc calibrate --robot sim --scenario <the method's default world
     ratio = mean over worlds of (error / sigma)^2
 
 with a 95 % interval (if the sigma is honest, n * ratio follows chi-square with n degrees of
-freedom, so 40 worlds allow 0.6-1.5 around 1). Each world is a new seed: new zero errors,
-new camera mount error, new rig-calibration views, new noise. Failed runs are counted.
+freedom, so 40 worlds allow 0.6-1.5 around 1), and how many worlds' chi2/dof is above the
+push's band, plain and with the rig's (head camera's) covariance inside (the chi2 the push
+tests when the dataset carries it, hostpc.fitting.shared_chi2). Each world is a new seed:
+new zero errors, new camera mount error, new rig-calibration views, new noise. Failed runs
+are counted.
 
     python bench/bench_sigma_mc.py [--worlds 40] [--methods stereo_target,sphere_probe,dual_loop]
                                    [--first-seed 1] [--keep DIR [--reuse [--refit]]]
@@ -63,13 +66,16 @@ def world(method: str, seed: int) -> tuple[dict[str, Any], list[str]]:
     return scenario, []
 
 
-def refitted(fit_path: Path, dataset_path: Path) -> dict[str, Any]:
+def refitted(fit_path: Path, dataset_path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
     """The fit.json `parameters` of the kept run, fitted again with the current code: per
-    name the std (SI) and "shift", the value's change against the run's own fit."""
+    name the std (SI) and "shift", the value's change against the run's own fit; and the
+    refit's chi2/dof figures (`band`)."""
     if str(ROOT) not in sys.path:  # run as a script from anywhere
         sys.path.insert(0, str(ROOT))
     import hostpc
+    from hostpc.calibrate.push import chi2_dof_upper
     from hostpc.dataset import load_dataset
+    from hostpc.fitting.shared_errors import result_shared_chi2
 
     kept = json.loads(fit_path.read_text())
     result = hostpc.fit(load_dataset(dataset_path), kept.get("effects"))
@@ -79,7 +85,20 @@ def refitted(fit_path: Path, dataset_path: Path) -> dict[str, Any]:
         std = estimate.std if estimate.std is not None and math.isfinite(estimate.std) else None
         out[name] = {"std": None if entry.get("std") is None else std,
                      "shift": float(estimate.value) - float(entry["value"])}
-    return out
+    full = result_shared_chi2(result)
+    return out, {"chi2_dof": result.chi2_dof, "chi2_dof_upper": chi2_dof_upper(result.dof),
+                 "chi2_dof_with_calibration": None if full is None else full.chi2_dof}
+
+
+def band(fit: dict[str, Any]) -> dict[str, Any]:
+    """Is the run's chi2/dof above the push band, plain and with the shared error inside
+    (None where the run has no such figure)? fit: result.json's "fit" (or `refitted`'s)."""
+    upper = fit.get("chi2_dof_upper")
+    if upper is None or fit.get("chi2_dof") is None:
+        return {}
+    shared = fit.get("chi2_dof_with_calibration")
+    return {"above_band": bool(fit["chi2_dof"] > upper),
+            "above_band_shared": None if shared is None else bool(shared > upper)}
 
 
 def run_world(method: str, seed: int, folder: Path, reuse: bool = False,
@@ -100,13 +119,16 @@ def run_world(method: str, seed: int, folder: Path, reuse: bool = False,
         if not (result_path.is_file() and fit_path.is_file()):
             last = (done.stderr.strip().splitlines() or ["no output"])[-1]
             return {"failed": f"exit {done.returncode}: {last}"}
-    truth = json.loads(result_path.read_text()).get("truth") or {}
+    document = json.loads(result_path.read_text())
+    truth = document.get("truth") or {}
     errors_deg = truth.get("joint_offsets_error_deg")
     if errors_deg is None:
         return {"failed": "no truth comparison in result.json"}
     parameters = json.loads(fit_path.read_text())["parameters"]
+    figures = band(document.get("fit") or {})
     if refit:
-        parameters = refitted(fit_path, out / "dataset.json")
+        parameters, refit_figures = refitted(fit_path, out / "dataset.json")
+        figures = band(refit_figures)
     errors, sigmas, names, shifts = [], [], [], []
     for name, entry in parameters.items():
         if not name.startswith("joint_offsets."):
@@ -116,7 +138,7 @@ def run_world(method: str, seed: int, folder: Path, reuse: bool = False,
         shifts.append(float(entry.get("shift", 0.0)))
     for value, shift in zip(errors_deg[: len(names)], shifts, strict=False):
         errors.append(math.nan if value is None else math.radians(float(value)) + shift)
-    return {"names": names, "errors": errors, "sigmas": sigmas}
+    return {"names": names, "errors": errors, "sigmas": sigmas, **figures}
 
 
 def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
@@ -143,8 +165,11 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
             "mean_z": float(np.mean(z)),
         }
     failures = [r["failed"] for r in runs if "failed" in r]
+    above = {key: [r[key] for r in good if r.get(key) is not None]
+             for key in ("above_band", "above_band_shared")}
     return {"worlds": len(good), "failed": len(failures), "failures": failures[:5],
-            "joints": joints}
+            "joints": joints,
+            **{key: {"worlds": len(v), "above": int(sum(v))} for key, v in above.items() if v}}
 
 
 def run(worlds: int = 8, methods: tuple[str, ...] = METHODS, first_seed: int = 1,
@@ -170,6 +195,11 @@ def print_table(figures: dict[str, Any]) -> None:
         print(f"{method}: {summary['worlds']} worlds, {summary['failed']} failed")
         for failure in summary.get("failures", []):
             print(f"  failed: {failure}")
+        for key, what in (("above_band", "plain chi2"),
+                          ("above_band_shared", "chi2 with the rig/camera covariance")):
+            if key in summary:
+                print(f"  above the push band ({what}): {summary[key]['above']} of "
+                      f"{summary[key]['worlds']} worlds")
         print("  joint  worlds  MSE/sigma^2  95% interval    mean error/sigma")
         for name, j in summary["joints"].items():
             if not j.get("worlds"):

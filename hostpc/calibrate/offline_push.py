@@ -49,6 +49,7 @@ class SavedFit:
     method: str = ""
     effects: tuple[str, ...] = ()
     robot: str = ""  # the dataset's built-in robot name ("" if unknown: a table or URDF)
+    chi2_dof_with_calibration: float | None = None  # the push guard's chi2, if the fit has it
 
     @property
     def chi2_dof(self) -> float:
@@ -110,6 +111,10 @@ def saved_fit_from_dict(document: Any, source: str) -> SavedFit:
         method=str(document.get("method", "")),
         effects=tuple(map(str, document.get("effects", []))),
         robot=str(document.get("robot") or ""),
+        chi2_dof_with_calibration=(
+            None if document.get("chi2_dof_with_calibration") is None
+            else _number(document["chi2_dof_with_calibration"],
+                         f"{source}: chi2_dof_with_calibration")),
     )
 
 

@@ -10,7 +10,12 @@ Guard rails:
   not explain the measurements (chi2/dof above its chi-square band at alpha = 1e-3: the
   band's upper edge is the chi-square upper 1e-3 quantile for the fit's dof, divided by the
   dof; a chi2/dof below the band is no reason to refuse), or if a pushed joint's correction
-  exceeds `max_correction_deg` (default 2 deg);
+  exceeds `max_correction_deg` (default 2 deg). When the dataset declares a shared error
+  (a `rig_uncertainty` block: the stereo rig's or the head camera's calibration and its
+  covariance), the chi2 tested is the one with that covariance inside
+  (`hostpc.fitting.shared_chi2`: the residuals against noise + floor + D S D^T, with the
+  residual projector, same dof): a rig that errs within its stated covariance is no reason
+  to refuse (docs/vision.md 3.3);
 - the intent (previous and new offsets, time) is saved durably in the run folder
   (`push.json`, status "intent", and the journal's `push_intent` event) BEFORE the
   controller is written, then the result (status "pushed", the controller's rollback id);
@@ -35,6 +40,7 @@ from hostpc.calibrate.journal import Journal, write_json_atomic
 from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult
+from hostpc.fitting.shared_errors import result_shared_chi2
 from hostpc.planning.design import joint_offset_names
 from hostpc.robots.base import RobotAdapter
 
@@ -79,6 +85,9 @@ class PushPlan:
     max_correction_deg: float = DEFAULT_MAX_CORRECTION_DEG
     fitted: np.ndarray = field(default_factory=lambda: np.zeros(0))
     labels: tuple[str, ...] = ()
+    chi2_dof_tested: float | None = None
+    """The chi2/dof the adequacy guard tested when it is not the fit's plain one (the chi2
+    with the dataset's shared error inside, `adequacy_chi2`), else None."""
 
     @property
     def anything(self) -> bool:
@@ -144,26 +153,48 @@ def plan_push(result: FitResult, old_offsets: np.ndarray,
         notes.append("")
     delta = np.where(pushed, fitted, 0.0)
     labels = tuple(name.split(".", 1)[1] for name in offset_names)
+    chi2_dof, shared = adequacy_chi2(result)
     refused = None if force else _refusal(result, delta, pushed, labels, max_correction_deg,
-                                          dataset_file)
+                                          dataset_file, chi2_dof, shared)
     return PushPlan(old=old, delta=delta, new=old + delta, sigma=sigma, pushed=pushed,
                     notes=tuple(notes), refused=refused, max_correction_deg=max_correction_deg,
-                    fitted=fitted, labels=labels)
+                    fitted=fitted, labels=labels,
+                    chi2_dof_tested=chi2_dof if shared else None)
+
+
+def adequacy_chi2(result: FitResult) -> tuple[float, bool]:
+    """(chi2/dof the guard tests, True if it includes the dataset's shared error).
+
+    With a `rig_uncertainty` block in the fit's dataset: the chi2 with the shared error's
+    covariance inside (`hostpc.fitting.shared_chi2`, same dof as the fit's; a saved fit,
+    `offline_push.SavedFit`, carries it as `chi2_dof_with_calibration`); else the fit's
+    plain chi2/dof."""
+    if not result.converged:
+        return result.chi2_dof, False
+    saved = getattr(result, "chi2_dof_with_calibration", None)
+    if saved is not None:
+        return float(saved), True
+    full = result_shared_chi2(result)
+    if full is not None and full.dof == result.dof:
+        return full.chi2_dof, True
+    return result.chi2_dof, False
 
 
 def _refusal(result: FitResult, delta: np.ndarray, pushed: np.ndarray,
-             labels: tuple[str, ...], max_correction_deg: float, dataset_file: str
-             ) -> str | None:
+             labels: tuple[str, ...], max_correction_deg: float, dataset_file: str,
+             chi2_dof: float, shared: bool) -> str | None:
     """Why the guard rails refuse the push (first reason that applies), or None.
 
-    delta: (n,) rad corrections, zero where not pushed; pushed: (n,) bool."""
+    delta: (n,) rad corrections, zero where not pushed; pushed: (n,) bool; chi2_dof,
+    shared: what `adequacy_chi2` returned."""
     if not result.converged:
         return (f"the fit did not converge ({result.message}); not pushing "
                 "(--force to push anyway)")
     band = chi2_dof_upper(result.dof)
-    if math.isfinite(result.chi2_dof) and math.isfinite(band) and result.chi2_dof > band:
-        return (f"the model does not explain the measurements (chi2/dof "
-                f"{result.chi2_dof:.3g} above its band {band:.3g}); run `hostpc diagnose "
+    if math.isfinite(chi2_dof) and math.isfinite(band) and chi2_dof > band:
+        what = " with the camera calibration's covariance" if shared else ""
+        return (f"the model does not explain the measurements (chi2/dof{what} "
+                f"{chi2_dof:.3g} above its band {band:.3g}); run `hostpc diagnose "
                 f"{dataset_file}` and rerun with the effect it names, or push anyway "
                 "with --force")
     too_big = pushed & (np.abs(delta) > math.radians(max_correction_deg))

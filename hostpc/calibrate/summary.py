@@ -93,6 +93,9 @@ def result_document(journal: Journal, run_dir: Path, robot: Mapping[str, Any],
             "max_mm": result.max * 1e3,
             "chi2_dof": finite_or_none(result.chi2_dof),
             "chi2_dof_upper": finite_or_none(chi2_dof_upper(result.dof)),
+            # the chi2/dof the push guard tested instead (shared error inside), if any
+            "chi2_dof_with_calibration": (None if push_plan.chi2_dof_tested is None
+                                          else finite_or_none(push_plan.chi2_dof_tested)),
             "noise_rms_mm": finite_or_none(measured_noise_rms(result) * 1e3),
             "stated_noise_rms_mm": finite_or_none(noise_rms(dataset) * 1e3),
             "cv_rms_mm": None if result.cv_rms is None else result.cv_rms * 1e3,
@@ -169,7 +172,9 @@ def format_summary(document: Mapping[str, Any]) -> str:
         f"{', '.join(fitd['effects'])}; residual RMS {fitd['rms_mm']:.4f} mm "
         f"(max {fitd['max_mm']:.4f}), measured noise RMS {_mm(fitd['noise_rms_mm'])} mm "
         f"(stated {_mm(fitd.get('stated_noise_rms_mm'))}), chi2/dof "
-        f"{fitd['chi2_dof'] if fitd['chi2_dof'] is None else round(fitd['chi2_dof'], 3)}",
+        f"{fitd['chi2_dof'] if fitd['chi2_dof'] is None else round(fitd['chi2_dof'], 3)}"
+        + (f" ({round(fitd['chi2_dof_with_calibration'], 3)} with the camera calibration's "
+           "covariance)" if fitd.get("chi2_dof_with_calibration") is not None else ""),
     ]
     for text in fitd["unidentifiable"]:
         lines.append(f"  unidentifiable: {text}")

@@ -117,10 +117,11 @@ def register(subparsers: Any) -> None:
                         help="rig calibration: chessboard coverage to plan for (default 0.5)")
     parser.add_argument("--depth", choices=("triangulate", "sgbm"), default="triangulate",
                         help="stereo depth method (default triangulate)")
-    parser.add_argument("--pixel-floor", type=finite(least=0.0), default=0.01, metavar="PX",
+    parser.add_argument("--pixel-floor", type=finite(least=0.0), default=None, metavar="PX",
                         help="systematic floor (px per image coordinate) added to each "
                         "measured covariance for rig calibration and detection errors "
-                        "(default 0.01; 0 = image noise only)")
+                        "(default 0.01 for stereo_target, 0 for dual_loop; 0 = image "
+                        "noise only)")
     parser.add_argument("--probe-io", choices=("guarded", "modbus"), default="guarded",
                         help="sphere_probe contacts: the controller's latched guarded move "
                         "(default) or stepping while polling the probe line over Modbus TCP")
@@ -196,9 +197,11 @@ def _settings(args: argparse.Namespace) -> RunSettings:
         raise InputError(f"--target-sigma {args.target_sigma}: must be positive")
     if args.timeout <= 0:
         raise InputError(f"--timeout {args.timeout}: must be positive")
-    if args.pixel_floor < 0:
+    if args.pixel_floor is not None and args.pixel_floor < 0:
         raise InputError(f"--pixel-floor {args.pixel_floor}: must not be negative")
-    options: dict[str, Any] = {"depth": args.depth, "pixel_floor": args.pixel_floor}
+    options: dict[str, Any] = {"depth": args.depth}
+    if args.pixel_floor is not None:  # else the method's own default (PIXEL_FLOOR_PX, 0)
+        options["pixel_floor"] = args.pixel_floor
     if args.rig:
         options["rig"] = str(Path(args.rig).resolve())
     if args.rig_coverage is not None:

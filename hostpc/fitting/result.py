@@ -143,4 +143,18 @@ class FitResult:
             "cv_rms": finite(self.cv_rms),
             "cv_folds": self.cv_folds,
             "loss": self.loss,
+            **self._shared_chi2_entry(),
         }
+
+    def _shared_chi2_entry(self) -> dict[str, Any]:
+        """{"chi2_dof_with_calibration": ...} when the dataset carries a rig / camera
+        calibration covariance (the chi2 the push guard tests, hostpc.fitting.shared_chi2;
+        an offline `hostpc push` reads it from this document), else nothing."""
+        from hostpc.fitting.shared_errors import result_shared_chi2
+
+        if not self.converged or not hasattr(self.problem, "dataset"):
+            return {}
+        full = result_shared_chi2(self)
+        if full is None or full.dof != self.dof or not math.isfinite(full.chi2_dof):
+            return {}
+        return {"chi2_dof_with_calibration": full.chi2_dof}

@@ -16,22 +16,34 @@ Which documents carry it: a dataset with a top-level `rig_uncertainty` block
 ({"rig": <rig file document>, "parameters": [...], "covariance": 24 x 24}) and per-sample
 `uv` (the raw pixel centres the points were triangulated from). Written by the stereo_target
 method when its rig has a calibration covariance (docs/vision.md section 3).
+
+The same block gives the fit's chi2 with the shared error inside (`shared_error_chi2`,
+`result_shared_chi2`; the algebra in hostpc.fitting.shared_chi2): the push guard's adequacy
+test (docs/vision.md 3.3).
 """
 
 from __future__ import annotations
 
 import hashlib
 from collections import OrderedDict
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from hostpc.fitting.shared_chi2 import (
+    chi2_with_shared_error,
+    covariance_factor,
+    shared_excess,
+)
 from hostpc.model.problem import Problem
 
 BLOCK = "rig_uncertainty"
-SIGNIFICANCE = 2.0
-"""The residual excess must exceed what the stated covariance explains by this many of its
-standard deviations before the shared covariance is scaled up (`residual_scale`)."""
+SCALE_ALPHA = 0.02
+"""S is scaled up (`residual_scale`) only when the fit's residual chi-square exceeds the upper
+SCALE_ALPHA quantile of its exact law under the stated S (`shared_chi2.shared_excess`): with
+S right, S is scaled up in SCALE_ALPHA of the worlds, whatever the geometry (about the
+one-sided level of the earlier "2 standard deviations" gate, which assumed a Gaussian)."""
 _CACHE: OrderedDict[str, np.ndarray] = OrderedDict()
 _CACHE_SIZE = 16
 
@@ -81,51 +93,37 @@ def shared_covariance(problem: Problem) -> tuple[np.ndarray, np.ndarray] | None:
 
 
 def residual_scale(jacobian_free: np.ndarray, D_whitened: np.ndarray, S: np.ndarray,
-                   residuals: np.ndarray, expected_noise: float | None = None,
-                   noise_variance: float | None = None) -> float:
+                   residuals: np.ndarray, noise_blocks: np.ndarray | None = None) -> float:
     """How much larger the shared error is than S says, from the fit's own residuals (>= 1).
 
-    The whitened residuals r = P (e + Dw delta) (P: projector off the Jacobian's columns)
-    have E[r^T r] = dof + k trace(P Dw S Dw^T P) when Cov(delta) = k S. The method-of-moments
-    estimate k = (chi2 - dof) / trace(...) is taken only when the excess is significant:
-    chi2 above its expectation under k = 1 by more than SIGNIFICANCE standard deviations
-    (Var = 2 dof + 2 trace((P Dw S Dw^T P)^2) for Gaussian errors); else k = 1, the rig's
-    own covariance, never less. (Without the gate, a chance excess of the noise in a world
-    whose S is right inflated the sigma: dual_loop's elbow offsets came out at MSE / sigma^2
-    0.6-0.7.) expected_noise, noise_variance replace dof, 2 dof when the whitening includes
-    more than the noise (a pixel floor: see below)."""
-    rows, free = jacobian_free.shape
-    dof = rows - free
-    if dof <= 0 or not np.all(np.isfinite(residuals)):
-        return 1.0
-    Q, _ = np.linalg.qr(jacobian_free)
-    PD = D_whitened - Q @ (Q.T @ D_whitened)
-    G = PD.T @ PD
-    GS = G @ S
-    trace = float(np.trace(GS))
-    if not trace > 0:
-        return 1.0
-    chi2 = float(residuals @ residuals)
-    noise = float(dof) if expected_noise is None else expected_noise
-    variance = (2.0 * dof if noise_variance is None else noise_variance) \
-        + 2.0 * float(np.sum(GS * GS.T))
-    if chi2 - noise - trace <= SIGNIFICANCE * np.sqrt(max(variance, 0.0)):
-        return 1.0
-    return max(1.0, (chi2 - noise) / trace)
+    Whitened by the noise (M) and projected off the Jacobian's columns, the residuals have
+    E[r^T r] = dof + k trace(G) when Cov(delta) = k S (G = (P Dw L)^T (P Dw L), S = L L^T):
+    the method-of-moments estimate k = 1 + (chi2 - dof - trace G) / trace G = (chi2 - dof) /
+    trace G is taken only when the excess is significant: chi2 above the upper SCALE_ALPHA
+    quantile of its exact law under k = 1 (`shared_chi2.shared_excess`: chi-square plus one
+    weighted chi-square(1) per shared direction); else k = 1, the stated S, never less.
 
+    Why the exact law: the earlier gate (chi2 above its mean by 2 of its standard
+    deviations, a Gaussian approximation) assumed many comparable shared directions, but one
+    or two dominate (the humanoid head camera: one carries 93 % of trace G), so the shared
+    part is a heavy-tailed chi-square(1): it scaled a right S up by k = 6-10 in 4 % of the
+    worlds (not 2.3 %), and those inflated sigmas pulled the elbows' MSE / sigma^2 to
+    0.87-0.89 on average (docs/vision.md 3.1, tests/hostpc/test_shared_error_scale.py).
 
-def noise_moments(M: np.ndarray, Q3: np.ndarray) -> tuple[float, float]:
-    """Mean and variance of r^T r for r = P e, e ~ N(0, M) (M: (N, m, m) block diagonal),
-    P = I - Q Q^T the projector off the orthonormal columns Q3 ((N, m, F) per block):
-    trace(P M P) = tr M - tr Q^T M Q and 2 trace(M P M P) =
-    2 (tr M^2 - 2 tr Q^T M^2 Q + tr (Q^T M Q)^2), without forming an (Nm, Nm) matrix."""
-    M2 = np.einsum("nij,njk->nik", M, M)
-    QMQ = np.einsum("nif,nij,njg->fg", Q3, M, Q3)
-    mean = float(np.trace(M, axis1=1, axis2=2).sum() - np.trace(QMQ))
-    variance = 2.0 * float(np.einsum("nij,nji->", M, M)
-                           - 2.0 * np.einsum("nif,nij,njf->", Q3, M2, Q3)
-                           + np.sum(QMQ * QMQ.T))
-    return mean, variance
+    jacobian_free: (n, F); D_whitened: (n, K); S: (K, K); residuals: (n,) whitened;
+    noise_blocks: (B, b, b) with B b = n, the whitened noise covariance M (block diagonal;
+    None: M = I), e.g. the noise without a pixel floor the whitening includes."""
+    r = np.ravel(residuals)
+    if jacobian_free.shape[0] <= jacobian_free.shape[1] or not np.all(np.isfinite(r)):
+        return 1.0
+    try:
+        chi2, dof, trace, tail = shared_excess(r, jacobian_free,
+                                               D_whitened @ covariance_factor(S), noise_blocks)
+    except np.linalg.LinAlgError:  # a noise block not positive definite: nothing to test
+        return 1.0
+    if not trace > 0 or tail >= SCALE_ALPHA:
+        return 1.0
+    return max(1.0, (chi2 - dof) / trace)
 
 
 def floor_covariance(problem: Problem, block: Any) -> np.ndarray | None:
@@ -171,7 +169,7 @@ def added_parameter_covariance(problem: Problem, jacobian_free: np.ndarray,
     D_whitened = np.einsum("nij,njk->nik", W, D).reshape(-1, D.shape[2]) * row_weight[:, None]
     floor = floor_covariance(problem, problem.dataset.extra_fields.get(BLOCK))
     change = np.zeros_like(covariance_free)
-    expected_noise = noise_variance = None
+    noise_blocks = None
     if floor is not None:
         # whitened noise without the floor: M_i = I - W_i F_i W_i^T (weights on the rows)
         M = np.eye(W.shape[1])[None] - np.einsum("nij,njk,nlk->nil", W, floor, W)
@@ -180,12 +178,74 @@ def added_parameter_covariance(problem: Problem, jacobian_free: np.ndarray,
         J3 = jacobian_free.reshape(W.shape[0], W.shape[1], -1)
         meat = np.einsum("nif,nij,njg->fg", J3, M, J3)
         change += covariance_free @ meat @ covariance_free - covariance_free
-        Q, _ = np.linalg.qr(jacobian_free)
-        expected_noise, noise_variance = noise_moments(
-            M, Q.reshape(W.shape[0], W.shape[1], -1))
+        noise_blocks = M
     if residuals is not None:
-        S = S * residual_scale(jacobian_free, D_whitened, S, np.ravel(residuals),
-                               expected_noise, noise_variance)
+        S = S * residual_scale(jacobian_free, D_whitened, S, np.ravel(residuals), noise_blocks)
     A = covariance_free @ (jacobian_free.T @ D_whitened)
     change += A @ S @ A.T
     return 0.5 * (change + change.T)
+
+
+@dataclass(frozen=True)
+class SharedChi2:
+    """chi2: the statistic T (see the module docstring); dof: rows - rank of the Jacobian;
+    plain_chi2: r^T r over the same rows (without the shared error)."""
+
+    chi2: float
+    dof: int
+    plain_chi2: float
+
+    @property
+    def chi2_dof(self) -> float:
+        return self.chi2 / self.dof if self.dof > 0 else float("nan")
+
+
+def shared_error_chi2(problem: Problem, x: np.ndarray, free: np.ndarray,
+                      weights: np.ndarray | None = None) -> SharedChi2 | None:
+    """The chi2 with the shared error inside of a fit at x (P,) with free parameters
+    free (P,) bool and robust sample weights (N,) (None: all 1), or None when the
+    problem's dataset declares no shared error (no `rig_uncertainty` block, or no uv).
+
+    Rows: the samples' whitened residuals (the weights' square roots applied) and the prior
+    rows of `--prior`; their Jacobian at x by the free parameters."""
+    from hostpc.fitting.priors import problem_constraints
+    from hostpc.fitting.solver import evaluate
+
+    shared = shared_covariance(problem)
+    if shared is None:
+        return None
+    D, S = shared
+    x = np.asarray(x, dtype=float)
+    free = np.asarray(free, dtype=bool)
+    evaluation = evaluate(problem, x)
+    assert evaluation.jacobian is not None
+    n, m = evaluation.whitened.shape
+    row_weight = (np.ones(n * m) if weights is None
+                  else np.repeat(np.sqrt(np.asarray(weights, dtype=float)), m))
+    r = evaluation.whitened.ravel() * row_weight
+    J = evaluation.jacobian[:, free] * row_weight[:, None]
+    L = covariance_factor(S)
+    Dw = np.einsum("nij,njk->nik", problem.sqrt_information, D).reshape(n * m, -1)
+    U = (Dw @ L) * row_weight[:, None]
+    constraints = problem_constraints(problem)
+    if constraints is not None and constraints.index.size:
+        r = np.concatenate([r, constraints.residuals(x)])
+        J = np.vstack([J, constraints.jacobian(x.size)[:, free]])
+        U = np.vstack([U, np.zeros((constraints.index.size, U.shape[1]))])
+    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J)) and np.all(np.isfinite(U))):
+        return None
+    chi2, dof = chi2_with_shared_error(r, J, U)
+    return SharedChi2(chi2=chi2, dof=dof, plain_chi2=float(r @ r))
+
+
+def result_shared_chi2(result: object) -> SharedChi2 | None:
+    """`shared_error_chi2` of a FitResult (None for anything else, e.g. a saved fit that
+    carries no problem, or a dataset without a shared error)."""
+    problem = getattr(result, "problem", None)
+    if not isinstance(problem, Problem):
+        return None
+    x, fixed, weights = (getattr(result, k, None) for k in ("x", "fixed", "weights"))
+    if x is None or fixed is None:
+        return None
+    return shared_error_chi2(problem, np.asarray(x), ~np.asarray(fixed, dtype=bool),
+                             None if weights is None else np.asarray(weights))

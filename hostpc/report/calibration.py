@@ -219,8 +219,13 @@ def fit_section(result: Document) -> str:
         rows.append(("converged", "yes" if fit.get("converged") else "NO"))
         if fit.get("chi2_dof") is not None:
             upper = fit.get("chi2_dof_upper")
-            rows.append(("chi2/dof", f"{fit['chi2_dof']:.3f}" + (
-                f" (push refused above {upper:.3f})" if upper is not None else "")))
+            edge = f" (push refused above {upper:.3f})" if upper is not None else ""
+            full = fit.get("chi2_dof_with_calibration")  # what the push tested, if any
+            rows.append(("chi2/dof", f"{fit['chi2_dof']:.3f}" + ("" if full is not None
+                                                                else edge)))
+            if full is not None:
+                rows.append(("chi2/dof with the camera calibration's covariance",
+                             f"{full:.3f}{edge}"))
         if fit.get("rms_mm") is not None:
             rows.append(("residual RMS / max [mm]",
                          f"{fit['rms_mm']:.4f} / {fit.get('max_mm', float('nan')):.4f}"))

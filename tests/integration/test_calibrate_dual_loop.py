@@ -160,6 +160,13 @@ def test_calibrate_sim_dual_loop_recovers_truth_pushes_and_verifies(
     dataset = load_dataset(out / "dataset.json")
     assert dataset.method == "dual_loop" and dataset.n_samples >= 60
     assert set(dataset.samples.chain) == {"left", "right"}  # type: ignore[arg-type]
+    # the head camera's calibration is in the dataset, with no pixel floor by default
+    # (measured unnecessary for dual_loop: docs/vision.md 3.3), and the push tested the
+    # chi2 with the calibration's covariance inside
+    block = dataset.extra_fields["rig_uncertainty"]
+    assert "pixel_floor_px" not in block
+    assert document["method_setup"]["dual_loop"]["pixel_floor"] == 0.0
+    assert document["fit"]["chi2_dof_with_calibration"] is not None
     problem = build_problem(dataset)
     fit_doc = json.loads((out / "fit.json").read_text())
     parameters = fit_doc["parameters"]
