@@ -186,7 +186,7 @@ def test_sigterm_stops_cleanly_and_a_sim_resume_keeps_time_increasing(tmp_path: 
     out = tmp_path / "run"
     command = [sys.executable, "-m", "hostpc.cli.main", "calibrate", "--robot", "sim",
                "--rig", str(rig), "--poses", "16", "--verify-poses", "0", "--cv-folds", "0",
-               "--no-report", "--time-scale", "0.05", "--out", str(out)]
+               "--no-report", "--time-scale", "0.3", "--out", str(out)]
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     process = subprocess.Popen(command, cwd=REPO, env=env, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)
