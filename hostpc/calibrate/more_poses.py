@@ -3,8 +3,9 @@
 A target-sigma plan (stereo_target's default) measures the fewest poses that reach the
 sigma: enough to fit a model that is right, too few for `hostpc diagnose` to tell which
 effect a wrong one lacks (with 7 poses the ladder names the wrong effect in the
-hidden-compliance world). So when the fit does not explain its measurements (chi2/dof
-above the push guard's band, `hostpc.calibrate.push.chi2_dof_upper`), the runner measures
+hidden-compliance world). So when the fit does not explain its measurements (the chi2/dof
+the push guard tests, `hostpc.calibrate.push.adequacy_chi2`: with the rig's covariance
+inside when the dataset carries it, above its band `chi2_dof_upper`), the runner measures
 the plan's further poses (`Plan.q_more`: the rest of the nested D-optimal selection, up to
 --poses) and fits again before the push decision. The decision is journaled
 (`{"event": "more_poses", ...}`) so a resume measures the same poses.
@@ -15,7 +16,7 @@ from __future__ import annotations
 import math
 
 from hostpc.calibrate.journal import Journal
-from hostpc.calibrate.push import chi2_dof_upper
+from hostpc.calibrate.push import adequacy_chi2, chi2_dof_upper
 from hostpc.fitting import FitResult
 from hostpc.methods.base import Plan
 
@@ -35,9 +36,11 @@ def more_poses_reason(journal: Journal, plan: Plan, result: FitResult,
     if pushed:
         return None
     upper = chi2_dof_upper(result.dof)
-    if not (math.isfinite(upper) and result.chi2_dof > upper):
+    chi2_dof, shared = adequacy_chi2(result)
+    if not (math.isfinite(upper) and chi2_dof > upper):
         return None
-    reason = (f"the model does not explain the {plan.q.shape[0]} poses (chi2/dof "
-              f"{result.chi2_dof:.3g} above its band {upper:.3g})")
+    what = " with the rig's covariance" if shared else ""
+    reason = (f"the model does not explain the {plan.q.shape[0]} poses (chi2/dof{what} "
+              f"{chi2_dof:.3g} above its band {upper:.3g})")
     journal.event("more_poses", reason=reason, n=int(plan.more.shape[0]))
     return reason
