@@ -6,7 +6,8 @@ combination of parameters that leaves every measurement unchanged. We fix one pa
 null direction (held at its start value, i.e. nominal) so the fit cannot drift along it, and
 say in words which parameters could not be separated.
 
-Which parameter to hold: a pivoted QR of the null basis picks parameters that span it,
+Which parameter to hold: a pivoted QR of the null basis picks parameters that span it
+(`pivoted_columns`: LAPACK's dgeqp3 column choice, in numpy),
 preferring (in order) geometry deltas, joint offsets, other effects, and frames last, so a
 frame absorbs what cannot be told apart and no unobservable zero offset is ever pushed.
 """
@@ -19,6 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 RELATIVE_RANK_TOLERANCE = 1e-7
+NEAR_TIE = 1e-9
+"""Column norms within this (relative) of the largest are a tie: the first parameter wins."""
 MIN_GAUGE_SPAN = 0.2
 FIX_PRIORITY = {"geometry": 3, "joint_offsets": 2}
 FRAME_EFFECTS = ("tool", "target", "base", "sphere", "camera", "left_base", "right_base",
@@ -90,6 +93,53 @@ def _describe(names: Sequence[str], units: Sequence[str], fixed: int, vector: np
     return NullDirection(names[fixed], tuple(names[k] for k in participants), coefficients, text)
 
 
+def pivoted_columns(matrix: np.ndarray) -> list[int]:
+    """The first min(M, P) column pivots of a QR with column pivoting of matrix (M, P),
+    in order: the columns `scipy.linalg.qr(matrix, pivoting=True)` puts first, except on
+    ties.
+
+    LAPACK's dgeqp3 rule (its unblocked dlaqp2, which it uses for so few rows): at each
+    step the column of largest remaining norm, its Householder reflection applied to the
+    rest, the norms downdated and recomputed where the downdate loses digits. Norms
+    within NEAR_TIE of the largest are a tie, and the column listed first wins: LAPACK
+    breaks such ties (equal norms in exact arithmetic, e.g. the symmetric participation of
+    two DH deltas in a null direction) by its round-off, so its choice depended on the
+    BLAS build; this one does not. Written out because scipy.linalg costs ~0.15 s to import
+    (its array-API layer), more than `hostpc diagnose` needs for everything else."""
+    a = np.array(matrix, dtype=float)
+    rows, cols = a.shape
+    order = np.arange(cols)
+    norms = np.linalg.norm(a, axis=0)
+    reference = norms.copy()
+    downdate_limit = np.sqrt(np.finfo(float).eps)
+    for step in range(min(rows, cols)):
+        rest = norms[step:]
+        tied = np.flatnonzero(rest >= rest.max() * (1.0 - NEAR_TIE))
+        pick = step + int(tied[np.argmin(order[step:][tied])])
+        for array in (a.T, order, norms, reference):  # swap like dgeqp3: rows of a.T
+            array[[step, pick]] = array[[pick, step]]
+        column = a[step:, step]
+        alpha = column[0]
+        tail_norm = np.linalg.norm(column[1:])
+        if tail_norm > 0.0:
+            beta = -np.copysign(np.hypot(alpha, tail_norm), alpha)
+            v = column / (alpha - beta)
+            v[0] = 1.0
+            tau = (beta - alpha) / beta
+            block = a[step:, step + 1:]
+            block -= tau * np.outer(v, v @ block)
+            a[step, step] = beta
+        for j in range(step + 1, cols):
+            if norms[j] == 0.0:
+                continue
+            shrink = max(0.0, 1.0 - (abs(a[step, j]) / norms[j]) ** 2)
+            if shrink * (norms[j] / reference[j]) ** 2 <= downdate_limit:
+                norms[j] = reference[j] = float(np.linalg.norm(a[step + 1:, j]))
+            else:
+                norms[j] *= np.sqrt(shrink)
+    return [int(k) for k in order[: min(rows, cols)]]
+
+
 def analyse(jacobian: np.ndarray, names: Sequence[str], units: Sequence[str],
             tolerance: float = RELATIVE_RANK_TOLERANCE,
             frames: Collection[str] | None = None) -> Identifiability:
@@ -119,16 +169,12 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], units: Sequence[str],
         strong = participation >= 0.1 * participation.max()
         priority = np.array([_priority(n, frame_names) for n in names], dtype=float)
         weight = np.where(strong, 10.0**priority, 1e-3)
-        import scipy.linalg  # ~50 ms to import: only where there is a null space to pivot
-
-        _, _, pivots = scipy.linalg.qr(null_basis.T * weight[None, :], pivoting=True)
-        chosen = list(pivots[: null_basis.shape[1]])
+        chosen = pivoted_columns(null_basis.T * weight[None, :])
         block = null_basis[chosen, :]
         # the basis is orthonormal: the held set spans the null space well when the block's
         # smallest singular value is not small; otherwise fall back to plain pivoting
         if np.linalg.svd(block, compute_uv=False).min() < MIN_GAUGE_SPAN:
-            _, _, pivots = scipy.linalg.qr(null_basis.T, pivoting=True)
-            chosen = list(pivots[: null_basis.shape[1]])
+            chosen = pivoted_columns(null_basis.T)
             block = null_basis[chosen, :]
         # one null vector per fixed parameter: 1 on it, 0 on the other fixed ones
         combos = null_basis @ np.linalg.inv(block)  # (P, k), normalised coordinates
