@@ -60,7 +60,14 @@ def f_logsf(statistic: np.ndarray | float, dfn: np.ndarray | float, dfd: np.ndar
     dfd = np.asarray(dfd, dtype=float)
     with np.errstate(divide="ignore"):
         exact = np.log(f_sf(statistic, dfn, dfd))
-        a, b = dfd / 2.0, dfn / 2.0
-        x = dfd / (dfd + dfn * statistic)
-        approximate = (a * np.log(x) + b * np.log1p(-x) - np.log(a) - log_beta(a, b))
-    return np.where(np.isfinite(exact) & (exact > _LOG_TINY), exact, approximate)
+    tiny = ~(np.isfinite(exact) & (exact > _LOG_TINY))
+    if not np.any(tiny):
+        return exact
+    a, b, statistic = (np.broadcast_to(v, exact.shape)[tiny] for v in (dfd / 2.0, dfn / 2.0,
+                                                                       statistic))
+    with np.errstate(divide="ignore"):
+        x = 2.0 * a / (2.0 * a + 2.0 * b * statistic)
+        approximate = a * np.log(x) + b * np.log1p(-x) - np.log(a) - log_beta(a, b)
+    result = np.array(exact, dtype=float)
+    result[tiny] = approximate
+    return result

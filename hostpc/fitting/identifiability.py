@@ -129,14 +129,16 @@ def pivoted_columns(matrix: np.ndarray) -> list[int]:
             block = a[step:, step + 1:]
             block -= tau * np.outer(v, v @ block)
             a[step, step] = beta
-        for j in range(step + 1, cols):
-            if norms[j] == 0.0:
-                continue
-            shrink = max(0.0, 1.0 - (abs(a[step, j]) / norms[j]) ** 2)
-            if shrink * (norms[j] / reference[j]) ** 2 <= downdate_limit:
-                norms[j] = reference[j] = float(np.linalg.norm(a[step + 1:, j]))
-            else:
-                norms[j] *= np.sqrt(shrink)
+        rest_norms = norms[step + 1:]  # downdate the others' norms (a view: in place)
+        live = rest_norms != 0.0
+        ratio = np.abs(a[step, step + 1:]) / np.where(live, rest_norms, 1.0)
+        shrink = np.maximum(0.0, 1.0 - ratio**2)
+        lost = live & (shrink * (rest_norms / np.where(live, reference[step + 1:], 1.0))**2
+                       <= downdate_limit)
+        recomputed = np.linalg.norm(a[step + 1:, step + 1:][:, lost], axis=0)
+        rest_norms[live] *= np.sqrt(shrink[live])
+        rest_norms[lost] = recomputed
+        reference[step + 1:][lost] = recomputed
     return [int(k) for k in order[: min(rows, cols)]]
 
 
