@@ -51,7 +51,10 @@ def stirling_remainder(a: np.ndarray | float) -> np.ndarray:
 def _stirling_remainder_scalar(a: float) -> float:
     if a < _STIRLING_FROM:
         return math.lgamma(a) - ((a - 0.5) * math.log(a) - a + _HALF_LOG_2PI)
-    return float(stirling_remainder(a))
+    inverse_square, total = 1.0 / (a * a), 0.0
+    for coefficient in reversed(_STIRLING):  # the same steps as stirling_remainder
+        total = total * inverse_square + coefficient
+    return total / a
 
 
 def _log1pmx_scalar(t: float) -> float:
