@@ -162,6 +162,8 @@ def gamma_inverse(a: float, q: float, upper: bool) -> float:
             new = u - (math.log(tail) - target) / slope if slope != 0.0 else math.nan
         else:
             new = math.nan  # underflow: bisect toward the bulk
+        if abs(new - u) <= 4.0 * EPSILON * max(1.0, abs(u)):
+            return math.exp(new)  # converged (round-off may put it just past the bracket)
         if not (low < new < high):
             if math.isfinite(low) and math.isfinite(high):
                 new = 0.5 * (low + high)
