@@ -98,48 +98,28 @@ def pivoted_columns(matrix: np.ndarray) -> list[int]:
     in order: the columns `scipy.linalg.qr(matrix, pivoting=True)` puts first, except on
     ties.
 
-    LAPACK's dgeqp3 rule (its unblocked dlaqp2, which it uses for so few rows): at each
-    step the column of largest remaining norm, its Householder reflection applied to the
-    rest, the norms downdated and recomputed where the downdate loses digits. Norms
-    within NEAR_TIE of the largest are a tie, and the column listed first wins: LAPACK
-    breaks such ties (equal norms in exact arithmetic, e.g. the symmetric participation of
-    two DH deltas in a null direction) by its round-off, so its choice depended on the
-    BLAS build; this one does not. Written out because scipy.linalg costs ~0.15 s to import
+    The rule of LAPACK's dgeqp3: at each step the column whose part outside the span of
+    the columns chosen so far is largest (here by Gram-Schmidt on the few rows of a null
+    basis: that part's norm is what dgeqp3's downdated norms estimate). Norms within
+    NEAR_TIE of the largest are a tie, and the column listed first wins: LAPACK breaks such
+    ties (equal norms in exact arithmetic, e.g. the symmetric participation of two DH
+    deltas in a null direction) by its round-off, so its choice depended on the BLAS
+    build; this one does not. Written out because scipy.linalg costs ~0.15 s to import
     (its array-API layer), more than `hostpc diagnose` needs for everything else."""
-    a = np.array(matrix, dtype=float)
-    rows, cols = a.shape
-    order = np.arange(cols)
-    norms = np.linalg.norm(a, axis=0)
-    reference = norms.copy()
-    downdate_limit = np.sqrt(np.finfo(float).eps)
-    for step in range(min(rows, cols)):
-        rest = norms[step:]
-        tied = np.flatnonzero(rest >= rest.max() * (1.0 - NEAR_TIE))
-        pick = step + int(tied[np.argmin(order[step:][tied])])
-        for array in (a.T, order, norms, reference):  # swap like dgeqp3: rows of a.T
-            array[[step, pick]] = array[[pick, step]]
-        column = a[step:, step]
-        alpha = column[0]
-        tail_norm = np.linalg.norm(column[1:])
-        if tail_norm > 0.0:
-            beta = -np.copysign(np.hypot(alpha, tail_norm), alpha)
-            v = column / (alpha - beta)
-            v[0] = 1.0
-            tau = (beta - alpha) / beta
-            block = a[step:, step + 1:]
-            block -= tau * np.outer(v, v @ block)
-            a[step, step] = beta
-        rest_norms = norms[step + 1:]  # downdate the others' norms (a view: in place)
-        live = rest_norms != 0.0
-        ratio = np.abs(a[step, step + 1:]) / np.where(live, rest_norms, 1.0)
-        shrink = np.maximum(0.0, 1.0 - ratio**2)
-        lost = live & (shrink * (rest_norms / np.where(live, reference[step + 1:], 1.0))**2
-                       <= downdate_limit)
-        recomputed = np.linalg.norm(a[step + 1:, step + 1:][:, lost], axis=0)
-        rest_norms[live] *= np.sqrt(shrink[live])
-        rest_norms[lost] = recomputed
-        reference[step + 1:][lost] = recomputed
-    return [int(k) for k in order[: min(rows, cols)]]
+    rest = np.array(matrix, dtype=float)
+    rows, cols = rest.shape
+    open_ = np.ones(cols, dtype=bool)
+    chosen: list[int] = []
+    for _ in range(min(rows, cols)):
+        norms = np.where(open_, np.sqrt(np.einsum("ij,ij->j", rest, rest)), -1.0)
+        best = norms.max()
+        pick = int(np.flatnonzero(norms >= best * (1.0 - NEAR_TIE))[0])
+        chosen.append(pick)
+        open_[pick] = False
+        if best > 0.0:
+            direction = rest[:, pick] / best
+            rest -= np.outer(direction, direction @ rest)
+    return chosen
 
 
 def analyse(jacobian: np.ndarray, names: Sequence[str], units: Sequence[str],
