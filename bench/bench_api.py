@@ -13,9 +13,11 @@
    parameters our fit found identifiable. "same" is the largest difference of the two
    solutions in units of our sigma. Also `hostpc.load_dataset` of the file and
    `hostpc.diagnose(dataset, ladder=True)` (what `hostpc diagnose --ladder` calls).
-2. Scaling: one subprocess per N (fresh memory): load, fit (defaults), diagnose (no
-   ladder) of the default model, with the process's peak resident memory
-   (`resource.getrusage`, cumulative: after load, after fit, after diagnose).
+2. Scaling: per N one subprocess writes the file, a fresh one (the reader's imports
+   warmed on a small file) measures: load, fit (defaults), fit with geometry (offsets, all
+   DH deltas, tool, target), diagnose (no ladder) of the default model, with the
+   process's peak resident memory (`resource.getrusage`, cumulative after each step) and
+   CPU seconds.
 3. Robot time per method: `hostpc calibrate --robot sim --method M --no-report` as a
    subprocess; robot_time_s from its result.json (simulated clock: motion, 0.3 s settle,
    0.1 s per capture) and the wall time; stereo_target also with --poses 60 (the old
@@ -98,45 +100,62 @@ def api_versus_scipy(repeats: int = 5) -> list[dict[str, Any]]:
     return rows
 
 
+_SYNTHESIS_CHILD = r"""
+import sys
+sys.path.insert(0, sys.argv[3])
+import numpy as np
+from hostpc.dataset import save_dataset
+from hostpc.synthesize import random_truth, synthesize_stereo_target
+truth = random_truth(np.random.default_rng(42))
+save_dataset(synthesize_stereo_target(truth, n_samples=int(sys.argv[1]), seed=42).dataset,
+             sys.argv[2])
+"""
 _SCALING_CHILD = r"""
 import json, resource, sys, time
 sys.path.insert(0, sys.argv[3])
-import numpy as np
 import hostpc
-from hostpc.dataset import save_dataset
-from hostpc.synthesize import random_truth, synthesize_stereo_target
 n, path = int(sys.argv[1]), sys.argv[2]
-truth = random_truth(np.random.default_rng(42))
-save_dataset(synthesize_stereo_target(truth, n_samples=n, seed=42).dataset, path)
 def peak():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # MB (Linux: kB)
+hostpc.load_dataset(sys.argv[4])  # the reader's imports (pydantic, numpy), not timed
 out = {"n": n, "base_mb": peak()}
-t = time.perf_counter(); dataset = hostpc.load_dataset(path)
-out["load_s"] = time.perf_counter() - t; out["load_peak_mb"] = peak()
+t, c = time.perf_counter(), time.process_time(); dataset = hostpc.load_dataset(path)
+out["load_s"] = time.perf_counter() - t; out["load_cpu_s"] = time.process_time() - c
+out["load_peak_mb"] = peak()
 print(json.dumps(out), flush=True)
-t = time.perf_counter(); json.load(open(path))
-out["json_load_s"] = time.perf_counter() - t
+t, c = time.perf_counter(), time.process_time(); json.load(open(path))
+out["json_load_s"] = time.perf_counter() - t; out["json_load_cpu_s"] = time.process_time() - c
 t, c = time.perf_counter(), time.process_time(); result = hostpc.fit(dataset)
 out["fit_s"] = time.perf_counter() - t; out["fit_cpu_s"] = time.process_time() - c
 out["fit_peak_mb"] = peak()
 print(json.dumps(out), flush=True)
-t = time.perf_counter(); hostpc.diagnose(dataset)
-out["diagnose_s"] = time.perf_counter() - t; out["diagnose_peak_mb"] = peak()
+t, c = time.perf_counter(), time.process_time()
+hostpc.fit(dataset, effects=["joint_offsets", "geometry", "tool", "target"])
+out["geometry_fit_s"] = time.perf_counter() - t
+out["geometry_fit_cpu_s"] = time.process_time() - c; out["geometry_peak_mb"] = peak()
+print(json.dumps(out), flush=True)
+t, c = time.perf_counter(), time.process_time(); hostpc.diagnose(dataset)
+out["diagnose_s"] = time.perf_counter() - t; out["diagnose_cpu_s"] = time.process_time() - c
+out["diagnose_peak_mb"] = peak()
 print(json.dumps(out))
 """
 
 
 def scaling(sizes: tuple[int, ...] = SCALING, timeout_s: float = 3600.0
             ) -> list[dict[str, Any]]:
-    """Section 2: one subprocess per N (synthesis and the file write are not timed)."""
+    """Section 2: one subprocess per N writes the file (synthesis, not timed), a fresh one
+    measures (so its peak memory is the reader's, the fits' and the diagnosis's own)."""
     rows = []
     for n in sizes:
         with tempfile.TemporaryDirectory() as tmp:
+            path = str(Path(tmp) / "d.json")
+            subprocess.run([sys.executable, "-c", _SYNTHESIS_CHILD, str(n), path, str(ROOT)],
+                           check=True, env=_env(), timeout=timeout_s)
             try:
                 done = subprocess.run(
-                    [sys.executable, "-c", _SCALING_CHILD, str(n), str(Path(tmp) / "d.json"),
-                     str(ROOT)], capture_output=True, text=True, timeout=timeout_s,
-                    env=_env(), check=False)
+                    [sys.executable, "-c", _SCALING_CHILD, str(n), path, str(ROOT),
+                     str(ROOT / "examples" / "ur5e_stereo.json")], capture_output=True,
+                    text=True, timeout=timeout_s, env=_env(), check=False)
             except subprocess.TimeoutExpired as exc:  # keep the steps that finished
                 text = exc.stdout.decode() if isinstance(exc.stdout, bytes) else exc.stdout
                 lines = (text or "").strip().splitlines()
@@ -230,15 +249,19 @@ def print_tables(figures: dict[str, Any]) -> None:
                   f"{row['scipy_ms'] / row['fit_ms']:>5.2f}x {row['same_sigma']:>22.2e}")
         else:
             print(f"{row['n']:>5} {row['model']:<22} {'':>3} {'':>4} {row['ms']:>11.1f}")
-    print("\nscaling (default model, defaults; one process per N; peak RSS cumulative, MB)")
-    print(f"{'N':>7} {'load s':>8} {'json s':>7} {'fit s':>7} {'fit cpu':>8} {'diag s':>8} "
-          f"{'MB load':>8} {'MB fit':>8} {'MB diag':>8}")
+    print("\nscaling (defaults; one process per N; geometry: + all DH deltas; peak RSS "
+          "cumulative, MB)")
+    print(f"{'N':>7} {'load s':>8} {'json s':>7} {'load cpu':>8} {'json cpu':>8} {'fit s':>7} "
+          f"{'fit cpu':>8} {'geo cpu':>8} {'diag s':>8} {'diag cpu':>8} {'MB load':>8} "
+          f"{'MB fit':>8} {'MB geo':>8} {'MB diag':>8}")
     for row in figures["scaling"]:
         cells = [f"{row[k]:>{w}.{d}f}" if isinstance(row.get(k), float) else f"{'-':>{w}}"
-                 for k, w, d in (("load_s", 8, 2), ("json_load_s", 7, 2), ("fit_s", 7, 2),
-                                 ("fit_cpu_s", 8, 2), ("diagnose_s", 8, 2),
+                 for k, w, d in (("load_s", 8, 2), ("json_load_s", 7, 2),
+                                 ("load_cpu_s", 8, 2), ("json_load_cpu_s", 8, 2), ("fit_s", 7, 2),
+                                 ("fit_cpu_s", 8, 2), ("geometry_fit_cpu_s", 8, 2),
+                                 ("diagnose_s", 8, 2), ("diagnose_cpu_s", 8, 2),
                                  ("load_peak_mb", 8, 0), ("fit_peak_mb", 8, 0),
-                                 ("diagnose_peak_mb", 8, 0))]
+                                 ("geometry_peak_mb", 8, 0), ("diagnose_peak_mb", 8, 0))]
         print(f"{row['n']:>7} " + " ".join(cells)
               + (f"  ({row['error']})" if "error" in row else ""))
     print("\nrobot time of `hostpc calibrate --robot sim` (simulated clock, s)")

@@ -5,8 +5,11 @@ Run ``python bench/bench_diagnose.py``; :func:`run` returns the figures as a dic
 - ``diagnose_s``: ``hostpc.diagnose(dataset)`` (fit, 5-fold held-out, all candidates with
   3-fold held-out RMS, the effect-agnostic search), median of ``repeats``;
 - ``ladder_s``: the same with ``ladder=True`` (here: one more model checked);
-- ``cli_ladder_s``: ``hostpc diagnose DATASET --ladder --json`` as a fresh process (includes
-  Python start-up and imports), median of ``repeats``; the budget is 3 s;
+- ``cli_ladder_s``, ``cli_ladder_min_s``: ``hostpc diagnose DATASET --ladder --json`` as a
+  fresh process (Python start-up and imports included), median and min of ``cli_repeats``;
+  the target is 0.5 s at these 120 poses (issue 17). Its import set is guarded by
+  tests/hostpc/test_cli_imports.py (no scipy); ``python -X importtime -m hostpc.cli.main
+  diagnose --ladder DATASET`` shows where start-up goes;
 - ``report_s``: rendering the HTML report once (inline SVG; bench_report.py has its figures).
 
 The dataset is examples/ur5e_stereo_hidden_compliance.json (compliance hidden), so the
@@ -23,19 +26,26 @@ import tempfile
 import time
 from pathlib import Path
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "ur5e_stereo_hidden_compliance.json"
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "examples" / "ur5e_stereo_hidden_compliance.json"
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
 
 
-def _median(func, repeats: int) -> float:  # type: ignore[no-untyped-def]
+def _times(func, repeats: int) -> list[float]:  # type: ignore[no-untyped-def]
     times = []
     for _ in range(repeats):
         start = time.perf_counter()
         func()
         times.append(time.perf_counter() - start)
-    return float(statistics.median(times))
+    return times
 
 
-def run(repeats: int = 3, dataset: Path = EXAMPLE) -> dict[str, float]:
+def _median(func, repeats: int) -> float:  # type: ignore[no-untyped-def]
+    return float(statistics.median(_times(func, repeats)))
+
+
+def run(repeats: int = 3, dataset: Path = EXAMPLE, cli_repeats: int = 7) -> dict[str, float]:
     """The figures, in seconds (and the problem size)."""
     import hostpc
     from hostpc.report import render_html
@@ -48,10 +58,11 @@ def run(repeats: int = 3, dataset: Path = EXAMPLE) -> dict[str, float]:
     command = [sys.executable, "-m", "hostpc.cli.main", "diagnose", str(dataset), "--ladder",
                "--json"]
     def cli() -> None:  # exit 1: ran, and the model is not adequate (this example's start)
-        if subprocess.run(command, check=False, capture_output=True).returncode not in (0, 1):
+        if subprocess.run(command, check=False, capture_output=True,
+                          cwd=ROOT).returncode not in (0, 1):
             raise RuntimeError(f"{' '.join(command)} failed")
 
-    cli_ladder_s = _median(cli, repeats)
+    cli_times = _times(cli, cli_repeats)
     with tempfile.TemporaryDirectory():
         start = time.perf_counter()
         render_html(diagnosis)
@@ -62,7 +73,8 @@ def run(repeats: int = 3, dataset: Path = EXAMPLE) -> dict[str, float]:
         "ladder_steps": float(len(diagnosis.ladder or ())),
         "diagnose_s": diagnose_s,
         "ladder_s": ladder_s,
-        "cli_ladder_s": cli_ladder_s,
+        "cli_ladder_s": float(statistics.median(cli_times)),
+        "cli_ladder_min_s": min(cli_times),
         "report_s": report_s,
     }
 

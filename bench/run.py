@@ -24,6 +24,12 @@ HERE = Path(__file__).resolve().parent
 
 
 def main(argv: list[str]) -> int:
+    try:
+        import numpy  # noqa: F401  (every bench needs it; a system Python may lack it)
+    except ImportError:
+        print(f"bench/run.py: {sys.executable} cannot import numpy: run it with the venv's "
+              "Python, e.g. .venv/bin/python bench/run.py", file=sys.stderr)
+        return 2
     flags = [a for a in argv if a.startswith("--")]
     argv = [a for a in argv if not a.startswith("--")]
     modules = sorted(p for p in HERE.glob("bench_*.py"))

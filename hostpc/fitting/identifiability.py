@@ -6,7 +6,8 @@ combination of parameters that leaves every measurement unchanged. We fix one pa
 null direction (held at its start value, i.e. nominal) so the fit cannot drift along it, and
 say in words which parameters could not be separated.
 
-Which parameter to hold: a pivoted QR of the null basis picks parameters that span it,
+Which parameter to hold: a pivoted QR of the null basis picks parameters that span it
+(`pivoted_columns`: LAPACK's dgeqp3 column choice, in numpy),
 preferring (in order) geometry deltas, joint offsets, other effects, and frames last, so a
 frame absorbs what cannot be told apart and no unobservable zero offset is ever pushed.
 """
@@ -19,6 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 RELATIVE_RANK_TOLERANCE = 1e-7
+NEAR_TIE = 1e-9
+"""Column norms within this (relative) of the largest are a tie: the first parameter wins."""
 MIN_GAUGE_SPAN = 0.2
 FIX_PRIORITY = {"geometry": 3, "joint_offsets": 2}
 FRAME_EFFECTS = ("tool", "target", "base", "sphere", "camera", "left_base", "right_base",
@@ -90,6 +93,35 @@ def _describe(names: Sequence[str], units: Sequence[str], fixed: int, vector: np
     return NullDirection(names[fixed], tuple(names[k] for k in participants), coefficients, text)
 
 
+def pivoted_columns(matrix: np.ndarray) -> list[int]:
+    """The first min(M, P) column pivots of a QR with column pivoting of matrix (M, P),
+    in order: the columns `scipy.linalg.qr(matrix, pivoting=True)` puts first, except on
+    ties.
+
+    The rule of LAPACK's dgeqp3: at each step the column whose part outside the span of
+    the columns chosen so far is largest (here by Gram-Schmidt on the few rows of a null
+    basis: that part's norm is what dgeqp3's downdated norms estimate). Norms within
+    NEAR_TIE of the largest are a tie, and the column listed first wins: LAPACK breaks such
+    ties (equal norms in exact arithmetic, e.g. the symmetric participation of two DH
+    deltas in a null direction) by its round-off, so its choice depended on the BLAS
+    build; this one does not. Written out because scipy.linalg costs ~0.15 s to import
+    (its array-API layer), more than `hostpc diagnose` needs for everything else."""
+    rest = np.array(matrix, dtype=float)
+    rows, cols = rest.shape
+    open_ = np.ones(cols, dtype=bool)
+    chosen: list[int] = []
+    for _ in range(min(rows, cols)):
+        norms = np.where(open_, np.sqrt(np.einsum("ij,ij->j", rest, rest)), -1.0)
+        best = norms.max()
+        pick = int(np.flatnonzero(norms >= best * (1.0 - NEAR_TIE))[0])
+        chosen.append(pick)
+        open_[pick] = False
+        if best > 0.0:
+            direction = rest[:, pick] / best
+            rest -= np.outer(direction, direction @ rest)
+    return chosen
+
+
 def analyse(jacobian: np.ndarray, names: Sequence[str], units: Sequence[str],
             tolerance: float = RELATIVE_RANK_TOLERANCE,
             frames: Collection[str] | None = None) -> Identifiability:
@@ -119,16 +151,12 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], units: Sequence[str],
         strong = participation >= 0.1 * participation.max()
         priority = np.array([_priority(n, frame_names) for n in names], dtype=float)
         weight = np.where(strong, 10.0**priority, 1e-3)
-        import scipy.linalg  # ~50 ms to import: only where there is a null space to pivot
-
-        _, _, pivots = scipy.linalg.qr(null_basis.T * weight[None, :], pivoting=True)
-        chosen = list(pivots[: null_basis.shape[1]])
+        chosen = pivoted_columns(null_basis.T * weight[None, :])
         block = null_basis[chosen, :]
         # the basis is orthonormal: the held set spans the null space well when the block's
         # smallest singular value is not small; otherwise fall back to plain pivoting
         if np.linalg.svd(block, compute_uv=False).min() < MIN_GAUGE_SPAN:
-            _, _, pivots = scipy.linalg.qr(null_basis.T, pivoting=True)
-            chosen = list(pivots[: null_basis.shape[1]])
+            chosen = pivoted_columns(null_basis.T)
             block = null_basis[chosen, :]
         # one null vector per fixed parameter: 1 on it, 0 on the other fixed ones
         combos = null_basis @ np.linalg.inv(block)  # (P, k), normalised coordinates

@@ -1,0 +1,47 @@
+"""What `hostpc diagnose --ladder` and `hostpc fit` import: no scipy (its array-API layer
+alone costs ~0.2 s, more than the 120-pose ladder itself), no OpenCV, no matplotlib.
+
+Each command runs in a fresh interpreter (the test process has scipy loaded already); the
+modules are read from sys.modules when the command has finished. Not a timed test: the
+import set is what start-up costs, and it is what this guards."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+HEAVY = ("scipy", "cv2", "matplotlib")
+_CHILD = r"""
+import contextlib, io, json, runpy, sys
+sys.argv = ["hostpc", *json.loads(sys.argv[1])]
+with contextlib.redirect_stdout(io.StringIO()):
+    try:
+        runpy.run_module("hostpc.cli.main", run_name="__main__")
+    except SystemExit as exc:
+        code = exc.code
+print(json.dumps({"code": code, "modules": sorted(sys.modules)}))
+"""
+
+
+def imported_by(*args: str) -> tuple[int, list[str]]:
+    done = subprocess.run([sys.executable, "-c", _CHILD, json.dumps(list(args))], cwd=ROOT,
+                          capture_output=True, text=True, check=True, timeout=120)
+    report = json.loads(done.stdout.strip().splitlines()[-1])
+    return report["code"], report["modules"]
+
+
+@pytest.mark.parametrize("args", [
+    ("diagnose", "--ladder", "examples/ur5e_stereo.json"),  # a null space: the pivoted QR
+    ("diagnose", "--ladder", "examples/ur5e_stereo_hidden_compliance.json"),
+    ("fit", "examples/ur5e_stereo.json"),
+])
+def test_offline_commands_import_no_scipy(args: tuple[str, ...]) -> None:
+    code, modules = imported_by(*args)
+    assert code in (0, 1)  # 1: not adequate (the hidden-compliance example)
+    heavy = [m for m in modules if m.split(".")[0] in HEAVY]
+    assert not heavy, heavy[:5]
