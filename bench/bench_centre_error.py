@@ -10,10 +10,10 @@ the TRUE camera) removes the perspective bias. The error is
 and its whitened mean square `e^T cov^-1 e / 2` (per coordinate; `cov` the centroid's
 reported covariance) is 1 for an honest covariance. Printed:
 
-1. Noise off (8-bit and float images): the deterministic error, and the same disk rendered
-   4x and 8x finer and area-averaged down (a pixel that integrates its area, as a sensor's
-   does, before the optical blur): how much of it the renderer's one-sample edge
-   anti-aliasing makes.
+1. Noise off (float images): the deterministic error of the renderer's exact pixel-area
+   edges, of the one-pixel ramp it used before (the signed distance over the pixel
+   footprint, exact only for edges along the grid), and of the same disk rendered 4x and
+   8x finer and area-averaged down (a pixel that integrates its area, as a sensor's does).
 2. Noise on (a fresh noise field per image, so the draws are independent): by distance,
    tilt and position in the field, and by blur.
 3. The normal's share: the error when the bias is computed with a normal off by 0.5 deg
@@ -36,6 +36,7 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+import controller_stub.render as render  # noqa: E402
 from controller_stub.render import CameraModel as RenderCamera  # noqa: E402
 from controller_stub.render import DiskPattern, Renderer  # noqa: E402
 from controller_stub.scenario import CameraSpec, TargetSpec  # noqa: E402
@@ -112,8 +113,14 @@ def noise_free(images: int) -> None:
                                      rng.uniform(0.45, 0.7)])) for _ in range(images)]
     truth = [true_centre(crop, T) for T in poses]
     print("1. noise off, blur 0.7 px (float images), 45 tilts 0-45 deg at 0.45-0.7 m:")
-    print("   edge rendering                    | RMS error u, v (px)")
-    for factor in (1, 4, 8):
+    print("   edge rendering                         | RMS error u, v (px)")
+    exact_cover = render._pixel_area_cover
+
+    def ramp_cover(signed: np.ndarray, grad_x: np.ndarray, grad_y: np.ndarray) -> np.ndarray:
+        return render._smooth_step(signed, np.maximum(np.hypot(grad_x, grad_y), 1e-12))
+
+    for factor, ramp in ((1, False), (1, True), (4, False), (8, False)):
+        render._pixel_area_cover = ramp_cover if ramp else exact_cover  # type: ignore
         fine = RenderCamera(width * factor, height * factor, SPEC.fx * factor,
                             SPEC.fy * factor, factor * (cx + 0.5) - 0.5,
                             factor * (cy + 0.5) - 0.5, CAMERA.distortion)
@@ -127,10 +134,12 @@ def noise_free(images: int) -> None:
             blob = detect_disk(image)
             if not isinstance(blob, DetectionFailure):
                 errors.append(blob.centroid - c)
+        render._pixel_area_cover = exact_cover  # type: ignore
         rms = np.sqrt(np.mean(np.square(errors), axis=0))
-        label = ("one sample per pixel (the simulator)" if factor == 1
+        label = ("exact pixel area (the simulator now)" if factor == 1 and not ramp
+                 else "one-pixel ramp (the simulator before)" if ramp
                  else f"{factor}x{factor} samples, area-averaged")
-        print(f"   {label:<34}| {rms[0]:.4f} {rms[1]:.4f}")
+        print(f"   {label:<39}| {rms[0]:.4f} {rms[1]:.4f}")
 
 
 def noisy(images: int, distance: float, tilt_deg: float, field: float, blur: float,
