@@ -45,7 +45,7 @@ from hostpc.kinematics import Chain, forward, invert_transform
 from hostpc.kinematics.inverse import look_at, solve_ik
 from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem
-from hostpc.planning.tour import nearest_neighbour, plan_tour
+from hostpc.planning.tour import move_times, nearest_neighbour, plan_tour
 
 CRITERIA = ("D", "random")
 DEFAULT_RIDGE = 1e-6
@@ -171,8 +171,6 @@ def _greedy_d_optimal_blocks(A: np.ndarray, n_select: int, ridge: float,
                              forbidden: Iterable[int], travel: Travel | None = None
                              ) -> np.ndarray:
     """Greedy D-optimal choice among the blocks A (N, m, p) (see the module docstring)."""
-    from hostpc.planning.tour import move_times
-
     n_pool, m, p = A.shape
     near = None
     if travel is not None and travel.slack > 0:
