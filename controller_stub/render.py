@@ -5,11 +5,14 @@ of the top-left pixel (OpenCV convention). Camera frame: x right, y down, z forw
 
 Every pattern lies on a plane given by `T_cam_plane` (plane coordinates u = x, v = y of the
 plane frame, plane z = 0). For each pixel the exact ray through its centre (from a
-precomputed undistortion map, solved to 1e-12) is intersected with the plane; each edge of
-the pattern is anti-aliased by its signed distance divided by the local pixel footprint
-(|gradient| of that distance in pixels), a one-pixel box filter that is exact to first order
-and unbiased, so the centroid of a disk and the saddle of a chessboard corner are
-sub-pixel exact. Then a Gaussian blur and pixel noise. The pattern is only computed inside
+precomputed undistortion map, solved to 1e-12) is intersected with the plane. A disk's edges
+cover each pixel by the exact area a straight edge through it covers (signed distance and
+direction from the local gradient, in pixels): a pixel that integrates its area, as a
+sensor's does, so a disk's intensity centroid is its image's area centroid to 2e-4 px
+(bench/bench_centre_error.py; a one-pixel ramp in the distance, exact only for edges along
+the pixel grid, left 0.002-0.004 px that varied with the sub-pixel phase). The chessboard's
+edges use that ramp (its signed distance divided by the local pixel footprint). Then a
+Gaussian blur and pixel noise. The pattern is only computed inside
 its projected bounding box (plus the blur support); the background is flat plus noise.
 
 Noise comes from a bank of Gaussian samples drawn once from the seeded RNG; each frame
@@ -173,8 +176,36 @@ def _smooth_step(signed_distance: np.ndarray, footprint: np.ndarray) -> np.ndarr
     return np.clip(out, 0.0, 1.0, out=out)
 
 
-def _gradient_norm(f: np.ndarray) -> np.ndarray:
-    """|grad f| in pixel units by central differences (one-sided at the border), (h, w)."""
+def _pixel_area_cover(signed_distance: np.ndarray, grad_x: np.ndarray, grad_y: np.ndarray
+                      ) -> np.ndarray:
+    """Exact area of a unit pixel covered by the half-plane signed_distance > 0, for an edge
+    whose signed distance (plane units) has the gradient (grad_x, grad_y) per pixel: with
+    d the distance from the pixel centre in pixels and (a, b) = the sorted |components| of
+    the edge's unit normal, the covered fraction is P(a U1 + b U2 < d) for U1, U2 uniform
+    on (-1/2, 1/2), a trapezoid's CDF (float32 (h, w)). A one-pixel ramp in d (the same
+    area only for axis-aligned edges) aliases: it moved a disk's centroid by 0.002-0.004 px
+    with the sub-pixel phase (bench/bench_centre_error.py)."""
+    g = np.hypot(grad_x, grad_y)
+    np.maximum(g, np.float32(1e-12), out=g)
+    d = signed_distance / g
+    ax = np.abs(grad_x) / g
+    ay = np.abs(grad_y) / g
+    a = np.maximum(ax, ay)
+    b = np.minimum(ax, ay)
+    t = np.clip(d + np.float32(0.5) * (a + b), 0.0, a + b)  # 0 .. a + b across the edge
+    b_safe = np.maximum(b, np.float32(1e-6))
+    inv_2ab = np.float32(0.5) / (a * b_safe)
+    low = t * t * inv_2ab
+    middle = (t - np.float32(0.5) * b) / a
+    high = np.float32(1.0) - (a + b - t) ** 2 * inv_2ab
+    cover = np.where(t < b, low, np.where(t <= a, middle, high))
+    cover = np.where(b < 1e-6, d + np.float32(0.5), cover)  # an axis-aligned edge: a ramp
+    return np.clip(cover, 0.0, 1.0).astype(np.float32)
+
+
+def _gradient(f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(d f / d x, d f / d y) in pixel units by central differences (one-sided at the
+    border), each (h, w)."""
     gx = np.empty_like(f)
     gy = np.empty_like(f)
     gx[:, 1:-1] = (f[:, 2:] - f[:, :-2]) * 0.5
@@ -183,6 +214,12 @@ def _gradient_norm(f: np.ndarray) -> np.ndarray:
     gy[1:-1] = (f[2:] - f[:-2]) * 0.5
     gy[0] = f[1] - f[0]
     gy[-1] = f[-1] - f[-2]
+    return gx, gy
+
+
+def _gradient_norm(f: np.ndarray) -> np.ndarray:
+    """|grad f| in pixel units by central differences (one-sided at the border), (h, w)."""
+    gx, gy = _gradient(f)
     g = np.hypot(gx, gy, out=gx)
     np.maximum(g, 1e-12, out=g)
     return g
@@ -316,9 +353,9 @@ class Renderer:
             return self.background()
         u, v, valid = self._plane_coords(T_cam_target, box)
         rho = np.hypot(u, v)
-        footprint = _gradient_norm(rho)
-        plate = _smooth_step(np.float32(pattern.plate_radius) - rho, footprint)
-        dot = _smooth_step(np.float32(pattern.radius) - rho, footprint)
+        grad_x, grad_y = _gradient(rho)
+        plate = _pixel_area_cover(np.float32(pattern.plate_radius) - rho, grad_x, grad_y)
+        dot = _pixel_area_cover(np.float32(pattern.radius) - rho, grad_x, grad_y)
         bg = np.float32(self.background_level)
         patch = bg + np.float32(pattern.plate_level - self.background_level) * plate
         patch += np.float32(pattern.dot_level - pattern.plate_level) * dot

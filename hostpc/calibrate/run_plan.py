@@ -3,12 +3,13 @@ verification poses (none of them a fit pose), and the identifiability check BEFO
 moves. Pure numerics apart from the progress messages.
 
 With a target sigma (stereo_target's default) the fit poses are the fewest that reach it
-(at least MIN_TARGET_POSES, for an honest sigma),
-visited as a tour, and the verification poses a random choice visited as a tour from the
-last fit pose (`hostpc.planning.verify_poses`): the short-robot-time plan. The rest of the
-selection (up to --poses) is kept as `q_more`, a tour from the last fit pose, which the
-runner measures only if the fit does not explain the measurements. Without one (`--poses
-N` alone) N poses nearest-neighbour ordered and a plain random verification choice."""
+(at least MIN_TARGET_POSES, which stereo_target's centre refinement needs), visited as a
+tour, and the verification poses a random choice visited as a tour from the last fit pose
+(`hostpc.planning.verify_poses`): the short-robot-time plan; the selection is travel-aware
+(TRAVEL_SLACK). The rest of the selection (up to --poses) is kept as `q_more`, a tour from
+the last fit pose, which the runner measures only if the fit does not explain the
+measurements. Without one (`--poses N` alone) N poses nearest-neighbour ordered and a plain
+random verification choice."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ import numpy as np
 from hostpc.errors import InputError
 from hostpc.methods.base import Method, Plan, Progress, RunSettings
 from hostpc.planning.design import (
+    Travel,
     check_plan,
     design_matrix,
     joint_offset_sigmas,
@@ -29,7 +31,7 @@ from hostpc.planning.design import (
     select_groups,
     verify_groups,
 )
-from hostpc.planning.tour import short_path
+from hostpc.planning.tour import full_turn_joints, short_path
 from hostpc.planning.verify_poses import nearby_verify_poses
 from hostpc.robots.base import RobotState
 
@@ -43,13 +45,26 @@ class PlanningError(InputError):
     """The planned poses cannot separate the model's parameters (or none are reachable)."""
 
 
-MIN_TARGET_POSES = 20
-"""A target-sigma plan measures at least this many poses. Fewer reach the predicted sigma
-(7-8 poses reach 0.002 deg) but their reported sigma is not honest: over 80 simulated worlds
-(`bench/bench_sigma_mc.py --worlds 80 --first-seed 21 --methods stereo_target`) the 7-8-pose
-plan gave MSE / sigma^2 1.26-2.56 per joint (q3, q5 about 2-2.6), 20 poses 0.73-1.13 and 30
-poses 1.08-1.43 over 40 worlds (`--calibrate-args "--poses 20"`): the few steep views a small
-D-optimal plan picks carry vision errors that do not average out (docs/performance.md)."""
+MIN_TARGET_POSES = 6
+"""A target-sigma plan measures at least this many poses: the fewest whose disk centres
+stereo_target re-corrects with the normals of their own preliminary fit
+(`hostpc.methods.stereo_refinement.MIN_SAMPLES`; a test keeps the two equal). The sigma
+target itself asks for 7-8 poses (10-11 with the travel-aware selection). This was 20 while
+a plan of fewer than 20 poses went unrefined, which, not the plan's size, made its sigma
+dishonest: refined, the plain 7-8-pose plan gives MSE / sigma^2 0.68-1.32 per joint over 40
+simulated worlds (1.29 0.69 2.09 1.50 2.11 unrefined; `bench/bench_sigma_mc.py --worlds 40
+--methods stereo_target`, docs/performance.md "Default plan size and the honesty of its
+sigma")."""
+
+
+TRAVEL_SLACK = 0.15
+"""A short plan's selection is travel-aware (`hostpc.planning.design.Travel`): each step
+takes, of the poses whose information gain is within 15 % of the best, the one nearest the
+poses already chosen. Chosen on simulated worlds 1-40 (`bench/bench_sigma_mc.py`; robot
+time from their result.json): 0 (plain D-optimal) gave 7 poses, 18.6 s of robot time on
+average, MSE / sigma^2 0.70-1.26; 0.15 gives 10-11 poses in 17.8 s (at most 19.8 s),
+0.96-1.18; 0.3 gives 15 poses in 18.1 s (2 of 40 runs above 20 s) and sigmas too large
+(q1 0.51). More poses in the same time: shorter moves between them."""
 
 
 def plan_run(method: Method, state: RobotState, settings: RunSettings, progress: Progress
@@ -73,7 +88,11 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     limits = (state.q_min, state.q_max)
     q_more: np.ndarray | None = None
     if groups is None:
-        chosen = select(design, settings.n_poses, settings.criterion, rng)
+        travel = None
+        if short:  # prefer informative poses near the ones already chosen
+            travel = Travel(pool, np.asarray(state.q, float),
+                            full_turn_joints(*limits), TRAVEL_SLACK)
+        chosen = select(design, settings.n_poses, settings.criterion, rng, travel)
         if settings.target_sigma_deg is not None:  # the fewest poses that reach it
             enough = poses_for_target_sigma(design, chosen,
                                             math.radians(settings.target_sigma_deg),

@@ -342,8 +342,9 @@ class StereoTargetMethod(Method):
         from hostpc.dataset import dataset_to_dict
         from hostpc.methods.stereo_refinement import refine_dataset
 
-        # each set by its own preliminary fit; a small (verify) set is left as measured: after
-        # a push its nominal normals are already right, and the fit's model would be wrong
+        # each set by its own preliminary fit (never the fit set's model: after a push it
+        # would be wrong for the verify set); a set too small for its own fit (a short
+        # plan's 4 verify poses) is left as measured (stereo_refinement.MIN_SAMPLES)
         dataset, _ = refine_dataset(dataset_from_dict(document), self.rig,
                                     self.cell.target_radius, self.cell.target_normal)
         refined = dataset_to_dict(dataset)

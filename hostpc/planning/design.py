@@ -45,7 +45,7 @@ from hostpc.kinematics import Chain, forward, invert_transform
 from hostpc.kinematics.inverse import look_at, solve_ik
 from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem
-from hostpc.planning.tour import nearest_neighbour, plan_tour
+from hostpc.planning.tour import move_times, nearest_neighbour, plan_tour
 
 CRITERIA = ("D", "random")
 DEFAULT_RIDGE = 1e-6
@@ -130,9 +130,27 @@ class PoseGroups:
 
 
 def greedy_d_optimal(design: Design, n_select: int, ridge: float = DEFAULT_RIDGE,
-                     forbidden: Iterable[int] = ()) -> np.ndarray:
-    """Indices of `n_select` poses in the order greedy D-optimal design picks them."""
-    return _greedy_d_optimal_blocks(_normalised_free(design), n_select, ridge, forbidden)
+                     forbidden: Iterable[int] = (), travel: Travel | None = None
+                     ) -> np.ndarray:
+    """Indices of `n_select` poses in the order greedy D-optimal design picks them; with
+    `travel`, travel-aware (see `Travel`)."""
+    return _greedy_d_optimal_blocks(_normalised_free(design), n_select, ridge, forbidden,
+                                    travel)
+
+
+@dataclass(frozen=True)
+class Travel:
+    """Travel-aware greedy selection: at each step, of the candidates whose information
+    gain (log det) is within `slack` (a fraction) of the best step's, take the one nearest
+    (move time, `hostpc.planning.tour.move_times`) to the poses already chosen or to the
+    start. q: (N, n) the pool's joint angles (rad); q_start: (n,); periodic: (n,) bool,
+    joints that may turn the short way round. Still nested (a prefix of the order is the
+    selection of that size), so the fewest poses that reach a target sigma stay a prefix."""
+
+    q: np.ndarray
+    q_start: np.ndarray
+    periodic: np.ndarray | None = None
+    slack: float = 0.0
 
 
 def greedy_d_optimal_groups(design: Design, members: Sequence[np.ndarray], n_select: int,
@@ -150,9 +168,13 @@ def greedy_d_optimal_groups(design: Design, members: Sequence[np.ndarray], n_sel
 
 
 def _greedy_d_optimal_blocks(A: np.ndarray, n_select: int, ridge: float,
-                             forbidden: Iterable[int]) -> np.ndarray:
+                             forbidden: Iterable[int], travel: Travel | None = None
+                             ) -> np.ndarray:
     """Greedy D-optimal choice among the blocks A (N, m, p) (see the module docstring)."""
     n_pool, m, p = A.shape
+    near = None
+    if travel is not None and travel.slack > 0:
+        near = move_times(travel.q, travel.q_start[None, :], periodic=travel.periodic)
     n_select = min(n_select, n_pool)
     Minv = np.eye(p) / ridge
     available = np.ones(n_pool, dtype=bool)
@@ -167,6 +189,11 @@ def _greedy_d_optimal_blocks(A: np.ndarray, n_select: int, ridge: float,
         k = int(np.argmax(gain))
         if not np.isfinite(gain[k]):
             break
+        if near is not None and travel is not None:
+            eligible = gain >= (1.0 - travel.slack) * gain[k]
+            k = int(np.flatnonzero(eligible)[np.argmin(near[eligible])])
+            near = np.minimum(near, move_times(travel.q, travel.q[k][None, :],
+                                               periodic=travel.periodic))
         chosen.append(k)
         available[k] = False
         Gk = G[k]                                          # (m, p) = A_k M^-1
@@ -180,11 +207,12 @@ def random_selection(n_pool: int, n_select: int, rng: np.random.Generator) -> np
     return rng.permutation(n_pool)[: min(n_select, n_pool)]
 
 
-def select(design: Design, n_select: int, criterion: str, rng: np.random.Generator
-           ) -> np.ndarray:
-    """Indices of the selected poses by `criterion` ("D" or "random")."""
+def select(design: Design, n_select: int, criterion: str, rng: np.random.Generator,
+           travel: Travel | None = None) -> np.ndarray:
+    """Indices of the selected poses by `criterion` ("D", travel-aware with `travel`, or
+    "random")."""
     if criterion == "D":
-        return greedy_d_optimal(design, n_select)
+        return greedy_d_optimal(design, n_select, travel=travel)
     if criterion == "random":
         return random_selection(design.A.shape[0], n_select, rng)
     raise ValueError(f"unknown planning criterion {criterion!r} (expected one of {CRITERIA})")

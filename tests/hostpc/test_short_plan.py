@@ -135,3 +135,13 @@ def test_target_sigma_on_a_method_that_plans_whole_groups_is_refused() -> None:
     with pytest.raises(InputError, match="whole groups"):
         _counts("--method", "sphere_probe", "--target-sigma", "0.002")
     assert _counts("--method", "sphere_probe")[1] == 10
+
+
+def test_a_target_sigma_plan_is_never_too_small_for_the_centre_refinement() -> None:
+    """The fewest poses of a target-sigma plan are the fewest stereo_target's centre
+    refinement fits (a plan below it would keep the nominal normal's bias, which made the
+    short plan's sigma dishonest: docs/vision.md section 3.2)."""
+    from hostpc.calibrate.run_plan import MIN_TARGET_POSES
+    from hostpc.methods.stereo_refinement import MIN_SAMPLES
+
+    assert MIN_TARGET_POSES == MIN_SAMPLES < 20
