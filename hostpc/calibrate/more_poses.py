@@ -4,8 +4,8 @@ A target-sigma plan (stereo_target's default) measures the fewest poses that rea
 sigma: enough to fit a model that is right, too few for `hostpc diagnose` to tell which
 effect a wrong one lacks (with 7 poses the ladder names the wrong effect in the
 hidden-compliance world). So when the fit does not explain its measurements (the chi2/dof
-the push guard tests, `hostpc.calibrate.push.adequacy_chi2`: with the rig's covariance
-inside when the dataset carries it, above its band `chi2_dof_upper`), the runner measures
+the push guard tests, `hostpc.calibrate.push.adequacy_chi2`: with the camera calibration's
+covariance inside when the dataset carries it, above its band `chi2_dof_upper`), the runner measures
 the plan's further poses (`Plan.q_more`: the rest of the nested D-optimal selection, up to
 --poses) and fits again before the push decision. The decision is journaled
 (`{"event": "more_poses", ...}`) so a resume measures the same poses.
@@ -39,7 +39,7 @@ def more_poses_reason(journal: Journal, plan: Plan, result: FitResult,
     chi2_dof, shared = adequacy_chi2(result)
     if not (math.isfinite(upper) and chi2_dof > upper):
         return None
-    what = " with the rig's covariance" if shared else ""
+    what = " with the camera calibration's covariance" if shared else ""
     reason = (f"the model does not explain the {plan.q.shape[0]} poses (chi2/dof{what} "
               f"{chi2_dof:.3g} above its band {upper:.3g})")
     journal.event("more_poses", reason=reason, n=int(plan.more.shape[0]))

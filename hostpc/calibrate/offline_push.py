@@ -71,6 +71,13 @@ def _number(value: Any, where: str) -> float:
     return float(value)
 
 
+def _finite(value: Any, where: str) -> float:
+    number = _number(value, where)
+    if not math.isfinite(number):
+        raise InputError(f"{where}: expected a finite number, got {value!r}")
+    return number
+
+
 def saved_fit_from_dict(document: Any, source: str) -> SavedFit:
     """Rebuild a SavedFit from `FitResult.to_dict()`; InputError naming the field."""
     if not isinstance(document, Mapping):
@@ -113,7 +120,7 @@ def saved_fit_from_dict(document: Any, source: str) -> SavedFit:
         robot=str(document.get("robot") or ""),
         chi2_dof_with_calibration=(
             None if document.get("chi2_dof_with_calibration") is None
-            else _number(document["chi2_dof_with_calibration"],
+            else _finite(document["chi2_dof_with_calibration"],
                          f"{source}: chi2_dof_with_calibration")),
     )
 

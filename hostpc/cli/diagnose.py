@@ -187,7 +187,10 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
         f"verdict: {verdict_word(check)}",
     ]
     if a.dof > 0:
-        lines.append(f"  chi2/dof {a.chi2_dof:.3f} (band {a.chi2_band[0]:.3f}.."
+        inside = ("" if a.chi2_dof_with_calibration is None else
+                  f", {a.chi2_dof_with_calibration:.3f} with the camera calibration's "
+                  "covariance, the one judged")
+        lines.append(f"  chi2/dof {a.chi2_dof:.3f}{inside} (band {a.chi2_band[0]:.3f}.."
                      f"{a.chi2_band[1]:.3f} for {a.dof} dof, p = {_p(a.p_value)})")
     else:
         lines.append(f"  chi2/dof - ({a.dof} degrees of freedom)")

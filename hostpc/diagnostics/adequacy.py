@@ -20,6 +20,7 @@ from hostpc.diagnostics.distributions import chi2_isf, chi2_ppf, chi2_sf
 from hostpc.diagnostics.outliers import Outlier
 from hostpc.fitting import FitResult
 from hostpc.fitting.fitting import held_out_by_fold
+from hostpc.fitting.shared_errors import result_shared_chi2
 from hostpc.model.problem import Problem
 
 ADEQUACY_P_MIN = 1e-3
@@ -108,6 +109,10 @@ class Adequacy:
     cv_folds: int
     adequate: bool
     reasons: tuple[str, ...]
+    chi2_dof_with_calibration: float | None = None
+    """The chi2/dof with the dataset's rig / head-camera calibration covariance inside
+    (`hostpc.fitting.shared_chi2`), which `p_value` and `chi2_ok` judge, as the push guard
+    does; None without a `rig_uncertainty` block (then the plain chi2 is judged)."""
 
 
 def chi2_band(dof: int, p_min: float = ADEQUACY_P_MIN) -> tuple[float, float]:
@@ -173,8 +178,11 @@ def assess(result: FitResult, held_out: HeldOut | None, alpha: float = ADEQUACY_
     found significant (``missing``: sentences naming what was). Reasons in that order."""
     dof = result.dof
     chi2_dof = result.chi2_dof
-    p_value = chi2_p_value(result.chi2, dof)
-    chi2_ok = chi2_adequate(result.chi2, dof, alpha)
+    full = result_shared_chi2(result) if result.converged else None
+    with_calibration = full.chi2_dof if full is not None and full.dof == dof else None
+    tested = result.chi2 if with_calibration is None else with_calibration * dof
+    p_value = chi2_p_value(tested, dof)
+    chi2_ok = chi2_adequate(tested, dof, alpha)
     m = result.residuals_raw.shape[1]
     sum_squares = float(np.sum(result.residuals_raw[:, result.problem.length_columns]**2))
     noise_rms = float(np.sqrt(sum_squares * m / dof)) if dof > 0 else float("nan")
@@ -185,7 +193,9 @@ def assess(result: FitResult, held_out: HeldOut | None, alpha: float = ADEQUACY_
     if dof <= 0:
         reasons.append(too_few_reason(result))
     elif not chi2_ok:
-        reasons.append(f"chi2/dof {chi2_dof:.3f} is above its band "
+        inside = ("" if with_calibration is None else
+                  f" ({with_calibration:.3f} with the camera calibration's covariance)")
+        reasons.append(f"chi2/dof {chi2_dof:.3f}{inside} is above its band "
                        f"[{band[0]:.3f}, {band[1]:.3f}] for {dof} degrees of freedom "
                        f"(p = {p_value:.2g})")
     reasons.extend(missing)
@@ -199,4 +209,5 @@ def assess(result: FitResult, held_out: HeldOut | None, alpha: float = ADEQUACY_
         cv_whitened_rms=None if held_out is None else held_out.whitened_rms,
         cv_folds=0 if held_out is None else held_out.folds,
         adequate=not reasons, reasons=tuple(reasons),
+        chi2_dof_with_calibration=with_calibration,
     )

@@ -238,6 +238,8 @@ class Diagnosis:
             "dof": a.dof,
             "chi2_dof": finite(a.chi2_dof),
             "chi2_band": [finite(a.chi2_band[0]), finite(a.chi2_band[1])],
+            "chi2_dof_with_calibration": (None if a.chi2_dof_with_calibration is None
+                                          else finite(a.chi2_dof_with_calibration)),
             "chi2_p_value": finite(a.p_value),
             "noise": {"scale": finite(a.noise_scale), "rms": finite(a.noise_rms),
                       "expected_rms": finite(a.expected_noise_rms)},

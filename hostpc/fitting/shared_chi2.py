@@ -37,6 +37,8 @@ Pure numerics: arrays in, numbers out.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 EIGEN_TOLERANCE = 1e-12
@@ -45,12 +47,21 @@ EIGEN_TOLERANCE = 1e-12
 
 def covariance_factor(S: np.ndarray) -> np.ndarray:
     """(K, R) L with L @ L.T = S (symmetric positive semi-definite (K, K)); the R columns
-    are the eigen-directions with positive variance (R = 0 for S = 0)."""
+    are the eigen-directions with positive variance (R = 0 for S = 0). The eigenvalues are
+    taken of the correlation matrix (S scaled by its standard deviations), so parameters in
+    different units (px, m) are not cut by the other's scale."""
     S = 0.5 * (np.asarray(S, dtype=float) + np.asarray(S, dtype=float).T)
-    values, vectors = np.linalg.eigh(S)
-    largest = float(np.max(np.abs(values))) if values.size else 0.0
-    keep = values > EIGEN_TOLERANCE * largest
-    return vectors[:, keep] * np.sqrt(values[keep])
+    sd = np.sqrt(np.clip(np.diag(S), 0.0, None)) if S.size else np.zeros(0)
+    varying = sd > 0
+    L = np.zeros((S.shape[0], 0))
+    if not np.any(varying):
+        return L
+    d = sd[varying]
+    values, vectors = np.linalg.eigh(S[np.ix_(varying, varying)] / np.outer(d, d))
+    keep = values > EIGEN_TOLERANCE * float(np.max(np.abs(values)))
+    L = np.zeros((S.shape[0], int(np.sum(keep))))
+    L[varying] = d[:, None] * vectors[:, keep] * np.sqrt(values[keep])
+    return L
 
 
 def _noise_whitened(residuals: np.ndarray, jacobian: np.ndarray, shared_whitened: np.ndarray,
@@ -107,12 +118,17 @@ def chi2_with_shared_error(residuals: np.ndarray, jacobian: np.ndarray,
     return float(r @ r), int(r.size - rank)
 
 
+def _normal_sf(z: float) -> float:
+    return 0.5 * math.erfc(z / math.sqrt(2.0))
+
+
 def weighted_chi2_tail(x: float, ones: int, weights: np.ndarray) -> float:
     """P(Q > x) for Q = chi2(ones) + sum_j weights_j chi2_j(1) (independent; weights > 0):
-    the Lugannani-Rice saddlepoint approximation (accurate to a few % of the tail
-    probability in the tails, tested against draws); the normal one near the mean."""
-    from scipy import optimize, stats
-
+    the Lugannani-Rice saddlepoint approximation, accurate to a few % of the tail
+    probability in the UPPER tail (the scale gate's use; tested against draws) and at the
+    mean (its limit there, 1/2 - skewness / (6 sqrt(2 pi))); in the far lower tail
+    (x below ~1e-6 of the mean) it returns 1. Pure Python and numpy (no scipy import: the
+    gate runs in every fit of a dataset with a shared error)."""
     lam = np.concatenate([np.ones(1), np.asarray(weights, dtype=float)])
     lam = lam[lam > 0]
     count = np.concatenate([[float(ones)], np.ones(lam.size - 1)])
@@ -120,28 +136,43 @@ def weighted_chi2_tail(x: float, ones: int, weights: np.ndarray) -> float:
         lam, count = lam[1:], count[1:]
     if lam.size == 0:
         return 1.0 if x < 0 else 0.0
+    if not x > 0:
+        return 1.0
     mean = float(np.sum(count * lam))
-    sd = float(np.sqrt(2.0 * np.sum(count * lam**2)))
+    k2 = float(np.sum(2.0 * count * lam**2))
+    sd = math.sqrt(k2)
+    if abs(x - mean) < 1e-3 * sd:  # the saddlepoint formula's removable singularity
+        skewness = float(np.sum(8.0 * count * lam**3)) / k2**1.5
+        return 0.5 - skewness / (6.0 * math.sqrt(2.0 * math.pi))
+    if x < 1e-6 * mean:
+        return 1.0
 
-    def slope(t: float) -> float:  # K'(t) - x
+    def slope(t: float) -> float:  # K'(t) - x, increasing in t
         return float(np.sum(count * lam / (1.0 - 2.0 * lam * t))) - x
 
-    if x <= 0:
-        return 1.0
-    if abs(x - mean) < 1e-3 * sd:
-        return float(stats.norm.sf((x - mean) / sd))
     upper = 0.5 / float(np.max(lam)) * (1.0 - 1e-12)
+    if slope(upper) < 0:  # beyond what the floats resolve: the tail is 0
+        return 0.0
     lower = -1.0
     while slope(lower) > 0:
         lower *= 4.0
-    t = float(optimize.brentq(slope, lower, upper, xtol=1e-14, rtol=1e-12, maxiter=400))
+    for _ in range(200):  # bisection to the float resolution (the slope is monotone)
+        middle = 0.5 * (lower + upper)
+        if middle in (lower, upper):
+            break
+        if slope(middle) > 0:
+            upper = middle
+        else:
+            lower = middle
+    t = 0.5 * (lower + upper)
     cgf = -0.5 * float(np.sum(count * np.log1p(-2.0 * lam * t)))
     curvature = float(np.sum(2.0 * count * lam**2 / (1.0 - 2.0 * lam * t) ** 2))
-    w = float(np.sign(t) * np.sqrt(max(2.0 * (t * x - cgf), 0.0)))
-    u = t * np.sqrt(curvature)
+    w = math.copysign(math.sqrt(max(2.0 * (t * x - cgf), 0.0)), t)
+    u = t * math.sqrt(curvature)
     if abs(w) < 1e-6 or abs(u) < 1e-9:
-        return float(stats.norm.sf((x - mean) / sd))
-    tail = float(stats.norm.sf(w) + stats.norm.pdf(w) * (1.0 / u - 1.0 / w))
+        return _normal_sf((x - mean) / sd)
+    density = math.exp(-0.5 * w * w) / math.sqrt(2.0 * math.pi)
+    tail = _normal_sf(w) + density * (1.0 / u - 1.0 / w)
     return min(1.0, max(0.0, tail))
 
 

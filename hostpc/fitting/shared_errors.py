@@ -244,8 +244,9 @@ def result_shared_chi2(result: object) -> SharedChi2 | None:
     problem = getattr(result, "problem", None)
     if not isinstance(problem, Problem):
         return None
-    x, fixed, weights = (getattr(result, k, None) for k in ("x", "fixed", "weights"))
+    x, fixed = (getattr(result, k, None) for k in ("x", "fixed"))
     if x is None or fixed is None:
         return None
-    return shared_error_chi2(problem, np.asarray(x), ~np.asarray(fixed, dtype=bool),
-                             None if weights is None else np.asarray(weights))
+    # unweighted, as the fit's own chi2 and the band it is held against: under a robust
+    # loss the weights would shrink exactly the residuals the guard must see
+    return shared_error_chi2(problem, np.asarray(x), ~np.asarray(fixed, dtype=bool))

@@ -45,3 +45,23 @@ def test_offline_commands_import_no_scipy(args: tuple[str, ...]) -> None:
     assert code in (0, 1)  # 1: not adequate (the hidden-compliance example)
     heavy = [m for m in modules if m.split(".")[0] in HEAVY]
     assert not heavy, heavy[:5]
+
+
+def test_fit_of_a_dataset_with_a_shared_error_imports_no_scipy(tmp_path: Path) -> None:
+    """A dual_loop dataset with its head camera's calibration (`rig_uncertainty`): the
+    shared-error scale gate and the guard's chi2 run in the fit, without scipy (its
+    saddlepoint tail imported scipy.stats and scipy.optimize: ~0.5 s)."""
+    import numpy as np
+
+    from hostpc.planning.dual_loop_poses import plan_poses
+    from tests.hostpc.test_head_camera_uncertainty import world_documents
+
+    document, _ = world_documents(1, plan_poses(12, np.random.default_rng(3)), 0.3)
+    assert "rig_uncertainty" in document
+    path = tmp_path / "dual_loop.json"
+    path.write_text(json.dumps(document))
+    code, modules = imported_by("fit", str(path))
+    assert code == 0
+    # OpenCV is used here: the calibration's sensitivities re-triangulate the pixel centres
+    heavy = [m for m in modules if m.split(".")[0] in ("scipy", "matplotlib")]
+    assert not heavy, heavy[:5]

@@ -44,4 +44,4 @@ def test_no_growth_when_the_rig_covariance_explains_the_excess(tmp_path: Path) -
     assert Journal(tmp_path).last_event("more_poses") is None
     # and above the band with it: grows, saying which chi2 it was
     reason = more_poses_reason(Journal(tmp_path / "b"), plan(), saved_fit(0.9, 2 * upper))  # type: ignore[arg-type]
-    assert reason is not None and "with the rig's covariance" in reason
+    assert reason is not None and "with the camera calibration's covariance" in reason

@@ -6,10 +6,12 @@ from __future__ import annotations
 import copy
 
 import numpy as np
+import pytest
 
 import hostpc
 from hostpc.calibrate.push import adequacy_chi2, chi2_dof_upper, plan_push
 from hostpc.dataset import dataset_from_dict
+from hostpc.errors import InputError
 from hostpc.planning.dual_loop_poses import plan_poses
 from tests.hostpc.test_head_camera_uncertainty import world_documents
 
@@ -63,3 +65,27 @@ def test_a_saved_fit_carries_the_chi2_the_push_tests() -> None:
     del saved_document["chi2_dof_with_calibration"]  # an older fit.json: the plain chi2
     older = saved_fit_from_dict(saved_document, "fit.json")
     assert plan_push(older, np.zeros(16), max_correction_deg=5.0).refused  # type: ignore[arg-type]
+    # a hand-edited NaN would skip the chi2 check: one line instead
+    saved_document["chi2_dof_with_calibration"] = float("nan")
+    with pytest.raises(InputError, match="chi2_dof_with_calibration: expected a finite"):
+        saved_fit_from_dict(saved_document, "fit.json")
+
+
+def test_diagnose_judges_the_chi2_the_push_tests() -> None:
+    """One adequacy rule: `hostpc diagnose`'s chi-square verdict is on the chi2 with the
+    calibration inside when the dataset carries it (it judged the plain one: NOT adequate
+    where the push went ahead)."""
+    from hostpc.diagnostics.adequacy import assess, chi2_p_value
+
+    document, _ = world_documents(1, plan_poses(40, np.random.default_rng(3)), 1.0)
+    result = hostpc.fit(dataset_from_dict(document), cv_folds=0)
+    tested, shared = adequacy_chi2(result)
+    assert shared and result.chi2_dof > chi2_dof_upper(result.dof) >= tested
+    adequacy = assess(result, None)
+    assert adequacy.chi2_dof_with_calibration == pytest.approx(tested, rel=1e-12)
+    assert adequacy.chi2_ok
+    assert adequacy.p_value == pytest.approx(chi2_p_value(tested * result.dof, result.dof))
+    plain = copy.deepcopy(document)
+    plain.pop("rig_uncertainty")
+    without = assess(hostpc.fit(dataset_from_dict(plain), cv_folds=0), None)
+    assert without.chi2_dof_with_calibration is None and not without.chi2_ok

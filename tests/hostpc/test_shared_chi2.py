@@ -12,7 +12,11 @@ from scipy import stats
 
 import hostpc
 from hostpc.dataset import dataset_from_dict
-from hostpc.fitting.shared_chi2 import chi2_with_shared_error, covariance_factor
+from hostpc.fitting.shared_chi2 import (
+    chi2_with_shared_error,
+    covariance_factor,
+    weighted_chi2_tail,
+)
 from hostpc.fitting.shared_errors import result_shared_chi2, shared_covariance
 from hostpc.fitting.solver import evaluate
 from hostpc.planning.dual_loop_poses import plan_poses
@@ -147,3 +151,53 @@ def test_weighted_chi2_tail_against_draws() -> None:
             tail = weighted_chi2_tail(float(np.quantile(Q, 1.0 - alpha)), ones, w)
             assert tail == pytest.approx(alpha, rel=0.1), (ones, weights, alpha, tail)
     assert weighted_chi2_tail(-1.0, 3, np.zeros(0)) == 1.0
+
+
+def test_robust_loss_does_not_soften_the_push_guards_chi2() -> None:
+    """Under a robust loss the guard's chi2 with the calibration inside is the UNWEIGHTED
+    one, as the fit's own chi2 and its band: with the calibration claimed exact it equals
+    the plain chi2 for every loss (the review's case: cauchy tested 1.03 against a plain
+    1.75 and pushed)."""
+    document, _ = world_documents(1, plan_poses(40, np.random.default_rng(3)), 1.0)
+    block = document["rig_uncertainty"]
+    block["covariance"] = (np.asarray(block["covariance"]) * 1e-12).tolist()
+    linear = hostpc.fit(dataset_from_dict(document), cv_folds=0)
+    for loss in ("huber", "cauchy"):
+        result = hostpc.fit(dataset_from_dict(document), cv_folds=0, loss=loss)
+        full = result_shared_chi2(result)
+        assert full is not None
+        # the GLS statistic re-minimises over the model's directions: at the robust
+        # solution it is the linear fit's chi2 (the weighted one was 0.59x that)
+        assert full.chi2 == pytest.approx(linear.chi2, rel=2e-3), loss
+
+
+def test_covariance_factor_keeps_small_variances_in_other_units() -> None:
+    """A 1 px^2 and a 1e-13 m^2 variance: both directions kept (a raw eigenvalue cut at
+    1e-12 of the largest dropped the metres)."""
+    S = np.diag([1.0, 1e-13])
+    L = covariance_factor(S)
+    assert L.shape == (2, 2)
+    assert L @ L.T == pytest.approx(S, rel=1e-9, abs=1e-25)
+    correlated = np.array([[1.0, 1e-6], [1e-6, 1e-12]])  # correlation 1: one direction
+    assert covariance_factor(correlated).shape[1] == 1
+
+
+def test_weighted_chi2_tail_edges() -> None:
+    """At the mean: the saddlepoint's limit (1/2 - skewness / (6 sqrt(2 pi))), continuous
+    with its neighbours and near the draws (was the normal's 1/2);
+    a statistic beyond the floats' resolution: 0, not an exception; far below the mean: 1."""
+    weights = np.array([10.0])
+    mean = 100.0 + 10.0
+    skew = (8 * (100 + 1000)) / (2 * (100 + 100)) ** 1.5
+    assert weighted_chi2_tail(mean, 100, weights) == pytest.approx(
+        0.5 - skew / (6 * np.sqrt(2 * np.pi)), rel=1e-12)
+    draws = np.random.default_rng(0).chisquare(100, 200_000) + 10 * np.random.default_rng(
+        1).chisquare(1, 200_000)
+    assert weighted_chi2_tail(mean, 100, weights) == pytest.approx(
+        float(np.mean(draws > mean)), abs=0.025)
+    sd = np.sqrt(400.0)
+    for step in (-0.002, 0.002):
+        assert weighted_chi2_tail(mean + step * sd, 100, weights) == pytest.approx(
+            weighted_chi2_tail(mean, 100, weights), abs=2e-3)
+    assert weighted_chi2_tail(2e13, 100, weights) == 0.0
+    assert weighted_chi2_tail(1e-300, 100, weights) == 1.0
