@@ -125,21 +125,23 @@ def noise_free(images: int) -> None:
         return render._smooth_step(signed, np.maximum(np.hypot(grad_x, grad_y), 1e-12))
 
     for factor, ramp in ((1, False), (1, True), (4, False), (8, False)):
-        render._pixel_area_cover = ramp_cover if ramp else exact_cover  # type: ignore
-        fine = RenderCamera(width * factor, height * factor, SPEC.fx * factor,
-                            SPEC.fy * factor, factor * (cx + 0.5) - 0.5,
-                            factor * (cy + 0.5) - 0.5, CAMERA.distortion)
-        renderer = _FloatRenderer(fine, 0.0, 0.0, 120.0, np.random.default_rng(0))
-        errors = []
-        for T, c in zip(poses, truth, strict=True):
-            image = renderer.render_disk(T, pattern)
-            if factor > 1:
-                image = cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA)
-            image = cv2.GaussianBlur(image, (0, 0), SPEC.blur_sigma)
-            blob = detect_disk(image)
-            if not isinstance(blob, DetectionFailure):
-                errors.append(blob.centroid - c)
-        render._pixel_area_cover = exact_cover  # type: ignore
+        try:
+            render._pixel_area_cover = ramp_cover if ramp else exact_cover  # type: ignore
+            fine = RenderCamera(width * factor, height * factor, SPEC.fx * factor,
+                                SPEC.fy * factor, factor * (cx + 0.5) - 0.5,
+                                factor * (cy + 0.5) - 0.5, CAMERA.distortion)
+            renderer = _FloatRenderer(fine, 0.0, 0.0, 120.0, np.random.default_rng(0))
+            errors = []
+            for T, c in zip(poses, truth, strict=True):
+                image = renderer.render_disk(T, pattern)
+                if factor > 1:
+                    image = cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA)
+                image = cv2.GaussianBlur(image, (0, 0), SPEC.blur_sigma)
+                blob = detect_disk(image)
+                if not isinstance(blob, DetectionFailure):
+                    errors.append(blob.centroid - c)
+        finally:
+            render._pixel_area_cover = exact_cover  # type: ignore
         rms = np.sqrt(np.mean(np.square(errors), axis=0))
         label = ("exact pixel area (the simulator now)" if factor == 1 and not ramp
                  else "one-pixel ramp (the simulator before)" if ramp

@@ -31,6 +31,9 @@ their own fit has too few measurements for the default model (3 per sample again
 and that alone made its sigmas dishonest (MSE / sigma^2 about 2.1 for q3 and q5 over 40
 simulated worlds; refined 1.04 and 1.30, docs/vision.md section 3.2)."""
 _EPS = 1e-3
+MAX_PRELIMINARY_CHI2_DOF = 100.0
+"""A preliminary fit whose whitened residuals are more than 10x the stated noise (RMS) is
+not trusted for the normals (`preliminary_model`)."""
 
 
 def model_normals(problem: Problem, x: np.ndarray, target_normal: np.ndarray) -> np.ndarray:
@@ -47,6 +50,24 @@ def model_normals(problem: Problem, x: np.ndarray, target_normal: np.ndarray) ->
     return np.asarray(n / np.linalg.norm(n, axis=1, keepdims=True), float)
 
 
+def preliminary_model(dataset: Dataset) -> tuple[tuple[str, ...], np.ndarray] | None:
+    """(effects, x) of the dataset's default model fitted to its samples, or None (the
+    centres then stay as measured): fewer than MIN_SAMPLES samples, a fit that does not
+    converge, or one whose residuals are grossly beyond the stated noise (chi2/dof above
+    MAX_PRELIMINARY_CHI2_DOF: a gross outlier, e.g. 3 mm among 6 samples, bends every fitted
+    normal by ~1 deg, worse than the nominal's 0.5 deg; a model missing a small effect,
+    chi2/dof of a few, still gives normals far better than the nominal ones)."""
+    from hostpc.fitting import solve
+
+    if len(dataset.samples.q) < MIN_SAMPLES:
+        return None
+    problem = build_problem(dataset)
+    result = solve(problem, cv_folds=0)
+    if not result.converged or not result.chi2_dof <= MAX_PRELIMINARY_CHI2_DOF:
+        return None
+    return problem.effect_names, np.asarray(result.x, float)
+
+
 def refine_dataset(dataset: Dataset, rig: Any, target_radius: float,
                    target_normal: np.ndarray, fitted: tuple[tuple[str, ...], np.ndarray] | None
                    = None) -> tuple[Dataset, tuple[tuple[str, ...], np.ndarray] | None]:
@@ -55,7 +76,6 @@ def refine_dataset(dataset: Dataset, rig: Any, target_radius: float,
     fitted: a model from an earlier refinement (effects, x) to use instead of fitting this
     dataset (which needs MIN_SAMPLES samples); returned unchanged when nothing can be done
     (no uv, too few samples and no model, a fit that does not converge)."""
-    from hostpc.fitting import solve
     from hostpc.vision.centre_refinement import recorrect_centres
 
     samples = dataset.samples
@@ -63,13 +83,9 @@ def refine_dataset(dataset: Dataset, rig: Any, target_radius: float,
         return dataset, fitted
     target_normal = np.asarray(target_normal, float) / np.linalg.norm(target_normal)
     if fitted is None:
-        if len(samples.q) < MIN_SAMPLES:
+        fitted = preliminary_model(dataset)
+        if fitted is None:
             return dataset, None
-        problem = build_problem(dataset)
-        result = solve(problem, cv_folds=0)
-        if not result.converged:
-            return dataset, None
-        fitted = (problem.effect_names, np.asarray(result.x, float))
     effects, x = fitted
     problem = build_problem(dataset, list(effects))
     if problem.layout.size != x.size:

@@ -145,3 +145,24 @@ def test_a_target_sigma_plan_is_never_too_small_for_the_centre_refinement() -> N
     from hostpc.methods.stereo_refinement import MIN_SAMPLES
 
     assert MIN_TARGET_POSES == MIN_SAMPLES < 20
+
+
+def test_a_gross_outlier_keeps_the_nominal_normals_of_a_short_set() -> None:
+    """Six samples, one 3 mm off: the preliminary fit would bend every plate normal by
+    ~1 deg (worse than the nominal's 0.5 deg; review of the >= 6-sample refinement), so
+    no model is returned and the centres stay as measured; the clean set is refined."""
+    import dataclasses
+
+    from hostpc.methods.stereo_refinement import MIN_SAMPLES, preliminary_model
+    from hostpc.synthesize import synthesize_stereo_target
+
+    truth = {"joint_offsets.q2": 0.004, "joint_offsets.q3": -0.003}
+    clean = synthesize_stereo_target(truth, n_samples=MIN_SAMPLES, seed=3,
+                                     known=("target",)).dataset
+    assert preliminary_model(clean) is not None
+    p = np.array(clean.samples.p, copy=True)
+    p[0, 0] += 3e-3
+    bad = dataclasses.replace(clean, samples=dataclasses.replace(clean.samples, p=p))
+    assert preliminary_model(bad) is None
+    too_few = dataclasses.replace(clean, samples=clean.samples.subset(np.arange(MIN_SAMPLES - 1)))
+    assert preliminary_model(too_few) is None
