@@ -67,6 +67,27 @@ average, MSE / sigma^2 0.70-1.26; 0.15 gives 10-11 poses in 17.8 s (at most 19.8
 (q1 0.51). More poses in the same time: shorter moves between them."""
 
 
+def plan_warnings(method: str, target_sigma_deg: float | None, sigmas: np.ndarray,
+                  n_fit: int, short: bool) -> list[str]:
+    """What a plan does not deliver, one line each: a target sigma the planned poses do not
+    reach (sigmas: (n,) predicted joint-offset sigmas, rad, NaN where not identifiable), and
+    a short stereo_target plan below the centre refinement's MIN_TARGET_POSES (its centres
+    then keep the nominal normal's bias, docs/vision.md 3.2)."""
+    lines: list[str] = []
+    finite = np.isfinite(sigmas)
+    if target_sigma_deg is not None and np.any(finite):
+        worst = int(np.argmax(np.where(finite, sigmas, -np.inf)))
+        if math.degrees(float(sigmas[worst])) > target_sigma_deg:
+            lines.append(f"plan: the {n_fit} poses reach a predicted sigma of "
+                         f"{math.degrees(float(sigmas[worst])):.2g} deg (joint {worst + 1}), "
+                         f"not the --target-sigma {target_sigma_deg:g} deg: give more --poses")
+    if short and method == "stereo_target" and n_fit < MIN_TARGET_POSES:
+        lines.append(f"plan: {n_fit} fit poses, fewer than the {MIN_TARGET_POSES} the centre "
+                     "refinement needs: the disk centres keep the nominal normal's bias and "
+                     "the sigmas may be too small")
+    return lines
+
+
 def plan_run(method: Method, state: RobotState, settings: RunSettings, progress: Progress
              ) -> Plan:
     """Candidate pool, informative selection, order, verification poses, check."""
@@ -143,6 +164,9 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     if not short:
         q_verify = pool[verify_indices]
     sigmas = joint_offset_sigmas(plan_design, state.q.size)
+    for line in plan_warnings(method.name, settings.target_sigma_deg, sigmas,
+                              len(fit_indices), short):
+        progress.message(line)
     info = {
         "criterion": settings.criterion,
         "target_sigma_deg": settings.target_sigma_deg,

@@ -166,3 +166,17 @@ def test_a_gross_outlier_keeps_the_nominal_normals_of_a_short_set() -> None:
     assert preliminary_model(bad) is None
     too_few = dataclasses.replace(clean, samples=clean.samples.subset(np.arange(MIN_SAMPLES - 1)))
     assert preliminary_model(too_few) is None
+
+
+def test_a_plan_that_misses_its_target_sigma_says_so() -> None:
+    """`--poses 5 --target-sigma 0.002`: 5 poses reach ~0.009 deg and are too few for the
+    centre refinement; both said in one line each (the review: nothing warned)."""
+    from hostpc.calibrate.run_plan import plan_warnings
+
+    lines = plan_warnings("stereo_target", 0.002, np.radians([0.009, 0.001, np.nan]), 5,
+                          True)
+    assert len(lines) == 2
+    assert "0.009 deg (joint 1), not the --target-sigma 0.002 deg" in lines[0]
+    assert "fewer than the 6 the centre refinement needs" in lines[1]
+    assert plan_warnings("stereo_target", 0.002, np.radians([0.001, np.nan]), 10, True) == []
+    assert plan_warnings("world_point", None, np.radians([0.5]), 3, False) == []
