@@ -48,9 +48,9 @@ def calibrate(args: list[str], out: Path) -> dict[str, Any]:
             "push": document["push"]["status"], "wall_s": wall}
 
 
-def false_fail(method: str, seeds: int, work: Path) -> dict[str, Any]:
+def false_fail(method: str, seeds: int, work: Path, first: int = 0) -> dict[str, Any]:
     runs = [calibrate(["--robot", "sim", "--method", method, "--seed", str(seed)],
-                      work / f"{method}-{seed}") for seed in range(seeds)]
+                      work / f"{method}-{seed}") for seed in range(first, first + seeds)]
     fails = sum(r.get("verdict") == "FAIL" for r in runs)
     errors = [r for r in runs if r.get("verdict") is None]
     return {"method": method, "runs": seeds, "fails": fails, "no_verdict": len(errors),
@@ -58,10 +58,10 @@ def false_fail(method: str, seeds: int, work: Path) -> dict[str, Any]:
             "wall_s_per_run": sum(r["wall_s"] for r in runs) / max(seeds, 1)}
 
 
-def power(seeds: int, work: Path) -> dict[str, Any]:
+def power(seeds: int, work: Path, first: int = 0) -> dict[str, Any]:
     runs = [calibrate(["--robot", "sim", "--scenario", str(HIDDEN), "--known", "target",
                        "--force", "--seed", str(seed)], work / f"hidden-{seed}")
-            for seed in range(seeds)]
+            for seed in range(first, first + seeds)]
     fails = sum(r.get("verdict") == "FAIL" for r in runs)
     return {"scenario": HIDDEN.name, "runs": seeds, "fails": fails,
             "pushed": sum(r.get("push") == "pushed" for r in runs),
@@ -70,23 +70,25 @@ def power(seeds: int, work: Path) -> dict[str, Any]:
             "wall_s_per_run": sum(r["wall_s"] for r in runs) / max(seeds, 1)}
 
 
-def run(seeds: int = 100, methods: tuple[str, ...] = METHODS) -> dict[str, Any]:
+def run(seeds: int = 100, methods: tuple[str, ...] = METHODS, first: int = 0
+        ) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="bench-verdicts-") as tmp:
         work = Path(tmp)
         figures: dict[str, Any] = {"seeds": seeds}
         for method in methods:
-            figures[f"false_fail_{method}"] = false_fail(method, seeds, work)
-        figures["power_hidden_compliance"] = power(seeds, work)
+            figures[f"false_fail_{method}"] = false_fail(method, seeds, work, first)
+        figures["power_hidden_compliance"] = power(seeds, work, first)
     return figures
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=100, help="runs per case (default 100)")
+    parser.add_argument("--first-seed", type=int, default=0, help="seed of the first run")
     parser.add_argument("--methods", default=",".join(METHODS),
                         help="comma-separated methods of the false-FAIL study")
     args = parser.parse_args()
-    figures = run(args.seeds, tuple(m for m in args.methods.split(",") if m))
+    figures = run(args.seeds, tuple(m for m in args.methods.split(",") if m), args.first_seed)
     for key, value in figures.items():
         print(f"{key}: {value}")
 
