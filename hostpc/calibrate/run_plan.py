@@ -59,12 +59,13 @@ sigma")."""
 
 TRAVEL_SLACK = 0.15
 """A short plan's selection is travel-aware (`hostpc.planning.design.Travel`): each step
-takes, of the poses whose information gain is within 15 % of the best, the one nearest the
-poses already chosen. Chosen on simulated worlds 1-40 (`bench/bench_sigma_mc.py`; robot
-time from their result.json): 0 (plain D-optimal) gave 7 poses, 18.6 s of robot time on
-average, MSE / sigma^2 0.70-1.26; 0.15 gives 10-11 poses in 17.8 s (at most 19.8 s),
-0.96-1.18; 0.3 gives 15 poses in 18.1 s (2 of 40 runs above 20 s) and sigmas too large
-(q1 0.51). More poses in the same time: shorter moves between them."""
+takes, of the poses whose information gain (the ridged log det, `design.Travel`'s caveat)
+is within 15 % of the best, the one nearest the poses already chosen. Chosen on simulated
+worlds 1-40 (`bench/bench_sigma_mc.py`; robot time from their result.json): 0 (plain
+D-optimal) gave 7 poses, 18.6 s of robot time on average, MSE / sigma^2 0.70-1.26; 0.15
+gives 10-11 poses in 17.8 s (at most 19.8 s), 0.96-1.18; 0.3 gives 15 poses in 18.1 s (2 of
+40 runs above 20 s) and sigmas too large (q1 0.51). More poses in the same time: shorter
+moves between them."""
 
 
 def plan_warnings(method: str, target_sigma_deg: float | None, sigmas: np.ndarray,

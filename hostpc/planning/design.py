@@ -145,7 +145,13 @@ class Travel:
     (move time, `hostpc.planning.tour.move_times`) to the poses already chosen or to the
     start. q: (N, n) the pool's joint angles (rad); q_start: (n,); periodic: (n,) bool,
     joints that may turn the short way round. Still nested (a prefix of the order is the
-    selection of that size), so the fewest poses that reach a target sigma stay a prefix."""
+    selection of that size), so the fewest poses that reach a target sigma stay a prefix.
+    Caveat (review): the gain is the log det of the RIDGED information matrix, which for the
+    first few picks is dominated by log(1 / ridge): there nearly every candidate is within
+    the slack and the first picks are simply the poses nearest the start; the selection
+    therefore depends on `ridge` (plain D-optimal does not). TRAVEL_SLACK was chosen, and its
+    sigmas checked on held-out worlds, with DEFAULT_RIDGE as it is; a ratio of determinants
+    (gain >= best + log(1 - slack)) would be the ridge-free rule, not yet re-tuned."""
 
     q: np.ndarray
     q_start: np.ndarray
