@@ -14,11 +14,8 @@ off), which is what a kind without column paths costs. sphere_probe's example ha
 from __future__ import annotations
 
 import json
-import statistics
 import sys
 import tempfile
-import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -26,17 +23,10 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from bench.harness import median_s  # noqa: E402
+
 KINDS = ("stereo_target", "sphere_probe", "dual_loop", "world_point", "world_pose")
 SIZES = (1_000, 10_000, 100_000)
-
-
-def _median(func: Callable[[], Any], repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        func()
-        times.append(time.perf_counter() - start)
-    return float(statistics.median(times))
 
 
 def _document(method: str, n: int) -> dict[str, Any]:
@@ -65,17 +55,17 @@ def run(sizes: tuple[int, ...] = SIZES, kinds: tuple[str, ...] = KINDS,
                 dataset = hostpc.load_dataset(path)
                 out = Path(tmp) / "out.json"
                 row: dict[str, Any] = {"kind": method, "n": n}
-                row["json_load_s"] = _median(lambda p=path: json.loads(p.read_text()), repeats)
-                row["load_s"] = _median(lambda p=path: hostpc.load_dataset(p), repeats)
-                row["save_s"] = _median(lambda d=dataset, o=out: save_dataset(d, o), repeats)
+                row["json_load_s"] = median_s(lambda p=path: json.loads(p.read_text()), repeats)
+                row["load_s"] = median_s(lambda p=path: hostpc.load_dataset(p), repeats)
+                row["save_s"] = median_s(lambda d=dataset, o=out: save_dataset(d, o), repeats)
                 if n <= 10_000:
                     columnar, writes = reading._columnar_dataset, writing._writes_columns
                     try:
                         reading._columnar_dataset = lambda *args: None  # type: ignore[assignment]
                         writing._writes_columns = lambda cls: False  # type: ignore[assignment]
-                        row["load_by_sample_s"] = _median(
+                        row["load_by_sample_s"] = median_s(
                             lambda p=path: hostpc.load_dataset(p), repeats)
-                        row["save_by_sample_s"] = _median(
+                        row["save_by_sample_s"] = median_s(
                             lambda d=dataset, o=out: save_dataset(d, o), repeats)
                     finally:
                         reading._columnar_dataset = columnar  # type: ignore[assignment]

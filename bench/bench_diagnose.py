@@ -31,6 +31,8 @@ EXAMPLE = ROOT / "examples" / "ur5e_stereo_hidden_compliance.json"
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from bench.harness import median_s  # noqa: E402
+
 
 def _times(func, repeats: int) -> list[float]:  # type: ignore[no-untyped-def]
     times = []
@@ -41,10 +43,6 @@ def _times(func, repeats: int) -> list[float]:  # type: ignore[no-untyped-def]
     return times
 
 
-def _median(func, repeats: int) -> float:  # type: ignore[no-untyped-def]
-    return float(statistics.median(_times(func, repeats)))
-
-
 def run(repeats: int = 3, dataset: Path = EXAMPLE, cli_repeats: int = 7) -> dict[str, float]:
     """The figures, in seconds (and the problem size)."""
     import hostpc
@@ -52,8 +50,8 @@ def run(repeats: int = 3, dataset: Path = EXAMPLE, cli_repeats: int = 7) -> dict
 
     data = hostpc.load_dataset(dataset)
     hostpc.diagnose(data)  # warm-up: imports and caches
-    diagnose_s = _median(lambda: hostpc.diagnose(data), repeats)
-    ladder_s = _median(lambda: hostpc.diagnose(data, ladder=True), repeats)
+    diagnose_s = median_s(lambda: hostpc.diagnose(data), repeats)
+    ladder_s = median_s(lambda: hostpc.diagnose(data, ladder=True), repeats)
     diagnosis = hostpc.diagnose(data, ladder=True)
     command = [sys.executable, "-m", "hostpc.cli.main", "diagnose", str(dataset), "--ladder",
                "--json"]

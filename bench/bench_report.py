@@ -20,10 +20,8 @@ the report's inputs need).
 from __future__ import annotations
 
 import math
-import statistics
 import subprocess
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -31,15 +29,10 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "ur5e_stereo_hidden_compliance.json"
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
 
-
-def _median(func, repeats: int) -> float:  # type: ignore[no-untyped-def]
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        func()
-        times.append(time.perf_counter() - start)
-    return float(statistics.median(times))
+from bench.harness import median_s  # noqa: E402
 
 
 def result_document(fit: Any) -> dict[str, Any]:
@@ -66,7 +59,7 @@ def _case(data: Any, repeats: int, **options: Any) -> dict[str, float]:
     import hostpc
     from hostpc.report import render_calibration_html, render_html
 
-    diagnose_s = _median(lambda: hostpc.diagnose(data, **options), 1)
+    diagnose_s = median_s(lambda: hostpc.diagnose(data, **options), 1)
     diagnosis = hostpc.diagnose(data, **options)
     truth = {"zero_errors": [0.0] * 6, "effects": {"joint_compliance": [0.0] * 6}}
     document = result_document(diagnosis.fit)
@@ -75,8 +68,8 @@ def _case(data: Any, repeats: int, **options: Any) -> dict[str, float]:
     return {
         "n_samples": float(data.n_samples),
         "diagnose_s": diagnose_s,
-        "render_diagnosis_s": _median(lambda: render_html(diagnosis), repeats),
-        "render_calibration_s": _median(
+        "render_diagnosis_s": median_s(lambda: render_html(diagnosis), repeats),
+        "render_calibration_s": median_s(
             lambda: render_calibration_html(document, diagnosis, truth), repeats),
         "html_kB": len(html.encode("utf-8")) / 1e3,
     }
@@ -91,9 +84,9 @@ def run(repeats: int = 5) -> dict[str, dict[str, float]]:
     large = synthesize_stereo_target(random_truth(np.random.default_rng(7)), seed=7,
                                      n_samples=5000).dataset
     command = [sys.executable, "-c", "import hostpc.report"]
-    import_s = _median(lambda: subprocess.run(command, check=True, cwd=ROOT), 3)
+    import_s = median_s(lambda: subprocess.run(command, check=True, cwd=ROOT), 3)
     base = [sys.executable, "-c", "import hostpc.diagnostics"]
-    import_base_s = _median(lambda: subprocess.run(base, check=True, cwd=ROOT), 3)
+    import_base_s = median_s(lambda: subprocess.run(base, check=True, cwd=ROOT), 3)
     return {
         "120 samples, ladder": _case(small, repeats, ladder=True),
         "5000 samples": _case(large, 3, cv_folds=0, rank_cv_folds=0, interactions=False),
@@ -111,5 +104,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.path.insert(0, str(ROOT))
     sys.exit(main())

@@ -23,9 +23,9 @@ import numpy as np
 FIT_CASES = (("offsets", None), ("offsets+tool+target", None), ("+geometry", "+geometry"))
 
 
-def median_ms(func: Callable[[], object], repeats: int, warm_up: int = 1) -> float:
-    """Median wall time of ``func()`` in ms over ``repeats`` calls, after ``warm_up`` calls
-    that are not timed (imports, caches, the allocator)."""
+def median_s(func: Callable[[], object], repeats: int, warm_up: int = 0) -> float:
+    """Median wall time of ``func()`` in seconds over ``repeats`` calls, after ``warm_up``
+    calls that are not timed."""
     for _ in range(warm_up):
         func()
     times = []
@@ -33,7 +33,13 @@ def median_ms(func: Callable[[], object], repeats: int, warm_up: int = 1) -> flo
         start = time.perf_counter()
         func()
         times.append(time.perf_counter() - start)
-    return 1e3 * float(np.median(times))
+    return float(np.median(times))
+
+
+def median_ms(func: Callable[[], object], repeats: int, warm_up: int = 1) -> float:
+    """Median wall time of ``func()`` in ms over ``repeats`` calls, after ``warm_up`` calls
+    that are not timed (imports, caches, the allocator)."""
+    return 1e3 * median_s(func, repeats, warm_up)
 
 
 def timed(func: Callable[[], Any]) -> tuple[float, Any]:
