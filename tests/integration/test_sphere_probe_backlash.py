@@ -12,12 +12,12 @@ from typing import Any
 
 import numpy as np
 
-from hostpc.calibrate.runner import RobotInfo, Runner, RunOutcome
+from hostpc.calibrate.runner import RunOutcome
 from hostpc.fitting import fit
 from hostpc.methods.base import RunSettings
 from hostpc.planning.approach import travel_signs
-from hostpc.robots.zerocal import ZerocalAdapter
-from tests.integration.conftest import TOKEN, StartStub
+from tests.integration.conftest import StartStub
+from tests.integration.runner_runs import run_on
 
 BACKLASH = [1.0e-4, 1.5e-4, 1.5e-4, 2.0e-4, 2.0e-4, 2.0e-4]  # rad, hidden in the stub
 WRIST_DOWN = [0.0, -1.9, 1.9, -1.6, -1.5708, 0.0]  # rad, the robot's pose at the start
@@ -28,17 +28,10 @@ async def calibrate(start_stub: StartStub, run_dir: Path, effects: str | None
     server = await start_stub({"truth": {"probe_trigger_latency_s": 0.0,
                                          "backlash": BACKLASH},
                                "motion": {"initial_q": WRIST_DOWN}})
-    host, port = server.address
     truth = np.asarray(server.sim.truth()["zero_errors"], float)
     settings = RunSettings(method="sphere_probe", n_poses=100, n_verify=10, seed=3,
                            cv_folds=0, effects=effects)
-    robot = await ZerocalAdapter.connect(host, port, token=TOKEN)
-    try:
-        outcome = await Runner(robot, run_dir, robot_info=RobotInfo(f"{host}:{port}"),
-                               settings=settings, report=False).run()
-    finally:
-        await robot.close()
-    return outcome, truth
+    return await run_on(server, run_dir, settings), truth
 
 
 def positive_share(run_dir: Path) -> np.ndarray:

@@ -9,27 +9,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hostpc.calibrate.runner import RobotInfo, Runner
 from hostpc.methods.base import RunSettings
-from hostpc.robots.zerocal import ZerocalAdapter
-from tests.integration.conftest import TOKEN, StartStub
+from tests.integration.conftest import StartStub
+from tests.integration.runner_runs import run_on
 
 
 @pytest.mark.slow
 async def test_runner_calibrates_pushes_verifies_and_resumes(start_stub: StartStub,
                                                              tmp_path: Path) -> None:
     server = await start_stub({"truth": {"probe_trigger_latency_s": 0.0}})
-    host, port = server.address
     truth_before = np.asarray(server.sim.truth()["zero_errors"], float)
     settings = RunSettings(method="sphere_probe", n_poses=100, n_verify=10, seed=3,
                            cv_folds=0)
     run_dir = tmp_path / "run"
-    robot = await ZerocalAdapter.connect(host, port, token=TOKEN)
-    try:
-        outcome = await Runner(robot, run_dir, robot_info=RobotInfo(f"{host}:{port}"),
-                               settings=settings, report=False).run()
-    finally:
-        await robot.close()
+    outcome = await run_on(server, run_dir, settings)
     assert outcome.fit is not None and outcome.dataset is not None
     assert outcome.dataset.method == "sphere_probe" and outcome.dataset.n_samples == 100
     assert (run_dir / "probe_plan.json").is_file()
@@ -48,12 +41,7 @@ async def test_runner_calibrates_pushes_verifies_and_resumes(start_stub: StartSt
 
     # resume of the finished run: the stored result, nothing measured or written again
     journal = (run_dir / "journal.jsonl").read_text().splitlines()
-    robot = await ZerocalAdapter.connect(host, port, token=TOKEN)
-    try:
-        again = await Runner(robot, run_dir, robot_info=RobotInfo(f"{host}:{port}"),
-                             report=False).run()
-    finally:
-        await robot.close()
+    again = await run_on(server, run_dir)
     assert again.document == json.loads((run_dir / "result.json").read_text())
     assert again.exit_code == 0 and again.document["verify"]["verdict"] == "PASS"
     assert (run_dir / "journal.jsonl").read_text().splitlines() == journal
