@@ -40,7 +40,6 @@ from hostpc.calibrate.journal import Journal, write_json_atomic
 from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult
-from hostpc.fitting.shared_errors import result_shared_chi2
 from hostpc.planning.design import joint_offset_names
 from hostpc.robots.base import RobotAdapter
 
@@ -166,17 +165,14 @@ def adequacy_chi2(result: FitResult) -> tuple[float, bool]:
     """(chi2/dof the guard tests, True if it includes the dataset's shared error).
 
     With a `rig_uncertainty` block in the fit's dataset: the chi2 with the shared error's
-    covariance inside (`hostpc.fitting.shared_chi2`, same dof as the fit's; a saved fit,
-    `offline_push.SavedFit`, carries it as `chi2_dof_with_calibration`); else the fit's
-    plain chi2/dof."""
+    covariance inside (`FitResult.chi2_dof_with_calibration`; a saved fit,
+    `offline_push.SavedFit`, carries it under the same name); else the fit's plain
+    chi2/dof."""
     if not result.converged:
         return result.chi2_dof, False
-    saved = getattr(result, "chi2_dof_with_calibration", None)
-    if saved is not None:
-        return float(saved), True
-    full = result_shared_chi2(result)
-    if full is not None and full.dof == result.dof:
-        return full.chi2_dof, True
+    full = getattr(result, "chi2_dof_with_calibration", None)
+    if full is not None:
+        return float(full), True
     return result.chi2_dof, False
 
 

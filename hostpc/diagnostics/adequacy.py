@@ -20,7 +20,6 @@ from hostpc.diagnostics.distributions import chi2_isf, chi2_ppf, chi2_sf
 from hostpc.diagnostics.outliers import Outlier
 from hostpc.fitting import FitResult
 from hostpc.fitting.fitting import held_out_by_fold
-from hostpc.fitting.shared_errors import result_shared_chi2
 from hostpc.model.problem import Problem
 
 ADEQUACY_P_MIN = 1e-3
@@ -178,8 +177,7 @@ def assess(result: FitResult, held_out: HeldOut | None, alpha: float = ADEQUACY_
     found significant (``missing``: sentences naming what was). Reasons in that order."""
     dof = result.dof
     chi2_dof = result.chi2_dof
-    full = result_shared_chi2(result) if result.converged else None
-    with_calibration = full.chi2_dof if full is not None and full.dof == dof else None
+    with_calibration = result.chi2_dof_with_calibration
     tested = result.chi2 if with_calibration is None else with_calibration * dof
     p_value = chi2_p_value(tested, dof)
     chi2_ok = chi2_adequate(tested, dof, alpha)

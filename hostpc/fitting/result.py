@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -147,14 +148,23 @@ class FitResult:
         }
 
     def _shared_chi2_entry(self) -> dict[str, Any]:
-        """{"chi2_dof_with_calibration": ...} when the dataset carries a rig / camera
-        calibration covariance (the chi2 the push guard tests, hostpc.fitting.shared_chi2;
-        an offline `hostpc push` reads it from this document), else nothing."""
+        """{"chi2_dof_with_calibration": ...} when the fit has it (an offline `hostpc push`
+        reads it from this document), else nothing."""
+        full = self.chi2_dof_with_calibration
+        return {} if full is None else {"chi2_dof_with_calibration": full}
+
+    @cached_property
+    def chi2_dof_with_calibration(self) -> float | None:
+        """The chi2/dof with the dataset's rig / camera calibration covariance inside
+        (`hostpc.fitting.shared_chi2`): the one chi2 the push guard, the runner's growing of
+        a short plan and `hostpc diagnose` judge. None when the fit did not converge, its
+        dataset carries no such covariance, or that chi2 is not finite or has another dof
+        (then the plain chi2 is judged). Computed once per result."""
         from hostpc.fitting.shared_errors import result_shared_chi2
 
         if not self.converged or not hasattr(self.problem, "dataset"):
-            return {}
+            return None
         full = result_shared_chi2(self)
         if full is None or full.dof != self.dof or not math.isfinite(full.chi2_dof):
-            return {}
-        return {"chi2_dof_with_calibration": full.chi2_dof}
+            return None
+        return full.chi2_dof
