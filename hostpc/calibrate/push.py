@@ -34,10 +34,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import special
 
 from hostpc.calibrate.journal import Journal, write_json_atomic
 from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN
+from hostpc.diagnostics.adequacy import chi2_dof_upper as chi2_dof_upper  # the guard's band
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult
 from hostpc.planning.design import joint_offset_names
@@ -50,15 +50,6 @@ ADEQUACY_ALPHA: float = ADEQUACY_P_MIN
 """A fit whose chi2 exceeds the chi-square upper quantile at this level (chi-square p-value
 below ADEQUACY_P_MIN) refuses the push."""
 OFFSET_MATCH_TOLERANCE = 1e-9  # rad: controller offsets "equal" to a recorded set
-
-
-def chi2_dof_upper(dof: int, alpha: float = ADEQUACY_ALPHA) -> float:
-    """Upper edge of the chi2/dof band of a fit with `dof` degrees of freedom: the
-    chi-square upper `alpha` quantile over dof (chi2/dof above it: the model does not
-    explain the measurements at level alpha). NaN for dof < 1."""
-    if dof < 1:
-        return math.nan
-    return float(2.0 * special.gammainccinv(dof / 2.0, alpha)) / dof
 
 
 def joint_display_name(index: int, label: str) -> str:
