@@ -200,14 +200,15 @@ class SharedChi2:
         return self.chi2 / self.dof if self.dof > 0 else float("nan")
 
 
-def shared_error_chi2(problem: Problem, x: np.ndarray, free: np.ndarray,
-                      weights: np.ndarray | None = None) -> SharedChi2 | None:
+def shared_error_chi2(problem: Problem, x: np.ndarray, free: np.ndarray
+                      ) -> SharedChi2 | None:
     """The chi2 with the shared error inside of a fit at x (P,) with free parameters
-    free (P,) bool and robust sample weights (N,) (None: all 1), or None when the
-    problem's dataset declares no shared error (no `rig_uncertainty` block, or no uv).
+    free (P,) bool, or None when the problem's dataset declares no shared error (no
+    `rig_uncertainty` block, or no uv).
 
-    Rows: the samples' whitened residuals (the weights' square roots applied) and the prior
-    rows of `--prior`; their Jacobian at x by the free parameters."""
+    Rows: the samples' whitened residuals, unweighted (as the fit's own chi2 and its band:
+    under a robust loss the weights would shrink exactly the residuals the guard must see),
+    and the prior rows of `--prior`; their Jacobian at x by the free parameters."""
     from hostpc.fitting.priors import problem_constraints
     from hostpc.fitting.solver import evaluate
 
@@ -220,13 +221,10 @@ def shared_error_chi2(problem: Problem, x: np.ndarray, free: np.ndarray,
     evaluation = evaluate(problem, x)
     assert evaluation.jacobian is not None
     n, m = evaluation.whitened.shape
-    row_weight = (np.ones(n * m) if weights is None
-                  else np.repeat(np.sqrt(np.asarray(weights, dtype=float)), m))
-    r = evaluation.whitened.ravel() * row_weight
-    J = evaluation.jacobian[:, free] * row_weight[:, None]
-    L = covariance_factor(S)
+    r = evaluation.whitened.ravel()
+    J = evaluation.jacobian[:, free]
     Dw = np.einsum("nij,njk->nik", problem.sqrt_information, D).reshape(n * m, -1)
-    U = (Dw @ L) * row_weight[:, None]
+    U = Dw @ covariance_factor(S)
     constraints = problem_constraints(problem)
     if constraints is not None and constraints.index.size:
         r = np.concatenate([r, constraints.residuals(x)])
@@ -247,6 +245,4 @@ def result_shared_chi2(result: object) -> SharedChi2 | None:
     x, fixed = (getattr(result, k, None) for k in ("x", "fixed"))
     if x is None or fixed is None:
         return None
-    # unweighted, as the fit's own chi2 and the band it is held against: under a robust
-    # loss the weights would shrink exactly the residuals the guard must see
     return shared_error_chi2(problem, np.asarray(x), ~np.asarray(fixed, dtype=bool))
