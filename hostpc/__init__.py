@@ -5,6 +5,7 @@
     result = hostpc.fit(dataset, effects=["joint_offsets", "tool", "target"])
     print(result.parameters["joint_offsets.q2"])
     diagnosis = hostpc.diagnose(dataset, ladder=True)
+    second_day = hostpc.predict(result, hostpc.load_dataset("day2/dataset.json"))
 
 The names below are imported on first use, so `hostpc` commands start fast and can set up
 the numeric libraries before numpy loads. `hostpc.fit` and `hostpc.diagnose` use one BLAS
@@ -23,6 +24,7 @@ _LAZY = {
     "save_dataset": "hostpc.dataset",
     "fit": "hostpc.fitting",
     "FitResult": "hostpc.fitting",
+    "predict": "hostpc.fitting.prediction",
     "diagnose": "hostpc.diagnostics",
     "Diagnosis": "hostpc.diagnostics",
 }

@@ -38,6 +38,7 @@ COMMAND_MODULES = (
     "robots",  # hostpc.kinematics: built-in robots and URDF chains
     "import_csv",  # hostpc.importing: metrology CSV -> dataset
     "push",  # push the offsets of an offline fit
+    "predict",  # hostpc.fitting: a saved fit against a dataset it never saw
 )
 
 

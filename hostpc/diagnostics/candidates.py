@@ -351,6 +351,7 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
     start = evaluate(problem, x0)  # shared by the fit, the subset choice and the subset fit
     extended = solve(problem, x0=x0, loss=loss, cv_folds=0, max_iterations=50, initial=start)
     extended, cv_whitened = with_held_out(extended, cv_folds)
+    held_rms = extended.cv_rms
     delta_chi2, p_full, added = f_test(base, extended)
     testable = base.dof > 0 and extended.dof > 0
     chosen, penalty = select_subset(base, extended, x0, start) if testable else ([], 0.0)
@@ -368,7 +369,11 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
         outcome = levenberg_marquardt(problem, x0, free, loss=loss, max_iterations=50,
                                       initial=start)
         chi2_subset = float(np.sum(outcome.evaluation.whitened**2))
-        cv_whitened = _better(cv_whitened, subset_held_out(problem, outcome, free, cv_folds))
+        subset_held = subset_held_out(problem, outcome, free, cv_folds)
+        if subset_held is not None and (cv_whitened is None or subset_held[1] < cv_whitened):
+            # the subset model predicts better held out: its figures, both of them, are
+            # the candidate's (the star and the mm column come from one model)
+            held_rms, cv_whitened = subset_held
         delta_bic = (n_rows * math.log(max(chi2_subset, 1e-300) / max(base.chi2, 1e-300))
                      + penalty - 0.0)
         drop = base.chi2 - chi2_subset
@@ -385,7 +390,7 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
         effect=effect.name, delta_bic=delta_bic if testable else None,
         delta_bic_full=bic(extended) - bic(base) if testable else None,
         selected=selected, delta_chi2=delta_chi2, added_parameters=added, rms=extended.rms,
-        max=extended.max, cv_rms=extended.cv_rms, cv_folds=extended.cv_folds,
+        max=extended.max, cv_rms=held_rms, cv_folds=extended.cv_folds,
         chi2_dof=extended.chi2_dof, p_value=p_value if testable else None,
         significant=p_significant and held_out_better,
         strongest=_strongest(extended, effect.name, selected), fit=extended,
@@ -397,17 +402,15 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
 
 
 def subset_held_out(problem: Problem, outcome: SolverOutcome, free: np.ndarray,
-                    folds: int) -> float | None:
-    """The whitened held-out RMS of the model with only the selected subset free (None
-    without held-out residuals)."""
+                    folds: int) -> tuple[float, float] | None:
+    """The held-out RMS (m, over the length components) and whitened held-out RMS of the
+    model with only the selected subset free (None without held-out residuals)."""
     held = held_out_by_fold(problem, outcome.x, free, folds, evaluation=outcome.evaluation)
-    return None if held is None else float(np.sqrt(np.mean(held[1] ** 2)))
-
-
-def _better(first: float | None, second: float | None) -> float | None:
-    if first is None or second is None:
-        return first if second is None else second
-    return min(first, second)
+    if held is None:
+        return None
+    raw, whitened = held
+    norms = np.linalg.norm(raw[:, problem.length_columns], axis=1)
+    return float(np.sqrt(np.mean(norms**2))), float(np.sqrt(np.mean(whitened**2)))
 
 
 def ranking_key(candidate: Candidate) -> tuple[bool, bool, float, float]:

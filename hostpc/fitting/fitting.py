@@ -13,6 +13,7 @@ import numpy as np
 
 from hostpc.dataset import Dataset
 from hostpc.errors import InputError
+from hostpc.fitting.folds import fold_indices
 from hostpc.fitting.identifiability import Identifiability
 from hostpc.fitting.priors import (
     analyse_with_constraints,
@@ -31,13 +32,6 @@ from hostpc.fitting.solver import (
 from hostpc.model.problem import Problem, build_problem
 
 DEFAULT_CV_FOLDS = 5
-
-
-def fold_indices(n_samples: int, folds: int) -> list[np.ndarray]:
-    """Interleaved fold assignment (sample i goes to fold i mod k): deterministic, and
-    balanced over a run recorded in time order."""
-    assignment = np.arange(n_samples) % folds
-    return [np.flatnonzero(assignment == k) for k in range(folds)]
 
 
 def _covariance(J_free: np.ndarray) -> np.ndarray:
@@ -65,7 +59,8 @@ def held_out_by_fold(problem: Problem, x: np.ndarray, free: np.ndarray, folds: i
                      evaluation: Evaluation | None = None, max_iterations: int = 30
                      ) -> tuple[np.ndarray, np.ndarray] | None:
     """Raw and whitened residuals (N, m) of every sample, each predicted by the fit of the
-    folds that do not hold it (``fold_indices``); None with too few samples for ``folds``.
+    folds that do not hold it (``fold_indices``: whole poses per fold); None with too few
+    poses for ``folds``.
 
     With the linear loss each fold's fit is the exact linearised leave-fold-out update of
     the solution ``x`` (``_leave_out_steps``; ``evaluation``: the Jacobian at ``x``, computed
@@ -75,9 +70,9 @@ def held_out_by_fold(problem: Problem, x: np.ndarray, free: np.ndarray, folds: i
     perturbation of it), as is a fold whose remaining samples do not determine the
     parameters."""
     n_samples, m = problem.measured.shape
-    if folds < 2 or n_samples < 2 * folds:
+    fold_sets = fold_indices(problem.dataset.samples, folds)
+    if fold_sets is None:
         return None
-    fold_sets = fold_indices(n_samples, folds)
     steps: list[np.ndarray | None] = [None] * folds
     if loss == "linear":
         if evaluation is None or evaluation.jacobian is None or not np.array_equal(

@@ -181,7 +181,8 @@ def warm_stereo_dataset(hidden: Mapping[str, float], seed: int, *, swing: float,
                         noise: bool = True) -> SyntheticDataset:
     """As ``hidden_dataset`` (same truth and poses), recorded over a run of
     ``seconds_per_pose`` per pose while the arm warms up by ``swing`` K (``warm_up``);
-    ``noise`` False: exact measurements (same poses)."""
+    ``noise`` False: exact measurements (same poses); ``markers_per_pose`` k: each pose holds
+    k consecutive samples (the reflectors seen in it), n_samples // k poses."""
     truth = random_truth(np.random.default_rng(50 + seed))
     truth.update(hidden)
     _, temperature = warm_up(n_samples, seconds_per_pose, swing)
@@ -212,12 +213,13 @@ def world_point_truth(rng: np.random.Generator) -> dict[str, float]:
 
 def hidden_world_point(hidden: Mapping[str, float], seed: int, *, swing: float = 0.0,
                        seconds_per_pose: float = 30.0, n_samples: int = N_SAMPLES,
-                       noise: bool = True) -> SyntheticDataset:
+                       noise: bool = True, markers_per_pose: int = 1) -> SyntheticDataset:
     """A world_point dataset (a laser tracker 2 m from a ur5e following three reflectors on
     its flange, one per pose in turn): random zero offsets and frame errors plus ``hidden``,
     the tracker's noise drawn from each point's covariance, approach signs of visiting the
     poses in order, and the arm warming up by ``swing`` K over the run (``warm_up``);
-    ``noise`` False: exact measurements (same poses)."""
+    ``noise`` False: exact measurements (same poses); ``markers_per_pose`` k: each pose holds
+    k consecutive samples (the reflectors seen in it), n_samples // k poses."""
     from hostpc.dataset import FramePose
     from hostpc.methods.world_point import spherical_covariance
     from hostpc.model.measurements.base import UR5E_HOME
@@ -226,7 +228,10 @@ def hidden_world_point(hidden: Mapping[str, float], seed: int, *, swing: float =
     rng = np.random.default_rng(seed)
     truth = world_point_truth(np.random.default_rng(50 + seed))
     truth.update(hidden)
-    q = UR5E_HOME + rng.uniform(-1.0, 1.0, (n_samples, 6)) * [0.8, 0.5, 0.5, 0.8, 0.8, 1.2]
+    q = UR5E_HOME + rng.uniform(-1.0, 1.0, (n_samples // markers_per_pose, 6)) * [
+        0.8, 0.5, 0.5, 0.8, 0.8, 1.2]
+    q = np.repeat(q, markers_per_pose, axis=0)
+    n_samples = q.shape[0]
     t, temperature = warm_up(n_samples, seconds_per_pose, swing)
     names = list(TRACKER_MARKERS)
     markers = {m: np.array(v) for m, v in TRACKER_MARKERS.items()}

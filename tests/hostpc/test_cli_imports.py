@@ -65,3 +65,15 @@ def test_fit_of_a_dataset_with_a_shared_error_imports_no_scipy(tmp_path: Path) -
     # OpenCV is used here: the calibration's sensitivities re-triangulate the pixel centres
     heavy = [m for m in modules if m.split(".")[0] in ("scipy", "matplotlib")]
     assert not heavy, heavy[:5]
+
+
+def test_predict_imports_no_scipy(tmp_path: Path) -> None:
+    fitted = subprocess.run([sys.executable, "-m", "hostpc.cli.main", "fit",
+                             "examples/ur5e_stereo.json", "--json"], cwd=ROOT,
+                            capture_output=True, text=True, check=True, timeout=120)
+    (tmp_path / "fit.json").write_text(fitted.stdout)
+    code, modules = imported_by("predict", str(tmp_path / "fit.json"),
+                                "examples/ur5e_stereo.json")
+    assert code == 0
+    heavy = [m for m in modules if m.split(".")[0] in HEAVY]
+    assert not heavy, heavy[:5]

@@ -30,7 +30,8 @@ def test_linearised_folds_match_full_refits(name: str, effects: str | None) -> N
     result = solve(problem, cv_folds=0)
     free = ~result.fixed
     final = evaluate(problem, result.x)
-    folds = fold_indices(problem.measured.shape[0], 5)
+    folds = fold_indices(problem.dataset.samples, 5)
+    assert folds is not None
     steps = _leave_out_steps(problem, final, free, folds)
     n = problem.measured.shape[0]
     for test, step in zip(folds, steps, strict=True):
@@ -58,7 +59,8 @@ def test_folds_batched_give_the_steps_of_each_fold_alone_and_none_where_singular
     free = ~result.fixed
     final = evaluate(problem, result.x)
     n, m = problem.measured.shape
-    folds = fold_indices(n, 5)
+    folds = fold_indices(problem.dataset.samples, 5)
+    assert folds is not None
     batched = _leave_out_steps(problem, final, free, folds)
     for fold, step in zip(folds, batched, strict=True):
         alone = _leave_out_steps(problem, final, free, [fold])[0]

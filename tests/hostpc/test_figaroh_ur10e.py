@@ -55,11 +55,13 @@ def test_figaroh_ur10e_fit_beats_the_nominal_model_held_out(figaroh_dataset):
     # the real robot's zero offsets are small (within 2 sigma: offsets alone do not beat
     # the nominal model held out); its geometry is not: with it the held-out error, in the
     # measurement's own units (whitened: position and orientation each by its sigma), drops
-    # (measured 2.13 -> 2.01), the held-out orientation error by a quarter (0.615 -> 0.447
-    # deg); the held-out position error does not (4.21 -> 4.40 mm; docs/metrology.md)
+    # a little (measured with the pose-grouped seeded folds of hostpc/fitting/folds.py: 2.061
+    # -> 2.009; with the former interleaved folds 2.13 -> 2.01), the held-out orientation
+    # error by a quarter (0.581 -> 0.441 deg); the held-out position error does not (4.14
+    # -> 4.40 mm; docs/metrology.md)
     nominal_whitened, nominal_angle = _held_out(nominal)
     geometry_whitened, geometry_angle = _held_out(geometry)
-    assert geometry_whitened < 0.97 * nominal_whitened
+    assert geometry_whitened < 0.99 * nominal_whitened
     assert geometry_angle < 0.8 * nominal_angle
     assert geometry.chi2_dof < nominal.chi2_dof
 
@@ -74,7 +76,9 @@ def _held_out(result) -> tuple[float, float]:
     problem, free = result.problem, ~result.fixed
     n = problem.measured.shape[0]
     whitened, angle = np.empty(n), np.empty(n)
-    for test in fold_indices(n, 5):
+    folds = fold_indices(problem.dataset.samples, 5)
+    assert folds is not None
+    for test in folds:
         train = np.setdiff1d(np.arange(n), test)
         outcome = levenberg_marquardt(problem.subset(train), result.x, free, loss="linear",
                                       loss_scale=3.0, max_iterations=30)

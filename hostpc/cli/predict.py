@@ -1,0 +1,77 @@
+"""`hostpc predict FIT.json DATASET`: how well a saved fit predicts data it never saw.
+
+    hostpc fit day1.json --effects +geometry --json > fit.json
+    hostpc predict fit.json day2.json [--refit-frames] [--json]
+
+Every sample of DATASET is predicted by the fit's model at the fit's values and compared
+with its measurement: the position error (RMS, max, mm), the orientation error where it is
+measured (deg) and the whitened RMS (1 = at the stated noise). With --refit-frames the
+instrument's frames (a tracker registered anew, a target moved between days) are
+estimated on DATASET with the robot's parameters held at the fit's values, so the error
+that remains is the robot model's. Exit 0; 2 for a bad file or a model that does not match.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from typing import Any
+
+from hostpc.calibrate.offline_push import load_saved_fit
+from hostpc.dataset import load_dataset
+from hostpc.fitting.prediction import FittedModel, predict
+
+
+def register(subparsers: Any) -> None:
+    """Add the `predict` subcommand."""
+    parser = subparsers.add_parser(
+        "predict",
+        help="predict a dataset the fit never saw with a saved fit (hostpc fit --json)",
+        description="Predict every sample of DATASET with the model and values of FIT.json "
+        "and report the error: the held-out test on a second day of data.",
+    )
+    parser.add_argument("fit", metavar="FIT.json", help="output of `hostpc fit DATASET --json`")
+    parser.add_argument("dataset", metavar="DATASET", help="zerocal-dataset/1 file to predict")
+    parser.add_argument("--refit-frames", action="store_true",
+                        help="estimate the instrument's frames on DATASET, the robot's "
+                        "parameters held at the fit's values")
+    parser.add_argument("--json", action="store_true",
+                        help="one JSON document with every sample's prediction")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    saved = load_saved_fit(args.fit)
+    dataset = load_dataset(args.dataset)
+    model = FittedModel(saved.effects, dict(zip(saved.names, map(float, saved.x),
+                                                strict=True)))
+    prediction = predict(model, dataset, refit_frames=args.refit_frames)
+    if args.json:
+        print(json.dumps({"fit": args.fit, "dataset": args.dataset,
+                          **_finite(prediction.to_dict())}, indent=2))
+        return 0
+    angle = prediction.angle_rms
+    print(f"predicted {dataset.n_samples} samples of {args.dataset} with {args.fit} "
+          f"({', '.join(saved.effects)}):")
+    print(f"  position error RMS {prediction.rms * 1e3:.4f} mm, max "
+          f"{prediction.max * 1e3:.4f} mm"
+          + (f"; orientation RMS {math.degrees(angle):.4f} deg" if angle is not None else ""))
+    print(f"  whitened RMS {prediction.whitened_rms:.3f} (1 = the dataset's stated noise)")
+    if prediction.refitted:
+        print(f"  frames estimated on this dataset: {', '.join(prediction.refitted)}")
+    elif not args.refit_frames:
+        print(f"  (the fit's frames as they were; if the instrument was set up anew: hostpc "
+              f"predict {args.fit} {args.dataset} --refit-frames)")
+    return 0
+
+
+def _finite(value: Any) -> Any:
+    """The document with non-finite numbers as null (strict JSON)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_finite(v) for v in value]
+    return value
