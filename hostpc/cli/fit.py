@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 
 from hostpc.cli.archive_options import add_archive_options, dataset_from_archive
@@ -12,8 +13,9 @@ from hostpc.cli.numbers import CV_FOLDS
 from hostpc.cli.robots import add_robot_override, load_dataset_with_robot, robot_document
 from hostpc.dataset import load_dataset
 from hostpc.errors import InputError
-from hostpc.fitting import fit
+from hostpc.fitting import FitResult, fit
 from hostpc.fitting.priors import with_constraints
+from hostpc.fitting.resampling import jackknife_std, scaled_std
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -32,6 +34,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     add_archive_options(parser, read=True)
     add_robot_override(parser)
     parser.add_argument("--json", action="store_true", help="print one JSON document")
+    parser.add_argument("--jackknife", action="store_true",
+                        help="also the leave-one-pose-out jackknife sigma of every parameter "
+                        "(one linearised refit per pose; no noise model assumed)")
     parser.set_defaults(func=run)
 
 
@@ -77,9 +82,26 @@ def run(args: argparse.Namespace) -> int:
     dataset = with_constraints(dataset, args.prior, args.hold)
     result = fit(dataset, args.effects, plugins=args.plugin, loss=args.loss,
                  cv_folds=args.cv_folds)
+    scaled = scaled_std(result) if _above_band(result) else None
+    jackknife = jackknife_std(result) if args.jackknife else None
     if args.json:
-        json.dump(result.to_dict(), sys.stdout, indent=2, allow_nan=False)
+        document = result.to_dict()
+        document["noise_scale"] = (math.sqrt(result.chi2_dof)
+                                   if math.isfinite(result.chi2_dof) else None)
+        for column, values in (("std_scaled", scaled), ("std_jackknife", jackknife)):
+            if values is not None:
+                for k, entry in enumerate(document["parameters"].values()):
+                    entry[column] = float(values[k]) if math.isfinite(values[k]) else None
+        json.dump(document, sys.stdout, indent=2, allow_nan=False)
         sys.stdout.write("\n")
     else:
-        print(format_fit_summary(result, source=args.dataset))
+        print(format_fit_summary(result, source=args.dataset, scaled=scaled,
+                                 jackknife=jackknife))
     return 0
+
+
+def _above_band(result: FitResult) -> bool:
+    """chi2/dof above the upper edge of its band (the one rule of hostpc.diagnostics)."""
+    from hostpc.diagnostics.adequacy import chi2_dof_upper
+
+    return result.dof > 0 and result.chi2_dof > chi2_dof_upper(result.dof)

@@ -20,20 +20,32 @@ def display(value: float | None, unit: str) -> tuple[str, str]:
     return f"{value * factor:+.4f}", shown_unit
 
 
-def format_parameter_table(result: FitResult) -> list[str]:
-    lines = [f"  {'parameter':<32} {'value':>12} {'+/- sigma':>11}  unit"]
-    for p in result.parameters.values():
+def format_parameter_table(result: FitResult, scaled: np.ndarray | None = None,
+                           jackknife: np.ndarray | None = None) -> list[str]:
+    """The parameter table; `scaled` / `jackknife`: (P,) further sigma columns (the sigmas
+    times sqrt(chi2/dof), the leave-one-pose-out jackknife; hostpc.fitting.resampling)."""
+    extra = [(name, values) for name, values in
+             (("x sqrt(chi2/dof)", scaled), ("jackknife", jackknife)) if values is not None]
+    lines = [f"  {'parameter':<32} {'value':>12} {'+/- sigma':>11}"
+             + "".join(f" {name:>16}" for name, _ in extra) + "  unit"]
+    for k, p in enumerate(result.parameters.values()):
         value, unit = display(p.value, p.unit)
         if p.fixed:
             sigma = "  (fixed)"
+            columns = "".join(f" {'':>16}" for _ in extra)
         else:
-            sigma_text, _ = display(p.std, p.unit)
-            sigma = sigma_text.lstrip("+")
-        lines.append(f"  {p.name:<32} {value:>12} {sigma:>11}  {unit}")
+            sigma = display(p.std, p.unit)[0].lstrip("+")
+            columns = "".join(f" {display(float(v[k]), p.unit)[0].lstrip('+'):>16}"
+                              for _, v in extra)
+        lines.append(f"  {p.name:<32} {value:>12} {sigma:>11}{columns}  {unit}")
     return lines
 
 
-def format_fit_summary(result: FitResult, source: str = "") -> str:
+def format_fit_summary(result: FitResult, source: str = "",
+                       scaled: np.ndarray | None = None,
+                       jackknife: np.ndarray | None = None) -> str:
+    """The fit as text; `scaled` / `jackknife`: further sigma columns (see
+    format_parameter_table), with a line that says which sigma is which."""
     n_samples = result.residuals_raw.shape[0]
     head = f"fit of {source}" if source else "fit"
     lines = [
@@ -48,8 +60,17 @@ def format_fit_summary(result: FitResult, source: str = "") -> str:
         f"  Jacobian rank {result.rank} of {len(result.names)}, "
         f"condition number {result.condition_number:.3g}",
         "",
-        *format_parameter_table(result),
+        *format_parameter_table(result, scaled, jackknife),
     ]
+    if scaled is not None or jackknife is not None:
+        lines += ["", "  sigma: from the stated noise of the samples"]
+        if scaled is not None:
+            lines.append(f"  x sqrt(chi2/dof): scaled by the measured noise "
+                         f"({math.sqrt(result.chi2_dof):.2f}x; chi2/dof is above its band: "
+                         "the stated noise is too small, or the model misses an effect)")
+        if jackknife is not None:
+            lines.append("  jackknife: the spread of the fits leaving one pose out (no noise "
+                         "model assumed)")
     if result.unidentifiable:
         lines += ["", "identifiability warnings:"]
         lines += [f"  - {d.description}" for d in result.unidentifiable]
