@@ -45,7 +45,9 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--effects",
         help="comma-separated effects (e.g. joint_offsets,tool,target); '+name' adds to the "
-        "default model, '-name' removes from it",
+        "default model, '-name' removes from it; 'auto': the model (nominal, offsets, "
+        "offsets + geometry, the diagnosis ladder's) with the best pose-grouped held-out "
+        "error, one-standard-error rule toward the simpler",
     )
     parser.add_argument("--plugin", action="append", default=[], metavar="FILE",
                         help="Python file defining extra effects or measurement models "
@@ -80,12 +82,29 @@ def run(args: argparse.Namespace) -> int:
     dataset = (load_dataset(args.dataset, plugins=args.plugin) if robot is None
                else load_dataset_with_robot(args.dataset, robot, plugins=args.plugin))
     dataset = with_constraints(dataset, args.prior, args.hold)
-    result = fit(dataset, args.effects, plugins=args.plugin, loss=args.loss,
-                 cv_folds=args.cv_folds)
+    choice = None
+    if args.effects == "auto":
+        from hostpc.diagnostics.model_choice import choose_model
+
+        choice = choose_model(dataset, plugins=args.plugin, cv_folds=args.cv_folds or 5)
+        result = choice.fit
+    else:
+        result = fit(dataset, args.effects, plugins=args.plugin, loss=args.loss,
+                     cv_folds=args.cv_folds)
     scaled = scaled_std(result) if _above_band(result) else None
     jackknife = jackknife_std(result) if args.jackknife else None
     if args.json:
         document = result.to_dict()
+        if choice is not None:
+            document["model_choice"] = {
+                "chosen": choice.chosen, "folds": choice.folds,
+                "rule": "fewest free parameters within one standard error of the best "
+                        "pose-grouped held-out score",
+                "models": [{"name": m.name, "effects": list(m.effects),
+                            "free_parameters": m.free_parameters, "converged": m.converged,
+                            "held_out_score": m.score, "standard_error": m.standard_error,
+                            "cv_rms": m.cv_rms, "note": m.note or None}
+                           for m in choice.scores]}
         document["noise_scale"] = (math.sqrt(result.chi2_dof)
                                    if math.isfinite(result.chi2_dof) else None)
         for column, values in (("std_scaled", scaled), ("std_jackknife", jackknife)):
@@ -95,6 +114,11 @@ def run(args: argparse.Namespace) -> int:
         json.dump(document, sys.stdout, indent=2, allow_nan=False)
         sys.stdout.write("\n")
     else:
+        if choice is not None:
+            print(f"model chosen by pose-grouped held-out error ({choice.folds} folds; the "
+                  "fewest free parameters within one standard error of the best):")
+            print("\n".join(choice.table()))
+            print()
         print(format_fit_summary(result, source=args.dataset, scaled=scaled,
                                  jackknife=jackknife))
     return 0

@@ -1,0 +1,147 @@
+"""The model chosen by held-out error: `hostpc fit --effects auto`.
+
+On small real sets a richer model often predicts worse: 24 geometry parameters fitted to
+23 poses explain the poses they saw and not the next one. The choice is made the way the
+user will be judged, on poses the fit never saw:
+
+- the models compared: ``nominal`` (the frames alone: the robot as drawn), ``offsets``
+  (the default model: joint zero offsets and the frames), ``offsets + geometry``, and, when
+  the diagnosis ladder ends on a richer model of registered effects, the ``ladder``'s;
+- each is scored by its pose-grouped held-out error (``hostpc.fitting.folds``; the same
+  folds for every model): per pose, the mean squared whitened held-out residual per scalar
+  row (1 at the stated noise), averaged over the poses, with its standard error over them;
+- the one-standard-error rule: among the models whose held-out score is within one
+  standard error of the best, the one with the fewest free parameters. A model whose fit
+  did not converge is listed, never chosen.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import cast
+
+import numpy as np
+
+from hostpc.dataset import Dataset
+from hostpc.errors import InputError
+from hostpc.fitting import FitResult, fit
+from hostpc.fitting.fitting import DEFAULT_CV_FOLDS, held_out_by_fold
+from hostpc.fitting.folds import pose_groups
+from hostpc.fitting.solver import Loss
+from hostpc.model.problem import build_problem
+
+
+@dataclass(frozen=True)
+class ModelScore:
+    """One model of the table. score, standard_error: the held-out mean squared whitened
+    residual per scalar row, over poses, and its standard error (None without held-out
+    residuals); cv_rms: the held-out position RMS (m); note: why it cannot be chosen."""
+
+    name: str
+    effects: tuple[str, ...]
+    free_parameters: int
+    converged: bool
+    score: float | None
+    standard_error: float | None
+    cv_rms: float | None
+    note: str = ""
+
+    @property
+    def whitened_rms(self) -> float | None:
+        return None if self.score is None else math.sqrt(self.score)
+
+
+@dataclass(frozen=True)
+class ModelChoice:
+    """The table (in order of complexity), the chosen model's name and its fit."""
+
+    scores: tuple[ModelScore, ...]
+    chosen: str
+    fit: FitResult
+    folds: int
+
+    def table(self) -> list[str]:
+        """The table as text lines (mm, whitened)."""
+        lines = [f"  {'model':<20} {'free':>5} {'held-out (whitened)':>20} "
+                 f"{'held-out RMS':>13}"]
+        for s in self.scores:
+            mark = "  <- chosen" if s.name == self.chosen else ""
+            if s.score is None or s.standard_error is None:
+                held = "-"
+            else:
+                held = f"{s.score:.3f} +- {s.standard_error:.3f}"
+            rms = "-" if s.cv_rms is None else f"{s.cv_rms * 1e3:.4f} mm"
+            note = f"  ({s.note})" if s.note else ""
+            lines.append(f"  {s.name:<20} {s.free_parameters:>5} {held:>20} {rms:>13}"
+                         f"{mark}{note}")
+        return lines
+
+
+def _score(result: FitResult, folds: int) -> tuple[float | None, float | None]:
+    held = held_out_by_fold(result.problem, result.x, ~result.fixed, folds,
+                            loss=cast(Loss, result.loss))
+    if held is None:
+        return None, None
+    _, whitened = held
+    groups = pose_groups(result.problem.dataset.samples)
+    per_row = np.mean(whitened**2, axis=1)
+    count = np.bincount(groups)
+    per_pose = np.bincount(groups, weights=per_row) / np.maximum(count, 1)
+    per_pose = per_pose[count > 0]
+    return (float(np.mean(per_pose)),
+            float(np.std(per_pose, ddof=1) / math.sqrt(per_pose.size)))
+
+
+def _models(dataset: Dataset, plugins: tuple[str | Path, ...]
+            ) -> list[tuple[str, tuple[str, ...]]]:
+    default = build_problem(dataset, None, plugins=plugins).effect_names
+    frames = tuple(name for name in default if name != "joint_offsets")
+    models = [("nominal", frames), ("offsets", default)]
+    if "geometry" not in default:
+        models.append(("offsets + geometry", (*default, "geometry")))
+    return models
+
+
+def choose_model(dataset: Dataset, *, plugins: Iterable[str | Path] = (),
+                 cv_folds: int = DEFAULT_CV_FOLDS, ladder: bool = True) -> ModelChoice:
+    """Fit every model of the table (module docstring) and choose by the one-standard-error
+    rule on the pose-grouped held-out score."""
+    plugin_files = tuple(plugins)
+    models = _models(dataset, plugin_files)
+    if ladder:
+        from hostpc.diagnostics.pipeline import diagnose
+
+        diagnosis = diagnose(dataset, plugins=plugin_files, ladder=True, cv_folds=cv_folds,
+                             auto_effects=False, interactions=False)
+        steps = diagnosis.ladder or ()
+        if steps and steps[-1].effects not in [effects for _, effects in models]:
+            models.append(("ladder", tuple(steps[-1].effects)))
+    scores: list[ModelScore] = []
+    fits: dict[str, FitResult] = {}
+    for name, effects in models:
+        try:
+            result = fit(dataset, list(effects), plugins=plugin_files, cv_folds=cv_folds)
+        except InputError as exc:  # e.g. a nominal model with every frame known: nothing free
+            scores.append(ModelScore(name, tuple(effects), 0, False, None, None, None,
+                                     f"not fitted: {exc}"))
+            continue
+        fits[name] = result
+        score, error = _score(result, cv_folds) if result.converged else (None, None)
+        note = "" if result.converged else "did not converge: not chosen"
+        if result.converged and score is None:
+            note = "too few poses for a held-out score"
+        scores.append(ModelScore(name, tuple(effects), int(np.count_nonzero(~result.fixed)),
+                                 result.converged, score, error, result.cv_rms, note))
+    scored = [s for s in scores if s.score is not None and s.standard_error is not None]
+    if scored:
+        best = min(scored, key=lambda s: s.score or math.inf)
+        assert best.score is not None and best.standard_error is not None
+        limit = best.score + best.standard_error
+        within = [s for s in scored if s.score is not None and s.score <= limit]
+        chosen = min(within, key=lambda s: (s.free_parameters, s.score or math.inf)).name
+    else:  # no held-out score for any: the default model, as without --effects auto
+        chosen = "offsets"
+    return ModelChoice(tuple(scores), chosen, fits[chosen], cv_folds)
