@@ -256,6 +256,9 @@ def not_taken_reason(candidate: Candidate, p_significant: bool, threshold: float
     """Why a candidate is not taken (a sentence part), or None when it is."""
     if not candidate.testable:
         return "too few samples to test it"
+    if not candidate.fit.converged:
+        return (f"the fit with it did not converge ({candidate.fit.message}): never adopted; "
+                "add poses that move its parameters, or hold the weak ones with --hold")
     if not p_significant:
         return f"not significant (p = {candidate.p_value:.2g}, threshold {threshold:.2g})"
     if candidate.cv_whitened_rms is not None and base_cv is not None \
@@ -392,7 +395,7 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
         selected=selected, delta_chi2=delta_chi2, added_parameters=added, rms=extended.rms,
         max=extended.max, cv_rms=held_rms, cv_folds=extended.cv_folds,
         chi2_dof=extended.chi2_dof, p_value=p_value if testable else None,
-        significant=p_significant and held_out_better,
+        significant=p_significant and held_out_better and extended.converged,
         strongest=_strongest(extended, effect.name, selected), fit=extended,
         testable=testable, cv_whitened_rms=cv_whitened,
         unidentifiable=lost_parameters(base, extended),

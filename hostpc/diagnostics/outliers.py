@@ -14,6 +14,9 @@ is F(m, dof - m) distributed if sample i is as good as the rest. A covariance th
 by a constant factor therefore flags no sample. A sample is an outlier when its p-value is
 below ``alpha / N`` (Bonferroni over the N samples, so ``alpha`` is family-wise).
 
+A pose measured twice is tested directly first (``repeats``): a pair of repeats that
+disagrees beyond the stated noise names its worse-fitted sample, and a sample whose repeats
+agree is never flagged by the leave-one-out test (its misfit is the model's, not a glitch).
 Outliers are found one at a time: the most significant sample is set aside, the model is
 refitted without it, and the test is repeated on the rest (a gross outlier drags the fit and
 would otherwise hide, or fake, others), at most ``max(1, N // 10)`` times.
@@ -27,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hostpc.diagnostics.distributions import f_sf
+from hostpc.diagnostics.repeats import check_repeats
 from hostpc.fitting import FitResult
 from hostpc.fitting.solver import evaluate
 
@@ -46,9 +50,14 @@ class Outlier:
     sample: int
     sigma: float
     p_value: float
+    #: which test named it: "leave-one-out", or "repeat" (a pose measured twice whose
+    #: measurements disagree beyond the noise: ``repeats``; the sample of the pair the fit
+    #: explains worse)
+    test: str = "leave-one-out"
 
     def to_dict(self) -> dict[str, object]:
-        return {"sample": self.sample, "sigma": self.sigma, "p_value": self.p_value}
+        return {"sample": self.sample, "sigma": self.sigma, "p_value": self.p_value,
+                "test": self.test}
 
 
 @dataclass(frozen=True)
@@ -114,8 +123,27 @@ def find_outliers(result: FitResult, alpha: float,
     kept = np.arange(n_samples)  # dataset indices of the current fit's samples
     current = result
     found: list[Outlier] = []
+    # repeats first: a pair that disagrees names its worse-fitted sample; a sample whose
+    # repeats agree is never a glitch (its misfit is the model's)
+    repeats = check_repeats(result.problem, alpha)
+    if repeats.pairs.size:
+        d2 = deletion_statistics(result).d2
+        bad = np.flatnonzero(repeats.disagreeing)
+        for k in bad[np.argsort(repeats.p_value[bad])][:limit]:
+            pair = repeats.pairs[k]
+            sample = int(pair[np.argmax(d2[pair])])
+            if all(o.sample != sample for o in found):
+                found.append(Outlier(sample, float(np.sqrt(repeats.statistic[k])),
+                                     float(repeats.p_value[k]), test="repeat"))
+        if found:
+            keep_local = np.setdiff1d(kept, [o.sample for o in found])
+            current = refit(current, keep_local)
+            kept = kept[keep_local]
+    protected = repeats.agreeing_samples()
     while len(found) < limit:
         stats = deletion_statistics(current)
+        stats = DeletionStatistics(stats.d2, stats.dfn, np.where(
+            np.isin(kept, protected), 1.0, stats.p_value))
         worst = int(np.argmin(stats.p_value))
         p_value = float(stats.p_value[worst])
         if not p_value < threshold:

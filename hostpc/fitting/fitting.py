@@ -14,7 +14,7 @@ import numpy as np
 from hostpc.dataset import Dataset
 from hostpc.errors import InputError
 from hostpc.fitting.folds import fold_indices
-from hostpc.fitting.identifiability import Identifiability
+from hostpc.fitting.identifiability import Identifiability, hold_weak_parameters
 from hostpc.fitting.priors import (
     analyse_with_constraints,
     problem_constraints,
@@ -222,6 +222,8 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
         ident, prior_notes = analyse_with_constraints(start.jacobian, layout.names,
                                                       layout.units, constraints,
                                                       frames=problem.frame_names)
+        ident = hold_weak_parameters(start.jacobian, prior_rows, ident, layout.names,
+                                     layout.units)
     else:  # reported through the solver's "failed" status; nothing can be analysed
         ident = Identifiability(0, np.zeros(layout.size), math.nan,
                                 np.zeros(layout.size, dtype=bool), ())

@@ -172,3 +172,56 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], units: Sequence[str],
         s_free = np.linalg.svd(Jn[:, free], compute_uv=False) if np.any(free) else np.ones(1)
     condition = float(s_free[0] / max(s_free[-1], 1e-300))
     return Identifiability(rank, s_rel, condition, fixed, tuple(directions))
+
+
+WEAK_SIGMA_LIMIT = {"rad": float(np.radians(5.0)), "m": 0.05}
+"""A parameter whose sigma (from the data, at the start) exceeds this bound per unit is not
+determined by the data, though not exactly unobservable: 5 deg for an angle, 50 mm for a
+length, far beyond any correction a calibration makes and far beyond what a determined
+parameter's sigma is (micrometres, thousandths of a degree)."""
+
+
+def hold_weak_parameters(jacobian: np.ndarray, prior_rows: np.ndarray,
+                         ident: Identifiability, names: Sequence[str], units: Sequence[str]
+                         ) -> Identifiability:
+    """`ident` with every weakly determined parameter held as well (the stated rule: a free
+    parameter whose sigma from `jacobian` (M, P) and `prior_rows` (K, P) exceeds
+    ``WEAK_SIGMA_LIMIT`` of its unit), so the solver cannot wander along a direction the
+    data barely sees. Greedy: the parameter furthest beyond its bound is held, the sigmas
+    recomputed, until every free one is within. Each held one is a NullDirection saying so
+    in words."""
+    limits = np.array([WEAK_SIGMA_LIMIT.get(unit, np.inf) for unit in units])
+    if not np.all(np.isfinite(jacobian)) or not np.any(np.isfinite(limits)):
+        return ident
+    # the normal matrix once (one BLAS product, P x P): every later step is on its blocks
+    normal = jacobian.T @ jacobian
+    if prior_rows.size:
+        normal = normal + prior_rows.T @ prior_rows
+    fixed = ident.fixed.copy()
+    directions = list(ident.null_directions)
+    while np.any(~fixed):
+        free = np.flatnonzero(~fixed)
+        block = normal[np.ix_(free, free)]
+        norms = np.sqrt(np.maximum(np.diag(block), 1e-300))
+        values, vectors = np.linalg.eigh(block / np.outer(norms, norms))
+        keep = values > max(float(values[-1]), 1e-300) * 1e-14
+        sigma = np.sqrt(np.sum(vectors[:, keep] ** 2 / values[keep], axis=1)) / norms
+        ratio = sigma / limits[free]
+        worst = int(np.argmax(ratio))
+        if not ratio[worst] > 1.0:
+            break
+        index = int(free[worst])
+        fixed[index] = True
+        limit_text = (f"{np.degrees(limits[index]):.0f} deg" if units[index] == "rad"
+                      else f"{limits[index] * 1e3:.0f} mm")
+        shown = (f"{np.degrees(sigma[worst]):.3g} deg" if units[index] == "rad"
+                 else f"{sigma[worst] * 1e3:.3g} mm")
+        directions.append(NullDirection(
+            names[index], (names[index],), (1.0,),
+            f"the data does not determine {names[index]} (sigma {shown}, beyond the "
+            f"{limit_text} a determined parameter never reaches): held at its nominal value; "
+            "add poses that move it, a prior, or hold it with --hold"))
+    if len(directions) == len(ident.null_directions):
+        return ident
+    return Identifiability(ident.rank, ident.singular_values, ident.condition_number, fixed,
+                           tuple(directions))

@@ -182,7 +182,8 @@ def warm_stereo_dataset(hidden: Mapping[str, float], seed: int, *, swing: float,
     """As ``hidden_dataset`` (same truth and poses), recorded over a run of
     ``seconds_per_pose`` per pose while the arm warms up by ``swing`` K (``warm_up``);
     ``noise`` False: exact measurements (same poses); ``markers_per_pose`` k: each pose holds
-    k consecutive samples (the reflectors seen in it), n_samples // k poses."""
+    k consecutive samples (the reflectors seen in it), n_samples // k poses; ``poses``: the
+    joint vectors of the poses (rad), instead of random ones."""
     truth = random_truth(np.random.default_rng(50 + seed))
     truth.update(hidden)
     _, temperature = warm_up(n_samples, seconds_per_pose, swing)
@@ -213,13 +214,15 @@ def world_point_truth(rng: np.random.Generator) -> dict[str, float]:
 
 def hidden_world_point(hidden: Mapping[str, float], seed: int, *, swing: float = 0.0,
                        seconds_per_pose: float = 30.0, n_samples: int = N_SAMPLES,
-                       noise: bool = True, markers_per_pose: int = 1) -> SyntheticDataset:
+                       noise: bool = True, markers_per_pose: int = 1,
+                       poses: np.ndarray | None = None) -> SyntheticDataset:
     """A world_point dataset (a laser tracker 2 m from a ur5e following three reflectors on
     its flange, one per pose in turn): random zero offsets and frame errors plus ``hidden``,
     the tracker's noise drawn from each point's covariance, approach signs of visiting the
     poses in order, and the arm warming up by ``swing`` K over the run (``warm_up``);
     ``noise`` False: exact measurements (same poses); ``markers_per_pose`` k: each pose holds
-    k consecutive samples (the reflectors seen in it), n_samples // k poses."""
+    k consecutive samples (the reflectors seen in it), n_samples // k poses; ``poses``: the
+    joint vectors of the poses (rad), instead of random ones."""
     from hostpc.dataset import FramePose
     from hostpc.methods.world_point import spherical_covariance
     from hostpc.model.measurements.base import UR5E_HOME
@@ -230,6 +233,8 @@ def hidden_world_point(hidden: Mapping[str, float], seed: int, *, swing: float =
     truth.update(hidden)
     q = UR5E_HOME + rng.uniform(-1.0, 1.0, (n_samples // markers_per_pose, 6)) * [
         0.8, 0.5, 0.5, 0.8, 0.8, 1.2]
+    if poses is not None:  # the caller's poses (n_poses, 6) instead of random ones
+        q = np.asarray(poses, float)
     q = np.repeat(q, markers_per_pose, axis=0)
     n_samples = q.shape[0]
     t, temperature = warm_up(n_samples, seconds_per_pose, swing)
