@@ -38,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
     from hostpc.archive.drift import DEFAULT_THRESHOLD_DEG, DEFAULT_Z_LIMIT, fleet_summary
     from hostpc.archive.history_page import history_html
 
-    with open_archive(args.db) as archive:
+    with open_archive(args.db, create=False) as archive:
         runs = archive.runs(args.robot)
     findings = drift_findings(runs, args.threshold or DEFAULT_THRESHOLD_DEG,
                               args.z_limit or DEFAULT_Z_LIMIT)
