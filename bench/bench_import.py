@@ -8,12 +8,13 @@ Per case (world_point: a UR5e with two SMR markers, joints in deg and points in 
 world_pose: a UR10e, SI units, roll/pitch/yaw) and N, a synthetic CSV (forward kinematics of
 the built-in robot through a world and a tool/marker frame, 20 um / 0.2 mrad noise, seeded),
 then ``python -m hostpc.cli.main import ...`` exactly as a user calls it, each run a fresh
-subprocess: wall time, and its peak resident memory (``os.wait4``'s ``ru_maxrss`` of that
-child alone). With ``--old COMMIT`` the same command runs the importer of that commit too
-(``git archive`` of its ``hostpc`` into a temporary folder, put first on ``PYTHONPATH``),
-interleaved with the new one, up to ``OLD_MAX_ROWS`` rows: the old frame guess built every
-pose pair (N^2/2 Python tuples; 4,600 rows took 1.2 GB), so larger files would exhaust the
-machine. The guessed frames of the new importer are checked against the truth.
+process: wall time (Python's start-up and imports included, about 1 s) and peak resident
+memory (``ru_maxrss`` of RUSAGE_CHILDREN in a small wrapper process). With ``--old COMMIT``
+the same command runs the importer of that commit too (``git archive`` of its ``hostpc``
+into a temporary folder, put first on ``PYTHONPATH``), interleaved with the new one, up to
+``OLD_MAX_ROWS`` rows: the old frame guess built every pose pair (N^2/2 Python tuples; 4,600
+rows took 1.2 GB), so larger files would exhaust the machine. The guessed frames of the new
+importer are checked against the truth (``frame_error_mm``).
 
 Optional in ``bench/run.py`` (OPTIONAL = True: the 1M-row files take minutes): run it by
 name, ``bench/run.py import``.
@@ -102,6 +103,14 @@ def _old_tree(commit: str, folder: Path) -> Path:
     return folder / "old"
 
 
+#: run in a fresh, small Python: the command's peak RSS is its RUSAGE_CHILDREN maximum
+#: (measured from this bench's process, a forked child would inherit the bench's own
+#: high-water mark, which Linux carries across exec)
+_PEAK_RSS = ("import resource, subprocess, sys; "
+             "code = subprocess.call(sys.argv[1:], stdout=subprocess.DEVNULL); "
+             "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss); sys.exit(code)")
+
+
 def measure(source_root: Path, csv_path: Path, method: str, output: Path
             ) -> dict[str, float]:
     """Wall seconds and peak RSS (MB) of one ``hostpc import`` in a fresh process."""
@@ -110,15 +119,12 @@ def measure(source_root: Path, csv_path: Path, method: str, output: Path
     command = [sys.executable, "-m", "hostpc.cli.main", "import", str(csv_path), "--method",
                method, "--robot", robot, "--columns", columns, *extra, "-o", str(output)]
     start = time.perf_counter()
-    process = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL,
-                               stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(process.pid, 0)
+    run = subprocess.run([sys.executable, "-c", _PEAK_RSS, *command], env=env,
+                         capture_output=True, text=True)
     seconds = time.perf_counter() - start
-    process.returncode = os.waitstatus_to_exitcode(status)
-    stderr = process.stderr.read().decode() if process.stderr else ""
-    if process.returncode != 0:
-        raise RuntimeError(f"{' '.join(command[2:5])} failed: {stderr.strip()}")
-    return {"s": seconds, "peak_MB": usage.ru_maxrss / 1024.0}
+    if run.returncode != 0:
+        raise RuntimeError(f"{' '.join(command[2:5])} failed: {run.stderr.strip()}")
+    return {"s": seconds, "peak_MB": int(run.stdout.split()[-1]) / 1024.0}
 
 
 def frame_error(output: Path, method: str) -> float:
