@@ -30,6 +30,7 @@ from sqlalchemy.engine import Connection, Engine
 
 from hostpc.archive.records import JointOffset, RunRecord
 from hostpc.errors import InputError, ZerocalError
+from hostpc.kinematics.robots import canonical_name
 
 
 class ArchiveError(ZerocalError):
@@ -193,7 +194,8 @@ class Archive:
         """Store `record`; returns its archive id. A record whose run_uid is already stored
         is not stored twice (its existing id is returned)."""
         values = {
-            "run_uid": record.run_uid, "serial": record.serial, "model": record.model,
+            "run_uid": record.run_uid, "serial": record.serial,
+            "model": canonical_name(record.model),
             "station": record.station, "started_at": _as_utc(record.started_at),
             "archived_at": datetime.now(UTC), "method": record.method,
             "effects": json.dumps(list(record.effects)), "verdict": record.verdict,
@@ -248,6 +250,7 @@ class Archive:
         except sa.exc.SQLAlchemyError as exc:
             raise ArchiveError(f"archive {self.url}: cannot read ({_first_line(exc)})") from None
         for row in rows:
+            row["model"] = canonical_name(row["model"])  # runs stored before it was canonical
             row["effects"] = json.loads(row["effects"])
             row["started_at"] = _as_utc(row["started_at"]).isoformat()
             row["archived_at"] = _as_utc(row["archived_at"]).isoformat()
