@@ -119,8 +119,10 @@ def measure(source_root: Path, csv_path: Path, method: str, output: Path
     command = [sys.executable, "-m", "hostpc.cli.main", "import", str(csv_path), "--method",
                method, "--robot", robot, "--columns", columns, *extra, "-o", str(output)]
     start = time.perf_counter()
+    # run from the CSV's folder: `python -m` puts the working folder first on sys.path,
+    # ahead of PYTHONPATH, so from the repository the old tree would never be imported
     run = subprocess.run([sys.executable, "-c", _PEAK_RSS, *command], env=env,
-                         capture_output=True, text=True)
+                         cwd=csv_path.parent, capture_output=True, text=True)
     seconds = time.perf_counter() - start
     if run.returncode != 0:
         raise RuntimeError(f"{' '.join(command[2:5])} failed: {run.stderr.strip()}")
