@@ -18,9 +18,11 @@ start together migrate once.
 from __future__ import annotations
 
 import json
+import shlex
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from datetime import UTC, datetime
+from pathlib import Path
 from typing import Any
 
 import sqlalchemy as sa
@@ -28,6 +30,7 @@ from sqlalchemy.engine import Connection, Engine
 
 from hostpc.archive.records import JointOffset, RunRecord
 from hostpc.errors import InputError, ZerocalError
+from hostpc.kinematics.robots import canonical_name
 
 
 class ArchiveError(ZerocalError):
@@ -92,10 +95,33 @@ SCHEMA_VERSION = len(MIGRATIONS)
 _ADVISORY_LOCK_KEY = 4_711_042  # arbitrary, constant: "zerocal archive migration"
 
 
-def _engine(url: str) -> Engine:
+def _existing_sqlite(url: str) -> sa.engine.URL:
+    """The SQLite URL of an archive file that must already exist, opened read-write without
+    create (a URI filename with ``mode=rw``): a read never leaves an empty archive behind,
+    e.g. when run from the wrong folder. InputError (exit 2) when the file is missing."""
+    parsed = sa.engine.make_url(url)
+    if not parsed.database or parsed.database == ":memory:" or "uri" in parsed.query:
+        return parsed  # nothing on disk to create, or the caller's own URI
+    path = Path(parsed.database).resolve()
+    if not path.is_file():
+        raise InputError(f"--db {url}: no archive at {path} (reading never creates one; "
+                         f"a calibration with --db or the station does): {_look(url)}")
+    return parsed.set(database=path.as_uri()).update_query_dict({"mode": "rw", "uri": "true"})
+
+
+def _look(url: str) -> str:
+    """The command that shows what is at ``url`` (where the archive may be instead)."""
+    if url.startswith("sqlite:"):
+        folder = Path(sa.engine.make_url(url).database or ".").resolve().parent
+        return f"ls {shlex.quote(str(folder))}"
+    return f"psql {shlex.quote(url)} -c '\\dt'"
+
+
+def _engine(url: str, create: bool = True) -> Engine:
     if url.startswith("sqlite:"):
         # several stations may write one file: wait for the lock instead of failing
-        engine = sa.create_engine(url, connect_args={"timeout": 60})
+        engine = sa.create_engine(url if create else _existing_sqlite(url),
+                                  connect_args={"timeout": 60})
 
         @sa.event.listens_for(engine, "connect")
         def _pragmas(dbapi_connection: Any, _record: Any) -> None:
@@ -124,11 +150,15 @@ def _current_version(connection: Connection) -> int:
     return int(version or 0)
 
 
-def _migrate(engine: Engine) -> None:
+def _migrate(engine: Engine, url: str, create: bool = True) -> None:
     with engine.begin() as connection:
         if engine.dialect.name == "postgresql":
             connection.execute(sa.text("SELECT pg_advisory_xact_lock(:key)"),
                                {"key": _ADVISORY_LOCK_KEY})
+        if not create and not sa.inspect(connection).has_table("zerocal_schema"):
+            raise InputError(f"--db {url}: no zerocal archive there (no zerocal tables; "
+                             "reading never creates them, a calibration with --db or the "
+                             f"station does): {_look(url)}")
         schema_table.create(connection, checkfirst=True)
         version = _current_version(connection)
         if version > SCHEMA_VERSION:
@@ -164,7 +194,8 @@ class Archive:
         """Store `record`; returns its archive id. A record whose run_uid is already stored
         is not stored twice (its existing id is returned)."""
         values = {
-            "run_uid": record.run_uid, "serial": record.serial, "model": record.model,
+            "run_uid": record.run_uid, "serial": record.serial,
+            "model": canonical_name(record.model),
             "station": record.station, "started_at": _as_utc(record.started_at),
             "archived_at": datetime.now(UTC), "method": record.method,
             "effects": json.dumps(list(record.effects)), "verdict": record.verdict,
@@ -219,6 +250,7 @@ class Archive:
         except sa.exc.SQLAlchemyError as exc:
             raise ArchiveError(f"archive {self.url}: cannot read ({_first_line(exc)})") from None
         for row in rows:
+            row["model"] = canonical_name(row["model"])  # runs stored before it was canonical
             row["effects"] = json.loads(row["effects"])
             row["started_at"] = _as_utc(row["started_at"]).isoformat()
             row["archived_at"] = _as_utc(row["archived_at"]).isoformat()
@@ -257,14 +289,20 @@ def _first_line(exc: BaseException) -> str:
     return text.strip().splitlines()[0] if text.strip() else type(exc).__name__
 
 
-def open_archive(url: str) -> Archive:
-    """Connect to the archive at `url`, creating or migrating its schema."""
-    engine = _engine(url)
+def open_archive(url: str, *, create: bool = True) -> Archive:
+    """Connect to the archive at `url`, migrating its schema. Writers (the station,
+    `calibrate --db`) create a missing archive; readers pass ``create=False``: a missing
+    SQLite file or a database without zerocal tables is then an InputError (exit 2) and
+    nothing is created."""
+    engine = _engine(url, create)
     try:
-        _migrate(engine)
+        _migrate(engine, url, create)
     except sa.exc.SQLAlchemyError as exc:
         engine.dispose()
         raise ArchiveError(f"archive {url}: cannot open ({_first_line(exc)})") from None
+    except InputError:
+        engine.dispose()
+        raise
     return Archive(engine, url)
 
 

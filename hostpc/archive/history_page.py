@@ -7,9 +7,16 @@ from __future__ import annotations
 import base64
 import html
 import io
+from datetime import datetime
 from typing import Any
 
 from hostpc.archive.drift import DriftFinding, fleet_summary, zero_series
+
+
+def local_time(stamp: str) -> str:
+    """An archive timestamp (ISO 8601, UTC) as the operator reads it: to the second, in this
+    computer's local time zone, named ("2026-03-02 14:05:09 CET")."""
+    return datetime.fromisoformat(stamp).astimezone().strftime("%Y-%m-%d %H:%M:%S %Z")
 
 
 def drift_plot_png(runs: list[dict[str, Any]], findings: list[DriftFinding]) -> bytes:
@@ -77,7 +84,8 @@ def history_html(runs: list[dict[str, Any]], findings: list[DriftFinding],
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}"
              f"</title><style>{STYLE}</style></head><body><h1>{html.escape(title)}</h1>"]
     parts.append("<h2>Fleet: last verdict per robot, largest zero move first</h2>")
-    parts.append(_table(fleet_summary(runs), [
+    fleet = [{**row, "last_run": local_time(row["last_run"])} for row in fleet_summary(runs)]
+    parts.append(_table(fleet, [
         ("serial", "robot"), ("model", "model"), ("runs", "runs"),
         ("last_verdict", "last verdict"), ("last_run", "last run"),
         ("largest_zero_move_deg", "largest zero move [deg]")]))
@@ -90,7 +98,8 @@ def history_html(runs: list[dict[str, Any]], findings: list[DriftFinding],
     else:
         parts.append("<p>none: no joint zero moved beyond its threshold or uncertainty.</p>")
     parts.append("<h2>Runs</h2>")
-    parts.append(_table(runs, [("id", "id"), ("serial", "robot"), ("started_at", "started"),
+    shown = [{**run, "started_at": local_time(run["started_at"])} for run in runs]
+    parts.append(_table(shown, [("id", "id"), ("serial", "robot"), ("started_at", "started"),
                                ("station", "station"), ("method", "method"),
                                ("verdict", "verdict"), ("push_status", "push"),
                                ("largest_correction_deg", "largest correction [deg]")]))

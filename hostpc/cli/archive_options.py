@@ -39,7 +39,7 @@ def dataset_from_archive(args: argparse.Namespace) -> str:
 
     if args.run is None:
         raise InputError("--db needs --run ID (the archived run to refit)")
-    with open_archive(args.db) as archive:
+    with open_archive(args.db, create=False) as archive:
         entry = archive.run(args.run)
     if entry["dataset"] is None:
         raise InputError(f"--run {args.run}: the archived run has no dataset")

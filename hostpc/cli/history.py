@@ -36,9 +36,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 def run(args: argparse.Namespace) -> int:
     from hostpc.archive import drift_findings, open_archive
     from hostpc.archive.drift import DEFAULT_THRESHOLD_DEG, DEFAULT_Z_LIMIT, fleet_summary
-    from hostpc.archive.history_page import history_html
+    from hostpc.archive.history_page import history_html, local_time
 
-    with open_archive(args.db) as archive:
+    with open_archive(args.db, create=False) as archive:
         runs = archive.runs(args.robot)
     findings = drift_findings(runs, args.threshold or DEFAULT_THRESHOLD_DEG,
                               args.z_limit or DEFAULT_Z_LIMIT)
@@ -55,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
         for row in fleet_summary(runs):
             move = row["largest_zero_move_deg"]
             print(f"{row['serial']:<20} {row['model']:<10} runs {row['runs']:>3}  last "
-                  f"{row['last_verdict']:<10} largest zero move {move:.4f} deg")
+                  f"{row['last_verdict']:<10} {local_time(row['last_run'])}  "
+                  f"largest zero move {move:.4f} deg")
         if not runs:
             print("no archived runs" + (f" of {args.robot}" if args.robot else ""))
         for finding in findings:

@@ -17,7 +17,6 @@ and the column, and exit code 2.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 from pathlib import Path
 from typing import Any
@@ -27,11 +26,13 @@ from hostpc.importing.csv_import import (
     ANGLE_UNITS,
     LENGTH_UNITS,
     ImportOptions,
-    build_document,
+    document_head,
     parse_column_map,
-    read_csv_rows,
+    read_samples,
 )
-from hostpc.importing.frame_guess import with_guessed_frames
+from hostpc.importing.csv_table import read_csv
+from hostpc.importing.frame_guess import guessed_frames
+from hostpc.importing.imported import ImportedSamples, write_document
 from hostpc.kinematics import Chain
 
 
@@ -108,28 +109,36 @@ def run(args: argparse.Namespace) -> int:
     output = Path(args.output)
     robot, chain = _robot(args, output)
     prismatic = tuple(bool(p) for p in chain.joint_is_prismatic)
+    options = ImportOptions(
+        method=args.method, robot=robot, prismatic=prismatic, length_unit=args.length_unit,
+        angle_unit=args.angle_unit, joint_unit=args.joint_unit,
+        sigma=args.sigma if args.sigma is not None else 1e-4 / LENGTH_UNITS[args.length_unit],
+        sigma_angle=args.sigma_angle, known=known)
+    samples = _read_csv_file(Path(args.csv), args, len(prismatic), options)
+    head = document_head(samples, options)
+    if not args.no_guess:
+        head["frames"] = guessed_frames(samples, chain, head["frames"])
     try:
-        text = Path(args.csv).read_text(encoding="utf-8-sig")
+        with output.open("w", encoding="utf-8") as out:
+            write_document(out, head, samples)
+    except OSError as exc:
+        output.unlink(missing_ok=True)
+        raise InputError(f"{output}: cannot write ({exc.strerror or exc})") from None
+    print(f"wrote {output}: {len(samples)} samples, method {args.method}, "
+          f"robot {robot.get('name') or robot.get('urdf')}")
+    return 0
+
+
+def _read_csv_file(path: Path, args: argparse.Namespace, n_joints: int,
+                   options: ImportOptions) -> ImportedSamples:
+    """The samples of the CSV at ``path``, read row by row from the open file (never the
+    whole text at once: a tracker export may have millions of rows)."""
+    try:
+        with path.open(encoding="utf-8-sig", newline="") as stream:
+            table = read_csv(stream, args.csv)
+            mapping = parse_column_map(args.columns, table.header.columns, n_joints,
+                                       args.method, args.csv)
+            return read_samples(table, mapping, options)
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{args.csv}: cannot read ({getattr(exc, 'strerror', None) or exc})"
                          ) from None
-    table = read_csv_rows(text, args.csv)
-    mapping = parse_column_map(args.columns, table.columns, len(prismatic), args.method,
-                               args.csv)
-    sigma = args.sigma if args.sigma is not None else 1e-4 / LENGTH_UNITS[args.length_unit]
-    options = ImportOptions(
-        method=args.method, robot=robot, prismatic=prismatic, length_unit=args.length_unit,
-        angle_unit=args.angle_unit, joint_unit=args.joint_unit, sigma=sigma,
-        sigma_angle=args.sigma_angle,
-        known=known,
-    )
-    document = build_document(table, mapping, options)
-    if not args.no_guess:
-        document = with_guessed_frames(document, chain)
-    try:
-        output.write_text(json.dumps(document, indent=1) + "\n", encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"{output}: cannot write ({exc.strerror or exc})") from None
-    print(f"wrote {output}: {len(document['samples'])} samples, method {args.method}, "
-          f"robot {robot.get('name') or robot.get('urdf')}")
-    return 0

@@ -1,9 +1,11 @@
 """Turn a metrology CSV export into a ``zerocal-dataset/1`` document (world_point, world_pose).
 
-Pure (no file writing): :func:`parse_column_map` reads the ``--columns`` mapping,
-:func:`read_csv_rows` checks the table and :func:`build_document` returns the JSON document
-(SI units: m, rad). Every bad input raises :class:`~hostpc.errors.InputError` with one line
-that names the file, the row (the file's line number; the header is row 1) and the column.
+Pure (no file writing): :func:`parse_column_map` reads the ``--columns`` mapping against the
+header (:func:`hostpc.importing.csv_table.read_csv`) and :func:`read_samples` reads the rows,
+one at a time, into columns of SI values (m, rad), an
+:class:`~hostpc.importing.imported.ImportedSamples`; memory grows by the numbers a row holds,
+not by its text. Every bad input raises :class:`~hostpc.errors.InputError` with one line that
+names the file, the row (the file's line number; the header is row 1) and the column.
 
 Column mapping (``--columns``), comma-separated ``KEY=COLUMN`` pairs:
 
@@ -20,10 +22,9 @@ mapping names the column without it, and the header's unit overrides the default
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 import re
+from array import array
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -31,12 +32,15 @@ from typing import Any
 import numpy as np
 
 from hostpc.errors import InputError
+from hostpc.importing.csv_table import CsvHeader, CsvRows
+from hostpc.importing.imported import FloatArray, ImportedSamples
 from hostpc.kinematics.rotations import matrix_to_rpy, rotvec_to_matrix
 
 __all__ = [
-    "LENGTH_UNITS", "ANGLE_UNITS", "ColumnMap", "CsvTable", "ImportOptions",
-    "build_document", "parse_column_map", "read_csv_rows",
+    "LENGTH_UNITS", "ANGLE_UNITS", "ColumnMap", "ImportOptions", "document_head",
+    "parse_column_map", "read_samples",
 ]
+
 
 LENGTH_UNITS: dict[str, float] = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "um": 1e-6, "in": 0.0254}
 ANGLE_UNITS: dict[str, float] = {"rad": 1.0, "deg": math.pi / 180.0, "mrad": 1e-3}
@@ -44,7 +48,6 @@ _ORIENTATIONS = {"rpy": ("roll", "pitch", "yaw"), "quat": ("qw", "qx", "qy", "qz
                  "rotvec": ("rx", "ry", "rz")}
 _SINGLE_KEYS = {"x", "y", "z", "marker", "t", "sigma"} | {
     k for keys in _ORIENTATIONS.values() for k in keys}
-_UNIT_SUFFIX = re.compile(r"^(.*?)\s*[\[(]\s*([^\])]*?)\s*[\])]\s*$")
 
 
 @dataclass(frozen=True)
@@ -54,16 +57,6 @@ class ColumnMap:
     joints: tuple[str, ...]
     fields: Mapping[str, str]
     orientation: str | None  # "rpy", "quat", "rotvec" or None
-
-
-@dataclass(frozen=True)
-class CsvTable:
-    """A CSV file's header (unit suffixes removed), header units and data rows."""
-
-    source: str
-    columns: tuple[str, ...]
-    units: Mapping[str, str]  # column -> unit named in its header
-    rows: tuple[tuple[int, tuple[str, ...]], ...]  # (file line number, cells)
 
 
 @dataclass(frozen=True)
@@ -168,68 +161,29 @@ def parse_column_map(spec: str, header: Sequence[str], n_joints: int, method: st
                      orientation=orientation)
 
 
-def read_csv_rows(text: str, source: str) -> CsvTable:
-    """Split CSV text into header, header units and rows (comma, semicolon or tab)."""
-    if not text.strip():
-        raise InputError(f"{source}: empty file")
-    try:
-        dialect: Any = csv.Sniffer().sniff(text.splitlines()[0], delimiters=",;\t")
-    except csv.Error:
-        dialect = csv.excel
-    reader = csv.reader(io.StringIO(text), dialect)
-    try:
-        header = next(reader)
-    except (StopIteration, csv.Error) as exc:
-        raise InputError(f"{source}: row 1: cannot read the header ({exc})") from None
-    columns: list[str] = []
-    units: dict[str, str] = {}
-    for k, cell in enumerate(header):
-        name = cell.strip().lstrip("\ufeff")
-        match = _UNIT_SUFFIX.match(name)
-        if match:
-            name = match.group(1)
-            units[name] = match.group(2)
-        if not name:
-            raise InputError(f"{source}: row 1, column {k + 1}: empty column name")
-        if name in columns:
-            raise InputError(f"{source}: row 1, column {k + 1}: {name!r} appears twice")
-        columns.append(name)
-    rows: list[tuple[int, tuple[str, ...]]] = []
-    try:
-        for cells in reader:
-            if not any(c.strip() for c in cells):
-                continue
-            rows.append((reader.line_num, tuple(c.strip() for c in cells)))
-    except csv.Error as exc:
-        raise InputError(f"{source}: row {reader.line_num}: {exc}") from None
-    if not rows:
-        raise InputError(f"{source}: no data rows below the header")
-    return CsvTable(source=source, columns=tuple(columns), units=units, rows=tuple(rows))
-
-
 class _Cells:
-    """Reads typed values out of one table, naming row and column in every error."""
+    """Reads typed values out of one CSV's rows, naming row and column in every error."""
 
-    def __init__(self, table: CsvTable, options: ImportOptions) -> None:
-        self.table = table
+    def __init__(self, header: CsvHeader, options: ImportOptions) -> None:
+        self.header = header
         self.options = options
-        self.index = {name: k for k, name in enumerate(table.columns)}
+        self.index = {name: k for k, name in enumerate(header.columns)}
 
     def unit_of(self, column: str, kind: str) -> float:
         """SI factor of ``column``: its header unit, else the option's default."""
         default = {"length": self.options.length_unit, "angle": self.options.angle_unit,
                    "joint": self.options.joint_unit}[kind]
-        unit = self.table.units.get(column, default)
+        unit = self.header.units.get(column, default)
         units = LENGTH_UNITS if kind == "length" else ANGLE_UNITS
-        if unit not in units and column in self.table.units:
-            raise InputError(f"{self.table.source}: row 1, column {column!r}: unknown unit "
+        if unit not in units and column in self.header.units:
+            raise InputError(f"{self.header.source}: row 1, column {column!r}: unknown unit "
                              f"{unit!r} (expected one of {', '.join(units)})")
         return _unit_factor(unit, units, kind)
 
     def text(self, line: int, cells: tuple[str, ...], column: str) -> str:
         k = self.index[column]
         if k >= len(cells) or cells[k] == "":
-            raise InputError(f"{self.table.source}: row {line}, column {column!r}: "
+            raise InputError(f"{self.header.source}: row {line}, column {column!r}: "
                              "missing value")
         return cells[k]
 
@@ -238,92 +192,130 @@ class _Cells:
         try:
             value = float(raw)
         except ValueError:
-            raise InputError(f"{self.table.source}: row {line}, column {column!r}: "
+            raise InputError(f"{self.header.source}: row {line}, column {column!r}: "
                              f"{raw!r} is not a number") from None
         if not math.isfinite(value):
-            raise InputError(f"{self.table.source}: row {line}, column {column!r}: "
+            raise InputError(f"{self.header.source}: row {line}, column {column!r}: "
                              f"{raw!r} is not finite")
         return value
 
+    def numbers(self, line: int, cells: tuple[str, ...], columns: Sequence[str],
+                indices: Sequence[int]) -> list[float]:
+        """The values of ``columns`` (at ``indices``) in one row: the plain conversion,
+        and the checking one (which names the first bad cell) only when that fails."""
+        try:
+            values = [float(cells[k]) for k in indices]
+            if all(map(math.isfinite, values)):
+                return values
+        except (ValueError, IndexError):
+            pass
+        return [self.number(line, cells, column) for column in columns]
 
-def _orientation_rpy(cells: _Cells, line: int, row: tuple[str, ...], mapping: ColumnMap
-                     ) -> list[float]:
-    keys = _ORIENTATIONS[mapping.orientation or "rpy"]
-    cols = [mapping.fields[k] for k in keys]
-    if mapping.orientation == "quat":
-        w, x, y, z = (cells.number(line, row, c) for c in cols)
-        norm = math.sqrt(w * w + x * x + y * y + z * z)
-        if norm < 1e-9:
-            raise InputError(f"{cells.table.source}: row {line}, column {cols[0]!r}: "
-                             "the quaternion is zero")
+
+def _rotations_to_rpy(values: FloatArray, orientation: str | None,
+                      factors: FloatArray) -> FloatArray:
+    """roll/pitch/yaw (rad, (N, 3)) of the orientation columns ``values`` (N, 3 or 4)."""
+    if orientation == "quat":
+        w, x, y, z = values.T
+        norm = np.sqrt(w * w + x * x + y * y + z * z)
         w, x, y, z = w / norm, x / norm, y / norm, z / norm
-        R = np.array([
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ])
-        return [float(v) for v in matrix_to_rpy(R)]
-    values = [cells.number(line, row, c) * cells.unit_of(c, "angle") for c in cols]
-    if mapping.orientation == "rotvec":
-        return [float(v) for v in matrix_to_rpy(rotvec_to_matrix(np.array(values)))]
-    return values
+        R = np.stack([
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ], axis=1)
+        return matrix_to_rpy(R)
+    angles = values * factors
+    if orientation == "rotvec":
+        return matrix_to_rpy(rotvec_to_matrix(angles))
+    return angles
 
 
-def build_document(table: CsvTable, mapping: ColumnMap, options: ImportOptions
-                   ) -> dict[str, Any]:
-    """The dataset document (SI units) of ``table`` read through ``mapping``."""
-    cells = _Cells(table, options)
-    joint_factor = [cells.unit_of(c, "length" if prismatic else "joint")
-                    for c, prismatic in zip(mapping.joints, options.prismatic, strict=True)]
-    xyz_cols = [mapping.fields[k] for k in ("x", "y", "z")]
-    xyz_factor = [cells.unit_of(c, "length") for c in xyz_cols]
-    sigma_col = mapping.fields.get("sigma")
-    length_default = _unit_factor(options.length_unit, LENGTH_UNITS, "length")
-    angle_default = _unit_factor(options.angle_unit, ANGLE_UNITS, "angle")
-    samples: list[dict[str, Any]] = []
-    markers: dict[str, None] = {}
-    for line, row in table.rows:
-        if len(row) > len(table.columns):
-            raise InputError(f"{table.source}: row {line}: {len(row)} cells but the header "
-                             f"has {len(table.columns)} columns")
-        sample: dict[str, Any] = {
-            "q": [cells.number(line, row, c) * f
-                  for c, f in zip(mapping.joints, joint_factor, strict=True)],
-            "p": [cells.number(line, row, c) * f for c, f in zip(xyz_cols, xyz_factor,
-                                                                 strict=True)],
-        }
-        if sigma_col is not None:
-            sigma = cells.number(line, row, sigma_col) * cells.unit_of(sigma_col, "length")
-            if sigma <= 0:
-                raise InputError(f"{table.source}: row {line}, column {sigma_col!r}: "
-                                 "sigma must be positive")
-            sample["sigma"] = sigma
-        else:
-            sample["sigma"] = options.sigma * length_default
-        if "t" in mapping.fields:
-            sample["t"] = cells.number(line, row, mapping.fields["t"])
-        if options.method == "world_pose":
-            sample["rpy"] = _orientation_rpy(cells, line, row, mapping)
-            sample["sigma_angle"] = (1e-3 if options.sigma_angle is None
-                                     else options.sigma_angle * angle_default)
-        elif "marker" in mapping.fields:
-            sample["marker"] = cells.text(line, row, mapping.fields["marker"])
-            markers[sample["marker"]] = None
-        samples.append(sample)
-    frames = dict(options.frames)
-    frames.setdefault("world", {"xyz": [0.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]})
-    if options.method == "world_pose":
-        frames.setdefault("tool", {"xyz": [0.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]})
+def read_samples(csv_rows: CsvRows, mapping: ColumnMap, options: ImportOptions
+                 ) -> ImportedSamples:
+    """The rows of ``csv_rows`` read through ``mapping`` into SI columns, one row at a
+    time (the numbers kept in a flat float64 buffer: about 8 bytes per mapped cell)."""
+    header = csv_rows.header
+    cells = _Cells(header, options)
+    fields = mapping.fields
+    ndof = len(mapping.joints)
+    orientation = _ORIENTATIONS[mapping.orientation] if mapping.orientation else ()
+    optional = [k for k in ("sigma", "t") if k in fields]
+    columns = [*mapping.joints, *(fields[k] for k in ("x", "y", "z")),
+               *(fields[k] for k in optional),
+               *(fields[k] for k in orientation if options.method == "world_pose")]
+    factors = np.array(
+        [cells.unit_of(c, "length" if prismatic else "joint")
+         for c, prismatic in zip(mapping.joints, options.prismatic, strict=True)]
+        + [cells.unit_of(fields[k], "length") for k in ("x", "y", "z")]
+        + [cells.unit_of(fields[k], "length") if k == "sigma" else 1.0 for k in optional]
+        + [1.0 if mapping.orientation == "quat" else cells.unit_of(fields[k], "angle")
+           for k in orientation if options.method == "world_pose"])
+    indices = [cells.index[c] for c in columns]
+    sigma_at = ndof + 3 + optional.index("sigma") if "sigma" in optional else None
+    quat_at = ndof + 3 + len(optional) if mapping.orientation == "quat" else None
+    marker_column = fields.get("marker") if options.method == "world_point" else None
+    width = len(header.columns)
+    values = array("d")
+    marker_index = array("q")
+    marker_ids: dict[str, int] = {}
+    for line, row in csv_rows.rows:
+        if len(row) > width:
+            raise InputError(f"{header.source}: row {line}: {len(row)} cells but the header "
+                             f"has {width} columns")
+        numbers = cells.numbers(line, row, columns, indices)
+        if sigma_at is not None and numbers[sigma_at] <= 0:
+            raise InputError(f"{header.source}: row {line}, column {fields['sigma']!r}: "
+                             "sigma must be positive")
+        if quat_at is not None and math.sqrt(sum(v * v for v in numbers[quat_at:])) < 1e-9:
+            raise InputError(f"{header.source}: row {line}, column {fields['qw']!r}: "
+                             "the quaternion is zero")
+        values.extend(numbers)
+        if marker_column is not None:
+            name = cells.text(line, row, marker_column)
+            marker_index.append(marker_ids.setdefault(name, len(marker_ids)))
+    if not values:
+        raise InputError(f"{header.source}: no data rows below the header")
+    table = np.frombuffer(values, dtype=np.float64).reshape(-1, len(columns))
+    at = ndof + 3 + len(optional)
+    scaled = table[:, :at] * factors[:at]
+    sigma = (scaled[:, sigma_at] if sigma_at is not None else np.full(
+        len(table), options.sigma * _unit_factor(options.length_unit, LENGTH_UNITS, "length")))
+    world_pose = options.method == "world_pose"
+    return ImportedSamples(
+        method=options.method, source=header.source,
+        q=scaled[:, :ndof], p=scaled[:, ndof:ndof + 3], sigma=sigma,
+        t=scaled[:, ndof + 3 + optional.index("t")] if "t" in optional else None,
+        rpy=(_rotations_to_rpy(table[:, at:], mapping.orientation, factors[at:])
+             if world_pose else None),
+        sigma_angle=((1e-3 if options.sigma_angle is None else options.sigma_angle
+                      * _unit_factor(options.angle_unit, ANGLE_UNITS, "angle"))
+                     if world_pose else None),
+        marker_index=(np.frombuffer(marker_index, dtype=np.int64)
+                      if marker_column is not None else None),
+        marker_names=tuple(marker_ids),
+    )
+
+
+def document_head(samples: ImportedSamples, options: ImportOptions) -> dict[str, Any]:
+    """The dataset document of ``samples`` without them (``"samples": []``, written by
+    :func:`~hostpc.importing.imported.write_document`): format, method, units, robot,
+    frames (``options.frames``; zero where it gives none), known."""
+    all_frames = dict(options.frames)
+    zero_pose = {"xyz": [0.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]}
+    all_frames.setdefault("world", zero_pose)
+    if samples.method == "world_pose":
+        all_frames.setdefault("tool", dict(zero_pose))
     else:
-        names = list(markers) or ["marker"]
-        frames.setdefault("markers", {name: [0.0, 0.0, 0.0] for name in names})
+        names = list(samples.marker_names) or ["marker"]
+        all_frames.setdefault("markers", {name: [0.0, 0.0, 0.0] for name in names})
     return {
         "format": "zerocal-dataset/1",
-        "method": options.method,
+        "method": samples.method,
         "units": {"length": "m", "angle": "rad", "time": "s"},
         "robot": dict(options.robot),
-        "frames": frames,
+        "frames": all_frames,
         "known": list(options.known),
-        "samples": samples,
-        "source": {"csv": table.source, "rows": len(samples)},
+        "samples": [],
+        "source": {"csv": samples.source, "rows": len(samples)},
     }

@@ -11,23 +11,62 @@ only refines them. Both estimates alternate two closed-form steps until they set
 - world_point (``p_k = W @ F_k @ m``): given the marker ``m``, ``W`` is the
   Kabsch fit of the points ``F_k m`` to ``p_k``; given ``W``, ``m`` is linear least squares.
 
+Both are starting values that the fit refines, so they need not read every sample: an import
+of a million rows reads an evenly strided :data:`GUESS_MAX_SAMPLES` of them (per marker), and
+the hand-eye step compares at most two pose pairs per pose (:func:`hand_eye_pairs`), never
+all N^2/2 of them, so time and memory stay bounded however long the file.
+
 Shapes: ``T_base_flange`` ``(N, 4, 4)``; measured poses ``(N, 4, 4)``; points ``(N, 3)``;
 all in SI units.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from hostpc.errors import InputError
+from hostpc.importing.imported import ImportedSamples
 from hostpc.kinematics.chain import Chain
 
-__all__ = ["guess_world_point", "guess_world_pose", "with_guessed_frames"]
+__all__ = ["GUESS_MAX_SAMPLES", "guess_sample_indices", "guess_world_point",
+           "guess_world_pose", "guessed_frames", "hand_eye_pairs"]
 
 FloatArray = NDArray[np.float64]
+IndexArray = NDArray[np.intp]
+
+#: the most samples the guess reads: 20,000 poses pin a starting value far below any
+#: instrument's noise, and the fit that follows reads every sample
+GUESS_MAX_SAMPLES = 20_000
+_ALL_PAIRS_MAX = 400  # the hand-eye step compares every pose pair up to this many
+
+
+def hand_eye_pairs(n_poses: int) -> tuple[IndexArray, IndexArray]:
+    """Index arrays ``(j, k)`` of the pose pairs the hand-eye step compares: every pair
+    while there are at most 400, else each pose with the next one and with the one half-way
+    round (``2 n_poses`` pairs): linear in the poses, never N^2/2."""
+    if n_poses * (n_poses - 1) // 2 <= _ALL_PAIRS_MAX:
+        first, second = np.triu_indices(n_poses, 1)
+        return first, second
+    k = np.arange(n_poses)
+    return np.concatenate([k, k]), np.concatenate([(k + 1) % n_poses,
+                                                   (k + n_poses // 2) % n_poses])
+
+
+def guess_sample_indices(n_samples: int, marker_index: NDArray[np.int64] | None = None,
+                         limit: int = GUESS_MAX_SAMPLES) -> IndexArray:
+    """Which samples the guess reads: all up to ``limit``, else an even stride through the
+    file, per marker (so that every marker keeps its share, at least 4 samples)."""
+    if n_samples <= limit:
+        return np.arange(n_samples)
+    if marker_index is None:
+        return np.arange(0, n_samples, -(-n_samples // limit))
+    groups = [np.flatnonzero(marker_index == m) for m in np.unique(marker_index)]
+    share = max(limit // len(groups), 4)
+    return np.sort(np.concatenate([g[::max(1, -(-len(g) // share))] for g in groups]))
 
 
 def _project_rotation(M: FloatArray) -> FloatArray:
@@ -50,16 +89,11 @@ def _hand_eye(T_base_flange: FloatArray, T_world_meas: FloatArray) -> FloatArray
     the translation solves ``(R_A - I) t_X = R_X t_B - t_A`` in least squares."""
     from hostpc.kinematics.rotations import matrix_to_rotvec
 
-    N = len(T_base_flange)
-    pairs = [(j, k) for j in range(N) for k in range(j + 1, N)]
-    if len(pairs) > 400:
-        pairs = [(k, (k + step) % N) for step in (1, N // 2) for k in range(N)]
-    F_inv = np.linalg.inv(T_base_flange)
-    M_inv = np.linalg.inv(T_world_meas)
-    A = np.array([F_inv[j] @ T_base_flange[k] for j, k in pairs])
-    B = np.array([M_inv[j] @ T_world_meas[k] for j, k in pairs])
-    alpha = np.array([matrix_to_rotvec(a[:3, :3]) for a in A])
-    beta = np.array([matrix_to_rotvec(b[:3, :3]) for b in B])
+    first, second = hand_eye_pairs(len(T_base_flange))
+    A = np.linalg.inv(T_base_flange)[first] @ T_base_flange[second]
+    B = np.linalg.inv(T_world_meas)[first] @ T_world_meas[second]
+    alpha = matrix_to_rotvec(A[:, :3, :3])
+    beta = matrix_to_rotvec(B[:, :3, :3])
     R_X = _project_rotation(alpha.T @ beta)
     lhs = (A[:, :3, :3] - np.eye(3)).reshape(-1, 3)
     rhs = (B[:, :3, 3] @ R_X.T - A[:, :3, 3]).reshape(-1)
@@ -141,10 +175,11 @@ def _refine_world_point(W: FloatArray, markers: FloatArray, R_bf: FloatArray,
         Rx = x @ W[:3, :3].T
         r = (Rx + W[:3, 3] - points).reshape(-1)
         J = np.zeros((N, 3, 6 + 3 * M))
-        J[:, :, :3] = -np.array([skew(v) for v in Rx])
+        J[:, :, :3] = -skew(Rx)
         J[:, :, 3:6] = np.eye(3)
-        for k in range(N):
-            J[k, :, 6 + 3 * index[k]:9 + 3 * index[k]] = W[:3, :3] @ R_bf[k]
+        dx_dm = W[:3, :3] @ R_bf  # (N, 3, 3): each row's block at its marker's columns
+        for axis in range(3):
+            J[np.arange(N), :, 6 + 3 * index + axis] = dx_dm[:, :, axis]
         step = np.linalg.lstsq(J.reshape(-1, 6 + 3 * M), -r, rcond=None)[0]
         W = W.copy()
         W[:3, :3] = rotvec_to_matrix(step[:3]) @ W[:3, :3]
@@ -162,27 +197,29 @@ def _pose_json(T: FloatArray) -> dict[str, list[float]]:
             "rpy": [float(v) for v in matrix_to_rpy(T[:3, :3])]}
 
 
-def with_guessed_frames(document: dict[str, Any], chain: Chain) -> dict[str, Any]:
-    """A copy of an imported world_point / world_pose document whose nominal ``world``
-    and ``tool`` (or ``markers``) frames are the estimates above (SI document)."""
+def guessed_frames(samples: ImportedSamples, chain: Chain, frames: Mapping[str, Any]
+                   ) -> dict[str, Any]:
+    """``frames`` (a document's, SI) with ``world`` and ``tool`` (world_pose) or ``markers``
+    (world_point, every name of ``frames["markers"]``) set to the estimates above, from at
+    most :data:`GUESS_MAX_SAMPLES` of ``samples``."""
     from hostpc.kinematics import forward
     from hostpc.kinematics.rotations import pose_to_transform
 
-    samples = document["samples"]
-    q = np.array([s["q"] for s in samples], dtype=np.float64)
-    T_base_flange = forward(chain, q).T_base_flange
-    points = np.array([s["p"] for s in samples], dtype=np.float64)
-    frames = dict(document["frames"])
-    if document["method"] == "world_pose":
-        T_meas = np.array([pose_to_transform(p, np.asarray(s["rpy"], float))
-                           for p, s in zip(points, samples, strict=True)])
-        W, X = guess_world_pose(T_base_flange, T_meas)
-        frames["tool"] = _pose_json(X)
+    world_pose = samples.method == "world_pose"
+    pick = guess_sample_indices(len(samples), None if world_pose else samples.marker_index)
+    T_base_flange = forward(chain, np.ascontiguousarray(samples.q[pick])).T_base_flange
+    points = np.ascontiguousarray(samples.p[pick])
+    guessed = dict(frames)
+    if world_pose:
+        assert samples.rpy is not None  # a world_pose import always has orientations
+        W, X = guess_world_pose(T_base_flange, pose_to_transform(points, samples.rpy[pick]))
+        guessed["tool"] = _pose_json(X)
     else:
         names = list(frames["markers"])
-        index = np.array([names.index(s.get("marker", names[0])) for s in samples])
+        index = (np.zeros(len(pick), dtype=np.int64) if samples.marker_index is None
+                 else samples.marker_index[pick])
         W, markers = guess_world_point(T_base_flange, points, index)
-        frames["markers"] = {n: [float(v) for v in m] for n, m in zip(names, markers,
-                                                                      strict=True)}
-    frames["world"] = _pose_json(W)
-    return {**document, "frames": frames}
+        guessed["markers"] = {n: [float(v) for v in m] for n, m in zip(names, markers,
+                                                                       strict=True)}
+    guessed["world"] = _pose_json(W)
+    return guessed

@@ -127,6 +127,14 @@ def names() -> list[str]:
     return sorted(_ROBOTS)
 
 
+def canonical_name(name: str) -> str:
+    """The built-in robot's own spelling of ``name``, matched ignoring case (a PLC writes
+    "UR5e", the CLI "ur5e": one robot model, one name in the archive); any other name (a
+    URDF robot's, a customer's) only stripped."""
+    wanted = name.strip()
+    return next((known for known in _ROBOTS if known.lower() == wanted.lower()), wanted)
+
+
 def get_robot(name: str) -> Chain:
     """The built-in robot ``name`` (see :func:`names`).
 

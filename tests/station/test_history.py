@@ -70,7 +70,10 @@ def test_history_raises_the_drift_alarm_on_the_drifting_joint(tmp_path: Path,
 
 
 def test_history_html_to_a_bad_path_is_one_line_exit_2(tmp_path: Path) -> None:
+    from hostpc.archive import open_archive
+
     db = f"sqlite:///{tmp_path / 'archive.db'}"
+    open_archive(db).close()  # an (empty) archive: history reads, never creates one
     for target in (tmp_path / "missing" / "h.html", tmp_path):
         run = subprocess.run(hostpc_command("history", "--db", db, "--html", str(target)),
                              cwd=REPO, capture_output=True, text=True, timeout=120)
