@@ -32,6 +32,7 @@ from hostpc.importing.csv_import import (
     read_csv_rows,
 )
 from hostpc.importing.frame_guess import with_guessed_frames
+from hostpc.input_files import CSV, check_input_file
 from hostpc.kinematics import Chain
 
 
@@ -108,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
     output = Path(args.output)
     robot, chain = _robot(args, output)
     prismatic = tuple(bool(p) for p in chain.joint_is_prismatic)
+    check_input_file(args.csv, CSV)  # a regular file (no FIFO, device) within the CSV limit
     try:
         text = Path(args.csv).read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:

@@ -107,8 +107,8 @@ def test_push_refuses_a_fit_of_another_robot(tmp_path: Path, capsys, fit_file) -
 @pytest.mark.parametrize(("content", "message"), [
     ("{", "not valid JSON"),
     ('{"parameters": {}}', "no 'converged'"),
-    ('{"parameters": {"tool.x": {"value": 0.1}}, "converged": true, "chi2": 1, "dof": 3}',
-     "no joint_offsets"),
+    ('{"parameters": {"tool.x": {"value": 0.1, "fixed": false}}, "converged": true, '
+     '"chi2": 1, "dof": 3}', "no joint_offsets"),
     ('{"parameters": {"joint_offsets.q1": {"value": "x"}}, "converged": true, "chi2": 1,'
      ' "dof": 3}', "joint_offsets.q1.value"),
 ])
