@@ -23,10 +23,10 @@ from typing import Any
 
 import numpy as np
 
-from hostpc.calibrate.fit_file import parse_fit_text, validate_fit_document
+from hostpc.calibrate.fit_file import REMEDY, parse_fit_text, validate_fit_document
 from hostpc.errors import InputError
 from hostpc.fitting.identifiability import NullDirection
-from hostpc.input_files import FIT, read_input_text
+from hostpc.input_files import FIT, read_input_bytes, read_input_text
 
 __all__ = ["SavedFit", "already_pushed", "ledger_path", "load_saved_fit", "record_push"]
 
@@ -97,7 +97,11 @@ def load_saved_fit(path: str | Path) -> SavedFit:
     """Read FIT.json (the output of `hostpc fit --json`): a regular file within the fit size
     limit (`hostpc.input_files`), then validated; InputError naming the file and field."""
     source = str(path)
-    text = read_input_text(path, FIT, source)
+    data = read_input_bytes(path, FIT, source)
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{source}: not UTF-8 text (byte {exc.start}); {REMEDY}") from None
     return saved_fit_from_dict(parse_fit_text(text, source), source)
 
 

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 DUPLICATE = "__duplicate_key__"
+DEEP = "__deeply_nested__"
 
 
 def _paths(value: Any, path: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
@@ -72,7 +73,8 @@ def mutate_document(document: Any, rng: np.random.Generator) -> str:
         text = json.dumps(damaged)
         return text.replace(json.dumps(DUPLICATE), json.dumps(key), 1)
     elif action == 2:
-        parent[key] = json.loads("[" * 3000 + "]" * 3000)
+        parent[key] = DEEP
+        return json.dumps(damaged).replace(json.dumps(DEEP), "[" * 3000 + "]" * 3000, 1)
     elif action == 3 and isinstance(parent[key], list) and parent[key]:
         parent[key] = parent[key][: int(rng.integers(len(parent[key])))]
     else:

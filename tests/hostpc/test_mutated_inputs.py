@@ -10,9 +10,10 @@ a traceback or a hang fails the test naming the input's index (rerun: same seed)
 
 Mutated fit files are pushed for real (`hostpc push`) to a controller-stub on 127.0.0.1: a
 push that goes ahead must leave the controller holding exactly the file's corrections (the
-free joint offsets added, the held ones unchanged); a refused push must leave it untouched.
+free joint offsets added, the held ones unchanged), and is rolled back; a refused push must
+leave it untouched.
 
-The default run feeds 880 inputs (about a minute); the slow variant ten times as many.
+The default run feeds 1100 inputs (about 15 s); the slow variant ten times as many.
 """
 
 from __future__ import annotations
@@ -43,9 +44,9 @@ PLUGIN_FILE = Path(__file__).with_name("distance_sensor_plugin.py")
 COLUMNS = "q=shoulder_pan_joint:wrist_3_joint,x=x1,y=y1,z=z1,roll=phix1,pitch=phiy1,yaw=phiz1"
 TIME_BOUND_S = 20.0
 """Longest a single command may take on a damaged file (a hang fails the test)."""
-COUNTS = {"dataset": 240, "rig_dataset": 80, "fit": 260, "csv": 120, "urdf": 120,
+COUNTS = {"dataset": 300, "rig_dataset": 100, "fit": 400, "csv": 120, "urdf": 120,
           "plugin": 60}
-"""Inputs per kind in the default run: 880 in all."""
+"""Inputs per kind in the default run: 1100 in all."""
 SLOW_FACTOR = 10
 
 
@@ -278,6 +279,12 @@ def test_mutated_fit_files_are_refused_or_pushed_exactly(
                                                    atol=1e-12):
                 why = (f"exit {outcome.code}: the controller moved by {after - before}, "
                        f"the file says {expected}")
+            elif outcome.code == 0:  # undo it: the stub refuses offsets 5 deg from its own
+                undo = run_cli(["rollback", "--run", str(tmp_path / f"push-{index}")])
+                restored = np.asarray(controller.truth()["zero_offsets"], float)
+                if problem(undo, {0}) is not None or not np.allclose(restored, before,
+                                                                     rtol=0, atol=1e-12):
+                    why = f"the rollback failed: {undo}"
         if why is not None:
             failures.append(f"fit #{index}: {why}")
     assert not failures, "\n".join(failures)
