@@ -19,6 +19,7 @@ from types import ModuleType
 from typing import Any
 
 from hostpc.errors import EffectError
+from hostpc.input_files import PLUGIN, check_input_file
 
 _MODULES: dict[str, ModuleType] = {}
 
@@ -26,8 +27,9 @@ _MODULES: dict[str, ModuleType] = {}
 def import_plugin_file(path: str | os.PathLike[str]) -> ModuleType:
     """Import a Python file once (cached by its resolved path); EffectError in one line."""
     path = Path(path)
-    if not path.is_file():
+    if not os.path.lexists(path):
         raise EffectError(f"plugin {path}: no such file")
+    check_input_file(path, PLUGIN, f"plugin {path}")  # a regular file within its size limit
     key = str(path.resolve())
     if key in _MODULES:
         return _MODULES[key]

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,8 +23,10 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.calibrate.fit_file import REMEDY, parse_fit_text, validate_fit_document
 from hostpc.errors import InputError
 from hostpc.fitting.identifiability import NullDirection
+from hostpc.input_files import FIT, read_input_bytes, read_input_text
 
 __all__ = ["SavedFit", "already_pushed", "ledger_path", "load_saved_fit", "record_push"]
 
@@ -57,86 +60,49 @@ class SavedFit:
 
     @property
     def problem(self) -> Any:
-        """What plan_push reads of the problem: the joint labels (q1..qn)."""
-        return SimpleNamespace(context=SimpleNamespace(joint_labels=()))
+        """What plan_push reads of the problem: the joint labels (q1..qn, or a kinematic
+        tree's head.q1, ...), from the names of the fit's joint offsets."""
+        labels = tuple(name.split(".", 1)[1] for name in self.joint_offsets())
+        return SimpleNamespace(context=SimpleNamespace(joint_labels=labels))
 
     def joint_offsets(self) -> list[str]:
         """The joint-offset parameters of the fit, in order."""
         return [n for n in self.names if n.startswith("joint_offsets.")]
 
 
-def _number(value: Any, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise InputError(f"{where}: expected a number, got {value!r}")
-    return float(value)
-
-
-def _finite(value: Any, where: str) -> float:
-    number = _number(value, where)
-    if not math.isfinite(number):
-        raise InputError(f"{where}: expected a finite number, got {value!r}")
-    return number
-
-
 def saved_fit_from_dict(document: Any, source: str) -> SavedFit:
-    """Rebuild a SavedFit from `FitResult.to_dict()`; InputError naming the field."""
-    if not isinstance(document, Mapping):
-        raise InputError(f"{source}: expected a JSON object (the output of hostpc fit --json)")
-    for key in ("parameters", "converged", "chi2", "dof"):
-        if key not in document:
-            raise InputError(f"{source}: no {key!r}: not the output of `hostpc fit --json`")
-    parameters = document["parameters"]
-    if not isinstance(parameters, Mapping) or not parameters:
-        raise InputError(f"{source}: parameters: expected a non-empty object")
-    names, x, std, fixed = [], [], [], []
-    for name, p in parameters.items():
-        where = f"{source}: parameters.{name}"
-        if not isinstance(p, Mapping) or "value" not in p:
-            raise InputError(f"{where}: expected {{value, std, fixed}}")
-        names.append(str(name))
-        x.append(_number(p["value"], f"{where}.value"))
-        held = bool(p.get("fixed", False))
-        fixed.append(held)
-        std.append(math.nan if held or p.get("std") is None
-                   else _number(p["std"], f"{where}.std"))
-    directions = []
-    for k, d in enumerate(document.get("unidentifiable") or []):
-        if not isinstance(d, Mapping) or "fixed" not in d:
-            raise InputError(f"{source}: unidentifiable[{k}]: expected {{fixed, parameters}}")
-        directions.append(NullDirection(
-            fixed=str(d["fixed"]), parameters=tuple(map(str, d.get("parameters", []))),
-            coefficients=tuple(float(c) for c in d.get("coefficients", [])),
-            description=str(d.get("description", ""))))
-    if not any(n.startswith("joint_offsets.") for n in names):
-        raise InputError(f"{source}: the fit has no joint_offsets parameters: nothing to push")
+    """Rebuild a SavedFit from `FitResult.to_dict()`, validated first
+    (`hostpc.calibrate.fit_file`: strict types, finite statistics, consistent fields, the
+    robot's joint count); InputError naming the field."""
+    fit = validate_fit_document(document, source)
+    names = tuple(fit.parameters)
+    entries = list(fit.parameters.values())
     return SavedFit(
-        names=tuple(names), x=np.array(x), std=np.array(std), fixed=np.array(fixed),
-        unidentifiable=tuple(directions), converged=bool(document["converged"]),
-        message=str(document.get("message", "")),
-        chi2=_number(document["chi2"], f"{source}: chi2"),
-        dof=int(_number(document["dof"], f"{source}: dof")), source=source,
-        method=str(document.get("method", "")),
-        effects=tuple(map(str, document.get("effects", []))),
-        robot=str(document.get("robot") or ""),
-        chi2_dof_with_calibration=(
-            None if document.get("chi2_dof_with_calibration") is None
-            else _finite(document["chi2_dof_with_calibration"],
-                         f"{source}: chi2_dof_with_calibration")),
+        names=names,
+        x=np.array([p.value for p in entries], dtype=float),
+        std=np.array([math.nan if p.fixed or p.std is None else p.std for p in entries],
+                     dtype=float),
+        fixed=np.array([p.fixed for p in entries], dtype=bool),
+        unidentifiable=tuple(
+            NullDirection(fixed=d.fixed, parameters=tuple(d.parameters),
+                          coefficients=tuple(d.coefficients), description=d.description)
+            for d in fit.unidentifiable),
+        converged=fit.converged, message=fit.message, chi2=fit.chi2, dof=fit.dof,
+        source=source, method=fit.method, effects=tuple(fit.effects), robot=fit.robot or "",
+        chi2_dof_with_calibration=fit.chi2_dof_with_calibration,
     )
 
 
 def load_saved_fit(path: str | Path) -> SavedFit:
-    """Read FIT.json (the output of `hostpc fit --json`); InputError naming the file."""
+    """Read FIT.json (the output of `hostpc fit --json`): a regular file within the fit size
+    limit (`hostpc.input_files`), then validated; InputError naming the file and field."""
     source = str(path)
+    data = read_input_bytes(path, FIT, source)
     try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"{source}: cannot read ({exc.strerror or exc})") from None
-    try:
-        document = json.loads(text)
-    except ValueError as exc:
-        raise InputError(f"{source}: not valid JSON ({exc})") from None
-    return saved_fit_from_dict(document, source)
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{source}: not UTF-8 text (byte {exc.start}); {REMEDY}") from None
+    return saved_fit_from_dict(parse_fit_text(text, source), source)
 
 
 LEDGER_SUFFIX = ".pushes.jsonl"
@@ -152,21 +118,24 @@ def ledger_path(fit_path: str | Path) -> Path:
 
 def _ledger_entries(fit_path: str | Path) -> list[dict[str, Any]]:
     path = ledger_path(fit_path)
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except FileNotFoundError:
+    if not os.path.lexists(path):
         return []
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
     entries = []
-    for line in lines:
+    for line in read_input_text(path, FIT).splitlines():  # a regular file, bounded
         try:
             entry = json.loads(line)
-        except ValueError:
+        except (ValueError, RecursionError):
             continue  # a line cut by a crash: the others still count
-        if isinstance(entry, Mapping) and isinstance(entry.get("after"), list):
+        if isinstance(entry, Mapping) and _offsets_list(entry.get("after")):
             entries.append(dict(entry))
     return entries
+
+
+def _offsets_list(value: Any) -> bool:
+    """True for a list of finite numbers (a ledger entry's offsets, rad)."""
+    return isinstance(value, list) and all(
+        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+        for v in value)
 
 
 def already_pushed(fit_path: str | Path, offsets: np.ndarray) -> dict[str, Any] | None:

@@ -33,6 +33,7 @@ from hostpc.importing.csv_import import (
 from hostpc.importing.csv_table import read_csv
 from hostpc.importing.frame_guess import guessed_frames
 from hostpc.importing.imported import ImportedSamples, write_document
+from hostpc.input_files import CSV, check_input_file
 from hostpc.kinematics import Chain
 
 
@@ -109,6 +110,7 @@ def run(args: argparse.Namespace) -> int:
     output = Path(args.output)
     robot, chain = _robot(args, output)
     prismatic = tuple(bool(p) for p in chain.joint_is_prismatic)
+    check_input_file(args.csv, CSV)  # a regular file (no FIFO, device) within the CSV limit
     options = ImportOptions(
         method=args.method, robot=robot, prismatic=prismatic, length_unit=args.length_unit,
         angle_unit=args.angle_unit, joint_unit=args.joint_unit,

@@ -135,7 +135,9 @@ async def _push(args: argparse.Namespace, saved: SavedFit, address: RobotAddress
         n_fit = len(saved.joint_offsets())
         if n_fit != offsets.size:
             raise InputError(f"{args.fit}: the fit has {n_fit} joint offsets, the controller "
-                             f"at {address} has {offsets.size} joints")
+                             f"at {address} has {offsets.size} joints (nothing written); "
+                             f"push it to the robot it was measured on: `hostpc push "
+                             f"{args.fit} --robot HOST`")
         if not args.force:
             await _check_same_robot_and_not_pushed(robot, saved, args.fit, address, offsets)
         plan = plan_push(saved, offsets, args.max_correction,  # type: ignore[arg-type]

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from hostpc.errors import InputError
+from hostpc.input_files import CONFIG, read_input_text
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -36,11 +37,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 
 def read_json(path: Path, what: str) -> dict[str, Any]:
     """A JSON object from ``path``; InputError naming the file otherwise."""
+    if not path.exists():
+        raise InputError(f"{path}: no {what} here")
     try:
-        document = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"{path}: no {what} here") from None
-    except (OSError, ValueError) as exc:
+        document = json.loads(read_input_text(path, CONFIG))  # regular file, bounded
+    except (OSError, ValueError, RecursionError) as exc:
         raise InputError(f"{path}: cannot read the {what}: {exc}") from exc
     if not isinstance(document, dict):
         raise InputError(f"{path}: the {what} is not a JSON object")

@@ -122,13 +122,12 @@ def load_dataset_with_robot(path: str, robot: dict[str, Any], **options: Any) ->
     """Read the dataset file at `path` with its `robot` replaced by `robot` (from
     `robot_document`); DatasetError naming the file for a bad file or a joint-count
     mismatch. `options` pass through to `dataset_from_dict`."""
-    from pathlib import Path
-
     from hostpc.dataset import dataset_from_dict, load_dataset
     from hostpc.errors import DatasetError
+    from hostpc.input_files import DATASET, read_input_text
 
     load_dataset(path)  # the file as it is: readable, valid JSON, a valid dataset
-    document = json.loads(Path(path).read_text(encoding="utf-8-sig"))
+    document = json.loads(read_input_text(path, DATASET, encoding="utf-8-sig"))
     replacement = {k: v for k, v in robot.items() if not k.startswith("_")}
     q = [s.get("q") for s in document.get("samples", []) if isinstance(s, dict)]
     if q and isinstance(q[0], list) and len(q[0]) != robot["_n"]:

@@ -6,7 +6,9 @@ beyond that, so that a damaged or malicious file is refused at load with one lin
 file, the sample and the field instead of overflowing inside the solver:
 
 - ``read_dataset_bytes``: a size limit (``ZEROCAL_MAX_DATASET_MB``, default 512 MB); a
-  device (``/dev/zero``) is refused at once, a pipe is read up to the limit only.
+  device (``/dev/zero``), a FIFO or a directory is refused at once (``hostpc.input_files``).
+- ``rig_block.check_rig_uncertainty`` (called by ``check_dataset``): the ``rig_uncertainty``
+  block (the rig's calibration covariance the push guard's chi2 includes) well formed.
 - ``check_dataset``: every number (in SI, after unit conversion) within a physical range:
   positions below ``MAX_POSITION_M``, angles below ``MAX_ANGLE_RAD``, covariance standard
   deviations (square roots of the eigenvalues) between ``MIN_STD_M`` and ``MAX_STD_M``, and,
@@ -18,18 +20,18 @@ Both raise ``hostpc.errors.DatasetError`` (CLI exit code 2).
 from __future__ import annotations
 
 import os
-import stat
 from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
 
 from hostpc.dataset.model import Dataset, FramePose, SphereFrame
-from hostpc.errors import DatasetError, InputError
+from hostpc.dataset.rig_block import BLOCK, check_rig_uncertainty
+from hostpc.errors import DatasetError
+from hostpc.input_files import DATASET, read_input_bytes
 
-MAX_DATASET_MB_ENV = "ZEROCAL_MAX_DATASET_MB"
-DEFAULT_MAX_DATASET_MB = 512.0
-READ_CHUNK = 1 << 20
+MAX_DATASET_MB_ENV = DATASET.env  # ZEROCAL_MAX_DATASET_MB
+DEFAULT_MAX_DATASET_MB = DATASET.default_mb
 
 MAX_POSITION_M = 100.0
 """Largest coordinate or length (m): no robot cell is larger."""
@@ -49,56 +51,17 @@ MAX_ABS_CONTEXT = 1e9
 
 def max_dataset_bytes() -> int:
     """The size limit of a dataset file in bytes ($ZEROCAL_MAX_DATASET_MB, default 512)."""
-    text = os.environ.get(MAX_DATASET_MB_ENV)
-    if text is None or not text.strip():
-        return int(DEFAULT_MAX_DATASET_MB * 1e6)
-    try:
-        megabytes = float(text)
-    except ValueError:
-        megabytes = float("nan")
-    if not (np.isfinite(megabytes) and megabytes > 0):
-        raise InputError(f"${MAX_DATASET_MB_ENV}={text!r}: expected a positive number of MB")
-    return int(megabytes * 1e6)
+    return DATASET.limit_bytes()
 
 
 def read_dataset_bytes(path: str | os.PathLike[str]) -> bytes:
-    """The bytes of a dataset file, refusing what is too large or not a file.
+    """The bytes of a dataset file, refusing what is too large or not a regular file.
 
-    Raises DatasetError (one line naming the file): missing, a directory, a device, larger
-    than the limit (a pipe: read up to the limit, then refused), unreadable.
+    Raises DatasetError (one line naming the file): missing, a directory, a device, a FIFO,
+    larger than the limit, unreadable (`hostpc.input_files`, the opening every input file
+    shares).
     """
-    source = os.fspath(path)
-    limit = max_dataset_bytes()
-    try:
-        with open(path, "rb") as handle:
-            mode = os.fstat(handle.fileno()).st_mode
-            if stat.S_ISDIR(mode):
-                raise DatasetError(f"{source}: is a directory, not a dataset file")
-            if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) or stat.S_ISSOCK(mode):
-                raise DatasetError(f"{source}: not a regular file (a device); give a dataset file")
-            if stat.S_ISREG(mode):
-                size = os.fstat(handle.fileno()).st_size
-                if size > limit:
-                    raise DatasetError(_too_large(source, size, limit))
-                return handle.read(limit + 1)
-            data = bytearray()  # a pipe: no size known, read no more than the limit
-            while chunk := handle.read(READ_CHUNK):
-                data += chunk
-                if len(data) > limit:
-                    raise DatasetError(_too_large(source, None, limit))
-            return bytes(data)
-    except FileNotFoundError as exc:
-        raise DatasetError(f"{source}: file not found") from exc
-    except IsADirectoryError as exc:
-        raise DatasetError(f"{source}: is a directory, not a dataset file") from exc
-    except OSError as exc:
-        raise DatasetError(f"{source}: cannot read file ({exc.strerror or exc})") from exc
-
-
-def _too_large(source: str, size: int | None, limit: int) -> str:
-    what = f"{size / 1e6:.1f} MB" if size is not None else "more than that"
-    return (f"{source}: {what}, above the dataset size limit of {limit / 1e6:g} MB "
-            f"(set ${MAX_DATASET_MB_ENV} to raise it)")
+    return read_input_bytes(path, DATASET)
 
 
 def check_dataset(dataset: Dataset, source: str = "<dataset>") -> Dataset:
@@ -114,6 +77,8 @@ def check_dataset(dataset: Dataset, source: str = "<dataset>") -> Dataset:
                                f"range (|value| < {limit:g} {unit})")
     _check_covariances(dataset, source)
     _check_dual_loop_robot(dataset, source)
+    if BLOCK in dataset.extra_fields:
+        check_rig_uncertainty(dataset.extra_fields[BLOCK], source)
     return dataset
 
 

@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hostpc.errors import InputError
+from hostpc.input_files import URDF, read_input_text
 from hostpc.kinematics.chain import Chain
 from hostpc.kinematics.rotations import pose_to_transform
 from hostpc.kinematics.tables import chain_from_table
@@ -78,6 +79,15 @@ class UrdfRobot:
     links: tuple[str, ...]
 
 
+MAX_ORIGIN_M = 100.0
+"""Largest joint or inertial origin coordinate (m): no robot is larger (as a dataset's
+positions, hostpc.dataset.validation.MAX_POSITION_M)."""
+MAX_ORIGIN_RAD = 100.0
+"""Largest origin roll, pitch or yaw (rad)."""
+MAX_LINK_MASS_KG = 1e6
+"""Largest link mass (kg): no robot link weighs more; a larger value is a typo."""
+
+
 def _floats(text: str | None, count: int, where: str, default: list[float]) -> list[float]:
     if text is None:
         return default
@@ -97,6 +107,11 @@ def _origin(element: ET.Element, where: str) -> FloatArray:
         return np.eye(4)
     xyz = _floats(origin.get("xyz"), 3, f"{where} origin xyz", [0.0, 0.0, 0.0])
     rpy = _floats(origin.get("rpy"), 3, f"{where} origin rpy", [0.0, 0.0, 0.0])
+    for name, values, limit, unit in (("xyz", xyz, MAX_ORIGIN_M, "m"),
+                                      ("rpy", rpy, MAX_ORIGIN_RAD, "rad")):
+        if any(abs(v) > limit for v in values):
+            raise InputError(f"{where} origin {name}: {origin.get(name)!r} is outside the "
+                             f"physical range (|value| <= {limit:g} {unit})")
     return pose_to_transform(np.array(xyz), np.array(rpy))
 
 
@@ -122,8 +137,9 @@ def parse_urdf(text: str, source: str = "URDF") -> UrdfRobot:
         where = f"{source}: link {name!r} inertial"
         mass = _floats(None if mass_el is None else mass_el.get("value"), 1, f"{where} mass",
                        [0.0])[0]
-        if mass < 0:
-            raise InputError(f"{where} mass: must be >= 0, got {mass}")
+        if not 0 <= mass <= MAX_LINK_MASS_KG:
+            raise InputError(f"{where} mass: must be in [0, {MAX_LINK_MASS_KG:g}] kg, "
+                             f"got {mass}")
         inertials[name] = (mass, _origin(inertial, where)[:3, 3])
     joints: dict[str, UrdfJoint] = {}
     for joint in root.findall("joint"):
@@ -138,6 +154,8 @@ def parse_urdf(text: str, source: str = "URDF") -> UrdfRobot:
         axis: FloatArray = np.array(_floats(axis_text, 3, f"{where} axis", [1.0, 0.0, 0.0]),
                                     dtype=np.float64)
         norm = float(np.linalg.norm(axis))
+        if not math.isfinite(norm):
+            raise InputError(f"{where} axis: {axis_text!r} is too large a vector")
         if kind in _MOVABLE and norm < 1e-12:
             raise InputError(f"{where} axis: zero vector")
         limit = joint.find("limit")
@@ -358,9 +376,5 @@ def load_urdf_chain(path: str | os.PathLike[str], base_link: str, tip_link: str)
         InputError: unreadable file, malformed URDF, unknown or unconnected links.
     """
     source = os.fspath(path)
-    try:
-        with open(source, encoding="utf-8") as handle:
-            text = handle.read()
-    except OSError as exc:
-        raise InputError(f"{source}: cannot read URDF ({exc.strerror or exc})") from None
+    text = read_input_text(path, URDF, source)  # a regular file within the URDF size limit
     return chain_from_urdf(parse_urdf(text, source), base_link, tip_link, source)

@@ -32,6 +32,7 @@ import numpy as np
 
 from hostpc.dataset import FramePose
 from hostpc.errors import InputError
+from hostpc.input_files import CONFIG, read_input_text
 
 FRAME_NAMES = ("tool", "target", "sphere", "base", "camera", "left_base", "right_base",
                "left_target", "right_target", "world", "markers")
@@ -113,7 +114,7 @@ def load_cell_file(path: str | Path) -> dict[str, Any]:
     """Read a --cell JSON file as a mapping; InputError naming the file if unreadable."""
     path = Path(path)
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = json.loads(read_input_text(path, CONFIG, f"--cell {path}"))
     except OSError as exc:
         raise InputError(f"--cell {path}: cannot read ({exc.strerror})") from None
     except ValueError as exc:

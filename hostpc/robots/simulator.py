@@ -44,6 +44,7 @@ from typing import IO, Any
 import yaml
 
 from hostpc.errors import ConnectionFailed, InputError
+from hostpc.input_files import CONFIG, read_input_text
 from hostpc.robots.connect import TOKEN_ENV, RobotAddress, resolve_token
 
 
@@ -131,8 +132,8 @@ def load_scenario_file(path: str | Path, time_scale: float | None = 0.0) -> dict
     """A user's scenario file (YAML/JSON) as a mapping, with the motion time scale set
     (None keeps the file's). InputError naming the file if it cannot be read."""
     path = Path(path)
+    text = read_input_text(path, CONFIG, f"--scenario {path}")  # regular file, bounded
     try:
-        text = path.read_text(encoding="utf-8")
         data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
     except (OSError, ValueError, yaml.YAMLError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__

@@ -28,6 +28,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from hostpc.errors import InputError
+from hostpc.input_files import CONFIG, read_input_text
 
 
 class _Strict(BaseModel):
@@ -84,7 +85,7 @@ def load_station_config(path: str | Path, overrides: dict[str, Any] | None = Non
     """Read and validate a station config; `overrides` (from the command line) win."""
     file = Path(path)
     try:
-        data = yaml.safe_load(file.read_text())
+        data = yaml.safe_load(read_input_text(file, CONFIG))  # regular file, bounded
     except (OSError, yaml.YAMLError) as exc:
         raise InputError(f"{file}: cannot read station config ({str(exc).splitlines()[0]})"
                          ) from None

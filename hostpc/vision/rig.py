@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.errors import InputError
+from hostpc.input_files import RIG, read_input_text
 
 RIG_FORMAT = "zerocal-stereo-rig"
 RIG_VERSION = 1
@@ -193,10 +194,7 @@ def save_rig(rig: StereoRig, path: str | Path) -> None:
 def load_rig(path: str | Path) -> StereoRig:
     """Read a rig JSON file; InputError (one line naming the file and field) on any problem."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read rig file ({exc.strerror})") from None
+    text = read_input_text(path, RIG)  # a regular file within the rig size limit
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:

@@ -104,11 +104,31 @@ def test_push_refuses_a_fit_of_another_robot(tmp_path: Path, capsys, fit_file) -
         assert code == 0, stderr
 
 
+def test_push_refuses_a_fit_with_another_joint_count(tmp_path: Path, capsys, fit_file) -> None:
+    """Even with --force: 7 joint offsets cannot go to a 6-joint controller (exit 2)."""
+    path, _ = fit_file
+    document = json.loads(path.read_text())
+    document["robot"] = None  # a URDF robot's fit names none: the count is all there is
+    document["parameters"]["joint_offsets.q7"] = {"value": 1e-3, "std": 1e-4, "unit": "rad",
+                                                  "fixed": False}
+    document["n_parameters"] += 1
+    other = tmp_path / "seven.json"
+    other.write_text(json.dumps(document))
+    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:
+        address = f"{sim.address.host}:{sim.address.port}"
+        before = _offsets(sim)
+        code, _, stderr = run_cli(capsys, "push", str(other), "--robot", address,
+                                  "--token", TOKEN, "--force", "--out", str(tmp_path / "p"))
+        assert code == 2, stderr
+        assert f"the fit has 7 joint offsets, the controller at {address} has 6" in stderr
+        assert np.array_equal(_offsets(sim), before) and not (tmp_path / "p").exists()
+
+
 @pytest.mark.parametrize(("content", "message"), [
     ("{", "not valid JSON"),
     ('{"parameters": {}}', "no 'converged'"),
-    ('{"parameters": {"tool.x": {"value": 0.1}}, "converged": true, "chi2": 1, "dof": 3}',
-     "no joint_offsets"),
+    ('{"parameters": {"tool.x": {"value": 0.1, "fixed": false}}, "converged": true, '
+     '"chi2": 1, "dof": 3}', "no joint_offsets"),
     ('{"parameters": {"joint_offsets.q1": {"value": "x"}}, "converged": true, "chi2": 1,'
      ' "dof": 3}', "joint_offsets.q1.value"),
 ])

@@ -1,0 +1,294 @@
+"""FIT.json, the output of `hostpc fit --json` (`FitResult.to_dict`), validated at the file
+edge before any guard rail reads it.
+
+`hostpc push FIT.json` writes a controller from this file, so nothing in it is trusted:
+
+- the JSON itself: UTF-8, no duplicated key at any level (the second would silently win),
+  no NaN / Infinity literal, no integer with thousands of digits, not nested without end;
+- strict types (pydantic, strict mode): booleans are JSON booleans (``"false"`` is not
+  false), numbers are JSON numbers (``"0.1"`` is not a number), integers are integers;
+- every statistic finite and in range: ``chi2 >= 0``, ``dof > 0`` (a fit without degrees
+  of freedom cannot be judged), ``chi2_dof`` equal to chi2 / dof, values, standard
+  deviations (>= 0), ``chi2_dof_with_calibration``, rms, correlations in [-1, 1];
+- consistency: a fixed parameter has no standard deviation (the writer writes null; 0 is
+  accepted), ``n_parameters`` counts the parameters, every parameter belongs to one of the
+  ``effects``, each held null direction names a fixed parameter of the file and one
+  coefficient per participant, the joint offsets are ``q1..qn`` in order (or a kinematic
+  tree's ``chain.qk`` labels), a joint offset is below half a turn (rad; 100 m for a
+  prismatic joint);
+- the robot: a fit of a built-in robot carries one joint offset per joint of that robot
+  (the push then compares the robot's name, a guard rail, and the joint count, always,
+  with the controller's).
+
+A bad file raises InputError (CLI exit code 2) with one line naming the file and the field,
+ending with the command that makes a good one.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from typing import Annotated, Any
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    StrictBool,
+    StrictInt,
+    StrictStr,
+    ValidationError,
+)
+
+from hostpc.errors import InputError
+
+MAX_JOINT_OFFSET_RAD = math.pi
+"""Largest joint offset a fit can hold (rad): a zero offset is corrected by degrees."""
+MAX_JOINT_OFFSET_M = 100.0
+"""Largest offset of a prismatic joint (m)."""
+MAX_PARAMETER = 1e6
+"""Largest magnitude of any other parameter (SI): a delta from nominal, never that large."""
+RELATIVE_TOLERANCE = 1e-9
+"""How closely chi2_dof must equal chi2 / dof (JSON round trip of a float)."""
+REMEDY = "make it again with `hostpc fit DATASET --json > FIT.json`"
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(allow_inf_nan=False, ge=0.0)]
+Count = Annotated[int, Field(strict=True, ge=0)]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(strict=True, extra="ignore", frozen=True)
+
+
+class ParameterEntry(_Strict):
+    """One parameter: value (SI delta from nominal), std (null where held), unit, fixed."""
+
+    value: Finite
+    std: NonNegative | None = None
+    unit: StrictStr = ""
+    fixed: StrictBool
+
+
+class NullDirectionEntry(_Strict):
+    """A held null direction: the parameter held and the combination it belongs to."""
+
+    fixed: StrictStr
+    parameters: list[StrictStr]
+    coefficients: list[Finite]
+    description: StrictStr = ""
+
+
+class CorrelationEntry(_Strict):
+    """A strong correlation between two parameters."""
+
+    a: StrictStr
+    b: StrictStr
+    rho: Annotated[float, Field(allow_inf_nan=False, ge=-1.0 - 1e-9, le=1.0 + 1e-9)]
+
+
+class FitDocument(_Strict):
+    """The fields of `FitResult.to_dict` (hostpc/fitting/result.py); unknown keys ignored.
+    Required: what the push reads (parameters, chi2, dof, converged)."""
+
+    method: StrictStr = ""
+    robot: StrictStr | None = None
+    effects: list[StrictStr] = []
+    parameters: Annotated[dict[StrictStr, ParameterEntry], Field(min_length=1)]
+    rms: NonNegative | None = None
+    max: NonNegative | None = None
+    chi2: NonNegative
+    dof: StrictInt
+    chi2_dof: NonNegative | None = None
+    converged: StrictBool
+    iterations: Count | None = None
+    message: StrictStr = ""
+    rank: Count | None = None
+    n_parameters: Count | None = None
+    n_samples: Count | None = None
+    singular_values: list[NonNegative] = []
+    condition_number: NonNegative | None = None
+    unidentifiable: list[NullDirectionEntry] = []
+    correlations: list[CorrelationEntry] = []
+    cv_rms: NonNegative | None = None
+    cv_folds: Count | None = None
+    loss: StrictStr = ""
+    chi2_dof_with_calibration: NonNegative | None = None
+
+
+class _Refused(ValueError):
+    """A JSON text refused by the parser hooks (duplicated key, non-finite literal)."""
+
+
+def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    result: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in result:
+            raise _Refused(f"key {key!r} appears twice in one object")
+        result[key] = value
+    return result
+
+
+def _no_constant(token: str) -> Any:
+    raise _Refused(f"{token} is not a number JSON allows")
+
+
+def parse_fit_text(text: str, source: str) -> Any:
+    """The JSON document of FIT.json; InputError for anything `json` would bend."""
+    try:
+        return json.loads(text, object_pairs_hook=_no_duplicates, parse_constant=_no_constant)
+    except _Refused as exc:
+        raise InputError(f"{source}: {exc}; {REMEDY}") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{source}: not valid JSON (line {exc.lineno}, column {exc.colno}: "
+                         f"{exc.msg}); {REMEDY}") from None
+    except RecursionError:
+        raise InputError(f"{source}: not valid JSON (nested too deeply); {REMEDY}") from None
+    except ValueError as exc:  # an integer literal with thousands of digits
+        raise InputError(f"{source}: not valid JSON ({exc}); {REMEDY}") from None
+
+
+_EXPECTED = {
+    "finite_number": "expected a finite number",
+    "float_type": "expected a finite number (a JSON number, not a string)",
+    "int_type": "expected an integer (a JSON number without a fraction)",
+    "bool_type": "expected true or false (a JSON boolean, not a string)",
+    "string_type": "expected a string",
+    "dict_type": "expected an object",
+    "list_type": "expected a list",
+    "missing": "required field missing",
+    "too_short": "expected at least one entry",
+}
+"""How a pydantic error type reads in the one-line message."""
+
+
+def _field(loc: tuple[int | str, ...]) -> str:
+    text = ""
+    for part in loc:
+        text += f"[{part}]" if isinstance(part, int) else (f".{part}" if text else str(part))
+    return text or "(top level)"
+
+
+def validate_fit_document(document: Any, source: str) -> FitDocument:
+    """The validated document (see the module docstring); InputError naming the field."""
+    if not isinstance(document, dict):
+        raise InputError(f"{source}: expected a JSON object (the output of "
+                         f"`hostpc fit DATASET --json`), got {type(document).__name__}")
+    for key in ("parameters", "converged", "chi2", "dof"):
+        if key not in document:
+            raise InputError(f"{source}: no {key!r}: not the output of `hostpc fit --json`; "
+                             f"{REMEDY}")
+    try:
+        fit = FitDocument.model_validate(document)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        value = first.get("input")
+        shown = repr(value) if not isinstance(value, dict | list) else type(value).__name__
+        why = _EXPECTED.get(first["type"], first["msg"].lower())
+        got = "" if first["type"] == "missing" else f", got {shown[:80]}"
+        raise InputError(f"{source}: {_field(tuple(first['loc']))}: {why}{got}; "
+                         f"{REMEDY}") from None
+    _check_consistency(fit, source)
+    return fit
+
+
+def _fail(source: str, where: str, why: str) -> InputError:
+    return InputError(f"{source}: {where}: {why}; {REMEDY}")
+
+
+def _check_consistency(fit: FitDocument, source: str) -> None:
+    """Raise InputError if the fields of a well-typed document disagree with each other."""
+    if fit.dof <= 0:
+        raise InputError(f"{source}: dof: {fit.dof}, a fit without degrees of freedom cannot "
+                         "be judged; add samples, then `hostpc fit DATASET --json > FIT.json`")
+    if fit.chi2_dof is not None and not math.isclose(
+            fit.chi2_dof, fit.chi2 / fit.dof, rel_tol=RELATIVE_TOLERANCE, abs_tol=1e-300):
+        raise _fail(source, "chi2_dof", f"{fit.chi2_dof!r} is not chi2 / dof = "
+                    f"{fit.chi2 / fit.dof!r}")
+    if fit.n_parameters is not None and fit.n_parameters != len(fit.parameters):
+        raise _fail(source, "n_parameters", f"{fit.n_parameters} but "
+                    f"{len(fit.parameters)} parameters are listed")
+    effects = set(fit.effects)
+    for name, entry in fit.parameters.items():
+        where = f"parameters.{name}"
+        effect, dot, _ = name.partition(".")
+        if not (effect and dot and name[-1] != "."):
+            raise _fail(source, where, "expected a name EFFECT.PARAMETER")
+        if effects and effect not in effects:
+            raise _fail(source, where, f"effect {effect!r} is not in effects {sorted(effects)}")
+        if entry.fixed and entry.std not in (None, 0.0):
+            raise _fail(source, f"{where}.std", f"{entry.std!r} for a fixed parameter "
+                        "(a held parameter has no standard deviation)")
+        _check_range(name, entry, source)
+    for k, direction in enumerate(fit.unidentifiable):
+        where = f"unidentifiable[{k}]"
+        held = fit.parameters.get(direction.fixed)
+        if held is None or not held.fixed:
+            raise _fail(source, f"{where}.fixed", f"{direction.fixed!r} is not a fixed "
+                        "parameter of this fit")
+        unknown = [p for p in direction.parameters if p not in fit.parameters]
+        if unknown:
+            raise _fail(source, f"{where}.parameters", f"{unknown[0]!r} is not a parameter "
+                        "of this fit")
+        if len(direction.coefficients) != len(direction.parameters):
+            raise _fail(source, f"{where}.coefficients", f"{len(direction.coefficients)} "
+                        f"coefficients for {len(direction.parameters)} parameters")
+    for k, pair in enumerate(fit.correlations):
+        for side in (pair.a, pair.b):
+            if side not in fit.parameters:
+                raise _fail(source, f"correlations[{k}]", f"{side!r} is not a parameter")
+    _check_joint_offsets(fit, source)
+
+
+def _check_range(name: str, entry: ParameterEntry, source: str) -> None:
+    if name.startswith("joint_offsets."):
+        limit, unit = ((MAX_JOINT_OFFSET_M, "m") if entry.unit == "m"
+                       else (MAX_JOINT_OFFSET_RAD, "rad"))
+    else:
+        limit, unit = MAX_PARAMETER, entry.unit
+    if not abs(entry.value) <= limit:
+        raise _fail(source, f"parameters.{name}.value", f"{entry.value:.6g} {unit} is "
+                    f"outside the possible range (|value| <= {limit:g})")
+
+
+_SERIAL_LABEL = re.compile(r"q[1-9][0-9]*")
+_TREE_LABEL = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\.q[1-9][0-9]*")
+
+
+def joint_offset_labels(fit: FitDocument) -> list[str]:
+    """The labels of the fit's joint offsets (``q1``.., or ``head.q1``..), in file order."""
+    return [name.split(".", 1)[1] for name in fit.parameters
+            if name.startswith("joint_offsets.")]
+
+
+def _check_joint_offsets(fit: FitDocument, source: str) -> None:
+    labels = joint_offset_labels(fit)
+    if not labels:
+        raise InputError(f"{source}: the fit has no joint_offsets parameters: nothing to "
+                         "push; fit with them: `hostpc fit DATASET --effects joint_offsets,"
+                         "... --json > FIT.json`")
+    serial = [f"q{j + 1}" for j in range(len(labels))]
+    if labels != serial and not (all(_TREE_LABEL.fullmatch(label) for label in labels)
+                                 and len(set(labels)) == len(labels)):
+        wrong = next((label for label, want in zip(labels, serial, strict=True)
+                      if label != want), labels[0])
+        raise _fail(source, f"parameters.joint_offsets.{wrong}", "the joint offsets must be "
+                    f"q1..q{len(labels)} in order (or a kinematic tree's chain.qk labels)")
+    if fit.robot is not None:
+        joints = _robot_joint_count(fit.robot)  # another name: the push compares it
+        if joints is not None and joints != len(labels):
+            raise _fail(source, "parameters", f"{len(labels)} joint offsets, but a "
+                        f"{fit.robot} has {joints} joints")
+
+
+def _robot_joint_count(name: str) -> int | None:
+    """Joints of a built-in robot or kinematic tree, None if ``name`` is neither."""
+    from hostpc.kinematics.humanoid import get_tree, tree_names
+    from hostpc.kinematics.robots import get_robot, names
+
+    if name in names():
+        return get_robot(name).n
+    if name in tree_names():
+        return get_tree(name).n
+    return None
