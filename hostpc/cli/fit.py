@@ -11,6 +11,7 @@ from hostpc.cli.archive_options import add_archive_options, dataset_from_archive
 from hostpc.cli.format import format_fit_summary
 from hostpc.cli.numbers import CV_FOLDS
 from hostpc.cli.robots import add_robot_override, load_dataset_with_robot, robot_document
+from hostpc.cli.urdf_out import add_write_urdf_option, write_calibrated_urdf
 from hostpc.dataset import load_dataset
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, fit
@@ -33,6 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     add_constraint_options(parser)
     add_archive_options(parser, read=True)
     add_robot_override(parser)
+    add_write_urdf_option(parser)
     parser.add_argument("--json", action="store_true", help="print one JSON document")
     parser.add_argument("--jackknife", action="store_true",
                         help="also the leave-one-pose-out jackknife sigma of every parameter "
@@ -121,6 +123,8 @@ def run(args: argparse.Namespace) -> int:
             print()
         print(format_fit_summary(result, source=args.dataset, scaled=scaled,
                                  jackknife=jackknife))
+    if args.write_urdf:
+        write_calibrated_urdf(result, args.write_urdf, args.dataset, args.json)
     return 0
 
 
