@@ -11,7 +11,7 @@ from hostpc.cli.archive_options import add_archive_options, dataset_from_archive
 from hostpc.cli.format import format_fit_summary
 from hostpc.cli.numbers import CV_FOLDS
 from hostpc.cli.robots import add_robot_override, load_dataset_with_robot, robot_document
-from hostpc.cli.urdf_out import add_write_urdf_option, write_calibrated_urdf
+from hostpc.cli.urdf_out import add_write_urdf_option, check_urdf_robot, write_calibrated_urdf
 from hostpc.dataset import load_dataset
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, fit
@@ -84,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
     dataset = (load_dataset(args.dataset, plugins=args.plugin) if robot is None
                else load_dataset_with_robot(args.dataset, robot, plugins=args.plugin))
     dataset = with_constraints(dataset, args.prior, args.hold)
+    if args.write_urdf:
+        check_urdf_robot(dataset.robot, args.write_urdf, args.dataset)
     choice = None
     if args.effects == "auto":
         from hostpc.diagnostics.model_choice import choose_model

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hostpc.dataset import RobotDescription
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult
 
@@ -27,6 +28,15 @@ def add_write_urdf_option(parser: argparse.ArgumentParser) -> None:
                         "and geometry folded into its joint origins) to OUT.urdf")
 
 
+def check_urdf_robot(robot: RobotDescription, out: str, dataset_arg: str) -> None:
+    """Refuse --write-urdf before the fit for a robot that is not read from a URDF."""
+    if robot.urdf is None or robot.base_link is None or robot.tip_link is None:
+        raise InputError(f"--write-urdf: the robot of {dataset_arg} is not a URDF robot (a "
+                         "built-in or table robot has no URDF to correct); give one: hostpc "
+                         f"fit {dataset_arg} --robot FILE.urdf --base-link L --tip-link L "
+                         f"--write-urdf {out}")
+
+
 def write_calibrated_urdf(result: FitResult, out: str, dataset_arg: str,
                           json_output: bool) -> None:
     """Write OUT.urdf from the fit of a URDF robot and print which origins changed (to
@@ -36,11 +46,8 @@ def write_calibrated_urdf(result: FitResult, out: str, dataset_arg: str,
     from hostpc.model.measurements.terms import kinematic_deltas
 
     robot = result.problem.dataset.robot
-    if robot.urdf is None or robot.base_link is None or robot.tip_link is None:
-        raise InputError(f"--write-urdf: the robot of {dataset_arg} is not a URDF robot (a "
-                         "built-in or table robot has no URDF to correct); give one: hostpc "
-                         f"fit {dataset_arg} --robot FILE.urdf --base-link L --tip-link L "
-                         f"--write-urdf {out}")
+    check_urdf_robot(robot, out, dataset_arg)
+    assert robot.urdf is not None and robot.base_link is not None and robot.tip_link
     delta, _, _ = kinematic_deltas(result.problem, result.x, False)
     if delta.shape[0] and np.max(np.abs(delta - delta[0])) > 1e-12:
         varying = [t.effect.name for t in result.problem.terms

@@ -113,3 +113,26 @@ def test_xacro_file_is_refused_with_the_command_that_expands_it(tmp_path, capsys
     declared.write_text(xacro.read_text())
     assert main(["robots", "--robot", str(declared), *LINKS]) == 2
     assert f"xacro {declared} >" in capsys.readouterr().err
+
+
+def test_corrected_origins_give_the_fitted_forward_kinematics_exactly():
+    """Every kind of delta (offsets incl. the prismatic one, d, a, alpha, Hayati beta)."""
+    from hostpc.kinematics.poses import forward
+    from hostpc.kinematics.urdf import chain_from_urdf, parse_urdf
+    from hostpc.kinematics.urdf_calibrated import calibrated_origins, calibrated_urdf_text
+
+    text = URDF.read_text()
+    robot = parse_urdf(text)
+    chain = chain_from_urdf(robot, "base_link", "tool0")
+    rng = np.random.default_rng(3)
+    delta = rng.normal(scale=0.01, size=5 * chain.n)
+    delta[4 * chain.n:] *= chain.hayati
+    changes = calibrated_origins(robot, "base_link", "tool0", delta)
+    assert [c.joint for c in changes] == ["lift"] + [f"joint{i}" for i in range(1, 7)]
+    written = chain_from_urdf(parse_urdf(calibrated_urdf_text(text, changes, "test")),
+                              "base_link", "tool0")
+    q = rng.uniform(-2.0, 2.0, size=(100, chain.n))
+    np.testing.assert_allclose(forward(written, q).T_base_flange,
+                               forward(chain, q, delta).T_base_flange, atol=1e-11)
+    unchanged = calibrated_origins(robot, "base_link", "tool0", np.zeros(5 * chain.n))
+    assert max(max(c.translation_mm, c.rotation_deg) for c in unchanged) < 1e-9
