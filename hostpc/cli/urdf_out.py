@@ -58,6 +58,10 @@ def write_calibrated_urdf(result: FitResult, out: str, dataset_arg: str,
                          f"has one geometry: hostpc fit {dataset_arg} --effects "
                          f"joint_offsets,geometry --write-urdf {out}")
     source = robot.urdf
+    if Path(out).resolve() == Path(source).resolve():
+        raise InputError(f"--write-urdf {out}: that is the input URDF; keep the nominal file "
+                         f"and write beside it: hostpc fit {dataset_arg} --write-urdf "
+                         f"{Path(out).with_suffix('')}.calibrated.urdf")
     try:
         text = Path(source).read_text(encoding="utf-8")
     except OSError as exc:
