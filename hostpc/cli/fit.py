@@ -11,6 +11,7 @@ from hostpc.cli.archive_options import add_archive_options, dataset_from_archive
 from hostpc.cli.format import format_fit_summary
 from hostpc.cli.numbers import CV_FOLDS
 from hostpc.cli.robots import add_robot_override, load_dataset_with_robot, robot_document
+from hostpc.cli.urdf_out import add_write_urdf_option, check_urdf_robot, write_calibrated_urdf
 from hostpc.dataset import load_dataset
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, fit
@@ -33,6 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     add_constraint_options(parser)
     add_archive_options(parser, read=True)
     add_robot_override(parser)
+    add_write_urdf_option(parser)
     parser.add_argument("--json", action="store_true", help="print one JSON document")
     parser.add_argument("--jackknife", action="store_true",
                         help="also the leave-one-pose-out jackknife sigma of every parameter "
@@ -82,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
     dataset = (load_dataset(args.dataset, plugins=args.plugin) if robot is None
                else load_dataset_with_robot(args.dataset, robot, plugins=args.plugin))
     dataset = with_constraints(dataset, args.prior, args.hold)
+    if args.write_urdf:
+        check_urdf_robot(dataset.robot, args.write_urdf, args.dataset)
     choice = None
     if args.effects == "auto":
         from hostpc.diagnostics.model_choice import choose_model
@@ -121,6 +125,8 @@ def run(args: argparse.Namespace) -> int:
             print()
         print(format_fit_summary(result, source=args.dataset, scaled=scaled,
                                  jackknife=jackknife))
+    if args.write_urdf:
+        write_calibrated_urdf(result, args.write_urdf, args.dataset, args.json)
     return 0
 
 

@@ -37,6 +37,10 @@ def register(subparsers: Any) -> None:
 
 def resolve_chain(robot: str, base_link: str | None, tip_link: str | None) -> Chain:
     """A built-in robot by name, or a URDF file's chain (both links required)."""
+    if robot.lower().endswith(".xacro"):
+        from hostpc.kinematics.urdf import xacro_refusal
+
+        raise InputError(xacro_refusal(robot))
     if robot.lower().endswith(".urdf"):
         if not base_link or not tip_link:
             raise InputError(f"--robot {robot}: a URDF robot needs --base-link and --tip-link")

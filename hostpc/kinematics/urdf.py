@@ -40,7 +40,8 @@ from hostpc.kinematics.chain import Chain
 from hostpc.kinematics.rotations import pose_to_transform
 from hostpc.kinematics.tables import chain_from_table
 
-__all__ = ["UrdfJoint", "UrdfRobot", "chain_from_urdf", "load_urdf_chain", "parse_urdf"]
+__all__ = ["UrdfJoint", "UrdfRobot", "chain_from_urdf", "load_urdf_chain", "parse_urdf",
+           "xacro_refusal"]
 
 FloatArray = NDArray[np.float64]
 
@@ -61,6 +62,7 @@ class UrdfJoint:
     axis: FloatArray  # (3,), unit, in the joint frame
     lower: float
     upper: float
+    mimic: str | None = None  # the joint this one follows (<mimic joint=...>), if any
 
 
 @dataclass(frozen=True)
@@ -120,9 +122,12 @@ def parse_urdf(text: str, source: str = "URDF") -> UrdfRobot:
     try:
         root = ET.fromstring(text)
     except ET.ParseError as exc:
+        if "xacro:" in text:  # a xacro prefix used without its namespace declaration
+            raise InputError(xacro_refusal(source)) from None
         raise InputError(f"{source}: not valid XML ({exc})") from None
     if root.tag != "robot":
         raise InputError(f"{source}: the root element is <{root.tag}>, expected <robot>")
+    _refuse_xacro(root, source)
     links: list[str] = []
     inertials: dict[str, tuple[float, FloatArray]] = {}
     for link in root.findall("link"):
@@ -168,11 +173,36 @@ def parse_urdf(text: str, source: str = "URDF") -> UrdfRobot:
         joints[name] = UrdfJoint(
             name=name, type=kind, parent=parent.get("link") or "", child=child.get("link") or "",
             origin=_origin(joint, where), axis=axis / max(norm, 1e-300),
-            lower=lower, upper=upper,
+            lower=lower, upper=upper, mimic=_mimicked(joint),
         )
     _check_tree(links, joints, source)
     return UrdfRobot(name=root.get("name") or "urdf", joints=joints, inertials=inertials,
                      links=tuple(links))
+
+
+_XACRO_NAMESPACE = "{http://www.ros.org/wiki/xacro}"
+
+
+def _refuse_xacro(root: ET.Element, source: str) -> None:
+    """A xacro file (macros, properties, includes) is not URDF until ROS's ``xacro`` has
+    expanded it; its elements carry the xacro namespace."""
+    if any(element.tag.startswith(_XACRO_NAMESPACE) or element.tag.startswith("xacro:")
+           for element in root.iter() if isinstance(element.tag, str)):
+        raise InputError(xacro_refusal(source))
+
+
+def xacro_refusal(source: str) -> str:
+    """The one line refusing a xacro file, with the command that expands it
+    (``arm.urdf.xacro`` / ``arm.xacro`` -> ``arm.urdf``)."""
+    stem = source[:-len(".xacro")] if source.endswith(".xacro") else source
+    target = stem if stem.endswith(".urdf") else stem + ".urdf"
+    return (f"{source}: a xacro file, not plain URDF; expand it first (ROS xacro), then use "
+            f"the .urdf: xacro {source} > {target}")
+
+
+def _mimicked(joint: ET.Element) -> str | None:
+    mimic = joint.find("mimic")
+    return None if mimic is None else (mimic.get("joint") or "?")
 
 
 def _check_tree(links: list[str], joints: dict[str, UrdfJoint], source: str) -> None:
@@ -224,6 +254,12 @@ def _path(robot: UrdfRobot, base_link: str, tip_link: str, source: str) -> list[
         if joint.type not in _MOVABLE and joint.type != "fixed":
             raise InputError(f"{source}: joint {joint.name!r} has type {joint.type!r}; only "
                              "revolute, continuous, prismatic and fixed are supported")
+        if joint.mimic is not None and joint.type in _MOVABLE:
+            raise InputError(f"{source}: joint {joint.name!r} mimics joint {joint.mimic!r} "
+                             "(<mimic>); zerocal takes every joint of the chain as independent "
+                             "and does not model coupled joints: end the chain before it, "
+                             f"e.g. hostpc robots --robot {source} --base-link {base_link} "
+                             f"--tip-link {joint.parent}")
         path.append(joint)
         link = joint.parent
         if len(path) > len(robot.joints):
