@@ -8,7 +8,7 @@
         --base-link base_link --tip-link tool0 \\
         --columns "q1=J1,q2=J2,...,x=X,y=Y,z=Z,marker=SMR" --length-unit mm --joint-unit deg
 
-The column mapping is described in ``hostpc.importing.csv_import`` and docs/metrology.md.
+The column mapping is described in ``hostpc.importing.column_map`` and docs/metrology.md.
 The output is SI (m, rad). A bad CSV (a mapped column missing from the header, text in a
 number, a missing joint value, an unknown unit in a header) gets one line naming the row
 and the column, and exit code 2.
