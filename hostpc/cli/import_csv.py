@@ -8,7 +8,7 @@
         --base-link base_link --tip-link tool0 \\
         --columns "q1=J1,q2=J2,...,x=X,y=Y,z=Z,marker=SMR" --length-unit mm --joint-unit deg
 
-The column mapping is described in ``hostpc.importing.csv_import`` and docs/metrology.md.
+The column mapping is described in ``hostpc.importing.column_map`` and docs/metrology.md.
 The output is SI (m, rad). A bad CSV (a mapped column missing from the header, text in a
 number, a missing joint value, an unknown unit in a header) gets one line naming the row
 and the column, and exit code 2.
@@ -24,6 +24,7 @@ from typing import Any
 from hostpc.errors import InputError
 from hostpc.importing.csv_import import (
     ANGLE_UNITS,
+    DECIMALS,
     LENGTH_UNITS,
     ImportOptions,
     document_head,
@@ -52,11 +53,19 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--base-link", help="URDF: the chain's base link")
     parser.add_argument("--tip-link", help="URDF: the chain's tip link (the flange)")
     parser.add_argument("--columns", required=True, metavar="MAP",
-                        help="KEY=COLUMN pairs: q1..qN (or q=FIRST:LAST), x, y, z, "
-                        "roll/pitch/yaw or qw/qx/qy/qz or rx/ry/rz, marker, t, sigma")
+                        help="KEY=COLUMN pairs: q1..qN (or q=FIRST:LAST), x, y, z (or "
+                        "marker.NAME=FIRST:LAST per reflector), roll/pitch/yaw or "
+                        "qw/qx/qy/qz or rx/ry/rz or e1/e2/e3 (--euler), marker, t, "
+                        "temperature, sigma or sx/sy/sz (docs/metrology.md)")
     parser.add_argument("--length-unit", default="m", help=f"{'/'.join(LENGTH_UNITS)}")
     parser.add_argument("--angle-unit", default="rad",
                         help=f"orientation columns: {'/'.join(ANGLE_UNITS)}")
+    parser.add_argument("--euler", metavar="SEQ-intrinsic|SEQ-extrinsic",
+                        help="the convention of the e1, e2, e3 columns, e.g. zyx-intrinsic "
+                        "(SEQ: xyz, zyx, zyz, ... any of the twelve)")
+    parser.add_argument("--decimal", default="auto", choices=DECIMALS,
+                        help="decimal mark of the numbers (auto: a comma when the fields are "
+                        "separated by ';' or tabs and the first row writes 1,5)")
     parser.add_argument("--joint-unit", default="rad",
                         help="revolute joint columns (prismatic use --length-unit)")
     parser.add_argument("--sigma", type=float, default=None,
@@ -115,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
         method=args.method, robot=robot, prismatic=prismatic, length_unit=args.length_unit,
         angle_unit=args.angle_unit, joint_unit=args.joint_unit,
         sigma=args.sigma if args.sigma is not None else 1e-4 / LENGTH_UNITS[args.length_unit],
-        sigma_angle=args.sigma_angle, known=known)
+        sigma_angle=args.sigma_angle, known=known, decimal=args.decimal, euler=args.euler)
     samples = _read_csv_file(Path(args.csv), args, len(prismatic), options)
     head = document_head(samples, options)
     if not args.no_guess:

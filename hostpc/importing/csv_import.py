@@ -1,23 +1,20 @@
 """Turn a metrology CSV export into a ``zerocal-dataset/1`` document (world_point, world_pose).
 
-Pure (no file writing): :func:`parse_column_map` reads the ``--columns`` mapping against the
-header (:func:`hostpc.importing.csv_table.read_csv`) and :func:`read_samples` reads the rows,
-one at a time, into columns of SI values (m, rad), an
+Pure (no file writing): :func:`parse_column_map` (``hostpc.importing.column_map``, where the
+``--columns`` syntax is described) reads the mapping against the header
+(:func:`hostpc.importing.csv_table.read_csv`) and :func:`read_samples` reads the rows, one at
+a time, into columns of SI values (m, rad), an
 :class:`~hostpc.importing.imported.ImportedSamples`; memory grows by the numbers a row holds,
 not by its text. Every bad input raises :class:`~hostpc.errors.InputError` with one line that
 names the file, the row (the file's line number; the header is row 1) and the column.
 
-Column mapping (``--columns``), comma-separated ``KEY=COLUMN`` pairs:
-
-- joints: ``q1=COL, q2=COL, ...`` or a header range ``q=FIRST:LAST`` (consecutive columns);
-- position in the world frame: ``x=COL, y=COL, z=COL``;
-- world_pose orientation: ``roll=, pitch=, yaw=`` (R = Rz(yaw) Ry(pitch) Rx(roll)), or a
-  quaternion ``qw=, qx=, qy=, qz=``, or a rotation vector ``rx=, ry=, rz=``;
-- optional: ``marker=COL`` (world_point marker id), ``t=COL`` (time, s), ``sigma=COL``
-  (per-row position sigma in the length unit).
-
 A header may carry its unit in brackets or parentheses, ``x [mm]`` or ``q1 (deg)``; the
 mapping names the column without it, and the header's unit overrides the default.
+
+Decimal commas (``1,234`` in a file whose fields are separated by ``;`` or tabs, as European
+tracker software writes): ``decimal="auto"`` reads them when the separator is not a comma
+and the first data row writes a mapped number with a comma; ``","`` insists, ``"."`` never.
+A file read with decimal commas must not also write decimal points.
 """
 
 from __future__ import annotations
@@ -27,36 +24,35 @@ import re
 from array import array
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from itertools import chain
 from typing import Any
 
 import numpy as np
 
 from hostpc.errors import InputError
-from hostpc.importing.csv_table import CsvHeader, CsvRows
+from hostpc.importing.column_map import (
+    ORIENTATIONS,
+    ColumnMap,
+    PointColumns,
+    parse_column_map,
+)
+from hostpc.importing.csv_table import CsvHeader, CsvRows, Row
+from hostpc.importing.euler import euler_to_matrix, parse_euler
 from hostpc.importing.imported import FloatArray, ImportedSamples
 from hostpc.kinematics.rotations import matrix_to_rpy, rotvec_to_matrix
 
 __all__ = [
-    "LENGTH_UNITS", "ANGLE_UNITS", "ColumnMap", "ImportOptions", "document_head",
+    "LENGTH_UNITS", "ANGLE_UNITS", "DECIMALS", "ColumnMap", "ImportOptions", "document_head",
     "parse_column_map", "read_samples",
 ]
 
 
 LENGTH_UNITS: dict[str, float] = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "um": 1e-6, "in": 0.0254}
 ANGLE_UNITS: dict[str, float] = {"rad": 1.0, "deg": math.pi / 180.0, "mrad": 1e-3}
-_ORIENTATIONS = {"rpy": ("roll", "pitch", "yaw"), "quat": ("qw", "qx", "qy", "qz"),
-                 "rotvec": ("rx", "ry", "rz")}
-_SINGLE_KEYS = {"x", "y", "z", "marker", "t", "sigma"} | {
-    k for keys in _ORIENTATIONS.values() for k in keys}
-
-
-@dataclass(frozen=True)
-class ColumnMap:
-    """Which CSV column holds what: ``joints`` in joint order, ``fields`` by key."""
-
-    joints: tuple[str, ...]
-    fields: Mapping[str, str]
-    orientation: str | None  # "rpy", "quat", "rotvec" or None
+DECIMALS = ("auto", ".", ",")
+_DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+([eE][+-]?\d+)?")
+# a decimal comma becomes a point; a point becomes a character float() refuses
+_FROM_DECIMAL_COMMA = str.maketrans({",": ".", ".": "!"})
 
 
 @dataclass(frozen=True)
@@ -67,7 +63,9 @@ class ImportOptions:
     prismatic: per joint, True where the joint variable is a length;
     length_unit, angle_unit, joint_unit: defaults for columns whose header names no unit;
     sigma (length unit) and sigma_angle (angle unit): measurement noise; frames and known
-    as in the dataset contract (SI)."""
+    as in the dataset contract (SI); decimal: the decimal mark of the numbers ("auto",
+    "." or ","); euler: the convention of the e1, e2, e3 columns (``SEQ-intrinsic`` or
+    ``SEQ-extrinsic``, :mod:`hostpc.importing.euler`)."""
 
     method: str
     robot: Mapping[str, Any]
@@ -79,6 +77,8 @@ class ImportOptions:
     sigma_angle: float | None = None
     frames: Mapping[str, Any] = field(default_factory=dict)
     known: tuple[str, ...] = ()
+    decimal: str = "."  # "auto", "." or ","
+    euler: str | None = None  # "zyx-intrinsic" etc. for the e1, e2, e3 columns
 
 
 def _unit_factor(unit: str, table: Mapping[str, float], what: str) -> float:
@@ -89,85 +89,15 @@ def _unit_factor(unit: str, table: Mapping[str, float], what: str) -> float:
                          f"{', '.join(table)})") from None
 
 
-def parse_column_map(spec: str, header: Sequence[str], n_joints: int, method: str,
-                     source: str = "CSV") -> ColumnMap:
-    """Parse ``--columns`` against the CSV header; InputError naming the offending pair."""
-    joints: dict[int, str] = {}
-    fields: dict[str, str] = {}
-    given: dict[str, str] = {}  # key -> the pair that gave it (q=A:B gives q1..qN)
-
-    def claim(key: str, raw: str) -> None:
-        if key in given:
-            raise InputError(f"--columns: {key} is given twice ({given[key]!r} and {raw!r})")
-        given[key] = raw
-
-    for raw in (part.strip() for part in spec.split(",")):
-        if not raw:
-            continue
-        key, sep, column = (s.strip() for s in raw.partition("="))
-        if not sep or not column:
-            raise InputError(f"--columns: {raw!r} is not KEY=COLUMN")
-        if key == "q":
-            first, colon, last = column.partition(":")
-            if not colon or first not in header or last not in header:
-                raise InputError(f"--columns: q={column} must be FIRST:LAST of two header "
-                                 f"columns (columns: {', '.join(header)})")
-            start, stop = header.index(first), header.index(last)
-            if stop < start:
-                raise InputError(f"--columns: q={column}: the range is reversed ({first!r} "
-                                 f"comes after {last!r} in the header); write q={last}:{first} "
-                                 "or list q1=..,qN=.. to map joints out of header order")
-            for k, name in enumerate(header[start:stop + 1]):
-                claim(f"q{k + 1}", raw)
-                joints[k + 1] = name
-            continue
-        joint = re.fullmatch(r"q(\d+)", key)
-        if joint or key in _SINGLE_KEYS:
-            claim(f"q{int(joint.group(1))}" if joint else key, raw)
-        if joint:
-            joints[int(joint.group(1))] = column
-        elif key in _SINGLE_KEYS:
-            fields[key] = column
-        else:
-            raise InputError(f"--columns: unknown key {key!r} (expected q1..qN, q=FIRST:LAST, "
-                             f"{', '.join(sorted(_SINGLE_KEYS))})")
-    for key, column in [*((f"q{k}", c) for k, c in joints.items()), *fields.items()]:
-        if column not in header:
-            raise InputError(f"{source}: row 1 (header): no column {column!r} for --columns "
-                             f"{key}={column} (columns: {', '.join(header)})")
-    missing = [f"q{k}" for k in range(1, n_joints + 1) if k not in joints]
-    extra = [f"q{k}" for k in joints if not 1 <= k <= n_joints]
-    if missing or extra:
-        problem = f"missing {', '.join(missing)}" if missing else f"extra {', '.join(extra)}"
-        raise InputError(f"--columns: the robot has {n_joints} joints; mapping {problem}")
-    for key in ("x", "y", "z"):
-        if key not in fields:
-            raise InputError(f"--columns: no column for {key} (the measured position)")
-    present = [name for name, keys in _ORIENTATIONS.items() if any(k in fields for k in keys)]
-    if len(present) > 1:
-        raise InputError(f"--columns: give one orientation ({' or '.join(present)}), not both")
-    orientation = present[0] if present else None
-    if orientation is not None:
-        lacking = [k for k in _ORIENTATIONS[orientation] if k not in fields]
-        if lacking:
-            raise InputError(f"--columns: orientation {orientation} lacks {', '.join(lacking)}")
-    if method == "world_pose" and orientation is None:
-        raise InputError("--columns: world_pose needs an orientation (roll,pitch,yaw or "
-                         "qw,qx,qy,qz or rx,ry,rz)")
-    if method == "world_point" and orientation is not None:
-        raise InputError("--columns: world_point measures points; drop the orientation "
-                         "columns or use --method world_pose")
-    return ColumnMap(joints=tuple(joints[k] for k in range(1, n_joints + 1)), fields=fields,
-                     orientation=orientation)
-
-
 class _Cells:
     """Reads typed values out of one CSV's rows, naming row and column in every error."""
 
-    def __init__(self, header: CsvHeader, options: ImportOptions) -> None:
+    def __init__(self, header: CsvHeader, options: ImportOptions,
+                 decimal_comma: bool = False) -> None:
         self.header = header
         self.options = options
         self.index = {name: k for k, name in enumerate(header.columns)}
+        self.decimal_comma = decimal_comma
 
     def unit_of(self, column: str, kind: str) -> float:
         """SI factor of ``column``: its header unit, else the option's default."""
@@ -190,10 +120,12 @@ class _Cells:
     def number(self, line: int, cells: tuple[str, ...], column: str) -> float:
         raw = self.text(line, cells, column)
         try:
-            value = float(raw)
+            value = float(raw.translate(_FROM_DECIMAL_COMMA) if self.decimal_comma else raw)
         except ValueError:
+            hint = (" (this file writes decimal commas, 1,5; a decimal point is ambiguous "
+                    "here)" if self.decimal_comma and "." in raw else "")
             raise InputError(f"{self.header.source}: row {line}, column {column!r}: "
-                             f"{raw!r} is not a number") from None
+                             f"{raw!r} is not a number{hint}") from None
         if not math.isfinite(value):
             raise InputError(f"{self.header.source}: row {line}, column {column!r}: "
                              f"{raw!r} is not finite")
@@ -204,7 +136,10 @@ class _Cells:
         """The values of ``columns`` (at ``indices``) in one row: the plain conversion,
         and the checking one (which names the first bad cell) only when that fails."""
         try:
-            values = [float(cells[k]) for k in indices]
+            if self.decimal_comma:
+                values = [float(cells[k].translate(_FROM_DECIMAL_COMMA)) for k in indices]
+            else:
+                values = [float(cells[k]) for k in indices]
             if all(map(math.isfinite, values)):
                 return values
         except (ValueError, IndexError):
@@ -213,7 +148,7 @@ class _Cells:
 
 
 def _rotations_to_rpy(values: FloatArray, orientation: str | None,
-                      factors: FloatArray) -> FloatArray:
+                      factors: FloatArray, euler: str | None) -> FloatArray:
     """roll/pitch/yaw (rad, (N, 3)) of the orientation columns ``values`` (N, 3 or 4)."""
     if orientation == "quat":
         w, x, y, z = values.T
@@ -228,71 +163,133 @@ def _rotations_to_rpy(values: FloatArray, orientation: str | None,
     angles = values * factors
     if orientation == "rotvec":
         return matrix_to_rpy(rotvec_to_matrix(angles))
+    if orientation == "euler":
+        assert euler is not None  # _check_euler
+        return matrix_to_rpy(euler_to_matrix(angles, parse_euler(euler)))
     return angles
+
+
+def _check_euler(mapping: ColumnMap, options: ImportOptions) -> None:
+    """e1, e2, e3 columns and ``--euler`` come together (the angles mean nothing alone)."""
+    if options.euler is not None:
+        parse_euler(options.euler)
+        if mapping.orientation != "euler":
+            raise InputError("--euler: its angles are the columns e1, e2, e3 in sequence "
+                             "order; map them in --columns, e.g. e1=A,e2=B,e3=C")
+    elif mapping.orientation == "euler":
+        raise InputError("--columns: e1, e2, e3 are Euler angles; name their convention, "
+                         "e.g. --euler zyx-intrinsic")
+
+
+def _uses_decimal_comma(choice: str, header: CsvHeader, first: Row | None,
+                        indices: Sequence[int]) -> bool:
+    """Whether the numbers are written with a decimal comma (see the module docstring)."""
+    if choice not in DECIMALS:
+        raise InputError(f"--decimal: {choice!r} is not one of {', '.join(DECIMALS)}")
+    if choice == "," and header.delimiter == ",":
+        raise InputError(f"{header.source}: --decimal , but the fields are separated by "
+                         "commas too; export with ';' or tabs between the fields")
+    if choice != "auto":
+        return choice == ","
+    if header.delimiter == "," or first is None:
+        return False
+    cells = first[1]
+    return any(k < len(cells) and _DECIMAL_COMMA.fullmatch(cells[k]) for k in indices)
 
 
 def read_samples(csv_rows: CsvRows, mapping: ColumnMap, options: ImportOptions
                  ) -> ImportedSamples:
     """The rows of ``csv_rows`` read through ``mapping`` into SI columns, one row at a
-    time (the numbers kept in a flat float64 buffer: about 8 bytes per mapped cell)."""
+    time (the numbers kept in a flat float64 buffer: about 8 bytes per mapped cell); a row
+    with several reflectors (``marker.NAME=``) gives one sample per reflector it saw."""
     header = csv_rows.header
-    cells = _Cells(header, options)
     fields = mapping.fields
+    _check_euler(mapping, options)
+    points = mapping.points or (PointColumns(
+        xyz=(fields["x"], fields["y"], fields["z"]),
+        sigma=(fields["sigma"],) if "sigma" in fields else ()),)
+    several = points[0].marker is not None
     ndof = len(mapping.joints)
-    orientation = _ORIENTATIONS[mapping.orientation] if mapping.orientation else ()
-    optional = [k for k in ("sigma", "t") if k in fields]
-    columns = [*mapping.joints, *(fields[k] for k in ("x", "y", "z")),
-               *(fields[k] for k in optional),
-               *(fields[k] for k in orientation if options.method == "world_pose")]
-    factors = np.array(
-        [cells.unit_of(c, "length" if prismatic else "joint")
-         for c, prismatic in zip(mapping.joints, options.prismatic, strict=True)]
-        + [cells.unit_of(fields[k], "length") for k in ("x", "y", "z")]
-        + [cells.unit_of(fields[k], "length") if k == "sigma" else 1.0 for k in optional]
-        + [1.0 if mapping.orientation == "quat" else cells.unit_of(fields[k], "angle")
-           for k in orientation if options.method == "world_pose"])
-    indices = [cells.index[c] for c in columns]
-    sigma_at = ndof + 3 + optional.index("sigma") if "sigma" in optional else None
-    quat_at = ndof + 3 + len(optional) if mapping.orientation == "quat" else None
+    world_pose = options.method == "world_pose"
+    orientation = ORIENTATIONS[mapping.orientation] if mapping.orientation and world_pose else ()
+    optional = [k for k in ("t", "temperature") if k in fields]
+    n_sigma = len(points[0].sigma)
+    group_columns = [[*mapping.joints, *point.xyz, *point.sigma,
+                      *(fields[k] for k in optional), *(fields[k] for k in orientation)]
+                     for point in points]
+    cells = _Cells(header, options)
+    indices = [[cells.index[c] for c in columns] for columns in group_columns]
+    rows = csv_rows.rows
+    first = next(rows, None)
+    cells.decimal_comma = _uses_decimal_comma(options.decimal, header, first,
+                                              [k for group in indices for k in group])
+    factors = np.array([
+        [*(cells.unit_of(c, "length" if prismatic else "joint")
+           for c, prismatic in zip(mapping.joints, options.prismatic, strict=True)),
+         *(cells.unit_of(c, "length") for c in (*point.xyz, *point.sigma)),
+         *(1.0 for _ in optional),
+         *(1.0 if mapping.orientation == "quat" else cells.unit_of(fields[k], "angle")
+           for k in orientation)] for point in points])
+    xyz_at = [group[ndof:ndof + 3] for group in indices]
+    sigma_at = slice(ndof + 3, ndof + 3 + n_sigma)
+    at = ndof + 3 + n_sigma + len(optional)  # the orientation's first value
+    quat_at = at if mapping.orientation == "quat" else None
     marker_column = fields.get("marker") if options.method == "world_point" else None
     width = len(header.columns)
     values = array("d")
     marker_index = array("q")
-    marker_ids: dict[str, int] = {}
-    for line, row in csv_rows.rows:
+    marker_ids: dict[str, int] = {p.marker: k for k, p in enumerate(points) if p.marker}
+    for line, row in chain([first] if first is not None else [], rows):
         if len(row) > width:
             raise InputError(f"{header.source}: row {line}: {len(row)} cells but the header "
                              f"has {width} columns")
-        numbers = cells.numbers(line, row, columns, indices)
-        if sigma_at is not None and numbers[sigma_at] <= 0:
-            raise InputError(f"{header.source}: row {line}, column {fields['sigma']!r}: "
-                             "sigma must be positive")
-        if quat_at is not None and math.sqrt(sum(v * v for v in numbers[quat_at:])) < 1e-9:
-            raise InputError(f"{header.source}: row {line}, column {fields['qw']!r}: "
-                             "the quaternion is zero")
-        values.extend(numbers)
+        for g, columns in enumerate(group_columns):
+            if several and all(k >= len(row) or row[k] == "" for k in xyz_at[g]):
+                continue  # this reflector was not seen in this pose
+            numbers = cells.numbers(line, row, columns, indices[g])
+            if n_sigma and min(numbers[sigma_at]) <= 0:
+                bad = ndof + 3 + int(np.argmin(numbers[sigma_at]))
+                raise InputError(f"{header.source}: row {line}, column {columns[bad]!r}: "
+                                 "sigma must be positive")
+            if quat_at is not None and math.sqrt(sum(v * v for v in numbers[quat_at:])) < 1e-9:
+                raise InputError(f"{header.source}: row {line}, column {fields['qw']!r}: "
+                                 "the quaternion is zero")
+            values.extend(numbers)
+            if several:
+                marker_index.append(g)
         if marker_column is not None:
             name = cells.text(line, row, marker_column)
             marker_index.append(marker_ids.setdefault(name, len(marker_ids)))
     if not values:
         raise InputError(f"{header.source}: no data rows below the header")
-    table = np.frombuffer(values, dtype=np.float64).reshape(-1, len(columns))
-    at = ndof + 3 + len(optional)
-    scaled = table[:, :at] * factors[:at]
-    sigma = (scaled[:, sigma_at] if sigma_at is not None else np.full(
-        len(table), options.sigma * _unit_factor(options.length_unit, LENGTH_UNITS, "length")))
-    world_pose = options.method == "world_pose"
+    table = np.frombuffer(values, dtype=np.float64).reshape(-1, len(group_columns[0]))
+    group = (np.frombuffer(marker_index, dtype=np.int64)
+             if marker_column is not None or several else None)
+    if several:
+        assert group is not None
+        unseen = [p.marker for p, n in zip(points, np.bincount(group, minlength=len(points)),
+                                           strict=True) if n == 0]
+        if unseen:
+            raise InputError(f"{header.source}: reflector {unseen[0]!r} is empty in every row; "
+                             f"drop marker.{unseen[0]}= from --columns")
+    scaled = table[:, :at] * (factors[group, :at] if several else factors[0, :at])
+    sigmas = scaled[:, sigma_at]
+    default_sigma = options.sigma * _unit_factor(options.length_unit, LENGTH_UNITS, "length")
     return ImportedSamples(
         method=options.method, source=header.source,
-        q=scaled[:, :ndof], p=scaled[:, ndof:ndof + 3], sigma=sigma,
-        t=scaled[:, ndof + 3 + optional.index("t")] if "t" in optional else None,
-        rpy=(_rotations_to_rpy(table[:, at:], mapping.orientation, factors[at:])
-             if world_pose else None),
+        q=scaled[:, :ndof], p=scaled[:, ndof:ndof + 3],
+        sigma=(np.sqrt(np.mean(sigmas**2, axis=1)) if n_sigma else
+               np.full(len(table), default_sigma)),
+        sigma_xyz=sigmas if n_sigma == 3 else None,
+        t=scaled[:, ndof + 3 + n_sigma + optional.index("t")] if "t" in optional else None,
+        temperature=(scaled[:, ndof + 3 + n_sigma + optional.index("temperature")]
+                     if "temperature" in optional else None),
+        rpy=(_rotations_to_rpy(table[:, at:], mapping.orientation, factors[0, at:],
+                               options.euler) if world_pose else None),
         sigma_angle=((1e-3 if options.sigma_angle is None else options.sigma_angle
                       * _unit_factor(options.angle_unit, ANGLE_UNITS, "angle"))
                      if world_pose else None),
-        marker_index=(np.frombuffer(marker_index, dtype=np.int64)
-                      if marker_column is not None else None),
+        marker_index=group,
         marker_names=tuple(marker_ids),
     )
 

@@ -23,7 +23,7 @@ from typing import Any
 
 from hostpc.errors import InputError
 
-__all__ = ["CsvHeader", "CsvRows", "read_csv"]
+__all__ = ["CsvHeader", "CsvRows", "Row", "read_csv"]
 
 _UNIT_SUFFIX = re.compile(r"^(.*?)\s*[\[(]\s*([^\])]*?)\s*[\])]\s*$")
 
@@ -38,6 +38,7 @@ class CsvHeader:
     source: str
     columns: tuple[str, ...]
     units: Mapping[str, str]  # column -> unit named in its header
+    delimiter: str = ","  # the field separator sniffed from the header line
 
 
 @dataclass(frozen=True)
@@ -48,7 +49,7 @@ class CsvRows:
     rows: Iterator[Row]
 
 
-def _parse_header(cells: list[str], source: str) -> CsvHeader:
+def _parse_header(cells: list[str], source: str, delimiter: str = ",") -> CsvHeader:
     columns: list[str] = []
     units: dict[str, str] = {}
     for k, cell in enumerate(cells):
@@ -62,7 +63,7 @@ def _parse_header(cells: list[str], source: str) -> CsvHeader:
         if name in columns:
             raise InputError(f"{source}: row 1, column {k + 1}: {name!r} appears twice")
         columns.append(name)
-    return CsvHeader(source=source, columns=tuple(columns), units=units)
+    return CsvHeader(source=source, columns=tuple(columns), units=units, delimiter=delimiter)
 
 
 def _data_rows(reader: Any, source: str) -> Iterator[Row]:
@@ -101,4 +102,5 @@ def read_csv(lines: Iterable[str], source: str) -> CsvRows:
         header = next(reader)
     except (StopIteration, csv.Error) as exc:
         raise InputError(f"{source}: row 1: cannot read the header ({exc})") from None
-    return CsvRows(header=_parse_header(header, source), rows=_data_rows(reader, source))
+    return CsvRows(header=_parse_header(header, source, str(dialect.delimiter)),
+                   rows=_data_rows(reader, source))

@@ -28,9 +28,11 @@ class ImportedSamples:
     """Every sample of one CSV, in SI units, one array per field.
 
     q ``(N, ndof)`` rad (m for prismatic joints); p ``(N, 3)`` m, in the world frame;
-    sigma ``(N,)`` m; t ``(N,)`` s or None; world_pose: rpy ``(N, 3)`` rad and one
-    sigma_angle (rad); world_point with a marker column: marker_index ``(N,)`` into
-    marker_names (in order of first appearance)."""
+    sigma ``(N,)`` m; sigma_xyz ``(N, 3)`` m or None: per-axis sigmas, written as a diagonal
+    ``cov`` instead of ``sigma`` (sigma is then their rms); t ``(N,)`` s or None;
+    temperature ``(N,)`` as written, or None; world_pose: rpy ``(N, 3)`` rad and one
+    sigma_angle (rad); world_point with markers: marker_index ``(N,)`` into marker_names
+    (in order of first appearance, or of the ``marker.NAME`` groups)."""
 
     method: str
     source: str
@@ -42,6 +44,8 @@ class ImportedSamples:
     sigma_angle: float | None = None
     marker_index: NDArray[np.int64] | None = None
     marker_names: tuple[str, ...] = ()
+    sigma_xyz: FloatArray | None = None
+    temperature: FloatArray | None = None
 
     def __len__(self) -> int:
         return len(self.q)
@@ -52,19 +56,39 @@ class ImportedSamples:
         for start in range(0, len(self), _CHUNK):
             part = slice(start, start + _CHUNK)
             columns: list[tuple[str, list[Any]]] = [
-                ("q", self.q[part].tolist()), ("p", self.p[part].tolist()),
-                ("sigma", self.sigma[part].tolist())]
+                ("q", self.q[part].tolist()), ("p", self.p[part].tolist())]
+            if self.sigma_xyz is None:
+                columns.append(("sigma", self.sigma[part].tolist()))
+            else:
+                columns.append(("cov", self._covariances(self.sigma_xyz[part])))
             if self.t is not None:
                 columns.append(("t", self.t[part].tolist()))
+            if self.temperature is not None:
+                columns.append(("temperature", self.temperature[part].tolist()))
             if self.rpy is not None:
                 columns.append(("rpy", self.rpy[part].tolist()))
-                columns.append(("sigma_angle", [self.sigma_angle] * len(columns[0][1])))
+                if self.sigma_xyz is None:
+                    columns.append(("sigma_angle", [self.sigma_angle] * len(columns[0][1])))
             elif self.marker_index is not None:
                 columns.append(("marker", [self.marker_names[k]
                                            for k in self.marker_index[part].tolist()]))
             keys = [key for key, _ in columns]
             for values in zip(*(column for _, column in columns), strict=True):
                 yield dict(zip(keys, values, strict=True))
+
+    def _covariances(self, sigma_xyz: FloatArray) -> list[Any]:
+        """Diagonal covariances of per-axis sigmas: 3x3 (world_point), or 6x6 with the
+        orientation's sigma_angle (world_pose, whose file takes ``cov`` or ``sigma`` and
+        ``sigma_angle``, not a mix)."""
+        variances = sigma_xyz**2
+        if self.rpy is not None:
+            assert self.sigma_angle is not None
+            variances = np.column_stack([variances, np.full((len(variances), 3),
+                                                            self.sigma_angle**2)])
+        size = variances.shape[1]
+        cov = np.zeros((len(variances), size, size))
+        cov[:, np.arange(size), np.arange(size)] = variances
+        return list(cov.tolist())
 
 
 def write_document(out: TextIO, head: Mapping[str, Any], samples: ImportedSamples) -> None:

@@ -1,0 +1,186 @@
+"""The ``--columns`` mapping of ``hostpc import``: which CSV column holds what.
+
+Comma-separated ``KEY=COLUMN`` pairs, checked against the CSV header:
+
+- joints: ``q1=COL, q2=COL, ...`` or a header range ``q=FIRST:LAST`` (consecutive columns);
+- position in the world frame: ``x=COL, y=COL, z=COL``; or, for several reflectors seen in
+  one pose (world_point), ``marker.NAME=FIRST:LAST`` per reflector: three consecutive
+  header columns x, y, z, each row giving one sample per reflector with the row's joints
+  (a reflector whose three cells are all empty in a row was not seen there: no sample);
+- world_pose orientation: ``roll=, pitch=, yaw=`` (R = Rz(yaw) Ry(pitch) Rx(roll)), or a
+  quaternion ``qw=, qx=, qy=, qz=``, or a rotation vector ``rx=, ry=, rz=``, or Euler
+  angles ``e1=, e2=, e3=`` in the order of the ``--euler`` sequence;
+- optional: ``marker=COL`` (world_point marker id), ``t=COL`` (time, s),
+  ``temperature=COL`` (kept as written), ``sigma=COL`` (per-row position sigma in the
+  length unit) or ``sx=, sy=, sz=`` (per-axis sigmas: a diagonal covariance per sample);
+  with reflector groups, ``sigma.NAME=COL`` or ``sigma.NAME=FIRST:LAST`` (sx, sy, sz) for
+  one reflector.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+from hostpc.errors import InputError
+
+__all__ = ["ORIENTATIONS", "ColumnMap", "PointColumns", "parse_column_map"]
+
+ORIENTATIONS = {"rpy": ("roll", "pitch", "yaw"), "quat": ("qw", "qx", "qy", "qz"),
+                "rotvec": ("rx", "ry", "rz"), "euler": ("e1", "e2", "e3")}
+_SINGLE_KEYS = {"x", "y", "z", "marker", "t", "sigma", "sx", "sy", "sz", "temperature"} | {
+    k for keys in ORIENTATIONS.values() for k in keys}
+_GROUP_KEYS = ("marker", "sigma")  # marker.NAME=, sigma.NAME=
+
+
+@dataclass(frozen=True)
+class PointColumns:
+    """One measured point per row: its x, y, z columns, its sigma columns (none, one
+    isotropic column, or sx, sy, sz) and the reflector's name (None: the ``marker``
+    column, if any, names it)."""
+
+    xyz: tuple[str, str, str]
+    sigma: tuple[str, ...] = ()
+    marker: str | None = None
+
+
+@dataclass(frozen=True)
+class ColumnMap:
+    """Which CSV column holds what: ``joints`` in joint order, ``fields`` by key, and the
+    points each row measures (one, or one per ``marker.NAME`` group)."""
+
+    joints: tuple[str, ...]
+    fields: Mapping[str, str]
+    orientation: str | None  # "rpy", "quat", "rotvec", "euler" or None
+    points: tuple[PointColumns, ...] = ()
+
+
+def _header_range(key: str, column: str, header: Sequence[str]) -> list[str]:
+    """The header columns FIRST..LAST of ``column`` ("FIRST:LAST")."""
+    first, colon, last = column.partition(":")
+    if not colon or first not in header or last not in header:
+        raise InputError(f"--columns: {key}={column} must be FIRST:LAST of two header "
+                         f"columns (columns: {', '.join(header)})")
+    start, stop = header.index(first), header.index(last)
+    if stop < start:
+        raise InputError(f"--columns: {key}={column}: the range is reversed ({first!r} "
+                         f"comes after {last!r} in the header); write {key}={last}:{first} "
+                         "or list the columns one by one")
+    return list(header[start:stop + 1])
+
+
+def _groups(groups: Mapping[str, dict[str, str]], fields: Mapping[str, str],
+            header: Sequence[str]) -> tuple[PointColumns, ...]:
+    """The reflector groups (``marker.NAME``, ``sigma.NAME``), or the one point of x, y, z."""
+    shared = (tuple(fields[k] for k in ("sx", "sy", "sz")) if "sx" in fields
+              else (fields["sigma"],) if "sigma" in fields else ())
+    if not groups:
+        for key in ("x", "y", "z"):
+            if key not in fields:
+                raise InputError(f"--columns: no column for {key} (the measured position; "
+                                 "or marker.NAME=FIRST:LAST per reflector)")
+        return (PointColumns(xyz=(fields["x"], fields["y"], fields["z"]), sigma=shared),)
+    clash = [k for k in ("x", "y", "z", "marker") if k in fields]
+    if clash:
+        raise InputError(f"--columns: marker.NAME= groups give the positions; drop "
+                         f"{', '.join(clash)}=")
+    points = []
+    for name, given in groups.items():
+        if "marker" not in given:
+            raise InputError(f"--columns: sigma.{name}= names no reflector (add "
+                             f"marker.{name}=FIRST:LAST)")
+        xyz = _header_range(f"marker.{name}", given["marker"], header)
+        if len(xyz) != 3:
+            raise InputError(f"--columns: marker.{name}={given['marker']} spans {len(xyz)} "
+                             "columns; it must span the three columns x, y, z")
+        sigma = tuple(_header_range(f"sigma.{name}", given["sigma"], header)
+                      if ":" in given.get("sigma", "") else
+                      [given["sigma"]] if "sigma" in given else shared)
+        if len(sigma) not in (0, 1, 3):
+            raise InputError(f"--columns: sigma.{name}={given['sigma']} spans {len(sigma)} "
+                             "columns; give one column or the three sx, sy, sz")
+        points.append(PointColumns(xyz=(xyz[0], xyz[1], xyz[2]), sigma=sigma, marker=name))
+    if len({len(p.sigma) for p in points}) > 1:
+        raise InputError("--columns: give every reflector the same kind of sigma (none, one "
+                         "column, or three)")
+    return tuple(points)
+
+
+def parse_column_map(spec: str, header: Sequence[str], n_joints: int, method: str,
+                     source: str = "CSV") -> ColumnMap:
+    """Parse ``--columns`` against the CSV header; InputError naming the offending pair."""
+    joints: dict[int, str] = {}
+    fields: dict[str, str] = {}
+    groups: dict[str, dict[str, str]] = {}  # reflector -> {"marker": range, "sigma": ...}
+    given: dict[str, str] = {}  # key -> the pair that gave it (q=A:B gives q1..qN)
+
+    def claim(key: str, raw: str) -> None:
+        if key in given:
+            raise InputError(f"--columns: {key} is given twice ({given[key]!r} and {raw!r})")
+        given[key] = raw
+
+    for raw in (part.strip() for part in spec.split(",")):
+        if not raw:
+            continue
+        key, sep, column = (s.strip() for s in raw.partition("="))
+        if not sep or not column:
+            raise InputError(f"--columns: {raw!r} is not KEY=COLUMN")
+        if key == "q":
+            for k, name in enumerate(_header_range("q", column, header)):
+                claim(f"q{k + 1}", raw)
+                joints[k + 1] = name
+            continue
+        kind, dot, name = key.partition(".")
+        if dot and kind in _GROUP_KEYS and name:
+            claim(key, raw)
+            groups.setdefault(name, {})[kind] = column
+            continue
+        joint = re.fullmatch(r"q(\d+)", key)
+        if joint or key in _SINGLE_KEYS:
+            claim(f"q{int(joint.group(1))}" if joint else key, raw)
+        if joint:
+            joints[int(joint.group(1))] = column
+        elif key in _SINGLE_KEYS:
+            fields[key] = column
+        else:
+            raise InputError(f"--columns: unknown key {key!r} (expected q1..qN, q=FIRST:LAST, "
+                             f"marker.NAME=FIRST:LAST, sigma.NAME=, "
+                             f"{', '.join(sorted(_SINGLE_KEYS))})")
+    for key, column in [*((f"q{k}", c) for k, c in joints.items()), *fields.items(),
+                        *((f"sigma.{n}", g["sigma"]) for n, g in groups.items()
+                          if ":" not in g.get("sigma", ":"))]:
+        if column not in header:
+            raise InputError(f"{source}: row 1 (header): no column {column!r} for --columns "
+                             f"{key}={column} (columns: {', '.join(header)})")
+    missing = [f"q{k}" for k in range(1, n_joints + 1) if k not in joints]
+    extra = [f"q{k}" for k in joints if not 1 <= k <= n_joints]
+    if missing or extra:
+        problem = f"missing {', '.join(missing)}" if missing else f"extra {', '.join(extra)}"
+        raise InputError(f"--columns: the robot has {n_joints} joints; mapping {problem}")
+    axes = [k for k in ("sx", "sy", "sz") if k in fields]
+    if axes and len(axes) != 3:
+        raise InputError(f"--columns: per-axis sigmas need all of sx, sy, sz (given "
+                         f"{', '.join(axes)})")
+    if axes and "sigma" in fields:
+        raise InputError("--columns: give sigma= or sx=, sy=, sz=, not both")
+    if groups and method != "world_point":
+        raise InputError("--columns: marker.NAME= groups are reflectors of world_point; "
+                         "use --method world_point")
+    points = _groups(groups, fields, header)
+    present = [name for name, keys in ORIENTATIONS.items() if any(k in fields for k in keys)]
+    if len(present) > 1:
+        raise InputError(f"--columns: give one orientation ({' or '.join(present)}), not both")
+    orientation = present[0] if present else None
+    if orientation is not None:
+        lacking = [k for k in ORIENTATIONS[orientation] if k not in fields]
+        if lacking:
+            raise InputError(f"--columns: orientation {orientation} lacks {', '.join(lacking)}")
+    if method == "world_pose" and orientation is None:
+        raise InputError("--columns: world_pose needs an orientation (roll,pitch,yaw or "
+                         "qw,qx,qy,qz or rx,ry,rz or e1,e2,e3 with --euler)")
+    if method == "world_point" and orientation is not None:
+        raise InputError("--columns: world_point measures points; drop the orientation "
+                         "columns or use --method world_pose")
+    return ColumnMap(joints=tuple(joints[k] for k in range(1, n_joints + 1)), fields=fields,
+                     orientation=orientation, points=points)
