@@ -47,12 +47,16 @@ def raise_open_file_limit(needed: int) -> None:
         resource.setrlimit(resource.RLIMIT_NOFILE, (needed, hard))
 
 
-def open_flood(port: int, count: int) -> list[socket.socket]:
-    """`count` connections that never send a byte (blocking connects: run in a thread)."""
+def open_flood(port: int, count: int, within_s: float = 60.0) -> list[socket.socket]:
+    """Up to `count` connections that never send a byte, opened within `within_s` (a server
+    that stops accepting must not stall the test); blocking connects: run in a thread."""
     flood = []
+    deadline = time.monotonic() + within_s
     for _ in range(count):
+        if time.monotonic() > deadline:
+            break
         try:
-            flood.append(socket.create_connection(("127.0.0.1", port), timeout=5))
+            flood.append(socket.create_connection(("127.0.0.1", port), timeout=1))
         except OSError:
             pass  # the server is shedding: what is open is the flood
     return flood
