@@ -22,10 +22,10 @@ time; a session that sends nothing for `idle_timeout_s` while no request of its 
 flight is closed (a heartbeat keeps it alive); at most `max_sessions` sessions, of which at
 most `max_unauthenticated_sessions` not yet authenticated: a newcomer evicts the oldest
 unauthenticated session (an error reply `busy`, then close; from the address holding the
-most, loiterers first: `controller_stub.admission.SessionSlots`), so an operator with the
+most, loiterers first: `protocol.admission.SessionSlots`), so an operator with the
 token always gets in; only when every slot holds an authenticated session is the newcomer
 refused (an error reply, then the connection closes). Failed authentications slow down
-every later session from the same peer address (`controller_stub.admission.AuthThrottle`);
+every later session from the same peer address (`protocol.admission.AuthThrottle`);
 at most `max_requests_in_flight` requests per session run at once (beyond that the server
 stops reading from that client: backpressure); the server also stops reading while the
 client's unsent replies exceed `WRITE_HIGH_WATER` bytes, and drops a client that has not
@@ -57,7 +57,6 @@ from pathlib import Path
 
 import numpy as np
 
-from controller_stub.admission import AuthThrottle, SessionSlots
 from controller_stub.controller_state import SimulatedController
 from controller_stub.handlers import RequestRefusedError, float_list, json_default
 from controller_stub.motion import GuardedMoveResult, MotionPlan, MoveResult
@@ -73,6 +72,7 @@ from controller_stub.session import (
 )
 from controller_stub.simulation import create_simulation
 from protocol import messages as m
+from protocol.admission import AuthThrottle, LogBudget, SessionSlots
 from protocol.connection import Connection, Role
 from protocol.errors import ErrorCode
 from protocol.framing import DEFAULT_MAX_FRAME_SIZE
@@ -144,7 +144,7 @@ class ControllerServer:
         self.requests_seen = 0
         self._dropped = False
         self._server: asyncio.Server | None = None
-        self._refusals_logged: dict[str, tuple[float, int]] = {}  # why -> (logged at, since)
+        self._refusals_logged = LogBudget(interval_s=REFUSAL_LOG_INTERVAL_S)  # per reason
         self._sessions: SessionSlots[Session] = SessionSlots(
             self.max_sessions, self.max_unauthenticated_sessions
         )
@@ -258,9 +258,9 @@ class ControllerServer:
         return asyncio.get_running_loop().time()
 
     def session_authenticated(self, session: Session) -> None:
-        """`session` proved the token: it keeps its slot; its address is trusted again."""
+        """`session` proved the token: it keeps its slot. Its address's failures are not
+        forgotten (they decay by time only: another peer on that address may be guessing)."""
         self._sessions.authenticated(session)
-        self.auth_throttle.succeeded(session.host)
 
     def session_loitering(self, session: Session) -> None:
         """`session` made a request before authenticating: evicted before the others."""
@@ -273,14 +273,9 @@ class ControllerServer:
     def _log_refusal(self, peer: object, why: str) -> None:
         """One warning per reason every REFUSAL_LOG_INTERVAL_S (with the count of those not
         logged since), so that a peer hammering the server cannot flood the log."""
-        now = self._now()
-        last, suppressed = self._refusals_logged.get(why, (-REFUSAL_LOG_INTERVAL_S, 0))
-        if now - last < REFUSAL_LOG_INTERVAL_S:
-            self._refusals_logged[why] = (last, suppressed + 1)
+        suppressed = self._refusals_logged.admit(why, self._now())
+        if suppressed is None:
             return
-        if len(self._refusals_logged) > 1024:
-            self._refusals_logged.clear()
-        self._refusals_logged[why] = (now, 0)
         more = f" ({suppressed} more refused for this since the last report)" if suppressed else ""
         logger.warning("refusing %s: %s%s", peer, why, more)
 

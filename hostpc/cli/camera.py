@@ -89,6 +89,9 @@ def run_serve(args: argparse.Namespace) -> int:
         raise InputError(f"--port {args.port}: out of range 0..65535")
     description = load_cell_file(args.describe) if args.describe else None
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", stream=sys.stderr)
+    from hostpc.serving.log_limits import limit_logging
+
+    limit_logging("asyncio")  # a peer can make it write: one line per record, a few per interval
     with _open(args) as camera:
         service = CameraService(camera, resolve_token(args.token), description)
         try:

@@ -56,6 +56,7 @@ async def _serve(args: argparse.Namespace) -> int:
     if http:
         try:
             page = await serve_page(station, *http)
+            http = page.address
         except OSError as exc:
             station.stop()
             await task
@@ -75,8 +76,12 @@ async def _serve(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hostpc.serving.log_limits import SERVER_LOGGERS, limit_logging
+
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    # a peer can make these write: one line per record, a few per interval (security.md)
+    limit_logging(*SERVER_LOGGERS, "hostpc.station")
     try:
         return asyncio.run(_serve(args))
     except OSError as exc:

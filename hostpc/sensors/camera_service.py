@@ -16,6 +16,17 @@ robot's host, port 47800) uses it unchanged. The service answers, after hello an
 
 Every capture's timing (host grab times, backend stamps, skew) is logged on one line.
 Binds 127.0.0.1 unless told otherwise; one capture at a time for all sessions.
+
+Against hostile peers, the controller's admission (docs/security.md), from the same
+shared policies (`protocol.admission`): at most MAX_SESSIONS sessions, of which
+MAX_UNAUTHENTICATED not yet authenticated; a newcomer evicts an unauthenticated session
+(`busy`, then close: from the address holding the most, those that made requests before
+authenticating first, the oldest first), so a peer holding idle sockets cannot lock a
+driver with the token out; hello and auth must both happen within HANDSHAKE_TIMEOUT_S of
+connecting; failed authentications delay every later session from that address
+(`AuthThrottle`: 0.1, 0.2, 0.4 ... 2 s apart, a queue beyond half the handshake deadline
+refused `busy`); an authenticated session silent for IDLE_TIMEOUT_S is closed. Refusals and
+client errors are logged once per interval with a count.
 """
 
 from __future__ import annotations
@@ -32,16 +43,42 @@ import numpy as np
 from hostpc.errors import ZerocalError
 from hostpc.sensors.stereo_camera import StereoCamera, StereoPair
 from protocol import messages as m
-from protocol.connection import Connection, ConnectionState, Rejected, Role
-from protocol.errors import ErrorCode
+from protocol.admission import AuthThrottle, LogBudget, SessionSlots
+from protocol.connection import Connection, ConnectionState, Rejected, Role, StateChanged
+from protocol.errors import ErrorCode, LocalProtocolError
 
 logger = logging.getLogger(__name__)
 
 SERVER_NAME = "zerocal-camera-service"
 READ_CHUNK = 64 * 1024
 PRE_AUTH_MAX_FRAME_SIZE = 64 * 1024
-HANDSHAKE_TIMEOUT_S = 10.0
-MAX_SESSIONS = 8
+HANDSHAKE_TIMEOUT_S = 5.0
+"""hello AND auth must be done this long after connecting (s); as the controller's."""
+IDLE_TIMEOUT_S = 300.0
+MAX_SESSIONS = 16
+MAX_UNAUTHENTICATED = 8
+LOG_INTERVAL_S = 10.0
+CLOSE_DRAIN_S = 1.0
+
+
+class _Session:
+    """One client connection of the service: its protocol state and socket."""
+
+    def __init__(self, conn: Connection, reader: asyncio.StreamReader,
+                 writer: asyncio.StreamWriter) -> None:
+        self.conn, self.reader, self.writer = conn, reader, writer
+        peer = writer.get_extra_info("peername")
+        self.host = str(peer[0]) if isinstance(peer, tuple) else str(peer)
+        self.evicted = False
+
+    def close_with(self, why: str) -> None:
+        """A `busy` error (if the session can still take one), then close."""
+        self.evicted = True
+        if not self.conn.closed and not self.writer.is_closing():
+            with contextlib.suppress(LocalProtocolError):
+                self.writer.write(self.conn.send_error(None, ErrorCode.BUSY, why))
+        if not self.writer.is_closing():
+            self.writer.close()
 
 
 class CameraService:
@@ -56,47 +93,85 @@ class CameraService:
         self.image_size: tuple[int, int] | None = None
         self.captures = 0
         self._capture_lock = asyncio.Lock()
-        self._sessions: set[asyncio.Task[None]] = set()
+        self._slots: SessionSlots[_Session] = SessionSlots(MAX_SESSIONS, MAX_UNAUTHENTICATED)
+        self.auth_throttle = AuthThrottle(max_wait_s=HANDSHAKE_TIMEOUT_S / 2)
+        self.sessions_evicted = 0
+        self.sessions_refused = 0
+        self._log_budget = LogBudget(interval_s=LOG_INTERVAL_S)
         self._t0 = time.monotonic()
 
     async def start(self, host: str = "127.0.0.1", port: int = 47800) -> asyncio.Server:
         """Listen on host:port (port 0: a free one); returns the asyncio server."""
         return await asyncio.start_server(self._session, host, port)
 
+    def _warn(self, kind: str, message: str, *args: object) -> None:
+        """One warning per kind every LOG_INTERVAL_S, with the count held back."""
+        held = self._log_budget.admit(kind, time.monotonic())
+        if held is not None:
+            logger.warning(message + (f" ({held} more since the last report)" if held else ""),
+                           *args)
+
     async def _session(self, reader: asyncio.StreamReader,
                        writer: asyncio.StreamWriter) -> None:
-        if len(self._sessions) >= MAX_SESSIONS:
-            writer.close()
+        loop = asyncio.get_running_loop()
+        session = _Session(Connection(Role.SERVER, token=self.token, server_name=SERVER_NAME,
+                                      pre_auth_max_frame_size=PRE_AUTH_MAX_FRAME_SIZE),
+                           reader, writer)
+        wait = self.auth_throttle.reserve(session.host, loop.time())
+        admitted, evicted = (False, []) if wait is None else self._slots.admit(session,
+                                                                               session.host)
+        for old in evicted:
+            self.sessions_evicted += 1
+            old.close_with(f"evicted for a newer connection: at most {MAX_UNAUTHENTICATED} "
+                           f"sessions may be unauthenticated (and {MAX_SESSIONS} in all)")
+        if evicted:
+            self._warn("evicted", "evicted %d unauthenticated session(s) for newer ones",
+                       len(evicted))
+        if not admitted:
+            self.sessions_refused += 1
+            why = (f"too many failed authentications from {session.host}; try again later"
+                   if wait is None else f"too many sessions: at most {MAX_SESSIONS}")
+            self._warn(why, "refusing %s: %s", session.host, why)
+            session.close_with(why)
+            await _closed(writer)
             return
-        task = asyncio.current_task()
-        assert task is not None
-        self._sessions.add(task)
-        conn = Connection(Role.SERVER, token=self.token, server_name=SERVER_NAME,
-                          pre_auth_max_frame_size=PRE_AUTH_MAX_FRAME_SIZE)
         try:
-            while not conn.closed:
-                timeout = None if conn.state is ConnectionState.READY else HANDSHAKE_TIMEOUT_S
-                try:
-                    data = await asyncio.wait_for(reader.read(READ_CHUNK), timeout)
-                except (TimeoutError, ConnectionError, OSError):
-                    break
-                events = conn.receive_data(data)
-                writer.write(conn.data_to_send())
-                for event in events:
-                    if isinstance(event, m.Request):
-                        writer.write(conn.send(await self._answer(event)))
-                    elif isinstance(event, Rejected):
-                        logger.warning("client: %s (%s)", event.message, event.code)
-                await writer.drain()
-                if not data:
-                    break
+            if wait:
+                await asyncio.sleep(wait)
+            await self._serve(session, loop.time() + HANDSHAKE_TIMEOUT_S)
         except (ConnectionError, OSError):
             pass
         finally:
-            self._sessions.discard(task)
-            writer.close()
-            with contextlib.suppress(Exception):
-                await writer.wait_closed()
+            self._slots.remove(session)
+            await _closed(writer)
+
+    async def _serve(self, session: _Session, handshake_deadline: float) -> None:
+        conn, reader, writer = session.conn, session.reader, session.writer
+        loop = asyncio.get_running_loop()
+        while not conn.closed and not session.evicted:
+            timeout = IDLE_TIMEOUT_S if conn.state is ConnectionState.READY \
+                else handshake_deadline - loop.time()
+            try:
+                data = await asyncio.wait_for(reader.read(READ_CHUNK), max(timeout, 0.0))
+            except (TimeoutError, ConnectionError, OSError):
+                break
+            events = conn.receive_data(data)
+            writer.write(conn.data_to_send())
+            for event in events:
+                if isinstance(event, m.Request):
+                    if conn.state is not ConnectionState.READY:
+                        self._slots.loitering(session)
+                    writer.write(conn.send(await self._answer(event)))
+                elif isinstance(event, Rejected):
+                    self._warn(f"client {event.code}", "client %s: %s (%s)", session.host,
+                               event.message, event.code)
+                    if event.code is ErrorCode.AUTH_FAILED:
+                        self.auth_throttle.failed(session.host, loop.time())
+                elif isinstance(event, StateChanged) and event.new is ConnectionState.READY:
+                    self._slots.authenticated(session)
+            await writer.drain()
+            if not data:
+                break
 
     async def _answer(self, request: m.Request) -> m._Message:
         try:
@@ -149,6 +224,14 @@ class CameraService:
                               q=[], time=pair.t_left - self._t0, images=infos)
         reply.with_attachments(*payloads)
         return reply
+
+
+async def _closed(writer: asyncio.StreamWriter) -> None:
+    """Close `writer` and wait (briefly) until it is."""
+    if not writer.is_closing():
+        writer.close()
+    with contextlib.suppress(Exception):
+        await asyncio.wait_for(writer.wait_closed(), CLOSE_DRAIN_S)
 
 
 def _png(pixels: np.ndarray) -> bytes:

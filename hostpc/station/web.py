@@ -4,20 +4,47 @@ their verdicts, and the drift plot of a chosen robot. Refreshes itself every sec
 aiohttp serves it because the station already runs an asyncio loop: the page shares it,
 with no second thread or framework. Routes: `/` (the page), `/api/state` (JSON),
 `/drift/{serial}.png` (plot). Nothing on it changes the station.
+
+Against hostile peers (docs/security.md): the page listens through a `ConnectionGuard`
+(at most `MAX_CONNECTIONS`, `MAX_PER_ADDRESS` per peer address, a connection that completes
+no request within `FIRST_REQUEST_TIMEOUT_S` or none for `IDLE_TIMEOUT_S` is closed, silent
+ones evicted first), aiohttp closes keep-alive connections after `KEEPALIVE_TIMEOUT_S`, and
+drift plots are rendered one at a time on their own thread, once per robot and archive
+state (`DriftPlots`), so a burst of plot requests neither renders twice nor starves the
+state requests. aiohttp's and asyncio's log is rate-limited, one line per record.
 """
 
 from __future__ import annotations
 
 import asyncio
+import collections
 import dataclasses
 import html
+import logging
+from collections.abc import Awaitable, Callable
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from aiohttp import web
 
 from hostpc.archive.drift import drift_findings
 from hostpc.archive.history_page import drift_plot_png
+from hostpc.serving.guard import ConnectionGuard, GuardedConnection
+from hostpc.serving.log_limits import SERVER_LOGGERS, limit_logging
 from hostpc.station.service import Station
+from protocol.connection_table import ConnectionTable
+
+logger = logging.getLogger("hostpc.station.web")
+
+MAX_CONNECTIONS = 64
+MAX_PER_ADDRESS = 32
+FIRST_REQUEST_TIMEOUT_S = 10.0
+"""A connection that sends no whole request head this long after connecting is closed (s)."""
+IDLE_TIMEOUT_S = 30.0
+"""A connection without a new request for this long is closed (s); a slowloris that dribbles
+a header byte at a time counts as idle."""
+KEEPALIVE_TIMEOUT_S = 15.0
+PLOT_CACHE_SIZE = 32
 
 PAGE = """<!doctype html><html><head><meta charset="utf-8"><title>zerocal station {name}</title>
 <style>body{{font-family:sans-serif;margin:2em;max-width:60em}}
@@ -69,7 +96,49 @@ refresh(); setInterval(refresh, 1000);
 </script></body></html>"""
 
 
-def build_app(station: Station) -> web.Application:
+class DriftPlots:
+    """Drift plot PNGs by (serial, the robot's archived runs: count and last id): rendered
+    once, on one thread of their own, concurrent requests for the same plot waiting for the
+    same rendering; at most PLOT_CACHE_SIZE kept (least recently used dropped)."""
+
+    def __init__(self) -> None:
+        self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="drift-plot")
+        self._plots: collections.OrderedDict[tuple[object, ...], asyncio.Future[bytes]] = (
+            collections.OrderedDict())
+        self.rendered = 0
+
+    async def png(self, serial: str, runs: list[dict[str, Any]]) -> bytes:
+        key = (serial, len(runs), max(int(r["id"]) for r in runs))
+        plot = self._plots.get(key)
+        if plot is None or (plot.done() and plot.exception() is not None):
+            plot = asyncio.get_running_loop().run_in_executor(self._executor, self._render, runs)
+            self._plots[key] = plot
+            while len(self._plots) > PLOT_CACHE_SIZE:
+                self._plots.popitem(last=False)
+        self._plots.move_to_end(key)
+        return await asyncio.shield(plot)
+
+    def _render(self, runs: list[dict[str, Any]]) -> bytes:
+        self.rendered += 1
+        return drift_plot_png(runs, drift_findings(runs))
+
+    def close(self) -> None:
+        self._executor.shutdown(wait=False, cancel_futures=True)
+
+
+def build_app(station: Station, guard: ConnectionGuard | None = None,
+              plots: DriftPlots | None = None) -> web.Application:
+    plots = plots if plots is not None else DriftPlots()
+
+    @web.middleware
+    async def count_request(request: web.Request,
+                            handler: Callable[[web.Request], Awaitable[web.StreamResponse]]
+                            ) -> web.StreamResponse:
+        connection = guard.connection_of(request.transport) if guard is not None else None
+        if connection is not None:
+            connection.request_done()
+        return await handler(request)
+
     async def page(_request: web.Request) -> web.Response:
         return web.Response(text=PAGE.format(name=html.escape(station.config.station),
                                              state=html.escape(station.status.state)),
@@ -92,18 +161,52 @@ def build_app(station: Station) -> web.Application:
         runs = await asyncio.to_thread(station.archive.runs, serial)
         if not runs:
             raise web.HTTPNotFound(text=f"no runs of {serial}")
-        png = await asyncio.to_thread(drift_plot_png, runs, drift_findings(runs))
+        png = await plots.png(serial, runs)
         return web.Response(body=png, content_type="image/png")
 
-    app = web.Application()
+    app = web.Application(middlewares=[count_request])
     app.add_routes([web.get("/", page), web.get("/api/state", state),
                     web.get("/drift/{serial}.png", drift)])
     return app
 
 
-async def serve_page(station: Station, host: str, port: int) -> web.AppRunner:
-    runner = web.AppRunner(build_app(station), access_log=None)
+class LivePage:
+    """The served page: its bound address, its guard (counters), `cleanup()` to stop."""
+
+    def __init__(self, runner: web.AppRunner, guard: ConnectionGuard, plots: DriftPlots,
+                 address: tuple[str, int]) -> None:
+        self.runner, self.guard, self.plots, self.address = runner, guard, plots, address
+
+    async def cleanup(self) -> None:
+        await self.guard.close()
+        await self.runner.cleanup()
+        self.plots.close()
+
+
+async def serve_page(station: Station, host: str, port: int, *,
+                     max_connections: int = MAX_CONNECTIONS,
+                     max_per_address: int = MAX_PER_ADDRESS,
+                     first_request_timeout_s: float = FIRST_REQUEST_TIMEOUT_S,
+                     idle_timeout_s: float = IDLE_TIMEOUT_S) -> LivePage:
+    """Serve the page on host:port (0: a free port) behind the connection guard."""
+    limit_logging(*SERVER_LOGGERS, logger.name)
+    plots = DriftPlots()
+    runner: web.AppRunner | None = None
+
+    def handler(_connection: GuardedConnection) -> asyncio.Protocol:
+        assert runner is not None and runner.server is not None
+        return runner.server()
+
+    guard = ConnectionGuard(
+        "page", ConnectionTable(max_connections, max_per_address, first_request_timeout_s,
+                                idle_timeout_s), handler, logger)
+    runner = web.AppRunner(build_app(station, guard, plots), access_log=None,
+                           keepalive_timeout=KEEPALIVE_TIMEOUT_S)
     await runner.setup()
-    site = web.TCPSite(runner, host, port)
-    await site.start()
-    return runner
+    try:
+        address = await guard.listen(host, port)
+    except OSError:
+        await runner.cleanup()
+        plots.close()
+        raise
+    return LivePage(runner, guard, plots, address)

@@ -7,9 +7,9 @@ import asyncio
 
 import pytest
 
-from controller_stub.admission import AuthThrottle, SessionSlots
 from controller_stub.server import ControllerServer
 from protocol import messages as m
+from protocol.admission import AuthThrottle, SessionSlots
 from protocol.connection import Connection, ConnectionState, Role
 from tests.controller_stub.test_server import RawClient
 from tests.controller_stub.test_server_limits import (
@@ -70,8 +70,6 @@ def test_failed_authentications_grow_the_delay_per_address() -> None:
     assert throttle.reserve("10.0.0.1", 6.0) == pytest.approx(4.0)
     assert throttle.reserve("10.0.0.1", 6.0) is None  # ... and refused beyond max_wait_s
     assert throttle.reserve("10.0.0.2", 6.0) == 0.0  # other addresses are not affected
-    throttle.succeeded("10.0.0.1")
-    assert throttle.reserve("10.0.0.1", 6.0) == 0.0  # the token was proven: trusted again
     throttle.failed("10.0.0.3", 0.0)
     assert throttle.failures("10.0.0.3", 61.0) == 0  # forgotten after a quiet minute
 
@@ -131,7 +129,7 @@ async def wrong_token_attempt(server: ControllerServer) -> list[str]:
     return codes
 
 
-async def test_wrong_tokens_slow_the_address_down_and_the_right_one_resets(
+async def test_wrong_tokens_slow_the_address_down_and_a_login_does_not_reset_it(
     start_server: StartServer,
 ) -> None:
     server = await start_server()
@@ -140,10 +138,15 @@ async def test_wrong_tokens_slow_the_address_down_and_the_right_one_resets(
     now = asyncio.get_running_loop().time()
     assert server.auth_throttle.failures("127.0.0.1", now) == 3
     assert server.auth_throttle.delay(3) == pytest.approx(0.4)
-    operator = await RawClient.open(server)  # served after its turn, then trusted again
+    operator = await RawClient.open(server)  # served after its turn
     try:
         assert operator.conn.state is ConnectionState.READY
-        assert server.auth_throttle.failures("127.0.0.1", now) == 0
+        # the operator's login does not hand a guesser on the same address a fresh budget
+        assert server.auth_throttle.failures("127.0.0.1", now) == 3
+        started = asyncio.get_running_loop().time()
+        assert await wrong_token_attempt(server) == ["auth_failed"]
+        assert asyncio.get_running_loop().time() - started >= 0.3
+        assert server.auth_throttle.failures("127.0.0.1", now) == 4
     finally:
         await operator.close()
 
