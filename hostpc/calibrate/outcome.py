@@ -12,13 +12,16 @@ Verdicts (the first that applies, top down):
     ERROR           the run did not finish (no `result` event); the controller text says
                     what it holds (e.g. new offsets, NOT verified: resume it)
     FAIL            offsets pushed, and their verification failed                  (exit 6)
+    ROLLED_BACK     the push was undone by `hostpc rollback --run`                 (exit 0)
+    REFUSED         a guard rail refused the push: offsets unchanged               (exit 5)
     JOINTS_MISSING  a required joint (`--require-joints`) is not calibrated from data
                     (the calibrated joints are still pushed and verified)           (exit 7)
     PASS            offsets pushed and verified
     NOT_VERIFIED    offsets pushed, no verification measured (`--verify-poses 0`)  (exit 0)
-    ROLLED_BACK     the push was undone by `hostpc rollback --run`                 (exit 0)
-    REFUSED         a guard rail refused the push: offsets unchanged               (exit 5)
     NOT_PUSHED      --no-push, nothing to push (a model check at most)             (exit 0)
+
+A refusal counts while no push of the run is in the controller (a refused re-push on a
+resume leaves the earlier, verified push standing).
 
 A joint is "calibrated" when the data determine it (source "data") and, if it was pushed,
 its verification did not fail; a hold or prior value never is (joint_status.py).
@@ -207,14 +210,14 @@ def derive_outcome(events: Sequence[Mapping[str, Any]], sources: Sequence[JointS
         verdict = "ERROR"
     elif active and state.verified is False:
         verdict = "FAIL"
+    elif not active and state.rolled_at is not None:
+        verdict = "ROLLED_BACK"
+    elif not active and state.refused is not None:
+        verdict = "REFUSED"
     elif missing:
         verdict = "JOINTS_MISSING"
     elif active:
         verdict = "PASS" if state.verified else "NOT_VERIFIED"
-    elif state.rolled_at is not None:
-        verdict = "ROLLED_BACK"
-    elif state.refused is not None:
-        verdict = "REFUSED"
     else:
         verdict = "NOT_PUSHED"
     controller = _controller_text(state, active)
