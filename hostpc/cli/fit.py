@@ -7,7 +7,7 @@ import json
 import sys
 
 from hostpc.cli.archive_options import add_archive_options, dataset_from_archive
-from hostpc.cli.format import format_fit_summary
+from hostpc.cli.format import format_fit_summary, model_adequacy
 from hostpc.cli.numbers import CV_FOLDS
 from hostpc.cli.robots import add_robot_override, load_dataset_with_robot, robot_document
 from hostpc.dataset import load_dataset
@@ -78,7 +78,9 @@ def run(args: argparse.Namespace) -> int:
     result = fit(dataset, args.effects, plugins=args.plugin, loss=args.loss,
                  cv_folds=args.cv_folds)
     if args.json:
-        json.dump(result.to_dict(), sys.stdout, indent=2, allow_nan=False)
+        document = result.to_dict()
+        document["model_adequacy"] = model_adequacy(result, args.dataset)
+        json.dump(document, sys.stdout, indent=2, allow_nan=False)
         sys.stdout.write("\n")
     else:
         print(format_fit_summary(result, source=args.dataset))
