@@ -244,13 +244,13 @@ class Archive:
     @staticmethod
     def _stored(connection: Connection, record: RunRecord) -> Any:
         """The stored row (id, revision, outcome columns) of the same run, or None: same
-        run_uid, else the same run folder (a run resumed by hand after the station
-        archived it under the station's uid)."""
+        run_uid, else, for a uid derived from the folder, the same run folder (a run
+        resumed by hand after the station archived it under the station's uid)."""
         columns = (runs_table.c.id, runs_table.c.revision, runs_table.c.verdict,
                    runs_table.c.exit_code, runs_table.c.push_status, runs_table.c.result_json)
         row = connection.execute(sa.select(*columns).where(
             runs_table.c.run_uid == record.run_uid)).first()
-        if row is None and record.run_dir:
+        if row is None and record.uid_from_folder and record.run_dir:
             folders = {record.run_dir, str(Path(record.run_dir).resolve())}
             row = connection.execute(sa.select(*columns).where(
                 runs_table.c.run_dir.in_(folders)).order_by(runs_table.c.id.desc())).first()

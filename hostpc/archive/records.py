@@ -61,6 +61,9 @@ class RunRecord:
     dataset: dict[str, Any] | None
     run_dir: str = ""
     truth: dict[str, Any] | None = field(default=None)
+    uid_from_folder: bool = False
+    """True if run_uid derives from the run folder (no caller gave one): the archive then
+    also finds the run by its folder (a station's run resumed by hand)."""
 
 
 def verdict_of(result: dict[str, Any], exit_code: int) -> str:
@@ -153,4 +156,4 @@ def record_from_run(run_dir: str | Path, *, serial: str, model: str = "", statio
         largest_correction_deg=max(corrections) if corrections else None,
         verify=dict(result.get("verify") or {}), fit=dict(fit), offsets=offsets,
         software_version=__version__, result=result, dataset=dataset,
-        run_dir=str(folder), truth=result.get("truth"))
+        run_dir=str(folder), truth=result.get("truth"), uid_from_folder=run_uid is None)
