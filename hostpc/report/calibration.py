@@ -1,8 +1,11 @@
 """The report of a calibration run (``RUN/report.html``): the result first, then the diagnosis.
 
 Read from the run's result document (``result.json``, hostpc.calibrate.summary), in this order:
-the verdict (PASS / FAIL, pushed or not and why), the offsets table (joint, old, correction,
-sigma, new, pushed; for a simulated run also the true zero error and fitted - true), the
+the verdict (the result's ``outcome`` block when it has one: its headline, what the
+controller holds, the next command; a per-joint table of calibrated / not calibrated, the
+source data / hold / prior and why not; older results: PASS / FAIL, pushed or not and
+why), the offsets table (joint, old, correction (a hold or prior value marked), sigma,
+new, pushed; for a simulated run also the true zero error and fitted - true), the
 verification statistic, the comparison with the simulator's truth, a short account of the
 fit and push, and then the diagnosis of the fitted model (hostpc.report.html) with every
 effect parameter's size (against the truth for a simulated run).
