@@ -13,6 +13,12 @@ Schema versioning: table `zerocal_schema` holds the applied version; `MIGRATIONS
 the schema from version k to k+1; `open_archive` applies the missing ones inside one
 transaction under a lock (PostgreSQL advisory lock; SQLite's write lock), so stations that
 start together migrate once.
+
+Revisions (schema version 3): a run's outcome may change after it was archived (a
+`--resume --force` pushes a refused run, `hostpc rollback --run` undoes a push). Archiving
+the same run again (same run_uid, or the same run folder) then REVISES its record: the runs
+row carries the current outcome and its `revision` number, and `run_revisions` keeps every
+outcome the run had (revision, time, verdict, exit code, push status, the outcome block).
 """
 
 from __future__ import annotations
@@ -63,6 +69,19 @@ runs_table = sa.Table(
     sa.Column("run_dir", sa.Text, nullable=False),
     sa.Column("result_json", sa.Text, nullable=False),
     sa.Column("dataset_json", sa.Text, nullable=True),
+    sa.Column("revision", sa.Integer, nullable=False, server_default="1"),
+)
+
+revisions_table = sa.Table(
+    "run_revisions", metadata,
+    sa.Column("run_id", sa.Integer, sa.ForeignKey("runs.id", ondelete="CASCADE"),
+              nullable=False, index=True),
+    sa.Column("revision", sa.Integer, nullable=False),
+    sa.Column("revised_at", sa.DateTime(timezone=True), nullable=False),
+    sa.Column("verdict", sa.String(16), nullable=False),
+    sa.Column("exit_code", sa.Integer, nullable=False),
+    sa.Column("push_status", sa.String(32), nullable=False),
+    sa.Column("outcome_json", sa.Text, nullable=True),
 )
 
 offsets_table = sa.Table(
@@ -90,7 +109,20 @@ def _migrate_1_to_2(connection: Connection) -> None:
     connection.exec_driver_sql("CREATE INDEX ix_runs_serial_started ON runs (serial, started_at)")
 
 
-MIGRATIONS: tuple[Callable[[Connection], None], ...] = (_migrate_0_to_1, _migrate_1_to_2)
+def _migrate_2_to_3(connection: Connection) -> None:
+    # version 3: a run's record is revised when its outcome changes; the history is kept
+    columns = {c["name"] for c in sa.inspect(connection).get_columns("runs")}
+    if "revision" not in columns:  # (a version-1 table created from today's description
+        connection.exec_driver_sql(  # already has it)
+            "ALTER TABLE runs ADD COLUMN revision INTEGER NOT NULL DEFAULT 1")
+    revisions_table.create(connection, checkfirst=True)
+    connection.exec_driver_sql(
+        "INSERT INTO run_revisions (run_id, revision, revised_at, verdict, exit_code, "
+        "push_status) SELECT id, 1, archived_at, verdict, exit_code, push_status FROM runs")
+
+
+MIGRATIONS: tuple[Callable[[Connection], None], ...] = (_migrate_0_to_1, _migrate_1_to_2,
+                                                        _migrate_2_to_3)
 SCHEMA_VERSION = len(MIGRATIONS)
 _ADVISORY_LOCK_KEY = 4_711_042  # arbitrary, constant: "zerocal archive migration"
 
@@ -182,17 +214,24 @@ def _as_utc(value: datetime) -> datetime:
     return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
 
 
+def _outcome_json(record: RunRecord) -> str | None:
+    outcome = record.result.get("outcome")
+    return None if outcome is None else json.dumps(outcome, allow_nan=True)
+
+
 class Archive:
-    """An open archive. `add` stores a run (idempotent by run_uid); `runs` lists runs as
-    plain dicts in time order; `run` returns one with its dataset and result."""
+    """An open archive. `add` stores a run (idempotent by run_uid; a changed outcome
+    revises the record); `runs` lists runs as plain dicts in time order; `run` returns one
+    with its dataset and result; `revisions` the outcomes a run has had."""
 
     def __init__(self, engine: Engine, url: str):
         self.engine = engine
         self.url = url
 
     def add(self, record: RunRecord) -> int:
-        """Store `record`; returns its archive id. A record whose run_uid is already stored
-        is not stored twice (its existing id is returned)."""
+        """Store `record`; returns its archive id. A record whose run_uid (or run folder)
+        is already stored is not stored twice: if its outcome (verdict, exit code, push
+        status, result) changed, the stored record is revised (module docstring)."""
         values = {
             "run_uid": record.run_uid, "serial": record.serial,
             "model": canonical_name(record.model),
@@ -207,16 +246,19 @@ class Archive:
         }
         try:
             with self.engine.begin() as connection:
-                existing = connection.execute(sa.select(runs_table.c.id).where(
-                    runs_table.c.run_uid == record.run_uid)).scalar()
+                existing = self._stored(connection, record)
                 if existing is not None:
-                    return int(existing)
+                    return self._revise(connection, existing, record, values)
                 key = connection.execute(runs_table.insert().values(**values)).inserted_primary_key
                 assert key is not None  # an insert's result has its primary key
                 run_id = int(key[0])
                 if record.offsets:
                     connection.execute(offsets_table.insert(),
                                        _offset_rows(run_id, record.offsets))
+                connection.execute(revisions_table.insert().values(
+                    run_id=run_id, revision=1, revised_at=values["archived_at"],
+                    verdict=record.verdict, exit_code=record.exit_code,
+                    push_status=record.push_status, outcome_json=_outcome_json(record)))
                 return run_id
         except sa.exc.IntegrityError:  # a concurrent writer stored the same uid first
             with self.engine.connect() as connection:
@@ -228,6 +270,58 @@ class Archive:
         except sa.exc.SQLAlchemyError as exc:
             raise ArchiveError(f"archive {self.url}: cannot store run "
                                f"({_first_line(exc)})") from None
+
+    @staticmethod
+    def _stored(connection: Connection, record: RunRecord) -> Any:
+        """The stored row (id, revision, outcome columns) of the same run, or None: same
+        run_uid, else, for a uid derived from the folder, the same run folder (a run
+        resumed by hand after the station archived it under the station's uid)."""
+        columns = (runs_table.c.id, runs_table.c.revision, runs_table.c.verdict,
+                   runs_table.c.exit_code, runs_table.c.push_status, runs_table.c.result_json)
+        row = connection.execute(sa.select(*columns).where(
+            runs_table.c.run_uid == record.run_uid)).first()
+        if row is None and record.uid_from_folder and record.run_dir:
+            folders = {record.run_dir, str(Path(record.run_dir).resolve())}
+            row = connection.execute(sa.select(*columns).where(
+                runs_table.c.run_dir.in_(folders)).order_by(runs_table.c.id.desc())).first()
+        return row
+
+    @staticmethod
+    def _revise(connection: Connection, row: Any, record: RunRecord,
+                values: dict[str, Any]) -> int:
+        """Revise the stored run `row` to `record`'s outcome if it changed; its id."""
+        run_id = int(row.id)
+        if (row.verdict, row.exit_code, row.push_status, row.result_json) == (
+                record.verdict, record.exit_code, record.push_status, values["result_json"]):
+            return run_id
+        revision = int(row.revision or 1) + 1
+        keep = ("run_uid", "serial", "model", "station", "started_at")
+        connection.execute(runs_table.update().where(runs_table.c.id == run_id).values(
+            **{k: v for k, v in values.items() if k not in keep}, revision=revision))
+        connection.execute(offsets_table.delete().where(offsets_table.c.run_id == run_id))
+        if record.offsets:
+            connection.execute(offsets_table.insert(), _offset_rows(run_id, record.offsets))
+        connection.execute(revisions_table.insert().values(
+            run_id=run_id, revision=revision, revised_at=values["archived_at"],
+            verdict=record.verdict, exit_code=record.exit_code,
+            push_status=record.push_status, outcome_json=_outcome_json(record)))
+        return run_id
+
+    def revisions(self, run_id: int) -> list[dict[str, Any]]:
+        """The outcomes run `run_id` has had, oldest first (revision, revised_at, verdict,
+        exit_code, push_status, outcome: the result's outcome block or None)."""
+        try:
+            with self.engine.connect() as connection:
+                rows = [dict(r._mapping) for r in connection.execute(
+                    sa.select(revisions_table).where(revisions_table.c.run_id == run_id)
+                    .order_by(revisions_table.c.revision))]
+        except sa.exc.SQLAlchemyError as exc:
+            raise ArchiveError(f"archive {self.url}: cannot read ({_first_line(exc)})") from None
+        for row in rows:
+            text = row.pop("outcome_json")
+            row["outcome"] = None if text is None else json.loads(text)
+            row["revised_at"] = _as_utc(row["revised_at"]).isoformat()
+        return rows
 
     def runs(self, serial: str | None = None) -> list[dict[str, Any]]:
         """Every run (of one robot if `serial`), oldest first, with its per-joint offsets

@@ -37,9 +37,9 @@ class JointOffset:
 class RunRecord:
     """One archived calibration run.
 
-    verdict: PASS (pushed and verified), FAIL (verification failed or push refused by a
-    guard rail), ERROR (the run did not finish: connection, refusal, input), or NOT_PUSHED
-    (`--no-push` / nothing verified). exit_code is `hostpc calibrate`'s exit code.
+    verdict: the run's outcome verdict (result.json "outcome", hostpc.calibrate.outcome:
+    PASS, FAIL, REFUSED, JOINTS_MISSING, NOT_PUSHED, NOT_VERIFIED, ROLLED_BACK, ERROR);
+    for an older result without one see `verdict_of`. exit_code is `hostpc calibrate`'s.
     """
 
     run_uid: str
@@ -61,12 +61,27 @@ class RunRecord:
     dataset: dict[str, Any] | None
     run_dir: str = ""
     truth: dict[str, Any] | None = field(default=None)
+    uid_from_folder: bool = False
+    """True if run_uid derives from the run folder (no caller gave one): the archive then
+    also finds the run by its folder (a station's run resumed by hand)."""
 
 
 def verdict_of(result: dict[str, Any], exit_code: int) -> str:
-    """PASS / FAIL / ERROR / NOT_PUSHED from a result document and the exit code."""
+    """The archive verdict: the result's outcome verdict when it has one (the one source
+    of truth; an ERROR exit still says ERROR). An older result without an outcome: a
+    refused push is REFUSED, and a verification counts only if offsets were pushed (with
+    nothing pushed it is a model check, never a PASS)."""
     verify = result.get("verify") or {}
     push = result.get("push") or {}
+    outcome = result.get("outcome")
+    if isinstance(outcome, dict) and isinstance(outcome.get("verdict"), str):
+        if exit_code not in (0, 5, 6, 7) and outcome["verdict"] in ("PASS", "NOT_PUSHED"):
+            return "ERROR"  # the process failed after writing its result
+        return str(outcome["verdict"])
+    if push.get("status") == "refused" or exit_code == 5:
+        return "REFUSED"
+    if push.get("status") != "pushed" and exit_code == 0:
+        return "NOT_PUSHED"  # a model check on fresh poses is no verification
     if isinstance(verify, dict) and verify.get("verdict") in ("PASS", "FAIL"):
         return str(verify["verdict"])
     if isinstance(verify, dict) and "passed" in verify and verify.get("passed") is not None:
@@ -141,4 +156,4 @@ def record_from_run(run_dir: str | Path, *, serial: str, model: str = "", statio
         largest_correction_deg=max(corrections) if corrections else None,
         verify=dict(result.get("verify") or {}), fit=dict(fit), offsets=offsets,
         software_version=__version__, result=result, dataset=dataset,
-        run_dir=str(folder), truth=result.get("truth"))
+        run_dir=str(folder), truth=result.get("truth"), uid_from_folder=run_uid is None)

@@ -237,6 +237,12 @@ class Journal:
         self._ensure_loaded()
         return [e for e in self._events if e.get("event") == kind]
 
+    def timeline(self, *kinds: str) -> list[dict[str, Any]]:
+        """The non-sample events whose kind is one of `kinds`, in journal order (what
+        happened to the controller: push, verify, rollback, ... for outcome.py)."""
+        self._ensure_loaded()
+        return [e for e in self._events if e.get("event") in kinds]
+
     def last_event(self, *kinds: str) -> dict[str, Any] | None:
         """The last non-sample event whose kind is one of `kinds` (None if there is none):
         e.g. `last_event("push_intent", "push")` tells an intent whose result is missing."""

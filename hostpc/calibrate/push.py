@@ -6,6 +6,8 @@ Compensation (docs/conventions.md): a fitted joint offset `delta_i` means
 Guard rails:
 - joints whose offset the fit holds fixed (unidentifiable: the data cannot tell it apart
   from a frame) or that are not in the model keep their offset, and the plan says why;
+  so do joints held by `--hold` or determined by their `--prior` rather than by the data
+  (joint_status.py: a value restated from a hold or a prior is never pushed as measured);
 - the whole push is refused unless `force` if the fit did not converge, if the model does
   not explain the measurements (chi2/dof above its chi-square band at alpha = 1e-3: the
   band's upper edge is the chi-square upper 1e-3 quantile for the fit's dof, divided by the
@@ -35,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.calibrate.joint_status import joint_sources
 from hostpc.calibrate.journal import Journal, write_json_atomic
 from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN
 from hostpc.diagnostics.adequacy import chi2_dof_upper as chi2_dof_upper  # the guard's band
@@ -124,11 +127,15 @@ def plan_push(result: FitResult, old_offsets: np.ndarray,
     notes = []
     held = {d.fixed: d for d in result.unidentifiable}
     offset_names = joint_offset_names(n, result.problem.context.joint_labels)
+    sources = joint_sources(result, n)  # a held or prior-dominated joint is never pushed
     for j, name in enumerate(offset_names):
         if name not in names:
             notes.append("not in the model (joint_offsets not fitted)")
             continue
         k = names.index(name)
+        if sources[j].source in ("hold", "prior"):
+            notes.append(f"{sources[j].reason}; left unchanged")
+            continue
         if result.fixed[k]:
             direction = held.get(name)
             reason = "unidentifiable with these frames and poses; left unchanged"

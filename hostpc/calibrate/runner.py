@@ -12,9 +12,9 @@
 
 A resume (resume.py) checks the controller's offsets, settles a push cut short, prints a
 finished run's stored result unchanged, and tells a lost push from a rollback. Controller
-refusals end as one `RunStopped` line with the resume hint (exit 4). Exit codes beyond
-hostpc.errors: 5 = push refused by a guard rail, 6 = verification of the pushed offsets
-failed (with nothing pushed the verification is a model check: reported only).
+refusals end as one `RunStopped` line with the resume hint (exit 4). The verdict and exit
+code are the run's outcome (outcome.py, from the journal): 5 = push refused, 6 =
+verification of the pushed offsets failed, 7 = a required joint not calibrated.
 """
 
 from __future__ import annotations
@@ -28,8 +28,11 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.calibrate.joint_status import joint_sources
 from hostpc.calibrate.journal import Journal, write_json_atomic
 from hostpc.calibrate.more_poses import more_poses_reason
+from hostpc.calibrate.outcome import parse_required_joints
+from hostpc.calibrate.outcome_files import run_outcome
 from hostpc.calibrate.push import (
     PushPlan,
     execute_push,
@@ -69,6 +72,7 @@ from hostpc.calibrate.verify import VerifyResult, evaluate_verify
 from hostpc.dataset import Dataset, dataset_from_dict, save_dataset
 from hostpc.errors import ConnectionFailed, ControllerError, InputError, ZerocalError
 from hostpc.fitting import FitResult, fit
+from hostpc.fitting.priors import with_constraints
 from hostpc.methods import method_class
 from hostpc.methods.base import (
     Method,
@@ -177,6 +181,7 @@ class Runner:
                                   int(stored.get("exit_code", 0)))
             settings = resume_settings(RunSettings.from_dict(self.header["settings"]),
                                        self.resume_overrides, self.journal, progress)
+            self.journal.event("resumed", at=_now())
             cell = cell_from_dict(self.header["cell"])
             self._clock.last_t = self.journal.last_sample_t()
             progress.message(f"resuming {self.run_dir}: "
@@ -186,6 +191,10 @@ class Runner:
             if self.settings is None:
                 raise InputError("a new run needs settings")
             settings = self.settings
+            try:  # a joint the robot does not have: one line before anything moves
+                parse_required_joints(settings.require_joints, len(offsets))
+            except ValueError as exc:
+                raise InputError(str(exc)) from None
             cell = build_cell(state.camera, state.robot, self.cell_file, self.known,
                               self.default_known)
             initial = _state_dict(state, offsets)
@@ -263,6 +272,12 @@ class Runner:
         document = result_document(self.journal, self.run_dir, self.robot_info.to_dict(),
                                    settings, cell, plan, method, dataset, result, push_plan,
                                    push_status, verify_result, truth)
+        outcome = run_outcome(self.journal, joint_sources(result, initial_offsets.size),
+                              run_dir=self.run_dir, header=self.header,
+                              require_joints=settings.require_joints, finished=True,
+                              known=cell.known)
+        document["outcome"] = outcome.to_dict()  # the verdict every view reads
+        document["exit_code"] = outcome.exit_code
         if exports is not None:  # the robot keeps no offsets (UR): these files are the push
             document["push"].update(on_controller=False, exports=exports)
             document["files"].update({f"ur_{kind}": path for kind, path in exports.items()})
@@ -277,6 +292,7 @@ class Runner:
         write_json_atomic(self.run_dir / "result.json", document)
         self.journal.event("result", exit_code=document["exit_code"], push=push_status,
                            verdict=None if verify_result is None else verify_result.verdict,
+                           outcome=outcome.verdict, at=_now(),
                            offsets=[float(v) for v in offsets])
         progress.close()
         return RunOutcome(self.run_dir, document, summary, document["exit_code"], result,
@@ -323,8 +339,10 @@ class Runner:
         return q_now
 
     def _fit(self, method: Method, settings: RunSettings) -> tuple[FitResult, Dataset]:
-        """Fit every measured fit pose (dataset.json written first)."""
-        dataset = self._dataset(method, "fit")
+        """Fit every measured fit pose (dataset.json written first, with the run's
+        --prior / --hold inside)."""
+        dataset = with_constraints(self._dataset(method, "fit"), settings.priors,
+                                   settings.hold)
         save_dataset(dataset, self.run_dir / "dataset.json")
         self.progress.stage("fit")
         return fit(dataset, settings.effects, plugins=settings.plugins, loss=settings.loss,
@@ -365,7 +383,7 @@ class Runner:
                                         alpha=settings.verify_alpha, tolerance=tolerance,
                                         factor=settings.verify_factor)
         write_json_atomic(self.run_dir / "verify.json", verify_result.to_dict())
-        self.journal.event("verify", round=number, verdict=verify_result.verdict,
+        self.journal.event("verify", round=number, verdict=verify_result.verdict, at=_now(),
                            statistic=finite_or_none(verify_result.statistic),
                            dof=verify_result.dof,
                            p_value=finite_or_none(verify_result.p_value),
@@ -394,6 +412,7 @@ class Runner:
             return "disabled", zero, offsets_now
         if plan.refused:
             progress.message(f"push refused: {plan.refused}")
+            self.journal.event("push_refused", reason=plan.refused, at=_now())
             return "refused", zero, offsets_now
         if not plan.anything:
             return "nothing_to_push", zero, offsets_now
@@ -425,6 +444,10 @@ class Runner:
         acts after the measurements: push, force, limits, verification, model)."""
         return any(value not in (None, False, [], ())
                    for value in self.resume_overrides.values())
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
 
 
 def _state_dict(state: RobotState, offsets: np.ndarray) -> dict[str, Any]:

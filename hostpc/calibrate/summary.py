@@ -2,9 +2,12 @@
 
 ``result_document`` gathers what a run produced (plan, acquisition, fit, offsets, push,
 verification, files) and its exit code; ``format_summary`` renders a result document as
-the human-readable summary (mm and degrees). Exit codes beyond hostpc.errors: 5 = push
-refused by a guard rail, 6 = verification of the pushed offsets failed (with nothing pushed
-the verification is a model check: reported only).
+the human-readable summary (mm and degrees), headline first (the run's outcome,
+outcome.py). Exit codes beyond hostpc.errors: 5 = push refused by a guard rail, 6 =
+verification of the pushed offsets failed (with nothing pushed the verification is a model
+check: reported only), 7 = a joint required by `--require-joints` is not calibrated from
+the data (the calibrated joints are still pushed and verified; the verdict is
+JOINTS_MISSING, never PASS).
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from hostpc.methods.cell import Cell
 RESULT_FORMAT = "zerocal-calibration/1"
 EXIT_PUSH_REFUSED = 5
 EXIT_VERIFY_FAILED = 6
+EXIT_JOINTS_NOT_CALIBRATED = 7
 
 
 def result_document(journal: Journal, run_dir: Path, robot: Mapping[str, Any],
@@ -155,7 +159,9 @@ def format_summary(document: Mapping[str, Any]) -> str:
     """The human-readable summary of a result document (mm and degrees)."""
     robot = document["robot"]
     plan, acq, fitd = document["plan"], document["acquisition"], document["fit"]
-    lines = [
+    outcome = document.get("outcome") or {}
+    lines = [outcome["headline"]] if outcome.get("headline") else []
+    lines += [
         f"zerocal calibration: {document['method']} on {robot['name']} at "
         f"{'sim (' + robot['address'] + ')' if robot.get('sim') else robot['address']}",
         f"run folder: {document['run_dir']}",
@@ -186,15 +192,21 @@ def format_summary(document: Mapping[str, Any]) -> str:
     rows = document["offsets"]["joints"]
     names = [joint_display_name(j, row.get("label", "")) for j, row in enumerate(rows)]
     width = max([6, *(len(name) + 2 for name in names)])
-    lines += ["", f"  {'joint':<{width}}{'old [deg]':>12}{'correction':>13}{'+/- sigma':>11}"
-                  f"{'new [deg]':>12}  pushed"]
+    status = {int(j["joint"]): j for j in outcome.get("joints", [])}
+    lines += ["", f"  {'joint':<{width}}{'old [deg]':>12}{'correction':>21}{'+/- sigma':>11}"
+                  f"{'new [deg]':>12}  pushed" + ("  status" if status else "")]
     for name, row in zip(names, rows, strict=True):
+        joint = status.get(int(row.get("joint", 0)), {})
         corr = "-" if row["correction_deg"] is None else f"{row['correction_deg']:+.5f}"
+        corr += SOURCE_MARK.get(str(joint.get("source")), "")
         sig = "-" if row["sigma_deg"] is None else f"{row['sigma_deg']:.5f}"
         pushed = "yes" if row["pushed"] else ("no: " + row["note"] if row["note"] else "no")
-        lines.append(f"  {name:<{width}}{row['old_deg']:>12.5f}{corr:>13}"
-                     f"{sig:>11}{row['new_deg']:>12.5f}  {pushed}")
+        lines.append(f"  {name:<{width}}{row['old_deg']:>12.5f}{corr:>21}"
+                     f"{sig:>11}{row['new_deg']:>12.5f}  {pushed}"
+                     + (f"  {joint_status_text(joint, row['note'])}" if joint else ""))
     lines.append("")
+    if outcome:
+        lines.append(f"controller: {outcome['controller']}")
     lines.append(_push_line(document))
     verify = document.get("verify")
     if verify:
@@ -210,7 +222,26 @@ def format_summary(document: Mapping[str, Any]) -> str:
         if inside:
             lines.append(f"  {sum(inside)} of {len(inside)} identifiable offsets within 3 sigma"
                          f", largest error {truth['max_abs_error_deg']:.5f} deg")
+    if outcome.get("next_command"):
+        lines.append(f"next: {outcome['next_command']}")
     return "\n".join(lines)
+
+
+SOURCE_MARK = {"hold": " (held)", "prior": " (prior)"}
+"""How a value restated from a hold or a prior is marked wherever it is shown."""
+
+
+def joint_status_text(joint: Mapping[str, Any], said: str = "") -> str:
+    """One joint of the outcome in words: `calibrated, verified` / `NOT CALIBRATED: why`
+    (without the why when `said`: the row already gives it)."""
+    if joint.get("status") != "calibrated":
+        return "NOT CALIBRATED" + ("" if said else ": " + str(
+            joint.get("reason") or "not determined by the data"))
+    if joint.get("verified") is True:
+        return "calibrated, verified"
+    if joint.get("pushed"):
+        return "calibrated, pushed, NOT verified"
+    return "calibrated (not pushed)"
 
 
 def _mm(value: float | None) -> str:

@@ -19,7 +19,8 @@ stderr; the summary (or, with --json, the result document) to stdout.
 
 Exit codes: 0 done (verification passed or not run), 2 bad input, 3 controller unreachable
 or link lost (resume with --resume DIR), 4 controller refused / failed, 5 push refused by a
-guard rail, 6 verification of the pushed offsets failed, 130 / 143 interrupted by Ctrl-C /
+guard rail, 6 verification of the pushed offsets failed, 7 a joint of --require-joints not
+calibrated from the data (the others still pushed and verified), 130 / 143 interrupted by Ctrl-C /
 SIGTERM (resume with --resume DIR). See docs/calibrate.md.
 """
 
@@ -37,6 +38,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.outcome import parse_required_joints
 from hostpc.calibrate.runner import PlanningError, RobotInfo, Runner, RunOutcome
 from hostpc.cli.archive_options import add_archive_options, archive_run
 from hostpc.cli.calibrate_checks import (
@@ -44,7 +46,7 @@ from hostpc.cli.calibrate_checks import (
     check_model_options,
     check_out_folder,
 )
-from hostpc.cli.fit import add_model_options
+from hostpc.cli.fit import add_constraint_options, add_model_options
 from hostpc.cli.numbers import finite, integer
 from hostpc.cli.pose_counts import pose_counts
 from hostpc.cli.progress import StderrProgress
@@ -137,6 +139,12 @@ def register(subparsers: Any) -> None:
                         "the measurements; on a resume: push again after a rollback)")
     parser.add_argument("--max-correction", type=POSITIVE, default=None, metavar="DEG",
                         help="largest correction pushed without --force (default 2 deg)")
+    parser.add_argument("--require-joints", metavar="all|none|1,2,6", default=None,
+                        help="joints that must be calibrated from the data: one that is not "
+                        "(unidentifiable, held, prior-dominated) makes the verdict "
+                        "JOINTS_MISSING, exit 7, even though the others are pushed and "
+                        "verified (default none; the station passes all)")
+    add_constraint_options(parser)
     parser.add_argument("--verify-alpha", type=finite(above=0.0, below=1.0), default=None,
                         metavar="P",
                         help="false-FAIL rate of the verification's chi-square test "
@@ -223,7 +231,8 @@ def _settings(args: argparse.Namespace) -> RunSettings:
         verify_alpha=0.01 if args.verify_alpha is None else args.verify_alpha,
         verify_tolerance_mm=args.verify_tolerance,
         criterion=args.criterion, n_candidates=args.candidates, options=options,
-        target_sigma_deg=args.target_sigma,
+        target_sigma_deg=args.target_sigma, priors=tuple(args.prior),
+        hold=tuple(args.hold), require_joints=args.require_joints,
     )
 
 
@@ -244,6 +253,10 @@ def _check_rig(settings: RunSettings) -> None:
 def run(args: argparse.Namespace) -> int:
     """Entry point of `hostpc calibrate`; returns the exit code."""
     check_sensor_options(args)  # --camera-*, --record, --replay (hostpc.sensors)
+    try:
+        parse_required_joints(args.require_joints)  # syntax; the joint count at the robot
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
     settings: RunSettings | None = None
     cell_file = None
     known = None
@@ -398,7 +411,8 @@ async def _calibrate(args: argparse.Namespace, address: RobotAddress, driver: st
                      "verify_alpha": args.verify_alpha,
                      "verify_tolerance_mm": args.verify_tolerance,
                      "effects": args.effects,
-                     "plugins": tuple(args.plugin) or None}
+                     "plugins": tuple(args.plugin) or None,
+                     "require_joints": args.require_joints}
         runner = Runner(robot, run_dir, robot_info=info, settings=settings,
                         cell_file=cell_file, known=known, default_known=default_known,
                         progress=progress, truth=truth, report=not args.no_report,

@@ -8,7 +8,7 @@ import math
 import sys
 
 from hostpc.cli.archive_options import add_archive_options, dataset_from_archive
-from hostpc.cli.format import format_fit_summary
+from hostpc.cli.format import format_fit_summary, model_adequacy
 from hostpc.cli.numbers import CV_FOLDS
 from hostpc.cli.robots import add_robot_override, load_dataset_with_robot, robot_document
 from hostpc.cli.urdf_out import add_write_urdf_option, check_urdf_robot, write_calibrated_urdf
@@ -115,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
             if values is not None:
                 for k, entry in enumerate(document["parameters"].values()):
                     entry[column] = float(values[k]) if math.isfinite(values[k]) else None
+        document["model_adequacy"] = model_adequacy(result, args.dataset)
         json.dump(document, sys.stdout, indent=2, allow_nan=False)
         sys.stdout.write("\n")
     else:

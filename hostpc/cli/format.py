@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
+from hostpc.diagnostics.adequacy import chi2_dof_upper
 from hostpc.fitting import FitResult
 from hostpc.units import DISPLAY_UNITS
 
@@ -41,6 +43,33 @@ def format_parameter_table(result: FitResult, scaled: np.ndarray | None = None,
     return lines
 
 
+def model_adequacy(result: FitResult, source: str = "DATASET") -> dict[str, Any]:
+    """Whether the converged model explains the data: its chi2/dof against the chi-square
+    band (hostpc.diagnostics.adequacy.chi2_dof_upper, the push guard's rule). A solver
+    that converged far outside the band has found the best of a wrong model.
+    JSON-ready: chi2_dof, chi2_dof_upper, explains_data (None: no dof to judge), next."""
+    band = chi2_dof_upper(result.dof)
+    judged = math.isfinite(band) and math.isfinite(result.chi2_dof)
+    explains = (result.chi2_dof <= band) if judged else None
+    return {"chi2_dof": result.chi2_dof if math.isfinite(result.chi2_dof) else None,
+            "chi2_dof_upper": band if math.isfinite(band) else None,
+            "explains_data": explains,
+            "next": None if explains is not False else f"hostpc diagnose {source} --ladder"}
+
+
+def _converged_line(result: FitResult, source: str) -> str:
+    """Never a plain "converged: yes" for a model that does not explain the data."""
+    how = f"({result.message}, {result.iterations} iterations)"
+    if not result.converged:
+        return f"  converged: NO {how}"
+    adequacy = model_adequacy(result, source or "DATASET")
+    if adequacy["explains_data"] is False:
+        return (f"  converged (solver) {how}, but the model does not explain the data: "
+                f"chi2/dof {result.chi2_dof:.4g} far above its band "
+                f"{adequacy['chi2_dof_upper']:.4g}; next: {adequacy['next']}")
+    return f"  converged: yes {how}"
+
+
 def format_fit_summary(result: FitResult, source: str = "",
                        scaled: np.ndarray | None = None,
                        jackknife: np.ndarray | None = None) -> str:
@@ -51,8 +80,7 @@ def format_fit_summary(result: FitResult, source: str = "",
     lines = [
         f"{head}: method {result.problem.method}, {n_samples} samples, "
         f"effects {', '.join(result.problem.effect_names)}",
-        f"  converged: {'yes' if result.converged else 'NO'} ({result.message}, "
-        f"{result.iterations} iterations)",
+        _converged_line(result, source),
         f"  residual RMS {result.rms * 1e3:.4f} mm, max {result.max * 1e3:.4f} mm, "
         f"chi2/dof {result.chi2_dof:.3f} (dof {result.dof})"
         + (f", {result.cv_folds}-fold cross-validated RMS {result.cv_rms * 1e3:.4f} mm"

@@ -9,6 +9,10 @@ push.json are written directly. A push.json without a rollback id (the run stopp
 recording its intent and the controller's answer) is settled from the controller's offsets:
 the intended new ones -> the previous ones are written; still the previous ones -> nothing
 to undo. Offsets are printed in degrees.
+
+With --run, the rollback is journaled and the run's outcome is derived again: result.json
+(outcome verdict ROLLED_BACK), summary.txt and report.html say so; with --db the archived
+record of the run is revised (hostpc.archive: its history of outcomes is kept).
 """
 
 from __future__ import annotations
@@ -22,7 +26,9 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.calibrate.outcome_files import rewrite_outcome
 from hostpc.calibrate.push import read_push_file, rollback, rollback_run
+from hostpc.cli.archive_options import add_archive_options, archive_run
 from hostpc.cli.numbers import TIMEOUT_S
 from hostpc.errors import InputError
 from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot
@@ -44,6 +50,7 @@ def register(subparsers: Any) -> None:
                         "simulator's default)")
     parser.add_argument("--timeout", type=TIMEOUT_S, default=10.0, help="seconds per request")
     parser.add_argument("--json", action="store_true", help="print JSON")
+    add_archive_options(parser, read=False)
     parser.set_defaults(func=run)
 
 
@@ -87,8 +94,12 @@ def run(args: argparse.Namespace) -> int:
                          "give the address of a running controller")
     now, how = asyncio.run(_rollback(address, args, rollback_id, previous, record))
     matches = previous is None or bool(np.allclose(now, previous, rtol=0.0, atol=1e-12))
+    outcome = None
     if args.run and how != "not_pushed":
         _journal_rollback(Path(args.run), now, how, str(address))
+        outcome = rewrite_outcome(Path(args.run))  # result.json, summary, report say so
+        if outcome is not None:
+            archive_run(args, Path(args.run), outcome.exit_code)
     document = {
         "controller": str(address),
         "rollback_id": record.get("rollback_id") if record is not None else rollback_id,
@@ -97,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
         "previous_offsets_deg": None if previous is None else [math.degrees(v)
                                                                for v in previous],
         "restored": matches,
+        "outcome": None if outcome is None else outcome.to_dict(),
     }
     if args.json:
         print(json.dumps(document, indent=2))
@@ -110,6 +122,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"rolled back {rollback_id} on {address}{note}")
         print("zero offsets now [deg]: " + ", ".join(
             f"J{j + 1} {math.degrees(v):+.5f}" for j, v in enumerate(now)))
+        if outcome is not None:
+            print(f"{args.run}: {outcome.headline} (result.json, summary.txt rewritten)")
         if not matches:
             print("warning: the offsets now differ from the ones saved before the push")
     return 0 if matches else 4

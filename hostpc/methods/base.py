@@ -67,7 +67,10 @@ class RunSettings:
     criterion ("D" or "random"); n_candidates: size of the candidate pool; options: method-specific
     settings (e.g. stereo_target "depth": "triangulate" | "sgbm"); target_sigma_deg: stop
     adding fit poses once every identifiable joint offset's predicted sigma is <= this
-    (deg; n_poses is then the most), None: n_poses poses.
+    (deg; n_poses is then the most), None: n_poses poses. priors / hold: the fit's
+    `--prior NAME=VALUE+-SIGMA` and `--hold NAME` (hostpc.fitting.priors; a joint they
+    decide is never pushed as measured); require_joints: `--require-joints` ("all", "1,2,6"
+    or None): a listed joint not calibrated from the data makes the verdict JOINTS_MISSING.
     """
 
     method: str
@@ -89,11 +92,15 @@ class RunSettings:
     n_candidates: int = 1500
     options: Mapping[str, Any] = field(default_factory=dict)
     target_sigma_deg: float | None = None
+    priors: tuple[str, ...] = ()
+    hold: tuple[str, ...] = ()
+    require_joints: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form."""
         data = dataclasses.asdict(self)
         data["plugins"] = list(self.plugins)
+        data["priors"], data["hold"] = list(self.priors), list(self.hold)
         data["options"] = dict(self.options)
         return data
 
@@ -103,6 +110,8 @@ class RunSettings:
         names = {f.name for f in dataclasses.fields(cls)}
         values = {k: v for k, v in data.items() if k in names}
         values["plugins"] = tuple(values.get("plugins", ()))
+        values["priors"] = tuple(values.get("priors", ()))
+        values["hold"] = tuple(values.get("hold", ()))
         values["options"] = dict(values.get("options", {}))
         return cls(**values)
 

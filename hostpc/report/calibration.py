@@ -1,8 +1,11 @@
 """The report of a calibration run (``RUN/report.html``): the result first, then the diagnosis.
 
 Read from the run's result document (``result.json``, hostpc.calibrate.summary), in this order:
-the verdict (PASS / FAIL, pushed or not and why), the offsets table (joint, old, correction,
-sigma, new, pushed; for a simulated run also the true zero error and fitted - true), the
+the verdict (the result's ``outcome`` block when it has one: its headline, what the
+controller holds, the next command; a per-joint table of calibrated / not calibrated, the
+source data / hold / prior and why not; older results: PASS / FAIL, pushed or not and
+why), the offsets table (joint, old, correction (a hold or prior value marked), sigma,
+new, pushed; for a simulated run also the true zero error and fitted - true), the
 verification statistic, the comparison with the simulator's truth, a short account of the
 fit and push, and then the diagnosis of the fitted model (hostpc.report.html) with every
 effect parameter's size (against the truth for a simulated run).
@@ -87,8 +90,54 @@ def _verified(result: Document) -> tuple[bool | None, bool]:
     return None, pushed
 
 
+OUTCOME_CSS = {"PASS": "good", "FAIL": "bad", "REFUSED": "bad", "JOINTS_MISSING": "bad",
+               "ERROR": "bad", "NOT_PUSHED": "neutral", "NOT_VERIFIED": "neutral",
+               "ROLLED_BACK": "neutral"}
+SOURCE_MARK = {"hold": " (held)", "prior": " (prior)"}
+"""A value restated from a hold or a prior, marked wherever it is shown."""
+
+
+def _outcome_verdict(outcome: Document, result: Document) -> tuple[str, str, list[str]]:
+    """The verdict box of a result with an outcome block: its headline, what the
+    controller holds, the next command; nothing re-derived."""
+    lines = [f"Controller: {outcome.get('controller')}."]
+    reason = (result.get("push") or {}).get("reason")
+    if outcome.get("verdict") == "REFUSED" and reason:
+        lines.append(f"Push refused: {reason}")
+    if outcome.get("next_command"):
+        lines.append(f"Next: {outcome['next_command']}")
+    if "exit_code" in result:
+        lines.append(f"Exit code {result['exit_code']}.")
+    return (OUTCOME_CSS.get(str(outcome.get("verdict")), "neutral"),
+            str(outcome.get("headline") or outcome.get("verdict")), lines)
+
+
+def outcome_table(result: Document) -> str:
+    """Per joint: calibrated or not, from where, pushed, verified, why not, the fix."""
+    joints = (result.get("outcome") or {}).get("joints") or []
+    if not joints:
+        return ""
+    rows = []
+    for j, row in enumerate(joints):
+        def flag(value: Any) -> str:
+            return "-" if value is None else ("yes" if value else "NO")
+
+        status = ("calibrated" if row.get("status") == "calibrated"
+                  else '<span class="significant">NOT CALIBRATED</span>')
+        rows.append([escape(joint_name(j, str(row.get("label", "")))), status,
+                     escape(row.get("source", "")), flag(row.get("pushed")),
+                     flag(row.get("verified")), escape(row.get("reason") or ""),
+                     escape(row.get("fix") or "")])
+    return ("<h2>Joints</h2>" + table(("joint", "status", "source", "pushed", "verified",
+                                       "why not calibrated", "what would determine it"),
+                                      rows, table_id="joints", text_columns=(1, 2, 5, 6)))
+
+
 def verdict(result: Document) -> tuple[str, str, list[str]]:
-    """(css class good/bad/neutral, headline, explanation sentences) of a run's result."""
+    """(css class good/bad/neutral, headline, explanation sentences) of a run's result:
+    its outcome block when it has one (outcome.py), else read from an older result."""
+    if isinstance(result.get("outcome"), Mapping):
+        return _outcome_verdict(result["outcome"], result)
     push = result.get("push") or {}
     status = push.get("status")
     passed, verified_push = _verified(result)
@@ -134,16 +183,21 @@ def offsets_table(result: Document) -> str:
               "pushed"]
     if truth:
         header += ["true zero error [deg]", "fitted - true [deg]", "within 3 sigma"]
+    sources = {int(j.get("joint", 0)): str(j.get("source"))
+               for j in (result.get("outcome") or {}).get("joints") or []}
     rows = []
     for j, row in enumerate(rows_in):
         def deg(key: str, signed: bool = False, source: Mapping[str, Any] = row) -> str:
             value = source.get(key)
             return "-" if value is None else (f"{value:+.5f}" if signed else f"{value:.5f}")
 
+        mark = SOURCE_MARK.get(sources.get(int(row.get("joint", j + 1)), ""), "")
+
         pushed = "yes" if row.get("pushed") else (
             "no: " + row["note"] if row.get("note") else "no")
         cells = [escape(joint_name(j, row.get("label", ""))), deg("old_deg"),
-                 deg("correction_deg", True), deg("sigma_deg"), deg("new_deg"), escape(pushed)]
+                 deg("correction_deg", True) + mark, deg("sigma_deg"), deg("new_deg"),
+                 escape(pushed)]
         if truth:
             true = _at(truth.get("zero_errors_deg"), j)
             error = _at(truth.get("joint_offsets_error_deg"), j)
@@ -261,6 +315,7 @@ def render_calibration_html(result: Document, diagnosis: Diagnosis | None = None
         f'<div class="verdict {css}" id="verdict">{escape(head)}{explanation}</div>',
         facts,
         f"<h2>Offsets</h2>{offsets_table(result)}",
+        outcome_table(result),
         f"<h2>Verification</h2>{verification_section(result)}",
         truth_section(result),
         fit_section(result),

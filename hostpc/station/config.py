@@ -5,6 +5,8 @@
     method: stereo_target
     effects: null                    # as `hostpc calibrate --effects`
     known: null                      # as `hostpc calibrate --known`
+    require_joints: all              # as `--require-joints` (null: none); a required joint
+                                     # not calibrated is FAIL, result code 7
     poses: 60
     verify_poses: 10
     calibrate_args: []               # further `hostpc calibrate` options, verbatim
@@ -56,6 +58,7 @@ class StationConfig(_Strict):
     method: str = "stereo_target"
     effects: str | None = None
     known: str | None = None
+    require_joints: str | None = "all"
     poses: int = Field(60, ge=4, le=10000)
     verify_poses: int = Field(10, ge=0, le=1000)
     calibrate_args: list[str] = Field(default_factory=list)

@@ -1,14 +1,20 @@
 """The station's Modbus register map (holding registers, 16 bit, 0-based addresses).
 
-The PLC writes COMMAND, SERIAL and MODEL; everything else is read-only to it. Strings are
-ASCII, two characters per register (high byte first), NUL-padded. 32-bit values span two
-registers, high word first. docs/station.md carries the same table for the PLC programmer.
+The PLC writes COMMAND, SERIAL and MODEL; everything else is read-only to it. STATE is
+PASS only for a run whose outcome verdict is PASS (pushed, verified, every required joint
+calibrated); any other finished outcome is FAIL with RESULT_CODE its exit code (5 refused,
+6 verification failed, 7 a required joint not calibrated, 0 not pushed / rolled back: see
+OUTCOME_FLAGS). Strings are ASCII, two characters per register (high byte first),
+NUL-padded. 32-bit values span two registers, high word first. docs/station.md carries
+the same table for the PLC programmer.
 """
 
 from __future__ import annotations
 
 import enum
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 N_REGISTERS = 64
 
@@ -23,6 +29,11 @@ VERIFY_STATISTIC = 8   # 8-9: uint32, verification statistic x 1000
 VERIFY_P_VALUE = 10    # uint16, p-value x 10000
 VERIFY_DOF = 11        # uint16, degrees of freedom of the verification test
 ARCHIVE_ID = 12        # 12-13: uint32, archive id of the last run
+# the run's outcome per joint (bit j-1 = joint j; hostpc.calibrate.outcome)
+JOINTS_CALIBRATED = 14       # calibrated from the data and, if pushed, verified
+JOINTS_NOT_CALIBRATED = 15   # not determined by the data (unidentifiable, held, prior)
+JOINTS_REQUIRED_MISSING = 16  # required (--require-joints) but not calibrated
+OUTCOME_FLAGS = 17     # bit0 pushed, bit1 verified, bit2 rolled back, bit3 refused
 SERIAL = 20            # 20-35: robot serial number, 32 ASCII characters
 SERIAL_LENGTH = 16
 MODEL = 40             # 40-55: robot model, 32 ASCII characters
@@ -83,7 +94,8 @@ def clamp_uint(value: float, bits: int) -> int:
 
 @dataclass(frozen=True)
 class RunOutcome:
-    """What the result registers show of a finished run."""
+    """What the result registers show of a finished run (the joint bitmasks and outcome
+    flags: registers 14-17, from the run's outcome block in result.json)."""
 
     state: State
     result_code: int
@@ -92,6 +104,33 @@ class RunOutcome:
     verify_p_value: float | None = None
     verify_dof: int | None = None
     archive_id: int | None = None
+    joints_calibrated: int = 0
+    joints_not_calibrated: int = 0
+    joints_required_missing: int = 0
+    outcome_flags: int = 0
+
+
+FLAG_PUSHED, FLAG_VERIFIED, FLAG_ROLLED_BACK, FLAG_REFUSED = 1, 2, 4, 8
+
+
+def outcome_bits(outcome: Mapping[str, Any]) -> dict[str, int]:
+    """The bitmasks and flags (RunOutcome's last four fields) of a result.json outcome
+    block: joint j sets bit j-1 (joints beyond 16 are left out)."""
+    joints = [j for j in outcome.get("joints") or [] if isinstance(j, Mapping)]
+
+    def mask(numbers: list[int]) -> int:
+        return sum(1 << (n - 1) for n in numbers if 1 <= n <= 16)
+
+    calibrated = [int(j["joint"]) for j in joints if j.get("status") == "calibrated"
+                  and (not j.get("pushed") or j.get("verified") is True)]
+    not_calibrated = [int(j["joint"]) for j in joints if j.get("source") != "data"]
+    missing = [int(n) for n in outcome.get("missing_required") or []]
+    flags = ((FLAG_PUSHED if outcome.get("pushed") else 0)
+             | (FLAG_VERIFIED if outcome.get("verified") is True else 0)
+             | (FLAG_ROLLED_BACK if outcome.get("verdict") == "ROLLED_BACK" else 0)
+             | (FLAG_REFUSED if outcome.get("verdict") == "REFUSED" else 0))
+    return {"joints_calibrated": mask(calibrated), "joints_not_calibrated": mask(not_calibrated),
+            "joints_required_missing": mask(missing), "outcome_flags": flags}
 
 
 def outcome_registers(outcome: RunOutcome) -> dict[int, int]:
@@ -107,4 +146,8 @@ def outcome_registers(outcome: RunOutcome) -> dict[int, int]:
     values[VERIFY_P_VALUE] = clamp_uint((outcome.verify_p_value or 0.0) * 1e4, 16)
     values[VERIFY_DOF] = clamp_uint(outcome.verify_dof or 0, 16)
     values[ARCHIVE_ID], values[ARCHIVE_ID + 1] = encode_int32(outcome.archive_id or 0)
+    values[JOINTS_CALIBRATED] = outcome.joints_calibrated & 0xFFFF
+    values[JOINTS_NOT_CALIBRATED] = outcome.joints_not_calibrated & 0xFFFF
+    values[JOINTS_REQUIRED_MISSING] = outcome.joints_required_missing & 0xFFFF
+    values[OUTCOME_FLAGS] = outcome.outcome_flags & 0xFFFF
     return values

@@ -59,6 +59,8 @@ def calibrate_command(config: StationConfig, run_dir: Path, serial: str,
         command += ["--effects", config.effects]
     if config.known:
         command += ["--known", config.known]
+    if config.require_joints:
+        command += ["--require-joints", config.require_joints]
     if config.robot == "sim":
         scenario_file = run_dir.parent / ".scenarios" / f"{run_dir.name}.json"
         scenario_file.parent.mkdir(parents=True, exist_ok=True)

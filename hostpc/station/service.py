@@ -7,6 +7,17 @@ result code, never a dead service. The run in progress is recorded in `current.j
 under the runs folder, so a restarted station resumes it (`hostpc calibrate --resume`)
 before taking a new command. SIGTERM stops the station gracefully: the child is
 interrupted at a safe point and stays resumable.
+
+Truth: STATE, RESULT_CODE and the joint registers come from the run's outcome
+(result.json "outcome", hostpc.calibrate.outcome): PASS only for the verdict PASS.
+A PLC abort once the run has written (or started writing) the controller's offsets is
+DEFERRED: the child is not interrupted, the verification of the pushed offsets finishes,
+and the registers show the real verdict (the log says the abort was deferred). If the
+child ends anyway with a push not followed by a result (killed, link lost), the station
+resumes it (`--resume`, up to resume_attempts) so the offsets get verified; current.json
+stays while the controller may hold unverified offsets. The last finished result is kept
+in `last_outcome.json` under the runs folder until the PLC acknowledges it: a station
+restarted before ACKNOWLEDGE serves the same result registers again.
 """
 
 from __future__ import annotations
@@ -23,6 +34,7 @@ from typing import Any
 
 from hostpc.archive import open_archive, record_from_run
 from hostpc.archive.database import Archive
+from hostpc.calibrate.journal import JOURNAL_FILE
 from hostpc.errors import ZerocalError
 from hostpc.files import write_json_atomic
 from hostpc.station import registers as reg
@@ -55,6 +67,7 @@ class Station:
         self.runs_dir = config.path(config.runs_dir)
         self.runs_dir.mkdir(parents=True, exist_ok=True)
         self.current_file = self.runs_dir / "current.json"
+        self.last_outcome_file = self.runs_dir / "last_outcome.json"
         self.plc = PlcServer(config.modbus.host, config.modbus.port)
         self.status = StationStatus()
         self.archive: Archive | None = None
@@ -75,6 +88,8 @@ class Station:
                 ready.set()
             if self.current_file.exists():
                 await self._resume_interrupted()
+            else:
+                self._serve_unacknowledged()
             while not self._stopping.is_set():
                 await self._poll_command()
                 with contextlib.suppress(TimeoutError):
@@ -114,6 +129,7 @@ class Station:
             self.plc.set_many(reg.outcome_registers(reg.RunOutcome(reg.State.IDLE, 0)))
             self.plc.set(reg.PROGRESS, 0)
             self._publish_state(reg.State.IDLE)
+            self.last_outcome_file.unlink(missing_ok=True)  # acknowledged: not served again
         else:
             logger.warning("command %d ignored in state %s", command, state.name)
 
@@ -179,18 +195,21 @@ class Station:
             finally:
                 watcher.cancel()
                 self._child = None
-            if self._aborted:
+            in_flight = push_in_flight(run_dir)
+            if self._aborted and not in_flight:
                 return reg.RESULT_ABORTED
             if self._stopping.is_set():
                 return code
-            if code == EXIT_CONNECTION and current["attempts"] < self.config.resume_attempts \
-                    and run_dir.exists():
+            if (code == EXIT_CONNECTION or in_flight) and run_dir.exists() \
+                    and current["attempts"] < self.config.resume_attempts:
                 current["attempts"] += 1
                 self._write_current(current)
-                logger.warning("link lost during the run of %s: resuming (attempt %d of %d)",
+                why = ("the controller holds pushed offsets not yet verified" if in_flight
+                       else "link lost")
+                logger.warning("%s during the run of %s: resuming (attempt %d of %d)", why,
                                current["serial"], current["attempts"],
                                self.config.resume_attempts)
-                resume = True
+                resume, self._aborted = True, False
                 continue
             return code
 
@@ -198,9 +217,13 @@ class Station:
         while True:
             if self.plc.values[reg.COMMAND] == reg.Command.ABORT:
                 self.plc.set(reg.COMMAND, reg.Command.NONE)
-                self._aborted = True
-                logger.warning("PLC abort: interrupting the run")
-                child.interrupt()
+                if push_in_flight(Path(self.status.run_dir)):
+                    logger.warning("PLC abort deferred: the run has written the controller's "
+                                   "offsets; their verification finishes first")
+                else:
+                    self._aborted = True
+                    logger.warning("PLC abort: interrupting the run")
+                    child.interrupt()
             await asyncio.sleep(0.05)
 
     def _on_progress(self, progress: int, line: str) -> None:
@@ -223,17 +246,25 @@ class Station:
                 logger.error("run %s not archived: %s", run_dir, exc)
                 code = code or reg.RESULT_ARCHIVE_FAILED
         if record is not None and code != reg.RESULT_ABORTED:
-            outcome_state = {"PASS": reg.State.PASS, "FAIL": reg.State.FAIL}.get(
-                record.verdict, reg.State.ERROR if code else reg.State.PASS)
+            # PASS only for the outcome verdict PASS; ERROR if the run did not finish
+            outcome_state = (reg.State.PASS if record.verdict == "PASS" else
+                             reg.State.ERROR if record.verdict == "ERROR" else reg.State.FAIL)
         verify = record.verify if record is not None else {}
+        block = record.result.get("outcome") if record is not None else None
         outcome = reg.RunOutcome(
             outcome_state, code,
             largest_correction_deg=record.largest_correction_deg if record else None,
             verify_statistic=_number(verify.get("statistic")),
             verify_p_value=_number(verify.get("p_value")),
-            verify_dof=int(verify.get("dof") or 0), archive_id=archive_id)
+            verify_dof=int(verify.get("dof") or 0), archive_id=archive_id,
+            **reg.outcome_bits(block if isinstance(block, dict) else {}))
         self._finish(outcome)
-        self.current_file.unlink(missing_ok=True)
+        if push_in_flight(run_dir):  # unverified offsets in the controller: resume later
+            logger.error("run %s ended with pushed offsets not verified: current.json kept, "
+                         "the next station start resumes it (or: hostpc calibrate --resume "
+                         "%s)", run_dir, run_dir)
+        else:
+            self.current_file.unlink(missing_ok=True)
         self.status.runs_done += 1
         self.status.recent = ([{"serial": current["serial"], "verdict": outcome_state.name,
                                 "result_code": code, "archive_id": archive_id,
@@ -247,6 +278,49 @@ class Station:
                      self.plc.values[reg.PROGRESS])
         self.status.result_code = outcome.result_code
         self._publish_state(outcome.state)
+        registers = {**reg.outcome_registers(outcome), reg.PROGRESS: self.plc.values[reg.PROGRESS]}
+        write_json_atomic(self.last_outcome_file,  # served again after a restart until ACK
+                          {"registers": {str(k): v for k, v in registers.items()},
+                           "result_code": outcome.result_code})
+
+    def _serve_unacknowledged(self) -> None:
+        """After a restart: the last result the PLC has not acknowledged, on the registers
+        again (last_outcome.json)."""
+        try:
+            saved = json.loads(self.last_outcome_file.read_text())
+            registers = {int(k): int(v) for k, v in saved["registers"].items()}
+            state = reg.State(registers[reg.STATE])
+        except FileNotFoundError:
+            return
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
+            logger.error("%s is damaged: the last result is not served again",
+                         self.last_outcome_file)
+            return
+        self.plc.set_many(registers)
+        self.status.result_code = saved.get("result_code")
+        self._publish_state(state)
+        logger.info("serving the unacknowledged result again: %s (result code %s)",
+                    state.name, registers.get(reg.RESULT_CODE))
+
+
+def push_in_flight(run_dir: Path) -> bool:
+    """True if the run's journal holds a push (or a push intent) not followed by the run's
+    result or a rollback: the controller may hold offsets nobody verified yet. Read only
+    (the child may be appending: an unfinished last line is skipped, never cut)."""
+    try:
+        data = (run_dir / JOURNAL_FILE).read_bytes()
+    except OSError:
+        return False
+    last = None
+    for raw in data.splitlines(keepends=True):
+        if not raw.endswith(b"\n") or b'"event":"sample"' in raw:
+            continue
+        with contextlib.suppress(ValueError):
+            obj = json.loads(raw)
+            event = obj.get("event") if isinstance(obj, dict) else None
+            if event in ("push_intent", "push", "result", "rollback"):
+                last = event
+    return last in ("push_intent", "push")
 
 
 def _number(value: Any) -> float | None:

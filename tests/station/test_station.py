@@ -70,7 +70,9 @@ def station(tmp_path: Path, fast_rig: Path) -> Iterator[tuple[StationProcess, di
     hidden = tmp_path / "hidden.json"
     hidden.write_text(json.dumps(_hidden_compliance_world()))
     port = _free_port()
+    # J6 is not separable from the estimated tool frame in this cell: require J1-J5
     config = {"station": "eol-1", "robot": "sim", "known": "target", "poses": 12,
+              "require_joints": "1,2,3,4,5",
               "verify_poses": 4, "calibrate_args": ["--rig", str(fast_rig)],
               "db": f"sqlite:///{tmp_path / 'archive.db'}", "runs_dir": str(tmp_path / "runs"),
               "modbus": {"host": "127.0.0.1", "port": port},
@@ -154,7 +156,8 @@ def test_twenty_robots_in_a_row(station: tuple[StationProcess, dict[str, object]
     with open_archive(str(config["db"])) as archive:
         runs = archive.runs()
     assert [r["serial"] for r in runs] == serials
-    assert {r["serial"]: r["verdict"] for r in runs}["SN-HIDDEN"] == "FAIL"
+    # its model does not explain the data: the push is refused (offsets unchanged)
+    assert {r["serial"]: r["verdict"] for r in runs}["SN-HIDDEN"] == "REFUSED"
     assert all(r["verdict"] == "PASS" for r in runs if r["serial"] != "SN-HIDDEN")
     assert "resuming (attempt 1 of 2)" in process.log.read_text()
     assert len({r["run_uid"] for r in runs}) == 20

@@ -1,0 +1,390 @@
+"""What a calibration run did to the ROBOT: one verdict, per joint, from the journal alone.
+
+`RobotOutcome` is the one source of truth every view reads (result.json's "outcome" block,
+summary.txt, report.html, the archive, the station's registers). It is derived ONLY from
+the run's journal (what was pushed, verified, rolled back, refused) and the fit's per-joint
+sources (joint_status.py, stored in the outcome's "joints" so a later rollback or resume
+re-derives it without refitting). Nothing else decides a verdict; a model check (a
+verification with nothing pushed) is never one.
+
+Verdicts (the first that applies, top down):
+
+    ERROR           the run did not finish (no `result` event); the controller text says
+                    what it holds (e.g. new offsets, NOT verified: resume it)
+    FAIL            offsets pushed, and their verification failed                  (exit 6)
+    ROLLED_BACK     the push was undone by `hostpc rollback --run`                 (exit 0)
+    REFUSED         a guard rail refused the push: offsets unchanged               (exit 5)
+    JOINTS_MISSING  a required joint (`--require-joints`) is not calibrated from data
+                    (the calibrated joints are still pushed and verified)           (exit 7)
+    PASS            offsets pushed and verified
+    NOT_VERIFIED    offsets pushed, no verification measured (`--verify-poses 0`)  (exit 0)
+    NOT_PUSHED      --no-push, nothing to push (a model check at most)             (exit 0)
+
+A refusal counts while no push of the run is in the controller (a refused re-push on a
+resume leaves the earlier, verified push standing).
+
+A joint is "calibrated" when the data determine it (source "data") and, if it was pushed,
+its verification did not fail; a hold or prior value never is (joint_status.py).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from hostpc.calibrate.joint_status import JointSource
+from hostpc.calibrate.summary import (
+    EXIT_JOINTS_NOT_CALIBRATED,
+    EXIT_PUSH_REFUSED,
+    EXIT_VERIFY_FAILED,
+)
+
+VERDICTS = ("PASS", "FAIL", "REFUSED", "NOT_PUSHED", "NOT_VERIFIED", "ROLLED_BACK",
+            "JOINTS_MISSING", "ERROR")
+EXIT_CODES = {"PASS": 0, "NOT_PUSHED": 0, "NOT_VERIFIED": 0, "ROLLED_BACK": 0,
+              "REFUSED": EXIT_PUSH_REFUSED, "FAIL": EXIT_VERIFY_FAILED,
+              "JOINTS_MISSING": EXIT_JOINTS_NOT_CALIBRATED, "ERROR": 1}
+"""`hostpc calibrate`'s exit code per verdict (ERROR: the error's own code at the CLI)."""
+JOURNAL_KINDS = ("push_intent", "push", "verify", "rollback", "push_refused", "resumed",
+                 "result")
+"""The journal events an outcome reads (Journal.timeline)."""
+_MATCH = 1e-9  # rad: the verified offsets are the pushed ones
+
+
+@dataclass(frozen=True)
+class JointOutcome:
+    """One joint after the run: status calibrated | not_calibrated; source data | hold |
+    prior | none; pushed: its new offset is in the controller now; verified: that offset
+    passed (True) / failed (False) verification, None if not pushed or not verified."""
+
+    joint: int
+    label: str
+    status: str
+    source: str
+    pushed: bool
+    verified: bool | None
+    reason: str | None
+    fix: str | None
+
+    @property
+    def on_robot(self) -> bool:
+        """Calibrated from data and, if pushed, verified (station register 14)."""
+        return self.status == "calibrated" and (not self.pushed or self.verified is True)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"joint": self.joint, "label": self.label, "status": self.status,
+                "source": self.source, "pushed": self.pushed, "verified": self.verified,
+                "reason": self.reason, "fix": self.fix}
+
+
+@dataclass(frozen=True)
+class OutcomeEvent:
+    """Something that happened to the controller: pushed | verified | model_check |
+    rolled_back | refused | resumed, at an ISO time (None in journals that lack it)."""
+
+    at: str | None
+    event: str
+    details: tuple[tuple[str, Any], ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"at": self.at, "event": self.event, **dict(self.details)}
+
+
+@dataclass(frozen=True)
+class RobotOutcome:
+    """The run's outcome (module docstring); `to_dict` is result.json's "outcome" block."""
+
+    verdict: str
+    controller: str
+    pushed: bool
+    verified: bool | None
+    rolled_back_at: str | None
+    joints: tuple[JointOutcome, ...]
+    required_joints: tuple[int, ...]
+    missing_required: tuple[int, ...]
+    headline: str
+    next_command: str | None
+    events: tuple[OutcomeEvent, ...] = field(default=())
+    refused_reason: str | None = None
+
+    @property
+    def exit_code(self) -> int:
+        return EXIT_CODES[self.verdict]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"verdict": self.verdict, "controller": self.controller, "pushed": self.pushed,
+                "verified": self.verified, "rolled_back_at": self.rolled_back_at,
+                "joints": [j.to_dict() for j in self.joints],
+                "required_joints": list(self.required_joints),
+                "missing_required": list(self.missing_required),
+                "headline": self.headline, "next_command": self.next_command,
+                "events": [e.to_dict() for e in self.events],
+                "refused_reason": self.refused_reason, "exit_code": self.exit_code}
+
+
+def parse_required_joints(text: str | None, n_joints: int | None = None) -> tuple[int, ...]:
+    """`--require-joints`: "all" (every joint), "none" or None (no requirement), or a
+    comma list of 1-based joint numbers ("1,2,6"). n_joints None: syntax only; "all"
+    then gives (). ValueError naming the bad item."""
+    if text is None or text.strip().lower() in ("", "none"):
+        return ()
+    if text.strip().lower() == "all":
+        return tuple(range(1, (n_joints or 0) + 1))
+    joints: list[int] = []
+    for item in text.split(","):
+        item = item.strip()
+        if not item.isdigit() or int(item) < 1:
+            raise ValueError(f"--require-joints {text}: {item!r} is not a joint number "
+                             "(all, none, or e.g. 1,2,6)")
+        if n_joints is not None and int(item) > n_joints:
+            raise ValueError(f"--require-joints {text}: joint {item} does not exist (the "
+                             f"robot has {n_joints} joints)")
+        if int(item) not in joints:
+            joints.append(int(item))
+    return tuple(sorted(joints))
+
+
+def sources_from_outcome(block: Mapping[str, Any]) -> tuple[JointSource, ...]:
+    """The fit's per-joint sources as a stored outcome block holds them (for a rollback or
+    a later view to derive the outcome again without the fit)."""
+    return tuple(JointSource(int(row["joint"]), str(row.get("label", f"q{row['joint']}")),
+                             str(row.get("source", "none")), row.get("reason"),
+                             row.get("fix"))
+                 for row in block.get("joints", []) if isinstance(row, Mapping))
+
+
+def joint_names(joints: Sequence[JointOutcome] | Sequence[JointSource],
+                numbers: Sequence[int]) -> str:
+    """J2-J5, J1, J6 (a kinematic tree's labels as they are)."""
+    by_number = {j.joint: j.label for j in joints}
+    labels = [by_number.get(n, f"q{n}") for n in numbers]
+    if any(label != f"q{n}" for n, label in zip(numbers, labels, strict=True)):
+        return ", ".join(labels)
+    parts: list[str] = []
+    run: list[int] = []
+    for n in sorted(numbers):
+        if run and n == run[-1] + 1:
+            run.append(n)
+            continue
+        if run:
+            parts.append(_span(run))
+        run = [n]
+    if run:
+        parts.append(_span(run))
+    return ", ".join(parts)
+
+
+def _span(run: list[int]) -> str:
+    return f"J{run[0]}" if len(run) == 1 else (
+        f"J{run[0]}, J{run[1]}" if len(run) == 2 else f"J{run[0]}-J{run[-1]}")
+
+
+def derive_outcome(events: Sequence[Mapping[str, Any]], sources: Sequence[JointSource], *,
+                   run_dir: str, finished: bool, required: Sequence[int] = (),
+                   robot_arg: str = "ROBOT", known: Sequence[str] = ()) -> RobotOutcome:
+    """The outcome from the journal's events (`Journal.timeline(*JOURNAL_KINDS)`, in
+    order) and the fit's per-joint sources. finished: the run wrote (or is writing) its
+    result; run_dir / robot_arg / known: for the next command (robot_arg: `sim` or the
+    address; known: the run's known frames, kept in a new run's `--known`)."""
+    state = _replay(events)
+    active = state.pushed_new is not None and state.rolled_at is None
+    pushed_mask = state.pushed_mask if active else ()
+    joints = []
+    for s in sources:
+        pushed = bool(active and (s.joint - 1 < len(pushed_mask) and pushed_mask[s.joint - 1]))
+        verified = state.verified if pushed else None
+        calibrated = s.calibrated and verified is not False
+        reason = s.reason if not s.calibrated else (
+            None if calibrated else "its pushed offset failed verification")
+        joints.append(JointOutcome(s.joint, s.label,
+                                   "calibrated" if calibrated else "not_calibrated",
+                                   s.source, pushed, verified, reason,
+                                   s.fix if not s.calibrated else None))
+    required = tuple(sorted(set(required)))
+    missing = tuple(n for n in required
+                    if not any(j.joint == n and j.source == "data" for j in joints))
+    if not finished:
+        verdict = "ERROR"
+    elif active and state.verified is False:
+        verdict = "FAIL"
+    elif not active and state.rolled_at is not None:
+        verdict = "ROLLED_BACK"
+    elif not active and state.refused is not None:
+        verdict = "REFUSED"
+    elif missing:
+        verdict = "JOINTS_MISSING"
+    elif active:
+        verdict = "PASS" if state.verified else "NOT_VERIFIED"
+    else:
+        verdict = "NOT_PUSHED"
+    controller = _controller_text(state, active)
+    outcome = RobotOutcome(
+        verdict=verdict, controller=controller, pushed=active,
+        verified=state.verified if active else None, rolled_back_at=state.rolled_at,
+        joints=tuple(joints), required_joints=required, missing_required=missing,
+        headline="", next_command=None, events=tuple(state.events),
+        refused_reason=state.refused)
+    return _with_words(outcome, run_dir, robot_arg, tuple(known), state.intent_open)
+
+
+@dataclass
+class _Replay:
+    pushed_new: np.ndarray | None = None
+    pushed_mask: tuple[bool, ...] = ()
+    verified: bool | None = None
+    rolled_at: str | None = None
+    refused: str | None = None
+    intent_open: bool = False
+    events: list[OutcomeEvent] = field(default_factory=list)
+
+
+def _replay(events: Sequence[Mapping[str, Any]]) -> _Replay:
+    """Walk the journal's events in order: the last push, whether it was verified or
+    rolled back since, a refusal after it."""
+    state = _Replay()
+    for e in events:
+        kind = e.get("event")
+        at = e.get("time") or e.get("at")
+        if kind == "push_intent":
+            state.intent_open = True
+        elif kind == "push":
+            state.pushed_new = np.asarray(e.get("new_offsets", ()), float)
+            state.pushed_mask = tuple(bool(v) for v in e.get("pushed", ()))
+            state.verified, state.rolled_at, state.refused = None, None, None
+            state.intent_open = False
+            state.events.append(OutcomeEvent(at, "pushed", (
+                ("rollback_id", e.get("rollback_id")),
+                ("recovered", bool(e.get("recovered", False))))))
+        elif kind == "verify":
+            offsets = np.asarray(e.get("offsets", ()), float)
+            judged = (state.pushed_new is not None and state.rolled_at is None
+                      and offsets.shape == state.pushed_new.shape
+                      and bool(np.allclose(offsets, state.pushed_new, rtol=0.0, atol=_MATCH)))
+            details = (("verdict", e.get("verdict")), ("p_value", e.get("p_value")))
+            if judged:
+                state.verified = e.get("verdict") == "PASS"
+            state.events.append(OutcomeEvent(at, "verified" if judged else "model_check",
+                                             details))
+        elif kind == "rollback":
+            if state.pushed_new is not None:
+                state.rolled_at = str(at or "an unrecorded time")
+            state.intent_open = False
+            state.events.append(OutcomeEvent(at, "rolled_back", (("how", e.get("how")),)))
+        elif kind == "push_refused":
+            state.refused = str(e.get("reason") or "refused by a guard rail")
+            state.events.append(OutcomeEvent(at, "refused", (("reason", state.refused),)))
+        elif kind == "resumed":
+            state.events.append(OutcomeEvent(at, "resumed"))
+    return state
+
+
+def _controller_text(state: _Replay, active: bool) -> str:
+    if active:
+        return {True: "new offsets, verified", False: "new offsets, verification FAILED",
+                None: "new offsets, NOT verified"}[state.verified]
+    if state.rolled_at is not None:
+        return f"offsets restored by rollback at {state.rolled_at}"
+    if state.intent_open:
+        return "unknown: a push was cut short (a resume settles it from the controller)"
+    return "offsets unchanged"
+
+
+def _with_words(outcome: RobotOutcome, run_dir: str, robot_arg: str, known: tuple[str, ...],
+                intent_open: bool) -> RobotOutcome:
+    """The outcome with its headline and next command filled in."""
+    joints = outcome.joints
+    good = [j.joint for j in joints if j.status == "calibrated"]
+    bad = [j for j in joints if j.source != "data"]
+    done = ("verified" if outcome.verified else "pushed, NOT verified" if outcome.pushed
+            else "fitted, not pushed")
+    good_text = f"{joint_names(joints, good)} calibrated and {done}" if good else \
+        "no joint calibrated"
+    if outcome.verdict in ("PASS", "NOT_VERIFIED", "JOINTS_MISSING") and not outcome.pushed:
+        good_text = f"{joint_names(joints, good)} fitted from data, not pushed" if good \
+            else "no joint fitted from data"
+    bad_text = _not_calibrated_text(joints, bad)
+    verdict = outcome.verdict
+    run = run_dir
+    next_command: str | None = None
+    if verdict == "PASS":
+        head = f"PASS: {good_text}" + (f"; {bad_text}" if bad_text else "")
+    elif verdict == "JOINTS_MISSING":
+        missing = joint_names(joints, outcome.missing_required)
+        head = f"JOINTS_MISSING: {good_text}; {bad_text} (required: {missing})"
+        next_command = _fix_command(joints, outcome, robot_arg, known)
+    elif verdict == "NOT_VERIFIED":
+        head = f"PUSHED, NOT VERIFIED: {good_text} (no verification poses)" + (
+            f"; {bad_text}" if bad_text else "")
+    elif verdict == "FAIL":
+        head = ("FAIL: the pushed offsets failed verification; the controller holds them"
+                + (f"; {bad_text}" if bad_text else ""))
+        next_command = f"hostpc rollback --run {run}"
+    elif verdict == "ROLLED_BACK":
+        head = (f"ROLLED BACK at {outcome.rolled_back_at}: the controller has its previous "
+                "offsets again")
+        next_command = f"hostpc calibrate --resume {run} --push"
+    elif verdict == "REFUSED":
+        head = f"REFUSED: push refused, offsets unchanged ({outcome.refused_reason})"
+        reason = outcome.refused_reason or ""
+        next_command = (f"hostpc diagnose {run}/dataset.json" if "hostpc diagnose" in reason
+                        else f"hostpc calibrate --resume {run} --force")
+    elif verdict == "NOT_PUSHED":
+        head = f"NOT PUSHED: offsets unchanged; {good_text}" + (
+            f"; {bad_text}" if bad_text else "")
+        next_command = f"hostpc calibrate --resume {run} --push" if good else None
+    else:
+        head = f"ERROR: the run did not finish; controller: {outcome.controller}"
+        next_command = f"hostpc calibrate --resume {run}"
+    if intent_open and verdict == "ERROR":
+        next_command = f"hostpc calibrate --resume {run}"
+    return RobotOutcome(**{**_fields(outcome), "headline": head,
+                           "next_command": next_command})
+
+
+def _fields(outcome: RobotOutcome) -> dict[str, Any]:
+    return {name: getattr(outcome, name) for name in outcome.__dataclass_fields__}
+
+
+def _not_calibrated_text(joints: Sequence[JointOutcome], bad: Sequence[JointOutcome]) -> str:
+    """"J1, J6 NOT CALIBRATED (unidentifiable: ...)" grouped by reason."""
+    if not bad:
+        return ""
+    by_reason: dict[str, list[int]] = {}
+    for j in bad:
+        by_reason.setdefault(_short_reason(j), []).append(j.joint)
+    return "; ".join(f"{joint_names(joints, numbers)} NOT CALIBRATED ({reason})"
+                     for reason, numbers in by_reason.items())
+
+
+def _short_reason(joint: JointOutcome) -> str:
+    reason = joint.reason or "not calibrated"
+    if joint.source == "hold":
+        return "held by --hold"
+    if joint.source == "prior":
+        return "prior value, not measured"
+    if reason.startswith("unidentifiable with the "):
+        return "unidentifiable: " + reason[len("unidentifiable with the "):].split(" (")[0]
+    return reason.split(" (")[0]
+
+
+def _fix_command(joints: Sequence[JointOutcome], outcome: RobotOutcome,
+                 robot_arg: str, known: tuple[str, ...]) -> str | None:
+    """A new run that would calibrate the missing joints (their `--known` frames added to
+    the run's own)."""
+    frames: list[str] = [f for f in known if f != "none"]
+    added = False
+    for j in joints:
+        if j.joint in outcome.missing_required and j.fix and j.fix.startswith("--known "):
+            for frame in j.fix.split()[1].split(","):
+                if frame not in frames:
+                    frames.append(frame)
+                    added = True
+    if not added:
+        return None
+    required = ("all" if len(outcome.required_joints) == len(joints)
+                else ",".join(str(n) for n in outcome.required_joints))
+    return (f"hostpc calibrate --robot {robot_arg} --known {','.join(frames)} "
+            f"--require-joints {required}")

@@ -1,0 +1,100 @@
+"""The outcome in the run folder: derived from the journal, written into every view.
+
+`run_outcome` derives a run's `RobotOutcome` (outcome.py) from its journal; the runner
+puts it into result.json at the end of a run or a resume. `rewrite_outcome` does it again
+later, when the journal changed after the result was written (`hostpc rollback --run`):
+result.json's "outcome" block and exit code, summary.txt and report.html are rewritten so
+no view keeps saying PASS for offsets that were rolled back. The previous result.json and
+summary.txt are kept as result.N.json / summary.N.txt (resume.archive_result).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from hostpc.calibrate.joint_status import JointSource
+from hostpc.calibrate.journal import Journal, write_json_atomic
+from hostpc.calibrate.outcome import (
+    JOURNAL_KINDS,
+    RobotOutcome,
+    derive_outcome,
+    parse_required_joints,
+    sources_from_outcome,
+)
+from hostpc.calibrate.resume import archive_result
+from hostpc.calibrate.summary import format_summary
+from hostpc.errors import InputError
+
+
+def robot_argument(header: Mapping[str, Any]) -> str:
+    """How a new run would name this run's robot: `sim` or its address."""
+    robot = header.get("robot") or {}
+    return "sim" if robot.get("sim") else str(robot.get("address") or "ROBOT")
+
+
+def run_outcome(journal: Journal, sources: Sequence[JointSource], *, run_dir: Path,
+                header: Mapping[str, Any], require_joints: str | None, finished: bool,
+                known: Sequence[str] = ()) -> RobotOutcome:
+    """The outcome of the run in `run_dir` from its journal and the fit's sources."""
+    required = parse_required_joints(require_joints, len(sources))
+    return derive_outcome(journal.timeline(*JOURNAL_KINDS), sources, run_dir=str(run_dir),
+                          finished=finished, required=required,
+                          robot_arg=robot_argument(header), known=known)
+
+
+def rewrite_outcome(run_dir: Path) -> RobotOutcome | None:
+    """Derive the outcome of a finished run again from its journal and rewrite result.json,
+    summary.txt and report.html (if the run has one) with it. None (nothing written) if
+    the run has no result.json or one without an outcome block (an older version's)."""
+    path = run_dir / "result.json"
+    try:
+        document: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path}: cannot read ({exc})") from None
+    block = document.get("outcome")
+    if not isinstance(block, dict):
+        return None
+    journal = Journal(run_dir)
+    header = journal.read_header()
+    journal.load()
+    settings = header.get("settings") or {}
+    outcome = run_outcome(journal, sources_from_outcome(block), run_dir=run_dir,
+                          header=header, require_joints=settings.get("require_joints"),
+                          finished=journal.last_event("result") is not None,
+                          known=tuple(document.get("known") or ()))
+    document["outcome"] = outcome.to_dict()
+    document["exit_code"] = outcome.exit_code
+    if outcome.verdict == "ROLLED_BACK":
+        document.setdefault("push", {})["status"] = "rolled_back"
+        for row in (document.get("offsets") or {}).get("joints", []):
+            row["pushed"] = False
+    summary = format_summary(document)
+    archive_result(run_dir)
+    (run_dir / "summary.txt").write_text(summary + "\n", encoding="utf-8")
+    write_json_atomic(path, document)
+    if (run_dir / "report.html").is_file():
+        _render_report(run_dir, document)
+    return outcome
+
+
+def _render_report(run_dir: Path, document: Mapping[str, Any]) -> None:
+    """report.html again with the new outcome (the diagnosis of the run's dataset too)."""
+    from hostpc.report import write_calibration_report
+
+    diagnosis = None
+    dataset = run_dir / "dataset.json"
+    if dataset.is_file():
+        from hostpc.diagnostics import diagnose
+
+        settings = document.get("settings") or {}
+        effects = (document.get("fit") or {}).get("effects") or settings.get("effects")
+        diagnosis = diagnose(dataset, effects, plugins=settings.get("plugins") or [],
+                             loss=settings.get("loss") or "linear", source=str(dataset))
+    truth_file = run_dir / "sim" / "truth.json"
+    truth = json.loads(truth_file.read_text()) if truth_file.is_file() else None
+    write_calibration_report(run_dir / "report.html", document, diagnosis, truth)

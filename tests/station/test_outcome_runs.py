@@ -1,0 +1,173 @@
+"""One outcome per run, in every view: result.json's "outcome" block, summary.txt,
+report.html and the archive (real SQLite and PostgreSQL) say what the run did to the
+robot; a later resume or rollback revises them, never leaving a stale PASS."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from hostpc.archive import open_archive
+from hostpc.archive.records import verdict_of
+from hostpc.cli.main import main
+from hostpc.robots.simulator import SimulatedController
+from tests.integration.test_calibrate_sim import TOKEN, sim_scenario
+
+
+def _cli(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
+    code = main(list(args))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _outcome(run_dir: Path) -> dict[str, Any]:
+    outcome: dict[str, Any] = json.loads((run_dir / "result.json").read_text())["outcome"]
+    return outcome
+
+
+def test_a_refused_push_is_refused_everywhere_and_a_forced_resume_revises_the_archive(
+        tmp_path: Path, fast_rig: Path, archive_url: str,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run"
+    code, stdout, stderr = _cli(
+        capsys, "calibrate", "--robot", "sim", "--max-correction", "0.01", "--poses", "12",
+        "--verify-poses", "4", "--rig", str(fast_rig), "--no-report", "--out", str(out),
+        "--db", archive_url, "--robot-serial", "SN-1")
+    assert code == 5, stderr
+    outcome = _outcome(out)
+    assert outcome["verdict"] == "REFUSED" and not outcome["pushed"]
+    assert outcome["controller"] == "offsets unchanged"
+    assert outcome["next_command"] == f"hostpc calibrate --resume {out} --force"
+    assert stdout.splitlines()[0].startswith("REFUSED: push refused, offsets unchanged")
+    with open_archive(archive_url) as archive:
+        (run,) = archive.runs("SN-1")
+        assert run["verdict"] == "REFUSED" and run["revision"] == 1
+
+    code, stdout, stderr = _cli(capsys, "calibrate", "--resume", str(out), "--force",
+                                "--db", archive_url, "--robot-serial", "SN-1")
+    assert code == 0, stderr
+    outcome = _outcome(out)
+    assert outcome["verdict"] == "PASS" and outcome["controller"] == "new offsets, verified"
+    assert [e["event"] for e in outcome["events"]] == [
+        "refused", "model_check", "resumed", "pushed", "verified"]
+    assert stdout.splitlines()[0].startswith("PASS: J1-J5 calibrated and verified; J6 NOT "
+                                             "CALIBRATED (unidentifiable: tool frame")
+    with open_archive(archive_url) as archive:
+        (run,) = archive.runs("SN-1")  # the same record, revised
+        assert run["verdict"] == "PASS" and run["revision"] == 2 and run["exit_code"] == 0
+        assert run["push_status"] == "pushed"
+        history = archive.revisions(run["id"])
+    assert [(r["revision"], r["verdict"]) for r in history] == [(1, "REFUSED"), (2, "PASS")]
+    assert history[1]["outcome"]["verdict"] == "PASS"
+
+
+def _offsets(sim: SimulatedController) -> np.ndarray:
+    """The zero offsets the simulated controller holds now (its own state)."""
+    return np.asarray(sim.truth()["zero_offsets"], float)
+
+
+def test_a_rollback_rewrites_result_summary_report_and_revises_the_archive(
+        tmp_path: Path, fast_rig: Path, archive_url: str,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run"
+    with SimulatedController(sim_scenario(), tmp_path / "stub", token=TOKEN) as sim:
+        address = f"{sim.address.host}:{sim.address.port}"
+        before = _offsets(sim)
+        code, _, stderr = _cli(
+            capsys, "calibrate", "--robot", address, "--token", TOKEN, "--known", "target",
+            "--poses", "12", "--verify-poses", "4", "--rig", str(fast_rig), "--cv-folds",
+            "0", "--out", str(out), "--db", archive_url, "--robot-serial", "SN-2")
+        assert code == 0, stderr
+        assert _outcome(out)["verdict"] == "PASS"
+        assert "PASS: J1-J5 calibrated and verified" in (out / "report.html").read_text()
+        assert not np.allclose(_offsets(sim), before)
+
+        code, stdout, stderr = _cli(capsys, "rollback", "--run", str(out), "--token", TOKEN,
+                                    "--db", archive_url, "--robot-serial", "SN-2")
+        assert code == 0, stderr
+        np.testing.assert_allclose(_offsets(sim), before, rtol=0, atol=1e-12)
+    outcome = _outcome(out)
+    assert outcome["verdict"] == "ROLLED_BACK" and not outcome["pushed"]
+    assert outcome["controller"].startswith("offsets restored by rollback at ")
+    assert outcome["rolled_back_at"] and outcome["events"][-1]["event"] == "rolled_back"
+    summary = (out / "summary.txt").read_text()
+    assert summary.startswith("ROLLED BACK at ") and "controller: offsets restored" in summary
+    report = (out / "report.html").read_text()
+    assert "ROLLED BACK at " in report and "offsets pushed and verified" not in report
+    assert json.loads((out / "result.1.json").read_text())["outcome"]["verdict"] == "PASS"
+    with open_archive(archive_url) as archive:
+        (run,) = archive.runs("SN-2")
+        assert run["verdict"] == "ROLLED_BACK" and run["revision"] == 2
+        assert [r["verdict"] for r in archive.revisions(run["id"])] == ["PASS", "ROLLED_BACK"]
+    # `hostpc report RUN` renders the same outcome again
+    (out / "report.html").unlink()
+    code, _, stderr = _cli(capsys, "report", str(out), "--no-diagnosis")
+    assert code == 0, stderr
+    assert "ROLLED BACK at " in (out / "report.html").read_text()
+    code, stdout, _ = _cli(capsys, "history", "--db", archive_url)
+    assert "last ROLLED_BACK" in stdout
+
+
+def test_an_estimated_target_leaves_j1_and_j6_not_calibrated_exit_7(
+        tmp_path: Path, fast_rig: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run"
+    code, stdout, stderr = _cli(
+        capsys, "calibrate", "--robot", "sim", "--known", "none", "--require-joints", "all",
+        "--poses", "12", "--verify-poses", "4", "--rig", str(fast_rig), "--out", str(out))
+    assert code == 7, stderr
+    outcome = _outcome(out)
+    assert outcome["verdict"] == "JOINTS_MISSING" and outcome["missing_required"] == [1, 6]
+    joints = {j["joint"]: j for j in outcome["joints"]}
+    assert [n for n, j in joints.items() if j["status"] == "calibrated"] == [2, 3, 4, 5]
+    assert all(joints[n]["verified"] is True and joints[n]["pushed"] for n in (2, 3, 4, 5))
+    assert "target frame estimated" in joints[1]["reason"]
+    assert joints[1]["fix"].startswith("--known target")
+    assert "tool frame estimated" in joints[6]["reason"]
+    assert outcome["next_command"] == ("hostpc calibrate --robot sim --known target,tool "
+                                       "--require-joints all")
+    head = stdout.splitlines()[0]
+    assert head.startswith("JOINTS_MISSING: J2-J5 calibrated and verified; J1 NOT CALIBRATED")
+    report = (out / "report.html").read_text()
+    assert 'id="joints"' in report and report.count("NOT CALIBRATED") >= 2
+    assert verdict_of(json.loads((out / "result.json").read_text()), 7) == "JOINTS_MISSING"
+
+
+@pytest.mark.parametrize("constraint", ["--prior", "--hold"])
+def test_held_and_prior_values_are_marked_and_never_pushed(
+        tmp_path: Path, fast_rig: Path, capsys: pytest.CaptureFixture[str],
+        constraint: str) -> None:
+    out = tmp_path / "run"
+    # q6 is not separable from the estimated tool frame: a prior alone decides it; a
+    # held q2 stays at its nominal value
+    joint, value, mark, source = ((6, "joint_offsets.q6=0+-0.05deg", "(prior)", "prior")
+                                  if constraint == "--prior" else
+                                  (2, "joint_offsets.q2", "(held)", "hold"))
+    code, _, stderr = _cli(
+        capsys, "calibrate", "--robot", "sim", "--poses", "12", "--verify-poses", "0",
+        "--rig", str(fast_rig), constraint, value, "--out", str(out), "--force")
+    assert code == 0, stderr
+    joints = {j["joint"]: j for j in _outcome(out)["joints"]}
+    assert (joints[joint]["source"], joints[joint]["status"]) == (source, "not_calibrated")
+    assert not joints[joint]["pushed"] and joints[1]["source"] == "data"
+    rows = {r["joint"]: r for r in json.loads((out / "result.json").read_text())
+            ["offsets"]["joints"]}
+    assert not rows[joint]["pushed"] and rows[1]["pushed"]
+    assert rows[joint]["new_deg"] == rows[joint]["old_deg"]
+    summary = (out / "summary.txt").read_text()
+    table = {line.split()[0]: line for line in summary.splitlines()
+             if line.startswith("  J")}
+    assert mark in table[f"J{joint}"] and "NOT CALIBRATED" in table[f"J{joint}"], summary
+    assert mark not in table["J1"]
+    report = (out / "report.html").read_text()
+    assert mark in report and 'id="joints"' in report
+
+
+def test_an_old_result_with_a_refused_push_is_never_pass() -> None:
+    old = {"push": {"status": "refused"}, "verify": {"verdict": "PASS", "pushed": False}}
+    assert verdict_of(old, 5) == "REFUSED"
+    model_check = {"push": {"status": "disabled"}, "verify": {"verdict": "PASS"}}
+    assert verdict_of(model_check, 0) == "NOT_PUSHED"
