@@ -38,6 +38,7 @@ COMMAND_MODULES = (
     "robots",  # hostpc.kinematics: built-in robots and URDF chains
     "import_csv",  # hostpc.importing: metrology CSV -> dataset
     "push",  # push the offsets of an offline fit
+    "reference",  # hostpc.calibrate.reference: record / show a cell reference
 )
 
 
