@@ -216,6 +216,9 @@ def joint_coverage(method: Method, plan: Plan, settings: RunSettings, cell: Cell
             missing[label] = (f"not separable from the {frame} frame: mark it known "
                               "(--known) or load a cell reference (--reference FILE)"
                               if frame else "not separable from other parameters")
+            if len(held_full[name].parameters) == 1:  # physics: nothing sees this joint
+                missing[label] = ("it has no effect on these measurements (e.g. a probe tip "
+                                  "or reflector on its axis): no frame can give it")
             if (reference is not None and frame in RIG_FRAMES and reference.frame(frame)
                     and not reference.rig_matches(dataset)):
                 missing[label] = (f"the reference's {frame} frame was measured with another "
