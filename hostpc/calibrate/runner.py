@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.calibrate import run_reference as cell_reference
 from hostpc.calibrate.joint_status import joint_sources
 from hostpc.calibrate.journal import Journal, write_json_atomic
 from hostpc.calibrate.more_poses import more_poses_reason
@@ -112,6 +113,8 @@ class Runner:
         truth: Callable[[], dict[str, Any]] | None = None,
         report: bool = True,
         resume_overrides: Mapping[str, Any] | None = None,
+        reference: str | None = None,
+        robot_serial: str | None = None,
     ) -> None:
         self.robot = robot
         self.run_dir = Path(run_dir)
@@ -124,6 +127,10 @@ class Runner:
         self.truth_reader = truth
         self.report = report
         self.resume_overrides = dict(resume_overrides or {})
+        self.reference_option = reference  # --reference FILE|none (run_reference.py)
+        self.robot_serial = robot_serial
+        self.reference: Any = None  # the CellReference the run uses, and its frames' priors
+        self._priors: list[Any] = []
         self.journal = Journal(self.run_dir)
         self.header: dict[str, Any] = {}
         self._clock = SampleClock(self.journal, self.progress)  # resume: sample t continues
@@ -182,7 +189,8 @@ class Runner:
             settings = resume_settings(RunSettings.from_dict(self.header["settings"]),
                                        self.resume_overrides, self.journal, progress)
             self.journal.event("resumed", at=_now())
-            cell = cell_from_dict(self.header["cell"])
+            cell = cell_reference.resume_known(cell_from_dict(self.header["cell"]), self.known,
+                                               self.header, self.journal, progress)
             self._clock.last_t = self.journal.last_sample_t()
             progress.message(f"resuming {self.run_dir}: "
                              f"{len(self.journal.records('fit'))} fit and "
@@ -201,6 +209,7 @@ class Runner:
             self.header = {
                 "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
                 "robot": self.robot_info.to_dict(),
+                "robot_serial": self.robot_serial,
                 "settings": settings.to_dict(),
                 "seed": settings.seed,
                 "cell": cell.to_dict(),
@@ -214,8 +223,13 @@ class Runner:
             # the method's own default model (sphere_probe: + trigger_latency)
             settings = dataclasses.replace(settings, effects=method.default_effects())
         method.check_inputs()
+        self.reference, changed = cell_reference.choose_reference(
+            self.run_dir, self.reference_option, resume=resume, method=settings.method,
+            robot_model=cell.robot, robot_serial=self.robot_serial)
         if not resume:  # the run exists from here on (a failed check leaves nothing)
             self.journal.write_header(self.header)
+        cell_reference.record_reference_choice(self.run_dir, self.journal, self.reference,
+                                               changed, self.reference_option, progress)
         self._timer = RobotTimer(self.robot, self.journal, state)  # robot time (robot_time.py)
         await method.prepare(self.robot, progress)
         await self._timer.end("rig")
@@ -226,6 +240,8 @@ class Runner:
             plan = plan_run(method, state, settings, progress)
             self.header["plan"] = plan.to_dict()
             self.journal.write_header(self.header)
+        plan = cell_reference.with_joint_coverage(plan, method, settings, cell, self.reference,
+                                                  progress)
         for text in plan.info.get("structural_unidentifiable", []):
             progress.message(f"note: {text}")
 
@@ -255,10 +271,13 @@ class Runner:
         status = "converged" if result.converged else "NOT converged"
         progress.message(f"fit: RMS {result.rms * 1e3:.4f} mm, chi2/dof "
                          f"{result.chi2_dof:.3f}, {status}")
+        check = cell_reference.check_run_reference(result, self._priors, settings, progress)
 
         initial_offsets = np.asarray(initial["zero_offsets"], float)
         push_plan = plan_push(result, initial_offsets, settings.max_correction_deg,
                               settings.force, dataset_file=str(self.run_dir / "dataset.json"))
+        push_plan = cell_reference.refuse_if_moved(push_plan, check, self.reference,
+                                                   self.run_dir)
         push_status, pushed_delta, offsets = await self._push(push_plan, settings, offsets)
         exports = export_offsets(self.robot, self.run_dir, cell.robot, push_plan,
                                  push_status, progress)
@@ -272,6 +291,7 @@ class Runner:
         document = result_document(self.journal, self.run_dir, self.robot_info.to_dict(),
                                    settings, cell, plan, method, dataset, result, push_plan,
                                    push_status, verify_result, truth)
+        cell_reference.add_reference_check(document, check, self.reference, self.run_dir)
         outcome = run_outcome(self.journal, joint_sources(result, initial_offsets.size),
                               run_dir=self.run_dir, header=self.header,
                               require_joints=settings.require_joints, finished=True,
@@ -340,9 +360,11 @@ class Runner:
 
     def _fit(self, method: Method, settings: RunSettings) -> tuple[FitResult, Dataset]:
         """Fit every measured fit pose (dataset.json written first, with the run's
-        --prior / --hold inside)."""
+        --prior / --hold and the cell reference's priors inside)."""
         dataset = with_constraints(self._dataset(method, "fit"), settings.priors,
                                    settings.hold)
+        dataset, self._priors = cell_reference.reference_priors(self.reference, dataset,
+                                                                settings)
         save_dataset(dataset, self.run_dir / "dataset.json")
         self.progress.stage("fit")
         return fit(dataset, settings.effects, plugins=settings.plugins, loss=settings.loss,
@@ -403,7 +425,8 @@ class Runner:
         zero = np.zeros_like(plan.old)
         journaled = push_state(self.journal, self.run_dir, progress, offsets_now,
                                self._push_asked(), zero)
-        remodel = any(self.resume_overrides.get(k) for k in ("effects", "plugins"))
+        remodel = any(self.resume_overrides.get(k)
+                      for k in ("effects", "plugins", "known", "reference"))
         if journaled is not None and not (
                 remodel and journaled[0] == "pushed" and not plan.refused and plan.anything
                 and not same_offsets(plan.new, offsets_now)):

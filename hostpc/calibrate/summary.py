@@ -22,6 +22,7 @@ import numpy as np
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.push import PUSH_FILE, PushPlan, chi2_dof_upper, joint_display_name
 from hostpc.calibrate.robot_time import format_robot_time, robot_time_document
+from hostpc.calibrate.run_reference import reference_summary_lines
 from hostpc.calibrate.verify import VerifyResult, measured_noise_rms, noise_rms
 from hostpc.dataset import Dataset
 from hostpc.fitting import FitResult
@@ -184,6 +185,7 @@ def format_summary(document: Mapping[str, Any]) -> str:
     ]
     for text in fitd["unidentifiable"]:
         lines.append(f"  unidentifiable: {text}")
+    lines += reference_summary_lines(document)  # joints calibrated, reference check
     robot_time = format_robot_time(document)
     if robot_time:
         lines.append(robot_time)

@@ -17,7 +17,8 @@ def add_archive_options(parser: argparse.ArgumentParser, *, read: bool) -> None:
                             help="with --db: refit the dataset of this archived run")
     else:
         parser.add_argument("--robot-serial", metavar="SERIAL",
-                            help="with --db: the robot's serial number (default: its address)")
+                            help="the robot's serial number: the archive's key with --db (default: "
+                            "its address), and the robot a cell reference belongs to")
 
 
 def archive_run(args: argparse.Namespace, run_dir: Path, exit_code: int) -> None:

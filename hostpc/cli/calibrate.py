@@ -45,6 +45,7 @@ from hostpc.cli.calibrate_checks import (
     check_known_frames,
     check_model_options,
     check_out_folder,
+    check_reference_option,
 )
 from hostpc.cli.fit import add_constraint_options, add_model_options
 from hostpc.cli.numbers import finite, integer
@@ -112,6 +113,10 @@ def register(subparsers: Any) -> None:
                         help="frames measured in the cell and held fixed: tool,target or none "
                         "(default: the cell's; for a controller: none)")
     parser.add_argument("--cell", metavar="FILE", help="cell description JSON (mount, target)")
+    parser.add_argument("--reference", metavar="FILE|none",
+                        help="cell reference (hostpc reference record): its frames enter the "
+                        "fit as priors so every joint is calibrated, and are checked against "
+                        "the data; on --resume: replace the run's, or none to drop it")
     parser.add_argument("--rig", metavar="FILE",
                         help="calibrated stereo rig JSON (default: calibrate from chessboard "
                         "captures through the controller)")
@@ -273,6 +278,9 @@ def run(args: argparse.Namespace) -> int:
         scenario_file = None
         if args.effects is not None or args.plugin:
             check_model_options(args.effects, tuple(args.plugin))
+        known = parse_known(args.known)  # a resume refits with them (run_reference.py)
+        check_known_frames(str(header.get("settings", {}).get("method", "")), known)
+        check_reference_option(args.reference, header.get("settings", {}).get("method"))
     elif args.replay:  # a recorded run again, without a robot (hostpc.sensors)
         check_replay_options(args, getattr(args, "option_defaults", {}))
         address, driver, settings, cell_file, known, run_dir = replay_inputs(args, _default_out)
@@ -290,6 +298,7 @@ def run(args: argparse.Namespace) -> int:
         cell_file = load_cell_file(args.cell) if args.cell else None
         known = parse_known(args.known)
         check_known_frames(settings.method, known)
+        check_reference_option(args.reference, settings.method)
         check_model_options(settings.effects, settings.plugins)
         run_dir = Path(args.out) if args.out else _default_out(settings.method)
         check_out_folder(run_dir)
@@ -412,11 +421,13 @@ async def _calibrate(args: argparse.Namespace, address: RobotAddress, driver: st
                      "verify_tolerance_mm": args.verify_tolerance,
                      "effects": args.effects,
                      "plugins": tuple(args.plugin) or None,
-                     "require_joints": args.require_joints}
+                     "require_joints": args.require_joints,
+                     "known": args.known, "reference": args.reference}
         runner = Runner(robot, run_dir, robot_info=info, settings=settings,
                         cell_file=cell_file, known=known, default_known=default_known,
                         progress=progress, truth=truth, report=not args.no_report,
-                        resume_overrides=overrides)
+                        resume_overrides=overrides, reference=args.reference,
+                        robot_serial=args.robot_serial)
         return await runner.run()
     finally:
         await robot.close()

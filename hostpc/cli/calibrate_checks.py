@@ -7,6 +7,7 @@ run folder left behind).
 - `--known`: only frames the method estimates; a frame the method does not have would be
   ignored silently and leave a parameter unidentifiable (e.g. `--known target` with
   sphere_probe, whose reference is the `sphere`: J1 stays unidentifiable);
+- `--reference`: the file is a valid cell reference recorded with this method;
 - `--out`: a folder (or nothing yet), not a file, and not a folder that holds a run.
 """
 
@@ -36,6 +37,18 @@ def check_known_frames(method: str, known: tuple[str, ...] | None) -> None:
             f"--known {','.join(known)}: {', '.join(foreign)} is not a {method} frame (its "
             f"frames: {', '.join(frames)}); holding it would leave the model's parameters "
             "unidentifiable")
+
+
+def check_reference_option(option: str | None, method: str | None) -> None:
+    """InputError (one line) if `--reference FILE` is unreadable, malformed or recorded
+    with another method (robot model and serial are checked once the controller said
+    them, still before anything moves)."""
+    if option is None or option == "none":
+        return
+    from hostpc.calibrate.reference import check_reference_matches, load_reference
+
+    check_reference_matches(load_reference(option), method=str(method), robot_model="",
+                            robot_serial=None, where=f"--reference {option}")
 
 
 def check_model_options(effects: str | None, plugins: tuple[str, ...]) -> None:

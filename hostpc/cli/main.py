@@ -39,6 +39,7 @@ COMMAND_MODULES = (
     "import_csv",  # hostpc.importing: metrology CSV -> dataset
     "push",  # push the offsets of an offline fit
     "predict",  # hostpc.fitting: a saved fit against a dataset it never saw
+    "reference",  # hostpc.calibrate.reference: record / show a cell reference
 )
 
 

@@ -10,6 +10,14 @@ covariance.
 A HOLD keeps a parameter at its start value (the nominal, zero delta): the solver never moves
 it, so after the fit it is bit-identical to the start.
 
+A PRIOR BLOCK is a prior on several parameters at once with a full covariance (a cell
+reference's frame, `hostpc reference`: a fitted frame's values are correlated, so their
+marginal sigmas alone would claim too much in some directions and too little in others). It
+enters as K residuals whitened by the inverse Cholesky factor of its covariance:
+L^-1 (x_block - value), C = L L^T. In the dataset: `"prior_blocks": [{"names": [...],
+"value": [...], "covariance": [[...]]}]` (SI), beside `priors`; a name may not be in two
+priors.
+
 Where they come from (all end up in the dataset's top-level `priors` and `hold` fields, which
 the fit reads from the problem's dataset):
 - the dataset file: `"priors": ["tool.x=0.045+-0.0005m", ...]` or
@@ -59,21 +67,32 @@ class Prior:
 class Constraints:
     """The priors and holds of a problem, resolved against its parameter layout.
 
-    index: (K,) parameter index of each prior; value, sigma: (K,) SI; held: (P,) bool."""
+    index: (K,) parameter index of each prior; value, sigma: (K,) SI (sigma: the marginal
+    one of a prior block's parameter); held: (P,) bool; whitening: (K, K) the matrix that
+    whitens x[index] - value when prior blocks are present (block-diagonal: 1 / sigma for a
+    single prior, L^-1 for a block), None: diag(1 / sigma)."""
 
     priors: tuple[Prior, ...]
     index: np.ndarray
     value: np.ndarray
     sigma: np.ndarray
     held: np.ndarray
+    whitening: np.ndarray | None = None
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
-        """(K,) whitened prior residuals (x_i - value) / sigma."""
-        return (np.asarray(x)[self.index] - self.value) / self.sigma
+        """(K,) whitened prior residuals (x_i - value) / sigma (or whitening @ (x - value))."""
+        difference = np.asarray(x)[self.index] - self.value
+        if self.whitening is not None:
+            whitened: np.ndarray = self.whitening @ difference
+            return whitened
+        return difference / self.sigma
 
     def jacobian(self, size: int) -> np.ndarray:
         """(K, P) derivative of the whitened prior residuals by x."""
         J = np.zeros((self.index.size, size))
+        if self.whitening is not None:
+            J[:, self.index] = self.whitening
+            return J
         J[np.arange(self.index.size), self.index] = 1.0 / self.sigma
         return J
 
@@ -165,7 +184,8 @@ def constraints_for(extra_fields: Mapping[str, Any], names: tuple[str, ...],
                     units: tuple[str, ...]) -> Constraints | None:
     """Resolve a dataset's `priors`/`hold` against a layout; None if it has neither."""
     raw_priors, raw_hold = extra_fields.get("priors"), extra_fields.get("hold")
-    if not raw_priors and not raw_hold:
+    raw_blocks = extra_fields.get("prior_blocks")
+    if not raw_priors and not raw_hold and not raw_blocks:
         return None
     unit_of = dict(zip(names, units, strict=True))
     priors: list[Prior] = []
@@ -182,6 +202,18 @@ def constraints_for(extra_fields: Mapping[str, Any], names: tuple[str, ...],
                                      unit_of))
         else:
             raise InputError(f"prior {entry!r}: expected NAME=VALUE+-SIGMA")
+    whitening: np.ndarray | None = None
+    if raw_blocks:
+        blocks = [prior_block(entry, unit_of) for entry in _block_entries(raw_blocks)]
+        whitening = block_whitening([np.diag(1.0 / np.array([p.sigma for p in priors]))]
+                                    + [w for _, w in blocks])
+        priors += [p for block, _ in blocks for p in block]
+    seen: set[str] = set()
+    for prior in priors:
+        if prior.name in seen:
+            raise InputError(f"prior {prior.name}: given twice (a prior and a prior block, "
+                             "or two blocks); keep one")
+        seen.add(prior.name)
     held = np.zeros(len(names), dtype=bool)
     given_prior = {p.name for p in priors}
     for name in hold_names(raw_hold):
@@ -194,7 +226,66 @@ def constraints_for(extra_fields: Mapping[str, Any], names: tuple[str, ...],
         held[names.index(name)] = True
     index = np.array([names.index(p.name) for p in priors], dtype=int)
     return Constraints(tuple(priors), index, np.array([p.value for p in priors], float),
-                       np.array([p.sigma for p in priors], float), held)
+                       np.array([p.sigma for p in priors], float), held, whitening)
+
+
+def _block_entries(raw: Any) -> list[Mapping[str, Any]]:
+    if not isinstance(raw, list | tuple) or not all(isinstance(e, Mapping) for e in raw):
+        raise InputError("prior_blocks: expected a list of {names, value, covariance}")
+    return list(raw)
+
+
+def prior_block(entry: Mapping[str, Any], units: Mapping[str, str]
+                ) -> tuple[list[Prior], np.ndarray]:
+    """One prior block -> (its Priors with marginal sigmas, its (K, K) whitening L^-1).
+    InputError if a name is unknown, the sizes disagree or the covariance is not positive
+    definite."""
+    names = [str(n) for n in entry.get("names", [])]
+    try:
+        value = np.asarray(entry.get("value"), dtype=float).reshape(-1)
+        covariance = np.asarray(entry.get("covariance"), dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"prior block {', '.join(names)}: value and covariance must be "
+                         "numbers") from None
+    k = len(names)
+    if k == 0 or value.shape != (k,) or covariance.shape != (k, k):
+        raise InputError(f"prior block {', '.join(names) or '(no names)'}: expected {k} "
+                         f"values and a {k}x{k} covariance")
+    if not (np.all(np.isfinite(covariance)) and np.allclose(covariance, covariance.T,
+                                                            rtol=1e-9, atol=0.0)):
+        raise InputError(f"prior block {', '.join(names)}: covariance not finite and "
+                         "symmetric")
+    try:
+        L = np.linalg.cholesky(covariance)
+    except np.linalg.LinAlgError:
+        raise InputError(f"prior block {', '.join(names)}: covariance is not positive "
+                         "definite") from None
+    sigma = np.sqrt(np.diag(covariance))
+    priors = [make_prior(name, float(v), float(s), "", units)
+              for name, v, s in zip(names, value, sigma, strict=True)]
+    whitening: np.ndarray = np.linalg.solve(L, np.eye(k))
+    return priors, whitening
+
+
+def block_whitening(blocks: list[np.ndarray]) -> np.ndarray:
+    """The block-diagonal matrix of square blocks (the whitening of all priors)."""
+    size = sum(b.shape[0] for b in blocks)
+    out = np.zeros((size, size))
+    start = 0
+    for block in blocks:
+        stop = start + block.shape[0]
+        out[start:stop, start:stop] = block
+        start = stop
+    return out
+
+
+def with_prior_blocks(dataset: Any, blocks: list[Mapping[str, Any]]) -> Any:
+    """A copy of `dataset` whose `prior_blocks` also hold these (added to the file's)."""
+    if not blocks:
+        return dataset
+    extra = dict(dataset.extra_fields)
+    extra["prior_blocks"] = list(extra.get("prior_blocks") or []) + [dict(b) for b in blocks]
+    return dataclasses.replace(dataset, extra_fields=extra)
 
 
 def problem_constraints(problem: Any) -> Constraints | None:

@@ -1,0 +1,132 @@
+"""`hostpc reference`: record a cell reference from a good run, and show one.
+
+    hostpc reference record --run RUN --out cell_ref.json [--robot-serial SN] [--force]
+    hostpc reference show cell_ref.json
+
+`record` reads a finished run folder (result.json, dataset.json, run.json), refits its
+dataset with the run's model and writes every frame the fit estimated, with its covariance
+block, tied to the robot (model, serial), the method and the cell
+(hostpc.calibrate.reference, format zerocal-cell-reference/1). It refuses a run whose
+verification did not PASS (its zeros are not known good), whose fit did not converge, or
+whose own reference check found a moved frame; `--force` records anyway (commissioning
+with zeros known good by other means). Whatever J1 / J6 zeros the controller had in that
+run are declared good: record right after a verified calibration, or at commissioning.
+Later runs load it with `hostpc calibrate --reference cell_ref.json` (docs/calibrate.md).
+
+Exit codes: 0 written / shown; 2 bad input (no run, a run that cannot be a reference, a
+malformed reference file).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+from typing import Any
+
+from hostpc.errors import InputError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    parser = subparsers.add_parser(
+        "reference",
+        help="record a cell reference from a verified run, or show one",
+        description=("A cell reference holds the cell's frames (target, camera mount, "
+                     "sphere, tracker registration, reflector nests) with their covariance, "
+                     "recorded while the robot's zeros are good; `hostpc calibrate "
+                     "--reference FILE` then calibrates every joint and checks the frames. "
+                     "See docs/calibrate.md."))
+    actions = parser.add_subparsers(dest="action", required=True, metavar="{record,show}")
+    record = actions.add_parser("record", help="write a reference from a finished run")
+    record.add_argument("--run", required=True, metavar="RUN",
+                        help="run folder of `hostpc calibrate` whose zeros are good")
+    record.add_argument("--out", required=True, metavar="FILE", help="reference file to write")
+    record.add_argument("--robot-serial", metavar="SERIAL",
+                        help="the robot's serial (default: the run's --robot-serial, else "
+                        "none: later runs then check model and method only)")
+    record.add_argument("--force", action="store_true",
+                        help="record from a run whose verification did not PASS")
+    record.set_defaults(func=run_record)
+    show = actions.add_parser("show", help="print a reference file")
+    show.add_argument("file", help="a zerocal-cell-reference/1 file")
+    show.set_defaults(func=run_show)
+
+
+def _refusal(run: Path, result: dict[str, Any], force: bool) -> str | None:
+    """Why this run cannot be a reference (None: it can)."""
+    if not result.get("fit", {}).get("converged"):
+        return "its fit did not converge"
+    check = result.get("reference_check") or {}
+    if check.get("moved"):
+        return f"its own reference check found a moved frame ({check.get('likely_cause')})"
+    verdict = (result.get("verify") or {}).get("verdict")
+    if verdict != "PASS" and not force:
+        return (f"its verification is {verdict or 'missing'}, not PASS (its zeros are not "
+                "known good); verify first, or record anyway with --force")
+    return None
+
+
+def run_record(args: argparse.Namespace) -> int:
+    import hostpc
+    from hostpc.calibrate.journal import Journal
+    from hostpc.calibrate.reference import reference_from_fit
+    from hostpc.cli.report import read_json
+    from hostpc.dataset import load_dataset
+    from hostpc.files import write_json_atomic
+    from hostpc.fitting import fit
+    from hostpc.methods.base import RunSettings
+
+    run = Path(args.run)
+    if not run.is_dir():
+        raise InputError(f"--run {run}: not a run folder")
+    result = read_json(run / "result.json", "result document (result.json)")
+    refused = _refusal(run, result, args.force)
+    if refused:
+        raise InputError(f"--run {run}: cannot be a reference: {refused}; calibrate and "
+                         f"verify first: hostpc calibrate --resume {run} --push")
+    header = Journal(run).read_header()
+    settings = RunSettings.from_dict(header.get("settings", {}))
+    dataset = load_dataset(run / "dataset.json")
+    fitted = fit(dataset, settings.effects, plugins=settings.plugins, loss=settings.loss,
+                 cv_folds=0)
+    serial = args.robot_serial or header.get("robot_serial") or ""
+    reference = reference_from_fit(fitted, robot_serial=str(serial),
+                                   cell=header.get("cell", {}), source_run=str(run.resolve()),
+                                   software=f"zerocal {hostpc.__version__}")
+    out = Path(args.out)
+    if out.exists() and out.is_dir():
+        raise InputError(f"--out {out}: is a folder")
+    write_json_atomic(out, reference.to_dict())
+    rig = ""
+    if reference.rig is not None:  # the camera frame holds for this rig only
+        rig_file = out.with_suffix(".rig.json")
+        write_json_atomic(rig_file, dict(reference.rig))
+        rig = f" --rig {rig_file}"
+    print(f"recorded {', '.join(f.name for f in reference.frames)} of {run} "
+          f"({reference.method} on {reference.robot_model}"
+          f"{', serial ' + reference.robot_serial if reference.robot_serial else ''}) "
+          f"in {out}; use it with: hostpc calibrate --reference {out}{rig} ...")
+    return 0
+
+
+def run_show(args: argparse.Namespace) -> int:
+    from hostpc.calibrate.reference import MOUNT_FLOOR_M, MOUNT_FLOOR_RAD, load_reference
+
+    reference = load_reference(args.file)
+    print(f"cell reference {args.file}: {reference.method} on {reference.robot_model or '?'}"
+          f" (serial {reference.robot_serial or 'not recorded'}), recorded "
+          f"{reference.recorded} by {reference.software or '?'} from "
+          f"{reference.source_run or '?'}")
+    for frame in reference.frames:
+        value = frame.absolute()
+        sigma = frame.floored_covariance().diagonal() ** 0.5
+        parts = []
+        for name, v, s in zip(frame.parameters, value, sigma, strict=True):
+            if name.rsplit(".", 1)[-1] in ("rx", "ry", "rz"):
+                parts.append(f"{name} {math.degrees(v):+.4f} +- {math.degrees(s):.4f} deg")
+            else:
+                parts.append(f"{name} {v * 1e3:+.3f} +- {s * 1e3:.4f} mm")
+        print(f"  {frame.name}: " + ", ".join(parts))
+    print(f"  (sigmas include the mount floor {MOUNT_FLOOR_M * 1e6:g} um / "
+          f"{math.degrees(MOUNT_FLOOR_RAD):g} deg)")
+    return 0

@@ -1,0 +1,173 @@
+"""A cell reference against the simulated controller: a motor swap on J1 and J6 is recovered
+only with a reference, a moved frame is named and nothing is pushed, and a resume refits
+with another reference or known set (hostpc.calibrate.reference, run_reference).
+
+Each method's world: every frame estimated (nothing declared known). The reference is
+recorded from a run whose J1 and J6 zeros are good (zero error), then the same cell gets a
+fresh 2 deg error on J1 and J6 (small errors elsewhere, another noise seed).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from hostpc.cli.main import main
+from hostpc.robots.simulator import default_sim_scenario
+from tests.integration.test_calibrate_sim import run_cli
+
+SMALL = [0.0, 0.0021, -0.0013, 0.0017, -0.0009, 0.0]
+SWAP = math.radians(2.0)
+
+
+def world(method: str, seed: int, zero_errors: list[float], *, tip_off_axis: bool = False,
+          **sections: Any) -> dict[str, Any]:
+    """The method's default simulated world with these zero errors; the probe's tip on the
+    flange axis (no frame can give J6: the plan says so), or off it."""
+    scenario = default_sim_scenario(method=method)
+    scenario["seed"] = seed
+    scenario["truth"] = {**scenario.get("truth", {}), "zero_errors": zero_errors}
+    if tip_off_axis:
+        scenario["probe"] = {**scenario["probe"], "tip": [0.03, -0.02, 0.12]}
+    for key, value in sections.items():
+        scenario[key] = {**scenario.get(key, {}), **value}
+    return scenario
+
+
+def calibrate(out: Path, scenario: dict[str, Any], method: str, *extra: str
+              ) -> tuple[int, dict[str, Any]]:
+    """`hostpc calibrate --robot sim --scenario` (every frame estimated) -> (exit, result)."""
+    scenario_file = out.parent / f"{out.name}.scenario.json"
+    scenario_file.write_text(json.dumps(scenario))
+    code = main(["calibrate", "--robot", "sim", "--method", method, "--scenario",
+                 str(scenario_file), "--out", str(out), "--no-report",
+                 "--max-correction", "5", *extra])
+    return code, json.loads((out / "result.json").read_text())
+
+
+def recorded(tmp: Path, method: str, tip_off_axis: bool = False
+             ) -> tuple[Path, dict[str, Any], tuple[str, ...]]:
+    """Run the recording world and record its reference: (file, result, --rig option)."""
+    code, document = calibrate(tmp / "record",
+                               world(method, 3, SMALL, tip_off_axis=tip_off_axis), method)
+    assert code == 0
+    reference = tmp / "cell_ref.json"
+    assert main(["reference", "record", "--run", str(tmp / "record"), "--out",
+                 str(reference)]) == 0
+    rig = tmp / "cell_ref.rig.json"
+    return reference, document, (("--rig", str(rig)) if rig.is_file() else ())
+
+
+SPHERE_SWAP = "open, sphere_probe's acquisition after a large J1 error (not the reference): "
+"2 deg on J1 moves the tip 16 mm at the sphere's 0.47 m from the base axis, so the "
+"contacts planned on the nominal model land on the flank of the 12.5 mm sphere or miss it"
+OFF_AXIS_TIP = pytest.param("sphere_probe", True, marks=pytest.mark.xfail(
+    strict=True, reason=SPHERE_SWAP + "; with the tip off the flange axis the swapped "
+    "world's contacts are not explained by the model (chi2/dof 6-20 even without a "
+    "reference, also at 0.5 deg)"))
+ON_AXIS_TIP = pytest.param("sphere_probe", False, marks=pytest.mark.xfail(
+    strict=False, reason=SPHERE_SWAP + "; on the axis J1 is recovered (0.0003 deg) but the "
+    "tip's estimate is biased by about 0.08 mm, which the reference check flags as a moved "
+    "tip in some worlds"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("method", "tip_off_axis"), [
+    ("stereo_target", False), ("world_point", False), ON_AXIS_TIP, OFF_AXIS_TIP])
+def test_motor_swap_on_j1_and_j6_is_recovered_with_a_reference(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], method: str,
+        tip_off_axis: bool) -> None:
+    reference, before, rig = recorded(tmp_path, method, tip_off_axis)
+    # physics: a stylus tip on the flange axis never sees J6, whatever frames are known
+    blind_j6 = method == "sphere_probe" and not tip_off_axis
+    # without a reference the plan and the fit say J1 and J6 cannot be calibrated
+    assert before["known"] == []
+    assert set(before["plan"]["joints"]["not_calibrated"]) == {"J1", "J6"}
+    assert [e is None for e in before["truth"]["joint_offsets_error_deg"]] == [
+        True, False, False, False, False, True]
+    held = {text.split(" ", 1)[0] for text in before["fit"]["unidentifiable"]}
+    assert held == {"joint_offsets.q1", "joint_offsets.q6"}
+    # the swap: +2 deg on J1 and J6; with the reference every joint is recovered
+    swapped = [SWAP, *SMALL[1:5], SWAP]
+    code, document = calibrate(tmp_path / "swap",
+                               world(method, 4, swapped, tip_off_axis=tip_off_axis), method,
+                               "--reference", str(reference), *rig)
+    capsys.readouterr()
+    assert code == 0, (document["push"]["reason"], document["reference_check"])
+    joints = document["plan"]["joints"]
+    if blind_j6:
+        assert joints["from_reference"] == ["J1"] and list(joints["not_calibrated"]) == ["J6"]
+        assert "no effect on these measurements" in joints["not_calibrated"]["J6"]
+    else:
+        assert joints["from_reference"] == ["J1", "J6"] and joints["not_calibrated"] == {}
+    errors = document["truth"]["joint_offsets_error_deg"]
+    if blind_j6:
+        errors = errors[:5]
+    assert all(e is not None and abs(e) <= 0.005 for e in errors), errors
+    assert all(w for w in document["truth"]["within_3_sigma"] if w is not None)
+    assert document["push"]["status"] == "pushed" and document["verify"]["verdict"] == "PASS"
+    check = document["reference_check"]
+    assert check["moved"] is False and check["likely_cause"] is None
+    assert {f["frame"] for f in check["frames"]} == {
+        "stereo_target": {"tool", "target"}, "sphere_probe": {"tool", "sphere"},
+        "world_point": {"world", "markers"}}[method]
+    assert "reference check:" in (tmp_path / "swap" / "summary.txt").read_text()
+
+
+@pytest.mark.slow
+def test_a_moved_target_is_named_nothing_is_pushed_and_a_resume_drops_the_reference(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    reference, before, rig = recorded(tmp_path, "stereo_target")
+    assert before["reference_check"] is None
+    # the target (no error in the recording world) moved 0.5 mm, in base x and z
+    moved = world("stereo_target", 4, [SWAP, *SMALL[1:5], SWAP],
+                  target={"centre_error": [0.0003, 0.0, 0.0004]})
+    run = tmp_path / "moved"
+    code, document = calibrate(run, moved, "stereo_target", "--reference", str(reference),
+                               *rig)
+    capsys.readouterr()
+    assert code == 5  # push refused
+    check = document["reference_check"]
+    assert check["moved"] is True and check["likely_cause"] == "target"
+    target = next(f for f in check["frames"] if f["frame"] == "target")
+    assert 0.3 <= target["translation_mm"] <= 0.6
+    assert document["push"]["status"] == "refused"
+    assert "the target frame moved" in document["push"]["reason"]
+    assert f"hostpc calibrate --resume {run} --reference none" in document["push"]["reason"]
+    summary = (run / "summary.txt").read_text()
+    assert "reference check: the target frame moved" in summary
+    # the resume refits the same samples without the reference: J1 and J6 unidentifiable
+    n_fit = sum(1 for line in (run / "journal.jsonl").read_text().splitlines()
+                if '"phase": "fit"' in line)
+    code, out, err = run_cli(capsys, "calibrate", "--resume", str(run), "--reference", "none",
+                             "--no-push")
+    assert code == 0, err
+    resumed = json.loads((run / "result.json").read_text())
+    assert resumed["reference_check"] is None
+    assert set(resumed["plan"]["joints"]["not_calibrated"]) == {"J1", "J6"}
+    assert not (run / "reference.json").exists()
+    assert n_fit == sum(1 for line in (run / "journal.jsonl").read_text().splitlines()
+                        if '"phase": "fit"' in line)  # nothing measured again
+
+
+@pytest.mark.slow
+def test_resume_with_known_none_refits_without_the_surveyed_target(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = tmp_path / "run"
+    code, out, err = run_cli(capsys, "calibrate", "--robot", "sim", "--no-push", "--out",
+                             str(run), "--no-report")
+    assert code == 0, err
+    first = json.loads((run / "result.json").read_text())
+    assert first["known"] == ["target"] and "J1" in first["plan"]["joints"]["from_measurements"]
+    code, out, err = run_cli(capsys, "calibrate", "--resume", str(run), "--known", "none",
+                             "--no-push")
+    assert code == 0, err
+    assert "resume with known frames: none" in err
+    resumed = json.loads((run / "result.json").read_text())
+    assert resumed["known"] == [] and "J1" in resumed["plan"]["joints"]["not_calibrated"]
+    assert resumed["truth"]["joint_offsets_error_deg"][0] is None
+    assert json.loads((run / "run.json").read_text())["cell"]["known"] == []
