@@ -61,7 +61,7 @@ def _header_range(key: str, column: str, header: Sequence[str]) -> list[str]:
     first, colon, last = column.partition(":")
     if not colon or first not in header or last not in header:
         raise InputError(f"--columns: {key}={column} must be FIRST:LAST of two header "
-                         f"columns (columns: {', '.join(header)})")
+                         f"columns (columns: {listed_columns(header)})")
     start, stop = header.index(first), header.index(last)
     if stop < start:
         raise InputError(f"--columns: {key}={column}: the range is reversed ({first!r} "
@@ -152,7 +152,7 @@ def parse_column_map(spec: str, header: Sequence[str], n_joints: int, method: st
                           if ":" not in g.get("sigma", ":"))]:
         if column not in header:
             raise InputError(f"{source}: row 1 (header): no column {column!r} for --columns "
-                             f"{key}={column} (columns: {', '.join(header)})")
+                             f"{key}={column} (columns: {listed_columns(header)})")
     missing = [f"q{k}" for k in range(1, n_joints + 1) if k not in joints]
     extra = [f"q{k}" for k in joints if not 1 <= k <= n_joints]
     if missing or extra:
@@ -184,3 +184,13 @@ def parse_column_map(spec: str, header: Sequence[str], n_joints: int, method: st
                          "columns or use --method world_pose")
     return ColumnMap(joints=tuple(joints[k] for k in range(1, n_joints + 1)), fields=fields,
                      orientation=orientation, points=points)
+
+
+def listed_columns(header: Sequence[str], most: int = 40) -> str:
+    """The header's column names for a one-line message: each on one line (a quoted cell
+    that spans lines is shown escaped) and cut to a readable length."""
+    shown = [name if name.isprintable() else repr(name) for name in header[:most]]
+    text = ", ".join(shown)
+    if len(header) > most:
+        text += f", ... ({len(header)} columns)"
+    return text if len(text) <= 400 else text[:400] + " ..."
