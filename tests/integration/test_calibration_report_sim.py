@@ -66,7 +66,8 @@ def test_hidden_compliance_effect_sizes_against_the_truth(
                  "0", "--rig", str(rig), "--out", str(out)])
     assert code == 0, capsys.readouterr().err
     report = ReportReader((out / "report.html").read_text(encoding="utf-8"))
-    assert report.texts["verdict"].startswith("NOT PUSHED: --no-push")
+    # the verdict box shows the run's outcome (hostpc.calibrate.outcome): nothing pushed
+    assert report.texts["verdict"].startswith("NOT PUSHED: offsets unchanged")
     sizes = {r["parameter"]: r for r in report.rows("effect-sizes")}
     fitted = json.loads((out / "fit.json").read_text())["parameters"]
     for name, true in (("joint_compliance.c2", 3e-6), ("joint_compliance.c3", 4e-6)):
