@@ -14,7 +14,7 @@ from hostpc.cli.robots import add_robot_override, load_dataset_with_robot, robot
 from hostpc.cli.urdf_out import add_write_urdf_option, check_urdf_robot, write_calibrated_urdf
 from hostpc.dataset import load_dataset
 from hostpc.errors import InputError
-from hostpc.fitting import FitResult, fit
+from hostpc.fitting import fit
 from hostpc.fitting.priors import with_constraints
 from hostpc.fitting.resampling import jackknife_std, scaled_std
 
@@ -95,7 +95,9 @@ def run(args: argparse.Namespace) -> int:
     else:
         result = fit(dataset, args.effects, plugins=args.plugin, loss=args.loss,
                      cv_folds=args.cv_folds)
-    scaled = scaled_std(result) if _above_band(result) else None
+    adequacy = model_adequacy(result, args.dataset)  # chi2/dof against its band, once
+    # above the band: the sigmas scaled by sqrt(chi2/dof) are shown beside the stated ones
+    scaled = scaled_std(result) if adequacy["explains_data"] is False else None
     jackknife = jackknife_std(result) if args.jackknife else None
     if args.json:
         document = result.to_dict()
@@ -115,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
             if values is not None:
                 for k, entry in enumerate(document["parameters"].values()):
                     entry[column] = float(values[k]) if math.isfinite(values[k]) else None
-        document["model_adequacy"] = model_adequacy(result, args.dataset)
+        document["model_adequacy"] = adequacy
         json.dump(document, sys.stdout, indent=2, allow_nan=False)
         sys.stdout.write("\n")
     else:
@@ -130,9 +132,3 @@ def run(args: argparse.Namespace) -> int:
         write_calibrated_urdf(result, args.write_urdf, args.dataset, args.json)
     return 0
 
-
-def _above_band(result: FitResult) -> bool:
-    """chi2/dof above the upper edge of its band (the one rule of hostpc.diagnostics)."""
-    from hostpc.diagnostics.adequacy import chi2_dof_upper
-
-    return result.dof > 0 and result.chi2_dof > chi2_dof_upper(result.dof)
