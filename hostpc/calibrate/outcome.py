@@ -277,6 +277,10 @@ def _replay(events: Sequence[Mapping[str, Any]]) -> _Replay:
             state.refused = str(e.get("reason") or "refused by a guard rail")
             state.events.append(OutcomeEvent(at, "refused", (("reason", state.refused),)))
         elif kind == "resumed":
+            # a refusal is the decision of one attempt: a resume decides the push anew (and
+            # journals its own push_refused if it refuses again), so an earlier refusal no
+            # longer speaks for the controller; a push or a rollback did change it and stays
+            state.refused = None
             state.events.append(OutcomeEvent(at, "resumed"))
     return state
 

@@ -119,10 +119,6 @@ def test_motor_swap_on_j1_and_j6_is_recovered_with_a_reference(
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason=(
-    "open after merging the run outcome (H1) with the reference (H5): the resume that drops "
-    "the reference refits to chi2/dof 2.26 on 60 poses and ends with exit 5 where this test "
-    "expects 0; the moved target is still named and nothing pushed in the first run"))
 def test_a_moved_target_is_named_nothing_is_pushed_and_a_resume_drops_the_reference(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     reference, before, rig = recorded(tmp_path, "stereo_target")

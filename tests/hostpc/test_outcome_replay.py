@@ -1,0 +1,34 @@
+"""The run's outcome derived from its journal (hostpc.calibrate.outcome.derive_outcome):
+what a resume changes and what it must not."""
+
+from __future__ import annotations
+
+from hostpc.calibrate.joint_status import JointSource
+from hostpc.calibrate.outcome import derive_outcome
+
+SOURCES = tuple(JointSource(j, f"q{j}", "data") for j in range(1, 7))
+PUSH = {"event": "push", "at": "t1", "new_offsets": [0.01] * 6, "previous_offsets": [0.0] * 6,
+        "pushed": [True] * 6, "rollback_id": "rb-1"}
+VERIFY_PASS = {"event": "verify", "at": "t2", "verdict": "PASS", "p_value": 0.5,
+               "offsets": [0.01] * 6}
+
+
+def outcome_of(*events: dict[str, object]) -> str:
+    return derive_outcome(list(events), SOURCES, run_dir="runs/x", finished=True).verdict
+
+
+def test_a_refusal_speaks_for_its_attempt_only() -> None:
+    refused = {"event": "push_refused", "at": "t1", "reason": "the target frame moved"}
+    resumed = {"event": "resumed", "at": "t2"}
+    assert outcome_of(refused) == "REFUSED"
+    # the resume re-decides the push: with the push off it is NOT_PUSHED, not the old refusal
+    assert outcome_of(refused, resumed) == "NOT_PUSHED"
+    # refused again on the resume: the resumed attempt's own refusal
+    assert outcome_of(refused, resumed, refused) == "REFUSED"
+
+
+def test_a_push_and_a_rollback_outlive_a_resume() -> None:
+    resumed = {"event": "resumed", "at": "t3"}
+    assert outcome_of(PUSH, VERIFY_PASS, resumed) == "PASS"
+    rollback = {"event": "rollback", "at": "t4", "how": "hostpc rollback"}
+    assert outcome_of(PUSH, VERIFY_PASS, rollback, resumed) == "ROLLED_BACK"
