@@ -31,7 +31,7 @@ from hostpc.dataset import Dataset
 from hostpc.fitting import solve
 from hostpc.fitting.stepwise import fit_stepwise, gauge_equivalent, identity_weighted
 from hostpc.kinematics.rotations import matrix_to_rotvec, pose_to_transform, rotvec_to_matrix
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import Problem, build_problem
 from hostpc.synthesize_dual_loop import PlannedPoses, make_dataset, plan_poses
 

@@ -48,7 +48,7 @@ class PlanningError(InputError):
 MIN_TARGET_POSES = 6
 """A target-sigma plan measures at least this many poses: the fewest whose disk centres
 stereo_target re-corrects with the normals of their own preliminary fit
-(`hostpc.methods.stereo_refinement.MIN_SAMPLES`; a test keeps the two equal). The sigma
+(`hostpc.kinds.stereo_target.refinement.MIN_SAMPLES`; a test keeps the two equal). The sigma
 target itself asks for 7-8 poses (10-11 with the travel-aware selection). This was 20 while
 a plan of fewer than 20 poses went unrefined, which, not the plan's size, made its sigma
 dishonest: refined, the plain 7-8-pose plan gives MSE / sigma^2 0.68-1.32 per joint over 40

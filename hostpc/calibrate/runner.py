@@ -216,7 +216,7 @@ class Runner:
                 "initial": initial,
             }
 
-        method = method_class(settings.method)(settings, cell, self.run_dir)
+        method = method_class(settings.method, settings.plugins)(settings, cell, self.run_dir)
         if hasattr(method, "set_time_origin"):
             method.set_time_origin(self._clock.time_origin(initial, state))
         if settings.effects is None and method.default_effects() is not None:

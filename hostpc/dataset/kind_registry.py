@@ -1,27 +1,76 @@
-"""The measurement kinds a dataset file may name: built-ins, entry points, plugin files.
+"""The one registry of measurement kinds: built-ins and plugins alike.
 
-``measurement_kinds(plugins)`` is what the dataset layer reads and writes with; the model
-layer's registry (``hostpc.model.measurements.registry``) extends the same lookup with the
-prediction. A package publishes a measurement model under the entry-point group
-``zerocal.measurements`` (``name = "module:Class"``); a plugin file (``--plugin``) may
-define one or more ``MeasurementModel`` subclasses next to its effects.
+A measurement kind is one folder (``hostpc/kinds/<name>/`` for the built-ins) that publishes
+one ``KindDescriptor``: its file face and model (one class: ``MeasurementModel`` extends the
+file face ``MeasurementKind``), its acquisition method (``"module:Class"``, imported only
+when a run needs it, so this pure layer never imports I/O), the frames ``--known`` may hold,
+and its ``--robot sim`` world. Every caller asks this registry by name; nothing else keeps a
+table keyed by a kind's name.
+
+Where kinds come from (``kind_descriptors(plugins)``):
+- entry points of the group ``zerocal.measurements`` (scanned once per process): zerocal
+  publishes its own built-ins there (``pyproject.toml``), so this generic layer finds them
+  without importing ``hostpc.kinds`` (an import contract forbids that); an installed package
+  publishes a descriptor or a bare ``MeasurementModel`` class the same way;
+- plugin files or folders (``--plugin``): every ``KindDescriptor`` at module level, and
+  every ``MeasurementKind`` subclass the file defines that no descriptor names.
+A plugin may not shadow a built-in.
 """
 
 from __future__ import annotations
 
 import inspect
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
 
-from hostpc.dataset.builtin_kinds import DualLoopFile, SphereProbeFile, StereoTargetFile
-from hostpc.dataset.kind import FRAME_KINDS, MeasurementKind
-from hostpc.dataset.world_kinds import WorldPointFile, WorldPoseFile
+from hostpc.dataset.measurement_kind import FRAME_KINDS, MeasurementKind
 from hostpc.errors import EffectError
 from hostpc.plugins import classes_defined_in, entry_point_objects, import_plugin_file
 
 ENTRY_POINT_GROUP = "zerocal.measurements"
-BUILTIN_KINDS: tuple[type[MeasurementKind], ...] = (
-    StereoTargetFile, SphereProbeFile, DualLoopFile, WorldPointFile, WorldPoseFile)
+#: the module prefix of zerocal's own kinds (a plugin may not take their names)
+BUILTIN_PREFIX = "hostpc.kinds."
+#: the kind a plain ``hostpc calibrate`` (and ``--robot sim`` without a method) uses
+DEFAULT_METHOD = "stereo_target"
+
+
+@dataclass(frozen=True)
+class SimDefault:
+    """A kind's default simulated world (``hostpc calibrate --robot sim``).
+
+    scenario: packaged scenario file of controller_stub; overrides: merged into it;
+    known: frames the simulated cell declares as measured (surveyed)."""
+
+    scenario: str = "default.yaml"
+    overrides: Mapping[str, Any] = field(default_factory=dict)
+    known: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class KindDescriptor:
+    """Everything zerocal knows about one measurement kind, registered once.
+
+    model: the kind's class, the file face (``MeasurementKind``) and, when it can be
+    fitted, the prediction (a ``hostpc.model.measurements.MeasurementModel``);
+    method: ``"module:Class"`` of its acquisition ``hostpc.methods.base.Method`` (None: the
+    kind is measured offline and imported, no ``hostpc calibrate``);
+    known_frames: the frames ``--known`` may hold (None: any);
+    sim: its ``--robot sim`` world (None: stereo_target's);
+    method_options: the method's own ``hostpc calibrate`` options (e.g. ``probe_io``)."""
+
+    name: str
+    model: type[MeasurementKind]
+    method: str | None = None
+    known_frames: tuple[str, ...] | None = None
+    sim: SimDefault | None = None
+    method_options: frozenset[str] = frozenset()
+
+    @property
+    def builtin(self) -> bool:
+        return self.model.__module__.startswith(BUILTIN_PREFIX)
 
 
 def check_kind_class(cls: type[MeasurementKind], origin: str) -> None:
@@ -35,38 +84,75 @@ def check_kind_class(cls: type[MeasurementKind], origin: str) -> None:
                               f"{kind!r}; expected one of {', '.join(FRAME_KINDS)}")
 
 
-def entry_point_kinds() -> dict[str, type[MeasurementKind]]:
-    """Measurement models published under ``zerocal.measurements`` (scanned once)."""
-    found: dict[str, type[MeasurementKind]] = {}
-    for entry_name, cls in entry_point_objects(ENTRY_POINT_GROUP):
-        if not (inspect.isclass(cls) and issubclass(cls, MeasurementKind)):
-            raise EffectError(f"entry point {entry_name}: {cls!r} is not a measurement model")
-        check_kind_class(cls, f"entry point {entry_name}")
-        found[cls.name] = cls
+def _descriptor(obj: object, origin: str) -> KindDescriptor:
+    """A published object as a descriptor: a KindDescriptor, or a bare kind class."""
+    if isinstance(obj, KindDescriptor):
+        descriptor = obj
+    elif inspect.isclass(obj) and issubclass(obj, MeasurementKind):
+        descriptor = KindDescriptor(name=getattr(obj, "name", ""), model=obj)
+    else:
+        raise EffectError(f"{origin}: {obj!r} is not a measurement model")
+    check_kind_class(descriptor.model, origin)
+    if descriptor.name != descriptor.model.name:
+        raise EffectError(f"{origin}: kind {descriptor.name!r} names a model called "
+                          f"{descriptor.model.name!r}")
+    return descriptor
+
+
+def entry_point_kinds() -> dict[str, KindDescriptor]:
+    """Kinds published under ``zerocal.measurements`` (zerocal's own among them)."""
+    found: dict[str, KindDescriptor] = {}
+    for entry_name, obj in entry_point_objects(ENTRY_POINT_GROUP):
+        descriptor = _descriptor(obj, f"entry point {entry_name}")
+        if descriptor.name in found:
+            raise EffectError(f"entry point {entry_name}: measurement model "
+                              f"{descriptor.name!r} is published twice")
+        found[descriptor.name] = descriptor
+    if DEFAULT_METHOD not in found:
+        raise EffectError(f"zerocal's built-in measurement kinds are not registered (no "
+                          f"{DEFAULT_METHOD!r} in the entry points {ENTRY_POINT_GROUP!r}): "
+                          "reinstall zerocal (pip install -e .)")
     return found
 
 
-def plugin_file_kinds(path: str | os.PathLike[str]) -> dict[str, type[MeasurementKind]]:
-    """The measurement models a plugin file defines, by name (maybe none)."""
+def plugin_file_kinds(path: str | os.PathLike[str]) -> dict[str, KindDescriptor]:
+    """The kinds a plugin file (or folder) defines, by name (maybe none)."""
     module = import_plugin_file(path)
-    found: dict[str, type[MeasurementKind]] = {}
+    origin = f"plugin {path}"
+    found = {d.name: d for d in (_descriptor(obj, origin) for obj in vars(module).values()
+                                 if isinstance(obj, KindDescriptor))}
+    described = {d.model for d in found.values()}
     for cls in classes_defined_in(module, MeasurementKind):
-        check_kind_class(cls, f"plugin {path}")
-        found[cls.name] = cls
+        if cls not in described and getattr(cls, "name", None) not in found:
+            descriptor = _descriptor(cls, origin)
+            found[descriptor.name] = descriptor
     return found
 
 
-def measurement_kinds(plugins: Iterable[str | os.PathLike[str]] = (),
-                      builtins: Iterable[type[MeasurementKind]] = BUILTIN_KINDS
-                      ) -> dict[str, type[MeasurementKind]]:
-    """Name -> class: built-ins, then entry points, then plugin files; a plugin may not
-    shadow a built-in."""
-    registry = {cls.name: cls for cls in builtins}
+def kind_descriptors(plugins: Iterable[str | os.PathLike[str]] = ()
+                     ) -> Mapping[str, KindDescriptor]:
+    """Name -> descriptor: entry points (built-ins first), then plugin files; a plugin may
+    not shadow a built-in."""
+    published = entry_point_kinds()
+    registry = {name: d for name, d in published.items() if d.builtin}
     builtin_names = set(registry)
-    for source in (entry_point_kinds(), *(plugin_file_kinds(p) for p in plugins)):
-        for name, cls in source.items():
+    for source in ({n: d for n, d in published.items() if not d.builtin},
+                   *(plugin_file_kinds(p) for p in plugins)):
+        for name, descriptor in source.items():
             if name in builtin_names:
                 raise EffectError(f"measurement model {name!r} from a plugin clashes with a "
                                   "built-in one")
-            registry[name] = cls
-    return registry
+            registry[name] = descriptor
+    return MappingProxyType(registry)
+
+
+def kind_descriptor(name: str, plugins: Iterable[str | os.PathLike[str]] = ()
+                    ) -> KindDescriptor | None:
+    """The descriptor of ``name`` (None if no kind has that name)."""
+    return kind_descriptors(plugins).get(name)
+
+
+def measurement_kinds(plugins: Iterable[str | os.PathLike[str]] = ()
+                      ) -> dict[str, type[MeasurementKind]]:
+    """Name -> class (file face, and model where it has one) of every registered kind."""
+    return {name: d.model for name, d in kind_descriptors(plugins).items()}

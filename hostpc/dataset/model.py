@@ -1,7 +1,8 @@
 """In-memory calibration dataset: frozen dataclasses holding numpy arrays in SI units.
 
 This is what the rest of hostpc uses; the file format (``zerocal-dataset/1``) is handled in
-``hostpc.dataset.io`` and ``hostpc.dataset.schema``. Everything here is in metres, radians
+``hostpc.dataset.reading``/``writing`` and ``hostpc.dataset.schema``. Everything here is in
+metres, radians
 and seconds whatever the file said (see ``docs/conventions.md``). Arrays are copied on
 construction and made read-only, so a value cannot change after it was validated.
 

@@ -20,13 +20,13 @@ from typing import Any
 import numpy as np
 
 from hostpc.dataset import schema, validation
-from hostpc.dataset.kind import MeasurementKind
-from hostpc.dataset.kinds import measurement_kinds
+from hostpc.dataset.file_units import Units
+from hostpc.dataset.kind_registry import measurement_kinds
+from hostpc.dataset.measurement_kind import MeasurementKind
 from hostpc.dataset.model import Dataset, FramePose, RobotDescription, Samples, SphereFrame
 from hostpc.dataset.reading_columns import NotColumnar, read_columns
 from hostpc.dataset.reading_samples import read_samples
 from hostpc.dataset.schema import FORMAT_TAG, FieldError, Loc, show
-from hostpc.dataset.units import Units
 from hostpc.errors import DatasetError, InputError
 from hostpc.kinematics.robots import get_robot
 

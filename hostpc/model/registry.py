@@ -11,7 +11,7 @@ import inspect
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
-from hostpc.dataset.kind import MeasurementKind
+from hostpc.dataset.measurement_kind import MeasurementKind
 from hostpc.errors import EffectError
 from hostpc.model.effect import Effect
 from hostpc.model.effects import BUILTIN_EFFECTS

@@ -16,7 +16,7 @@ import numpy as np
 from hostpc.dataset import Dataset, RobotDescription, Samples, SphereFrame
 from hostpc.fitting.solver import evaluate
 from hostpc.model.effect import Effect
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import Problem, build_problem
 from hostpc.model.registry import load_plugin_file
 from hostpc.synthesize import SyntheticDataset, random_truth, synthesize_stereo_target
@@ -224,7 +224,7 @@ def hidden_world_point(hidden: Mapping[str, float], seed: int, *, swing: float =
     k consecutive samples (the reflectors seen in it), n_samples // k poses; ``poses``: the
     joint vectors of the poses (rad), instead of random ones."""
     from hostpc.dataset import FramePose
-    from hostpc.methods.world_point import spherical_covariance
+    from hostpc.kinds.world_point.method import spherical_covariance
     from hostpc.model.measurements.base import UR5E_HOME
     from hostpc.synthesize import approach_signs
 

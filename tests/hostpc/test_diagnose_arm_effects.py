@@ -14,7 +14,7 @@ import pytest
 
 import hostpc
 from hostpc.dataset import Dataset
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.synthesize_dual_loop import plan_poses, synthesize_dual_loop
 
 OFFSETS = {"joint_offsets.left.q3": 1e-3, "joint_offsets.right.q4": -1e-3}

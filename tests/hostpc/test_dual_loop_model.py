@@ -11,7 +11,7 @@ from hostpc.fitting import solve
 from hostpc.kinematics import forward, get_robot
 from hostpc.kinematics.humanoid import HUMANOID_HOME, get_tree, humanoid_upper, tree_names
 from hostpc.kinematics.tree import Branch, KinematicTree, tree_gravity_torque
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
 from hostpc.synthesize_dual_loop import plan_poses, synthesize_dual_loop
 from tests.hostpc.test_measurement_jacobians import (

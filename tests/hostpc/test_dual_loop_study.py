@@ -18,7 +18,7 @@ from controller_stub.humanoid import HumanoidSimulation
 from controller_stub.scenario import scenario_from_dict
 from hostpc.fitting import solve
 from hostpc.fitting.stepwise import fit_stepwise, gauge_equivalent
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
 from hostpc.synthesize_dual_loop import plan_poses
 

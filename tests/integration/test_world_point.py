@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hostpc.kinds.world_point.method import WorldPointMethod, identifiable_offsets
 from hostpc.methods.base import NullProgress, RunSettings
 from hostpc.methods.cell import build_cell
-from hostpc.methods.world_point import WorldPointMethod, identifiable_offsets
 from hostpc.robots.zerocal import ZerocalAdapter
 from hostpc.transport import ControllerClient
 from tests.integration.conftest import TOKEN, StartStub

@@ -34,7 +34,7 @@ from hostpc.methods.base import (
     SampleRecord,
 )
 from hostpc.methods.cell import require_camera_cell
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
 from hostpc.planning.design import look_at_candidates
 from hostpc.robots.base import RobotAdapter, RobotState
@@ -318,7 +318,7 @@ class StereoTargetMethod(Method):
     def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         """A `zerocal-dataset/1` document with the cell's nominal frames and `known`; the
         disk centres re-corrected with the normals of a preliminary fit when the samples
-        carry `uv` (hostpc.methods.stereo_refinement)."""
+        carry `uv` (hostpc.kinds.stereo_target.refinement)."""
         document = {
             "format": FORMAT_TAG,
             "method": self.name,
@@ -340,7 +340,7 @@ class StereoTargetMethod(Method):
         if self.rig is None or not samples or any("uv" not in s for s in samples):
             return document
         from hostpc.dataset import dataset_to_dict
-        from hostpc.methods.stereo_refinement import refine_dataset
+        from hostpc.kinds.stereo_target.refinement import refine_dataset
 
         # each set by its own preliminary fit (never the fit set's model: after a push it
         # would be wrong for the verify set); a set too small for its own fit (a short
