@@ -7,7 +7,6 @@ sample index. The format is documented in ``docs/dataset-format.md``.
 """
 
 from hostpc.dataset.model import (
-    METHODS,
     Dataset,
     FramePose,
     RobotDescription,
@@ -20,7 +19,6 @@ from hostpc.dataset.writing import dataset_to_dict, save_dataset
 
 __all__ = [
     "FORMAT_TAG",
-    "METHODS",
     "Dataset",
     "FramePose",
     "RobotDescription",

@@ -59,7 +59,10 @@ class KindDescriptor:
     kind is measured offline and imported, no ``hostpc calibrate``);
     known_frames: the frames ``--known`` may hold (None: any);
     sim: its ``--robot sim`` world (None: stereo_target's);
-    method_options: the method's own ``hostpc calibrate`` options (e.g. ``probe_io``)."""
+    method_options: the method's own ``hostpc calibrate`` options (e.g. ``probe_io``);
+    csv_rows: what ``hostpc import`` reads from a metrology CSV row for it, ``"point"`` (x,
+    y, z; a marker per reflector) or ``"pose"`` (x, y, z and an orientation); None: not
+    imported from a CSV."""
 
     name: str
     model: type[MeasurementKind]
@@ -67,6 +70,7 @@ class KindDescriptor:
     known_frames: tuple[str, ...] | None = None
     sim: SimDefault | None = None
     method_options: frozenset[str] = frozenset()
+    csv_rows: str | None = None
 
     @property
     def builtin(self) -> bool:
@@ -150,6 +154,18 @@ def kind_descriptor(name: str, plugins: Iterable[str | os.PathLike[str]] = ()
                     ) -> KindDescriptor | None:
     """The descriptor of ``name`` (None if no kind has that name)."""
     return kind_descriptors(plugins).get(name)
+
+
+def csv_row_kinds(rows: str | None = None) -> tuple[str, ...]:
+    """The kinds ``hostpc import`` writes (with ``rows``: those whose CSV rows are that)."""
+    return tuple(name for name, d in kind_descriptors().items()
+                 if d.csv_rows is not None and rows in (None, d.csv_rows))
+
+
+def csv_row_shape(method: str) -> str | None:
+    """What a metrology CSV row of ``method`` holds (``KindDescriptor.csv_rows``)."""
+    descriptor = kind_descriptor(method)
+    return descriptor.csv_rows if descriptor is not None else None
 
 
 def measurement_kinds(plugins: Iterable[str | os.PathLike[str]] = ()

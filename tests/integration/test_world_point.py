@@ -97,9 +97,9 @@ async def test_method_plans_visible_poses_and_acquires(start_stub: StartStub,
 
 
 def _world_point_registered() -> bool:
-    from hostpc.dataset.model import METHODS
+    from hostpc.dataset.kind_registry import measurement_kinds
 
-    return "world_point" in METHODS
+    return "world_point" in measurement_kinds()
 
 
 @pytest.mark.slow

@@ -68,6 +68,18 @@ class StereoTargetMethod(Method):
     name: ClassVar[str] = "stereo_target"
     default_target_sigma_deg: ClassVar[float | None] = 0.002
 
+    @classmethod
+    def short_plan_warning(cls, n_fit: int) -> str | None:
+        """Below the centre refinement's MIN_SAMPLES the disk centres keep the nominal
+        normal's bias (docs/vision.md 3.2)."""
+        from hostpc.kinds.stereo_target.refinement import MIN_SAMPLES
+
+        if n_fit >= MIN_SAMPLES:
+            return None
+        return (f"plan: {n_fit} fit poses, fewer than the {MIN_SAMPLES} the centre "
+                "refinement needs: the disk centres keep the nominal normal's bias and "
+                "the sigmas may be too small")
+
     def __init__(self, settings: Any, cell: Any, run_dir: Path) -> None:
         super().__init__(settings, cell, run_dir)
         self.rig: Any = None

@@ -13,4 +13,5 @@ from hostpc.kinds.world_point.model import WorldPoint
 KIND = KindDescriptor(
     name="world_point", model=WorldPoint,
     method="hostpc.kinds.world_point.method:WorldPointMethod",
-    sim=SimDefault(overrides={"motion": {"time_scale": 0.0}}, known=("world", "markers")))
+    sim=SimDefault(overrides={"motion": {"time_scale": 0.0}}, known=("world", "markers")),
+    csv_rows="point")

@@ -6,4 +6,4 @@ acquisition.
 from hostpc.dataset.kind_registry import KindDescriptor
 from hostpc.kinds.world_pose.model import WorldPose
 
-KIND = KindDescriptor(name="world_pose", model=WorldPose)
+KIND = KindDescriptor(name="world_pose", model=WorldPose, csv_rows="pose")
