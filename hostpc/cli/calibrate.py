@@ -282,7 +282,8 @@ def run(args: argparse.Namespace) -> int:
         scenario_file = None
         if args.effects is not None or args.plugin:
             check_model_options(args.effects, tuple(args.plugin))
-        known = parse_known(args.known)  # a resume refits with them (run_reference.py)
+        # a resume refits with them (run_reference.py)
+        known = parse_known(args.known, tuple(args.plugin))
         check_known_frames(str(header.get("settings", {}).get("method", "")), known,
                            tuple(args.plugin) or tuple(header.get("settings", {}).get("plugins")
                                                        or ()))
@@ -302,7 +303,7 @@ def run(args: argparse.Namespace) -> int:
             settings = _with_option(settings, "modbus", f"{address.host}:{MODBUS_PORT}")
         _check_rig(settings)
         cell_file = load_cell_file(args.cell) if args.cell else None
-        known = parse_known(args.known)
+        known = parse_known(args.known, tuple(args.plugin))
         check_known_frames(settings.method, known, settings.plugins)
         check_reference_option(args.reference, settings.method)
         check_model_options(settings.effects, settings.plugins)
