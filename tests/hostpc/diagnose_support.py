@@ -149,10 +149,10 @@ def coupled_dual_loop(truth: Mapping[str, float], n_per_arm: int = 50, seed: int
                       ) -> Dataset:
     """A dual_loop dataset (hostpc's own model) with a hidden coupling of any neighbouring
     joints, ``joint_coupling.left.k4_3`` (the built-in effect couples only the wrist)."""
+    from hostpc.kinds.dual_loop.synthesize import make_dataset, plan_poses
     from hostpc.model.effects import JointCoupling
     from hostpc.model.registry import available_effects, instantiate
     from hostpc.synthesize import noisy_measurements
-    from hostpc.synthesize_dual_loop import make_dataset, plan_poses
 
     poses = plan_poses(n_per_arm, np.random.default_rng(seed - 1))
     placeholder = make_dataset(poses, np.zeros((poses.n, 3)),
