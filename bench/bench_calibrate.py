@@ -52,10 +52,10 @@ def wall_time_sim(out_dir: Path) -> dict[str, Any]:
 
 def _design(known: tuple[str, ...], n_candidates: int, seed: int) -> Any:
     """The default simulated cell's candidate pool and its design (nominal rig)."""
+    from hostpc.kinds.stereo_target.method import StereoTargetMethod
     from hostpc.kinematics import get_robot
     from hostpc.methods.base import RunSettings
     from hostpc.methods.cell import build_cell
-    from hostpc.methods.stereo_target import StereoTargetMethod
     from hostpc.planning.design import design_matrix, make_design
     from hostpc.robots.base import RobotState
     from hostpc.robots.simulator import default_sim_scenario

@@ -30,10 +30,10 @@ from controller_stub.scenario import scenario_from_dict
 from hostpc.dataset import Dataset
 from hostpc.fitting import solve
 from hostpc.fitting.stepwise import fit_stepwise, gauge_equivalent, identity_weighted
+from hostpc.kinds.dual_loop.synthesize import PlannedPoses, make_dataset, plan_poses
 from hostpc.kinematics.rotations import matrix_to_rotvec, pose_to_transform, rotvec_to_matrix
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import Problem, build_problem
-from hostpc.synthesize_dual_loop import PlannedPoses, make_dataset, plan_poses
 
 POSE_FRAMES = ("camera", "left_base", "right_base")
 

@@ -44,7 +44,7 @@ from hostpc.calibrate.reference_check import check_reference  # noqa: E402
 from hostpc.dataset import Dataset, Samples  # noqa: E402
 from hostpc.fitting import fit  # noqa: E402
 from hostpc.fitting.priors import with_prior_blocks  # noqa: E402
-from hostpc.model.measurement import predict  # noqa: E402
+from hostpc.model.measurements.predict import predict  # noqa: E402
 from hostpc.model.problem import build_problem  # noqa: E402
 
 SWAP = math.radians(2.0)

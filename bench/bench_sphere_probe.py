@@ -20,9 +20,9 @@ import numpy as np
 from controller_stub.modbus_io import ModbusIoServer
 from controller_stub.scenario import scenario_from_dict
 from controller_stub.server import ControllerServer
+from hostpc.kinds.sphere_probe import method as sp
+from hostpc.kinds.sphere_probe.probe_modbus import ModbusProbe, SteppedGuardedMove
 from hostpc.kinematics import get_robot
-from hostpc.methods.sphere_probe import method as sp
-from hostpc.methods.sphere_probe.probe_modbus import ModbusProbe, SteppedGuardedMove
 from hostpc.robots.zerocal import ZerocalAdapter
 
 TOKEN = "bench-token"

@@ -25,16 +25,23 @@ _MODULES: dict[str, ModuleType] = {}
 
 
 def import_plugin_file(path: str | os.PathLike[str]) -> ModuleType:
-    """Import a Python file once (cached by its resolved path); EffectError in one line."""
+    """Import a Python file once (cached by its resolved path); EffectError in one line.
+
+    A folder with an ``__init__.py`` is a plugin package (a measurement kind in one folder,
+    docs/measurement-models.md): its ``__init__`` is imported as the package, its other
+    modules by relative import (``from .model import ...``)."""
     path = Path(path)
     if not os.path.lexists(path):
         raise EffectError(f"plugin {path}: no such file")
-    check_input_file(path, PLUGIN, f"plugin {path}")  # a regular file within its size limit
+    package = path.is_dir() and os.path.lexists(path / "__init__.py")
+    source = path / "__init__.py" if package else path
+    check_input_file(source, PLUGIN, f"plugin {source}")  # a regular file within its limit
     key = str(path.resolve())
     if key in _MODULES:
         return _MODULES[key]
     module_name = f"zerocal_plugin_{path.stem}_{abs(hash(key))}"
-    spec = importlib.util.spec_from_file_location(module_name, path)
+    spec = importlib.util.spec_from_file_location(
+        module_name, source, submodule_search_locations=[str(path)] if package else None)
     if spec is None or spec.loader is None:
         raise EffectError(f"plugin {path}: not a Python file")
     module = importlib.util.module_from_spec(spec)

@@ -17,7 +17,7 @@ import numpy as np
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
 from hostpc.kinematics import get_robot, invert_transform, pose_to_transform
 from hostpc.kinematics.inverse import look_at, solve_ik
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import Problem, build_problem
 
 # A pose of each built-in robot with the flange pointing down (-z of base), used as the IK seed

@@ -18,6 +18,7 @@ import math
 import numpy as np
 
 from hostpc.errors import InputError
+from hostpc.methods import method_class
 from hostpc.methods.base import Method, Plan, Progress, RunSettings
 from hostpc.planning.design import (
     Travel,
@@ -48,7 +49,7 @@ class PlanningError(InputError):
 MIN_TARGET_POSES = 6
 """A target-sigma plan measures at least this many poses: the fewest whose disk centres
 stereo_target re-corrects with the normals of their own preliminary fit
-(`hostpc.methods.stereo_refinement.MIN_SAMPLES`; a test keeps the two equal). The sigma
+(`hostpc.kinds.stereo_target.refinement.MIN_SAMPLES`; a test keeps the two equal). The sigma
 target itself asks for 7-8 poses (10-11 with the travel-aware selection). This was 20 while
 a plan of fewer than 20 poses went unrefined, which, not the plan's size, made its sigma
 dishonest: refined, the plain 7-8-pose plan gives MSE / sigma^2 0.68-1.32 per joint over 40
@@ -68,12 +69,13 @@ gives 10-11 poses in 17.8 s (at most 19.8 s), 0.96-1.18; 0.3 gives 15 poses in 1
 moves between them."""
 
 
-def plan_warnings(method: str, target_sigma_deg: float | None, sigmas: np.ndarray,
-                  n_fit: int, short: bool) -> list[str]:
+def plan_warnings(method: str | type[Method], target_sigma_deg: float | None,
+                  sigmas: np.ndarray, n_fit: int, short: bool) -> list[str]:
     """What a plan does not deliver, one line each: a target sigma the planned poses do not
     reach (sigmas: (n,) predicted joint-offset sigmas, rad, NaN where not identifiable), and
-    a short stereo_target plan below the centre refinement's MIN_TARGET_POSES (its centres
-    then keep the nominal normal's bias, docs/vision.md 3.2)."""
+    what a short plan lacks for its method (``Method.short_plan_warning``: stereo_target's
+    below the centre refinement's MIN_TARGET_POSES, whose centres then keep the nominal
+    normal's bias, docs/vision.md 3.2). method: the Method class, or a built-in's name."""
     lines: list[str] = []
     finite = np.isfinite(sigmas)
     if target_sigma_deg is not None and np.any(finite):
@@ -82,10 +84,10 @@ def plan_warnings(method: str, target_sigma_deg: float | None, sigmas: np.ndarra
             lines.append(f"plan: the {n_fit} poses reach a predicted sigma of "
                          f"{math.degrees(float(sigmas[worst])):.2g} deg (joint {worst + 1}), "
                          f"not the --target-sigma {target_sigma_deg:g} deg: give more --poses")
-    if short and method == "stereo_target" and n_fit < MIN_TARGET_POSES:
-        lines.append(f"plan: {n_fit} fit poses, fewer than the {MIN_TARGET_POSES} the centre "
-                     "refinement needs: the disk centres keep the nominal normal's bias and "
-                     "the sigmas may be too small")
+    cls = method_class(method) if isinstance(method, str) else method
+    warning = cls.short_plan_warning(n_fit) if short else None
+    if warning is not None:
+        lines.append(warning)
     return lines
 
 
@@ -165,7 +167,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     if not short:
         q_verify = pool[verify_indices]
     sigmas = joint_offset_sigmas(plan_design, state.q.size)
-    for line in plan_warnings(method.name, settings.target_sigma_deg, sigmas,
+    for line in plan_warnings(type(method), settings.target_sigma_deg, sigmas,
                               len(fit_indices), short):
         progress.message(line)
     info = {

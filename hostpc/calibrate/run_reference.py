@@ -187,7 +187,7 @@ def joint_coverage(method: Method, plan: Plan, settings: RunSettings, cell: Cell
     """Which joints the planned poses calibrate with this run's frames: from the
     measurements (with the known frames), from the reference, or not at all (and why).
     Linear analysis at the nominal model of the fit poses; nothing moves."""
-    from hostpc.model.measurement import predict
+    from hostpc.model.measurements.predict import predict
     from hostpc.model.problem import build_problem
 
     dataset = method.design_dataset(plan.q)

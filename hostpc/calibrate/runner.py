@@ -189,8 +189,9 @@ class Runner:
             settings = resume_settings(RunSettings.from_dict(self.header["settings"]),
                                        self.resume_overrides, self.journal, progress)
             self.journal.event("resumed", at=_now())
-            cell = cell_reference.resume_known(cell_from_dict(self.header["cell"]), self.known,
-                                               self.header, self.journal, progress)
+            cell = cell_reference.resume_known(
+                cell_from_dict(self.header["cell"], settings.plugins), self.known,
+                self.header, self.journal, progress)
             self._clock.last_t = self.journal.last_sample_t()
             progress.message(f"resuming {self.run_dir}: "
                              f"{len(self.journal.records('fit'))} fit and "
@@ -204,7 +205,7 @@ class Runner:
             except ValueError as exc:
                 raise InputError(str(exc)) from None
             cell = build_cell(state.camera, state.robot, self.cell_file, self.known,
-                              self.default_known)
+                              self.default_known, settings.plugins)
             initial = _state_dict(state, offsets)
             self.header = {
                 "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
@@ -216,7 +217,7 @@ class Runner:
                 "initial": initial,
             }
 
-        method = method_class(settings.method)(settings, cell, self.run_dir)
+        method = method_class(settings.method, settings.plugins)(settings, cell, self.run_dir)
         if hasattr(method, "set_time_origin"):
             method.set_time_origin(self._clock.time_origin(initial, state))
         if settings.effects is None and method.default_effects() is not None:
@@ -365,7 +366,7 @@ class Runner:
                                    settings.hold)
         dataset, self._priors = cell_reference.reference_priors(self.reference, dataset,
                                                                 settings)
-        save_dataset(dataset, self.run_dir / "dataset.json")
+        save_dataset(dataset, self.run_dir / "dataset.json", plugins=settings.plugins)
         self.progress.stage("fit")
         return fit(dataset, settings.effects, plugins=settings.plugins, loss=settings.loss,
                    cv_folds=settings.cv_folds), dataset
@@ -374,7 +375,8 @@ class Runner:
                  stop: int | None = None) -> Dataset:
         samples = [r.sample for r in self.journal.records(phase) if r.ok and r.sample
                    and first <= r.index and (stop is None or r.index < stop)]
-        return dataset_from_dict(method.dataset_document(samples))
+        return dataset_from_dict(method.dataset_document(samples),
+                                 plugins=method.settings.plugins)
 
     async def _verify(self, method: Method, plan: Plan, result: FitResult,
                       settings: RunSettings, offsets: np.ndarray, pushed_delta: np.ndarray,
@@ -398,7 +400,8 @@ class Runner:
                              f"skipped ({'; '.join(reasons)}); {state}; measure them again "
                              f"with: hostpc calibrate --resume {self.run_dir}")
         verify_dataset = self._dataset(method, "verify", first, first + n_verify)
-        save_dataset(verify_dataset, self.run_dir / "verify_dataset.json")
+        save_dataset(verify_dataset, self.run_dir / "verify_dataset.json",
+                     plugins=method.settings.plugins)
         tolerance = (None if settings.verify_tolerance_mm is None
                      else settings.verify_tolerance_mm * 1e-3)
         verify_result = evaluate_verify(result, verify_dataset, pushed_delta, n_verify,

@@ -42,7 +42,7 @@ import numpy as np
 from hostpc.dataset import Dataset
 from hostpc.diagnostics.distributions import chi2_sf
 from hostpc.fitting import FitResult
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
 from hostpc.planning.design import joint_offset_names
 

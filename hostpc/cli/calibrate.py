@@ -58,8 +58,8 @@ from hostpc.cli.termination import (  # noqa: F401  (re-exported: the old import
     cancel_on_sigterm,
     sigterm_as_interrupt,
 )
+from hostpc.dataset.kind_registry import DEFAULT_METHOD, kind_descriptors
 from hostpc.errors import InputError
-from hostpc.methods import METHOD_CLASSES
 from hostpc.methods.base import RunSettings
 from hostpc.methods.cell import load_cell_file, parse_known
 from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot, resolve_token
@@ -97,8 +97,9 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--token", help="shared token (default: $ZEROCAL_TOKEN, else the "
                         "simulator's default)")
     parser.add_argument("--timeout", type=POSITIVE, default=10.0, help="seconds per request")
-    parser.add_argument("--method", choices=tuple(METHOD_CLASSES), default="stereo_target",
-                        help="measurement method (default stereo_target)")
+    parser.add_argument("--method", default=DEFAULT_METHOD,
+                        help=f"measurement method: a kind with a live acquisition, built in "
+                        f"or a plugin's (--plugin); default {DEFAULT_METHOD}")
     parser.add_argument("--poses", type=COUNT, default=None,
                         help="fit poses (default: stereo_target the fewest, >= 20, reaching "
                         "--target-sigma, at most 60; other methods 60); --poses N alone "
@@ -220,8 +221,11 @@ def _settings(args: argparse.Namespace) -> RunSettings:
     if args.rig_coverage is not None:
         options["rig_coverage"] = args.rig_coverage
     if args.probe_io != "guarded":
-        if args.method != "sphere_probe":
-            raise InputError(f"--probe-io {args.probe_io}: only for --method sphere_probe")
+        takers = [name for name, kind in kind_descriptors(args.plugin).items()
+                  if "probe_io" in kind.method_options]
+        if args.method not in takers:
+            raise InputError(f"--probe-io {args.probe_io}: only for --method "
+                             f"{', '.join(takers)}")
         options["probe_io"] = args.probe_io
     if args.modbus:
         if args.probe_io != "modbus":
@@ -278,8 +282,11 @@ def run(args: argparse.Namespace) -> int:
         scenario_file = None
         if args.effects is not None or args.plugin:
             check_model_options(args.effects, tuple(args.plugin))
-        known = parse_known(args.known)  # a resume refits with them (run_reference.py)
-        check_known_frames(str(header.get("settings", {}).get("method", "")), known)
+        # a resume refits with them (run_reference.py)
+        known = parse_known(args.known, tuple(args.plugin))
+        check_known_frames(str(header.get("settings", {}).get("method", "")), known,
+                           tuple(args.plugin) or tuple(header.get("settings", {}).get("plugins")
+                                                       or ()))
         check_reference_option(args.reference, header.get("settings", {}).get("method"))
     elif args.replay:  # a recorded run again, without a robot (hostpc.sensors)
         check_replay_options(args, getattr(args, "option_defaults", {}))
@@ -296,8 +303,8 @@ def run(args: argparse.Namespace) -> int:
             settings = _with_option(settings, "modbus", f"{address.host}:{MODBUS_PORT}")
         _check_rig(settings)
         cell_file = load_cell_file(args.cell) if args.cell else None
-        known = parse_known(args.known)
-        check_known_frames(settings.method, known)
+        known = parse_known(args.known, tuple(args.plugin))
+        check_known_frames(settings.method, known, settings.plugins)
         check_reference_option(args.reference, settings.method)
         check_model_options(settings.effects, settings.plugins)
         run_dir = Path(args.out) if args.out else _default_out(settings.method)
@@ -366,8 +373,10 @@ def _run_with_robot(args: argparse.Namespace, address: RobotAddress, driver: str
         default_known = ()
     else:
         method = settings.method if settings is not None else None
-        scenario = default_sim_scenario(time_scale=args.time_scale, method=method)
-        default_known = sim_default_known(method)
+        plugins = settings.plugins if settings is not None else ()
+        scenario = default_sim_scenario(time_scale=args.time_scale, method=method,
+                                        plugins=plugins)
+        default_known = sim_default_known(method, plugins)
     token = args.token or (scenario.get("server") or {}).get("token") or resolve_token(None)
     modbus_port, settings = _sim_modbus(settings, run_dir)
     progress.stage("start simulator")
@@ -389,7 +398,7 @@ def _sim_modbus(settings: RunSettings | None, run_dir: Path
     """The simulator's Modbus port for `--probe-io modbus` (None: the run does not poll
     over Modbus) and the settings pointing at it. A new run takes --modbus's port or a free
     one; a resume restarts the simulator on the port its run recorded."""
-    from hostpc.methods.sphere_probe.method import parse_modbus_address
+    from hostpc.kinds.sphere_probe.method import parse_modbus_address
     from hostpc.robots.simulator import free_local_port
 
     options = (settings.options if settings is not None

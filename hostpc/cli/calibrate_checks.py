@@ -13,22 +13,22 @@ run folder left behind).
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
 
 from hostpc.calibrate.journal import Journal
+from hostpc.dataset.kind_registry import kind_descriptor
 from hostpc.errors import EffectError, InputError
 
-KNOWN_FRAMES: dict[str, tuple[str, ...]] = {
-    "stereo_target": ("tool", "target"),
-    "sphere_probe": ("tool", "sphere"),
-    "dual_loop": ("camera", "left_base", "right_base", "left_target", "right_target"),
-}
-"""The frames each method can hold known (`--known`); a method not listed accepts any."""
 
-
-def check_known_frames(method: str, known: tuple[str, ...] | None) -> None:
-    """InputError if `known` names a frame `method` does not estimate."""
-    frames = KNOWN_FRAMES.get(method)
+def check_known_frames(method: str, known: tuple[str, ...] | None,
+                       plugins: Iterable[str | Path] = ()) -> None:
+    """InputError if `known` names a frame `method` does not estimate (the frames its
+    kind's descriptor lists; a kind that lists none accepts any)."""
+    if not known:
+        return
+    kind = kind_descriptor(method, plugins)
+    frames = kind.known_frames if kind is not None else None
     if not known or frames is None:
         return
     foreign = [name for name in known if name not in frames]

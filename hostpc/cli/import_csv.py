@@ -47,7 +47,9 @@ def register(subparsers: Any) -> None:
         "tracker, motion capture) and write a zerocal dataset file.",
     )
     parser.add_argument("csv", metavar="CSV", help="the CSV file (first row: column names)")
-    parser.add_argument("--method", required=True, choices=("world_point", "world_pose"))
+    parser.add_argument("--method", required=True,
+                        help="the dataset's measurement kind: one that reads metrology CSV "
+                        "rows (world_point, world_pose)")
     parser.add_argument("--robot", required=True, metavar="NAME|FILE.urdf",
                         help="a built-in robot (hostpc robots) or a URDF file")
     parser.add_argument("--base-link", help="URDF: the chain's base link")
@@ -101,6 +103,11 @@ def _method_frames(method: str) -> tuple[str, ...]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hostpc.dataset.kind_registry import csv_row_kinds
+
+    if args.method not in csv_row_kinds():
+        raise InputError(f"--method {args.method!r}: not read from a metrology CSV (known: "
+                         f"{', '.join(csv_row_kinds())})")
     for option, value, units in (("--length-unit", args.length_unit, LENGTH_UNITS),
                                  ("--angle-unit", args.angle_unit, ANGLE_UNITS),
                                  ("--joint-unit", args.joint_unit, ANGLE_UNITS)):

@@ -32,7 +32,7 @@ def pose_counts(args: argparse.Namespace) -> tuple[int, int, float | None]:
     the method's defaults: a method with a default target sigma (stereo_target) stops at
     it unless --poses alone asks for a fixed count; with a target sigma the verification
     takes the poses its power needs (hostpc.planning.verify_poses), else 10."""
-    method = method_class(args.method)
+    method = method_class(args.method, tuple(args.plugin))
     target = args.target_sigma
     if target is not None and getattr(method, "plans_whole_groups", False):
         raise InputError(f"--target-sigma: {args.method} plans whole groups of poses (a probe "

@@ -6,20 +6,19 @@
 sample index. The format is documented in ``docs/dataset-format.md``.
 """
 
-from hostpc.dataset.io import dataset_from_dict, dataset_to_dict, load_dataset, save_dataset
 from hostpc.dataset.model import (
-    METHODS,
     Dataset,
     FramePose,
     RobotDescription,
     Samples,
     SphereFrame,
 )
+from hostpc.dataset.reading import dataset_from_dict, load_dataset
 from hostpc.dataset.schema import FORMAT_TAG
+from hostpc.dataset.writing import dataset_to_dict, save_dataset
 
 __all__ = [
     "FORMAT_TAG",
-    "METHODS",
     "Dataset",
     "FramePose",
     "RobotDescription",

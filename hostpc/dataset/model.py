@@ -1,7 +1,8 @@
 """In-memory calibration dataset: frozen dataclasses holding numpy arrays in SI units.
 
 This is what the rest of hostpc uses; the file format (``zerocal-dataset/1``) is handled in
-``hostpc.dataset.io`` and ``hostpc.dataset.schema``. Everything here is in metres, radians
+``hostpc.dataset.reading``/``writing`` and ``hostpc.dataset.schema``. Everything here is in
+metres, radians
 and seconds whatever the file said (see ``docs/conventions.md``). Arrays are copied on
 construction and made read-only, so a value cannot change after it was validated.
 
@@ -24,10 +25,8 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 StrArray = NDArray[np.str_]
 
-#: the built-in methods; a plugin's measurement model adds its own name
+#: a measurement kind's name (the registered kinds: ``hostpc.dataset.kind_registry``)
 Method = str
-METHODS: tuple[str, ...] = ("stereo_target", "sphere_probe", "dual_loop", "world_point",
-                            "world_pose")
 
 
 def _frozen(value: ArrayLike, dtype: Any = np.float64) -> NDArray[Any]:
@@ -337,8 +336,8 @@ class Dataset:
     """One calibration dataset in SI units (the value of a ``zerocal-dataset/1`` file).
 
     Attributes:
-        method: the measurement model's name: ``"stereo_target"``, ``"sphere_probe"``,
-            ``"dual_loop"``, or a plugin's (``hostpc.model.measurements``).
+        method: the measurement kind's name, a built-in's or a plugin's
+            (``hostpc.dataset.kind_registry``).
         robot: the robot description.
         frames: nominal frames by name. ``FramePose`` for ``tool`` and, for dual_loop,
             ``camera``, ``left_base``, ``right_base``; a (3,) point (m) for ``target``

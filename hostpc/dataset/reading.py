@@ -20,13 +20,13 @@ from typing import Any
 import numpy as np
 
 from hostpc.dataset import schema, validation
-from hostpc.dataset.kind import MeasurementKind
-from hostpc.dataset.kinds import measurement_kinds
+from hostpc.dataset.file_units import Units
+from hostpc.dataset.kind_registry import measurement_kinds
+from hostpc.dataset.measurement_kind import MeasurementKind
 from hostpc.dataset.model import Dataset, FramePose, RobotDescription, Samples, SphereFrame
 from hostpc.dataset.reading_columns import NotColumnar, read_columns
 from hostpc.dataset.reading_samples import read_samples
 from hostpc.dataset.schema import FORMAT_TAG, FieldError, Loc, show
-from hostpc.dataset.units import Units
 from hostpc.errors import DatasetError, InputError
 from hostpc.kinematics.robots import get_robot
 
@@ -84,7 +84,7 @@ def dataset_from_dict(doc: Any, source: str = "<dict>",
         dataset = _columnar_dataset(doc, kinds, base_dir)
         if dataset is None:  # read sample by sample: the error names the first bad sample
             dataset = _dataset_from_document(schema.normalize(doc), kinds, base_dir)
-        return validation.check_dataset(dataset, source)
+        return validation.check_dataset(dataset, source, kinds[dataset.method])
     except FieldError as exc:
         raise DatasetError(f"{source}: {exc}") from exc
     except RecursionError as exc:
@@ -132,7 +132,7 @@ def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]],
     units = Units(document.units)
     n_joints: int | None
     if document.robot.urdf is not None:  # extension A (hostpc.kinematics.urdf)
-        robot, n_joints, robot_label = read_urdf_robot(document.robot, method, base_dir)
+        robot, n_joints, robot_label = read_urdf_robot(document.robot, kind, base_dir)
     else:
         robot, n_joints, robot_label = _read_robot(document.robot, kind, units)
     frames = _read_frames(document.frames, kind, units)
@@ -159,7 +159,7 @@ def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]],
     )
 
 
-def read_urdf_robot(robot: schema.RobotSchema, method: str, base_dir: PathLike | None
+def read_urdf_robot(robot: schema.RobotSchema, kind: MeasurementKind, base_dir: PathLike | None
                     ) -> tuple[RobotDescription, int, str]:
     """Extension A: ``{"urdf": PATH, "base_link", "tip_link"}``, PATH relative to the file."""
     from hostpc.kinematics.urdf import load_urdf_chain  # imported late: a sibling package
@@ -167,8 +167,8 @@ def read_urdf_robot(robot: schema.RobotSchema, method: str, base_dir: PathLike |
     for key in ("name", "convention", "joints", "mass", "com"):
         if getattr(robot, key) is not None:
             raise FieldError(("robot", key), "not allowed with 'urdf'")
-    if method == "dual_loop":
-        raise FieldError(("robot", "urdf"), "dual_loop needs a built-in robot 'name'")
+    if kind.robot_tree:
+        raise FieldError(("robot", "urdf"), f"{kind.name} needs a built-in robot 'name'")
     for key in ("base_link", "tip_link"):
         if not getattr(robot, key):
             raise FieldError(("robot", key), "required with 'urdf'")

@@ -22,11 +22,11 @@ from typing import Any
 import numpy as np
 
 from hostpc.dataset import schema
-from hostpc.dataset.kind import MeasurementKind
+from hostpc.dataset.file_units import Units
+from hostpc.dataset.measurement_kind import MeasurementKind
 from hostpc.dataset.model import FloatArray, Samples
-from hostpc.dataset.units import Units
 
-_SYMMETRY_TOLERANCE = 1e-6  # as hostpc.dataset.kind.check_covariance
+_SYMMETRY_TOLERANCE = 1e-6  # as hostpc.dataset.measurement_kind.check_covariance
 _MAX_GROUP = 2**31
 
 

@@ -1,7 +1,8 @@
 """Reading the samples of a ``zerocal-dataset/1`` document into ``Samples`` (SI).
 
 Every sample is checked against its measurement kind (the fields it may and must have, joint
-counts, covariances: ``hostpc.dataset.kind``) and the context every kind shares (approach
+counts, covariances: ``hostpc.dataset.measurement_kind``) and the context every kind shares
+(approach
 signs, t, temperature, speed, extra), and the values are gathered into arrays, NaN / -1
 where an optional value is absent. Raises ``hostpc.dataset.schema.FieldError`` naming the
 sample index and field; ``reading`` turns it into a ``DatasetError``.
@@ -15,10 +16,10 @@ from typing import Any
 import numpy as np
 
 from hostpc.dataset import schema
-from hostpc.dataset.kind import Columns, MeasurementKind
+from hostpc.dataset.file_units import Units
+from hostpc.dataset.measurement_kind import Columns, MeasurementKind
 from hostpc.dataset.model import Samples
 from hostpc.dataset.schema import FieldError, Loc, show
-from hostpc.dataset.units import Units
 
 
 def _check_field_names(sample: schema.SampleSchema, loc: Loc, kind: MeasurementKind) -> None:

@@ -3,7 +3,7 @@
 This is the only module of hostpc.dataset that uses pydantic. The models check structure
 and types only (strict: numbers must be JSON numbers, no strings, no booleans); the
 checks that need the method, the units or several fields at once live in
-``hostpc.dataset.io``. Numbers here are in the file's units.
+``hostpc.dataset.reading``. Numbers here are in the file's units.
 
 Every failure is a :class:`FieldError` carrying the location of the offending value
 (``("samples", 3, "cov")``) and a one-line message; ``io`` prefixes the file name and

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.dataset.measurement_kind import MeasurementKind
 from hostpc.dataset.model import Dataset, FramePose, SphereFrame
 from hostpc.dataset.rig_block import BLOCK, check_rig_uncertainty
 from hostpc.errors import DatasetError
@@ -64,9 +65,11 @@ def read_dataset_bytes(path: str | os.PathLike[str]) -> bytes:
     return read_input_bytes(path, DATASET)
 
 
-def check_dataset(dataset: Dataset, source: str = "<dataset>") -> Dataset:
+def check_dataset(dataset: Dataset, source: str = "<dataset>",
+                  kind: type[MeasurementKind] | None = None) -> Dataset:
     """Return `dataset` if every value is within its physical range; else DatasetError with
-    one line: ``source: samples[i].field: value ... outside ...`` (SI units)."""
+    one line: ``source: samples[i].field: value ... outside ...`` (SI units). kind: the
+    dataset's measurement kind (a kinematic-tree kind's robot must be a built-in tree)."""
     for field, value, limit, unit in _ranged_values(dataset):
         array = np.asarray(value, dtype=np.float64)
         bad = ~(np.abs(array) < limit) & ~np.isnan(array)  # NaN: padding of absent values
@@ -76,7 +79,8 @@ def check_dataset(dataset: Dataset, source: str = "<dataset>") -> Dataset:
                                f"{float(array[index]):.6g} {unit} is outside the physical "
                                f"range (|value| < {limit:g} {unit})")
     _check_covariances(dataset, source)
-    _check_dual_loop_robot(dataset, source)
+    if kind is not None and kind.robot_tree:
+        _check_tree_robot(dataset, source)
     if BLOCK in dataset.extra_fields:
         check_rig_uncertainty(dataset.extra_fields[BLOCK], source)
     return dataset
@@ -155,12 +159,10 @@ def _check_covariances(dataset: Dataset, source: str) -> None:
                                "measurement covariance)")
 
 
-def _check_dual_loop_robot(dataset: Dataset, source: str) -> None:
-    if dataset.method != "dual_loop":
-        return
+def _check_tree_robot(dataset: Dataset, source: str) -> None:
     from hostpc.kinematics.humanoid import tree_names  # a sibling package, imported late
 
     name = dataset.robot.name
     if name not in tree_names():
         raise DatasetError(f"{source}: robot.name: unknown kinematic tree {name!r} for "
-                           f"dual_loop (built-in: {', '.join(tree_names())})")
+                           f"{dataset.method} (built-in: {', '.join(tree_names())})")

@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from hostpc.dataset.kind import MeasurementKind
-from hostpc.dataset.kinds import measurement_kinds
+from hostpc.dataset.kind_registry import measurement_kinds
+from hostpc.dataset.measurement_kind import MeasurementKind
 from hostpc.dataset.model import Dataset, FramePose, RobotDescription, Samples, SphereFrame
 from hostpc.dataset.reading import PathLike, dataset_from_dict
 from hostpc.dataset.schema import FORMAT_TAG

@@ -16,7 +16,7 @@ from typing import Literal
 import numpy as np
 
 from hostpc.fitting.priors import Constraints, problem_constraints
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.memo import memoised, recall, remember
 from hostpc.model.problem import Problem
 

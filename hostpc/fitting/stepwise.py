@@ -31,7 +31,7 @@ import numpy as np
 from hostpc.dataset import Dataset
 from hostpc.fitting.identifiability import analyse
 from hostpc.fitting.solver import SolverOutcome, evaluate, levenberg_marquardt
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import Problem, build_problem
 
 __all__ = ["StepwiseResult", "fit_stepwise", "gauge_equivalent"]

@@ -23,6 +23,7 @@ import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+from hostpc.dataset.kind_registry import csv_row_kinds, csv_row_shape
 from hostpc.errors import InputError
 
 __all__ = ["ORIENTATIONS", "ColumnMap", "PointColumns", "parse_column_map"]
@@ -164,9 +165,11 @@ def parse_column_map(spec: str, header: Sequence[str], n_joints: int, method: st
                          f"{', '.join(axes)})")
     if axes and "sigma" in fields:
         raise InputError("--columns: give sigma= or sx=, sy=, sz=, not both")
-    if groups and method != "world_point":
-        raise InputError("--columns: marker.NAME= groups are reflectors of world_point; "
-                         "use --method world_point")
+    rows = csv_row_shape(method)
+    if groups and rows != "point":
+        points_kinds = ", ".join(csv_row_kinds("point"))
+        raise InputError(f"--columns: marker.NAME= groups are reflectors of {points_kinds}; "
+                         f"use --method {points_kinds}")
     points = _groups(groups, fields, header)
     present = [name for name, keys in ORIENTATIONS.items() if any(k in fields for k in keys)]
     if len(present) > 1:
@@ -176,12 +179,12 @@ def parse_column_map(spec: str, header: Sequence[str], n_joints: int, method: st
         lacking = [k for k in ORIENTATIONS[orientation] if k not in fields]
         if lacking:
             raise InputError(f"--columns: orientation {orientation} lacks {', '.join(lacking)}")
-    if method == "world_pose" and orientation is None:
-        raise InputError("--columns: world_pose needs an orientation (roll,pitch,yaw or "
+    if rows == "pose" and orientation is None:
+        raise InputError(f"--columns: {method} needs an orientation (roll,pitch,yaw or "
                          "qw,qx,qy,qz or rx,ry,rz or e1,e2,e3 with --euler)")
-    if method == "world_point" and orientation is not None:
-        raise InputError("--columns: world_point measures points; drop the orientation "
-                         "columns or use --method world_pose")
+    if rows == "point" and orientation is not None:
+        raise InputError(f"--columns: {method} measures points; drop the orientation "
+                         f"columns or use --method {', '.join(csv_row_kinds('pose'))}")
     return ColumnMap(joints=tuple(joints[k] for k in range(1, n_joints + 1)), fields=fields,
                      orientation=orientation, points=points)
 

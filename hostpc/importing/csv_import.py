@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.dataset.kind_registry import csv_row_shape
 from hostpc.errors import InputError
 from hostpc.importing.column_map import (
     ORIENTATIONS,
@@ -59,7 +60,8 @@ _FROM_DECIMAL_COMMA = str.maketrans({",": ".", ".": "!"})
 class ImportOptions:
     """Everything of the output document that the CSV does not give.
 
-    method: "world_point" or "world_pose"; robot: the dataset's ``robot`` object;
+    method: a kind that reads metrology CSV rows (``csv_rows``: world_point,
+    world_pose); robot: the dataset's ``robot`` object;
     prismatic: per joint, True where the joint variable is a length;
     length_unit, angle_unit, joint_unit: defaults for columns whose header names no unit;
     sigma (length unit) and sigma_angle (angle unit): measurement noise; frames and known
@@ -210,7 +212,7 @@ def read_samples(csv_rows: CsvRows, mapping: ColumnMap, options: ImportOptions
         sigma=(fields["sigma"],) if "sigma" in fields else ()),)
     several = points[0].marker is not None
     ndof = len(mapping.joints)
-    world_pose = options.method == "world_pose"
+    world_pose = csv_row_shape(options.method) == "pose"
     orientation = ORIENTATIONS[mapping.orientation] if mapping.orientation and world_pose else ()
     optional = [k for k in ("t", "temperature") if k in fields]
     n_sigma = len(points[0].sigma)
@@ -234,7 +236,7 @@ def read_samples(csv_rows: CsvRows, mapping: ColumnMap, options: ImportOptions
     sigma_at = slice(ndof + 3, ndof + 3 + n_sigma)
     at = ndof + 3 + n_sigma + len(optional)  # the orientation's first value
     quat_at = at if mapping.orientation == "quat" else None
-    marker_column = fields.get("marker") if options.method == "world_point" else None
+    marker_column = fields.get("marker") if csv_row_shape(options.method) == "point" else None
     width = len(header.columns)
     values = array("d")
     marker_index = array("q")
@@ -301,7 +303,7 @@ def document_head(samples: ImportedSamples, options: ImportOptions) -> dict[str,
     all_frames = dict(options.frames)
     zero_pose = {"xyz": [0.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]}
     all_frames.setdefault("world", zero_pose)
-    if samples.method == "world_pose":
+    if csv_row_shape(samples.method) == "pose":
         all_frames.setdefault("tool", dict(zero_pose))
     else:
         names = list(samples.marker_names) or ["marker"]

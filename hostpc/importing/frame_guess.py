@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from hostpc.dataset.kind_registry import csv_row_shape
 from hostpc.errors import InputError
 from hostpc.importing.imported import ImportedSamples
 from hostpc.kinematics.chain import Chain
@@ -205,7 +206,7 @@ def guessed_frames(samples: ImportedSamples, chain: Chain, frames: Mapping[str, 
     from hostpc.kinematics import forward
     from hostpc.kinematics.rotations import pose_to_transform
 
-    world_pose = samples.method == "world_pose"
+    world_pose = csv_row_shape(samples.method) == "pose"
     pick = guess_sample_indices(len(samples), None if world_pose else samples.marker_index)
     T_base_flange = forward(chain, np.ascontiguousarray(samples.q[pick])).T_base_flange
     points = np.ascontiguousarray(samples.p[pick])

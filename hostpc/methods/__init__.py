@@ -1,32 +1,35 @@
 """Measurement methods and the shared calibration procedure.
 
-A method is one module with one `hostpc.methods.base.Method` subclass (plan candidates,
-acquire one sample per pose, build the dataset); `hostpc.calibrate.runner` runs every method
-through the same procedure (journal, resume, planning, fit, guarded push, verify, report).
-A new method registers here by name -> "module:Class" (imported on first use).
+A method is one `hostpc.methods.base.Method` subclass (plan candidates, acquire one sample
+per pose, build the dataset) in its kind's folder (`hostpc/kinds/<name>/method.py`), named
+by the kind's descriptor as "module:Class" and imported on first use;
+`hostpc.calibrate.runner` runs every method through the same procedure (journal, resume,
+planning, fit, guarded push, verify, report).
 """
 
 from __future__ import annotations
 
 import importlib
+from collections.abc import Iterable
+from pathlib import Path
 
+from hostpc.dataset.kind_registry import kind_descriptors
 from hostpc.errors import InputError
 from hostpc.methods.base import Method
 
-METHOD_CLASSES: dict[str, str] = {
-    "stereo_target": "hostpc.methods.stereo_target:StereoTargetMethod",
-    "sphere_probe": "hostpc.methods.sphere_probe.method:SphereProbeMethod",
-    "dual_loop": "hostpc.methods.dual_loop:DualLoopMethod",
-    "world_point": "hostpc.methods.world_point:WorldPointMethod",
-}
+
+def method_names(plugins: Iterable[str | Path] = ()) -> tuple[str, ...]:
+    """The kinds that can be measured live (`hostpc calibrate --method`)."""
+    return tuple(name for name, kind in kind_descriptors(plugins).items()
+                 if kind.method is not None)
 
 
-def method_class(name: str) -> type[Method]:
-    """The Method class registered as `name`; InputError if unknown or not built yet."""
-    spec = METHOD_CLASSES.get(name)
-    if spec is None:
-        raise InputError(f"--method {name!r}: unknown (known: {', '.join(METHOD_CLASSES)})")
-    module_name, _, class_name = spec.partition(":")
+def method_class(name: str, plugins: Iterable[str | Path] = ()) -> type[Method]:
+    """The Method class of kind `name`; InputError if unknown or not built yet."""
+    kind = kind_descriptors(plugins).get(name)
+    if kind is None or kind.method is None:
+        raise InputError(f"--method {name!r}: unknown (known: {', '.join(method_names(plugins))})")
+    module_name, _, class_name = kind.method.partition(":")
     try:
         module = importlib.import_module(module_name)
     except ModuleNotFoundError as exc:
@@ -37,4 +40,4 @@ def method_class(name: str) -> type[Method]:
     return cls
 
 
-__all__ = ["METHOD_CLASSES", "Method", "method_class"]
+__all__ = ["Method", "method_class", "method_names"]

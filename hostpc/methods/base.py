@@ -281,6 +281,12 @@ class Method(ABC):
     """The plan takes whole groups of poses (`pose_groups`: sphere_probe's orientations of
     5 contacts), so it has no per-pose stop at a target sigma (--target-sigma refused)."""
 
+    @classmethod
+    def short_plan_warning(cls, n_fit: int) -> str | None:
+        """What a short plan (`--poses N` alone) of `n_fit` fit poses lacks for this method,
+        one line (None: nothing)."""
+        return None
+
     def __init__(self, settings: RunSettings, cell: Cell, run_dir: Path) -> None:
         self.settings = settings
         self.cell = cell

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -31,12 +31,18 @@ from typing import Any
 import numpy as np
 
 from hostpc.dataset import FramePose
+from hostpc.dataset.kind_registry import kind_descriptors
 from hostpc.errors import InputError
 from hostpc.input_files import CONFIG, read_input_text
 
-FRAME_NAMES = ("tool", "target", "sphere", "base", "camera", "left_base", "right_base",
-               "left_target", "right_target", "world", "markers")
-"""Frame names `known` may list (each method uses its own: stereo_target tool, target)."""
+
+def frame_names(plugins: Iterable[str | Path] = ()) -> tuple[str, ...]:
+    """Frame names `known` may list: every registered kind's frames, and `base` (each
+    method uses its own: stereo_target tool, target)."""
+    names = {"base": None}
+    for kind in kind_descriptors(plugins).values():
+        names.update(dict.fromkeys(kind.model.frames))
+    return tuple(names)
 
 
 @dataclass(frozen=True)
@@ -124,17 +130,18 @@ def load_cell_file(path: str | Path) -> dict[str, Any]:
     return data
 
 
-def parse_known(text: str | None) -> tuple[str, ...] | None:
+def parse_known(text: str | None, plugins: Iterable[str | Path] = ()) -> tuple[str, ...] | None:
     """`--known tool,target` / `none` -> names; None if not given. InputError if unknown."""
     if text is None:
         return None
     names = [n.strip() for n in text.split(",") if n.strip()]
     if names in (["none"], []):
         return ()
+    known = frame_names(plugins)
     for name in names:
-        if name not in FRAME_NAMES:
+        if name not in known:
             raise InputError(f"--known {text!r}: unknown frame {name!r} "
-                             f"(expected {', '.join(FRAME_NAMES)} or none)")
+                             f"(expected {', '.join(known)} or none)")
     return tuple(dict.fromkeys(names))
 
 
@@ -154,6 +161,7 @@ def build_cell(
     cell_file: Mapping[str, Any] | None = None,
     known: tuple[str, ...] | None = None,
     default_known: tuple[str, ...] = (),
+    plugins: Iterable[str | Path] = (),
 ) -> Cell:
     """Merge the controller's description, a cell file and --known into a Cell.
 
@@ -185,7 +193,7 @@ def build_cell(
         listed = raw.get("known")
         known = tuple(listed) if isinstance(listed, list) else default_known
     for name in known:
-        if name not in FRAME_NAMES:
+        if name not in frame_names(plugins):
             raise InputError(f"cell known: unknown frame {name!r}")
     return Cell(
         robot=str(raw.get("robot") or robot),
@@ -202,6 +210,7 @@ def build_cell(
     )
 
 
-def cell_from_dict(data: Mapping[str, Any]) -> Cell:
+def cell_from_dict(data: Mapping[str, Any], plugins: Iterable[str | Path] = ()) -> Cell:
     """Rebuild a Cell from `Cell.to_dict()` (the run folder's copy)."""
-    return build_cell({}, str(data.get("robot", "")), data, tuple(data.get("known", ())))
+    return build_cell({}, str(data.get("robot", "")), data, tuple(data.get("known", ())),
+                      plugins=plugins)

@@ -11,7 +11,8 @@ import inspect
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
-from hostpc.dataset.kind import MeasurementKind
+from hostpc.dataset.kind_registry import KindDescriptor
+from hostpc.dataset.measurement_kind import MeasurementKind
 from hostpc.errors import EffectError
 from hostpc.model.effect import Effect
 from hostpc.model.effects import BUILTIN_EFFECTS
@@ -40,14 +41,16 @@ def _check_effect_class(cls: type[Effect], origin: str) -> None:
 def load_plugin_file(path: str | Path) -> dict[str, type[Effect]]:
     """Import a Python file (once) and return the Effect subclasses it defines, by name.
 
-    A file may define measurement models instead of (or besides) effects; a file that
-    defines neither is an error."""
+    A file may define measurement models (or a folder a kind's descriptor) instead of (or
+    besides) effects; a file that defines neither is an error."""
     module = import_plugin_file(path)
     found: dict[str, type[Effect]] = {}
     for cls in classes_defined_in(module, Effect):
         _check_effect_class(cls, f"plugin {path}")
         found[cls.name] = cls
-    if not found and not classes_defined_in(module, MeasurementKind):
+    kinds = bool(classes_defined_in(module, MeasurementKind)) or any(
+        isinstance(obj, KindDescriptor) for obj in vars(module).values())
+    if not found and not kinds:
         raise EffectError(f"plugin {path}: defines no Effect subclass with a `name`")
     return found
 

@@ -17,8 +17,7 @@ in the plan: arrive from the other side on about half of the samples.
   joint travelling the other way (the other joints make up the tip position; the tool
   turns a little on the way, which a touch probe's ball does not mind). The number of
   moves and their start poses stay the same.
-- ``balance_probe_plan``: the sphere_probe plan for a model (unchanged without an
-  approach-dependent effect).
+- (sphere_probe's plan balanced with these: ``hostpc.kinds.sphere_probe.planning.contacts``.)
 - ``ApproachTally``, ``via_point``, ``approach_after``: for free moves to poses in tour
   order (stereo_target, world_point; the moves themselves: hostpc.methods.approach_moves):
   the directions recorded so far; once a joint has arrived one way on fewer than
@@ -34,14 +33,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
 from hostpc.model.registry import available_effects
-from hostpc.planning.sphere_contacts import ProbePlan
 
 MIN_SHARE = 0.3
 """A joint whose rarer approach direction is below this share of the moves is balanced."""
@@ -259,23 +257,3 @@ def approach_after(q_from: np.ndarray | None, via: np.ndarray | None, q: np.ndar
     second = np.sign(q - via)
     return np.where(second != 0, second, first)
 
-
-def balance_probe_plan(plan: ProbePlan, chain: Chain, tip: np.ndarray,
-                       effects: str | Iterable[str] | None,
-                       plugins: Iterable[str | Path] = (), q_min: np.ndarray | None = None,
-                       q_max: np.ndarray | None = None) -> ProbePlan:
-    """The sphere_probe plan for a model: unchanged (the same object) when no effect of
-    ``effects`` is approach-dependent; else with its guarded moves balanced
-    (``balance_guarded_moves`` on every contact: same start poses, same number of moves).
-    tip: (3,) stylus tip centre in the flange (m)."""
-    if not approach_dependent_effects(effects, plugins) or not plan.contacts:
-        return plan
-    contacts = plan.contacts
-    q_start = np.array([c.q_start for c in contacts])
-    targets = balance_guarded_moves(chain, q_start, np.array([c.q_target for c in contacts]),
-                                    tip, q_min=q_min, q_max=q_max)
-    moved = iter(targets)
-    orientations = tuple(
-        replace(o, contacts=tuple(replace(c, q_target=next(moved)) for c in o.contacts))
-        for o in plan.orientations)
-    return replace(plan, orientations=orientations)

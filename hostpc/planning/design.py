@@ -43,7 +43,7 @@ from hostpc.dataset import Dataset
 from hostpc.fitting import NullDirection, analyse
 from hostpc.kinematics import Chain, forward, invert_transform
 from hostpc.kinematics.inverse import look_at, solve_ik
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
 from hostpc.planning.tour import move_times, nearest_neighbour, plan_tour
 

@@ -5,8 +5,9 @@ port (`--port 0`; the stub prints `listening on HOST:PORT`) and writes its hidde
 file (`--truth-out`), which only the truth comparison of a simulated run reads. hostpc never
 imports the simulator's code: it talks to it over the protocol like to any controller.
 
-Each method has its own default simulated world (`SIM_DEFAULTS`, documented in
-docs/calibrate.md). stereo_target and sphere_probe use the stub's packaged default scenario
+Each measurement kind declares its own default simulated world (`KindDescriptor.sim` in
+`hostpc/kinds/<name>/__init__.py`, documented in docs/calibrate.md); a kind without one gets
+stereo_target's. stereo_target and sphere_probe use the stub's packaged default scenario
 (a UR5e with random zero errors within +-0.5 deg and one hidden physical effect, a 2 ms
 probe trigger latency that only the touch probe sees) with `motion.time_scale` 0 (motions
 take no wall time) and one surveyed frame, declared known by the simulated cell:
@@ -35,51 +36,18 @@ import socket
 import subprocess
 import sys
 import threading
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterable
 from importlib import resources
 from pathlib import Path
 from typing import IO, Any
 
 import yaml
 
+from hostpc.dataset.kind_registry import DEFAULT_METHOD, SimDefault, kind_descriptor
 from hostpc.errors import ConnectionFailed, InputError
 from hostpc.input_files import CONFIG, read_input_text
 from hostpc.robots.connect import TOKEN_ENV, RobotAddress, resolve_token
 
-
-@dataclass(frozen=True)
-class SimDefault:
-    """The default simulated world of one method.
-
-    scenario: packaged scenario file of controller_stub; overrides: merged into it;
-    known: frames the simulated cell declares as measured (surveyed)."""
-
-    scenario: str = "default.yaml"
-    overrides: dict[str, Any] = field(default_factory=dict)
-    known: tuple[str, ...] = ()
-
-
-SIM_DEFAULTS: dict[str, SimDefault] = {
-    "stereo_target": SimDefault(
-        overrides={"motion": {"time_scale": 0.0}, "target": {"centre_error": [0.0, 0.0, 0.0]}},
-        known=("target",)),
-    "sphere_probe": SimDefault(
-        overrides={"motion": {"time_scale": 0.0},
-                   "probe": {"sphere_centre_error": [0.0, 0.0, 0.0]}},
-        known=("sphere",)),
-    "dual_loop": SimDefault(scenario="humanoid.yaml"),
-    # a laser tracker with a surveyed registration and a dowel-pinned reflector nest
-    # (controller_stub/tracker.py): both frames known, so every joint's zero is defined
-    "world_point": SimDefault(overrides={"motion": {"time_scale": 0.0}},
-                              known=("world", "markers")),
-}
-"""Each method's `--robot sim` world (see the module docstring); unknown methods and None
-use stereo_target's."""
-DEFAULT_SIM_METHOD = "stereo_target"
-SIM_DEFAULT_KNOWN: tuple[str, ...] = SIM_DEFAULTS[DEFAULT_SIM_METHOD].known
-"""Frames the default (stereo_target) simulated cell declares as measured."""
-SIM_DEFAULT_OVERRIDES: dict[str, Any] = SIM_DEFAULTS[DEFAULT_SIM_METHOD].overrides
 START_TIMEOUT_S = 30.0
 STUB_LOG = "stub.log"
 PR_SET_PDEATHSIG = 1
@@ -107,25 +75,30 @@ def packaged_default_scenario(name: str = "default.yaml") -> dict[str, Any]:
     return data
 
 
-def sim_default(method: str | None = None) -> SimDefault:
-    """The SimDefault of `method` (stereo_target's for None or a method without one)."""
-    return SIM_DEFAULTS.get(method or "", SIM_DEFAULTS[DEFAULT_SIM_METHOD])
+def sim_default(method: str | None = None, plugins: Iterable[str | Path] = ()) -> SimDefault:
+    """The SimDefault of `method`'s kind (stereo_target's for None or a kind without one)."""
+    descriptor = kind_descriptor(method, plugins) if method else None
+    if descriptor is None or descriptor.sim is None:
+        descriptor = kind_descriptor(DEFAULT_METHOD)
+    assert descriptor is not None and descriptor.sim is not None
+    return descriptor.sim
 
 
-def default_sim_scenario(time_scale: float | None = None,
-                         method: str | None = None) -> dict[str, Any]:
+def default_sim_scenario(time_scale: float | None = None, method: str | None = None,
+                         plugins: Iterable[str | Path] = ()) -> dict[str, Any]:
     """The default world of `--robot sim --method METHOD` (see the module docstring), with
     the motion time scale set to `time_scale` if given."""
-    default = sim_default(method)
-    scenario = _merge(packaged_default_scenario(default.scenario), default.overrides)
+    default = sim_default(method, plugins)
+    scenario = _merge(packaged_default_scenario(default.scenario), dict(default.overrides))
     if time_scale is not None:
         scenario = _merge(scenario, {"motion": {"time_scale": float(time_scale)}})
     return scenario
 
 
-def sim_default_known(method: str | None = None) -> tuple[str, ...]:
+def sim_default_known(method: str | None = None, plugins: Iterable[str | Path] = ()
+                      ) -> tuple[str, ...]:
     """Frames the default simulated cell of `method` declares as measured."""
-    return sim_default(method).known
+    return sim_default(method, plugins).known
 
 
 def load_scenario_file(path: str | Path, time_scale: float | None = 0.0) -> dict[str, Any]:

@@ -16,7 +16,7 @@ import numpy as np
 from hostpc.dataset import Dataset, RobotDescription, Samples, SphereFrame
 from hostpc.fitting.solver import evaluate
 from hostpc.model.effect import Effect
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import Problem, build_problem
 from hostpc.model.registry import load_plugin_file
 from hostpc.synthesize import SyntheticDataset, random_truth, synthesize_stereo_target
@@ -149,10 +149,10 @@ def coupled_dual_loop(truth: Mapping[str, float], n_per_arm: int = 50, seed: int
                       ) -> Dataset:
     """A dual_loop dataset (hostpc's own model) with a hidden coupling of any neighbouring
     joints, ``joint_coupling.left.k4_3`` (the built-in effect couples only the wrist)."""
+    from hostpc.kinds.dual_loop.synthesize import make_dataset, plan_poses
     from hostpc.model.effects import JointCoupling
     from hostpc.model.registry import available_effects, instantiate
     from hostpc.synthesize import noisy_measurements
-    from hostpc.synthesize_dual_loop import make_dataset, plan_poses
 
     poses = plan_poses(n_per_arm, np.random.default_rng(seed - 1))
     placeholder = make_dataset(poses, np.zeros((poses.n, 3)),
@@ -224,7 +224,7 @@ def hidden_world_point(hidden: Mapping[str, float], seed: int, *, swing: float =
     k consecutive samples (the reflectors seen in it), n_samples // k poses; ``poses``: the
     joint vectors of the poses (rad), instead of random ones."""
     from hostpc.dataset import FramePose
-    from hostpc.methods.world_point import spherical_covariance
+    from hostpc.kinds.world_point.method import spherical_covariance
     from hostpc.model.measurements.base import UR5E_HOME
     from hostpc.synthesize import approach_signs
 

@@ -17,8 +17,8 @@ from hostpc.errors import EffectError, InputError
 from hostpc.fitting import solve
 from hostpc.model.effect import Effect
 from hostpc.model.layout import Problem
-from hostpc.model.measurement import predict
 from hostpc.model.measurements import MeasurementModel
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem, extend_problem
 from hostpc.model.registry import available_effects
 

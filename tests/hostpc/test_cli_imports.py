@@ -53,7 +53,7 @@ def test_fit_of_a_dataset_with_a_shared_error_imports_no_scipy(tmp_path: Path) -
     saddlepoint tail imported scipy.stats and scipy.optimize: ~0.5 s)."""
     import numpy as np
 
-    from hostpc.planning.dual_loop_poses import plan_poses
+    from hostpc.kinds.dual_loop.planning import plan_poses
     from tests.hostpc.test_head_camera_uncertainty import world_documents
 
     document, _ = world_documents(1, plan_poses(12, np.random.default_rng(3)), 0.3)

@@ -81,7 +81,7 @@ def test_column_writer_writes_the_bytes_of_the_sample_writer(
 
 
 def test_a_plugin_overriding_write_sample_alone_is_written_sample_by_sample() -> None:
-    from hostpc.dataset.builtin_kinds import StereoTargetFile
+    from hostpc.kinds.stereo_target.file_face import StereoTargetFile
 
     class Tagged(StereoTargetFile):
         def write_sample(self, samples: Any, index: int) -> tuple[dict[str, Any], int]:

@@ -14,8 +14,8 @@ import pytest
 
 import hostpc
 from hostpc.dataset import Dataset
-from hostpc.model.measurement import predict
-from hostpc.synthesize_dual_loop import plan_poses, synthesize_dual_loop
+from hostpc.kinds.dual_loop.synthesize import plan_poses, synthesize_dual_loop
+from hostpc.model.measurements.predict import predict
 
 OFFSETS = {"joint_offsets.left.q3": 1e-3, "joint_offsets.right.q4": -1e-3}
 DEPTH_BIAS = 1.5e-3  # m, along the camera's optical axis, on the left arm's samples

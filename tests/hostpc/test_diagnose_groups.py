@@ -16,8 +16,8 @@ from hostpc.diagnostics.interactions import modulators
 from hostpc.diagnostics.residual_analysis import bin_pattern
 from hostpc.kinematics import get_robot
 from hostpc.model.context import group_variable
-from hostpc.model.measurement import predict
 from hostpc.model.measurements.base import UR5E_HOME, example_poses
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
 from tests.hostpc.diagnose_support import sphere_contact_dataset
 

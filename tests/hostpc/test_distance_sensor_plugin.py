@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from hostpc.dataset import save_dataset
-from hostpc.model.measurement import predict
 from hostpc.model.measurements import measurement_models
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
 from tests.hostpc.measurement_contract import check_model
 

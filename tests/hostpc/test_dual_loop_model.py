@@ -8,12 +8,12 @@ import pytest
 from hostpc.dataset import dataset_from_dict, save_dataset
 from hostpc.errors import InputError
 from hostpc.fitting import solve
+from hostpc.kinds.dual_loop.synthesize import plan_poses, synthesize_dual_loop
 from hostpc.kinematics import forward, get_robot
 from hostpc.kinematics.humanoid import HUMANOID_HOME, get_tree, humanoid_upper, tree_names
 from hostpc.kinematics.tree import Branch, KinematicTree, tree_gravity_torque
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
-from hostpc.synthesize_dual_loop import plan_poses, synthesize_dual_loop
 from tests.hostpc.test_measurement_jacobians import (
     assert_jacobian_close,
     central_difference,

@@ -18,9 +18,9 @@ from controller_stub.humanoid import HumanoidSimulation
 from controller_stub.scenario import scenario_from_dict
 from hostpc.fitting import solve
 from hostpc.fitting.stepwise import fit_stepwise, gauge_equivalent
-from hostpc.model.measurement import predict
+from hostpc.kinds.dual_loop.synthesize import plan_poses
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
-from hostpc.synthesize_dual_loop import plan_poses
 
 NULL_PAIRS = {
     "joint_offsets.head.q1": {"left_base", "right_base"},  # pan vs both bases about pan axis

@@ -19,9 +19,9 @@ COLUMNS = "q=shoulder_pan_joint:wrist_3_joint,x=x1,y=y1,z=z1,roll=phix1,pitch=ph
 
 
 def _world_pose_registered() -> bool:
-    from hostpc.dataset.model import METHODS
+    from hostpc.dataset.kind_registry import measurement_kinds
 
-    return "world_pose" in METHODS
+    return "world_pose" in measurement_kinds()
 
 
 @pytest.fixture(scope="module")

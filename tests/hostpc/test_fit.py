@@ -180,7 +180,7 @@ def test_stall_is_not_reported_as_convergence(noisy_stereo) -> None:  # type: ig
 
     from dataclasses import replace
 
-    from hostpc.model.measurement import predict
+    from hostpc.model.measurements.predict import predict
 
     class RightSign(WrongSign):
         def joint_jacobian(self, ctx, p):  # type: ignore[no-untyped-def]

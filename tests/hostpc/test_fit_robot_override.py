@@ -10,7 +10,7 @@ import numpy as np
 
 from hostpc.cli.main import main
 from hostpc.dataset.reading import dataset_from_dict
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
 from tests.hostpc.test_urdf_fit import URDF, _document, _poses
 

@@ -20,8 +20,8 @@ from controller_stub.scenario import scenario_from_dict
 from controller_stub.simulation import create_simulation
 from hostpc.dataset import dataset_from_dict
 from hostpc.errors import InputError
-from hostpc.methods.dual_loop import camera_calibration
-from hostpc.planning.dual_loop_poses import nominal_frames, plan_poses
+from hostpc.kinds.dual_loop.method import camera_calibration
+from hostpc.kinds.dual_loop.planning import nominal_frames, plan_poses
 from hostpc.vision.rectification import rectification_for
 from hostpc.vision.rig import rig_from_dict
 from hostpc.vision.rig_uncertainty import (
@@ -229,9 +229,9 @@ def test_method_floor_is_the_floor_the_fit_takes_back_out(tmp_path: Any) -> None
     the covariance shared_errors.floor_covariance removes, for a calibration far from the
     nominal 1400 px / 0.12 m."""
     from hostpc.fitting.shared_errors import BLOCK, floor_covariance
+    from hostpc.kinds.dual_loop.method import DualLoopMethod
     from hostpc.methods.base import RunSettings
     from hostpc.methods.cell import build_cell
-    from hostpc.methods.dual_loop import DualLoopMethod
     from hostpc.model.problem import build_problem
 
     pair = StereoTriangulator(1500.0, 0.1, 1280, 1024, 0.15, ERROR, SIGMA)

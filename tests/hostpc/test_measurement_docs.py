@@ -14,8 +14,8 @@ import pytest
 from hostpc.dataset import dataset_from_dict
 from hostpc.errors import DatasetError
 from hostpc.fitting import solve
-from hostpc.model.measurement import predict
 from hostpc.model.measurements import measurement_models
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
 from tests.hostpc.measurement_contract import check_model
 

@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hostpc.kinds.stereo_target.method import StereoTargetMethod
 from hostpc.kinematics import get_robot
 from hostpc.methods.base import RunSettings
 from hostpc.methods.cell import build_cell
-from hostpc.methods.stereo_target import StereoTargetMethod
 from hostpc.planning.design import (
     Design,
     PoseGroups,
@@ -226,7 +226,7 @@ def test_target_sigma_stop_takes_the_fewest_poses_and_the_fit_delivers_it(
         pool_and_design) -> None:  # type: ignore[no-untyped-def]
     from hostpc.dataset import dataset_from_dict
     from hostpc.fitting import fit
-    from hostpc.model.measurement import predict
+    from hostpc.model.measurements.predict import predict
     from hostpc.model.problem import build_problem
 
     method, pool, design = pool_and_design

@@ -8,6 +8,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from hostpc.kinds.sphere_probe.planning.contacts import (
+    ProbePlan,
+    balance_probe_plan,
+    plan_sphere_probe,
+    tip_positions,
+)
+from hostpc.kinds.sphere_probe.planning.setup import PlanConfig, ProbeSetup
 from hostpc.kinematics import forward, get_robot
 from hostpc.model.problem import build_problem
 from hostpc.model.registry import builtin_effects
@@ -17,14 +24,11 @@ from hostpc.planning.approach import (
     approach_after,
     approach_dependent_effects,
     balance_guarded_moves,
-    balance_probe_plan,
     reversed_target,
     travel_signs,
     unbalanced_joints,
     via_point,
 )
-from hostpc.planning.sphere_contacts import ProbePlan, plan_sphere_probe, tip_positions
-from hostpc.planning.sphere_setup import PlanConfig, ProbeSetup
 from tests.support import sphere_dataset
 
 WRIST_DOWN = np.array([0.0, -1.9, 1.9, -1.6, -1.5708, 0.0])

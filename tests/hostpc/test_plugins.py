@@ -46,7 +46,7 @@ def test_plugin_effect_is_loaded_and_fitted(tmp_path: Path, stereo_poses) -> Non
     # synthesise with the plugin's effect hidden, via the same model
     from dataclasses import replace
 
-    from hostpc.model.measurement import predict
+    from hostpc.model.measurements.predict import predict
     from hostpc.model.problem import build_problem
 
     problem = build_problem(base.dataset, ["joint_offsets", "wrist_coupling"], plugins=[plugin])

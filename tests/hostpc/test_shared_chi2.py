@@ -19,7 +19,7 @@ from hostpc.fitting.shared_chi2 import (
 )
 from hostpc.fitting.shared_errors import result_shared_chi2, shared_covariance
 from hostpc.fitting.solver import evaluate
-from hostpc.planning.dual_loop_poses import plan_poses
+from hostpc.kinds.dual_loop.planning import plan_poses
 from tests.hostpc.test_head_camera_uncertainty import world_documents
 
 

@@ -142,7 +142,7 @@ def test_a_target_sigma_plan_is_never_too_small_for_the_centre_refinement() -> N
     refinement fits (a plan below it would keep the nominal normal's bias, which made the
     short plan's sigma dishonest: docs/vision.md section 3.2)."""
     from hostpc.calibrate.run_plan import MIN_TARGET_POSES
-    from hostpc.methods.stereo_refinement import MIN_SAMPLES
+    from hostpc.kinds.stereo_target.refinement import MIN_SAMPLES
 
     assert MIN_TARGET_POSES == MIN_SAMPLES < 20
 
@@ -153,7 +153,7 @@ def test_a_gross_outlier_keeps_the_nominal_normals_of_a_short_set() -> None:
     no model is returned and the centres stay as measured; the clean set is refined."""
     import dataclasses
 
-    from hostpc.methods.stereo_refinement import MIN_SAMPLES, preliminary_model
+    from hostpc.kinds.stereo_target.refinement import MIN_SAMPLES, preliminary_model
     from hostpc.synthesize import synthesize_stereo_target
 
     truth = {"joint_offsets.q2": 0.004, "joint_offsets.q3": -0.003}

@@ -1,12 +1,11 @@
-"""Closed-form sphere_probe estimates (hostpc.planning.sphere_geometry)."""
+"""Closed-form sphere_probe estimates (hostpc.kinds.sphere_probe.planning.geometry)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from hostpc.kinematics import rotvec_to_matrix
-from hostpc.planning.sphere_geometry import (
+from hostpc.kinds.sphere_probe.planning.geometry import (
     SphereFitError,
     fit_sphere,
     initial_estimate,
@@ -14,6 +13,7 @@ from hostpc.planning.sphere_geometry import (
     orientation_centres,
     tip_and_centre_linear,
 )
+from hostpc.kinematics import rotvec_to_matrix
 
 RHO = 0.014
 CENTRE = np.array([0.45, -0.15, 0.05])

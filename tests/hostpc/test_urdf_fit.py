@@ -14,7 +14,7 @@ from hostpc.dataset.writing import save_dataset
 from hostpc.errors import DatasetError
 from hostpc.fitting import fit
 from hostpc.kinematics.urdf import load_urdf_chain
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem, robot_chain
 
 URDF = Path(__file__).resolve().parents[1] / "data" / "arm7_prismatic.urdf"

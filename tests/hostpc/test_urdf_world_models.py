@@ -30,9 +30,9 @@ MARKER_ERROR = np.array([0.0004, -0.0003, 0.0006])
 
 
 def _registered(name: str) -> bool:
-    from hostpc.dataset.model import METHODS
+    from hostpc.dataset.kind_registry import measurement_kinds
 
-    return name in METHODS
+    return name in measurement_kinds()
 
 
 def _poses(n: int = 60, seed: int = 2) -> np.ndarray:

@@ -10,7 +10,7 @@ import numpy as np
 
 from hostpc.cli.main import main
 from hostpc.dataset.reading import dataset_from_dict, load_dataset
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
 
 URDF = Path(__file__).resolve().parents[1] / "data" / "arm7_prismatic.urdf"

@@ -16,11 +16,11 @@ from hostpc.dataset import Dataset, dataset_from_dict, dataset_to_dict, load_dat
 from hostpc.errors import DatasetError
 from hostpc.fitting import solve
 from hostpc.fitting.stepwise import gauge_equivalent
+from hostpc.kinds.world_point.model import WorldPoint
+from hostpc.kinds.world_pose.model import WorldPose
 from hostpc.kinematics.rotations import matrix_to_rpy, rotvec_to_matrix, rpy_to_matrix
 from hostpc.model.layout import Problem
-from hostpc.model.measurement import predict
-from hostpc.model.measurements.world_point import WorldPoint
-from hostpc.model.measurements.world_pose import WorldPose
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
 from tests.hostpc.test_dataset_errors import stereo
 

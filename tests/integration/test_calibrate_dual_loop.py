@@ -22,13 +22,13 @@ from bench.bench_dual_loop import truth_vector as bench_truth_vector
 from hostpc.dataset import load_dataset
 from hostpc.errors import InputError
 from hostpc.fitting.stepwise import gauge_equivalent
+from hostpc.kinds.dual_loop.method import DualLoopMethod
+from hostpc.kinds.dual_loop.synthesize import plan_poses
 from hostpc.methods.base import NullProgress, RunSettings
 from hostpc.methods.cell import build_cell
-from hostpc.methods.dual_loop import DualLoopMethod
 from hostpc.model.problem import Problem, build_problem
 from hostpc.robots.simulator import SimulatedController, default_sim_scenario, sim_default_known
 from hostpc.robots.zerocal import ZerocalAdapter
-from hostpc.synthesize_dual_loop import plan_poses
 from hostpc.transport import ControllerClient, ControllerRefusedError
 from protocol import messages as m
 from tests.integration.conftest import TOKEN, StartStub

@@ -11,7 +11,7 @@ import pytest
 from controller_stub.scenario import default_scenario
 from controller_stub.simulation import Simulation
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
 
 

@@ -18,8 +18,8 @@ import pytest
 from controller_stub.server import ControllerServer
 from hostpc.dataset import load_dataset, save_dataset
 from hostpc.fitting import FitResult
+from hostpc.kinds.sphere_probe import method as sp
 from hostpc.kinematics import get_robot, rot_z
-from hostpc.methods.sphere_probe import method as sp
 from hostpc.robots.zerocal import ZerocalAdapter
 from tests.integration.conftest import TOKEN, StartStub
 
@@ -194,7 +194,7 @@ async def test_hidden_trigger_latency_is_found(start_stub: StartStub, tmp_path: 
 @pytest.mark.slow
 async def test_modbus_polling_path(start_stub: StartStub) -> None:
     from controller_stub.modbus_io import ModbusIoServer
-    from hostpc.methods.sphere_probe.probe_modbus import ModbusProbe, SteppedGuardedMove
+    from hostpc.kinds.sphere_probe.probe_modbus import ModbusProbe, SteppedGuardedMove
 
     server = await start_stub({"probe": {"repeatability_sigma": 0.0}})
     modbus = ModbusIoServer(server.sim, host="127.0.0.1", port=0)

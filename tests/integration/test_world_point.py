@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hostpc.kinds.world_point.method import WorldPointMethod, identifiable_offsets
 from hostpc.methods.base import NullProgress, RunSettings
 from hostpc.methods.cell import build_cell
-from hostpc.methods.world_point import WorldPointMethod, identifiable_offsets
 from hostpc.robots.zerocal import ZerocalAdapter
 from hostpc.transport import ControllerClient
 from tests.integration.conftest import TOKEN, StartStub
@@ -97,9 +97,9 @@ async def test_method_plans_visible_poses_and_acquires(start_stub: StartStub,
 
 
 def _world_point_registered() -> bool:
-    from hostpc.dataset.model import METHODS
+    from hostpc.dataset.kind_registry import measurement_kinds
 
-    return "world_point" in METHODS
+    return "world_point" in measurement_kinds()
 
 
 @pytest.mark.slow

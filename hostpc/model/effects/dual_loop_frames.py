@@ -1,6 +1,6 @@
 """Frame effects of the dual_loop method (a head camera observing targets on two arms).
 
-Their math lives in the measurement model (``hostpc.model.dual_loop``); here they only
+Their math lives in the measurement model (``hostpc.kinds.dual_loop.model``); here they only
 declare their parameters. Pose deltas follow conventions.md: ``T = T_nom @ [exp([r]x), t]``
 (translation delta in the parent frame, m; rotation vector in the frame itself, rad).
 """

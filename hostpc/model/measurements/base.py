@@ -1,7 +1,8 @@
 """The measurement-model plugin contract: what an instrument sees, and its derivative.
 
 A measurement model is one class (a subclass of ``MeasurementModel``) registered by name
-(``hostpc.model.measurements.registry``). Its file face (``hostpc.dataset.kind``: frames and
+(``hostpc.model.measurements.registry``). Its file face
+(``hostpc.dataset.measurement_kind``: frames and
 their kinds, sample fields, reading and writing) says what a dataset of its method holds;
 here it adds what a fit needs:
 
@@ -30,7 +31,7 @@ from typing import ClassVar
 import numpy as np
 
 from hostpc.dataset import Dataset
-from hostpc.dataset.kind import MeasurementKind
+from hostpc.dataset.measurement_kind import MeasurementKind
 from hostpc.errors import InputError
 from hostpc.kinematics import Chain, forward
 from hostpc.kinematics.rotations import pose_to_transform

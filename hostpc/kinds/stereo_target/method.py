@@ -34,7 +34,7 @@ from hostpc.methods.base import (
     SampleRecord,
 )
 from hostpc.methods.cell import require_camera_cell
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
 from hostpc.planning.design import look_at_candidates
 from hostpc.robots.base import RobotAdapter, RobotState
@@ -67,6 +67,18 @@ class StereoTargetMethod(Method):
 
     name: ClassVar[str] = "stereo_target"
     default_target_sigma_deg: ClassVar[float | None] = 0.002
+
+    @classmethod
+    def short_plan_warning(cls, n_fit: int) -> str | None:
+        """Below the centre refinement's MIN_SAMPLES the disk centres keep the nominal
+        normal's bias (docs/vision.md 3.2)."""
+        from hostpc.kinds.stereo_target.refinement import MIN_SAMPLES
+
+        if n_fit >= MIN_SAMPLES:
+            return None
+        return (f"plan: {n_fit} fit poses, fewer than the {MIN_SAMPLES} the centre "
+                "refinement needs: the disk centres keep the nominal normal's bias and "
+                "the sigmas may be too small")
 
     def __init__(self, settings: Any, cell: Any, run_dir: Path) -> None:
         super().__init__(settings, cell, run_dir)
@@ -318,7 +330,7 @@ class StereoTargetMethod(Method):
     def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         """A `zerocal-dataset/1` document with the cell's nominal frames and `known`; the
         disk centres re-corrected with the normals of a preliminary fit when the samples
-        carry `uv` (hostpc.methods.stereo_refinement)."""
+        carry `uv` (hostpc.kinds.stereo_target.refinement)."""
         document = {
             "format": FORMAT_TAG,
             "method": self.name,
@@ -340,7 +352,7 @@ class StereoTargetMethod(Method):
         if self.rig is None or not samples or any("uv" not in s for s in samples):
             return document
         from hostpc.dataset import dataset_to_dict
-        from hostpc.methods.stereo_refinement import refine_dataset
+        from hostpc.kinds.stereo_target.refinement import refine_dataset
 
         # each set by its own preliminary fit (never the fit set's model: after a push it
         # would be wrong for the verify set); a set too small for its own fit (a short

@@ -27,7 +27,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
-from hostpc.dataset.world_kinds import WorldPointFile
+from hostpc.kinds.world_point.file_face import WorldPointFile
 from hostpc.kinematics import Chain, get_robot, point_jacobian
 from hostpc.kinematics.rotations import skew
 from hostpc.model.context import sample_variables, serial_context

@@ -11,9 +11,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from hostpc.dataset import FramePose
+from hostpc.kinds.dual_loop.model import humanoid_frames
 from hostpc.kinematics.humanoid import HUMANOID_HOME, get_tree
 from hostpc.kinematics.tree import KinematicTree
-from hostpc.model.measurements.dual_loop import humanoid_frames
 
 __all__ = ["PlannedPoses", "head_look_at", "nominal_frames", "plan_poses"]
 

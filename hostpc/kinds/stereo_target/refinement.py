@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.dataset import Dataset
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import Problem, build_problem
 
 MIN_SAMPLES = 6

@@ -17,13 +17,13 @@ from collections.abc import Mapping
 import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
-from hostpc.model.problem import build_problem
-from hostpc.planning.dual_loop_poses import (
+from hostpc.kinds.dual_loop.planning import (
     PlannedPoses,
     head_look_at,
     nominal_frames,
     plan_poses,
 )
+from hostpc.model.problem import build_problem
 from hostpc.synthesize import noisy_measurements
 
 __all__ = ["PlannedPoses", "head_look_at", "make_dataset", "nominal_frames", "plan_poses",

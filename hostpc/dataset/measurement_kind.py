@@ -20,9 +20,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from hostpc.dataset import schema
+from hostpc.dataset.file_units import Units
 from hostpc.dataset.model import FloatArray, Samples
 from hostpc.dataset.schema import FieldError, Loc, show
-from hostpc.dataset.units import Units
 
 #: per-sample context fields every kind accepts (read and written by the dataset layer)
 CONTEXT_FIELDS = frozenset({"t", "approach", "temperature", "speed", "extra"})
@@ -240,6 +240,36 @@ class MeasurementKind:
             if np.all(np.isfinite(value)):
                 out[name] = value.tolist()
         return out, len(q)
+
+
+class PointSampleKind(MeasurementKind):
+    """Samples that measure a 3-D point ``p`` with its covariance ``cov`` (or ``sigma``)."""
+
+    def read_point(self, sample: schema.SampleSchema, loc: Loc, columns: Columns,
+                   units: Units) -> None:
+        index = int(loc[1])
+        columns.put("p", index, require(sample, loc, "p"))
+        columns.put("cov", index, read_point_covariance(sample, loc, units))
+
+    def read_uv(self, sample: schema.SampleSchema, loc: Loc, columns: Columns) -> None:
+        if sample.uv is not None:
+            columns.put("uv", int(loc[1]), sample.uv)
+
+    def point_arguments(self, columns: Columns, units: Units) -> dict[str, Any]:
+        uv = None
+        if columns.given("uv"):
+            uv = np.full((columns.n_samples, 2, 2), np.nan)
+            for i, value in enumerate(columns.values["uv"]):
+                if value is not None:
+                    uv[i] = value
+        return {"p": units.length(columns.values["p"]),
+                "cov": np.asarray(columns.values["cov"]), "uv": uv}
+
+    def write_point(self, samples: Samples, index: int, out: dict[str, Any]) -> None:
+        if samples.p is not None:
+            out["p"] = samples.p[index].tolist()
+        if samples.cov is not None:
+            out["cov"] = samples.cov[index].tolist()
 
 
 class WrittenColumns:

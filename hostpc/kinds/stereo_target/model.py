@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
-from hostpc.dataset.builtin_kinds import StereoTargetFile
+from hostpc.kinds.stereo_target.file_face import StereoTargetFile
 from hostpc.kinematics import get_robot, point_jacobian
 from hostpc.model.frame_math import inverse_point_derivatives
 from hostpc.model.layout import Problem

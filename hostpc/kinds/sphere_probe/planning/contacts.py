@@ -11,16 +11,22 @@ Units SI (m, rad, s); frames per docs/conventions.md.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from hostpc.errors import InputError
+from hostpc.kinds.sphere_probe.planning.setup import (
+    CONTACTS_PER_ORIENTATION,
+    PlanConfig,
+    ProbeSetup,
+)
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
 from hostpc.kinematics.inverse import solve_ik
-from hostpc.planning.sphere_setup import CONTACTS_PER_ORIENTATION, PlanConfig, ProbeSetup
+from hostpc.planning.approach import approach_dependent_effects, balance_guarded_moves
 
 DESIGN_JOINT_SPEED = 1.5
 """rad/s at speed fraction 1 assumed for the planner's approach speeds (a UR's base joints;
@@ -279,3 +285,24 @@ def design_speeds(chain: Chain, contacts: Sequence[PlannedContact], q: np.ndarra
     normals = np.array([c.normal for c in contacts])
     speed: np.ndarray = -np.sum(tip_velocity * normals, axis=1)
     return speed
+
+
+def balance_probe_plan(plan: ProbePlan, chain: Chain, tip: np.ndarray,
+                       effects: str | Iterable[str] | None,
+                       plugins: Iterable[str | Path] = (), q_min: np.ndarray | None = None,
+                       q_max: np.ndarray | None = None) -> ProbePlan:
+    """The sphere_probe plan for a model: unchanged (the same object) when no effect of
+    ``effects`` is approach-dependent; else with its guarded moves balanced
+    (``balance_guarded_moves`` on every contact: same start poses, same number of moves).
+    tip: (3,) stylus tip centre in the flange (m)."""
+    if not approach_dependent_effects(effects, plugins) or not plan.contacts:
+        return plan
+    contacts = plan.contacts
+    q_start = np.array([c.q_start for c in contacts])
+    targets = balance_guarded_moves(chain, q_start, np.array([c.q_target for c in contacts]),
+                                    tip, q_min=q_min, q_max=q_max)
+    moved = iter(targets)
+    orientations = tuple(
+        replace(o, contacts=tuple(replace(c, q_target=next(moved)) for c in o.contacts))
+        for o in plan.orientations)
+    return replace(plan, orientations=orientations)

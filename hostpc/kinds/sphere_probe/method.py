@@ -41,10 +41,7 @@ import numpy as np
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples, SphereFrame
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
-from hostpc.kinematics import Chain
-from hostpc.methods.base import Method, Phase, Progress, RunSettings, SampleRecord
-from hostpc.methods.cell import Cell
-from hostpc.methods.sphere_probe.acquisition import (
+from hostpc.kinds.sphere_probe.acquisition import (
     ContactCallback,
     ContactRecord,
     GuardedMove,
@@ -52,7 +49,7 @@ from hostpc.methods.sphere_probe.acquisition import (
     nominal_tip_speed,
     probe_contact,
 )
-from hostpc.methods.sphere_probe.dataset import (
+from hostpc.kinds.sphere_probe.dataset import (
     build_dataset,
     frames_from_result,
     normal_speeds,
@@ -60,13 +57,12 @@ from hostpc.methods.sphere_probe.dataset import (
     solve,
     with_initial_estimate,
 )
-from hostpc.planning.approach import balance_probe_plan, travel_signs
-from hostpc.planning.design import PoseGroups
-from hostpc.planning.sphere_contacts import (
+from hostpc.kinds.sphere_probe.planning.contacts import (
     DESIGN_JOINT_SPEED,
     PlannedContact,
     PlannedOrientation,
     ProbePlan,
+    balance_probe_plan,
     contact_normals,
     contact_pose,
     design_speeds,
@@ -75,15 +71,20 @@ from hostpc.planning.sphere_contacts import (
     plan_sphere_probe,
     tip_positions,
 )
-from hostpc.planning.sphere_contacts import plan_from_dict as _plan_from_dict
-from hostpc.planning.sphere_contacts import plan_to_dict as _plan_to_dict
-from hostpc.planning.sphere_setup import (
+from hostpc.kinds.sphere_probe.planning.contacts import plan_from_dict as _plan_from_dict
+from hostpc.kinds.sphere_probe.planning.contacts import plan_to_dict as _plan_to_dict
+from hostpc.kinds.sphere_probe.planning.setup import (
     CONTACTS_PER_ORIENTATION,
     METHOD,
     MIN_ORIENTATIONS,
     PlanConfig,
     ProbeSetup,
 )
+from hostpc.kinematics import Chain
+from hostpc.methods.base import Method, Phase, Progress, RunSettings, SampleRecord
+from hostpc.methods.cell import Cell
+from hostpc.planning.approach import travel_signs
+from hostpc.planning.design import PoseGroups
 from hostpc.robots.base import RobotAdapter, RobotState
 
 __all__ = [
@@ -106,7 +107,7 @@ latency (a touch-trigger probe always has one; the spread of approach speeds ide
 The Modbus stepping probe reads at rest (no latency) and uses the dataset's default."""
 PROBE_IO = ("guarded", "modbus")
 """How contacts are taken: the controller's latched guarded move, or stepping while polling
-the probe line over Modbus (``hostpc.methods.sphere_probe.probe_modbus``)."""
+the probe line over Modbus (``hostpc.kinds.sphere_probe.probe_modbus``)."""
 DEFAULT_MODBUS_PORT = 502
 
 PLAN_FILE = "probe_plan.json"
@@ -222,7 +223,7 @@ class SphereProbeMethod(Method):
             self.plan = _plan_from_dict(json.loads(self.plan_path.read_text()))
             progress.message(f"probe plan: {self.plan_path} (from this run)")
         if self.modbus is not None:
-            from hostpc.methods.sphere_probe.probe_modbus import ModbusProbe
+            from hostpc.kinds.sphere_probe.probe_modbus import ModbusProbe
 
             host, port = self.modbus
             async with ModbusProbe(host, port, self.setup.io_line) as probe:
@@ -315,7 +316,7 @@ class SphereProbeMethod(Method):
             record = await probe_contact(robot, orientation, contact, self.setup,
                                          self.config, t, chain=self.chain)
         else:
-            from hostpc.methods.sphere_probe.probe_modbus import ModbusProbe, SteppedGuardedMove
+            from hostpc.kinds.sphere_probe.probe_modbus import ModbusProbe, SteppedGuardedMove
 
             host, port = self.modbus
             async with ModbusProbe(host, port, self.setup.io_line) as probe:
@@ -342,8 +343,8 @@ class SphereProbeMethod(Method):
         """The samples as a dataset document, with the initial estimate as nominal frames
         and approach speeds along the contact normal (falls back to the nominal frames and
         tip speeds when the samples cannot support the estimate, e.g. a few verify ones)."""
-        from hostpc.dataset.io import dataset_to_dict
-        from hostpc.planning.sphere_geometry import SphereFitError
+        from hostpc.dataset.writing import dataset_to_dict
+        from hostpc.kinds.sphere_probe.planning.geometry import SphereFitError
 
         contacts = {(c.group, c.index): c for c in (self.plan.contacts if self.plan else [])}
         records = []

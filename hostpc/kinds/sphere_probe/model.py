@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples, SphereFrame
-from hostpc.dataset.builtin_kinds import SphereProbeFile
+from hostpc.kinds.sphere_probe.file_face import SphereProbeFile
 from hostpc.kinematics import Chain, get_robot, point_jacobian
 from hostpc.model.context import group_variable, sample_variables, serial_context
 from hostpc.model.effect import ModelContext

@@ -18,10 +18,10 @@ import numpy as np
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples, SphereFrame
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, fit
+from hostpc.kinds.sphere_probe.acquisition import ContactRecord
+from hostpc.kinds.sphere_probe.planning.geometry import InitialEstimate, initial_estimate
+from hostpc.kinds.sphere_probe.planning.setup import METHOD, ProbeSetup
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
-from hostpc.methods.sphere_probe.acquisition import ContactRecord
-from hostpc.planning.sphere_geometry import InitialEstimate, initial_estimate
-from hostpc.planning.sphere_setup import METHOD, ProbeSetup
 
 
 def build_dataset(robot_name: str, setup: ProbeSetup, records: Sequence[ContactRecord],

@@ -23,7 +23,8 @@ from __future__ import annotations
 import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
-from hostpc.dataset.world_kinds import WorldPoseFile
+from hostpc.kinds.world_point.model import world_variables
+from hostpc.kinds.world_pose.file_face import WorldPoseFile
 from hostpc.kinematics import Chain, forward, get_robot, point_jacobian, screws
 from hostpc.kinematics.jacobians import rotation_jacobian
 from hostpc.kinematics.rotations import (
@@ -38,7 +39,6 @@ from hostpc.model.effect import ModelContext
 from hostpc.model.layout import Problem
 from hostpc.model.measurements.base import POSE, UR5E_HOME, MeasurementModel, example_poses
 from hostpc.model.measurements.terms import apply_sensor_effects, flange, frame_pose
-from hostpc.model.measurements.world_point import world_variables
 
 __all__ = ["WorldPose", "so3_left_jacobian_inverse"]
 

@@ -14,9 +14,13 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.kinds.sphere_probe.planning.contacts import (
+    PlannedContact,
+    PlannedOrientation,
+    ProbePlan,
+)
+from hostpc.kinds.sphere_probe.planning.setup import PlanConfig, ProbeSetup
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
-from hostpc.planning.sphere_contacts import PlannedContact, PlannedOrientation, ProbePlan
-from hostpc.planning.sphere_setup import PlanConfig, ProbeSetup
 from hostpc.robots.base import RobotAdapter
 
 

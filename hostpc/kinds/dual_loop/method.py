@@ -14,7 +14,7 @@ journal keeps one record per pose with `{"observations": [...]}`; `dataset_docum
 flattens them into the samples of a `zerocal-dataset/1` document. A pose with no target in
 view is journaled as skipped.
 
-Planning: candidates come from `hostpc.planning.dual_loop_poses.plan_poses` (an arm pose around
+Planning: candidates come from `hostpc.kinds.dual_loop.planning.plan_poses` (an arm pose around
 the home pose, the head aimed at that arm's target, nominal model), as combined poses with
 the other arm at its home pose, kept when the aimed target falls inside both images (the
 camera's nominal focal length, baseline and image size) and all joints are inside the
@@ -51,6 +51,8 @@ import numpy as np
 
 from hostpc.dataset import FORMAT_TAG, Dataset, FramePose, dataset_from_dict
 from hostpc.errors import InputError
+from hostpc.kinds.dual_loop.model import ARMS, DUAL_LOOP_FRAMES
+from hostpc.kinds.dual_loop.planning import nominal_frames, plan_poses
 from hostpc.kinematics.humanoid import HUMANOID_HOME, get_tree
 from hostpc.kinematics.rotations import pose_to_transform
 from hostpc.kinematics.tree import KinematicTree
@@ -63,10 +65,8 @@ from hostpc.methods.base import (
     move_or_skip,
 )
 from hostpc.methods.cell import Cell
-from hostpc.model.dual_loop import ARMS, DUAL_LOOP_FRAMES
-from hostpc.model.measurement import predict
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
-from hostpc.planning.dual_loop_poses import nominal_frames, plan_poses
 from hostpc.robots.base import (
     RobotAdapter,
     RobotState,

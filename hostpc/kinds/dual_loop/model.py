@@ -39,8 +39,8 @@ from functools import lru_cache
 import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
-from hostpc.dataset.builtin_kinds import DualLoopFile
 from hostpc.errors import InputError
+from hostpc.kinds.dual_loop.file_face import DualLoopFile
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
 from hostpc.kinematics.humanoid import HUMANOID_FRAMES, HUMANOID_HOME, get_tree
 from hostpc.kinematics.rotations import pose_to_transform, skew
