@@ -72,6 +72,7 @@ from hostpc.robots.base import (
     RobotAdapter,
     RobotState,
     TargetMeasurement,
+    check_needs,
     targets_of,
 )
 
@@ -206,7 +207,9 @@ class DualLoopMethod(Method):
         self._t0 = float(t0)
 
     async def prepare(self, robot: RobotAdapter, progress: Progress) -> None:
-        """Nothing to set up; the robot triangulates targets itself (`needs`)."""
+        """Nothing to set up; the robot must triangulate targets itself (`needs`: the
+        runner checks it before this; checked here too for use without the runner)."""
+        check_needs(robot, self.needs, f"--method {self.name}")
         progress.message(f"dual_loop: {self.tree.name}, known frames: "
                          f"{', '.join(self.known) or 'none'}")
         self._progress = progress

@@ -18,7 +18,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -105,6 +105,7 @@ class TargetMeasurement:
     targets: tuple[MeasuredTarget, ...]
 
 
+@runtime_checkable
 class RobotAdapter(Protocol):
     """What a measurement method may ask of a robot. Every call may raise
     hostpc.errors.ConnectionFailed, RequestTimeout or ControllerError.
@@ -220,28 +221,31 @@ class MissingCapability(InputError):
     """The method needs a call the driver does not offer (exit code 2, before any pose)."""
 
 
-def _offered(capabilities: Capabilities, need: Need) -> bool:
-    if need is Need.TARGETS:
-        return capabilities.targets is not None
-    return capabilities.tracker is not None
+def _capabilities(robot: RobotAdapter) -> Capabilities:
+    # a caller without type checks (library use, tests) may pass something that is not an
+    # adapter at all: it offers nothing
+    return robot.capabilities if isinstance(robot, RobotAdapter) else Capabilities()
 
 
 def _missing(robot: RobotAdapter, need: Need, who: str) -> MissingCapability:
-    return MissingCapability(f"{who} needs {_WHAT[need]} ({need.value}); the {robot.driver} "
+    driver = robot.driver if isinstance(robot, RobotAdapter) else type(robot).__name__
+    return MissingCapability(f"{who} needs {_WHAT[need]} ({need.value}); the {driver} "
                              "driver does not offer it")
 
 
 def check_needs(robot: RobotAdapter, needs: Iterable[Need], who: str) -> None:
     """MissingCapability naming `who` (e.g. `--method dual_loop`), the call and the driver
     for the first need `robot` does not offer."""
+    capabilities = _capabilities(robot)
+    offered = {Need.TARGETS: capabilities.targets, Need.TRACKER: capabilities.tracker}
     for need in needs:
-        if not _offered(robot.capabilities, need):
+        if offered[need] is None:
             raise _missing(robot, need, who)
 
 
 def targets_of(robot: RobotAdapter, who: str) -> TargetCamera:
     """The robot's `TargetCamera` (MissingCapability if it has none: `check_needs` first)."""
-    camera = robot.capabilities.targets
+    camera = _capabilities(robot).targets
     if camera is None:
         raise _missing(robot, Need.TARGETS, who)
     return camera
@@ -249,7 +253,7 @@ def targets_of(robot: RobotAdapter, who: str) -> TargetCamera:
 
 def tracker_of(robot: RobotAdapter, who: str) -> LaserTracker:
     """The robot's `LaserTracker` (MissingCapability if it has none: `check_needs` first)."""
-    tracker = robot.capabilities.tracker
+    tracker = _capabilities(robot).tracker
     if tracker is None:
         raise _missing(robot, Need.TRACKER, who)
     return tracker
