@@ -63,7 +63,7 @@ from hostpc.methods import METHOD_CLASSES
 from hostpc.methods.base import RunSettings
 from hostpc.methods.cell import load_cell_file, parse_known
 from hostpc.robots.connect import RobotAddress, open_robot, parse_robot, resolve_token
-from hostpc.robots.drivers import DRIVER_NAMES
+from hostpc.robots.drivers import DEFAULT_DRIVER, DRIVER_NAMES, SIM_DRIVER
 from hostpc.sensors.calibrate_options import (
     add_sensor_options,
     check_replay_options,
@@ -93,7 +93,7 @@ def register(subparsers: Any) -> None:
     )
     parser.add_argument("--robot", metavar="HOST[:PORT]|sim",
                         help="controller address, or `sim` for the simulated controller")
-    parser.add_argument("--driver", choices=DRIVER_NAMES, default="zerocal",
+    parser.add_argument("--driver", choices=DRIVER_NAMES, default=DEFAULT_DRIVER,
                         help="robot driver (default zerocal)")
     parser.add_argument("--token", help="shared token (default: $ZEROCAL_TOKEN, else the "
                         "simulator's default)")
@@ -374,9 +374,9 @@ def _run_with_robot(args: argparse.Namespace, address: RobotAddress, driver: str
     progress.stage("start simulator")
     with SimulatedController(scenario, sim_dir, modbus_port=modbus_port, token=token) as simulator:
         info = RobotInfo(address=f"{simulator.address.host}:{simulator.address.port}",
-                         driver="zerocal", sim=True, scenario=str(simulator.scenario_path))
+                         driver=SIM_DRIVER, sim=True, scenario=str(simulator.scenario_path))
         return asyncio.run(cancel_on_sigterm(_calibrate(
-            args, simulator.address, "zerocal", run_dir, settings, cell_file, known,
+            args, simulator.address, SIM_DRIVER, run_dir, settings, cell_file, known,
             default_known, info, progress, simulator.truth, token)))
 
 

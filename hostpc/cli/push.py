@@ -39,7 +39,7 @@ from hostpc.calibrate.summary import EXIT_PUSH_REFUSED
 from hostpc.errors import InputError, ZerocalError
 from hostpc.robots.base import RobotAdapter
 from hostpc.robots.connect import RobotAddress, open_robot, parse_robot
-from hostpc.robots.drivers import DRIVER_NAMES
+from hostpc.robots.drivers import DEFAULT_DRIVER, DRIVER_NAMES
 
 
 class PushRefused(ZerocalError):
@@ -62,7 +62,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument("fit", metavar="FIT.json", help="output of `hostpc fit DATASET --json`")
     parser.add_argument("--robot", required=True, metavar="HOST[:PORT]",
                         help="controller address")
-    parser.add_argument("--driver", choices=DRIVER_NAMES, default="zerocal")
+    parser.add_argument("--driver", choices=DRIVER_NAMES, default=DEFAULT_DRIVER)
     parser.add_argument("--token", help="shared token (default: $ZEROCAL_TOKEN, else the "
                         "simulator's default)")
     parser.add_argument("--timeout", type=float, default=10.0, help="seconds per request")

@@ -32,7 +32,7 @@ from hostpc.cli.archive_options import add_archive_options, archive_run
 from hostpc.cli.numbers import TIMEOUT_S
 from hostpc.errors import InputError
 from hostpc.robots.connect import RobotAddress, open_robot, parse_robot
-from hostpc.robots.drivers import DRIVER_NAMES, DRIVERS
+from hostpc.robots.drivers import DEFAULT_DRIVER, DRIVER_NAMES, DRIVERS
 
 
 def register(subparsers: Any) -> None:
@@ -44,7 +44,7 @@ def register(subparsers: Any) -> None:
     )
     parser.add_argument("--robot", metavar="HOST[:PORT]",
                         help="controller address (default: the one recorded in the run)")
-    parser.add_argument("--driver", choices=DRIVER_NAMES, default="zerocal")
+    parser.add_argument("--driver", choices=DRIVER_NAMES, default=DEFAULT_DRIVER)
     parser.add_argument("--run", metavar="DIR", help="calibration run folder")
     parser.add_argument("--id", dest="rollback_id", help="the controller's rollback id")
     parser.add_argument("--token", help="shared token (default: $ZEROCAL_TOKEN, else the "

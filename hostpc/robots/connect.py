@@ -18,7 +18,7 @@ from pathlib import Path
 
 from hostpc.errors import InputError
 from hostpc.robots.base import RobotAdapter
-from hostpc.robots.drivers import ConnectOptions, driver_named
+from hostpc.robots.drivers import DEFAULT_DRIVER, ConnectOptions, driver_named
 from protocol import DEFAULT_PORT
 from protocol.auth import read_token_file as auth_token_file
 
@@ -94,7 +94,7 @@ def read_token_file(path: str | Path) -> str:
 
 async def open_robot(
     address: RobotAddress,
-    driver: str = "zerocal",
+    driver: str = DEFAULT_DRIVER,
     *,
     token: str | None = None,
     timeout: float = 10.0,

@@ -70,6 +70,11 @@ DRIVERS: dict[str, Driver] = {
 }
 DRIVER_NAMES = tuple(DRIVERS)
 """`--driver` choices."""
+DEFAULT_DRIVER = "zerocal"
+"""`--driver` when none is given."""
+SIM_DRIVER = "zerocal"
+"""The driver of `--robot sim`: the simulated controller (controller-stub) speaks our
+protocol."""
 
 
 def driver_named(name: str) -> Driver:

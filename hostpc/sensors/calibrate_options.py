@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 from hostpc.errors import InputError
 from hostpc.robots.base import RobotAdapter
-from hostpc.robots.drivers import DRIVERS, driver_named
+from hostpc.robots.drivers import DEFAULT_DRIVER, DRIVERS, driver_named
 
 if TYPE_CHECKING:
     from hostpc.calibrate.run_values import RobotInfo
@@ -72,7 +72,7 @@ def check_sensor_options(args: argparse.Namespace) -> None:
     if getattr(args, "record", None) is not None and args.resume:
         raise InputError("--record is for a new run, not a --resume")
     if getattr(args, "camera_service", None) and (
-            left or not driver_named(getattr(args, "driver", "zerocal")).camera_service):
+            left or not driver_named(getattr(args, "driver", DEFAULT_DRIVER)).camera_service):
         with_service = " / ".join(d.name for d in DRIVERS.values() if d.camera_service)
         raise InputError(f"--camera-service is for --driver {with_service} without "
                          "--camera-left/right")
