@@ -188,7 +188,7 @@ class RecordingAdapter:
         result: dict[str, Any] = {"frame": frame, "q": _floats(c.q), "t": float(c.t)}
         clock = self.capabilities.capture_timing  # host cameras: stamps and skew
         timing = None if clock is None else clock.last_timing
-        if isinstance(timing, dict):
+        if timing is not None:
             result["timing"] = timing
         return result
 
