@@ -341,14 +341,15 @@ async def rollback(robot: RobotAdapter, rollback_id: str,
 
 def export_offsets(robot: RobotAdapter, run_dir: Path, robot_name: str, plan: PushPlan,
                    status: str, progress: Any) -> dict[str, str] | None:
-    """For a robot that keeps no zero offsets (an adapter with `export_offsets`, the UR
-    driver) write the compensated offsets as files into the run folder: the only lasting
-    form of its push. None if the adapter writes the controller or nothing is pushed."""
-    export = getattr(robot, "export_offsets", None)
-    if (not callable(export) or status not in ("pushed", "disabled") or plan.refused
+    """For a robot that keeps no zero offsets (an adapter whose capabilities include an
+    `OffsetExport`, the UR driver) write the compensated offsets as files into the run
+    folder: the only lasting form of its push. None if the adapter writes the controller or
+    nothing is pushed."""
+    export = robot.capabilities.offset_export
+    if (export is None or status not in ("pushed", "disabled") or plan.refused
             or not plan.anything):
         return None
-    paths = export(run_dir, robot_name, plan.new)
+    paths = export.export_offsets(run_dir, robot_name, plan.new)
     progress.message("offsets exported for the robot's own software: "
                      + ", ".join(str(path) for path in paths.values()))
     return {kind: str(path) for kind, path in paths.items()}

@@ -83,7 +83,7 @@ from hostpc.methods.base import (
     RunSettings,
 )
 from hostpc.methods.cell import build_cell, cell_from_dict
-from hostpc.robots.base import RobotAdapter, RobotState
+from hostpc.robots.base import RobotAdapter, RobotState, check_needs
 
 __all__ = [
     "CLOCK_TOLERANCE_S", "EXIT_PUSH_REFUSED", "EXIT_VERIFY_FAILED", "MAX_POSE_ATTEMPTS",
@@ -218,8 +218,9 @@ class Runner:
             }
 
         method = method_class(settings.method, settings.plugins)(settings, cell, self.run_dir)
-        if hasattr(method, "set_time_origin"):
-            method.set_time_origin(self._clock.time_origin(initial, state))
+        clock = method.sample_clock()
+        if clock is not None:
+            clock.set_time_origin(self._clock.time_origin(initial, state))
         if settings.effects is None and method.default_effects() is not None:
             # the method's own default model (sphere_probe: + trigger_latency)
             settings = dataclasses.replace(settings, effects=method.default_effects())
@@ -232,6 +233,7 @@ class Runner:
         cell_reference.record_reference_choice(self.run_dir, self.journal, self.reference,
                                                changed, self.reference_option, progress)
         self._timer = RobotTimer(self.robot, self.journal, state)  # robot time (robot_time.py)
+        check_needs(self.robot, method.needs, f"--method {settings.method}")
         await method.prepare(self.robot, progress)
         await self._timer.end("rig")
 

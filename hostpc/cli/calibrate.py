@@ -62,14 +62,15 @@ from hostpc.dataset.kind_registry import DEFAULT_METHOD, kind_descriptors
 from hostpc.errors import InputError
 from hostpc.methods.base import RunSettings
 from hostpc.methods.cell import load_cell_file, parse_known
-from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot, resolve_token
+from hostpc.robots.connect import RobotAddress, open_robot, parse_robot, resolve_token
+from hostpc.robots.drivers import DEFAULT_DRIVER, DRIVER_NAMES, SIM_DRIVER
 from hostpc.sensors.calibrate_options import (
     add_sensor_options,
     check_replay_options,
     check_sensor_options,
     open_with_sensors,
     replay_inputs,
-    robot_options,
+    robot_camera,
 )
 
 SIM_FOLDER = "sim"
@@ -92,7 +93,7 @@ def register(subparsers: Any) -> None:
     )
     parser.add_argument("--robot", metavar="HOST[:PORT]|sim",
                         help="controller address, or `sim` for the simulated controller")
-    parser.add_argument("--driver", choices=DRIVERS, default="zerocal",
+    parser.add_argument("--driver", choices=DRIVER_NAMES, default=DEFAULT_DRIVER,
                         help="robot driver (default zerocal)")
     parser.add_argument("--token", help="shared token (default: $ZEROCAL_TOKEN, else the "
                         "simulator's default)")
@@ -382,9 +383,9 @@ def _run_with_robot(args: argparse.Namespace, address: RobotAddress, driver: str
     progress.stage("start simulator")
     with SimulatedController(scenario, sim_dir, modbus_port=modbus_port, token=token) as simulator:
         info = RobotInfo(address=f"{simulator.address.host}:{simulator.address.port}",
-                         driver="zerocal", sim=True, scenario=str(simulator.scenario_path))
+                         driver=SIM_DRIVER, sim=True, scenario=str(simulator.scenario_path))
         return asyncio.run(cancel_on_sigterm(_calibrate(
-            args, simulator.address, "zerocal", run_dir, settings, cell_file, known,
+            args, simulator.address, SIM_DRIVER, run_dir, settings, cell_file, known,
             default_known, info, progress, simulator.truth, token)))
 
 
@@ -421,7 +422,7 @@ async def _calibrate(args: argparse.Namespace, address: RobotAddress, driver: st
     robot = await open_with_sensors(  # host cameras, --record, --replay (hostpc.sensors)
         args, run_dir, settings, cell_file, known, default_known, info,
         lambda: open_robot(address, driver, token=token, timeout=args.timeout,
-                           options=robot_options(args, driver)))
+                           camera=robot_camera(args, driver)))
     try:
         overrides = {"push": args.push, "force": args.force,
                      "max_correction_deg": args.max_correction,

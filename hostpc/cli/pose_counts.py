@@ -34,11 +34,11 @@ def pose_counts(args: argparse.Namespace) -> tuple[int, int, float | None]:
     takes the poses its power needs (hostpc.planning.verify_poses), else 10."""
     method = method_class(args.method, tuple(args.plugin))
     target = args.target_sigma
-    if target is not None and getattr(method, "plans_whole_groups", False):
+    if target is not None and method.plans_whole_groups:
         raise InputError(f"--target-sigma: {args.method} plans whole groups of poses (a probe "
                          "orientation's contacts), not pose by pose; use --poses N")
     if target is None and args.poses is None:
-        target = getattr(method, "default_target_sigma_deg", None)
+        target = method.default_target_sigma_deg
     poses = DEFAULT_MAX_POSES if args.poses is None else args.poses
     verify = args.verify_poses
     if verify is None:

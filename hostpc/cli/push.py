@@ -37,7 +37,9 @@ from hostpc.calibrate.offline_push import (
 from hostpc.calibrate.push import DEFAULT_MAX_CORRECTION_DEG, PushPlan, execute_push, plan_push
 from hostpc.calibrate.summary import EXIT_PUSH_REFUSED
 from hostpc.errors import InputError, ZerocalError
-from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot
+from hostpc.robots.base import RobotAdapter
+from hostpc.robots.connect import RobotAddress, open_robot, parse_robot
+from hostpc.robots.drivers import DEFAULT_DRIVER, DRIVER_NAMES
 
 
 class PushRefused(ZerocalError):
@@ -60,7 +62,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument("fit", metavar="FIT.json", help="output of `hostpc fit DATASET --json`")
     parser.add_argument("--robot", required=True, metavar="HOST[:PORT]",
                         help="controller address")
-    parser.add_argument("--driver", choices=DRIVERS, default="zerocal")
+    parser.add_argument("--driver", choices=DRIVER_NAMES, default=DEFAULT_DRIVER)
     parser.add_argument("--token", help="shared token (default: $ZEROCAL_TOKEN, else the "
                         "simulator's default)")
     parser.add_argument("--timeout", type=float, default=10.0, help="seconds per request")
@@ -158,12 +160,12 @@ async def _push(args: argparse.Namespace, saved: SavedFit, address: RobotAddress
         await robot.close()
 
 
-async def _check_same_robot_and_not_pushed(robot: Any, saved: SavedFit, fit: str,
+async def _check_same_robot_and_not_pushed(robot: RobotAdapter, saved: SavedFit, fit: str,
                                            address: RobotAddress, offsets: np.ndarray) -> None:
     """Guard rails of an offline push (PushRefused, exit 5, unless --force): the controller
     is the robot the fit's dataset was measured on, and does not already carry this fit."""
     state = await robot.state()
-    controller_robot = str(getattr(state, "robot", "") or "")
+    controller_robot = str(state.robot or "")
     if saved.robot and controller_robot and saved.robot.lower() != controller_robot.lower():
         raise PushRefused(f"push refused: {fit} was measured on a {saved.robot}, the controller "
                           f"at {address} is a {controller_robot}; use --force to push anyway")

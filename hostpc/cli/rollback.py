@@ -31,7 +31,8 @@ from hostpc.calibrate.push import read_push_file, rollback, rollback_run
 from hostpc.cli.archive_options import add_archive_options, archive_run
 from hostpc.cli.numbers import TIMEOUT_S
 from hostpc.errors import InputError
-from hostpc.robots.connect import DRIVERS, RobotAddress, open_robot, parse_robot
+from hostpc.robots.connect import RobotAddress, open_robot, parse_robot
+from hostpc.robots.drivers import DEFAULT_DRIVER, DRIVER_NAMES, DRIVERS
 
 
 def register(subparsers: Any) -> None:
@@ -43,7 +44,7 @@ def register(subparsers: Any) -> None:
     )
     parser.add_argument("--robot", metavar="HOST[:PORT]",
                         help="controller address (default: the one recorded in the run)")
-    parser.add_argument("--driver", choices=DRIVERS, default="zerocal")
+    parser.add_argument("--driver", choices=DRIVER_NAMES, default=DEFAULT_DRIVER)
     parser.add_argument("--run", metavar="DIR", help="calibration run folder")
     parser.add_argument("--id", dest="rollback_id", help="the controller's rollback id")
     parser.add_argument("--token", help="shared token (default: $ZEROCAL_TOKEN, else the "
@@ -52,12 +53,6 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--json", action="store_true", help="print JSON")
     add_archive_options(parser, read=False)
     parser.set_defaults(func=run)
-
-
-UR_NOT_APPLICABLE = (
-    "rollback is not applicable to a UR (--driver ur): it has no writable zero offsets, so "
-    "the calibration was applied on the host for that session only and nothing on the "
-    "robot changed; to undo, stop loading the run's ur_calibration.yaml")
 
 
 def _run_driver(run_dir: Path) -> str | None:
@@ -74,8 +69,10 @@ def run(args: argparse.Namespace) -> int:
     """Entry point of `hostpc rollback`; returns the exit code."""
     if bool(args.run) == bool(args.rollback_id):
         raise InputError("give exactly one of --run DIR and --id ROLLBACK_ID")
-    if args.driver == "ur" or (args.run and _run_driver(Path(args.run)) == "ur"):
-        raise InputError(UR_NOT_APPLICABLE)
+    for name in (args.driver, _run_driver(Path(args.run)) if args.run else None):
+        driver = DRIVERS.get(name or "")
+        if driver is not None and driver.no_rollback:  # e.g. a UR: offsets on the host
+            raise InputError(driver.no_rollback)
     previous: np.ndarray | None = None
     record: dict[str, Any] | None = None
     address: RobotAddress | None = parse_robot(args.robot) if args.robot else None

@@ -23,6 +23,12 @@ Optional hooks (defaults in `Method`):
     pose_groups(pool)               candidates that must be measured together (sphere_probe:
                                     the 5 contacts of one orientation): the planner then
                                     selects, orders and verifies whole groups
+    sample_clock()                  a `SampleClock` if the samples' `t` counts controller time
+                                    from the run's start (the runner sets the origin)
+
+What a method needs of the robot beyond `RobotAdapter` it declares in `needs` (e.g.
+dual_loop: `Need.TARGETS`, the controller's `measure_targets`); the runner checks it once,
+before `prepare` (hostpc.robots.base.check_needs).
 
 The runner (`hostpc.calibrate.runner`) owns everything else: reading the controller's state
 and offsets, planning (`hostpc.planning.design`), the identifiability check, the journal
@@ -46,7 +52,7 @@ import numpy as np
 from hostpc.dataset import Dataset
 from hostpc.methods.cell import Cell
 from hostpc.planning.design import PoseGroups
-from hostpc.robots.base import MoveOutcome, RobotAdapter, RobotState
+from hostpc.robots.base import MoveOutcome, Need, RobotAdapter, RobotState
 
 Phase = Literal["fit", "verify"]
 SKIP_REASONS = ("joint_limit", "refused_fault", "invalid_argument")
@@ -265,6 +271,13 @@ def approach_signs(q_from: np.ndarray | None, q_to: np.ndarray) -> list[float]:
     return [float(s) if s != 0 else 1.0 for s in signs]
 
 
+class SampleClock(Protocol):
+    """A method whose samples' `t` counts controller time (s) from the run's start."""
+
+    def set_time_origin(self, t0: float) -> None:
+        """Controller time (s) at the start of the run: sample `t` counts from here."""
+
+
 class Method(ABC):
     """A measurement method (see the module docstring). One instance per run.
 
@@ -280,6 +293,9 @@ class Method(ABC):
     plans_whole_groups: ClassVar[bool] = False
     """The plan takes whole groups of poses (`pose_groups`: sphere_probe's orientations of
     5 contacts), so it has no per-pose stop at a target sigma (--target-sigma refused)."""
+    needs: ClassVar[tuple[Need, ...]] = ()
+    """Calls beyond `RobotAdapter` the method makes (hostpc.robots.base capabilities),
+    checked by the runner before `prepare`."""
 
     @classmethod
     def short_plan_warning(cls, n_fit: int) -> str | None:
@@ -330,6 +346,11 @@ class Method(ABC):
     def pose_groups(self, pool: np.ndarray) -> PoseGroups | None:
         """Groups of the candidate poses (N_c, n) that are only measured together, or None
         (every pose stands alone). The default has none."""
+        return None
+
+    def sample_clock(self) -> SampleClock | None:
+        """The method's time origin if its samples' `t` counts controller time (the runner
+        sets it); None (the default): its samples are timed otherwise."""
         return None
 
     def describe(self) -> dict[str, Any]:

@@ -2,8 +2,11 @@
 
 Adapters: the zerocal protocol (`hostpc.robots.zerocal`, the simulated controller or a
 controller speaking our protocol), Universal Robots through ur_rtde (`hostpc.robots.ur`), and
-Modbus IO (`hostpc.robots.modbus_io`) for triggers and station bits. Methods never import a
-transport or a vendor library; they receive a RobotAdapter.
+Modbus IO (`hostpc.robots.modbus_io`) for triggers and station bits; the driver table is
+`hostpc.robots.drivers`. Methods never import a transport or a vendor library; they receive a
+RobotAdapter. What an adapter offers beyond it (measure_targets, measure_tracker,
+export_offsets, last_timing) is a typed capability (the Protocols below, collected in the
+adapter's `Capabilities`), never an attribute probed with getattr.
 
 All angles radians, lengths metres (docs/conventions.md). Joint angles are the controller's
 reported ("commanded") angles, `q_cmd`.
@@ -11,10 +14,18 @@ reported ("commanded") angles, `q_cmd`.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from enum import Enum
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
+
+from hostpc.errors import InputError
+
+if TYPE_CHECKING:  # the I/O layer's value type; loaded with the adapter that returns it
+    from hostpc.transport import TrackerReading
 
 
 @dataclass(frozen=True)
@@ -94,9 +105,19 @@ class TargetMeasurement:
     targets: tuple[MeasuredTarget, ...]
 
 
+@runtime_checkable
 class RobotAdapter(Protocol):
     """What a measurement method may ask of a robot. Every call may raise
-    hostpc.errors.ConnectionFailed, RequestTimeout or ControllerError."""
+    hostpc.errors.ConnectionFailed, RequestTimeout or ControllerError.
+
+    driver: the driver's name (`zerocal`, `ur`, `replay`), for messages; capabilities: what
+    it offers beyond these calls (below)."""
+
+    @property
+    def driver(self) -> str: ...
+
+    @property
+    def capabilities(self) -> Capabilities: ...
 
     async def state(self) -> RobotState: ...
 
@@ -117,15 +138,122 @@ class RobotAdapter(Protocol):
     async def close(self) -> None: ...
 
 
-class TargetMeasuringAdapter(RobotAdapter, Protocol):
-    """An adapter whose controller also triangulates targets itself (optional: the
-    dual_loop method needs it; check with `supports_target_measurement`)."""
+# ---------------------------------------------------------------------- capabilities
+#
+# One typed Protocol per call an adapter MAY offer:
+#
+#     TargetCamera    measure_targets()   the controller triangulates targets itself (dual_loop)
+#     LaserTracker    measure_tracker()   the cell's laser tracker (world_point)
+#     OffsetExport    export_offsets()    a robot that keeps no zero offsets writes them as
+#                                         files for its own software (UR; calibrate/push.py)
+#     CaptureTiming   last_timing         host cameras: stamps and skew of the last pair
+#                                         (recorded by sensors/recording.py)
+#
+# An adapter says what it offers in one value, its `capabilities`: per capability the object
+# that answers it, or None. A wrapper (recording, host cameras) builds its own from the wrapped
+# adapter's, so nothing is found by probing attributes. A method declares the calls it needs
+# (`Method.needs`); the runner checks them once, before the method's `prepare`
+# (`check_needs`: one InputError naming the driver and the missing call); the method then
+# takes the call with `targets_of` / `tracker_of`, which cannot fail after that check.
+
+
+class TargetCamera(Protocol):
+    """The controller's own vision triangulates the targets in view (`measure_targets`)."""
 
     async def measure_targets(self) -> TargetMeasurement:
         """The targets the camera sees now, with the joint angles at the measurement."""
         ...
 
 
-def supports_target_measurement(robot: object) -> bool:
-    """True if `robot` offers `measure_targets()` (a `TargetMeasuringAdapter`)."""
-    return callable(getattr(robot, "measure_targets", None))
+class LaserTracker(Protocol):
+    """The cell's laser tracker (`measure_tracker`)."""
+
+    async def measure_tracker(self) -> TrackerReading:
+        """Each reflector's point in the tracker frame now (hostpc.transport.TrackerReading)."""
+        ...
+
+
+class OffsetExport(Protocol):
+    """A robot that keeps no zero offsets: the compensated offsets become files its own
+    software loads (the only lasting form of a push)."""
+
+    def export_offsets(self, directory: str | Path, robot: str,
+                       offsets: np.ndarray) -> dict[str, Path]:
+        """Write offsets (n,) rad of robot model `robot` into `directory`; returns
+        {kind: path}."""
+        ...
+
+
+class CaptureTiming(Protocol):
+    """Cameras on the host: the timing of the last stereo pair (stamps, skew), or None."""
+
+    @property
+    def last_timing(self) -> dict[str, Any] | None:
+        """Host grab times, backend timestamps and skew of the last capture."""
+        ...
+
+
+@dataclass(frozen=True)
+class Capabilities:
+    """What an adapter offers beyond `RobotAdapter`: per capability, the object that answers
+    it, or None (not offered)."""
+
+    targets: TargetCamera | None = None
+    tracker: LaserTracker | None = None
+    offset_export: OffsetExport | None = None
+    capture_timing: CaptureTiming | None = None
+
+
+class Need(Enum):
+    """A call a measurement method needs from the robot (value: the call's name)."""
+
+    TARGETS = "measure_targets"
+    TRACKER = "measure_tracker"
+
+
+_WHAT = {
+    Need.TARGETS: "a controller that measures targets",
+    Need.TRACKER: "a controller with a laser tracker",
+}
+
+
+class MissingCapability(InputError):
+    """The method needs a call the driver does not offer (exit code 2, before any pose)."""
+
+
+def _capabilities(robot: RobotAdapter) -> Capabilities:
+    # a caller without type checks (library use, tests) may pass something that is not an
+    # adapter at all: it offers nothing
+    return robot.capabilities if isinstance(robot, RobotAdapter) else Capabilities()
+
+
+def _missing(robot: RobotAdapter, need: Need, who: str) -> MissingCapability:
+    driver = robot.driver if isinstance(robot, RobotAdapter) else type(robot).__name__
+    return MissingCapability(f"{who} needs {_WHAT[need]} ({need.value}); the {driver} "
+                             "driver does not offer it")
+
+
+def check_needs(robot: RobotAdapter, needs: Iterable[Need], who: str) -> None:
+    """MissingCapability naming `who` (e.g. `--method dual_loop`), the call and the driver
+    for the first need `robot` does not offer."""
+    capabilities = _capabilities(robot)
+    offered = {Need.TARGETS: capabilities.targets, Need.TRACKER: capabilities.tracker}
+    for need in needs:
+        if offered[need] is None:
+            raise _missing(robot, need, who)
+
+
+def targets_of(robot: RobotAdapter, who: str) -> TargetCamera:
+    """The robot's `TargetCamera` (MissingCapability if it has none: `check_needs` first)."""
+    camera = _capabilities(robot).targets
+    if camera is None:
+        raise _missing(robot, Need.TARGETS, who)
+    return camera
+
+
+def tracker_of(robot: RobotAdapter, who: str) -> LaserTracker:
+    """The robot's `LaserTracker` (MissingCapability if it has none: `check_needs` first)."""
+    tracker = _capabilities(robot).tracker
+    if tracker is None:
+        raise _missing(robot, Need.TRACKER, who)
+    return tracker

@@ -3,7 +3,8 @@
     --robot HOST[:PORT]   a controller at that address (IPv6 as `[::1]:PORT`)
     --robot sim           the simulated controller, started on 127.0.0.1 by the caller
                           (`hostpc.robots.simulator`); this module only recognises the word
-    --driver zerocal      our protocol (default; port 47800) | ur (Universal Robots, ur_rtde)
+    --driver zerocal      our protocol (default; port 47800) | ur (Universal Robots, ur_rtde);
+                          the table of drivers is `hostpc.robots.drivers`
 
 `open_robot` returns a connected `RobotAdapter`; an unreachable controller raises
 `ConnectionFailed` (CLI exit code 3), a malformed address `InputError` (exit code 2).
@@ -11,18 +12,16 @@
 
 from __future__ import annotations
 
-import importlib
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from hostpc.errors import InputError
 from hostpc.robots.base import RobotAdapter
+from hostpc.robots.drivers import DEFAULT_DRIVER, ConnectOptions, driver_named
 from protocol import DEFAULT_PORT
 from protocol.auth import read_token_file as auth_token_file
 
-DRIVERS = ("zerocal", "ur")
 DEFAULT_TOKEN = "zerocal-sim"
 """The simulator's default token (controller_stub scenario: server.token)."""
 TOKEN_ENV = "ZEROCAL_TOKEN"
@@ -95,36 +94,21 @@ def read_token_file(path: str | Path) -> str:
 
 async def open_robot(
     address: RobotAddress,
-    driver: str = "zerocal",
+    driver: str = DEFAULT_DRIVER,
     *,
     token: str | None = None,
     timeout: float = 10.0,
-    options: dict[str, Any] | None = None,
+    camera: str | None = None,
 ) -> RobotAdapter:
-    """Connect to the robot at `address` with `driver`; returns an open RobotAdapter.
+    """Connect to the robot at `address` with `driver` (a name in the driver table,
+    hostpc.robots.drivers); returns an open RobotAdapter. camera: where a driver with a
+    camera service fetches captures (`--camera-service`, `none`; None: its default).
 
     For `sim` the caller starts the simulator first and passes its real address.
     Raises ConnectionFailed (unreachable), InputError (unknown driver, bad address).
     """
     if address.sim:
         raise InputError("--robot sim: start the simulator first (hostpc.robots.simulator)")
-    if driver not in DRIVERS:
-        raise InputError(f"--driver {driver!r}: expected one of {', '.join(DRIVERS)}")
-    if driver == "zerocal":
-        from hostpc.robots.zerocal import ZerocalAdapter
-
-        return await ZerocalAdapter.connect(
-            address.host, address.port, token=resolve_token(token), timeout=timeout
-        )
-    # driver == "ur": the UR adapter module provides `async connect(host, port, **options)`
-    try:
-        module = importlib.import_module("hostpc.robots.ur")
-    except ModuleNotFoundError as exc:
-        raise InputError(f"--driver ur is not available: {exc}") from exc
-    connect = getattr(module, "connect", None)
-    if connect is None:
-        raise InputError("--driver ur is not available: hostpc.robots.ur has no connect()")
-    adapter: RobotAdapter = await connect(
-        address.host, address.port, timeout=timeout, token=resolve_token(token), **(options or {})
-    )
-    return adapter
+    chosen = driver_named(driver)
+    return await chosen.connect(address.host, address.port, ConnectOptions(
+        token=resolve_token(token), timeout=timeout, camera=camera))

@@ -21,7 +21,13 @@ Two hazards of ur_rtde shape this module (both measured):
 2. Right after `moveJ` returns, the receive interface may still hold a sample from before
    the end of the motion. `move_joints` therefore waits for a sample whose RTDE timestamp
    is newer than the one held when moveJ returned and that is at the target (within
-   `SETTLE_TOLERANCE_RAD`, up to `SETTLE_TIMEOUT_S`).
+   `SETTLE_TOLERANCE_RAD`, up to `SETTLE_TIMEOUT_S`; `ur_link.py`).
+
+The adapter is composed of collaborators that own their state: `UrLink` (ur_link.py: the
+ur_rtde interfaces, samples, moves, the motion lock), `UrHostOffsets` (ur_offsets.py: the
+host zero offsets, their rollback ids and the export, the adapter's `OffsetExport`
+capability), `UrGuardedMove` (ur_guarded.py: the probe's guarded move and latch timings),
+and the pre-checks of `ur_precheck.py` run by `connect_ur`.
 
 Zero offsets: a UR controller offers no way to write joint zero offsets. This adapter applies
 them ON THE HOST. With the host offsets `o` (n,) rad (zero at connect unless given):
@@ -43,48 +49,20 @@ import asyncio
 import contextlib
 import logging
 import math
-from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Any
 
 import numpy as np
 
-from hostpc.errors import ConnectionFailed, ControllerError, InputError, RequestTimeout
-from hostpc.robots.base import MoveOutcome, RobotState, StereoCapture
-from hostpc.robots.ur_guarded import (
-    JOINT_ACCELERATION,
-    MAX_JOINT_SPEED,
-    N_DIGITAL_IO,
-    LatchTiming,
-    UrGuardedMoveMixin,
-    rtde_frequency,
-)
-from hostpc.robots.ur_offsets import MAX_OFFSET_RAD, UrOffsetsMixin
-from hostpc.robots.ur_precheck import (
-    DASHBOARD_PORT,
-    RTDE_PORT,
-    RTDE_PROTOCOL_VERSION,
-    SCRIPT_PORT,
-    UrControllerInfo,
-    check_controller,
-    probe_dashboard,
-    probe_port,
-    probe_rtde,
-)
+from hostpc.errors import ConnectionFailed, ControllerError, InputError
+from hostpc.robots.base import Capabilities, ContactOutcome, MoveOutcome, RobotState, StereoCapture
+from hostpc.robots.ur_guarded import N_DIGITAL_IO, LatchTiming, UrGuardedMove, rtde_frequency
+from hostpc.robots.ur_link import UrLink, check_joints, joint_velocity
+from hostpc.robots.ur_offsets import UrHostOffsets
+from hostpc.robots.ur_precheck import UrControllerInfo, check_controller
 
 logger = logging.getLogger(__name__)
 
-__all__ = [  # constants, pre-checks and offsets of the sibling modules are re-exported
-    "CAMERA_PORT", "DASHBOARD_PORT", "JOINT_ACCELERATION", "MAX_JOINT_SPEED", "MAX_OFFSET_RAD",
-    "N_DIGITAL_IO", "RTDE_PORT", "RTDE_PROTOCOL_VERSION", "SCRIPT_PORT", "SETTLE_TIMEOUT_S",
-    "SETTLE_TOLERANCE_RAD", "LatchTiming", "UrAdapter", "UrControllerInfo", "check_controller",
-    "connect", "connect_ur", "parse_camera", "probe_dashboard", "probe_port", "probe_rtde",
-    "rtde_frequency",
-]
-
 CAMERA_PORT = 47800
-SETTLE_TOLERANCE_RAD = 1e-3
-SETTLE_TIMEOUT_S = 2.0
-T = TypeVar("T")
 
 
 # ---------------------------------------------------------------------- the adapter
@@ -104,19 +82,16 @@ def _bits(word: int, n: int) -> tuple[bool, ...]:
     return tuple(bool(int(word) >> i & 1) for i in range(n))
 
 
-class UrAdapter(UrOffsetsMixin, UrGuardedMoveMixin):
+class UrAdapter:
     """A `RobotAdapter` over ur_rtde's three interfaces (+ a camera client).
 
     The ur_rtde objects are created by `connect_ur`; tests may pass fakes. offsets: the
-    host zero offsets (6,) rad (module docstring).
+    host zero offsets (6,) rad (module docstring). capabilities: `OffsetExport` (the host
+    offsets' `export_offsets`): the zero offsets live in this adapter for this session, not
+    in the robot, so a push is also written as files for the software that drives the robot.
     """
 
     driver = "ur"
-    offsets_on_controller = False
-    """The zero offsets live in this adapter for this session, not in the robot (module
-    docstring); `export_offsets` writes them for the software that drives the robot."""
-    EXPORT_STEM = "ur"
-    """Exports are `ur_calibration.yaml`, `ur_joints.urdf.xml`, `ur_offsets.script`."""
 
     def __init__(
         self,
@@ -132,97 +107,38 @@ class UrAdapter(UrOffsetsMixin, UrGuardedMoveMixin):
     ) -> None:
         self.host = host
         self.info = info
-        self.receive = receive
-        self.control = control
-        self.io = io
         self.camera = camera
-        self.timeout = float(timeout)
-        self._offsets = np.zeros(6) if offsets is None else self._check_offsets(offsets)
-        self._rollbacks: dict[str, np.ndarray] = {}
-        self._rollback_counter = 0
-        self._motion_lock = asyncio.Lock()
+        self.link = UrLink(host, receive, control, io, timeout)
+        self.offsets = UrHostOffsets(host, offsets)
+        self.guarded = UrGuardedMove(self.link, self.offsets,
+                                     rtde_frequency(info.controller_version))
         self.q_min, self.q_max = _limits(info.robot_name)
-        self.rtde_frequency = rtde_frequency(info.controller_version)
-        self.latches: list[LatchTiming] = []
-        """Timing of every probe contact of this session (guarded_move)."""
+        self.capabilities = Capabilities(offset_export=self.offsets)
 
     @property
     def address(self) -> str:
         """The UR host."""
         return self.host
 
-    # ---------------------------------------------------------------- helpers
+    @property
+    def latches(self) -> list[LatchTiming]:
+        """Timing of every probe contact of this session (guarded_move)."""
+        return self.guarded.latches
 
-    async def _call(self, function: Callable[..., T], *args: Any) -> T:
-        """Run a blocking ur_rtde call in a worker thread; errors -> ControllerError."""
-        try:
-            return await asyncio.to_thread(function, *args)
-        except (RuntimeError, ValueError, TypeError) as exc:
-            name = getattr(function, "__name__", "ur_rtde call")
-            raise ControllerError(f"UR {self.host}: {name} failed: {exc}") from exc
+    @property
+    def latch_jitter_s(self) -> float:
+        """One-sigma timing spread of a latched edge (s), UrGuardedMove.latch_jitter_s."""
+        return self.guarded.latch_jitter_s
 
-    def _sample(self) -> tuple[float, np.ndarray, int, int]:
-        """(timestamp, actual q (6,), input bits, output bits) of ONE RTDE package: read
-        again if the receive thread stored a newer package between the getters."""
-        for _ in range(10):
-            stamp = float(self.receive.getTimestamp())
-            sample = (
-                stamp,
-                np.asarray(self.receive.getActualQ(), float),
-                int(self.receive.getActualDigitalInputBits()),
-                int(self.receive.getActualDigitalOutputBits()),
-            )
-            if float(self.receive.getTimestamp()) == stamp:
-                return sample
-        return sample
-
-    async def _fresh_q(self, after: float, target: np.ndarray | None) -> np.ndarray:
-        """Measured q (6,) from a sample newer than timestamp `after` (and at `target` within
-        SETTLE_TOLERANCE_RAD if given, waiting up to SETTLE_TIMEOUT_S for it)."""
-        loop = asyncio.get_running_loop()
-        deadline = loop.time() + SETTLE_TIMEOUT_S
-        fresh: np.ndarray | None = None
-        while True:
-            stamp, q, _, _ = await self._call(self._sample)
-            if stamp > after:
-                fresh = q
-                if target is None or np.max(np.abs(q - target)) <= SETTLE_TOLERANCE_RAD:
-                    return q
-            if loop.time() > deadline:
-                if fresh is not None:
-                    logger.warning("UR %s: robot %.2e rad from the target after the move",
-                                   self.host, float(np.max(np.abs(fresh - target))))
-                    return fresh
-                raise RequestTimeout(
-                    f"UR {self.host}: no new RTDE sample within {SETTLE_TIMEOUT_S:.1f} s"
-                )
-            await asyncio.sleep(0.002)
-
-    def _check_q(self, q: np.ndarray | list[float], name: str = "q") -> np.ndarray:
-        values = np.asarray(q, dtype=float).reshape(-1)
-        if values.shape != (6,) or not np.all(np.isfinite(values)):
-            raise InputError(f"{name}: expected 6 finite joint angles (rad), got {values.tolist()}")
-        return values
-
-    def _speed(self, speed: float) -> float:
-        if not 0.0 < float(speed) <= 1.0:
-            raise InputError(f"speed {speed!r}: expected a fraction in (0, 1]")
-        return max(1e-3, float(speed) * MAX_JOINT_SPEED)
-
-    async def _failure_reason(self) -> str:
-        if await self._call(self.receive.isEmergencyStopped):
-            return "estop"
-        if await self._call(self.receive.isProtectiveStopped):
-            return "protective_stop"
-        if not await self._call(self.control.isProgramRunning):
-            return "control_script_stopped"
-        return "refused"
+    def latch_summary(self) -> str | None:
+        """One line on the probe latches of this session (None without contacts)."""
+        return self.guarded.latch_summary()
 
     # ---------------------------------------------------------------- RobotAdapter
 
     async def state(self) -> RobotState:
         """Reported angles (measured + host offsets), limits, IO, camera description."""
-        stamp, q, inputs, outputs = await self._call(self._sample)
+        stamp, q, inputs, outputs = await self.link.call(self.link.sample)
         camera: dict[str, Any] = {}
         if self.camera is not None:
             camera_state = await self.camera.state()
@@ -231,13 +147,14 @@ class UrAdapter(UrOffsetsMixin, UrGuardedMoveMixin):
                 # this driver latches the probe from RTDE samples: at least their spread
                 probe = dict(camera["probe"])
                 probe["latency_jitter"] = max(float(probe.get("latency_jitter") or 0.0),
-                                              self.latch_jitter_s)
+                                              self.guarded.latch_jitter_s)
                 camera["probe"] = probe
+        offsets = self.offsets.values
         return RobotState(
-            q=q + self._offsets,
-            zero_offsets=self._offsets.copy(),
-            q_min=self.q_min + self._offsets,
-            q_max=self.q_max + self._offsets,
+            q=q + offsets,
+            zero_offsets=offsets,
+            q_min=self.q_min + offsets,
+            q_max=self.q_max + offsets,
             digital_inputs=_bits(inputs, N_DIGITAL_IO),
             digital_outputs=_bits(outputs, N_DIGITAL_IO),
             camera=camera,
@@ -254,23 +171,16 @@ class UrAdapter(UrOffsetsMixin, UrGuardedMoveMixin):
 
     async def move_joints(self, q: np.ndarray, speed: float) -> MoveOutcome:
         """moveJ to the reported angles q (6,) rad; the UR gets q - offsets."""
-        target = self._check_q(q) - self._offsets
-        velocity = self._speed(speed)
-        async with self._motion_lock:
-            return await self._move_locked(target, velocity)
+        target = self.offsets.to_ur(check_joints(q))
+        velocity = joint_velocity(speed)
+        async with self.link.motion_lock:
+            moved = await self.link.move(target, velocity)
+        return MoveOutcome(completed=moved.completed, q=self.offsets.reported(moved.q),
+                           reason=moved.reason)
 
-    async def _move_locked(self, target: np.ndarray, velocity: float) -> MoveOutcome:
-        """moveJ to the UR angles target (6,) at velocity rad/s (motion lock held)."""
-        ok = await self._call(
-            self.control.moveJ, target.tolist(), velocity, JOINT_ACCELERATION, False
-        )
-        after = float(await self._call(self.receive.getTimestamp))
-        if not ok:
-            reason = await self._failure_reason()
-            measured = await self._fresh_q(after, None)
-            return MoveOutcome(completed=False, q=measured + self._offsets, reason=reason)
-        measured = await self._fresh_q(after, target)
-        return MoveOutcome(completed=True, q=measured + self._offsets)
+    async def guarded_move(self, q: np.ndarray, speed: float, io_line: int) -> ContactOutcome:
+        """Guarded move toward the reported angles q (6,) (UrGuardedMove.guarded_move)."""
+        return await self.guarded.guarded_move(q, speed, io_line)
 
     async def capture(self, pattern: str = "target", view: int = 0) -> StereoCapture:
         """Stereo pair from the camera service; q at exposure reported (+ host offsets)."""
@@ -278,27 +188,29 @@ class UrAdapter(UrOffsetsMixin, UrGuardedMoveMixin):
             raise ControllerError("UR driver: no camera service configured (--camera HOST:PORT)")
         left, right, q, t = await self.camera.capture(pattern, view)
         if len(q) == 0:  # a camera service without joints (hostpc camera serve): our q, t
-            t, q, _, _ = await self._call(self._sample)
-        return StereoCapture(left=left, right=right, q=np.asarray(q, float) + self._offsets, t=t)
+            t, q, _, _ = await self.link.call(self.link.sample)
+        return StereoCapture(left=left, right=right,
+                             q=self.offsets.reported(np.asarray(q, float)), t=t)
+
+    async def get_offsets(self) -> np.ndarray:
+        """The host zero offsets (6,) rad (UrHostOffsets)."""
+        return await self.offsets.get_offsets()
+
+    async def set_offsets(self, offsets: np.ndarray) -> tuple[np.ndarray, str]:
+        """Replace the host zero offsets, nothing written to the robot (UrHostOffsets)."""
+        return await self.offsets.set_offsets(offsets)
+
+    async def rollback(self, rollback_id: str) -> np.ndarray:
+        """Restore the host offsets saved under `rollback_id` (UrHostOffsets)."""
+        return await self.offsets.rollback(rollback_id)
 
     async def close(self) -> None:
         """Report the probe latch timing (a warning-level line, so it is always shown),
         stop the control script and disconnect every interface."""
-        summary = self.latch_summary()
+        summary = self.guarded.latch_summary()
         if summary is not None:
             logger.warning("%s", summary)
-        for name, call in (
-            ("stopScript", getattr(self.control, "stopScript", None)),
-            ("control.disconnect", getattr(self.control, "disconnect", None)),
-            ("io.disconnect", getattr(self.io, "disconnect", None)),
-            ("receive.disconnect", getattr(self.receive, "disconnect", None)),
-        ):
-            if call is None:
-                continue
-            try:
-                await asyncio.to_thread(call)
-            except Exception as exc:  # closing must go on
-                logger.warning("UR %s: %s failed: %s", self.host, name, exc)
+        await self.link.close()
         if self.camera is not None:
             await self.camera.close()
 
@@ -338,11 +250,15 @@ async def connect_ur(
     """Connect to the UR at `host` (fixed ports 30004 / 29999 / 30003) and to its camera
     service (`camera_host:camera_port` over the zerocal protocol; camera_host None = no
     camera). The asyncio pre-checks run first (module docstring); ConnectionFailed if any
-    fails, before any ur_rtde interface is constructed.
+    fails, before any ur_rtde interface is constructed. InputError if ur_rtde is not
+    installed (it has wheels for some Python versions only).
     """
-    import rtde_control
-    import rtde_io
-    import rtde_receive
+    try:
+        import rtde_control
+        import rtde_io
+        import rtde_receive
+    except ModuleNotFoundError as exc:
+        raise InputError(f"--driver ur is not available: {exc}") from exc
 
     from hostpc.transport import ControllerClient
 
@@ -389,26 +305,23 @@ async def connect(
     *,
     timeout: float = 10.0,
     camera: str | tuple[str, int] | None = None,
-    token: str | None = None,
+    token: str,
     offsets: np.ndarray | list[float] | None = None,
-    **_: Any,
 ) -> UrAdapter:
-    """Entry point of `hostpc.robots.connect.open_robot(..., driver="ur")`.
+    """The UR row of the driver table (`hostpc.robots.drivers`).
 
     The UR ports are fixed (30004 / 29999 / 30003), so the `--robot HOST:PORT` port names
     the camera service's zerocal port instead (default 47800). camera: `HOST:PORT`
-    overriding that (`none` for no camera). token: the camera service's token (default
-    --token / $ZEROCAL_TOKEN / the simulator's).
+    overriding that (`none` for no camera). token: the camera service's token (resolved by
+    `open_robot`: --token / $ZEROCAL_TOKEN / the simulator's).
     """
-    from hostpc.robots.connect import resolve_token
-
     camera_address = parse_camera(camera if camera is not None else (host, port or CAMERA_PORT),
                                   host)
     return await connect_ur(
         host,
         camera_address[0] if camera_address else None,
         camera_address[1] if camera_address else CAMERA_PORT,
-        resolve_token(token),
+        token,
         timeout,
         offsets=offsets,
     )

@@ -1,8 +1,9 @@
 """Guarded moves of the UR driver for the touch probe: an asynchronous moveJ watched sample by
 sample over RTDE, stopped with stopJ at the probe input's rising edge (docs/ur-probe.md).
 
-Part of `hostpc.robots.ur.UrAdapter` (a mixin; the adapter provides the ur_rtde interfaces,
-the host offsets and the motion lock). Each RTDE sample carries the joint angles and the
+`UrGuardedMove` is a collaborator of `hostpc.robots.ur.UrAdapter`: it moves through the
+adapter's `UrLink` (ur_rtde, the motion lock) and converts angles with its `UrHostOffsets`,
+and owns the latch timings of the session. Each RTDE sample carries the joint angles and the
 input bits of one controller cycle; the latch is the midpoint of the edge window (the last
 sample with the input low, the first with it high) and every contact's timing is kept as a
 `LatchTiming`. Angles rad, times s.
@@ -10,28 +11,27 @@ sample with the input low, the first with it high) and every contact's timing is
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import math
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from hostpc.errors import InputError
-from hostpc.robots.base import ContactOutcome, MoveOutcome
+from hostpc.robots.base import ContactOutcome
+from hostpc.robots.ur_link import (
+    JOINT_ACCELERATION,
+    MAX_JOINT_SPEED,
+    Sample,
+    UrLink,
+    check_joints,
+    joint_velocity,
+)
+from hostpc.robots.ur_offsets import UrHostOffsets
 
 logger = logging.getLogger("hostpc.robots.ur")
 
-Sample = tuple[float, np.ndarray, int, int]
-"""(RTDE timestamp s, actual q (6,) rad, digital input bits, digital output bits)."""
-
-MAX_JOINT_SPEED = 3.14
-"""rad/s; ur_rtde's UR_JOINT_VELOCITY_MAX, `speed` 1.0 maps to it."""
-JOINT_ACCELERATION = 1.4
-"""rad/s^2, UR's default movej acceleration."""
 N_DIGITAL_IO = 16
 """Standard (0-7) and configurable (8-15) digital IO, bit i of the RTDE IO bit words."""
 STOP_DECELERATION = 10.0
@@ -85,26 +85,17 @@ class _Watch:
     stop_command_s: float
 
 
-class UrGuardedMoveMixin:
-    """guarded_move and the latch timing of `UrAdapter` (see the module docstring)."""
+class UrGuardedMove:
+    """guarded_move and the latch timing of a UR session (see the module docstring).
+    link: the RTDE link; offsets: the host zero offsets (reported = UR angles + offsets);
+    rtde_frequency: Hz of the RTDE stream (a sample period when none was measured)."""
 
-    host: str
-    control: Any
-    timeout: float
-    rtde_frequency: float
-    latches: list[LatchTiming]
-    _offsets: np.ndarray
-    _motion_lock: asyncio.Lock
-
-    if TYPE_CHECKING:  # provided by UrAdapter
-
-        async def _call(self, function: Callable[..., Any], *args: Any) -> Any: ...
-        def _sample(self) -> Sample: ...
-        async def _fresh_q(self, after: float, target: np.ndarray | None) -> np.ndarray: ...
-        def _check_q(self, q: np.ndarray | list[float], name: str = "q") -> np.ndarray: ...
-        def _speed(self, speed: float) -> float: ...
-        async def _failure_reason(self) -> str: ...
-        async def _move_locked(self, target: np.ndarray, velocity: float) -> MoveOutcome: ...
+    def __init__(self, link: UrLink, offsets: UrHostOffsets, rtde_frequency: float) -> None:
+        self.link = link
+        self.offsets = offsets
+        self.rtde_frequency = rtde_frequency
+        self.latches: list[LatchTiming] = []
+        """Timing of every probe contact of this session."""
 
     async def guarded_move(self, q: np.ndarray, speed: float, io_line: int) -> ContactOutcome:
         """Asynchronous moveJ toward q (6,) watching digital input `io_line` in every RTDE
@@ -123,28 +114,30 @@ class UrGuardedMoveMixin:
         """
         if not 0 <= int(io_line) < N_DIGITAL_IO:
             raise InputError(f"io_line {io_line}: expected 0..{N_DIGITAL_IO - 1}")
-        target = self._check_q(q) - self._offsets
-        velocity = self._speed(speed)
-        async with self._motion_lock:
-            start = await self._call(self._sample)
+        link = self.link
+        target = self.offsets.to_ur(check_joints(q))
+        velocity = joint_velocity(speed)
+        async with link.motion_lock:
+            start = await link.call(link.sample)
             for attempt in range(MAX_LATCH_RETRIES + 1):
                 if start[2] >> io_line & 1:
-                    return ContactOutcome(False, None, start[1] + self._offsets,
+                    return ContactOutcome(False, None, self.offsets.reported(start[1]),
                                           reason="probe_already_triggered")
-                ok = await self._call(
-                    self.control.moveJ, target.tolist(), velocity, JOINT_ACCELERATION, True
+                ok = await link.call(
+                    link.control.moveJ, target.tolist(), velocity, JOINT_ACCELERATION, True
                 )
                 if not ok:
-                    reason = await self._failure_reason()
-                    _, q_now, _, _ = await self._call(self._sample)
-                    return ContactOutcome(False, None, q_now + self._offsets, reason=reason)
-                watch = await self._call(self._watch, io_line, start)
+                    reason = await link.failure_reason()
+                    _, q_now, _, _ = await link.call(link.sample)
+                    return ContactOutcome(False, None, self.offsets.reported(q_now),
+                                          reason=reason)
+                watch = await link.call(self._watch, io_line, start)
                 if watch.edge is None:
-                    measured = await self._fresh_q(watch.last[0] - 1e-9, None)
-                    return ContactOutcome(False, None, measured + self._offsets,
+                    measured = await link.fresh_q(watch.last[0] - 1e-9, None)
+                    return ContactOutcome(False, None, self.offsets.reported(measured),
                                           reason="no_contact")
                 low, high = watch.edge
-                q_stop = await self._fresh_q(high[0], None)
+                q_stop = await link.fresh_q(high[0], None)
                 latch = LatchTiming(
                     edge_window_s=high[0] - low[0],
                     sample_period_s=(watch.period if math.isfinite(watch.period)
@@ -155,20 +148,20 @@ class UrGuardedMoveMixin:
                 )
                 self.latches.append(latch)
                 logger.info("UR %s: probe edge within %.1f ms (%d sample(s) missed), stopJ "
-                            "took %.1f ms, overtravel %.2e rad", self.host,
+                            "took %.1f ms, overtravel %.2e rad", link.host,
                             1e3 * latch.edge_window_s, latch.missed_samples,
                             1e3 * latch.stop_command_s, latch.overtravel_rad)
                 if latch.missed_samples == 0:
                     q_latched = 0.5 * (low[1] + high[1])
-                    return ContactOutcome(True, q_latched + self._offsets,
-                                          q_stop + self._offsets,
+                    return ContactOutcome(True, self.offsets.reported(q_latched),
+                                          self.offsets.reported(q_stop),
                                           qd=(high[1] - low[1]) / latch.edge_window_s)
-                back = await self._move_locked(start[1], RETRY_SPEED * MAX_JOINT_SPEED)
+                back = await link.move(start[1], RETRY_SPEED * MAX_JOINT_SPEED)
                 if not back.completed:
                     break
-                start = await self._call(self._sample)
+                start = await link.call(link.sample)
             # every attempt missed samples at the edge: no contact of known precision
-            return ContactOutcome(False, None, q_stop + self._offsets,
+            return ContactOutcome(False, None, self.offsets.reported(q_stop),
                                   reason="edge_window_missed_samples")
 
     def _watch(self, io_line: int, start: Sample) -> _Watch:
@@ -176,16 +169,16 @@ class UrGuardedMoveMixin:
         until the input rises (stopJ at once) or the move ends."""
         low = start
         period = math.inf
-        deadline = time.monotonic() + max(self.timeout, 60.0)
+        deadline = time.monotonic() + max(self.link.timeout, 60.0)
         next_status = 0.0
         started = False
-        op0 = self.control.getAsyncOperationProgressEx().operationId()
+        op0 = self.link.control.getAsyncOperationProgressEx().operationId()
         while True:
-            sample = self._sample()
+            sample = self.link.sample()
             if sample[0] > low[0]:
                 if sample[2] >> io_line & 1:
                     seen = time.monotonic()
-                    self.control.stopJ(STOP_DECELERATION, False)
+                    self.link.control.stopJ(STOP_DECELERATION, False)
                     return _Watch((low, sample), sample, min(period, sample[0] - low[0]),
                                   time.monotonic() - seen)
                 if low is not start:
@@ -194,15 +187,15 @@ class UrGuardedMoveMixin:
             now = time.monotonic()
             if now >= next_status:  # the move's end, checked every few cycles
                 next_status = now + 0.005
-                status = self.control.getAsyncOperationProgressEx()
+                status = self.link.control.getAsyncOperationProgressEx()
                 started = started or status.operationId() != op0
                 if started and not status.isAsyncOperationRunning():
-                    final = self._sample()
+                    final = self.link.sample()
                     if not final[2] >> io_line & 1:
                         return _Watch(None, final, period, 0.0)
                     continue  # the edge came with the last samples
             if now > deadline:
-                self.control.stopJ(STOP_DECELERATION, False)
+                self.link.control.stopJ(STOP_DECELERATION, False)
                 raise RuntimeError("guarded move did not end")
             time.sleep(POLL_INTERVAL_S)
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from hostpc.robots.base import (
+    Capabilities,
     ContactOutcome,
     MeasuredTarget,
     MoveOutcome,
@@ -25,12 +26,15 @@ from hostpc.transport import ControllerClient, TrackerReading
 
 
 class ZerocalAdapter:
-    """A `RobotAdapter` for one `ControllerClient` session (the adapter owns the client)."""
+    """A `RobotAdapter` for one `ControllerClient` session (the adapter owns the client).
+    capabilities: the protocol's `measure_targets` and `measure_tracker` (a controller
+    without the sensor refuses the call)."""
 
     driver = "zerocal"
 
     def __init__(self, client: ControllerClient) -> None:
         self.client = client
+        self.capabilities = Capabilities(targets=self, tracker=self)
 
     @property
     def address(self) -> str:

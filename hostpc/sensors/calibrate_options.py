@@ -21,10 +21,14 @@ import argparse
 import json
 from collections.abc import Awaitable, Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hostpc.errors import InputError
 from hostpc.robots.base import RobotAdapter
+from hostpc.robots.drivers import DEFAULT_DRIVER, DRIVERS, driver_named
+
+if TYPE_CHECKING:
+    from hostpc.calibrate.run_values import RobotInfo
 
 RECORDING_FOLDER = "recording"
 DEFAULT_MAX_SKEW_MS = 20.0
@@ -67,8 +71,11 @@ def check_sensor_options(args: argparse.Namespace) -> None:
                              "--resume and --camera-*")
     if getattr(args, "record", None) is not None and args.resume:
         raise InputError("--record is for a new run, not a --resume")
-    if getattr(args, "camera_service", None) and (left or getattr(args, "driver", "") != "ur"):
-        raise InputError("--camera-service is for --driver ur without --camera-left/right")
+    if getattr(args, "camera_service", None) and (
+            left or not driver_named(getattr(args, "driver", DEFAULT_DRIVER)).camera_service):
+        with_service = " / ".join(d.name for d in DRIVERS.values() if d.camera_service)
+        raise InputError(f"--camera-service is for --driver {with_service} without "
+                         "--camera-left/right")
     if getattr(args, "discard", None) is not None and args.discard < 0:
         raise InputError(f"--discard {args.discard}: must not be negative")
     max_skew = getattr(args, "max_skew", DEFAULT_MAX_SKEW_MS)
@@ -128,19 +135,20 @@ def replay_inputs(args: argparse.Namespace, default_out: Callable[[str], Path]
         run_dir
 
 
-def robot_options(args: argparse.Namespace, driver: str) -> dict[str, Any] | None:
-    """Driver options: where the UR driver gets its captures (none with host cameras)."""
-    if driver != "ur":
+def robot_camera(args: argparse.Namespace, driver: str) -> str | None:
+    """Where a driver with a camera service (the UR driver) gets its captures: `none` with
+    host cameras, --camera-service, else None (its default)."""
+    if not driver_named(driver).camera_service:
         return None
     if getattr(args, "camera_left", None):
-        return {"camera": "none"}
+        return "none"
     service = getattr(args, "camera_service", None)
-    return {"camera": service} if service else None
+    return str(service) if service else None
 
 
 async def open_with_sensors(args: argparse.Namespace, run_dir: Path, settings: Any,
                             cell_file: Any, known: tuple[str, ...] | None,
-                            default_known: tuple[str, ...], robot_info: Any,
+                            default_known: tuple[str, ...], robot_info: RobotInfo,
                             open_robot: Callable[[], Awaitable[RobotAdapter]]) -> RobotAdapter:
     """The run's robot: the recording (--replay), else `open_robot()` with the host cameras
     (--camera-left/right) and the recorder (--record) around it."""
@@ -177,7 +185,7 @@ async def open_with_sensors(args: argparse.Namespace, run_dir: Path, settings: A
             "settings": settings.to_dict() if settings is not None else None,
             "cell_file": cell_file, "known": None if known is None else list(known),
             "default_known": list(default_known),
-            "robot": robot_info.to_dict() if hasattr(robot_info, "to_dict") else {},
+            "robot": robot_info.to_dict(),
             "cameras": None if camera is None else [s.text for s in camera.sources],
         }
         try:

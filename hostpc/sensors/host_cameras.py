@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.robots.base import (
+    Capabilities,
     ContactOutcome,
     MoveOutcome,
     RobotAdapter,
@@ -36,7 +37,8 @@ TIMING_FILE = "camera_timing.jsonl"
 
 class HostCameraAdapter:
     """`robot` for motion and joints, `camera` for images. timing_log: file the timing of
-    every pair is appended to (None: not logged). Closing closes both."""
+    every pair is appended to (None: not logged). Closing closes both. capabilities: the
+    robot's, plus this adapter's `last_timing` (a `CaptureTiming`)."""
 
     def __init__(self, robot: RobotAdapter, camera: StereoCamera,
                  timing_log: Path | None = None) -> None:
@@ -45,10 +47,15 @@ class HostCameraAdapter:
         self.timing_log = timing_log
         self.last_timing: dict[str, Any] | None = None
         self._lock = asyncio.Lock()
+        inner = robot.capabilities
+        self.capabilities = Capabilities(
+            targets=inner.targets, tracker=inner.tracker, offset_export=inner.offset_export,
+            capture_timing=self)
 
-    def __getattr__(self, name: str) -> Any:
-        # anything else the robot offers (measure_targets, export_offsets, driver, ...)
-        return getattr(self.__dict__["robot"], name)
+    @property
+    def driver(self) -> str:
+        """The robot's driver (the cameras are this host's)."""
+        return self.robot.driver
 
     async def state(self) -> RobotState:
         return await self.robot.state()

@@ -10,12 +10,14 @@ A recording is a folder:
     left_%04d.png      the raw image pairs, frame k of every capture in order (lossless
     right_%04d.png     PNG, so the folder is also an image-sequence camera source)
 
-`RecordingAdapter` wraps any RobotAdapter and writes that tape as the run goes.
-`ReplayAdapter` answers the same calls from the tape, so `hostpc calibrate --replay DIR`
-runs the whole pipeline (rig calibration, detection, fit, diagnose) without a robot and
-reaches the same dataset to the last digit: floats go through JSON as their shortest
-round-trip text and images through PNG bit for bit. A replay that asks for something the
-tape does not hold next (another pose, another call) stops with `ReplayDiverged`.
+`RecordingAdapter` wraps any RobotAdapter and writes that tape as the run goes (its
+capabilities are the wrapped adapter's: `measure_targets` recorded, the others passed on
+unrecorded). `ReplayAdapter` answers the same calls from the tape, so
+`hostpc calibrate --replay DIR` runs the whole pipeline (rig calibration, detection, fit,
+diagnose) without a robot and reaches the same dataset to the last digit: floats go through
+JSON as their shortest round-trip text and images through PNG bit for bit. A replay that
+asks for something the tape does not hold next (another pose, another call) stops with
+`ReplayDiverged`.
 """
 
 from __future__ import annotations
@@ -30,12 +32,14 @@ import numpy as np
 
 from hostpc.errors import ConnectionFailed, ControllerError, InputError, RequestTimeout
 from hostpc.robots.base import (
+    Capabilities,
     ContactOutcome,
     MeasuredTarget,
     MoveOutcome,
     RobotAdapter,
     RobotState,
     StereoCapture,
+    TargetCamera,
     TargetMeasurement,
 )
 
@@ -90,9 +94,24 @@ def _error_from_json(d: Mapping[str, Any]) -> BaseException:
     return ControllerError(f"{kind}: {message}")
 
 
+def _targets_to_json(m: TargetMeasurement) -> dict[str, Any]:
+    return {"q": _floats(m.q), "t": float(m.t), "targets": [
+        {"chain": t.chain, "p": _floats(t.p), "cov": np.asarray(t.cov, float).tolist(),
+         **({} if t.uv is None else {"uv": np.asarray(t.uv, float).tolist()})}
+        for t in m.targets]}
+
+
+def _targets_from_json(r: Mapping[str, Any]) -> TargetMeasurement:
+    return TargetMeasurement(q=_array(r["q"]), t=float(r["t"]), targets=tuple(
+        MeasuredTarget(chain=t["chain"], p=_array(t["p"]), cov=_array(t["cov"]),
+                       uv=None if t.get("uv") is None else _array(t["uv"]))
+        for t in r["targets"]))
+
+
 class RecordingAdapter:
     """Wraps `robot`; every call and its answer go to the recording in `folder`.
-    header: the run's inputs (recording.json). Images are written as PNG as they come."""
+    header: the run's inputs (recording.json). Images are written as PNG as they come.
+    capabilities: the robot's, its target camera recorded too (`RecordedTargets`)."""
 
     def __init__(self, robot: RobotAdapter, folder: Path, header: Mapping[str, Any]) -> None:
         folder.mkdir(parents=True, exist_ok=True)
@@ -102,17 +121,21 @@ class RecordingAdapter:
         self.folder = folder
         self._n = 0
         self._frames = 0
+        inner = robot.capabilities
+        self.capabilities = Capabilities(
+            targets=None if inner.targets is None else RecordedTargets(self, inner.targets),
+            tracker=inner.tracker, offset_export=inner.offset_export,
+            capture_timing=inner.capture_timing)
         document = {"format": RECORDING_FORMAT, **header,
-                    "measure_targets": callable(getattr(robot, "measure_targets", None))}
+                    "measure_targets": inner.targets is not None}
         (folder / HEADER_FILE).write_text(json.dumps(document, indent=2) + "\n",
                                           encoding="utf-8")
         self._tape = (folder / TAPE_FILE).open("a", encoding="utf-8")
 
-    def __getattr__(self, name: str) -> Any:
-        robot = self.__dict__["robot"]
-        if name == "measure_targets" and callable(getattr(robot, name, None)):
-            return self._measure_targets
-        return getattr(robot, name)
+    @property
+    def driver(self) -> str:
+        """The recorded robot's driver."""
+        return self.robot.driver
 
     def _write(self, entry: dict[str, Any]) -> None:
         entry = {"n": self._n, **entry, "wall": time.time()}
@@ -120,8 +143,9 @@ class RecordingAdapter:
         self._tape.write(json.dumps(entry, allow_nan=False) + "\n")
         self._tape.flush()
 
-    async def _call(self, call: str, args: dict[str, Any], run: Callable[[], Any],
-                    encode: Callable[[Any], Any]) -> Any:
+    async def record(self, call: str, args: dict[str, Any], run: Callable[[], Any],
+                     encode: Callable[[Any], Any]) -> Any:
+        """`await run()`, its answer (`encode`d) or its error written to the tape."""
         try:
             result = await run()
         except (ControllerError, ConnectionFailed) as exc:
@@ -131,16 +155,16 @@ class RecordingAdapter:
         return result
 
     async def state(self) -> RobotState:
-        return await self._call("state", {}, self.robot.state, _state_to_json)
+        return await self.record("state", {}, self.robot.state, _state_to_json)
 
     async def move_joints(self, q: np.ndarray, speed: float) -> MoveOutcome:
-        return await self._call(
+        return await self.record(
             "move_joints", {"q": _floats(q), "speed": float(speed)},
             lambda: self.robot.move_joints(q, speed),
             lambda o: {"completed": o.completed, "q": _floats(o.q), "reason": o.reason})
 
     async def guarded_move(self, q: np.ndarray, speed: float, io_line: int) -> ContactOutcome:
-        return await self._call(
+        return await self.record(
             "guarded_move", {"q": _floats(q), "speed": float(speed), "io_line": int(io_line)},
             lambda: self.robot.guarded_move(q, speed, io_line),
             lambda o: {"contact": o.contact, "q": _floats(o.q), "reason": o.reason,
@@ -148,7 +172,7 @@ class RecordingAdapter:
                        "speed": None if o.speed is None else float(o.speed)})
 
     async def capture(self, pattern: str = "target", view: int = 0) -> StereoCapture:
-        return await self._call(
+        return await self.record(
             "capture", {"pattern": pattern, "view": int(view)},
             lambda: self.robot.capture(pattern, view), self._save_capture)
 
@@ -162,30 +186,23 @@ class RecordingAdapter:
                 raise InputError(f"--record {self.folder}: cannot write {path.name}")
         self._frames += 1
         result: dict[str, Any] = {"frame": frame, "q": _floats(c.q), "t": float(c.t)}
-        timing = getattr(self.robot, "last_timing", None)  # host cameras: stamps and skew
-        if isinstance(timing, dict):
+        clock = self.capabilities.capture_timing  # host cameras: stamps and skew
+        timing = None if clock is None else clock.last_timing
+        if timing is not None:
             result["timing"] = timing
         return result
 
-    async def _measure_targets(self) -> TargetMeasurement:
-        return await self._call(
-            "measure_targets", {}, self.robot.measure_targets,  # type: ignore[attr-defined]
-            lambda m: {"q": _floats(m.q), "t": float(m.t), "targets": [
-                {"chain": t.chain, "p": _floats(t.p), "cov": np.asarray(t.cov, float).tolist(),
-                 **({} if t.uv is None else {"uv": np.asarray(t.uv, float).tolist()})}
-                for t in m.targets]})
-
     async def get_offsets(self) -> np.ndarray:
-        return await self._call("get_offsets", {}, self.robot.get_offsets, _floats)
+        return await self.record("get_offsets", {}, self.robot.get_offsets, _floats)
 
     async def set_offsets(self, offsets: np.ndarray) -> tuple[np.ndarray, str]:
-        return await self._call(
+        return await self.record(
             "set_offsets", {"offsets": _floats(offsets)},
             lambda: self.robot.set_offsets(offsets),
             lambda r: {"previous": _floats(r[0]), "rollback_id": str(r[1])})
 
     async def rollback(self, rollback_id: str) -> np.ndarray:
-        return await self._call("rollback", {"rollback_id": rollback_id},
+        return await self.record("rollback", {"rollback_id": rollback_id},
                                 lambda: self.robot.rollback(rollback_id), _floats)
 
     async def close(self) -> None:
@@ -193,6 +210,19 @@ class RecordingAdapter:
             await self.robot.close()
         finally:
             self._tape.close()
+
+
+class RecordedTargets:
+    """The wrapped robot's `TargetCamera`, every measurement written to the recorder's tape."""
+
+    def __init__(self, recorder: RecordingAdapter, camera: TargetCamera) -> None:
+        self.recorder = recorder
+        self.camera = camera
+
+    async def measure_targets(self) -> TargetMeasurement:
+        result: TargetMeasurement = await self.recorder.record(
+            "measure_targets", {}, self.camera.measure_targets, _targets_to_json)
+        return result
 
 
 def read_header(folder: Path) -> dict[str, Any]:
@@ -211,7 +241,9 @@ def read_header(folder: Path) -> dict[str, Any]:
 
 class ReplayAdapter:
     """Answers a run's robot calls from the recording in `folder` (see the module
-    docstring); nothing is moved or written anywhere but the new run folder."""
+    docstring); nothing is moved or written anywhere but the new run folder.
+    capabilities: a target camera if the recorded robot had one (`measure_targets` from the
+    tape), nothing else."""
 
     driver = "replay"
 
@@ -236,11 +268,8 @@ class ReplayAdapter:
                                  "object")
             self._entries.append(entry)
         self._next = 0
-
-    def __getattr__(self, name: str) -> Any:
-        if name == "measure_targets" and self.__dict__["header"].get("measure_targets"):
-            return self._measure_targets
-        raise AttributeError(name)
+        self.capabilities = Capabilities(
+            targets=self if self.header.get("measure_targets") else None)
 
     def _take(self, call: str, args: Mapping[str, Any]) -> Any:
         if self._next >= len(self._entries):
@@ -285,12 +314,9 @@ class ReplayAdapter:
             images.append(image)
         return StereoCapture(left=images[0], right=images[1], q=_array(r["q"]), t=float(r["t"]))
 
-    async def _measure_targets(self) -> TargetMeasurement:
-        r = self._take("measure_targets", {})
-        return TargetMeasurement(q=_array(r["q"]), t=float(r["t"]), targets=tuple(
-            MeasuredTarget(chain=t["chain"], p=_array(t["p"]), cov=_array(t["cov"]),
-                           uv=None if t.get("uv") is None else _array(t["uv"]))
-            for t in r["targets"]))
+    async def measure_targets(self) -> TargetMeasurement:
+        """The next recorded target measurement (a `TargetCamera` if the header says so)."""
+        return _targets_from_json(self._take("measure_targets", {}))
 
     async def get_offsets(self) -> np.ndarray:
         return _array(self._take("get_offsets", {}))

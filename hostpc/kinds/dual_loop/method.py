@@ -68,10 +68,12 @@ from hostpc.methods.cell import Cell
 from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
 from hostpc.robots.base import (
+    Need,
     RobotAdapter,
     RobotState,
     TargetMeasurement,
-    supports_target_measurement,
+    check_needs,
+    targets_of,
 )
 
 PLANNING_PIXEL_SIGMA = 0.15
@@ -170,6 +172,7 @@ class DualLoopMethod(Method):
     stereo_target; 0 = the controller's covariance as reported)."""
 
     name: ClassVar[str] = "dual_loop"
+    needs: ClassVar[tuple[Need, ...]] = (Need.TARGETS,)
 
     def __init__(self, settings: RunSettings, cell: Cell, run_dir: Path) -> None:
         super().__init__(settings, cell, run_dir)
@@ -194,17 +197,19 @@ class DualLoopMethod(Method):
         self.calibration = camera_calibration(raw.get("calibration"))
         self._home = np.concatenate([HUMANOID_HOME[b.name] for b in self.tree.branches])
         self._t0 = 0.0
+        self._progress: Progress | None = None  # prepare's, for the dataset's notes
+
+    def sample_clock(self) -> DualLoopMethod:
+        return self
 
     def set_time_origin(self, t0: float) -> None:
         """Controller time (s) at the start of the run: sample `t` counts from here."""
         self._t0 = float(t0)
 
     async def prepare(self, robot: RobotAdapter, progress: Progress) -> None:
-        """Nothing to set up; the robot must triangulate targets itself."""
-        if not supports_target_measurement(robot):
-            raise InputError(f"--method dual_loop needs a controller that measures targets "
-                             f"(measure_targets); the {getattr(robot, 'driver', '?')} driver "
-                             "does not")
+        """Nothing to set up; the robot must triangulate targets itself (`needs`: the
+        runner checks it before this; checked here too for use without the runner)."""
+        check_needs(robot, self.needs, f"--method {self.name}")
         progress.message(f"dual_loop: {self.tree.name}, known frames: "
                          f"{', '.join(self.known) or 'none'}")
         self._progress = progress
@@ -352,7 +357,8 @@ class DualLoopMethod(Method):
         if isinstance(outcome, SampleRecord):
             return outcome
         q_end = [float(v) for v in outcome.q]
-        measurement: TargetMeasurement = await robot.measure_targets()  # type: ignore[attr-defined]
+        camera = targets_of(robot, f"--method {self.name}")  # checked by the runner (needs)
+        measurement: TargetMeasurement = await camera.measure_targets()
         q_seen = np.asarray(measurement.q, dtype=float)
         self._check_joints(int(q_seen.size))
         observations = []
@@ -364,9 +370,8 @@ class DualLoopMethod(Method):
                 cov = cov + self.floor_covariance(np.asarray(target.p))
             sample = self._sample(target.chain, q_seen, np.asarray(target.p), cov,
                                   float(measurement.t) - self._t0, q_from)
-            uv = getattr(target, "uv", None)
-            if uv is not None:
-                sample["uv"] = np.asarray(uv, dtype=float).reshape(2, 2).tolist()
+            if target.uv is not None:
+                sample["uv"] = np.asarray(target.uv, dtype=float).reshape(2, 2).tolist()
             observations.append(sample)
         if not observations:
             return SampleRecord(phase, index, False, reason="no target in view", q_end=q_end)
@@ -409,11 +414,11 @@ class DualLoopMethod(Method):
             return {}
         missing = sum("uv" not in s for s in samples)
         if missing:
-            progress = getattr(self, "_progress", None)
-            if progress is not None:
-                progress.message(f"head camera calibration not propagated: {missing} of "
-                                 f"{len(samples)} target observations came without pixel "
-                                 "centres (uv); the sigmas cover the pixel noise only")
+            if self._progress is not None:
+                self._progress.message(
+                    f"head camera calibration not propagated: {missing} of {len(samples)} "
+                    "target observations came without pixel centres (uv); the sigmas cover "
+                    "the pixel noise only")
             return {}
         from hostpc.vision.rig_uncertainty import uncertainty_document
 

@@ -21,7 +21,7 @@ from hostpc.kinds.sphere_probe.planning.contacts import (
 )
 from hostpc.kinds.sphere_probe.planning.setup import PlanConfig, ProbeSetup
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
-from hostpc.robots.base import RobotAdapter
+from hostpc.robots.base import ContactOutcome, RobotAdapter
 
 
 @dataclass(frozen=True)
@@ -96,7 +96,7 @@ def tip_speed_at(chain: Chain, q: np.ndarray, tip: np.ndarray, qd: np.ndarray) -
 
 
 ContactCallback = Callable[[ContactRecord], Awaitable[None] | None]
-GuardedMove = Callable[[np.ndarray, float], Awaitable[Any]]
+GuardedMove = Callable[[np.ndarray, float], Awaitable[ContactOutcome]]
 
 
 async def acquire(robot: RobotAdapter, plan: ProbePlan, setup: ProbeSetup, config: PlanConfig,
@@ -157,9 +157,8 @@ async def probe_contact(robot: RobotAdapter, orientation: PlannedOrientation,
     approach[approach == 0] = 1.0
     latched = outcome.q_latched if outcome.contact else None
     speed = None if outcome.speed is None else float(outcome.speed)
-    qd = getattr(outcome, "qd", None)
-    if speed is None and latched is not None and qd is not None and chain is not None:
-        speed = tip_speed_at(chain, np.asarray(latched, float), setup.tip, qd)
+    if speed is None and latched is not None and outcome.qd is not None and chain is not None:
+        speed = tip_speed_at(chain, np.asarray(latched, float), setup.tip, outcome.qd)
     await _move(robot, contact.q_start, config.move_speed)
     await _move(robot, orientation.q_hover, config.move_speed)
     return ContactRecord(

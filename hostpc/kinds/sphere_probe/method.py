@@ -114,17 +114,17 @@ PLAN_FILE = "probe_plan.json"
 FRAMES_FILE = "probe_frames.json"
 
 
-def _setup_from_cell(cell: Any, options: dict[str, Any]) -> ProbeSetup:
+def _setup_from_cell(cell: Cell, options: dict[str, Any]) -> ProbeSetup:
     """The probe set-up from the cell's raw description (controller + --cell file) key
     ``probe`` (or top-level keys) and the method options."""
-    raw = dict(getattr(cell, "raw", {}) or {})
+    raw = dict(cell.raw or {})
     probe = dict(raw.get("probe") or {})
     aliases = {"sphere_centre_nominal": "sphere_centre", "tip_nominal": "tip",
                "sphere_center": "sphere_centre"}
     for old, new in aliases.items():
         if old in probe and new not in probe:
             probe[new] = probe.pop(old)
-    known = tuple(k for k in getattr(cell, "known", ()) if k in ("sphere", "tool"))
+    known = tuple(k for k in cell.known if k in ("sphere", "tool"))
     known = tuple(options.get("probe_known", known))
     return ProbeSetup.from_description(probe, known=known,
                                        **{k: options.get(k) for k in (

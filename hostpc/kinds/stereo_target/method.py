@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -38,6 +38,9 @@ from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
 from hostpc.planning.design import look_at_candidates
 from hostpc.robots.base import RobotAdapter, RobotState
+
+if TYPE_CHECKING:  # OpenCV's layer, loaded by prepare
+    from hostpc.vision import TargetMeasurer
 
 RIG_FILE = "rig.json"
 RIG_REPORT_FILE = "rig_calibration.json"
@@ -85,7 +88,7 @@ class StereoTargetMethod(Method):
         self.rig: Any = None
         self.rig_report: dict[str, Any] = {}
         self.rig_plan: dict[str, Any] = {}
-        self._measurer: Any = None
+        self._measurer: TargetMeasurer | None = None
         self._tool, self._target = require_camera_cell(cell)
         tool = self._tool
         self._chain = get_robot(cell.robot)
@@ -100,6 +103,9 @@ class StereoTargetMethod(Method):
     @property
     def rig_path(self) -> Path:
         return self.run_dir / RIG_FILE
+
+    def sample_clock(self) -> StereoTargetMethod:
+        return self
 
     def set_time_origin(self, t0: float) -> None:
         """Controller time (s) at the start of the run: sample `t` counts from here."""
@@ -296,6 +302,8 @@ class StereoTargetMethod(Method):
     async def acquire(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
                       q_from: np.ndarray | None) -> SampleRecord:
         """Move to q, capture, detect and triangulate (see the module docstring)."""
+        from hostpc.vision import TargetRejected
+
         outcome = await self._moves.move(robot, phase, index, q, q_from)
         if isinstance(outcome, SampleRecord):
             return outcome
@@ -304,12 +312,11 @@ class StereoTargetMethod(Method):
             raise ControllerError("stereo_target: prepare() was not run")
         observation = self._measurer.measure(capture.left, capture.right,
                                              normal_hint=self.normal_in_camera(capture.q))
-        p = getattr(observation, "p", None)
-        if p is None:
-            reason = getattr(observation, "reason", "no observation")
-            return SampleRecord(phase, index, False, reason=f"target rejected: {reason}",
+        if isinstance(observation, TargetRejected):
+            return SampleRecord(phase, index, False,
+                                reason=f"target rejected: {observation.reason}",
                                 q_end=outcome.q.tolist())
-        p = np.asarray(p, float)
+        p = np.asarray(observation.p, float)
         cov = np.asarray(observation.cov, float)
         if self.pixel_floor > 0:
             cov = cov + self.expected_covariance(p[None, :], self.pixel_floor)[0]
@@ -320,9 +327,8 @@ class StereoTargetMethod(Method):
             "t": float(capture.t) - self._t0,
             "approach": self._moves.signs(q_from, capture.q),
         }
-        uv = getattr(observation, "uv", None)
-        if uv is not None:
-            sample["uv"] = np.asarray(uv, float).tolist()
+        if observation.uv is not None:
+            sample["uv"] = np.asarray(observation.uv, float).tolist()
         return SampleRecord(phase, index, True, sample=sample, q_end=outcome.q.tolist())
 
     # ---------------------------------------------------------------- dataset
@@ -369,7 +375,7 @@ class StereoTargetMethod(Method):
     def _rig_uncertainty(self) -> dict[str, Any]:
         """The dataset's `rig_uncertainty` block (the rig and its calibration covariance,
         hostpc.fitting.shared_errors), or nothing for a rig without a covariance."""
-        if self.rig is None or getattr(self.rig, "covariance", None) is None:
+        if self.rig is None or self.rig.covariance is None:
             return {}
         from hostpc.vision.rig_uncertainty import uncertainty_document
 

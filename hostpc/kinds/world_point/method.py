@@ -37,7 +37,7 @@ from hostpc.methods.base import (
     Progress,
     SampleRecord,
 )
-from hostpc.robots.base import RobotAdapter, RobotState
+from hostpc.robots.base import Need, RobotAdapter, RobotState, tracker_of
 
 TRACKER_FILE = "tracker.json"
 LOS_MARGIN_DEG = 10.0
@@ -76,6 +76,7 @@ class WorldPointMethod(Method):
     """See the module docstring. options: none beyond the run settings."""
 
     name: ClassVar[str] = "world_point"
+    needs: ClassVar[tuple[Need, ...]] = (Need.TRACKER,)
 
     def __init__(self, settings: Any, cell: Any, run_dir: Path) -> None:
         super().__init__(settings, cell, run_dir)
@@ -85,6 +86,9 @@ class WorldPointMethod(Method):
         # an approach-dependent effect (backlash) in the model: each joint arrives from
         # both sides, through via-points where needed (methods/approach_moves.py)
         self._moves = ApproachMoves(settings, self._chain)
+
+    def sample_clock(self) -> WorldPointMethod:
+        return self
 
     def set_time_origin(self, t0: float) -> None:
         """Controller time (s) at the start of the run: sample `t` counts from here."""
@@ -104,12 +108,7 @@ class WorldPointMethod(Method):
         if self.tracker_path.is_file():
             self._description = json.loads(self.tracker_path.read_text(encoding="utf-8"))
         else:
-            measure = getattr(robot, "measure_tracker", None)
-            if not callable(measure):
-                raise InputError("world_point needs a controller with a laser tracker "
-                                 f"(measure_tracker); the {getattr(robot, 'driver', '?')} "
-                                 "driver has none")
-            reading = await measure()
+            reading = await tracker_of(robot, f"--method {self.name}").measure_tracker()
             self._description = dict(reading.description)
             write_json_atomic(self.tracker_path, self._description)
         joints, notes = identifiable_offsets(self._chain.n, self.cell.known)
@@ -206,7 +205,7 @@ class WorldPointMethod(Method):
         outcome = await self._moves.move(robot, phase, index, q, q_from)
         if isinstance(outcome, SampleRecord):
             return outcome
-        reading = await robot.measure_tracker()  # type: ignore[attr-defined]
+        reading = await tracker_of(robot, f"--method {self.name}").measure_tracker()
         names = list(self.markers())
         wanted = names[max(int(self._visible_marker(np.asarray(q)[None])[0]), 0)]
         name = wanted if wanted in reading.points else next(iter(reading.points), None)
