@@ -184,7 +184,7 @@ def test_effect_sizes_with_sigma_against_the_truth(
     fit = diagnosis.fit
     for name in ("joint_compliance.c2", "joint_compliance.c3", "encoder_scale.s2"):
         row = sizes[name]
-        unit, factor = DISPLAY[fit.parameters[name].unit]  # deg/(N m), ppm
+        unit, factor = DISPLAY[fit.parameters[name].unit]  # deg/(kN m), ppm
         assert row["unit"] == unit
         assert float(row["value"]) / factor == pytest.approx(fit.value(name), rel=1e-4)
         assert float(row["sigma"]) / factor == pytest.approx(fit.sigma(name), rel=0.03)
