@@ -104,7 +104,7 @@ def format_state(state: ControllerState, address: str) -> str:
     session = "authenticated" if state.authenticated else "read-only"
     width, height = state.camera.get("image_width"), state.camera.get("image_height")
     if is_camera_service(state):
-        camera = f"stereo {width}x{height}" if width and height else "no camera described"
+        camera = f"stereo camera {width}x{height}" if width and height else "stereo camera"
         return (f"camera service {address} (`hostpc camera serve`: no robot, no joints): "
                 f"{camera}, time {state.time:.3f} s, session {session}\n"
                 f"use it with `hostpc calibrate --driver ur --robot HOST "
