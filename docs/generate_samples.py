@@ -22,7 +22,8 @@ Options after the command, separated by ``;``:
   shown ones are one ``...`` line. Without ``show`` the whole output.
 - ``grep=REGEX``: then only the lines that match REGEX (a table's header and two rows).
 - ``prepare=NAME``: make the files the command reads first (``PREPARE`` below: a dataset
-  with an outlier, a dataset whose zero drifts, a calibration run on the simulator).
+  with an outlier, a dataset whose zero drifts, a calibration run on the simulator, a
+  recorded one).
 - ``prompt=no``: no ``$ command`` line.
 - ``slow``: the block needs a calibration run (skipped with ``--fast``).
 
@@ -120,7 +121,17 @@ def _hidden_run(work: Path) -> None:
               "--no-push", "--no-report", "--out", "runs/hidden"])
 
 
+#: the camera-free recipe of docs/vision.md, first step: a recorded simulator run, whose
+#: recording holds the chessboard pairs the rig was calibrated from
+RECORDED_RUN = "hostpc calibrate --robot sim --record --no-report --out runs/recorded"
+
+
+def _recorded_run(work: Path) -> None:
+    run_main(shlex.split(RECORDED_RUN)[1:])
+
+
 PREPARE: dict[str, Callable[[Path], None]] = {
+    "recorded_run": _recorded_run,
     "outlier_dataset": _outlier_dataset,
     "drift_dataset": _drift_dataset,
     "hidden_run": _hidden_run,
