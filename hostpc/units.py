@@ -9,7 +9,8 @@ import math
 DISPLAY_UNITS = {
     "rad": ("deg", math.degrees(1.0)),
     "m": ("mm", 1e3),
-    "rad/(N m)": ("deg/(N m)", math.degrees(1.0)),
+    # a compliance is ~1e-4 deg per N m: per kN m it shows digits ("+0.1719", not "+0.0002")
+    "rad/(N m)": ("deg/(kN m)", math.degrees(1.0) * 1e3),
     "1": ("ppm", 1e6),
 }
 

@@ -44,3 +44,18 @@ def more_poses_reason(journal: Journal, plan: Plan, result: FitResult,
               f"{chi2_dof:.3g} above its band {upper:.3g})")
     journal.event("more_poses", reason=reason, n=int(plan.more.shape[0]))
     return reason
+
+
+def more_poses_message(reason: str, journal: Journal, plan: Plan) -> str:
+    """The progress line when the plan grows: how many further poses are measured now and
+    how many a resume replays from the journal (never "measuring 49 more" while it only
+    reads them back)."""
+    first, total = plan.q.shape[0], plan.more.shape[0]
+    journaled = sum(first <= r.index < first + total for r in journal.records("fit"))
+    if journaled == 0:
+        return f"{reason}: measuring {total} more poses"
+    if journaled >= total:
+        return (f"{reason}: the {total} more poses were measured before; replaying them "
+                "from the journal")
+    return (f"{reason}: {total} more poses, {journaled} replayed from the journal, measuring "
+            f"{total - journaled}")

@@ -31,7 +31,7 @@ import numpy as np
 from hostpc.calibrate import run_reference as cell_reference
 from hostpc.calibrate.joint_status import joint_sources
 from hostpc.calibrate.journal import Journal, write_json_atomic
-from hostpc.calibrate.more_poses import more_poses_reason
+from hostpc.calibrate.more_poses import more_poses_message, more_poses_reason
 from hostpc.calibrate.outcome import parse_required_joints
 from hostpc.calibrate.outcome_files import run_outcome
 from hostpc.calibrate.push import (
@@ -265,7 +265,7 @@ class Runner:
         result, dataset = self._fit(method, settings)
         reason = more_poses_reason(self.journal, plan, result, pushed=self._pushed_ever())
         if reason is not None:  # diagnostics need more data to see the missing effect
-            progress.message(f"{reason}: measuring {plan.more.shape[0]} more poses")
+            progress.message(more_poses_message(reason, self.journal, plan))
             self._timer.begin()
             q_now = await self._acquire(method, "fit", plan.more, q_now, plan.q.shape[0])
             await self._timer.end("measure")
@@ -304,14 +304,14 @@ class Runner:
         if exports is not None:  # the robot keeps no offsets (UR): these files are the push
             document["push"].update(on_controller=False, exports=exports)
             document["files"].update({f"ur_{kind}": path for kind, path in exports.items()})
-        summary = format_summary(document)
         archive_result(self.run_dir)
-        (self.run_dir / "summary.txt").write_text(summary + "\n", encoding="utf-8")
         if self.report:
             report_file = write_run_report(self.run_dir, dataset, settings, document, truth,
                                            self.progress)
             if report_file:
                 document["files"]["report"] = report_file
+        summary = format_summary(document)  # after the report: it names the report's path
+        (self.run_dir / "summary.txt").write_text(summary + "\n", encoding="utf-8")
         write_json_atomic(self.run_dir / "result.json", document)
         self.journal.event("result", exit_code=document["exit_code"], push=push_status,
                            verdict=None if verify_result is None else verify_result.verdict,

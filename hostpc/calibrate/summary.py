@@ -167,8 +167,7 @@ def format_summary(document: Mapping[str, Any]) -> str:
         f"{'sim (' + robot['address'] + ')' if robot.get('sim') else robot['address']}",
         f"run folder: {document['run_dir']}",
         f"known frames: {', '.join(document['known']) or 'none (every frame estimated)'}",
-        f"plan: {plan['n_poses']} poses ({plan.get('criterion', '?')}-optimal from "
-        f"{plan.get('n_candidates', '?')} candidates), {plan['n_verify']} verification poses",
+        plan_line(plan, acq),
         f"measured: {acq.get('n_poses_measured', acq['n_measured'])} of {acq['n_planned']} "
         "fit poses"
         + (f" ({acq['n_measured']} samples)"
@@ -224,9 +223,25 @@ def format_summary(document: Mapping[str, Any]) -> str:
         if inside:
             lines.append(f"  {sum(inside)} of {len(inside)} identifiable offsets within 3 sigma"
                          f", largest error {truth['max_abs_error_deg']:.5f} deg")
+    report = (document.get("files") or {}).get("report")
+    if report:
+        lines.append(f"report: {report}")
     if outcome.get("next_command"):
         lines.append(f"next: {outcome['next_command']}")
     return "\n".join(lines)
+
+
+def plan_line(plan: Mapping[str, Any], acquisition: Mapping[str, Any]) -> str:
+    """The summary's plan line: the poses planned and, when the model failed on them and
+    the plan grew (more_poses.py), what it grew to, so it never disagrees with the
+    "measured" line below it."""
+    source = (f"{plan.get('criterion', '?')}-optimal from {plan.get('n_candidates', '?')} "
+              "candidates")
+    if acquisition.get("more_poses"):
+        return (f"plan: {plan['n_poses']} poses ({source}), grown to "
+                f"{acquisition['n_planned']} fit and {plan['n_verify']} verification poses "
+                f"when the model did not explain the first {plan['n_poses']}")
+    return f"plan: {plan['n_poses']} poses ({source}), {plan['n_verify']} verification poses"
 
 
 SOURCE_MARK = {"hold": " (held)", "prior": " (prior)"}

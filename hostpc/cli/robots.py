@@ -15,6 +15,8 @@ import json
 import math
 from typing import Any
 
+import numpy as np
+
 from hostpc.errors import InputError
 from hostpc.kinematics import Chain, get_robot, names
 from hostpc.kinematics.humanoid import get_tree, tree_names
@@ -50,18 +52,38 @@ def resolve_chain(robot: str, base_link: str | None, tip_link: str | None) -> Ch
     return get_robot(robot)
 
 
+def _number(value: float, decimals: int) -> float:
+    """``value`` rounded as printed, without a negative zero (``-0.000`` is 0.000)."""
+    return round(float(value), decimals) + 0.0
+
+
+def _mount(T: Any) -> dict[str, list[float]]:
+    """A fixed mount transform as xyz (mm) and roll-pitch-yaw (deg), rounded as printed."""
+    from hostpc.kinematics.rotations import matrix_to_rpy
+
+    T = np.asarray(T, dtype=float)
+    return {"xyz_mm": [_number(v * 1e3, 3) for v in T[:3, 3]],
+            "rpy_deg": [_number(math.degrees(v), 4) for v in matrix_to_rpy(T[:3, :3])]}
+
+
 def _describe(chain: Chain) -> dict[str, Any]:
     rows = []
     for i in range(chain.n):
         kind = "prismatic" if chain.joint_is_prismatic[i] else "revolute"
         rows.append({
             "joint": i + 1, "type": kind,
-            "a_mm": chain.a[i] * 1e3, "alpha_deg": math.degrees(chain.alpha[i]),
-            "d_mm": chain.d[i] * 1e3, "theta_deg": math.degrees(chain.theta[i]),
+            "a_mm": _number(chain.a[i] * 1e3, 6),
+            "alpha_deg": _number(math.degrees(chain.alpha[i]), 6),
+            "d_mm": _number(chain.d[i] * 1e3, 6),
+            "theta_deg": _number(math.degrees(chain.theta[i]), 6),
             "mass_kg": None if chain.mass is None else float(chain.mass[i]),
         })
-    return {"name": chain.name, "convention": chain.convention, "joints": rows,
-            "mounts": chain.has_mounts}
+    description = {"name": chain.name, "convention": chain.convention, "joints": rows,
+                   "mounts": chain.has_mounts}
+    if chain.has_mounts:  # T_base_link0 before the first row, T_link_flange after the last
+        description["base_mount"] = _mount(chain.T_base_link0)
+        description["flange_mount"] = _mount(chain.T_link_flange)
+    return description
 
 
 def run(args: argparse.Namespace) -> int:
@@ -91,8 +113,15 @@ def run(args: argparse.Namespace) -> int:
           f"{'theta deg':>9s} {'mass kg':>8s}")
     for r in description["joints"]:
         mass = "-" if r["mass_kg"] is None else f"{r['mass_kg']:.3f}"
-        print(f"{r['joint']:5d} {r['type']:>9s} {r['a_mm']:9.2f} {r['alpha_deg']:9.3f} "
-              f"{r['d_mm']:9.2f} {r['theta_deg']:9.3f} {mass:>8s}")
+        print(f"{r['joint']:5d} {r['type']:>9s} {_number(r['a_mm'], 2):9.2f} "
+              f"{_number(r['alpha_deg'], 3):9.3f} {_number(r['d_mm'], 2):9.2f} "
+              f"{_number(r['theta_deg'], 3):9.3f} {mass:>8s}")
+    for key, label in (("base_mount", "base mount (T_base_link0, before joint 1)"),
+                       ("flange_mount", "flange mount (T_link_flange, after the last joint)")):
+        if key in description:
+            xyz = ", ".join(f"{_number(v, 2):.2f}" for v in description[key]["xyz_mm"])
+            rpy = ", ".join(f"{_number(v, 3):.3f}" for v in description[key]["rpy_deg"])
+            print(f"{label}: xyz [{xyz}] mm, rpy [{rpy}] deg")
     return 0
 
 

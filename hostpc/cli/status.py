@@ -73,6 +73,7 @@ def state_as_dict(state: ControllerState, address: str) -> dict[str, Any]:
     """The state as JSON-ready values, angles in degrees."""
     return {
         "controller": address,
+        "kind": "camera_service" if is_camera_service(state) else "controller",
         "robot": state.robot_name,
         "n_joints": state.n_joints,
         "mode": state.mode,
@@ -92,9 +93,22 @@ def _bits(values: tuple[bool, ...]) -> str:
     return " ".join("1" if v else "0" for v in values) or "-"
 
 
+def is_camera_service(state: ControllerState) -> bool:
+    """A camera service (`hostpc camera serve`) speaks the protocol with no robot: no
+    robot name and no joints."""
+    return state.n_joints == 0 and not state.robot_name
+
+
 def format_state(state: ControllerState, address: str) -> str:
-    """Human-readable table, angles in degrees."""
+    """Human-readable table, angles in degrees (a camera service: its camera only)."""
     session = "authenticated" if state.authenticated else "read-only"
+    width, height = state.camera.get("image_width"), state.camera.get("image_height")
+    if is_camera_service(state):
+        camera = f"stereo camera {width}x{height}" if width and height else "stereo camera"
+        return (f"camera service {address} (`hostpc camera serve`: no robot, no joints): "
+                f"{camera}, time {state.time:.3f} s, session {session}\n"
+                f"use it with `hostpc calibrate --driver ur --robot HOST "
+                f"--camera-service {address}`")
     lines = [
         f"controller {address}: robot {state.robot_name}, mode {state.mode}, "
         f"time {state.time:.3f} s, session {session}",
@@ -108,7 +122,6 @@ def format_state(state: ControllerState, address: str) -> str:
         )
     lines.append(f"digital inputs : {_bits(state.digital_inputs)}")
     lines.append(f"digital outputs: {_bits(state.digital_outputs)}")
-    width, height = state.camera.get("image_width"), state.camera.get("image_height")
     if width and height:
         lines.append(f"camera: stereo {width}x{height}")
     return "\n".join(lines)

@@ -130,20 +130,13 @@ def needed_samples(check: ModelCheck) -> int:
     return max(math.ceil(3 * largest / m), 2 * DEFAULT_FOLDS)
 
 
-def few_samples_sentence(check: ModelCheck) -> str | None:
-    """A plain statement when the samples are too few to judge the model (None if not):
-    no degrees of freedom left, fewer than FEW_DOF, or candidates that cannot be tested."""
+def few_samples_problems(check: ModelCheck) -> list[str]:
+    """Why the samples are too few to judge the model, as clauses (empty: they are not):
+    fewer than FEW_DOF degrees of freedom, candidates that cannot be tested, too few samples
+    for a held-out RMS. (No degrees of freedom at all: few_samples_sentence says so.)"""
     a = check.adequacy
-    n_samples, m = check.fit.residuals_raw.shape
+    n_samples = check.fit.residuals_raw.shape[0]
     untestable = [c.effect for c in check.candidates if not c.testable]
-    needed = needed_samples(check)
-    if a.dof <= 0:
-        return (f"Too few samples to judge: {n_samples} samples give {n_samples * m} numbers "
-                f"for {int((~check.fit.fixed).sum())} fitted parameters, so nothing can be "
-                f"tested (no verdict, no candidate, no noise estimate). Measure at least "
-                f"{needed} samples.")
-    if a.dof >= FEW_DOF and not untestable:
-        return None
     problems = []
     if a.dof < FEW_DOF:
         problems.append(f"{a.dof} degrees of freedom give a wide chi-square band "
@@ -152,8 +145,25 @@ def few_samples_sentence(check: ModelCheck) -> str | None:
         problems.append(f"{len(untestable)} of {len(check.candidates)} candidate effects "
                         f"cannot be tested ({', '.join(untestable)}: no degrees of freedom "
                         f"left with them)")
-    if a.cv_rms is None and n_samples < 2 * DEFAULT_FOLDS:
+    if problems and a.cv_rms is None and n_samples < 2 * DEFAULT_FOLDS:
         problems.append("there are too few samples for a held-out RMS")
+    return problems
+
+
+def few_samples_sentence(check: ModelCheck) -> str | None:
+    """A plain statement when the samples are too few to judge the model (None if not):
+    no degrees of freedom left, fewer than FEW_DOF, or candidates that cannot be tested."""
+    a = check.adequacy
+    n_samples, m = check.fit.residuals_raw.shape
+    needed = needed_samples(check)
+    if a.dof <= 0:
+        return (f"Too few samples to judge: {n_samples} samples give {n_samples * m} numbers "
+                f"for {int((~check.fit.fixed).sum())} fitted parameters, so nothing can be "
+                f"tested (no verdict, no candidate, no noise estimate). Measure at least "
+                f"{needed} samples.")
+    problems = few_samples_problems(check)
+    if not problems:
+        return None
     return (f"Too few samples to judge reliably ({n_samples} samples): "
             f"{'; '.join(problems)}. The verdict is weak evidence either way; measure at "
             f"least {needed} samples.")

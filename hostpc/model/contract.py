@@ -12,6 +12,14 @@ from hostpc.model.effect import Effect, ModelContext, numeric_jacobian
 JACOBIAN_TOLERANCE = 1e-4
 
 
+def _check_shape(effect: Effect, what: str, value: np.ndarray,
+                 shape: tuple[int, ...]) -> None:
+    """EffectError naming the effect unless ``value`` is an array of ``shape``."""
+    got = tuple(np.shape(value))
+    if got != shape:
+        raise EffectError(f"effect {effect.name!r}: {what} has shape {got}, expected {shape}")
+
+
 def check_effect(effect: Effect, ctx: ModelContext, measurement_dim: int) -> None:
     """Raise EffectError naming the effect and the broken rule. Frame effects have no code."""
     if effect.hook == "frame":
@@ -23,6 +31,9 @@ def check_effect(effect: Effect, ctx: ModelContext, measurement_dim: int) -> Non
     zero = np.zeros(n_params)
     n_samples, n_joints = ctx.q_cmd.shape
     try:
+        if effect.is_linear and effect.hook in ("joint", "geometry"):
+            rows = n_joints if effect.hook == "joint" else 5 * n_joints
+            _check_shape(effect, "basis", effect.basis(ctx), (n_samples, rows, n_params))
         if effect.hook == "joint":
             value, shape = effect.joint_delta(ctx, zero), (n_samples, n_joints)
             analytic = effect.joint_jacobian(ctx, p)

@@ -25,7 +25,8 @@ from typing import Any
 
 from hostpc.diagnostics import Diagnosis
 from hostpc.report.html import diagnosis_body
-from hostpc.report.markup import escape, page, table
+from hostpc.report.markup import escape, page, prose, table
+from hostpc.report.run_advice import run_advice
 
 Document = Mapping[str, Any]
 
@@ -126,8 +127,8 @@ def outcome_table(result: Document) -> str:
                   else '<span class="significant">NOT CALIBRATED</span>')
         rows.append([escape(joint_name(j, str(row.get("label", "")))), status,
                      escape(row.get("source", "")), flag(row.get("pushed")),
-                     flag(row.get("verified")), escape(row.get("reason") or ""),
-                     escape(row.get("fix") or "")])
+                     flag(row.get("verified")), prose(row.get("reason") or ""),
+                     prose(row.get("fix") or "")])
     return ("<h2>Joints</h2>" + table(("joint", "status", "source", "pushed", "verified",
                                        "why not calibrated", "what would determine it"),
                                       rows, table_id="joints", text_columns=(1, 2, 5, 6)))
@@ -262,7 +263,10 @@ def fit_section(result: Document) -> str:
     acquisition = result.get("acquisition") or {}
     rows = []
     if plan:
-        rows.append(("plan", f"{plan.get('n_poses', '-')} fit poses, "
+        grown = (f" grown to {acquisition.get('n_planned', '-')} (the model did not explain "
+                 f"the first {plan.get('n_poses', '-')})" if acquisition.get("more_poses")
+                 else "")
+        rows.append(("plan", f"{plan.get('n_poses', '-')} fit poses{grown}, "
                              f"{plan.get('n_verify', '-')} verification poses"))
     if acquisition:
         rows.append(("measured", f"{acquisition.get('n_measured', '-')} samples of "
@@ -288,7 +292,7 @@ def fit_section(result: Document) -> str:
     if not rows:
         return ""
     return "<h2>Fit</h2>" + table(("quantity", "value"),
-                                  [(escape(k), escape(v)) for k, v in rows], table_id="fit",
+                                  [(escape(k), prose(v)) for k, v in rows], table_id="fit",
                                   text_columns=(1,))
 
 
@@ -305,7 +309,7 @@ def render_calibration_html(result: Document, diagnosis: Diagnosis | None = None
         f" at {robot['address']}" if robot.get("address") else "")
     title = f"zerocal calibration: {result.get('method', 'run')} on {name}{where}"
     css, head, lines = verdict(result)
-    explanation = "".join(f"<p>{escape(line)}</p>" for line in lines)
+    explanation = "".join(f"<p>{prose(line)}</p>" for line in lines)
     known = ", ".join(result.get("known", [])) or "none (every frame estimated)"
     run_dir = result.get("run_dir")
     facts = (f"<p>Run folder <code>{escape(run_dir)}</code>; " if run_dir else "<p>") + \
@@ -325,7 +329,8 @@ def render_calibration_html(result: Document, diagnosis: Diagnosis | None = None
         sections.append("<p>Not diagnosed: run <code>hostpc diagnose</code> on the run's "
                         "dataset.json for the diagnosis.</p>")
     else:
-        sections.append(diagnosis_body(diagnosis, truth, skip_parameters=("joint_offsets",)))
+        sections.append(diagnosis_body(diagnosis, truth, skip_parameters=("joint_offsets",),
+                                       advice_sentences=run_advice(diagnosis, result)))
     return page(title, "\n".join(s for s in sections if s))
 
 

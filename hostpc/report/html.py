@@ -12,6 +12,7 @@ from typing import Any
 
 import hostpc
 from hostpc.diagnostics import Diagnosis
+from hostpc.diagnostics.candidates import Candidate
 from hostpc.diagnostics.pipeline import variables_of
 from hostpc.report import plots
 from hostpc.report.effect_sizes import effect_sizes
@@ -20,6 +21,7 @@ from hostpc.report.markup import figure, page
 from hostpc.report.markup import mm as _mm
 from hostpc.report.markup import num as _num
 from hostpc.report.markup import p_value as _p
+from hostpc.report.markup import prose as _prose
 from hostpc.report.markup import table as _table
 
 
@@ -60,6 +62,24 @@ def _candidates(diagnosis: Diagnosis) -> str:
     return _table(("effect", "delta BIC", "delta BIC (all)", "RMS [mm]", "held-out [mm]",
                    "chi2/dof", "p", "parameters the data need", "why not taken"), rows,
                   flags=flags)
+
+
+def changes_the_fit(candidate: Candidate) -> bool:
+    """Whether adding the candidate changes the fit: it was tested and the data need at
+    least one of its parameters (else its delta BIC is 0 and it has no bar to draw)."""
+    return (candidate.testable and bool(candidate.selected)
+            and candidate.delta_bic is not None and candidate.delta_bic != 0.0)
+
+
+def _candidate_chart(diagnosis: Diagnosis) -> str:
+    """The candidates' delta BIC chart, or one sentence when no candidate changes the fit
+    (a chart of zero-length bars is an empty frame)."""
+    if any(changes_the_fit(c) for c in diagnosis.candidates):
+        return _img(plots.candidate_ranking(diagnosis), "candidate ranking")
+    tested = sum(c.testable for c in diagnosis.candidates)
+    return (f'<p id="no-candidate-changes">No candidate effect changes the fit: the data '
+            f"need none of the parameters of the {tested} effects tested (delta BIC 0 for "
+            f"each; the table lists them).</p>")
 
 
 def _interactions(diagnosis: Diagnosis, top: int = 15) -> str:
@@ -113,17 +133,20 @@ def _identifiability(diagnosis: Diagnosis) -> str:
 
 
 def diagnosis_body(diagnosis: Diagnosis, truth: Mapping[str, Any] | None = None,
-                   skip_parameters: Sequence[str] = ()) -> str:
-    """The diagnosis as HTML sections (no page shell): the model's verdict, advice,
-    adequacy, residual views, candidates, ladder, parameters (effect sizes; against
-    ``truth`` for a simulated run, without the effects in ``skip_parameters``) and
-    identifiability."""
+                   skip_parameters: Sequence[str] = (),
+                   advice_sentences: Sequence[str] | None = None) -> str:
+    """The diagnosis as HTML sections (no page shell): the model's verdict, advice
+    (``advice_sentences`` instead of the diagnosis's own, if given: a calibration report's,
+    hostpc.report.run_advice), adequacy, residual views, candidates, ladder, parameters
+    (effect sizes; against ``truth`` for a simulated run, without the effects in
+    ``skip_parameters``) and identifiability."""
     check = diagnosis.check
     fit = diagnosis.fit
     a = check.adequacy
     verdict_class = "good" if a.adequate else "bad"
     verdict = "adequate" if a.adequate else "NOT adequate"
-    advice = "".join(f"<li>{_e(s)}</li>" for s in diagnosis.advice)
+    sentences = diagnosis.advice if advice_sentences is None else advice_sentences
+    advice = "".join(f"<li>{_prose(s)}</li>" for s in sentences)
     outliers = set(check.excluded)
     worst = _table(("sample", "|residual| [mm]", "whitened [sigma]"),
                    [(str(w.index) + (" (outlier)" if w.index in outliers else ""), _mm(w.norm),
@@ -152,12 +175,12 @@ def diagnosis_body(diagnosis: Diagnosis, truth: Mapping[str, Any] | None = None,
         f"<p>Binned residuals against each variable (red: significant after correction for "
         f"{len(diagnosis.residuals.patterns)} variables).</p>{patterns}",
         "<h2>Which effect is missing?</h2>",
-        f'<div class="row">{_img(plots.candidate_ranking(diagnosis), "candidate ranking")}'
+        f'<div class="row">{_candidate_chart(diagnosis)}'
         f"<div>{_candidates(diagnosis)}</div></div>",
         f"<p>Effect-agnostic search: {check.n_interaction_tests} (parameter, variable) pairs "
         f"tested.</p>",
-        f'<div class="row">{_img(plots.interaction_ranking(diagnosis), "interactions")}'
-        f"<div>{_interactions(diagnosis)}</div></div>",
+        (f'<div class="row">{_img(plots.interaction_ranking(diagnosis), "interactions")}'
+         f"<div>{_interactions(diagnosis)}</div></div>" if diagnosis.interactions else ""),
         f"<h2>Ladder</h2>{_ladder(diagnosis)}",
         f"<h2>Parameters: effect sizes{skipped}</h2>"
         f"{_parameters(diagnosis, truth, skip_parameters)}",

@@ -38,6 +38,15 @@ def escape(value: object) -> str:
     return html.escape(str(value))
 
 
+def prose(value: object) -> str:
+    """A sentence as HTML: escaped, and each command the text quotes between backticks
+    (`hostpc diagnose RUN/dataset.json`) set as code, never shown with its backticks."""
+    parts = escape(value).split("`")
+    if len(parts) % 2 == 0:  # an unpaired backtick: no command to mark, drop none
+        return escape(value)
+    return "".join(f"<code>{part}</code>" if k % 2 else part for k, part in enumerate(parts))
+
+
 def mm(value: float | None) -> str:
     """Metres as mm with 4 decimals; '-' for None and non-finite."""
     return "-" if value is None or not math.isfinite(value) else f"{value * 1e3:.4f}"

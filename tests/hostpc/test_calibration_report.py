@@ -184,13 +184,13 @@ def test_effect_sizes_with_sigma_against_the_truth(
     fit = diagnosis.fit
     for name in ("joint_compliance.c2", "joint_compliance.c3", "encoder_scale.s2"):
         row = sizes[name]
-        unit, factor = DISPLAY[fit.parameters[name].unit]  # deg/(N m), ppm
+        unit, factor = DISPLAY[fit.parameters[name].unit]  # deg/(kN m), ppm
         assert row["unit"] == unit
         assert float(row["value"]) / factor == pytest.approx(fit.value(name), rel=1e-4)
         assert float(row["sigma"]) / factor == pytest.approx(fit.sigma(name), rel=0.03)
         assert abs(float(row["(fitted - true) / sigma"])) <= 3.0, (name, row)
     assert float(sizes["joint_compliance.c2"]["true (simulation)"]) == pytest.approx(
-        math.degrees(2.0e-5), rel=1e-4)
+        math.degrees(2.0e-5) * 1e3, rel=1e-4)  # deg/(kN m)
     assert float(sizes["encoder_scale.s2"]["true (simulation)"]) == 0.0  # not injected: zero
     assert sizes["tool.x"]["true (simulation)"] == "not simulated by name"
     without = ReportReader(render_calibration_html(document(), diagnosis, None))

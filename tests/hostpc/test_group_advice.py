@@ -1,5 +1,5 @@
 """The advice on a "parameter differs per level" finding: its figures in the units a
-reader sees (the CLI's display table: mm, deg, ppm, deg/(N m)), and a level named only when
+reader sees (the CLI's display table: mm, deg, ppm, deg/(kN m)), and a level named only when
 it stands out from the runner-up; level names quoted in the list of values."""
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ def _interaction(shifts: dict[str, float], unit: str = "m", parameter: str = "wo
     (3e-4, "m", "+0.3 mm"),
     (-math.radians(0.0123), "rad", "-0.0123 deg"),
     (1.2e-3, "1", "+1200 ppm"),
-    (math.radians(2e-3), "rad/(N m)", "+0.002 deg/(N m)"),
+    (math.radians(2e-3), "rad/(N m)", "+2 deg/(kN m)"),
     (2e-3, "s", "+0.002 s"),
     (-0.5, "", "-0.5"),
 ])

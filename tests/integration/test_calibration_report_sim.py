@@ -72,8 +72,8 @@ def test_hidden_compliance_effect_sizes_against_the_truth(
     fitted = json.loads((out / "fit.json").read_text())["parameters"]
     for name, true in (("joint_compliance.c2", 3e-6), ("joint_compliance.c3", 4e-6)):
         row, fit = sizes[name], fitted[name]
-        degrees = math.degrees(1.0)  # the report shows deg/(N m)
-        assert row["unit"] == "deg/(N m)"
+        degrees = math.degrees(1.0) * 1e3  # the report shows deg/(kN m)
+        assert row["unit"] == "deg/(kN m)"
         assert float(row["value"]) == pytest.approx(fit["value"] * degrees, rel=1e-4)
         assert float(row["sigma"]) == pytest.approx(fit["std"] * degrees, rel=0.03)
         assert float(row["true (simulation)"]) == pytest.approx(true * degrees, rel=1e-4)
