@@ -214,7 +214,8 @@ def test_live_page_shows_state_and_verdicts_in_chromium(tmp_path: Path, fast_rig
         pytest.skip("chromium is not installed (apt-get install -y chromium)")
     modbus, http = _free_port(), _free_port()
     config = {"station": "eol-page", "robot": "sim", "known": "target", "poses": 10,
-              "verify_poses": 3, "require_joints": "1,2,3,4,5",  # J6: tool estimated "calibrate_args": ["--rig", str(fast_rig)],
+              "verify_poses": 3, "require_joints": "1,2,3,4,5",  # J6: tool estimated
+              "calibrate_args": ["--rig", str(fast_rig)],
               "db": f"sqlite:///{tmp_path / 'archive.db'}", "runs_dir": str(tmp_path / "runs"),
               "modbus": {"host": "127.0.0.1", "port": modbus}, "http": f"127.0.0.1:{http}"}
     path = tmp_path / "station.yaml"
