@@ -9,7 +9,7 @@ import html
 import io
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hostpc.archive.drift import (
     DEFAULT_THRESHOLD_DEG,
@@ -17,6 +17,9 @@ from hostpc.archive.drift import (
     fleet_summary,
     zero_series,
 )
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def local_time(stamp: str) -> str:
@@ -27,6 +30,18 @@ def local_time(stamp: str) -> str:
 
 def drift_plot_png(runs: list[dict[str, Any]], findings: list[DriftFinding],
                    threshold_deg: float = DEFAULT_THRESHOLD_DEG) -> bytes:
+    """`drift_figure` as a PNG."""
+    figure = drift_figure(runs, findings, threshold_deg)  # selects the Agg backend first
+    import matplotlib.pyplot as plt
+
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=80)
+    plt.close(figure)
+    return buffer.getvalue()
+
+
+def drift_figure(runs: list[dict[str, Any]], findings: list[DriftFinding],
+                 threshold_deg: float = DEFAULT_THRESHOLD_DEG) -> Figure:
     """One robot's zero of each joint against the calibrations' dates (local time; deg,
     change from the first calibration, error bars = 1 sigma); joints with a drift finding
     are drawn in red. The drift threshold is drawn as the band a calibration's zero may
@@ -72,10 +87,7 @@ def drift_plot_png(runs: list[dict[str, Any]], findings: list[DriftFinding],
                         f"calibration; band: +-{threshold_deg:g} deg drift threshold from the "
                         "previous one)", fontsize=9)
     figure.tight_layout()
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=80)
-    plt.close(figure)
-    return buffer.getvalue()
+    return figure
 
 
 def _table(rows: list[dict[str, Any]], columns: list[tuple[str, str]]) -> str:
