@@ -1,4 +1,4 @@
-"""The report.html of a station run that ended before `hostpc calibrate` wrote one (it was
+"""The report.html of a station run for which `hostpc calibrate` wrote none (it was
 refused its input, could not start, or was aborted before its result): every station run
 has a report, archived with it. It says what the station knows: the robot, the verdict,
 the result code, the one-line reason and the end of the run's log."""
@@ -32,6 +32,6 @@ def write_station_report(path: Path, *, serial: str, model: str, station: str,
         "td,th{border:1px solid #bbb;padding:3px 8px;text-align:left}"
         "table{border-collapse:collapse}pre{background:#f4f4f4;padding:1em;overflow:auto}"
         f"</style></head><body><h1>{html.escape(title)}</h1>"
-        "<p>The calibration ended before it wrote its own report: what the station knows of "
-        f"the run.</p><table>{table}</table><h2>End of the run's log</h2>"
+        "<p>The calibration wrote no report of its own: what the station knows of the run."
+        f"</p><table>{table}</table><h2>End of the run's log</h2>"
         f"<pre>{html.escape(tail) or '(no output)'}</pre></body></html>\n")

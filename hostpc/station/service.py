@@ -45,6 +45,7 @@ from typing import Any
 
 from hostpc.archive import open_archive, record_from_run
 from hostpc.archive.database import Archive
+from hostpc.archive.records import verdict_of
 from hostpc.calibrate.journal import JOURNAL_FILE
 from hostpc.errors import InputError, ZerocalError
 from hostpc.files import write_json_atomic
@@ -244,6 +245,7 @@ class Station:
                 self._child_error = f"the calibration cannot start: {exc}"
                 return reg.RESULT_STATION_ERROR
             log_path = (run_dir.parent / f"{run_dir.name}.log")
+            self.status.last_line = ""  # (a resume: the last child's hint is acted on)
             child, done = await start_child(command, log_path, self._on_progress)
             self._child = child
             watcher = asyncio.create_task(self._watch_abort(child))
@@ -299,7 +301,7 @@ class Station:
                 write_station_report(
                     run_dir / "report.html", serial=serial, model=current.get("model", ""),
                     station=self.config.station, started_at=started_at.isoformat(),
-                    verdict="ERROR" if code != 0 else "NOT_PUSHED", result_code=code,
+                    verdict=verdict_of(result, code), result_code=code,
                     reason=reason, log_path=log_path)
             except OSError as exc:
                 logger.error("run %s: no report written (%s)", run_dir, exc.strerror or exc)
