@@ -19,6 +19,9 @@ Revisions (schema version 3): a run's outcome may change after it was archived (
 the same run again (same run_uid, or the same run folder) then REVISES its record: the runs
 row carries the current outcome and its `revision` number, and `run_revisions` keeps every
 outcome the run had (revision, time, verdict, exit code, push status, the outcome block).
+
+Reason and report (schema version 4): `reason` is the one-line reason of a run that did not
+PASS (the station's; None where none was given), `report_path` the run's report.html.
 """
 
 from __future__ import annotations
@@ -70,6 +73,8 @@ runs_table = sa.Table(
     sa.Column("result_json", sa.Text, nullable=False),
     sa.Column("dataset_json", sa.Text, nullable=True),
     sa.Column("revision", sa.Integer, nullable=False, server_default="1"),
+    sa.Column("reason", sa.Text, nullable=True),
+    sa.Column("report_path", sa.Text, nullable=True),
 )
 
 revisions_table = sa.Table(
@@ -121,8 +126,16 @@ def _migrate_2_to_3(connection: Connection) -> None:
         "push_status) SELECT id, 1, archived_at, verdict, exit_code, push_status FROM runs")
 
 
+def _migrate_3_to_4(connection: Connection) -> None:
+    # version 4: a run's one-line reason and the path of its report.html
+    columns = {c["name"] for c in sa.inspect(connection).get_columns("runs")}
+    for name in ("reason", "report_path"):
+        if name not in columns:  # (a table created from today's description has them)
+            connection.exec_driver_sql(f"ALTER TABLE runs ADD COLUMN {name} TEXT")
+
+
 MIGRATIONS: tuple[Callable[[Connection], None], ...] = (_migrate_0_to_1, _migrate_1_to_2,
-                                                        _migrate_2_to_3)
+                                                        _migrate_2_to_3, _migrate_3_to_4)
 SCHEMA_VERSION = len(MIGRATIONS)
 _ADVISORY_LOCK_KEY = 4_711_042  # arbitrary, constant: "zerocal archive migration"
 
@@ -243,6 +256,7 @@ class Archive:
             "software_version": record.software_version, "run_dir": record.run_dir,
             "result_json": json.dumps(record.result, allow_nan=True),
             "dataset_json": None if record.dataset is None else json.dumps(record.dataset),
+            "reason": record.reason or None, "report_path": record.report_path or None,
         }
         try:
             with self.engine.begin() as connection:
@@ -277,7 +291,8 @@ class Archive:
         run_uid, else, for a uid derived from the folder, the same run folder (a run
         resumed by hand after the station archived it under the station's uid)."""
         columns = (runs_table.c.id, runs_table.c.revision, runs_table.c.verdict,
-                   runs_table.c.exit_code, runs_table.c.push_status, runs_table.c.result_json)
+                   runs_table.c.exit_code, runs_table.c.push_status, runs_table.c.result_json,
+                   runs_table.c.reason, runs_table.c.report_path)
         row = connection.execute(sa.select(*columns).where(
             runs_table.c.run_uid == record.run_uid)).first()
         if row is None and record.uid_from_folder and record.run_dir:
@@ -291,8 +306,10 @@ class Archive:
                 values: dict[str, Any]) -> int:
         """Revise the stored run `row` to `record`'s outcome if it changed; its id."""
         run_id = int(row.id)
-        if (row.verdict, row.exit_code, row.push_status, row.result_json) == (
-                record.verdict, record.exit_code, record.push_status, values["result_json"]):
+        if (row.verdict, row.exit_code, row.push_status, row.result_json, row.reason,
+                row.report_path) == (record.verdict, record.exit_code, record.push_status,
+                                     values["result_json"], values["reason"],
+                                     values["report_path"]):
             return run_id
         revision = int(row.revision or 1) + 1
         keep = ("run_uid", "serial", "model", "station", "started_at")
@@ -367,6 +384,16 @@ class Archive:
         entry["dataset"] = None if dataset is None else json.loads(dataset)
         entry["effects"] = json.loads(entry["effects"])
         return entry
+
+    def report_path(self, run_id: int) -> str | None:
+        """The report.html path archived with run `run_id` (None: no such run or none)."""
+        try:
+            with self.engine.connect() as connection:
+                path = connection.execute(sa.select(runs_table.c.report_path).where(
+                    runs_table.c.id == run_id)).scalar()
+        except sa.exc.SQLAlchemyError as exc:
+            raise ArchiveError(f"archive {self.url}: cannot read ({_first_line(exc)})") from None
+        return None if path is None else str(path)
 
     def close(self) -> None:
         self.engine.dispose()

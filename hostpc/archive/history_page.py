@@ -8,9 +8,18 @@ import base64
 import html
 import io
 from datetime import datetime
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
-from hostpc.archive.drift import DriftFinding, fleet_summary, zero_series
+from hostpc.archive.drift import (
+    DEFAULT_THRESHOLD_DEG,
+    DriftFinding,
+    fleet_summary,
+    zero_series,
+)
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def local_time(stamp: str) -> str:
@@ -19,42 +28,66 @@ def local_time(stamp: str) -> str:
     return datetime.fromisoformat(stamp).astimezone().strftime("%Y-%m-%d %H:%M:%S %Z")
 
 
-def drift_plot_png(runs: list[dict[str, Any]], findings: list[DriftFinding]) -> bytes:
-    """One robot's zero of each joint over its calibrations (deg, change from the first
-    calibration, error bars = 1 sigma); joints with a drift finding are drawn in red."""
+def drift_plot_png(runs: list[dict[str, Any]], findings: list[DriftFinding],
+                   threshold_deg: float = DEFAULT_THRESHOLD_DEG) -> bytes:
+    """`drift_figure` as a PNG."""
+    figure = drift_figure(runs, findings, threshold_deg)  # selects the Agg backend first
+    import matplotlib.pyplot as plt
+
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=80)
+    plt.close(figure)
+    return buffer.getvalue()
+
+
+def drift_figure(runs: list[dict[str, Any]], findings: list[DriftFinding],
+                 threshold_deg: float = DEFAULT_THRESHOLD_DEG) -> Figure:
+    """One robot's zero of each joint against the calibrations' dates (local time; deg,
+    change from the first calibration, error bars = 1 sigma); joints with a drift finding
+    are drawn in red. The drift threshold is drawn as the band a calibration's zero may
+    lie in without an alarm: +-`threshold_deg` around the previous calibration's zero."""
     import matplotlib
 
     matplotlib.use("Agg")
+    import matplotlib.dates as mdates
     import matplotlib.pyplot as plt
-    from matplotlib.ticker import MaxNLocator
 
     series = zero_series(runs)
     drifting = {f.label for f in findings}
     labels = sorted(series, key=lambda s: (len(s), s))
-    figure, axes = plt.subplots(max(1, len(labels)), 1, figsize=(7, 1.3 + 1.25 * len(labels)),
+    figure, axes = plt.subplots(max(1, len(labels)), 1, figsize=(7, 1.5 + 1.25 * len(labels)),
                                 sharex=True, squeeze=False)
-    run_index = {int(run["id"]): i + 1 for i, run in enumerate(runs)}
+    zone = datetime.now().astimezone().tzinfo
+    threshold_mdeg = threshold_deg * 1000.0
     for axis, label in zip(axes[:, 0], labels, strict=False):
         points = series[label]
-        x = [run_index[p[0]] for p in points]
+        x = [datetime.fromisoformat(p[1]).astimezone(zone) for p in points]
         base = points[0][2]
         y = [(p[2] - base) * 1000.0 for p in points]
         err = [0.0 if p[3] is None else p[3] * 1000.0 for p in points]
+        for k in range(1, len(points)):  # the band the next zero may lie in
+            axis.fill_between([x[k - 1], x[k]], y[k - 1] - threshold_mdeg,
+                              y[k - 1] + threshold_mdeg, color="tab:orange", alpha=0.15,
+                              lw=0, label="drift threshold" if k == 1 else None)
+            axis.plot([x[k], x[k]], [y[k - 1] - threshold_mdeg, y[k - 1] + threshold_mdeg],
+                      color="tab:orange", lw=1.0, ls="--")
         colour = "tab:red" if label in drifting else "tab:blue"
         axis.errorbar(x, y, yerr=err, marker="o", color=colour, capsize=3, lw=1.2)
         axis.set_ylabel(f"{label}\n[mdeg]", fontsize=8)
         axis.grid(alpha=0.3)
         axis.tick_params(labelsize=8)
-    axes[-1, 0].set_xlabel("calibration #", fontsize=9)
-    axes[-1, 0].xaxis.set_major_locator(MaxNLocator(integer=True))
+    locator = mdates.AutoDateLocator(tz=zone)  # type: ignore[no-untyped-call]
+    axes[-1, 0].xaxis.set_major_locator(locator)
+    formatter = mdates.ConciseDateFormatter(locator, tz=zone)  # type: ignore[no-untyped-call]
+    axes[-1, 0].xaxis.set_major_formatter(formatter)
+    axes[-1, 0].set_xlabel(f"date of the calibration ({datetime.now().astimezone():%Z})",
+                           fontsize=9)
     if runs:
         figure.suptitle(f"zero offsets of {runs[0]['serial']} (change since first "
-                        f"calibration)", fontsize=10)
+                        f"calibration; band: +-{threshold_deg:g} deg drift threshold from the "
+                        "previous one)", fontsize=9)
     figure.tight_layout()
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=80)
-    plt.close(figure)
-    return buffer.getvalue()
+    return figure
 
 
 def _table(rows: list[dict[str, Any]], columns: list[tuple[str, str]]) -> str:
@@ -64,6 +97,11 @@ def _table(rows: list[dict[str, Any]], columns: list[tuple[str, str]]) -> str:
         cells = []
         for key, _ in columns:
             value = row.get(key, "")
+            if key == "report":  # a link to the run's report.html (file URL), or nothing
+                link = (f"<a class='report' href='{html.escape(report_url(value))}'>report</a>"
+                        if value else "")
+                cells.append(f"<td>{link}</td>")
+                continue
             text = f"{value:.4f}" if isinstance(value, float) else str(value)
             css = f' class="{html.escape(text)}"' if key in ("verdict", "last_verdict") else ""
             cells.append(f"<td{css}>{html.escape(text)}</td>")
@@ -77,9 +115,16 @@ font-size:90%}th{background:#eee}.PASS{color:#070;font-weight:bold}.FAIL,.ERROR{
 font-weight:bold}.alarm{color:#b00}"""
 
 
+def report_url(path: str) -> str:
+    """The URL of a run's report.html as the history page links it (a file URL)."""
+    return Path(path).resolve().as_uri()
+
+
 def history_html(runs: list[dict[str, Any]], findings: list[DriftFinding],
-                 robot: str | None = None) -> str:
-    """The history page for `runs` (all robots, or the one named `robot`)."""
+                 robot: str | None = None,
+                 threshold_deg: float = DEFAULT_THRESHOLD_DEG) -> str:
+    """The history page for `runs` (all robots, or the one named `robot`); each run links
+    its report.html, each robot's plot draws the drift threshold `threshold_deg`."""
     title = f"zerocal history: {robot}" if robot else "zerocal history: fleet"
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}"
              f"</title><style>{STYLE}</style></head><body><h1>{html.escape(title)}</h1>"]
@@ -98,17 +143,21 @@ def history_html(runs: list[dict[str, Any]], findings: list[DriftFinding],
     else:
         parts.append("<p>none: no joint zero moved beyond its threshold or uncertainty.</p>")
     parts.append("<h2>Runs</h2>")
-    shown = [{**run, "started_at": local_time(run["started_at"])} for run in runs]
+    shown = [{**run, "started_at": local_time(run["started_at"]),
+              "reason": run.get("reason") or "",
+              "report": run.get("report_path") or ""} for run in runs]
     parts.append(_table(shown, [("id", "id"), ("serial", "robot"), ("started_at", "started"),
                                ("station", "station"), ("method", "method"),
                                ("verdict", "verdict"), ("push_status", "push"),
-                               ("largest_correction_deg", "largest correction [deg]")]))
+                               ("largest_correction_deg", "largest correction [deg]"),
+                               ("reason", "reason"), ("report", "report")]))
     by_robot: dict[str, list[dict[str, Any]]] = {}
     for run in runs:
         by_robot.setdefault(str(run["serial"]), []).append(run)
     for serial, robot_runs in by_robot.items():
         robot_findings = [f for f in findings if f.serial == serial]
-        png = base64.b64encode(drift_plot_png(robot_runs, robot_findings)).decode()
+        png = base64.b64encode(drift_plot_png(robot_runs, robot_findings,
+                                              threshold_deg)).decode()
         parts.append(f"<h2>Robot {html.escape(serial)}</h2><img alt='zero offsets of "
                      f"{html.escape(serial)}' src='data:image/png;base64,{png}'>")
     parts.append("</body></html>")

@@ -64,6 +64,10 @@ class RunRecord:
     uid_from_folder: bool = False
     """True if run_uid derives from the run folder (no caller gave one): the archive then
     also finds the run by its folder (a station's run resumed by hand)."""
+    reason: str = ""
+    """One line: why the run did not PASS (the station's reason; empty if none given)."""
+    report_path: str = ""
+    """The run's report.html (empty if it has none)."""
 
 
 def verdict_of(result: dict[str, Any], exit_code: int) -> str:
@@ -124,9 +128,11 @@ def _read_json(path: Path) -> Any:
 
 def record_from_run(run_dir: str | Path, *, serial: str, model: str = "", station: str = "",
                     exit_code: int | None = None, run_uid: str | None = None,
-                    started_at: datetime | None = None) -> RunRecord:
-    """The archive record of the run in `run_dir` (result.json required; dataset.json kept
-    whole when present). exit_code defaults to the one result.json states."""
+                    started_at: datetime | None = None, reason: str = "") -> RunRecord:
+    """The archive record of the run in `run_dir` (result.json and dataset.json kept whole
+    when present; a run that failed before writing them is recorded with what it has).
+    exit_code defaults to the one result.json states; `reason` is the one-line reason of a
+    run that did not PASS; report_path is RUN/report.html when it exists."""
     folder = Path(run_dir)
     result_path = folder / "result.json"
     result: dict[str, Any] = _read_json(result_path) if result_path.exists() else {}
@@ -156,4 +162,6 @@ def record_from_run(run_dir: str | Path, *, serial: str, model: str = "", statio
         largest_correction_deg=max(corrections) if corrections else None,
         verify=dict(result.get("verify") or {}), fit=dict(fit), offsets=offsets,
         software_version=__version__, result=result, dataset=dataset,
-        run_dir=str(folder), truth=result.get("truth"), uid_from_folder=run_uid is None)
+        run_dir=str(folder), truth=result.get("truth"), uid_from_folder=run_uid is None,
+        reason=reason,
+        report_path=str(folder / "report.html") if (folder / "report.html").is_file() else "")

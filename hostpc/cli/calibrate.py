@@ -179,6 +179,10 @@ def register(subparsers: Any) -> None:
     add_archive_options(parser, read=False)
     parser.add_argument("--resume", metavar="DIR", help="continue the run in DIR")
     parser.add_argument("--no-report", action="store_true", help="skip report.html")
+    parser.add_argument("--check", action="store_true",
+                        help="only check the options and the files they name (rig, cell, "
+                             "reference, effects, ...), connect to nothing, exit 0 (the "
+                             "station checks its config so)")
     parser.add_argument("--json", action="store_true", help="print the result document")
     add_sensor_options(parser)
     parser.set_defaults(func=run, option_defaults={  # a --replay refuses changed options
@@ -313,6 +317,9 @@ def run(args: argparse.Namespace) -> int:
         scenario_file = args.scenario
     if args.scenario and not address.sim:
         raise InputError("--scenario needs --robot sim")
+    if args.check:  # every pre-flight check above passed; nothing connects or moves
+        print("hostpc calibrate: options and files checked")
+        return 0
     progress = StderrProgress()
     created = not run_dir.exists()
     try:

@@ -44,7 +44,8 @@ def run(args: argparse.Namespace) -> int:
                               args.z_limit or DEFAULT_Z_LIMIT)
     if args.html:
         try:
-            Path(args.html).write_text(history_html(runs, findings, args.robot))
+            Path(args.html).write_text(history_html(
+                runs, findings, args.robot, args.threshold or DEFAULT_THRESHOLD_DEG))
         except OSError as exc:
             raise InputError(f"--html {args.html}: cannot write ({exc.strerror})") from None
     if args.json:

@@ -33,6 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 
 
 async def _serve(args: argparse.Namespace) -> int:
+    from hostpc.station.checks import check_station_config
     from hostpc.station.config import load_station_config
     from hostpc.station.service import Station
     from hostpc.station.web import serve_page
@@ -41,27 +42,30 @@ async def _serve(args: argparse.Namespace) -> int:
     if args.modbus:
         overrides["modbus"] = {"host": args.modbus[0], "port": args.modbus[1]}
     config = load_station_config(args.config, overrides)
-    station = Station(config)
-    loop = asyncio.get_running_loop()
-    for signum in (signal.SIGTERM, signal.SIGINT):
-        loop.add_signal_handler(signum, station.stop)
-    ready = asyncio.Event()
-    task = asyncio.create_task(station.run(ready))
-    await asyncio.wait([task, asyncio.create_task(ready.wait())],
-                       return_when=asyncio.FIRST_COMPLETED)
-    if task.done():
-        task.result()
+    # the whole configuration, before anything listens or runs (docs/station.md)
+    await asyncio.to_thread(check_station_config, config, args.config)
+    station = Station(config, args.config)
     page = None
-    http = args.http or (_address(config.http) if config.http else None)
-    if http:
-        try:
+    http = args.http or config.http_address()
+    if http:  # the ports first (`http`, then `modbus`), then the archive: nothing created
+        try:  # by a station that refuses to start
             page = await serve_page(station, *http)
             http = page.address
         except OSError as exc:
-            station.stop()
-            await task
-            raise InputError(f"--http {http[0]}:{http[1]}: cannot listen "
+            key = "--http" if args.http else f"{args.config}: http:"
+            raise InputError(f"{key} {http[0]}:{http[1]}: cannot listen "
                              f"({exc.strerror})") from None
+    try:
+        await station.open()  # the PLC's port (`modbus`), the archive (`db`), `runs_dir`
+    except BaseException:
+        if page is not None:
+            await page.cleanup()
+        raise
+    loop = asyncio.get_running_loop()
+    for signum in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(signum, station.stop)
+    task = asyncio.create_task(station.run())
+    assert station.modbus_address is not None
     host, port = station.modbus_address
     print(f"hostpc station {config.station}: PLC registers on {host}:{port}"
           + (f", page on http://{http[0]}:{http[1]}/" if http else "")

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from hostpc.errors import InputError
 from hostpc.input_files import CONFIG, read_input_text
@@ -70,6 +70,17 @@ class StationConfig(_Strict):
     sim: SimCell = SimCell()
     base_dir: str = "."
 
+    @field_validator("http")
+    @classmethod
+    def _host_port(cls, value: str | None) -> str | None:
+        if value is not None:
+            http_address(value)
+        return value
+
+    def http_address(self) -> tuple[str, int] | None:
+        """`http` as (host, port), or None."""
+        return None if self.http is None else http_address(self.http)
+
     def database_url(self) -> str:
         """`db` with a relative SQLite path taken relative to the config file's folder."""
         prefix = "sqlite:///"
@@ -81,6 +92,14 @@ class StationConfig(_Strict):
         """`value` relative to the config file's folder."""
         candidate = Path(value).expanduser()
         return candidate if candidate.is_absolute() else Path(self.base_dir) / candidate
+
+
+def http_address(text: str) -> tuple[str, int]:
+    """HOST:PORT as (host, port); ValueError otherwise."""
+    host, sep, port = text.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise ValueError(f"expected HOST:PORT, got {text!r}")
+    return host, int(port)
 
 
 def load_station_config(path: str | Path, overrides: dict[str, Any] | None = None

@@ -80,9 +80,7 @@ class PlcServer:
         limit_logging("pymodbus.logging", "hostpc.station.plc")
 
     async def start(self) -> tuple[str, int]:
-        host, port = await self.guard.listen(self.host, self.port)
-        logger.info("PLC registers on %s:%d", host, port)
-        return host, port
+        return await self.guard.listen(self.host, self.port)
 
     async def close(self) -> None:
         await self.guard.close()

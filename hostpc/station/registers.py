@@ -5,8 +5,10 @@ PASS only for a run whose outcome verdict is PASS (pushed, verified, every requi
 calibrated); any other finished outcome is FAIL with RESULT_CODE its exit code (5 refused,
 6 verification failed, 7 a required joint not calibrated, 0 not pushed / rolled back: see
 OUTCOME_FLAGS). Strings are ASCII, two characters per register (high byte first),
-NUL-padded. 32-bit values span two registers, high word first. docs/station.md carries
-the same table for the PLC programmer.
+NUL-padded. 32-bit values span two registers, high word first. A run that did not PASS
+says why in REASON_CODE (Reason below) and REASON (the one-line reason, as in the station
+log, the live page and the archive). docs/station.md carries the same table for the PLC
+programmer.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-N_REGISTERS = 64
+N_REGISTERS = 96
 
 COMMAND = 0            # PLC writes: 1 start, 2 abort, 3 acknowledge; the station clears it
 STATE = 1              # State below
@@ -34,10 +36,13 @@ JOINTS_CALIBRATED = 14       # calibrated from the data and, if pushed, verified
 JOINTS_NOT_CALIBRATED = 15   # not determined by the data (unidentifiable, held, prior)
 JOINTS_REQUIRED_MISSING = 16  # required (--require-joints) but not calibrated
 OUTCOME_FLAGS = 17     # bit0 pushed, bit1 verified, bit2 rolled back, bit3 refused
+REASON_CODE = 18       # why the last run did not PASS (Reason below; 0 = it did, or idle)
 SERIAL = 20            # 20-35: robot serial number, 32 ASCII characters
 SERIAL_LENGTH = 16
 MODEL = 40             # 40-55: robot model, 32 ASCII characters
 MODEL_LENGTH = 16
+REASON = 64            # 64-95: the last run's one-line reason, 64 ASCII characters (cut)
+REASON_LENGTH = 32
 
 PLC_WRITABLE = frozenset({COMMAND, *range(SERIAL, SERIAL + SERIAL_LENGTH),
                           *range(MODEL, MODEL + MODEL_LENGTH)})
@@ -63,6 +68,41 @@ RESULT_NO_SERIAL = 20       # start without a serial number in SERIAL
 RESULT_ABORTED = 21         # the PLC aborted the run
 RESULT_ARCHIVE_FAILED = 22  # the run finished but could not be archived
 RESULT_STATION_ERROR = 23   # the calibration could not be started at all
+
+
+class Reason(enum.IntEnum):
+    """REASON_CODE: the kind of failure of the last run (the text is in REASON)."""
+
+    NONE = 0                # passed, or nothing to report
+    INPUT = 1               # calibrate refused an input: a file or option (exit 2)
+    CONTROLLER_UNREACHABLE = 2  # the controller could not be reached / link lost (exit 3)
+    CONTROLLER_REFUSED = 3  # the controller refused (estop, busy, limit) (exit 4)
+    PUSH_REFUSED = 4        # a guard rail refused the push (exit 5)
+    VERIFY_FAILED = 5       # the verification of the pushed offsets failed (exit 6)
+    JOINTS_MISSING = 6      # a required joint was not calibrated (exit 7)
+    NOT_PUSHED = 7          # the run ended without pushing, or rolled back (exit 0)
+    INTERRUPTED = 8         # the run was interrupted (exit 130/143)
+    ABORTED = 9             # the PLC aborted the run (result code 21)
+    NO_SERIAL = 10          # start without a serial number (result code 20)
+    NOT_ARCHIVED = 11       # the run finished but could not be archived (result code 22)
+    CANNOT_START = 12       # the calibration could not be started (result code 23)
+    INTERNAL = 13           # any other failure of the calibration process
+
+
+_REASON_BY_CODE = {2: Reason.INPUT, 3: Reason.CONTROLLER_UNREACHABLE,
+                   4: Reason.CONTROLLER_REFUSED, 5: Reason.PUSH_REFUSED,
+                   6: Reason.VERIFY_FAILED, 7: Reason.JOINTS_MISSING, 130: Reason.INTERRUPTED,
+                   143: Reason.INTERRUPTED, 20: Reason.NO_SERIAL, 21: Reason.ABORTED,
+                   22: Reason.NOT_ARCHIVED, 23: Reason.CANNOT_START}
+
+
+def reason_of(state: State, result_code: int) -> Reason:
+    """The REASON_CODE of a finished run in `state` with `result_code`."""
+    if state in (State.IDLE, State.RUNNING, State.PASS):
+        return Reason.NONE
+    if result_code == 0:
+        return Reason.NOT_PUSHED
+    return _REASON_BY_CODE.get(result_code, Reason.INTERNAL)
 
 
 def encode_text(text: str, n_registers: int) -> list[int]:
@@ -108,6 +148,8 @@ class RunOutcome:
     joints_not_calibrated: int = 0
     joints_required_missing: int = 0
     outcome_flags: int = 0
+    reason: str = ""
+    """The one-line reason of a run that did not PASS (REASON; its kind: REASON_CODE)."""
 
 
 FLAG_PUSHED, FLAG_VERIFIED, FLAG_ROLLED_BACK, FLAG_REFUSED = 1, 2, 4, 8
@@ -150,4 +192,7 @@ def outcome_registers(outcome: RunOutcome) -> dict[int, int]:
     values[JOINTS_NOT_CALIBRATED] = outcome.joints_not_calibrated & 0xFFFF
     values[JOINTS_REQUIRED_MISSING] = outcome.joints_required_missing & 0xFFFF
     values[OUTCOME_FLAGS] = outcome.outcome_flags & 0xFFFF
+    values[REASON_CODE] = int(reason_of(outcome.state, outcome.result_code))
+    for address, value in enumerate(encode_text(outcome.reason, REASON_LENGTH), start=REASON):
+        values[address] = value
     return values

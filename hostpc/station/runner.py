@@ -46,36 +46,65 @@ def sim_scenario(config: StationConfig, serial: str) -> dict[str, object]:
     return {**scenario, "seed": seed_of(serial)}
 
 
+CALIBRATE = [sys.executable, "-m", "hostpc.cli.main", "calibrate"]
+OPTION_KEYS = {"--robot": "robot", "--driver": "driver", "--method": "method",
+               "--poses": "poses", "--verify-poses": "verify_poses", "--effects": "effects",
+               "--known": "known", "--require-joints": "require_joints", "--out": "runs_dir",
+               "--scenario": "sim"}
+"""The config key behind each `hostpc calibrate` option the station sets itself; any other
+option comes from `calibrate_args`."""
+
+
+def calibrate_options(config: StationConfig, run_dir: Path,
+                      scenario_file: Path | None = None) -> list[str]:
+    """The `hostpc calibrate` options of a new run in `run_dir` (with the simulated robot's
+    `scenario_file`): the config's keys, then `calibrate_args` verbatim. Every run writes
+    its report.html."""
+    options = ["--robot", config.robot, "--driver", config.driver, "--method", config.method,
+               "--poses", str(config.poses), "--verify-poses", str(config.verify_poses),
+               "--out", str(run_dir)]
+    if config.effects:
+        options += ["--effects", config.effects]
+    if config.known:
+        options += ["--known", config.known]
+    if config.require_joints:
+        options += ["--require-joints", config.require_joints]
+    if scenario_file is not None:
+        options += ["--scenario", str(scenario_file)]
+    return [*options, *config.calibrate_args]
+
+
 def calibrate_command(config: StationConfig, run_dir: Path, serial: str,
                       resume: bool) -> list[str]:
     """The `hostpc calibrate` command line of one run (or of its resume)."""
-    command = [sys.executable, "-m", "hostpc.cli.main", "calibrate"]
     if resume:
-        return [*command, "--resume", str(run_dir), "--no-report"]
-    command += ["--robot", config.robot, "--driver", config.driver, "--method", config.method,
-                "--poses", str(config.poses), "--verify-poses", str(config.verify_poses),
-                "--out", str(run_dir), "--no-report"]
-    if config.effects:
-        command += ["--effects", config.effects]
-    if config.known:
-        command += ["--known", config.known]
-    if config.require_joints:
-        command += ["--require-joints", config.require_joints]
+        return [*CALIBRATE, "--resume", str(run_dir)]
+    scenario_file = None
     if config.robot == "sim":
         scenario_file = run_dir.parent / ".scenarios" / f"{run_dir.name}.json"
         scenario_file.parent.mkdir(parents=True, exist_ok=True)
         scenario_file.write_text(json.dumps(sim_scenario(config, serial), indent=1))
-        command += ["--scenario", str(scenario_file)]
-    return [*command, *config.calibrate_args]
+    return [*CALIBRATE, *calibrate_options(config, run_dir, scenario_file)]
+
+
+def error_line(line: str) -> str | None:
+    """The reason in a line of `hostpc calibrate`'s output ("hostpc calibrate: error: ..."
+    or "hostpc calibrate: interrupted ..."), or None."""
+    for prefix in ("hostpc calibrate: error: ", "hostpc calibrate: "):
+        if line.startswith(prefix) and ("error:" in line or "interrupted" in line):
+            return line[len(prefix):].strip()
+    return None
 
 
 @dataclass
 class ChildRun:
-    """A running `hostpc calibrate`; `progress` is 0..100, `log` its last output lines."""
+    """A running `hostpc calibrate`; `progress` is 0..100, `last_line` its last output line,
+    `error` the reason of its last error line ("hostpc calibrate: error: ...")."""
 
     process: asyncio.subprocess.Process
     progress: int = 0
     last_line: str = ""
+    error: str = ""
 
     def interrupt(self) -> None:
         """Ask the run to stop at a safe point (SIGINT: the run stays resumable)."""
@@ -102,6 +131,7 @@ async def start_child(command: list[str], log_path: Path, on_progress: Callable[
                 line = raw.decode(errors="replace").rstrip()
                 if line:
                     child.last_line = line
+                    child.error = error_line(line) or child.error
                 match = _PROGRESS.search(line)
                 if match:
                     phase, done, total = match.group(1), int(match.group(2)), int(match.group(3))

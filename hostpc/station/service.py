@@ -18,6 +18,17 @@ resumes it (`--resume`, up to resume_attempts) so the offsets get verified; curr
 stays while the controller may hold unverified offsets. The last finished result is kept
 in `last_outcome.json` under the runs folder until the PLC acknowledges it: a station
 restarted before ACKNOWLEDGE serves the same result registers again.
+
+Reasons: a run that does not PASS has a one-line reason (calibrate's own error line, the
+outcome's headline, or the station's: aborted, cannot start, not archived). It goes to the
+station log, the live page (`status.reason`), the archive (the run's `reason`) and the
+registers (REASON_CODE, REASON). Every concluded run is archived, also one that failed
+before its run folder held anything, and has a report.html: calibrate's own, or the
+station's (hostpc.station.run_report) when the run ended before writing one.
+
+What the live page shows is `status`, exactly the station's state: a run's progress and
+output line only while it runs, its result (verdict, reason, report) until the PLC
+acknowledges it, nothing of it once IDLE.
 """
 
 from __future__ import annotations
@@ -34,12 +45,14 @@ from typing import Any
 
 from hostpc.archive import open_archive, record_from_run
 from hostpc.archive.database import Archive
+from hostpc.archive.records import verdict_of
 from hostpc.calibrate.journal import JOURNAL_FILE
-from hostpc.errors import ZerocalError
+from hostpc.errors import InputError, ZerocalError
 from hostpc.files import write_json_atomic
 from hostpc.station import registers as reg
 from hostpc.station.config import StationConfig
 from hostpc.station.plc import PlcServer
+from hostpc.station.run_report import write_station_report
 from hostpc.station.runner import ChildRun, calibrate_command, start_child
 
 logger = logging.getLogger("hostpc.station")
@@ -48,7 +61,10 @@ EXIT_CONNECTION = 3  # `hostpc calibrate`: the controller could not be reached /
 
 @dataclass
 class StationStatus:
-    """What the live page and the log show of the station."""
+    """What the live page and the log show of the station: the robot, progress and output
+    line of the run in progress (RUNNING); the result of the last run until acknowledged
+    (PASS, FAIL, ERROR: result code, reason and its code, archive id, report); none of it
+    when IDLE."""
 
     state: str = "IDLE"
     serial: str = ""
@@ -57,15 +73,26 @@ class StationStatus:
     last_line: str = ""
     run_dir: str = ""
     result_code: int | None = None
+    reason: str = ""
+    reason_code: int = 0
+    archive_id: int | None = None
+    report: str = ""
+    """The last run's report.html as the live page serves it (/runs/ID/report.html)."""
     runs_done: int = 0
     recent: list[dict[str, Any]] = field(default_factory=list)
 
+    def clear_run(self) -> None:
+        """Nothing of the last run (the station is IDLE, or a new run starts)."""
+        self.serial = self.model = self.last_line = self.run_dir = ""
+        self.reason, self.reason_code, self.report = "", 0, ""
+        self.progress, self.result_code, self.archive_id = 0, None, None
+
 
 class Station:
-    def __init__(self, config: StationConfig):
+    def __init__(self, config: StationConfig, source: str = "station config"):
         self.config = config
+        self.source = source  # the config file, as one-line errors name it
         self.runs_dir = config.path(config.runs_dir)
-        self.runs_dir.mkdir(parents=True, exist_ok=True)
         self.current_file = self.runs_dir / "current.json"
         self.last_outcome_file = self.runs_dir / "last_outcome.json"
         self.plc = PlcServer(config.modbus.host, config.modbus.port)
@@ -74,13 +101,35 @@ class Station:
         self._child: ChildRun | None = None
         self._stopping = asyncio.Event()
         self._aborted = False
+        self._child_error = ""
+        self.modbus_address: tuple[str, int] | None = None
 
     # -- life cycle -------------------------------------------------------------------
+    async def open(self) -> None:
+        """Listen for the PLC, then open the archive (the station creates it if missing)
+        and the runs folder; InputError naming the config key (`modbus`, `db`, `runs_dir`)
+        if one fails, nothing created then."""
+        try:
+            address = await self.plc.start()
+        except OSError as exc:
+            raise InputError(f"{self.source}: modbus: {self.config.modbus.host}:"
+                             f"{self.config.modbus.port}: cannot listen "
+                             f"({exc.strerror or exc})") from None
+        try:
+            self.archive = await asyncio.to_thread(open_archive, self.config.database_url())
+            self.runs_dir.mkdir(parents=True, exist_ok=True)
+        except (ZerocalError, OSError) as exc:
+            await self.close()
+            key = "db" if isinstance(exc, ZerocalError) else "runs_dir"
+            raise InputError(f"{self.source}: {key}: {exc}") from None
+        self.modbus_address = address
+        logger.info("PLC registers on %s:%d", *address)
+
     async def run(self, ready: asyncio.Event | None = None) -> None:
-        """Serve until `stop()`; resumes an interrupted run first."""
-        self.archive = await asyncio.to_thread(open_archive, self.config.database_url())
-        host, port = await self.plc.start()
-        self.modbus_address = (host, port)
+        """Serve until `stop()` (opening first unless `open()` was called); resumes an
+        interrupted run first."""
+        if self.modbus_address is None:
+            await self.open()
         self._publish_state(reg.State.IDLE)
         heartbeat = asyncio.create_task(self._heartbeat())
         try:
@@ -96,9 +145,14 @@ class Station:
                     await asyncio.wait_for(self._stopping.wait(), 0.1)
         finally:
             heartbeat.cancel()
-            await self.plc.close()
-            if self.archive is not None:
-                await asyncio.to_thread(self.archive.close)
+            await self.close()
+
+    async def close(self) -> None:
+        """Stop listening and close the archive (after `open`, without `run`)."""
+        await self.plc.close()
+        if self.archive is not None:
+            await asyncio.to_thread(self.archive.close)
+            self.archive = None
 
     def stop(self) -> None:
         """Graceful stop: interrupt the child at a safe point (it stays resumable)."""
@@ -128,6 +182,7 @@ class Station:
                 reg.State.PASS, reg.State.FAIL, reg.State.ERROR):
             self.plc.set_many(reg.outcome_registers(reg.RunOutcome(reg.State.IDLE, 0)))
             self.plc.set(reg.PROGRESS, 0)
+            self.status.clear_run()
             self._publish_state(reg.State.IDLE)
             self.last_outcome_file.unlink(missing_ok=True)  # acknowledged: not served again
         else:
@@ -137,9 +192,11 @@ class Station:
         serial = reg.decode_text(self.plc.values[reg.SERIAL:reg.SERIAL + reg.SERIAL_LENGTH])
         model = reg.decode_text(self.plc.values[reg.MODEL:reg.MODEL + reg.MODEL_LENGTH])
         if not serial:
-            self._finish(reg.RunOutcome(reg.State.ERROR, reg.RESULT_NO_SERIAL))
-            logger.error("start refused: no robot serial number in registers %d..%d",
-                         reg.SERIAL, reg.SERIAL + reg.SERIAL_LENGTH - 1)
+            reason = (f"start refused: no robot serial number in registers {reg.SERIAL}.."
+                      f"{reg.SERIAL + reg.SERIAL_LENGTH - 1}")
+            self.status.clear_run()
+            self._finish(reg.RunOutcome(reg.State.ERROR, reg.RESULT_NO_SERIAL, reason=reason))
+            logger.error("%s", reason)
             return
         stamp = datetime.now(UTC)
         safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in serial)
@@ -167,12 +224,13 @@ class Station:
 
     async def _execute(self, current: dict[str, Any], resume: bool) -> None:
         serial, run_dir = current["serial"], Path(current["run_dir"])
+        self.status.clear_run()
         self.status.serial, self.status.model = serial, current.get("model", "")
         self.status.run_dir, self.status.progress = str(run_dir), 0
         self.plc.set(reg.RUN_COUNTER, (self.plc.values[reg.RUN_COUNTER] + 1) & 0xFFFF)
         self.plc.set(reg.PROGRESS, 0)
         self._publish_state(reg.State.RUNNING)
-        self._aborted = False
+        self._aborted, self._child_error = False, ""
         code = await self._attempts(current, run_dir, resume)
         if self._stopping.is_set() and not self._aborted:
             logger.info("station stopping: run %s left resumable", run_dir)
@@ -183,10 +241,11 @@ class Station:
         while True:
             try:
                 command = calibrate_command(self.config, run_dir, current["serial"], resume)
-            except ZerocalError as exc:
-                logger.error("run of %s cannot start: %s", current["serial"], exc)
+            except (ZerocalError, OSError) as exc:
+                self._child_error = f"the calibration cannot start: {exc}"
                 return reg.RESULT_STATION_ERROR
             log_path = (run_dir.parent / f"{run_dir.name}.log")
+            self.status.last_line = ""  # (a resume: the last child's hint is acted on)
             child, done = await start_child(command, log_path, self._on_progress)
             self._child = child
             watcher = asyncio.create_task(self._watch_abort(child))
@@ -195,6 +254,7 @@ class Station:
             finally:
                 watcher.cancel()
                 self._child = None
+            self._child_error = child.error
             in_flight = push_in_flight(run_dir)
             if self._aborted and not in_flight:
                 return reg.RESULT_ABORTED
@@ -231,24 +291,40 @@ class Station:
         self.plc.set(reg.PROGRESS, progress)
 
     async def _conclude(self, current: dict[str, Any], run_dir: Path, code: int) -> None:
-        outcome_state = reg.State.ERROR
+        serial = current["serial"]
+        started_at = datetime.fromisoformat(current["started_at"])
+        result = _read_result(run_dir)
+        reason = self._reason(code, result)
+        log_path = run_dir.parent / f"{run_dir.name}.log"
+        if not (run_dir / "report.html").is_file():  # ended before calibrate wrote one
+            try:
+                write_station_report(
+                    run_dir / "report.html", serial=serial, model=current.get("model", ""),
+                    station=self.config.station, started_at=started_at.isoformat(),
+                    verdict=verdict_of(result, code), result_code=code,
+                    reason=reason, log_path=log_path)
+            except OSError as exc:
+                logger.error("run %s: no report written (%s)", run_dir, exc.strerror or exc)
         archive_id = None
         record = None
-        if run_dir.exists():
-            try:
-                record = record_from_run(
-                    run_dir, serial=current["serial"], model=current.get("model", ""),
-                    station=self.config.station, exit_code=code, run_uid=current["run_uid"],
-                    started_at=datetime.fromisoformat(current["started_at"]))
-                assert self.archive is not None
-                archive_id = await asyncio.to_thread(self.archive.add, record)
-            except ZerocalError as exc:
-                logger.error("run %s not archived: %s", run_dir, exc)
-                code = code or reg.RESULT_ARCHIVE_FAILED
+        try:
+            record = record_from_run(
+                run_dir, serial=serial, model=current.get("model", ""),
+                station=self.config.station, exit_code=code, run_uid=current["run_uid"],
+                started_at=started_at, reason=reason)
+            assert self.archive is not None
+            archive_id = await asyncio.to_thread(self.archive.add, record)
+        except ZerocalError as exc:
+            logger.error("run %s not archived: %s", run_dir, exc)
+            if not code:
+                code, reason = reg.RESULT_ARCHIVE_FAILED, f"not archived: {exc}"
+        outcome_state = reg.State.ERROR
         if record is not None and code != reg.RESULT_ABORTED:
             # PASS only for the outcome verdict PASS; ERROR if the run did not finish
             outcome_state = (reg.State.PASS if record.verdict == "PASS" else
                              reg.State.ERROR if record.verdict == "ERROR" else reg.State.FAIL)
+        if outcome_state == reg.State.PASS:
+            reason = ""
         verify = record.verify if record is not None else {}
         block = record.result.get("outcome") if record is not None else None
         outcome = reg.RunOutcome(
@@ -257,7 +333,12 @@ class Station:
             verify_statistic=_number(verify.get("statistic")),
             verify_p_value=_number(verify.get("p_value")),
             verify_dof=int(verify.get("dof") or 0), archive_id=archive_id,
-            **reg.outcome_bits(block if isinstance(block, dict) else {}))
+            reason=reason, **reg.outcome_bits(block if isinstance(block, dict) else {}))
+        self.status.last_line = ""  # the run's output: acted on, the result says the rest
+        self.status.archive_id = archive_id
+        self.status.report = (f"/runs/{archive_id}/report.html"
+                              if archive_id is not None and record is not None
+                              and record.report_path else "")
         self._finish(outcome)
         if push_in_flight(run_dir):  # unverified offsets in the controller: resume later
             logger.error("run %s ended with pushed offsets not verified: current.json kept, "
@@ -266,22 +347,47 @@ class Station:
         else:
             self.current_file.unlink(missing_ok=True)
         self.status.runs_done += 1
-        self.status.recent = ([{"serial": current["serial"], "verdict": outcome_state.name,
+        self.status.recent = ([{"serial": serial, "verdict": outcome_state.name,
                                 "result_code": code, "archive_id": archive_id,
-                                "run_dir": str(run_dir)}] + self.status.recent)[:20]
-        logger.info("run of %s: %s (result code %d, archive id %s)", current["serial"],
-                    outcome_state.name, code, archive_id)
+                                "run_dir": str(run_dir), "reason": reason}]
+                              + self.status.recent)[:20]
+        if reason:
+            logger.error("run of %s: %s (result code %d, archive id %s): %s", serial,
+                         outcome_state.name, code, archive_id, reason)
+        else:
+            logger.info("run of %s: %s (result code %d, archive id %s)", serial,
+                        outcome_state.name, code, archive_id)
+
+    def _reason(self, code: int, result: dict[str, Any]) -> str:
+        """One line: why the run with exit `code` and `result` (result.json) did not PASS
+        (empty when it did)."""
+        block = result.get("outcome")
+        outcome: dict[str, Any] = block if isinstance(block, dict) else {}
+        if code == reg.RESULT_ABORTED:
+            return "aborted by the PLC before the push"
+        if code == 0 and outcome.get("verdict") == "PASS":
+            return ""
+        text = self._child_error or str(outcome.get("headline") or "")
+        if not text and code:
+            text = f"hostpc calibrate ended with exit code {code}"
+        return " ".join(text.split())
 
     def _finish(self, outcome: reg.RunOutcome) -> None:
         self.plc.set_many(reg.outcome_registers(outcome))
         self.plc.set(reg.PROGRESS, 100 if outcome.state != reg.State.ERROR else
                      self.plc.values[reg.PROGRESS])
         self.status.result_code = outcome.result_code
+        self.status.reason = outcome.reason
+        self.status.reason_code = int(reg.reason_of(outcome.state, outcome.result_code))
+        self.status.progress = self.plc.values[reg.PROGRESS]
         self._publish_state(outcome.state)
         registers = {**reg.outcome_registers(outcome), reg.PROGRESS: self.plc.values[reg.PROGRESS]}
         write_json_atomic(self.last_outcome_file,  # served again after a restart until ACK
                           {"registers": {str(k): v for k, v in registers.items()},
-                           "result_code": outcome.result_code})
+                           "result_code": outcome.result_code, "reason": outcome.reason,
+                           "serial": self.status.serial, "model": self.status.model,
+                           "archive_id": self.status.archive_id,
+                           "report": self.status.report})
 
     def _serve_unacknowledged(self) -> None:
         """After a restart: the last result the PLC has not acknowledged, on the registers
@@ -298,6 +404,12 @@ class Station:
             return
         self.plc.set_many(registers)
         self.status.result_code = saved.get("result_code")
+        self.status.reason = str(saved.get("reason") or "")
+        self.status.reason_code = registers.get(reg.REASON_CODE, 0)
+        self.status.serial = str(saved.get("serial") or "")
+        self.status.model = str(saved.get("model") or "")
+        self.status.archive_id = saved.get("archive_id")
+        self.status.report = str(saved.get("report") or "")
         self._publish_state(state)
         logger.info("serving the unacknowledged result again: %s (result code %s)",
                     state.name, registers.get(reg.RESULT_CODE))
@@ -321,6 +433,15 @@ def push_in_flight(run_dir: Path) -> bool:
             if event in ("push_intent", "push", "result", "rollback"):
                 last = event
     return last in ("push_intent", "push")
+
+
+def _read_result(run_dir: Path) -> dict[str, Any]:
+    """The run's result.json, or {} (none yet, or unreadable: the archive says why)."""
+    try:
+        result = json.loads((run_dir / "result.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return result if isinstance(result, dict) else {}
 
 
 def _number(value: Any) -> float | None:

@@ -1,9 +1,15 @@
 """The station's read-only live page (aiohttp): state, progress, the last robots with
 their verdicts, and the drift plot of a chosen robot. Refreshes itself every second.
 
+It shows exactly the station's state (`StationStatus`): the progress bar and the run's
+output line only while a run is RUNNING; the last run's verdict, result code, one-line
+reason and report link until the PLC acknowledges it; an IDLE station shows "idle" and
+nothing of the last run (the table of last robots keeps it, with its report).
+
 aiohttp serves it because the station already runs an asyncio loop: the page shares it,
 with no second thread or framework. Routes: `/` (the page), `/api/state` (JSON),
-`/drift/{serial}.png` (plot). Nothing on it changes the station.
+`/drift/{serial}.png` (plot), `/runs/{id}/report.html` (an archived run's report).
+Nothing on it changes the station.
 
 Against hostile peers (docs/security.md): the page listens through a `ConnectionGuard`
 (at most `MAX_CONNECTIONS`, `MAX_PER_ADDRESS` per peer address, a connection that completes
@@ -23,12 +29,13 @@ import html
 import logging
 from collections.abc import Awaitable, Callable
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 from typing import Any
 
 from aiohttp import web
 
 from hostpc.archive.drift import drift_findings
-from hostpc.archive.history_page import drift_plot_png
+from hostpc.archive.history_page import drift_plot_png, local_time
 from hostpc.serving.guard import ConnectionGuard, GuardedConnection
 from hostpc.serving.log_limits import SERVER_LOGGERS, limit_logging
 from hostpc.station.service import Station
@@ -53,11 +60,15 @@ table{{border-collapse:collapse}}td,th{{border:1px solid #bbb;padding:3px 8px}}
 .RUNNING{{color:#05a}}progress{{width:20em}}</style></head><body>
 <h1>zerocal station <span id="name">{name}</span></h1>
 <p>state: <span id="state" class="{state}">{state}</span>
- <progress id="progress" max="100" value="0"></progress> <span id="percent"></span></p>
-<p>robot: <span id="serial"></span> <span id="model"></span><br>
+ <span id="running" hidden><progress id="progress" max="100" value="0"></progress>
+ <span id="percent"></span></span></p>
+<p id="robot-line" hidden>robot: <span id="serial"></span> <span id="model"></span><br>
 <small id="line"></small></p>
+<p id="result" hidden>result code <span id="code"></span>
+<span id="reason-line">: <span id="reason"></span></span>
+<a id="report" href="">report</a></p>
 <h2>Last robots</h2><table id="recent"><tr><th>robot</th><th>model</th><th>started</th>
-<th>verdict</th><th>push</th></tr></table>
+<th>verdict</th><th>push</th><th>reason</th><th>report</th></tr></table>
 <h2>Drift of <select id="robot"></select></h2><img id="drift" alt="drift plot">
 <script>
 let chosen = null;
@@ -65,17 +76,32 @@ async function refresh() {{
   const s = await (await fetch('/api/state')).json();
   const st = document.getElementById('state');
   st.textContent = s.state; st.className = s.state;
-  document.getElementById('progress').value = s.progress;
-  document.getElementById('percent').textContent = s.progress + ' %';
+  const running = s.state === 'RUNNING', finished = ['PASS', 'FAIL', 'ERROR'].includes(s.state);
+  document.getElementById('running').hidden = !running;
+  document.getElementById('progress').value = running ? s.progress : 0;
+  document.getElementById('percent').textContent = running ? s.progress + ' %' : '';
+  document.getElementById('robot-line').hidden = s.state === 'IDLE';
   document.getElementById('serial').textContent = s.serial;
   document.getElementById('model').textContent = s.model;
-  document.getElementById('line').textContent = s.last_line;
+  document.getElementById('line').textContent = running ? s.last_line : '';
+  document.getElementById('result').hidden = !finished;
+  document.getElementById('code').textContent = finished ? s.result_code : '';
+  document.getElementById('reason-line').hidden = !s.reason;
+  document.getElementById('reason').textContent = finished ? s.reason : '';
+  const report = document.getElementById('report');
+  report.hidden = !(finished && s.report);
+  report.setAttribute('href', finished && s.report ? s.report : '');
   const table = document.getElementById('recent');
   table.querySelectorAll('tr.run').forEach(r => r.remove());
   for (const r of s.runs) {{
     const tr = document.createElement('tr'); tr.className = 'run';
-    for (const v of [r.serial, r.model, r.started_at, r.verdict, r.push_status]) {{
+    for (const v of [r.serial, r.model, r.started_at, r.verdict, r.push_status,
+                     r.reason || '']) {{
       const td = document.createElement('td'); td.textContent = v; tr.appendChild(td); }}
+    const td = document.createElement('td');
+    if (r.report) {{ const a = document.createElement('a'); a.href = r.report;
+      a.textContent = 'report'; a.className = 'report'; td.appendChild(a); }}
+    tr.appendChild(td);
     tr.children[3].className = r.verdict; table.appendChild(tr);
   }}
   const select = document.getElementById('robot');
@@ -150,9 +176,25 @@ def build_app(station: Station, guard: ConnectionGuard | None = None,
             runs = await asyncio.to_thread(station.archive.runs)
         latest = list(reversed(runs))[:20]
         body = dataclasses.asdict(station.status)
-        body["runs"] = [{k: r[k] for k in ("id", "serial", "model", "started_at", "verdict",
-                                           "push_status")} for r in latest]
+        body["runs"] = [{**{k: r[k] for k in ("id", "serial", "model", "verdict",
+                                              "push_status", "reason")},
+                         "started_at": local_time(r["started_at"]),
+                         "report": f"/runs/{r['id']}/report.html" if r.get("report_path")
+                         else None} for r in latest]
         return web.json_response(body)
+
+    async def report(request: web.Request) -> web.StreamResponse:
+        run_id = request.match_info["run_id"]
+        if station.archive is None or not run_id.isdigit() or len(run_id) > 10:
+            raise web.HTTPNotFound()
+        path = await asyncio.to_thread(station.archive.report_path, int(run_id))
+        if not path:
+            raise web.HTTPNotFound(text=f"run {run_id}: no report archived")
+        try:
+            text = await asyncio.to_thread(Path(path).read_bytes)
+        except OSError:
+            raise web.HTTPNotFound(text=f"run {run_id}: its report {path} is gone") from None
+        return web.Response(body=text, content_type="text/html", charset="utf-8")
 
     async def drift(request: web.Request) -> web.Response:
         serial = request.match_info["serial"]
@@ -166,7 +208,8 @@ def build_app(station: Station, guard: ConnectionGuard | None = None,
 
     app = web.Application(middlewares=[count_request])
     app.add_routes([web.get("/", page), web.get("/api/state", state),
-                    web.get("/drift/{serial}.png", drift)])
+                    web.get("/drift/{serial}.png", drift),
+                    web.get("/runs/{run_id}/report.html", report)])
     return app
 
 
