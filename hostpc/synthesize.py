@@ -18,8 +18,9 @@ from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
 from hostpc.kinematics import get_robot, invert_transform, pose_to_transform
 from hostpc.kinematics.inverse import look_at, solve_ik
 from hostpc.model.joint_offsets import offset_name
+from hostpc.model.layout import Problem
 from hostpc.model.measurement import predict
-from hostpc.model.problem import Problem, build_problem
+from hostpc.model.problem import build_problem
 
 # A pose of each built-in robot with the flange pointing down (-z of base), used as the IK seed
 HOME_POSES = {

@@ -38,10 +38,10 @@ from typing import Any
 import numpy as np
 
 from hostpc.calibrate.joint_status import joint_sources
-from hostpc.calibrate.journal import Journal, write_json_atomic
-from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN
-from hostpc.diagnostics.adequacy import chi2_dof_upper as chi2_dof_upper  # the guard's band
+from hostpc.calibrate.journal import Journal
+from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN, chi2_dof_upper
 from hostpc.errors import InputError
+from hostpc.files import write_json_atomic
 from hostpc.fitting import FitResult
 from hostpc.model.joint_offsets import PushTable
 from hostpc.robots.base import RobotAdapter

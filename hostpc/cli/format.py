@@ -12,7 +12,7 @@ from hostpc.fitting import FitResult
 from hostpc.model.joint_offsets import is_offset
 from hostpc.units import DISPLAY_UNITS
 
-__all__ = ["DISPLAY_UNITS", "display", "format_fit_summary", "format_parameter_table"]
+__all__ = ["display", "format_fit_summary", "format_parameter_table"]
 
 
 def display(value: float | None, unit: str) -> tuple[str, str]:

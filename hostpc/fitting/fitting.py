@@ -27,8 +27,9 @@ from hostpc.fitting.solver import (
     levenberg_marquardt,
     normal_equations,
 )
+from hostpc.model.layout import Problem
 from hostpc.model.memo import SharedValues
-from hostpc.model.problem import Problem, build_problem
+from hostpc.model.problem import build_problem
 
 DEFAULT_CV_FOLDS = 5
 

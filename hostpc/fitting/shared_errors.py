@@ -35,8 +35,8 @@ from hostpc.fitting.shared_chi2 import (
     covariance_factor,
     shared_excess,
 )
+from hostpc.model.layout import Problem
 from hostpc.model.memo import SharedValues
-from hostpc.model.problem import Problem
 
 BLOCK = "rig_uncertainty"
 SCALE_ALPHA = 0.02

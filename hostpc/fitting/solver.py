@@ -17,8 +17,8 @@ from typing import Literal
 import numpy as np
 
 from hostpc.fitting.priors import Constraints, problem_constraints
+from hostpc.model.layout import Problem
 from hostpc.model.measurement import predict
-from hostpc.model.problem import Problem
 
 Loss = Literal["linear", "huber", "cauchy"]
 

@@ -32,8 +32,9 @@ from hostpc.dataset import Dataset
 from hostpc.fitting.identifiability import analyse
 from hostpc.fitting.solver import SolverOutcome, evaluate, levenberg_marquardt
 from hostpc.model.joint_offsets import chain_prefix
+from hostpc.model.layout import Problem
 from hostpc.model.measurement import predict
-from hostpc.model.problem import Problem, build_problem
+from hostpc.model.problem import build_problem
 
 __all__ = ["StepwiseResult", "fit_stepwise", "gauge_equivalent"]
 

@@ -13,7 +13,8 @@ import numpy as np
 
 from hostpc.dataset import Dataset, Samples
 from hostpc.kinematics import Chain, gravity_torque
-from hostpc.kinematics.robots import chain_from_table, get_robot
+from hostpc.kinematics.robots import get_robot
+from hostpc.kinematics.tables import chain_from_table
 from hostpc.model.effect import ModelContext
 
 

@@ -8,9 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 from hostpc.model.layout import Problem
-from hostpc.model.measurements.terms import apply_sensor_effects, kinematic_deltas
 
-__all__ = ["apply_sensor_effects", "kinematic_deltas", "predict"]
+__all__ = ["predict"]
 
 
 def predict(problem: Problem, x: np.ndarray, jacobian: bool = True

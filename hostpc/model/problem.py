@@ -14,7 +14,7 @@ import numpy as np
 from hostpc.dataset import Dataset
 from hostpc.errors import EffectError
 from hostpc.kinematics import Chain
-from hostpc.model.context import chain_version, sample_variables
+from hostpc.model.context import chain_version
 from hostpc.model.contract import check_effect
 from hostpc.model.effect import Effect, EffectTerm, ModelContext
 from hostpc.model.effects.frames import frame_effect
@@ -29,8 +29,7 @@ from hostpc.model.registry import (
     parse_effect_list,
 )
 
-__all__ = ["ParameterLayout", "Problem", "build_problem", "default_effects", "extend_problem",
-           "robot_chain", "sample_variables"]
+__all__ = ["build_problem", "default_effects", "extend_problem", "robot_chain"]
 
 
 def robot_chain(dataset: Dataset, plugins: Iterable[str | Path] = (), *,

@@ -58,28 +58,13 @@ from hostpc.robots.ur_guarded import (
     UrGuardedMoveMixin,
     rtde_frequency,
 )
-from hostpc.robots.ur_offsets import MAX_OFFSET_RAD, UrOffsetsMixin
-from hostpc.robots.ur_precheck import (
-    DASHBOARD_PORT,
-    RTDE_PORT,
-    RTDE_PROTOCOL_VERSION,
-    SCRIPT_PORT,
-    UrControllerInfo,
-    check_controller,
-    probe_dashboard,
-    probe_port,
-    probe_rtde,
-)
+from hostpc.robots.ur_offsets import UrOffsetsMixin
+from hostpc.robots.ur_precheck import UrControllerInfo, check_controller
 
 logger = logging.getLogger(__name__)
 
-__all__ = [  # constants, pre-checks and offsets of the sibling modules are re-exported
-    "CAMERA_PORT", "DASHBOARD_PORT", "JOINT_ACCELERATION", "MAX_JOINT_SPEED", "MAX_OFFSET_RAD",
-    "N_DIGITAL_IO", "RTDE_PORT", "RTDE_PROTOCOL_VERSION", "SCRIPT_PORT", "SETTLE_TIMEOUT_S",
-    "SETTLE_TOLERANCE_RAD", "LatchTiming", "UrAdapter", "UrControllerInfo", "check_controller",
-    "connect", "connect_ur", "parse_camera", "probe_dashboard", "probe_port", "probe_rtde",
-    "rtde_frequency",
-]
+__all__ = ["CAMERA_PORT", "SETTLE_TIMEOUT_S", "SETTLE_TOLERANCE_RAD", "UrAdapter", "connect",
+           "connect_ur", "parse_camera"]
 
 CAMERA_PORT = 47800
 SETTLE_TOLERANCE_RAD = 1e-3

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from hostpc.robots.ur import UrAdapter, UrControllerInfo
+from hostpc.robots.ur import UrAdapter
+from hostpc.robots.ur_precheck import UrControllerInfo
 
 PERIOD_S = 0.02
 """A slow controller cycle, so the watcher thread reads every sample even on a busy host."""

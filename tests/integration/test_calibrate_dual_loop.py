@@ -25,7 +25,8 @@ from hostpc.fitting.stepwise import gauge_equivalent
 from hostpc.methods.base import NullProgress, RunSettings
 from hostpc.methods.cell import build_cell
 from hostpc.methods.dual_loop import DualLoopMethod
-from hostpc.model.problem import Problem, build_problem
+from hostpc.model.layout import Problem
+from hostpc.model.problem import build_problem
 from hostpc.robots.simulator import SimulatedController, default_sim_scenario, sim_default_known
 from hostpc.robots.zerocal import ZerocalAdapter
 from hostpc.synthesize_dual_loop import plan_poses
