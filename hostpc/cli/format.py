@@ -9,6 +9,7 @@ import numpy as np
 
 from hostpc.diagnostics.adequacy import chi2_dof_upper
 from hostpc.fitting import FitResult
+from hostpc.model import joint_offsets
 from hostpc.model.joint_offsets import is_offset
 from hostpc.units import DISPLAY_UNITS
 
@@ -111,5 +112,6 @@ def format_fit_summary(result: FitResult, source: str = "",
     offsets = [p for p in result.parameters.values() if is_offset(p.name)]
     if offsets:
         worst = max(abs(p.value) for p in offsets)
-        lines += ["", f"largest joint offset correction: {np.degrees(worst):.4f} deg"]
+        lines += ["", "largest joint offset correction: "
+                  f"{joint_offsets.degrees(worst):.4f} {joint_offsets.DISPLAY_UNIT}"]
     return "\n".join(lines)
