@@ -17,8 +17,10 @@ import numpy as np
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
 from hostpc.kinematics import get_robot, invert_transform, pose_to_transform
 from hostpc.kinematics.inverse import look_at, solve_ik
+from hostpc.model.joint_offsets import offset_name
+from hostpc.model.layout import Problem
 from hostpc.model.measurements.predict import predict
-from hostpc.model.problem import Problem, build_problem
+from hostpc.model.problem import build_problem
 
 # A pose of each built-in robot with the flange pointing down (-z of base), used as the IK seed
 HOME_POSES = {
@@ -126,7 +128,7 @@ def random_truth(rng: np.random.Generator, n_joints: int = 6, *, offsets_deg: fl
                  tool_mm: float = 2.0, tool_deg: float = 0.5, target_mm: float = 2.0
                  ) -> dict[str, float]:
     """Uniform random zero offsets and frame errors of the stereo_target method."""
-    truth = {f"joint_offsets.q{i + 1}": np.radians(rng.uniform(-offsets_deg, offsets_deg))
+    truth = {offset_name(f"q{i + 1}"): np.radians(rng.uniform(-offsets_deg, offsets_deg))
              for i in range(n_joints)}
     for axis in "xyz":
         truth[f"tool.{axis}"] = rng.uniform(-tool_mm, tool_mm) * 1e-3

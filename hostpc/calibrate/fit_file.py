@@ -42,6 +42,8 @@ from pydantic import (
 )
 
 from hostpc.errors import InputError
+from hostpc.model.joint_offsets import is_offset, offset_name
+from hostpc.model.joint_offsets import labels as offset_labels
 
 MAX_JOINT_OFFSET_RAD = math.pi
 """Largest joint offset a fit can hold (rad): a zero offset is corrected by degrees."""
@@ -242,7 +244,7 @@ def _check_consistency(fit: FitDocument, source: str) -> None:
 
 
 def _check_range(name: str, entry: ParameterEntry, source: str) -> None:
-    if name.startswith("joint_offsets."):
+    if is_offset(name):
         limit, unit = ((MAX_JOINT_OFFSET_M, "m") if entry.unit == "m"
                        else (MAX_JOINT_OFFSET_RAD, "rad"))
     else:
@@ -258,8 +260,7 @@ _TREE_LABEL = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\.q[1-9][0-9]*")
 
 def joint_offset_labels(fit: FitDocument) -> list[str]:
     """The labels of the fit's joint offsets (``q1``.., or ``head.q1``..), in file order."""
-    return [name.split(".", 1)[1] for name in fit.parameters
-            if name.startswith("joint_offsets.")]
+    return offset_labels(fit.parameters)
 
 
 def _check_joint_offsets(fit: FitDocument, source: str) -> None:
@@ -273,7 +274,7 @@ def _check_joint_offsets(fit: FitDocument, source: str) -> None:
                                  and len(set(labels)) == len(labels)):
         wrong = next((label for label, want in zip(labels, serial, strict=True)
                       if label != want), labels[0])
-        raise _fail(source, f"parameters.joint_offsets.{wrong}", "the joint offsets must be "
+        raise _fail(source, f"parameters.{offset_name(wrong)}", "the joint offsets must be "
                     f"q1..q{len(labels)} in order (or a kinematic tree's chain.qk labels)")
     if fit.robot is not None:
         joints = _robot_joint_count(fit.robot)  # another name: the push compares it

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from hostpc.planning.design import joint_offset_names
+from hostpc.model.joint_offsets import PushTable
 
 PRIOR_DOMINATED_RATIO = 1.0 / math.sqrt(2.0)
 """A joint with a prior is determined by the data only if sigma_fit <= this x sigma_prior."""
@@ -97,12 +97,11 @@ def joint_sources(result: Any, n_joints: int) -> tuple[JointSource, ...]:
     module docstring). result: a FitResult (names, fixed, std, unidentifiable, problem)."""
     names = list(result.names)
     labels = tuple(getattr(result.problem.context, "joint_labels", ()) or ())
-    offset_names = joint_offset_names(n_joints, labels)
+    table = PushTable.for_controller(n_joints, labels)
     held_by = {d.fixed: d for d in result.unidentifiable}
     prior_sigma, user_held = _prior_sigmas(result)
     out = []
-    for j, name in enumerate(offset_names):
-        label = name.split(".", 1)[1]
+    for j, (name, label) in enumerate(zip(table.names, table.labels, strict=True)):
         if name not in names:
             out.append(JointSource(j + 1, label, "none",
                                    "not in the model (joint_offsets not fitted)",

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from hostpc.errors import InputError
-from hostpc.files import write_json_atomic as write_json_atomic  # re-exported
+from hostpc.files import write_json_atomic
 from hostpc.methods.base import SampleRecord
 
 RUN_FORMAT = "zerocal-run/1"

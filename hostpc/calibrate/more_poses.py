@@ -16,7 +16,8 @@ from __future__ import annotations
 import math
 
 from hostpc.calibrate.journal import Journal
-from hostpc.calibrate.push import adequacy_chi2, chi2_dof_upper
+from hostpc.calibrate.push import adequacy_chi2
+from hostpc.diagnostics.adequacy import chi2_dof_upper
 from hostpc.fitting import FitResult
 from hostpc.methods.base import Plan
 

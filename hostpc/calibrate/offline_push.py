@@ -27,6 +27,8 @@ from hostpc.calibrate.fit_file import REMEDY, parse_fit_text, validate_fit_docum
 from hostpc.errors import InputError
 from hostpc.fitting.identifiability import NullDirection
 from hostpc.input_files import FIT, read_input_bytes, read_input_text
+from hostpc.model.joint_offsets import is_offset
+from hostpc.model.joint_offsets import labels as offset_labels
 
 __all__ = ["SavedFit", "already_pushed", "ledger_path", "load_saved_fit", "record_push"]
 
@@ -62,12 +64,12 @@ class SavedFit:
     def problem(self) -> Any:
         """What plan_push reads of the problem: the joint labels (q1..qn, or a kinematic
         tree's head.q1, ...), from the names of the fit's joint offsets."""
-        labels = tuple(name.split(".", 1)[1] for name in self.joint_offsets())
+        labels = tuple(offset_labels(self.names))
         return SimpleNamespace(context=SimpleNamespace(joint_labels=labels))
 
     def joint_offsets(self) -> list[str]:
         """The joint-offset parameters of the fit, in order."""
-        return [n for n in self.names if n.startswith("joint_offsets.")]
+        return [n for n in self.names if is_offset(n)]
 
 
 def saved_fit_from_dict(document: Any, source: str) -> SavedFit:

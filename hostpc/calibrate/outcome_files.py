@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from hostpc.calibrate.joint_status import JointSource
-from hostpc.calibrate.journal import Journal, write_json_atomic
+from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.outcome import (
     JOURNAL_KINDS,
     RobotOutcome,
@@ -27,6 +27,7 @@ from hostpc.calibrate.outcome import (
 from hostpc.calibrate.resume import archive_result
 from hostpc.calibrate.summary import format_summary
 from hostpc.errors import InputError
+from hostpc.files import write_json_atomic
 
 
 def robot_argument(header: Mapping[str, Any]) -> str:

@@ -38,12 +38,12 @@ from typing import Any
 import numpy as np
 
 from hostpc.calibrate.joint_status import joint_sources
-from hostpc.calibrate.journal import Journal, write_json_atomic
-from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN
-from hostpc.diagnostics.adequacy import chi2_dof_upper as chi2_dof_upper  # the guard's band
+from hostpc.calibrate.journal import Journal
+from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN, chi2_dof_upper
 from hostpc.errors import InputError
+from hostpc.files import write_json_atomic
 from hostpc.fitting import FitResult
-from hostpc.planning.design import joint_offset_names
+from hostpc.model.joint_offsets import PushTable
 from hostpc.robots.base import RobotAdapter
 
 PUSH_FILE = "push.json"
@@ -126,9 +126,9 @@ def plan_push(result: FitResult, old_offsets: np.ndarray,
     pushed = np.zeros(n, dtype=bool)
     notes = []
     held = {d.fixed: d for d in result.unidentifiable}
-    offset_names = joint_offset_names(n, result.problem.context.joint_labels)
+    table = PushTable.for_controller(n, result.problem.context.joint_labels)
     sources = joint_sources(result, n)  # a held or prior-dominated joint is never pushed
-    for j, name in enumerate(offset_names):
+    for j, name in enumerate(table.names):
         if name not in names:
             notes.append("not in the model (joint_offsets not fitted)")
             continue
@@ -149,7 +149,7 @@ def plan_push(result: FitResult, old_offsets: np.ndarray,
         pushed[j] = True
         notes.append("")
     delta = np.where(pushed, fitted, 0.0)
-    labels = tuple(name.split(".", 1)[1] for name in offset_names)
+    labels = table.labels
     chi2_dof, shared = adequacy_chi2(result)
     refused = None if force else _refusal(result, delta, pushed, labels, max_correction_deg,
                                           dataset_file, chi2_dof, shared)

@@ -19,9 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from hostpc.calibrate.journal import Journal, sample_times, shift_sample_t, write_json_atomic
+from hostpc.calibrate.journal import Journal, sample_times, shift_sample_t
 from hostpc.calibrate.push import PUSH_FILE, PushRecord, intent_outcome, same_offsets
 from hostpc.errors import ControllerError, InputError
+from hostpc.files import write_json_atomic
 from hostpc.methods.base import Progress, RunSettings, SampleRecord
 from hostpc.robots.base import RobotState
 

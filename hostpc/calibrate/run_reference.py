@@ -37,7 +37,7 @@ from hostpc.files import write_json_atomic
 from hostpc.fitting.priors import analyse_with_constraints, constraints_for, with_prior_blocks
 from hostpc.methods.base import Method, Plan, Progress, RunSettings
 from hostpc.methods.cell import Cell
-from hostpc.planning.design import joint_offset_names
+from hostpc.model.joint_offsets import PushTable
 
 NO_REFERENCE = "none"
 
@@ -202,8 +202,9 @@ def joint_coverage(method: Method, plan: Plan, settings: RunSettings, cell: Cell
     constraints = constraints_for(dataset.extra_fields, names, units)
     full, _ = analyse_with_constraints(A, names, units, constraints, frames=frames)
     n = int(np.asarray(plan.q).shape[1])
-    offsets = joint_offset_names(n, problem.context.joint_labels)
-    labels = [joint_display_name(j, o.split(".", 1)[1]) for j, o in enumerate(offsets)]
+    table = PushTable.for_controller(n, problem.context.joint_labels)
+    offsets = table.names
+    labels = [joint_display_name(j, label) for j, label in enumerate(table.labels)]
     held_bare = {d.fixed: d for d in bare.null_directions}
     held_full = {d.fixed: d for d in full.null_directions}
     measured, referenced, resolved, missing = [], [], [], {}

@@ -30,7 +30,7 @@ import numpy as np
 
 from hostpc.calibrate import run_reference as cell_reference
 from hostpc.calibrate.joint_status import joint_sources
-from hostpc.calibrate.journal import Journal, write_json_atomic
+from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.more_poses import more_poses_message, more_poses_reason
 from hostpc.calibrate.outcome import parse_required_joints
 from hostpc.calibrate.outcome_files import run_outcome
@@ -43,8 +43,6 @@ from hostpc.calibrate.push import (
 )
 from hostpc.calibrate.refusals import MAX_POSE_ATTEMPTS, RunStopped, refusal_text, stopped
 from hostpc.calibrate.resume import (
-    CLOCK_TOLERANCE_S,
-    RESUME_OVERRIDABLE,
     PushLost,
     SampleClock,
     VerifyLost,
@@ -57,21 +55,18 @@ from hostpc.calibrate.resume import (
     verify_round,
 )
 from hostpc.calibrate.robot_time import RobotTimer
-from hostpc.calibrate.run_plan import PlanningError, plan_run
+from hostpc.calibrate.run_plan import plan_run
 from hostpc.calibrate.run_report import write_run_report
 from hostpc.calibrate.run_values import RobotInfo, RunOutcome
 from hostpc.calibrate.summary import (
-    EXIT_PUSH_REFUSED,
-    EXIT_VERIFY_FAILED,
-    RESULT_FORMAT,
     finite_or_none,
     format_summary,
     result_document,
-    truth_comparison,
 )
 from hostpc.calibrate.verify import VerifyResult, evaluate_verify
 from hostpc.dataset import Dataset, dataset_from_dict, save_dataset
 from hostpc.errors import ConnectionFailed, ControllerError, InputError, ZerocalError
+from hostpc.files import write_json_atomic
 from hostpc.fitting import FitResult, fit
 from hostpc.fitting.priors import with_constraints
 from hostpc.methods import method_class
@@ -85,12 +80,7 @@ from hostpc.methods.base import (
 from hostpc.methods.cell import build_cell, cell_from_dict
 from hostpc.robots.base import RobotAdapter, RobotState, check_needs
 
-__all__ = [
-    "CLOCK_TOLERANCE_S", "EXIT_PUSH_REFUSED", "EXIT_VERIFY_FAILED", "MAX_POSE_ATTEMPTS",
-    "RESULT_FORMAT", "RunStopped",
-    "RESUME_OVERRIDABLE", "PlanningError", "RobotInfo", "RunOutcome", "Runner",
-    "format_summary", "truth_comparison",
-]
+__all__ = ["Runner"]
 
 class Runner:
     """One calibration run in `run_dir` (new, or resumed if the folder holds a run).

@@ -20,11 +20,12 @@ from typing import Any
 import numpy as np
 
 from hostpc.calibrate.journal import Journal
-from hostpc.calibrate.push import PUSH_FILE, PushPlan, chi2_dof_upper, joint_display_name
+from hostpc.calibrate.push import PUSH_FILE, PushPlan, joint_display_name
 from hostpc.calibrate.robot_time import format_robot_time, robot_time_document
 from hostpc.calibrate.run_reference import reference_summary_lines
 from hostpc.calibrate.verify import VerifyResult, measured_noise_rms, noise_rms
 from hostpc.dataset import Dataset
+from hostpc.diagnostics.adequacy import chi2_dof_upper
 from hostpc.fitting import FitResult
 from hostpc.methods.base import Method, Plan, RunSettings
 from hostpc.methods.cell import Cell

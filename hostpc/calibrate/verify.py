@@ -42,9 +42,9 @@ import numpy as np
 from hostpc.dataset import Dataset
 from hostpc.diagnostics.distributions import chi2_sf
 from hostpc.fitting import FitResult
+from hostpc.model.joint_offsets import PushTable
 from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
-from hostpc.planning.design import joint_offset_names
 
 DEFAULT_VERIFY_ALPHA = 0.01
 """The verification's false-FAIL rate: a correct calibration FAILs this often at most."""
@@ -181,7 +181,7 @@ def evaluate_verify(result: FitResult, dataset: Dataset, pushed_delta: np.ndarra
     x_after = result.x.copy()
     x_before = result.x.copy()
     delta = np.asarray(pushed_delta, float)
-    offset_names = joint_offset_names(delta.size, problem.context.joint_labels)
+    offset_names = PushTable.for_controller(delta.size, problem.context.joint_labels).names
     for name, d in zip(offset_names, delta, strict=True):
         if name in problem.layout.names:
             k = problem.layout.index(name)

@@ -39,7 +39,9 @@ from typing import Any, NoReturn
 
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.outcome import parse_required_joints
-from hostpc.calibrate.runner import PlanningError, RobotInfo, Runner, RunOutcome
+from hostpc.calibrate.run_plan import PlanningError
+from hostpc.calibrate.run_values import RobotInfo, RunOutcome
+from hostpc.calibrate.runner import Runner
 from hostpc.cli.archive_options import add_archive_options, archive_run
 from hostpc.cli.calibrate_checks import (
     check_known_frames,
@@ -51,7 +53,7 @@ from hostpc.cli.fit import add_constraint_options, add_model_options
 from hostpc.cli.numbers import finite, integer
 from hostpc.cli.pose_counts import pose_counts
 from hostpc.cli.progress import StderrProgress
-from hostpc.cli.termination import (  # noqa: F401  (re-exported: the old import path)
+from hostpc.cli.termination import (
     EXIT_INTERRUPTED,
     EXIT_TERMINATED,
     Terminated,

@@ -9,9 +9,11 @@ import numpy as np
 
 from hostpc.diagnostics.adequacy import chi2_dof_upper
 from hostpc.fitting import FitResult
+from hostpc.model import joint_offsets
+from hostpc.model.joint_offsets import is_offset
 from hostpc.units import DISPLAY_UNITS
 
-__all__ = ["DISPLAY_UNITS", "display", "format_fit_summary", "format_parameter_table"]
+__all__ = ["display", "format_fit_summary", "format_parameter_table"]
 
 
 def display(value: float | None, unit: str) -> tuple[str, str]:
@@ -107,8 +109,9 @@ def format_fit_summary(result: FitResult, source: str = "",
         lines += [f"  - {a} ~ {b}: {rho:+.3f}" for a, b, rho in result.correlations[:10]]
         if len(result.correlations) > 10:
             lines.append(f"  ... and {len(result.correlations) - 10} more")
-    offsets = [p for p in result.parameters.values() if p.name.startswith("joint_offsets.")]
+    offsets = [p for p in result.parameters.values() if is_offset(p.name)]
     if offsets:
         worst = max(abs(p.value) for p in offsets)
-        lines += ["", f"largest joint offset correction: {np.degrees(worst):.4f} deg"]
+        lines += ["", "largest joint offset correction: "
+                  f"{joint_offsets.degrees(worst):.4f} {joint_offsets.DISPLAY_UNIT}"]
     return "\n".join(lines)

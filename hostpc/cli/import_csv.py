@@ -22,13 +22,13 @@ from pathlib import Path
 from typing import Any
 
 from hostpc.errors import InputError
+from hostpc.importing.column_map import parse_column_map
 from hostpc.importing.csv_import import (
     ANGLE_UNITS,
     DECIMALS,
     LENGTH_UNITS,
     ImportOptions,
     document_head,
-    parse_column_map,
     read_samples,
 )
 from hostpc.importing.csv_table import read_csv

@@ -20,7 +20,7 @@ from hostpc.diagnostics.distributions import chi2_isf, chi2_ppf, chi2_sf
 from hostpc.diagnostics.outliers import Outlier
 from hostpc.fitting import FitResult
 from hostpc.fitting.fitting import held_out_by_fold
-from hostpc.model.problem import Problem
+from hostpc.model.layout import Problem
 
 ADEQUACY_P_MIN = 1e-3
 """A fit is adequate (chi-square test) when P(chi2 this large | model right) >= this."""

@@ -22,9 +22,9 @@ import numpy as np
 
 from hostpc.diagnostics.interactions import Interaction
 from hostpc.diagnostics.patterns import pattern_effect
+from hostpc.model import joint_offsets
 from hostpc.model.effect import Effect, ModelContext
 
-_OFFSET = re.compile(r"joint_offsets\.(?P<label>(?:\w+\.)?q\d+)$")
 _GEOMETRY = re.compile(r"geometry\.(?P<kind>d|a|alpha|beta)(?P<joint>\d+)$")
 
 _JOINT_TEMPLATE = '''"""{title}
@@ -132,9 +132,9 @@ def generate(interaction: Interaction, values: np.ndarray) -> GeneratedEffect | 
               "reference": float(defined.mean()),
               "class_name": "".join(p.capitalize() for p in name.split("_")),
               "title": f"{parameter} varies with {variable}: a generated zerocal effect."}
-    offset, geometry = _OFFSET.match(parameter), _GEOMETRY.match(parameter)
+    offset, geometry = joint_offsets.match(parameter), _GEOMETRY.match(parameter)
     if offset:
-        source = _JOINT_TEMPLATE.format(label=offset.group("label"), **fields)
+        source = _JOINT_TEMPLATE.format(label=offset.label, **fields)
     elif geometry:
         source = _GEOMETRY_TEMPLATE.format(kind=geometry.group("kind"),
                                            joint=int(geometry.group("joint")), **fields)

@@ -47,6 +47,7 @@ from hostpc.errors import InputError
 from hostpc.fitting import FitResult, solve
 from hostpc.fitting.fitting import held_out_by_fold
 from hostpc.fitting.solver import Evaluation, Loss, SolverOutcome, evaluate, levenberg_marquardt
+from hostpc.model import joint_offsets
 from hostpc.model.effect import Effect
 from hostpc.model.layout import Problem
 from hostpc.model.problem import extend_problem as extend_with_effects
@@ -223,7 +224,6 @@ def lost_parameters(base: FitResult, extended: FitResult) -> tuple[str, ...]:
                  and name.split(".", 1)[0] not in COSTLESS_EFFECTS)
 
 
-_OFFSET_NAME = re.compile(r"joint_offsets\.(?P<branch>(?:\w+\.)?)q(?P<joint>\d+)$")
 
 
 def remedy(effect: str, lost: Sequence[str], effect_names: Sequence[str]) -> str:
@@ -231,12 +231,12 @@ def remedy(effect: str, lost: Sequence[str], effect_names: Sequence[str]) -> str
     effect_names: the effect's parameter names (full), to name the one each trades with."""
     joints, partners = [], []
     for name in lost:
-        match = _OFFSET_NAME.match(name)
-        if not match:
+        offset = joint_offsets.match(name)
+        if offset is None:
             continue
-        joints.append(match.group("branch") + match.group("joint"))
-        own = re.compile(rf"{re.escape(effect)}\.{re.escape(match.group('branch'))}"
-                         rf"[a-z]+{match.group('joint')}$")
+        joints.append(f"{offset.branch}{offset.joint}")
+        own = re.compile(rf"{re.escape(effect)}\.{re.escape(offset.branch)}"
+                         rf"[a-z]+{offset.joint}$")
         partners += [n for n in effect_names if own.match(n)]
     plural = "s" if len(joints) > 1 else ""
     if effect == "backlash" and joints:

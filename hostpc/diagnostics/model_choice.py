@@ -31,6 +31,7 @@ from hostpc.fitting import FitResult, fit
 from hostpc.fitting.fitting import DEFAULT_CV_FOLDS, held_out_by_fold
 from hostpc.fitting.folds import pose_groups
 from hostpc.fitting.solver import Loss
+from hostpc.model.memo import SharedValues
 from hostpc.model.problem import build_problem
 
 
@@ -95,9 +96,9 @@ def _score(result: FitResult, folds: int) -> tuple[float | None, float | None]:
             float(np.std(per_pose, ddof=1) / math.sqrt(per_pose.size)))
 
 
-def _models(dataset: Dataset, plugins: tuple[str | Path, ...]
+def _models(dataset: Dataset, plugins: tuple[str | Path, ...], shared: SharedValues
             ) -> list[tuple[str, tuple[str, ...]]]:
-    default = build_problem(dataset, None, plugins=plugins).effect_names
+    default = build_problem(dataset, None, plugins=plugins, shared=shared).effect_names
     frames = tuple(name for name in default if name != "joint_offsets")
     models = [("nominal", frames), ("offsets", default)]
     if "geometry" not in default:
@@ -110,7 +111,8 @@ def choose_model(dataset: Dataset, *, plugins: Iterable[str | Path] = (),
     """Fit every model of the table (module docstring) and choose by the one-standard-error
     rule on the pose-grouped held-out score."""
     plugin_files = tuple(plugins)
-    models = _models(dataset, plugin_files)
+    shared = SharedValues()  # the chain and the rig's sensitivity, once for every model
+    models = _models(dataset, plugin_files, shared)
     if ladder:
         from hostpc.diagnostics.pipeline import diagnose
 
@@ -123,7 +125,8 @@ def choose_model(dataset: Dataset, *, plugins: Iterable[str | Path] = (),
     fits: dict[str, FitResult] = {}
     for name, effects in models:
         try:
-            result = fit(dataset, list(effects), plugins=plugin_files, cv_folds=cv_folds)
+            result = fit(dataset, list(effects), plugins=plugin_files, cv_folds=cv_folds,
+                         shared=shared)
         except InputError as exc:  # e.g. a nominal model with every frame known: nothing free
             scores.append(ModelScore(name, tuple(effects), 0, False, None, None, None,
                                      f"not fitted: {exc}"))

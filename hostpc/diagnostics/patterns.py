@@ -5,16 +5,19 @@ from __future__ import annotations
 
 import re
 
+from hostpc.model import joint_offsets
 from hostpc.model.effect import ModelContext
 from hostpc.model.effects.coupling import JointCoupling
 
-# which built-in effect a "parameter varies with variable" pattern is; {b}: the branch
-# prefix of a kinematic tree ("left."), {j}: the joint
-_OFFSET = re.compile(r"joint_offsets\.(?P<b>(?:\w+\.)?)q(?P<j>\d+)$")
+# which built-in effect a "joint offset varies with variable" pattern is; {b}: the branch
+# prefix of a kinematic tree ("left."), {j}: the joint (checked first)
+OFFSET_PATTERN_EFFECTS = (
+    ("{b}tau{j}", "joint_compliance"),
+    ("{b}approach{j}", "backlash"),
+    ("{b}q{j}", "encoder_scale or transmission_harmonic"),
+)
+# the same for other parameters
 PATTERN_EFFECTS = (
-    (_OFFSET, "{b}tau{j}", "joint_compliance"),
-    (_OFFSET, "{b}approach{j}", "backlash"),
-    (_OFFSET, "{b}q{j}", "encoder_scale or transmission_harmonic"),
     (re.compile(r"tool\.z$"), "depth", "depth_scale"),
     (re.compile(r".*$"), "speed", "trigger_latency"),
     (re.compile(r"geometry\.[ad]\d+$"), "temperature", "thermal_expansion"),
@@ -26,6 +29,11 @@ def pattern_effect(parameter: str, variable: str, context: ModelContext | None =
                    ) -> str | None:
     """The built-in effect(s) a "parameter varies with variable" pattern is, or None (a
     neighbour's angle is joint_coupling only for the pairs it has on ``context``'s robot)."""
+    offset = joint_offsets.match(parameter)
+    if offset is not None:
+        for template, effect in OFFSET_PATTERN_EFFECTS:
+            if variable == template.format(b=offset.branch, j=offset.joint):
+                return effect
     for pattern, template, effect in PATTERN_EFFECTS:
         match = pattern.match(parameter)
         if match and variable == template.format(**match.groupdict()):
@@ -36,9 +44,8 @@ def pattern_effect(parameter: str, variable: str, context: ModelContext | None =
         return "joint_compliance"
     if re.fullmatch(r"(\w+\.)?approach\d+", variable):
         return "backlash"
-    offset = _OFFSET.match(parameter)
-    if offset:  # a joint's zero moving with a neighbouring joint's angle
-        b, j = offset.group("b"), int(offset.group("j"))
+    if offset is not None:  # a joint's zero moving with a neighbouring joint's angle
+        b, j = offset.branch, offset.joint
         for i in (j - 1, j + 1):
             if variable == f"{b}q{i}" and (context is None or f"{b}k{j}_{i}" in
                                            JointCoupling().parameter_names(context)):

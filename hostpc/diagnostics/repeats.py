@@ -22,7 +22,7 @@ import numpy as np
 
 from hostpc.diagnostics.distributions import chi2_sf
 from hostpc.fitting.folds import pose_groups
-from hostpc.model.problem import Problem
+from hostpc.model.layout import Problem
 
 ALL_PAIRS_UP_TO = 6
 """A repeat group of at most this many samples is tested pair by pair; a larger one by

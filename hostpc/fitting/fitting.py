@@ -3,9 +3,7 @@
 
 from __future__ import annotations
 
-import functools
 import math
-import weakref
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -29,7 +27,9 @@ from hostpc.fitting.solver import (
     levenberg_marquardt,
     normal_equations,
 )
-from hostpc.model.problem import Problem, build_problem
+from hostpc.model.layout import Problem
+from hostpc.model.memo import SharedValues
+from hostpc.model.problem import build_problem
 
 DEFAULT_CV_FOLDS = 5
 
@@ -292,7 +292,7 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
 
 def fit(dataset: Dataset, effects: str | Iterable[str] | None = None, *,
         plugins: Iterable[str | Path] = (), priors: object = None, hold: object = None,
-        **options: object) -> FitResult:
+        shared: SharedValues | None = None, **options: object) -> FitResult:
     """Fit an error model to a dataset.
 
     effects: None for the default model (joint_offsets plus every frame not marked known),
@@ -301,41 +301,11 @@ def fit(dataset: Dataset, effects: str | Iterable[str] | None = None, *,
     cv_folds, max_iterations, x0). priors: ["tool.x=0.045+-0.0005m", ...] or
     {"tool.x": {"value": 0.045, "sigma": 0.0005, "unit": "m"}}; hold: parameter names kept
     at their start value (both added to the dataset's own; hostpc.fitting.priors).
+    shared: what other fits of this dataset computed (``result.problem.shared``: the chain,
+    the rig's point sensitivity), reused; None computes them for this fit.
     """
     dataset = with_constraints(dataset, priors, hold)  # type: ignore[arg-type]
-    problem = _built_problem(dataset, effects, tuple(plugins))
+    problem = build_problem(dataset, effects, plugins=tuple(plugins), shared=shared)
     return solve(problem, **options)  # type: ignore[arg-type]
 
 
-#: (id(dataset), effects) -> the problem last built for them, weakly: it lives as long as a
-#: FitResult holds it (a refit of the same dataset, as a notebook or a benchmark does, then
-#: reuses it), and never keeps a dataset alive
-_BUILT: dict[tuple[int, str | tuple[str, ...] | None], weakref.ref[Problem]] = {}
-
-
-def _built_problem(dataset: Dataset, effects: str | Iterable[str] | None,
-                   plugins: tuple[str | Path, ...]) -> Problem:
-    """``build_problem(dataset, effects)``, or the same problem built for them before and
-    still held by a result (a problem is immutable, built from the immutable dataset; with
-    plugins, whose files may change, it is always built anew). A Dataset is a value: a
-    nested dict of it edited in place (``frames["camera"]``, ``extra_fields``) after a fit
-    is not seen by a refit of the same object; make a new one (``dataclasses.replace``)."""
-    if plugins:
-        return build_problem(dataset, effects, plugins=plugins)
-    spec = effects if effects is None or isinstance(effects, str) else tuple(effects)
-    if isinstance(spec, tuple) and not all(isinstance(name, str) for name in spec):
-        return build_problem(dataset, spec)  # its error names what is wrong
-    key = (id(dataset), spec)
-    ref = _BUILT.get(key)
-    problem = ref() if ref is not None else None
-    if problem is not None and problem.dataset is dataset:
-        return problem
-    problem = build_problem(dataset, spec)
-    _BUILT[key] = weakref.ref(problem, functools.partial(_forget_built, key))
-    return problem
-
-
-def _forget_built(key: tuple[int, str | tuple[str, ...] | None], ref: weakref.ref[Problem]
-                  ) -> None:
-    if _BUILT.get(key) is ref:
-        del _BUILT[key]

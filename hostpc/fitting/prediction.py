@@ -125,7 +125,8 @@ def predict(fitted: FitResult | FittedModel, dataset: Dataset, *,
     refitted: dict[str, float] = {}
     if refit_frames and frame_effects:
         hold = [n for n in names if n.split(".", 1)[0] not in frame_effects]
-        result = fit(dataset, list(effect_names), hold=hold, x0=x, cv_folds=0)
+        result = fit(dataset, list(effect_names), hold=hold, x0=x, cv_folds=0,
+                     shared=problem.shared)
         x = result.x
         problem = result.problem
         refitted = {n: float(v) for n, v in zip(names, x, strict=True)

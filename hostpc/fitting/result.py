@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.fitting.identifiability import NullDirection
-from hostpc.model.problem import Problem
+from hostpc.model.layout import Problem
 
 CORRELATION_THRESHOLD = 0.9
 

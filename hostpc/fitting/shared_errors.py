@@ -25,7 +25,6 @@ test (docs/vision.md 3.3).
 from __future__ import annotations
 
 import hashlib
-from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
@@ -36,7 +35,8 @@ from hostpc.fitting.shared_chi2 import (
     covariance_factor,
     shared_excess,
 )
-from hostpc.model.problem import Problem
+from hostpc.model.layout import Problem
+from hostpc.model.memo import SharedValues
 
 BLOCK = "rig_uncertainty"
 SCALE_ALPHA = 0.02
@@ -44,31 +44,27 @@ SCALE_ALPHA = 0.02
 SCALE_ALPHA quantile of its exact law under the stated S (`shared_chi2.shared_excess`): with
 S right, S is scaled up in SCALE_ALPHA of the worlds, whatever the geometry (about the
 one-sided level of the earlier "2 standard deviations" gate, which assumed a Gaussian)."""
-_CACHE: OrderedDict[str, np.ndarray] = OrderedDict()
-_CACHE_SIZE = 16
 
 
-def _sensitivity(block: Any, uv: np.ndarray) -> np.ndarray | None:
-    """(N, 3, 24) dp/drig for the samples' uv (cached: candidate fits reuse it)."""
+def _sensitivity(shared: SharedValues, block: Any, uv: np.ndarray) -> np.ndarray | None:
+    """(N, 3, 24) dp/drig for the samples' uv; kept in the problem's shared values by the
+    content of uv and the rig (candidate fits and folds of one dataset reuse it)."""
+    digest = hashlib.sha1(np.ascontiguousarray(uv).tobytes())
+    digest.update(repr(block.get("rig")).encode())
+    return shared.value(None, ("rig point sensitivity", digest.hexdigest()),
+                        lambda: _compute_sensitivity(block, uv))
+
+
+def _compute_sensitivity(block: Any, uv: np.ndarray) -> np.ndarray | None:
     from hostpc.errors import InputError
     from hostpc.vision.rig import rig_from_dict
     from hostpc.vision.rig_uncertainty import point_sensitivity
 
-    digest = hashlib.sha1(np.ascontiguousarray(uv).tobytes())
-    digest.update(repr(block.get("rig")).encode())
-    key = digest.hexdigest()
-    if key in _CACHE:
-        _CACHE.move_to_end(key)
-        return _CACHE[key]
     try:
         rig = rig_from_dict(block.get("rig"), f"dataset {BLOCK}.rig")
     except InputError:
         return None
-    value = point_sensitivity(rig, uv)
-    _CACHE[key] = value
-    while len(_CACHE) > _CACHE_SIZE:
-        _CACHE.popitem(last=False)
-    return value
+    return point_sensitivity(rig, uv)
 
 
 def shared_covariance(problem: Problem) -> tuple[np.ndarray, np.ndarray] | None:
@@ -84,7 +80,7 @@ def shared_covariance(problem: Problem) -> tuple[np.ndarray, np.ndarray] | None:
         S = np.asarray(block.get("covariance"), dtype=float)
     except (TypeError, ValueError):
         return None
-    D = _sensitivity(block, np.asarray(uv, float))
+    D = _sensitivity(problem.shared, block, np.asarray(uv, float))
     if D is None or S.ndim != 2 or S.shape != (D.shape[2], D.shape[2]):
         return None
     if not (np.all(np.isfinite(S)) and np.all(np.isfinite(D))):

@@ -3,9 +3,10 @@
 Residuals are ``r = W (measured - predicted)`` per sample (W = whitening matrix, W^T W =
 cov^-1), so the objective is the Mahalanobis distance. Only the parameters in ``free`` move;
 the others stay at their start values. Pure numpy, no I/O. One cache: a small problem's
-latest evaluation with its Jacobian is kept with the problem (``hostpc.model.memo``, read-
-only arrays), since a fit, its held-out residuals, the candidate ranking and the interaction
-search each evaluate the same fit at the same x.
+latest evaluation with its Jacobian is kept on the problem (``problem.memo``, a
+``hostpc.model.memo.ProblemMemo``; read-only arrays), since a fit, its held-out
+residuals, the candidate ranking and the interaction search each evaluate the same fit at
+the same x.
 """
 
 from __future__ import annotations
@@ -16,9 +17,8 @@ from typing import Literal
 import numpy as np
 
 from hostpc.fitting.priors import Constraints, problem_constraints
+from hostpc.model.layout import Problem
 from hostpc.model.measurements.predict import predict
-from hostpc.model.memo import memoised, recall, remember
-from hostpc.model.problem import Problem
 
 Loss = Literal["linear", "huber", "cauchy"]
 
@@ -69,7 +69,7 @@ def evaluate(problem: Problem, x: np.ndarray, jacobian: bool = True) -> Evaluati
         return _evaluate_in_chunks(problem, x)
     reuse = problem.measured.size * np.size(x) <= REUSE_ELEMENTS
     if reuse:
-        latest = recall(problem, "latest evaluation")
+        latest = problem.memo.recall("latest evaluation")
         if latest is not None and np.array_equal(latest.x, x):
             return latest
     evaluation = _evaluate(problem, x, jacobian)
@@ -79,7 +79,7 @@ def evaluate(problem: Problem, x: np.ndarray, jacobian: bool = True) -> Evaluati
         for array in (evaluation.x, evaluation.raw, evaluation.whitened, evaluation.jacobian):
             if array is not None:
                 array.setflags(write=False)
-        remember(problem, "latest evaluation", evaluation)
+        problem.memo.remember("latest evaluation", evaluation)
     return evaluation
 
 
@@ -166,7 +166,7 @@ def levenberg_marquardt(
     if free_index.size == 0:
         return SolverOutcome(x, current, weights, True, 0, "nothing to fit", cost)
     # residuals below this are rounding noise of the predictions: an exact fit
-    round_off_cost = memoised(problem, "round-off cost", lambda: _round_off_cost(problem))
+    round_off_cost = problem.memo.value("round-off cost", lambda: _round_off_cost(problem))
     mu = 1e-6
     nu = 2.0
     message = "maximum iterations reached"

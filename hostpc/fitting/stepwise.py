@@ -31,15 +31,17 @@ import numpy as np
 from hostpc.dataset import Dataset
 from hostpc.fitting.identifiability import analyse
 from hostpc.fitting.solver import SolverOutcome, evaluate, levenberg_marquardt
+from hostpc.model.joint_offsets import chain_prefix
+from hostpc.model.layout import Problem
 from hostpc.model.measurements.predict import predict
-from hostpc.model.problem import Problem, build_problem
+from hostpc.model.problem import build_problem
 
 __all__ = ["StepwiseResult", "fit_stepwise", "gauge_equivalent"]
 
 STEP_PARAMETERS = {
-    "left": ("joint_offsets.head.", "joint_offsets.left.", "camera.", "left_base.",
+    "left": (chain_prefix("head"), chain_prefix("left"), "camera.", "left_base.",
              "left_target."),
-    "right": ("joint_offsets.right.", "right_base.", "right_target."),
+    "right": (chain_prefix("right"), "right_base.", "right_target."),
 }
 """Name prefixes of the parameters each step estimates (the rest stay where they are)."""
 

@@ -35,7 +35,6 @@ from hostpc.importing.column_map import (
     ORIENTATIONS,
     ColumnMap,
     PointColumns,
-    parse_column_map,
 )
 from hostpc.importing.csv_table import CsvHeader, CsvRows, Row
 from hostpc.importing.euler import euler_to_matrix, parse_euler
@@ -43,8 +42,8 @@ from hostpc.importing.imported import FloatArray, ImportedSamples
 from hostpc.kinematics.rotations import matrix_to_rpy, rotvec_to_matrix
 
 __all__ = [
-    "LENGTH_UNITS", "ANGLE_UNITS", "DECIMALS", "ColumnMap", "ImportOptions", "document_head",
-    "parse_column_map", "read_samples",
+    "LENGTH_UNITS", "ANGLE_UNITS", "DECIMALS", "ImportOptions", "document_head",
+    "read_samples",
 ]
 
 

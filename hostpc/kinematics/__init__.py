@@ -15,7 +15,7 @@ from hostpc.kinematics.jacobians import (
     screws,
 )
 from hostpc.kinematics.poses import ChainPoses, forward
-from hostpc.kinematics.robots import chain_from_table, get_robot, names
+from hostpc.kinematics.robots import get_robot, names
 from hostpc.kinematics.rotations import (
     invert_transform,
     make_transform,
@@ -29,6 +29,7 @@ from hostpc.kinematics.rotations import (
     rpy_to_matrix,
     skew,
 )
+from hostpc.kinematics.tables import chain_from_table
 
 __all__ = [
     "GRAVITY",

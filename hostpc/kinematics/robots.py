@@ -13,9 +13,9 @@ import numpy as np
 from hostpc.errors import InputError
 from hostpc.kinematics.chain import Chain
 from hostpc.kinematics.humanoid import tree_names
-from hostpc.kinematics.tables import JOINT_TYPES, PARALLEL_TOL, chain_from_table
+from hostpc.kinematics.tables import chain_from_table
 
-__all__ = ["JOINT_TYPES", "PARALLEL_TOL", "chain_from_table", "get_robot", "names"]
+__all__ = ["get_robot", "names"]
 
 _HALF_PI = np.pi / 2.0
 

@@ -13,26 +13,26 @@ import numpy as np
 
 from hostpc.dataset import Dataset, Samples
 from hostpc.kinematics import Chain, gravity_torque
-from hostpc.kinematics.robots import chain_from_table, get_robot
+from hostpc.kinematics.robots import get_robot
+from hostpc.kinematics.tables import chain_from_table
 from hostpc.model.effect import ModelContext
-from hostpc.model.memo import memoised
+
+
+def chain_version(dataset: Dataset) -> tuple[int, int] | None:
+    """What a chain built from the dataset's robot description depends on beyond it: the
+    URDF file's version (modification time, size), (0, 0) without a URDF; None if the file
+    cannot be read (then nothing may be kept: the loader says what is wrong)."""
+    if dataset.robot.urdf is None:
+        return (0, 0)
+    try:
+        stat = os.stat(dataset.robot.urdf)
+    except OSError:
+        return None
+    return (stat.st_mtime_ns, stat.st_size)
 
 
 def serial_chain(dataset: Dataset) -> Chain:
-    """The nominal chain of the dataset's robot (built-in by name, explicit table or URDF);
-    built once per robot description (``memo``; a URDF file again when it changed)."""
-    robot = dataset.robot
-    key: tuple[object, ...] = ("serial_chain",)
-    if robot.urdf is not None:
-        try:
-            stat = os.stat(robot.urdf)
-        except OSError:  # the loader says what is wrong with the path
-            return _serial_chain(dataset)
-        key = ("serial_chain", stat.st_mtime_ns, stat.st_size)
-    return memoised(robot, key, lambda: _serial_chain(dataset))
-
-
-def _serial_chain(dataset: Dataset) -> Chain:
+    """The nominal chain of the dataset's robot (built-in by name, explicit table or URDF)."""
     robot = dataset.robot
     if robot.name is not None and robot.a is None:
         return get_robot(robot.name)
@@ -102,8 +102,9 @@ def serial_context(dataset: Dataset, chain: Chain,
     ``categorical``: which of the given variables are group labels, with their levels."""
     samples = dataset.samples
     q_cmd = np.asarray(samples.q, dtype=float)
-    if chain.mass is not None and chain.com is not None:  # once per samples and chain
-        tau = memoised(samples, ("gravity_torque", chain), lambda: gravity_torque(chain, q_cmd))
+    if chain.mass is not None and chain.com is not None:  # once per build: views share it
+        tau = gravity_torque(chain, q_cmd)
+        tau.setflags(write=False)  # shared by the problem's views and extensions
     else:
         tau = np.full_like(q_cmd, np.nan)
     approach = np.nan_to_num(np.asarray(samples.approach, dtype=float), nan=0.0)

@@ -17,6 +17,7 @@ import numpy as np
 from hostpc.dataset import Dataset
 from hostpc.kinematics import Chain
 from hostpc.model.effect import EffectTerm, ModelContext
+from hostpc.model.memo import ProblemMemo, SharedValues
 
 
 class MeasurementPredictor(Protocol):
@@ -85,6 +86,13 @@ class Problem:
     #: computed once, or None
     linear_bases: tuple[np.ndarray | None, ...] = field(default=())
     model: MeasurementPredictor | None = None
+    #: what the problems of this dataset share (the chain, the rig's point sensitivity):
+    #: carried by its views and extensions, handed to another build on request
+    shared: SharedValues = field(default_factory=SharedValues, repr=False, compare=False)
+    #: this problem's own values (its latest evaluation, its round-off cost): new for every
+    #: problem, a view or an extension included
+    memo: ProblemMemo = field(init=False, default_factory=ProblemMemo, repr=False,
+                              compare=False)
 
     @property
     def method(self) -> str:

@@ -14,13 +14,14 @@ import numpy as np
 from hostpc.dataset import Dataset
 from hostpc.errors import EffectError
 from hostpc.kinematics import Chain
-from hostpc.model.context import sample_variables
+from hostpc.model.context import chain_version
 from hostpc.model.contract import check_effect
 from hostpc.model.effect import Effect, EffectTerm, ModelContext
 from hostpc.model.effects.frames import frame_effect
 from hostpc.model.layout import MeasurementPredictor, ParameterLayout, Problem
 from hostpc.model.measurements.base import MeasurementModel
 from hostpc.model.measurements.registry import measurement_model
+from hostpc.model.memo import SharedValues
 from hostpc.model.registry import (
     available_effects,
     builtin_effects,
@@ -28,13 +29,22 @@ from hostpc.model.registry import (
     parse_effect_list,
 )
 
-__all__ = ["ParameterLayout", "Problem", "build_problem", "default_effects", "extend_problem",
-           "robot_chain", "sample_variables"]
+__all__ = ["build_problem", "default_effects", "extend_problem", "robot_chain"]
 
 
-def robot_chain(dataset: Dataset, plugins: Iterable[str | Path] = ()) -> Chain:
-    """The nominal chain the fit of this dataset works on (its measurement model's)."""
-    return measurement_model(dataset.method, plugins).chain(dataset)
+def robot_chain(dataset: Dataset, plugins: Iterable[str | Path] = (), *,
+                shared: SharedValues | None = None) -> Chain:
+    """The nominal chain the fit of this dataset works on (its measurement model's); kept
+    in ``shared`` (if given) per robot description and URDF file version."""
+    return _chain(measurement_model(dataset.method, plugins), dataset, shared)
+
+
+def _chain(model: MeasurementModel, dataset: Dataset, shared: SharedValues | None) -> Chain:
+    version = chain_version(dataset)
+    if shared is None or version is None:
+        return model.chain(dataset)
+    return shared.value(dataset.robot, ("chain", type(model), version),
+                        lambda: model.chain(dataset))
 
 
 def default_effects(dataset: Dataset, plugins: Iterable[str | Path] = ()) -> list[str]:
@@ -121,16 +131,20 @@ def build_problem(
     *,
     plugins: Iterable[str | Path] = (),
     effect_instances: Iterable[Effect] | None = None,
+    shared: SharedValues | None = None,
 ) -> Problem:
     """Validate effects against the dataset and lay out the parameter vector.
 
     effects: None for the default (joint_offsets + unknown frames), a list of names, or a
     spec string such as ``"joint_offsets,tool"`` or ``"+backlash"`` (added to the default).
-    plugins: Python files defining effects and measurement models.
+    plugins: Python files defining effects and measurement models. shared: what another
+    problem of this dataset computed (``problem.shared``, hostpc.model.memo), reused and
+    carried on; None starts anew.
     """
     plugin_paths = tuple(str(p) for p in plugins)
     model = measurement_model(dataset.method, plugin_paths)
-    chain = model.chain(dataset)
+    shared = SharedValues() if shared is None else shared
+    chain = _chain(model, dataset, shared)
     model.check(dataset, chain)
     names = parse_effect_list(effects, default_effects(dataset, plugin_paths))
     if effect_instances is None:
@@ -141,6 +155,7 @@ def build_problem(
     terms, layout = _terms(model, dataset, context, instances)
     bases = _linear_bases(terms, context)
     measured, W = model.measurements(dataset)
+    W.setflags(write=False)  # shared by the problem's views and extensions
     return Problem(
         dataset=dataset,
         chain=chain,
@@ -152,6 +167,7 @@ def build_problem(
         plugins=plugin_paths,
         linear_bases=bases,
         model=model,
+        shared=shared,
     )
 
 

@@ -43,6 +43,8 @@ from hostpc.dataset import Dataset
 from hostpc.fitting import NullDirection, analyse
 from hostpc.kinematics import Chain, forward, invert_transform
 from hostpc.kinematics.inverse import look_at, solve_ik
+from hostpc.model import joint_offsets
+from hostpc.model.joint_offsets import PushTable
 from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
 from hostpc.planning.tour import move_times, nearest_neighbour, plan_tour
@@ -285,22 +287,13 @@ def predicted_covariance(design: Design) -> np.ndarray:
     return cov
 
 
-def joint_offset_names(n_joints: int, joint_labels: Sequence[str] = ()) -> list[str]:
-    """The zero-offset parameter of each of the controller's n joints, in its order:
-    `joint_offsets.q1..qn`, or with the model's joint labels of a kinematic tree (when there
-    are n of them) `joint_offsets.head.q1`, ... (docs/dual-loop.md)."""
-    labels = (list(joint_labels) if len(joint_labels) == n_joints
-              else [f"q{j + 1}" for j in range(n_joints)])
-    return [f"joint_offsets.{label}" for label in labels]
-
-
 def joint_offset_sigmas(design: Design, n_joints: int) -> np.ndarray:
     """(n,) predicted standard deviation of each joint offset (rad), NaN if unidentifiable
     (structural gauge) or not determined by these poses."""
     cov = predicted_covariance(design)
     sigmas = np.full(n_joints, np.nan)
-    labels = [n.split(".", 1)[1] for n in design.names if n.startswith("joint_offsets.")]
-    for j, name in enumerate(joint_offset_names(n_joints, labels)):
+    table = PushTable.for_controller(n_joints, joint_offsets.labels(design.names))
+    for j, name in enumerate(table.names):
         if name in design.names:
             k = design.names.index(name)
             sigmas[j] = np.sqrt(cov[k, k]) if np.isfinite(cov[k, k]) else np.nan
@@ -338,8 +331,8 @@ def poses_for_target_sigma(design: Design, order: np.ndarray, target_sigma: floa
     of `order` does not reach it. Adding a pose never raises a predicted sigma, so the
     count is found by bisection."""
     order = np.asarray(order, dtype=int)
-    labels = [n.split(".", 1)[1] for n in design.names if n.startswith("joint_offsets.")]
-    wanted = [j for j, name in enumerate(joint_offset_names(n_joints, labels))
+    table = PushTable.for_controller(n_joints, joint_offsets.labels(design.names))
+    wanted = [j for j, name in enumerate(table.names)
               if name in design.names and design.free[design.names.index(name)]]
 
     def reached(count: int) -> bool:

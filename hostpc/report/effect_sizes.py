@@ -27,6 +27,7 @@ import numpy as np
 
 from hostpc.errors import EffectError
 from hostpc.fitting import FitResult
+from hostpc.model.joint_offsets import is_offset
 from hostpc.report.markup import display, escape, table
 
 PER_JOINT = {"joint_compliance": "c", "backlash": "b", "encoder_scale": "s"}
@@ -167,4 +168,4 @@ def effect_sizes(fit: FitResult, truth: Mapping[str, Any] | None = None,
 
 def _joints(fit: FitResult) -> int:
     """Joints of the fitted robot: its joint-offset parameters (every model has them)."""
-    return sum(name.startswith("joint_offsets.") for name in fit.names)
+    return sum(is_offset(name) for name in fit.names)

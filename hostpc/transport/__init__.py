@@ -4,8 +4,8 @@ from hostpc.transport.client import (
     IDEMPOTENT_KINDS,
     MOTION_KINDS,
     ControllerClient,
-    IoEventSubscription,
 )
+from hostpc.transport.io_events import IoEventSubscription
 from hostpc.transport.types import (
     ControllerRefusedError,
     ControllerState,

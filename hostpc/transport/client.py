@@ -32,9 +32,8 @@ import numpy as np
 
 from hostpc.errors import ConnectionFailed, ProtocolViolation, RequestTimeout
 from hostpc.transport.error_mapping import _os_error_text, _reply_error
-from hostpc.transport.io_events import IoEventSubscription as IoEventSubscription
-from hostpc.transport.link import READ_CHUNK as READ_CHUNK
-from hostpc.transport.link import _Link, _LinkLostError
+from hostpc.transport.io_events import IoEventSubscription
+from hostpc.transport.link import READ_CHUNK, _Link, _LinkLostError
 from hostpc.transport.reply_values import _array, _decode_image, _floats
 from hostpc.transport.types import (
     ControllerState,

@@ -1,16 +1,16 @@
 """Stereo rectification of a rig: matrices, point rectification, cached image maps.
 
-`rectification_for(rig)` runs cv2.stereoRectify once per rig (cache keyed by the rig's
-fingerprint). Rectified frame: the left camera frame rotated by `R1` (x_rect = R1 @ x_left),
-both rectified cameras share the focal length `f` and the row `cy`; the right camera sits
-at +baseline along the rectified x axis, so a point at depth Z has disparity
-`x_left - x_right = f * baseline / Z` (with CALIB_ZERO_DISPARITY, cx is shared too).
+`rectification_for(rig)` runs cv2.stereoRectify once per rig (kept on the rig object,
+``rig.rectification``: no module cache). Rectified frame: the left camera frame rotated
+by `R1` (x_rect = R1 @ x_left), both rectified cameras share the focal length `f` and the
+row `cy`; the right camera sits at +baseline along the rectified x axis, so a point at
+depth Z has disparity `x_left - x_right = f * baseline / Z` (with CALIB_ZERO_DISPARITY, cx
+is shared too).
 The full-image remap tables (only the SGBM path needs them) are built on first use.
 """
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import cv2
@@ -19,7 +19,6 @@ import numpy as np
 from hostpc.vision.rig import StereoRig
 
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-12)
-_CACHE_SIZE = 8
 
 
 @dataclass(eq=False)
@@ -100,22 +99,14 @@ class Rectification:
         )
 
 
-_cache: OrderedDict[str, Rectification] = OrderedDict()
-
-
 def rectification_for(rig: StereoRig) -> Rectification:
-    """The (cached) Rectification of `rig`."""
-    key = rig.fingerprint()
-    hit = _cache.get(key)
-    if hit is not None:
-        _cache.move_to_end(key)
-        return hit
+    """The Rectification of `rig`, computed once per rig object (``rig.rectification``)."""
+    if isinstance(rig.rectification, Rectification):
+        return rig.rectification
     R1, R2, P1, P2, Q, _, _ = cv2.stereoRectify(
         rig.K_left, rig.dist_left, rig.K_right, rig.dist_right, rig.image_size,
         rig.R, rig.T.reshape(3, 1), flags=cv2.CALIB_ZERO_DISPARITY, alpha=0.0,
     )
     rect = Rectification(rig, R1, R2, P1, P2, Q)
-    _cache[key] = rect
-    while len(_cache) > _CACHE_SIZE:
-        _cache.popitem(last=False)
+    object.__setattr__(rig, "rectification", rect)  # frozen: the one value it derives
     return rect

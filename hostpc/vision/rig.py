@@ -19,7 +19,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -69,6 +69,9 @@ class StereoRig:
     rms: float = 0.0
     n_views: int = 0
     covariance: np.ndarray | None = None
+    #: its ``hostpc.vision.rectification.Rectification``, computed on the first
+    #: ``rectification_for(rig)`` and kept with the rig (a rig is immutable)
+    rectification: object | None = field(init=False, default=None, repr=False)
 
     def __post_init__(self) -> None:
         w, h = (int(v) for v in self.image_size)
@@ -109,7 +112,7 @@ class StereoRig:
         return T
 
     def fingerprint(self) -> str:
-        """A short hash of every parameter (used as the rectification cache key)."""
+        """A short hash of every parameter (to compare two rigs)."""
         digest = hashlib.sha1(repr(self.image_size).encode())
         for a in (self.K_left, self.dist_left, self.K_right, self.dist_right, self.R, self.T):
             digest.update(np.ascontiguousarray(a).tobytes())

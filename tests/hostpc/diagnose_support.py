@@ -16,8 +16,9 @@ import numpy as np
 from hostpc.dataset import Dataset, RobotDescription, Samples, SphereFrame
 from hostpc.fitting.solver import evaluate
 from hostpc.model.effect import Effect
+from hostpc.model.layout import Problem
 from hostpc.model.measurements.predict import predict
-from hostpc.model.problem import Problem, build_problem
+from hostpc.model.problem import build_problem
 from hostpc.model.registry import load_plugin_file
 from hostpc.synthesize import SyntheticDataset, random_truth, synthesize_stereo_target
 

@@ -1,6 +1,7 @@
 """What problem builds share (issue 17): the theta-only screws equal those rows of all 5n;
-the chain, gravity torques and whitening are computed once per dataset, read-only, and
-never handed to another dataset."""
+the chain, gravity torques and whitening are computed once per build, read-only, shared by
+the problem's extensions and (the chain) by the builds handed its visible cache
+(``problem.shared``, issue 26), and never handed to another dataset."""
 
 from __future__ import annotations
 
@@ -11,7 +12,9 @@ import numpy as np
 import pytest
 
 from hostpc.kinematics import forward, get_robot, joint_screws, screws
-from hostpc.model.problem import build_problem
+from hostpc.model.memo import SharedValues
+from hostpc.model.problem import build_problem, extend_problem
+from hostpc.model.registry import builtin_effects
 from hostpc.synthesize import random_truth, synthesize_stereo_target
 
 
@@ -48,10 +51,13 @@ def test_builds_of_one_dataset_share_chain_torques_and_whitening() -> None:
     dataset = _dataset(3)
     first = build_problem(dataset)
     again = build_problem(dataclasses.replace(dataset, extra_fields={"note": "copy"}),
-                          "+geometry")
+                          "+geometry", shared=first.shared)
     assert again.chain is first.chain
+    assert again.shared is first.shared
+    again = extend_problem(first, [builtin_effects()["geometry"]()])
     assert again.context.tau is first.context.tau
     assert again.sqrt_information is first.sqrt_information
+    assert build_problem(dataset).chain is not first.chain  # not handed: its own
     assert not first.context.tau.flags.writeable
     assert not first.sqrt_information.flags.writeable
     with pytest.raises(ValueError):
@@ -100,29 +106,45 @@ def test_a_urdf_chain_is_read_once_and_again_when_the_file_changes(tmp_path) -> 
                             for i in range(5)]}
     (tmp_path / "set.json").write_text(json.dumps(document))
     dataset = load_dataset(tmp_path / "set.json")
-    first = robot_chain(dataset)
-    assert robot_chain(dataset) is first
+    shared = SharedValues()
+    first = robot_chain(dataset, shared=shared)
+    assert robot_chain(dataset, shared=shared) is first
     urdf.write_text(source.read_text() + "\n")  # changed: read again
     os.utime(urdf, ns=(1, 1))
-    assert robot_chain(dataset) is not first
+    assert robot_chain(dataset, shared=shared) is not first
 
 
-def test_a_refit_reuses_the_problem_a_result_holds_and_gives_the_same_result() -> None:
+def test_a_refit_builds_anew_and_gives_the_same_result() -> None:
     from hostpc.fitting import fit
 
     dataset = _dataset(7)
     first = fit(dataset)
     again = fit(dataset)
-    assert again.problem is first.problem  # held by `first`: not built again
+    assert again.problem is not first.problem  # no hidden cache keyed by the dataset
     for field in ("x", "std", "covariance", "residuals_whitened"):
         np.testing.assert_array_equal(getattr(again, field), getattr(first, field))
     assert (again.cv_rms, again.iterations, again.message) == (
         first.cv_rms, first.iterations, first.message)
-    other = fit(dataset, ["joint_offsets"])  # other effects: their own problem
-    assert other.problem is not first.problem
-    assert fit(dataset, ["joint_offsets"]).problem is other.problem
-    del first, again
-    import gc
+    handed = fit(dataset, shared=first.problem.shared)  # the visible cache, on request
+    assert handed.problem.chain is first.problem.chain
+    np.testing.assert_array_equal(handed.x, first.x)
 
-    gc.collect()
-    assert fit(dataset).problem.dataset is dataset  # built anew once no result holds it
+
+def test_editing_a_dataset_in_place_and_refitting_gives_the_new_answer() -> None:
+    """A marker added in place to a world_point dataset's markers (a dict): the refit of
+    the same object lays out its parameters (a refit that reused the problem built before
+    did not, and failed on the stale layout)."""
+    from hostpc.fitting import fit
+    from hostpc.model.measurements.registry import measurement_models
+
+    dataset = measurement_models()["world_point"].example(np.random.default_rng(0))
+    first = fit(dataset)
+    markers = dataset.frames["markers"]
+    assert isinstance(markers, dict)
+    markers["c"] = np.array([0.01, 0.0, 0.02])  # edited in place
+    edited = fit(dataset)
+    fresh = fit(dataclasses.replace(dataset, frames=dict(dataset.frames)))
+    assert "markers.c.x" in edited.names and "markers.c.x" not in first.names
+    assert edited.names == fresh.names
+    np.testing.assert_array_equal(edited.x, fresh.x)
+    np.testing.assert_array_equal(edited.std, fresh.std)

@@ -10,7 +10,7 @@ import numpy as np
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.more_poses import more_poses_reason
 from hostpc.calibrate.offline_push import SavedFit
-from hostpc.calibrate.push import chi2_dof_upper
+from hostpc.diagnostics.adequacy import chi2_dof_upper
 from hostpc.methods.base import Plan
 
 DOF = 40

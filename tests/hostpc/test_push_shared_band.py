@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 import hostpc
-from hostpc.calibrate.push import adequacy_chi2, chi2_dof_upper, plan_push
+from hostpc.calibrate.push import adequacy_chi2, plan_push
 from hostpc.dataset import dataset_from_dict
+from hostpc.diagnostics.adequacy import chi2_dof_upper
 from hostpc.errors import InputError
 from hostpc.kinds.dual_loop.planning import plan_poses
 from tests.hostpc.test_head_camera_uncertainty import world_documents

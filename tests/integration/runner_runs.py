@@ -6,7 +6,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from controller_stub.server import ControllerServer
-from hostpc.calibrate.runner import RobotInfo, Runner, RunOutcome
+from hostpc.calibrate.run_values import RobotInfo, RunOutcome
+from hostpc.calibrate.runner import Runner
 from hostpc.methods.base import RunSettings
 from hostpc.robots.zerocal import ZerocalAdapter
 from tests.integration.conftest import TOKEN

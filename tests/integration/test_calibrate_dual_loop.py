@@ -26,7 +26,8 @@ from hostpc.kinds.dual_loop.method import DualLoopMethod
 from hostpc.kinds.dual_loop.synthesize import plan_poses
 from hostpc.methods.base import NullProgress, RunSettings
 from hostpc.methods.cell import build_cell
-from hostpc.model.problem import Problem, build_problem
+from hostpc.model.layout import Problem
+from hostpc.model.problem import build_problem
 from hostpc.robots.simulator import SimulatedController, default_sim_scenario, sim_default_known
 from hostpc.robots.zerocal import ZerocalAdapter
 from hostpc.transport import ControllerClient, ControllerRefusedError

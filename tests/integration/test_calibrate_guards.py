@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hostpc.calibrate.push import chi2_dof_upper, plan_push
+from hostpc.calibrate.push import plan_push
+from hostpc.diagnostics.adequacy import chi2_dof_upper
 from hostpc.fitting import fit
 from hostpc.robots.simulator import SimulatedController, load_scenario_file
 from hostpc.synthesize import synthesize_stereo_target

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from hostpc.calibrate.runner import RunOutcome
+from hostpc.calibrate.run_values import RunOutcome
 from hostpc.fitting import fit
 from hostpc.methods.base import RunSettings
 from hostpc.planning.approach import travel_signs

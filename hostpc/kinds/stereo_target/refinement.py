@@ -21,8 +21,9 @@ from typing import Any
 import numpy as np
 
 from hostpc.dataset import Dataset
+from hostpc.model.layout import Problem
 from hostpc.model.measurements.predict import predict
-from hostpc.model.problem import Problem, build_problem
+from hostpc.model.problem import build_problem
 
 MIN_SAMPLES = 6
 """Fewer samples than this (the 4 poses of a short plan's verify set) are left as measured:

@@ -38,7 +38,6 @@ from hostpc.kinematics.rotations import pose_to_transform
 from hostpc.model.context import serial_chain, serial_context
 from hostpc.model.effect import ModelContext
 from hostpc.model.layout import Problem
-from hostpc.model.memo import memoised
 
 POSE = ("x", "y", "z", "rx", "ry", "rz")
 POINT = ("x", "y", "z")
@@ -96,8 +95,7 @@ def point_measurements(dataset: Dataset) -> tuple[np.ndarray, np.ndarray]:
     if samples.p is None or samples.cov is None:
         raise InputError(f"method {dataset.method!r}: samples need p and cov")
     cov = np.asarray(samples.cov, dtype=float)
-    return np.asarray(samples.p, dtype=float), memoised(samples, "whitening",
-                                                        lambda: whitening(cov))
+    return np.asarray(samples.p, dtype=float), whitening(cov)
 
 
 def whitening(cov: np.ndarray) -> np.ndarray:
