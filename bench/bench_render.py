@@ -10,9 +10,9 @@ import time
 
 import numpy as np
 
-from controller_stub.robot_model import make_transform
-from controller_stub.scenario import Scenario
-from controller_stub.simulation import Simulation
+from controller_stub.geometry import make_transform
+from controller_stub.scenario.spec import Scenario
+from controller_stub.world.simulation import Simulation
 
 
 def run(repeats: int = 20) -> dict[str, float]:

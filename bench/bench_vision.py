@@ -21,8 +21,8 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from controller_stub.scenario import Scenario
-from controller_stub.simulation import Simulation
+from controller_stub.scenario.spec import Scenario
+from controller_stub.world.simulation import Simulation
 from hostpc.vision import ChessboardSpec, TargetMeasurer, TargetRejected, calibrate_rig
 
 

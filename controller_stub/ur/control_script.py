@@ -45,7 +45,7 @@ from typing import Protocol
 
 import numpy as np
 
-from controller_stub.controller_state import SimulatedController
+from controller_stub.world.controller_state import SimulatedController
 
 logger = logging.getLogger(__name__)
 

@@ -36,11 +36,8 @@ from typing import Any
 
 import numpy as np
 
-from controller_stub.controller_state import SimulatedController
 from controller_stub.errors import SimulationRefused
-from controller_stub.robot_model import forward
-from controller_stub.server import ControllerServer
-from controller_stub.simulation import Simulation
+from controller_stub.network.server import ControllerServer
 from controller_stub.ur.control_script import ControlScript
 from controller_stub.ur.dashboard import DashboardServer
 from controller_stub.ur.paced_motion import CYCLE_S, PacedMotion
@@ -62,6 +59,9 @@ from controller_stub.ur.rtde_values import (
 )
 from controller_stub.ur.rtde_wire import N_REGISTERS
 from controller_stub.ur.script_server import ScriptServer
+from controller_stub.world.controller_state import SimulatedController
+from controller_stub.world.robot_model import forward
+from controller_stub.world.simulation import Simulation
 
 logger = logging.getLogger(__name__)
 
@@ -322,7 +322,7 @@ class UrPersonality(UrRtdeValuesMixin):
         simulation's refusal code ("joint_limit", "estop", ...) which also raises a
         protective stop.
         """
-        from controller_stub.server import RequestRefusedError
+        from controller_stub.network.server import RequestRefusedError
 
         max_speed = float(np.min(self.sim.max_joint_speed()))
         fraction = float(np.clip(velocity / max_speed, 1e-3, 1.0)) * max(self.speed_slider, 1e-3)

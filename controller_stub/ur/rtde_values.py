@@ -14,9 +14,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from controller_stub.simulation import Simulation
 from controller_stub.ur.paced_motion import CYCLE_S
 from controller_stub.ur.rtde_wire import output_type, register_field
+from controller_stub.world.simulation import Simulation
 
 RUNTIME_STOPPED, RUNTIME_PLAYING = 1, 2
 ROBOT_MODE_RUNNING = 7

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from controller_stub.scenario import Scenario, scenario_from_dict
-from controller_stub.simulation import Simulation
+from controller_stub.scenario.spec import Scenario, scenario_from_dict
+from controller_stub.world.simulation import Simulation
 
 
 def _make_sim(**overrides: object) -> Simulation:

@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller_stub.controller_state import ControllerState
-from controller_stub.humanoid import HumanoidSimulation
-from controller_stub.scenario import scenario_from_dict
-from controller_stub.simulation import (
+from controller_stub.scenario.spec import scenario_from_dict
+from controller_stub.world.controller_state import ControllerState
+from controller_stub.world.humanoid import HumanoidSimulation
+from controller_stub.world.simulation import (
     SimulatedController,
     Simulation,
     SimulationRefused,

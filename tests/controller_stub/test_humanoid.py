@@ -9,7 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from controller_stub.humanoid import (
+from controller_stub.geometry import make_transform
+from controller_stub.scenario.spec import ScenarioError, scenario_from_dict
+from controller_stub.world.humanoid import (
     CAMERA_NOMINAL,
     HOME,
     HumanoidSimulation,
@@ -17,9 +19,8 @@ from controller_stub.humanoid import (
     arm_model,
     head_model,
 )
-from controller_stub.robot_model import forward, make_transform
-from controller_stub.scenario import ScenarioError, scenario_from_dict
-from controller_stub.simulation import SimulationRefused, create_simulation
+from controller_stub.world.robot_model import forward
+from controller_stub.world.simulation import SimulationRefused, create_simulation
 
 
 def dh(a: float, alpha: float, d: float, q: float) -> np.ndarray:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from controller_stub.simulation import Simulation
+from controller_stub.world.simulation import Simulation
 
 MakeSim = Callable[..., Simulation]
 LATENCY = 0.004

@@ -8,15 +8,15 @@ import cv2
 import numpy as np
 import pytest
 
-from controller_stub.render import (
+from controller_stub.geometry import make_transform
+from controller_stub.sensors.render import (
     CameraModel,
     DiskPattern,
     Renderer,
     project_points,
     undistort_pixels,
 )
-from controller_stub.robot_model import make_transform
-from controller_stub.simulation import Simulation
+from controller_stub.world.simulation import Simulation
 
 CAMERA = CameraModel(1280, 1024, 1400.0, 1395.0, 641.3, 509.7, (-0.08, 0.05, 4e-4, -3e-4, 0.01))
 DISK = DiskPattern(radius=0.01, plate_radius=0.05, dot_level=30.0, plate_level=220.0)
@@ -41,7 +41,7 @@ def test_undistort_inverts_distortion() -> None:
 def test_one_pixel_undistort_is_bit_identical() -> None:
     """The board-view sampler's one-pixel path (Python floats) gives the same bits as the
     array path, so the simulated board poses did not change when it got faster."""
-    from controller_stub.board_views import _undistort_pixel
+    from controller_stub.sensors.board_views import _undistort_pixel
 
     rng = np.random.default_rng(2)
     for u, v in np.column_stack([rng.uniform(0, 1279, 100), rng.uniform(0, 1023, 100)]):

@@ -9,8 +9,8 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from controller_stub.robot_model import gravity_torque
-from controller_stub.simulation import Simulation, SimulationRefused
+from controller_stub.world.robot_model import gravity_torque
+from controller_stub.world.simulation import Simulation, SimulationRefused
 
 MakeSim = Callable[..., Simulation]
 

@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from controller_stub.robot_model import make_transform
-from controller_stub.scenario import scenario_from_dict
-from controller_stub.simulation import Simulation
-from controller_stub.tracker import Tracker, TrackerSpec, spherical_noise
+from controller_stub.geometry import make_transform
+from controller_stub.scenario.spec import scenario_from_dict
+from controller_stub.scenario.tracker import TrackerSpec
+from controller_stub.sensors.world_point import Tracker, spherical_noise
+from controller_stub.world.simulation import Simulation
 
 
 def _flange_poses(sim: Simulation, count: int, seed: int = 0) -> np.ndarray:

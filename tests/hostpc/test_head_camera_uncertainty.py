@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 import hostpc
-from controller_stub.humanoid import CALIBRATION_PARAMETERS, StereoTriangulator
-from controller_stub.scenario import scenario_from_dict
-from controller_stub.simulation import create_simulation
+from controller_stub.scenario.spec import scenario_from_dict
+from controller_stub.world.humanoid import CALIBRATION_PARAMETERS, StereoTriangulator
+from controller_stub.world.simulation import create_simulation
 from hostpc.dataset import dataset_from_dict
 from hostpc.errors import InputError
 from hostpc.methods.dual_loop import camera_calibration

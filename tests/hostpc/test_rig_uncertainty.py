@@ -11,8 +11,8 @@ import cv2
 import numpy as np
 import pytest
 
-from controller_stub.scenario import Scenario
-from controller_stub.simulation import Simulation
+from controller_stub.scenario.spec import Scenario
+from controller_stub.world.simulation import Simulation
 from hostpc.dataset import dataset_from_dict, dataset_to_dict
 from hostpc.fitting import fit
 from hostpc.synthesize import random_truth, synthesize_stereo_target
@@ -237,7 +237,7 @@ def test_planned_views_pass_the_coverage_check(world: str) -> None:
 
     import yaml
 
-    from controller_stub.scenario import scenario_from_dict
+    from controller_stub.scenario.spec import scenario_from_dict
     from hostpc.vision import calibrate_rig
     from hostpc.vision.rig_calibration import find_chessboard
 

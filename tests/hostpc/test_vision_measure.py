@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from controller_stub.render import project_points
-from controller_stub.robot_model import make_transform
-from controller_stub.scenario import Scenario
-from controller_stub.simulation import Simulation
+from controller_stub.geometry import make_transform
+from controller_stub.scenario.spec import Scenario
+from controller_stub.sensors.render import project_points
+from controller_stub.world.simulation import Simulation
 from hostpc.errors import InputError
 from hostpc.vision import (
     ChessboardSpec,

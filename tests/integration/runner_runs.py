@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from controller_stub.server import ControllerServer
+from controller_stub.network.server import ControllerServer
 from hostpc.calibrate.runner import RobotInfo, Runner, RunOutcome
 from hostpc.methods.base import RunSettings
 from hostpc.robots.zerocal import ZerocalAdapter

@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller_stub.scenario import default_scenario
-from controller_stub.simulation import Simulation
+from controller_stub.scenario.spec import default_scenario
+from controller_stub.world.simulation import Simulation
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
 from hostpc.model.measurement import predict
 from hostpc.model.problem import build_problem

@@ -14,15 +14,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from controller_stub.board_views import chessboard_views
 from controller_stub.errors import SimulationRefused
-from controller_stub.render import (
+from controller_stub.scenario.spec import Scenario
+from controller_stub.sensors.board_views import chessboard_views
+from controller_stub.sensors.render import (
     CameraModel,
     ChessboardPattern,
     DiskPattern,
     Renderer,
 )
-from controller_stub.scenario import Scenario
 from controller_stub.streams import STREAM_LEFT, STREAM_RIGHT, STREAM_VIEWS, stream_rng
 
 STREAM_EXTRA_VIEWS = 16
@@ -45,7 +45,7 @@ class StereoFrame:
 class StereoCameraMixin:
     """The stereo camera of `Simulation`: renderers, chessboard views, captures.
 
-    Part of `controller_stub.simulation.Simulation` (its module docstring has the contract);
+    Part of `controller_stub.world.simulation.Simulation` (its module docstring has the contract);
     the state below is created by `Simulation.__init__`.
     """
 

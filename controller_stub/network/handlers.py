@@ -17,15 +17,15 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from controller_stub.controller_state import SimulatedController
 from controller_stub.errors import SimulationRefused
-from controller_stub.motion import GuardedMoveResult, MotionPlan, MoveResult
+from controller_stub.world.controller_state import SimulatedController
+from controller_stub.world.motion import GuardedMoveResult, MotionPlan, MoveResult
 from protocol import messages as m
 from protocol.connection import Connection
 from protocol.errors import ErrorCode
 
 # the server's logger: log records keep the name they had before the server was split
-logger = logging.getLogger("controller_stub.server")
+logger = logging.getLogger("controller_stub.network.server")
 
 Handler = Callable[[Any], Awaitable[m._Message]]
 
@@ -44,7 +44,7 @@ class RequestRefusedError(Exception):
 
 
 class MotionHost(Protocol):
-    """What the handlers use of the server (`controller_stub.server.ControllerServer`):
+    """What the handlers use of the server (`controller_stub.network.server.ControllerServer`):
     the state shared by all sessions (motion pacing, mode, the truth file)."""
 
     def mode(self) -> str: ...
@@ -60,7 +60,7 @@ ROLLBACK_ID_PREFIX = "rb-"
 
 
 class RequestHandlers:
-    """The request handlers of `controller_stub.session.Session`, by request kind.
+    """The request handlers of `controller_stub.network.session.Session`, by request kind.
 
     The state below is created by `Session.__init__`.
     """

@@ -19,7 +19,7 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from controller_stub.tracker import TrackerSpec
+from controller_stub.scenario.tracker import TrackerSpec
 
 RobotName = Literal["ur5e", "ur10e", "industrial6", "humanoid_upper"]
 
@@ -281,7 +281,7 @@ class Scenario(_Model):
     server: ServerSpec = ServerSpec()
     faults: FaultSpec = FaultSpec()
     humanoid: HumanoidSpec = HumanoidSpec()
-    tracker: TrackerSpec = TrackerSpec()  # the laser tracker (controller_stub/tracker.py)
+    tracker: TrackerSpec = TrackerSpec()  # the laser tracker (sensors/world_point.py)
 
     @model_validator(mode="after")
     def _check_lengths(self) -> Scenario:

@@ -14,17 +14,17 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from controller_stub import probe as probe_mod
-from controller_stub.motion import GuardedContact, GuardedMoveResult, MotionPlan, PathEdge
-from controller_stub.physics import HiddenEffects, Physics
-from controller_stub.robot_model import RobotModel
-from controller_stub.scenario import Scenario
+from controller_stub.scenario.spec import Scenario
+from controller_stub.sensors import sphere_probe as probe_mod
+from controller_stub.world.motion import GuardedContact, GuardedMoveResult, MotionPlan, PathEdge
+from controller_stub.world.physics import HiddenEffects, Physics
+from controller_stub.world.robot_model import RobotModel
 
 
 class GuardedMoveMixin:
     """Guarded moves and the probe input of `Simulation`.
 
-    Part of `controller_stub.simulation.Simulation` (its module docstring has the contract);
+    Part of `controller_stub.world.simulation.Simulation` (its module docstring has the contract);
     the state below is created by `Simulation.__init__`.
     """
 

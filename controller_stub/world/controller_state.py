@@ -19,8 +19,8 @@ from typing import Any, Protocol
 import numpy as np
 
 from controller_stub.errors import SimulationRefused
-from controller_stub.motion import GuardedMoveResult, MotionPlan, MoveResult
-from controller_stub.scenario import Scenario
+from controller_stub.scenario.spec import Scenario
+from controller_stub.world.motion import GuardedMoveResult, MotionPlan, MoveResult
 
 __all__ = ["ControllerState", "OnIoEdge", "SimulatedController"]
 

@@ -1,7 +1,7 @@
 """The simulated humanoid upper body: a pan-tilt head with a stereo camera and two 7-DoF arms.
 
 The stub's OWN model of the ``humanoid_upper`` design (never imports hostpc). Each chain is
-a :class:`~controller_stub.robot_model.RobotModel` in URDF form (fixed joint origins, then a
+a :class:`~controller_stub.world.robot_model.RobotModel` in URDF form (fixed joint origins, then a
 rotation about the local z axis), derived BY HAND from the design's DH tables
 (docs/dual-loop.md) exactly as robot_model.py does for the UR robots:
 ``O_1 = I``, ``O_k = [Rx(alpha_{k-1}), (a_{k-1}, 0, d_{k-1})]``, ``O_flange = [Rx(alpha_n),
@@ -43,18 +43,13 @@ from typing import Any
 
 import numpy as np
 
-from controller_stub.controller_state import ControllerState
 from controller_stub.errors import SimulationRefused
-from controller_stub.motion import GuardedMoveResult, MotionPlan, MoveResult
-from controller_stub.robot_model import (
-    LengthSite,
-    RobotModel,
-    forward,
-    make_transform,
-    matrix_to_rpy,
-)
-from controller_stub.scenario import RandomSpec, Scenario
+from controller_stub.geometry import make_transform, matrix_to_rpy
+from controller_stub.scenario.spec import RandomSpec, Scenario
 from controller_stub.streams import stream_rng  # the stub's seeded streams
+from controller_stub.world.controller_state import ControllerState
+from controller_stub.world.motion import GuardedMoveResult, MotionPlan, MoveResult
+from controller_stub.world.robot_model import LengthSite, RobotModel, forward
 
 HALF_PI = math.pi / 2
 DEG = math.pi / 180
@@ -230,7 +225,7 @@ class HumanoidSimulation(ControllerState):
     """The simulated humanoid controller: the Simulation contract over the combined joint
     vector (head 2, left 7, right 7; reported angles, rad) plus :meth:`measure_targets`.
     Offsets, their history, limits, IO, e-stop and the busy check are the shared
-    :class:`~controller_stub.controller_state.ControllerState`.
+    :class:`~controller_stub.world.controller_state.ControllerState`.
 
     Motion is ideal (no hidden joint-space physics): the physical angle is the reported one
     plus the current zero error.

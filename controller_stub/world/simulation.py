@@ -20,7 +20,7 @@ types); its behaviour comes one concept per module: joint moves and motion plans
 
 INTERFACE CONTRACT (the server depends on exactly these names):
 
-    sim = Simulation(scenario)                 # scenario: controller_stub.scenario.Scenario
+    sim = Simulation(scenario)                 # scenario: controller_stub.scenario.spec.Scenario
     sim.robot_name -> str ; sim.n_joints -> int ; sim.time -> float (simulated clock, s)
     sim.time_scale -> float                    # wall seconds per simulated second of motion
     sim.joint_positions() -> (n,) reported angles
@@ -57,13 +57,18 @@ from typing import Any
 
 import numpy as np
 
-from controller_stub import probe as probe_mod
-from controller_stub.cameras import StereoCameraMixin, StereoFrame
-from controller_stub.controller_state import ControllerState, OnIoEdge, SimulatedController
 from controller_stub.errors import SimulationRefused
-from controller_stub.guarded import GuardedMoveMixin
-from controller_stub.humanoid import HumanoidSimulation
-from controller_stub.motion import (
+from controller_stub.geometry import make_transform, matrix_to_rpy
+from controller_stub.scenario.spec import RandomSpec, Scenario
+from controller_stub.sensors import sphere_probe as probe_mod
+from controller_stub.sensors.render import CameraModel, ChessboardPattern, DiskPattern, Renderer
+from controller_stub.sensors.stereo_target import StereoCameraMixin, StereoFrame
+from controller_stub.sensors.world_point import TrackerMixin
+from controller_stub.streams import STREAM_PROBE, STREAM_TRUTH, stream_rng
+from controller_stub.world.controller_state import ControllerState, OnIoEdge, SimulatedController
+from controller_stub.world.guarded import GuardedMoveMixin
+from controller_stub.world.humanoid import HumanoidSimulation
+from controller_stub.world.motion import (
     GuardedContact,
     GuardedMoveResult,
     MotionMixin,
@@ -71,12 +76,8 @@ from controller_stub.motion import (
     MoveResult,
     PathEdge,
 )
-from controller_stub.physics import HiddenEffects, Physics
-from controller_stub.render import CameraModel, ChessboardPattern, DiskPattern, Renderer
-from controller_stub.robot_model import get_robot, make_transform, matrix_to_rpy
-from controller_stub.scenario import RandomSpec, Scenario
-from controller_stub.streams import STREAM_PROBE, STREAM_TRUTH, stream_rng
-from controller_stub.tracker import TrackerMixin
+from controller_stub.world.physics import HiddenEffects, Physics
+from controller_stub.world.robot_model import get_robot
 
 __all__ = [
     "GuardedContact",
@@ -110,7 +111,7 @@ def _pose_dict(T: np.ndarray) -> dict[str, list[float]]:
 
 def create_simulation(scenario: Scenario) -> SimulatedController:
     """The simulation of `scenario`: a `Simulation`, or for robot "humanoid_upper" a
-    `controller_stub.humanoid.HumanoidSimulation` (the same contract over the combined
+    `controller_stub.world.humanoid.HumanoidSimulation` (the same contract over the combined
     16-joint vector, plus `measure_targets()`)."""
     if scenario.robot == "humanoid_upper":
         return HumanoidSimulation(scenario)

@@ -6,7 +6,7 @@ reading), turns any handler failure into an `error` reply, and pushes `io_edge` 
 authenticated. It closes a client that does not say hello and authenticate, or finish a
 frame, within `handshake_timeout_s`, that is idle for `idle_timeout_s`, or that does not read
 its replies; the server may evict it while it is unauthenticated. See
-`controller_stub.server` for the limits as a whole.
+`controller_stub.network.server` for the limits as a whole.
 """
 
 from __future__ import annotations
@@ -17,9 +17,9 @@ import logging
 import socket
 from typing import Protocol
 
-from controller_stub.controller_state import SimulatedController
 from controller_stub.errors import SimulationRefused
-from controller_stub.handlers import MotionHost, RequestHandlers, RequestRefusedError
+from controller_stub.network.handlers import MotionHost, RequestHandlers, RequestRefusedError
+from controller_stub.world.controller_state import SimulatedController
 from protocol import messages as m
 from protocol.connection import (
     Connection,
@@ -32,7 +32,7 @@ from protocol.connection import (
 from protocol.errors import ErrorCode, LocalProtocolError
 
 # the server's logger: log records keep the name they had before the server was split
-logger = logging.getLogger("controller_stub.server")
+logger = logging.getLogger("controller_stub.network.server")
 
 SERVER_NAME = "controller-stub"
 SESSION_READ_CHUNK = 64 * 1024
@@ -48,7 +48,7 @@ CLOSE_DRAIN_S = 2.0
 
 
 class SessionHost(MotionHost, Protocol):
-    """What a session uses of the server (`controller_stub.server.ControllerServer`): the
+    """What a session uses of the server (`controller_stub.network.server.ControllerServer`): the
     simulation, the token, the limits, the fault counters and the admission bookkeeping."""
 
     sim: SimulatedController

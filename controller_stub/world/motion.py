@@ -16,10 +16,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from controller_stub.errors import SimulationRefused
-from controller_stub.scenario import Scenario
+from controller_stub.scenario.spec import Scenario
 
 if TYPE_CHECKING:
-    from controller_stub import probe as probe_mod
+    from controller_stub.sensors import sphere_probe as probe_mod
 
 
 @dataclass(frozen=True)
@@ -124,7 +124,7 @@ class MotionPlan:
 class MotionMixin:
     """Joint moves of `Simulation`: begin_move / finish_move and the immediate move_joints.
 
-    Part of `controller_stub.simulation.Simulation` (its module docstring has the contract);
+    Part of `controller_stub.world.simulation.Simulation` (its module docstring has the contract);
     the state below is created by `Simulation.__init__`.
     """
 
