@@ -181,7 +181,7 @@ def points(n_poses: int, seed: int = 4) -> None:
     sim = Simulation(Scenario())
     truth = sim.truth()["camera"]
     K = np.array([[truth["fx"], 0, truth["cx"]], [0, truth["fy"], truth["cy"]], [0, 0, 1.0]])
-    T_right_left = np.linalg.inv(sim.T_left_right)
+    T_right_left = np.linalg.inv(sim.stereo.T_left_right)
     rig = StereoRig((truth["image_width"], truth["image_height"]), K, truth["distortion"], K,
                     truth["distortion"], T_right_left[:3, :3], T_right_left[:3, 3])
     measurer = TargetMeasurer(rig, TARGET.radius)
@@ -196,7 +196,7 @@ def points(n_poses: int, seed: int = 4) -> None:
             continue
         sim.move_joints(q, 1.0)
         frame = sim.capture_stereo("target")
-        T = np.linalg.inv(sim.camera_pose()) @ sim.T_base_target
+        T = np.linalg.inv(sim.camera_pose()) @ sim.stereo.T_base_target
         normal = T[:3, 2] if T[2, 2] < 0 else -T[:3, 2]
         obs = measurer.measure(frame.left, frame.right, normal_hint=normal)
         if not isinstance(obs, TargetObservation):

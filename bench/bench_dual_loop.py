@@ -76,7 +76,7 @@ def acquire(sim: HumanoidSimulation, poses: PlannedPoses) -> tuple[Dataset, np.n
         span = slice(2, 9) if side == "left" else slice(9, 16)
         q[span] = poses.q_arm[i]
         sim.move_joints(q, 1.0)
-        seen = sim.measure_targets()["targets"].get(side)
+        seen = sim.targets.measure_targets()["targets"].get(side)
         if seen is None:
             continue
         p.append(seen["p"])

@@ -206,13 +206,14 @@ class RequestHandlers:
         return reply
 
     async def _measure_targets(self, request: m.MeasureTargets) -> m.TargetsMeasured:
-        """The simulation's triangulated targets (`sim.measure_targets()`); a simulation
+        """The simulation's triangulated targets (its `targets` sensor); a simulation
         without that sensor refuses with reason `unsupported`."""
-        measure = getattr(self.sim, "measure_targets", None)
-        if measure is None:
+        sensor = self.sim.targets
+        if sensor is None:
             raise SimulationRefused("unsupported", f"{self.sim.robot_name} has no target "
                                     "measurement; use capture")
-        result = measure()  # during a motion: at its start pose, with that q (as capture)
+        # during a motion: at its start pose, with that q (as capture)
+        result = sensor.measure_targets()
         targets = [
             m.TargetObservation(chain=str(chain), p=float_list(seen["p"]),
                                 cov=np.asarray(seen["cov"], dtype=float).reshape(3, 3).tolist(),
@@ -224,12 +225,13 @@ class RequestHandlers:
                                  time=float(result["time"]), targets=targets)
 
     async def _measure_tracker(self, request: m.MeasureTracker) -> m.TrackerMeasured:
-        """The laser tracker's reflectors (`sim.measure_tracker()`, controller_stub/tracker.py);
-        a simulation without a tracker refuses with reason `unsupported`."""
-        measure = getattr(self.sim, "measure_tracker", None)
-        if measure is None:
+        """The laser tracker's reflectors (the simulation's `tracker` sensor,
+        controller_stub/sensors/world_point.py); a simulation without a tracker refuses with
+        reason `unsupported`."""
+        tracker = self.sim.tracker
+        if tracker is None:
             raise SimulationRefused("unsupported", f"{self.sim.robot_name} has no tracker")
-        result = measure()
+        result = tracker.measure_tracker()
         reflectors = [
             m.ReflectorObservation(name=str(name), p=float_list(seen["p"]),
                                    cov=np.asarray(seen["cov"], dtype=float).reshape(3, 3).tolist())

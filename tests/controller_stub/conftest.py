@@ -27,7 +27,7 @@ def _pose_looking_at(
 
     def residual(q: np.ndarray) -> np.ndarray:
         T = sim.physics.flange_pose(sim.physical_angles(q)[None], sim.time)[0]
-        T_cam = T @ sim.T_flange_camera
+        T_cam = T @ sim.stereo.T_flange_camera
         return np.concatenate([T_cam[:3, 3] - eye, T_cam[:3, 2] + normal])
 
     q0 = sim.joint_positions()

@@ -128,14 +128,14 @@ def test_disk_centroid_is_its_images_area_centroid_at_any_tilt_and_phase() -> No
 
 def test_chessboard_corners_found_by_opencv(make_sim: Callable[..., Simulation]) -> None:
     sim = make_sim(seed=4)
-    corners = sim.chessboard_corners()
-    T_right_left = np.linalg.inv(sim.T_left_right)
+    corners = sim.stereo.chessboard_corners()
+    T_right_left = np.linalg.inv(sim.stereo.T_left_right)
     worst = 0.0
     for view in range(0, sim.scenario.chessboard.n_views, 7):
         frame = sim.capture_stereo("chessboard", view)
-        T_left = sim.chessboard_poses()[view]
+        T_left = sim.stereo.chessboard_poses()[view]
         for img, T in ((frame.left, T_left), (frame.right, T_right_left @ T_left)):
-            exact = project_points(sim.camera, corners @ T[:3, :3].T + T[:3, 3])
+            exact = project_points(sim.stereo.camera, corners @ T[:3, :3].T + T[:3, 3])
             ok, found = cv2.findChessboardCornersSB(img, (9, 6), flags=cv2.CALIB_CB_ACCURACY)
             assert ok, f"view {view}: board not found"
             d = np.linalg.norm(found.reshape(-1, 1, 2) - exact[None], axis=2).min(axis=1)
@@ -146,8 +146,9 @@ def test_chessboard_corners_found_by_opencv(make_sim: Callable[..., Simulation])
 def test_chessboard_cornersubpix(make_sim: Callable[..., Simulation]) -> None:
     sim = make_sim(seed=4)
     frame = sim.capture_stereo("chessboard", 1)
-    T = sim.chessboard_poses()[1]
-    exact = project_points(sim.camera, sim.chessboard_corners() @ T[:3, :3].T + T[:3, 3])
+    T = sim.stereo.chessboard_poses()[1]
+    exact = project_points(sim.stereo.camera,
+                           sim.stereo.chessboard_corners() @ T[:3, :3].T + T[:3, 3])
     ok, found = cv2.findChessboardCorners(frame.left, (9, 6))
     assert ok
     criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
@@ -161,17 +162,17 @@ def test_target_capture_matches_true_projection(
 ) -> None:
     """The rendered dot is where the TRUE camera pose projects the TRUE target centre."""
     sim = make_sim(seed=6, camera={"pixel_noise_sigma": 0.0})
-    q = pose_looking_at(sim, sim.target_centre, sim.scenario.target.normal, 0.35)
+    q = pose_looking_at(sim, sim.stereo.target_centre, sim.scenario.target.normal, 0.35)
     sim.move_joints(q, 0.5)
     frame = sim.capture_stereo("target")
     T_base_left = sim.camera_pose()
     T_left_base = np.linalg.inv(T_base_left)
     for img, T in (
         (frame.left, T_left_base),
-        (frame.right, np.linalg.inv(sim.T_left_right) @ T_left_base),
+        (frame.right, np.linalg.inv(sim.stereo.T_left_right) @ T_left_base),
     ):
-        p = T[:3, :3] @ sim.target_centre + T[:3, 3]
-        expected = project_points(sim.camera, p[None])[0]
+        p = T[:3, :3] @ sim.stereo.target_centre + T[:3, 3]
+        expected = project_points(sim.stereo.camera, p[None])[0]
         found = _centroid(img, expected, 1400 * 0.01 / 0.35, 220.0)
         assert np.linalg.norm(found - expected) < 0.1, (found, expected)
 

@@ -66,7 +66,7 @@ def test_scenario_errors_move_the_truth_not_the_description() -> None:
         "world_base_error": {"xyz": [0.001, 0.0, 0.0], "rpy": [0.0, 0.0, 0.001]},
         "reflectors": {"a": {"position": [0.0, 0.0, 0.05], "error": [0.0002, 0.0, 0.0]},
                        "b": {"position": [0.05, 0.0, 0.03], "axis": [1.0, 0.0, 0.0]}}}}))
-    description = sim.measure_tracker()["description"]
+    description = sim.tracker.measure_tracker()["description"]
     assert description["reflectors"] == {"a": [0.0, 0.0, 0.05], "b": [0.05, 0.0, 0.03]}
     truth = sim.truth()["tracker"]
     np.testing.assert_allclose(truth["reflectors"]["a"], [0.0002, 0.0, 0.05])
