@@ -70,7 +70,7 @@ SIM_DEFAULTS: dict[str, SimDefault] = {
         known=("sphere",)),
     "dual_loop": SimDefault(scenario="humanoid.yaml"),
     # a laser tracker with a surveyed registration and a dowel-pinned reflector nest
-    # (controller_stub/tracker.py): both frames known, so every joint's zero is defined
+    # (controller_stub/sensors/world_point.py): both frames known, so every joint's zero is defined
     "world_point": SimDefault(overrides={"motion": {"time_scale": 0.0}},
                               known=("world", "markers")),
 }
