@@ -60,17 +60,21 @@ ROLLBACK_ID_PREFIX = "rb-"
 
 
 class RequestHandlers:
-    """The request handlers of `controller_stub.network.session.Session`, by request kind.
+    """The request handlers of one `controller_stub.network.session.Session`, by request kind.
 
-    The state below is created by `Session.__init__`.
+    server: what is shared by all sessions (`MotionHost`); sim: the simulation; conn: the
+    session's protocol connection (authenticated or not); peer: its address, for the log.
+    The session holds one and dispatches through `table()`.
     """
 
-    server: MotionHost
-    sim: SimulatedController
-    conn: Connection
-    peer: str
+    def __init__(self, server: MotionHost, sim: SimulatedController, conn: Connection,
+                 peer: str) -> None:
+        self.server = server
+        self.sim = sim
+        self.conn = conn
+        self.peer = peer
 
-    def _handler_table(self) -> dict[str, Handler]:
+    def table(self) -> dict[str, Handler]:
         """Request kind -> bound handler."""
         return {
             "get_state": self._get_state,

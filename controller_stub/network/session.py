@@ -66,7 +66,7 @@ class SessionHost(MotionHost, Protocol):
     def authentication_failed(self, session: Session) -> None: ...
 
 
-class Session(RequestHandlers):
+class Session:
     """One client connection: reader loop, request tasks, event pushes (and its limits)."""
 
     server: SessionHost
@@ -99,7 +99,7 @@ class Session(RequestHandlers):
         self._handshake_deadline = loop.time() + server.handshake_timeout_s
         self._frame_started: float | None = None  # loop time the frame in progress began
         writer.transport.set_write_buffer_limits(high=WRITE_HIGH_WATER)
-        self._handlers = self._handler_table()
+        self._handlers = RequestHandlers(server, self.sim, self.conn, self.peer).table()
         sock = writer.get_extra_info("socket")
         if sock is not None:
             with contextlib.suppress(OSError):
