@@ -1,6 +1,6 @@
 """The simulated controller's world: robot, truth, motion, sensors.
 
-Synchronous and free of I/O: the asyncio server (`server.py`) is a thin shell that turns
+Synchronous and free of I/O: the asyncio server (`network/server.py`) is a thin shell that turns
 protocol requests into calls on one `Simulation` and paces motions in wall time
 (`duration_s * time_scale`): it plans a motion with `begin_move`, and `finish_move` moves the
 robot at the end, or part-way if the motion was aborted. Everything here is reproducible
