@@ -1,6 +1,6 @@
 """Where does the disk centre's error come from? Rendered disks against their known truth.
 
-The simulator's renderer (`controller_stub.render`) draws the target with a known camera
+The simulator's renderer (`controller_stub.sensors.render`) draws the target with a known camera
 and pose; `hostpc.vision.target_detection.detect_disk` measures its intensity centroid and
 the disk model (`hostpc.vision.triangulation.disk_image_moments`, with the TRUE normal and
 the TRUE camera) removes the perspective bias. The error is
@@ -39,10 +39,10 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-import controller_stub.render as render  # noqa: E402
-from controller_stub.render import CameraModel as RenderCamera  # noqa: E402
-from controller_stub.render import DiskPattern, Renderer  # noqa: E402
-from controller_stub.scenario import CameraSpec, TargetSpec  # noqa: E402
+import controller_stub.sensors.render as render  # noqa: E402
+from controller_stub.scenario.spec import CameraSpec, TargetSpec  # noqa: E402
+from controller_stub.sensors.render import CameraModel as RenderCamera  # noqa: E402
+from controller_stub.sensors.render import DiskPattern, Renderer  # noqa: E402
 from hostpc.vision.target_detection import DetectionFailure, detect_disk  # noqa: E402
 from hostpc.vision.triangulation import CameraModel, disk_image_moments  # noqa: E402
 
@@ -174,14 +174,14 @@ def noisy(images: int, distance: float, tilt_deg: float, field: float, blur: flo
 def points(n_poses: int, seed: int = 4) -> None:
     """Table 4: whitened true errors of the measured points (true rig, true normal)."""
     from bench.bench_vision import look_at_q  # noqa: PLC0415 (the simulator's IK helper)
-    from controller_stub.scenario import Scenario
-    from controller_stub.simulation import Simulation
+    from controller_stub.scenario.spec import Scenario
+    from controller_stub.world.simulation import Simulation
     from hostpc.vision import StereoRig, TargetMeasurer, TargetObservation
 
     sim = Simulation(Scenario())
     truth = sim.truth()["camera"]
     K = np.array([[truth["fx"], 0, truth["cx"]], [0, truth["fy"], truth["cy"]], [0, 0, 1.0]])
-    T_right_left = np.linalg.inv(sim.T_left_right)
+    T_right_left = np.linalg.inv(sim.stereo.T_left_right)
     rig = StereoRig((truth["image_width"], truth["image_height"]), K, truth["distortion"], K,
                     truth["distortion"], T_right_left[:3, :3], T_right_left[:3, 3])
     measurer = TargetMeasurer(rig, TARGET.radius)
@@ -196,7 +196,7 @@ def points(n_poses: int, seed: int = 4) -> None:
             continue
         sim.move_joints(q, 1.0)
         frame = sim.capture_stereo("target")
-        T = np.linalg.inv(sim.camera_pose()) @ sim.T_base_target
+        T = np.linalg.inv(sim.camera_pose()) @ sim.stereo.T_base_target
         normal = T[:3, 2] if T[2, 2] < 0 else -T[:3, 2]
         obs = measurer.measure(frame.left, frame.right, normal_hint=normal)
         if not isinstance(obs, TargetObservation):

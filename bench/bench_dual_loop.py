@@ -1,7 +1,7 @@
 """dual_loop: solve-time benchmark and the joint-vs-stepwise Monte-Carlo study.
 
 Data come from the simulated controller's independent humanoid model
-(``controller_stub.humanoid.HumanoidSimulation``): hostpc plans the poses with its nominal
+(``controller_stub.world.humanoid.HumanoidSimulation``): hostpc plans the poses with its nominal
 model, the stub moves there and returns each target triangulated with its covariance.
 
 - :func:`run` (the benchmark): the time to solve one joint dual_loop problem of 2 x 60
@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from controller_stub.humanoid import HumanoidSimulation
-from controller_stub.scenario import scenario_from_dict
+from controller_stub.scenario.spec import scenario_from_dict
+from controller_stub.world.humanoid import HumanoidSimulation
 from hostpc.dataset import Dataset
 from hostpc.fitting import solve
 from hostpc.fitting.stepwise import fit_stepwise, gauge_equivalent, identity_weighted
@@ -76,7 +76,7 @@ def acquire(sim: HumanoidSimulation, poses: PlannedPoses) -> tuple[Dataset, np.n
         span = slice(2, 9) if side == "left" else slice(9, 16)
         q[span] = poses.q_arm[i]
         sim.move_joints(q, 1.0)
-        seen = sim.measure_targets()["targets"].get(side)
+        seen = sim.targets.measure_targets()["targets"].get(side)
         if seen is None:
             continue
         p.append(seen["p"])

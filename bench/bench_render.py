@@ -10,9 +10,9 @@ import time
 
 import numpy as np
 
-from controller_stub.robot_model import make_transform
-from controller_stub.scenario import Scenario
-from controller_stub.simulation import Simulation
+from controller_stub.geometry import make_transform
+from controller_stub.scenario.spec import Scenario
+from controller_stub.world.simulation import Simulation
 
 
 def run(repeats: int = 20) -> dict[str, float]:
@@ -20,14 +20,14 @@ def run(repeats: int = 20) -> dict[str, float]:
     from the target, slightly tilted, so the plate covers ~470x470 px) and return timings."""
     sim = Simulation(Scenario())
     sim.capture_stereo("target")  # builds renderers (ray map, noise bank) outside the timing
-    left, right = sim.renderers()
+    left, right = sim.stereo.renderers()
     T_left_target = make_transform([0.01, -0.02, 0.3], [0.1, -0.05, 0.4])
-    T_right_left = np.linalg.inv(sim.T_left_right)
+    T_right_left = np.linalg.inv(sim.stereo.T_left_right)
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        left.render_disk(T_left_target, sim.disk_pattern)
-        right.render_disk(T_right_left @ T_left_target, sim.disk_pattern)
+        left.render_disk(T_left_target, sim.stereo.disk_pattern)
+        right.render_disk(T_right_left @ T_left_target, sim.stereo.disk_pattern)
         times.append((time.perf_counter() - t0) * 1e3)
     full = []
     for _ in range(repeats):

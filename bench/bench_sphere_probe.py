@@ -17,9 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from controller_stub.modbus_io import ModbusIoServer
-from controller_stub.scenario import scenario_from_dict
-from controller_stub.server import ControllerServer
+from controller_stub.network.modbus_io import ModbusIoServer
+from controller_stub.network.server import ControllerServer
+from controller_stub.scenario.spec import scenario_from_dict
 from hostpc.kinds.sphere_probe import method as sp
 from hostpc.kinds.sphere_probe.probe_modbus import ModbusProbe, SteppedGuardedMove
 from hostpc.kinematics import get_robot

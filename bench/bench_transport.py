@@ -36,7 +36,7 @@ IN_VIEW_Q = [0.5094, -2.912, 0.7385, 0.5531, -1.5731, 0.8099]
 
 
 def _scenario():  # type: ignore[no-untyped-def]
-    from controller_stub.scenario import default_scenario
+    from controller_stub.scenario.spec import default_scenario
 
     scenario = default_scenario()
     return scenario.model_copy(
@@ -92,7 +92,7 @@ async def _measure(host: str, port: int, requests: int, captures: int) -> dict[s
 
 
 def _render_share(captures: int) -> dict[str, float]:
-    from controller_stub.simulation import Simulation
+    from controller_stub.world.simulation import Simulation
 
     sim = Simulation(_scenario())
     sim.capture_stereo("target")
@@ -105,7 +105,7 @@ def _render_share(captures: int) -> dict[str, float]:
 
 
 async def _run_in_process(requests: int, captures: int) -> dict[str, Any]:
-    from controller_stub.server import ControllerServer
+    from controller_stub.network.server import ControllerServer
 
     server = ControllerServer.from_scenario(_scenario())
     host, port = await server.start("127.0.0.1", 0)

@@ -21,8 +21,8 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from controller_stub.scenario import Scenario
-from controller_stub.simulation import Simulation
+from controller_stub.scenario.spec import Scenario
+from controller_stub.world.simulation import Simulation
 from hostpc.vision import ChessboardSpec, TargetMeasurer, TargetRejected, calibrate_rig
 
 
@@ -30,11 +30,11 @@ def look_at_q(sim: Simulation, T_camera_target: np.ndarray) -> np.ndarray | None
     """Reported joint angles (n,) that put the TRUE left camera at T_camera_target (4, 4)
     relative to the target frame, or None if unreachable (solved on the simulator's
     truth)."""
-    T_goal = sim.T_base_target @ np.linalg.inv(T_camera_target)
+    T_goal = sim.stereo.T_base_target @ np.linalg.inv(T_camera_target)
 
     def residual(q: np.ndarray) -> np.ndarray:
         T = sim.physics.flange_pose(sim.physical_angles(q)[None], sim.time)[0]
-        T_cam = T @ sim.T_flange_camera
+        T_cam = T @ sim.stereo.T_flange_camera
         return np.concatenate(
             [T_cam[:3, 3] - T_goal[:3, 3], 0.3 * (T_cam[:3, :3] - T_goal[:3, :3]).ravel()]
         )
@@ -103,7 +103,7 @@ def run(
         if q is None:
             continue
         sim.move_joints(q, 1.0)
-        truth = (np.linalg.inv(sim.camera_pose()) @ np.append(sim.target_centre, 1.0))[:3]
+        truth = (np.linalg.inv(sim.camera_pose()) @ np.append(sim.stereo.target_centre, 1.0))[:3]
         frame = sim.capture_stereo("target")
         results = {}
         for name, measurer in (("centre", centre), ("sgbm", sgbm)):

@@ -82,14 +82,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _load_scenario(path: Path | None) -> object:
-    from controller_stub.scenario import default_scenario, load_scenario
+    from controller_stub.scenario.spec import default_scenario, load_scenario
 
     return load_scenario(path) if path is not None else default_scenario()
 
 
 async def _serve(args: argparse.Namespace) -> int:
-    from controller_stub.modbus_io import ModbusIoServer
-    from controller_stub.server import ControllerServer
+    from controller_stub.network.modbus_io import ModbusIoServer
+    from controller_stub.network.server import ControllerServer
 
     scenario: Any = _load_scenario(args.scenario)
     try:
@@ -209,7 +209,7 @@ def main(argv: list[str] | None = None) -> int:
         stream=sys.stderr,
     )
     try:
-        from controller_stub.scenario import ScenarioError
+        from controller_stub.scenario.spec import ScenarioError
 
         try:
             return asyncio.run(_serve(args))

@@ -45,7 +45,8 @@ from typing import Protocol
 
 import numpy as np
 
-from controller_stub.controller_state import SimulatedController
+from controller_stub.ur.registers import UrRegisters
+from controller_stub.world.controller_state import SimulatedController
 
 logger = logging.getLogger(__name__)
 
@@ -54,10 +55,7 @@ class ScriptedRobot(Protocol):
     """What the control script uses of the UR controller it runs on
     (`controller_stub.ur.personality.UrPersonality`): its registers, motions and stops."""
 
-    input_int: list[int]
-    input_double: list[float]
-    output_int: list[int]
-    output_double: list[float]
+    registers: UrRegisters
 
     @property
     def sim(self) -> SimulatedController: ...
@@ -128,16 +126,16 @@ class ControlScript:
     # ----------------------------------------------------------------- registers
 
     def _in_int(self, index: int) -> int:
-        return self.robot.input_int[index + self.offset]
+        return self.robot.registers.input_int[index + self.offset]
 
     def _in_double(self, index: int) -> float:
-        return self.robot.input_double[index + self.offset]
+        return self.robot.registers.input_double[index + self.offset]
 
     def _out_int(self, index: int, value: int) -> None:
-        self.robot.output_int[index + self.offset] = int(value)
+        self.robot.registers.output_int[index + self.offset] = int(value)
 
     def _out_double(self, index: int, value: float) -> None:
-        self.robot.output_double[index + self.offset] = float(value)
+        self.robot.registers.output_double[index + self.offset] = float(value)
 
     def _q_from_inputs(self, start: int = 0) -> np.ndarray:
         return np.array([self._in_double(start + i) for i in range(6)])

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controller_stub.motion import MotionPlan
+from controller_stub.world.motion import MotionPlan
 
 CYCLE_S = 0.002
 """The controller cycle (s): 500 Hz like a UR e-Series."""

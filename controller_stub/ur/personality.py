@@ -36,14 +36,12 @@ from typing import Any
 
 import numpy as np
 
-from controller_stub.controller_state import SimulatedController
 from controller_stub.errors import SimulationRefused
-from controller_stub.robot_model import forward
-from controller_stub.server import ControllerServer
-from controller_stub.simulation import Simulation
+from controller_stub.network.server import ControllerServer
 from controller_stub.ur.control_script import ControlScript
 from controller_stub.ur.dashboard import DashboardServer
 from controller_stub.ur.paced_motion import CYCLE_S, PacedMotion
+from controller_stub.ur.registers import UrRegisters
 from controller_stub.ur.rtde_server import RtdeServer
 from controller_stub.ur.rtde_values import (
     JOINT_MODE_RUNNING,
@@ -58,10 +56,14 @@ from controller_stub.ur.rtde_values import (
     SAFETY_MODE_ROBOT_EMERGENCY_STOP,
     STATUS_BIT_POWER_ON,
     STATUS_BIT_PROGRAM_RUNNING,
-    UrRtdeValuesMixin,
+    RtdeValues,
 )
 from controller_stub.ur.rtde_wire import N_REGISTERS
 from controller_stub.ur.script_server import ScriptServer
+from controller_stub.world.controller_state import SimulatedController
+from controller_stub.world.motion import GuardedMoveResult
+from controller_stub.world.robot_model import forward
+from controller_stub.world.simulation import Simulation
 
 logger = logging.getLogger(__name__)
 
@@ -97,12 +99,17 @@ def _rotation_vector(R: np.ndarray) -> np.ndarray:
     return axis / (2.0 * math.sin(angle)) * angle
 
 
-class UrPersonality(UrRtdeValuesMixin):
+class UrPersonality:
     """Serve one `Simulation` as a Universal Robots controller (RTDE, dashboard, script).
 
     sim: the Simulation (6 joints). server: the stub's `ControllerServer` sharing `sim`
     (motion pacing and busy/abort across both interfaces), or None (pacing by sleeping).
     max_stream_hz: cap of the RTDE data package rate.
+
+    Collaborators, each owning its state: `registers` (the register banks, `registers.py`),
+    `rtde_values` (the RTDE data source over them, `rtde_values.py`), the three servers, the
+    running program (`control_script.py`) and the paced motion (`paced_motion.py`). The
+    personality itself owns the controller cycle, the protective stop and the program task.
     """
 
     def __init__(
@@ -117,21 +124,14 @@ class UrPersonality(UrRtdeValuesMixin):
         if sim.n_joints != 6 or not isinstance(sim, Simulation):
             raise ValueError(f"the UR personality needs a 6-joint robot, {sim.robot_name} has "
                              f"{sim.n_joints}")
-        self.sim = sim
+        self.sim: Simulation = sim
         self.server = server
         self.controller_version = controller_version
         self.serial_number = serial_number
         self.robot_model = sim.robot_name.upper().rstrip("E") if sim.robot_name.startswith(
             "ur") else "UR5"
-        self.input_int = [0] * N_REGISTERS
-        self.input_double = [0.0] * N_REGISTERS
-        self.output_int = [0] * N_REGISTERS
-        self.output_double = [0.0] * N_REGISTERS
-        self.input_bits = 0
-        self.output_bits = 0
-        self.speed_slider = 1.0
-        self.standard_analog_output = [0.0, 0.0]
-        self.tool_outputs = 0
+        self.registers = UrRegisters()
+        self.rtde_values = RtdeValues(self, self.registers)
         self._program_name = ""
         self._program: asyncio.Task[None] | None = None
         self._protective_stop = False
@@ -141,7 +141,7 @@ class UrPersonality(UrRtdeValuesMixin):
         """The controller cycle counter (`paced_motion.py`)."""
         self._cycle_event = asyncio.Event()
         self._clock: asyncio.Task[None] | None = None
-        self._rtde = RtdeServer(self, max_stream_hz=max_stream_hz)
+        self._rtde = RtdeServer(self.rtde_values, max_stream_hz=max_stream_hz)
         self._dashboard = DashboardServer(self)
         self._script = ScriptServer(self)
 
@@ -251,8 +251,6 @@ class UrPersonality(UrRtdeValuesMixin):
         _, T = forward(self.sim.model, np.asarray(q, float)[None, :])
         return [*T[0, :3, 3].tolist(), *_rotation_vector(T[0, :3, :3]).tolist()]
 
-    # RTDE source: output_values / apply_inputs come from UrRtdeValuesMixin (rtde_values.py)
-
     # ------------------------------------------------------------------ programs
 
     def run_program(self, name: str, text: str) -> None:
@@ -287,7 +285,7 @@ class UrPersonality(UrRtdeValuesMixin):
             except ValueError:
                 continue
             if 0 <= index < N_REGISTERS:
-                self.output_int[index] = int(value)
+                self.registers.output_int[index] = int(value)
         await asyncio.sleep(0.01)
 
     def stop_program(self) -> None:
@@ -322,10 +320,11 @@ class UrPersonality(UrRtdeValuesMixin):
         simulation's refusal code ("joint_limit", "estop", ...) which also raises a
         protective stop.
         """
-        from controller_stub.server import RequestRefusedError
+        from controller_stub.network.server import RequestRefusedError
 
         max_speed = float(np.min(self.sim.max_joint_speed()))
-        fraction = float(np.clip(velocity / max_speed, 1e-3, 1.0)) * max(self.speed_slider, 1e-3)
+        slider = max(self.registers.speed_slider, 1e-3)
+        fraction = float(np.clip(velocity / max_speed, 1e-3, 1.0)) * slider
         if self._protective_stop or self.emergency_stopped():
             return False, "estop" if self.emergency_stopped() else "protective_stop"
         probe_line = int(self.sim.scenario.probe.io_line)
@@ -361,7 +360,8 @@ class UrPersonality(UrRtdeValuesMixin):
         if fraction_done < 1.0:
             return False, "stopped"
         if plan.contact is not None:
-            return False, "contact" if getattr(result, "contact", False) else "no_contact"
+            contact = isinstance(result, GuardedMoveResult) and result.contact
+            return False, "contact" if contact else "no_contact"
         return True, None
 
     def stop_motion(self) -> bool:

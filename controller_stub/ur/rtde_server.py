@@ -68,7 +68,10 @@ MAX_WRITE_BUFFER = 1 << 20
 class RtdeDataSource(Protocol):
     """What the RTDE server needs from the robot behind it."""
 
-    controller_version: tuple[int, int, int, int]
+    @property
+    def controller_version(self) -> tuple[int, int, int, int]:
+        """(major, minor, bugfix, build) reported to GET_URCONTROL_VERSION."""
+        ...
 
     def output_values(self, names: Sequence[str]) -> list[Any]:
         """Current values of the named outputs, in order (types as in `output_type`)."""

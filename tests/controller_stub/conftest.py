@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from controller_stub.scenario import Scenario, scenario_from_dict
-from controller_stub.simulation import Simulation
+from controller_stub.scenario.spec import Scenario, scenario_from_dict
+from controller_stub.world.simulation import Simulation
 
 
 def _make_sim(**overrides: object) -> Simulation:
@@ -27,7 +27,7 @@ def _pose_looking_at(
 
     def residual(q: np.ndarray) -> np.ndarray:
         T = sim.physics.flange_pose(sim.physical_angles(q)[None], sim.time)[0]
-        T_cam = T @ sim.T_flange_camera
+        T_cam = T @ sim.stereo.T_flange_camera
         return np.concatenate([T_cam[:3, 3] - eye, T_cam[:3, 2] + normal])
 
     q0 = sim.joint_positions()

@@ -7,7 +7,7 @@ import asyncio
 
 import pytest
 
-from controller_stub.server import ControllerServer
+from controller_stub.network.server import ControllerServer
 from protocol import messages as m
 from protocol.admission import AuthThrottle, SessionSlots
 from protocol.connection import Connection, ConnectionState, Role
@@ -155,7 +155,7 @@ async def test_refusals_are_logged_once_per_interval_with_a_count(
     start_server: StartServer, caplog: pytest.LogCaptureFixture
 ) -> None:
     server = await start_server()
-    with caplog.at_level("WARNING", logger="controller_stub.server"):
+    with caplog.at_level("WARNING", logger="controller_stub.network.server"):
         for port in range(1000):
             server._log_refusal(("10.0.0.9", port), "too many failed authentications")
     refusals = [r for r in caplog.records if "refusing" in r.getMessage()]

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from controller_stub.cli import _exposure_refusal, main
-from controller_stub.scenario import scenario_from_dict
+from controller_stub.scenario.spec import scenario_from_dict
 
 
 @pytest.mark.parametrize("host", ["127.0.0.1", "127.0.0.2", "::1", "localhost"])

@@ -1,4 +1,4 @@
-"""The state every simulated controller shares (controller_stub/controller_state.py): the arm
+"""The state every simulated controller shares (controller_stub/world/controller_state.py): the arm
 simulation and the humanoid refuse the same things the same way, and keep one offset history
 that rollback ids name."""
 
@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller_stub.controller_state import ControllerState
-from controller_stub.humanoid import HumanoidSimulation
-from controller_stub.scenario import scenario_from_dict
-from controller_stub.simulation import (
+from controller_stub.scenario.spec import scenario_from_dict
+from controller_stub.world.controller_state import ControllerState
+from controller_stub.world.humanoid import HumanoidSimulation
+from controller_stub.world.simulation import (
     SimulatedController,
     Simulation,
     SimulationRefused,
@@ -28,7 +28,8 @@ def test_both_simulations_share_the_one_state() -> None:
     assert isinstance(make("ur5e"), Simulation)
     assert isinstance(make("humanoid_upper"), HumanoidSimulation)
     for robot in ROBOTS:
-        assert isinstance(make(robot), ControllerState)
+        sim = make(robot)  # the state is a collaborator the simulation holds (issue 26)
+        assert isinstance(sim.state, ControllerState)
 
 
 @pytest.mark.parametrize("robot", ROBOTS)

@@ -9,17 +9,18 @@ import math
 import numpy as np
 import pytest
 
-from controller_stub.humanoid import (
+from controller_stub.geometry import make_transform
+from controller_stub.scenario.spec import ScenarioError, scenario_from_dict
+from controller_stub.sensors.dual_loop import StereoTriangulator
+from controller_stub.world.humanoid import (
     CAMERA_NOMINAL,
     HOME,
     HumanoidSimulation,
-    StereoTriangulator,
     arm_model,
     head_model,
 )
-from controller_stub.robot_model import forward, make_transform
-from controller_stub.scenario import ScenarioError, scenario_from_dict
-from controller_stub.simulation import SimulationRefused, create_simulation
+from controller_stub.world.robot_model import forward
+from controller_stub.world.simulation import SimulationRefused, create_simulation
 
 
 def dh(a: float, alpha: float, d: float, q: float) -> np.ndarray:
@@ -92,7 +93,7 @@ def test_measure_targets_at_home_sees_both_targets(sim: HumanoidSimulation) -> N
     moved = sim.move_joints(q, 1.0)
     assert moved.settle_s == 0.3  # robot time: motion, settling, then the capture
     assert sim.time == pytest.approx(moved.duration_s + 0.3)
-    reading = sim.measure_targets()
+    reading = sim.targets.measure_targets()
     assert reading["time"] == pytest.approx(moved.duration_s + 0.3)
     assert sim.time == pytest.approx(moved.duration_s + 0.4)
     assert set(reading["targets"]) == {"left", "right"}
@@ -104,7 +105,7 @@ def test_measure_targets_at_home_sees_both_targets(sim: HumanoidSimulation) -> N
     # looking away: nothing visible
     q[0] = 1.5
     sim.move_joints(q, 1.0)
-    assert sim.measure_targets()["targets"] == {}
+    assert sim.targets.measure_targets()["targets"] == {}
 
 
 def test_true_frames_compose_as_documented(sim: HumanoidSimulation) -> None:

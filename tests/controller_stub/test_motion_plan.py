@@ -7,8 +7,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from controller_stub.scenario import scenario_from_dict
-from controller_stub.simulation import (
+from controller_stub.scenario.spec import scenario_from_dict
+from controller_stub.world.simulation import (
     GuardedMoveResult,
     MoveResult,
     Simulation,

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from controller_stub.simulation import Simulation
+from controller_stub.world.simulation import Simulation
 
 MakeSim = Callable[..., Simulation]
 LATENCY = 0.004
@@ -27,7 +27,7 @@ def _pose_with_tip_at(sim: Simulation, point: np.ndarray) -> np.ndarray:
 
     def residual(q: np.ndarray) -> np.ndarray:
         T = sim.physics.flange_pose(sim.physical_angles(q)[None], sim.time)[0]
-        tip = T[:3, :3] @ sim.tip_flange + T[:3, 3]
+        tip = T[:3, :3] @ sim.probe.tip_flange + T[:3, 3]
         return np.concatenate([tip - point, 0.1 * (T[:3, 2] - [0, 0, -1.0])])
 
     lo, hi = sim.joint_limits()
@@ -40,7 +40,7 @@ def _pose_with_tip_at(sim: Simulation, point: np.ndarray) -> np.ndarray:
 
 def _descent(sim: Simulation) -> tuple[np.ndarray, np.ndarray]:
     """Start 3 cm above the sphere top, target 1 cm below its top (through the sphere)."""
-    top = sim.sphere_centre + [0.0, 0.0, sim.scenario.probe.sphere_radius]
+    top = sim.probe.sphere_centre + [0.0, 0.0, sim.scenario.probe.sphere_radius]
     q_above = _pose_with_tip_at(sim, top + [0.0, 0.0, 0.03])
     q_below = _pose_with_tip_at(sim, top - [0.0, 0.0, 0.01])
     return q_above, q_below
@@ -57,16 +57,16 @@ def test_contact_distance_and_overtravel(make_sim: MakeSim) -> None:
     assert result.contact and result.q_latched is not None
     assert edges and edges[0][0] == 0 and edges[0][1] is True
     assert sim.digital_inputs()[0] is True
-    full = sim.motion_duration(q_above, q_below, 0.05)
+    full = sim.motion.motion_duration(q_above, q_below, 0.05)
     rate = (q_below - q_above) / full  # rad/s per joint
     t_latch = edges[0][2]
     t_contact = t_latch - LATENCY
     q_contact = q_above + (t_contact - t0) * rate
     # at the exact contact the tip-sphere distance is R + r to 1e-9 m
     T = sim.physics.flange_pose(sim.physical_angles(q_contact)[None], sim.time)[0]
-    tip = T[:3, :3] @ sim.tip_flange + T[:3, 3]
+    tip = T[:3, :3] @ sim.probe.tip_flange + T[:3, 3]
     pr = sim.scenario.probe
-    assert np.linalg.norm(tip - sim.sphere_centre) == pytest.approx(
+    assert np.linalg.norm(tip - sim.probe.sphere_centre) == pytest.approx(
         pr.sphere_radius + pr.stylus_radius, abs=1e-9
     )
     # latched overtravel = joint speed x latency
@@ -74,7 +74,7 @@ def test_contact_distance_and_overtravel(make_sim: MakeSim) -> None:
     np.testing.assert_allclose(edges[0][3], result.q_latched, atol=0)
     # Cartesian overtravel = tip speed x latency (a nearly straight, slow path)
     T_l = sim.physics.flange_pose(sim.physical_angles(result.q_latched)[None], sim.time)[0]
-    tip_l = T_l[:3, :3] @ sim.tip_flange + T_l[:3, 3]
+    tip_l = T_l[:3, :3] @ sim.probe.tip_flange + T_l[:3, 3]
     assert result.speed_mps is not None and result.speed_mps > 0
     assert np.linalg.norm(tip_l - tip) == pytest.approx(result.speed_mps * LATENCY, rel=1e-3)
     # the robot stopped shortly after the latch, not at the end of travel
@@ -104,7 +104,7 @@ def test_no_contact_and_lost_edge(make_sim: MakeSim) -> None:
     sim = _probe_sim(make_sim)
     q_above, q_below = _descent(sim)
     sim.move_joints(q_above, 1.0)
-    q_side = _pose_with_tip_at(sim, sim.sphere_centre + [0.05, 0.0, 0.05])
+    q_side = _pose_with_tip_at(sim, sim.probe.sphere_centre + [0.05, 0.0, 0.05])
     r = sim.guarded_move(q_side, 0.1, io_line=0)
     assert not r.contact and r.q_latched is None
     np.testing.assert_array_equal(r.q, q_side)

@@ -8,15 +8,15 @@ import cv2
 import numpy as np
 import pytest
 
-from controller_stub.render import (
+from controller_stub.geometry import make_transform
+from controller_stub.sensors.render import (
     CameraModel,
     DiskPattern,
     Renderer,
     project_points,
     undistort_pixels,
 )
-from controller_stub.robot_model import make_transform
-from controller_stub.simulation import Simulation
+from controller_stub.world.simulation import Simulation
 
 CAMERA = CameraModel(1280, 1024, 1400.0, 1395.0, 641.3, 509.7, (-0.08, 0.05, 4e-4, -3e-4, 0.01))
 DISK = DiskPattern(radius=0.01, plate_radius=0.05, dot_level=30.0, plate_level=220.0)
@@ -41,7 +41,7 @@ def test_undistort_inverts_distortion() -> None:
 def test_one_pixel_undistort_is_bit_identical() -> None:
     """The board-view sampler's one-pixel path (Python floats) gives the same bits as the
     array path, so the simulated board poses did not change when it got faster."""
-    from controller_stub.board_views import _undistort_pixel
+    from controller_stub.sensors.board_views import _undistort_pixel
 
     rng = np.random.default_rng(2)
     for u, v in np.column_stack([rng.uniform(0, 1279, 100), rng.uniform(0, 1023, 100)]):
@@ -128,14 +128,14 @@ def test_disk_centroid_is_its_images_area_centroid_at_any_tilt_and_phase() -> No
 
 def test_chessboard_corners_found_by_opencv(make_sim: Callable[..., Simulation]) -> None:
     sim = make_sim(seed=4)
-    corners = sim.chessboard_corners()
-    T_right_left = np.linalg.inv(sim.T_left_right)
+    corners = sim.stereo.chessboard_corners()
+    T_right_left = np.linalg.inv(sim.stereo.T_left_right)
     worst = 0.0
     for view in range(0, sim.scenario.chessboard.n_views, 7):
         frame = sim.capture_stereo("chessboard", view)
-        T_left = sim.chessboard_poses()[view]
+        T_left = sim.stereo.chessboard_poses()[view]
         for img, T in ((frame.left, T_left), (frame.right, T_right_left @ T_left)):
-            exact = project_points(sim.camera, corners @ T[:3, :3].T + T[:3, 3])
+            exact = project_points(sim.stereo.camera, corners @ T[:3, :3].T + T[:3, 3])
             ok, found = cv2.findChessboardCornersSB(img, (9, 6), flags=cv2.CALIB_CB_ACCURACY)
             assert ok, f"view {view}: board not found"
             d = np.linalg.norm(found.reshape(-1, 1, 2) - exact[None], axis=2).min(axis=1)
@@ -146,8 +146,9 @@ def test_chessboard_corners_found_by_opencv(make_sim: Callable[..., Simulation])
 def test_chessboard_cornersubpix(make_sim: Callable[..., Simulation]) -> None:
     sim = make_sim(seed=4)
     frame = sim.capture_stereo("chessboard", 1)
-    T = sim.chessboard_poses()[1]
-    exact = project_points(sim.camera, sim.chessboard_corners() @ T[:3, :3].T + T[:3, 3])
+    T = sim.stereo.chessboard_poses()[1]
+    exact = project_points(sim.stereo.camera,
+                           sim.stereo.chessboard_corners() @ T[:3, :3].T + T[:3, 3])
     ok, found = cv2.findChessboardCorners(frame.left, (9, 6))
     assert ok
     criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
@@ -161,17 +162,17 @@ def test_target_capture_matches_true_projection(
 ) -> None:
     """The rendered dot is where the TRUE camera pose projects the TRUE target centre."""
     sim = make_sim(seed=6, camera={"pixel_noise_sigma": 0.0})
-    q = pose_looking_at(sim, sim.target_centre, sim.scenario.target.normal, 0.35)
+    q = pose_looking_at(sim, sim.stereo.target_centre, sim.scenario.target.normal, 0.35)
     sim.move_joints(q, 0.5)
     frame = sim.capture_stereo("target")
     T_base_left = sim.camera_pose()
     T_left_base = np.linalg.inv(T_base_left)
     for img, T in (
         (frame.left, T_left_base),
-        (frame.right, np.linalg.inv(sim.T_left_right) @ T_left_base),
+        (frame.right, np.linalg.inv(sim.stereo.T_left_right) @ T_left_base),
     ):
-        p = T[:3, :3] @ sim.target_centre + T[:3, 3]
-        expected = project_points(sim.camera, p[None])[0]
+        p = T[:3, :3] @ sim.stereo.target_centre + T[:3, 3]
+        expected = project_points(sim.stereo.camera, p[None])[0]
         found = _centroid(img, expected, 1400 * 0.01 / 0.35, 220.0)
         assert np.linalg.norm(found - expected) < 0.1, (found, expected)
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from controller_stub.robot_model import forward, get_robot, gravity_torque, robot_names
+from controller_stub.world.robot_model import forward, get_robot, gravity_torque, robot_names
 
 HP = math.pi / 2
 # (a, alpha, d) per joint as published (see robot_model.py comments), theta nominal 0.

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from controller_stub.scenario import (
+from controller_stub.scenario.spec import (
     Scenario,
     ScenarioError,
     default_scenario,

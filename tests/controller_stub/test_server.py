@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from controller_stub.scenario import scenario_from_dict
-from controller_stub.server import ControllerServer
-from controller_stub.simulation import Simulation
+from controller_stub.network.server import ControllerServer
+from controller_stub.scenario.spec import scenario_from_dict
+from controller_stub.world.simulation import Simulation
 from protocol import messages as m
 from protocol.connection import Connection, ConnectionState, Role
 from protocol.framing import encode_frame

@@ -23,8 +23,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from controller_stub.scenario import scenario_from_dict
-from controller_stub.server import ControllerServer
+from controller_stub.network.server import ControllerServer
+from controller_stub.scenario.spec import scenario_from_dict
 from protocol import messages as m
 from protocol.connection import Connection, ConnectionState, Role
 from protocol.framing import MAGIC, FrameDecoder, encode_frame

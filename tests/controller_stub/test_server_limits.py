@@ -11,13 +11,13 @@ from typing import Any
 
 import pytest
 
-from controller_stub.scenario import scenario_from_dict
-from controller_stub.server import (
+from controller_stub.network.server import (
     PRE_AUTH_MAX_FRAME_SIZE,
     SESSION_READ_CHUNK,
     WRITE_HIGH_WATER,
     ControllerServer,
 )
+from controller_stub.scenario.spec import scenario_from_dict
 from protocol import messages as m
 from protocol.connection import Connection, ConnectionState, Role
 from protocol.framing import MAGIC, FrameDecoder, encode_frame

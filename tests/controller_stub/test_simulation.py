@@ -9,8 +9,8 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from controller_stub.robot_model import gravity_torque
-from controller_stub.simulation import Simulation, SimulationRefused
+from controller_stub.world.robot_model import gravity_torque
+from controller_stub.world.simulation import Simulation, SimulationRefused
 
 MakeSim = Callable[..., Simulation]
 
@@ -36,7 +36,7 @@ def test_settle_and_capture_time_charged_to_the_clock(make_sim: MakeSim) -> None
                    motion={"settle_s": 0.5, "capture_s": 0.25})
     q0 = sim.joint_positions()
     target = q0 + np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.4])
-    motion = sim.motion_duration(q0, target, 1.0)
+    motion = sim.motion.motion_duration(q0, target, 1.0)
     sim.move_joints(target, 1.0)
     assert sim.time == pytest.approx(motion + 0.5, rel=1e-12)
     still = sim.move_joints(target, 1.0)  # already there: no motion, nothing to settle
@@ -254,8 +254,8 @@ def test_determinism_same_seed_same_world(make_sim: MakeSim) -> None:
     fa, fb = a.capture_stereo("chessboard", 3), b.capture_stereo("chessboard", 3)
     np.testing.assert_array_equal(fa.left, fb.left)
     np.testing.assert_array_equal(fa.right, fb.right)
-    np.testing.assert_array_equal(a.chessboard_poses(), b.chessboard_poses())
-    assert not np.array_equal(a.chessboard_poses(), c.chessboard_poses())
+    np.testing.assert_array_equal(a.stereo.chessboard_poses(), b.stereo.chessboard_poses())
+    assert not np.array_equal(a.stereo.chessboard_poses(), c.stereo.chessboard_poses())
 
 
 def test_digital_outputs_and_io_range(make_sim: MakeSim) -> None:

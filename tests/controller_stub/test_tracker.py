@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from controller_stub.robot_model import make_transform
-from controller_stub.scenario import scenario_from_dict
-from controller_stub.simulation import Simulation
-from controller_stub.tracker import Tracker, TrackerSpec, spherical_noise
+from controller_stub.geometry import make_transform
+from controller_stub.scenario.spec import scenario_from_dict
+from controller_stub.scenario.tracker import TrackerSpec
+from controller_stub.sensors.world_point import Tracker, spherical_noise
+from controller_stub.world.simulation import Simulation
 
 
 def _flange_poses(sim: Simulation, count: int, seed: int = 0) -> np.ndarray:
@@ -65,7 +66,7 @@ def test_scenario_errors_move_the_truth_not_the_description() -> None:
         "world_base_error": {"xyz": [0.001, 0.0, 0.0], "rpy": [0.0, 0.0, 0.001]},
         "reflectors": {"a": {"position": [0.0, 0.0, 0.05], "error": [0.0002, 0.0, 0.0]},
                        "b": {"position": [0.05, 0.0, 0.03], "axis": [1.0, 0.0, 0.0]}}}}))
-    description = sim.measure_tracker()["description"]
+    description = sim.tracker.measure_tracker()["description"]
     assert description["reflectors"] == {"a": [0.0, 0.0, 0.05], "b": [0.05, 0.0, 0.03]}
     truth = sim.truth()["tracker"]
     np.testing.assert_allclose(truth["reflectors"]["a"], [0.0002, 0.0, 0.05])

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller_stub.motion import GuardedContact, MotionPlan, PathEdge
 from controller_stub.ur.paced_motion import CYCLE_S, PacedMotion
+from controller_stub.world.motion import GuardedContact, MotionPlan, PathEdge
 
 Q0 = np.zeros(6)
 Q1 = np.array([0.2, -0.1, 0.0, 0.05, 0.0, 0.0])

@@ -14,8 +14,8 @@ from bench.bench_dual_loop import (
     true_points,
     truth_vector,
 )
-from controller_stub.humanoid import HumanoidSimulation
-from controller_stub.scenario import scenario_from_dict
+from controller_stub.scenario.spec import scenario_from_dict
+from controller_stub.world.humanoid import HumanoidSimulation
 from hostpc.fitting import solve
 from hostpc.fitting.stepwise import fit_stepwise, gauge_equivalent
 from hostpc.kinds.dual_loop.synthesize import plan_poses

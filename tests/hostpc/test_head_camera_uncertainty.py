@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 import hostpc
-from controller_stub.humanoid import CALIBRATION_PARAMETERS, StereoTriangulator
-from controller_stub.scenario import scenario_from_dict
-from controller_stub.simulation import create_simulation
+from controller_stub.scenario.spec import scenario_from_dict
+from controller_stub.sensors.dual_loop import CALIBRATION_PARAMETERS, StereoTriangulator
+from controller_stub.world.simulation import create_simulation
 from hostpc.dataset import dataset_from_dict
 from hostpc.errors import InputError
 from hostpc.kinds.dual_loop.method import camera_calibration
@@ -129,7 +129,7 @@ def world_documents(seed: int, poses: Any, calibration_sigma_px: float,
         q[2:9] = q_arm if side == "left" else q[2:9]
         q[9:16] = q_arm if side == "right" else q[9:16]
         sim.move_joints(q, 1.0)
-        seen = sim.measure_targets()["targets"].get(str(side))
+        seen = sim.targets.measure_targets()["targets"].get(str(side))
         if seen is None:
             continue
         samples.append({"chain": str(side), "q_head": list(q_head), "q_arm": list(q_arm),

@@ -11,8 +11,8 @@ import cv2
 import numpy as np
 import pytest
 
-from controller_stub.scenario import Scenario
-from controller_stub.simulation import Simulation
+from controller_stub.scenario.spec import Scenario
+from controller_stub.world.simulation import Simulation
 from hostpc.dataset import dataset_from_dict, dataset_to_dict
 from hostpc.fitting import fit
 from hostpc.synthesize import random_truth, synthesize_stereo_target
@@ -180,17 +180,17 @@ def sim() -> Simulation:
 def test_recorrected_centres_equal_a_measurement_with_the_better_normal(sim: Simulation) -> None:
     cam = sim.truth()["camera"]
     K = np.array([[cam["fx"], 0, cam["cx"]], [0, cam["fy"], cam["cy"]], [0, 0, 1.0]])
-    T_right_left = np.linalg.inv(sim.T_left_right)
+    T_right_left = np.linalg.inv(sim.stereo.T_left_right)
     rig = StereoRig((cam["image_width"], cam["image_height"]), K, cam["distortion"], K,
                     cam["distortion"], T_right_left[:3, :3], T_right_left[:3, 3])
     measurer = TargetMeasurer(rig, sim.scenario.target.radius)
-    left_r, right_r = sim.renderers()
+    left_r, right_r = sim.stereo.renderers()
     T = np.eye(4)
     tilt = cv2.Rodrigues(np.array([0.35, -0.25, 0.0]))[0]
     T[:3, :3] = tilt @ np.diag([1.0, -1.0, -1.0])
     T[:3, 3] = [0.05, -0.02, 0.42]
-    left = left_r.render_disk(T, sim.disk_pattern)
-    right = right_r.render_disk(T_right_left @ T, sim.disk_pattern)
+    left = left_r.render_disk(T, sim.stereo.disk_pattern)
+    right = right_r.render_disk(T_right_left @ T, sim.stereo.disk_pattern)
     n_true = T[:3, 2]
     n_wrong = cv2.Rodrigues(np.array([0.01, -0.008, 0.0]))[0] @ n_true  # ~0.7 deg off
     with_wrong = measurer.measure(left, right, normal_hint=n_wrong)
@@ -237,7 +237,7 @@ def test_planned_views_pass_the_coverage_check(world: str) -> None:
 
     import yaml
 
-    from controller_stub.scenario import scenario_from_dict
+    from controller_stub.scenario.spec import scenario_from_dict
     from hostpc.vision import calibrate_rig
     from hostpc.vision.rig_calibration import find_chessboard
 

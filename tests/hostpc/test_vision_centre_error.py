@@ -8,8 +8,8 @@ import math
 import cv2
 import numpy as np
 
-from controller_stub.render import CameraModel as RenderCamera
-from controller_stub.render import DiskPattern, Renderer
+from controller_stub.sensors.render import CameraModel as RenderCamera
+from controller_stub.sensors.render import DiskPattern, Renderer
 from hostpc.vision.target_detection import DiskBlob, detect_disk
 from hostpc.vision.triangulation import CameraModel, disk_image_moments
 

@@ -8,8 +8,8 @@ import cv2
 import numpy as np
 import pytest
 
-from controller_stub.render import CameraModel, DiskPattern, Renderer
-from controller_stub.robot_model import make_transform
+from controller_stub.geometry import make_transform
+from controller_stub.sensors.render import CameraModel, DiskPattern, Renderer
 from hostpc.vision import StereoRig
 from hostpc.vision.rectification import rectification_for
 from hostpc.vision.target_detection import DiskBlob, detect_disk

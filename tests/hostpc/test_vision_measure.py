@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from controller_stub.render import project_points
-from controller_stub.robot_model import make_transform
-from controller_stub.scenario import Scenario
-from controller_stub.simulation import Simulation
+from controller_stub.geometry import make_transform
+from controller_stub.scenario.spec import Scenario
+from controller_stub.sensors.render import project_points
+from controller_stub.world.simulation import Simulation
 from hostpc.errors import InputError
 from hostpc.vision import (
     ChessboardSpec,
@@ -32,7 +32,7 @@ def truth_rig(sim: Simulation) -> StereoRig:
     """The simulator's true rig (both cameras share the truth intrinsics)."""
     cam = sim.truth()["camera"]
     K = np.array([[cam["fx"], 0, cam["cx"]], [0, cam["fy"], cam["cy"]], [0, 0, 1.0]])
-    T_right_left = np.linalg.inv(sim.T_left_right)
+    T_right_left = np.linalg.inv(sim.stereo.T_left_right)
     size = (cam["image_width"], cam["image_height"])
     return StereoRig(size, K, cam["distortion"], K, cam["distortion"], T_right_left[:3, :3],
                      T_right_left[:3, 3])
@@ -40,11 +40,11 @@ def truth_rig(sim: Simulation) -> StereoRig:
 
 def look_at_q(sim: Simulation, T_camera_target: np.ndarray) -> np.ndarray | None:
     """Reported q (n,) putting the TRUE left camera at T_camera_target from the target."""
-    T_goal = sim.T_base_target @ np.linalg.inv(T_camera_target)
+    T_goal = sim.stereo.T_base_target @ np.linalg.inv(T_camera_target)
 
     def residual(q: np.ndarray) -> np.ndarray:
         T_cam = sim.physics.flange_pose(sim.physical_angles(q)[None], sim.time)[0]
-        T_cam = T_cam @ sim.T_flange_camera
+        T_cam = T_cam @ sim.stereo.T_flange_camera
         return np.concatenate(
             [T_cam[:3, 3] - T_goal[:3, 3], 0.3 * (T_cam[:3, :3] - T_goal[:3, :3]).ravel()]
         )
@@ -72,7 +72,7 @@ def camera_target(tilt: float, azimuth: float, offset: tuple[float, float, float
 
 def truth_point(sim: Simulation) -> np.ndarray:
     """(3,) target centre in the TRUE left camera frame at the current pose (m)."""
-    return (np.linalg.inv(sim.camera_pose()) @ np.append(sim.target_centre, 1.0))[:3]
+    return (np.linalg.inv(sim.camera_pose()) @ np.append(sim.stereo.target_centre, 1.0))[:3]
 
 
 @pytest.fixture(scope="module")
@@ -111,7 +111,7 @@ def test_rig_calibration_recovers_truth(sim: Simulation, calibration: RigCalibra
         assert K[1, 2] == pytest.approx(truth["cy"], abs=0.5)
         np.testing.assert_allclose(dist[:4], truth["distortion"][:4], atol=2e-3)
     assert rig.baseline == pytest.approx(truth["baseline"], abs=2e-5)
-    T_right_left = np.linalg.inv(sim.T_left_right)
+    T_right_left = np.linalg.inv(sim.stereo.T_left_right)
     np.testing.assert_allclose(rig.T, T_right_left[:3, 3], atol=5e-5)
     dR = cv2.Rodrigues(rig.R @ T_right_left[:3, :3].T)[0]
     assert np.linalg.norm(dR) < 5e-4
@@ -133,7 +133,7 @@ def captures(sim: Simulation) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, 
             continue
         sim.move_joints(q, 1.0)
         frame = sim.capture_stereo("target")
-        T_left_target = np.linalg.inv(sim.camera_pose()) @ sim.T_base_target
+        T_left_target = np.linalg.inv(sim.camera_pose()) @ sim.stereo.T_base_target
         out.append((frame.left, frame.right, truth_point(sim), T_left_target))
     return out
 
@@ -160,7 +160,7 @@ def test_pipeline_exact_with_true_rig(sim: Simulation, captures: list) -> None:
     rig = truth_rig(sim)
     measurer = TargetMeasurer(rig, 0.01)
     errors, uv_errors, centroid_errors = [], [], []
-    T_right_left = np.linalg.inv(sim.T_left_right)
+    T_right_left = np.linalg.inv(sim.stereo.T_left_right)
     for left, right, truth, T_left_target in captures:
         obs = measurer.measure(left, right)
         assert isinstance(obs, TargetObservation), obs
@@ -169,8 +169,9 @@ def test_pipeline_exact_with_true_rig(sim: Simulation, captures: list) -> None:
         normal_error = math.degrees(math.acos(min(1.0, abs(obs.normal @ T_left_target[:3, 2]))))
         assert normal_error < 1.0
         uv_true = np.vstack([
-            project_points(sim.camera, truth[None]),
-            project_points(sim.camera, (T_right_left[:3, :3] @ truth + T_right_left[:3, 3])[None]),
+            project_points(sim.stereo.camera, truth[None]),
+            project_points(sim.stereo.camera,
+                           (T_right_left[:3, :3] @ truth + T_right_left[:3, 3])[None]),
         ])
         uv_errors.append(np.abs(obs.uv - uv_true).max())
         centroid_errors.append(np.abs(obs.uv_centroid - uv_true).max())
@@ -183,14 +184,14 @@ def test_covariance_matches_spread(sim: Simulation) -> None:
     """Repeated noisy captures of one pose: the spread of p matches cov within 30 %."""
     rig = truth_rig(sim)
     measurer = TargetMeasurer(rig, 0.01)
-    left_r, right_r = sim.renderers()
+    left_r, right_r = sim.stereo.renderers()
     T_left_target = make_transform([0.05, 0.01, 0.5], [math.pi + 0.2, 0.15, 0.3])
-    T_right_target = np.linalg.inv(sim.T_left_right) @ T_left_target
+    T_right_target = np.linalg.inv(sim.stereo.T_left_right) @ T_left_target
     points, covs = [], []
     for _ in range(80):
         obs = measurer.measure(
-            left_r.render_disk(T_left_target, sim.disk_pattern),
-            right_r.render_disk(T_right_target, sim.disk_pattern),
+            left_r.render_disk(T_left_target, sim.stereo.disk_pattern),
+            right_r.render_disk(T_right_target, sim.stereo.disk_pattern),
         )
         assert isinstance(obs, TargetObservation), obs
         points.append(obs.p)
@@ -205,11 +206,11 @@ def test_covariance_matches_spread(sim: Simulation) -> None:
 
 
 def _render(sim: Simulation, T_left_target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    left_r, right_r = sim.renderers()
-    T_right_target = np.linalg.inv(sim.T_left_right) @ T_left_target
+    left_r, right_r = sim.stereo.renderers()
+    T_right_target = np.linalg.inv(sim.stereo.T_left_right) @ T_left_target
     return (
-        left_r.render_disk(T_left_target, sim.disk_pattern),
-        right_r.render_disk(T_right_target, sim.disk_pattern),
+        left_r.render_disk(T_left_target, sim.stereo.disk_pattern),
+        right_r.render_disk(T_right_target, sim.stereo.disk_pattern),
     )
 
 

@@ -9,8 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from controller_stub.scenario import Scenario
-from controller_stub.simulation import Simulation
+from controller_stub.scenario.spec import Scenario
+from controller_stub.world.simulation import Simulation
 from hostpc.cli.main import main
 from hostpc.errors import InputError
 from hostpc.vision import (

@@ -14,8 +14,8 @@ from typing import Any
 
 import pytest
 
-from controller_stub.scenario import scenario_from_dict
-from controller_stub.server import ControllerServer
+from controller_stub.network.server import ControllerServer
+from controller_stub.scenario.spec import scenario_from_dict
 from hostpc.transport import ControllerClient
 
 TOKEN = "test-token"

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from controller_stub.server import ControllerServer
+from controller_stub.network.server import ControllerServer
 from hostpc.calibrate.run_values import RobotInfo, RunOutcome
 from hostpc.calibrate.runner import Runner
 from hostpc.methods.base import RunSettings

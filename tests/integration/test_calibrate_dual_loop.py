@@ -1,6 +1,6 @@
 """`hostpc calibrate --method dual_loop`: the humanoid's head camera calibrates both arms.
 
-Against the simulated humanoid (`controller_stub.humanoid`) over real loopback sockets: the
+Against the simulated humanoid (`controller_stub.world.humanoid`) over real loopback sockets: the
 `measure_targets` message, the whole run (`--robot sim`) compared with the stub's hidden
 truth in the fit's gauge (`hostpc.fitting.stepwise.gauge_equivalent`), the held offsets, push
 and verify, `hostpc fit` / `hostpc diagnose` on the produced dataset, and a run cut by a

@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller_stub.scenario import default_scenario
-from controller_stub.simulation import Simulation
+from controller_stub.scenario.spec import default_scenario
+from controller_stub.world.simulation import Simulation
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
 from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
@@ -27,7 +27,7 @@ def test_stub_and_host_agree_on_the_measurement(robot: str) -> None:
         assert sim.move_joints(q, 1.0).completed
         q_reported.append(sim.joint_positions())
         T_base_camera = sim.camera_pose()
-        target = np.append(sim.target_centre, 1.0)
+        target = np.append(sim.stereo.target_centre, 1.0)
         expected.append((np.linalg.inv(T_base_camera) @ target)[:3])
     truth = sim.truth()
     mount = truth["camera"]["T_flange_camera"]
@@ -35,7 +35,7 @@ def test_stub_and_host_agree_on_the_measurement(robot: str) -> None:
     dataset = Dataset(
         method="stereo_target", robot=RobotDescription(name=robot),
         frames={"tool": FramePose(np.array(mount["xyz"]), np.array(mount["rpy"])),
-                "target": np.asarray(sim.target_centre)},
+                "target": np.asarray(sim.stereo.target_centre)},
         samples=Samples(q=np.array(q_reported), p=np.zeros((12, 3)),
                         cov=np.broadcast_to(np.eye(3) * 1e-8, (12, 3, 3))),
         known=("tool", "target"),

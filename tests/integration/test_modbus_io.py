@@ -8,8 +8,8 @@ from collections.abc import AsyncIterator
 
 import pytest
 
-from controller_stub.modbus_io import ModbusIoServer
-from controller_stub.server import ControllerServer
+from controller_stub.network.modbus_io import ModbusIoServer
+from controller_stub.network.server import ControllerServer
 from hostpc.errors import ConnectionFailed, InputError, RequestTimeout
 from hostpc.robots.modbus_io import ModbusIo
 from tests.integration.conftest import StartStub

@@ -18,8 +18,8 @@ import aiohttp
 import pytest
 from pymodbus.client import AsyncModbusTcpClient
 
-from controller_stub.scenario import scenario_from_dict
-from controller_stub.server import ControllerServer
+from controller_stub.network.server import ControllerServer
+from controller_stub.scenario.spec import scenario_from_dict
 from hostpc.sensors.camera_service import CameraService
 from hostpc.sensors.stereo_camera import StereoCamera
 from hostpc.station import registers as reg

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from controller_stub.server import ControllerServer
+from controller_stub.network.server import ControllerServer
 from hostpc.dataset import load_dataset, save_dataset
 from hostpc.fitting import FitResult
 from hostpc.kinds.sphere_probe import method as sp
@@ -193,7 +193,7 @@ async def test_hidden_trigger_latency_is_found(start_stub: StartStub, tmp_path: 
     assert diagnosis.candidates[0].effect == "trigger_latency"
 @pytest.mark.slow
 async def test_modbus_polling_path(start_stub: StartStub) -> None:
-    from controller_stub.modbus_io import ModbusIoServer
+    from controller_stub.network.modbus_io import ModbusIoServer
     from hostpc.kinds.sphere_probe.probe_modbus import ModbusProbe, SteppedGuardedMove
 
     server = await start_stub({"probe": {"repeatability_sigma": 0.0}})

@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from controller_stub.scenario import scenario_from_dict
-from controller_stub.server import ControllerServer
-from controller_stub.simulation import Simulation
+from controller_stub.network.server import ControllerServer
+from controller_stub.scenario.spec import scenario_from_dict
+from controller_stub.world.simulation import Simulation
 from hostpc.errors import ConnectionFailed, ControllerError, RequestTimeout
 from hostpc.transport import ControllerClient, ControllerRefusedError
 from tests.integration.conftest import BASE_SCENARIO, TOKEN, StartStub
@@ -151,7 +151,7 @@ async def test_unauthenticated_writes_are_refused_and_change_nothing(
                 await attempt
             assert refused.value.code == "auth_required"
         assert await reader.heartbeat() >= 0.0  # session still usable
-    with caplog.at_level("WARNING", logger="controller_stub.server"):
+    with caplog.at_level("WARNING", logger="controller_stub.network.server"):
         with pytest.raises(ControllerError, match="auth_failed"):
             async with connect(stub, token="wrong-token"):
                 pass
@@ -254,7 +254,7 @@ async def test_unreachable_controller_raises_connection_failed() -> None:
 async def test_modbus_discrete_inputs_mirror_the_simulation(start_stub: StartStub) -> None:
     from pymodbus.client import AsyncModbusTcpClient
 
-    from controller_stub.modbus_io import ModbusIoServer
+    from controller_stub.network.modbus_io import ModbusIoServer
 
     overrides, q_start, q_end = probe_scenario()
     server = await start_stub(overrides)
@@ -287,7 +287,7 @@ async def test_modbus_discrete_inputs_mirror_the_simulation(start_stub: StartStu
 async def test_modbus_is_read_only_by_default(stub: ControllerServer) -> None:
     from pymodbus.client import AsyncModbusTcpClient
 
-    from controller_stub.modbus_io import ModbusIoServer
+    from controller_stub.network.modbus_io import ModbusIoServer
 
     modbus = ModbusIoServer(stub.sim, host="127.0.0.1", port=0)
     host, port = await modbus.start()

@@ -9,7 +9,7 @@ import socket
 import numpy as np
 import pytest
 
-from controller_stub.server import ControllerServer
+from controller_stub.network.server import ControllerServer
 from hostpc.errors import ConnectionFailed, RequestTimeout
 from hostpc.transport import ControllerClient
 from tests.integration.conftest import TOKEN, StartStub

@@ -4,7 +4,7 @@ tracker, motion capture, CMM).
 ``KIND`` registers it (``hostpc.dataset.kind_registry``): the file face and model, the
 acquisition with the stub's laser tracker (``method.py``), and the ``--robot sim`` world: a
 laser tracker with a surveyed registration and a dowel-pinned reflector nest
-(controller_stub/tracker.py), both frames known so every joint's zero is defined.
+(controller_stub/sensors/world_point.py), both frames known so every joint's zero is defined.
 """
 
 from hostpc.dataset.kind_registry import KindDescriptor, SimDefault

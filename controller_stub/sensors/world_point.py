@@ -21,51 +21,14 @@ Shapes: a flange pose is ``(4, 4)`` (base frame); points ``(3,)`` m; covariances
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
 
-from controller_stub.robot_model import make_transform
+from controller_stub.geometry import make_transform, matrix_to_rpy
+from controller_stub.scenario.tracker import TrackerSpec
 
-__all__ = ["PoseSpec", "ReflectorSpec", "TrackerSpec", "spherical_noise", "Tracker"]
-
-
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class PoseSpec(_Model):
-    """A pose as xyz (m) and roll-pitch-yaw (rad)."""
-
-    xyz: list[float] = Field(default=[0.0, 0.0, 0.0], min_length=3, max_length=3)
-    rpy: list[float] = Field(default=[0.0, 0.0, 0.0], min_length=3, max_length=3)
-
-
-class ReflectorSpec(_Model):
-    """One reflector: nominal centre in the flange frame (m), the error of the real one,
-    and its opening axis in the flange frame."""
-
-    position: list[float] = Field(min_length=3, max_length=3)
-    error: list[float] = Field(default=[0.0, 0.0, 0.0], min_length=3, max_length=3)
-    axis: list[float] = Field(default=[0.0, 0.0, 1.0], min_length=3, max_length=3)
-
-
-class TrackerSpec(_Model):
-    """The scenario's `tracker` section (defaults: a tracker 2.4 m from the base).
-
-    world_base: nominal pose of the robot base in the tracker frame (the registration);
-    world_base_error: the real base differs from it by this (applied on the right);
-    reflectors: name -> reflector; sigma_distance (m), sigma_angle (rad): 1-sigma noise;
-    acceptance_deg: half-angle of each reflector's acceptance cone."""
-
-    world_base: PoseSpec = PoseSpec(xyz=[2.2, 0.9, -0.35], rpy=[0.0, 0.0, 2.7])
-    world_base_error: PoseSpec = PoseSpec()
-    reflectors: dict[str, ReflectorSpec] = Field(
-        default_factory=lambda: {"smr1": ReflectorSpec(position=[0.03, -0.02, 0.06])})
-    sigma_distance: float = Field(default=8e-6, ge=0.0)
-    sigma_angle: float = Field(default=4e-6, ge=0.0)
-    acceptance_deg: float = Field(default=55.0, gt=0.0, le=90.0)
+__all__ = ["STREAM_TRACKER", "TrackedArm", "Tracker", "spherical_noise"]
 
 
 def spherical_noise(p_world: np.ndarray, sigma_distance: float, sigma_angle: float
@@ -79,12 +42,27 @@ def spherical_noise(p_world: np.ndarray, sigma_distance: float, sigma_angle: flo
     return cov
 
 
-class Tracker:
-    """The tracker of one simulation (see the module docstring)."""
+class TrackedArm(Protocol):
+    """What the tracker reads of the robot it measures (the arm `Simulation`)."""
 
-    def __init__(self, spec: TrackerSpec, rng: np.random.Generator) -> None:
+    @property
+    def time(self) -> float: ...
+    def flange_pose(self) -> np.ndarray: ...
+    def joint_positions(self) -> np.ndarray: ...
+
+
+class Tracker:
+    """The tracker of one simulation (see the module docstring).
+
+    spec: the scenario's `tracker` section; rng: its noise stream; arm: the robot whose
+    flange it measures in `measure_tracker` (None: only `measure` of a given pose).
+    """
+
+    def __init__(self, spec: TrackerSpec, rng: np.random.Generator,
+                 arm: TrackedArm | None = None) -> None:
         self.spec = spec
         self.rng = rng
+        self.arm = arm
         self.T_world_base_nominal = make_transform(spec.world_base.xyz, spec.world_base.rpy)
         self.T_world_base = self.T_world_base_nominal @ make_transform(
             spec.world_base_error.xyz, spec.world_base_error.rpy)
@@ -115,6 +93,16 @@ class Tracker:
             seen[name] = self._noisy(p)
         return seen, lost
 
+    def measure_tracker(self) -> dict[str, Any]:
+        """Measure every reflector at the arm's current pose: {"q": (n,) reported, "time": s,
+        "seen": name -> {"p", "cov"}, "lost": [names], "description": the tracker's nominal
+        facts}."""
+        if self.arm is None:
+            raise RuntimeError("this tracker measures no robot (constructed without `arm`)")
+        seen, lost = self.measure(self.arm.flange_pose())
+        return {"q": self.arm.joint_positions(), "time": float(self.arm.time), "seen": seen,
+                "lost": lost, "description": self.description()}
+
     def _noisy(self, p: np.ndarray) -> dict[str, Any]:
         r = float(np.linalg.norm(p))
         azimuth = math.atan2(p[1], p[0])
@@ -144,43 +132,11 @@ class Tracker:
 
     def truth(self) -> dict[str, Any]:
         """The hidden truth (for --truth-out and tests)."""
-        from controller_stub.robot_model import matrix_to_rpy
-
         return {
             "T_world_base": {"xyz": self.T_world_base[:3, 3].tolist(),
                              "rpy": matrix_to_rpy(self.T_world_base[:3, :3]).tolist()},
             "reflectors": {n: self.reflector_true(n).tolist() for n in self.spec.reflectors},
         }
-
-
-class TrackerMixin:
-    """`measure_tracker()` for the Simulation (needs `scenario`, `flange_pose()`, `_q`,
-    `_time` and a seed)."""
-
-    scenario: Any
-    _q: np.ndarray
-    _time: float
-    _tracker: Tracker | None = None
-
-    def flange_pose(self) -> np.ndarray:  # provided by Simulation
-        raise NotImplementedError
-
-    @property
-    def tracker(self) -> Tracker:
-        """The cell's tracker, built on first use from the scenario's `tracker` section."""
-        if self._tracker is None:
-            from controller_stub.streams import stream_rng
-
-            spec = getattr(self.scenario, "tracker", None) or TrackerSpec()
-            self._tracker = Tracker(spec, stream_rng(self.scenario.seed, STREAM_TRACKER))
-        return self._tracker
-
-    def measure_tracker(self) -> dict[str, Any]:
-        """Measure every reflector now: {"q": (n,) reported, "time": s, "seen": name ->
-        {"p", "cov"}, "lost": [names], "description": the tracker's nominal facts}."""
-        seen, lost = self.tracker.measure(self.flange_pose())
-        return {"q": self._q.copy(), "time": float(self._time), "seen": seen, "lost": lost,
-                "description": self.tracker.description()}
 
 
 STREAM_TRACKER = 7101

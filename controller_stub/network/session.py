@@ -6,7 +6,7 @@ reading), turns any handler failure into an `error` reply, and pushes `io_edge` 
 authenticated. It closes a client that does not say hello and authenticate, or finish a
 frame, within `handshake_timeout_s`, that is idle for `idle_timeout_s`, or that does not read
 its replies; the server may evict it while it is unauthenticated. See
-`controller_stub.server` for the limits as a whole.
+`controller_stub.network.server` for the limits as a whole.
 """
 
 from __future__ import annotations
@@ -17,9 +17,9 @@ import logging
 import socket
 from typing import Protocol
 
-from controller_stub.controller_state import SimulatedController
 from controller_stub.errors import SimulationRefused
-from controller_stub.handlers import MotionHost, RequestHandlers, RequestRefusedError
+from controller_stub.network.handlers import MotionHost, RequestHandlers, RequestRefusedError
+from controller_stub.world.controller_state import SimulatedController
 from protocol import messages as m
 from protocol.connection import (
     Connection,
@@ -32,7 +32,7 @@ from protocol.connection import (
 from protocol.errors import ErrorCode, LocalProtocolError
 
 # the server's logger: log records keep the name they had before the server was split
-logger = logging.getLogger("controller_stub.server")
+logger = logging.getLogger("controller_stub.network.server")
 
 SERVER_NAME = "controller-stub"
 SESSION_READ_CHUNK = 64 * 1024
@@ -48,7 +48,7 @@ CLOSE_DRAIN_S = 2.0
 
 
 class SessionHost(MotionHost, Protocol):
-    """What a session uses of the server (`controller_stub.server.ControllerServer`): the
+    """What a session uses of the server (`controller_stub.network.server.ControllerServer`): the
     simulation, the token, the limits, the fault counters and the admission bookkeeping."""
 
     sim: SimulatedController
@@ -66,7 +66,7 @@ class SessionHost(MotionHost, Protocol):
     def authentication_failed(self, session: Session) -> None: ...
 
 
-class Session(RequestHandlers):
+class Session:
     """One client connection: reader loop, request tasks, event pushes (and its limits)."""
 
     server: SessionHost
@@ -99,7 +99,7 @@ class Session(RequestHandlers):
         self._handshake_deadline = loop.time() + server.handshake_timeout_s
         self._frame_started: float | None = None  # loop time the frame in progress began
         writer.transport.set_write_buffer_limits(high=WRITE_HIGH_WATER)
-        self._handlers = self._handler_table()
+        self._handlers = RequestHandlers(server, self.sim, self.conn, self.peer).table()
         sock = writer.get_extra_info("socket")
         if sock is not None:
             with contextlib.suppress(OSError):

@@ -17,15 +17,15 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from controller_stub.controller_state import SimulatedController
 from controller_stub.errors import SimulationRefused
-from controller_stub.motion import GuardedMoveResult, MotionPlan, MoveResult
+from controller_stub.world.controller_state import SimulatedController
+from controller_stub.world.motion import GuardedMoveResult, MotionPlan, MoveResult
 from protocol import messages as m
 from protocol.connection import Connection
 from protocol.errors import ErrorCode
 
 # the server's logger: log records keep the name they had before the server was split
-logger = logging.getLogger("controller_stub.server")
+logger = logging.getLogger("controller_stub.network.server")
 
 Handler = Callable[[Any], Awaitable[m._Message]]
 
@@ -44,7 +44,7 @@ class RequestRefusedError(Exception):
 
 
 class MotionHost(Protocol):
-    """What the handlers use of the server (`controller_stub.server.ControllerServer`):
+    """What the handlers use of the server (`controller_stub.network.server.ControllerServer`):
     the state shared by all sessions (motion pacing, mode, the truth file)."""
 
     def mode(self) -> str: ...
@@ -60,17 +60,21 @@ ROLLBACK_ID_PREFIX = "rb-"
 
 
 class RequestHandlers:
-    """The request handlers of `controller_stub.session.Session`, by request kind.
+    """The request handlers of one `controller_stub.network.session.Session`, by request kind.
 
-    The state below is created by `Session.__init__`.
+    server: what is shared by all sessions (`MotionHost`); sim: the simulation; conn: the
+    session's protocol connection (authenticated or not); peer: its address, for the log.
+    The session holds one and dispatches through `table()`.
     """
 
-    server: MotionHost
-    sim: SimulatedController
-    conn: Connection
-    peer: str
+    def __init__(self, server: MotionHost, sim: SimulatedController, conn: Connection,
+                 peer: str) -> None:
+        self.server = server
+        self.sim = sim
+        self.conn = conn
+        self.peer = peer
 
-    def _handler_table(self) -> dict[str, Handler]:
+    def table(self) -> dict[str, Handler]:
         """Request kind -> bound handler."""
         return {
             "get_state": self._get_state,
@@ -206,13 +210,14 @@ class RequestHandlers:
         return reply
 
     async def _measure_targets(self, request: m.MeasureTargets) -> m.TargetsMeasured:
-        """The simulation's triangulated targets (`sim.measure_targets()`); a simulation
+        """The simulation's triangulated targets (its `targets` sensor); a simulation
         without that sensor refuses with reason `unsupported`."""
-        measure = getattr(self.sim, "measure_targets", None)
-        if measure is None:
+        sensor = self.sim.targets
+        if sensor is None:
             raise SimulationRefused("unsupported", f"{self.sim.robot_name} has no target "
                                     "measurement; use capture")
-        result = measure()  # during a motion: at its start pose, with that q (as capture)
+        # during a motion: at its start pose, with that q (as capture)
+        result = sensor.measure_targets()
         targets = [
             m.TargetObservation(chain=str(chain), p=float_list(seen["p"]),
                                 cov=np.asarray(seen["cov"], dtype=float).reshape(3, 3).tolist(),
@@ -224,12 +229,13 @@ class RequestHandlers:
                                  time=float(result["time"]), targets=targets)
 
     async def _measure_tracker(self, request: m.MeasureTracker) -> m.TrackerMeasured:
-        """The laser tracker's reflectors (`sim.measure_tracker()`, controller_stub/tracker.py);
-        a simulation without a tracker refuses with reason `unsupported`."""
-        measure = getattr(self.sim, "measure_tracker", None)
-        if measure is None:
+        """The laser tracker's reflectors (the simulation's `tracker` sensor,
+        controller_stub/sensors/world_point.py); a simulation without a tracker refuses with
+        reason `unsupported`."""
+        tracker = self.sim.tracker
+        if tracker is None:
             raise SimulationRefused("unsupported", f"{self.sim.robot_name} has no tracker")
-        result = measure()
+        result = tracker.measure_tracker()
         reflectors = [
             m.ReflectorObservation(name=str(name), p=float_list(seen["p"]),
                                    cov=np.asarray(seen["cov"], dtype=float).reshape(3, 3).tolist())

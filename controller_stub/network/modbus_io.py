@@ -27,7 +27,7 @@ from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
-from controller_stub.controller_state import SimulatedController
+from controller_stub.world.controller_state import SimulatedController
 
 logger = logging.getLogger(__name__)
 

@@ -57,11 +57,8 @@ from pathlib import Path
 
 import numpy as np
 
-from controller_stub.controller_state import SimulatedController
-from controller_stub.handlers import RequestRefusedError, float_list, json_default
-from controller_stub.motion import GuardedMoveResult, MotionPlan, MoveResult
-from controller_stub.scenario import Scenario
-from controller_stub.session import (
+from controller_stub.network.handlers import RequestRefusedError, float_list, json_default
+from controller_stub.network.session import (
     CLOSE_DRAIN_S,
     EVENT_DROP_BYTES,
     PRE_AUTH_MAX_FRAME_SIZE,
@@ -70,7 +67,10 @@ from controller_stub.session import (
     WRITE_HIGH_WATER,
     Session,
 )
-from controller_stub.simulation import create_simulation
+from controller_stub.scenario.spec import Scenario
+from controller_stub.world.controller_state import SimulatedController
+from controller_stub.world.motion import GuardedMoveResult, MotionPlan, MoveResult
+from controller_stub.world.simulation import create_simulation
 from protocol import messages as m
 from protocol.admission import AuthThrottle, LogBudget, SessionSlots
 from protocol.connection import Connection, Role
@@ -101,7 +101,7 @@ REFUSAL_LOG_INTERVAL_S = 10.0
 class ControllerServer:
     """Serve one simulation to many clients over the zerocal protocol.
 
-    sim: a simulated controller (`controller_stub.controller_state.SimulatedController`).
+    sim: a simulated controller (`controller_stub.world.controller_state.SimulatedController`).
     token: the shared secret clients prove with HMAC. max_frame_size: largest frame
     accepted from an authenticated client (bytes). drop_after_requests / reply_delay_s:
     injected faults (see the module docstring). truth_out: file rewritten with `sim.truth()`

@@ -1,7 +1,7 @@
 """The simulated humanoid upper body: a pan-tilt head with a stereo camera and two 7-DoF arms.
 
 The stub's OWN model of the ``humanoid_upper`` design (never imports hostpc). Each chain is
-a :class:`~controller_stub.robot_model.RobotModel` in URDF form (fixed joint origins, then a
+a :class:`~controller_stub.world.robot_model.RobotModel` in URDF form (fixed joint origins, then a
 rotation about the local z axis), derived BY HAND from the design's DH tables
 (docs/dual-loop.md) exactly as robot_model.py does for the UR robots:
 ``O_1 = I``, ``O_k = [Rx(alpha_{k-1}), (a_{k-1}, 0, d_{k-1})]``, ``O_flange = [Rx(alpha_n),
@@ -21,8 +21,9 @@ sits at the true ``T_headend_camera``; one target point per flange. All four fra
 all 16 joint zero errors are hidden truth (scenario ``humanoid`` and ``truth.zero_errors``,
 combined joint order head 1-2, left 1-7, right 1-7).
 
-Measurement (:meth:`HumanoidSimulation.measure_targets`): the stub returns each visible
-target already triangulated, with its covariance, instead of images. The camera is a
+Measurement (:meth:`HeadCamera.measure_targets`, the simulation's `targets` sensor; the pair
+itself is `sensors/dual_loop.py`): the stub returns each visible target already
+triangulated, with its covariance, instead of images. The camera is a
 rectified pinhole pair (focal ``f`` px, principal point at the image centre, right camera
 at ``+baseline`` along the left camera's x). The true point is projected into both images,
 each centroid coordinate gets Gaussian noise ``pixel_sigma``, and the point is triangulated:
@@ -39,22 +40,23 @@ the humanoid: it refuses with ``unsupported``.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from controller_stub.controller_state import ControllerState
 from controller_stub.errors import SimulationRefused
-from controller_stub.motion import GuardedMoveResult, MotionPlan, MoveResult
-from controller_stub.robot_model import (
-    LengthSite,
-    RobotModel,
-    forward,
-    make_transform,
-    matrix_to_rpy,
-)
-from controller_stub.scenario import RandomSpec, Scenario
+from controller_stub.geometry import make_transform, matrix_to_rpy
+from controller_stub.scenario.spec import RandomSpec, Scenario
+from controller_stub.sensors.dual_loop import CALIBRATION_PARAMETERS, StereoTriangulator
 from controller_stub.streams import stream_rng  # the stub's seeded streams
+from controller_stub.world.controller_base import ControllerBase
+from controller_stub.world.controller_state import (
+    ControllerState,
+    TrackerSensor,
+)
+from controller_stub.world.motion import GuardedMoveResult, MotionPlan, MoveResult
+from controller_stub.world.robot_model import LengthSite, RobotModel, forward
 
 HALF_PI = math.pi / 2
 DEG = math.pi / 180
@@ -132,105 +134,12 @@ def _span(chain: str) -> slice:
     raise KeyError(chain)
 
 
-CALIBRATION_PARAMETERS = ("left.fx", "left.fy", "left.cx", "left.cy",
-                          "right.fx", "right.fy", "right.cx", "right.cy", "baseline")
-# the rig-file parameter vector (24: per camera fx fy cx cy k1 k2 p1 p2 k3, then the stereo
-# rotation vector and translation T; the right camera at +baseline means T = (-b, 0, 0))
-RIG_VECTOR = tuple(f"{c}.{n}" for c in ("left", "right")
-                   for n in ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")) + (
-    "stereo.rx", "stereo.ry", "stereo.rz", "stereo.tx", "stereo.ty", "stereo.tz")
-
-
-class StereoTriangulator:
-    """Rectified stereo pair: projection, pixel noise, triangulation and its covariance.
-
-    focal: px; baseline: m; width, height: px; pixel_sigma: px per image coordinate.
-    calibration_error: (9,) what the controller's own calibration of the pair errs by, in
-    CALIBRATION_PARAMETERS order (px, m); calibration_sigma: (9,) the standard deviations its
-    calibration reports. Projection uses the true pair, triangulation the calibrated one
-    (per camera ``n = ((u - cx) / fx, (v - cy) / fy)``, ``z = b / (n_Lx - n_Rx)``,
-    ``x = n_Lx z``, ``y = (n_Ly + n_Ry) / 2 z``); the stereo rotation is exact."""
-
-    def __init__(self, focal: float, baseline: float, width: int, height: int,
-                 pixel_sigma: float, calibration_error: np.ndarray | None = None,
-                 calibration_sigma: np.ndarray | None = None) -> None:
-        self.f = float(focal)
-        self.b = float(baseline)
-        self.width = int(width)
-        self.height = int(height)
-        self.cx = (width - 1) / 2.0
-        self.cy = (height - 1) / 2.0
-        self.sigma = float(pixel_sigma)
-        true = np.array([self.f, self.f, self.cx, self.cy] * 2 + [self.b])
-        self.calibration_error = (np.zeros(9) if calibration_error is None
-                                  else np.asarray(calibration_error, dtype=float))
-        self.calibrated = true + self.calibration_error
-        self.calibration_sigma = (np.zeros(9) if calibration_sigma is None
-                                  else np.asarray(calibration_sigma, dtype=float))
-
-    def project(self, p: np.ndarray) -> np.ndarray:
-        """(4,) pixels [uL, vL, uR, vR] of a point p (3,) in the left camera frame."""
-        x, y, z = p
-        return np.array([self.f * x / z + self.cx, self.f * y / z + self.cy,
-                         self.f * (x - self.b) / z + self.cx, self.f * y / z + self.cy])
-
-    def visible(self, p: np.ndarray) -> bool:
-        if p[2] <= 0.05:
-            return False
-        uv = self.project(p)
-        inside_u = (0.0 <= uv[[0, 2]]) & (uv[[0, 2]] <= self.width - 1)
-        inside_v = (0.0 <= uv[[1, 3]]) & (uv[[1, 3]] <= self.height - 1)
-        return bool(np.all(inside_u) and np.all(inside_v))
-
-    def triangulate(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Point (3,) m from pixels (4,) with the calibrated pair, and the Jacobian
-        d point / d pixels (3, 4)."""
-        uL, vL, uR, vR = uv
-        fxl, fyl, cxl, cyl, fxr, fyr, cxr, cyr, b = self.calibrated
-        nxl, nyl = (uL - cxl) / fxl, (vL - cyl) / fyl
-        nxr, nyr = (uR - cxr) / fxr, (vR - cyr) / fyr
-        disparity = nxl - nxr
-        z = b / disparity
-        ny = 0.5 * (nyl + nyr)
-        dn_dx = np.array([1.0 / fxl, 0.0, -1.0 / fxr, 0.0])  # d disparity / d pixels
-        dz = -z / disparity * dn_dx
-        dx = nxl * dz + np.array([z / fxl, 0.0, 0.0, 0.0])
-        dy = ny * dz + np.array([0.0, 0.5 / fyl, 0.0, 0.5 / fyr]) * z
-        return np.array([nxl * z, ny * z, z]), np.vstack([dx, dy, dz])
-
-    def measure(self, p_true: np.ndarray, rng: np.random.Generator
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Noisy triangulated point (3,), its covariance (3, 3) (m, m^2) and the noisy
-        pixels [[uL, vL], [uR, vR]] (2, 2) it was triangulated from."""
-        uv = self.project(p_true) + rng.normal(0.0, self.sigma, 4)
-        p, J = self.triangulate(uv)
-        cov = (self.sigma**2) * J @ J.T
-        return p, cov, uv.reshape(2, 2)
-
-    def calibration(self) -> dict[str, Any]:
-        """The controller's calibration of the pair as a rig document (the host's rig-file
-        format: zerocal-stereo-rig, version 1) with its (24, 24) covariance in RIG_VECTOR
-        order (zero for distortion and the stereo rotation, which this model has exact)."""
-        fxl, fyl, cxl, cyl, fxr, fyr, cxr, cyr, b = (float(v) for v in self.calibrated)
-        rig = {"format": "zerocal-stereo-rig", "version": 1,
-               "image_size": [self.width, self.height],
-               "K_left": [[fxl, 0.0, cxl], [0.0, fyl, cyl], [0.0, 0.0, 1.0]],
-               "dist_left": [0.0] * 5,
-               "K_right": [[fxr, 0.0, cxr], [0.0, fyr, cyr], [0.0, 0.0, 1.0]],
-               "dist_right": [0.0] * 5,
-               "R": np.eye(3).tolist(), "T": [-b, 0.0, 0.0], "rms": 0.0, "n_views": 0}
-        index = [RIG_VECTOR.index(n) for n in CALIBRATION_PARAMETERS[:8]]
-        index.append(RIG_VECTOR.index("stereo.tx"))  # T_x = -b: same variance
-        covariance = np.zeros((len(RIG_VECTOR), len(RIG_VECTOR)))
-        covariance[index, index] = self.calibration_sigma**2
-        return {"rig": rig, "parameters": list(RIG_VECTOR), "covariance": covariance.tolist()}
-
-
-class HumanoidSimulation(ControllerState):
+class HumanoidSimulation(ControllerBase):
     """The simulated humanoid controller: the Simulation contract over the combined joint
-    vector (head 2, left 7, right 7; reported angles, rad) plus :meth:`measure_targets`.
-    Offsets, their history, limits, IO, e-stop and the busy check are the shared
-    :class:`~controller_stub.controller_state.ControllerState`.
+    vector (head 2, left 7, right 7; reported angles, rad) with a `targets` sensor (the head
+    camera, :class:`HeadCamera`) and no tracker. Offsets, their history, limits, IO, e-stop,
+    clock and the busy check are its `state`
+    (:class:`~controller_stub.world.controller_state.ControllerState`).
 
     Motion is ideal (no hidden joint-space physics): the physical angle is the reported one
     plus the current zero error.
@@ -251,7 +160,7 @@ class HumanoidSimulation(ControllerState):
         model_min = np.concatenate([self.models[c].q_min for c in CHAINS])
         model_max = np.concatenate([self.models[c].q_max for c in CHAINS])
         speeds = np.concatenate([self.models[c].max_speed for c in CHAINS])
-        super().__init__(
+        super().__init__(ControllerState(
             scenario,
             zero_errors=errors,
             q_min=np.asarray(motion.q_min if motion.q_min is not None else model_min),
@@ -259,8 +168,7 @@ class HumanoidSimulation(ControllerState):
             max_speed=(speeds if motion.max_joint_speed is None else
                        np.broadcast_to(np.asarray(motion.max_joint_speed, float), (n,)).copy()),
             start=motion.initial_q if motion.initial_q is not None else HOME,
-        )
-        self._rng_noise = stream_rng(scenario.seed, 11)
+        ))
         self.T_headend_camera_nominal = make_transform(list(CAMERA_NOMINAL[0]),
                                                        list(CAMERA_NOMINAL[1]))
         self.T_headend_camera = self.T_headend_camera_nominal @ make_transform(
@@ -282,6 +190,9 @@ class HumanoidSimulation(ControllerState):
         self.stereo = StereoTriangulator(spec.focal_px, spec.baseline, spec.image_width,
                                          spec.image_height, spec.pixel_sigma,
                                          calibration_error, calibration_sigma)
+        self.targets = HeadCamera(self.state, self.stereo, stream_rng(scenario.seed, 11),
+                                  self.target_in_camera)
+        self.tracker: TrackerSensor | None = None  # no laser tracker in this cell
         self._moves = 0
 
     @property
@@ -295,34 +206,34 @@ class HumanoidSimulation(ControllerState):
         (fraction of max joint speed); nothing moves until :meth:`finish_move`. Refused:
         "busy" (a motion is in progress), "estop", "invalid_argument", "joint_limit",
         "unsupported" for a guarded move (no touch probe)."""
-        self._refuse_if_busy()
+        state = self.state
+        state.refuse_if_busy()
         if io_line is not None:
             raise SimulationRefused("unsupported", "the humanoid has no touch probe")
-        if self._estopped:
+        if state.estopped:
             raise SimulationRefused("estop", "emergency stop is active")
-        target = self._check_vector(q_target, "q_target")
+        target = state.check_vector(q_target, "q_target")
         if not 0.0 < float(speed) <= 1.0:
             raise SimulationRefused("invalid_argument", f"speed {speed} not in (0, 1]")
-        self._check_joint_limits(target)
-        duration = float(np.max(np.abs(target - self._q) / (speed * self._max_speed)))
-        plan = MotionPlan(self._q.copy(), target, self._time, duration, 1.0, None, ())
-        self._active_plan = plan
+        state.check_joint_limits(target)
+        q = state.joint_positions()
+        duration = float(np.max(np.abs(target - q) / (speed * state.max_joint_speed())))
+        plan = MotionPlan(q, target, state.time, duration, 1.0, None, ())
+        state.hold_plan(plan)
         return plan
 
     def finish_move(self, plan: MotionPlan, fraction: float = 1.0) -> MoveResult:
         """Execute `plan` up to `fraction` (clipped to [0, 1]) of it: the robot stops there
         and a move stopped early reports completed=False / reason "aborted". A completed
         move that went somewhere is followed by the settling time (`motion.settle_s`)."""
-        if plan is not self._active_plan:
-            raise SimulationRefused("invalid_argument", "finish_move: not the motion in progress")
-        self._active_plan = None
+        self.state.release_plan(plan)
         fraction = min(max(float(fraction), 0.0), 1.0)
         stopped = fraction < 1.0
         q_end = plan.q_at(fraction)
         duration = fraction * plan.duration_s
         settle = float(self.scenario.motion.settle_s) if duration > 0.0 and not stopped else 0.0
-        self._q = q_end.copy()
-        self._time += duration + settle  # robot time: the motion, then the settling
+        self.state.set_position(q_end)
+        self.state.advance_clock(duration + settle)  # robot time: the motion, then the settling
         self._moves += 1
         return MoveResult(completed=not stopped, q=q_end, duration_s=duration,
                           reason="aborted" if stopped else None, settle_s=settle)
@@ -338,7 +249,7 @@ class HumanoidSimulation(ControllerState):
 
     def physical_angles(self) -> np.ndarray:
         """(16,) physical joint angles at the current pose (rad)."""
-        physical: np.ndarray = self._q + self.current_zero_errors()
+        physical: np.ndarray = self.state.joint_positions() + self.state.current_zero_errors()
         return physical
 
     def frames(self) -> dict[str, np.ndarray]:
@@ -360,27 +271,6 @@ class HumanoidSimulation(ControllerState):
         T = frames["camera"]
         point: np.ndarray = T[:3, :3].T @ (frames[side] - T[:3, 3])
         return point
-
-    # ------------------------------------------------------------------ sensing
-
-    def measure_targets(self) -> dict[str, Any]:
-        """Triangulate both targets at the current pose (see the module docstring).
-
-        Returns ``{"q": (16,) reported angles, "time": s, "targets": {side: {"p": (3,) m,
-        "cov": (3, 3) m^2, "uv": (2, 2) px}}}`` with an entry only for each visible target
-        (uv: the noisy centres [[uL, vL], [uR, vR]] it was triangulated from)."""
-        if self._estopped:
-            raise SimulationRefused("estop", "emergency stop is active")
-        targets: dict[str, dict[str, np.ndarray]] = {}
-        for side in ARMS:
-            p_true = self.target_in_camera(side)
-            if not self.stereo.visible(p_true):
-                continue
-            p, cov, uv = self.stereo.measure(p_true, self._rng_noise)
-            targets[side] = {"p": p, "cov": cov, "uv": uv}
-        measured = {"q": self._q.copy(), "time": self._time, "targets": targets}
-        self._time += float(self.scenario.motion.capture_s)  # one stereo capture
-        return measured
 
     def capture_stereo(self, pattern: str = "target", view: int = 0) -> Any:
         raise SimulationRefused("unsupported", "humanoid_upper serves measure_targets, not "
@@ -411,12 +301,12 @@ class HumanoidSimulation(ControllerState):
 
         return {
             "robot": self.robot_name,
-            "time_s": self._time,
+            "time_s": self.state.time,
             "joint_order": [f"{c}.q{j + 1}" for c in CHAINS for j in range(N_JOINTS[c])],
             "zero_errors": self.current_zero_errors().tolist(),
-            "zero_errors_initial": self._zero_error_initial.tolist(),
-            "zero_offsets": self._offsets.tolist(),
-            "q_reported": self._q.tolist(),
+            "zero_errors_initial": self.state.zero_errors_initial().tolist(),
+            "zero_offsets": self.state.zero_offsets().tolist(),
+            "q_reported": self.state.joint_positions().tolist(),
             "q_physical": self.physical_angles().tolist(),
             "camera": pose(self.T_headend_camera),
             "left_base": pose(self.T_headbase_armbase["left"]),
@@ -430,3 +320,40 @@ class HumanoidSimulation(ControllerState):
                            self.stereo.calibration_error.tolist(),
                            strict=True))},
         }
+
+
+class HeadCamera:
+    """The humanoid's target sensor: the head's stereo pair triangulating the arms' targets.
+
+    state: the controller state (e-stop, reported angles, clock); stereo: the pair
+    (`sensors/dual_loop.py`); rng: its pixel-noise stream; target_in_camera: side -> (3,)
+    true target point of that arm in the camera frame (m) at the current pose.
+    """
+
+    def __init__(self, state: ControllerState, stereo: StereoTriangulator,
+                 rng: np.random.Generator, target_in_camera: Callable[[str], np.ndarray]
+                 ) -> None:
+        self.state = state
+        self.stereo = stereo
+        self._rng = rng
+        self._target_in_camera = target_in_camera
+
+    def measure_targets(self) -> dict[str, Any]:
+        """Triangulate both targets at the current pose (see the module docstring).
+
+        Returns ``{"q": (16,) reported angles, "time": s, "targets": {side: {"p": (3,) m,
+        "cov": (3, 3) m^2, "uv": (2, 2) px}}}`` with an entry only for each visible target
+        (uv: the noisy centres [[uL, vL], [uR, vR]] it was triangulated from)."""
+        state = self.state
+        if state.estopped:
+            raise SimulationRefused("estop", "emergency stop is active")
+        targets: dict[str, dict[str, np.ndarray]] = {}
+        for side in ARMS:
+            p_true = self._target_in_camera(side)
+            if not self.stereo.visible(p_true):
+                continue
+            p, cov, uv = self.stereo.measure(p_true, self._rng)
+            targets[side] = {"p": p, "cov": cov, "uv": uv}
+        measured = {"q": state.joint_positions(), "time": state.time, "targets": targets}
+        state.advance_clock(float(state.scenario.motion.capture_s))  # one stereo capture
+        return measured

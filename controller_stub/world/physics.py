@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controller_stub.robot_model import RobotModel, forward, gravity_torque
-from controller_stub.scenario import TruthSpec
+from controller_stub.scenario.spec import TruthSpec
+from controller_stub.world.robot_model import RobotModel, forward, gravity_torque
 
 _COMPLIANCE_TOL = 1e-14  # rad
 _COMPLIANCE_MAX_ITER = 60

@@ -2,10 +2,14 @@
 
 `SimulatedController` is the typed contract the server, the request handlers, the sessions,
 the Modbus IO server and the UR personality are written against (the arm `Simulation` and
-the `HumanoidSimulation` both satisfy it). `ControllerState` is the one implementation of
-the parts they share: the reported joint angles and their limits, the zero offsets with
-their history and rollback, the digital IO, the e-stop, the simulated clock and the "busy
-while moving" refusal. A simulation subclasses it and adds its motion, sensors and truth.
+the `HumanoidSimulation` both satisfy it). Its optional sensors are typed too: `targets` (a
+`TargetSensor`) and `tracker` (a `TrackerSensor`) are None on a simulation without them.
+
+`ControllerState` is the one owner of the parts they share: the reported joint angles and
+their limits, the zero offsets with their history and rollback, the digital IO, the e-stop,
+the simulated clock and the motion in progress. A simulation holds one and lends it to its
+collaborators (motion, guarded moves, sensors), which change it only through its methods;
+`controller_base.ControllerBase` answers the contract's state calls from it.
 
 Angles are radians (reported frame: `q_reported = encoder + zero_offset`), times seconds.
 """
@@ -19,20 +23,41 @@ from typing import Any, Protocol
 import numpy as np
 
 from controller_stub.errors import SimulationRefused
-from controller_stub.motion import GuardedMoveResult, MotionPlan, MoveResult
-from controller_stub.scenario import Scenario
+from controller_stub.scenario.spec import Scenario
+from controller_stub.world.motion import GuardedMoveResult, MotionPlan, MoveResult
 
-__all__ = ["ControllerState", "OnIoEdge", "SimulatedController"]
+__all__ = [
+    "ControllerState", "OnIoEdge", "SimulatedController", "TargetSensor", "TrackerSensor",
+]
 
 OnIoEdge = Callable[[int, bool, float, np.ndarray], None]
 """Called for each IO edge the controller reports: (line, new value, sim time, latched q)."""
 
 
-class SimulatedController(Protocol):
-    """The contract of a simulated controller (see controller_stub/simulation.py's docstring).
+class TargetSensor(Protocol):
+    """A sensor that returns targets already triangulated (the humanoid's head camera)."""
 
-    Optional sensors (`measure_targets`, `measure_tracker`) are not part of it: the
-    handlers look them up and refuse with "unsupported" where a simulation has none.
+    def measure_targets(self) -> dict[str, Any]:
+        """{"q": (n,) reported rad, "time": s, "targets": chain -> {"p": (3,) m,
+        "cov": (3, 3) m^2, "uv": (2, 2) px or absent}} at the current pose."""
+        ...
+
+
+class TrackerSensor(Protocol):
+    """A laser tracker measuring reflectors on the flange (sensors/world_point.py)."""
+
+    def measure_tracker(self) -> dict[str, Any]:
+        """{"q": (n,) reported rad, "time": s, "seen": name -> {"p": (3,) m, "cov": (3, 3)
+        m^2}, "lost": [names], "description": the tracker's nominal facts}."""
+        ...
+
+
+class SimulatedController(Protocol):
+    """The contract of a simulated controller (see controller_stub/world/simulation.py's
+    docstring).
+
+    Optional sensors are typed attributes: `targets` and `tracker` are None where a
+    simulation has no such sensor (the handlers then refuse with "unsupported").
     """
 
     scenario: Scenario
@@ -76,10 +101,18 @@ class SimulatedController(Protocol):
     def capture_stereo(self, pattern: str = "target", view: int = 0) -> Any: ...
     def camera_description(self) -> dict[str, Any]: ...
     def truth(self) -> dict[str, Any]: ...
+    @property
+    def targets(self) -> TargetSensor | None: ...
+    @property
+    def tracker(self) -> TrackerSensor | None: ...
 
 
 class ControllerState:
     """The state every simulated controller holds, and the behaviour on it that they share.
+
+    Its collaborators (motion, guarded moves, sensors) read it through the contract's calls
+    and change it only through the methods below the contract's (`set_position`,
+    `advance_clock`, `hold_plan` / `release_plan`, `drive_input` / `latch_input`).
 
     scenario: the scenario (server limits, IO count, initial offsets, motion limits).
     zero_errors: (n,) the hidden zero errors with the original offsets (rad).
@@ -189,7 +222,7 @@ class ControllerState:
         """
         if self.busy:
             raise SimulationRefused("busy", "cannot change the zero offsets while moving")
-        new = self._check_vector(offsets, "offsets")
+        new = self.check_vector(offsets, "offsets")
         limit = self.scenario.server.offset_limit_rad
         change = np.abs(new - self._offsets_initial)
         if np.any(change > limit):
@@ -242,6 +275,35 @@ class ControllerState:
                 return index
         raise SimulationRefused("unknown_history_id", f"no offset history entry {history_id}")
 
+    def zero_errors_initial(self) -> np.ndarray:
+        """(n,) rad: the hidden zero errors with the original offsets (truth)."""
+        return self._zero_error_initial.copy()
+
+    def offsets_initial(self) -> np.ndarray:
+        """(n,) rad: the offsets the controller started with."""
+        return self._offsets_initial.copy()
+
+    # ------------------------------------------------------------------ motion and clock
+
+    def set_position(self, q: np.ndarray) -> None:
+        """The robot now stands at reported angles `q` (n,) rad (end of a motion)."""
+        self._q = np.asarray(q, dtype=float).copy()
+
+    def advance_clock(self, dt: float) -> None:
+        """Advance the simulated clock by `dt` s (motion, settling, capture)."""
+        self._time += dt
+
+    def hold_plan(self, plan: MotionPlan) -> None:
+        """`plan` is the motion in progress (begun, not finished); busy until released."""
+        self._active_plan = plan
+
+    def release_plan(self, plan: MotionPlan) -> None:
+        """End the motion in progress, which must be `plan`, else
+        SimulationRefused("invalid_argument")."""
+        if plan is not self._active_plan:
+            raise SimulationRefused("invalid_argument", "finish_move: not the motion in progress")
+        self._active_plan = None
+
     # ------------------------------------------------------------------ IO
 
     def digital_inputs(self) -> list[bool]:
@@ -257,9 +319,31 @@ class ControllerState:
             )
         self._outputs[int(index)] = bool(value)
 
+    @property
+    def n_io(self) -> int:
+        """Number of digital input (and output) lines."""
+        return self._n_io
+
+    def drive_input(self, line: int, value: bool, t: float, q: np.ndarray, emit: bool) -> None:
+        """Set digital input `line` to `value` (a sensor's line, e.g. the probe's). A change
+        is reported through `on_io_edge(line, value, t, q)` unless `emit` is False (an edge
+        the controller does not see); no change, no report."""
+        if self._inputs[line] == value:
+            return
+        self._inputs[line] = value
+        if emit and self.on_io_edge is not None:
+            self.on_io_edge(line, value, t, q.copy())
+
+    def latch_input(self, line: int, t: float, q_latched: np.ndarray) -> None:
+        """A trigger latched on input `line`: it is high, and the edge is reported with the
+        latch time `t` and the latched angles `q_latched` (n,)."""
+        self._inputs[line] = True
+        if self.on_io_edge is not None:
+            self.on_io_edge(line, True, t, q_latched.copy())
+
     # ------------------------------------------------------------------ argument checks
 
-    def _check_vector(self, values: Any, name: str) -> np.ndarray:
+    def check_vector(self, values: Any, name: str) -> np.ndarray:
         """(n,) finite float vector from `values`, or SimulationRefused("invalid_argument")."""
         try:
             v = np.asarray(values, dtype=float).reshape(-1)
@@ -273,7 +357,7 @@ class ControllerState:
             raise SimulationRefused("invalid_argument", f"{name}: non-finite value")
         return v
 
-    def _check_joint_limits(self, target: np.ndarray) -> None:
+    def check_joint_limits(self, target: np.ndarray) -> None:
         """SimulationRefused("joint_limit") if `target` (n,) is outside the joint limits."""
         outside = (target < self._q_min) | (target > self._q_max)
         if np.any(outside):
@@ -284,7 +368,8 @@ class ControllerState:
                 f"[{self._q_min[i]:.6f}, {self._q_max[i]:.6f}]",
             )
 
-    def _refuse_if_busy(self) -> None:
+    def refuse_if_busy(self) -> None:
         """SimulationRefused("busy") while a motion from begin_move is not finished."""
         if self.busy:
             raise SimulationRefused("busy", "another motion is in progress")
+

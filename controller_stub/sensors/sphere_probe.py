@@ -101,3 +101,35 @@ def find_crossings(
 def tip_positions(T_base_flange: np.ndarray, tip_flange: np.ndarray) -> np.ndarray:
     """(N, 4, 4) flange poses and (3,) tip in flange (m) -> (N, 3) tip centres in base."""
     return np.einsum("nij,j->ni", T_base_flange[:, :3, :3], tip_flange) + T_base_flange[:, :3, 3]
+
+
+class TouchProbe:
+    """The touch probe of one simulation: the stylus on the flange and the reference sphere.
+
+    tip_flange: (3,) true stylus tip centre in the flange frame (m); sphere_centre: (3,) true
+    sphere centre in base (m); sphere_radius, stylus_radius: m; io_line: the digital input
+    the probe switches.
+    """
+
+    def __init__(self, tip_flange: np.ndarray, sphere_centre: np.ndarray,
+                 sphere_radius: float, stylus_radius: float, io_line: int) -> None:
+        self.tip_flange = tip_flange
+        self.sphere_centre = sphere_centre
+        self.sphere_radius = sphere_radius
+        self.stylus_radius = stylus_radius
+        self.io_line = io_line
+
+    def tips(self, T_base_flange: np.ndarray) -> np.ndarray:
+        """(N, 4, 4) flange poses -> (N, 3) tip centres in base (m)."""
+        return tip_positions(T_base_flange, self.tip_flange)
+
+    def gaps(self, T_base_flange: np.ndarray, extra: float = 0.0) -> np.ndarray:
+        """(N, 4, 4) flange poses -> (N,) gap |tip - P_b| - (R + r + extra) (m), < 0 inside."""
+        contact = self.sphere_radius + self.stylus_radius + extra
+        return np.linalg.norm(self.tips(T_base_flange) - self.sphere_centre, axis=1) - contact
+
+    def touching(self, T_base_flange: np.ndarray) -> bool:
+        """True if the stylus touches the sphere at the flange pose (4, 4)."""
+        tip = self.tips(T_base_flange[None])[0]
+        reach = self.sphere_radius + self.stylus_radius
+        return bool(np.linalg.norm(tip - self.sphere_centre) <= reach)

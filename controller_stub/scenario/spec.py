@@ -19,7 +19,7 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from controller_stub.tracker import TrackerSpec
+from controller_stub.scenario.tracker import TrackerSpec
 
 RobotName = Literal["ur5e", "ur10e", "industrial6", "humanoid_upper"]
 
@@ -202,7 +202,7 @@ class MotionSpec(_Model):
 
 
 class ServerSpec(_Model):
-    """Server settings (used by server.py / modbus_io.py).
+    """Server settings (used by network/server.py / network/modbus_io.py).
 
     max_frame_bytes: largest frame from an authenticated client (before auth: 64 KiB).
     token: the shared secret (not empty). handshake_timeout_s: a client must say hello and
@@ -239,7 +239,7 @@ class FaultSpec(_Model):
 
 
 class HumanoidSpec(_Model):
-    """The humanoid_upper world (robot: humanoid_upper; controller_stub/humanoid.py).
+    """The humanoid_upper world (robot: humanoid_upper; controller_stub/world/humanoid.py).
 
     Hidden truth deltas of the dual_loop frames (nominal values: the design in
     humanoid.py): poses T_true = T_nom @ [R(rpy), xyz]; points p_true = p_nom + error (m,
@@ -281,7 +281,7 @@ class Scenario(_Model):
     server: ServerSpec = ServerSpec()
     faults: FaultSpec = FaultSpec()
     humanoid: HumanoidSpec = HumanoidSpec()
-    tracker: TrackerSpec = TrackerSpec()  # the laser tracker (controller_stub/tracker.py)
+    tracker: TrackerSpec = TrackerSpec()  # the laser tracker (sensors/world_point.py)
 
     @model_validator(mode="after")
     def _check_lengths(self) -> Scenario:

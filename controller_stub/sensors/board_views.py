@@ -13,8 +13,8 @@ import math
 import cv2
 import numpy as np
 
-from controller_stub.render import CameraModel, ChessboardPattern, project_points
-from controller_stub.robot_model import rpy_to_matrix
+from controller_stub.geometry import rpy_to_matrix
+from controller_stub.sensors.render import CameraModel, ChessboardPattern, project_points
 
 
 def _undistort_pixel(camera: CameraModel, u: float, v: float, tol: float = 1e-14
