@@ -9,17 +9,19 @@ that was fitted: ``hostpc fit DATA --plugin DIR/NAME.py --effects +NAME`` reprod
 
 Parameters that can vary this way: a joint's zero offset (``joint_offsets.q4``,
 ``joint_offsets.left.q4``: joint hook) and a DH/MDH table entry (``geometry.a3``: geometry
-hook, serial robots). Where V is not recorded (NaN: the other arm's samples) the effect is 0.
+hook, serial robots), and the translation of the frame a measurement is expressed in
+(``world.z``, also per level of a group label: ``frame_candidates``). Where V is not
+recorded (NaN: the other arm's samples) the effect is 0.
 """
 
 from __future__ import annotations
 
 import re
-import types
 from dataclasses import dataclass
 
 import numpy as np
 
+from hostpc.diagnostics.frame_candidates import frame_source, load
 from hostpc.diagnostics.interactions import Interaction
 from hostpc.diagnostics.patterns import pattern_effect
 from hostpc.model import joint_offsets
@@ -120,13 +122,24 @@ def effect_name(parameter: str, variable: str) -> str:
     return re.sub(r"\W", "_", f"{local}_with_{variable}").lower()
 
 
-def generate(interaction: Interaction, values: np.ndarray) -> GeneratedEffect | None:
+def generate(interaction: Interaction, values: np.ndarray,
+             context: ModelContext | None = None) -> GeneratedEffect | None:
     """The effect "parameter linear in variable" (values: the variable on the diagnosed
-    samples, for its reference), or None when the parameter is not one it can vary."""
+    samples, for its reference), or None when the parameter is not one it can vary.
+    With the model's context, frame translations are written too (``frame_candidates``),
+    linear in a numeric variable or per level of a group label."""
     parameter, variable = interaction.parameter, interaction.variable
     defined = values[np.isfinite(values)]
     if defined.size == 0:
         return None
+    if context is not None:
+        frame = frame_source(parameter, variable, context.method, values,
+                             context.categorical.get(variable))
+        if frame is not None:
+            return GeneratedEffect(frame[0], parameter, variable, frame[1],
+                                   load(frame[0], frame[1]))
+        if variable in context.categorical:
+            return None
     name = effect_name(parameter, variable)
     fields = {"parameter": parameter, "variable": variable, "name": name,
               "reference": float(defined.mean()),
@@ -140,12 +153,7 @@ def generate(interaction: Interaction, values: np.ndarray) -> GeneratedEffect | 
                                            joint=int(geometry.group("joint")), **fields)
     else:
         return None
-    module = types.ModuleType(f"zerocal_generated_{name}")
-    exec(compile(source, f"<generated {name}>", "exec"), module.__dict__)  # noqa: S102
-    cls = next(v for v in vars(module).values()
-               if isinstance(v, type) and issubclass(v, Effect) and v is not Effect)
-    cls.plugin_source = source  # type: ignore[attr-defined]
-    return GeneratedEffect(name, parameter, variable, source, cls)
+    return GeneratedEffect(name, parameter, variable, source, load(name, source))
 
 
 def generated_sources(effects: list[Effect]) -> dict[str, str]:

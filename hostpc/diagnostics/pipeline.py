@@ -123,9 +123,9 @@ class _Checker:
         tried = {c.effect for c in check.candidates}
         context = check.fit.problem.context
         for interaction in unexplained(check.interactions, tried, context)[:MAX_PROPOSALS]:
-            if interaction.variable in context.categorical:
-                continue  # a per-group difference: named in the advice, not a linear effect
-            generated = generate(interaction, variables[interaction.variable])
+            # a per-group difference is written only on a frame (frame_candidates); on a
+            # joint or table entry it is named in the advice, not made a linear effect
+            generated = generate(interaction, variables[interaction.variable], context)
             if generated is None or generated.name in check.effects:
                 continue
             try:
