@@ -243,6 +243,9 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
         lines += [ladder_row(step) for step in diagnosis.ladder]
         if diagnosis.ladder_stop:
             lines.append(f"  stopped: {diagnosis.ladder_stop}")
+    if diagnosis.detectable:
+        lines += ["", "what these poses can see (80 % power at the candidates' threshold):"]
+        lines += [f"  {d.sentence}" for d in diagnosis.detectable]
     lines += ["", "advice:"] + [f"  - {sentence}" for sentence in diagnosis.advice]
     return "\n".join(lines)
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from hostpc.diagnostics.adequacy import Adequacy, HeldOut
 from hostpc.diagnostics.candidates import Candidate, SkippedCandidate
+from hostpc.diagnostics.detectable import DetectableSize
 from hostpc.diagnostics.interactions import Interaction
 from hostpc.diagnostics.outliers import Outlier
 from hostpc.diagnostics.residual_analysis import ResidualAnalysis
@@ -146,7 +147,8 @@ class Diagnosis:
     are outliers); advice: plain sentences, most important first; alpha: the family-wise
     significance of every test; source: the dataset's path (for the commands in the
     advice), if known; ladder_stop: why the ladder stopped before the model was adequate, as
-    a sentence (None when it did not, or without a ladder).
+    a sentence (None when it did not, or without a ladder); detectable: each tried
+    candidate's minimum detectable size with these poses (``detectable``).
     """
 
     check: ModelCheck
@@ -157,6 +159,7 @@ class Diagnosis:
     source: str | None
     plugins: tuple[str, ...]
     ladder_stop: str | None = None
+    detectable: tuple[DetectableSize, ...] = ()
 
     # the headline numbers of the current model ------------------------------------------
     @property
@@ -269,6 +272,7 @@ class Diagnosis:
             },
             "fit": fit.to_dict(),
             "advice": list(self.advice),
+            "detectable": [d.to_dict() for d in self.detectable],
         }
         if self.ladder is not None:
             document["ladder"] = [step.to_dict() for step in self.ladder]

@@ -20,6 +20,7 @@ from hostpc.diagnostics.candidates import (
     try_candidate,
     warm_start,
 )
+from hostpc.diagnostics.detectable import candidate_sizes
 from hostpc.diagnostics.diagnosis import Diagnosis, LadderStep, ModelCheck
 from hostpc.diagnostics.interactions import Interaction, search_interactions
 from hostpc.diagnostics.ladder import DEFAULT_MAX_STEPS, climb
@@ -255,5 +256,8 @@ def diagnose(
                             propose=climber.propose if auto_effects else None,
                             prune=lambda check, keep: climber.prune(check, base, keep))
     advice = advise(start, residuals, steps, source, plugin_paths, ladder_stop=stop)
+    detectable = candidate_sizes(start.fit, registry, [c.effect for c in start.candidates],
+                                 alpha)
     return Diagnosis(check=start, residuals=residuals, ladder=steps, advice=advice,
-                     alpha=alpha, source=source, plugins=plugin_paths, ladder_stop=stop)
+                     alpha=alpha, source=source, plugins=plugin_paths, ladder_stop=stop,
+                     detectable=detectable)

@@ -107,6 +107,9 @@ def _ladder(diagnosis: Diagnosis) -> str:
         notes += f"<p>Fitted without the outlier samples {_e(excluded)}.</p>"
     if diagnosis.ladder_stop:
         notes += f"<p>Stopped: {_e(diagnosis.ladder_stop)}.</p>"
+    if diagnosis.detectable:
+        seen = "".join(f"<li>{_e(d.sentence)}</li>" for d in diagnosis.detectable)
+        notes += f"<p>What these poses can see (80 % power):</p><ul>{seen}</ul>"
     return _img(plots.ladder_chart(diagnosis), "ladder chart") + notes + table
 
 

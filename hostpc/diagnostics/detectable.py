@@ -1,0 +1,135 @@
+"""What the plan can see: the smallest size of each candidate effect the data would find.
+
+For a candidate's parameter k, the chi-square drop its true value s buys (first order, the
+fitted parameters re-adjusting) is ``s^2 |P c_k|^2``, with c_k the whitened Jacobian column
+of k at the current fit and P the projection off the fitted columns: the part of the
+effect the model cannot already absorb. The test finds it with probability ``power`` at
+the per-candidate significance ``alpha`` when that drop reaches the noncentrality lambda
+at which a one-degree-of-freedom chi-square test at level alpha has that power. So
+
+    minimum detectable size = sqrt(lambda) * sigma_scale / |P c_k|
+
+in the parameter's unit (sigma_scale: the square root of the fit's chi2/dof when above 1,
+the stated noise otherwise). It depends only on the design (the poses, the noise, the
+model), not on the measured values: before measuring it is computed on the planned poses.
+``shift`` is what that size does to the measurements: the largest change of one measured
+point (m, the length axes) across the samples - "thermal_expansion below 35 um at the
+flange would not be seen with these poses".
+
+The power of the noncentral chi-square uses Patnaik's approximation (a scaled central
+chi-square with the same mean and variance).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from hostpc.diagnostics.candidates import extend_problem, warm_start
+from hostpc.diagnostics.distributions import chi2_isf, chi2_sf
+from hostpc.errors import InputError
+from hostpc.fitting import FitResult
+from hostpc.fitting.solver import evaluate
+from hostpc.model.effect import Effect
+from hostpc.model.measurements.predict import predict
+
+DEFAULT_POWER = 0.8
+
+
+def power(noncentrality: float, critical: float, dof: int = 1) -> float:
+    """P(noncentral chi-square(dof, noncentrality) > critical) (Patnaik)."""
+    mean, variance = dof + noncentrality, 2.0 * (dof + 2.0 * noncentrality)
+    scale = variance / (2.0 * mean)
+    return chi2_sf(critical / scale, mean / scale)
+
+
+def required_noncentrality(alpha: float, target: float = DEFAULT_POWER, dof: int = 1
+                           ) -> float:
+    """The noncentrality at which the chi-square test at level alpha has power target."""
+    critical = chi2_isf(alpha, dof)
+    low, high = 0.0, 1.0
+    while power(high, critical, dof) < target:
+        high *= 2.0
+    for _ in range(60):
+        middle = 0.5 * (low + high)
+        low, high = (middle, high) if power(middle, critical, dof) < target else (low, middle)
+    return high
+
+
+@dataclass(frozen=True)
+class DetectableSize:
+    """The smallest value of one candidate parameter the test would find (``size``, in
+    ``unit``; inf: the model absorbs it entirely) and its largest shift of a measured point
+    (m)."""
+
+    effect: str
+    parameter: str
+    size: float
+    unit: str
+    shift: float
+
+    @property
+    def sentence(self) -> str:
+        if not math.isfinite(self.size):
+            return f"{self.parameter} cannot be seen with these poses (the model absorbs it)"
+        unit = "" if self.unit in ("", "1") else f" {self.unit}"
+        return (f"{self.parameter} below {self.size:.3g}{unit} "
+                f"({self.shift * 1e6:.3g} um at the measured points) would not be seen "
+                "with these poses")
+
+    def to_dict(self) -> dict[str, object]:
+        return {"effect": self.effect, "parameter": self.parameter,
+                "size": self.size if math.isfinite(self.size) else None,
+                "unit": self.unit, "shift": self.shift}
+
+
+def detectable_sizes(base: FitResult, effect: Effect, alpha: float,
+                     target: float = DEFAULT_POWER) -> tuple[DetectableSize, ...]:
+    """The minimum detectable size of each parameter of ``effect`` added to ``base`` at
+    significance ``alpha`` (the per-candidate threshold) and power ``target``."""
+    problem = extend_problem(base.problem, effect)
+    x0 = warm_start(base, problem)
+    J = evaluate(problem, x0).jacobian
+    assert J is not None
+    n_base = base.x.size
+    fitted = J[:, :n_base][:, ~base.fixed]
+    basis = np.linalg.qr(fitted)[0] if fitted.shape[1] else np.zeros((J.shape[0], 0))
+    _, raw = predict(problem, x0, jacobian=True)
+    assert raw is not None
+    lengths = raw[:, problem.length_columns, :]
+    scale = math.sqrt(max(base.chi2_dof, 1.0)) if base.dof > 0 else 1.0
+    root = math.sqrt(required_noncentrality(alpha, target))
+    span = problem.layout.effect_slices[effect.name]
+    units = list(effect.parameter_units(problem.context))
+    sizes = []
+    for index, k in enumerate(range(span.start, span.stop)):
+        column = J[:, k] - basis @ (basis.T @ J[:, k])
+        norm = float(np.linalg.norm(column))
+        whole = float(np.linalg.norm(J[:, k]))
+        size = math.inf if norm <= 1e-9 * max(whole, 1e-300) else root * scale / norm
+        shift = (float(np.max(np.linalg.norm(lengths[:, :, k], axis=1))) * size
+                 if math.isfinite(size) else math.inf)
+        sizes.append(DetectableSize(effect.name, problem.layout.names[k], size,
+                                    units[index] if index < len(units) else "", shift))
+    return tuple(sizes)
+
+
+def candidate_sizes(base: FitResult, registry: Mapping[str, type[Effect]],
+                    names: Sequence[str], alpha: float, target: float = DEFAULT_POWER
+                    ) -> tuple[DetectableSize, ...]:
+    """The best-seen parameter of each candidate (its smallest detectable shift), at the
+    candidates' Bonferroni threshold ``alpha / len(names)``, halved because a candidate's
+    p-value is doubled (``try_candidate``); candidates that cannot be added are left out."""
+    threshold = alpha / max(len(names), 1) / 2.0
+    found = []
+    for name in names:
+        try:
+            sizes = detectable_sizes(base, registry[name](), threshold, target)
+        except InputError:
+            continue
+        if sizes:
+            found.append(min(sizes, key=lambda s: s.shift))
+    return tuple(found)

@@ -1,0 +1,56 @@
+"""What the plan can see: diagnose states, for each candidate, the smallest size the data
+would find (80 % power at the candidates' threshold), in the effect's units and as a shift
+of the measured points; an effect well above it is found, one well below it is not (the
+40-world check is bench/bench_detectable.py)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from hostpc.diagnostics import DEFAULT_ALPHA, diagnose
+from hostpc.diagnostics.candidates import candidate_effects, rank_candidates
+from hostpc.diagnostics.detectable import (
+    candidate_sizes,
+    power,
+    required_noncentrality,
+)
+from hostpc.diagnostics.distributions import chi2_isf
+from hostpc.fitting import fit
+from hostpc.model.registry import available_effects
+from tests.hostpc.diagnose_support import hidden_dataset
+
+
+def test_the_noncentrality_gives_the_power() -> None:
+    alpha = 1e-3
+    lam = required_noncentrality(alpha, 0.8)
+    assert power(lam, chi2_isf(alpha, 1)) == pytest.approx(0.8, abs=1e-6)
+    # one degree of freedom: (z_{1-alpha/2} + z_{0.8})^2 = (3.29 + 0.84)^2 = 17.1
+    assert lam == pytest.approx(17.1, rel=0.05)
+
+
+def test_diagnose_states_what_these_poses_can_see() -> None:
+    diagnosis = diagnose(hidden_dataset({}, seed=3).dataset)
+    by_effect = {d.effect: d for d in diagnosis.detectable}
+    assert set(by_effect) == {c.effect for c in diagnosis.check.candidates}
+    depth = by_effect["depth_scale"]
+    assert depth.parameter == "depth_scale.s" and 0 < depth.size < 0.1
+    assert depth.shift > 0 and "would not be seen with these poses" in depth.sentence
+    assert diagnosis.to_dict()["detectable"]
+
+
+@pytest.mark.parametrize("seed", [101, 102])
+def test_three_times_the_stated_size_is_found_and_a_third_is_not(seed: int) -> None:
+    registry = available_effects()
+    base = fit(hidden_dataset({}, seed=seed).dataset, cv_folds=0)
+    names = candidate_effects(base.problem, registry)
+    stated = next(s for s in candidate_sizes(base, registry, names, DEFAULT_ALPHA)
+                  if s.effect == "depth_scale")
+    assert math.isfinite(stated.size)
+    for factor, expected in ((3.0, True), (1 / 3, False)):
+        dataset = hidden_dataset({"depth_scale.s": factor * stated.size}, seed=seed).dataset
+        extended = fit(dataset, cv_folds=0)
+        ranked, _ = rank_candidates(extended, registry, names, alpha=DEFAULT_ALPHA,
+                                    cv_folds=3, loss="linear")
+        assert any(c.effect == "depth_scale" and c.significant for c in ranked) is expected
