@@ -24,6 +24,7 @@ import numpy as np
 from hostpc.diagnostics.frame_candidates import frame_source, load
 from hostpc.diagnostics.interactions import Interaction
 from hostpc.diagnostics.patterns import pattern_effect
+from hostpc.fitting import FitResult
 from hostpc.model import joint_offsets
 from hostpc.model.effect import Effect, ModelContext
 
@@ -123,22 +124,21 @@ def effect_name(parameter: str, variable: str) -> str:
 
 
 def generate(interaction: Interaction, values: np.ndarray,
-             context: ModelContext | None = None) -> GeneratedEffect | None:
+             fit: FitResult | None = None) -> GeneratedEffect | None:
     """The effect "parameter linear in variable" (values: the variable on the diagnosed
     samples, for its reference), or None when the parameter is not one it can vary.
-    With the model's context, frame translations are written too (``frame_candidates``),
-    linear in a numeric variable or per level of a group label."""
+    With the current fit, frame translations are written too (``frame_candidates``):
+    linear in a numeric variable, a step in time, or per level of a group label."""
     parameter, variable = interaction.parameter, interaction.variable
     defined = values[np.isfinite(values)]
     if defined.size == 0:
         return None
-    if context is not None:
-        frame = frame_source(parameter, variable, context.method, values,
-                             context.categorical.get(variable))
+    if fit is not None:
+        frame = frame_source(parameter, variable, fit, values)
         if frame is not None:
             return GeneratedEffect(frame[0], parameter, variable, frame[1],
                                    load(frame[0], frame[1]))
-        if variable in context.categorical:
+        if variable in fit.problem.context.categorical:
             return None
     name = effect_name(parameter, variable)
     fields = {"parameter": parameter, "variable": variable, "name": name,

@@ -1,49 +1,77 @@
-"""Generated effects on frames: "the instrument's frame drifts with t", "it moved per group".
+"""Generated effects on frames: "the instrument's frame drifts with t", "marker b was knocked
+at t = 1234 s", "it moved per group".
 
 The effect-agnostic search tests every model parameter, frame parameters included, against
 every logged variable; ``auto_effects`` writes joint and table parameters as effects. This
-module writes the frame parameters whose change enters the measurement additively: the
-translation of the frame the measurement is expressed in (world_point's ``world``: the
-laser tracker's registration; ``world.z`` drifting as its stand settles). Such a change
-is exact as a sensor effect, ``y[:, axis] += k * f(v)``, so the written plugin is the
-fitted effect on any dataset of that method.
+module writes frame translations, as sensor effects ``y += d(sample) * k * f(v)``:
 
-f is the centred variable (linear: ``k`` in m per unit of v), or for a group label one
-indicator per level after the first ("per level": the frame's offset on that level's
-samples against the first level's, in m). 0 where v is not recorded.
+- the frame the measurement is expressed in (world_point's ``world``: the laser tracker's
+  registration; ``world.z`` drifting as its stand settles): d is the axis itself, exact;
+- a point carried by the flange (world_point's ``markers.b``: a reflector nest) or fixed
+  in the base frame (stereo_target's ``target``, seen by the camera on the flange): d is
+  the axis turned into the measurement frame, ``R_wb R_bf(q) e`` or ``R_ft^T R_bf(q)^T e``,
+  with the instrument or camera rotation taken at the fit (a constant in the plugin) and
+  the flange rotation at the commanded joints (first order: the fitted zero offsets turn
+  it by a fraction of a degree). A marker's effect acts on that marker's samples only.
 
-Frames whose change depends on the pose (a marker on the flange, a target seen by a camera
-on the flange, rotations) are not written here: the search still names them.
+f is the centred variable (linear: ``k`` in m per unit of v); a step ``1[t > t0]`` when the
+variable is time and a step explains more of the residual than a line (a knocked marker,
+a bumped stand: t0 the best cut between two samples); or for a group label one indicator
+per level after the first ("per level": the frame's offset on that level's samples
+against the first level's). 0 where v is not recorded. Rotations are not written.
 """
 
 from __future__ import annotations
 
 import re
 import types
-from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
+from hostpc.fitting import FitResult
+from hostpc.fitting.solver import evaluate
 from hostpc.model.effect import Effect
-
-#: (method, frame): the frame each method's measurement is expressed in, whose translation
-#: adds to the measurement unchanged
-ADDITIVE_FRAMES: dict[str, str] = {"world_point": "world"}
+from hostpc.model.measurements.terms import frame_pose
 
 _AXES = ("x", "y", "z")
+#: fewest samples on either side of a step
+MIN_STEP_SIDE = 3
 
-_TEMPLATE = '''"""{title}
+
+@dataclass(frozen=True)
+class FrameKind:
+    """How a frame's translation reaches one method's measurement: ``rotation_frame``
+    (None: additive, the measurement's own frame) is the pose frame whose rotation at the
+    fit turns the flange-rotated axis into the measurement frame; ``inverse``: the point
+    is fixed in the base frame (seen through the flange: R_ft^T R_bf^T) rather than
+    carried by the flange (R_wb R_bf); ``grouped``: one point per level of ``marker``."""
+
+    rotation_frame: str | None
+    inverse: bool = False
+    grouped: bool = False
+
+
+#: (method, frame) -> how its translation enters the measurement
+FRAMES: dict[tuple[str, str], FrameKind] = {
+    ("world_point", "world"): FrameKind(None),
+    ("world_point", "markers"): FrameKind("world", grouped=True),
+    ("stereo_target", "target"): FrameKind("tool", inverse=True),
+}
+
+_TEMPLATE = """\"\"\"{title}
 
 Written by `hostpc diagnose --ladder --write-plugins`: the effect-agnostic search found
-"{parameter} varies with {variable}" and no built-in effect models it. The measurement is
-expressed in frame {frame!r}; its {axis} translation changes by {law}, which moves every
-measured point by the same amount along {axis} (0 where {variable} is not recorded).
-Load it with
+"{parameter} varies with {variable}" and no built-in effect models it. The frame's
+{axis} translation changes by {law}; every measured point{whose} moves by that much along
+the frame's {axis} axis as seen in the measurement frame{seen} (0 where {variable} is not
+recorded). Load it with
     hostpc fit DATASET --plugin THIS_FILE --effects +{name}
-"""
+\"\"\"
 
 import numpy as np
 
+from hostpc.kinematics import forward
 from hostpc.model.effect import Effect
 
 
@@ -53,11 +81,16 @@ class {class_name}(Effect):
     methods = ({method!r},)
     is_linear = True
     unit = "m"
-    description = "{parameter} {basis} in {variable} (found by hostpc diagnose)"
+    description = "{parameter} {basis} {variable} (found by hostpc diagnose)"
     variable = "{variable}"
     axis = {axis_index}
     reference = {reference!r}
+    step = {step!r}
     levels = {levels!r}
+    #: the samples it acts on: (group variable, level index), or None for all
+    group = {group!r}
+    #: None: the axis adds to the measurement; else (rotation at the fit, inverse)
+    rotation = {rotation!r}
 
     def parameter_names(self, ctx):
         return [{names}]
@@ -66,61 +99,131 @@ class {class_name}(Effect):
         values = ctx.variable(self.variable)
         if self.levels:
             columns = [np.where(values == level, 1.0, 0.0) for level in self.levels]
-            return np.stack(columns, axis=1)
-        return np.nan_to_num(values - self.reference, nan=0.0)[:, None]
+            F = np.stack(columns, axis=1)
+        elif self.step is not None:
+            F = np.where(values > self.step, 1.0, 0.0)[:, None]
+        else:
+            F = np.nan_to_num(values - self.reference, nan=0.0)[:, None]
+        if self.group is not None:
+            F = F * (ctx.variable(self.group[0]) == self.group[1])[:, None]
+        return F
+
+    def direction(self, ctx, m):
+        axis = np.eye(3)[self.axis]
+        if self.rotation is None:
+            return np.broadcast_to(np.eye(m)[self.axis], (ctx.n_samples, m))
+        R, inverse = np.array(self.rotation[0]), self.rotation[1]
+        R_bf = forward(ctx.chain, ctx.q_cmd).T_base_flange[:, :3, :3]
+        if inverse:
+            return np.einsum("ij,nkj,k->ni", R, R_bf, axis)
+        return np.einsum("ij,njk,k->ni", R, R_bf, axis)
 
     def sensor_apply(self, ctx, p, y):
-        out = np.array(y, dtype=float)
-        out[:, self.axis] += self.modulators(ctx) @ p
-        return out
+        return y + self.direction(ctx, y.shape[1]) * (self.modulators(ctx) @ p)[:, None]
 
     def sensor_jacobians(self, ctx, p, y):
         n, m = y.shape
         d_y = np.broadcast_to(np.eye(m), (n, m, m)).copy()
-        d_p = np.zeros((n, m, len(p)))
-        d_p[:, self.axis, :] = self.modulators(ctx)
+        d_p = np.einsum("ni,np->nip", self.direction(ctx, m), self.modulators(ctx))
         return d_y, d_p
-'''
+"""
 
 
-def frame_effect_name(parameter: str, variable: str) -> str:
-    """``world_z_with_t``: the frame is kept in the name (``z_with_t`` would not say whose)."""
-    return re.sub(r"\W", "_", f"{parameter}_with_{variable}").lower()
+def frame_effect_name(parameter: str, variable: str, step: bool = False) -> str:
+    """``world_z_with_t``, ``markers_b_x_step_in_t``: the frame is kept in the name."""
+    link = "step_in" if step else "with"
+    return re.sub(r"\W", "_", f"{parameter}_{link}_{variable}").lower()
 
 
-def frame_source(parameter: str, variable: str, method: str, values: np.ndarray,
-                 levels: Sequence[str] | None = None) -> tuple[str, str] | None:
-    """(effect name, plugin source) of "parameter varies with variable" for a frame
-    translation that is additive in ``method``'s measurement, else None. values: the
-    variable on the diagnosed samples (level indices for a group label); levels: the
-    group label's level names (None: a numeric variable)."""
-    frame = ADDITIVE_FRAMES.get(method)
-    head, _, axis = parameter.partition(".")
-    if frame is None or head != frame or axis not in _AXES:
+def best_step(fit: FitResult, parameter: str, values: np.ndarray) -> float | None:
+    """The cut t0 between two samples at which "parameter steps at t0" explains more of the
+    residual (first-order chi-square drop) than "parameter linear in the variable", or None
+    when the line explains more (or too few samples lie on a side)."""
+    if parameter not in fit.names:
         return None
+    evaluation = evaluate(fit.problem, fit.x)
+    J = evaluation.jacobian
+    assert J is not None
+    n, m = evaluation.whitened.shape
+    r = evaluation.whitened.ravel()
+    fitted = J[:, ~fit.fixed]
+    basis = np.linalg.qr(fitted)[0] if fitted.shape[1] else np.zeros((r.size, 0))
+    column = J[:, fit.names.index(parameter)]
+    defined = np.isfinite(values)
+    times = np.unique(values[defined])
+    if times.size < 2 * MIN_STEP_SIDE:
+        return None
+    cuts = 0.5 * (times[MIN_STEP_SIDE - 1:-MIN_STEP_SIDE] + times[MIN_STEP_SIDE:1 - MIN_STEP_SIDE])
+    per_row = np.repeat(np.where(defined, values, np.nan), m)
+
+    def drop(columns: np.ndarray) -> np.ndarray:
+        columns = columns - basis @ (basis.T @ columns)
+        norms = np.einsum("ij,ij->j", columns, columns)
+        return np.where(norms > 1e-12, (columns.T @ r) ** 2 / np.maximum(norms, 1e-300), 0.0)
+
+    steps = column[:, None] * (np.nan_to_num(per_row, nan=-np.inf)[:, None] > cuts[None, :])
+    linear = column * np.nan_to_num(per_row - np.nanmean(values), nan=0.0)
+    drops = drop(steps)
+    best = int(np.argmax(drops))
+    return float(cuts[best]) if drops[best] > float(drop(linear[:, None])[0]) else None
+
+
+def frame_source(parameter: str, variable: str, fit: FitResult, values: np.ndarray
+                 ) -> tuple[str, str] | None:
+    """(effect name, plugin source) of "parameter varies with variable" for a frame
+    translation of the fit's method (``FRAMES``), else None. values: the variable on the
+    diagnosed samples (level indices for a group label)."""
+    problem = fit.problem
+    context = problem.context
+    head, _, local = parameter.partition(".")
+    kind = FRAMES.get((context.method, head))
+    point, _, axis = local.rpartition(".")
+    if kind is None or axis not in _AXES or bool(point) != kind.grouped:
+        return None
+    group: tuple[str, float] | None = None
+    if kind.grouped:
+        levels = list(context.categorical.get("marker", ()))
+        if point not in levels or variable == "marker":
+            return None
+        group = ("marker", float(levels.index(point)))
     defined = values[np.isfinite(values)]
     if defined.size == 0:
         return None
-    name = frame_effect_name(parameter, variable)
-    if levels is not None:
+    rotation = None
+    if kind.rotation_frame is not None:
+        R = frame_pose(problem, kind.rotation_frame, fit.x)[0]
+        rotation = ((R.T if kind.inverse else R).round(12).tolist(), kind.inverse)
+    level_names = context.categorical.get(variable)
+    step = None
+    if level_names is not None:
         present = sorted({int(v) for v in defined})
         if len(present) < 2:
             return None
         indices = present[1:]
-        names = ", ".join(repr(f"{levels[i]}") for i in indices)
         fields = {"levels": tuple(float(i) for i in indices), "reference": 0.0,
-                  "basis": "per level of", "names": names,
+                  "basis": "per level of", "names": ", ".join(repr(level_names[i])
+                                                             for i in indices),
                   "law": f"k_LEVEL on the samples of each {variable} level after "
-                         f"{levels[present[0]]!r} (k in m)"}
+                         f"{level_names[present[0]]!r} (k in m)"}
     else:
+        step = best_step(fit, parameter, values) if variable == "t" else None
         reference = float(defined.mean())
-        fields = {"levels": (), "reference": reference, "basis": "linear",
-                  "names": "'k'",
-                  "law": f"k * ({variable} - {reference!r}) (k in m per unit of {variable})"}
+        fields = {"levels": (), "reference": reference, "names": "'k'"}
+        if step is not None:
+            fields |= {"basis": "steps in", "law": f"k from {variable} > {step!r} on (k in m)"}
+        else:
+            fields |= {"basis": "linear in", "law": f"k * ({variable} - {reference!r}) "
+                                                     f"(k in m per unit of {variable})"}
+    name = frame_effect_name(parameter, variable, step is not None)
+    seen = ("" if rotation is None else
+            " (the camera's or instrument's rotation at the fit, the flange's at the "
+            "commanded joints)")
+    whose = "" if group is None else f" of marker {point!r}"
     source = _TEMPLATE.format(
         title=f"{parameter} varies with {variable}: a generated zerocal effect.",
-        parameter=parameter, variable=variable, name=name, frame=frame, method=method,
-        axis=axis, axis_index=_AXES.index(axis),
+        parameter=parameter, variable=variable, name=name, method=context.method,
+        axis=axis, axis_index=_AXES.index(axis), step=step, group=group,
+        rotation=rotation, seen=seen, whose=whose,
         class_name="".join(p.capitalize() for p in name.split("_")), **fields)
     return name, source
 

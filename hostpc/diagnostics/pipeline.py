@@ -126,7 +126,7 @@ class _Checker:
         for interaction in unexplained(check.interactions, tried, context)[:MAX_PROPOSALS]:
             # a per-group difference is written only on a frame (frame_candidates); on a
             # joint or table entry it is named in the advice, not made a linear effect
-            generated = generate(interaction, variables[interaction.variable], context)
+            generated = generate(interaction, variables[interaction.variable], check.fit)
             if generated is None or generated.name in check.effects:
                 continue
             try:
