@@ -24,6 +24,7 @@ from hostpc.diagnostics.detectable import candidate_sizes
 from hostpc.diagnostics.diagnosis import Diagnosis, LadderStep, ModelCheck
 from hostpc.diagnostics.interactions import Interaction, search_interactions
 from hostpc.diagnostics.ladder import DEFAULT_MAX_STEPS, climb
+from hostpc.diagnostics.law_candidates import law_effects
 from hostpc.diagnostics.outliers import Outlier, find_outliers
 from hostpc.diagnostics.residual_analysis import (
     ResidualAnalysis,
@@ -244,6 +245,8 @@ def diagnose(
     if candidates is not None:
         check_candidate_names(candidates, registry)
     problem = build_problem(dataset, effects, plugins=plugin_paths)
+    if candidates is None:  # physical laws of the logged variables (law_candidates)
+        registry = {**registry, **law_effects(problem.context)}
     checker = _Checker(registry, candidates, alpha, cv_folds, rank_cv_folds, loss, interactions)
     start = checker(solve(problem, loss=loss, cv_folds=0))
     residuals = residual_analysis(start, alpha)
