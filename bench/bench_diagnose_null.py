@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -25,13 +26,16 @@ from bench.harness import seeds_argument  # noqa: E402
 OPTIONAL = True
 
 
-def run(seeds: int = 24) -> dict[str, float]:
+def run(seeds: int = 24, alarms_of: Callable[[int], list[str]] | None = None
+        ) -> dict[str, float]:
+    """alarms_of(seed): what diagnose --ladder flags on world ``seed`` (default: the
+    stereo_target worlds of ``null_alarms``)."""
     from tests.hostpc.diagnose_support import allowed_alarms, null_alarm_rate, null_alarms
 
     start = time.perf_counter()
     alarmed = 0
     for seed in range(seeds):
-        alarms = null_alarms(seed)
+        alarms = (alarms_of or null_alarms)(seed)
         alarmed += bool(alarms)
         print(f"seed {100 + seed}: {'; '.join(alarms) if alarms else 'no alarm'}", flush=True)
     rate = null_alarm_rate()
@@ -40,8 +44,10 @@ def run(seeds: int = 24) -> dict[str, float]:
             "seconds": time.perf_counter() - start}
 
 
-def main(argv: list[str] | None = None) -> int:
-    figures = run(seeds_argument(__doc__.splitlines()[0], 24, 4, argv))
+def main(argv: list[str] | None = None, alarms_of: Callable[[int], list[str]] | None = None,
+         description: str | None = None) -> int:
+    figures = run(seeds_argument(description or __doc__.splitlines()[0], 24, 4, argv),
+                  alarms_of)
     print(f"{figures['alarms']:.0f} of {figures['datasets']:.0f} datasets alarmed; stated "
           f"rate <= {figures['rate_bound']:.3g} a dataset allows {figures['allowed']:.0f} "
           f"(P(more) < 1 %); {figures['seconds']:.1f} s")
