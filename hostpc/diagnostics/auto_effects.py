@@ -9,9 +9,9 @@ that was fitted: ``hostpc fit DATA --plugin DIR/NAME.py --effects +NAME`` reprod
 
 Parameters that can vary this way: a joint's zero offset (``joint_offsets.q4``,
 ``joint_offsets.left.q4``: joint hook) and a DH/MDH table entry (``geometry.a3``: geometry
-hook, serial robots), and the translation of the frame a measurement is expressed in
-(``world.z``, also per level of a group label: ``frame_candidates``). Where V is not
-recorded (NaN: the other arm's samples) the effect is 0.
+hook, serial robots), and a frame's translation (``world.z``, ``markers.b.x``,
+``target.z``: ``frame_candidates``, which also writes a step in time and per level of a
+group label). Where V is not recorded (NaN: the other arm's samples) the effect is 0.
 """
 
 from __future__ import annotations
