@@ -83,7 +83,7 @@ class DetectableSize:
     def to_dict(self) -> dict[str, object]:
         return {"effect": self.effect, "parameter": self.parameter,
                 "size": self.size if math.isfinite(self.size) else None,
-                "unit": self.unit, "shift": self.shift}
+                "unit": self.unit, "shift": self.shift if math.isfinite(self.shift) else None}
 
 
 def detectable_sizes(base: FitResult, effect: Effect, alpha: float,
