@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -37,6 +37,12 @@ class MeasurementPredictor(Protocol):
 
     def predict(self, problem: Problem, x: np.ndarray, jacobian: bool = True
                 ) -> tuple[np.ndarray, np.ndarray | None]: ...
+
+    def shared_error_sensitivity(self, problem: Problem, block: Mapping[str, Any]
+                                 ) -> np.ndarray | None: ...
+
+    def shared_error_floor(self, problem: Problem, block: Mapping[str, Any]
+                           ) -> np.ndarray | None: ...
 
 
 @dataclass(frozen=True)

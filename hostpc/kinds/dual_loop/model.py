@@ -35,12 +35,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
 from hostpc.errors import InputError
 from hostpc.kinds.dual_loop.file_face import DualLoopFile
+from hostpc.kinds.stereo_target.shared_error import rig_floor_covariance, rig_point_sensitivity
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
 from hostpc.kinematics.humanoid import HUMANOID_FRAMES, HUMANOID_HOME, get_tree
 from hostpc.kinematics.rotations import pose_to_transform, skew
@@ -298,6 +300,15 @@ class DualLoop(DualLoopFile, MeasurementModel):
 
     def context(self, dataset: Dataset, chain: Chain) -> ModelContext:
         return dual_loop_context(dataset, chain, self.frame_parameters(dataset))
+
+    def shared_error_sensitivity(self, problem: Problem, block: Mapping[str, Any]
+                                 ) -> np.ndarray | None:
+        """The rig's point sensitivity (hostpc.kinds.stereo_target.shared_error)."""
+        return rig_point_sensitivity(problem, block)
+
+    def shared_error_floor(self, problem: Problem, block: Mapping[str, Any]
+                           ) -> np.ndarray | None:
+        return rig_floor_covariance(problem, block)
 
     def predict(self, problem: Problem, x: np.ndarray, jacobian: bool = True
                 ) -> tuple[np.ndarray, np.ndarray | None]:

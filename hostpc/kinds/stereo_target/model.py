@@ -8,10 +8,14 @@ sensor effects in order. Frames: ``tool`` (sensor frame in the flange frame, pos
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
 from hostpc.kinds.stereo_target.file_face import StereoTargetFile
+from hostpc.kinds.stereo_target.shared_error import rig_floor_covariance, rig_point_sensitivity
 from hostpc.kinematics import get_robot, point_jacobian
 from hostpc.model.frame_math import inverse_point_derivatives
 from hostpc.model.layout import Problem
@@ -41,6 +45,15 @@ class StereoTarget(StereoTargetFile, MeasurementModel):
     frame_effects = {"tool": POSE, "target": POINT, "base": POSE}
     default_frames = ("tool", "target")
     measurement_size = 3
+
+    def shared_error_sensitivity(self, problem: Problem, block: Mapping[str, Any]
+                                 ) -> np.ndarray | None:
+        """The rig's point sensitivity (hostpc.kinds.stereo_target.shared_error)."""
+        return rig_point_sensitivity(problem, block)
+
+    def shared_error_floor(self, problem: Problem, block: Mapping[str, Any]
+                           ) -> np.ndarray | None:
+        return rig_floor_covariance(problem, block)
 
     def predict(self, problem: Problem, x: np.ndarray, jacobian: bool = True
                 ) -> tuple[np.ndarray, np.ndarray | None]:

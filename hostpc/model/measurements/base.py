@@ -15,6 +15,9 @@ here it adds what a fit needs:
   and the ModelContext (contract variables for diagnostics), computed once per problem;
 - ``predict(problem, x, jacobian) -> (prediction (N, m), d prediction / dx (N, m, P))``
   with analytic Jacobians (the contract test checks them against finite differences);
+- ``shared_error_sensitivity`` and ``shared_error_floor``: how an error shared by every
+  sample (a stereo rig's calibration) moves the measurements, for the fit's covariance
+  (default: none);
 - ``example(rng) -> Dataset``: a small plausible dataset of this method, which the contract
   test fits, differentiates and writes to a file and back.
 
@@ -26,7 +29,7 @@ a method's name; they ask its model.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -82,6 +85,20 @@ class MeasurementModel(MeasurementKind):
                 ) -> tuple[np.ndarray, np.ndarray | None]:
         """Predicted measurements (N, m) and their derivative by x (N, m, P) (or None)."""
         raise NotImplementedError
+
+    # the instrument's shared error (hostpc.fitting.shared_errors) ----------------------
+    def shared_error_sensitivity(self, problem: Problem, block: Mapping[str, Any]
+                                 ) -> np.ndarray | None:
+        """(N, m, K) how the instrument's shared error (K parameters with the covariance of
+        the dataset's ``rig_uncertainty`` block) moves each measurement, or None (default:
+        the instrument declares no shared error)."""
+        return None
+
+    def shared_error_floor(self, problem: Problem, block: Mapping[str, Any]
+                           ) -> np.ndarray | None:
+        """(N, m, m) the part of each sample's covariance the method added to stand for the
+        shared error (a weighting only), or None (default: none added)."""
+        return None
 
     @classmethod
     def example(cls, rng: np.random.Generator) -> Dataset:
