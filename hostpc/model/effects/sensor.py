@@ -18,9 +18,15 @@ class DepthScale(Effect):
     hook: ClassVar[Hook] = "sensor"
     description = "stereo depth measured scaled by (1 + s) (baseline or focal length error)"
     methods = ("stereo_target", "dual_loop")
+    advice = "Residuals grow with the distance along the camera's optical axis"
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         return ["s"]
+
+    @classmethod
+    def explains(cls, parameter: str, variable: str, ctx: ModelContext | None = None) -> bool:
+        """The sensor frame's z moving with the depth."""
+        return parameter == "tool.z" and variable == "depth"
 
     def sensor_apply(self, ctx: ModelContext, p: np.ndarray, y: np.ndarray) -> np.ndarray:
         out = y.copy()
@@ -49,9 +55,15 @@ class TriggerLatency(Effect):
     unit = "s"
     description = "joints latched late after the probe's contact: overtravel grows with speed"
     methods = ("sphere_probe",)
+    advice = "Residuals grow with the probe's approach speed"
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         return ["latency"]
+
+    @classmethod
+    def explains(cls, parameter: str, variable: str, ctx: ModelContext | None = None) -> bool:
+        """Any parameter moving with the approach speed."""
+        return variable == "speed"
 
     def _speed(self, ctx: ModelContext) -> np.ndarray:
         if "speed" not in ctx.variables:
