@@ -1,7 +1,7 @@
 """Built-in physical effects. The registry (hostpc.model.registry) lists them by name."""
 
 from hostpc.model.effects.coupling import JointCoupling
-from hostpc.model.effects.dual_loop_frames import DUAL_LOOP_FRAME_EFFECTS
+from hostpc.kinds.dual_loop.frames import DUAL_LOOP_FRAME_EFFECTS
 from hostpc.model.effects.frames import BaseFrame, SphereFrame, TargetFrame, ToolFrame
 from hostpc.model.effects.geometry import Geometry
 from hostpc.model.effects.joint_space import (
