@@ -165,7 +165,7 @@ def candidate_effects(problem: Problem, registry: Mapping[str, type[Effect]],
         cls = registry[name]
         if name in problem.effect_names or cls.hook == "frame":
             continue
-        if cls.methods is not None and problem.method not in cls.methods:
+        if not problem.measurement.accepts(cls):
             continue
         chosen.append(name)
     return chosen

@@ -103,8 +103,10 @@ class Effect:
     name: ClassVar[str]
     hook: ClassVar[Hook]
     description: ClassVar[str] = ""
-    #: methods the effect applies to (None: all). A sensor effect acts on the method's
-    #: measurement: (N, 3) points for stereo_target, (N, 1) distances for sphere_probe.
+    #: the measurement kinds the effect applies to (None: all; a plugin effect may name
+    #: kinds). A sensor effect acts on a kind's measurement ((N, 3) points of a stereo
+    #: camera, (N, 1) contact distances of a probe): a built-in one sets ``()`` and the kinds
+    #: it acts on name it (``MeasurementModel.sensor_effects``, ``accepts``).
     methods: ClassVar[tuple[str, ...] | None] = None
     #: the effect depends on the direction each joint last moved (``ctx.approach``):
     #: the planners then reach every joint from both sides (hostpc.planning.approach), so

@@ -16,7 +16,7 @@ import numpy as np
 
 from hostpc.dataset import Dataset
 from hostpc.kinematics import Chain
-from hostpc.model.effect import EffectTerm, ModelContext
+from hostpc.model.effect import Effect, EffectTerm, ModelContext
 from hostpc.model.memo import ProblemMemo, SharedValues
 
 
@@ -34,6 +34,8 @@ class MeasurementPredictor(Protocol):
     def residual_units(self) -> tuple[str, ...] | None: ...
 
     def frame_parameters(self, dataset: Dataset) -> Mapping[str, tuple[str, ...]]: ...
+
+    def accepts(self, effect: type[Effect]) -> bool: ...
 
     def predict(self, problem: Problem, x: np.ndarray, jacobian: bool = True
                 ) -> tuple[np.ndarray, np.ndarray | None]: ...

@@ -42,6 +42,7 @@ import numpy as np
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
 from hostpc.errors import InputError
 from hostpc.kinds.dual_loop.file_face import DualLoopFile
+from hostpc.kinds.dual_loop.frames import DUAL_LOOP_FRAME_EFFECTS
 from hostpc.kinds.stereo_target.shared_error import rig_floor_covariance, rig_point_sensitivity
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
 from hostpc.kinematics.humanoid import HUMANOID_FRAMES, HUMANOID_HOME, get_tree
@@ -290,6 +291,8 @@ class DualLoop(DualLoopFile, MeasurementModel):
                      "left_target": POINT, "right_target": POINT}
     default_frames = DUAL_LOOP_FRAMES
     measurement_size = 3
+    own_frame_effects = DUAL_LOOP_FRAME_EFFECTS
+    sensor_effects = ("depth_scale",)
 
     def chain(self, dataset: Dataset) -> Chain:
         """The tree's stacked bookkeeping chain (``KinematicTree.stacked_chain``)."""

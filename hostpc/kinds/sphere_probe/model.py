@@ -42,6 +42,7 @@ class SphereProbe(SphereProbeFile, MeasurementModel):
     frame_effects = {"tool": POINT, "sphere": POINT, "base": POSE}
     default_frames = ("tool", "sphere")
     measurement_size = 1
+    sensor_effects = ("trigger_latency",)
 
     def context(self, dataset: Dataset, chain: Chain) -> ModelContext:
         """The serial context plus ``probe_group``, each contact's probe orientation as a

@@ -45,6 +45,7 @@ class StereoTarget(StereoTargetFile, MeasurementModel):
     frame_effects = {"tool": POSE, "target": POINT, "base": POSE}
     default_frames = ("tool", "target")
     measurement_size = 3
+    sensor_effects = ("depth_scale",)
 
     def shared_error_sensitivity(self, problem: Problem, block: Mapping[str, Any]
                                  ) -> np.ndarray | None:

@@ -17,7 +17,7 @@ class DepthScale(Effect):
     name = "depth_scale"
     hook: ClassVar[Hook] = "sensor"
     description = "stereo depth measured scaled by (1 + s) (baseline or focal length error)"
-    methods = ("stereo_target", "dual_loop")
+    methods = ()  # the stereo kinds name it (MeasurementModel.sensor_effects)
     advice = "Residuals grow with the distance along the camera's optical axis"
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
@@ -54,7 +54,7 @@ class TriggerLatency(Effect):
     hook: ClassVar[Hook] = "sensor"
     unit = "s"
     description = "joints latched late after the probe's contact: overtravel grows with speed"
-    methods = ("sphere_probe",)
+    methods = ()  # the probe kind names it (MeasurementModel.sensor_effects)
     advice = "Residuals grow with the probe's approach speed"
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:

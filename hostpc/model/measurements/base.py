@@ -9,6 +9,8 @@ here it adds what a fit needs:
 - ``frame_effects``: the frames the fit may estimate, each with its parameter names (an
   effect named like the frame; built-in frame effects are reused, others made on the fly);
   ``default_frames``: the ones estimated by default unless the dataset marks them known;
+- ``own_frame_effects``, ``sensor_effects`` and ``accepts(effect)``: which effects its frames
+  and its measurement take, declared by the kind (the generic layers hold no kind names);
 - ``measurement_size`` m and ``measurements(dataset) -> (measured (N, m),
   sqrt_information (N, m, m))`` (the whitening W with W^T W = cov^-1);
 - ``chain(dataset)``, ``check(dataset, chain)`` and ``context(dataset, chain)``: the robot
@@ -39,7 +41,7 @@ from hostpc.errors import InputError
 from hostpc.kinematics import Chain, forward
 from hostpc.kinematics.rotations import pose_to_transform
 from hostpc.model.context import serial_chain, serial_context
-from hostpc.model.effect import ModelContext
+from hostpc.model.effect import Effect, ModelContext
 from hostpc.model.layout import Problem
 
 POSE = ("x", "y", "z", "rx", "ry", "rz")
@@ -55,6 +57,22 @@ class MeasurementModel(MeasurementKind):
     #: SI unit of each measurement component; None: all lengths (m). RMS and max residual
     #: norms in m are taken over the length components only (world_pose: x, y, z).
     residual_units: ClassVar[tuple[str, ...] | None] = None
+    #: frame effects of its own (a class per frame with its description and parameters),
+    #: for frames no built-in frame effect covers (dual_loop's camera, arm bases and
+    #: targets); the effect registry lists them with the built-ins. A frame with none gets
+    #: an effect made on the fly.
+    own_frame_effects: ClassVar[tuple[type[Effect], ...]] = ()
+    #: the kind-specific sensor effects (``Effect.methods == ()``) that act on this kind's
+    #: measurement, by name (depth_scale on a stereo point, trigger_latency on a contact)
+    sensor_effects: ClassVar[tuple[str, ...]] = ()
+
+    @classmethod
+    def accepts(cls, effect: type[Effect]) -> bool:
+        """Whether ``effect`` may be in a model of this kind: an effect for every kind
+        (``methods`` None), one that names this kind in its ``methods`` (a plugin's), or a
+        kind-specific one this kind names in ``sensor_effects``."""
+        return (effect.methods is None or cls.name in effect.methods
+                or effect.name in cls.sensor_effects)
 
     # the robot and the context ----------------------------------------------------------
     def chain(self, dataset: Dataset) -> Chain:
