@@ -13,10 +13,10 @@ from hostpc.diagnostics.diagnosis import LadderStep, ModelCheck
 from hostpc.diagnostics.interactions import Interaction
 from hostpc.diagnostics.patterns import pattern_effect
 from hostpc.diagnostics.residual_analysis import ResidualAnalysis
+from hostpc.display_units import quantity
 from hostpc.errors import InputError
 from hostpc.model.problem import default_effects
 from hostpc.model.registry import available_effects
-from hostpc.units import quantity
 
 #: fewer degrees of freedom than this: the advice says the samples are too few to judge
 FEW_DOF = 10
