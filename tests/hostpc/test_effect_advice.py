@@ -10,36 +10,21 @@ from hostpc.diagnostics import diagnose
 from hostpc.diagnostics.patterns import pattern_effect
 from hostpc.model.registry import available_effects
 from tests.hostpc.diagnose_support import hidden_dataset, inject, plugin_effect
+from tests.hostpc.test_diagnose_unknown import WRIST_COUPLING
 
-ADVISED_COUPLING = '''
-import numpy as np
-from hostpc.model.effect import Effect
-
-
-class WristCoupling(Effect):
-    """Joint 6's angle leaks into joint 5: dq5 = k * sin(q6)."""
-
-    name = "wrist_coupling"
-    hook = "joint"
-    is_linear = True
-    unit = "rad"
+#: test_diagnose_unknown's wrist coupling, declaring its advice and its patterns
+ADVISED_COUPLING = WRIST_COUPLING.replace('''    unit = "rad"
+''', '''    unit = "rad"
     advice = "Residuals follow the sine of joint 6's angle ({parameter} leaks into joint 5)"
 
     @classmethod
     def explains(cls, parameter, variable, ctx=None):
         return parameter == "joint_offsets.q5" and variable in ("q6", "humidity")
-
-    def parameter_names(self, ctx):
-        return ["k"]
-
-    def basis(self, ctx):
-        basis = np.zeros((ctx.n_samples, ctx.n_joints, 1))
-        basis[:, 4, 0] = np.sin(ctx.q_cmd[:, 5])
-        return basis
-'''
+''')
 
 
 def _plugin(tmp_path: Path) -> Path:
+    assert "advice" in ADVISED_COUPLING
     plugin = tmp_path / "wrist.py"
     plugin.write_text(ADVISED_COUPLING)
     return plugin

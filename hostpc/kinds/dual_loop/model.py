@@ -35,7 +35,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from functools import lru_cache
-from typing import Any
 
 import numpy as np
 
@@ -293,6 +292,9 @@ class DualLoop(DualLoopFile, MeasurementModel):
     measurement_size = 3
     own_frame_effects = DUAL_LOOP_FRAME_EFFECTS
     sensor_effects = ("depth_scale",)
+    # the stereo rig's shared error (hostpc.kinds.stereo_target.shared_error)
+    shared_error_sensitivity = staticmethod(rig_point_sensitivity)
+    shared_error_floor = staticmethod(rig_floor_covariance)
 
     def chain(self, dataset: Dataset) -> Chain:
         """The tree's stacked bookkeeping chain (``KinematicTree.stacked_chain``)."""
@@ -303,15 +305,6 @@ class DualLoop(DualLoopFile, MeasurementModel):
 
     def context(self, dataset: Dataset, chain: Chain) -> ModelContext:
         return dual_loop_context(dataset, chain, self.frame_parameters(dataset))
-
-    def shared_error_sensitivity(self, problem: Problem, block: Mapping[str, Any]
-                                 ) -> np.ndarray | None:
-        """The rig's point sensitivity (hostpc.kinds.stereo_target.shared_error)."""
-        return rig_point_sensitivity(problem, block)
-
-    def shared_error_floor(self, problem: Problem, block: Mapping[str, Any]
-                           ) -> np.ndarray | None:
-        return rig_floor_covariance(problem, block)
 
     def predict(self, problem: Problem, x: np.ndarray, jacobian: bool = True
                 ) -> tuple[np.ndarray, np.ndarray | None]:

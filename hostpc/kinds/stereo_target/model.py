@@ -9,9 +9,6 @@ sensor effects in order. Frames: ``tool`` (sensor frame in the flange frame, pos
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
-
 import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
@@ -47,15 +44,9 @@ class StereoTarget(StereoTargetFile, MeasurementModel):
     default_frames = ("tool", "target")
     measurement_size = 3
     sensor_effects = ("depth_scale",)
-
-    def shared_error_sensitivity(self, problem: Problem, block: Mapping[str, Any]
-                                 ) -> np.ndarray | None:
-        """The rig's point sensitivity (hostpc.kinds.stereo_target.shared_error)."""
-        return rig_point_sensitivity(problem, block)
-
-    def shared_error_floor(self, problem: Problem, block: Mapping[str, Any]
-                           ) -> np.ndarray | None:
-        return rig_floor_covariance(problem, block)
+    # the stereo rig's shared error (hostpc.kinds.stereo_target.shared_error)
+    shared_error_sensitivity = staticmethod(rig_point_sensitivity)
+    shared_error_floor = staticmethod(rig_floor_covariance)
 
     def predict(self, problem: Problem, x: np.ndarray, jacobian: bool = True
                 ) -> tuple[np.ndarray, np.ndarray | None]:
