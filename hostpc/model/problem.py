@@ -65,8 +65,10 @@ def _registry_with_frames(model: MeasurementModel, dataset: Dataset,
 
 
 def _kinds_accepting(effect: type[Effect]) -> list[str]:
-    """The registered kinds whose models take ``effect`` (for the error message)."""
-    return [name for name, model in measurement_models().items() if model.accepts(effect)]
+    """The kinds ``effect`` names and the registered kinds whose models take it (for the
+    error message)."""
+    accepting = [name for name, model in measurement_models().items() if model.accepts(effect)]
+    return list(dict.fromkeys([*(effect.methods or ()), *accepting]))
 
 
 def _terms(model: MeasurementPredictor, dataset: Dataset, context: ModelContext,
