@@ -8,10 +8,10 @@ from typing import Any
 import numpy as np
 
 from hostpc.diagnostics.adequacy import chi2_dof_upper
+from hostpc.display_units import DISPLAY_UNITS
 from hostpc.fitting import FitResult
 from hostpc.model import joint_offsets
 from hostpc.model.joint_offsets import is_offset
-from hostpc.units import DISPLAY_UNITS
 
 __all__ = ["display", "format_fit_summary", "format_parameter_table"]
 

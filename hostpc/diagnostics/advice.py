@@ -13,31 +13,15 @@ from hostpc.diagnostics.diagnosis import LadderStep, ModelCheck
 from hostpc.diagnostics.interactions import Interaction
 from hostpc.diagnostics.patterns import pattern_effect
 from hostpc.diagnostics.residual_analysis import ResidualAnalysis
+from hostpc.display_units import quantity
 from hostpc.errors import InputError
 from hostpc.model.problem import default_effects
-from hostpc.units import quantity
+from hostpc.model.registry import available_effects
 
 #: fewer degrees of freedom than this: the advice says the samples are too few to judge
 FEW_DOF = 10
 #: the default folds of the held-out residuals (they need 2 samples per fold)
 DEFAULT_FOLDS = 5
-
-# what the residuals follow when a built-in effect is missing; {j}: the joint
-EFFECT_PHRASES = {
-    "joint_compliance": "Residuals follow the gravity torque on joint {j}",
-    "encoder_scale": "Residuals grow with the angle of joint {j} (a scale error of its encoder)",
-    "transmission_harmonic": "Residuals follow a once- or twice-per-revolution pattern of "
-                             "joint {j}'s angle",
-    "backlash": "Residuals depend on the direction of the last motion of joint {j}",
-    "depth_scale": "Residuals grow with the distance along the camera's optical axis",
-    "geometry": "Residuals follow the link geometry ({parameter} differs from the nominal "
-                "table)",
-    "trigger_latency": "Residuals grow with the probe's approach speed",
-    "joint_coupling": "Residuals follow a neighbouring joint's angle (joint {j}'s angle error "
-                      "is proportional to it)",
-    "thermal_expansion": "Residuals drift with the temperature (or the time since the start)",
-}
-
 
 def mm(value: float | None) -> str:
     return "-" if value is None else f"{value * 1e3:.4f} mm"
@@ -77,9 +61,10 @@ def command(check: ModelCheck, name: str, source: str | None, plugins: Sequence[
 def candidate_sentence(check: ModelCheck, candidate: Candidate, source: str | None,
                        plugins: Sequence[str]) -> str:
     parameter = candidate.strongest[0] if candidate.strongest else None
-    template = EFFECT_PHRASES.get(candidate.effect)
+    effect = type(candidate.fit.problem.term(candidate.effect).effect)  # type: ignore[union-attr]
+    template = effect.advice
     if template is None:
-        description = type(candidate.fit.problem.term(candidate.effect).effect).description  # type: ignore[union-attr]
+        description = effect.description
         phrase = f"Residuals are explained by {candidate.effect}" + (
             f" ({description})" if description else "")
     else:
@@ -169,14 +154,17 @@ def few_samples_sentence(check: ModelCheck) -> str | None:
             f"least {needed} samples.")
 
 
-def interaction_sentence(interaction: Interaction, check: ModelCheck) -> str:
-    """"X varies with Y", what that is, and what to do about it."""
+def interaction_sentence(interaction: Interaction, check: ModelCheck,
+                         plugins: Sequence[str] = ()) -> str:
+    """"X varies with Y", what that is (asking the built-in effects and those of the
+    plugins), and what to do about it."""
     head = (f"The effect-agnostic search finds: {interaction.sentence} "
             f"(score {interaction.score:.1f}, p = {interaction.p_value:.2g})")
     context = check.fit.problem.context
     if interaction.variable in context.categorical:
         return f"{head}: {group_sentence(interaction)}"
-    effect = pattern_effect(interaction.parameter, interaction.variable, context)
+    effect = pattern_effect(interaction.parameter, interaction.variable, context,
+                            available_effects(plugins).values())
     if effect is not None and all(e not in check.effects for e in effect.split(" or ")):
         return f"{head}: that is what {effect} models."
     return (f"{head}. If no built-in effect explains it, write one whose parameter makes "
@@ -318,7 +306,7 @@ def advise(check: ModelCheck, residuals: ResidualAnalysis, ladder: Sequence[Ladd
                          f"{costly.not_taken}.")
     top = check.significant_interactions[:1]
     if top:
-        sentences.append(interaction_sentence(top[0], check))
+        sentences.append(interaction_sentence(top[0], check, plugins))
     ranked = check.ranked.adequacy
     if not ranked.adequate and ranked.dof > 0 and best is None and costly is None \
             and not top:

@@ -165,7 +165,7 @@ def candidate_effects(problem: Problem, registry: Mapping[str, type[Effect]],
         cls = registry[name]
         if name in problem.effect_names or cls.hook == "frame":
             continue
-        if cls.methods is not None and problem.method not in cls.methods:
+        if not problem.measurement.accepts(cls):
             continue
         chosen.append(name)
     return chosen
@@ -210,25 +210,28 @@ def with_held_out(result: FitResult, folds: int) -> tuple[FitResult, float | Non
     return replace(result, cv_rms=held.rms, cv_folds=folds), held.whitened_rms
 
 
-COSTLESS_EFFECTS = ("geometry",)
-"""Effects whose parameters may be traded without a word: the DH/MDH deltas are many, the
-data identify a varying subset of them, and none is a correction that is pushed."""
-
-
 def lost_parameters(base: FitResult, extended: FitResult) -> tuple[str, ...]:
     """Parameters free (identifiable) in ``base`` that ``extended`` holds fixed (leaving out
-    those of COSTLESS_EFFECTS)."""
+    those of effects whose parameters are ``traded_freely``)."""
     held = {name for name, fixed in zip(extended.names, extended.fixed, strict=True) if fixed}
     return tuple(name for name, fixed in zip(base.names, base.fixed, strict=True)
                  if not fixed and name in held
-                 and name.split(".", 1)[0] not in COSTLESS_EFFECTS)
+                 and not _traded_freely(base, name.split(".", 1)[0]))
+
+
+def _traded_freely(result: FitResult, effect: str) -> bool:
+    term = result.problem.term(effect)
+    return term is not None and term.effect.traded_freely
 
 
 
 
-def remedy(effect: str, lost: Sequence[str], effect_names: Sequence[str]) -> str:
+def remedy(effect: str, lost: Sequence[str], effect_names: Sequence[str],
+           approach_dependent: bool = False) -> str:
     """What to do when adding ``effect`` makes ``lost`` unidentifiable (a sentence part);
-    effect_names: the effect's parameter names (full), to name the one each trades with."""
+    effect_names: the effect's parameter names (full), to name the one each trades with;
+    approach_dependent: the effect's (``Effect.approach_dependent``): reaching the joints
+    from both sides tells it apart."""
     joints, partners = [], []
     for name in lost:
         offset = joint_offsets.match(name)
@@ -239,9 +242,9 @@ def remedy(effect: str, lost: Sequence[str], effect_names: Sequence[str]) -> str
                          rf"[a-z]+{offset.joint}$")
         partners += [n for n in effect_names if own.match(n)]
     plural = "s" if len(joints) > 1 else ""
-    if effect == "backlash" and joints:
+    if approach_dependent and joints:
         how = (f"approach joint{plural} {', '.join(joints)} from both sides in the measured "
-               "poses (hostpc calibrate plans that when backlash is in the model)")
+               f"poses (hostpc calibrate plans that when {effect} is in the model)")
     elif joints:
         how = f"vary joint{plural} {', '.join(joints)} more widely"
     else:
@@ -267,8 +270,10 @@ def not_taken_reason(candidate: Candidate, p_significant: bool, threshold: float
                 f"samples worse ({base_cv:.3f} -> {candidate.cv_whitened_rms:.3f} sigma)")
     if candidate.unidentifiable:
         span = candidate.fit.problem.layout.effect_slices[candidate.effect]
+        term = candidate.fit.problem.term(candidate.effect)
         return remedy(candidate.effect, candidate.unidentifiable,
-                      list(candidate.fit.names[span]))
+                      list(candidate.fit.names[span]),
+                      term is not None and term.effect.approach_dependent)
     return None
 
 

@@ -19,13 +19,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hostpc.model.registry import builtin_effects
+
 RELATIVE_RANK_TOLERANCE = 1e-7
 NEAR_TIE = 1e-9
 """Column norms within this (relative) of the largest are a tie: the first parameter wins."""
 MIN_GAUGE_SPAN = 0.2
 FIX_PRIORITY = {"geometry": 3, "joint_offsets": 2}
-FRAME_EFFECTS = ("tool", "target", "base", "sphere", "camera", "left_base", "right_base",
-                 "left_target", "right_target")
 
 
 @dataclass(frozen=True)
@@ -63,7 +63,13 @@ class Identifiability:
     null_directions: tuple[NullDirection, ...]
 
 
-def _priority(name: str, frames: Collection[str] = FRAME_EFFECTS) -> int:
+def builtin_frame_names() -> frozenset[str]:
+    """The frames with a built-in frame effect (those of hostpc.model.effects and the ones
+    the built-in kinds declare): what `analyse` holds last when not told the frames."""
+    return frozenset(name for name, cls in builtin_effects().items() if cls.hook == "frame")
+
+
+def _priority(name: str, frames: Collection[str]) -> int:
     effect = name.split(".", 1)[0]
     if effect in FIX_PRIORITY:
         return FIX_PRIORITY[effect]
@@ -71,7 +77,7 @@ def _priority(name: str, frames: Collection[str] = FRAME_EFFECTS) -> int:
 
 
 def _describe(names: Sequence[str], units: Sequence[str], fixed: int, vector: np.ndarray,
-              frame_names: Collection[str] = FRAME_EFFECTS) -> NullDirection:
+              frame_names: Collection[str]) -> NullDirection:
     order = [fixed] + [k for k in np.argsort(-np.abs(vector)) if k != fixed]
     participants = [k for k in order if k == fixed or abs(vector[k]) > 1e-3 * abs(vector[fixed])]
     coefficients = tuple(float(vector[k] / vector[fixed]) for k in participants)
@@ -127,9 +133,9 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], units: Sequence[str],
             frames: Collection[str] | None = None) -> Identifiability:
     """Rank, null directions and the gauge (fixed mask) for a whitened Jacobian (M, P).
 
-    frames: the effects that are frames (held last; default: the built-in methods' frames;
-    a fit passes its problem's own)."""
-    frame_names: Collection[str] = FRAME_EFFECTS if frames is None else frames
+    frames: the effects that are frames (held last; default: `builtin_frame_names`; a fit
+    passes its problem's own)."""
+    frame_names: Collection[str] = builtin_frame_names() if frames is None else frames
     n_params = jacobian.shape[1]
     norms = np.linalg.norm(jacobian, axis=0)
     dead = norms <= 1e-12 * max(float(norms.max(initial=0.0)), 1e-300)

@@ -4,7 +4,9 @@ Each sample's `cov` holds the noise of that sample only. The rig used to triangu
 point was itself estimated (from chessboard views) and errs by some delta with covariance
 S (24 x 24, `hostpc.vision.rig_uncertainty`). That delta moves every measured point by
 D_i @ delta (D_i = dp_i/drig, (3, 24)), the SAME delta for all samples: the measurement
-errors are correlated across samples and do not average out.
+errors are correlated across samples and do not average out. The measurement model supplies
+D (`shared_error_sensitivity`) and the per-sample floor (`shared_error_floor`): the rig is
+its knowledge (hostpc.kinds.stereo_target.shared_error), not this module's.
 
 The fit's estimator is unchanged (weighted by the per-sample covariances); its covariance is
 the sandwich for the full, correlated measurement covariance. To first order the estimate
@@ -24,9 +26,7 @@ test (docs/vision.md 3.3).
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -36,7 +36,6 @@ from hostpc.fitting.shared_chi2 import (
     shared_excess,
 )
 from hostpc.model.layout import Problem
-from hostpc.model.memo import SharedValues
 
 BLOCK = "rig_uncertainty"
 SCALE_ALPHA = 0.02
@@ -46,41 +45,17 @@ S right, S is scaled up in SCALE_ALPHA of the worlds, whatever the geometry (abo
 one-sided level of the earlier "2 standard deviations" gate, which assumed a Gaussian)."""
 
 
-def _sensitivity(shared: SharedValues, block: Any, uv: np.ndarray) -> np.ndarray | None:
-    """(N, 3, 24) dp/drig for the samples' uv; kept in the problem's shared values by the
-    content of uv and the rig (candidate fits and folds of one dataset reuse it)."""
-    digest = hashlib.sha1(np.ascontiguousarray(uv).tobytes())
-    digest.update(repr(block.get("rig")).encode())
-    return shared.value(None, ("rig point sensitivity", digest.hexdigest()),
-                        lambda: _compute_sensitivity(block, uv))
-
-
-def _compute_sensitivity(block: Any, uv: np.ndarray) -> np.ndarray | None:
-    from hostpc.errors import InputError
-    from hostpc.vision.rig import rig_from_dict
-    from hostpc.vision.rig_uncertainty import point_sensitivity
-
-    try:
-        rig = rig_from_dict(block.get("rig"), f"dataset {BLOCK}.rig")
-    except InputError:
-        return None
-    return point_sensitivity(rig, uv)
-
-
 def shared_covariance(problem: Problem) -> tuple[np.ndarray, np.ndarray] | None:
     """(D (N, m, K) raw sensitivity of the measurements, S (K, K)) of the problem's shared
     error, or None if its dataset declares none (or cannot: no uv, wrong shapes)."""
     block = problem.dataset.extra_fields.get(BLOCK)
     if not isinstance(block, dict):
         return None
-    uv = getattr(problem.dataset.samples, "uv", None)
-    if uv is None or problem.measured.shape[1] != 3:
-        return None
     try:
         S = np.asarray(block.get("covariance"), dtype=float)
     except (TypeError, ValueError):
         return None
-    D = _sensitivity(problem.shared, block, np.asarray(uv, float))
+    D = problem.measurement.shared_error_sensitivity(problem, block)
     if D is None or S.ndim != 2 or S.shape != (D.shape[2], D.shape[2]):
         return None
     if not (np.all(np.isfinite(S)) and np.all(np.isfinite(D))):
@@ -122,26 +97,6 @@ def residual_scale(jacobian_free: np.ndarray, D_whitened: np.ndarray, S: np.ndar
     return max(1.0, (chi2 - dof) / trace)
 
 
-def floor_covariance(problem: Problem, block: Any) -> np.ndarray | None:
-    """(N, 3, 3) the per-sample `pixel_floor_px` part of the samples' covariance (the
-    diagonal lateral z s/f, depth z^2 sqrt(2) s/(f b) model of stereo_target), or None if the
-    block declares no floor."""
-    try:
-        floor = float(block.get("pixel_floor_px") or 0.0)
-        rig = block.get("rig") or {}
-        fx = float(rig["K_left"][0][0])
-        baseline = float(np.linalg.norm(np.asarray(rig["T"], float)))
-    except (TypeError, ValueError, KeyError, IndexError):
-        return None
-    if not (floor > 0 and fx > 0 and baseline > 0):
-        return None
-    z = np.maximum(np.abs(np.asarray(problem.measured, float)[:, 2]), 1e-3)
-    cov = np.zeros((z.size, 3, 3))
-    cov[:, 0, 0] = cov[:, 1, 1] = (z * floor / fx) ** 2
-    cov[:, 2, 2] = (z**2 * np.sqrt(2.0) * floor / (fx * baseline)) ** 2
-    return cov
-
-
 def added_parameter_covariance(problem: Problem, jacobian_free: np.ndarray,
                                covariance_free: np.ndarray, row_weight: np.ndarray,
                                residuals: np.ndarray | None = None) -> np.ndarray | None:
@@ -163,7 +118,7 @@ def added_parameter_covariance(problem: Problem, jacobian_free: np.ndarray,
     D, S = shared
     W = problem.sqrt_information  # (N, m, m)
     D_whitened = np.einsum("nij,njk->nik", W, D).reshape(-1, D.shape[2]) * row_weight[:, None]
-    floor = floor_covariance(problem, problem.dataset.extra_fields.get(BLOCK))
+    floor = problem.measurement.shared_error_floor(problem, problem.dataset.extra_fields[BLOCK])
     change = np.zeros_like(covariance_free)
     noise_blocks = None
     if floor is not None:

@@ -144,14 +144,15 @@ def guess_world_point(T_base_flange: FloatArray, points_world: FloatArray,
     index = np.zeros(N, dtype=np.int64) if marker_index is None else np.asarray(marker_index)
     M = int(index.max()) + 1
     markers = np.zeros((M, 3))
-    R_bf, t_bf = T_base_flange[:, :3, :3], T_base_flange[:, :3, 3]
+    R_base_flange, t_base_flange = T_base_flange[:, :3, :3], T_base_flange[:, :3, 3]
     W = np.eye(4)
     for _ in range(iterations):
-        in_base = np.einsum("nij,nj->ni", R_bf, markers[index]) + t_bf
+        in_base = np.einsum("nij,nj->ni", R_base_flange, markers[index]) + t_base_flange
         W = _kabsch(in_base, points_world)
-        # p_k = R_w (R_bf m + t_bf) + t_w  ->  (R_w R_bf) m = p_k - t_w - R_w t_bf
-        A = W[:3, :3] @ R_bf  # (N, 3, 3)
-        b = points_world - W[:3, 3] - t_bf @ W[:3, :3].T
+        # p_k = R_w (R_base_flange m + t_base_flange) + t_w
+        #   ->  (R_w R_base_flange) m = p_k - t_w - R_w t_base_flange
+        A = W[:3, :3] @ R_base_flange  # (N, 3, 3)
+        b = points_world - W[:3, 3] - t_base_flange @ W[:3, :3].T
         new = np.zeros_like(markers)
         for m in range(M):
             rows = index == m
@@ -160,11 +161,11 @@ def guess_world_point(T_base_flange: FloatArray, points_world: FloatArray,
         if np.allclose(new, markers, atol=1e-12):
             break
         markers = new
-    return _refine_world_point(W, markers, R_bf, t_bf, points_world, index)
+    return _refine_world_point(W, markers, R_base_flange, t_base_flange, points_world, index)
 
 
-def _refine_world_point(W: FloatArray, markers: FloatArray, R_bf: FloatArray,
-                        t_bf: FloatArray, points: FloatArray, index: NDArray[np.int64]
+def _refine_world_point(W: FloatArray, markers: FloatArray, R_base_flange: FloatArray,
+                        t_base_flange: FloatArray, points: FloatArray, index: NDArray[np.int64]
                         ) -> tuple[FloatArray, FloatArray]:
     """Gauss-Newton on ``(rotation of W, t_W, markers)`` from the alternating estimate
     (which converges only linearly): ``p_k = R_W x_k + t_W`` with ``x_k = F_k m``."""
@@ -172,13 +173,13 @@ def _refine_world_point(W: FloatArray, markers: FloatArray, R_bf: FloatArray,
 
     N, M = len(points), len(markers)
     for _ in range(20):
-        x = np.einsum("nij,nj->ni", R_bf, markers[index]) + t_bf
+        x = np.einsum("nij,nj->ni", R_base_flange, markers[index]) + t_base_flange
         Rx = x @ W[:3, :3].T
         r = (Rx + W[:3, 3] - points).reshape(-1)
         J = np.zeros((N, 3, 6 + 3 * M))
         J[:, :, :3] = -skew(Rx)
         J[:, :, 3:6] = np.eye(3)
-        dx_dm = W[:3, :3] @ R_bf  # (N, 3, 3): each row's block at its marker's columns
+        dx_dm = W[:3, :3] @ R_base_flange  # (N, 3, 3): each row's block at its marker's columns
         for axis in range(3):
             J[np.arange(N), :, 6 + 3 * index + axis] = dx_dm[:, :, axis]
         step = np.linalg.lstsq(J.reshape(-1, 6 + 3 * M), -r, rcond=None)[0]

@@ -103,13 +103,31 @@ class Effect:
     name: ClassVar[str]
     hook: ClassVar[Hook]
     description: ClassVar[str] = ""
-    #: methods the effect applies to (None: all). A sensor effect acts on the method's
-    #: measurement: (N, 3) points for stereo_target, (N, 1) distances for sphere_probe.
+    #: the measurement kinds the effect applies to (None: all; a plugin effect may name
+    #: kinds). A sensor effect acts on a kind's measurement ((N, 3) points of a stereo
+    #: camera, (N, 1) contact distances of a probe): a built-in one sets ``()`` and the kinds
+    #: it acts on name it (``MeasurementModel.sensor_effects``, ``accepts``).
     methods: ClassVar[tuple[str, ...] | None] = None
     #: the effect depends on the direction each joint last moved (``ctx.approach``):
     #: the planners then reach every joint from both sides (hostpc.planning.approach), so
     #: the effect and the joint's zero offset can be told apart
     approach_dependent: ClassVar[bool] = False
+    #: the effect's parameters may be traded against others without a word in the
+    #: diagnosis (many deltas of which the data identify a varying subset, none pushed)
+    traded_freely: ClassVar[bool] = False
+    #: the advice's sentence when this effect is missing and ranked best: what the
+    #: residuals follow ("Residuals grow with ..."); ``{j}`` is the joint of the strongest
+    #: parameter, ``{parameter}`` its name. None: the advice names the effect and its
+    #: description.
+    advice: ClassVar[str | None] = None
+
+    @classmethod
+    def explains(cls, parameter: str, variable: str, ctx: ModelContext | None = None) -> bool:
+        """Whether a residual pattern "parameter varies with variable" (the effect-agnostic
+        search's finding) is what this effect models: the variables it suggests for a
+        parameter. The advice then names the effect (default: no pattern). ctx: the model's
+        context, when the answer depends on the robot (None: assume it does not)."""
+        return False
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         """Local parameter names (without the ``<effect>.`` prefix)."""

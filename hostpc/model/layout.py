@@ -10,13 +10,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
 from hostpc.dataset import Dataset
 from hostpc.kinematics import Chain
-from hostpc.model.effect import EffectTerm, ModelContext
+from hostpc.model.effect import Effect, EffectTerm, ModelContext
 from hostpc.model.memo import ProblemMemo, SharedValues
 
 
@@ -35,8 +35,16 @@ class MeasurementPredictor(Protocol):
 
     def frame_parameters(self, dataset: Dataset) -> Mapping[str, tuple[str, ...]]: ...
 
+    def accepts(self, effect: type[Effect]) -> bool: ...
+
     def predict(self, problem: Problem, x: np.ndarray, jacobian: bool = True
                 ) -> tuple[np.ndarray, np.ndarray | None]: ...
+
+    def shared_error_sensitivity(self, problem: Problem, block: Mapping[str, Any]
+                                 ) -> np.ndarray | None: ...
+
+    def shared_error_floor(self, problem: Problem, block: Mapping[str, Any]
+                           ) -> np.ndarray | None: ...
 
 
 @dataclass(frozen=True)

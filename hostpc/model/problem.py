@@ -20,7 +20,7 @@ from hostpc.model.effect import Effect, EffectTerm, ModelContext
 from hostpc.model.effects.frames import frame_effect
 from hostpc.model.layout import MeasurementPredictor, ParameterLayout, Problem
 from hostpc.model.measurements.base import MeasurementModel
-from hostpc.model.measurements.registry import measurement_model
+from hostpc.model.measurements.registry import measurement_model, measurement_models
 from hostpc.model.memo import SharedValues
 from hostpc.model.registry import (
     available_effects,
@@ -64,6 +64,13 @@ def _registry_with_frames(model: MeasurementModel, dataset: Dataset,
     return registry
 
 
+def _kinds_accepting(effect: type[Effect]) -> list[str]:
+    """The kinds ``effect`` names and the registered kinds whose models take it (for the
+    error message)."""
+    accepting = [name for name, model in measurement_models().items() if model.accepts(effect)]
+    return list(dict.fromkeys([*(effect.methods or ()), *accepting]))
+
+
 def _terms(model: MeasurementPredictor, dataset: Dataset, context: ModelContext,
            instances: Sequence[Effect]) -> tuple[tuple[EffectTerm, ...], ParameterLayout]:
     """Check each effect against the model and the dataset and lay out the vector."""
@@ -90,10 +97,10 @@ def _terms(model: MeasurementPredictor, dataset: Dataset, context: ModelContext,
                 f"effect {effect.name!r} is a frame the dataset marks as known; "
                 "remove it from `known` to estimate it"
             )
-        if effect.methods is not None and dataset.method not in effect.methods:
+        if not model.accepts(type(effect)):
             raise EffectError(
                 f"effect {effect.name!r} does not apply to method {dataset.method!r} "
-                f"(only to {', '.join(effect.methods)})"
+                f"(only to {', '.join(_kinds_accepting(type(effect)))})"
             )
         if type(effect) not in builtin_effects().values():
             check_effect(effect, context, model.measurement_size)

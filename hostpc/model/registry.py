@@ -11,11 +11,12 @@ import inspect
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
-from hostpc.dataset.kind_registry import KindDescriptor
+from hostpc.dataset.kind_registry import KindDescriptor, kind_descriptors
 from hostpc.dataset.measurement_kind import MeasurementKind
 from hostpc.errors import EffectError
 from hostpc.model.effect import Effect
 from hostpc.model.effects import BUILTIN_EFFECTS
+from hostpc.model.measurements.base import MeasurementModel
 from hostpc.plugins import classes_defined_in, entry_point_objects, import_plugin_file
 
 ENTRY_POINT_GROUP = "zerocal.effects"
@@ -23,8 +24,13 @@ VALID_HOOKS = ("joint", "geometry", "sensor", "frame")
 
 
 def builtin_effects() -> dict[str, type[Effect]]:
-    """Name -> class of every built-in effect."""
-    return {cls.name: cls for cls in BUILTIN_EFFECTS}
+    """Name -> class of every built-in effect: hostpc.model.effects' and the frame effects
+    the built-in kinds declare for their own frames (``own_frame_effects``)."""
+    kinds = [d.model for d in kind_descriptors().values() if d.builtin]
+    own: list[type[Effect]] = [cls for model in kinds if issubclass(model, MeasurementModel)
+                               for cls in model.own_frame_effects]
+    effects: list[type[Effect]] = [*BUILTIN_EFFECTS, *own]
+    return {cls.name: cls for cls in effects}
 
 
 def _check_effect_class(cls: type[Effect], origin: str) -> None:

@@ -8,7 +8,7 @@ import html
 import math
 from collections.abc import Iterable, Sequence
 
-from hostpc.units import DISPLAY_UNITS
+from hostpc.display_units import DISPLAY_UNITS
 
 #: the display units of the CLI, and latencies in ms
 DISPLAY = {**DISPLAY_UNITS, "s": ("ms", 1e3)}

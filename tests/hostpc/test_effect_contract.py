@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from hostpc.model.effect import ModelContext, numeric_jacobian
+from hostpc.model.measurements.registry import measurement_models
 from hostpc.model.problem import build_problem
 from hostpc.model.registry import builtin_effects
 from tests.support import sphere_dataset
@@ -15,7 +16,8 @@ REGISTERED = sorted(builtin_effects())
 
 
 def context_for(effect_cls, noisy_stereo):  # type: ignore[no-untyped-def]
-    methods = effect_cls.methods or ("stereo_target",)
+    methods = [name for name, model in measurement_models().items()
+               if model.accepts(effect_cls)]
     if "stereo_target" in methods:
         dataset = noisy_stereo.dataset
     else:

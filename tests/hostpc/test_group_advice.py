@@ -32,7 +32,7 @@ def test_a_quantity_is_shown_in_the_display_unit(value: float, unit: str, text: 
 
 def test_the_display_table_is_the_cli_one() -> None:
     from hostpc.cli import format as cli_format
-    from hostpc.units import DISPLAY_UNITS
+    from hostpc.display_units import DISPLAY_UNITS
     assert cli_format.DISPLAY_UNITS is DISPLAY_UNITS
     assert cli_format.display(1.2e-3, "1") == ("+1200.0000", "ppm")
 

@@ -226,10 +226,11 @@ def test_target_observation_pixels_are_optional_and_checked() -> None:
 
 def test_method_floor_is_the_floor_the_fit_takes_back_out(tmp_path: Any) -> None:
     """The floor dual_loop adds to each sample (calibrated focal length and baseline) is
-    the covariance shared_errors.floor_covariance removes, for a calibration far from the
-    nominal 1400 px / 0.12 m."""
-    from hostpc.fitting.shared_errors import BLOCK, floor_covariance
+    the covariance the fit's shared error removes (the stereo kinds' floor_covariance), for a
+    calibration far from the nominal 1400 px / 0.12 m."""
+    from hostpc.fitting.shared_errors import BLOCK
     from hostpc.kinds.dual_loop.method import DualLoopMethod
+    from hostpc.kinds.stereo_target.shared_error import rig_floor_covariance as floor_covariance
     from hostpc.methods.base import RunSettings
     from hostpc.methods.cell import build_cell
     from hostpc.model.problem import build_problem

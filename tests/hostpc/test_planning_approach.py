@@ -16,6 +16,7 @@ from hostpc.kinds.sphere_probe.planning.contacts import (
 )
 from hostpc.kinds.sphere_probe.planning.setup import PlanConfig, ProbeSetup
 from hostpc.kinematics import forward, get_robot
+from hostpc.model.measurements.registry import measurement_models
 from hostpc.model.problem import build_problem
 from hostpc.model.registry import builtin_effects
 from hostpc.planning.approach import (
@@ -159,7 +160,7 @@ def test_an_effect_declares_approach_dependent_exactly_when_it_reads_approach(
     cls = builtin_effects()[name]
     if cls.hook not in ("joint", "geometry", "sensor"):
         return
-    methods = cls.methods or ("stereo_target",)
+    methods = [name for name, model in measurement_models().items() if model.accepts(cls)]
     dataset = noisy_stereo.dataset if "stereo_target" in methods else sphere_dataset()
     ctx = build_problem(dataset, ["joint_offsets"]).context
     rng = np.random.default_rng(1)

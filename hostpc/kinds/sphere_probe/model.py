@@ -1,9 +1,9 @@
 """sphere_probe: touch contacts on a reference sphere (m = 1).
 
-The distance from the stylus tip centre to the sphere centre, ``|R_bf t_ft + t_bf - c_b|``,
-measured as ``R + r`` (sphere radius plus stylus radius) with the sample's ``sigma``. Frames:
-``tool`` (the tip centre in the flange frame: a point, x y z), ``sphere`` (the centre in the
-base frame), ``base`` (robot base in the sphere's frame).
+The distance from the stylus tip centre to the sphere centre, ``|R_base_flange t_flange_tool
++ t_base_flange - c_b|``, measured as ``R + r`` (sphere radius plus stylus radius) with the
+sample's ``sigma``. Frames: ``tool`` (the tip centre in the flange frame: a point, x y z),
+``sphere`` (the centre in the base frame), ``base`` (robot base in the sphere's frame).
 """
 
 from __future__ import annotations
@@ -42,6 +42,7 @@ class SphereProbe(SphereProbeFile, MeasurementModel):
     frame_effects = {"tool": POINT, "sphere": POINT, "base": POSE}
     default_frames = ("tool", "sphere")
     measurement_size = 1
+    sensor_effects = ("trigger_latency",)
 
     def context(self, dataset: Dataset, chain: Chain) -> ModelContext:
         """The serial context plus ``probe_group``, each contact's probe orientation as a
@@ -69,9 +70,9 @@ class SphereProbe(SphereProbeFile, MeasurementModel):
                 ) -> tuple[np.ndarray, np.ndarray | None]:
         """Predicted tip-to-centre distance (N, 1) and d/dx (N, 1, P)."""
         chain = problem.chain
-        poses, R_bf, t_bf, d_delta, rows = flange(problem, x, jacobian)
-        _, t_ft, _ = frame_pose(problem, "tool", x)
-        tip = np.einsum("nij,j->ni", R_bf, t_ft) + t_bf
+        poses, R_base_flange, t_base_flange, d_delta, rows = flange(problem, x, jacobian)
+        _, t_flange_tool, _ = frame_pose(problem, "tool", x)
+        tip = np.einsum("nij,j->ni", R_base_flange, t_flange_tool) + t_base_flange
         sphere = problem.dataset.sphere()
         c_b, d_cb = world_point_in_base(problem, x, "sphere", np.asarray(sphere.center, float))
         diff = tip - c_b[None, :]
@@ -88,7 +89,7 @@ class SphereProbe(SphereProbeFile, MeasurementModel):
         J += d_dist_dkin @ d_delta
         tool = problem.term("tool")
         if tool is not None:
-            J[:, 0, tool.slice] += np.einsum("ni,nij->nj", u, R_bf)
+            J[:, 0, tool.slice] += np.einsum("ni,nij->nj", u, R_base_flange)
         for name, d_cb_term in d_cb.items():
             span = problem.term(name).slice  # type: ignore[union-attr]
             J[:, 0, span] -= u @ d_cb_term

@@ -1,6 +1,7 @@
 """stereo_target: a sensor on the flange measures a fixed target point (m = 3).
 
-The target point in the sensor frame, ``y = R_ft^T (R_bf^T (p_b - t_bf) - t_ft)``, then the
+The target point in the sensor frame,
+``y = R_flange_tool^T (R_base_flange^T (p_b - t_base_flange) - t_flange_tool)``, then the
 sensor effects in order. Frames: ``tool`` (sensor frame in the flange frame, pose),
 ``target`` (the point in the base frame, or in the world frame of ``base``), ``base``
 (robot base in the target's frame, pose; nominal identity).
@@ -12,6 +13,7 @@ import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
 from hostpc.kinds.stereo_target.file_face import StereoTargetFile
+from hostpc.kinds.stereo_target.shared_error import rig_floor_covariance, rig_point_sensitivity
 from hostpc.kinematics import get_robot, point_jacobian
 from hostpc.model.frame_math import inverse_point_derivatives
 from hostpc.model.layout import Problem
@@ -41,36 +43,42 @@ class StereoTarget(StereoTargetFile, MeasurementModel):
     frame_effects = {"tool": POSE, "target": POINT, "base": POSE}
     default_frames = ("tool", "target")
     measurement_size = 3
+    sensor_effects = ("depth_scale",)
+    # the stereo rig's shared error (hostpc.kinds.stereo_target.shared_error)
+    shared_error_sensitivity = staticmethod(rig_point_sensitivity)
+    shared_error_floor = staticmethod(rig_floor_covariance)
 
     def predict(self, problem: Problem, x: np.ndarray, jacobian: bool = True
                 ) -> tuple[np.ndarray, np.ndarray | None]:
         """Predicted target point in the sensor frame (N, 3) and d/dx (N, 3, P)."""
         chain = problem.chain
-        poses, R_bf, t_bf, d_delta, rows = flange(problem, x, jacobian)
+        poses, R_base_flange, t_base_flange, d_delta, rows = flange(problem, x, jacobian)
         p_b, d_pb = world_point_in_base(
             problem, x, "target", np.asarray(problem.dataset.frames["target"], dtype=float)
         )
-        R_ft, t_ft, J_r_tool = frame_pose(problem, "tool", x)
-        R_bf_T = np.swapaxes(R_bf, 1, 2)
-        p_f = np.einsum("nij,nj->ni", R_bf_T, p_b[None, :] - t_bf)
-        y = (p_f - t_ft) @ R_ft  # rows: R_ft^T (p_f - t_ft)
+        R_flange_tool, t_flange_tool, J_r_tool = frame_pose(problem, "tool", x)
+        R_flange_base = np.swapaxes(R_base_flange, 1, 2)
+        p_f = np.einsum("nij,nj->ni", R_flange_base, p_b[None, :] - t_base_flange)
+        y = (p_f - t_flange_tool) @ R_flange_tool  # rows: R_flange_tool^T (p_f - t_flange_tool)
         if not jacobian:
             return apply_sensor_effects(problem, x, y, None)
         assert d_delta is not None
         n_samples = y.shape[0]
         J = np.zeros((n_samples, 3, x.size))
         # kinematic parameters: moving the flange by a screw moves the fixed target point the
-        # opposite way in the flange frame: dp_f = -R_bf^T (w x (p_b - c)) or -R_bf^T v
+        # opposite way in the flange frame:
+        # dp_f = -R_base_flange^T (w x (p_b - c)) or -R_base_flange^T v
         d_pb_world_dkin = point_jacobian(row_screws(chain, poses, rows),
                                          np.broadcast_to(p_b, (n_samples, 3)))
-        A = R_ft.T @ R_bf_T  # (N, 3, 3): d y / d p_b  (and -d y / d (flange motion))
+        # (N, 3, 3): d y / d p_b  (and -d y / d (flange motion))
+        A = R_flange_tool.T @ R_flange_base
         J -= (A @ d_pb_world_dkin) @ d_delta
         for name, d_pb_term in d_pb.items():
             span = problem.term(name).slice  # type: ignore[union-attr]
             J[:, :, span] += A @ d_pb_term
         tool = problem.term("tool")
         if tool is not None:
-            dy_dt, dy_dr = inverse_point_derivatives(y, R_ft, J_r_tool)
+            dy_dt, dy_dr = inverse_point_derivatives(y, R_flange_tool, J_r_tool)
             J[:, :, tool.slice.start:tool.slice.start + 3] += dy_dt
             J[:, :, tool.slice.start + 3:tool.slice.stop] += dy_dr
         return apply_sensor_effects(problem, x, y, J)

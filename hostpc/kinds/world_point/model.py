@@ -3,12 +3,13 @@
 A laser tracker following a reflector, a motion-capture system tracking markers, a CMM.
 For a sample of marker k (``samples.fields["marker"]``)::
 
-    p_world = R_wb (R_bf m_k + t_bf) + t_wb
+    p_world = R_world_base (R_base_flange m_k + t_base_flange) + t_world_base
 
-with ``T_wb = world`` (robot base in the world frame, pose delta ``T_nom @ [exp(r), t]``) and
-``m_k`` the marker in the flange frame (``markers``, deltas ``markers.NAME.x`` ...). Axes a
-sample did not measure (``mask`` 0) carry no weight: their prediction is the measured value
-itself (zero residual, zero derivative). Sensor effects act on the world-frame point.
+with ``T_world_base = world`` (robot base in the world frame, pose delta ``T_nom @ [exp(r),
+t]``) and ``m_k`` the marker in the flange frame (``markers``, deltas ``markers.NAME.x``
+...). Axes a sample did not measure (``mask`` 0) carry no weight: their prediction is the
+measured value itself (zero residual, zero derivative). Sensor effects act on the
+world-frame point.
 
 What the data cannot tell apart, in words (the fit names each held combination):
 
@@ -108,11 +109,11 @@ class WorldPoint(WorldPointFile, MeasurementModel):
         markers_term = problem.term("markers")
         if markers_term is not None:
             nominal = nominal + x[markers_term.slice].reshape(-1, 3)
-        poses, R_bf, t_bf, d_delta, rows = flange(problem, x, jacobian)
+        poses, R_base_flange, t_base_flange, d_delta, rows = flange(problem, x, jacobian)
         m_f = nominal[index]  # (N, 3) each sample's marker in the flange frame
-        p_b = np.einsum("nij,nj->ni", R_bf, m_f) + t_bf
-        R_wb, t_wb, J_r = frame_pose(problem, "world", x)
-        y = p_b @ R_wb.T + t_wb
+        p_b = np.einsum("nij,nj->ni", R_base_flange, m_f) + t_base_flange
+        R_world_base, t_world_base, J_r = frame_pose(problem, "world", x)
+        y = p_b @ R_world_base.T + t_world_base
         mask = np.asarray(dataset.samples.fields["mask"], dtype=bool)
         if not jacobian:
             y, _ = apply_sensor_effects(problem, x, y, None)
@@ -120,15 +121,16 @@ class WorldPoint(WorldPointFile, MeasurementModel):
         assert d_delta is not None
         J = np.zeros((y.shape[0], 3, x.size))
         d_pb = point_jacobian(row_screws(problem.chain, poses, rows), p_b)
-        J += np.einsum("ij,njk->nik", R_wb, d_pb) @ d_delta
+        J += np.einsum("ij,njk->nik", R_world_base, d_pb) @ d_delta
         world = problem.term("world")
         if world is not None:
             start = world.slice.start
             J[:, :, start:start + 3] += np.eye(3)
-            J[:, :, start + 3:start + 6] += -np.einsum("ij,njk,kl->nil", R_wb, skew(p_b), J_r)
+            J[:, :, start + 3:start + 6] += -np.einsum("ij,njk,kl->nil", R_world_base,
+                                                       skew(p_b), J_r)
         if markers_term is not None:
             columns = markers_term.slice.start + 3 * index[:, None] + np.arange(3)  # (N, 3)
-            block = np.einsum("ij,njk->nik", R_wb, R_bf)  # (N, 3, 3)
+            block = np.einsum("ij,njk->nik", R_world_base, R_base_flange)  # (N, 3, 3)
             for axis in range(3):
                 J[np.arange(y.shape[0]), :, columns[:, axis]] += block[:, :, axis]
         y, J_out = apply_sensor_effects(problem, x, y, J)

@@ -2,8 +2,9 @@
 
 A tracker's 6-DoF probe or a motion-capture rigid body. The prediction of a sample is::
 
-    p_world = R_wb (R_bf t_ft + t_bf) + t_wb              (position, m)
-    phi     = log(R_wb R_bf R_ft R_meas^T)                 (orientation, rad)
+    p_world = R_world_base (R_base_flange t_flange_tool + t_base_flange) + t_world_base
+                                                                     (position, m)
+    phi     = log(R_world_base R_base_flange R_flange_tool R_meas^T)  (orientation, rad)
 
 ``phi`` is the predicted orientation's difference from the measured one as a rotation
 vector in the world frame; its measured value is 0, so the residual's rotation part is the
@@ -79,12 +80,12 @@ class WorldPose(WorldPoseFile, MeasurementModel):
 
     def predict(self, problem: Problem, x: np.ndarray, jacobian: bool = True
                 ) -> tuple[np.ndarray, np.ndarray | None]:
-        poses, R_bf, t_bf, d_delta, rows = flange(problem, x, jacobian)
-        R_wb, t_wb, J_r_world = frame_pose(problem, "world", x)
-        R_ft, t_ft, J_r_tool = frame_pose(problem, "tool", x)
-        p_b = np.einsum("nij,j->ni", R_bf, t_ft) + t_bf
-        position = p_b @ R_wb.T + t_wb
-        R_pred = R_wb @ R_bf @ R_ft
+        poses, R_base_flange, t_base_flange, d_delta, rows = flange(problem, x, jacobian)
+        R_world_base, t_world_base, J_r_world = frame_pose(problem, "world", x)
+        R_flange_tool, t_flange_tool, J_r_tool = frame_pose(problem, "tool", x)
+        p_b = np.einsum("nij,j->ni", R_base_flange, t_flange_tool) + t_base_flange
+        position = p_b @ R_world_base.T + t_world_base
+        R_pred = R_world_base @ R_base_flange @ R_flange_tool
         R_meas = rpy_to_matrix(problem.dataset.samples.fields["rpy"])
         phi = matrix_to_rotvec(R_pred @ np.swapaxes(R_meas, 1, 2))
         y = np.concatenate([position, phi], axis=1)
@@ -95,20 +96,21 @@ class WorldPose(WorldPoseFile, MeasurementModel):
         J = np.zeros((n, 6, x.size))
         S = screws(problem.chain, poses)
         J_inv = so3_left_jacobian_inverse(phi)
-        J[:, :3] += np.einsum("ij,njk->nik", R_wb, point_jacobian(S, p_b)[:, :, rows]) @ d_delta
-        w_world = np.einsum("ij,njk->nik", R_wb, rotation_jacobian(S)[:, :, rows])
+        J[:, :3] += np.einsum("ij,njk->nik", R_world_base,
+                              point_jacobian(S, p_b)[:, :, rows]) @ d_delta
+        w_world = np.einsum("ij,njk->nik", R_world_base, rotation_jacobian(S)[:, :, rows])
         J[:, 3:] += (J_inv @ w_world) @ d_delta
         world = problem.term("world")
         if world is not None:
             start = world.slice.start
             J[:, :3, start:start + 3] += np.eye(3)
-            J[:, :3, start + 3:start + 6] += -np.einsum("ij,njk,kl->nil", R_wb, skew(p_b),
+            J[:, :3, start + 3:start + 6] += -np.einsum("ij,njk,kl->nil", R_world_base, skew(p_b),
                                                          J_r_world)
-            J[:, 3:, start + 3:start + 6] += J_inv @ (R_wb @ J_r_world)
+            J[:, 3:, start + 3:start + 6] += J_inv @ (R_world_base @ J_r_world)
         tool = problem.term("tool")
         if tool is not None:
             start = tool.slice.start
-            J[:, :3, start:start + 3] += np.einsum("ij,njk->nik", R_wb, R_bf)
+            J[:, :3, start:start + 3] += np.einsum("ij,njk->nik", R_world_base, R_base_flange)
             J[:, 3:, start + 3:start + 6] += J_inv @ (R_pred @ J_r_tool)
         return apply_sensor_effects(problem, x, y, J)
 

@@ -1,7 +1,8 @@
-"""Built-in physical effects. The registry (hostpc.model.registry) lists them by name."""
+"""Built-in physical effects. The registry (hostpc.model.registry) lists them by name, with
+the frame effects the built-in kinds declare for their own frames
+(``MeasurementModel.own_frame_effects``)."""
 
 from hostpc.model.effects.coupling import JointCoupling
-from hostpc.model.effects.dual_loop_frames import DUAL_LOOP_FRAME_EFFECTS
 from hostpc.model.effects.frames import BaseFrame, SphereFrame, TargetFrame, ToolFrame
 from hostpc.model.effects.geometry import Geometry
 from hostpc.model.effects.joint_space import (
@@ -29,7 +30,6 @@ BUILTIN_EFFECTS = (
     TriggerLatency,
     JointCoupling,
     ThermalExpansion,
-    *DUAL_LOOP_FRAME_EFFECTS,
 )
 
 __all__ = [

@@ -19,6 +19,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from hostpc.model import joint_offsets
 from hostpc.model.effect import Effect, Hook, ModelContext
 
 WRIST_JOINTS = 3
@@ -54,6 +55,8 @@ class JointCoupling(Effect):
     is_linear: ClassVar[bool] = True
     unit = "rad/rad"
     description = "a joint's angle error proportional to its neighbour's angle (coupled wrists)"
+    advice = ("Residuals follow a neighbouring joint's angle (joint {j}'s angle error is "
+              "proportional to it)")
 
     def __init__(self, pairs: str = "wrist") -> None:
         if pairs not in ("wrist", "all"):
@@ -62,6 +65,18 @@ class JointCoupling(Effect):
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         return [name for name, _, _ in coupled_pairs(ctx, self.wrist_only)]
+
+    @classmethod
+    def explains(cls, parameter: str, variable: str, ctx: ModelContext | None = None) -> bool:
+        """A joint's zero moving with a neighbouring joint's angle, for the pairs the
+        effect has on ctx's robot (any neighbour when ctx is None)."""
+        offset = joint_offsets.match(parameter)
+        if offset is None:
+            return False
+        b, j = offset.branch, offset.joint
+        return any(variable == f"{b}q{i}" and (ctx is None or f"{b}k{j}_{i}" in
+                                               cls().parameter_names(ctx))
+                   for i in (j - 1, j + 1))
 
     def basis(self, ctx: ModelContext) -> np.ndarray:
         pairs = coupled_pairs(ctx, self.wrist_only)

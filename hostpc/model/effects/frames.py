@@ -12,7 +12,7 @@ POSE_PARAMETERS = ("x", "y", "z", "rx", "ry", "rz")
 POINT_PARAMETERS = ("x", "y", "z")
 
 
-class _FrameEffect(Effect):
+class FrameEffect(Effect):
     hook: ClassVar[Hook] = "frame"
     parameters: ClassVar[tuple[str, ...]] = POSE_PARAMETERS
 
@@ -25,7 +25,7 @@ class _FrameEffect(Effect):
                 for name in self.parameter_names(ctx)]
 
 
-class ToolFrame(_FrameEffect):
+class ToolFrame(FrameEffect):
     """Sensor frame in the flange frame: T_flange_tool = T_nom @ [exp([r]x), t].
 
     For sphere_probe only the stylus tip position matters (x, y, z): its measurement model
@@ -35,14 +35,14 @@ class ToolFrame(_FrameEffect):
     description = "sensor (camera or stylus tip) frame on the flange"
 
 
-class BaseFrame(_FrameEffect):
+class BaseFrame(FrameEffect):
     """Robot base in the world frame where the target lives: T_world_base = T_nom @ delta."""
 
     name = "base"
     description = "robot base frame in the frame of the fixed target"
 
 
-class TargetFrame(_FrameEffect):
+class TargetFrame(FrameEffect):
     """Target point delta in the base frame (m)."""
 
     name = "target"
@@ -50,7 +50,7 @@ class TargetFrame(_FrameEffect):
     parameters = POINT_PARAMETERS
 
 
-class SphereFrame(_FrameEffect):
+class SphereFrame(FrameEffect):
     """Reference sphere centre delta in the base frame (m); the radius is known."""
 
     name = "sphere"
@@ -58,9 +58,9 @@ class SphereFrame(_FrameEffect):
     parameters = POINT_PARAMETERS
 
 
-def frame_effect(name: str, parameters: tuple[str, ...]) -> type[_FrameEffect]:
+def frame_effect(name: str, parameters: tuple[str, ...]) -> type[FrameEffect]:
     """A frame effect class for a frame a measurement model declares that has no built-in
     effect of its own (a plugin's frame, world_point's markers)."""
-    return type(f"Frame_{name}", (_FrameEffect,), {
+    return type(f"Frame_{name}", (FrameEffect,), {
         "name": name, "parameters": parameters,
         "description": f"frame {name!r} of its measurement model"})

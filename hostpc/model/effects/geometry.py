@@ -19,6 +19,8 @@ class Geometry(Effect):
     hook: ClassVar[Hook] = "geometry"
     is_linear: ClassVar[bool] = True
     description = "link lengths, offsets and twists differ from the nominal table"
+    advice = "Residuals follow the link geometry ({parameter} differs from the nominal table)"
+    traded_freely = True
 
     def _slots(self, ctx: ModelContext) -> list[tuple[str, int]]:
         chain = ctx.chain

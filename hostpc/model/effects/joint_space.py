@@ -2,13 +2,20 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from typing import ClassVar
 
 import numpy as np
 
 from hostpc.errors import EffectError
+from hostpc.model import joint_offsets
 from hostpc.model.effect import Effect, Hook, ModelContext
+
+#: a gravity torque or an approach direction as a diagnostic variable ("tau3",
+#: "left.approach2"): compliance and backlash show in many parameters at once
+TORQUE_VARIABLE = re.compile(r"(\w+\.)?tau\d+")
+APPROACH_VARIABLE = re.compile(r"(\w+\.)?approach\d+")
 
 
 def _diagonal_basis(values: np.ndarray) -> np.ndarray:
@@ -48,6 +55,12 @@ class JointCompliance(_LinearJointEffect):
     name = "joint_compliance"
     unit = "rad/(N m)"
     description = "joints bend under the gravity load torque"
+    advice = "Residuals follow the gravity torque on joint {j}"
+
+    @classmethod
+    def explains(cls, parameter: str, variable: str, ctx: ModelContext | None = None) -> bool:
+        """Any parameter moving with a joint's gravity torque."""
+        return TORQUE_VARIABLE.fullmatch(variable) is not None
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         return ctx.per_joint_names("c")
@@ -65,6 +78,12 @@ class EncoderScale(_LinearJointEffect):
 
     name = "encoder_scale"
     description = "joint angle reads scaled by (1 + s)"
+    advice = "Residuals grow with the angle of joint {j} (a scale error of its encoder)"
+
+    @classmethod
+    def explains(cls, parameter: str, variable: str, ctx: ModelContext | None = None) -> bool:
+        """A joint's zero moving with its own angle."""
+        return _own_angle(parameter, variable)
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         return ctx.per_joint_names("s")
@@ -80,6 +99,12 @@ class Backlash(_LinearJointEffect):
     unit = "rad"
     approach_dependent = True
     description = "joint angle depends on the direction of the last motion"
+    advice = "Residuals depend on the direction of the last motion of joint {j}"
+
+    @classmethod
+    def explains(cls, parameter: str, variable: str, ctx: ModelContext | None = None) -> bool:
+        """Any parameter moving with a joint's approach direction."""
+        return APPROACH_VARIABLE.fullmatch(variable) is not None
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         return ctx.per_joint_names("b")
@@ -94,8 +119,15 @@ class TransmissionHarmonic(_LinearJointEffect):
     name = "transmission_harmonic"
     unit = "rad"
     description = "once- and twice-per-revolution errors of each joint's transmission"
+    advice = ("Residuals follow a once- or twice-per-revolution pattern of joint {j}'s "
+              "angle")
     _terms = (("sin1", np.sin, 1.0), ("cos1", np.cos, 1.0), ("sin2", np.sin, 2.0),
               ("cos2", np.cos, 2.0))
+
+    @classmethod
+    def explains(cls, parameter: str, variable: str, ctx: ModelContext | None = None) -> bool:
+        """A joint's zero moving with its own angle."""
+        return _own_angle(parameter, variable)
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         return [f"{term}_{label}" for label in ctx.joint_labels for term, _, _ in self._terms]
@@ -108,3 +140,9 @@ class TransmissionHarmonic(_LinearJointEffect):
             for k, (_, function, order) in enumerate(self._terms):
                 basis[:, joint, joint * n_terms + k] = function(order * ctx.q_cmd[:, joint])
         return basis
+
+
+def _own_angle(parameter: str, variable: str) -> bool:
+    """Whether parameter is a joint's zero offset and variable that joint's angle."""
+    offset = joint_offsets.match(parameter)
+    return offset is not None and variable == f"{offset.branch}q{offset.joint}"

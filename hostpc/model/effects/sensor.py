@@ -17,10 +17,16 @@ class DepthScale(Effect):
     name = "depth_scale"
     hook: ClassVar[Hook] = "sensor"
     description = "stereo depth measured scaled by (1 + s) (baseline or focal length error)"
-    methods = ("stereo_target", "dual_loop")
+    methods = ()  # the stereo kinds name it (MeasurementModel.sensor_effects)
+    advice = "Residuals grow with the distance along the camera's optical axis"
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         return ["s"]
+
+    @classmethod
+    def explains(cls, parameter: str, variable: str, ctx: ModelContext | None = None) -> bool:
+        """The sensor frame's z moving with the depth."""
+        return parameter == "tool.z" and variable == "depth"
 
     def sensor_apply(self, ctx: ModelContext, p: np.ndarray, y: np.ndarray) -> np.ndarray:
         out = y.copy()
@@ -48,10 +54,16 @@ class TriggerLatency(Effect):
     hook: ClassVar[Hook] = "sensor"
     unit = "s"
     description = "joints latched late after the probe's contact: overtravel grows with speed"
-    methods = ("sphere_probe",)
+    methods = ()  # the probe kind names it (MeasurementModel.sensor_effects)
+    advice = "Residuals grow with the probe's approach speed"
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         return ["latency"]
+
+    @classmethod
+    def explains(cls, parameter: str, variable: str, ctx: ModelContext | None = None) -> bool:
+        """Any parameter moving with the approach speed."""
+        return variable == "speed"
 
     def _speed(self, ctx: ModelContext) -> np.ndarray:
         if "speed" not in ctx.variables:

@@ -10,6 +10,7 @@ and ``e`` is the expansion per kelvin (1/K) or per second (1/s). Linear in ``e``
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from typing import ClassVar
 
@@ -18,6 +19,9 @@ import numpy as np
 from hostpc.errors import EffectError
 from hostpc.kinematics import kin_index
 from hostpc.model.effect import Effect, Hook, ModelContext
+
+#: a link length or offset of the geometry effect ("geometry.a2", "geometry.d4")
+LINK_LENGTH = re.compile(r"geometry\.[ad]\d+")
 
 
 def thermal_driver(ctx: ModelContext) -> tuple[str, np.ndarray]:
@@ -38,9 +42,15 @@ class ThermalExpansion(Effect):
     hook: ClassVar[Hook] = "geometry"
     is_linear: ClassVar[bool] = True
     description = "link lengths grow with temperature (or with time since the start)"
+    advice = "Residuals drift with the temperature (or the time since the start)"
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         return ["e"]
+
+    @classmethod
+    def explains(cls, parameter: str, variable: str, ctx: ModelContext | None = None) -> bool:
+        """A link length or offset moving with the temperature or the time."""
+        return LINK_LENGTH.fullmatch(parameter) is not None and variable in ("temperature", "t")
 
     def parameter_units(self, ctx: ModelContext) -> Sequence[str]:
         return ["1/K" if thermal_driver(ctx)[0] == "temperature" else "1/s"]

@@ -9,12 +9,17 @@ here it adds what a fit needs:
 - ``frame_effects``: the frames the fit may estimate, each with its parameter names (an
   effect named like the frame; built-in frame effects are reused, others made on the fly);
   ``default_frames``: the ones estimated by default unless the dataset marks them known;
+- ``own_frame_effects``, ``sensor_effects`` and ``accepts(effect)``: which effects its frames
+  and its measurement take, declared by the kind (the generic layers hold no kind names);
 - ``measurement_size`` m and ``measurements(dataset) -> (measured (N, m),
   sqrt_information (N, m, m))`` (the whitening W with W^T W = cov^-1);
 - ``chain(dataset)``, ``check(dataset, chain)`` and ``context(dataset, chain)``: the robot
   and the ModelContext (contract variables for diagnostics), computed once per problem;
 - ``predict(problem, x, jacobian) -> (prediction (N, m), d prediction / dx (N, m, P))``
   with analytic Jacobians (the contract test checks them against finite differences);
+- ``shared_error_sensitivity`` and ``shared_error_floor``: how an error shared by every
+  sample (a stereo rig's calibration) moves the measurements, for the fit's covariance
+  (default: none);
 - ``example(rng) -> Dataset``: a small plausible dataset of this method, which the contract
   test fits, differentiates and writes to a file and back.
 
@@ -26,7 +31,7 @@ a method's name; they ask its model.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -36,7 +41,7 @@ from hostpc.errors import InputError
 from hostpc.kinematics import Chain, forward
 from hostpc.kinematics.rotations import pose_to_transform
 from hostpc.model.context import serial_chain, serial_context
-from hostpc.model.effect import ModelContext
+from hostpc.model.effect import Effect, ModelContext
 from hostpc.model.layout import Problem
 
 POSE = ("x", "y", "z", "rx", "ry", "rz")
@@ -52,6 +57,22 @@ class MeasurementModel(MeasurementKind):
     #: SI unit of each measurement component; None: all lengths (m). RMS and max residual
     #: norms in m are taken over the length components only (world_pose: x, y, z).
     residual_units: ClassVar[tuple[str, ...] | None] = None
+    #: frame effects of its own (a class per frame with its description and parameters),
+    #: for frames no built-in frame effect covers (dual_loop's camera, arm bases and
+    #: targets); the effect registry lists them with the built-ins. A frame with none gets
+    #: an effect made on the fly.
+    own_frame_effects: ClassVar[tuple[type[Effect], ...]] = ()
+    #: the kind-specific sensor effects (``Effect.methods == ()``) that act on this kind's
+    #: measurement, by name (depth_scale on a stereo point, trigger_latency on a contact)
+    sensor_effects: ClassVar[tuple[str, ...]] = ()
+
+    @classmethod
+    def accepts(cls, effect: type[Effect]) -> bool:
+        """Whether ``effect`` may be in a model of this kind: an effect for every kind
+        (``methods`` None), one that names this kind in its ``methods`` (a plugin's), or a
+        kind-specific one this kind names in ``sensor_effects``."""
+        return (effect.methods is None or cls.name in effect.methods
+                or effect.name in cls.sensor_effects)
 
     # the robot and the context ----------------------------------------------------------
     def chain(self, dataset: Dataset) -> Chain:
@@ -82,6 +103,20 @@ class MeasurementModel(MeasurementKind):
                 ) -> tuple[np.ndarray, np.ndarray | None]:
         """Predicted measurements (N, m) and their derivative by x (N, m, P) (or None)."""
         raise NotImplementedError
+
+    # the instrument's shared error (hostpc.fitting.shared_errors) ----------------------
+    def shared_error_sensitivity(self, problem: Problem, block: Mapping[str, Any]
+                                 ) -> np.ndarray | None:
+        """(N, m, K) how the instrument's shared error (K parameters with the covariance of
+        the dataset's ``rig_uncertainty`` block) moves each measurement, or None (default:
+        the instrument declares no shared error)."""
+        return None
+
+    def shared_error_floor(self, problem: Problem, block: Mapping[str, Any]
+                           ) -> np.ndarray | None:
+        """(N, m, m) the part of each sample's covariance the method added to stand for the
+        shared error (a weighting only), or None (default: none added)."""
+        return None
 
     @classmethod
     def example(cls, rng: np.random.Generator) -> Dataset:

@@ -105,12 +105,12 @@ def world_point_in_base(problem: Problem, x: np.ndarray, point_name: str, nomina
         if term is not None:
             derivatives[point_name] = np.eye(3)
         return point_world, derivatives
-    R_wb, t_wb, J_r = frame_pose(problem, "base", x)
-    point_base = R_wb.T @ (point_world - t_wb)
-    dy_dt, dy_dr = inverse_point_derivatives(point_base[None, :], R_wb, J_r)
+    R_world_base, t_world_base, J_r = frame_pose(problem, "base", x)
+    point_base = R_world_base.T @ (point_world - t_world_base)
+    dy_dt, dy_dr = inverse_point_derivatives(point_base[None, :], R_world_base, J_r)
     derivatives["base"] = np.concatenate([dy_dt, dy_dr[0]], axis=1)
     if term is not None:
-        derivatives[point_name] = R_wb.T
+        derivatives[point_name] = R_world_base.T
     return point_base, derivatives
 
 
@@ -125,8 +125,8 @@ def flange(problem: Problem, x: np.ndarray, jacobian: bool
         poses = forward(problem.chain, problem.context.q_cmd + delta[:, :n_joints])
     else:
         poses = forward(problem.chain, problem.context.q_cmd, delta)
-    T_bf = poses.T_base_flange
-    return poses, T_bf[:, :3, :3], T_bf[:, :3, 3], d_delta, rows
+    T_base_flange = poses.T_base_flange
+    return poses, T_base_flange[:, :3, :3], T_base_flange[:, :3, 3], d_delta, rows
 
 
 def apply_sensor_effects(problem: Problem, x: np.ndarray, y: np.ndarray, J: np.ndarray | None

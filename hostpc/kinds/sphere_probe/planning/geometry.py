@@ -4,14 +4,14 @@ The touch-probe procedure (docs/sphere-probe.md) touches a reference sphere of r
 stylus ball of radius r, 5 times per probe orientation. At a contact the stylus tip centre is
 at the contact distance rho = R + r from the sphere centre:
 
-    | R_bf P_t + t_bf - P_b | = rho                                        (S11)
+    | R_base_flange P_t + t_base_flange - P_b | = rho                        (S11)
 
-with ``T_base_flange = [R_bf, t_bf]`` from forward kinematics of the latched joint angles,
-``P_t`` the stylus tip centre in the flange frame and ``P_b`` the sphere centre in the base
-frame (all in metres). For a fixed flange rotation ``R_k`` the flange origins of the group's
-contacts lie on a sphere of radius rho around ``P_c,k = P_b - R_k P_t`` (S4); the ``P_c,k``
-of all orientations lie on a sphere of radius |P_t| around ``P_b`` (S7); ``P_t`` follows from
-one orientation: ``P_t = R_1^T (P_b - P_c,1)`` (S8-S9).
+with ``T_base_flange = [R_base_flange, t_base_flange]`` from forward kinematics of the
+latched joint angles, ``P_t`` the stylus tip centre in the flange frame and ``P_b`` the
+sphere centre in the base frame (all in metres). For a fixed flange rotation ``R_k`` the
+flange origins of the group's contacts lie on a sphere of radius rho around ``P_c,k = P_b -
+R_k P_t`` (S4); the ``P_c,k`` of all orientations lie on a sphere of radius |P_t| around
+``P_b`` (S7); ``P_t`` follows from one orientation: ``P_t = R_1^T (P_b - P_c,1)`` (S8-S9).
 
 These estimates ignore the joint offsets: they are the starting frames of the joint solve
 (hostpc.fit), which estimates offsets, P_b and P_t together. Here we add two refinements of
@@ -137,7 +137,7 @@ def mean_rotation(R: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class OrientationCentre:
     """S4 for one probe orientation: group index, P_c (3,) base frame (m), the group's mean
-    flange rotation R_bf (3, 3), the number of contacts and the sphere-fit rms (m)."""
+    flange rotation R_base_flange (3, 3), the number of contacts and the sphere-fit rms (m)."""
 
     group: int
     centre: np.ndarray
