@@ -12,9 +12,12 @@ procedure around it:
                                     expected covariances (nominal model): the planner's and the
                                     identifiability check's Jacobian comes from it
     acquire(robot, phase, index, q, q_from)
-                                    drive to one pose and measure: a SampleRecord with a sample
-                                    in dataset-file form, or skipped with the reason
-    dataset_document(records)       the journaled samples as a `zerocal-dataset/1` document
+                                    drive to one pose and measure: the kind's typed sample
+                                    (a frozen dataclass, `Sample`) journaled through its
+                                    `to_json` (`SampleRecord.measured`), or skipped with the
+                                    reason
+    dataset_document(records)       the journaled samples (their JSON form, read back with
+                                    the kind's `from_json`) as a `zerocal-dataset/1` document
 
 Optional hooks (defaults in `Method`):
 
@@ -175,12 +178,32 @@ class Plan:
         return cls(q=q, q_verify=q_verify, info=dict(data.get("info", {})), **more)
 
 
+class Sample(Protocol):
+    """A measured sample of one kind as a typed value (each kind's frozen dataclass, e.g.
+    ``hostpc.kinds.stereo_target.sample.StereoSample``); its JSON form, the sample in
+    dataset-file form, is what the journal holds."""
+
+    def to_json(self) -> dict[str, Any]:
+        """The sample's dataset-file form (SI)."""
+
+
+def floats(values: Sequence[float] | np.ndarray) -> tuple[float, ...]:
+    """A typed sample's vector field from a list or array (JSON numbers, floats)."""
+    return tuple(float(v) for v in np.asarray(values, dtype=float).reshape(-1))
+
+
+def matrix(values: Sequence[Sequence[float]] | np.ndarray) -> tuple[tuple[float, ...], ...]:
+    """A typed sample's matrix field from nested lists or a 2-D array (floats)."""
+    return tuple(tuple(float(v) for v in row) for row in np.asarray(values, dtype=float))
+
+
 @dataclass(frozen=True)
 class SampleRecord:
     """One pose's outcome, as journaled.
 
     phase / index: which plan pose; ok: measured; sample: the sample in dataset-file form
-    (SI units; stereo_target: q, p, cov, t, approach, uv); reason: why it was skipped;
+    (SI units; the `to_json` of the kind's typed sample, `Sample`; stereo_target: q, p,
+    cov, t, approach, uv); reason: why it was skipped;
     q_end: (n,) where the robot is after this pose (for the next pose's approach signs).
     """
 
@@ -228,6 +251,12 @@ class SampleRecord:
             reason=data.get("reason"),
             q_end=data.get("q_end"),
         )
+
+    @classmethod
+    def measured(cls, phase: Phase, index: int, sample: Sample,
+                 q_end: Sequence[float] | None) -> SampleRecord:
+        """The record of a measured pose: its typed sample in the journal's (JSON) form."""
+        return cls(phase, index, True, sample=sample.to_json(), q_end=q_end)
 
 
 class Progress(Protocol):

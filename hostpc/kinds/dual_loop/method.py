@@ -53,6 +53,7 @@ from hostpc.dataset import FORMAT_TAG, Dataset, FramePose, dataset_from_dict
 from hostpc.errors import InputError
 from hostpc.kinds.dual_loop.model import ARMS, DUAL_LOOP_FRAMES
 from hostpc.kinds.dual_loop.planning import nominal_frames, plan_poses
+from hostpc.kinds.dual_loop.sample import PoseObservations, TargetObservation
 from hostpc.kinematics.humanoid import HUMANOID_HOME, get_tree
 from hostpc.kinematics.rotations import pose_to_transform
 from hostpc.kinematics.tree import KinematicTree
@@ -62,6 +63,8 @@ from hostpc.methods.base import (
     Progress,
     RunSettings,
     SampleRecord,
+    floats,
+    matrix,
     move_or_skip,
 )
 from hostpc.methods.cell import Cell
@@ -319,8 +322,8 @@ class DualLoopMethod(Method):
         chains = self.aimed_chain(q)
 
         def samples(p: np.ndarray, cov: np.ndarray) -> list[dict[str, Any]]:
-            return [self._sample(str(chains[k]), q[k], p[k], cov[k], float(k), None)
-                    for k in range(q.shape[0])]
+            return [self._observation(str(chains[k]), q[k], p[k], cov[k], float(k), None,
+                                      None).to_json() for k in range(q.shape[0])]
 
         placeholder = np.broadcast_to(np.array([0.0, 0.0, 0.5]), (q.shape[0], 3))
         eye = np.broadcast_to(np.eye(3) * 1e-8, (q.shape[0], 3, 3))
@@ -332,23 +335,19 @@ class DualLoopMethod(Method):
 
     # ---------------------------------------------------------------- acquisition
 
-    def _sample(self, side: str, q: np.ndarray, p: np.ndarray, cov: np.ndarray, t: float,
-                q_from: np.ndarray | None) -> dict[str, Any]:
-        """One observation in dataset-file form (SI)."""
-        head = self.tree.joint_slice("head")
+    def _observation(self, side: str, q: np.ndarray, p: np.ndarray, cov: np.ndarray,
+                     t: float, q_from: np.ndarray | None, uv: np.ndarray | None
+                     ) -> TargetObservation:
+        """One observation (SI) of the target on arm `side` at q (n,)."""
         arm = self.tree.joint_slice(side)
-        sample: dict[str, Any] = {
-            "chain": side,
-            "q_head": [float(v) for v in q[head]],
-            "q_arm": [float(v) for v in q[arm]],
-            "p": [float(v) for v in p],
-            "cov": np.asarray(cov, dtype=float).tolist(),
-            "t": t,
-        }
+        approach = None
         if q_from is not None:
             signs = np.sign(q[arm] - np.asarray(q_from, dtype=float)[arm])
-            sample["approach"] = [float(s) if s != 0 else 1.0 for s in signs]
-        return sample
+            approach = tuple(float(s) if s != 0 else 1.0 for s in signs)
+        return TargetObservation(
+            chain=side, q_head=floats(q[self.tree.joint_slice("head")]), q_arm=floats(q[arm]),
+            p=floats(p), cov=matrix(cov), t=t, approach=approach,
+            uv=None if uv is None else matrix(np.asarray(uv, dtype=float).reshape(2, 2)))
 
     async def acquire(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
                       q_from: np.ndarray | None) -> SampleRecord:
@@ -368,27 +367,22 @@ class DualLoopMethod(Method):
             cov = np.asarray(target.cov, dtype=float)
             if self.pixel_floor > 0:
                 cov = cov + self.floor_covariance(np.asarray(target.p))
-            sample = self._sample(target.chain, q_seen, np.asarray(target.p), cov,
-                                  float(measurement.t) - self._t0, q_from)
-            if target.uv is not None:
-                sample["uv"] = np.asarray(target.uv, dtype=float).reshape(2, 2).tolist()
-            observations.append(sample)
+            observations.append(self._observation(
+                target.chain, q_seen, np.asarray(target.p), cov,
+                float(measurement.t) - self._t0, q_from,
+                None if target.uv is None else np.asarray(target.uv, dtype=float)))
         if not observations:
             return SampleRecord(phase, index, False, reason="no target in view", q_end=q_end)
-        return SampleRecord(phase, index, True, sample={"observations": observations},
-                            q_end=q_end)
+        return SampleRecord.measured(phase, index, PoseObservations(tuple(observations)),
+                                     q_end=q_end)
 
     # ---------------------------------------------------------------- dataset
 
     def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         """A `zerocal-dataset/1` dual_loop document: the journaled records' observations
         (or plain samples) in order, the nominal frames and `known`."""
-        flat: list[dict[str, Any]] = []
-        for record in samples:
-            if "observations" in record:
-                flat.extend(dict(o) for o in record["observations"])
-            else:
-                flat.append(dict(record))
+        flat = [o for record in samples
+                for o in PoseObservations.from_json(record).observations]
         frames: dict[str, Any] = {}
         for name, value in self.frames.items():
             if isinstance(value, FramePose):
@@ -402,17 +396,17 @@ class DualLoopMethod(Method):
             "robot": {"name": self.tree.name},
             "frames": frames,
             "known": list(self.known),
-            "samples": flat,
+            "samples": [o.to_json() for o in flat],
             **self._camera_uncertainty(flat),
         }
 
-    def _camera_uncertainty(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    def _camera_uncertainty(self, samples: Sequence[TargetObservation]) -> dict[str, Any]:
         """The dataset's `rig_uncertainty` block (the head camera's calibration, its
         covariance and the pixel floor the covariances include), or nothing when the
         controller reports no calibration or a sample has no `uv`."""
         if self.calibration is None or not samples:
             return {}
-        missing = sum("uv" not in s for s in samples)
+        missing = sum(s.uv is None for s in samples)
         if missing:
             if self._progress is not None:
                 self._progress.message(

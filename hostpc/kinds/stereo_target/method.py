@@ -25,6 +25,7 @@ import numpy as np
 from hostpc.dataset import FORMAT_TAG, Dataset, dataset_from_dict
 from hostpc.errors import ControllerError, InputError, ZerocalError
 from hostpc.files import write_json_atomic
+from hostpc.kinds.stereo_target.sample import StereoSample
 from hostpc.kinematics import forward, get_robot, invert_transform, pose_to_transform
 from hostpc.methods.approach_moves import ApproachMoves
 from hostpc.methods.base import (
@@ -32,6 +33,8 @@ from hostpc.methods.base import (
     Phase,
     Progress,
     SampleRecord,
+    floats,
+    matrix,
 )
 from hostpc.methods.cell import require_camera_cell
 from hostpc.model.measurements.predict import predict
@@ -287,14 +290,15 @@ class StereoTargetMethod(Method):
         """Nominal predicted points at q (N, n) with the planning covariance."""
         n = q.shape[0]
         placeholder = self.dataset_document(
-            [{"q": row.tolist(), "p": [0.0, 0.0, 0.5], "sigma": 1e-4} for row in q])
+            [StereoSample(q=floats(row), p=(0.0, 0.0, 0.5), cov=matrix(np.eye(3) * 1e-8)
+                          ).to_json() for row in q])
         dataset = dataset_from_dict(placeholder)
         problem = build_problem(dataset, "joint_offsets")
         p, _ = predict(problem, np.zeros(problem.layout.size), jacobian=False)
         cov = self.expected_covariance(p)
         document = self.dataset_document(
-            [{"q": q[k].tolist(), "p": p[k].tolist(), "cov": cov[k].tolist(),
-              "t": float(k)} for k in range(n)])
+            [StereoSample(q=floats(q[k]), p=floats(p[k]), cov=matrix(cov[k]), t=float(k)
+                          ).to_json() for k in range(n)])
         return dataset_from_dict(document)
 
     # ---------------------------------------------------------------- acquisition
@@ -320,16 +324,12 @@ class StereoTargetMethod(Method):
         cov = np.asarray(observation.cov, float)
         if self.pixel_floor > 0:
             cov = cov + self.expected_covariance(p[None, :], self.pixel_floor)[0]
-        sample: dict[str, Any] = {
-            "q": [float(v) for v in capture.q],
-            "p": [float(v) for v in p],
-            "cov": cov.tolist(),
-            "t": float(capture.t) - self._t0,
-            "approach": self._moves.signs(q_from, capture.q),
-        }
-        if observation.uv is not None:
-            sample["uv"] = np.asarray(observation.uv, float).tolist()
-        return SampleRecord(phase, index, True, sample=sample, q_end=outcome.q.tolist())
+        sample = StereoSample(
+            q=floats(capture.q), p=floats(p), cov=matrix(cov),
+            t=float(capture.t) - self._t0,
+            approach=floats(self._moves.signs(q_from, capture.q)),
+            uv=None if observation.uv is None else matrix(observation.uv))
+        return SampleRecord.measured(phase, index, sample, q_end=outcome.q.tolist())
 
     # ---------------------------------------------------------------- dataset
 

@@ -29,6 +29,7 @@ import numpy as np
 from hostpc.dataset import FORMAT_TAG, Dataset, dataset_from_dict
 from hostpc.errors import ControllerError, InputError
 from hostpc.files import write_json_atomic
+from hostpc.kinds.world_point.sample import WorldPointSample
 from hostpc.kinematics import forward, get_robot, pose_to_transform
 from hostpc.methods.approach_moves import ApproachMoves
 from hostpc.methods.base import (
@@ -36,6 +37,8 @@ from hostpc.methods.base import (
     Phase,
     Progress,
     SampleRecord,
+    floats,
+    matrix,
 )
 from hostpc.robots.base import Need, RobotAdapter, RobotState, tracker_of
 
@@ -193,8 +196,9 @@ class WorldPointMethod(Method):
         p = np.einsum("nij,nj->ni", T[:, :3, :3], positions) + T[:, :3, 3]
         cov = spherical_covariance(p, *self._noise())
         document = self.dataset_document(
-            [{"q": q[k].tolist(), "marker": names[chosen[k]], "p": p[k].tolist(),
-              "cov": cov[k].tolist(), "t": float(k)} for k in range(q.shape[0])])
+            [WorldPointSample(q=floats(q[k]), marker=names[chosen[k]], p=floats(p[k]),
+                              cov=matrix(cov[k]), t=float(k)).to_json()
+             for k in range(q.shape[0])])
         return dataset_from_dict(document)
 
     # ---------------------------------------------------------------- acquisition
@@ -214,11 +218,10 @@ class WorldPointMethod(Method):
             return SampleRecord(phase, index, False, reason=f"beam lost: {lost}",
                                 q_end=outcome.q.tolist())
         p, cov = reading.points[name]
-        sample = {"q": [float(v) for v in reading.q], "marker": name,
-                  "p": [float(v) for v in p], "cov": np.asarray(cov, float).tolist(),
-                  "t": float(reading.time) - self._t0,
-                  "approach": self._moves.signs(q_from, reading.q)}
-        return SampleRecord(phase, index, True, sample=sample, q_end=outcome.q.tolist())
+        sample = WorldPointSample(q=floats(reading.q), marker=name, p=floats(p),
+                                  cov=matrix(cov), t=float(reading.time) - self._t0,
+                                  approach=floats(self._moves.signs(q_from, reading.q)))
+        return SampleRecord.measured(phase, index, sample, q_end=outcome.q.tolist())
 
     # ---------------------------------------------------------------- dataset
 

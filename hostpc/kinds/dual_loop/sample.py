@@ -1,0 +1,73 @@
+"""dual_loop's samples as typed values: one target observation, and one pose's observations.
+
+The acquisition builds a ``PoseObservations`` per pose; the journal stores it through
+``to_json`` (``{"observations": [...]}``, each observation in dataset-file form, key for key
+as the journal has always held it, so an old run resumes) and the dataset is built from the
+observations read back with ``from_json``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from hostpc.methods.base import floats, matrix
+
+
+@dataclass(frozen=True)
+class TargetObservation:
+    """chain: the arm whose target was seen ("left" / "right"); q_head, q_arm: the head's
+    and that arm's joint angles (rad); p: (3,) the target in the camera frame (m); cov:
+    (3, 3) its covariance (m^2); t: s since the run's start; approach: the arm's joints'
+    last motion signs (None: unknown); uv: (2, 2) the target's centres in the left and
+    right images (px; None: not reported)."""
+
+    chain: str
+    q_head: tuple[float, ...]
+    q_arm: tuple[float, ...]
+    p: tuple[float, ...]
+    cov: tuple[tuple[float, ...], ...]
+    t: float
+    approach: tuple[float, ...] | None = None
+    uv: tuple[tuple[float, ...], ...] | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """The dataset-file form (one entry of ``samples``)."""
+        out: dict[str, Any] = {"chain": self.chain, "q_head": list(self.q_head),
+                               "q_arm": list(self.q_arm), "p": list(self.p),
+                               "cov": [list(row) for row in self.cov], "t": self.t}
+        if self.approach is not None:
+            out["approach"] = list(self.approach)
+        if self.uv is not None:
+            out["uv"] = [list(row) for row in self.uv]
+        return out
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> TargetObservation:
+        """Inverse of ``to_json``."""
+        approach, uv = data.get("approach"), data.get("uv")
+        return cls(chain=str(data["chain"]), q_head=floats(data["q_head"]),
+                   q_arm=floats(data["q_arm"]), p=floats(data["p"]),
+                   cov=matrix(data["cov"]), t=float(data.get("t", 0.0)),
+                   approach=None if approach is None else floats(approach),
+                   uv=None if uv is None else matrix(uv))
+
+
+@dataclass(frozen=True)
+class PoseObservations:
+    """One pose's sample: the observation of each arm whose target was in view."""
+
+    observations: tuple[TargetObservation, ...]
+
+    def to_json(self) -> dict[str, Any]:
+        """The journal's form: ``{"observations": [...]}``."""
+        return {"observations": [o.to_json() for o in self.observations]}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> PoseObservations:
+        """Inverse of ``to_json``; a plain observation (a sample of a dataset document) is
+        a pose with that one observation."""
+        if "observations" in data:
+            return cls(tuple(TargetObservation.from_json(o) for o in data["observations"]))
+        return cls((TargetObservation.from_json(data),))

@@ -1,0 +1,52 @@
+"""sphere_probe's sample as a typed value: one probe contact (SI).
+
+The acquisition builds it; the journal stores it through ``to_json`` (the sample's
+dataset-file form, key for key as the journal has always held it, so an old run resumes)
+and the dataset is built from the samples read back with ``from_json``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from hostpc.methods.base import floats
+
+
+@dataclass(frozen=True)
+class ProbeSample:
+    """q: (n,) joint angles (rad) latched at the contact; group: the probe orientation;
+    sigma: the contact's position sigma (m) at its approach speed; approach: (n,) sign of
+    each joint's motion into the contact; t: host time since the run's start (s);
+    contact: the contact's number over the plan (group x contacts per orientation + its
+    index in the group); speed: approach speed at contact (m/s; None: not known)."""
+
+    q: tuple[float, ...]
+    group: int
+    sigma: float
+    approach: tuple[float, ...]
+    t: float
+    contact: int
+    speed: float | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """The dataset-file form (one entry of ``samples``; the contact number and the tip
+        speed in ``extra``)."""
+        extra: dict[str, Any] = {"contact": float(self.contact)}
+        out: dict[str, Any] = {"q": list(self.q), "group": self.group, "sigma": self.sigma,
+                               "approach": list(self.approach), "t": self.t, "extra": extra}
+        if self.speed is not None:
+            out["speed"] = self.speed
+            extra["tip_speed"] = self.speed
+        return out
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> ProbeSample:
+        """Inverse of ``to_json`` (a sample without a contact number gets -1)."""
+        extra = data.get("extra") or {}
+        return cls(q=floats(data["q"]), group=int(data["group"]),
+                   sigma=float(data.get("sigma", 0.0)), approach=floats(data["approach"]),
+                   t=float(data.get("t", 0.0)),
+                   contact=int(round(float(extra.get("contact", -1)))),
+                   speed=None if data.get("speed") is None else float(data["speed"]))

@@ -1,0 +1,48 @@
+"""world_point's sample as a typed value: one tracker reading of a flange reflector (SI).
+
+The acquisition builds it; the journal stores it through ``to_json`` (the sample's
+dataset-file form, key for key as the journal has always held it, so an old run resumes)
+and the dataset is read back from that form with ``from_json``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from hostpc.methods.base import floats, matrix
+
+
+@dataclass(frozen=True)
+class WorldPointSample:
+    """q: (n,) joint angles (rad) at the reading; marker: the reflector's name
+    (``frames.markers``); p: (3,) its position in the world frame (m); cov: (3, 3) its
+    covariance (m^2); t: s since the run's start (None: untimed); approach: (n,) sign of
+    each joint's last motion (None: unknown)."""
+
+    q: tuple[float, ...]
+    marker: str
+    p: tuple[float, ...]
+    cov: tuple[tuple[float, ...], ...]
+    t: float | None = None
+    approach: tuple[float, ...] | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """The dataset-file form (one entry of ``samples``)."""
+        out: dict[str, Any] = {"q": list(self.q), "marker": self.marker, "p": list(self.p),
+                               "cov": [list(row) for row in self.cov]}
+        if self.t is not None:
+            out["t"] = self.t
+        if self.approach is not None:
+            out["approach"] = list(self.approach)
+        return out
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> WorldPointSample:
+        """Inverse of ``to_json``."""
+        approach = data.get("approach")
+        return cls(q=floats(data["q"]), marker=str(data["marker"]), p=floats(data["p"]),
+                   cov=matrix(data["cov"]),
+                   t=None if data.get("t") is None else float(data["t"]),
+                   approach=None if approach is None else floats(approach))
