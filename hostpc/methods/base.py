@@ -16,8 +16,11 @@ procedure around it:
                                     (a frozen dataclass, `Sample`) journaled through its
                                     `to_json` (`SampleRecord.measured`), or skipped with the
                                     reason
-    dataset_document(records)       the journaled samples (their JSON form, read back with
-                                    the kind's `from_json`) as a `zerocal-dataset/1` document
+    dataset_document(records)       the journaled samples (their JSON form) as a
+                                    `zerocal-dataset/1` document
+    dataset(records)                the journaled samples as the run's Dataset (built-in
+                                    kinds: read back with the kind's `from_json` and built
+                                    from the typed samples; default: from dataset_document)
 
 Optional hooks (defaults in `Method`):
 
@@ -197,6 +200,21 @@ def matrix(values: Sequence[Sequence[float]] | np.ndarray) -> tuple[tuple[float,
     return tuple(tuple(float(v) for v in row) for row in np.asarray(values, dtype=float))
 
 
+def optional_values(values: Sequence[float | None]) -> np.ndarray:
+    """(N,) a typed samples' optional number as a ``Samples`` column: NaN where absent."""
+    return np.array([np.nan if v is None else v for v in values], dtype=float)
+
+
+def optional_rows(rows: Sequence[Sequence[float] | None], width: int) -> np.ndarray:
+    """(N, width) typed samples' optional vectors (e.g. ``approach``) as a ``Samples``
+    column: NaN rows where absent."""
+    out = np.full((len(rows), width), np.nan)
+    for i, row in enumerate(rows):
+        if row is not None:
+            out[i, :len(row)] = row
+    return out
+
+
 @dataclass(frozen=True)
 class SampleRecord:
     """One pose's outcome, as journaled.
@@ -366,6 +384,15 @@ class Method(ABC):
     @abstractmethod
     def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         """The samples (dataset-file form, in order) as a `zerocal-dataset/1` document."""
+
+    def dataset(self, samples: Sequence[Mapping[str, Any]]) -> Dataset:
+        """The journaled samples (dataset-file form, in order) as the run's Dataset. A kind
+        with typed samples reads them with its `from_json` and builds the Dataset from
+        them; the default reads `dataset_document` (a plugin's method)."""
+        from hostpc.dataset import dataset_from_dict
+
+        return dataset_from_dict(self.dataset_document(samples),
+                                 plugins=self.settings.plugins)
 
     def default_effects(self) -> str | None:
         """The effect spec fitted (and planned for) when the settings give none; None: the

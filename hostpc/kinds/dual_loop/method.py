@@ -49,11 +49,15 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hostpc.dataset import FORMAT_TAG, Dataset, FramePose, dataset_from_dict
+from hostpc.dataset import Dataset, FramePose, RobotDescription, dataset_to_dict
 from hostpc.errors import InputError
 from hostpc.kinds.dual_loop.model import ARMS, DUAL_LOOP_FRAMES
 from hostpc.kinds.dual_loop.planning import nominal_frames, plan_poses
-from hostpc.kinds.dual_loop.sample import PoseObservations, TargetObservation
+from hostpc.kinds.dual_loop.sample import (
+    PoseObservations,
+    TargetObservation,
+    observation_samples,
+)
 from hostpc.kinematics.humanoid import HUMANOID_HOME, get_tree
 from hostpc.kinematics.rotations import pose_to_transform
 from hostpc.kinematics.tree import KinematicTree
@@ -321,17 +325,17 @@ class DualLoopMethod(Method):
         q = np.asarray(q, dtype=float)
         chains = self.aimed_chain(q)
 
-        def samples(p: np.ndarray, cov: np.ndarray) -> list[dict[str, Any]]:
+        def samples(p: np.ndarray, cov: np.ndarray) -> list[TargetObservation]:
             return [self._observation(str(chains[k]), q[k], p[k], cov[k], float(k), None,
-                                      None).to_json() for k in range(q.shape[0])]
+                                      None) for k in range(q.shape[0])]
 
         placeholder = np.broadcast_to(np.array([0.0, 0.0, 0.5]), (q.shape[0], 3))
         eye = np.broadcast_to(np.eye(3) * 1e-8, (q.shape[0], 3, 3))
-        dataset = dataset_from_dict(self.dataset_document(samples(placeholder, eye)))
-        problem = build_problem(dataset, "joint_offsets")
+        problem = build_problem(self.observations_dataset(samples(placeholder, eye)),
+                                "joint_offsets")
         p, _ = predict(problem, np.zeros(problem.layout.size), jacobian=False)
         cov = self.expected_covariance(p, self.pixel_sigma)
-        return dataset_from_dict(self.dataset_document(samples(p, cov)))
+        return self.observations_dataset(samples(p, cov))
 
     # ---------------------------------------------------------------- acquisition
 
@@ -379,26 +383,22 @@ class DualLoopMethod(Method):
     # ---------------------------------------------------------------- dataset
 
     def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-        """A `zerocal-dataset/1` dual_loop document: the journaled records' observations
-        (or plain samples) in order, the nominal frames and `known`."""
-        flat = [o for record in samples
-                for o in PoseObservations.from_json(record).observations]
-        frames: dict[str, Any] = {}
-        for name, value in self.frames.items():
-            if isinstance(value, FramePose):
-                frames[name] = {"xyz": value.xyz.tolist(), "rpy": value.rpy.tolist()}
-            else:
-                frames[name] = np.asarray(value, dtype=float).tolist()
-        return {
-            "format": FORMAT_TAG,
-            "method": self.name,
-            "units": {"length": "m", "angle": "rad", "time": "s"},
-            "robot": {"name": self.tree.name},
-            "frames": frames,
-            "known": list(self.known),
-            "samples": [o.to_json() for o in flat],
-            **self._camera_uncertainty(flat),
-        }
+        """A `zerocal-dataset/1` dual_loop document (`dataset`, written)."""
+        return dataset_to_dict(self.dataset(samples))
+
+    def dataset(self, samples: Sequence[Mapping[str, Any]]) -> Dataset:
+        """The journaled records' observations (or plain samples) in order as a Dataset
+        with the nominal frames and `known`, built from the typed observations."""
+        return self.observations_dataset(
+            [o for record in samples for o in PoseObservations.from_json(record).observations])
+
+    def observations_dataset(self, observations: Sequence[TargetObservation]) -> Dataset:
+        """`dataset` of typed observations."""
+        frames: dict[str, Any] = {name: self.frames[name] for name in DUAL_LOOP_FRAMES}
+        return Dataset(method=self.name, robot=RobotDescription(name=self.tree.name),
+                       frames=frames, samples=observation_samples(observations),
+                       known=tuple(self.known),
+                       extra_fields=self._camera_uncertainty(observations))
 
     def _camera_uncertainty(self, samples: Sequence[TargetObservation]) -> dict[str, Any]:
         """The dataset's `rig_uncertainty` block (the head camera's calibration, its
@@ -421,11 +421,13 @@ class DualLoopMethod(Method):
 
     def describe(self) -> dict[str, Any]:
         """The tree, frames and camera model for the result document (SI)."""
-        document = self.dataset_document([])
         return {"dual_loop": {
             "tree": self.tree.name,
             "joints": list(self.tree.joint_labels),
-            "frames": document["frames"],
+            "frames": {name: ({"xyz": value.xyz.tolist(), "rpy": value.rpy.tolist()}
+                              if isinstance(value, FramePose)
+                              else np.asarray(value, dtype=float).tolist())
+                       for name, value in self.frames.items()},
             "known": list(self.known),
             "camera": {"focal_px": self.focal_px, "baseline": self.baseline,
                        "image_size": list(self.image_size)},

@@ -8,11 +8,14 @@ observations read back with ``from_json``.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from hostpc.methods.base import floats, matrix
+import numpy as np
+
+from hostpc.dataset.model import Samples
+from hostpc.methods.base import floats, matrix, optional_rows, optional_values
 
 
 @dataclass(frozen=True)
@@ -71,3 +74,24 @@ class PoseObservations:
         if "observations" in data:
             return cls(tuple(TargetObservation.from_json(o) for o in data["observations"]))
         return cls((TargetObservation.from_json(data),))
+
+
+def observation_samples(observations: Sequence[TargetObservation]) -> Samples:
+    """The observations as a dataset's ``Samples``: ``q`` the observed arm's joints,
+    NaN-padded to the longer arm; ``uv`` NaN where an observation has none."""
+    n = len(observations)
+    width = max((len(o.q_arm) for o in observations), default=0)
+    uv = None
+    if any(o.uv is not None for o in observations):
+        uv = np.full((n, 2, 2), np.nan)
+        for i, o in enumerate(observations):
+            if o.uv is not None:
+                uv[i] = o.uv
+    return Samples(
+        q=optional_rows([o.q_arm for o in observations], width),
+        p=np.array([o.p for o in observations], dtype=float).reshape(n, 3),
+        cov=np.array([o.cov for o in observations], dtype=float).reshape(n, 3, 3),
+        t=optional_values([o.t for o in observations]),
+        approach=optional_rows([o.approach for o in observations], width), uv=uv,
+        chain=np.asarray([o.chain for o in observations], dtype=np.str_),
+        q_head=np.array([o.q_head for o in observations], dtype=float))

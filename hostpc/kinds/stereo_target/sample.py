@@ -11,7 +11,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from hostpc.methods.base import floats, matrix
+import numpy as np
+
+from hostpc.dataset.model import Samples
+from hostpc.methods.base import floats, matrix, optional_rows, optional_values
 
 
 @dataclass(frozen=True)
@@ -47,6 +50,23 @@ class StereoSample:
                    t=None if data.get("t") is None else float(data["t"]),
                    approach=_optional(data.get("approach")),
                    uv=None if data.get("uv") is None else matrix(data["uv"]))
+
+
+def stereo_samples(samples: Sequence[StereoSample], n_joints: int) -> Samples:
+    """The samples as a dataset's ``Samples`` (``uv`` NaN where a sample has none)."""
+    n = len(samples)
+    uv = None
+    if any(s.uv is not None for s in samples):
+        uv = np.full((n, 2, 2), np.nan)
+        for i, s in enumerate(samples):
+            if s.uv is not None:
+                uv[i] = s.uv
+    return Samples(
+        q=np.array([s.q for s in samples], dtype=float).reshape(n, n_joints),
+        p=np.array([s.p for s in samples], dtype=float).reshape(n, 3),
+        cov=np.array([s.cov for s in samples], dtype=float).reshape(n, 3, 3),
+        t=optional_values([s.t for s in samples]),
+        approach=optional_rows([s.approach for s in samples], n_joints), uv=uv)
 
 
 def _optional(values: Sequence[float] | None) -> tuple[float, ...] | None:

@@ -26,10 +26,11 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hostpc.dataset import FORMAT_TAG, Dataset, dataset_from_dict
+from hostpc.dataset import Dataset, FramePose, RobotDescription, dataset_to_dict
 from hostpc.errors import ControllerError, InputError
 from hostpc.files import write_json_atomic
-from hostpc.kinds.world_point.sample import WorldPointSample
+from hostpc.kinds.world_point.file_face import WorldPointFile
+from hostpc.kinds.world_point.sample import WorldPointSample, world_point_samples
 from hostpc.kinematics import forward, get_robot, pose_to_transform
 from hostpc.methods.approach_moves import ApproachMoves
 from hostpc.methods.base import (
@@ -195,11 +196,9 @@ class WorldPointMethod(Method):
                                                                      q).T_base_flange
         p = np.einsum("nij,nj->ni", T[:, :3, :3], positions) + T[:, :3, 3]
         cov = spherical_covariance(p, *self._noise())
-        document = self.dataset_document(
+        return self.samples_dataset(
             [WorldPointSample(q=floats(q[k]), marker=names[chosen[k]], p=floats(p[k]),
-                              cov=matrix(cov[k]), t=float(k)).to_json()
-             for k in range(q.shape[0])])
-        return dataset_from_dict(document)
+                              cov=matrix(cov[k]), t=float(k)) for k in range(q.shape[0])])
 
     # ---------------------------------------------------------------- acquisition
 
@@ -226,16 +225,30 @@ class WorldPointMethod(Method):
     # ---------------------------------------------------------------- dataset
 
     def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-        """A `zerocal-dataset/1` world_point document with the nominal frames and `known`."""
-        return {
-            "format": FORMAT_TAG,
-            "method": self.name,
-            "units": {"length": "m", "angle": "rad", "time": "s"},
-            "robot": {"name": self.cell.robot},
-            "frames": {"world": self.world(), "markers": self.markers()},
-            "known": [k for k in self.cell.known if k in ("world", "markers")],
-            "samples": [dict(s) for s in samples],
-        }
+        """A `zerocal-dataset/1` world_point document with the nominal frames and `known`
+        (`dataset`, written)."""
+        return dataset_to_dict(self.dataset(samples))
+
+    def dataset(self, samples: Sequence[Mapping[str, Any]]) -> Dataset:
+        """The journaled samples as the run's Dataset, built from the typed samples (the
+        same as reading ``dataset_document``). A subclass with its own samples and file
+        form (a plugin kind on world_point's instrument: tests/kinds_example/tracker_range)
+        is read from its document."""
+        if type(self).dataset_document is not WorldPointMethod.dataset_document:
+            return super().dataset(samples)
+        return self.samples_dataset([WorldPointSample.from_json(s) for s in samples])
+
+    def samples_dataset(self, typed: Sequence[WorldPointSample]) -> Dataset:
+        """`dataset` of typed samples."""
+        world = self.world()
+        frames: dict[str, Any] = {
+            "world": FramePose(xyz=np.asarray(world["xyz"]), rpy=np.asarray(world["rpy"])),
+            "markers": {k: np.asarray(v, dtype=float) for k, v in self.markers().items()}}
+        built = world_point_samples(typed, self._chain.n)
+        WorldPointFile().check_samples(built, frames)
+        return Dataset(method=self.name, robot=RobotDescription(name=self.cell.robot),
+                       frames=frames, samples=built,
+                       known=tuple(k for k in self.cell.known if k in ("world", "markers")))
 
     def describe(self) -> dict[str, Any]:
         """What is known and which offsets the data define, for the result document."""

@@ -7,11 +7,14 @@ and the dataset is read back from that form with ``from_json``.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from hostpc.methods.base import floats, matrix
+import numpy as np
+
+from hostpc.dataset.model import Samples
+from hostpc.methods.base import floats, matrix, optional_rows, optional_values
 
 
 @dataclass(frozen=True)
@@ -46,3 +49,16 @@ class WorldPointSample:
                    cov=matrix(data["cov"]),
                    t=None if data.get("t") is None else float(data["t"]),
                    approach=None if approach is None else floats(approach))
+
+
+def world_point_samples(samples: Sequence[WorldPointSample], n_joints: int) -> Samples:
+    """The samples as a dataset's ``Samples`` (every axis measured: ``mask`` all ones)."""
+    n = len(samples)
+    return Samples(
+        q=np.array([s.q for s in samples], dtype=float).reshape(n, n_joints),
+        p=np.array([s.p for s in samples], dtype=float).reshape(n, 3),
+        cov=np.array([s.cov for s in samples], dtype=float).reshape(n, 3, 3),
+        t=optional_values([s.t for s in samples]),
+        approach=optional_rows([s.approach for s in samples], n_joints),
+        fields={"marker": np.asarray([s.marker for s in samples], dtype=np.str_),
+                "mask": np.ones((n, 3))})
