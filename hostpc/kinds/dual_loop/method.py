@@ -8,11 +8,11 @@ each with its covariance; the method never sees images. Both loops are solved jo
 the shared runner (`hostpc.fit`, Mahalanobis: each point whitened by its own covariance).
 
 Per plan pose: move all 16 joints, `measure_targets`, and record one observation per arm
-whose target is in view, in dataset-file form (`chain`, `q_head`, `q_arm`, `p` (m, camera
-frame), `cov` (m^2), `t` (s since the run started), `approach` (the arm's joints)). The
-journal keeps one record per pose with `{"observations": [...]}`; `dataset_document`
-flattens them into the samples of a `zerocal-dataset/1` document. A pose with no target in
-view is journaled as skipped.
+whose target is in view, a `TargetObservation` (`chain`, `q_head`, `q_arm`, `p` (m, camera
+frame), `cov` (m^2), `t` (s since the run started), `approach` (the arm's joints);
+hostpc.kinds.dual_loop.sample). The journal keeps one record per pose,
+`PoseObservations` in its JSON form `{"observations": [...]}`; `dataset` flattens them into
+the samples of a Dataset. A pose with no target in view is journaled as skipped.
 
 Planning: candidates come from `hostpc.kinds.dual_loop.planning.plan_poses` (an arm pose around
 the home pose, the head aimed at that arm's target, nominal model), as combined poses with

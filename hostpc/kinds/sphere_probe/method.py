@@ -337,10 +337,16 @@ class SphereProbeMethod(Method):
         return SampleRecord.measured(phase, index, sample, q_end=q_end)
 
     def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-        """The samples as a dataset document, with the initial estimate as nominal frames
-        and approach speeds along the contact normal (falls back to the nominal frames and
-        tip speeds when the samples cannot support the estimate, e.g. a few verify ones)."""
+        """The samples as a dataset document (`dataset`, written)."""
         from hostpc.dataset.writing import dataset_to_dict
+
+        return dataset_to_dict(self.dataset(samples))
+
+    def dataset(self, samples: Sequence[Mapping[str, Any]]) -> Dataset:
+        """The journaled samples as a Dataset built from the typed samples, with the
+        initial estimate as nominal frames and approach speeds along the contact normal
+        (falls back to the nominal frames and tip speeds when the samples cannot support
+        the estimate, e.g. a few verify ones)."""
         from hostpc.kinds.sphere_probe.planning.geometry import SphereFitError
 
         contacts = {(c.group, c.index): c for c in (self.plan.contacts if self.plan else [])}
@@ -369,10 +375,9 @@ class SphereProbeMethod(Method):
         if saved is not None and saved["samples"] != digest:
             # another sample set (verification): the fit's nominal frames, so that the
             # fitted deltas apply to the same nominals
-            dataset = build_dataset(self.cell.robot, self.setup, records,
-                                    start_frames={k: np.asarray(saved[k], float)
-                                                  for k in ("tool", "sphere")})
-            return dataset_to_dict(dataset)
+            return build_dataset(self.cell.robot, self.setup, records,
+                                 start_frames={k: np.asarray(saved[k], float)
+                                               for k in ("tool", "sphere")})
         try:
             dataset = build_dataset(self.cell.robot, self.setup, records)
         except (SphereFitError, np.linalg.LinAlgError):
@@ -382,7 +387,7 @@ class SphereProbeMethod(Method):
         write_json_atomic(self.frames_path, {
             "samples": digest, "tool": dataset.pose("tool").xyz.tolist(),
             "sphere": dataset.sphere().center.tolist()})
-        return dataset_to_dict(dataset)
+        return dataset
 
     def describe(self) -> dict[str, Any]:
         """The probe set-up for the result document (SI)."""
