@@ -200,6 +200,39 @@ def matrix(values: Sequence[Sequence[float]] | np.ndarray) -> tuple[tuple[float,
     return tuple(tuple(float(v) for v in row) for row in np.asarray(values, dtype=float))
 
 
+def optional_json(**fields: Any) -> dict[str, Any]:
+    """A typed sample's optional fields that are set, in order, as JSON (tuples as
+    lists): what its ``to_json`` appends after the fields every sample has."""
+    def plain(value: Any) -> Any:
+        return [plain(v) for v in value] if isinstance(value, tuple) else value
+
+    return {name: plain(value) for name, value in fields.items() if value is not None}
+
+
+def optional_floats(data: Mapping[str, Any], name: str) -> tuple[float, ...] | None:
+    """A JSON sample's optional vector field (``floats``), None where absent."""
+    value = data.get(name)
+    return None if value is None else floats(value)
+
+
+def optional_matrix(data: Mapping[str, Any], name: str) -> tuple[tuple[float, ...], ...] | None:
+    """A JSON sample's optional matrix field (``matrix``), None where absent."""
+    value = data.get(name)
+    return None if value is None else matrix(value)
+
+
+def optional_stack(values: Sequence[Any | None], shape: tuple[int, ...]) -> np.ndarray | None:
+    """(N, *shape) typed samples' optional arrays (e.g. ``uv``) as a ``Samples`` column:
+    NaN where a sample has none; None where none has one."""
+    if all(v is None for v in values):
+        return None
+    out = np.full((len(values), *shape), np.nan)
+    for i, value in enumerate(values):
+        if value is not None:
+            out[i] = value
+    return out
+
+
 def optional_values(values: Sequence[float | None]) -> np.ndarray:
     """(N,) a typed samples' optional number as a ``Samples`` column: NaN where absent."""
     return np.array([np.nan if v is None else v for v in values], dtype=float)

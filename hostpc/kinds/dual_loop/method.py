@@ -394,7 +394,7 @@ class DualLoopMethod(Method):
 
     def observations_dataset(self, observations: Sequence[TargetObservation]) -> Dataset:
         """`dataset` of typed observations."""
-        frames: dict[str, Any] = {name: self.frames[name] for name in DUAL_LOOP_FRAMES}
+        frames = {name: self.frames[name] for name in DUAL_LOOP_FRAMES}
         return Dataset(method=self.name, robot=RobotDescription(name=self.tree.name),
                        frames=frames, samples=observation_samples(observations),
                        known=tuple(self.known),

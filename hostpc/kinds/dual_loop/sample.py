@@ -15,7 +15,16 @@ from typing import Any
 import numpy as np
 
 from hostpc.dataset.model import Samples
-from hostpc.methods.base import floats, matrix, optional_rows, optional_values
+from hostpc.methods.base import (
+    floats,
+    matrix,
+    optional_floats,
+    optional_json,
+    optional_matrix,
+    optional_rows,
+    optional_stack,
+    optional_values,
+)
 
 
 @dataclass(frozen=True)
@@ -37,24 +46,17 @@ class TargetObservation:
 
     def to_json(self) -> dict[str, Any]:
         """The dataset-file form (one entry of ``samples``)."""
-        out: dict[str, Any] = {"chain": self.chain, "q_head": list(self.q_head),
-                               "q_arm": list(self.q_arm), "p": list(self.p),
-                               "cov": [list(row) for row in self.cov], "t": self.t}
-        if self.approach is not None:
-            out["approach"] = list(self.approach)
-        if self.uv is not None:
-            out["uv"] = [list(row) for row in self.uv]
-        return out
+        return {"chain": self.chain, "q_head": list(self.q_head), "q_arm": list(self.q_arm),
+                "p": list(self.p), "cov": [list(row) for row in self.cov], "t": self.t,
+                **optional_json(approach=self.approach, uv=self.uv)}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> TargetObservation:
         """Inverse of ``to_json``."""
-        approach, uv = data.get("approach"), data.get("uv")
         return cls(chain=str(data["chain"]), q_head=floats(data["q_head"]),
                    q_arm=floats(data["q_arm"]), p=floats(data["p"]),
                    cov=matrix(data["cov"]), t=float(data.get("t", 0.0)),
-                   approach=None if approach is None else floats(approach),
-                   uv=None if uv is None else matrix(uv))
+                   approach=optional_floats(data, "approach"), uv=optional_matrix(data, "uv"))
 
 
 @dataclass(frozen=True)
@@ -81,17 +83,12 @@ def observation_samples(observations: Sequence[TargetObservation]) -> Samples:
     NaN-padded to the longer arm; ``uv`` NaN where an observation has none."""
     n = len(observations)
     width = max((len(o.q_arm) for o in observations), default=0)
-    uv = None
-    if any(o.uv is not None for o in observations):
-        uv = np.full((n, 2, 2), np.nan)
-        for i, o in enumerate(observations):
-            if o.uv is not None:
-                uv[i] = o.uv
     return Samples(
         q=optional_rows([o.q_arm for o in observations], width),
         p=np.array([o.p for o in observations], dtype=float).reshape(n, 3),
         cov=np.array([o.cov for o in observations], dtype=float).reshape(n, 3, 3),
         t=optional_values([o.t for o in observations]),
-        approach=optional_rows([o.approach for o in observations], width), uv=uv,
+        approach=optional_rows([o.approach for o in observations], width),
+        uv=optional_stack([o.uv for o in observations], (2, 2)),
         chain=np.asarray([o.chain for o in observations], dtype=np.str_),
         q_head=np.array([o.q_head for o in observations], dtype=float))

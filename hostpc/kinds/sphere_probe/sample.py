@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from hostpc.methods.base import floats
+from hostpc.methods.base import floats, optional_json
 
 
 @dataclass(frozen=True)
@@ -33,13 +33,11 @@ class ProbeSample:
     def to_json(self) -> dict[str, Any]:
         """The dataset-file form (one entry of ``samples``; the contact number and the tip
         speed in ``extra``)."""
-        extra: dict[str, Any] = {"contact": float(self.contact)}
-        out: dict[str, Any] = {"q": list(self.q), "group": self.group, "sigma": self.sigma,
-                               "approach": list(self.approach), "t": self.t, "extra": extra}
-        if self.speed is not None:
-            out["speed"] = self.speed
-            extra["tip_speed"] = self.speed
-        return out
+        return {"q": list(self.q), "group": self.group, "sigma": self.sigma,
+                "approach": list(self.approach), "t": self.t,
+                "extra": {"contact": float(self.contact),
+                          **optional_json(tip_speed=self.speed)},
+                **optional_json(speed=self.speed)}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> ProbeSample:

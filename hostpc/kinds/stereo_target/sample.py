@@ -14,7 +14,16 @@ from typing import Any
 import numpy as np
 
 from hostpc.dataset.model import Samples
-from hostpc.methods.base import floats, matrix, optional_rows, optional_values
+from hostpc.methods.base import (
+    floats,
+    matrix,
+    optional_floats,
+    optional_json,
+    optional_matrix,
+    optional_rows,
+    optional_stack,
+    optional_values,
+)
 
 
 @dataclass(frozen=True)
@@ -33,41 +42,26 @@ class StereoSample:
 
     def to_json(self) -> dict[str, Any]:
         """The dataset-file form (one entry of ``samples``)."""
-        out: dict[str, Any] = {"q": list(self.q), "p": list(self.p),
-                               "cov": [list(row) for row in self.cov]}
-        if self.t is not None:
-            out["t"] = self.t
-        if self.approach is not None:
-            out["approach"] = list(self.approach)
-        if self.uv is not None:
-            out["uv"] = [list(row) for row in self.uv]
-        return out
+        return {"q": list(self.q), "p": list(self.p), "cov": [list(row) for row in self.cov],
+                **optional_json(t=self.t, approach=self.approach, uv=self.uv)}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> StereoSample:
         """Inverse of ``to_json``."""
         return cls(q=floats(data["q"]), p=floats(data["p"]), cov=matrix(data["cov"]),
                    t=None if data.get("t") is None else float(data["t"]),
-                   approach=_optional(data.get("approach")),
-                   uv=None if data.get("uv") is None else matrix(data["uv"]))
+                   approach=optional_floats(data, "approach"),
+                   uv=optional_matrix(data, "uv"))
 
 
 def stereo_samples(samples: Sequence[StereoSample], n_joints: int) -> Samples:
     """The samples as a dataset's ``Samples`` (``uv`` NaN where a sample has none)."""
     n = len(samples)
-    uv = None
-    if any(s.uv is not None for s in samples):
-        uv = np.full((n, 2, 2), np.nan)
-        for i, s in enumerate(samples):
-            if s.uv is not None:
-                uv[i] = s.uv
     return Samples(
         q=np.array([s.q for s in samples], dtype=float).reshape(n, n_joints),
         p=np.array([s.p for s in samples], dtype=float).reshape(n, 3),
         cov=np.array([s.cov for s in samples], dtype=float).reshape(n, 3, 3),
         t=optional_values([s.t for s in samples]),
-        approach=optional_rows([s.approach for s in samples], n_joints), uv=uv)
+        approach=optional_rows([s.approach for s in samples], n_joints),
+        uv=optional_stack([s.uv for s in samples], (2, 2)))
 
-
-def _optional(values: Sequence[float] | None) -> tuple[float, ...] | None:
-    return None if values is None else floats(values)

@@ -241,14 +241,16 @@ class WorldPointMethod(Method):
     def samples_dataset(self, typed: Sequence[WorldPointSample]) -> Dataset:
         """`dataset` of typed samples."""
         world = self.world()
-        frames: dict[str, Any] = {
-            "world": FramePose(xyz=np.asarray(world["xyz"]), rpy=np.asarray(world["rpy"])),
-            "markers": {k: np.asarray(v, dtype=float) for k, v in self.markers().items()}}
-        built = world_point_samples(typed, self._chain.n)
-        WorldPointFile().check_samples(built, frames)
-        return Dataset(method=self.name, robot=RobotDescription(name=self.cell.robot),
-                       frames=frames, samples=built,
-                       known=tuple(k for k in self.cell.known if k in ("world", "markers")))
+        dataset = Dataset(
+            method=self.name, robot=RobotDescription(name=self.cell.robot),
+            frames={"world": FramePose(xyz=np.asarray(world["xyz"]),
+                                       rpy=np.asarray(world["rpy"])),
+                    "markers": {k: np.asarray(v, dtype=float)
+                                for k, v in self.markers().items()}},
+            samples=world_point_samples(typed, self._chain.n),
+            known=tuple(k for k in self.cell.known if k in ("world", "markers")))
+        WorldPointFile().check_samples(dataset.samples, dataset.frames)
+        return dataset
 
     def describe(self) -> dict[str, Any]:
         """What is known and which offsets the data define, for the result document."""

@@ -14,7 +14,14 @@ from typing import Any
 import numpy as np
 
 from hostpc.dataset.model import Samples
-from hostpc.methods.base import floats, matrix, optional_rows, optional_values
+from hostpc.methods.base import (
+    floats,
+    matrix,
+    optional_floats,
+    optional_json,
+    optional_rows,
+    optional_values,
+)
 
 
 @dataclass(frozen=True)
@@ -33,22 +40,17 @@ class WorldPointSample:
 
     def to_json(self) -> dict[str, Any]:
         """The dataset-file form (one entry of ``samples``)."""
-        out: dict[str, Any] = {"q": list(self.q), "marker": self.marker, "p": list(self.p),
-                               "cov": [list(row) for row in self.cov]}
-        if self.t is not None:
-            out["t"] = self.t
-        if self.approach is not None:
-            out["approach"] = list(self.approach)
-        return out
+        return {"q": list(self.q), "marker": self.marker, "p": list(self.p),
+                "cov": [list(row) for row in self.cov],
+                **optional_json(t=self.t, approach=self.approach)}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> WorldPointSample:
         """Inverse of ``to_json``."""
-        approach = data.get("approach")
         return cls(q=floats(data["q"]), marker=str(data["marker"]), p=floats(data["p"]),
                    cov=matrix(data["cov"]),
                    t=None if data.get("t") is None else float(data["t"]),
-                   approach=None if approach is None else floats(approach))
+                   approach=optional_floats(data, "approach"))
 
 
 def world_point_samples(samples: Sequence[WorldPointSample], n_joints: int) -> Samples:
