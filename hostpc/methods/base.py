@@ -184,7 +184,8 @@ class Plan:
 class Sample(Protocol):
     """A measured sample of one kind as a typed value (each kind's frozen dataclass, e.g.
     ``hostpc.kinds.stereo_target.sample.StereoSample``); its JSON form, the sample in
-    dataset-file form, is what the journal holds."""
+    dataset-file form key for key as the journal has always held it (so an old run
+    resumes), is what the journal holds; the kind reads it back with ``from_json``."""
 
     def to_json(self) -> dict[str, Any]:
         """The sample's dataset-file form (SI)."""

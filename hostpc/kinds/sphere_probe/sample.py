@@ -1,8 +1,7 @@
 """sphere_probe's sample as a typed value: one probe contact (SI).
 
-The acquisition builds it; the journal stores it through ``to_json`` (the sample's
-dataset-file form, key for key as the journal has always held it, so an old run resumes)
-and the dataset is built from the samples read back with ``from_json``.
+A ``hostpc.methods.base.Sample``: built by the acquisition, journaled through ``to_json``,
+read back with ``from_json``.
 """
 
 from __future__ import annotations
