@@ -55,7 +55,7 @@ from typing import Any, ClassVar, Literal, Protocol
 
 import numpy as np
 
-from hostpc.dataset import Dataset
+from hostpc.dataset import Dataset, Samples
 from hostpc.methods.cell import Cell
 from hostpc.planning.design import PoseGroups
 from hostpc.robots.base import MoveOutcome, Need, RobotAdapter, RobotState
@@ -232,6 +232,33 @@ def optional_stack(values: Sequence[Any | None], shape: tuple[int, ...]) -> np.n
         if value is not None:
             out[i] = value
     return out
+
+
+class PointSample(Protocol):
+    """A typed sample that measures a 3-D point (stereo_target, world_point)."""
+
+    @property
+    def q(self) -> tuple[float, ...]: ...
+    @property
+    def p(self) -> tuple[float, ...]: ...
+    @property
+    def cov(self) -> tuple[tuple[float, ...], ...]: ...
+    @property
+    def t(self) -> float | None: ...
+    @property
+    def approach(self) -> tuple[float, ...] | None: ...
+
+
+def point_samples(samples: Sequence[PointSample], n_joints: int, **more: Any) -> Samples:
+    """Typed point samples as a dataset's ``Samples`` (q, p, cov, t, approach), with a
+    kind's further columns ``more`` (``Samples`` arguments)."""
+    n = len(samples)
+    return Samples(
+        q=np.array([s.q for s in samples], dtype=float).reshape(n, n_joints),
+        p=np.array([s.p for s in samples], dtype=float).reshape(n, 3),
+        cov=np.array([s.cov for s in samples], dtype=float).reshape(n, 3, 3),
+        t=optional_values([s.t for s in samples]),
+        approach=optional_rows([s.approach for s in samples], n_joints), **more)
 
 
 def optional_values(values: Sequence[float | None]) -> np.ndarray:

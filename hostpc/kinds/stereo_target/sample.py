@@ -11,8 +11,6 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
 from hostpc.dataset.model import Samples
 from hostpc.methods.base import (
     floats,
@@ -20,9 +18,8 @@ from hostpc.methods.base import (
     optional_floats,
     optional_json,
     optional_matrix,
-    optional_rows,
     optional_stack,
-    optional_values,
+    point_samples,
 )
 
 
@@ -56,12 +53,6 @@ class StereoSample:
 
 def stereo_samples(samples: Sequence[StereoSample], n_joints: int) -> Samples:
     """The samples as a dataset's ``Samples`` (``uv`` NaN where a sample has none)."""
-    n = len(samples)
-    return Samples(
-        q=np.array([s.q for s in samples], dtype=float).reshape(n, n_joints),
-        p=np.array([s.p for s in samples], dtype=float).reshape(n, 3),
-        cov=np.array([s.cov for s in samples], dtype=float).reshape(n, 3, 3),
-        t=optional_values([s.t for s in samples]),
-        approach=optional_rows([s.approach for s in samples], n_joints),
-        uv=optional_stack([s.uv for s in samples], (2, 2)))
+    return point_samples(samples, n_joints,
+                         uv=optional_stack([s.uv for s in samples], (2, 2)))
 

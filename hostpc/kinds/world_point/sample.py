@@ -18,8 +18,7 @@ from hostpc.methods.base import (
     matrix,
     optional_floats,
     optional_json,
-    optional_rows,
-    optional_values,
+    point_samples,
 )
 
 
@@ -54,12 +53,7 @@ class WorldPointSample:
 
 def world_point_samples(samples: Sequence[WorldPointSample], n_joints: int) -> Samples:
     """The samples as a dataset's ``Samples`` (every axis measured: ``mask`` all ones)."""
-    n = len(samples)
-    return Samples(
-        q=np.array([s.q for s in samples], dtype=float).reshape(n, n_joints),
-        p=np.array([s.p for s in samples], dtype=float).reshape(n, 3),
-        cov=np.array([s.cov for s in samples], dtype=float).reshape(n, 3, 3),
-        t=optional_values([s.t for s in samples]),
-        approach=optional_rows([s.approach for s in samples], n_joints),
+    return point_samples(
+        samples, n_joints,
         fields={"marker": np.asarray([s.marker for s in samples], dtype=np.str_),
-                "mask": np.ones((n, 3))})
+                "mask": np.ones((len(samples), 3))})
