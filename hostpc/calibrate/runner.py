@@ -64,7 +64,7 @@ from hostpc.calibrate.summary import (
     result_document,
 )
 from hostpc.calibrate.verify import VerifyResult, evaluate_verify
-from hostpc.dataset import Dataset, dataset_from_dict, save_dataset
+from hostpc.dataset import Dataset, save_dataset
 from hostpc.errors import ConnectionFailed, ControllerError, InputError, ZerocalError
 from hostpc.files import write_json_atomic
 from hostpc.fitting import FitResult, fit
@@ -367,8 +367,7 @@ class Runner:
                  stop: int | None = None) -> Dataset:
         samples = [r.sample for r in self.journal.records(phase) if r.ok and r.sample
                    and first <= r.index and (stop is None or r.index < stop)]
-        return dataset_from_dict(method.dataset_document(samples),
-                                 plugins=method.settings.plugins)
+        return method.dataset(samples)
 
     async def _verify(self, method: Method, plan: Plan, result: FitResult,
                       settings: RunSettings, offsets: np.ndarray, pushed_delta: np.ndarray,

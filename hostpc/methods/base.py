@@ -12,9 +12,15 @@ procedure around it:
                                     expected covariances (nominal model): the planner's and the
                                     identifiability check's Jacobian comes from it
     acquire(robot, phase, index, q, q_from)
-                                    drive to one pose and measure: a SampleRecord with a sample
-                                    in dataset-file form, or skipped with the reason
-    dataset_document(records)       the journaled samples as a `zerocal-dataset/1` document
+                                    drive to one pose and measure: the kind's typed sample
+                                    (a frozen dataclass, `Sample`) journaled through its
+                                    `to_json` (`SampleRecord.measured`), or skipped with the
+                                    reason
+    dataset_document(records)       the journaled samples (their JSON form) as a
+                                    `zerocal-dataset/1` document
+    dataset(records)                the journaled samples as the run's Dataset (built-in
+                                    kinds: read back with the kind's `from_json` and built
+                                    from the typed samples; default: from dataset_document)
 
 Optional hooks (defaults in `Method`):
 
@@ -49,7 +55,7 @@ from typing import Any, ClassVar, Literal, Protocol
 
 import numpy as np
 
-from hostpc.dataset import Dataset
+from hostpc.dataset import Dataset, Samples
 from hostpc.methods.cell import Cell
 from hostpc.planning.design import PoseGroups
 from hostpc.robots.base import MoveOutcome, Need, RobotAdapter, RobotState
@@ -175,12 +181,108 @@ class Plan:
         return cls(q=q, q_verify=q_verify, info=dict(data.get("info", {})), **more)
 
 
+class Sample(Protocol):
+    """A measured sample of one kind as a typed value (each kind's frozen dataclass, e.g.
+    ``hostpc.kinds.stereo_target.sample.StereoSample``); its JSON form, the sample in
+    dataset-file form key for key as the journal has always held it (so an old run
+    resumes), is what the journal holds; the kind reads it back with ``from_json``."""
+
+    def to_json(self) -> dict[str, Any]:
+        """The sample's dataset-file form (SI)."""
+
+
+def floats(values: Sequence[float] | np.ndarray) -> tuple[float, ...]:
+    """A typed sample's vector field from a list or array (JSON numbers, floats)."""
+    return tuple(float(v) for v in np.asarray(values, dtype=float).reshape(-1))
+
+
+def matrix(values: Sequence[Sequence[float]] | np.ndarray) -> tuple[tuple[float, ...], ...]:
+    """A typed sample's matrix field from nested lists or a 2-D array (floats)."""
+    return tuple(tuple(float(v) for v in row) for row in np.asarray(values, dtype=float))
+
+
+def optional_json(**fields: Any) -> dict[str, Any]:
+    """A typed sample's optional fields that are set, in order, as JSON (tuples as
+    lists): what its ``to_json`` appends after the fields every sample has."""
+    def plain(value: Any) -> Any:
+        return [plain(v) for v in value] if isinstance(value, tuple) else value
+
+    return {name: plain(value) for name, value in fields.items() if value is not None}
+
+
+def optional_floats(data: Mapping[str, Any], name: str) -> tuple[float, ...] | None:
+    """A JSON sample's optional vector field (``floats``), None where absent."""
+    value = data.get(name)
+    return None if value is None else floats(value)
+
+
+def optional_matrix(data: Mapping[str, Any], name: str) -> tuple[tuple[float, ...], ...] | None:
+    """A JSON sample's optional matrix field (``matrix``), None where absent."""
+    value = data.get(name)
+    return None if value is None else matrix(value)
+
+
+def optional_stack(values: Sequence[Any | None], shape: tuple[int, ...]) -> np.ndarray | None:
+    """(N, *shape) typed samples' optional arrays (e.g. ``uv``) as a ``Samples`` column:
+    NaN where a sample has none; None where none has one."""
+    if all(v is None for v in values):
+        return None
+    out = np.full((len(values), *shape), np.nan)
+    for i, value in enumerate(values):
+        if value is not None:
+            out[i] = value
+    return out
+
+
+class PointSample(Protocol):
+    """A typed sample that measures a 3-D point (stereo_target, world_point)."""
+
+    @property
+    def q(self) -> tuple[float, ...]: ...
+    @property
+    def p(self) -> tuple[float, ...]: ...
+    @property
+    def cov(self) -> tuple[tuple[float, ...], ...]: ...
+    @property
+    def t(self) -> float | None: ...
+    @property
+    def approach(self) -> tuple[float, ...] | None: ...
+
+
+def point_samples(samples: Sequence[PointSample], n_joints: int, **more: Any) -> Samples:
+    """Typed point samples as a dataset's ``Samples`` (q, p, cov, t, approach), with a
+    kind's further columns ``more`` (``Samples`` arguments)."""
+    n = len(samples)
+    return Samples(
+        q=np.array([s.q for s in samples], dtype=float).reshape(n, n_joints),
+        p=np.array([s.p for s in samples], dtype=float).reshape(n, 3),
+        cov=np.array([s.cov for s in samples], dtype=float).reshape(n, 3, 3),
+        t=optional_values([s.t for s in samples]),
+        approach=optional_rows([s.approach for s in samples], n_joints), **more)
+
+
+def optional_values(values: Sequence[float | None]) -> np.ndarray:
+    """(N,) a typed samples' optional number as a ``Samples`` column: NaN where absent."""
+    return np.array([np.nan if v is None else v for v in values], dtype=float)
+
+
+def optional_rows(rows: Sequence[Sequence[float] | None], width: int) -> np.ndarray:
+    """(N, width) typed samples' optional vectors (e.g. ``approach``) as a ``Samples``
+    column: NaN rows where absent."""
+    out = np.full((len(rows), width), np.nan)
+    for i, row in enumerate(rows):
+        if row is not None:
+            out[i, :len(row)] = row
+    return out
+
+
 @dataclass(frozen=True)
 class SampleRecord:
     """One pose's outcome, as journaled.
 
     phase / index: which plan pose; ok: measured; sample: the sample in dataset-file form
-    (SI units; stereo_target: q, p, cov, t, approach, uv); reason: why it was skipped;
+    (SI units; the `to_json` of the kind's typed sample, `Sample`; stereo_target: q, p,
+    cov, t, approach, uv); reason: why it was skipped;
     q_end: (n,) where the robot is after this pose (for the next pose's approach signs).
     """
 
@@ -228,6 +330,12 @@ class SampleRecord:
             reason=data.get("reason"),
             q_end=data.get("q_end"),
         )
+
+    @classmethod
+    def measured(cls, phase: Phase, index: int, sample: Sample,
+                 q_end: Sequence[float] | None) -> SampleRecord:
+        """The record of a measured pose: its typed sample in the journal's (JSON) form."""
+        return cls(phase, index, True, sample=sample.to_json(), q_end=q_end)
 
 
 class Progress(Protocol):
@@ -337,6 +445,15 @@ class Method(ABC):
     @abstractmethod
     def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         """The samples (dataset-file form, in order) as a `zerocal-dataset/1` document."""
+
+    def dataset(self, samples: Sequence[Mapping[str, Any]]) -> Dataset:
+        """The journaled samples (dataset-file form, in order) as the run's Dataset. A kind
+        with typed samples reads them with its `from_json` and builds the Dataset from
+        them; the default reads `dataset_document` (a plugin's method)."""
+        from hostpc.dataset import dataset_from_dict
+
+        return dataset_from_dict(self.dataset_document(samples),
+                                 plugins=self.settings.plugins)
 
     def default_effects(self) -> str | None:
         """The effect spec fitted (and planned for) when the settings give none; None: the

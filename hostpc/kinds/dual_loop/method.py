@@ -8,11 +8,11 @@ each with its covariance; the method never sees images. Both loops are solved jo
 the shared runner (`hostpc.fit`, Mahalanobis: each point whitened by its own covariance).
 
 Per plan pose: move all 16 joints, `measure_targets`, and record one observation per arm
-whose target is in view, in dataset-file form (`chain`, `q_head`, `q_arm`, `p` (m, camera
-frame), `cov` (m^2), `t` (s since the run started), `approach` (the arm's joints)). The
-journal keeps one record per pose with `{"observations": [...]}`; `dataset_document`
-flattens them into the samples of a `zerocal-dataset/1` document. A pose with no target in
-view is journaled as skipped.
+whose target is in view, a `TargetObservation` (`chain`, `q_head`, `q_arm`, `p` (m, camera
+frame), `cov` (m^2), `t` (s since the run started), `approach` (the arm's joints);
+hostpc.kinds.dual_loop.sample). The journal keeps one record per pose,
+`PoseObservations` in its JSON form `{"observations": [...]}`; `dataset` flattens them into
+the samples of a Dataset. A pose with no target in view is journaled as skipped.
 
 Planning: candidates come from `hostpc.kinds.dual_loop.planning.plan_poses` (an arm pose around
 the home pose, the head aimed at that arm's target, nominal model), as combined poses with
@@ -49,10 +49,15 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hostpc.dataset import FORMAT_TAG, Dataset, FramePose, dataset_from_dict
+from hostpc.dataset import Dataset, FramePose, RobotDescription, dataset_to_dict
 from hostpc.errors import InputError
 from hostpc.kinds.dual_loop.model import ARMS, DUAL_LOOP_FRAMES
 from hostpc.kinds.dual_loop.planning import nominal_frames, plan_poses
+from hostpc.kinds.dual_loop.sample import (
+    PoseObservations,
+    TargetObservation,
+    observation_samples,
+)
 from hostpc.kinematics.humanoid import HUMANOID_HOME, get_tree
 from hostpc.kinematics.rotations import pose_to_transform
 from hostpc.kinematics.tree import KinematicTree
@@ -62,6 +67,8 @@ from hostpc.methods.base import (
     Progress,
     RunSettings,
     SampleRecord,
+    floats,
+    matrix,
     move_or_skip,
 )
 from hostpc.methods.cell import Cell
@@ -318,37 +325,33 @@ class DualLoopMethod(Method):
         q = np.asarray(q, dtype=float)
         chains = self.aimed_chain(q)
 
-        def samples(p: np.ndarray, cov: np.ndarray) -> list[dict[str, Any]]:
-            return [self._sample(str(chains[k]), q[k], p[k], cov[k], float(k), None)
-                    for k in range(q.shape[0])]
+        def samples(p: np.ndarray, cov: np.ndarray) -> list[TargetObservation]:
+            return [self._observation(str(chains[k]), q[k], p[k], cov[k], float(k), None,
+                                      None) for k in range(q.shape[0])]
 
         placeholder = np.broadcast_to(np.array([0.0, 0.0, 0.5]), (q.shape[0], 3))
         eye = np.broadcast_to(np.eye(3) * 1e-8, (q.shape[0], 3, 3))
-        dataset = dataset_from_dict(self.dataset_document(samples(placeholder, eye)))
-        problem = build_problem(dataset, "joint_offsets")
+        problem = build_problem(self.observations_dataset(samples(placeholder, eye)),
+                                "joint_offsets")
         p, _ = predict(problem, np.zeros(problem.layout.size), jacobian=False)
         cov = self.expected_covariance(p, self.pixel_sigma)
-        return dataset_from_dict(self.dataset_document(samples(p, cov)))
+        return self.observations_dataset(samples(p, cov))
 
     # ---------------------------------------------------------------- acquisition
 
-    def _sample(self, side: str, q: np.ndarray, p: np.ndarray, cov: np.ndarray, t: float,
-                q_from: np.ndarray | None) -> dict[str, Any]:
-        """One observation in dataset-file form (SI)."""
-        head = self.tree.joint_slice("head")
+    def _observation(self, side: str, q: np.ndarray, p: np.ndarray, cov: np.ndarray,
+                     t: float, q_from: np.ndarray | None, uv: np.ndarray | None
+                     ) -> TargetObservation:
+        """One observation (SI) of the target on arm `side` at q (n,)."""
         arm = self.tree.joint_slice(side)
-        sample: dict[str, Any] = {
-            "chain": side,
-            "q_head": [float(v) for v in q[head]],
-            "q_arm": [float(v) for v in q[arm]],
-            "p": [float(v) for v in p],
-            "cov": np.asarray(cov, dtype=float).tolist(),
-            "t": t,
-        }
+        approach = None
         if q_from is not None:
             signs = np.sign(q[arm] - np.asarray(q_from, dtype=float)[arm])
-            sample["approach"] = [float(s) if s != 0 else 1.0 for s in signs]
-        return sample
+            approach = tuple(float(s) if s != 0 else 1.0 for s in signs)
+        return TargetObservation(
+            chain=side, q_head=floats(q[self.tree.joint_slice("head")]), q_arm=floats(q[arm]),
+            p=floats(p), cov=matrix(cov), t=t, approach=approach,
+            uv=None if uv is None else matrix(np.asarray(uv, dtype=float).reshape(2, 2)))
 
     async def acquire(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
                       q_from: np.ndarray | None) -> SampleRecord:
@@ -368,51 +371,42 @@ class DualLoopMethod(Method):
             cov = np.asarray(target.cov, dtype=float)
             if self.pixel_floor > 0:
                 cov = cov + self.floor_covariance(np.asarray(target.p))
-            sample = self._sample(target.chain, q_seen, np.asarray(target.p), cov,
-                                  float(measurement.t) - self._t0, q_from)
-            if target.uv is not None:
-                sample["uv"] = np.asarray(target.uv, dtype=float).reshape(2, 2).tolist()
-            observations.append(sample)
+            observations.append(self._observation(
+                target.chain, q_seen, np.asarray(target.p), cov,
+                float(measurement.t) - self._t0, q_from,
+                None if target.uv is None else np.asarray(target.uv, dtype=float)))
         if not observations:
             return SampleRecord(phase, index, False, reason="no target in view", q_end=q_end)
-        return SampleRecord(phase, index, True, sample={"observations": observations},
-                            q_end=q_end)
+        return SampleRecord.measured(phase, index, PoseObservations(tuple(observations)),
+                                     q_end=q_end)
 
     # ---------------------------------------------------------------- dataset
 
     def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-        """A `zerocal-dataset/1` dual_loop document: the journaled records' observations
-        (or plain samples) in order, the nominal frames and `known`."""
-        flat: list[dict[str, Any]] = []
-        for record in samples:
-            if "observations" in record:
-                flat.extend(dict(o) for o in record["observations"])
-            else:
-                flat.append(dict(record))
-        frames: dict[str, Any] = {}
-        for name, value in self.frames.items():
-            if isinstance(value, FramePose):
-                frames[name] = {"xyz": value.xyz.tolist(), "rpy": value.rpy.tolist()}
-            else:
-                frames[name] = np.asarray(value, dtype=float).tolist()
-        return {
-            "format": FORMAT_TAG,
-            "method": self.name,
-            "units": {"length": "m", "angle": "rad", "time": "s"},
-            "robot": {"name": self.tree.name},
-            "frames": frames,
-            "known": list(self.known),
-            "samples": flat,
-            **self._camera_uncertainty(flat),
-        }
+        """A `zerocal-dataset/1` dual_loop document (`dataset`, written)."""
+        return dataset_to_dict(self.dataset(samples))
 
-    def _camera_uncertainty(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    def dataset(self, samples: Sequence[Mapping[str, Any]]) -> Dataset:
+        """The journaled records' observations (or plain samples) in order as a Dataset
+        with the nominal frames and `known`, built from the typed observations."""
+        return self.observations_dataset(
+            [o for record in samples for o in PoseObservations.from_json(record).observations])
+
+    def observations_dataset(self, observations: Sequence[TargetObservation]) -> Dataset:
+        """`dataset` of typed observations."""
+        frames = {name: self.frames[name] for name in DUAL_LOOP_FRAMES}
+        return Dataset(method=self.name, robot=RobotDescription(name=self.tree.name),
+                       frames=frames, samples=observation_samples(observations),
+                       known=tuple(self.known),
+                       extra_fields=self._camera_uncertainty(observations))
+
+    def _camera_uncertainty(self, samples: Sequence[TargetObservation]) -> dict[str, Any]:
         """The dataset's `rig_uncertainty` block (the head camera's calibration, its
         covariance and the pixel floor the covariances include), or nothing when the
         controller reports no calibration or a sample has no `uv`."""
         if self.calibration is None or not samples:
             return {}
-        missing = sum("uv" not in s for s in samples)
+        missing = sum(s.uv is None for s in samples)
         if missing:
             if self._progress is not None:
                 self._progress.message(
@@ -427,11 +421,13 @@ class DualLoopMethod(Method):
 
     def describe(self) -> dict[str, Any]:
         """The tree, frames and camera model for the result document (SI)."""
-        document = self.dataset_document([])
         return {"dual_loop": {
             "tree": self.tree.name,
             "joints": list(self.tree.joint_labels),
-            "frames": document["frames"],
+            "frames": {name: ({"xyz": value.xyz.tolist(), "rpy": value.rpy.tolist()}
+                              if isinstance(value, FramePose)
+                              else np.asarray(value, dtype=float).tolist())
+                       for name, value in self.frames.items()},
             "known": list(self.known),
             "camera": {"focal_px": self.focal_px, "baseline": self.baseline,
                        "image_size": list(self.image_size)},

@@ -80,8 +80,9 @@ from hostpc.kinds.sphere_probe.planning.setup import (
     PlanConfig,
     ProbeSetup,
 )
+from hostpc.kinds.sphere_probe.sample import ProbeSample
 from hostpc.kinematics import Chain
-from hostpc.methods.base import Method, Phase, Progress, RunSettings, SampleRecord
+from hostpc.methods.base import Method, Phase, Progress, RunSettings, SampleRecord, floats
 from hostpc.methods.cell import Cell
 from hostpc.planning.approach import travel_signs
 from hostpc.planning.design import PoseGroups
@@ -327,29 +328,32 @@ class SphereProbeMethod(Method):
             return SampleRecord(phase, index, False, q_end=q_end,
                                 reason=f"no probe contact before the end of travel "
                                        f"({record.reason})")
-        sample: dict[str, Any] = {
-            "q": record.q_latched.tolist(), "group": record.group,
-            "sigma": float(self.setup.contact_sigma(record.speed or 0.0)),
-            "approach": record.approach.tolist(), "t": record.t,
-            "extra": {"contact": float(record.group * CONTACTS_PER_ORIENTATION
-                                       + record.index)},
-        }
-        if record.speed is not None:
-            sample["speed"] = record.speed
-            sample["extra"]["tip_speed"] = record.speed
-        return SampleRecord(phase, index, True, sample=sample, q_end=q_end)
+        sample = ProbeSample(
+            q=floats(record.q_latched), group=record.group,
+            sigma=float(self.setup.contact_sigma(record.speed or 0.0)),
+            approach=floats(record.approach), t=record.t,
+            contact=record.group * CONTACTS_PER_ORIENTATION + record.index,
+            speed=record.speed)
+        return SampleRecord.measured(phase, index, sample, q_end=q_end)
 
     def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-        """The samples as a dataset document, with the initial estimate as nominal frames
-        and approach speeds along the contact normal (falls back to the nominal frames and
-        tip speeds when the samples cannot support the estimate, e.g. a few verify ones)."""
+        """The samples as a dataset document (`dataset`, written)."""
         from hostpc.dataset.writing import dataset_to_dict
+
+        return dataset_to_dict(self.dataset(samples))
+
+    def dataset(self, samples: Sequence[Mapping[str, Any]]) -> Dataset:
+        """The journaled samples as a Dataset built from the typed samples, with the
+        initial estimate as nominal frames and approach speeds along the contact normal
+        (falls back to the nominal frames and tip speeds when the samples cannot support
+        the estimate, e.g. a few verify ones)."""
         from hostpc.kinds.sphere_probe.planning.geometry import SphereFitError
 
         contacts = {(c.group, c.index): c for c in (self.plan.contacts if self.plan else [])}
+        typed = [ProbeSample.from_json(s) for s in samples]
         records = []
-        for s in samples:
-            key = int(round(float(s.get("extra", {}).get("contact", -1))))
+        for sample in typed:
+            key = sample.contact
             planned = contacts.get((key // CONTACTS_PER_ORIENTATION,
                                     key % CONTACTS_PER_ORIENTATION))
             direction = None
@@ -357,26 +361,23 @@ class SphereProbeMethod(Method):
                 travel = planned.q_target - planned.q_start
                 direction = travel / np.linalg.norm(travel)
             records.append(ContactRecord(
-                group=int(s["group"]), index=key % CONTACTS_PER_ORIENTATION, contact=True,
-                q_latched=np.asarray(s["q"], float),
-                speed=None if s.get("speed") is None else float(s["speed"]),
-                approach=np.asarray(s["approach"], float), t=float(s.get("t", 0.0)),
+                group=sample.group, index=key % CONTACTS_PER_ORIENTATION, contact=True,
+                q_latched=np.asarray(sample.q, float), speed=sample.speed,
+                approach=np.asarray(sample.approach, float), t=sample.t,
                 direction=direction))
         import hashlib
         import json
 
-
         digest = hashlib.sha256(
-            json.dumps([list(s["q"]) for s in samples]).encode()).hexdigest()
+            json.dumps([list(sample.q) for sample in typed]).encode()).hexdigest()
         saved = (json.loads(self.frames_path.read_text()) if self.frames_path.is_file()
                  else None)
         if saved is not None and saved["samples"] != digest:
             # another sample set (verification): the fit's nominal frames, so that the
             # fitted deltas apply to the same nominals
-            dataset = build_dataset(self.cell.robot, self.setup, records,
-                                    start_frames={k: np.asarray(saved[k], float)
-                                                  for k in ("tool", "sphere")})
-            return dataset_to_dict(dataset)
+            return build_dataset(self.cell.robot, self.setup, records,
+                                 start_frames={k: np.asarray(saved[k], float)
+                                               for k in ("tool", "sphere")})
         try:
             dataset = build_dataset(self.cell.robot, self.setup, records)
         except (SphereFitError, np.linalg.LinAlgError):
@@ -386,7 +387,7 @@ class SphereProbeMethod(Method):
         write_json_atomic(self.frames_path, {
             "samples": digest, "tool": dataset.pose("tool").xyz.tolist(),
             "sphere": dataset.sphere().center.tolist()})
-        return dataset_to_dict(dataset)
+        return dataset
 
     def describe(self) -> dict[str, Any]:
         """The probe set-up for the result document (SI)."""

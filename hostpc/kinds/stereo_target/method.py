@@ -22,9 +22,10 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from hostpc.dataset import FORMAT_TAG, Dataset, dataset_from_dict
+from hostpc.dataset import Dataset, RobotDescription
 from hostpc.errors import ControllerError, InputError, ZerocalError
 from hostpc.files import write_json_atomic
+from hostpc.kinds.stereo_target.sample import StereoSample, stereo_samples
 from hostpc.kinematics import forward, get_robot, invert_transform, pose_to_transform
 from hostpc.methods.approach_moves import ApproachMoves
 from hostpc.methods.base import (
@@ -32,6 +33,8 @@ from hostpc.methods.base import (
     Phase,
     Progress,
     SampleRecord,
+    floats,
+    matrix,
 )
 from hostpc.methods.cell import require_camera_cell
 from hostpc.model.measurements.predict import predict
@@ -286,16 +289,15 @@ class StereoTargetMethod(Method):
     def design_dataset(self, q: np.ndarray) -> Dataset:
         """Nominal predicted points at q (N, n) with the planning covariance."""
         n = q.shape[0]
-        placeholder = self.dataset_document(
-            [{"q": row.tolist(), "p": [0.0, 0.0, 0.5], "sigma": 1e-4} for row in q])
-        dataset = dataset_from_dict(placeholder)
-        problem = build_problem(dataset, "joint_offsets")
+        placeholder = self.samples_dataset(
+            [StereoSample(q=floats(row), p=(0.0, 0.0, 0.5), cov=matrix(np.eye(3) * 1e-8))
+             for row in q])
+        problem = build_problem(placeholder, "joint_offsets")
         p, _ = predict(problem, np.zeros(problem.layout.size), jacobian=False)
         cov = self.expected_covariance(p)
-        document = self.dataset_document(
-            [{"q": q[k].tolist(), "p": p[k].tolist(), "cov": cov[k].tolist(),
-              "t": float(k)} for k in range(n)])
-        return dataset_from_dict(document)
+        return self.samples_dataset(
+            [StereoSample(q=floats(q[k]), p=floats(p[k]), cov=matrix(cov[k]), t=float(k))
+             for k in range(n)])
 
     # ---------------------------------------------------------------- acquisition
 
@@ -320,57 +322,45 @@ class StereoTargetMethod(Method):
         cov = np.asarray(observation.cov, float)
         if self.pixel_floor > 0:
             cov = cov + self.expected_covariance(p[None, :], self.pixel_floor)[0]
-        sample: dict[str, Any] = {
-            "q": [float(v) for v in capture.q],
-            "p": [float(v) for v in p],
-            "cov": cov.tolist(),
-            "t": float(capture.t) - self._t0,
-            "approach": self._moves.signs(q_from, capture.q),
-        }
-        if observation.uv is not None:
-            sample["uv"] = np.asarray(observation.uv, float).tolist()
-        return SampleRecord(phase, index, True, sample=sample, q_end=outcome.q.tolist())
+        sample = StereoSample(
+            q=floats(capture.q), p=floats(p), cov=matrix(cov),
+            t=float(capture.t) - self._t0,
+            approach=floats(self._moves.signs(q_from, capture.q)),
+            uv=None if observation.uv is None else matrix(observation.uv))
+        return SampleRecord.measured(phase, index, sample, q_end=outcome.q.tolist())
 
     # ---------------------------------------------------------------- dataset
 
     def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-        """A `zerocal-dataset/1` document with the cell's nominal frames and `known`; the
-        disk centres re-corrected with the normals of a preliminary fit when the samples
-        carry `uv` (hostpc.kinds.stereo_target.refinement)."""
-        document = {
-            "format": FORMAT_TAG,
-            "method": self.name,
-            "units": {"length": "m", "angle": "rad", "time": "s"},
-            "robot": {"name": self.cell.robot},
-            "frames": {
-                "tool": {"xyz": self._tool.xyz.tolist(), "rpy": self._tool.rpy.tolist()},
-                "target": self._target.tolist(),
-            },
-            "known": list(self.cell.known),
-            "samples": [dict(s) for s in samples],
-            **self._rig_uncertainty(),
-        }
-        return self._refined(document)
-
-    def _refined(self, document: dict[str, Any]) -> dict[str, Any]:
-        """The document with its centres re-corrected by fitted normals (or as it was)."""
-        samples = document["samples"]
-        if self.rig is None or not samples or any("uv" not in s for s in samples):
-            return document
+        """The samples as a `zerocal-dataset/1` document (`dataset`, written)."""
         from hostpc.dataset import dataset_to_dict
+
+        return dataset_to_dict(self.dataset(samples))
+
+    def dataset(self, samples: Sequence[Mapping[str, Any]]) -> Dataset:
+        """The journaled samples as a Dataset with the cell's nominal frames and `known`,
+        built from the typed samples; the disk centres re-corrected with the normals of a
+        preliminary fit when every sample carries `uv`
+        (hostpc.kinds.stereo_target.refinement)."""
+        return self.samples_dataset([StereoSample.from_json(s) for s in samples])
+
+    def samples_dataset(self, typed: Sequence[StereoSample]) -> Dataset:
+        """`dataset` of typed samples."""
+        dataset = Dataset(
+            method=self.name, robot=RobotDescription(name=self.cell.robot),
+            frames={"tool": self._tool, "target": self._target},
+            samples=stereo_samples(typed, self._chain.n), known=tuple(self.cell.known),
+            extra_fields=self._rig_uncertainty())
+        if self.rig is None or not typed or any(s.uv is None for s in typed):
+            return dataset
         from hostpc.kinds.stereo_target.refinement import refine_dataset
 
         # each set by its own preliminary fit (never the fit set's model: after a push it
         # would be wrong for the verify set); a set too small for its own fit (a short
         # plan's 4 verify poses) is left as measured (stereo_refinement.MIN_SAMPLES)
-        dataset, _ = refine_dataset(dataset_from_dict(document), self.rig,
-                                    self.cell.target_radius, self.cell.target_normal)
-        refined = dataset_to_dict(dataset)
-        for before, after in zip(samples, refined["samples"], strict=True):
-            for key, value in before.items():  # keep fields the dataset layer does not read
-                after.setdefault(key, value)
+        refined, _ = refine_dataset(dataset, self.rig, self.cell.target_radius,
+                                    self.cell.target_normal)
         return refined
-
 
     def _rig_uncertainty(self) -> dict[str, Any]:
         """The dataset's `rig_uncertainty` block (the rig and its calibration covariance,

@@ -26,9 +26,11 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hostpc.dataset import FORMAT_TAG, Dataset, dataset_from_dict
+from hostpc.dataset import Dataset, FramePose, RobotDescription, dataset_to_dict
 from hostpc.errors import ControllerError, InputError
 from hostpc.files import write_json_atomic
+from hostpc.kinds.world_point.file_face import WorldPointFile
+from hostpc.kinds.world_point.sample import WorldPointSample, world_point_samples
 from hostpc.kinematics import forward, get_robot, pose_to_transform
 from hostpc.methods.approach_moves import ApproachMoves
 from hostpc.methods.base import (
@@ -36,6 +38,8 @@ from hostpc.methods.base import (
     Phase,
     Progress,
     SampleRecord,
+    floats,
+    matrix,
 )
 from hostpc.robots.base import Need, RobotAdapter, RobotState, tracker_of
 
@@ -192,10 +196,9 @@ class WorldPointMethod(Method):
                                                                      q).T_base_flange
         p = np.einsum("nij,nj->ni", T[:, :3, :3], positions) + T[:, :3, 3]
         cov = spherical_covariance(p, *self._noise())
-        document = self.dataset_document(
-            [{"q": q[k].tolist(), "marker": names[chosen[k]], "p": p[k].tolist(),
-              "cov": cov[k].tolist(), "t": float(k)} for k in range(q.shape[0])])
-        return dataset_from_dict(document)
+        return self.samples_dataset(
+            [WorldPointSample(q=floats(q[k]), marker=names[chosen[k]], p=floats(p[k]),
+                              cov=matrix(cov[k]), t=float(k)) for k in range(q.shape[0])])
 
     # ---------------------------------------------------------------- acquisition
 
@@ -214,25 +217,40 @@ class WorldPointMethod(Method):
             return SampleRecord(phase, index, False, reason=f"beam lost: {lost}",
                                 q_end=outcome.q.tolist())
         p, cov = reading.points[name]
-        sample = {"q": [float(v) for v in reading.q], "marker": name,
-                  "p": [float(v) for v in p], "cov": np.asarray(cov, float).tolist(),
-                  "t": float(reading.time) - self._t0,
-                  "approach": self._moves.signs(q_from, reading.q)}
-        return SampleRecord(phase, index, True, sample=sample, q_end=outcome.q.tolist())
+        sample = WorldPointSample(q=floats(reading.q), marker=name, p=floats(p),
+                                  cov=matrix(cov), t=float(reading.time) - self._t0,
+                                  approach=floats(self._moves.signs(q_from, reading.q)))
+        return SampleRecord.measured(phase, index, sample, q_end=outcome.q.tolist())
 
     # ---------------------------------------------------------------- dataset
 
     def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-        """A `zerocal-dataset/1` world_point document with the nominal frames and `known`."""
-        return {
-            "format": FORMAT_TAG,
-            "method": self.name,
-            "units": {"length": "m", "angle": "rad", "time": "s"},
-            "robot": {"name": self.cell.robot},
-            "frames": {"world": self.world(), "markers": self.markers()},
-            "known": [k for k in self.cell.known if k in ("world", "markers")],
-            "samples": [dict(s) for s in samples],
-        }
+        """A `zerocal-dataset/1` world_point document with the nominal frames and `known`
+        (`dataset`, written)."""
+        return dataset_to_dict(self.dataset(samples))
+
+    def dataset(self, samples: Sequence[Mapping[str, Any]]) -> Dataset:
+        """The journaled samples as the run's Dataset, built from the typed samples (the
+        same as reading ``dataset_document``). A subclass with its own samples and file
+        form (a plugin kind on world_point's instrument: tests/kinds_example/tracker_range)
+        is read from its document."""
+        if type(self).dataset_document is not WorldPointMethod.dataset_document:
+            return super().dataset(samples)
+        return self.samples_dataset([WorldPointSample.from_json(s) for s in samples])
+
+    def samples_dataset(self, typed: Sequence[WorldPointSample]) -> Dataset:
+        """`dataset` of typed samples."""
+        world = self.world()
+        dataset = Dataset(
+            method=self.name, robot=RobotDescription(name=self.cell.robot),
+            frames={"world": FramePose(xyz=np.asarray(world["xyz"]),
+                                       rpy=np.asarray(world["rpy"])),
+                    "markers": {k: np.asarray(v, dtype=float)
+                                for k, v in self.markers().items()}},
+            samples=world_point_samples(typed, self._chain.n),
+            known=tuple(k for k in self.cell.known if k in ("world", "markers")))
+        WorldPointFile().check_samples(dataset.samples, dataset.frames)
+        return dataset
 
     def describe(self) -> dict[str, Any]:
         """What is known and which offsets the data define, for the result document."""
