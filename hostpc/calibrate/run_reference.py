@@ -13,7 +13,7 @@ rewritten, so a later resume keeps it.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +31,7 @@ from hostpc.calibrate.reference import (
     load_reference,
 )
 from hostpc.calibrate.reference_check import ReferenceCheck, check_reference
+from hostpc.calibrate.run_result import RunResult
 from hostpc.dataset import Dataset
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
@@ -145,12 +146,11 @@ def refuse_if_moved(plan: PushPlan, check: ReferenceCheck | None,
     return dataclasses.replace(plan, refused=moved_line(check, reference, run_dir))
 
 
-def add_reference_check(document: dict[str, Any], check: ReferenceCheck | None,
-                        reference: CellReference | None, run_dir: Path) -> None:
-    """The result document's `reference_check` block (null without a reference)."""
+def reference_check_block(check: ReferenceCheck | None, reference: CellReference | None,
+                          run_dir: Path) -> dict[str, Any] | None:
+    """The result's `reference_check` block (None without a reference)."""
     if reference is None:
-        document["reference_check"] = None
-        return
+        return None
     block: dict[str, Any] = {"reference": str(run_dir / REFERENCE_FILE),
                              "recorded": reference.recorded,
                              "robot_serial": reference.robot_serial}
@@ -158,16 +158,16 @@ def add_reference_check(document: dict[str, Any], check: ReferenceCheck | None,
         block.update(check.to_dict())
         if check.moved:
             block["message"] = moved_line(check, reference, run_dir)
-    document["reference_check"] = block
+    return block
 
 
-def reference_summary_lines(document: Mapping[str, Any]) -> list[str]:
+def reference_summary_lines(run: RunResult) -> list[str]:
     """The summary's lines for the joints the run can calibrate and the reference check."""
     lines = []
-    joints = (document.get("plan") or {}).get("joints")
+    joints = run.plan.get("joints")
     if joints:
         lines.append(f"joints: {joints['text']}")
-    block = document.get("reference_check")
+    block = run.reference_check
     if block:
         if block.get("moved"):
             lines.append(f"reference check: {block['message']}")

@@ -61,7 +61,7 @@ from hostpc.calibrate.run_values import RobotInfo, RunOutcome
 from hostpc.calibrate.summary import (
     finite_or_none,
     format_summary,
-    result_document,
+    run_result,
 )
 from hostpc.calibrate.verify import VerifyResult, evaluate_verify
 from hostpc.dataset import Dataset, dataset_from_dict, save_dataset
@@ -175,7 +175,7 @@ class Runner:
             if stored is not None:
                 progress.close()
                 return RunOutcome(self.run_dir, stored, format_summary(stored),
-                                  int(stored.get("exit_code", 0)))
+                                  stored.exit_code)
             settings = resume_settings(RunSettings.from_dict(self.header["settings"]),
                                        self.resume_overrides, self.journal, progress)
             self.journal.event("resumed", at=_now())
@@ -281,35 +281,31 @@ class Runner:
             verify_result = await self._verify(method, plan, result, settings, offsets,
                                                pushed_delta, q_now)
 
-        document = result_document(self.journal, self.run_dir, self.robot_info.to_dict(),
-                                   settings, cell, plan, method, dataset, result, push_plan,
-                                   push_status, verify_result, truth)
-        cell_reference.add_reference_check(document, check, self.reference, self.run_dir)
         outcome = run_outcome(self.journal, joint_sources(result, initial_offsets.size),
                               run_dir=self.run_dir, header=self.header,
                               require_joints=settings.require_joints, finished=True,
                               known=cell.known)
-        document["outcome"] = outcome.to_dict()  # the verdict every view reads
-        document["exit_code"] = outcome.exit_code
-        if exports is not None:  # the robot keeps no offsets (UR): these files are the push
-            document["push"].update(on_controller=False, exports=exports)
-            document["files"].update({f"ur_{kind}": path for kind, path in exports.items()})
+        run = run_result(self.journal, self.run_dir, self.robot_info.to_dict(), settings, cell,
+                         plan, method, dataset, result, push_plan, push_status, verify_result,
+                         truth, outcome=outcome.to_dict(), exports=exports,
+                         reference_check=cell_reference.reference_check_block(
+                             check, self.reference, self.run_dir))
         archive_result(self.run_dir)
         if self.report:
-            report_file = write_run_report(self.run_dir, dataset, settings, document, truth,
+            report_file = write_run_report(self.run_dir, dataset, settings, run, truth,
                                            self.progress)
             if report_file:
-                document["files"]["report"] = report_file
-        summary = format_summary(document)  # after the report: it names the report's path
+                run = run.with_files(report=report_file)
+        summary = format_summary(run)  # after the report: it names the report's path
         (self.run_dir / "summary.txt").write_text(summary + "\n", encoding="utf-8")
-        write_json_atomic(self.run_dir / "result.json", document)
-        self.journal.event("result", exit_code=document["exit_code"], push=push_status,
+        write_json_atomic(self.run_dir / "result.json", run.to_dict())
+        self.journal.event("result", exit_code=run.exit_code, push=push_status,
                            verdict=None if verify_result is None else verify_result.verdict,
                            outcome=outcome.verdict, at=_now(),
                            offsets=[float(v) for v in offsets])
         progress.close()
-        return RunOutcome(self.run_dir, document, summary, document["exit_code"], result,
-                          dataset, verify_result, push_plan)
+        return RunOutcome(self.run_dir, run, summary, run.exit_code, result, dataset,
+                          verify_result, push_plan)
 
     # ------------------------------------------------------------------ steps
 
