@@ -12,9 +12,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from hostpc.calibrate.joint_status import JointSource
 from hostpc.calibrate.journal import Journal
@@ -26,26 +25,21 @@ from hostpc.calibrate.outcome import (
     sources_from_outcome,
 )
 from hostpc.calibrate.resume import archive_result
+from hostpc.calibrate.run_header import RunHeader, read_run_header
 from hostpc.calibrate.run_result import RunResult
 from hostpc.calibrate.summary import format_summary
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
 
 
-def robot_argument(header: Mapping[str, Any]) -> str:
-    """How a new run would name this run's robot: `sim` or its address."""
-    robot = header.get("robot") or {}
-    return "sim" if robot.get("sim") else str(robot.get("address") or "ROBOT")
-
-
 def run_outcome(journal: Journal, sources: Sequence[JointSource], *, run_dir: Path,
-                header: Mapping[str, Any], require_joints: str | None, finished: bool,
+                header: RunHeader, require_joints: str | None, finished: bool,
                 known: Sequence[str] = ()) -> RobotOutcome:
     """The outcome of the run in `run_dir` from its journal and the fit's sources."""
     required = parse_required_joints(require_joints, len(sources))
     return derive_outcome(journal.timeline(*JOURNAL_KINDS), sources, run_dir=str(run_dir),
                           finished=finished, required=required,
-                          robot_arg=robot_argument(header), known=known)
+                          robot_arg=header.robot_argument(), known=known)
 
 
 def rewrite_outcome(run_dir: Path) -> RobotOutcome | None:
@@ -63,11 +57,10 @@ def rewrite_outcome(run_dir: Path) -> RobotOutcome | None:
         return None
     stored = RunResult.from_dict(document)
     journal = Journal(run_dir)
-    header = journal.read_header()
+    header = read_run_header(journal)
     journal.load()
-    settings = header.get("settings") or {}
     outcome = run_outcome(journal, sources_from_outcome(document["outcome"]), run_dir=run_dir,
-                          header=header, require_joints=settings.get("require_joints"),
+                          header=header, require_joints=header.settings.require_joints,
                           finished=journal.last_event("result") is not None,
                           known=stored.known)
     run = dataclasses.replace(stored, outcome=outcome.to_dict(), exit_code=outcome.exit_code)

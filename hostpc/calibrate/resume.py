@@ -82,11 +82,12 @@ class SampleClock:
         self.last_t: float | None = None
         self.t_shift: float | None = None
 
-    def time_origin(self, initial: Mapping[str, Any], state: RobotState) -> float:
-        """The controller time (s) sample `t` counts from: the run's start; on a resume
+    def time_origin(self, started: float | None, state: RobotState) -> float:
+        """The controller time (s) sample `t` counts from: the run's start (`started`, the
+        controller time in the run header, None if not known); on a resume
         whose controller clock went back (a restarted controller, e.g. a resumed `--robot
         sim` run) moved so that the new samples' t continue from the last journaled one."""
-        t0 = float(initial.get("time") or 0.0)
+        t0 = float(started or 0.0)
         now = state.extra.get("time")
         if self.last_t is None or not isinstance(now, int | float) or not math.isfinite(now):
             return t0

@@ -31,6 +31,7 @@ from hostpc.calibrate.reference import (
     load_reference,
 )
 from hostpc.calibrate.reference_check import ReferenceCheck, check_reference
+from hostpc.calibrate.run_header import RunHeader
 from hostpc.calibrate.run_result import RunResult
 from hostpc.dataset import Dataset
 from hostpc.errors import InputError
@@ -83,19 +84,20 @@ def record_reference_choice(run_dir: Path, journal: Journal, reference: CellRefe
                      f"{', '.join(f.name for f in reference.frames)})")
 
 
-def resume_known(cell: Cell, known: tuple[str, ...] | None, header: dict[str, Any],
-                 journal: Journal, progress: Progress) -> Cell:
+def resume_known(cell: Cell, known: tuple[str, ...] | None, header: RunHeader,
+                 journal: Journal, progress: Progress) -> tuple[Cell, RunHeader]:
     """The resumed run's cell with `--known` applied (None: unchanged): the samples are
-    refitted with the new known set, which is journaled and kept in run.json."""
+    refitted with the new known set, which is journaled and kept in run.json (the header
+    returned)."""
     if known is None or tuple(known) == tuple(cell.known):
-        return cell
+        return cell, header
     cell = dataclasses.replace(cell, known=tuple(known))
-    header["cell"] = cell.to_dict()
-    journal.write_header(header)
+    header = dataclasses.replace(header, cell=cell.to_dict())
+    journal.write_header(header.to_dict())
     journal.event("note", text="known frames changed on resume", known=list(known))
     progress.message(f"resume with known frames: {', '.join(known) or 'none'} (the measured "
                      "samples are refitted)")
-    return cell
+    return cell, header
 
 
 def reference_priors(reference: CellReference | None, dataset: Dataset,

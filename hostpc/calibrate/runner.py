@@ -55,6 +55,7 @@ from hostpc.calibrate.resume import (
     verify_round,
 )
 from hostpc.calibrate.robot_time import RobotTimer
+from hostpc.calibrate.run_header import InitialState, RunHeader, read_run_header
 from hostpc.calibrate.run_plan import plan_run
 from hostpc.calibrate.run_report import write_run_report
 from hostpc.calibrate.run_values import RobotInfo, RunOutcome
@@ -122,7 +123,7 @@ class Runner:
         self.reference: Any = None  # the CellReference the run uses, and its frames' priors
         self._priors: list[Any] = []
         self.journal = Journal(self.run_dir)
-        self.header: dict[str, Any] = {}
+        self.header: RunHeader | None = None  # run.json (run_header.py)
         self._clock = SampleClock(self.journal, self.progress)  # resume: sample t continues
 
     # ------------------------------------------------------------------ top level
@@ -163,11 +164,10 @@ class Runner:
         truth = self.truth_reader() if self.truth_reader is not None else None
 
         if resume:
-            self.header = self.journal.read_header()
+            header = self.header = read_run_header(self.journal)
             self.journal.load()
-            initial = self.header["initial"]
-            check_resume_offsets(self.journal, self.run_dir,
-                                 np.asarray(initial["zero_offsets"], float), offsets)
+            initial = header.initial
+            check_resume_offsets(self.journal, self.run_dir, initial.offsets, offsets)
             settle_push_intent(self.journal, self.run_dir, self.robot_info.address, progress,
                                offsets)
             stored = stored_result(self.journal, self.run_dir, offsets, self._asked(),
@@ -176,12 +176,12 @@ class Runner:
                 progress.close()
                 return RunOutcome(self.run_dir, stored, format_summary(stored),
                                   stored.exit_code)
-            settings = resume_settings(RunSettings.from_dict(self.header["settings"]),
-                                       self.resume_overrides, self.journal, progress)
+            settings = resume_settings(header.settings, self.resume_overrides, self.journal,
+                                       progress)
             self.journal.event("resumed", at=_now())
-            cell = cell_reference.resume_known(
-                cell_from_dict(self.header["cell"], settings.plugins), self.known,
-                self.header, self.journal, progress)
+            cell, header = cell_reference.resume_known(
+                cell_from_dict(header.cell, settings.plugins), self.known, header,
+                self.journal, progress)
             self._clock.last_t = self.journal.last_sample_t()
             progress.message(f"resuming {self.run_dir}: "
                              f"{len(self.journal.records('fit'))} fit and "
@@ -196,21 +196,15 @@ class Runner:
                 raise InputError(str(exc)) from None
             cell = build_cell(state.camera, state.robot, self.cell_file, self.known,
                               self.default_known, settings.plugins)
-            initial = _state_dict(state, offsets)
-            self.header = {
-                "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
-                "robot": self.robot_info.to_dict(),
-                "robot_serial": self.robot_serial,
-                "settings": settings.to_dict(),
-                "seed": settings.seed,
-                "cell": cell.to_dict(),
-                "initial": initial,
-            }
+            initial = _initial_state(state, offsets)
+            header = RunHeader(_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+                               self.robot_info, self.robot_serial, settings, cell.to_dict(),
+                               initial)
 
         method = method_class(settings.method, settings.plugins)(settings, cell, self.run_dir)
         clock = method.sample_clock()
         if clock is not None:
-            clock.set_time_origin(self._clock.time_origin(initial, state))
+            clock.set_time_origin(self._clock.time_origin(initial.time, state))
         if settings.effects is None and method.default_effects() is not None:
             # the method's own default model (sphere_probe: + trigger_latency)
             settings = dataclasses.replace(settings, effects=method.default_effects())
@@ -219,7 +213,7 @@ class Runner:
             self.run_dir, self.reference_option, resume=resume, method=settings.method,
             robot_model=cell.robot, robot_serial=self.robot_serial)
         if not resume:  # the run exists from here on (a failed check leaves nothing)
-            self.journal.write_header(self.header)
+            self.journal.write_header(header.to_dict())
         cell_reference.record_reference_choice(self.run_dir, self.journal, self.reference,
                                                changed, self.reference_option, progress)
         self._timer = RobotTimer(self.robot, self.journal, state)  # robot time (robot_time.py)
@@ -227,12 +221,13 @@ class Runner:
         await method.prepare(self.robot, progress)
         await self._timer.end("rig")
 
-        if "plan" in self.header:
-            plan = Plan.from_dict(self.header["plan"])
+        if header.plan is not None:
+            plan = header.plan
         else:
             plan = plan_run(method, state, settings, progress)
-            self.header["plan"] = plan.to_dict()
-            self.journal.write_header(self.header)
+            header = dataclasses.replace(header, plan=plan)
+            self.journal.write_header(header.to_dict())
+        self.header = header
         plan = cell_reference.with_joint_coverage(plan, method, settings, cell, self.reference,
                                                   progress)
         for text in plan.info.get("structural_unidentifiable", []):
@@ -266,7 +261,7 @@ class Runner:
                          f"{result.chi2_dof:.3f}, {status}")
         check = cell_reference.check_run_reference(result, self._priors, settings, progress)
 
-        initial_offsets = np.asarray(initial["zero_offsets"], float)
+        initial_offsets = initial.offsets
         push_plan = plan_push(result, initial_offsets, settings.max_correction_deg,
                               settings.force, dataset_file=str(self.run_dir / "dataset.json"))
         push_plan = cell_reference.refuse_if_moved(push_plan, check, self.reference,
@@ -282,7 +277,7 @@ class Runner:
                                                pushed_delta, q_now)
 
         outcome = run_outcome(self.journal, joint_sources(result, initial_offsets.size),
-                              run_dir=self.run_dir, header=self.header,
+                              run_dir=self.run_dir, header=header,
                               require_joints=settings.require_joints, finished=True,
                               known=cell.known)
         run = run_result(self.journal, self.run_dir, self.robot_info.to_dict(), settings, cell,
@@ -464,14 +459,11 @@ def _now() -> str:
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
 
 
-def _state_dict(state: RobotState, offsets: np.ndarray) -> dict[str, Any]:
-    return {
-        "robot": state.robot,
-        "q": [float(v) for v in state.q],
-        "zero_offsets": [float(v) for v in offsets],
-        "q_min": [float(v) for v in state.q_min],
-        "q_max": [float(v) for v in state.q_max],
-        "time": finite_or_none(float(state.extra.get("time", 0.0) or 0.0)),
-        "camera": state.camera,
-    }
+def _initial_state(state: RobotState, offsets: np.ndarray) -> InitialState:
+    return InitialState(state.robot, tuple(float(v) for v in state.q),
+                        tuple(float(v) for v in offsets),
+                        tuple(float(v) for v in state.q_min),
+                        tuple(float(v) for v in state.q_max),
+                        finite_or_none(float(state.extra.get("time", 0.0) or 0.0)),
+                        state.camera)
 
