@@ -123,7 +123,6 @@ class Runner:
         self.reference: Any = None  # the CellReference the run uses, and its frames' priors
         self._priors: list[Any] = []
         self.journal = Journal(self.run_dir)
-        self.header: RunHeader | None = None  # run.json (run_header.py)
         self._clock = SampleClock(self.journal, self.progress)  # resume: sample t continues
 
     # ------------------------------------------------------------------ top level
@@ -164,7 +163,7 @@ class Runner:
         truth = self.truth_reader() if self.truth_reader is not None else None
 
         if resume:
-            header = self.header = read_run_header(self.journal)
+            header = read_run_header(self.journal)
             self.journal.load()
             initial = header.initial
             check_resume_offsets(self.journal, self.run_dir, initial.offsets, offsets)
@@ -227,7 +226,6 @@ class Runner:
             plan = plan_run(method, state, settings, progress)
             header = dataclasses.replace(header, plan=plan)
             self.journal.write_header(header.to_dict())
-        self.header = header
         plan = cell_reference.with_joint_coverage(plan, method, settings, cell, self.reference,
                                                   progress)
         for text in plan.info.get("structural_unidentifiable", []):
