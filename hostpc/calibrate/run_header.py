@@ -98,7 +98,12 @@ class RunHeader:
 
 def read_run_header(journal: Journal) -> RunHeader:
     """The run header of `journal`'s folder (InputError if it is missing or broken)."""
+    return parse_run_header(journal.read_header(), journal)
+
+
+def parse_run_header(data: Mapping[str, Any], journal: Journal) -> RunHeader:
+    """`data` (``journal.read_header()``) as a RunHeader (InputError if it is broken)."""
     try:
-        return RunHeader.from_dict(journal.read_header())
+        return RunHeader.from_dict(data)
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise InputError(f"{journal.run_path}: not a calibration run header ({exc!r})") from None

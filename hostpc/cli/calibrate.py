@@ -39,7 +39,7 @@ from typing import Any, NoReturn
 
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.outcome import parse_required_joints
-from hostpc.calibrate.run_header import read_run_header
+from hostpc.calibrate.run_header import parse_run_header, read_run_header
 from hostpc.calibrate.run_plan import PlanningError
 from hostpc.calibrate.run_values import RobotInfo, RunOutcome
 from hostpc.calibrate.runner import Runner
@@ -280,8 +280,9 @@ def run(args: argparse.Namespace) -> int:
     if args.resume:
         run_dir = Path(args.resume)
         journal = Journal(run_dir)
-        header = read_run_header(journal)
+        data = journal.read_header()
         journal.load()  # a damaged journal line: one line, exit 2, before connecting
+        header = parse_run_header(data, journal)
         recorded = header.robot
         address = parse_robot(args.robot) if args.robot else (
             RobotAddress(sim=True) if recorded.sim else parse_robot(recorded.address))
