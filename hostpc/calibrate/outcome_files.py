@@ -10,10 +10,10 @@ summary.txt are kept as result.N.json / summary.N.txt (resume.archive_result).
 
 from __future__ import annotations
 
+import dataclasses
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from hostpc.calibrate.joint_status import JointSource
 from hostpc.calibrate.journal import Journal
@@ -25,25 +25,21 @@ from hostpc.calibrate.outcome import (
     sources_from_outcome,
 )
 from hostpc.calibrate.resume import archive_result
+from hostpc.calibrate.run_header import RunHeader, read_run_header
+from hostpc.calibrate.run_result import RunResult
 from hostpc.calibrate.summary import format_summary
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
 
 
-def robot_argument(header: Mapping[str, Any]) -> str:
-    """How a new run would name this run's robot: `sim` or its address."""
-    robot = header.get("robot") or {}
-    return "sim" if robot.get("sim") else str(robot.get("address") or "ROBOT")
-
-
 def run_outcome(journal: Journal, sources: Sequence[JointSource], *, run_dir: Path,
-                header: Mapping[str, Any], require_joints: str | None, finished: bool,
+                header: RunHeader, require_joints: str | None, finished: bool,
                 known: Sequence[str] = ()) -> RobotOutcome:
     """The outcome of the run in `run_dir` from its journal and the fit's sources."""
     required = parse_required_joints(require_joints, len(sources))
     return derive_outcome(journal.timeline(*JOURNAL_KINDS), sources, run_dir=str(run_dir),
                           finished=finished, required=required,
-                          robot_arg=robot_argument(header), known=known)
+                          robot_arg=header.robot_argument(), known=known)
 
 
 def rewrite_outcome(run_dir: Path) -> RobotOutcome | None:
@@ -52,38 +48,36 @@ def rewrite_outcome(run_dir: Path) -> RobotOutcome | None:
     the run has no result.json or one without an outcome block (an older version's)."""
     path = run_dir / "result.json"
     try:
-        document: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
+        document = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         return None
     except (OSError, ValueError) as exc:
         raise InputError(f"{path}: cannot read ({exc})") from None
-    block = document.get("outcome")
-    if not isinstance(block, dict):
+    if not isinstance(document.get("outcome"), dict):
         return None
+    stored = RunResult.from_dict(document)
     journal = Journal(run_dir)
-    header = journal.read_header()
+    header = read_run_header(journal)
     journal.load()
-    settings = header.get("settings") or {}
-    outcome = run_outcome(journal, sources_from_outcome(block), run_dir=run_dir,
-                          header=header, require_joints=settings.get("require_joints"),
+    outcome = run_outcome(journal, sources_from_outcome(document["outcome"]), run_dir=run_dir,
+                          header=header, require_joints=header.settings.require_joints,
                           finished=journal.last_event("result") is not None,
-                          known=tuple(document.get("known") or ()))
-    document["outcome"] = outcome.to_dict()
-    document["exit_code"] = outcome.exit_code
+                          known=stored.known)
+    run = dataclasses.replace(stored, outcome=outcome.to_dict(), exit_code=outcome.exit_code)
     if outcome.verdict == "ROLLED_BACK":
-        document.setdefault("push", {})["status"] = "rolled_back"
-        for row in (document.get("offsets") or {}).get("joints", []):
-            row["pushed"] = False
-    summary = format_summary(document)
+        run = dataclasses.replace(
+            run, push=dataclasses.replace(run.push, status="rolled_back"),
+            offsets=tuple(dataclasses.replace(row, pushed=False) for row in run.offsets))
+    summary = format_summary(run)
     archive_result(run_dir)
     (run_dir / "summary.txt").write_text(summary + "\n", encoding="utf-8")
-    write_json_atomic(path, document)
+    write_json_atomic(path, run.to_dict())
     if (run_dir / "report.html").is_file():
-        _render_report(run_dir, document)
+        _render_report(run_dir, run)
     return outcome
 
 
-def _render_report(run_dir: Path, document: Mapping[str, Any]) -> None:
+def _render_report(run_dir: Path, run: RunResult) -> None:
     """report.html again with the new outcome (the diagnosis of the run's dataset too)."""
     from hostpc.report import write_calibration_report
 
@@ -92,10 +86,10 @@ def _render_report(run_dir: Path, document: Mapping[str, Any]) -> None:
     if dataset.is_file():
         from hostpc.diagnostics import diagnose
 
-        settings = document.get("settings") or {}
-        effects = (document.get("fit") or {}).get("effects") or settings.get("effects")
+        settings = run.settings
+        effects = run.fit.get("effects") or settings.get("effects")
         diagnosis = diagnose(dataset, effects, plugins=settings.get("plugins") or [],
                              loss=settings.get("loss") or "linear", source=str(dataset))
     truth_file = run_dir / "sim" / "truth.json"
     truth = json.loads(truth_file.read_text()) if truth_file.is_file() else None
-    write_calibration_report(run_dir / "report.html", document, diagnosis, truth)
+    write_calibration_report(run_dir / "report.html", run.to_dict(), diagnosis, truth)

@@ -21,6 +21,7 @@ import numpy as np
 
 from hostpc.calibrate.journal import Journal, sample_times, shift_sample_t
 from hostpc.calibrate.push import PUSH_FILE, PushRecord, intent_outcome, same_offsets
+from hostpc.calibrate.run_result import RunResult
 from hostpc.errors import ControllerError, InputError
 from hostpc.files import write_json_atomic
 from hostpc.methods.base import Progress, RunSettings, SampleRecord
@@ -81,11 +82,12 @@ class SampleClock:
         self.last_t: float | None = None
         self.t_shift: float | None = None
 
-    def time_origin(self, initial: Mapping[str, Any], state: RobotState) -> float:
-        """The controller time (s) sample `t` counts from: the run's start; on a resume
+    def time_origin(self, started: float | None, state: RobotState) -> float:
+        """The controller time (s) sample `t` counts from: the run's start (`started`, the
+        controller time in the run header, None if not known); on a resume
         whose controller clock went back (a restarted controller, e.g. a resumed `--robot
         sim` run) moved so that the new samples' t continue from the last journaled one."""
-        t0 = float(initial.get("time") or 0.0)
+        t0 = float(started or 0.0)
         now = state.extra.get("time")
         if self.last_t is None or not isinstance(now, int | float) or not math.isfinite(now):
             return t0
@@ -219,8 +221,8 @@ def verify_round(journal: Journal, offsets: np.ndarray, pushed_delta: np.ndarray
 
 
 def stored_result(journal: Journal, run_dir: Path, offsets_now: np.ndarray, asked: bool,
-                  progress: Progress) -> dict[str, Any] | None:
-    """The finished run's result document if this resume has nothing to do: the run wrote
+                  progress: Progress) -> RunResult | None:
+    """The finished run's result if this resume has nothing to do: the run wrote
     its result (journal event `result`) under the offsets the controller has now, and the
     resume asks for nothing new (`asked`: --push, --force, --effects, ...) or the stored
     result is pushed offsets that PASSed their verification (never overwritten). A PASS of
@@ -234,10 +236,10 @@ def stored_result(journal: Journal, run_dir: Path, offsets_now: np.ndarray, aske
     if asked and not (final.get("verdict") == "PASS" and final.get("push") == "pushed"):
         return None
     try:
-        document: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        stored = RunResult.from_dict(json.loads(path.read_text(encoding="utf-8")))
+    except (OSError, ValueError, KeyError, TypeError):
         return None
-    status = (document.get("push") or {}).get("status")
+    status = stored.push.status
     verdict = final.get("verdict")
     if status == "pushed" and verdict is not None:
         what = f"already pushed and verified ({verdict})"
@@ -246,7 +248,7 @@ def stored_result(journal: Journal, run_dir: Path, offsets_now: np.ndarray, aske
     note = ("; verified pushed offsets are never overwritten: start a new run to change "
             "them" if asked else "")
     progress.message(f"{what}: the stored result follows; nothing changed{note}")
-    return document
+    return stored
 
 
 def archive_result(run_dir: Path) -> None:

@@ -13,7 +13,7 @@ rewritten, so a later resume keeps it.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +31,8 @@ from hostpc.calibrate.reference import (
     load_reference,
 )
 from hostpc.calibrate.reference_check import ReferenceCheck, check_reference
+from hostpc.calibrate.run_header import RunHeader
+from hostpc.calibrate.run_result import RunResult
 from hostpc.dataset import Dataset
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
@@ -82,19 +84,20 @@ def record_reference_choice(run_dir: Path, journal: Journal, reference: CellRefe
                      f"{', '.join(f.name for f in reference.frames)})")
 
 
-def resume_known(cell: Cell, known: tuple[str, ...] | None, header: dict[str, Any],
-                 journal: Journal, progress: Progress) -> Cell:
+def resume_known(cell: Cell, known: tuple[str, ...] | None, header: RunHeader,
+                 journal: Journal, progress: Progress) -> tuple[Cell, RunHeader]:
     """The resumed run's cell with `--known` applied (None: unchanged): the samples are
-    refitted with the new known set, which is journaled and kept in run.json."""
+    refitted with the new known set, which is journaled and kept in run.json (the header
+    returned)."""
     if known is None or tuple(known) == tuple(cell.known):
-        return cell
+        return cell, header
     cell = dataclasses.replace(cell, known=tuple(known))
-    header["cell"] = cell.to_dict()
-    journal.write_header(header)
+    header = dataclasses.replace(header, cell=cell.to_dict())
+    journal.write_header(header.to_dict())
     journal.event("note", text="known frames changed on resume", known=list(known))
     progress.message(f"resume with known frames: {', '.join(known) or 'none'} (the measured "
                      "samples are refitted)")
-    return cell
+    return cell, header
 
 
 def reference_priors(reference: CellReference | None, dataset: Dataset,
@@ -145,12 +148,11 @@ def refuse_if_moved(plan: PushPlan, check: ReferenceCheck | None,
     return dataclasses.replace(plan, refused=moved_line(check, reference, run_dir))
 
 
-def add_reference_check(document: dict[str, Any], check: ReferenceCheck | None,
-                        reference: CellReference | None, run_dir: Path) -> None:
-    """The result document's `reference_check` block (null without a reference)."""
+def reference_check_block(check: ReferenceCheck | None, reference: CellReference | None,
+                          run_dir: Path) -> dict[str, Any] | None:
+    """The result's `reference_check` block (None without a reference)."""
     if reference is None:
-        document["reference_check"] = None
-        return
+        return None
     block: dict[str, Any] = {"reference": str(run_dir / REFERENCE_FILE),
                              "recorded": reference.recorded,
                              "robot_serial": reference.robot_serial}
@@ -158,16 +160,16 @@ def add_reference_check(document: dict[str, Any], check: ReferenceCheck | None,
         block.update(check.to_dict())
         if check.moved:
             block["message"] = moved_line(check, reference, run_dir)
-    document["reference_check"] = block
+    return block
 
 
-def reference_summary_lines(document: Mapping[str, Any]) -> list[str]:
+def reference_summary_lines(run: RunResult) -> list[str]:
     """The summary's lines for the joints the run can calibrate and the reference check."""
     lines = []
-    joints = (document.get("plan") or {}).get("joints")
+    joints = run.plan.get("joints")
     if joints:
         lines.append(f"joints: {joints['text']}")
-    block = document.get("reference_check")
+    block = run.reference_check
     if block:
         if block.get("moved"):
             lines.append(f"reference check: {block['message']}")

@@ -3,9 +3,11 @@ the diagnosis of its dataset. An extra: a failure to write it never loses a run.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from hostpc.calibrate.run_result import RunResult
 from hostpc.dataset import Dataset
 from hostpc.diagnostics import diagnose
 from hostpc.methods.base import Progress, RunSettings
@@ -13,7 +15,7 @@ from hostpc.report import write_calibration_report
 
 
 def write_run_report(run_dir: Path, dataset: Dataset, settings: RunSettings,
-                     document: dict[str, Any], truth: dict[str, Any] | None,
+                     run: RunResult, truth: Mapping[str, Any] | None,
                      progress: Progress) -> str | None:
     """Write RUN/report.html; returns its path, or None (the reason as a progress message)."""
     progress.stage("report")
@@ -21,7 +23,8 @@ def write_run_report(run_dir: Path, dataset: Dataset, settings: RunSettings,
     try:
         diagnosis = diagnose(dataset, settings.effects, plugins=settings.plugins,
                              source=str(run_dir / "dataset.json"))
-        write_calibration_report(path, document, diagnosis, truth)
+        # the report (a pure layer) reads the result in its JSON form
+        write_calibration_report(path, run.to_dict(), diagnosis, truth)
     except Exception as exc:  # the report is an extra: never lose a run over it
         progress.message(f"report not written: {type(exc).__name__}: {exc}")
         return None

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from hostpc.calibrate.push import PushPlan
+from hostpc.calibrate.run_result import RunResult
 from hostpc.calibrate.verify import VerifyResult
 from hostpc.dataset import Dataset
 from hostpc.fitting import FitResult
@@ -29,10 +30,10 @@ class RobotInfo:
 
 @dataclass
 class RunOutcome:
-    """What a run produced. document: the JSON result; summary: the human text."""
+    """What a run produced. run: its result (result.json); summary: the human text."""
 
     run_dir: Path
-    document: dict[str, Any]
+    run: RunResult
     summary: str
     exit_code: int
     fit: FitResult | None = None
@@ -40,3 +41,8 @@ class RunOutcome:
     verify: VerifyResult | None = None
     push: PushPlan | None = None
     extras: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def document(self) -> dict[str, object]:
+        """The result's JSON form (result.json; `hostpc calibrate --json` prints it)."""
+        return self.run.to_dict()

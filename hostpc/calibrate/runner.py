@@ -55,13 +55,14 @@ from hostpc.calibrate.resume import (
     verify_round,
 )
 from hostpc.calibrate.robot_time import RobotTimer
+from hostpc.calibrate.run_header import InitialState, RunHeader, read_run_header
 from hostpc.calibrate.run_plan import plan_run
 from hostpc.calibrate.run_report import write_run_report
 from hostpc.calibrate.run_values import RobotInfo, RunOutcome
 from hostpc.calibrate.summary import (
     finite_or_none,
     format_summary,
-    result_document,
+    run_result,
 )
 from hostpc.calibrate.verify import VerifyResult, evaluate_verify
 from hostpc.dataset import Dataset, save_dataset
@@ -122,7 +123,6 @@ class Runner:
         self.reference: Any = None  # the CellReference the run uses, and its frames' priors
         self._priors: list[Any] = []
         self.journal = Journal(self.run_dir)
-        self.header: dict[str, Any] = {}
         self._clock = SampleClock(self.journal, self.progress)  # resume: sample t continues
 
     # ------------------------------------------------------------------ top level
@@ -163,11 +163,10 @@ class Runner:
         truth = self.truth_reader() if self.truth_reader is not None else None
 
         if resume:
-            self.header = self.journal.read_header()
+            header = read_run_header(self.journal)
             self.journal.load()
-            initial = self.header["initial"]
-            check_resume_offsets(self.journal, self.run_dir,
-                                 np.asarray(initial["zero_offsets"], float), offsets)
+            initial = header.initial
+            check_resume_offsets(self.journal, self.run_dir, initial.offsets, offsets)
             settle_push_intent(self.journal, self.run_dir, self.robot_info.address, progress,
                                offsets)
             stored = stored_result(self.journal, self.run_dir, offsets, self._asked(),
@@ -175,13 +174,13 @@ class Runner:
             if stored is not None:
                 progress.close()
                 return RunOutcome(self.run_dir, stored, format_summary(stored),
-                                  int(stored.get("exit_code", 0)))
-            settings = resume_settings(RunSettings.from_dict(self.header["settings"]),
-                                       self.resume_overrides, self.journal, progress)
+                                  stored.exit_code)
+            settings = resume_settings(header.settings, self.resume_overrides, self.journal,
+                                       progress)
             self.journal.event("resumed", at=_now())
-            cell = cell_reference.resume_known(
-                cell_from_dict(self.header["cell"], settings.plugins), self.known,
-                self.header, self.journal, progress)
+            cell, header = cell_reference.resume_known(
+                cell_from_dict(header.cell, settings.plugins), self.known, header,
+                self.journal, progress)
             self._clock.last_t = self.journal.last_sample_t()
             progress.message(f"resuming {self.run_dir}: "
                              f"{len(self.journal.records('fit'))} fit and "
@@ -196,21 +195,15 @@ class Runner:
                 raise InputError(str(exc)) from None
             cell = build_cell(state.camera, state.robot, self.cell_file, self.known,
                               self.default_known, settings.plugins)
-            initial = _state_dict(state, offsets)
-            self.header = {
-                "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
-                "robot": self.robot_info.to_dict(),
-                "robot_serial": self.robot_serial,
-                "settings": settings.to_dict(),
-                "seed": settings.seed,
-                "cell": cell.to_dict(),
-                "initial": initial,
-            }
+            initial = _initial_state(state, offsets)
+            header = RunHeader(_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+                               self.robot_info, self.robot_serial, settings, cell.to_dict(),
+                               initial)
 
         method = method_class(settings.method, settings.plugins)(settings, cell, self.run_dir)
         clock = method.sample_clock()
         if clock is not None:
-            clock.set_time_origin(self._clock.time_origin(initial, state))
+            clock.set_time_origin(self._clock.time_origin(initial.time, state))
         if settings.effects is None and method.default_effects() is not None:
             # the method's own default model (sphere_probe: + trigger_latency)
             settings = dataclasses.replace(settings, effects=method.default_effects())
@@ -219,7 +212,7 @@ class Runner:
             self.run_dir, self.reference_option, resume=resume, method=settings.method,
             robot_model=cell.robot, robot_serial=self.robot_serial)
         if not resume:  # the run exists from here on (a failed check leaves nothing)
-            self.journal.write_header(self.header)
+            self.journal.write_header(header.to_dict())
         cell_reference.record_reference_choice(self.run_dir, self.journal, self.reference,
                                                changed, self.reference_option, progress)
         self._timer = RobotTimer(self.robot, self.journal, state)  # robot time (robot_time.py)
@@ -227,12 +220,12 @@ class Runner:
         await method.prepare(self.robot, progress)
         await self._timer.end("rig")
 
-        if "plan" in self.header:
-            plan = Plan.from_dict(self.header["plan"])
+        if header.plan is not None:
+            plan = header.plan
         else:
             plan = plan_run(method, state, settings, progress)
-            self.header["plan"] = plan.to_dict()
-            self.journal.write_header(self.header)
+            header = dataclasses.replace(header, plan=plan)
+            self.journal.write_header(header.to_dict())
         plan = cell_reference.with_joint_coverage(plan, method, settings, cell, self.reference,
                                                   progress)
         for text in plan.info.get("structural_unidentifiable", []):
@@ -266,7 +259,7 @@ class Runner:
                          f"{result.chi2_dof:.3f}, {status}")
         check = cell_reference.check_run_reference(result, self._priors, settings, progress)
 
-        initial_offsets = np.asarray(initial["zero_offsets"], float)
+        initial_offsets = initial.offsets
         push_plan = plan_push(result, initial_offsets, settings.max_correction_deg,
                               settings.force, dataset_file=str(self.run_dir / "dataset.json"))
         push_plan = cell_reference.refuse_if_moved(push_plan, check, self.reference,
@@ -281,35 +274,31 @@ class Runner:
             verify_result = await self._verify(method, plan, result, settings, offsets,
                                                pushed_delta, q_now)
 
-        document = result_document(self.journal, self.run_dir, self.robot_info.to_dict(),
-                                   settings, cell, plan, method, dataset, result, push_plan,
-                                   push_status, verify_result, truth)
-        cell_reference.add_reference_check(document, check, self.reference, self.run_dir)
         outcome = run_outcome(self.journal, joint_sources(result, initial_offsets.size),
-                              run_dir=self.run_dir, header=self.header,
+                              run_dir=self.run_dir, header=header,
                               require_joints=settings.require_joints, finished=True,
                               known=cell.known)
-        document["outcome"] = outcome.to_dict()  # the verdict every view reads
-        document["exit_code"] = outcome.exit_code
-        if exports is not None:  # the robot keeps no offsets (UR): these files are the push
-            document["push"].update(on_controller=False, exports=exports)
-            document["files"].update({f"ur_{kind}": path for kind, path in exports.items()})
+        run = run_result(self.journal, self.run_dir, self.robot_info.to_dict(), settings, cell,
+                         plan, method, dataset, result, push_plan, push_status, verify_result,
+                         truth, outcome=outcome.to_dict(), exports=exports,
+                         reference_check=cell_reference.reference_check_block(
+                             check, self.reference, self.run_dir))
         archive_result(self.run_dir)
         if self.report:
-            report_file = write_run_report(self.run_dir, dataset, settings, document, truth,
+            report_file = write_run_report(self.run_dir, dataset, settings, run, truth,
                                            self.progress)
             if report_file:
-                document["files"]["report"] = report_file
-        summary = format_summary(document)  # after the report: it names the report's path
+                run = run.with_files(report=report_file)
+        summary = format_summary(run)  # after the report: it names the report's path
         (self.run_dir / "summary.txt").write_text(summary + "\n", encoding="utf-8")
-        write_json_atomic(self.run_dir / "result.json", document)
-        self.journal.event("result", exit_code=document["exit_code"], push=push_status,
+        write_json_atomic(self.run_dir / "result.json", run.to_dict())
+        self.journal.event("result", exit_code=run.exit_code, push=push_status,
                            verdict=None if verify_result is None else verify_result.verdict,
                            outcome=outcome.verdict, at=_now(),
                            offsets=[float(v) for v in offsets])
         progress.close()
-        return RunOutcome(self.run_dir, document, summary, document["exit_code"], result,
-                          dataset, verify_result, push_plan)
+        return RunOutcome(self.run_dir, run, summary, run.exit_code, result, dataset,
+                          verify_result, push_plan)
 
     # ------------------------------------------------------------------ steps
 
@@ -467,14 +456,11 @@ def _now() -> str:
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
 
 
-def _state_dict(state: RobotState, offsets: np.ndarray) -> dict[str, Any]:
-    return {
-        "robot": state.robot,
-        "q": [float(v) for v in state.q],
-        "zero_offsets": [float(v) for v in offsets],
-        "q_min": [float(v) for v in state.q_min],
-        "q_max": [float(v) for v in state.q_max],
-        "time": finite_or_none(float(state.extra.get("time", 0.0) or 0.0)),
-        "camera": state.camera,
-    }
+def _initial_state(state: RobotState, offsets: np.ndarray) -> InitialState:
+    return InitialState(state.robot, tuple(float(v) for v in state.q),
+                        tuple(float(v) for v in offsets),
+                        tuple(float(v) for v in state.q_min),
+                        tuple(float(v) for v in state.q_max),
+                        finite_or_none(float(state.extra.get("time", 0.0) or 0.0)),
+                        state.camera)
 

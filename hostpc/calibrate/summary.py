@@ -1,8 +1,8 @@
 """The result of a calibration run: the ``result.json`` document and the ``summary.txt`` text.
 
-``result_document`` gathers what a run produced (plan, acquisition, fit, offsets, push,
-verification, files) and its exit code; ``format_summary`` renders a result document as
-the human-readable summary (mm and degrees), headline first (the run's outcome,
+``run_result`` builds what a run produced (plan, acquisition, fit, offsets, push,
+verification, files, outcome) once, as a ``RunResult`` (run_result.py); ``format_summary``
+renders it as the human-readable summary (mm and degrees), headline first (the run's outcome,
 outcome.py). Exit codes beyond hostpc.errors: 5 = push refused by a guard rail, 6 =
 verification of the pushed offsets failed (with nothing pushed the verification is a model
 check: reported only), 7 = a joint required by `--require-joints` is not calibrated from
@@ -12,6 +12,7 @@ JOINTS_MISSING, never PASS).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -23,6 +24,13 @@ from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.push import PUSH_FILE, PushPlan, joint_display_name
 from hostpc.calibrate.robot_time import format_robot_time, robot_time_document
 from hostpc.calibrate.run_reference import reference_summary_lines
+from hostpc.calibrate.run_result import (
+    Acquisition,
+    OffsetRow,
+    PushResult,
+    RunResult,
+    SkippedPose,
+)
 from hostpc.calibrate.verify import VerifyResult, measured_noise_rms, noise_rms
 from hostpc.dataset import Dataset
 from hostpc.diagnostics.adequacy import chi2_dof_upper
@@ -36,63 +44,60 @@ EXIT_VERIFY_FAILED = 6
 EXIT_JOINTS_NOT_CALIBRATED = 7
 
 
-def result_document(journal: Journal, run_dir: Path, robot: Mapping[str, Any],
-                    settings: RunSettings, cell: Cell, plan: Plan, method: Method,
-                    dataset: Dataset, result: FitResult, push_plan: PushPlan,
-                    push_status: str, verify_result: VerifyResult | None,
-                    truth: dict[str, Any] | None) -> dict[str, Any]:
-    """The result document (``result.json``, format ``RESULT_FORMAT``) of a run in
-    `run_dir`: settings, plan, acquisition (skipped poses from `journal`), fit, offsets,
-    push, verification, files and the exit code; robot: ``RobotInfo.to_dict()``; truth
-    (simulation only) adds ``truth_comparison``."""
-    skipped = [{"phase": r.phase, "index": r.index, "reason": r.reason}
-               for phase in ("fit", "verify") for r in journal.records(phase)
-               if not r.ok]
-    joints = push_plan.joints()
+def run_result(journal: Journal, run_dir: Path, robot: Mapping[str, Any], settings: RunSettings,
+               cell: Cell, plan: Plan, method: Method, dataset: Dataset, result: FitResult,
+               push_plan: PushPlan, push_status: str, verify_result: VerifyResult | None,
+               truth: Mapping[str, Any] | None, *, outcome: Mapping[str, Any],
+               reference_check: Mapping[str, Any] | None,
+               exports: Mapping[str, str] | None) -> RunResult:
+    """The result (``result.json``, format ``RESULT_FORMAT``) of a run in `run_dir`, built
+    once: settings, plan, acquisition (skipped poses from `journal`), fit, offsets, push
+    (with the UR `exports` that are the push, if any), verification, files, the reference
+    check, the outcome (``RobotOutcome.to_dict()``) and its exit code; robot:
+    ``RobotInfo.to_dict()``; truth (simulation only) adds ``truth_comparison``."""
+    skipped = tuple(SkippedPose(r.phase, r.index, r.reason)
+                    for phase in ("fit", "verify") for r in journal.records(phase)
+                    if not r.ok)
     written = push_status == "pushed"
-    for row in joints:
-        row["pushed"] = bool(row["pushed"] and written)
-        if not written:
-            row["new_deg"] = row["old_deg"]
-    push_doc: dict[str, Any] = {"status": push_status, "reason": push_plan.refused,
-                                "max_correction_deg": push_plan.max_correction_deg}
+    rows = tuple(dataclasses.replace(row, pushed=row.pushed and written,
+                                     new_deg=row.new_deg if written else row.old_deg)
+                 for row in (OffsetRow.from_dict(r) for r in push_plan.joints()))
     pushes = journal.events("push")
-    if written and pushes:
-        push_doc["rollback_id"] = pushes[-1]["rollback_id"]
-        push_doc["recovered"] = bool(pushes[-1].get("recovered", False))
-        push_doc["file"] = str(run_dir / PUSH_FILE)
-    # with nothing pushed the verification is a model check: reported, never exit 6
-    if push_status == "refused":
-        exit_code = EXIT_PUSH_REFUSED
-    elif (verify_result is not None and verify_result.pushed
-          and not verify_result.passed):
-        exit_code = EXIT_VERIFY_FAILED
-    else:
-        exit_code = 0
-    document: dict[str, Any] = {
-        "format": RESULT_FORMAT,
-        "run_dir": str(run_dir),
-        "robot": {**robot, "name": cell.robot},
-        "method": settings.method,
-        "settings": settings.to_dict(),
-        "known": list(cell.known),
-        "method_setup": method.describe(),
-        "plan": {
+    push = PushResult(push_status, push_plan.refused, push_plan.max_correction_deg,
+                      {"rollback_id": pushes[-1]["rollback_id"],
+                       "recovered": bool(pushes[-1].get("recovered", False)),
+                       "file": str(run_dir / PUSH_FILE)} if written and pushes else None,
+                      exports)
+    more = journal.last_event("more_poses")
+    files = {
+        "run": str(journal.run_path),
+        "journal": str(journal.journal_path),
+        "dataset": str(run_dir / "dataset.json"),
+        "fit": str(run_dir / "fit.json"),
+        "summary": str(run_dir / "summary.txt"),
+        "result": str(run_dir / "result.json"),
+        **{f"ur_{kind}": path for kind, path in (exports or {}).items()},
+    }
+    return RunResult(
+        format=RESULT_FORMAT,
+        run_dir=str(run_dir),
+        robot={**robot, "name": cell.robot},
+        method=settings.method,
+        settings=settings.to_dict(),
+        known=tuple(cell.known),
+        method_setup=method.describe(),
+        plan={
             "n_poses": int(plan.q.shape[0]),
-            "n_verify": int(plan.verify_poses(
-                journal.last_event("more_poses") is not None).shape[0]),
+            "n_verify": int(plan.verify_poses(more is not None).shape[0]),
             **{k: v for k, v in plan.info.items() if k != "parameters"},
         },
-        "acquisition": {
-            "n_planned": int(plan.q.shape[0]) + (
-                int(plan.more.shape[0]) if journal.last_event("more_poses") else 0),
-            "more_poses": (journal.last_event("more_poses") or {}).get("reason"),
-            "n_measured": dataset.n_samples,
-            "n_poses_measured": sum(r.ok for r in journal.records("fit")),
-            "n_skipped": len(skipped),
-            "skipped": skipped,
-        },
-        "fit": {
+        acquisition=Acquisition(
+            n_planned=int(plan.q.shape[0]) + (int(plan.more.shape[0]) if more else 0),
+            more_poses=(more or {}).get("reason"),
+            n_measured=dataset.n_samples,
+            n_poses_measured=sum(r.ok for r in journal.records("fit")),
+            skipped=skipped),
+        fit={
             "converged": result.converged,
             "effects": list(result.problem.effect_names),
             "rms_mm": result.rms * 1e3,
@@ -110,23 +115,16 @@ def result_document(journal: Journal, run_dir: Path, robot: Mapping[str, Any],
             "unidentifiable": [d.description for d in result.unidentifiable],
             "file": str(run_dir / "fit.json"),
         },
-        "offsets": {"joints": joints},
-        "push": push_doc,
-        "verify": verify_result.to_dict() if verify_result is not None else None,
-        "robot_time_s": robot_time_document(journal),
-        "files": {
-            "run": str(journal.run_path),
-            "journal": str(journal.journal_path),
-            "dataset": str(run_dir / "dataset.json"),
-            "fit": str(run_dir / "fit.json"),
-            "summary": str(run_dir / "summary.txt"),
-            "result": str(run_dir / "result.json"),
-        },
-        "exit_code": exit_code,
-    }
-    if truth is not None:
-        document["truth"] = truth_comparison(truth, push_plan)
-    return document
+        offsets=rows,
+        push=push,
+        verify=verify_result.to_dict() if verify_result is not None else None,
+        robot_time_s=robot_time_document(journal),
+        files=files,
+        exit_code=int(outcome["exit_code"]),  # the verdict every view reads
+        truth=None if truth is None else truth_comparison(truth, push_plan),
+        reference_check=reference_check,
+        outcome=outcome,
+    )
 
 
 def truth_comparison(truth: Mapping[str, Any], push_plan: PushPlan) -> dict[str, Any]:
@@ -157,24 +155,22 @@ def finite_or_none(value: float) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def format_summary(document: Mapping[str, Any]) -> str:
-    """The human-readable summary of a result document (mm and degrees)."""
-    robot = document["robot"]
-    plan, acq, fitd = document["plan"], document["acquisition"], document["fit"]
-    outcome = document.get("outcome") or {}
+def format_summary(run: RunResult) -> str:
+    """The human-readable summary of a run's result (mm and degrees)."""
+    robot, plan, acq, fitd = run.robot, run.plan, run.acquisition, run.fit
+    outcome = run.outcome or {}
     lines = [outcome["headline"]] if outcome.get("headline") else []
+    n_poses = acq.n_measured if acq.n_poses_measured is None else acq.n_poses_measured
     lines += [
-        f"zerocal calibration: {document['method']} on {robot['name']} at "
+        f"zerocal calibration: {run.method} on {robot['name']} at "
         f"{'sim (' + robot['address'] + ')' if robot.get('sim') else robot['address']}",
-        f"run folder: {document['run_dir']}",
-        f"known frames: {', '.join(document['known']) or 'none (every frame estimated)'}",
-        plan_line(plan, acq),
-        f"measured: {acq.get('n_poses_measured', acq['n_measured'])} of {acq['n_planned']} "
-        "fit poses"
-        + (f" ({acq['n_measured']} samples)"
-           if acq.get("n_poses_measured", acq["n_measured"]) != acq["n_measured"] else "")
-        + (f", {acq['n_skipped']} skipped" if acq["n_skipped"] else "")
-        + (f" (more poses measured: {acq['more_poses']})" if acq.get("more_poses") else ""),
+        f"run folder: {run.run_dir}",
+        f"known frames: {', '.join(run.known) or 'none (every frame estimated)'}",
+        plan_line(plan, acq.to_dict()),
+        f"measured: {n_poses} of {acq.n_planned} fit poses"
+        + (f" ({acq.n_measured} samples)" if n_poses != acq.n_measured else "")
+        + (f", {len(acq.skipped)} skipped" if acq.skipped else "")
+        + (f" (more poses measured: {acq.more_poses})" if acq.more_poses else ""),
         f"fit: {'converged' if fitd['converged'] else 'NOT CONVERGED'}, effects "
         f"{', '.join(fitd['effects'])}; residual RMS {fitd['rms_mm']:.4f} mm "
         f"(max {fitd['max_mm']:.4f}), measured noise RMS {_mm(fitd['noise_rms_mm'])} mm "
@@ -185,35 +181,35 @@ def format_summary(document: Mapping[str, Any]) -> str:
     ]
     for text in fitd["unidentifiable"]:
         lines.append(f"  unidentifiable: {text}")
-    lines += reference_summary_lines(document)  # joints calibrated, reference check
-    robot_time = format_robot_time(document)
+    lines += reference_summary_lines(run)  # joints calibrated, reference check
+    robot_time = format_robot_time({"robot_time_s": run.robot_time_s})
     if robot_time:
         lines.append(robot_time)
-    for item in acq["skipped"][:10]:
-        lines.append(f"  skipped {item['phase']} pose {item['index']}: {item['reason']}")
-    rows = document["offsets"]["joints"]
-    names = [joint_display_name(j, row.get("label", "")) for j, row in enumerate(rows)]
+    for item in acq.skipped[:10]:
+        lines.append(f"  skipped {item.phase} pose {item.index}: {item.reason}")
+    rows = run.offsets
+    names = [joint_display_name(j, row.label) for j, row in enumerate(rows)]
     width = max([6, *(len(name) + 2 for name in names)])
     status = {int(j["joint"]): j for j in outcome.get("joints", [])}
     lines += ["", f"  {'joint':<{width}}{'old [deg]':>12}{'correction':>21}{'+/- sigma':>11}"
                   f"{'new [deg]':>12}  pushed" + ("  status" if status else "")]
     for name, row in zip(names, rows, strict=True):
-        joint = status.get(int(row.get("joint", 0)), {})
-        corr = "-" if row["correction_deg"] is None else f"{row['correction_deg']:+.5f}"
+        joint = status.get(row.joint, {})
+        corr = "-" if row.correction_deg is None else f"{row.correction_deg:+.5f}"
         corr += SOURCE_MARK.get(str(joint.get("source")), "")
-        sig = "-" if row["sigma_deg"] is None else f"{row['sigma_deg']:.5f}"
-        pushed = "yes" if row["pushed"] else ("no: " + row["note"] if row["note"] else "no")
-        lines.append(f"  {name:<{width}}{row['old_deg']:>12.5f}{corr:>21}"
-                     f"{sig:>11}{row['new_deg']:>12.5f}  {pushed}"
-                     + (f"  {joint_status_text(joint, row['note'])}" if joint else ""))
+        sig = "-" if row.sigma_deg is None else f"{row.sigma_deg:.5f}"
+        pushed = "yes" if row.pushed else ("no: " + row.note if row.note else "no")
+        lines.append(f"  {name:<{width}}{row.old_deg:>12.5f}{corr:>21}"
+                     f"{sig:>11}{row.new_deg:>12.5f}  {pushed}"
+                     + (f"  {joint_status_text(joint, row.note)}" if joint else ""))
     lines.append("")
     if outcome:
         lines.append(f"controller: {outcome['controller']}")
-    lines.append(_push_line(document))
-    verify = document.get("verify")
-    if verify:
-        lines.append(_verify_line(verify))
-    truth = document.get("truth")
+    lines.append(_push_line({"push": run.push.to_dict(), "robot": robot,
+                             "run_dir": run.run_dir}))
+    if run.verify:
+        lines.append(_verify_line(run.verify))
+    truth = run.truth
     if truth:
         errors = ", ".join(
             f"{names[j] if j < len(names) else f'J{j + 1}'} "
@@ -224,7 +220,7 @@ def format_summary(document: Mapping[str, Any]) -> str:
         if inside:
             lines.append(f"  {sum(inside)} of {len(inside)} identifiable offsets within 3 sigma"
                          f", largest error {truth['max_abs_error_deg']:.5f} deg")
-    report = (document.get("files") or {}).get("report")
+    report = run.files.get("report")
     if report:
         lines.append(f"report: {report}")
     if outcome.get("next_command"):

@@ -39,6 +39,7 @@ from typing import Any, NoReturn
 
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.outcome import parse_required_joints
+from hostpc.calibrate.run_header import parse_run_header, read_run_header
 from hostpc.calibrate.run_plan import PlanningError
 from hostpc.calibrate.run_values import RobotInfo, RunOutcome
 from hostpc.calibrate.runner import Runner
@@ -279,22 +280,21 @@ def run(args: argparse.Namespace) -> int:
     if args.resume:
         run_dir = Path(args.resume)
         journal = Journal(run_dir)
-        header = journal.read_header()
+        data = journal.read_header()
         journal.load()  # a damaged journal line: one line, exit 2, before connecting
-        recorded = header.get("robot", {})
-        sim = bool(recorded.get("sim"))
+        header = parse_run_header(data, journal)
+        recorded = header.robot
         address = parse_robot(args.robot) if args.robot else (
-            RobotAddress(sim=True) if sim else parse_robot(str(recorded.get("address", ""))))
-        driver = recorded.get("driver", args.driver)
+            RobotAddress(sim=True) if recorded.sim else parse_robot(recorded.address))
+        driver = recorded.driver
         scenario_file = None
         if args.effects is not None or args.plugin:
             check_model_options(args.effects, tuple(args.plugin))
         # a resume refits with them (run_reference.py)
         known = parse_known(args.known, tuple(args.plugin))
-        check_known_frames(str(header.get("settings", {}).get("method", "")), known,
-                           tuple(args.plugin) or tuple(header.get("settings", {}).get("plugins")
-                                                       or ()))
-        check_reference_option(args.reference, header.get("settings", {}).get("method"))
+        check_known_frames(header.settings.method, known,
+                           tuple(args.plugin) or header.settings.plugins)
+        check_reference_option(args.reference, header.settings.method)
     elif args.replay:  # a recorded run again, without a robot (hostpc.sensors)
         check_replay_options(args, getattr(args, "option_defaults", {}))
         address, driver, settings, cell_file, known, run_dir = replay_inputs(args, _default_out)
@@ -412,7 +412,7 @@ def _sim_modbus(settings: RunSettings | None, run_dir: Path
     from hostpc.robots.simulator import free_local_port
 
     options = (settings.options if settings is not None
-               else Journal(run_dir).read_header().get("settings", {}).get("options", {}))
+               else read_run_header(Journal(run_dir)).settings.options)
     if options.get("probe_io") != "modbus":
         return None, settings
     given = options.get("modbus")

@@ -70,11 +70,11 @@ def run_record(args: argparse.Namespace) -> int:
     import hostpc
     from hostpc.calibrate.journal import Journal
     from hostpc.calibrate.reference import reference_from_fit
+    from hostpc.calibrate.run_header import read_run_header
     from hostpc.cli.report import read_json
     from hostpc.dataset import load_dataset
     from hostpc.files import write_json_atomic
     from hostpc.fitting import fit
-    from hostpc.methods.base import RunSettings
 
     run = Path(args.run)
     if not run.is_dir():
@@ -84,14 +84,14 @@ def run_record(args: argparse.Namespace) -> int:
     if refused:
         raise InputError(f"--run {run}: cannot be a reference: {refused}; calibrate and "
                          f"verify first: hostpc calibrate --resume {run} --push")
-    header = Journal(run).read_header()
-    settings = RunSettings.from_dict(header.get("settings", {}))
+    header = read_run_header(Journal(run))
+    settings = header.settings
     dataset = load_dataset(run / "dataset.json")
     fitted = fit(dataset, settings.effects, plugins=settings.plugins, loss=settings.loss,
                  cv_folds=0)
-    serial = args.robot_serial or header.get("robot_serial") or ""
+    serial = args.robot_serial or header.robot_serial or ""
     reference = reference_from_fit(fitted, robot_serial=str(serial),
-                                   cell=header.get("cell", {}), source_run=str(run.resolve()),
+                                   cell=header.cell, source_run=str(run.resolve()),
                                    software=f"zerocal {hostpc.__version__}")
     out = Path(args.out)
     if out.exists() and out.is_dir():

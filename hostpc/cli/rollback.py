@@ -26,8 +26,10 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.outcome_files import rewrite_outcome
 from hostpc.calibrate.push import read_push_file, rollback, rollback_run
+from hostpc.calibrate.run_header import read_run_header
 from hostpc.cli.archive_options import add_archive_options, archive_run
 from hostpc.cli.numbers import TIMEOUT_S
 from hostpc.errors import InputError
@@ -58,11 +60,9 @@ def register(subparsers: Any) -> None:
 def _run_driver(run_dir: Path) -> str | None:
     """The driver recorded in a run folder's run.json (None if unreadable)."""
     try:
-        header = json.loads((run_dir / "run.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        return read_run_header(Journal(run_dir)).robot.driver
+    except InputError:
         return None
-    robot = header.get("robot") if isinstance(header, dict) else None
-    return str(robot.get("driver")) if isinstance(robot, dict) else None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -145,7 +145,6 @@ def _journal_rollback(run_dir: Path, now: np.ndarray, how: str, controller: str)
     "rolled back" (and only then: previous offsets without this event mean a lost push)."""
     import datetime as _dt
 
-    from hostpc.calibrate.journal import Journal
 
     journal = Journal(run_dir)
     if journal.exists:
