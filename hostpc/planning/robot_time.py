@@ -1,0 +1,86 @@
+"""The plan's robot time, predicted before anything moves, and its physical floor.
+
+Pure numerics. A plan keeps the robot busy for its moves, the settling after each move and
+the captures at each pose (docs/simulator.md charges exactly these):
+
+- motion: each joint move takes `max_i |dq_i| / (speed * v_i)` (v_i the joint's top speed,
+  rad/s; speed the run's fraction of it, `--speed`), from the robot's pose along the fit
+  poses, then along the verification poses;
+- settle: `settle_s` after every move;
+- capture: `capture_s` per pose.
+
+The controller's limits come from its state when it reports them (`RobotState.extra`:
+`max_joint_speed` (n,) rad/s, `settle_s`, `capture_s`), else a UR's: 180 deg/s on every
+joint, 0.3 s settling, 0.1 s a capture (the simulator's defaults). The floor is what no
+tour can save: settle and capture of every planned pose, no motion.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hostpc.planning.tour import move_times
+
+DEFAULT_JOINT_SPEED = math.pi
+"""rad/s of a joint at speed fraction 1 when the controller does not report it (a UR's)."""
+DEFAULT_SETTLE_S = 0.3
+DEFAULT_CAPTURE_S = 0.1
+
+
+@dataclass(frozen=True)
+class TimeLimits:
+    """joint_speed: (n,) rad/s at speed fraction 1; settle_s after each move; capture_s per
+    pose."""
+
+    joint_speed: np.ndarray
+    settle_s: float = DEFAULT_SETTLE_S
+    capture_s: float = DEFAULT_CAPTURE_S
+
+    @classmethod
+    def from_extra(cls, extra: Mapping[str, Any], n_joints: int) -> TimeLimits:
+        """The controller's reported limits (`RobotState.extra`), defaults for the rest."""
+        speed = extra.get("max_joint_speed")
+        joint_speed = (np.broadcast_to(np.asarray(speed, float), (n_joints,)).copy()
+                       if speed is not None else np.full(n_joints, DEFAULT_JOINT_SPEED))
+        return cls(joint_speed,
+                   float(extra.get("settle_s", DEFAULT_SETTLE_S)),
+                   float(extra.get("capture_s", DEFAULT_CAPTURE_S)))
+
+
+def predicted_robot_time(q_start: np.ndarray, q_fit: np.ndarray, q_verify: np.ndarray,
+                         speed: float, limits: TimeLimits, floor_poses: int | None = None
+                         ) -> dict[str, float]:
+    """{"motion", "settle", "capture", "total", "floor"} in s of visiting q_fit (N, n) then
+    q_verify (M, n) in their order from q_start (n,) at the speed fraction `speed`; the
+    floor that of `floor_poses` poses (None: N + M; the planner's: the fewest that reach the
+    target sigma, and the verification poses)."""
+    path = np.vstack([np.asarray(q_start, float)[None, :], np.asarray(q_fit, float),
+                      np.asarray(q_verify, float).reshape(-1, np.size(q_start))])
+    moves = move_times(path[:-1], path[1:], limits.joint_speed * max(speed, 1e-9))
+    n_poses = path.shape[0] - 1
+    motion = float(np.sum(moves))
+    settle = limits.settle_s * int(np.count_nonzero(moves > 0.0))
+    capture = limits.capture_s * n_poses
+    return {"motion": motion, "settle": settle, "capture": capture,
+            "total": motion + settle + capture,
+            "floor": robot_time_floor(n_poses if floor_poses is None else floor_poses,
+                                      limits)}
+
+
+def robot_time_floor(n_poses: int, limits: TimeLimits) -> float:
+    """The physical floor (s) of a plan of n_poses poses: settle + capture each, no motion."""
+    return n_poses * (limits.settle_s + limits.capture_s)
+
+
+def largest_joint_moves(q_start: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(n,) rad: each joint's largest move between consecutive poses of q (N, n) visited
+    from q_start (n,) (a joint that unwinds shows here)."""
+    path = np.vstack([np.asarray(q_start, float)[None, :], np.asarray(q, float)])
+    if path.shape[0] < 2:
+        return np.zeros(path.shape[1])
+    return np.asarray(np.max(np.abs(np.diff(path, axis=0)), axis=0))
