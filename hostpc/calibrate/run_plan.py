@@ -33,7 +33,12 @@ from hostpc.planning.design import (
     select_groups,
     verify_groups,
 )
-from hostpc.planning.robot_time import TimeLimits, predicted_robot_time
+from hostpc.planning.robot_time import (
+    RobotPath,
+    TimeLimits,
+    Waypoints,
+    predicted_robot_time,
+)
 from hostpc.planning.tour import full_turn_joints, short_path, unwrap_path, unwrap_plan
 from hostpc.planning.verify_poses import nearby_verify_poses
 from hostpc.robots.base import RobotState
@@ -202,7 +207,8 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     fewest = poses_for_target_sigma(
         design, selection, math.radians(settings.target_sigma_deg or FLOOR_SIGMA_DEG),
         state.q.size)
-    planned = predicted_robot_time(state.q, q_fit, q_verify, settings.speed,
+    path = method.robot_path if isinstance(method, RobotPath) else Waypoints.plain
+    planned = predicted_robot_time(state.q, path(q_fit), path(q_verify), settings.speed,
                                    TimeLimits.from_extra(state.extra, state.q.size),
                                    (fewest or len(selection)) + q_verify.shape[0])
     info["predicted_robot_time_s"] = planned

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -52,24 +52,62 @@ class TimeLimits:
                    float(extra.get("capture_s", DEFAULT_CAPTURE_S)))
 
 
-def predicted_robot_time(q_start: np.ndarray, q_fit: np.ndarray, q_verify: np.ndarray,
-                         speed: float, limits: TimeLimits, floor_poses: int | None = None
+@dataclass(frozen=True)
+class Waypoints:
+    """The robot's moves that measure some planned poses, in order: q (M, n) the joint
+    targets; speed (M,) the speed fraction of the move into each (NaN: the run's --speed);
+    settle (M,) bool: the controller settles after that move; captures: measurements taken
+    (each `capture_s`). A plain pose is one waypoint at the run's speed, settled, one
+    capture; a guarded approach (sphere_probe) is a move that latches in motion: no
+    settling, no capture."""
+
+    q: np.ndarray
+    speed: np.ndarray
+    settle: np.ndarray
+    captures: int
+
+    @classmethod
+    def plain(cls, q: np.ndarray) -> Waypoints:
+        """Each pose of q (N, n) visited at the run's speed, settled and captured once."""
+        q = np.asarray(q, float)
+        return cls(q, np.full(q.shape[0], np.nan), np.ones(q.shape[0], bool), q.shape[0])
+
+
+@runtime_checkable
+class RobotPath(Protocol):
+    """A method whose measurement of a pose is more than one plain move (sphere_probe: hover,
+    start, guarded approach, back)."""
+
+    def robot_path(self, q: np.ndarray) -> Waypoints:
+        """The waypoints that measure the poses q (N, n), in order."""
+
+
+def waypoints_time(q_start: np.ndarray, path: Waypoints, speed: float, limits: TimeLimits
+                   ) -> tuple[float, float, float]:
+    """(motion, settle, capture) in s of `path` from q_start (n,); speed: the run's."""
+    q = np.vstack([np.asarray(q_start, float)[None, :], path.q])
+    fraction = np.where(np.isnan(path.speed), speed, path.speed)
+    moves = move_times(q[:-1], q[1:], limits.joint_speed)
+    moves = moves / np.maximum(fraction, 1e-9)
+    settle = limits.settle_s * int(np.count_nonzero(path.settle & (moves > 0.0)))
+    return float(np.sum(moves)), settle, limits.capture_s * path.captures
+
+
+def predicted_robot_time(q_start: np.ndarray, fit: Waypoints, verify: Waypoints,
+                         speed: float, limits: TimeLimits, floor_poses: int
                          ) -> dict[str, float]:
-    """{"motion", "settle", "capture", "total", "floor"} in s of visiting q_fit (N, n) then
-    q_verify (M, n) in their order from q_start (n,) at the speed fraction `speed`; the
-    floor that of `floor_poses` poses (None: N + M; the planner's: the fewest that reach the
-    target sigma, and the verification poses)."""
-    path = np.vstack([np.asarray(q_start, float)[None, :], np.asarray(q_fit, float),
-                      np.asarray(q_verify, float).reshape(-1, np.size(q_start))])
-    moves = move_times(path[:-1], path[1:], limits.joint_speed * max(speed, 1e-9))
-    n_poses = path.shape[0] - 1
-    motion = float(np.sum(moves))
-    settle = limits.settle_s * int(np.count_nonzero(moves > 0.0))
-    capture = limits.capture_s * n_poses
+    """{"motion", "settle", "capture", "total", "floor"} in s of the fit's waypoints then
+    the verification's from q_start (n,) at the run's speed fraction `speed`; the floor
+    that of `floor_poses` poses (the planner's: the fewest that reach the target sigma,
+    and the verification poses)."""
+    start = np.asarray(q_start, float)
+    first = waypoints_time(start, fit, speed, limits)
+    last = fit.q[-1] if fit.q.shape[0] else start
+    second = waypoints_time(last, verify, speed, limits)
+    motion, settle, capture = (a + b for a, b in zip(first, second, strict=True))
     return {"motion": motion, "settle": settle, "capture": capture,
             "total": motion + settle + capture,
-            "floor": robot_time_floor(n_poses if floor_poses is None else floor_poses,
-                                      limits)}
+            "floor": robot_time_floor(floor_poses, limits)}
 
 
 def robot_time_floor(n_poses: int, limits: TimeLimits) -> float:

@@ -13,6 +13,7 @@ from hostpc.calibrate.run_plan import plan_run
 from hostpc.methods.base import NullProgress, RunSettings
 from hostpc.planning.robot_time import (
     TimeLimits,
+    Waypoints,
     largest_joint_moves,
     predicted_robot_time,
     robot_time_floor,
@@ -28,7 +29,8 @@ def test_predicted_robot_time_is_motion_settle_and_capture() -> None:
     start = np.zeros(6)
     fit = np.array([[np.pi / 2, 0, 0, 0, 0, 0], [np.pi / 2, 0, 0, 0, 0, np.pi]])
     verify = np.array([[0.0, 0, 0, 0, 0, np.pi]])
-    planned = predicted_robot_time(start, fit, verify, 0.5, limits)
+    planned = predicted_robot_time(start, Waypoints.plain(fit), Waypoints.plain(verify), 0.5,
+                                   limits, 3)
     # moves of 90, 180 and 90 deg at half of 180 deg/s: 1 + 2 + 1 s
     assert planned["motion"] == pytest.approx(4.0)
     assert planned["settle"] == pytest.approx(0.9) and planned["capture"] == pytest.approx(0.3)
