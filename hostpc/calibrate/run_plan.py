@@ -39,7 +39,7 @@ from hostpc.planning.robot_time import (
     Waypoints,
     predicted_robot_time,
 )
-from hostpc.planning.tour import full_turn_joints, short_path, unwrap_path, unwrap_plan
+from hostpc.planning.tour import full_turn_joints, short_path, unwrap_plan
 from hostpc.planning.verify_poses import nearby_verify_poses
 from hostpc.robots.base import RobotState
 
@@ -179,8 +179,9 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
                                                        *limits)
         fit_indices, verify_indices = fit_indices[orders[0]], verify_indices[orders[1]]
         q_verify_more = tail[0] if tail else None
-        if q_more is not None:
-            q_more = unwrap_path(q_more, q_fit[-1], *limits)
+        if q_more is not None:  # from the last fit pose, if the model fails
+            orders, (q_more,) = unwrap_plan([q_more], q_fit[-1], *limits)
+            more = more[orders[0]]
     elif groups is None:
         rest = np.setdiff1d(np.arange(pool.shape[0]), fit_indices)
         verify_indices = rng.choice(rest, size=min(settings.n_verify, rest.size),
@@ -190,6 +191,9 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         verify_indices = verify_groups(groups, fit_indices, settings.n_verify, rng)
     if not short:
         q_verify = pool[verify_indices]
+    if not short and groups is None:  # full-turn joints: no unwinding (tour.unwrap_plan)
+        orders, (q_fit, q_verify) = unwrap_plan([q_fit, q_verify], state.q, *limits)
+        fit_indices, verify_indices = fit_indices[orders[0]], verify_indices[orders[1]]
     sigmas = joint_offset_sigmas(plan_design, state.q.size)
     for line in plan_warnings(type(method), settings.target_sigma_deg, sigmas,
                               len(fit_indices), short):

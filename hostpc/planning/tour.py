@@ -178,6 +178,15 @@ def unwinding(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray, q_max: np.n
     return float(np.sum(np.maximum(size - np.pi, 0.0)))
 
 
+def unwinding_moves(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray,
+                    q_max: np.ndarray) -> np.ndarray:
+    """Indices into q (N, n) of the poses reached by an unwinding move from the previous
+    one (from q_start for the first): a full-turn joint moves more than half a turn."""
+    path = np.vstack([np.asarray(q_start, float)[None, :], np.asarray(q, float)])
+    size = np.abs(np.diff(path, axis=0))[:, full_turn_joints(q_min, q_max)]
+    return np.flatnonzero(np.any(size > np.pi, axis=1))
+
+
 def unwrap_plan(parts: list[np.ndarray], q_start: np.ndarray, q_min: np.ndarray,
                 q_max: np.ndarray, joint_speed: np.ndarray | None = None
                 ) -> tuple[list[np.ndarray], list[np.ndarray]]:
@@ -188,8 +197,9 @@ def unwrap_plan(parts: list[np.ndarray], q_start: np.ndarray, q_min: np.ndarray,
     Each tour is kept as it is unless the unwrapped whole still unwinds a joint (a tour
     wound up so far that an equivalent angle of the next pose lies beyond the limit); then
     2-opt reversals inside each tour, judged by the unwrapped whole's travel time plus
-    UNWIND_PENALTY x its `unwinding`, until none helps. So the IK branch of every full-turn
-    joint is chosen over the whole plan, not pose by pose."""
+    UNWIND_PENALTY x its `unwinding`, until none helps; only the reversals that replace an
+    unwinding move are tried (each trial unwraps the whole path). So the IK branch of every
+    full-turn joint is chosen over the whole plan, not pose by pose."""
     q_start = np.asarray(q_start, float)
     blocks = [np.asarray(p, float).reshape(-1, q_start.size) for p in parts]
     orders = [np.arange(b.shape[0]) for b in blocks]
@@ -204,18 +214,28 @@ def unwrap_plan(parts: list[np.ndarray], q_start: np.ndarray, q_min: np.ndarray,
 
     path = whole(orders)
     best = cost(path)
-    for _ in range(MAX_PASSES if unwinding(path, q_start, q_min, q_max) > 0 else 0):
+    first = np.cumsum([0] + [b.shape[0] for b in blocks])[:-1]  # each part's first pose
+    for _ in range(MAX_PASSES):
         improved = False
-        for k, order in enumerate(orders):
-            for i in range(order.size - 1):
-                for j in range(i + 1, order.size):
-                    trial = orders.copy()
-                    trial[k] = np.concatenate([order[:i], order[i:j + 1][::-1], order[j + 1:]])
-                    trial_cost = cost(whole(trial))
-                    if trial_cost < best - 1e-12:
-                        orders, best, order, improved = trial, trial_cost, trial[k], True
+        for m in unwinding_moves(path, q_start, q_min, q_max):
+            k = int(np.searchsorted(first, m, side="right")) - 1
+            local, order = int(m - first[k]), orders[k]
+            # the reversals of part k that end just before the pose the move reaches, or
+            # start at it: only they replace that move
+            spans = [(i, local - 1) for i in range(local - 1)]
+            spans += [(local, j) for j in range(local + 1, order.size)]
+            for i, j in spans:
+                trial = orders.copy()
+                trial[k] = np.concatenate([order[:i], order[i:j + 1][::-1], order[j + 1:]])
+                trial_cost = cost(whole(trial))
+                if trial_cost < best - 1e-12:
+                    orders, best, improved = trial, trial_cost, True
+                    break
+            if improved:
+                break
         if not improved:
             break
+        path = whole(orders)
     ends = np.cumsum([b.shape[0] for b in blocks])[:-1]
     return orders, list(np.split(whole(orders), ends))
 
