@@ -40,6 +40,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 from bench.bench_sigma_mc import summarise, world  # noqa: E402
 from bench.bench_verdicts import power  # noqa: E402
+from hostpc.planning.robot_time import largest_joint_moves  # noqa: E402
 
 METHODS = ("stereo_target", "sphere_probe", "world_point", "dual_loop")
 OPTIONAL = True
@@ -68,14 +69,15 @@ def run_world(method: str, seed: int, folder: Path) -> dict[str, Any]:
     errors_deg = (document.get("truth") or {}).get("joint_offsets_error_deg") or []
     errors = [math.nan if e is None else math.radians(float(e)) for e in errors_deg[:len(names)]]
     header = json.loads((out / "run.json").read_text())
-    path = np.vstack([header["initial"]["q"], header["plan"]["q"], header["plan"]["q_verify"]])
+    moves = largest_joint_moves(np.asarray(header["initial"]["q"], float),
+                                np.vstack([header["plan"]["q"], header["plan"]["q_verify"]]))
     planned = plan.get("predicted_robot_time_s") or {}
     return {"names": names, "errors": errors, "sigmas": sigmas,
             "robot_time": document["robot_time_s"]["total"],
             "rig": document["robot_time_s"]["rig"],
             "planned": planned.get("total"), "floor": planned.get("floor"),
             "poses": plan["n_poses"] + plan["n_verify"],
-            "largest_move_deg": float(np.degrees(np.max(np.abs(np.diff(path, axis=0))))),
+            "largest_move_deg": float(np.degrees(np.max(moves))),
             "verdict": (document.get("verify") or {}).get("verdict")}
 
 
