@@ -6,13 +6,15 @@ the captures at each pose (docs/simulator.md charges exactly these):
 - motion: each joint move takes `max_i |dq_i| / (speed * v_i)` (v_i the joint's top speed,
   rad/s; speed the run's fraction of it, `--speed`), from the robot's pose along the fit
   poses, then along the verification poses;
-- settle: `settle_s` after every move;
-- capture: `capture_s` per pose.
+- settle: `settle_s` after every move that goes somewhere (none after a guarded approach,
+  which latches in motion);
+- capture: `capture_s` per measurement (`Waypoints`: a method's moves per pose).
 
 The controller's limits come from its state when it reports them (`RobotState.extra`:
 `max_joint_speed` (n,) rad/s, `settle_s`, `capture_s`), else a UR's: 180 deg/s on every
 joint, 0.3 s settling, 0.1 s a capture (the simulator's defaults). The floor is what no
-tour can save: settle and capture of every planned pose, no motion.
+tour can save: settle and capture of the fewest poses that reach the target sigma and of
+the verification poses, no motion (the planner counts the poses: hostpc.calibrate.run_plan).
 """
 
 from __future__ import annotations

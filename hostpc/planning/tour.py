@@ -169,22 +169,27 @@ def unwrap_path(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray, q_max: np
     return out
 
 
+def _excess(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray, q_max: np.ndarray
+            ) -> np.ndarray:
+    """(N, k) rad: what each full-turn joint's move to each pose of q (N, n), from the
+    previous one (q_start for the first), exceeds half a turn by (0 if it does not)."""
+    path = np.vstack([np.asarray(q_start, float)[None, :], np.asarray(q, float)])
+    size = np.abs(np.diff(path, axis=0))[:, full_turn_joints(q_min, q_max)]
+    return np.maximum(size - np.pi, 0.0)
+
+
 def unwinding(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray, q_max: np.ndarray
               ) -> float:
     """What the full-turn joints' moves along q (N, n) from q_start exceed half a turn by,
     summed (rad): 0 for a path on which no joint unwinds."""
-    path = np.vstack([np.asarray(q_start, float)[None, :], np.asarray(q, float)])
-    size = np.abs(np.diff(path, axis=0))[:, full_turn_joints(q_min, q_max)]
-    return float(np.sum(np.maximum(size - np.pi, 0.0)))
+    return float(np.sum(_excess(q, q_start, q_min, q_max)))
 
 
 def unwinding_moves(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray,
                     q_max: np.ndarray) -> np.ndarray:
     """Indices into q (N, n) of the poses reached by an unwinding move from the previous
     one (from q_start for the first): a full-turn joint moves more than half a turn."""
-    path = np.vstack([np.asarray(q_start, float)[None, :], np.asarray(q, float)])
-    size = np.abs(np.diff(path, axis=0))[:, full_turn_joints(q_min, q_max)]
-    return np.flatnonzero(np.any(size > np.pi, axis=1))
+    return np.flatnonzero(np.any(_excess(q, q_start, q_min, q_max) > 0.0, axis=1))
 
 
 def unwrap_plan(parts: list[np.ndarray], q_start: np.ndarray, q_min: np.ndarray,
