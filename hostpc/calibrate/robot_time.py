@@ -102,5 +102,8 @@ def format_robot_time(document: Mapping[str, Any]) -> str | None:
         return None
     source = {"controller": "controller clock", "host": "wall time on the host",
               "mixed": "controller and host clocks"}.get(str(rt.get("clock")), "not measured")
+    planned = (document.get("plan") or {}).get("predicted_robot_time_s")
+    against = (f"; planned {planned['total']:.1f} s for measure + verify, floor "
+               f"{planned['floor']:.1f} s" if isinstance(planned, Mapping) else "")
     return (f"robot time: {rt['total']:.1f} s (rig {rt['rig']:.1f}, measure "
-            f"{rt['measure']:.1f}, verify {rt['verify']:.1f}; {source})")
+            f"{rt['measure']:.1f}, verify {rt['verify']:.1f}; {source}{against})")

@@ -14,6 +14,7 @@ random verification choice."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -32,7 +33,13 @@ from hostpc.planning.design import (
     select_groups,
     verify_groups,
 )
-from hostpc.planning.tour import full_turn_joints, short_path
+from hostpc.planning.robot_time import (
+    RobotPath,
+    TimeLimits,
+    Waypoints,
+    predicted_robot_time,
+)
+from hostpc.planning.tour import full_turn_joints, short_path, unwrap_plan
 from hostpc.planning.verify_poses import nearby_verify_poses
 from hostpc.robots.base import RobotState
 
@@ -40,6 +47,12 @@ EXTENDED_VERIFY_POSES = 10
 """Verification poses of a short plan that had to grow (its model failed the fit): the
 count of a fixed plan; 4 nearby-in-time poses lack the power against the unmodelled effect
 (docs/performance.md: 15 of 20 forced pushes caught with 4, 20 of 20 with 10)."""
+
+
+FLOOR_SIGMA_DEG = 0.002
+"""The joint-offset sigma (deg) of a plan's robot-time floor when the run sets no
+--target-sigma: the floor is the settle and capture of the fewest selected poses that
+reach it, plus the verification poses (`hostpc.planning.robot_time`)."""
 
 
 class PlanningError(InputError):
@@ -117,6 +130,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
             travel = Travel(pool, np.asarray(state.q, float),
                             full_turn_joints(*limits), TRAVEL_SLACK)
         chosen = select(design, settings.n_poses, settings.criterion, rng, travel)
+        selection = chosen
         if settings.target_sigma_deg is not None:  # the fewest poses that reach it
             enough = poses_for_target_sigma(design, chosen,
                                             math.radians(settings.target_sigma_deg),
@@ -134,6 +148,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     else:  # whole groups (sphere_probe: an orientation's 5 contacts), in the pool order
         fit_indices = select_groups(design, groups, settings.n_poses, settings.criterion,
                                     rng)
+        selection = fit_indices
     plan_design = design.subset(fit_indices)
     check = check_plan(plan_design)
     if not check.ok:
@@ -157,6 +172,16 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
                 pool, rest, from_pose, max(0, EXTENDED_VERIFY_POSES - verify_indices.size),
                 rng)
             q_verify_more = short_path(pool[extra], from_pose, *limits)[1]
+        # the whole plan as one path: a joint wound up by the fit tour must not unwind on
+        # the way to the verification poses (tour.unwrap_plan)
+        tail = [] if q_verify_more is None else [q_verify_more]
+        orders, (q_fit, q_verify, *tail) = unwrap_plan([q_fit, q_verify, *tail], state.q,
+                                                       *limits)
+        fit_indices, verify_indices = fit_indices[orders[0]], verify_indices[orders[1]]
+        q_verify_more = tail[0] if tail else None
+        if q_more is not None:  # from the last fit pose, if the model fails
+            orders, (q_more,) = unwrap_plan([q_more], q_fit[-1], *limits)
+            more = more[orders[0]]
     elif groups is None:
         rest = np.setdiff1d(np.arange(pool.shape[0]), fit_indices)
         verify_indices = rng.choice(rest, size=min(settings.n_verify, rest.size),
@@ -166,11 +191,14 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         verify_indices = verify_groups(groups, fit_indices, settings.n_verify, rng)
     if not short:
         q_verify = pool[verify_indices]
+    if not short and groups is None:  # full-turn joints: no unwinding (tour.unwrap_plan)
+        orders, (q_fit, q_verify) = unwrap_plan([q_fit, q_verify], state.q, *limits)
+        fit_indices, verify_indices = fit_indices[orders[0]], verify_indices[orders[1]]
     sigmas = joint_offset_sigmas(plan_design, state.q.size)
     for line in plan_warnings(type(method), settings.target_sigma_deg, sigmas,
                               len(fit_indices), short):
         progress.message(line)
-    info = {
+    info: dict[str, Any] = {
         "criterion": settings.criterion,
         "target_sigma_deg": settings.target_sigma_deg,
         "n_candidates": int(pool.shape[0]),
@@ -180,12 +208,23 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         "structural_unidentifiable": [d.description for d in structural],
         "structural_fixed": [d.fixed for d in structural],
     }
+    fewest = poses_for_target_sigma(
+        design, selection, math.radians(settings.target_sigma_deg or FLOOR_SIGMA_DEG),
+        state.q.size)
+    path = method.robot_path if isinstance(method, RobotPath) else Waypoints.plain
+    planned = predicted_robot_time(state.q, path(q_fit), path(q_verify), settings.speed,
+                                   TimeLimits.from_extra(state.extra, state.q.size),
+                                   (fewest or len(selection)) + q_verify.shape[0])
+    info["predicted_robot_time_s"] = planned
     progress.message(
         f"plan: {len(fit_indices)} poses from {pool.shape[0]} candidates "
         f"({settings.criterion}-optimal), {q_verify.shape[0]} verification poses; "
         "predicted joint offset sigma "
         + ", ".join("-" if not np.isfinite(s) else f"{math.degrees(s):.4f}"
-                    for s in sigmas) + " deg")
+                    for s in sigmas) + " deg; predicted robot time "
+        f"{planned['total']:.1f} s (motion {planned['motion']:.1f}, settle "
+        f"{planned['settle']:.1f}, capture {planned['capture']:.1f}; floor "
+        f"{planned['floor']:.1f})")
     if more.size:
         info["more_poses"] = int(more.size)
     return Plan(q=q_fit, q_verify=q_verify, info=info, q_more=q_more,

@@ -30,6 +30,10 @@ from __future__ import annotations
 import numpy as np
 
 MAX_PASSES = 50
+UNWIND_PENALTY = 10.0
+"""`unwrap_path` charges a full-turn joint's move beyond half a turn this many times its
+excess: it avoids unwinding moves (a UR's wrist 3 turning 228-298 deg between two poses
+against its +-360 deg limit) wherever an equivalent angle allows it."""
 
 
 def move_times(q_from: np.ndarray, q_to: np.ndarray,
@@ -139,7 +143,10 @@ def unwrap_path(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray, q_max: np
     """q (N, n) in visiting order with each full-turn joint's angle replaced by an
     equivalent q + 2 pi m within [q_min, q_max]: per joint, the choice that minimises the
     joint's total travel from q_start (dynamic programming over the 5 equivalents of each
-    pose), so a joint does not wind itself into its limit. The same poses."""
+    pose), a move of more than half a turn charged UNWIND_PENALTY times its excess, so a
+    joint does not wind itself into its limit and then unwind. Unwrap a whole plan (fit and
+    verification poses) in one call: a tour unwrapped alone can end wound up so far that
+    the next tour must unwind. The same poses."""
     out = np.asarray(q, float).copy()
     n_poses = out.shape[0]
     if n_poses == 0:
@@ -149,10 +156,10 @@ def unwrap_path(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray, q_max: np
         options = out[:, j, None] + shifts[None, :]                     # (N, 5)
         allowed = (options >= q_min[j]) & (options <= q_max[j])
         allowed[~allowed.any(axis=1), 2] = True  # none within the limits: keep it as it is
-        cost = np.where(allowed[0], np.abs(options[0] - q_start[j]), np.inf)
+        cost = np.where(allowed[0], _joint_cost(options[0] - q_start[j]), np.inf)
         choice = np.zeros((n_poses, shifts.size), dtype=int)
         for k in range(1, n_poses):
-            step = cost[:, None] + np.abs(options[k][None, :] - options[k - 1][:, None])
+            step = cost[:, None] + _joint_cost(options[k][None, :] - options[k - 1][:, None])
             choice[k] = np.argmin(step, axis=0)
             cost = np.where(allowed[k], step[choice[k], np.arange(shifts.size)], np.inf)
         best = int(np.argmin(cost))
@@ -160,6 +167,89 @@ def unwrap_path(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray, q_max: np
             out[k, j] = options[k, best]
             best = choice[k, best]
     return out
+
+
+def _excess(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray, q_max: np.ndarray
+            ) -> np.ndarray:
+    """(N, k) rad: what each full-turn joint's move to each pose of q (N, n), from the
+    previous one (q_start for the first), exceeds half a turn by (0 if it does not)."""
+    path = np.vstack([np.asarray(q_start, float)[None, :], np.asarray(q, float)])
+    size = np.abs(np.diff(path, axis=0))[:, full_turn_joints(q_min, q_max)]
+    return np.maximum(size - np.pi, 0.0)
+
+
+def unwinding(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray, q_max: np.ndarray
+              ) -> float:
+    """What the full-turn joints' moves along q (N, n) from q_start exceed half a turn by,
+    summed (rad): 0 for a path on which no joint unwinds."""
+    return float(np.sum(_excess(q, q_start, q_min, q_max)))
+
+
+def unwinding_moves(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray,
+                    q_max: np.ndarray) -> np.ndarray:
+    """Indices into q (N, n) of the poses reached by an unwinding move from the previous
+    one (from q_start for the first): a full-turn joint moves more than half a turn."""
+    return np.flatnonzero(np.any(_excess(q, q_start, q_min, q_max) > 0.0, axis=1))
+
+
+def unwrap_plan(parts: list[np.ndarray], q_start: np.ndarray, q_min: np.ndarray,
+                q_max: np.ndarray, joint_speed: np.ndarray | None = None
+                ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """The consecutive tours `parts` ((N_k, n) each, visited one after the other from
+    q_start) as one path with no joint unwinding where their orders allow it: (orders (N_k,)
+    into each part, the parts' poses in that order, unwrapped as one path (`unwrap_path`)).
+
+    Each tour is kept as it is unless the unwrapped whole still unwinds a joint (a tour
+    wound up so far that an equivalent angle of the next pose lies beyond the limit); then
+    2-opt reversals inside each tour, judged by the unwrapped whole's travel time plus
+    UNWIND_PENALTY x its `unwinding`, until none helps; only the reversals that replace an
+    unwinding move are tried (each trial unwraps the whole path). So the IK branch of every
+    full-turn joint is chosen over the whole plan, not pose by pose."""
+    q_start = np.asarray(q_start, float)
+    blocks = [np.asarray(p, float).reshape(-1, q_start.size) for p in parts]
+    orders = [np.arange(b.shape[0]) for b in blocks]
+
+    def whole(orders: list[np.ndarray]) -> np.ndarray:
+        return unwrap_path(np.vstack([b[o] for b, o in zip(blocks, orders, strict=True)]),
+                           q_start, q_min, q_max)
+
+    def cost(path: np.ndarray) -> float:
+        return (path_time(path, q_start, joint_speed)
+                + UNWIND_PENALTY * unwinding(path, q_start, q_min, q_max))
+
+    path = whole(orders)
+    best = cost(path)
+    first = np.cumsum([0] + [b.shape[0] for b in blocks])[:-1]  # each part's first pose
+    for _ in range(MAX_PASSES):
+        improved = False
+        for m in unwinding_moves(path, q_start, q_min, q_max):
+            k = int(np.searchsorted(first, m, side="right")) - 1
+            local, order = int(m - first[k]), orders[k]
+            # the reversals of part k that end just before the pose the move reaches, or
+            # start at it: only they replace that move
+            spans = [(i, local - 1) for i in range(local - 1)]
+            spans += [(local, j) for j in range(local + 1, order.size)]
+            for i, j in spans:
+                trial = orders.copy()
+                trial[k] = np.concatenate([order[:i], order[i:j + 1][::-1], order[j + 1:]])
+                trial_cost = cost(whole(trial))
+                if trial_cost < best - 1e-12:
+                    orders, best, improved = trial, trial_cost, True
+                    break
+            if improved:
+                break
+        if not improved:
+            break
+        path = whole(orders)
+    ends = np.cumsum([b.shape[0] for b in blocks])[:-1]
+    return orders, list(np.split(whole(orders), ends))
+
+
+def _joint_cost(dq: np.ndarray) -> np.ndarray:
+    """A full-turn joint's cost of moves dq (rad): |dq|, plus UNWIND_PENALTY x what exceeds
+    half a turn (such a move is an unwinding: an equivalent angle would be nearer)."""
+    size = np.abs(dq)
+    return np.asarray(size + UNWIND_PENALTY * np.maximum(size - np.pi, 0.0))
 
 
 def short_path(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray, q_max: np.ndarray,

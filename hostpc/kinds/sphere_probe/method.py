@@ -86,6 +86,7 @@ from hostpc.methods.base import Method, Phase, Progress, RunSettings, SampleReco
 from hostpc.methods.cell import Cell
 from hostpc.planning.approach import travel_signs
 from hostpc.planning.design import PoseGroups
+from hostpc.planning.robot_time import Waypoints
 from hostpc.robots.base import RobotAdapter, RobotState
 
 __all__ = [
@@ -269,6 +270,21 @@ class SphereProbeMethod(Method):
         contact = self.plan.contacts[k]
         orientation = next(o for o in self.plan.orientations if o.group == contact.group)
         return orientation, contact
+
+    def robot_path(self, q: np.ndarray) -> Waypoints:
+        """The moves that probe the contacts q (N, n) (``probe_contact``): per contact
+        hover, start, the guarded approach to the contact (no settling), start, hover; the
+        free moves at the plan's move speed, the approach at the contact's."""
+        rows, speeds, settles = [], [], []
+        for row in np.asarray(q, float):
+            orientation, contact = self._lookup(row)
+            rows += [orientation.q_hover, contact.q_start, row, contact.q_start,
+                     orientation.q_hover]
+            speeds += [self.config.move_speed] * 2 + [contact.speed] + [self.config.move_speed] * 2
+            settles += [True, True, False, True, True]
+        n = np.size(q, 1) if np.ndim(q) == 2 else 0
+        return Waypoints(np.asarray(rows, float).reshape(-1, n), np.asarray(speeds, float),
+                         np.asarray(settles, bool), 0)
 
     def design_dataset(self, q: np.ndarray) -> Dataset:
         """Contacts at q (N, n) on the nominal sphere, sigma = repeatability, with the

@@ -1,0 +1,152 @@
+"""Robot time against its physical floor, per method, with the sigmas' honesty (issue 28).
+
+For each method and held-out world seed k (default 201-240: the worlds tuned on were 1-40),
+one default `hostpc calibrate --robot sim --method M --scenario <the method's world, seed k>`
+(the worlds of `bench_sigma_mc.world`), then from its result.json:
+
+- robot time (the simulator's clock: rig + measure + verify) and the plan's prediction;
+- the floor: settle + capture of the fewest poses that reach the target sigma (the run's
+  --target-sigma, else 0.002 deg) and of the verification poses, no motion
+  (`hostpc.planning.robot_time`; the plan's `predicted_robot_time_s.floor`);
+- poses (fit + verification) and the largest joint move between consecutive poses;
+- MSE / sigma^2 of every identifiable joint offset over the worlds (`bench_sigma_mc.summarise`;
+  honest: 0.6-1.5 over 40 worlds);
+- verdict power (stereo_target only, the one hidden-effect world: `bench_verdicts.power`,
+  the stereo_hidden_compliance world with --force: FAILs of --worlds forced pushes).
+
+    python bench/bench_robot_time.py [--worlds 40] [--first-seed 201] [--methods ...]
+                                     [--jobs 2] [--json OUT]
+
+Slow (one simulated calibration per world and method, 5-20 s each): bench/run.py runs it
+only when named (`python bench/run.py robot_time`, 8 worlds by default).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+import tempfile
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+from bench.bench_sigma_mc import summarise, world  # noqa: E402
+from bench.bench_verdicts import power  # noqa: E402
+from hostpc.planning.robot_time import largest_joint_moves  # noqa: E402
+
+METHODS = ("stereo_target", "sphere_probe", "world_point", "dual_loop")
+OPTIONAL = True
+"""bench/run.py skips this module unless its name is asked for (slow)."""
+
+
+def run_world(method: str, seed: int, folder: Path) -> dict[str, Any]:
+    """One default calibration in `method`'s world `seed`: robot time, plan, errors."""
+    scenario, options = world(method, seed)
+    scenario_path = folder / f"{method}_{seed}.yaml"
+    scenario_path.write_text(yaml.safe_dump(scenario))
+    out = folder / f"{method}_{seed}"
+    subprocess.run([sys.executable, "-m", "hostpc.cli.main", "calibrate", "--robot", "sim",
+                    "--method", method, "--scenario", str(scenario_path), "--no-report",
+                    "--out", str(out), *options],
+                   cwd=ROOT, capture_output=True, text=True, check=False, timeout=900)
+    try:
+        document = json.loads((out / "result.json").read_text())
+        parameters = json.loads((out / "fit.json").read_text())["parameters"]
+    except (OSError, ValueError):
+        return {"failed": "no result.json"}
+    plan = document["plan"]
+    names = [n.split(".", 1)[1] for n in parameters if n.startswith("joint_offsets.")]
+    sigmas = [math.nan if parameters[f"joint_offsets.{n}"].get("std") is None
+              else float(parameters[f"joint_offsets.{n}"]["std"]) for n in names]
+    errors_deg = (document.get("truth") or {}).get("joint_offsets_error_deg") or []
+    errors = [math.nan if e is None else math.radians(float(e)) for e in errors_deg[:len(names)]]
+    header = json.loads((out / "run.json").read_text())
+    moves = largest_joint_moves(np.asarray(header["initial"]["q"], float),
+                                np.vstack([header["plan"]["q"], header["plan"]["q_verify"]]))
+    planned = plan.get("predicted_robot_time_s") or {}
+    return {"names": names, "errors": errors, "sigmas": sigmas,
+            "robot_time": document["robot_time_s"]["total"],
+            "rig": document["robot_time_s"]["rig"],
+            "planned": planned.get("total"), "floor": planned.get("floor"),
+            "poses": plan["n_poses"] + plan["n_verify"],
+            "largest_move_deg": float(np.degrees(np.max(moves))),
+            "verdict": (document.get("verify") or {}).get("verdict")}
+
+
+def run(worlds: int = 8, methods: tuple[str, ...] = METHODS, first_seed: int = 201,
+        jobs: int = 2) -> dict[str, Any]:
+    """{method: figures}; see the module docstring."""
+    out: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory(prefix="zerocal-robot-time-") as tmp:
+        folder = Path(tmp)
+        for method in methods:
+            seeds = range(first_seed, first_seed + worlds)
+            with ThreadPoolExecutor(jobs) as pool:
+                runs = list(pool.map(lambda s, m=method: run_world(m, s, folder), seeds))
+            good = [r for r in runs if "failed" not in r]
+            times = np.array([r["robot_time"] for r in good])
+            floors = np.array([r["floor"] for r in good if r["floor"] is not None])
+            honesty = summarise(runs)
+            out[method] = {
+                "worlds": len(good), "failed": len(runs) - len(good),
+                "robot_time_median": float(np.median(times)) if good else None,
+                "robot_time_max": float(np.max(times)) if good else None,
+                "rig_median": float(np.median([r["rig"] for r in good])) if good else None,
+                "planned_median": float(np.median([r["planned"] for r in good
+                                                    if r["planned"] is not None] or [np.nan])),
+                "floor_median": float(np.median(floors)) if floors.size else None,
+                "poses_median": float(np.median([r["poses"] for r in good])) if good else None,
+                "largest_move_deg": max((r["largest_move_deg"] for r in good), default=None),
+                "pass": sum(r["verdict"] == "PASS" for r in good),
+                "mse_over_sigma2": {name: round(j["ratio"], 2)
+                                    for name, j in honesty["joints"].items() if "ratio" in j},
+            }
+            print(f"  {method}: {out[method]}", file=sys.stderr, flush=True)
+        if "stereo_target" in methods:
+            forced = power(worlds, folder, first_seed)
+            out["stereo_target"]["power"] = f"{forced['fails']} of {forced['runs']}"
+    return out
+
+
+def print_table(figures: dict[str, Any]) -> None:
+    print("| method | worlds | robot time median / max (s) | of it rig | planned | floor | "
+          "median x floor | poses | largest joint move | MSE/sigma^2 per offset | power |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for method, f in figures.items():
+        if not f.get("worlds"):
+            print(f"| {method} | 0 ({f.get('failed')} failed) |")
+            continue
+        ratio = f["robot_time_median"] / f["floor_median"] if f["floor_median"] else math.nan
+        mse = ", ".join(f"{k} {v:.2f}" for k, v in f["mse_over_sigma2"].items())
+        print(f"| {method} | {f['worlds']} | {f['robot_time_median']:.1f} / "
+              f"{f['robot_time_max']:.1f} | {f['rig_median']:.1f} | {f['planned_median']:.1f} "
+              f"| {f['floor_median']:.1f} | {ratio:.1f}x | {f['poses_median']:.0f} | "
+              f"{f['largest_move_deg']:.0f} deg | {mse} | {f.get('power', '-')} |")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--worlds", type=int, default=8)
+    parser.add_argument("--first-seed", type=int, default=201)
+    parser.add_argument("--methods", default=",".join(METHODS))
+    parser.add_argument("--jobs", type=int, default=2, help="calibrations at a time")
+    parser.add_argument("--json", metavar="OUT", help="also write the figures as JSON")
+    args = parser.parse_args(argv)
+    figures = run(args.worlds, tuple(m for m in args.methods.split(",") if m),
+                  args.first_seed, args.jobs)
+    print_table(figures)
+    if args.json:
+        Path(args.json).write_text(json.dumps(figures, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

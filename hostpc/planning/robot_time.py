@@ -1,0 +1,126 @@
+"""The plan's robot time, predicted before anything moves, and its physical floor.
+
+Pure numerics. A plan keeps the robot busy for its moves, the settling after each move and
+the captures at each pose (docs/simulator.md charges exactly these):
+
+- motion: each joint move takes `max_i |dq_i| / (speed * v_i)` (v_i the joint's top speed,
+  rad/s; speed the run's fraction of it, `--speed`), from the robot's pose along the fit
+  poses, then along the verification poses;
+- settle: `settle_s` after every move that goes somewhere (none after a guarded approach,
+  which latches in motion);
+- capture: `capture_s` per measurement (`Waypoints`: a method's moves per pose).
+
+The controller's limits come from its state when it reports them (`RobotState.extra`:
+`max_joint_speed` (n,) rad/s, `settle_s`, `capture_s`), else a UR's: 180 deg/s on every
+joint, 0.3 s settling, 0.1 s a capture (the simulator's defaults). The floor is what no
+tour can save: settle and capture of the fewest poses that reach the target sigma and of
+the verification poses, no motion (the planner counts the poses: hostpc.calibrate.run_plan).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from hostpc.planning.tour import move_times
+
+DEFAULT_JOINT_SPEED = math.pi
+"""rad/s of a joint at speed fraction 1 when the controller does not report it (a UR's)."""
+DEFAULT_SETTLE_S = 0.3
+DEFAULT_CAPTURE_S = 0.1
+
+
+@dataclass(frozen=True)
+class TimeLimits:
+    """joint_speed: (n,) rad/s at speed fraction 1; settle_s after each move; capture_s per
+    pose."""
+
+    joint_speed: np.ndarray
+    settle_s: float = DEFAULT_SETTLE_S
+    capture_s: float = DEFAULT_CAPTURE_S
+
+    @classmethod
+    def from_extra(cls, extra: Mapping[str, Any], n_joints: int) -> TimeLimits:
+        """The controller's reported limits (`RobotState.extra`), defaults for the rest."""
+        speed = extra.get("max_joint_speed")
+        joint_speed = (np.broadcast_to(np.asarray(speed, float), (n_joints,)).copy()
+                       if speed is not None else np.full(n_joints, DEFAULT_JOINT_SPEED))
+        return cls(joint_speed,
+                   float(extra.get("settle_s", DEFAULT_SETTLE_S)),
+                   float(extra.get("capture_s", DEFAULT_CAPTURE_S)))
+
+
+@dataclass(frozen=True)
+class Waypoints:
+    """The robot's moves that measure some planned poses, in order: q (M, n) the joint
+    targets; speed (M,) the speed fraction of the move into each (NaN: the run's --speed);
+    settle (M,) bool: the controller settles after that move; captures: measurements taken
+    (each `capture_s`). A plain pose is one waypoint at the run's speed, settled, one
+    capture; a guarded approach (sphere_probe) is a move that latches in motion: no
+    settling, no capture."""
+
+    q: np.ndarray
+    speed: np.ndarray
+    settle: np.ndarray
+    captures: int
+
+    @classmethod
+    def plain(cls, q: np.ndarray) -> Waypoints:
+        """Each pose of q (N, n) visited at the run's speed, settled and captured once."""
+        q = np.asarray(q, float)
+        return cls(q, np.full(q.shape[0], np.nan), np.ones(q.shape[0], bool), q.shape[0])
+
+
+@runtime_checkable
+class RobotPath(Protocol):
+    """A method whose measurement of a pose is more than one plain move (sphere_probe: hover,
+    start, guarded approach, back)."""
+
+    def robot_path(self, q: np.ndarray) -> Waypoints:
+        """The waypoints that measure the poses q (N, n), in order."""
+
+
+def waypoints_time(q_start: np.ndarray, path: Waypoints, speed: float, limits: TimeLimits
+                   ) -> tuple[float, float, float]:
+    """(motion, settle, capture) in s of `path` from q_start (n,); speed: the run's."""
+    q = np.vstack([np.asarray(q_start, float)[None, :], path.q])
+    fraction = np.where(np.isnan(path.speed), speed, path.speed)
+    moves = move_times(q[:-1], q[1:], limits.joint_speed)
+    moves = moves / np.maximum(fraction, 1e-9)
+    settle = limits.settle_s * int(np.count_nonzero(path.settle & (moves > 0.0)))
+    return float(np.sum(moves)), settle, limits.capture_s * path.captures
+
+
+def predicted_robot_time(q_start: np.ndarray, fit: Waypoints, verify: Waypoints,
+                         speed: float, limits: TimeLimits, floor_poses: int
+                         ) -> dict[str, float]:
+    """{"motion", "settle", "capture", "total", "floor"} in s of the fit's waypoints then
+    the verification's from q_start (n,) at the run's speed fraction `speed`; the floor
+    that of `floor_poses` poses (the planner's: the fewest that reach the target sigma,
+    and the verification poses)."""
+    start = np.asarray(q_start, float)
+    first = waypoints_time(start, fit, speed, limits)
+    last = fit.q[-1] if fit.q.shape[0] else start
+    second = waypoints_time(last, verify, speed, limits)
+    motion, settle, capture = (a + b for a, b in zip(first, second, strict=True))
+    return {"motion": motion, "settle": settle, "capture": capture,
+            "total": motion + settle + capture,
+            "floor": robot_time_floor(floor_poses, limits)}
+
+
+def robot_time_floor(n_poses: int, limits: TimeLimits) -> float:
+    """The physical floor (s) of a plan of n_poses poses: settle + capture each, no motion."""
+    return n_poses * (limits.settle_s + limits.capture_s)
+
+
+def largest_joint_moves(q_start: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(n,) rad: each joint's largest move between consecutive poses of q (N, n) visited
+    from q_start (n,) (a joint that unwinds shows here)."""
+    path = np.vstack([np.asarray(q_start, float)[None, :], np.asarray(q, float)])
+    if path.shape[0] < 2:
+        return np.zeros(path.shape[1])
+    return np.asarray(np.max(np.abs(np.diff(path, axis=0)), axis=0))

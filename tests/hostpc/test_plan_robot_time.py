@@ -1,0 +1,79 @@
+"""Robot time as a planned quantity (hostpc.planning.robot_time) and a plan on which no
+joint unwinds (hostpc.planning.tour.unwrap_plan, issue 28): no robot."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hostpc.calibrate.run_plan import plan_run
+from hostpc.methods.base import NullProgress, RunSettings
+from hostpc.planning.robot_time import (
+    TimeLimits,
+    Waypoints,
+    largest_joint_moves,
+    predicted_robot_time,
+    robot_time_floor,
+)
+from hostpc.planning.tour import unwinding, unwrap_plan
+from tests.hostpc.test_planning import home_state, stereo_method
+
+LIMIT = np.full(6, 2 * np.pi)
+
+
+def test_predicted_robot_time_is_motion_settle_and_capture() -> None:
+    limits = TimeLimits(np.full(6, np.pi), settle_s=0.3, capture_s=0.1)
+    start = np.zeros(6)
+    fit = np.array([[np.pi / 2, 0, 0, 0, 0, 0], [np.pi / 2, 0, 0, 0, 0, np.pi]])
+    verify = np.array([[0.0, 0, 0, 0, 0, np.pi]])
+    planned = predicted_robot_time(start, Waypoints.plain(fit), Waypoints.plain(verify), 0.5,
+                                   limits, 3)
+    # moves of 90, 180 and 90 deg at half of 180 deg/s: 1 + 2 + 1 s
+    assert planned["motion"] == pytest.approx(4.0)
+    assert planned["settle"] == pytest.approx(0.9) and planned["capture"] == pytest.approx(0.3)
+    assert planned["total"] == pytest.approx(5.2)
+    assert planned["floor"] == pytest.approx(robot_time_floor(3, limits)) == pytest.approx(1.2)
+
+
+def test_limits_come_from_the_controller_when_it_reports_them() -> None:
+    limits = TimeLimits.from_extra({"max_joint_speed": 2.0, "settle_s": 0.5}, 6)
+    assert np.all(limits.joint_speed == 2.0) and limits.settle_s == 0.5
+    assert limits.capture_s == 0.1  # the default
+    assert np.all(TimeLimits.from_extra({}, 6).joint_speed == math.pi)
+
+
+def test_a_wound_up_tour_is_reordered_so_no_joint_unwinds() -> None:
+    # wrist 3 of simulated world 3 as planned pose by pose: wound to -229 deg, then -1 deg,
+    # whose equivalent -361 deg is beyond the limit: a 228 deg unwinding move
+    q6 = np.radians([-71, -149, -110, -79, -115, -164, -208, -229, -229, -1])
+    fit = np.zeros((q6.size, 6))
+    fit[:, 5] = q6
+    verify = np.zeros((2, 6))
+    verify[:, 5] = np.radians([-31, -139])
+    start = np.zeros(6)
+    assert np.degrees(largest_joint_moves(start, np.vstack([fit, verify]))[5]) > 220
+    orders, (q_fit, q_verify) = unwrap_plan([fit, verify], start, -LIMIT, LIMIT)
+    whole = np.vstack([q_fit, q_verify])
+    assert np.degrees(largest_joint_moves(start, whole)).max() <= 180
+    assert unwinding(whole, start, -LIMIT, LIMIT) == 0.0
+    # the same poses (2 pi equivalents), in the returned orders
+    same = np.vstack([fit[orders[0]], verify[orders[1]]])
+    assert np.allclose(np.mod(whole - same + np.pi, 2 * np.pi) - np.pi, 0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_no_joint_moves_more_than_half_a_turn_on_a_default_plan(seed: int,
+                                                                 tmp_path: Path) -> None:
+    method = stereo_method(("target",), tmp_path)
+    settings = RunSettings(method="stereo_target", seed=seed, n_verify=4,
+                           target_sigma_deg=0.002, n_candidates=600)
+    state = home_state()
+    plan = plan_run(method, state, settings, NullProgress())
+    # the plan's path: the fit poses, then the verification poses
+    path = np.vstack([plan.q, plan.q_verify])
+    assert np.degrees(largest_joint_moves(state.q, path)).max() <= 180
+    planned = plan.info["predicted_robot_time_s"]
+    assert planned["floor"] < planned["total"]
