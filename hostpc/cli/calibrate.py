@@ -42,6 +42,7 @@ from hostpc.calibrate.outcome import parse_required_joints
 from hostpc.calibrate.run_plan import PlanningError
 from hostpc.calibrate.run_values import RobotInfo, RunOutcome
 from hostpc.calibrate.runner import Runner
+from hostpc.calibrate.swaps import DEFAULT_SWAP_LIMIT_DEG, parse_swapped
 from hostpc.cli.archive_options import add_archive_options, archive_run
 from hostpc.cli.calibrate_checks import (
     check_known_frames,
@@ -148,6 +149,11 @@ def register(subparsers: Any) -> None:
                         "the measurements; on a resume: push again after a rollback)")
     parser.add_argument("--max-correction", type=POSITIVE, default=None, metavar="DEG",
                         help="largest correction pushed without --force (default 2 deg)")
+    parser.add_argument("--swapped", metavar="J3[,J5]", default=None,
+                        help="joints whose motor was swapped: their push limit is "
+                        "--swap-limit, the others keep --max-correction")
+    parser.add_argument("--swap-limit", type=POSITIVE, default=None, metavar="DEG",
+                        help="push limit of a --swapped joint (default 45 deg)")
     parser.add_argument("--require-joints", metavar="all|none|1,2,6", default=None,
                         help="joints that must be calibrated from the data: one that is not "
                         "(unidentifiable, held, prior-dominated) makes the verdict "
@@ -248,6 +254,9 @@ def _settings(args: argparse.Namespace) -> RunSettings:
         verify_tolerance_mm=args.verify_tolerance,
         criterion=args.criterion, n_candidates=args.candidates, options=options,
         target_sigma_deg=args.target_sigma, priors=tuple(args.prior),
+        swapped=parse_swapped(args.swapped),
+        swap_limit_deg=(DEFAULT_SWAP_LIMIT_DEG if args.swap_limit is None
+                        else args.swap_limit),
         hold=tuple(args.hold), require_joints=args.require_joints,
     )
 
