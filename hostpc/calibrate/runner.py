@@ -258,7 +258,8 @@ class Runner:
             q_now = await self._staging.run(
                 plan.q, q_now, lambda q, now, first: self._measure(method, q, now, first),
                 lambda first: self._fit(method, settings, first)[0],
-                lambda fitted: plan_push(fitted, offsets, force=True).fitted)
+                lambda fitted: plan_push(fitted, offsets, force=True).fitted, settings,
+                lambda q, now: self._try_pose(method, q, now))
 
         n_measured = sum(r.ok for r in self.journal.records("fit"))
         if n_measured < 3 and any(stopped(r) for r in self.journal.records("fit")):
@@ -377,6 +378,14 @@ class Runner:
         await self._timer.end("measure")
         return q_now
 
+    async def _try_pose(self, method: Method, q: np.ndarray, q_now: np.ndarray
+                        ) -> tuple[bool, np.ndarray]:
+        """Measure one pose without journaling it (the coarse search, swaps.py)."""
+        self._timer.begin()
+        record = await method.acquire(self.robot, "fit", -1, q, q_now)
+        await self._timer.end("measure")
+        return record.ok, (q_now if record.q_end is None else np.asarray(record.q_end, float))
+
     def _fit(self, method: Method, settings: RunSettings, first: int = 0
              ) -> tuple[FitResult, Dataset]:
         """Fit every measured fit pose from index `first` on (a stage's, swaps.py;
@@ -389,7 +398,8 @@ class Runner:
         save_dataset(dataset, self.run_dir / "dataset.json", plugins=settings.plugins)
         self.progress.stage("fit")
         return fit(dataset, settings.effects, plugins=settings.plugins, loss=settings.loss,
-                   cv_folds=settings.cv_folds), dataset
+                   cv_folds=settings.cv_folds,
+                   x0=self._staging.start_vector(dataset, settings)), dataset
 
     def _dataset(self, method: Method, phase: str, first: int = 0,
                  stop: int | None = None) -> Dataset:

@@ -9,9 +9,14 @@ joint is estimated more than ``COARSE_DEG`` off it measures the same plan again 
 pose shifted by the estimate (commanded ``q - estimate``: the robot is where the plan meant
 it to be), fits that stage alone, and repeats until the estimate moves less than
 ``SETTLED_DEG`` (at most ``MAX_STAGES`` extra stages). The final fit uses the last stage's
-poses only. Each stage is journaled (`stage` event: its number, the estimate it is
-shifted by, the index of its first pose), so a resume replays the stages and measures only
-what no stage journaled yet.
+poses only. When the plan's own poses gave too little to fit (fewer than a quarter measured:
+a sphere_probe touch misses the 12.5 mm sphere after a 2 deg J1 error) and a swap is
+declared, a coarse search comes first: the plan's first pose is tried with the swapped
+joint shifted by +-1, +-2, ... deg (``SEARCH_STEP_DEG``, up to --swap-limit) until it is
+measured, then on while it is: the middle of the measured range is the first stage's
+shift (the first hit is a touch on the flank). Each stage is journaled (`stage` event:
+its number, the estimate it is shifted by, the index of its first pose), so a resume
+replays the stages and measures only what no stage journaled yet.
 
 A method opts in through `Method.staged` (a joint-space plan: stereo_target, world_point);
 one whose acquisition plans contacts on the nominal model (sphere_probe) or a kinematic
@@ -34,9 +39,11 @@ from typing import Any
 import numpy as np
 
 from hostpc.calibrate.journal import Journal
+from hostpc.dataset import Dataset
 from hostpc.errors import ControllerError, InputError
 from hostpc.fitting import FitResult
 from hostpc.methods.base import Method, Progress, RunSettings
+from hostpc.model.problem import build_problem
 
 __all__ = ["DEFAULT_SWAP_LIMIT_DEG", "Staging", "controller_limit_refusal",
            "joint_limits_deg", "parse_swapped", "swap_message"]
@@ -49,6 +56,8 @@ SETTLED_DEG = 0.05
 """The stages stop when no joint's estimate moved more than this (deg) since the last."""
 MAX_STAGES = 3
 """Extra (shifted) stages at most, after the plan's own."""
+SEARCH_STEP_DEG = 1.0
+"""The coarse search's step (deg) on a declared swapped joint."""
 STAGE_STRIDE = 100_000
 """Stage k's fit poses are journaled from index k * STAGE_STRIDE (the plan's own from 0,
 its further poses, more_poses, right after them)."""
@@ -113,6 +122,9 @@ FitFn = Callable[[int], FitResult]
 """first journal index of a stage -> the fit of that stage's poses."""
 EstimateFn = Callable[[FitResult], np.ndarray]
 """A fit -> (n,) joint offset estimate, rad (zero where not identified)."""
+TryFn = Callable[[np.ndarray, np.ndarray], Awaitable[tuple[bool, np.ndarray]]]
+"""(one commanded pose (n,), where the robot is) -> (measured?, where it is); not
+journaled (the coarse search)."""
 
 
 class Staging:
@@ -137,26 +149,49 @@ class Staging:
             return q_plan
         return self._shift(q_plan, self.estimate - (0.0 if pushed is None else pushed))
 
-    def _shift(self, q_plan: np.ndarray, estimate: np.ndarray) -> np.ndarray:
+    def start_vector(self, dataset: Dataset, settings: RunSettings) -> np.ndarray | None:
+        """The fit's start: the joint offsets at the current stage's shift (a fit started
+        15 deg away can end in another minimum), the rest zero; None unstaged."""
+        if self.estimate is None:
+            return None
+        layout = build_problem(dataset, settings.effects, plugins=settings.plugins).layout
+        x0 = np.zeros(layout.size)
+        for j, value in enumerate(self.estimate):
+            if f"joint_offsets.q{j + 1}" in layout.names:
+                x0[layout.index(f"joint_offsets.q{j + 1}")] = value
+        return x0
+
+    def _shift(self, q_plan: np.ndarray, estimate: np.ndarray, new_stage: bool = False
+               ) -> np.ndarray:
         """The poses commanded so the robot reaches them when its joints are off by
         `estimate` (within the controller's joint limits); the method told so."""
-        self.method.set_joint_estimate(estimate)
+        self.method.set_joint_estimate(estimate, new_stage)
         q = np.asarray(q_plan, float) - estimate[None, :]
         if self.q_min.size == q.shape[1] and self.q_max.size == q.shape[1]:
             q = np.clip(q, self.q_min, self.q_max)
         return q
 
     async def run(self, q_plan: np.ndarray, q_now: np.ndarray, acquire: AcquireFn,
-                  fit_stage: FitFn, estimate_of: EstimateFn) -> np.ndarray:
+                  fit_stage: FitFn, estimate_of: EstimateFn, settings: RunSettings,
+                  try_pose: TryFn) -> np.ndarray:
         """After the plan's own poses were measured: stage while a joint is far off or the
         estimate still moves; returns where the robot is. Journaled stages are replayed
-        (their poses measured only where missing), never re-planned."""
+        (their poses measured only where missing), never re-planned or searched again."""
         journaled = {int(e["number"]): e for e in self.journal.events("stage")}
         estimate = np.zeros(q_plan.shape[1])
         for number in range(1, MAX_STAGES + 1):
             event = journaled.get(number)
             if event is None:
-                new = estimate_of(fit_stage(self.first))
+                measured = self._measured()
+                if number == 1 and 4 * measured < q_plan.shape[0] and settings.swapped:
+                    found, q_now = await self._search(q_plan[0], q_now, settings, try_pose)
+                    if found is None:
+                        break
+                    new = found
+                elif measured < 3:
+                    break  # nothing to fit: the runner says so
+                else:
+                    new = estimate_of(fit_stage(self.first))
                 moved = float(np.max(np.abs(new - estimate))) if new.size else 0.0
                 far = float(np.max(np.abs(new))) if new.size else 0.0
                 limit = COARSE_DEG if number == 1 else SETTLED_DEG
@@ -175,6 +210,58 @@ class Staging:
             else:
                 estimate = np.asarray(event["estimate"], float)
                 first = int(event["first"])
+            before = (self.first, self.estimate)
             self.first, self.estimate = first, estimate
-            q_now = await acquire(self._shift(q_plan, estimate), q_now, first)
+            q_now = await acquire(self._shift(q_plan, estimate, new_stage=True), q_now,
+                                  first)
+            if self._measured() < 3:  # this stage lost everything: the last one stands
+                self.first, self.estimate = before
+                self.progress.message(f"stage {number} measured too little; the fit uses "
+                                      "the stage before")
+                self.method.set_joint_estimate(
+                    np.zeros_like(estimate) if self.estimate is None else self.estimate,
+                    new_stage=True)
+                break
         return q_now
+
+    def _measured(self) -> int:
+        """Poses measured in the current stage."""
+        return sum(r.ok for r in self.journal.records("fit")
+                   if self.first <= r.index < self.first + STAGE_STRIDE)
+
+    async def _search(self, q_pose: np.ndarray, q_now: np.ndarray, settings: RunSettings,
+                      try_pose: TryFn) -> tuple[np.ndarray | None, np.ndarray]:
+        """The coarse search (module docstring): the first shift of a declared swapped
+        joint at which `q_pose` is measured, or None; and where the robot is."""
+        steps = int(math.floor(settings.swap_limit_deg / SEARCH_STEP_DEG))
+        joints = [j - 1 for j in settings.swapped if j <= q_pose.size]
+        self.progress.message(
+            "too few poses measured for a fit: searching the swapped "
+            + ", ".join(f"J{j + 1}" for j in joints)
+            + f" in steps of {SEARCH_STEP_DEG:g} deg up to {settings.swap_limit_deg:g} deg")
+        for step in range(1, steps + 1):
+            for sign in (1.0, -1.0):
+                for joint in joints:
+                    estimate = np.zeros(q_pose.size)
+                    estimate[joint] = sign * math.radians(step * SEARCH_STEP_DEG)
+                    ok, q_now = await try_pose(self._shift(q_pose[None, :], estimate)[0],
+                                               q_now)
+                    if not ok:
+                        continue
+                    # the first hit is at the edge (a touch on the sphere's flank): go on
+                    # while it is measured, and take the middle of the measured range
+                    last = estimate.copy()
+                    for _ in range(steps - step):
+                        further = last.copy()
+                        further[joint] += sign * math.radians(SEARCH_STEP_DEG)
+                        ok, q_now = await try_pose(
+                            self._shift(q_pose[None, :], further)[0], q_now)
+                        if not ok:
+                            break
+                        last = further
+                    self.method.set_joint_estimate(np.zeros(q_pose.size))
+                    return 0.5 * (estimate + last), q_now
+        self.method.set_joint_estimate(np.zeros(q_pose.size))
+        self.progress.message("the search found no shift at which the first pose is "
+                              "measured")
+        return None, q_now

@@ -319,11 +319,13 @@ class Method(ABC):
         self.cell = cell
         self.run_dir = Path(run_dir)
 
-    def set_joint_estimate(self, estimate: np.ndarray) -> None:
+    def set_joint_estimate(self, estimate: np.ndarray, new_stage: bool = False) -> None:
         """Planning hook of a staged method: from now on the robot's joints are off by
         `estimate` ((n,) rad, the runner's current joint offset estimate) when it is sent
         to commanded poses; what the method predicts from the nominal model while it
-        acquires (which marker faces the tracker, the plate's normal) uses it. The
+        acquires (which marker faces the tracker, the contact to make) uses it.
+        new_stage: the poses measured from now on are a new fit set (what the method
+        kept of the last one, e.g. sphere_probe's start frames, no longer holds). The
         default ignores it."""
         return None
 

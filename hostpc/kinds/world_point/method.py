@@ -89,7 +89,7 @@ class WorldPointMethod(Method):
         self._moves = ApproachMoves(settings, self._chain)
         self._joint_estimate = np.zeros(self._chain.n)  # set_joint_estimate
 
-    def set_joint_estimate(self, estimate: np.ndarray) -> None:
+    def set_joint_estimate(self, estimate: np.ndarray, new_stage: bool = False) -> None:
         """The reflector facing the tracker is chosen with the joints' estimate."""
         self._joint_estimate = np.asarray(estimate, float)
 
