@@ -257,7 +257,7 @@ class Runner:
         if method.staged:  # a joint far off: measured again, shifted (swaps.py)
             q_now = await self._staging.run(
                 plan.q, q_now, lambda q, now, first: self._measure(method, q, now, first),
-                lambda first: self._fit(method, settings, first)[0],
+                lambda first: self._fit(method, settings, first),
                 lambda fitted: plan_push(fitted, offsets, force=True).fitted, settings,
                 lambda q, now: self._try_pose(method, q, now))
 
@@ -269,7 +269,9 @@ class Runner:
         if n_measured < 3:
             raise ZerocalError(f"only {n_measured} of {plan.q.shape[0]} poses measured; "
                                "nothing to fit (see the skipped reasons in journal.jsonl)")
-        result, dataset = self._fit(method, settings, self._staging.first)
+        last = self._staging.last_fit  # the staging's fit of these poses, if it made one
+        result, dataset = (last[1] if last is not None and last[0] == self._staging.first
+                           else self._fit(method, settings, self._staging.first))
         reason = more_poses_reason(self.journal, plan, result, pushed=self._pushed_ever())
         if reason is not None:  # diagnostics need more data to see the missing effect
             progress.message(more_poses_message(reason, self.journal, plan))

@@ -118,8 +118,8 @@ def _now() -> str:
 
 AcquireFn = Callable[[np.ndarray, np.ndarray, int], Awaitable[np.ndarray]]
 """(commanded poses (N, n), where the robot is, first journal index) -> where it is."""
-FitFn = Callable[[int], FitResult]
-"""first journal index of a stage -> the fit of that stage's poses."""
+FitFn = Callable[[int], tuple[FitResult, Dataset]]
+"""first journal index of a stage -> the fit of that stage's poses, and its dataset."""
 EstimateFn = Callable[[FitResult], np.ndarray]
 """A fit -> (n,) joint offset estimate, rad (zero where not identified)."""
 TryFn = Callable[[np.ndarray, np.ndarray], Awaitable[tuple[bool, np.ndarray]]]
@@ -141,6 +141,8 @@ class Staging:
         self.q_max = np.asarray(q_max, float)
         self.first = 0
         self.estimate: np.ndarray | None = None  # the last stage's shift, rad
+        self.last_fit: tuple[int, tuple[FitResult, Dataset]] | None = None
+        """The last fit run() made and the `first` of its stage: the runner reuses it."""
 
     def shifted(self, q_plan: np.ndarray, pushed: np.ndarray | None = None) -> np.ndarray:
         """Further poses of a staged run commanded like its last stage (less what was
@@ -191,7 +193,8 @@ class Staging:
                 elif measured < 3:
                     break  # nothing to fit: the runner says so
                 else:
-                    new = estimate_of(fit_stage(self.first))
+                    self.last_fit = (self.first, fit_stage(self.first))
+                    new = estimate_of(self.last_fit[1][0])
                 moved = float(np.max(np.abs(new - estimate))) if new.size else 0.0
                 far = float(np.max(np.abs(new))) if new.size else 0.0
                 limit = COARSE_DEG if number == 1 else SETTLED_DEG

@@ -85,7 +85,10 @@ def test_a_swapped_joint_is_found_coarse_to_fine_and_passes(
     assert document["outcome"]["verdict"] == "PASS"
     stages = Journal(out).events("stage")
     assert stages, "a joint this far off is measured again, shifted"
-    assert math.degrees(stages[0]["estimate"][joint - 1]) == pytest.approx(degrees, abs=0.5)
+    # the first stage's shift is coarse (a search's middle, or a fit of the poses that
+    # kept the target); the last stage's is the fit's
+    assert math.degrees(stages[0]["estimate"][joint - 1]) == pytest.approx(degrees, abs=10.0)
+    assert math.degrees(stages[-1]["estimate"][joint - 1]) == pytest.approx(degrees, abs=0.5)
     summary = (out / "summary.txt").read_text() if (out / "summary.txt").is_file() else ""
     assert "robot time" in summary
 

@@ -394,8 +394,8 @@ class SphereProbeMethod(Method):
                                                   for k in ("tool", "sphere")})
             return dataset_to_dict(dataset)
         try:
-            if np.any(self._joint_estimate != 0.0):  # staged: the closed-form estimate
-                raise SphereFitError("assumes zero offsets")  # assumes zero offsets
+            if np.any(self._joint_estimate != 0.0):  # staged: the closed-form start
+                raise SphereFitError("frames assume zero joint offsets; start nominal")
             dataset = build_dataset(self.cell.robot, self.setup, records)
         except (SphereFitError, np.linalg.LinAlgError):
             dataset = build_dataset(self.cell.robot, self.setup,
