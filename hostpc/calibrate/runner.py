@@ -416,6 +416,7 @@ class Runner:
         """Measure this round's verification poses (all measured under `offsets`, the
         controller's now) and test them; VerifyLost if every pose was skipped."""
         q_verify = self._staging.shifted(self._verify_poses(plan), pushed_delta)
+        q_now = self._staging.reading_after_push(q_now, pushed_delta)
         n_verify = q_verify.shape[0]
         number, first = verify_round(self.journal, offsets, pushed_delta, n_verify)
         self._timer.begin()

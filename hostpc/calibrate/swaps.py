@@ -151,6 +151,12 @@ class Staging:
             return q_plan
         return self._shift(q_plan, self.estimate - (0.0 if pushed is None else pushed))
 
+    def reading_after_push(self, q_now: np.ndarray, pushed: np.ndarray) -> np.ndarray:
+        """Where a staged run's robot reads now that `pushed` ((n,) rad) is in the
+        controller (the same place reads q + pushed; a 15 deg push is not a rounding
+        error); unchanged when nothing was staged."""
+        return q_now if self.estimate is None else np.asarray(q_now, float) + pushed
+
     def start_vector(self, dataset: Dataset, settings: RunSettings) -> np.ndarray | None:
         """The fit's start: the joint offsets at the current stage's shift (a fit started
         15 deg away can end in another minimum), the rest zero; None unstaged."""
