@@ -450,6 +450,8 @@ async def _calibrate(args: argparse.Namespace, address: RobotAddress, driver: st
                      "effects": args.effects,
                      "plugins": tuple(args.plugin) or None,
                      "require_joints": args.require_joints,
+                     "swapped": parse_swapped(args.swapped) or None,
+                     "swap_limit_deg": args.swap_limit,
                      "known": args.known, "reference": args.reference}
         runner = Runner(robot, run_dir, robot_info=info, settings=settings,
                         cell_file=cell_file, known=known, default_known=default_known,

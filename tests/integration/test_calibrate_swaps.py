@@ -132,3 +132,14 @@ def test_a_resume_replays_the_stages_and_measures_nothing_again(tmp_path: Path) 
     document = json.loads((out / "result.json").read_text())
     assert document["outcome"]["verdict"] == "PASS"
     assert all(abs(e) < TOLERANCE_DEG for e in document["truth"]["joint_offsets_error_deg"])
+
+
+@pytest.mark.slow
+def test_a_swap_declared_on_the_resume_of_a_refused_push_is_pushed(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    code, document = calibrate(out, swap_world("world_point", 3, 15.0), "world_point")
+    assert code == 5 and "exceeds the limit of 2 deg" in document["push"]["reason"]
+    assert main(["calibrate", "--resume", str(out), "--swapped", "J3", "--no-report"]) == 0
+    document = json.loads((out / "result.json").read_text())
+    assert document["outcome"]["verdict"] == "PASS"
+    assert document["settings"]["swapped"] == [3]
