@@ -18,9 +18,9 @@ shift (the first hit is a touch on the flank). Each stage is journaled (`stage` 
 its number, the estimate it is shifted by, the index of its first pose), so a resume
 replays the stages and measures only what no stage journaled yet.
 
-A method opts in through `Method.staged` (a joint-space plan: stereo_target, world_point);
-one whose acquisition plans contacts on the nominal model (sphere_probe) or a kinematic
-tree (dual_loop) does not.
+A method opts in through `Method.staged` and follows the shift through its planning hook
+`Method.set_joint_estimate` (stereo_target, world_point, sphere_probe: its contacts are
+commanded less the estimate); dual_loop (a kinematic tree) does not.
 
 `--swapped J3` (the station's ``swapped``) raises the push limit of that joint only to
 ``--swap-limit`` (default ``DEFAULT_SWAP_LIMIT_DEG``); the others keep ``--max-correction``.

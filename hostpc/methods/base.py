@@ -305,8 +305,8 @@ class Method(ABC):
     staged: ClassVar[bool] = False
     """The runner may measure the plan again in stages, its poses shifted by the current
     joint offset estimate, when a joint is found far off (hostpc.calibrate.swaps: a motor
-    swap). A method opts in when its planned poses keep the target in view after such a
-    shift (a joint-space plan); one that plans contacts on the nominal model does not."""
+    swap). A method opts in when it can follow the shift (`set_joint_estimate`):
+    stereo_target, world_point, sphere_probe; dual_loop (a kinematic tree) does not."""
 
     @classmethod
     def short_plan_warning(cls, n_fit: int) -> str | None:
