@@ -275,6 +275,7 @@ def _replay(events: Sequence[Mapping[str, Any]]) -> _Replay:
             state.events.append(OutcomeEvent(at, "rolled_back", (("how", e.get("how")),)))
         elif kind == "push_refused":
             state.refused = str(e.get("reason") or "refused by a guard rail")
+            state.intent_open = False  # refused: the offsets were not written
             state.events.append(OutcomeEvent(at, "refused", (("reason", state.refused),)))
         elif kind == "resumed":
             # a refusal is the decision of one attempt: a resume decides the push anew (and
@@ -334,6 +335,9 @@ def _with_words(outcome: RobotOutcome, run_dir: str, robot_arg: str, known: tupl
         head = f"REFUSED: push refused, offsets unchanged ({outcome.refused_reason})"
         reason = outcome.refused_reason or ""
         next_command = (f"hostpc diagnose {run}/dataset.json" if "hostpc diagnose" in reason
+                        # the controller's own limit: --force would meet it again
+                        else f"hostpc calibrate --resume {run} --push"
+                        if "controller's own offset limit" in reason
                         else f"hostpc calibrate --resume {run} --force")
     elif verdict == "NOT_PUSHED":
         head = f"NOT PUSHED: offsets unchanged; {good_text}" + (

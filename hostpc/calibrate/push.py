@@ -113,11 +113,14 @@ class PushPlan:
 
 def plan_push(result: FitResult, old_offsets: np.ndarray,
               max_correction_deg: float = DEFAULT_MAX_CORRECTION_DEG, force: bool = False,
-              dataset_file: str = "DIR/dataset.json") -> PushPlan:
+              dataset_file: str = "DIR/dataset.json",
+              limits_deg: np.ndarray | None = None) -> PushPlan:
     """Decide what to push from a fit (see the module docstring); nothing is written.
 
     old_offsets: (n,) rad, the controller's offsets; dataset_file: the fit's dataset, named
-    in the refusal of an inadequate model (what to run `hostpc diagnose` on)."""
+    in the refusal of an inadequate model (what to run `hostpc diagnose` on); limits_deg:
+    (n,) per-joint limit where a joint has its own (a declared swap, swaps.py), else
+    max_correction_deg for every joint."""
     old = np.asarray(old_offsets, dtype=float)
     n = old.size
     names = result.names
@@ -151,8 +154,10 @@ def plan_push(result: FitResult, old_offsets: np.ndarray,
     delta = np.where(pushed, fitted, 0.0)
     labels = table.labels
     chi2_dof, shared = adequacy_chi2(result)
+    limits = (np.full(n, float(max_correction_deg)) if limits_deg is None
+              else np.asarray(limits_deg, float))
     refused = None if force else _refusal(result, delta, pushed, labels, max_correction_deg,
-                                          dataset_file, chi2_dof, shared)
+                                          limits, dataset_file, chi2_dof, shared)
     return PushPlan(old=old, delta=delta, new=old + delta, sigma=sigma, pushed=pushed,
                     notes=tuple(notes), refused=refused, max_correction_deg=max_correction_deg,
                     fitted=fitted, labels=labels,
@@ -175,8 +180,8 @@ def adequacy_chi2(result: FitResult) -> tuple[float, bool]:
 
 
 def _refusal(result: FitResult, delta: np.ndarray, pushed: np.ndarray,
-             labels: tuple[str, ...], max_correction_deg: float, dataset_file: str,
-             chi2_dof: float, shared: bool) -> str | None:
+             labels: tuple[str, ...], max_correction_deg: float, limits: np.ndarray,
+             dataset_file: str, chi2_dof: float, shared: bool) -> str | None:
     """Why the guard rails refuse the push (first reason that applies), or None.
 
     delta: (n,) rad corrections, zero where not pushed; pushed: (n,) bool; chi2_dof,
@@ -191,12 +196,14 @@ def _refusal(result: FitResult, delta: np.ndarray, pushed: np.ndarray,
                 f"{chi2_dof:.3g} above its band {band:.3g}); run `hostpc diagnose "
                 f"{dataset_file}` and rerun with the effect it names, or push anyway "
                 "with --force")
-    too_big = pushed & (np.abs(delta) > math.radians(max_correction_deg))
+    too_big = pushed & (np.abs(delta) > np.radians(limits))
     if np.any(too_big):
         j = int(np.argmax(np.where(too_big, np.abs(delta), 0.0)))
         joint = labels[j] if labels[j] != f"q{j + 1}" else str(j + 1)  # head.q2, else 2
+        own = ("" if limits[j] == max_correction_deg
+               else " of a declared swap (--swap-limit)")
         return (f"joint {joint} correction {math.degrees(delta[j]):+.4f} deg exceeds the "
-                f"limit of {max_correction_deg:g} deg; check the cell and the data, and "
+                f"limit{own} of {limits[j]:g} deg; check the cell and the data, and "
                 "rerun with --force to push anyway")
     return None
 

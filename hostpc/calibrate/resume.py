@@ -29,7 +29,7 @@ from hostpc.robots.base import RobotState
 
 RESUME_OVERRIDABLE = frozenset({"push", "force", "max_correction_deg", "verify_factor",
                                 "verify_alpha", "verify_tolerance_mm", "effects", "plugins",
-                                "require_joints"})
+                                "require_joints", "swapped", "swap_limit_deg"})
 """Settings a resume may change (they act after the measurements: a new model refits the
 measured dataset, then pushes and verifies)."""
 CLOCK_TOLERANCE_S = 1e-6

@@ -64,6 +64,12 @@ from hostpc.calibrate.summary import (
     format_summary,
     run_result,
 )
+from hostpc.calibrate.swaps import (
+    Staging,
+    controller_limit_refusal,
+    joint_limits_deg,
+    swap_message,
+)
 from hostpc.calibrate.verify import VerifyResult, evaluate_verify
 from hostpc.dataset import Dataset, save_dataset
 from hostpc.errors import ConnectionFailed, ControllerError, InputError, ZerocalError
@@ -124,6 +130,7 @@ class Runner:
         self._priors: list[Any] = []
         self.journal = Journal(self.run_dir)
         self._clock = SampleClock(self.journal, self.progress)  # resume: sample t continues
+        self._controller_refusal: str | None = None  # the controller's own offset limit
 
     # ------------------------------------------------------------------ top level
 
@@ -230,12 +237,22 @@ class Runner:
                                                   progress)
         for text in plan.info.get("structural_unidentifiable", []):
             progress.message(f"note: {text}")
+        limits_deg = joint_limits_deg(len(offsets), settings)
+        if (text := swap_message(settings)) is not None:
+            progress.message(text)
 
         q_from = self.journal.last_q()
         q_now = np.asarray(q_from, float) if q_from is not None else state.q
         self._timer.begin()
         q_now = await self._acquire(method, "fit", plan.q, q_now)
         await self._timer.end("measure")
+        self._staging = Staging(method, self.journal, progress, state.q_min, state.q_max)
+        if method.staged:  # a joint far off: measured again, shifted (swaps.py)
+            q_now = await self._staging.run(
+                plan.q, q_now, lambda q, now, first: self._measure(method, q, now, first),
+                lambda first: self._fit(method, settings, first),
+                lambda fitted: plan_push(fitted, offsets, force=True).fitted, settings,
+                lambda q, now: self._try_pose(method, q, now))
 
         n_measured = sum(r.ok for r in self.journal.records("fit"))
         if n_measured < 3 and any(stopped(r) for r in self.journal.records("fit")):
@@ -245,14 +262,15 @@ class Runner:
         if n_measured < 3:
             raise ZerocalError(f"only {n_measured} of {plan.q.shape[0]} poses measured; "
                                "nothing to fit (see the skipped reasons in journal.jsonl)")
-        result, dataset = self._fit(method, settings)
+        last = self._staging.last_fit  # the staging's fit of these poses, if it made one
+        result, dataset = (last[1] if last is not None and last[0] == self._staging.first
+                           else self._fit(method, settings, self._staging.first))
         reason = more_poses_reason(self.journal, plan, result, pushed=self._pushed_ever())
         if reason is not None:  # diagnostics need more data to see the missing effect
             progress.message(more_poses_message(reason, self.journal, plan))
-            self._timer.begin()
-            q_now = await self._acquire(method, "fit", plan.more, q_now, plan.q.shape[0])
-            await self._timer.end("measure")
-            result, dataset = self._fit(method, settings)
+            q_now = await self._measure(method, self._staging.shifted(plan.more), q_now,
+                                        self._staging.first + plan.q.shape[0])
+            result, dataset = self._fit(method, settings, self._staging.first)
         write_json_atomic(self.run_dir / "fit.json", result.to_dict())
         status = "converged" if result.converged else "NOT converged"
         progress.message(f"fit: RMS {result.rms * 1e3:.4f} mm, chi2/dof "
@@ -261,10 +279,13 @@ class Runner:
 
         initial_offsets = initial.offsets
         push_plan = plan_push(result, initial_offsets, settings.max_correction_deg,
-                              settings.force, dataset_file=str(self.run_dir / "dataset.json"))
+                              settings.force, dataset_file=str(self.run_dir / "dataset.json"),
+                              limits_deg=limits_deg)
         push_plan = cell_reference.refuse_if_moved(push_plan, check, self.reference,
                                                    self.run_dir)
         push_status, pushed_delta, offsets = await self._push(push_plan, settings, offsets)
+        if self._controller_refusal is not None:
+            push_plan = dataclasses.replace(push_plan, refused=self._controller_refusal)
         exports = export_offsets(self.robot, self.run_dir, cell.robot, push_plan,
                                  push_status, progress)
 
@@ -340,17 +361,36 @@ class Runner:
             progress.advance(done, f"{phase} pose {pose + 1}/{total}")
         return q_now
 
-    def _fit(self, method: Method, settings: RunSettings) -> tuple[FitResult, Dataset]:
-        """Fit every measured fit pose (dataset.json written first, with the run's
-        --prior / --hold and the cell reference's priors inside)."""
-        dataset = with_constraints(self._dataset(method, "fit"), settings.priors,
+    async def _measure(self, method: Method, q_plan: np.ndarray, q_now: np.ndarray,
+                       first: int) -> np.ndarray:
+        """`_acquire` further fit poses from index `first`, timed as measurement."""
+        self._timer.begin()
+        q_now = await self._acquire(method, "fit", q_plan, q_now, first)
+        await self._timer.end("measure")
+        return q_now
+
+    async def _try_pose(self, method: Method, q: np.ndarray, q_now: np.ndarray
+                        ) -> tuple[bool, np.ndarray]:
+        """Measure one pose without journaling it (the coarse search, swaps.py)."""
+        self._timer.begin()
+        record = await method.acquire(self.robot, "fit", -1, q, q_now)
+        await self._timer.end("measure")
+        return record.ok, (q_now if record.q_end is None else np.asarray(record.q_end, float))
+
+    def _fit(self, method: Method, settings: RunSettings, first: int = 0
+             ) -> tuple[FitResult, Dataset]:
+        """Fit every measured fit pose from index `first` on (a stage's, swaps.py;
+        dataset.json written first, with the run's --prior / --hold and the cell
+        reference's priors inside)."""
+        dataset = with_constraints(self._dataset(method, "fit", first), settings.priors,
                                    settings.hold)
         dataset, self._priors = cell_reference.reference_priors(self.reference, dataset,
                                                                 settings)
         save_dataset(dataset, self.run_dir / "dataset.json", plugins=settings.plugins)
         self.progress.stage("fit")
         return fit(dataset, settings.effects, plugins=settings.plugins, loss=settings.loss,
-                   cv_folds=settings.cv_folds), dataset
+                   cv_folds=settings.cv_folds,
+                   x0=self._staging.start_vector(dataset, settings)), dataset
 
     def _dataset(self, method: Method, phase: str, first: int = 0,
                  stop: int | None = None) -> Dataset:
@@ -363,7 +403,8 @@ class Runner:
                       q_now: np.ndarray) -> VerifyResult:
         """Measure this round's verification poses (all measured under `offsets`, the
         controller's now) and test them; VerifyLost if every pose was skipped."""
-        q_verify = self._verify_poses(plan)
+        q_verify = self._staging.shifted(self._verify_poses(plan), pushed_delta)
+        q_now = self._staging.reading_after_push(q_now, pushed_delta)
         n_verify = q_verify.shape[0]
         number, first = verify_round(self.journal, offsets, pushed_delta, n_verify)
         self._timer.begin()
@@ -423,8 +464,17 @@ class Runner:
         if not plan.anything:
             return "nothing_to_push", zero, offsets_now
         progress.stage("push")
-        record = await execute_push(self.robot, plan, self.run_dir, self.robot_info.address,
-                                    journal=self.journal)
+        try:
+            record = await execute_push(self.robot, plan, self.run_dir,
+                                        self.robot_info.address, journal=self.journal)
+        except ControllerError as exc:  # the controller's own limit: said once (swaps.py)
+            refused = controller_limit_refusal(exc, self.run_dir)
+            if refused is None:
+                raise
+            self._controller_refusal = refused
+            progress.message(f"push refused: {refused}")
+            self.journal.event("push_refused", reason=refused, by="controller", at=_now())
+            return "refused", zero, offsets_now
         labels = plan.display_names()
         progress.message("pushed zero offsets: " + ", ".join(
             f"{labels[j]} {math.degrees(o):+.4f}->{math.degrees(n):+.4f}"

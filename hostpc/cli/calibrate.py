@@ -43,6 +43,7 @@ from hostpc.calibrate.run_header import parse_run_header, read_run_header
 from hostpc.calibrate.run_plan import PlanningError
 from hostpc.calibrate.run_values import RobotInfo, RunOutcome
 from hostpc.calibrate.runner import Runner
+from hostpc.calibrate.swaps import DEFAULT_SWAP_LIMIT_DEG, parse_swapped
 from hostpc.cli.archive_options import add_archive_options, archive_run
 from hostpc.cli.calibrate_checks import (
     check_known_frames,
@@ -149,6 +150,11 @@ def register(subparsers: Any) -> None:
                         "the measurements; on a resume: push again after a rollback)")
     parser.add_argument("--max-correction", type=POSITIVE, default=None, metavar="DEG",
                         help="largest correction pushed without --force (default 2 deg)")
+    parser.add_argument("--swapped", metavar="J3[,J5]", default=None,
+                        help="joints whose motor was swapped: their push limit is "
+                        "--swap-limit, the others keep --max-correction")
+    parser.add_argument("--swap-limit", type=POSITIVE, default=None, metavar="DEG",
+                        help="push limit of a --swapped joint (default 45 deg)")
     parser.add_argument("--require-joints", metavar="all|none|1,2,6", default=None,
                         help="joints that must be calibrated from the data: one that is not "
                         "(unidentifiable, held, prior-dominated) makes the verdict "
@@ -249,6 +255,9 @@ def _settings(args: argparse.Namespace) -> RunSettings:
         verify_tolerance_mm=args.verify_tolerance,
         criterion=args.criterion, n_candidates=args.candidates, options=options,
         target_sigma_deg=args.target_sigma, priors=tuple(args.prior),
+        swapped=parse_swapped(args.swapped),
+        swap_limit_deg=(DEFAULT_SWAP_LIMIT_DEG if args.swap_limit is None
+                        else args.swap_limit),
         hold=tuple(args.hold), require_joints=args.require_joints,
     )
 
@@ -441,6 +450,8 @@ async def _calibrate(args: argparse.Namespace, address: RobotAddress, driver: st
                      "effects": args.effects,
                      "plugins": tuple(args.plugin) or None,
                      "require_joints": args.require_joints,
+                     "swapped": parse_swapped(args.swapped) or None,
+                     "swap_limit_deg": args.swap_limit,
                      "known": args.known, "reference": args.reference}
         runner = Runner(robot, run_dir, robot_info=info, settings=settings,
                         cell_file=cell_file, known=known, default_known=default_known,

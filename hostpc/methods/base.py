@@ -83,6 +83,8 @@ class RunSettings:
     `--prior NAME=VALUE+-SIGMA` and `--hold NAME` (hostpc.fitting.priors; a joint they
     decide is never pushed as measured); require_joints: `--require-joints` ("all", "1,2,6"
     or None): a listed joint not calibrated from the data makes the verdict JOINTS_MISSING.
+    swapped: `--swapped J3` joints (1-based) declared swapped: their push limit is
+    swap_limit_deg instead of max_correction_deg (hostpc.calibrate.swaps).
     """
 
     method: str
@@ -107,12 +109,15 @@ class RunSettings:
     priors: tuple[str, ...] = ()
     hold: tuple[str, ...] = ()
     require_joints: str | None = None
+    swapped: tuple[int, ...] = ()
+    swap_limit_deg: float = 45.0
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form."""
         data = dataclasses.asdict(self)
         data["plugins"] = list(self.plugins)
         data["priors"], data["hold"] = list(self.priors), list(self.hold)
+        data["swapped"] = list(self.swapped)
         data["options"] = dict(self.options)
         return data
 
@@ -124,6 +129,7 @@ class RunSettings:
         values["plugins"] = tuple(values.get("plugins", ()))
         values["priors"] = tuple(values.get("priors", ()))
         values["hold"] = tuple(values.get("hold", ()))
+        values["swapped"] = tuple(int(j) for j in values.get("swapped", ()))
         values["options"] = dict(values.get("options", {}))
         return cls(**values)
 
@@ -404,6 +410,11 @@ class Method(ABC):
     needs: ClassVar[tuple[Need, ...]] = ()
     """Calls beyond `RobotAdapter` the method makes (hostpc.robots.base capabilities),
     checked by the runner before `prepare`."""
+    staged: ClassVar[bool] = False
+    """The runner may measure the plan again in stages, its poses shifted by the current
+    joint offset estimate, when a joint is found far off (hostpc.calibrate.swaps: a motor
+    swap). A method opts in when it can follow the shift (`set_joint_estimate`):
+    stereo_target, world_point, sphere_probe; dual_loop (a kinematic tree) does not."""
 
     @classmethod
     def short_plan_warning(cls, n_fit: int) -> str | None:
@@ -415,6 +426,16 @@ class Method(ABC):
         self.settings = settings
         self.cell = cell
         self.run_dir = Path(run_dir)
+
+    def set_joint_estimate(self, estimate: np.ndarray, new_stage: bool = False) -> None:
+        """Planning hook of a staged method: from now on the robot's joints are off by
+        `estimate` ((n,) rad, the runner's current joint offset estimate) when it is sent
+        to commanded poses; what the method predicts from the nominal model while it
+        acquires (which marker faces the tracker, the contact to make) uses it.
+        new_stage: the poses measured from now on are a new fit set (what the method
+        kept of the last one, e.g. sphere_probe's start frames, no longer holds). The
+        default ignores it."""
+        return None
 
     def check_inputs(self) -> None:
         """Validate method inputs that need no robot (files given on the command line);

@@ -7,6 +7,8 @@
     known: null                      # as `hostpc calibrate --known`
     require_joints: all              # as `--require-joints` (null: none); a required joint
                                      # not calibrated is FAIL, result code 7
+    swapped: null                    # as `--swapped` (e.g. J3 after its motor swap)
+    swap_limit: null                 # as `--swap-limit` (deg; null: 45)
     poses: 60
     verify_poses: 10
     calibrate_args: []               # further `hostpc calibrate` options, verbatim
@@ -59,6 +61,8 @@ class StationConfig(_Strict):
     effects: str | None = None
     known: str | None = None
     require_joints: str | None = "all"
+    swapped: str | None = None
+    swap_limit: float | None = Field(None, gt=0.0, le=180.0)
     poses: int = Field(60, ge=4, le=10000)
     verify_poses: int = Field(10, ge=0, le=1000)
     calibrate_args: list[str] = Field(default_factory=list)

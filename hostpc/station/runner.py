@@ -50,7 +50,7 @@ CALIBRATE = [sys.executable, "-m", "hostpc.cli.main", "calibrate"]
 OPTION_KEYS = {"--robot": "robot", "--driver": "driver", "--method": "method",
                "--poses": "poses", "--verify-poses": "verify_poses", "--effects": "effects",
                "--known": "known", "--require-joints": "require_joints", "--out": "runs_dir",
-               "--scenario": "sim"}
+               "--swapped": "swapped", "--swap-limit": "swap_limit", "--scenario": "sim"}
 """The config key behind each `hostpc calibrate` option the station sets itself; any other
 option comes from `calibrate_args`."""
 
@@ -69,6 +69,10 @@ def calibrate_options(config: StationConfig, run_dir: Path,
         options += ["--known", config.known]
     if config.require_joints:
         options += ["--require-joints", config.require_joints]
+    if config.swapped:
+        options += ["--swapped", config.swapped]
+    if config.swap_limit is not None:
+        options += ["--swap-limit", f"{config.swap_limit:g}"]
     if scenario_file is not None:
         options += ["--scenario", str(scenario_file)]
     return [*options, *config.calibrate_args]

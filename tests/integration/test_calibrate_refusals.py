@@ -102,21 +102,24 @@ def test_estop_exit_4_one_line_with_resume_hint(
     assert "5 poses journaled" in line
 
 
-def test_offset_limit_exit_4_and_nothing_half_pushed(
+def test_offset_limit_is_the_controllers_own_said_once_and_nothing_half_pushed(
         tmp_path: Path, rig: Path, out: Path,
         capsys: pytest.CaptureFixture[str]) -> None:
+    # issue 24: the controller's own limit is a refused push (exit 5) that says whose limit
+    # it is and what to do, never a resume loop (it used to be exit 4, "--resume" again)
     with SimulatedController(_scenario(server={"offset_limit_rad": 1e-4}),
                              tmp_path / "s") as sim:
         before = sim.truth()["zero_offsets"]
-        code, _, stderr = _calibrate(capsys, sim, rig, out, "--verify-poses", "0")
-        line = _error_line(stderr)
-        assert code == 4 and "controller refused (offset_limit): " in line
-        assert f"--resume {out}" in line
+        code, stdout, stderr = _calibrate(capsys, sim, rig, out, "--verify-poses", "0")
+        assert code == 5
+        assert "the controller's own offset limit refused the push" in stdout + stderr
+        assert f"hostpc calibrate --resume {out} --push" in stdout + stderr
         assert sim.truth()["zero_offsets"] == before
-        # the resume settles the intent (not pushed) and is refused again, the same way
-        code, _, stderr = run_cli(capsys, "calibrate", "--resume", str(out))
-        assert code == 4 and "did not reach the controller" in stderr
-        assert "controller refused (offset_limit): " in _error_line(stderr)
+        # a plain resume prints the stored result: it does not push into the same refusal
+        code, stdout, stderr = run_cli(capsys, "calibrate", "--resume", str(out))
+        assert code == 5 and "controller refused (offset_limit)" not in stderr
+        assert "controller's own offset limit" in stdout
+        assert sim.truth()["zero_offsets"] == before
 
 
 def test_busy_controller_exit_4_one_line(

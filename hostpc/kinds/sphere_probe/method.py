@@ -174,6 +174,7 @@ class SphereProbeMethod(Method):
 
     name: ClassVar[str] = METHOD
     plans_whole_groups: ClassVar[bool] = True
+    staged: ClassVar[bool] = True
 
     def __init__(self, settings: RunSettings, cell: Cell, run_dir: Path) -> None:
         super().__init__(settings, cell, run_dir)
@@ -197,6 +198,15 @@ class SphereProbeMethod(Method):
         self.plan: ProbePlan | None = None
         self._contact_poses: np.ndarray | None = None
         self._t0 = time.monotonic()
+        self._joint_estimate = np.zeros(self.chain.n)  # set_joint_estimate
+
+    def set_joint_estimate(self, estimate: np.ndarray, new_stage: bool = False) -> None:
+        """A contact is looked up at the pose the robot reaches and its hover, start and
+        guarded-move target commanded less the joints' estimate (staging); a new stage's
+        samples get their own start frames (`dataset_document`)."""
+        self._joint_estimate = np.asarray(estimate, float)
+        if new_stage:
+            self.frames_path.unlink(missing_ok=True)
 
     @property
     def frames_path(self) -> Path:
@@ -326,8 +336,14 @@ class SphereProbeMethod(Method):
     async def acquire(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
                       q_from: np.ndarray | None) -> SampleRecord:
         """One contact (hover, start, guarded move, back); a missed one is skipped."""
-        orientation, contact = self._lookup(np.asarray(q, float))
-        self._check_transfer(q_from, orientation)
+        shift = self._joint_estimate
+        orientation, contact = self._lookup(np.asarray(q, float) + shift)
+        self._check_transfer(None if q_from is None else np.asarray(q_from, float) + shift,
+                             orientation)
+        if np.any(shift != 0.0):  # commanded where the robot reaches the planned poses
+            contact = replace(contact, q_start=contact.q_start - shift,
+                              q_target=contact.q_target - shift)
+            orientation = replace(orientation, q_hover=orientation.q_hover - shift)
         t = time.monotonic() - self._t0
         if self.modbus is None:
             record = await probe_contact(robot, orientation, contact, self.setup,
@@ -395,6 +411,8 @@ class SphereProbeMethod(Method):
                                  start_frames={k: np.asarray(saved[k], float)
                                                for k in ("tool", "sphere")})
         try:
+            if np.any(self._joint_estimate != 0.0):  # staged: the closed-form start
+                raise SphereFitError("frames assume zero joint offsets; start nominal")
             dataset = build_dataset(self.cell.robot, self.setup, records)
         except (SphereFitError, np.linalg.LinAlgError):
             dataset = build_dataset(self.cell.robot, self.setup,

@@ -73,6 +73,7 @@ class StereoTargetMethod(Method):
 
     name: ClassVar[str] = "stereo_target"
     default_target_sigma_deg: ClassVar[float | None] = 0.002
+    staged: ClassVar[bool] = True
 
     @classmethod
     def short_plan_warning(cls, n_fit: int) -> str | None:

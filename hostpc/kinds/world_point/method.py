@@ -81,6 +81,7 @@ class WorldPointMethod(Method):
 
     name: ClassVar[str] = "world_point"
     needs: ClassVar[tuple[Need, ...]] = (Need.TRACKER,)
+    staged: ClassVar[bool] = True
 
     def __init__(self, settings: Any, cell: Any, run_dir: Path) -> None:
         super().__init__(settings, cell, run_dir)
@@ -90,6 +91,11 @@ class WorldPointMethod(Method):
         # an approach-dependent effect (backlash) in the model: each joint arrives from
         # both sides, through via-points where needed (methods/approach_moves.py)
         self._moves = ApproachMoves(settings, self._chain)
+        self._joint_estimate = np.zeros(self._chain.n)  # set_joint_estimate
+
+    def set_joint_estimate(self, estimate: np.ndarray, new_stage: bool = False) -> None:
+        """The reflector facing the tracker is chosen with the joints' estimate."""
+        self._joint_estimate = np.asarray(estimate, float)
 
     def sample_clock(self) -> WorldPointMethod:
         return self
@@ -210,7 +216,8 @@ class WorldPointMethod(Method):
             return outcome
         reading = await tracker_of(robot, f"--method {self.name}").measure_tracker()
         names = list(self.markers())
-        wanted = names[max(int(self._visible_marker(np.asarray(q)[None])[0]), 0)]
+        wanted = names[max(int(self._visible_marker(
+            np.asarray(q, float)[None] + self._joint_estimate)[0]), 0)]
         name = wanted if wanted in reading.points else next(iter(reading.points), None)
         if name is None:
             lost = ", ".join(reading.lost) or "no reflector"

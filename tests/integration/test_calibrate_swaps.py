@@ -1,0 +1,145 @@
+"""A motor swap of any size against the simulated controller (hostpc.calibrate.swaps): a
+joint off by 15 deg (30 deg on J2) is found coarse to fine and PASSes with the swap
+declared; the controller's own offset limit is reported once, with what to do; a resume
+replays the journaled stages and measures nothing again.
+
+Each world: the method's default simulated cell with every frame the method needs to
+calibrate all six joints known and true (stereo_target: the true rig, the target and the
+camera mount; world_point: the registration and the reflectors; sphere_probe: the sphere
+and a tip off the flange axis), small zero errors elsewhere, and the controller's own
+offset limit raised to 40 deg (a real controller's limit is its own setting: the last test
+keeps the stub's 5 deg).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from hostpc.calibrate.journal import Journal
+from hostpc.cli.main import main
+from hostpc.robots.simulator import default_sim_scenario
+from tests.integration.test_calibrate_sim import truth_rig_file
+
+SMALL = [0.0, 0.0021, -0.0013, 0.0017, -0.0009, 0.0]
+KNOWN = {"stereo_target": "target,tool", "world_point": "world,markers",
+         "sphere_probe": "tool,sphere"}
+TOLERANCE_DEG = 0.005
+
+
+def swap_world(method: str, joint: int, degrees: float, *,
+               controller_limit_deg: float = 40.0) -> dict[str, Any]:
+    """The method's simulated cell (module docstring) with `joint` off by `degrees`."""
+    scenario = default_sim_scenario(method=method)
+    scenario["seed"] = 5
+    errors = list(SMALL)
+    errors[joint - 1] += math.radians(degrees)
+    scenario["truth"] = {**scenario.get("truth", {}), "zero_errors": errors}
+    scenario["server"] = {**scenario.get("server", {}),
+                          "offset_limit_rad": math.radians(controller_limit_deg)}
+    if method == "stereo_target":
+        scenario["camera"] = {**scenario["camera"],
+                              "mount_error": {"xyz": [0.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]}}
+    if method == "sphere_probe":
+        scenario["probe"] = {**scenario["probe"], "tip": [0.03, -0.02, 0.12],
+                             "tip_error": [0.0, 0.0, 0.0]}
+    return scenario
+
+
+def calibrate(out: Path, scenario: dict[str, Any], method: str, *extra: str
+              ) -> tuple[int, dict[str, Any]]:
+    """`hostpc calibrate --robot sim` on `scenario` -> (exit code, result.json)."""
+    scenario_file = out.parent / f"{out.name}.scenario.json"
+    scenario_file.write_text(json.dumps(scenario))
+    rig: tuple[str, ...] = ()
+    if method == "stereo_target":
+        rig = ("--rig", str(truth_rig_file(scenario, out.parent / f"{out.name}.rig.json")))
+    code = main(["calibrate", "--robot", "sim", "--method", method, "--scenario",
+                 str(scenario_file), "--out", str(out), "--no-report", "--known",
+                 KNOWN[method], *rig, *extra])
+    return code, json.loads((out / "result.json").read_text())
+
+
+CASES = [
+    *(pytest.param(method, joint, 15.0, id=f"{method}-J{joint}-15")
+      for method in ("stereo_target", "world_point", "sphere_probe") for joint in (1, 3, 6)),
+    *(pytest.param(method, 2, 30.0, id=f"{method}-J2-30")
+      for method in ("stereo_target", "world_point", "sphere_probe")),
+]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("method", "joint", "degrees"), CASES)
+def test_a_swapped_joint_is_found_coarse_to_fine_and_passes(
+        tmp_path: Path, method: str, joint: int, degrees: float) -> None:
+    out = tmp_path / "run"
+    code, document = calibrate(out, swap_world(method, joint, degrees), method,
+                               "--swapped", f"J{joint}")
+    errors = document["truth"]["joint_offsets_error_deg"]
+    assert code == 0, (document["outcome"]["headline"], errors)
+    assert all(e is not None and abs(e) < TOLERANCE_DEG for e in errors), errors
+    assert document["outcome"]["verdict"] == "PASS"
+    stages = Journal(out).events("stage")
+    assert stages, "a joint this far off is measured again, shifted"
+    # the first stage's shift is coarse (a search's middle, or a fit of the poses that
+    # kept the target); the last stage's is the fit's
+    assert math.degrees(stages[0]["estimate"][joint - 1]) == pytest.approx(degrees, abs=10.0)
+    assert math.degrees(stages[-1]["estimate"][joint - 1]) == pytest.approx(degrees, abs=0.5)
+    summary = (out / "summary.txt").read_text() if (out / "summary.txt").is_file() else ""
+    assert "robot time" in summary
+
+
+@pytest.mark.slow
+def test_the_controllers_own_limit_is_reported_once_with_what_to_do(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run"
+    code, document = calibrate(out, swap_world("world_point", 3, 15.0,
+                                               controller_limit_deg=5.0),
+                               "world_point", "--swapped", "J3")
+    assert code == 5
+    reason = document["push"]["reason"]
+    assert "controller's own offset limit" in reason
+    assert "not zerocal's --max-correction or --swap-limit" in reason
+    next_command = document["outcome"]["next_command"]
+    assert next_command == f"hostpc calibrate --resume {out} --push"  # never --force
+    assert len(Journal(out).events("push_refused")) == 1
+    capsys.readouterr()
+    # a plain resume prints the stored result: it does not push into the same refusal
+    assert main(["calibrate", "--resume", str(out), "--no-report"]) == 5
+    assert len(Journal(out).events("push_refused")) == 1
+    assert "controller's own offset limit" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_a_resume_replays_the_stages_and_measures_nothing_again(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    code, _ = calibrate(out, swap_world("world_point", 3, 15.0), "world_point",
+                        "--swapped", "J3", "--no-push")
+    assert code == 0
+    journal = Journal(out)
+    journal.load()
+    fit_poses, stages = len(journal.records("fit")), journal.events("stage")
+    assert stages
+    assert main(["calibrate", "--resume", str(out), "--push", "--no-report"]) == 0
+    journal = Journal(out)
+    journal.load()
+    assert len(journal.records("fit")) == fit_poses
+    assert journal.events("stage") == stages
+    document = json.loads((out / "result.json").read_text())
+    assert document["outcome"]["verdict"] == "PASS"
+    assert all(abs(e) < TOLERANCE_DEG for e in document["truth"]["joint_offsets_error_deg"])
+
+
+@pytest.mark.slow
+def test_a_swap_declared_on_the_resume_of_a_refused_push_is_pushed(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    code, document = calibrate(out, swap_world("world_point", 3, 15.0), "world_point")
+    assert code == 5 and "exceeds the limit of 2 deg" in document["push"]["reason"]
+    assert main(["calibrate", "--resume", str(out), "--swapped", "J3", "--no-report"]) == 0
+    document = json.loads((out / "result.json").read_text())
+    assert document["outcome"]["verdict"] == "PASS"
+    assert document["settings"]["swapped"] == [3]
