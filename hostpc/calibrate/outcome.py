@@ -29,6 +29,7 @@ its verification did not fail; a hold or prior value never is (joint_status.py).
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -48,6 +49,8 @@ EXIT_CODES = {"PASS": 0, "NOT_PUSHED": 0, "NOT_VERIFIED": 0, "ROLLED_BACK": 0,
               "REFUSED": EXIT_PUSH_REFUSED, "FAIL": EXIT_VERIFY_FAILED,
               "JOINTS_MISSING": EXIT_JOINTS_NOT_CALIBRATED, "ERROR": 1}
 """`hostpc calibrate`'s exit code per verdict (ERROR: the error's own code at the CLI)."""
+_SWAP_HINT = re.compile(r"declare it with --swapped (J\d+)")
+"""The push guard's words for a correction beyond the default limit (hostpc.calibrate.push)."""
 JOURNAL_KINDS = ("push_intent", "push", "verify", "rollback", "push_refused", "resumed",
                  "result")
 """The journal events an outcome reads (Journal.timeline)."""
@@ -334,10 +337,15 @@ def _with_words(outcome: RobotOutcome, run_dir: str, robot_arg: str, known: tupl
     elif verdict == "REFUSED":
         head = f"REFUSED: push refused, offsets unchanged ({outcome.refused_reason})"
         reason = outcome.refused_reason or ""
+        swapped = _SWAP_HINT.search(reason)
         next_command = (f"hostpc diagnose {run}/dataset.json" if "hostpc diagnose" in reason
                         # the controller's own limit: --force would meet it again
                         else f"hostpc calibrate --resume {run} --push"
                         if "controller's own offset limit" in reason
+                        # a correction beyond the 2 deg limit: a declared swap raises that
+                        # joint's limit only, where --force would drop every guard rail
+                        else f"hostpc calibrate --resume {run} --swapped {swapped.group(1)}"
+                        if swapped is not None
                         else f"hostpc calibrate --resume {run} --force")
     elif verdict == "NOT_PUSHED":
         head = f"NOT PUSHED: offsets unchanged; {good_text}" + (

@@ -200,11 +200,15 @@ def _refusal(result: FitResult, delta: np.ndarray, pushed: np.ndarray,
     if np.any(too_big):
         j = int(np.argmax(np.where(too_big, np.abs(delta), 0.0)))
         joint = labels[j] if labels[j] != f"q{j + 1}" else str(j + 1)  # head.q2, else 2
-        own = ("" if limits[j] == max_correction_deg
-               else " of a declared swap (--swap-limit)")
+        declared = limits[j] != max_correction_deg
+        own = " of a declared swap (--swap-limit)" if declared else ""
+        swap_sized = abs(math.degrees(delta[j])) > DEFAULT_MAX_CORRECTION_DEG
+        swap = ("" if declared or not swap_sized or labels[j] != f"q{j + 1}" else
+                f"; if its motor was swapped or re-mastered, declare it with --swapped J{j + 1}"
+                " (raises that joint's limit only)")
         return (f"joint {joint} correction {math.degrees(delta[j]):+.4f} deg exceeds the "
-                f"limit{own} of {limits[j]:g} deg; check the cell and the data, and "
-                "rerun with --force to push anyway")
+                f"limit{own} of {limits[j]:g} deg{swap}; {'else ' if swap else ''}check the "
+                "cell and the data, and rerun with --force to push anyway")
     return None
 
 

@@ -32,3 +32,17 @@ def test_a_push_and_a_rollback_outlive_a_resume() -> None:
     assert outcome_of(PUSH, VERIFY_PASS, resumed) == "PASS"
     rollback = {"event": "rollback", "at": "t4", "how": "hostpc rollback"}
     assert outcome_of(PUSH, VERIFY_PASS, rollback, resumed) == "ROLLED_BACK"
+
+
+def test_a_correction_beyond_the_limit_suggests_declaring_the_swap_not_force() -> None:
+    swap = {"event": "push_refused", "at": "t1", "reason": (
+        "joint 3 correction +15.0000 deg exceeds the limit of 2 deg; if its motor was swapped "
+        "or re-mastered, declare it with --swapped J3 (raises that joint's limit only); else "
+        "check the cell and the data, and rerun with --force to push anyway")}
+    outcome = derive_outcome([swap], SOURCES, run_dir="runs/x", finished=True)
+    assert outcome.next_command == "hostpc calibrate --resume runs/x --swapped J3"
+    small = {"event": "push_refused", "at": "t1", "reason": (
+        "joint 1 correction +0.1682 deg exceeds the limit of 0.01 deg; check the cell "
+        "and the data, and rerun with --force to push anyway")}
+    outcome = derive_outcome([small], SOURCES, run_dir="runs/x", finished=True)
+    assert outcome.next_command == "hostpc calibrate --resume runs/x --force"

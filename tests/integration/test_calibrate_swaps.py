@@ -139,7 +139,10 @@ def test_a_swap_declared_on_the_resume_of_a_refused_push_is_pushed(tmp_path: Pat
     out = tmp_path / "run"
     code, document = calibrate(out, swap_world("world_point", 3, 15.0), "world_point")
     assert code == 5 and "exceeds the limit of 2 deg" in document["push"]["reason"]
-    assert main(["calibrate", "--resume", str(out), "--swapped", "J3", "--no-report"]) == 0
+    # the refusal's next command declares the swap (that joint's limit only), not --force
+    next_command = document["outcome"]["next_command"]
+    assert next_command == f"hostpc calibrate --resume {out} --swapped J3"
+    assert main([*next_command.split()[1:], "--no-report"]) == 0
     document = json.loads((out / "result.json").read_text())
     assert document["outcome"]["verdict"] == "PASS"
     assert document["settings"]["swapped"] == [3]
