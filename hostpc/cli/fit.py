@@ -90,7 +90,8 @@ def run(args: argparse.Namespace) -> int:
     if args.effects == "auto":
         from hostpc.diagnostics.model_choice import choose_model
 
-        choice = choose_model(dataset, plugins=args.plugin, cv_folds=args.cv_folds or 5)
+        choice = choose_model(dataset, plugins=args.plugin, cv_folds=args.cv_folds or 5,
+                              loss=args.loss)
         result = choice.fit
     else:
         result = fit(dataset, args.effects, plugins=args.plugin, loss=args.loss,

@@ -107,9 +107,11 @@ def _models(dataset: Dataset, plugins: tuple[str | Path, ...], shared: SharedVal
 
 
 def choose_model(dataset: Dataset, *, plugins: Iterable[str | Path] = (),
-                 cv_folds: int = DEFAULT_CV_FOLDS, ladder: bool = True) -> ModelChoice:
+                 cv_folds: int = DEFAULT_CV_FOLDS, ladder: bool = True,
+                 loss: Loss = "linear") -> ModelChoice:
     """Fit every model of the table (module docstring) and choose by the one-standard-error
-    rule on the pose-grouped held-out score."""
+    rule on the pose-grouped held-out score; loss: the robust loss every model (and the
+    ladder) is fitted and held out with."""
     plugin_files = tuple(plugins)
     shared = SharedValues()  # the chain and the rig's sensitivity, once for every model
     models = _models(dataset, plugin_files, shared)
@@ -117,7 +119,7 @@ def choose_model(dataset: Dataset, *, plugins: Iterable[str | Path] = (),
         from hostpc.diagnostics.pipeline import diagnose
 
         diagnosis = diagnose(dataset, plugins=plugin_files, ladder=True, cv_folds=cv_folds,
-                             auto_effects=False, interactions=False)
+                             auto_effects=False, interactions=False, loss=loss)
         steps = diagnosis.ladder or ()
         if steps and steps[-1].effects not in [effects for _, effects in models]:
             models.append(("ladder", tuple(steps[-1].effects)))
@@ -126,7 +128,7 @@ def choose_model(dataset: Dataset, *, plugins: Iterable[str | Path] = (),
     for name, effects in models:
         try:
             result = fit(dataset, list(effects), plugins=plugin_files, cv_folds=cv_folds,
-                         shared=shared)
+                         shared=shared, loss=loss)
         except InputError as exc:  # e.g. a nominal model with every frame known: nothing free
             scores.append(ModelScore(name, tuple(effects), 0, False, None, None, None,
                                      f"not fitted: {exc}"))
