@@ -351,6 +351,10 @@ def _with_words(outcome: RobotOutcome, run_dir: str, robot_arg: str, known: tupl
         head = f"NOT PUSHED: offsets unchanged; {good_text}" + (
             f"; {bad_text}" if bad_text else "")
         next_command = f"hostpc calibrate --resume {run} --push" if good else None
+        if _model_check_failed(outcome.events):
+            # the push would be refused for the same reason: find the missing effect first
+            head += "; the model does not explain fresh poses (model check FAIL)"
+            next_command = f"hostpc diagnose {run}/dataset.json --ladder"
     else:
         head = f"ERROR: the run did not finish; controller: {outcome.controller}"
         next_command = f"hostpc calibrate --resume {run}"
@@ -358,6 +362,12 @@ def _with_words(outcome: RobotOutcome, run_dir: str, robot_arg: str, known: tupl
         next_command = f"hostpc calibrate --resume {run}"
     return RobotOutcome(**{**_fields(outcome), "headline": head,
                            "next_command": next_command})
+
+
+def _model_check_failed(events: Sequence[OutcomeEvent]) -> bool:
+    """True if the last check of the fitted model on fresh poses (nothing pushed) failed."""
+    checks = [dict(e.details) for e in events if e.event == "model_check"]
+    return bool(checks) and checks[-1].get("verdict") == "FAIL"
 
 
 def _fields(outcome: RobotOutcome) -> dict[str, Any]:

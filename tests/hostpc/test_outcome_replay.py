@@ -46,3 +46,16 @@ def test_a_correction_beyond_the_limit_suggests_declaring_the_swap_not_force() -
         "and the data, and rerun with --force to push anyway")}
     outcome = derive_outcome([small], SOURCES, run_dir="runs/x", finished=True)
     assert outcome.next_command == "hostpc calibrate --resume runs/x --force"
+
+
+def test_a_failed_model_check_without_a_push_sends_to_diagnose() -> None:
+    check = {"event": "verify", "at": "t1", "verdict": "FAIL", "p_value": 4.8e-13,
+             "offsets": [0.0] * 6}
+    outcome = derive_outcome([check], SOURCES, run_dir="runs/x", finished=True)
+    assert outcome.verdict == "NOT_PUSHED"
+    assert outcome.next_command == "hostpc diagnose runs/x/dataset.json --ladder"
+    assert "model check FAIL" in outcome.headline
+    passed = {**check, "verdict": "PASS", "p_value": 0.4}
+    outcome = derive_outcome([check, {"event": "resumed", "at": "t2"}, passed], SOURCES,
+                             run_dir="runs/x", finished=True)
+    assert outcome.next_command == "hostpc calibrate --resume runs/x --push"
