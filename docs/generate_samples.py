@@ -272,4 +272,10 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     sys.path.insert(0, str(ROOT))
+    try:
+        import pytest  # noqa: F401  (the drift sample's synthetic world lives in tests/)
+    except ModuleNotFoundError:
+        print("docs/generate_samples.py needs the test extras (its drift sample is built by "
+              "tests/hostpc): .venv/bin/pip install '.[test]'", file=sys.stderr)
+        raise SystemExit(2) from None
     raise SystemExit(main())
