@@ -106,7 +106,30 @@ def run_record(args: argparse.Namespace) -> int:
           f"({reference.method} on {reference.robot_model}"
           f"{', serial ' + reference.robot_serial if reference.robot_serial else ''}) "
           f"in {out}; use it with: hostpc calibrate --reference {out}{rig} ...")
+    for line in _zeros_taken_as_good(result):
+        print(line)
     return 0
+
+
+def _zeros_taken_as_good(result: dict[str, Any]) -> list[str]:
+    """A line per joint the recording run did not calibrate: the reference fixes the frame
+    that joint trades against, so that joint's present zero is taken as good for good."""
+    joints = (result.get("outcome") or {}).get("joints") or []
+    rows = {row.get("joint"): row for row in (result.get("offsets") or {}).get("joints", [])
+            if isinstance(row, dict)}
+    lines = []
+    for joint in joints:
+        if not isinstance(joint, dict) or joint.get("status") == "calibrated":
+            continue
+        number = joint.get("joint")
+        zero = rows.get(number, {}).get("new_deg")
+        value = f"{zero:+.5f} deg" if isinstance(zero, (int, float)) else "as it is"
+        lines.append(f"note: J{number} was not calibrated by {result.get('run_dir') or 'this run'}"
+                     f" ({joint.get('reason') or 'not determined'}); the reference takes its "
+                     f"present zero ({value}) as good, and every later run with it is only as "
+                     "right as that zero: record at commissioning or right after a verified "
+                     "full calibration")
+    return lines
 
 
 def run_show(args: argparse.Namespace) -> int:
