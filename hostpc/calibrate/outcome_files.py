@@ -34,9 +34,11 @@ from hostpc.files import write_json_atomic
 
 def run_outcome(journal: Journal, sources: Sequence[JointSource], *, run_dir: Path,
                 header: RunHeader, require_joints: str | None, finished: bool,
-                known: Sequence[str] = ()) -> RobotOutcome:
-    """The outcome of the run in `run_dir` from its journal and the fit's sources."""
-    required = parse_required_joints(require_joints, len(sources))
+                known: Sequence[str] = (), swapped: Sequence[int] = ()) -> RobotOutcome:
+    """The outcome of the run in `run_dir` from its journal and the fit's sources. A joint
+    declared swapped (`--swapped`) is required too: the technician said its zero is wrong,
+    so a run that cannot calibrate it must not read PASS."""
+    required = (*parse_required_joints(require_joints, len(sources)), *swapped)
     return derive_outcome(journal.timeline(*JOURNAL_KINDS), sources, run_dir=str(run_dir),
                           finished=finished, required=required,
                           robot_arg=header.robot_argument(), known=known)
@@ -61,6 +63,7 @@ def rewrite_outcome(run_dir: Path) -> RobotOutcome | None:
     journal.load()
     outcome = run_outcome(journal, sources_from_outcome(document["outcome"]), run_dir=run_dir,
                           header=header, require_joints=header.settings.require_joints,
+                          swapped=tuple(int(j) for j in stored.settings.get("swapped", ())),
                           finished=journal.last_event("result") is not None,
                           known=stored.known)
     run = dataclasses.replace(stored, outcome=outcome.to_dict(), exit_code=outcome.exit_code)

@@ -200,6 +200,10 @@ class Runner:
                 parse_required_joints(settings.require_joints, len(offsets))
             except ValueError as exc:
                 raise InputError(str(exc)) from None
+            beyond = [j for j in settings.swapped if not 1 <= j <= len(offsets)]
+            if beyond:
+                raise InputError(f"--swapped J{beyond[0]}: the robot has {len(offsets)} joints "
+                                 f"(J1..J{len(offsets)})")
             cell = build_cell(state.camera, state.robot, self.cell_file, self.known,
                               self.default_known, settings.plugins)
             initial = _initial_state(state, offsets)
@@ -298,7 +302,7 @@ class Runner:
         outcome = run_outcome(self.journal, joint_sources(result, initial_offsets.size),
                               run_dir=self.run_dir, header=header,
                               require_joints=settings.require_joints, finished=True,
-                              known=cell.known)
+                              known=cell.known, swapped=settings.swapped)
         run = run_result(self.journal, self.run_dir, self.robot_info.to_dict(), settings, cell,
                          plan, method, dataset, result, push_plan, push_status, verify_result,
                          truth, outcome=outcome.to_dict(), exports=exports,

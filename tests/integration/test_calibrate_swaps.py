@@ -146,3 +146,24 @@ def test_a_swap_declared_on_the_resume_of_a_refused_push_is_pushed(tmp_path: Pat
     document = json.loads((out / "result.json").read_text())
     assert document["outcome"]["verdict"] == "PASS"
     assert document["settings"]["swapped"] == [3]
+
+
+def test_a_declared_swap_on_a_joint_the_run_cannot_calibrate_is_never_a_pass(
+        tmp_path: Path) -> None:
+    """The default cell estimates the tool frame, so J6 cannot be calibrated: declaring its
+    motor swapped makes it required (JOINTS_MISSING, exit 7), not a PASS that leaves it off."""
+    out = tmp_path / "run"
+    code = main(["calibrate", "--robot", "sim", "--swapped", "J6", "--no-push", "--no-report",
+                 "--out", str(out)])
+    document = json.loads((out / "result.json").read_text())
+    assert code == 7, document["outcome"]["headline"]
+    assert document["outcome"]["verdict"] == "JOINTS_MISSING"
+    assert document["outcome"]["missing_required"] == [6]
+
+
+def test_a_swapped_joint_the_robot_does_not_have_is_refused_before_moving(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "run"
+    assert main(["calibrate", "--robot", "sim", "--swapped", "J9", "--out", str(out)]) == 2
+    assert "--swapped J9: the robot has 6 joints" in capsys.readouterr().err
+    assert not (out / "rig.json").exists()  # nothing measured
