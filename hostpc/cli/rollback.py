@@ -77,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
     record: dict[str, Any] | None = None
     address: RobotAddress | None = parse_robot(args.robot) if args.robot else None
     if args.run:
+        _refuse_if_rolled_back(Path(args.run))
         record = read_push_file(Path(args.run))
         rollback_id = str(record.get("rollback_id") or "(none: push recorded as intent)")
         previous = np.asarray(record.get("previous_offsets"), float)
@@ -138,6 +139,22 @@ async def _rollback(address: RobotAddress, args: argparse.Namespace, rollback_id
         return await rollback(robot, rollback_id, previous)
     finally:
         await robot.close()
+
+
+def _refuse_if_rolled_back(run_dir: Path) -> None:
+    """InputError if the run's latest push was rolled back already: the controller may hold
+    a later run's verified offsets by now, and a second rollback would silently discard
+    them (review R1)."""
+    journal = Journal(run_dir)
+    if not journal.exists:
+        return
+    journal.load()
+    last = journal.last_event("push", "rollback")
+    if last is not None and last.get("event") == "rollback":
+        raise InputError(f"--run {run_dir}: its push was rolled back already "
+                         f"({last.get('time') or 'at an unrecorded time'}); nothing of it is "
+                         "left to undo (to see what the controller holds now: hostpc status "
+                         "--robot HOST)")
 
 
 def _journal_rollback(run_dir: Path, now: np.ndarray, how: str, controller: str) -> None:

@@ -155,6 +155,10 @@ def test_push_intent_is_journaled_first_and_settled_on_resume(
         code, stdout, stderr = run_cli(capsys, "rollback", "--run", str(out), "--token", TOKEN)
         assert code == 0 and "wrote the saved previous offsets" in stdout, stderr
         assert np.array_equal(_offsets(sim), before)
+        # a second rollback of the same push is refused: the controller may hold a later
+        # run's verified offsets by now, which it would silently discard
+        code, stdout, stderr = run_cli(capsys, "rollback", "--run", str(out), "--token", TOKEN)
+        assert code == 2 and "rolled back already" in stderr, stderr
 
         # the deliberate rollback is not undone by a plain resume ...
         journal_before = (out / "journal.jsonl").read_text()
