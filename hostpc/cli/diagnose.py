@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from hostpc.cli.fit import add_constraint_options, add_model_options
+from hostpc.cli.format import repeated_lines
 from hostpc.diagnostics.advice import mm, without
 from hostpc.errors import InputError, ZerocalError
 
@@ -107,6 +108,8 @@ def _run(args: argparse.Namespace) -> int:
         sys.stdout.write("\n")
     else:
         print(format_diagnosis(diagnosis))
+        for line in repeated_lines(diagnosis.check.fit):
+            print(line)
         if args.report:
             print(f"\nreport written to {args.report}")
         for path in written:

@@ -109,9 +109,27 @@ def format_fit_summary(result: FitResult, source: str = "",
         lines += [f"  - {a} ~ {b}: {rho:+.3f}" for a, b, rho in result.correlations[:10]]
         if len(result.correlations) > 10:
             lines.append(f"  ... and {len(result.correlations) - 10} more")
+    lines += repeated_lines(result)
     offsets = [p for p in result.parameters.values() if is_offset(p.name)]
     if offsets:
         worst = max(abs(p.value) for p in offsets)
         lines += ["", "largest joint offset correction: "
                   f"{joint_offsets.degrees(worst):.4f} {joint_offsets.DISPLAY_UNIT}"]
     return "\n".join(lines)
+
+
+def repeated_lines(result: FitResult) -> list[str]:
+    """A warning when samples repeat another one exactly (copied rows): the fit counts
+    each as a new measurement."""
+    from hostpc.fitting.folds import repeated_samples
+
+    pairs = repeated_samples(result.problem.dataset.samples, result.problem.measured)
+    if not pairs:
+        return []
+    shown = ", ".join(f"#{i} = #{j}" for i, j in pairs[:5]) + (
+        f", and {len(pairs) - 5} more" if len(pairs) > 5 else "")
+    counted = "1 sample repeats" if len(pairs) == 1 else f"{len(pairs)} samples repeat"
+    return ["", f"warning: {counted} another sample exactly ({shown}): the "
+            "fit counts each as a new measurement, so its dof, chi2/dof and every sigma treat "
+            "copies as data; remove the copied rows (a real repeat of a pose differs by its "
+            "noise)"]

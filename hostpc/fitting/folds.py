@@ -109,3 +109,18 @@ def fold_indices(samples: Samples, folds: int, seed: int = FOLD_SEED
     fold_of_pose = np.random.default_rng(seed).permutation(count) % folds
     assignment = fold_of_pose[groups]
     return [np.flatnonzero(assignment == k) for k in range(folds)]
+
+
+def repeated_samples(samples: Samples, measured: np.ndarray) -> tuple[tuple[int, int], ...]:
+    """(repeat, first) index pairs of samples that repeat an earlier sample EXACTLY: the
+    same joint state and the same measured values (N, m), to the bit. A real second
+    measurement of a pose differs by its noise; an exact repeat is a copied row, which a
+    fit would count as new data (its dof, chi2 and sigmas as if measured twice)."""
+    keys = pose_keys(samples)
+    rows = np.concatenate([keys, np.asarray(measured, float).reshape(keys.shape[0], -1)],
+                          axis=1)
+    if rows.shape[0] < 2:
+        return ()
+    _, first, inverse = np.unique(rows, axis=0, return_index=True, return_inverse=True)
+    owner = first[np.ravel(inverse)]
+    return tuple((int(i), int(owner[i])) for i in range(rows.shape[0]) if owner[i] != i)
