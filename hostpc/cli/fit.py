@@ -87,6 +87,10 @@ def run(args: argparse.Namespace) -> int:
     if args.write_urdf:
         check_urdf_robot(dataset.robot, args.write_urdf, args.dataset)
     choice = None
+    parts = [part.strip() for part in (args.effects or "").split(",")]
+    if "auto" in parts and len(parts) > 1:
+        raise InputError(f"--effects {args.effects}: 'auto' chooses the whole model and takes "
+                         "no other effects; give --effects auto alone, or list the effects")
     if args.effects == "auto":
         from hostpc.diagnostics.model_choice import choose_model
 

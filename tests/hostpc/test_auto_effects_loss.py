@@ -19,3 +19,8 @@ def test_auto_keeps_the_loss(loss: str, capsys: pytest.CaptureFixture[str]) -> N
     document = json.loads(capsys.readouterr().out)
     assert document["loss"] == loss
     assert document["model_choice"]["chosen"]
+
+
+def test_auto_with_other_effects_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["fit", str(EXAMPLE), "--effects", "auto,+geometry"]) == 2
+    assert "'auto' chooses the whole model" in capsys.readouterr().err
