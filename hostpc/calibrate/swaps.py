@@ -43,6 +43,7 @@ from hostpc.dataset import Dataset
 from hostpc.errors import ControllerError, InputError
 from hostpc.fitting import FitResult
 from hostpc.methods.base import Method, Progress, RunSettings
+from hostpc.model import joint_offsets
 from hostpc.model.problem import build_problem
 
 __all__ = ["DEFAULT_SWAP_LIMIT_DEG", "Staging", "controller_limit_refusal",
@@ -165,8 +166,9 @@ class Staging:
         layout = build_problem(dataset, settings.effects, plugins=settings.plugins).layout
         x0 = np.zeros(layout.size)
         for j, value in enumerate(self.estimate):
-            if f"joint_offsets.q{j + 1}" in layout.names:
-                x0[layout.index(f"joint_offsets.q{j + 1}")] = value
+            name = joint_offsets.offset_name(f"q{j + 1}")
+            if name in layout.names:
+                x0[layout.index(name)] = value
         return x0
 
     def _shift(self, q_plan: np.ndarray, estimate: np.ndarray, new_stage: bool = False

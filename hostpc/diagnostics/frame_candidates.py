@@ -9,7 +9,8 @@ module writes frame translations, as sensor effects ``y += d(sample) * k * f(v)`
   registration; ``world.z`` drifting as its stand settles): d is the axis itself, exact;
 - a point carried by the flange (world_point's ``markers.b``: a reflector nest) or fixed
   in the base frame (stereo_target's ``target``, seen by the camera on the flange): d is
-  the axis turned into the measurement frame, ``R_wb R_bf(q) e`` or ``R_ft^T R_bf(q)^T e``,
+  the axis turned into the measurement frame, ``R_world_base R_base_flange(q) e`` or
+  ``R_flange_tool^T R_base_flange(q)^T e``,
   with the instrument or camera rotation taken at the fit (a constant in the plugin) and
   the flange rotation at the commanded joints (first order: the fitted zero offsets turn
   it by a fraction of a degree). A marker's effect acts on that marker's samples only.
@@ -44,8 +45,9 @@ class FrameKind:
     """How a frame's translation reaches one method's measurement: ``rotation_frame``
     (None: additive, the measurement's own frame) is the pose frame whose rotation at the
     fit turns the flange-rotated axis into the measurement frame; ``inverse``: the point
-    is fixed in the base frame (seen through the flange: R_ft^T R_bf^T) rather than
-    carried by the flange (R_wb R_bf); ``grouped``: one point per level of ``marker``."""
+    is fixed in the base frame (seen through the flange: R_flange_tool^T R_base_flange^T)
+    rather than carried by the flange (R_world_base R_base_flange); ``grouped``: one point
+    per level of ``marker``."""
 
     rotation_frame: str | None
     inverse: bool = False
@@ -113,10 +115,10 @@ class {class_name}(Effect):
         if self.rotation is None:
             return np.broadcast_to(np.eye(m)[self.axis], (ctx.n_samples, m))
         R, inverse = np.array(self.rotation[0]), self.rotation[1]
-        R_bf = forward(ctx.chain, ctx.q_cmd).T_base_flange[:, :3, :3]
+        R_base_flange = forward(ctx.chain, ctx.q_cmd).T_base_flange[:, :3, :3]
         if inverse:
-            return np.einsum("ij,nkj,k->ni", R, R_bf, axis)
-        return np.einsum("ij,njk,k->ni", R, R_bf, axis)
+            return np.einsum("ij,nkj,k->ni", R, R_base_flange, axis)
+        return np.einsum("ij,njk,k->ni", R, R_base_flange, axis)
 
     def sensor_apply(self, ctx, p, y):
         return y + self.direction(ctx, y.shape[1]) * (self.modulators(ctx) @ p)[:, None]

@@ -18,13 +18,13 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from hostpc.dataset.kind_registry import DEFAULT_METHOD
 from hostpc.diagnostics import Diagnosis
 from hostpc.diagnostics.advice import few_samples_problems, few_samples_sentence, needed_samples
 
 Document = Mapping[str, Any]
 
 #: the measurement method a calibration uses without --method
-DEFAULT_METHOD = "stereo_target"
 
 
 def _passed(result: Document) -> tuple[bool, bool, int]:

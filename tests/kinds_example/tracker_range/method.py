@@ -20,7 +20,7 @@ from hostpc.files import write_json_atomic
 from hostpc.kinds.world_point.method import WorldPointMethod
 from hostpc.kinematics import forward, pose_to_transform
 from hostpc.methods.base import Phase, Progress, SampleRecord
-from hostpc.robots.base import RobotAdapter
+from hostpc.robots.base import RobotAdapter, tracker_of
 
 
 class TrackerRangeMethod(WorldPointMethod):
@@ -33,7 +33,7 @@ class TrackerRangeMethod(WorldPointMethod):
         if self.tracker_path.is_file():
             self._description = json.loads(self.tracker_path.read_text(encoding="utf-8"))
         else:
-            reading = await robot.measure_tracker()  # type: ignore[attr-defined]
+            reading = await tracker_of(robot, f"--method {self.name}").measure_tracker()
             self._description = dict(reading.description)
             write_json_atomic(self.tracker_path, self._description)
 
@@ -64,7 +64,7 @@ class TrackerRangeMethod(WorldPointMethod):
         outcome = await self._moves.move(robot, phase, index, q, q_from)
         if isinstance(outcome, SampleRecord):
             return outcome
-        reading = await robot.measure_tracker()  # type: ignore[attr-defined]
+        reading = await tracker_of(robot, f"--method {self.name}").measure_tracker()
         name = self._reflector()[0]
         if name not in reading.points:
             return SampleRecord(phase, index, False, reason=f"beam lost: {name}",

@@ -3,7 +3,7 @@
 The distance (m = 1) from the tracker's origin (``anchor``, a point in the robot base
 frame) to the reflector (``tool``, a point in the flange frame)::
 
-    d = |R_bf t_ft + t_bf - anchor|
+    d = |R_base_flange t_flange_tool + t_base_flange - anchor|
 
 with the sample's ``sigma`` (m). Samples: ``q``, ``distance``, ``sigma`` (file length unit).
 """
@@ -37,12 +37,12 @@ class TrackerRange(MeasurementModel):
 
     def predict(self, problem: Problem, x: np.ndarray, jacobian: bool = True
                 ) -> tuple[np.ndarray, np.ndarray | None]:
-        poses, R_bf, t_bf, d_delta, rows = flange(problem, x, jacobian)
+        poses, R_base_flange, t_base_flange, d_delta, rows = flange(problem, x, jacobian)
         frames = problem.dataset.frames
         tool, anchor = problem.term("tool"), problem.term("anchor")
-        t_ft = np.asarray(frames["tool"], float) + (0 if tool is None else x[tool.slice])
+        t_flange_tool = np.asarray(frames["tool"], float) + (0 if tool is None else x[tool.slice])
         c_b = np.asarray(frames["anchor"], float) + (0 if anchor is None else x[anchor.slice])
-        tip = np.einsum("nij,j->ni", R_bf, t_ft) + t_bf
+        tip = np.einsum("nij,j->ni", R_base_flange, t_flange_tool) + t_base_flange
         diff = tip - c_b
         distance = np.linalg.norm(diff, axis=1)[:, None]
         if not jacobian:
@@ -53,7 +53,7 @@ class TrackerRange(MeasurementModel):
         d_tip = point_jacobian(screws(problem.chain, poses), tip)[:, :, rows]
         J += (u[:, None, :] @ d_tip) @ d_delta
         if tool is not None:
-            J[:, 0, tool.slice] += np.einsum("ni,nij->nj", u, R_bf)
+            J[:, 0, tool.slice] += np.einsum("ni,nij->nj", u, R_base_flange)
         if anchor is not None:
             J[:, 0, anchor.slice] -= u
         return apply_sensor_effects(problem, x, distance, J)
