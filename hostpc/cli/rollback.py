@@ -148,8 +148,7 @@ def _refuse_if_rolled_back(run_dir: Path) -> None:
     journal = Journal(run_dir)
     if not journal.exists:
         return
-    journal.load()
-    last = journal.last_event("push", "rollback")
+    last = journal.last_event("push", "rollback")  # reads the journal on first use
     if last is not None and last.get("event") == "rollback":
         raise InputError(f"--run {run_dir}: its push was rolled back already "
                          f"({last.get('time') or 'at an unrecorded time'}); nothing of it is "

@@ -1,16 +1,12 @@
-"""The file faces of world_point and world_pose (shared/spec/dataset-format.md, extension A):
-an instrument fixed in the cell (laser tracker, motion capture, CMM) measures a point or a
-frame fixed to the flange in its own frame, ``world``.
+"""world_point's file face (shared/spec/dataset-format.md, extension A): an instrument fixed
+in the cell (laser tracker, motion capture, CMM) measures a point fixed to the flange in its
+own frame, ``world`` (world_pose, the same instrument measuring a whole frame, has its own
+file face in hostpc/kinds/world_pose/file_face.py and reads its joints with ``read_q``).
 
 world_point samples: ``q``, ``marker`` (a name of ``frames.markers``; may be omitted when
 there is one marker), ``p`` (world frame), ``cov`` or ``sigma``, optional ``mask`` (which
 world axes were measured). In ``Samples``: ``p``, ``cov`` and ``fields["marker"]`` (N,)
 names, ``fields["mask"]`` (N, 3) of 0/1.
-
-world_pose samples: ``q``, ``p``, ``rpy`` (orientation of the measured frame in the world
-frame), ``cov`` (6x6 over x, y, z and the world-frame rotation vector of the orientation
-error; file units) or ``sigma`` and ``sigma_angle``. In ``Samples``: ``p``,
-``fields["rpy"]`` (N, 3) rad and ``fields["pose_cov"]`` (N, 6, 6) SI (m^2, m rad, rad^2).
 """
 
 from __future__ import annotations
