@@ -42,7 +42,7 @@ session. The server binds 127.0.0.1 unless told otherwise.
 
 This module holds `ControllerServer` (accepting, the session limit, motion pacing, rollback
 ids, the truth file); one client connection is a `session.Session`, and its request handlers
-are in `handlers.py`. The limits' constants are importable from here.
+are in `handlers.py`; the session's limits (frame sizes, buffers) are `session.py`'s.
 """
 
 from __future__ import annotations
@@ -60,11 +60,7 @@ import numpy as np
 from controller_stub.network.handlers import RequestRefusedError, float_list, json_default
 from controller_stub.network.session import (
     CLOSE_DRAIN_S,
-    EVENT_DROP_BYTES,
-    PRE_AUTH_MAX_FRAME_SIZE,
-    SERVER_NAME,
     SESSION_READ_CHUNK,
-    WRITE_HIGH_WATER,
     Session,
 )
 from controller_stub.scenario.spec import Scenario
@@ -73,22 +69,10 @@ from controller_stub.world.motion import GuardedMoveResult, MotionPlan, MoveResu
 from controller_stub.world.simulation import create_simulation
 from protocol import messages as m
 from protocol.admission import AuthThrottle, LogBudget, SessionSlots
-from protocol.connection import Connection, Role
+from protocol.connection import Connection
 from protocol.errors import ErrorCode
 from protocol.framing import DEFAULT_MAX_FRAME_SIZE
-
-__all__ = [
-    "CLOSE_DRAIN_S",
-    "DEFAULT_HOST",
-    "EVENT_DROP_BYTES",
-    "PRE_AUTH_MAX_FRAME_SIZE",
-    "READ_CHUNK",
-    "SERVER_NAME",
-    "SESSION_READ_CHUNK",
-    "WRITE_HIGH_WATER",
-    "ControllerServer",
-    "RequestRefusedError",
-]
+from protocol.session_states import Role
 
 logger = logging.getLogger(__name__)
 

@@ -47,8 +47,9 @@ from hostpc.transport.types import (
 )
 from protocol import DEFAULT_PORT
 from protocol import messages as m
-from protocol.connection import Connection, Role
+from protocol.connection import Connection
 from protocol.errors import LocalProtocolError
+from protocol.session_states import Role
 
 logger = logging.getLogger(__name__)
 

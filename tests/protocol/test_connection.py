@@ -11,17 +11,17 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from protocol import messages as m
-from protocol.connection import (
+from protocol.connection import Connection
+from protocol.errors import ErrorCode, LocalProtocolError
+from protocol.framing import FrameDecoder, encode_frame
+from protocol.session_states import (
     ALLOWED_REQUESTS,
-    Connection,
     ConnectionClosed,
     ConnectionState,
     Rejected,
     Role,
     StateChanged,
 )
-from protocol.errors import ErrorCode, LocalProtocolError
-from protocol.framing import FrameDecoder, encode_frame
 
 TOKEN = "shared-secret"
 Q = [0.1, -1.2, 1.3, -0.4, 0.5, 2.6]
