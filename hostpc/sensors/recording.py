@@ -3,7 +3,8 @@
 A recording is a folder:
 
     recording.json     {"format": "zerocal-recording/1", "settings", "cell_file", "known",
-                        "default_known", "robot", "measure_targets"}: what the run was asked
+                        "default_known", "robot", "measure_targets", "sensor_read"}: what
+                        the run was asked and which recorded calls the robot offered
     tape.jsonl         one line per robot call in order: {"n", "call", "args", "result"} or
                        {"n", "call", "args", "error": {"type", "message", "code", "reason"}};
                        a capture's result names its frame and timing, not the pixels
@@ -11,7 +12,8 @@ A recording is a folder:
     right_%04d.png     PNG, so the folder is also an image-sequence camera source)
 
 `RecordingAdapter` wraps any RobotAdapter and writes that tape as the run goes (its
-capabilities are the wrapped adapter's: `measure_targets` recorded, the others passed on
+capabilities are the wrapped adapter's: `measure_targets` and `sensor_read` (any kind's own
+instrument, its request and reading as they are) recorded, the others passed on
 unrecorded). `ReplayAdapter` answers the same calls from the tape, so
 `hostpc calibrate --replay DIR` runs the whole pipeline (rig calibration, detection, fit,
 diagnose) without a robot and reaches the same dataset to the last digit: floats go through
@@ -25,12 +27,14 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable, Mapping
+from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from hostpc.errors import ConnectionFailed, ControllerError, InputError, RequestTimeout
+from hostpc.json_object import JsonObject
 from hostpc.robots.base import (
     Capabilities,
     ContactOutcome,
@@ -38,10 +42,14 @@ from hostpc.robots.base import (
     MoveOutcome,
     RobotAdapter,
     RobotState,
+    SensorPort,
     StereoCapture,
     TargetCamera,
     TargetMeasurement,
 )
+
+if TYPE_CHECKING:  # the I/O layer's value type, built on replay
+    from hostpc.transport import SensorReading
 
 RECORDING_FORMAT = "zerocal-recording/1"
 HEADER_FILE = "recording.json"
@@ -108,10 +116,23 @@ def _targets_from_json(r: Mapping[str, Any]) -> TargetMeasurement:
         for t in r["targets"]))
 
 
+def _reading_to_json(r: SensorReading) -> JsonObject:
+    return {"sensor": r.sensor, "q": _floats(r.q), "time": float(r.time),
+            "reading": r.reading}
+
+
+def _reading_from_json(r: JsonObject) -> SensorReading:
+    from hostpc.transport import SensorReading
+
+    return SensorReading(sensor=str(r["sensor"]), q=_array(r["q"]), time=float(r["time"]),
+                         reading=dict(r["reading"]))
+
+
 class RecordingAdapter:
     """Wraps `robot`; every call and its answer go to the recording in `folder`.
     header: the run's inputs (recording.json). Images are written as PNG as they come.
-    capabilities: the robot's, its target camera recorded too (`RecordedTargets`)."""
+    capabilities: the robot's, its target camera and named instruments recorded too
+    (`RecordedTargets`, `RecordedSensors`)."""
 
     def __init__(self, robot: RobotAdapter, folder: Path, header: Mapping[str, Any]) -> None:
         folder.mkdir(parents=True, exist_ok=True)
@@ -122,12 +143,14 @@ class RecordingAdapter:
         self._n = 0
         self._frames = 0
         inner = robot.capabilities
-        self.capabilities = Capabilities(
+        self.capabilities = replace(
+            inner,
             targets=None if inner.targets is None else RecordedTargets(self, inner.targets),
-            tracker=inner.tracker, offset_export=inner.offset_export,
-            capture_timing=inner.capture_timing)
+            sensors=None if inner.sensors is None else RecordedSensors(self, inner.sensors))
         document = {"format": RECORDING_FORMAT, **header,
                     "measure_targets": inner.targets is not None}
+        if inner.sensors is not None:  # a recording without it reads as before
+            document["sensor_read"] = True
         (folder / HEADER_FILE).write_text(json.dumps(document, indent=2) + "\n",
                                           encoding="utf-8")
         self._tape = (folder / TAPE_FILE).open("a", encoding="utf-8")
@@ -225,6 +248,20 @@ class RecordedTargets:
         return result
 
 
+class RecordedSensors:
+    """The wrapped robot's `SensorPort`, every reading written to the recorder's tape."""
+
+    def __init__(self, recorder: RecordingAdapter, sensors: SensorPort) -> None:
+        self.recorder = recorder
+        self.sensors = sensors
+
+    async def read_sensor(self, sensor: str, request: JsonObject) -> SensorReading:
+        result: SensorReading = await self.recorder.record(
+            "sensor_read", {"sensor": sensor, "request": request},
+            lambda: self.sensors.read_sensor(sensor, request), _reading_to_json)
+        return result
+
+
 def read_header(folder: Path) -> dict[str, Any]:
     """recording.json of `folder`; InputError (one line) if it is not a recording."""
     path = folder / HEADER_FILE
@@ -242,8 +279,8 @@ def read_header(folder: Path) -> dict[str, Any]:
 class ReplayAdapter:
     """Answers a run's robot calls from the recording in `folder` (see the module
     docstring); nothing is moved or written anywhere but the new run folder.
-    capabilities: a target camera if the recorded robot had one (`measure_targets` from the
-    tape), nothing else."""
+    capabilities: a target camera and named instruments if the recorded robot had them
+    (`measure_targets`, `sensor_read` from the tape), nothing else."""
 
     driver = "replay"
 
@@ -269,7 +306,8 @@ class ReplayAdapter:
             self._entries.append(entry)
         self._next = 0
         self.capabilities = Capabilities(
-            targets=self if self.header.get("measure_targets") else None)
+            targets=self if self.header.get("measure_targets") else None,
+            sensors=self if self.header.get("sensor_read") else None)
 
     def _take(self, call: str, args: Mapping[str, Any]) -> Any:
         if self._next >= len(self._entries):
@@ -317,6 +355,11 @@ class ReplayAdapter:
     async def measure_targets(self) -> TargetMeasurement:
         """The next recorded target measurement (a `TargetCamera` if the header says so)."""
         return _targets_from_json(self._take("measure_targets", {}))
+
+    async def read_sensor(self, sensor: str, request: JsonObject) -> SensorReading:
+        """The next recorded reading of `sensor` (a `SensorPort` if the header says so)."""
+        return _reading_from_json(self._take("sensor_read",
+                                             {"sensor": sensor, "request": request}))
 
     async def get_offsets(self) -> np.ndarray:
         return _array(self._take("get_offsets", {}))
