@@ -23,6 +23,7 @@ from controller_stub.network.server import ControllerServer
 from controller_stub.scenario.spec import scenario_from_dict
 from hostpc.errors import ControllerError
 from hostpc.model.measurements import measurement_models
+from hostpc.sensors.recording import read_header
 from hostpc.transport import ControllerClient, ControllerRefusedError
 from protocol import messages as m
 from protocol.measurement_messages import MAX_SENSOR_NODES
@@ -90,6 +91,10 @@ def test_calibrate_sim_with_its_own_instrument_recorded_and_replayed(
             (out / "recording" / "tape.jsonl").read_text().splitlines()]
     reads = [e for e in tape if e["call"] == "sensor_read"]
     assert len(reads) >= 1 + 20 + 4 and reads[0]["args"]["request"] == {"what": "describe"}
+    header = read_header(out / "recording")  # recording.json read -> typed -> written
+    assert header.sensor_read and header.settings is not None
+    assert (json.dumps(header.to_json(), indent=2) + "\n"
+            == (out / "recording" / "recording.json").read_text())
 
     replayed = tmp_path / "replayed"
     code, _, stderr = run_cli(capsys, "calibrate", "--replay", str(out / "recording"),
