@@ -17,12 +17,13 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 
-from hostpc.dataset import FORMAT_TAG, Dataset, dataset_from_dict
+from hostpc.dataset import Dataset, RobotDescription, Samples, dataset_to_dict
 from hostpc.errors import ControllerError
 from hostpc.files import write_json_atomic
 from hostpc.kinematics import forward, get_robot
@@ -34,6 +35,24 @@ DESCRIPTION_FILE = "string_pot.json"
 AVERAGE = 4
 RANGE_MARGIN = 0.9
 """Candidates keep the nominal cable length below this fraction of the range."""
+FRAMES = ("tool", "anchor")
+
+
+@dataclass(frozen=True)
+class CableLength:
+    """One sample: the joint angles at the reading (rad), the cable length and its sigma
+    (m); journaled in its dataset-file form (``to_json``)."""
+
+    q: tuple[float, ...]
+    length: float
+    sigma: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {"q": list(self.q), "length": self.length, "sigma": self.sigma}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> CableLength:
+        return cls(floats(data["q"]), float(data["length"]), float(data["sigma"]))
 
 
 class StringPotMethod(Method):
@@ -82,9 +101,8 @@ class StringPotMethod(Method):
     def design_dataset(self, q: np.ndarray) -> Dataset:
         """Nominal cable lengths at q (N, n) with the averaged reading's noise."""
         sigma = float(self._nominal("sigma")) / math.sqrt(AVERAGE)
-        samples = [{"q": floats(q[k]), "length": float(length), "sigma": sigma}
-                   for k, length in enumerate(self._lengths(q))]
-        return dataset_from_dict(self.dataset_document(samples), plugins=self.settings.plugins)
+        return self.samples_dataset([CableLength(floats(q[k]), float(length), sigma)
+                                     for k, length in enumerate(self._lengths(q))])
 
     async def acquire(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
                       q_from: np.ndarray | None) -> SampleRecord:
@@ -96,20 +114,25 @@ class StringPotMethod(Method):
         if reading.reading.get("over_range"):
             return SampleRecord(phase, index, False, reason="cable over range",
                                 q_end=outcome.q.tolist())
-        sample = {"q": floats(reading.q), "length": float(reading.reading["length"]),
-                  "sigma": float(reading.reading["sigma"])}
-        return SampleRecord(phase, index, True, sample=sample, q_end=outcome.q.tolist())
+        sample = CableLength(floats(reading.q), float(reading.reading["length"]),
+                             float(reading.reading["sigma"]))
+        return SampleRecord.measured(phase, index, sample, q_end=outcome.q.tolist())
+
+    def dataset(self, samples: Sequence[Mapping[str, Any]]) -> Dataset:
+        """The journaled samples (their JSON form) as the run's Dataset."""
+        return self.samples_dataset([CableLength.from_json(s) for s in samples])
+
+    def samples_dataset(self, typed: Sequence[CableLength]) -> Dataset:
+        """A Dataset of typed samples with the instrument's nominal frames."""
+        fields = {"length": np.array([s.length for s in typed]),
+                  "sigma": np.array([s.sigma for s in typed])}
+        return Dataset(method=self.name, robot=RobotDescription(name=self.cell.robot),
+                       frames={name: self._nominal(name) for name in FRAMES},
+                       samples=Samples(q=np.array([s.q for s in typed]), fields=fields),
+                       known=tuple(k for k in self.cell.known if k in FRAMES))
 
     def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-        return {
-            "format": FORMAT_TAG, "method": self.name,
-            "units": {"length": "m", "angle": "rad", "time": "s"},
-            "robot": {"name": self.cell.robot},
-            "frames": {"tool": self._nominal("tool").tolist(),
-                       "anchor": self._nominal("anchor").tolist()},
-            "known": [k for k in self.cell.known if k in ("tool", "anchor")],
-            "samples": [{**s, "q": list(s["q"])} for s in samples],
-        }
+        return dataset_to_dict(self.dataset(samples), plugins=self.settings.plugins)
 
     def describe(self) -> dict[str, Any]:
         return {"known": list(self.cell.known), "instrument": self._description}
