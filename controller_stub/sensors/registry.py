@@ -37,6 +37,7 @@ import sys
 import zlib
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
+from functools import cache
 from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any, Protocol
@@ -122,6 +123,20 @@ def load_sensor_folder(folder: str | Path) -> dict[str, SensorFactory]:
     return dict(sensors)
 
 
+@cache
+def installed_sensors() -> tuple[tuple[str, Any], ...]:
+    """(name, loaded object) of the entry points of group ``zerocal.sim_sensors``, scanned
+    once per process (a scan reads every installed distribution's metadata, ~10 ms, and
+    every server the tests start would pay it)."""
+    found = []
+    for entry in entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            found.append((entry.name, entry.load()))
+        except Exception as exc:
+            raise SensorPluginError(f"entry point {entry.name}: failed to load: {exc}") from exc
+    return tuple(found)
+
+
 def sensor_factories(folders: Iterable[str | Path] = ()) -> dict[str, SensorFactory]:
     """Every simulated sensor: the installed entry points (group ``zerocal.sim_sensors``),
     then the plugin folders; a name given twice is a SensorPluginError."""
@@ -135,13 +150,8 @@ def sensor_factories(folders: Iterable[str | Path] = ()) -> dict[str, SensorFact
             raise SensorPluginError(f"{source}: {name!r} is not a sensor factory")
         found[name] = factory
 
-    for entry in entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            add(entry.name, entry.load(), f"entry point {entry.name}")
-        except SensorPluginError:
-            raise
-        except Exception as exc:
-            raise SensorPluginError(f"entry point {entry.name}: failed to load: {exc}") from exc
+    for name, factory in installed_sensors():
+        add(name, factory, f"entry point {name}")
     for folder in folders:
         for name, factory in load_sensor_folder(folder).items():
             add(name, factory, f"--sensor-plugin {folder}")

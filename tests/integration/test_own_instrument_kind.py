@@ -11,6 +11,7 @@ protocol's error codes over real sockets.
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from collections.abc import AsyncIterator
@@ -112,6 +113,31 @@ def test_the_stub_refuses_a_sensor_plugin_that_imports_hostpc(tmp_path: Path) ->
         capture_output=True, text=True, timeout=60, cwd=Path(__file__).resolve().parents[2])
     assert done.returncode == 2 and "imports hostpc" in done.stderr, done.stderr
     assert "listening on" not in done.stdout
+
+
+def test_an_installed_package_publishes_the_sensor_by_entry_point(tmp_path: Path) -> None:
+    """The other way in: an installed distribution's entry point (group
+    zerocal.sim_sensors), found by importlib.metadata in a fresh process; the same name
+    from a folder as well is refused."""
+    info = tmp_path / "string_pot_kind-1.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: string-pot-kind\n"
+                                   "Version: 1.0\n")
+    (info / "entry_points.txt").write_text(
+        "[zerocal.sim_sensors]\nstring_pot = sim_sensor:SimulatedStringPot\n")
+    script = ("from controller_stub.sensors.registry import sensor_factories, "
+              "SensorPluginError\n"
+              "print(sorted(sensor_factories()))\n"
+              f"try:\n    sensor_factories([{KIND!r}])\n"
+              "except SensorPluginError as exc:\n    print(exc)\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=60, cwd=Path(__file__).resolve().parents[2],
+                          env={**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path),
+                                                                           KIND])})
+    assert done.returncode == 0, done.stderr
+    listed, refused = done.stdout.splitlines()
+    assert listed == "['string_pot']"
+    assert "simulated sensor 'string_pot' is already registered" in refused
 
 
 @pytest.fixture
