@@ -122,10 +122,10 @@ async def _serve(args: argparse.Namespace) -> int:
     except SensorPluginError as exc:
         print(f"controller-stub serve: error: {exc}", file=sys.stderr)
         return 2
-    if "hostpc" in sys.modules:  # a sensor plugin pulled the fitter's code in
-        print("controller-stub serve: error: a --sensor-plugin imports hostpc; a simulated "
-              "sensor uses numpy and controller_stub only (the simulator keeps its own models)",
-              file=sys.stderr)
+    if "hostpc" in sys.modules:  # a simulated sensor pulled the fitter's code in
+        print("controller-stub serve: error: a simulated sensor (--sensor-plugin or entry "
+              "point) imports hostpc; it may use numpy and controller_stub only (the simulator "
+              "keeps its own models)", file=sys.stderr)
         return 2
     server.token = token
     modbus: ModbusIoServer | None = None
