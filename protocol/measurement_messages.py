@@ -219,6 +219,3 @@ class SensorReading(Reply):
     q: JointVector
     time: FiniteFloat
     reading: SensorDocument
-
-
-# --- zero offsets --------------------------------------------------------------------------
