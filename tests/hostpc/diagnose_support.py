@@ -150,7 +150,8 @@ def coupled_dual_loop(truth: Mapping[str, float], n_per_arm: int = 50, seed: int
                       ) -> Dataset:
     """A dual_loop dataset (hostpc's own model) with a hidden coupling of any neighbouring
     joints, ``joint_coupling.left.k4_3`` (the built-in effect couples only the wrist)."""
-    from hostpc.kinds.dual_loop.synthesize import make_dataset, plan_poses
+    from hostpc.kinds.dual_loop.planning import plan_poses
+    from hostpc.kinds.dual_loop.synthesize import make_dataset
     from hostpc.model.effects import JointCoupling
     from hostpc.model.registry import available_effects, instantiate
     from hostpc.synthesize import noisy_measurements
