@@ -21,7 +21,7 @@ import numpy as np
 
 from hostpc.dataset import schema
 from hostpc.dataset.file_units import Units
-from hostpc.dataset.model import FloatArray, Samples
+from hostpc.dataset.model import Dataset, FloatArray, Samples
 from hostpc.dataset.schema import FieldError, Loc, show
 
 #: per-sample context fields every kind accepts (read and written by the dataset layer)
@@ -211,6 +211,11 @@ class MeasurementKind:
     def check_samples(self, samples: Samples, frames: Mapping[str, Any]) -> None:
         """Checks across samples and against the frames (after reading); raise FieldError.
         Default: none."""
+
+    def check_loaded(self, dataset: Dataset, source: str) -> None:
+        """Checks of the kind's own top-level blocks (``dataset.extra_fields``) once the
+        dataset is read, e.g. the stereo kinds' ``rig_uncertainty``; raise DatasetError
+        ``source: field: ...``. Default: none."""
 
     # writing ------------------------------------------------------------------------
     def write_columns(self, samples: Samples) -> WrittenColumns | None:

@@ -17,8 +17,9 @@ from hostpc.dataset.measurement_kind import (
     point_columns_out,
     require,
 )
-from hostpc.dataset.model import Samples
+from hostpc.dataset.model import Dataset, Samples
 from hostpc.dataset.schema import FieldError, Loc
+from hostpc.kinds.stereo_target.rig_block import check_rig_block
 
 
 class DualLoopFile(PointSampleKind):
@@ -104,3 +105,6 @@ class DualLoopFile(PointSampleKind):
         return WrittenColumns([("chain", chain, None), ("q_head", samples.q_head.tolist(), None),
                                ("q_arm", q_arm, None), *point_columns_out(samples)],
                               measured.sum(axis=1).tolist())
+
+    def check_loaded(self, dataset: Dataset, source: str) -> None:
+        check_rig_block(dataset, source)

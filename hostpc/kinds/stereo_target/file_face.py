@@ -15,8 +15,9 @@ from hostpc.dataset.measurement_kind import (
     point_columns_out,
     require,
 )
-from hostpc.dataset.model import Samples
+from hostpc.dataset.model import Dataset, Samples
 from hostpc.dataset.schema import Loc
+from hostpc.kinds.stereo_target.rig_block import check_rig_block
 
 
 class StereoTargetFile(PointSampleKind):
@@ -53,3 +54,6 @@ class StereoTargetFile(PointSampleKind):
     def write_columns(self, samples: Samples) -> WrittenColumns | None:
         return WrittenColumns([("q", samples.q.tolist(), None), *point_columns_out(samples)],
                               [samples.q.shape[1]] * samples.n)
+
+    def check_loaded(self, dataset: Dataset, source: str) -> None:
+        check_rig_block(dataset, source)

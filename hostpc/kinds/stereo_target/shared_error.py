@@ -16,9 +16,8 @@ from typing import Any
 import numpy as np
 
 from hostpc.errors import InputError
+from hostpc.kinds.stereo_target.rig_block import BLOCK
 from hostpc.model.layout import Problem
-
-BLOCK = "rig_uncertainty"
 
 
 def rig_point_sensitivity(problem: Problem, block: Mapping[str, Any]) -> np.ndarray | None:
