@@ -12,6 +12,7 @@ import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples, SphereFrame
 from hostpc.kinds.sphere_probe.file_face import SphereProbeFile
+from hostpc.kinds.sphere_probe.frames import SphereCentreFrame
 from hostpc.kinematics import Chain, get_robot, point_jacobian
 from hostpc.model.context import group_variable, sample_variables, serial_context
 from hostpc.model.effect import ModelContext
@@ -42,6 +43,7 @@ class SphereProbe(SphereProbeFile, MeasurementModel):
     frame_effects = {"tool": POINT, "sphere": POINT, "base": POSE}
     default_frames = ("tool", "sphere")
     measurement_size = 1
+    own_frame_effects = (SphereCentreFrame,)
     sensor_effects = ("trigger_latency",)
 
     def context(self, dataset: Dataset, chain: Chain) -> ModelContext:
