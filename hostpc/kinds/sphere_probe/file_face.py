@@ -11,6 +11,7 @@ from hostpc.dataset import schema
 from hostpc.dataset.file_units import Units
 from hostpc.dataset.measurement_kind import (
     Columns,
+    KindArrays,
     MeasurementKind,
     WrittenColumns,
     check_joint_count,
@@ -19,6 +20,7 @@ from hostpc.dataset.measurement_kind import (
 )
 from hostpc.dataset.model import Samples
 from hostpc.dataset.schema import Loc
+from hostpc.json_object import JsonObject
 
 
 class SphereProbeFile(MeasurementKind):
@@ -43,10 +45,10 @@ class SphereProbeFile(MeasurementKind):
             columns.put("group", index, sample.group)
         return list(q)
 
-    def samples_arguments(self, columns: Columns, units: Units) -> dict[str, Any]:
-        return {"sigma": units.length(columns.values["sigma"])}
+    def samples_arguments(self, columns: Columns, units: Units) -> KindArrays:
+        return KindArrays(sigma=units.length(columns.values["sigma"]))
 
-    def read_columns(self, table: Any, units: Units) -> dict[str, Any] | None:
+    def read_columns(self, table: Any, units: Units) -> KindArrays | None:
         if "sigma" not in table.names:
             return None
         sigma = table.numbers("sigma", list[float], ())
@@ -58,10 +60,10 @@ class SphereProbeFile(MeasurementKind):
         if not all(type(v) is int and 0 <= v < 2**31 for v in values):
             return None
         group[rows] = values
-        return {"sigma": units.length(sigma), "group": group}
+        return KindArrays(sigma=units.length(sigma), group=group)
 
-    def write_sample(self, samples: Samples, index: int) -> tuple[dict[str, Any], int]:
-        out: dict[str, Any] = {"q": samples.q[index].tolist()}
+    def write_sample(self, samples: Samples, index: int) -> tuple[JsonObject, int]:
+        out: JsonObject = {"q": samples.q[index].tolist()}
         if samples.sigma is not None:
             out["sigma"] = float(samples.sigma[index])
         if samples.group[index] >= 0:
