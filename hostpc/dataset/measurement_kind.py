@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from hostpc.dataset import schema
 from hostpc.dataset.file_units import Units
-from hostpc.dataset.model import Dataset, FloatArray, IntArray, Samples, StrArray
+from hostpc.dataset.model import Dataset, FloatArray, Frame, IntArray, Samples, StrArray
 from hostpc.dataset.schema import FieldError, Loc, show
 from hostpc.json_object import JsonObject
 
@@ -245,7 +245,7 @@ class MeasurementKind:
                                      for v in column])
         return KindArrays(fields=fields)
 
-    def check_samples(self, samples: Samples, frames: Mapping[str, Any]) -> None:
+    def check_samples(self, samples: Samples, frames: Mapping[str, Frame]) -> None:
         """Checks across samples and against the frames (after reading); raise FieldError.
         Default: none."""
 

@@ -21,6 +21,8 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from hostpc.json_object import JsonObject
+
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 StrArray = NDArray[np.str_]
@@ -122,6 +124,12 @@ class SphereFrame:
         object.__setattr__(self, "radius", float(self.radius))
 
     __eq__ = _dataclass_eq
+
+
+#: a nominal frame's value in a ``Dataset``: a pose, a (3,) point (m), the sphere, named
+#: points (name -> (3,) m), or a JSON object kept as the file gave it (the stereo camera
+#: model: zerocal reads nothing of it and writes it back unchanged)
+Frame = FramePose | FloatArray | SphereFrame | Mapping[str, FloatArray] | JsonObject
 
 
 @dataclass(frozen=True, eq=False)
@@ -352,7 +360,7 @@ class Dataset:
 
     method: Method
     robot: RobotDescription
-    frames: Mapping[str, FramePose | FloatArray | SphereFrame | dict[str, Any]]
+    frames: Mapping[str, Frame]
     samples: Samples
     known: tuple[str, ...] = ()
     probe_stylus_radius: float | None = None
@@ -361,9 +369,9 @@ class Dataset:
     def __post_init__(self) -> None:
         if not isinstance(self.method, str) or not self.method.isidentifier():
             raise ValueError(f"Dataset.method: not a method name: {self.method!r}")
-        frames: dict[str, Any] = {}
+        frames: dict[str, Frame] = {}
         for name, value in self.frames.items():
-            if isinstance(value, FramePose | SphereFrame | dict):
+            if isinstance(value, FramePose | SphereFrame | Mapping):
                 frames[name] = value
             else:
                 point = _frozen(value)

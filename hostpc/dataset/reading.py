@@ -23,11 +23,19 @@ from hostpc.dataset import schema, validation
 from hostpc.dataset.file_units import Units
 from hostpc.dataset.kind_registry import measurement_kinds
 from hostpc.dataset.measurement_kind import MeasurementKind
-from hostpc.dataset.model import Dataset, FramePose, RobotDescription, Samples, SphereFrame
+from hostpc.dataset.model import (
+    Dataset,
+    Frame,
+    FramePose,
+    RobotDescription,
+    Samples,
+    SphereFrame,
+)
 from hostpc.dataset.reading_columns import NotColumnar, read_columns
 from hostpc.dataset.reading_samples import read_samples
 from hostpc.dataset.schema import FORMAT_TAG, FieldError, Loc, show
 from hostpc.errors import DatasetError, InputError
+from hostpc.json_object import JsonObject
 from hostpc.kinematics.robots import get_robot
 
 PathLike = str | os.PathLike[str]
@@ -273,8 +281,8 @@ def _check_count(loc: Loc, values: Sequence[Any], n: int, what: str) -> None:
         raise FieldError(loc, f"expected {n} values ({what}), got {len(values)}")
 
 
-def _read_frames(frames: dict[str, Any], method: MeasurementKind, units: Units
-                 ) -> dict[str, Any]:
+def _read_frames(frames: JsonObject, method: MeasurementKind, units: Units
+                 ) -> dict[str, Frame]:
     """The nominal frames of ``method`` in SI."""
     kinds = method.frames
     for name in frames:
@@ -284,7 +292,7 @@ def _read_frames(frames: dict[str, Any], method: MeasurementKind, units: Units
                 ("frames", name),
                 f"unknown frame for method '{method.name}' (expected {expected})",
             )
-    result: dict[str, Any] = {}
+    result: dict[str, Frame] = {}
     for name, kind in kinds.items():
         loc: Loc = ("frames", name)
         if name not in frames:
@@ -302,7 +310,7 @@ def _read_frames(frames: dict[str, Any], method: MeasurementKind, units: Units
         elif kind == "point":
             result[name] = units.length(schema.validate(schema.Vec3, value, loc))
         elif kind == "points":
-            points: dict[str, Any] = schema.validate(dict[str, schema.Vec3], value, loc)
+            points: dict[str, list[float]] = schema.validate(dict[str, schema.Vec3], value, loc)
             if not points:
                 raise FieldError(loc, "expected at least one named point")
             result[name] = {key: units.length(point) for key, point in points.items()}
@@ -320,7 +328,7 @@ def _read_frames(frames: dict[str, Any], method: MeasurementKind, units: Units
     return result
 
 
-def _read_known(known: list[str], frames: Mapping[str, Any]) -> tuple[str, ...]:
+def _read_known(known: list[str], frames: Mapping[str, Frame]) -> tuple[str, ...]:
     seen: set[str] = set()
     for i, name in enumerate(known):
         if name not in frames:

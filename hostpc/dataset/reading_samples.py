@@ -18,7 +18,7 @@ import numpy as np
 from hostpc.dataset import schema
 from hostpc.dataset.file_units import Units
 from hostpc.dataset.measurement_kind import Columns, MeasurementKind
-from hostpc.dataset.model import Samples
+from hostpc.dataset.model import Frame, Samples
 from hostpc.dataset.schema import FieldError, Loc, show
 
 
@@ -39,7 +39,7 @@ def read_samples(
     n_joints: int | None,
     robot_label: str,
     units: Units,
-    frames: Mapping[str, Any] | None = None,
+    frames: Mapping[str, Frame] | None = None,
 ) -> Samples:
     """Check every sample against ``kind`` and build the arrays in SI."""
     columns = Columns(len(samples))

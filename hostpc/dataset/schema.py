@@ -30,6 +30,8 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
+from hostpc.json_object import JsonObject
+
 FORMAT_TAG = "zerocal-dataset/1"
 
 Loc = tuple[str | int, ...]
@@ -228,7 +230,7 @@ class DocumentSchema(BaseModel):
     method: str
     units: UnitsSchema = UnitsSchema()
     robot: RobotSchema
-    frames: dict[str, Any]
+    frames: JsonObject
     known: list[str] = []
     probe: ProbeSchema | None = None
     samples: list[SampleSchema]
@@ -282,7 +284,7 @@ def validate(kind: Any, value: Any, loc: Loc = ()) -> Any:
         raise FieldError(loc + tuple(first["loc"]), _describe(first)) from None
 
 
-class DuplicateKeys(dict[str, Any]):
+class DuplicateKeys(JsonObject):
     """A JSON object in which some key appeared more than once (see ``pairs_hook``)."""
 
     duplicates: tuple[str, ...] = ()
@@ -295,9 +297,9 @@ class NonFinite:
         self.token = token
 
 
-def pairs_hook(pairs: Sequence[tuple[str, Any]]) -> dict[str, Any]:
+def pairs_hook(pairs: Sequence[tuple[str, Any]]) -> JsonObject:
     """``json`` object hook that remembers duplicate keys instead of keeping the last."""
-    result: dict[str, Any] = {}
+    result: JsonObject = {}
     duplicates: list[str] = []
     for key, value in pairs:
         if key in result:
@@ -346,7 +348,7 @@ def normalize(value: Any, loc: Loc = (), depth: int = 0) -> Any:
     if isinstance(value, dict):
         if isinstance(value, DuplicateKeys):
             raise FieldError(loc, f"duplicate key {show(value.duplicates[0])}")
-        result: dict[str, Any] = {}
+        result: JsonObject = {}
         for key, item in value.items():
             if not isinstance(key, str):
                 raise FieldError(loc, f"keys must be strings, got {show(key)}")

@@ -29,7 +29,7 @@ from hostpc.dataset.measurement_kind import (
     require,
     sample_value,
 )
-from hostpc.dataset.model import Samples
+from hostpc.dataset.model import Frame, Samples
 from hostpc.dataset.schema import FieldError, Loc, show
 from hostpc.json_object import JsonObject
 
@@ -100,9 +100,10 @@ class WorldPointFile(PointSampleKind):
         return replace(points, uv=None,
                        fields={"marker": np.asarray(markers, dtype=np.str_), "mask": mask})
 
-    def check_samples(self, samples: Samples, frames: Mapping[str, Any]) -> None:
+    def check_samples(self, samples: Samples, frames: Mapping[str, Frame]) -> None:
         """Every sample names a marker of ``frames.markers`` (or there is only one)."""
-        names = list(frames.get("markers", {}))
+        markers = frames.get("markers")
+        names = list(markers) if isinstance(markers, Mapping) else []
         for i, marker in enumerate(samples.fields["marker"]):
             if not marker and len(names) != 1:
                 raise FieldError(("samples", i, "marker"), "required field missing (there "
