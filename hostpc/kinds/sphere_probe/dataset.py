@@ -16,8 +16,10 @@ from typing import Any
 import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples, SphereFrame
+from hostpc.dataset.model import Frame
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, fit
+from hostpc.json_object import JsonObject
 from hostpc.kinds.sphere_probe.acquisition import ContactRecord
 from hostpc.kinds.sphere_probe.planning.geometry import InitialEstimate, initial_estimate
 from hostpc.kinds.sphere_probe.planning.setup import METHOD, ProbeSetup
@@ -25,7 +27,7 @@ from hostpc.kinematics import Chain, forward, point_jacobian, screws
 
 
 def build_dataset(robot_name: str, setup: ProbeSetup, records: Sequence[ContactRecord],
-                  *, estimate: bool = True, extra: dict[str, Any] | None = None,
+                  *, estimate: bool = True, extra: JsonObject | None = None,
                   start_frames: Mapping[str, np.ndarray] | None = None) -> Dataset:
     """The sphere_probe dataset of the contacts that touched (missed ones are listed in
     ``extra_fields["sphere_probe"]["missed"]``).
@@ -53,11 +55,11 @@ def build_dataset(robot_name: str, setup: ProbeSetup, records: Sequence[ContactR
     tip = setup.tip if start_frames is None else np.asarray(start_frames["tool"], float)
     centre = (setup.sphere_centre if start_frames is None
               else np.asarray(start_frames["sphere"], float))
-    frames: dict[str, Any] = {
+    frames: dict[str, Frame] = {
         "tool": FramePose(xyz=tip, rpy=np.zeros(3)),
         "sphere": SphereFrame(centre, setup.sphere_radius),
     }
-    info: dict[str, Any] = {
+    info: JsonObject = {
         "missed": missed,
         "nominal_frames": {"tip": setup.tip.tolist(),
                            "sphere_centre": setup.sphere_centre.tolist()},
