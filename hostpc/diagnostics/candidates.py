@@ -47,6 +47,7 @@ from hostpc.errors import InputError
 from hostpc.fitting import FitResult, solve
 from hostpc.fitting.fitting import held_out_by_fold
 from hostpc.fitting.solver import Evaluation, Loss, SolverOutcome, evaluate, levenberg_marquardt
+from hostpc.json_object import JsonObject
 from hostpc.model import joint_offsets
 from hostpc.model.effect import Effect
 from hostpc.model.layout import Problem
@@ -94,7 +95,7 @@ class Candidate:
         """Whether the ladder would add it: significant and no identifiable parameter lost."""
         return self.significant and not self.unidentifiable
 
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self) -> JsonObject:
         return {
             "effect": self.effect,
             "delta_bic": _finite(self.delta_bic),

@@ -33,6 +33,7 @@ from hostpc.diagnostics.distributions import chi2_isf, chi2_sf
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult
 from hostpc.fitting.solver import evaluate
+from hostpc.json_object import JsonObject
 from hostpc.model.effect import Effect
 from hostpc.model.measurements.predict import predict
 
@@ -80,7 +81,7 @@ class DetectableSize:
                 f"({self.shift * 1e6:.3g} um at the measured points) would not be seen "
                 "with these poses")
 
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self) -> JsonObject:
         return {"effect": self.effect, "parameter": self.parameter,
                 "size": self.size if math.isfinite(self.size) else None,
                 "unit": self.unit, "shift": self.shift if math.isfinite(self.shift) else None}
