@@ -23,7 +23,15 @@ from numpy.typing import NDArray
 
 from hostpc.dataset import schema
 from hostpc.dataset.file_units import Units
-from hostpc.dataset.model import Dataset, FloatArray, Frame, IntArray, Samples, StrArray
+from hostpc.dataset.model import (
+    Dataset,
+    FloatArray,
+    Frame,
+    IntArray,
+    KindBlock,
+    Samples,
+    StrArray,
+)
 from hostpc.dataset.schema import FieldError, Loc, show
 from hostpc.json_object import JsonObject
 
@@ -178,7 +186,8 @@ class MeasurementKind:
     Class attributes a kind sets: ``name``; ``frames`` (frame name -> kind, one of
     ``FRAME_KINDS``); ``optional_frames``; ``sample_fields`` (name -> unit kind; ``q`` is
     implied); ``optional_fields``; ``sample_hints`` (field -> hint appended to "not a
-    field of method"); ``uses_probe`` (the document carries ``probe``); ``robot_tree``
+    field of method"); ``document_blocks`` (top-level fields of the document the kind reads
+    itself, ``read_block``: sphere_probe's ``probe``); ``robot_tree``
     (the robot is a built-in kinematic tree by name; samples give the joint counts).
     """
 
@@ -189,7 +198,7 @@ class MeasurementKind:
     sample_fields: ClassVar[Mapping[str, str]] = {}
     optional_fields: ClassVar[frozenset[str]] = frozenset()
     sample_hints: ClassVar[Mapping[str, str]] = {}
-    uses_probe: ClassVar[bool] = False
+    document_blocks: ClassVar[tuple[str, ...]] = ()
     robot_tree: ClassVar[bool] = False
     #: optional fields some samples of a regular file leave out (its column reader reads
     #: them at ``SampleTable.present``); any other field varying sends the file to the
@@ -248,6 +257,11 @@ class MeasurementKind:
     def check_samples(self, samples: Samples, frames: Mapping[str, Frame]) -> None:
         """Checks across samples and against the frames (after reading); raise FieldError.
         Default: none."""
+
+    def read_block(self, name: str, value: Any, units: Units) -> KindBlock | None:
+        """The kind's top-level block ``name`` (one of ``document_blocks``) from the file's
+        JSON ``value`` (None: absent), SI; None to leave it out; raise FieldError."""
+        return None
 
     def check_loaded(self, dataset: Dataset, source: str) -> None:
         """Checks of the kind's own top-level blocks (``dataset.extra_fields``) once the

@@ -4,7 +4,7 @@ Loading converts the file's units to SI (``units.Units``) and checks everything 
 relies on; a file that breaks the contract raises ``hostpc.errors.DatasetError`` with one
 line naming the file, the field and the sample index, e.g.
 ``data.json: samples[3].cov: not positive definite``. The document level (format, method,
-robot, frames, known, probe) is checked here, the samples in ``reading_samples``.
+robot, frames, known, the kind's blocks) is checked here, the samples in ``reading_samples``.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ from hostpc.dataset.model import (
     Dataset,
     Frame,
     FramePose,
+    KindBlock,
     RobotDescription,
     Samples,
     SphereFrame,
@@ -145,7 +146,7 @@ def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]],
         robot, n_joints, robot_label = _read_robot(document.robot, kind, units)
     frames = _read_frames(document.frames, kind, units)
     known = _read_known(document.known, frames)
-    stylus_radius = _read_probe(document.probe, kind, units)
+    blocks = _read_blocks(doc, kind, kinds, units)
     if columnar_samples is not None:
         fast = read_columns(columnar_samples, kind, n_joints, units)
         if fast is None:
@@ -155,14 +156,15 @@ def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]],
     else:
         samples = read_samples(document.samples, kind, n_joints, robot_label, units, frames)
     samples = prismatic_q_to_length(samples, robot, units)
-    extra_fields = {k: v for k, v in doc.items() if k not in schema.DOCUMENT_FIELDS}
+    extra_fields = {k: v for k, v in doc.items()
+                    if k not in schema.DOCUMENT_FIELDS and k not in kind.document_blocks}
     return Dataset(
         method=method,
         robot=robot,
         frames=frames,
         samples=samples,
         known=known,
-        probe_stylus_radius=stylus_radius,
+        blocks=blocks,
         extra_fields=extra_fields,
     )
 
@@ -342,16 +344,18 @@ def _read_known(known: list[str], frames: Mapping[str, Frame]) -> tuple[str, ...
     return tuple(known)
 
 
-def _read_probe(probe: schema.ProbeSchema | None, kind: MeasurementKind, units: Units
-                ) -> float | None:
-    if not kind.uses_probe:
-        if probe is not None:
-            raise FieldError(("probe",), f"not a field of method '{kind.name}'")
-        return None
-    if probe is None:
-        raise FieldError(("probe",), 'required field missing ({"stylus_radius": r})')
-    if probe.stylus_radius < 0:
-        raise FieldError(
-            ("probe", "stylus_radius"), f"must be >= 0, got {show(probe.stylus_radius)}"
-        )
-    return float(units.length(probe.stylus_radius))
+def _read_blocks(doc: JsonObject, kind: MeasurementKind,
+                 kinds: Mapping[str, type[MeasurementKind]], units: Units
+                 ) -> dict[str, KindBlock]:
+    """The kind's own top-level blocks (``MeasurementKind.read_block``); another kind's
+    block in this kind's file is an error."""
+    for other in kinds.values():
+        for name in other.document_blocks:
+            if name in doc and name not in kind.document_blocks:
+                raise FieldError((name,), f"not a field of method '{kind.name}'")
+    blocks = {}
+    for name in kind.document_blocks:
+        block = kind.read_block(name, doc.get(name), units)
+        if block is not None:
+            blocks[name] = block
+    return blocks

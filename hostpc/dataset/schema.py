@@ -136,11 +136,13 @@ Mat2 = Annotated[list[Vec2], _matrix(2, 2)]
 Covariance = Annotated[list[list[float]], _square(3, 6)]
 
 
-class _Strict(BaseModel):
+class StrictSchema(BaseModel):
+    """A JSON object with exactly these fields (a kind's own blocks subclass it too)."""
+
     model_config = ConfigDict(strict=True, extra="forbid", frozen=True)
 
 
-class UnitsSchema(_Strict):
+class UnitsSchema(StrictSchema):
     """``units``: the units of the file's numbers (default SI)."""
 
     length: Literal["m", "mm"] = "m"
@@ -148,7 +150,7 @@ class UnitsSchema(_Strict):
     time: Literal["s", "ms"] = "s"
 
 
-class JointRowSchema(_Strict):
+class JointRowSchema(StrictSchema):
     """One row of an explicit DH/MDH table (lengths and angles in the file's units)."""
 
     a: float
@@ -158,7 +160,7 @@ class JointRowSchema(_Strict):
     type: Literal["revolute", "prismatic"] = "revolute"  # extension A: prismatic q adds to d
 
 
-class RobotSchema(_Strict):
+class RobotSchema(StrictSchema):
     """``robot``: ``{"name": ...}`` or ``{"convention", "joints", "mass"?, "com"?}``."""
 
     name: str | None = None
@@ -171,31 +173,25 @@ class RobotSchema(_Strict):
     tip_link: str | None = None
 
 
-class FramePoseSchema(_Strict):
+class FramePoseSchema(StrictSchema):
     """A frame as ``xyz`` (length) and ``rpy`` (angle)."""
 
     xyz: Vec3
     rpy: Vec3
 
 
-class TipFrameSchema(_Strict):
+class TipFrameSchema(StrictSchema):
     """``frames.tool`` of sphere_probe: only ``xyz`` matters, ``rpy`` may be omitted."""
 
     xyz: Vec3
     rpy: Vec3 | None = None
 
 
-class SphereSchema(_Strict):
+class SphereSchema(StrictSchema):
     """``frames.sphere``: centre (length, base frame) and radius (length)."""
 
     center: Vec3
     radius: float
-
-
-class ProbeSchema(_Strict):
-    """``probe``: the stylus ball radius (length)."""
-
-    stylus_radius: float
 
 
 class SampleSchema(BaseModel):
@@ -232,7 +228,6 @@ class DocumentSchema(BaseModel):
     robot: RobotSchema
     frames: JsonObject
     known: list[str] = []
-    probe: ProbeSchema | None = None
     samples: list[SampleSchema]
 
 

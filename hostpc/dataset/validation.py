@@ -128,8 +128,9 @@ def _ranged_values(dataset: Dataset) -> Iterator[tuple[str, Any, float, str]]:
             yield f"frames.{name}.radius", frame.radius, MAX_POSITION_M, "m"
         elif isinstance(frame, np.ndarray):
             yield f"frames.{name}", frame, MAX_POSITION_M, "m"
-    if dataset.probe_stylus_radius is not None:
-        yield "probe.stylus_radius", dataset.probe_stylus_radius, MAX_POSITION_M, "m"
+    for name, block in dataset.blocks.items():
+        for length, value in block.lengths():
+            yield f"{name}.{length}", value, MAX_POSITION_M, "m"
 
 
 def _check_covariances(dataset: Dataset, source: str) -> None:

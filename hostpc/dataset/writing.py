@@ -50,8 +50,8 @@ def dataset_to_dict(dataset: Dataset, plugins: Iterable[str | os.PathLike[str]] 
         "frames": {name: _frame_to_json(value) for name, value in dataset.frames.items()},
         "known": list(dataset.known),
     }
-    if dataset.probe_stylus_radius is not None:
-        doc["probe"] = {"stylus_radius": float(dataset.probe_stylus_radius)}
+    for name, block in dataset.blocks.items():
+        doc[name] = block.to_json()
     kinds = measurement_kinds(plugins)
     if dataset.method not in kinds:
         raise InputError(f"method {dataset.method!r}: no measurement model of that name "

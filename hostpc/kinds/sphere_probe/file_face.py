@@ -3,6 +3,8 @@ sphere; extended by its model (``model.py``) with the prediction."""
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -18,9 +20,50 @@ from hostpc.dataset.measurement_kind import (
     positive,
     require,
 )
-from hostpc.dataset.model import Samples
-from hostpc.dataset.schema import Loc
+from hostpc.dataset.model import Dataset, KindBlock, Samples, SphereFrame
+from hostpc.dataset.schema import FieldError, Loc, show
 from hostpc.json_object import JsonObject
+
+
+class ProbeSchema(schema.StrictSchema):
+    """``probe``: the stylus ball radius (length)."""
+
+    stylus_radius: float
+
+
+@dataclass(frozen=True, eq=False)
+class Probe(KindBlock):
+    """sphere_probe's ``probe`` block: the stylus ball radius, m."""
+
+    stylus_radius: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "stylus_radius", float(self.stylus_radius))
+
+    def to_json(self) -> JsonObject:
+        return {"stylus_radius": float(self.stylus_radius)}
+
+    def lengths(self) -> Iterable[tuple[str, float]]:
+        return (("stylus_radius", self.stylus_radius),)
+
+
+def probe_blocks(stylus_radius: float) -> dict[str, KindBlock]:
+    """A sphere_probe dataset's ``blocks``: the probe with this stylus radius (m)."""
+    return {"probe": Probe(stylus_radius)}
+
+
+def stylus_radius(dataset: Dataset) -> float | None:
+    """The stylus ball radius of a sphere_probe dataset, m (None: no ``probe`` block)."""
+    probe = dataset.blocks.get("probe")
+    return probe.stylus_radius if isinstance(probe, Probe) else None
+
+
+def reference_sphere(dataset: Dataset) -> SphereFrame:
+    """The reference sphere of a sphere_probe dataset (``frames.sphere``)."""
+    value = dataset.frames["sphere"]
+    if not isinstance(value, SphereFrame):
+        raise TypeError(f"frames['sphere'] is not a sphere: {type(value).__name__}")
+    return value
 
 
 class SphereProbeFile(MeasurementKind):
@@ -32,7 +75,17 @@ class SphereProbeFile(MeasurementKind):
     columns_may_omit = frozenset({"group"})
     sample_hints = {"q_arm": " (use 'q')", "cov": " (give the contact-distance 'sigma')",
                     "p": " (a contact has no measured point)"}
-    uses_probe = True
+    document_blocks = ("probe",)
+
+    def read_block(self, name: str, value: Any, units: Units) -> Probe:
+        """``probe``: ``{"stylus_radius": r}``, a length >= 0."""
+        if value is None:
+            raise FieldError((name,), 'required field missing ({"stylus_radius": r})')
+        probe: ProbeSchema = schema.validate(ProbeSchema, value, (name,))
+        if probe.stylus_radius < 0:
+            raise FieldError((name, "stylus_radius"),
+                             f"must be >= 0, got {show(probe.stylus_radius)}")
+        return Probe(float(units.length(probe.stylus_radius)))
 
     def read_sample(self, sample: schema.SampleSchema, loc: Loc, columns: Columns,
                     n_joints: int | None, robot_label: str, units: Units) -> list[float]:

@@ -48,6 +48,7 @@ from hostpc.kinds.sphere_probe.acquisition import (
 from hostpc.kinds.sphere_probe.dataset import (
     build_dataset,
 )
+from hostpc.kinds.sphere_probe.file_face import probe_blocks, reference_sphere
 from hostpc.kinds.sphere_probe.planning.contacts import (
     PlannedContact,
     PlannedOrientation,
@@ -289,7 +290,7 @@ class SphereProbeMethod(Method):
                                "sphere": SphereFrame(self.setup.sphere_centre,
                                                      self.setup.sphere_radius)},
                        samples=samples, known=self.setup.known,
-                       probe_stylus_radius=self.setup.stylus_radius)
+                       blocks=probe_blocks(self.setup.stylus_radius))
 
     def _check_transfer(self, q_from: np.ndarray | None,
                         orientation: PlannedOrientation) -> None:
@@ -396,7 +397,7 @@ class SphereProbeMethod(Method):
                                     estimate=False)
         write_json_atomic(self.frames_path, {
             "samples": digest, "tool": dataset.pose("tool").xyz.tolist(),
-            "sphere": dataset.sphere().center.tolist()})
+            "sphere": reference_sphere(dataset).center.tolist()})
         return dataset
 
     def describe(self) -> dict[str, Any]:
