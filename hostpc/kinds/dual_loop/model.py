@@ -41,7 +41,7 @@ from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
 from hostpc.errors import InputError
 from hostpc.kinds.dual_loop.file_face import DualLoopFile
 from hostpc.kinds.dual_loop.frames import DUAL_LOOP_FRAME_EFFECTS
-from hostpc.kinds.stereo_target.shared_error import rig_floor_covariance, rig_point_sensitivity
+from hostpc.kinds.stereo_target.shared_error import rig_shared_error
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
 from hostpc.kinematics.humanoid import HUMANOID_FRAMES, HUMANOID_HOME, get_tree
 from hostpc.kinematics.rotations import pose_to_transform, skew
@@ -297,8 +297,7 @@ class DualLoop(DualLoopFile, MeasurementModel):
     own_frame_effects = DUAL_LOOP_FRAME_EFFECTS
     sensor_effects = ("depth_scale",)
     # the stereo rig's shared error (hostpc.kinds.stereo_target.shared_error)
-    shared_error_sensitivity = staticmethod(rig_point_sensitivity)
-    shared_error_floor = staticmethod(rig_floor_covariance)
+    shared_error = staticmethod(rig_shared_error)
 
     def chain(self, dataset: Dataset) -> Chain:
         """The tree's stacked bookkeeping chain (``KinematicTree.stacked_chain``)."""
