@@ -53,6 +53,11 @@ DEFAULT_SWAP_LIMIT_DEG = 45.0
 """The push limit of a joint declared swapped (--swap-limit), deg."""
 COARSE_DEG = 3.0
 """A joint estimated farther off than this (deg) makes the runner measure again, shifted."""
+LOST_FRACTION = 0.25
+LOST_DEG = 0.2
+"""When more than LOST_FRACTION of the plan's poses were lost (a sphere_probe contact
+misses the 12.5 mm sphere after 2 deg on J1), a joint estimated more than LOST_DEG off
+(deg) is enough to measure again, shifted."""
 SETTLED_DEG = 0.05
 """The stages stop when no joint's estimate moved more than this (deg) since the last."""
 MAX_STAGES = 3
@@ -206,6 +211,8 @@ class Staging:
                 moved = float(np.max(np.abs(new - estimate))) if new.size else 0.0
                 far = float(np.max(np.abs(new))) if new.size else 0.0
                 limit = COARSE_DEG if number == 1 else SETTLED_DEG
+                if number == 1 and self._measured() < (1.0 - LOST_FRACTION) * q_plan.shape[0]:
+                    limit = LOST_DEG  # the poses were lost to a smaller error
                 if (far if number == 1 else moved) <= math.radians(limit):
                     break
                 first = number * STAGE_STRIDE

@@ -19,7 +19,13 @@ from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples, Sphere
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, fit
 from hostpc.kinds.sphere_probe.acquisition import ContactRecord
-from hostpc.kinds.sphere_probe.planning.geometry import InitialEstimate, initial_estimate
+from hostpc.kinds.sphere_probe.planning.geometry import (
+    MIN_POINTS_KNOWN_RADIUS,
+    InitialEstimate,
+    SphereFitError,
+    fit_sphere,
+    initial_estimate,
+)
 from hostpc.kinds.sphere_probe.planning.setup import METHOD, ProbeSetup
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
 
@@ -110,6 +116,14 @@ def normal_speeds(dataset: Dataset, directions: np.ndarray, tip_speed: np.ndarra
     poses = forward(chain, q)
     T = poses.T_base_flange
     tip = np.einsum("nij,j->ni", T[:, :3, :3], frames["tool"]) + T[:, :3, 3]
+    if not preliminary_fit and tip.shape[0] >= MIN_POINTS_KNOWN_RADIUS:
+        # the centre these contacts touched (the nominal one can be millimetres off: a
+        # joint's error moves every contact alike); the radius is known
+        rho = float(dataset.sphere().radius) + float(dataset.probe_stylus_radius or 0.0)
+        try:
+            frames["sphere"] = fit_sphere(tip, rho, centre_guess=frames["sphere"]).centre
+        except SphereFitError:
+            pass
     J = point_jacobian(screws(chain, poses), tip)[:, :, : chain.n]
     velocity = np.einsum("nij,nj->ni", J, directions)
     velocity /= np.maximum(np.linalg.norm(velocity, axis=1, keepdims=True), 1e-300)
