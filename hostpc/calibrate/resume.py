@@ -38,7 +38,10 @@ CLOCK_TOLERANCE_S = 1e-6
 def resume_settings(settings: RunSettings, overrides: Mapping[str, Any], journal: Journal,
                     progress: Progress) -> RunSettings:
     """The run's settings with this resume's `overrides` applied (only the
-    ``RESUME_OVERRIDABLE`` ones that are given and differ); a change is journaled."""
+    ``RESUME_OVERRIDABLE`` ones that are given and differ); a change is journaled, and
+    the runner writes the changed settings into run.json, so a later resume keeps them
+    (--swapped, --swap-limit, --force, ... ; --known is kept in its cell); the same
+    `settings` object when nothing changed."""
     changed = {k: v for k, v in overrides.items()
                if k in RESUME_OVERRIDABLE and v is not None
                and getattr(settings, k) != v}

@@ -184,6 +184,9 @@ class Runner:
                                   stored.exit_code)
             settings = resume_settings(header.settings, self.resume_overrides, self.journal,
                                        progress)
+            if settings is not header.settings:  # kept for the next resume (resume.py)
+                header = dataclasses.replace(header, settings=settings)
+                self.journal.write_header(header.to_dict())
             self.journal.event("resumed", at=_now())
             cell, header = cell_reference.resume_known(
                 cell_from_dict(header.cell, settings.plugins), self.known, header,

@@ -167,3 +167,33 @@ def test_a_swapped_joint_the_robot_does_not_have_is_refused_before_moving(
     assert main(["calibrate", "--robot", "sim", "--swapped", "J9", "--out", str(out)]) == 2
     assert "--swapped J9: the robot has 6 joints" in capsys.readouterr().err
     assert not (out / "rig.json").exists()  # nothing measured
+
+
+@pytest.mark.slow
+def test_a_resumes_overrides_are_kept_for_the_next_resume(tmp_path: Path) -> None:
+    """Refused at 2 deg -> resume with --swapped J3 -> the controller's own 5 deg limit
+    refuses -> the limit is raised -> `--resume RUN --push` (the next command as given)
+    pushes J3 with the swap still declared, instead of the 2 deg refusal again."""
+    out = tmp_path / "run"
+    code, document = calibrate(out, swap_world("world_point", 3, 15.0,
+                                               controller_limit_deg=5.0), "world_point")
+    assert code == 5 and "exceeds the limit of 2 deg" in document["push"]["reason"]
+    first = document["outcome"]["next_command"]
+    assert first == f"hostpc calibrate --resume {out} --swapped J3"
+    assert main([*first.split()[1:], "--no-report"]) == 5
+    document = json.loads((out / "result.json").read_text())
+    assert "controller's own offset limit" in document["push"]["reason"]
+    header = json.loads((out / "run.json").read_text())
+    assert header["settings"]["swapped"] == [3]  # kept in run.json
+    second = document["outcome"]["next_command"]
+    assert second == f"hostpc calibrate --resume {out} --push"
+    # the technician raises the controller's limit (here: the simulated controller's)
+    scenario_path = out / "sim" / "scenario.json"
+    scenario = json.loads(scenario_path.read_text())
+    scenario["server"]["offset_limit_rad"] = math.radians(40.0)
+    scenario_path.write_text(json.dumps(scenario))
+    assert main([*second.split()[1:], "--no-report"]) == 0
+    document = json.loads((out / "result.json").read_text())
+    assert document["outcome"]["verdict"] == "PASS", document["outcome"]["headline"]
+    assert document["settings"]["swapped"] == [3]
+    assert all(abs(e) < TOLERANCE_DEG for e in document["truth"]["joint_offsets_error_deg"])
