@@ -35,13 +35,20 @@ from hostpc.calibrate.more_poses import more_poses_message, more_poses_reason
 from hostpc.calibrate.outcome import parse_required_joints
 from hostpc.calibrate.outcome_files import run_outcome
 from hostpc.calibrate.push import (
+    PUSH_FILE,
     PushPlan,
     execute_push,
     export_offsets,
     plan_push,
     same_offsets,
 )
-from hostpc.calibrate.refusals import MAX_POSE_ATTEMPTS, RunStopped, refusal_text, stopped
+from hostpc.calibrate.refusals import (
+    MAX_POSE_ATTEMPTS,
+    PushRefusal,
+    RunStopped,
+    refusal_text,
+    stopped,
+)
 from hostpc.calibrate.resume import (
     PushLost,
     SampleClock,
@@ -130,7 +137,7 @@ class Runner:
         self._priors: list[Any] = []
         self.journal = Journal(self.run_dir)
         self._clock = SampleClock(self.journal, self.progress)  # resume: sample t continues
-        self._controller_refusal: str | None = None  # the controller's own offset limit
+        self._controller_refusal: PushRefusal | None = None  # the controller's own limit
 
     # ------------------------------------------------------------------ top level
 
@@ -292,7 +299,8 @@ class Runner:
                                                    self.run_dir)
         push_status, pushed_delta, offsets = await self._push(push_plan, settings, offsets)
         if self._controller_refusal is not None:
-            push_plan = dataclasses.replace(push_plan, refused=self._controller_refusal)
+            push_plan = dataclasses.replace(push_plan, refused=self._controller_refusal.reason,
+                                            refusal=self._controller_refusal)
         exports = export_offsets(self.robot, self.run_dir, cell.robot, push_plan,
                                  push_status, progress)
 
@@ -466,7 +474,9 @@ class Runner:
             return "disabled", zero, offsets_now
         if plan.refused:
             progress.message(f"push refused: {plan.refused}")
-            self.journal.event("push_refused", reason=plan.refused, at=_now())
+            fields = ({"reason": plan.refused} if plan.refusal is None
+                      else plan.refusal.to_event())
+            self.journal.event("push_refused", **fields, at=_now())
             return "refused", zero, offsets_now
         if not plan.anything:
             return "nothing_to_push", zero, offsets_now
@@ -479,8 +489,10 @@ class Runner:
             if refused is None:
                 raise
             self._controller_refusal = refused
-            progress.message(f"push refused: {refused}")
-            self.journal.event("push_refused", reason=refused, by="controller", at=_now())
+            (self.run_dir / PUSH_FILE).unlink(missing_ok=True)  # its intent: never written
+            progress.message(f"push refused: {refused.reason}")
+            self.journal.event("push_refused", **refused.to_event(), by="controller",
+                               at=_now())
             return "refused", zero, offsets_now
         labels = plan.display_names()
         progress.message("pushed zero offsets: " + ", ".join(

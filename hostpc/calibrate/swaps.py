@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.refusals import PushRefusal, resume_with
 from hostpc.dataset import Dataset
 from hostpc.errors import ControllerError, InputError
 from hostpc.fitting import FitResult
@@ -104,18 +105,20 @@ def swap_message(settings: RunSettings) -> str | None:
             "(--max-correction)")
 
 
-def controller_limit_refusal(exc: ControllerError, run_dir: Any) -> str | None:
-    """The refusal text of a push the controller refused for its own offset limit, or
-    None for any other error. It says whose limit it is and what to do; the command it
-    ends with pushes only after the limit was raised (never the same refusal again)."""
+def controller_limit_refusal(exc: ControllerError, run_dir: Any) -> PushRefusal | None:
+    """The refusal of a push the controller refused for its own offset limit, or None
+    for any other error. It says whose limit it is and what to do; its next command pushes
+    only after the limit was raised (never the same refusal again)."""
     name = getattr(exc, "reason", None) or getattr(exc, "code", None)
     if name != "offset_limit":
         return None
-    return (f"the controller's own offset limit refused the push ({exc}): this is the "
-            "controller's setting, not zerocal's --max-correction or --swap-limit; the "
-            f"fitted offsets are kept in {run_dir}/fit.json; raise the controller's offset "
-            "limit (or set the joint's zero with the robot maker's zeroing procedure), "
-            f"then push and verify with: hostpc calibrate --resume {run_dir} --push")
+    return PushRefusal(
+        f"the controller's own offset limit refused the push ({exc}): this is the "
+        "controller's setting, not zerocal's --max-correction or --swap-limit; the "
+        f"fitted offsets are kept in {run_dir}/fit.json; raise the controller's offset "
+        "limit (or set the joint's zero with the robot maker's zeroing procedure), "
+        f"then push and verify with: hostpc calibrate --resume {run_dir} --push",
+        "controller_limit", resume_with("--push"))
 
 
 def _now() -> str:

@@ -16,6 +16,7 @@ from typing import Any
 
 import pytest
 
+from hostpc.calibrate.journal import Journal
 from hostpc.cli.main import main
 from hostpc.robots.simulator import default_sim_scenario
 from tests.integration.test_calibrate_sim import run_cli
@@ -129,6 +130,11 @@ def test_a_moved_target_is_named_nothing_is_pushed_and_a_resume_drops_the_refere
     assert document["push"]["status"] == "refused"
     assert "the target frame moved" in document["push"]["reason"]
     assert f"hostpc calibrate --resume {run} --reference none" in document["push"]["reason"]
+    # refused even with --force: the next command drops the reference, never --force
+    assert document["outcome"]["next_command"] == (
+        f"hostpc calibrate --resume {run} --reference none")
+    refused = Journal(run).events("push_refused")[-1]
+    assert refused["rule"] == "reference_moved"
     summary = (run / "summary.txt").read_text()
     assert "reference check: the target frame moved" in summary
     # the resume refits the same samples without the reference: J1 and J6 unidentifiable
