@@ -112,6 +112,13 @@ def test_the_controllers_own_limit_is_reported_once_with_what_to_do(
     assert main(["calibrate", "--resume", str(out), "--no-report"]) == 5
     assert len(Journal(out).events("push_refused")) == 1
     assert "controller's own offset limit" in capsys.readouterr().out
+    refused = Journal(out).events("push_refused")[0]
+    assert refused["rule"] == "controller_limit" and refused["by"] == "controller"
+    # nothing reached the controller: a rollback says so from the journal, dialling nothing
+    # (the simulated controller's port in the run is closed by now)
+    assert not (out / "push.json").exists()
+    assert main(["rollback", "--run", str(out)]) == 0
+    assert "nothing to roll back" in capsys.readouterr().out
 
 
 @pytest.mark.slow
