@@ -75,6 +75,7 @@ from hostpc.calibrate.swaps import (
     Staging,
     controller_limit_refusal,
     joint_limits_deg,
+    lost_plan_line,
     swap_message,
 )
 from hostpc.calibrate.verify import VerifyResult, evaluate_verify
@@ -274,8 +275,10 @@ class Runner:
                              "poses measured, their moves were stopped (aborted) again and "
                              "again")
         if n_measured < 3:
-            raise ZerocalError(f"only {n_measured} of {plan.q.shape[0]} poses measured; "
-                               "nothing to fit (see the skipped reasons in journal.jsonl)")
+            raise ZerocalError(lost_plan_line(
+                n_measured, plan.q.shape[0], [r.reason for r in self.journal.records("fit")
+                                              if not r.ok], settings, self.run_dir,
+                staged=method.staged))
         last = self._staging.last_fit  # the staging's fit of these poses, if it made one
         result, dataset = (last[1] if last is not None and last[0] == self._staging.first
                            else self._fit(method, settings, self._staging.first))

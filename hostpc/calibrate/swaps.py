@@ -33,7 +33,8 @@ from __future__ import annotations
 
 import datetime as _dt
 import math
-from collections.abc import Awaitable, Callable
+from collections import Counter
+from collections.abc import Awaitable, Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -48,7 +49,7 @@ from hostpc.model import joint_offsets
 from hostpc.model.problem import build_problem
 
 __all__ = ["DEFAULT_SWAP_LIMIT_DEG", "Staging", "controller_limit_refusal",
-           "joint_limits_deg", "parse_swapped", "swap_message"]
+           "joint_limits_deg", "lost_plan_line", "parse_swapped", "swap_message"]
 
 DEFAULT_SWAP_LIMIT_DEG = 45.0
 """The push limit of a joint declared swapped (--swap-limit), deg."""
@@ -119,6 +120,27 @@ def controller_limit_refusal(exc: ControllerError, run_dir: Any) -> PushRefusal 
         "limit (or set the joint's zero with the robot maker's zeroing procedure), "
         f"then push and verify with: hostpc calibrate --resume {run_dir} --push",
         "controller_limit", resume_with("--push"))
+
+
+def lost_plan_line(n_measured: int, n_planned: int, reasons: Sequence[str | None],
+                   settings: RunSettings, run_dir: Any, *, staged: bool) -> str:
+    """The one line of a run that measured too few of its poses to fit, ending with the
+    next command: a joint far off loses every pose (a sphere_probe touch misses the sphere
+    after a 15 deg swap), and only a declared swap searches for it."""
+    counts = Counter(str(r) for r in reasons if r)
+    why = f" (mostly: {counts.most_common(1)[0][0]})" if counts else ""
+    line = f"only {n_measured} of {n_planned} poses measured{why}; nothing to fit"
+    if not staged:
+        return line + " (see the skipped reasons in journal.jsonl)"
+    if not settings.swapped:
+        return (line + "; if a joint's zero is far off (a motor swapped or re-mastered), "
+                "declare that joint, and the run searches for it; e.g. for J1: "
+                f"hostpc calibrate --resume {run_dir} --swapped J1")
+    joints = ",".join(f"J{j}" for j in settings.swapped)
+    farther = min(2.0 * float(settings.swap_limit_deg), 180.0)
+    return (line + f"; the search of the swapped {joints} found nothing up to "
+            f"{settings.swap_limit_deg:g} deg: declare the joint that was swapped, or search "
+            f"farther: hostpc calibrate --resume {run_dir} --swap-limit {farther:g}")
 
 
 def _now() -> str:

@@ -204,3 +204,27 @@ def test_a_resumes_overrides_are_kept_for_the_next_resume(tmp_path: Path) -> Non
     assert document["outcome"]["verdict"] == "PASS", document["outcome"]["headline"]
     assert document["settings"]["swapped"] == [3]
     assert all(abs(e) < TOLERANCE_DEG for e in document["truth"]["joint_offsets_error_deg"])
+
+
+@pytest.mark.slow
+def test_an_undeclared_swap_that_loses_every_pose_ends_with_the_command_that_finds_it(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """sphere_probe with J1 15 deg off, not declared: every touch misses the sphere; the
+    one line says so and ends with the resume that declares the swap, which finds it."""
+    out = tmp_path / "run"
+    scenario_file = tmp_path / "world.json"
+    scenario_file.write_text(json.dumps(swap_world("sphere_probe", 1, 15.0)))
+    capsys.readouterr()
+    code = main(["calibrate", "--robot", "sim", "--method", "sphere_probe", "--scenario",
+                 str(scenario_file), "--out", str(out), "--no-report", "--known",
+                 KNOWN["sphere_probe"]])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1
+    line = err[-1]
+    assert "0 of 100 poses measured" in line and "no probe contact" in line
+    command = f"hostpc calibrate --resume {out} --swapped J1"
+    assert line.endswith(command)
+    assert main([*command.split()[1:], "--no-report"]) == 0
+    document = json.loads((out / "result.json").read_text())
+    assert document["outcome"]["verdict"] == "PASS"
+    assert all(abs(e) < TOLERANCE_DEG for e in document["truth"]["joint_offsets_error_deg"])
