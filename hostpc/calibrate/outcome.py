@@ -192,11 +192,12 @@ def _span(run: list[int]) -> str:
 
 def derive_outcome(events: Sequence[Mapping[str, Any]], sources: Sequence[JointSource], *,
                    run_dir: str, finished: bool, required: Sequence[int] = (),
-                   robot_arg: str = "ROBOT", known: Sequence[str] = ()) -> RobotOutcome:
+                   new_run: str = "--robot ROBOT", known: Sequence[str] = ()) -> RobotOutcome:
     """The outcome from the journal's events (`Journal.timeline(*JOURNAL_KINDS)`, in
     order) and the fit's per-joint sources. finished: the run wrote (or is writing) its
-    result; run_dir / robot_arg / known: for the next command (robot_arg: `sim` or the
-    address; known: the run's known frames, kept in a new run's `--known`)."""
+    result; run_dir / new_run / known: for the next command (new_run: a new run's
+    options for this robot and cell, `RunHeader.new_run_options`; known: the run's known
+    frames, kept in a new run's `--known`)."""
     state = _replay(events)
     active = state.pushed_new is not None and state.rolled_at is None
     pushed_mask = state.pushed_mask if active else ()
@@ -235,7 +236,7 @@ def derive_outcome(events: Sequence[Mapping[str, Any]], sources: Sequence[JointS
         joints=tuple(joints), required_joints=required, missing_required=missing,
         headline="", next_command=None, events=tuple(state.events),
         refused_reason=state.refused, refusal=state.refusal if state.refused else None)
-    return _with_words(outcome, run_dir, robot_arg, tuple(known), state.intent_open)
+    return _with_words(outcome, run_dir, new_run, tuple(known), state.intent_open)
 
 
 @dataclass
@@ -307,7 +308,7 @@ def _controller_text(state: _Replay, active: bool) -> str:
     return "offsets unchanged"
 
 
-def _with_words(outcome: RobotOutcome, run_dir: str, robot_arg: str, known: tuple[str, ...],
+def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[str, ...],
                 intent_open: bool) -> RobotOutcome:
     """The outcome with its headline and next command filled in."""
     joints = outcome.joints
@@ -329,7 +330,7 @@ def _with_words(outcome: RobotOutcome, run_dir: str, robot_arg: str, known: tupl
     elif verdict == "JOINTS_MISSING":
         missing = joint_names(joints, outcome.missing_required)
         head = f"JOINTS_MISSING: {good_text}; {bad_text} (required: {missing})"
-        next_command = _fix_command(joints, outcome, robot_arg, known)
+        next_command = _fix_command(joints, outcome, new_run, known)
     elif verdict == "NOT_VERIFIED":
         head = f"PUSHED, NOT VERIFIED: {good_text} (no verification poses)" + (
             f"; {bad_text}" if bad_text else "")
@@ -408,7 +409,7 @@ def _short_reason(joint: JointOutcome) -> str:
 
 
 def _fix_command(joints: Sequence[JointOutcome], outcome: RobotOutcome,
-                 robot_arg: str, known: tuple[str, ...]) -> str | None:
+                 new_run: str, known: tuple[str, ...]) -> str | None:
     """A new run that would calibrate the missing joints (their `--known` frames added to
     the run's own)."""
     frames: list[str] = [f for f in known if f != "none"]
@@ -423,5 +424,5 @@ def _fix_command(joints: Sequence[JointOutcome], outcome: RobotOutcome,
         return None
     required = ("all" if len(outcome.required_joints) == len(joints)
                 else ",".join(str(n) for n in outcome.required_joints))
-    return (f"hostpc calibrate --robot {robot_arg} --known {','.join(frames)} "
+    return (f"hostpc calibrate {new_run} --known {','.join(frames)} "
             f"--require-joints {required}")

@@ -166,6 +166,11 @@ def test_a_declared_swap_on_a_joint_the_run_cannot_calibrate_is_never_a_pass(
     assert code == 7, document["outcome"]["headline"]
     assert document["outcome"]["verdict"] == "JOINTS_MISSING"
     assert document["outcome"]["missing_required"] == [6]
+    # the new run it suggests is this robot's and cell's: the same method, simulated world
+    # and declared swap, with the frame J6 needs known
+    assert document["outcome"]["next_command"] == (
+        f"hostpc calibrate --robot sim --method stereo_target --scenario "
+        f"{out / 'sim' / 'scenario.json'} --swapped J6 --known target,tool --require-joints 6")
 
 
 def test_a_swapped_joint_the_robot_does_not_have_is_refused_before_moving(
