@@ -59,6 +59,7 @@ from hostpc.calibrate.resume import (
     resume_settings,
     settle_push_intent,
     stored_result,
+    verify_lost_line,
     verify_round,
 )
 from hostpc.calibrate.robot_time import RobotTimer
@@ -430,14 +431,11 @@ class Runner:
         await self._timer.end("verify")
         if not any(r.ok for r in self.journal.records("verify")
                    if first <= r.index < first + n_verify):
-            reasons = sorted({str(r.reason) for r in self.journal.records("verify")
-                              if first <= r.index < first + n_verify})
+            lost = [r for r in self.journal.records("verify")
+                    if first <= r.index < first + n_verify]
             self.journal.event("verify_lost", round=number)
-            state = ("the pushed offsets stay in the controller"
-                     if np.any(pushed_delta != 0.0) else "nothing was pushed")
-            raise VerifyLost(f"verification lost: all {n_verify} verification poses were "
-                             f"skipped ({'; '.join(reasons)}); {state}; measure them again "
-                             f"with: hostpc calibrate --resume {self.run_dir}")
+            raise VerifyLost(verify_lost_line(lost, n_verify, bool(np.any(pushed_delta != 0.0)),
+                                              self.run_dir))
         verify_dataset = self._dataset(method, "verify", first, first + n_verify)
         save_dataset(verify_dataset, self.run_dir / "verify_dataset.json",
                      plugins=method.settings.plugins)
