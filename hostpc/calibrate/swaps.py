@@ -9,14 +9,17 @@ joint is estimated more than ``COARSE_DEG`` off it measures the same plan again 
 pose shifted by the estimate (commanded ``q - estimate``: the robot is where the plan meant
 it to be), fits that stage alone, and repeats until the estimate moves less than
 ``SETTLED_DEG`` (at most ``MAX_STAGES`` extra stages). The final fit uses the last stage's
-poses only. When the plan's own poses gave too little to fit (fewer than a quarter measured:
-a sphere_probe touch misses the 12.5 mm sphere after a 2 deg J1 error) and a swap is
-declared, a coarse search comes first: the plan's first pose is tried with the swapped
-joint shifted by +-1, +-2, ... deg (``SEARCH_STEP_DEG``, up to --swap-limit) until it is
-measured, then on while it is: the middle of the measured range is the first stage's
-shift (the first hit is a touch on the flank). Each stage is journaled (`stage` event:
-its number, the estimate it is shifted by, the index of its first pose), so a resume
-replays the stages and measures only what no stage journaled yet.
+poses only. When more than a quarter of the plan's poses were lost (a sphere_probe touch
+misses the 12.5 mm sphere after a 2 deg J1 error), ``LOST_DEG`` instead of ``COARSE_DEG``
+starts the stages. When the plan's own poses gave too little to fit (fewer than a quarter
+measured: a 15 deg swap) and a swap is declared, a coarse search comes first: the plan's
+first pose is tried with the swapped joint shifted by +-1, +-2, ... deg
+(``SEARCH_STEP_DEG``, up to --swap-limit) until it is measured, then on while it is: the
+middle of the measured range is the first stage's shift (the first hit is a touch on the
+flank). Each stage is journaled (`stage` event: its number, the estimate it is shifted by,
+the index of its first pose), so a resume replays the stages and measures only what no
+stage journaled yet. Undeclared, nothing is searched: the run ends with the command that
+declares the swap (`lost_plan_line`).
 
 A method opts in through `Method.staged` and follows the shift through its planning hook
 `Method.set_joint_estimate` (stereo_target, world_point, sphere_probe: its contacts are
