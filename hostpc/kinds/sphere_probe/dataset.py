@@ -101,7 +101,9 @@ def normal_speeds(dataset: Dataset, directions: np.ndarray, tip_speed: np.ndarra
     of the guarded moves; tip_speed: (N,) the controller's tip speed (m/s). The geometry
     comes from a preliminary fit (joint offsets and frames, no cross-validation) of the
     dataset, so the contact normals are accurate to the fit's residuals (preliminary_fit
-    False: the dataset's nominal frames and the joints as latched).
+    False, a verification set: the dataset's nominal tip and the joints as latched, and
+    the sphere centre these contacts touched, fitted with the known radius, since the
+    nominal one is off by whatever joint error the latched joints still carry).
     """
     chain = robot_chain_of(dataset)
     q = np.asarray(dataset.samples.q, float).copy()
