@@ -233,3 +233,18 @@ def test_an_undeclared_swap_that_loses_every_pose_ends_with_the_command_that_fin
     document = json.loads((out / "result.json").read_text())
     assert document["outcome"]["verdict"] == "PASS"
     assert all(abs(e) < TOLERANCE_DEG for e in document["truth"]["joint_offsets_error_deg"])
+
+
+@pytest.mark.slow
+def test_the_model_check_of_a_staged_run_is_measured_where_the_robot_is(
+        tmp_path: Path) -> None:
+    """Nothing pushed after a 15 deg swap: the verification poses are commanded less the
+    estimate, and the detector's plate normal is taken where the robot is, not 15 deg off
+    where it reads (a 0.06 mm disk-centre bias failed the model check)."""
+    out = tmp_path / "run"
+    code, document = calibrate(out, swap_world("stereo_target", 3, 15.0), "stereo_target",
+                               "--swapped", "J3", "--no-push")
+    assert code == 0, document["outcome"]["headline"]
+    assert document["verify"]["kind"] == "model_check"
+    assert document["verify"]["verdict"] == "PASS", document["verify"]
+    assert "model check FAIL" not in document["outcome"]["headline"]
