@@ -22,7 +22,13 @@ from hostpc.fitting import FitResult, fit
 from hostpc.json_object import JsonObject
 from hostpc.kinds.sphere_probe.acquisition import ContactRecord
 from hostpc.kinds.sphere_probe.file_face import probe_blocks, reference_sphere, stylus_radius
-from hostpc.kinds.sphere_probe.planning.geometry import InitialEstimate, initial_estimate
+from hostpc.kinds.sphere_probe.planning.geometry import (
+    MIN_POINTS_KNOWN_RADIUS,
+    InitialEstimate,
+    SphereFitError,
+    fit_sphere,
+    initial_estimate,
+)
 from hostpc.kinds.sphere_probe.planning.setup import METHOD, ProbeSetup
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
 
@@ -98,7 +104,9 @@ def normal_speeds(dataset: Dataset, directions: np.ndarray, tip_speed: np.ndarra
     of the guarded moves; tip_speed: (N,) the controller's tip speed (m/s). The geometry
     comes from a preliminary fit (joint offsets and frames, no cross-validation) of the
     dataset, so the contact normals are accurate to the fit's residuals (preliminary_fit
-    False: the dataset's nominal frames and the joints as latched).
+    False, a verification set: the dataset's nominal tip and the joints as latched, and
+    the sphere centre these contacts touched, fitted with the known radius, since the
+    nominal one is off by whatever joint error the latched joints still carry).
     """
     chain = robot_chain_of(dataset)
     q = np.asarray(dataset.samples.q, float).copy()
@@ -113,6 +121,14 @@ def normal_speeds(dataset: Dataset, directions: np.ndarray, tip_speed: np.ndarra
     poses = forward(chain, q)
     T = poses.T_base_flange
     tip = np.einsum("nij,j->ni", T[:, :3, :3], frames["tool"]) + T[:, :3, 3]
+    if not preliminary_fit and tip.shape[0] >= MIN_POINTS_KNOWN_RADIUS:
+        # the centre these contacts touched (the nominal one can be millimetres off: a
+        # joint's error moves every contact alike); the radius is known
+        rho = float(reference_sphere(dataset).radius) + float(stylus_radius(dataset) or 0.0)
+        try:
+            frames["sphere"] = fit_sphere(tip, rho, centre_guess=frames["sphere"]).centre
+        except SphereFitError:
+            pass
     J = point_jacobian(screws(chain, poses), tip)[:, :, : chain.n]
     velocity = np.einsum("nij,nj->ni", J, directions)
     velocity /= np.maximum(np.linalg.norm(velocity, axis=1, keepdims=True), 1e-300)

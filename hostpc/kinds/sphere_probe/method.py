@@ -388,9 +388,7 @@ class SphereProbeMethod(Method):
                                  start_frames={k: np.asarray(saved[k], float)
                                                for k in ("tool", "sphere")})
         try:
-            if np.any(self._joint_estimate != 0.0):  # staged: the closed-form start
-                raise SphereFitError("frames assume zero joint offsets; start nominal")
-            dataset = build_dataset(self.cell.robot, self.setup, records)
+            dataset = self._estimated_dataset(records)
         except (SphereFitError, np.linalg.LinAlgError):
             dataset = build_dataset(self.cell.robot, self.setup,
                                     [replace(r, direction=None) for r in records],
@@ -399,6 +397,20 @@ class SphereProbeMethod(Method):
             "samples": digest, "tool": dataset.pose("tool").xyz.tolist(),
             "sphere": reference_sphere(dataset).center.tolist()})
         return dataset
+
+    def _estimated_dataset(self, records: Sequence[ContactRecord]) -> Dataset:
+        """The dataset with the closed-form frames and the contacts' normal speeds. A staged
+        run's contacts are latched about the joints' estimate off (the robot is where
+        latched + estimate reads): the closed form and the normals are computed there, so
+        the frames are the ones the fit, started at the estimate, sets out from."""
+        shift = self._joint_estimate
+        if not np.any(shift != 0.0):
+            return build_dataset(self.cell.robot, self.setup, records)
+        dataset = build_dataset(self.cell.robot, self.setup, [
+            r if r.q_latched is None else replace(r, q_latched=r.q_latched + shift)
+            for r in records])
+        return dataset.with_samples(replace(dataset.samples,
+                                            q=np.asarray(dataset.samples.q) - shift))
 
     def describe(self) -> dict[str, Any]:
         """The probe set-up for the result document (SI)."""
