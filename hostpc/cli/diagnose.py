@@ -249,6 +249,11 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
     if diagnosis.detectable:
         lines += ["", "what these poses can see (80 % power at the candidates' threshold):"]
         lines += [f"  {d.sentence}" for d in diagnosis.detectable]
+    if diagnosis.confounded:
+        lines += ["", "confounded candidates (neither significant given the other):"]
+        for pair in diagnosis.confounded:
+            lines += [f"  {pair.sentence}",
+                      f"  separate them: {diagnosis.separate_command(pair)}"]
     lines += ["", "advice:"] + [f"  - {sentence}" for sentence in diagnosis.advice]
     return "\n".join(lines)
 

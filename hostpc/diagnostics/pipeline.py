@@ -31,6 +31,7 @@ from hostpc.diagnostics.residual_analysis import (
     analyse_residuals,
     analysis_variables,
 )
+from hostpc.diagnostics.separation import confounded_pairs
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, solve
 from hostpc.fitting.solver import Loss
@@ -261,6 +262,8 @@ def diagnose(
     advice = advise(start, residuals, steps, source, plugin_paths, ladder_stop=stop)
     detectable = candidate_sizes(start.fit, registry, [c.effect for c in start.candidates],
                                  alpha)
+    confounded = confounded_pairs(start.ranked.candidates, registry, alpha=alpha,
+                                  cv_folds=rank_cv_folds, loss=loss)
     return Diagnosis(check=start, residuals=residuals, ladder=steps, advice=advice,
                      alpha=alpha, source=source, plugins=plugin_paths, ladder_stop=stop,
-                     detectable=detectable)
+                     detectable=detectable, confounded=confounded)
