@@ -392,7 +392,7 @@ class Runner:
         test the pair again (separate.py)."""
         self.progress.stage("plan")
         planned = plan_separation(self.journal, method, state, plan, settings, result,
-                                  dataset, effects)
+                                  effects)
         for line in planned.lines():
             self.progress.message(line)
         if planned.q.shape[0]:

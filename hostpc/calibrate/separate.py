@@ -22,10 +22,10 @@ from typing import Any, cast
 import numpy as np
 
 from hostpc.calibrate.journal import Journal
-from hostpc.dataset import Dataset
 from hostpc.diagnostics.candidates import Candidate, check_candidate_names, try_candidate
 from hostpc.diagnostics.separation import (
     PairTest,
+    measured_rows,
     needed_noncentralities,
     noncentralities,
     pair_model,
@@ -121,9 +121,8 @@ def _candidates(result: FitResult, effects: tuple[str, str],
 
 
 def plan_separation(journal: Journal, method: Method, state: RobotState, plan: Plan,
-                    settings: RunSettings, result: FitResult, dataset: Dataset,
-                    effects: tuple[str, str], alpha: float = SEPARATION_ALPHA
-                    ) -> SeparationPlan:
+                    settings: RunSettings, result: FitResult, effects: tuple[str, str],
+                    alpha: float = SEPARATION_ALPHA) -> SeparationPlan:
     """The separating poses of ``effects`` for this run (journaled; see the module doc)."""
     known = journaled_plan(journal, effects)
     if known is not None:
@@ -140,7 +139,7 @@ def plan_separation(journal: Journal, method: Method, state: RobotState, plan: P
     members = (groups.members() if groups is not None
                else [np.array([i]) for i in range(pool.shape[0])])
     members = [g for g in members if not any(_is_used(pool[i], used) for i in g)]
-    measured = model.blocks(dataset).reshape(-1, len(model.layout))
+    measured = measured_rows(result, model)
     blocks = (model.blocks(method.design_dataset(pool)) if pool.shape[0]
               else np.zeros((0, 1, len(model.layout))))
     needed = needed_noncentralities(model, alpha)

@@ -252,8 +252,12 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
     if diagnosis.confounded:
         lines += ["", "confounded candidates (neither significant given the other):"]
         for pair in diagnosis.confounded:
-            lines += [f"  {pair.sentence}",
-                      f"  separate them: {diagnosis.separate_command(pair)}"]
+            lines.append(f"  {pair.sentence}")
+            if pair.gain_sentence is not None:
+                lines.append(f"  {pair.gain_sentence}")
+            lines.append(f"  separate them: {diagnosis.separate_command(pair)} (plans the "
+                         "fewest extra poses that give both, prints their predicted "
+                         "separation, measures them and tests again)")
     lines += ["", "advice:"] + [f"  - {sentence}" for sentence in diagnosis.advice]
     return "\n".join(lines)
 

@@ -27,6 +27,8 @@ FORMAT = "zerocal-diagnosis/1"
 #: delta BIC difference below which two candidates are tied (``ModelCheck.best_candidate``)
 BIC_TIE = 2.0
 JSON_INTERACTIONS = 25
+#: the file that makes a folder a calibrate run (``hostpc.calibrate.journal``)
+RUN_JOURNAL = "journal.jsonl"
 
 
 def finite(value: float | None) -> float | None:
@@ -169,8 +171,10 @@ class Diagnosis:
 
     def separate_command(self, pair: PairTest) -> str:
         """``hostpc calibrate --resume RUN --separate A,B`` for the run the dataset is
-        in (RUN: the dataset's folder, or RUN when the source is not known)."""
-        run = "RUN" if not self.source else (str(Path(self.source).parent) or ".")
+        in (RUN: the dataset's folder when it holds a calibrate run's journal, else the
+        word RUN)."""
+        folder = Path(self.source).parent if self.source else None
+        run = str(folder) if folder is not None and (folder / RUN_JOURNAL).is_file() else "RUN"
         return f"hostpc calibrate --resume {run} --separate {','.join(pair.names)}"
 
     # the headline numbers of the current model ------------------------------------------

@@ -262,8 +262,9 @@ def diagnose(
     advice = advise(start, residuals, steps, source, plugin_paths, ladder_stop=stop)
     detectable = candidate_sizes(start.fit, registry, [c.effect for c in start.candidates],
                                  alpha)
-    confounded = confounded_pairs(start.ranked.candidates, registry, alpha=alpha,
-                                  cv_folds=rank_cv_folds, loss=loss)
+    ranked = start.ranked
+    confounded = confounded_pairs(ranked.fit, ranked.candidates, registry, alpha=alpha,
+                                  cv_folds=rank_cv_folds, loss=loss, plugins=plugin_paths)
     return Diagnosis(check=start, residuals=residuals, ladder=steps, advice=advice,
                      alpha=alpha, source=source, plugins=plugin_paths, ladder_stop=stop,
                      detectable=detectable, confounded=confounded)

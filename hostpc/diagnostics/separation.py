@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -35,7 +35,7 @@ from hostpc.diagnostics.detectable import DEFAULT_POWER, power, required_noncent
 from hostpc.diagnostics.distributions import chi2_isf
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult
-from hostpc.fitting.solver import Loss
+from hostpc.fitting.solver import Loss, evaluate
 from hostpc.model.effect import Effect
 from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem, extend_problem
@@ -69,10 +69,26 @@ class NestedTest:
 
 @dataclass(frozen=True)
 class PairTest:
-    """Both nested tests of a pair: ``first`` is A given B, ``second`` B given A."""
+    """Both nested tests of a pair: ``first`` is A given B, ``second`` B given A;
+    noncentrality: the chi-square gain each test would see on these data if that
+    candidate were what is there (``noncentralities``), and needed: the gain each needs to
+    find it with ``DEFAULT_POWER`` (None when not computed)."""
 
     first: NestedTest
     second: NestedTest
+    noncentrality: tuple[float, float] | None = None
+    needed: tuple[float, float] | None = None
+
+    @property
+    def gain_sentence(self) -> str | None:
+        """The predicted separation in words, or None."""
+        if self.noncentrality is None or self.needed is None:
+            return None
+        a, b = self.names
+        now, need = self.noncentrality, self.needed
+        return (f"if {a} is what is there, its test given {b} sees a chi-square gain of "
+                f"{now[0]:.3g} on these data (it needs {need[0]:.3g} for "
+                f"{DEFAULT_POWER:.0%} power); if {b}, {now[1]:.3g} (needs {need[1]:.3g})")
 
     @property
     def names(self) -> tuple[str, str]:
@@ -104,8 +120,13 @@ class PairTest:
         return f"{what} ({self.first.sentence}; {self.second.sentence})"
 
     def to_dict(self) -> dict[str, object]:
-        return {"effects": list(self.names), "confounded": self.confounded,
-                "winner": self.winner, "tests": [self.first.to_dict(), self.second.to_dict()]}
+        document: dict[str, object] = {
+            "effects": list(self.names), "confounded": self.confounded,
+            "winner": self.winner, "tests": [self.first.to_dict(), self.second.to_dict()]}
+        if self.noncentrality is not None and self.needed is not None:
+            document["noncentrality"] = list(self.noncentrality)
+            document["needed"] = list(self.needed)
+        return document
 
 
 def nested_test(with_given: FitResult, effect: Effect, given: str, *, alpha: float,
@@ -127,10 +148,13 @@ def pair_test(a: Candidate, b: Candidate, registry: Mapping[str, type[Effect]], 
                     cv_folds=cv_folds, loss=loss))
 
 
-def confounded_pairs(candidates: Sequence[Candidate], registry: Mapping[str, type[Effect]],
-                     *, alpha: float, cv_folds: int, loss: Loss) -> tuple[PairTest, ...]:
-    """The confounded pairs of the best significant candidate with the next ones (up to
-    ``MAX_CONFOUNDED`` significant candidates in all)."""
+def confounded_pairs(base: FitResult, candidates: Sequence[Candidate],
+                     registry: Mapping[str, type[Effect]], *, alpha: float,
+                     cv_folds: int, loss: Loss, plugins: Sequence[str] = ()
+                     ) -> tuple[PairTest, ...]:
+    """The confounded pairs of the best significant candidate (of ``base``) with the next
+    ones (up to ``MAX_CONFOUNDED`` significant candidates in all), with the chi-square
+    gain each nested test sees on ``base``'s samples and the gain it needs."""
     significant = [c for c in candidates if c.significant][:MAX_CONFOUNDED]
     pairs = []
     for other in significant[1:]:
@@ -139,8 +163,16 @@ def confounded_pairs(candidates: Sequence[Candidate], registry: Mapping[str, typ
                              cv_folds=cv_folds, loss=loss)
         except InputError:
             continue
-        if test.confounded:
+        if not test.confounded:
+            continue
+        try:
+            model = pair_model(base, significant[0], other, registry, plugins)
+            rows = measured_rows(base, model)
+        except InputError:
             pairs.append(test)
+            continue
+        pairs.append(replace(test, noncentrality=noncentralities(model, rows),
+                             needed=needed_noncentralities(model, alpha)))
     return tuple(pairs)
 
 
@@ -212,6 +244,14 @@ def pair_model(base: FitResult, a: Candidate, b: Candidate,
                      tuple(str(p) for p in plugins), names, x,
                      (signals[0], signals[1]), (absorb[0], absorb[1]),
                      (scales[0], scales[1]), (sizes[0], sizes[1]))
+
+
+def measured_rows(base: FitResult, model: PairModel) -> np.ndarray:
+    """(R, P) the whitened Jacobian of the model with both on ``base``'s samples."""
+    problem = extend_problem(base.problem, list(model.effects))
+    J = evaluate(problem, model.x).jacobian
+    assert J is not None and problem.layout.names == model.layout
+    return J
 
 
 def noncentralities(model: PairModel, rows: np.ndarray) -> tuple[float, float]:
