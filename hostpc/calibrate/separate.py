@@ -85,8 +85,9 @@ class SeparationPlan:
     @classmethod
     def from_event(cls, event: Mapping[str, Any]) -> SeparationPlan:
         a, b = event["effects"]
+        q = np.asarray(event["q"], float)
         return cls((str(a), str(b)), int(event["first"]),
-                   np.asarray(event["q"], float).reshape(len(event["q"]), -1),
+                   q.reshape(q.shape[0], -1) if q.size else np.zeros((0, 0)),
                    dict(event.get("predicted", {})))
 
     def lines(self) -> list[str]:

@@ -181,7 +181,7 @@ def confounded_pairs(base: FitResult, candidates: Sequence[Candidate],
 @dataclass(frozen=True)
 class PairModel:
     """A confounded pair on one dataset, linearised for planning: the model with both
-    effects (``problem``'s layout), the point of linearisation, the signal of each
+    effects (its parameter names ``layout``), the point of linearisation ``x``, the signal of each
     candidate (its fitted values, zero elsewhere), the columns that absorb it (the model
     and the other candidate's free parameters) and the noise scale of each fit."""
 
