@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.diagnostics.detectable import planned_sizes
+from hostpc.diagnostics.pipeline import DEFAULT_ALPHA
 from hostpc.errors import InputError
 from hostpc.methods import method_class
 from hostpc.methods.base import Method, Plan, Progress, RunSettings
@@ -225,6 +227,12 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         f"{planned['total']:.1f} s (motion {planned['motion']:.1f}, settle "
         f"{planned['settle']:.1f}, capture {planned['capture']:.1f}; floor "
         f"{planned['floor']:.1f})")
+    detectable = planned_sizes(method.design_dataset(q_fit), settings.effects,
+                               settings.plugins, DEFAULT_ALPHA)
+    info["detectable"] = [d.to_dict() for d in detectable]
+    if detectable:
+        progress.message("plan: smallest effects these poses would find (80 % power, "
+                         "before measuring): " + "; ".join(d.short for d in detectable))
     if more.size:
         info["more_poses"] = int(more.size)
     return Plan(q=q_fit, q_verify=q_verify, info=info, q_more=q_more,

@@ -67,6 +67,7 @@ from hostpc.calibrate.run_header import InitialState, RunHeader, read_run_header
 from hostpc.calibrate.run_plan import plan_run
 from hostpc.calibrate.run_report import write_run_report
 from hostpc.calibrate.run_values import RobotInfo, RunOutcome
+from hostpc.calibrate.separate import plan_separation, retest
 from hostpc.calibrate.summary import (
     finite_or_none,
     format_summary,
@@ -183,6 +184,12 @@ class Runner:
             self.journal.load()
             initial = header.initial
             check_resume_offsets(self.journal, self.run_dir, initial.offsets, offsets)
+            if self.resume_overrides.get("separate") and self._pushed_ever():
+                raise InputError(
+                    "--separate: this run pushed offsets, and poses measured under them "
+                    "cannot join its data; separate on a run that pushed nothing (e.g. "
+                    f"hostpc calibrate ... --no-push), or roll back (hostpc rollback --run "
+                    f"{self.run_dir}) and start a new run")
             settle_push_intent(self.journal, self.run_dir, self.robot_info.address, progress,
                                offsets)
             stored = stored_result(self.journal, self.run_dir, offsets, self._asked(),
@@ -289,6 +296,10 @@ class Runner:
             q_now = await self._measure(method, self._staging.shifted(plan.more), q_now,
                                         self._staging.first + plan.q.shape[0])
             result, dataset = self._fit(method, settings, self._staging.first)
+        separate = self.resume_overrides.get("separate")
+        if separate:  # --separate A,B: the poses that tell them apart (separate.py)
+            q_now, result, dataset = await self._separate(method, state, plan, settings,
+                                                          result, dataset, separate, q_now)
         write_json_atomic(self.run_dir / "fit.json", result.to_dict())
         status = "converged" if result.converged else "NOT converged"
         progress.message(f"fit: RMS {result.rms * 1e3:.4f} mm, chi2/dof "
@@ -387,6 +398,25 @@ class Runner:
         q_now = await self._acquire(method, "fit", q_plan, q_now, first)
         await self._timer.end("measure")
         return q_now
+
+    async def _separate(self, method: Method, state: RobotState, plan: Plan,
+                        settings: RunSettings, result: FitResult, dataset: Dataset,
+                        effects: tuple[str, str], q_now: np.ndarray
+                        ) -> tuple[np.ndarray, FitResult, Dataset]:
+        """Plan (or read back), measure and fit the separating poses of ``effects``, then
+        test the pair again (separate.py)."""
+        self.progress.stage("plan")
+        planned = plan_separation(self.journal, method, state, plan, settings, result,
+                                  effects)
+        for line in planned.lines():
+            self.progress.message(line)
+        if planned.q.shape[0]:
+            q_now = await self._measure(method, self._staging.shifted(planned.q), q_now,
+                                        planned.first)
+            result, dataset = self._fit(method, settings, self._staging.first)
+        test = retest(self.journal, self.run_dir, result, settings, effects)
+        self.progress.message(f"separation: {test.sentence}")
+        return q_now, result, dataset
 
     async def _try_pose(self, method: Method, q: np.ndarray, q_now: np.ndarray
                         ) -> tuple[bool, np.ndarray]:

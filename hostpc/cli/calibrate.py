@@ -11,6 +11,8 @@
                                                        continue an interrupted run (the push
                                                        options may change: they act after
                                                        the measurements)
+    hostpc calibrate --resume DIR --separate A,B       measure the poses that tell two
+                                                       confounded candidates apart, test again
 
 Everything lands in the run folder (DIR): run.json (settings, seed, plan), journal.jsonl
 (every pose as measured), rig.json, dataset.json, fit.json, push.json (rollback id and the
@@ -43,6 +45,7 @@ from hostpc.calibrate.run_header import parse_run_header, read_run_header
 from hostpc.calibrate.run_plan import PlanningError
 from hostpc.calibrate.run_values import RobotInfo, RunOutcome
 from hostpc.calibrate.runner import Runner
+from hostpc.calibrate.separate import parse_separate
 from hostpc.calibrate.swaps import DEFAULT_SWAP_LIMIT_DEG, parse_swapped
 from hostpc.cli.archive_options import add_archive_options, archive_run
 from hostpc.cli.calibrate_checks import (
@@ -63,7 +66,7 @@ from hostpc.cli.termination import (
     sigterm_as_interrupt,
 )
 from hostpc.dataset.kind_registry import DEFAULT_METHOD, kind_descriptors
-from hostpc.errors import InputError
+from hostpc.errors import InputError, ZerocalError
 from hostpc.methods.base import RunSettings
 from hostpc.methods.cell import load_cell_file, parse_known
 from hostpc.robots.connect import RobotAddress, open_robot, parse_robot, resolve_token
@@ -187,6 +190,10 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--out", metavar="DIR", help="run folder (default ./zerocal-runs/...)")
     add_archive_options(parser, read=False)
     parser.add_argument("--resume", metavar="DIR", help="continue the run in DIR")
+    parser.add_argument("--separate", metavar="A,B",
+                        help="with --resume: measure the fewest extra poses that tell two "
+                        "confounded candidate effects apart (hostpc diagnose names them), "
+                        "append them to the run's data and test the pair again")
     parser.add_argument("--no-report", action="store_true", help="skip report.html")
     parser.add_argument("--check", action="store_true",
                         help="only check the options and the files they name (rig, cell, "
@@ -262,6 +269,16 @@ def _settings(args: argparse.Namespace) -> RunSettings:
     )
 
 
+def _run_plugins(args: argparse.Namespace) -> tuple[str, ...]:
+    """The plugins a resume's effects come from: --plugin, else the run's own."""
+    if args.plugin or not args.resume:
+        return tuple(args.plugin)
+    try:
+        return read_run_header(Journal(Path(args.resume))).settings.plugins
+    except ZerocalError:  # the resume itself says what is wrong with the run
+        return ()
+
+
 def _default_out(method: str) -> Path:
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     return Path("zerocal-runs") / f"{stamp}-{method}"
@@ -286,6 +303,8 @@ def run(args: argparse.Namespace) -> int:
     settings: RunSettings | None = None
     cell_file = None
     known = None
+    if args.separate is not None:  # one line, exit 2, before anything else
+        args.separate = parse_separate(args.separate, _run_plugins(args), args.resume)
     if args.resume:
         run_dir = Path(args.resume)
         journal = Journal(run_dir)
@@ -454,7 +473,8 @@ async def _calibrate(args: argparse.Namespace, address: RobotAddress, driver: st
                      "require_joints": args.require_joints,
                      "swapped": parse_swapped(args.swapped) or None,
                      "swap_limit_deg": args.swap_limit,
-                     "known": args.known, "reference": args.reference}
+                     "known": args.known, "reference": args.reference,
+                     "separate": args.separate}
         runner = Runner(robot, run_dir, robot_info=info, settings=settings,
                         cell_file=cell_file, known=known, default_known=default_known,
                         progress=progress, truth=truth, report=not args.no_report,

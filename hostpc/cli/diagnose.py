@@ -249,6 +249,15 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
     if diagnosis.detectable:
         lines += ["", "what these poses can see (80 % power at the candidates' threshold):"]
         lines += [f"  {d.sentence}" for d in diagnosis.detectable]
+    if diagnosis.confounded:
+        lines += ["", "confounded candidates (neither significant given the other):"]
+        for pair in diagnosis.confounded:
+            lines.append(f"  {pair.sentence}")
+            if pair.gain_sentence is not None:
+                lines.append(f"  {pair.gain_sentence}")
+            lines.append(f"  separate them: {diagnosis.separate_command(pair)} (plans the "
+                         "fewest extra poses that give both, prints their predicted "
+                         "separation, measures them and tests again)")
     lines += ["", "advice:"] + [f"  - {sentence}" for sentence in diagnosis.advice]
     return "\n".join(lines)
 

@@ -28,15 +28,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hostpc.diagnostics.candidates import warm_start
+from hostpc.dataset import Dataset
+from hostpc.diagnostics.candidates import candidate_effects, warm_start
 from hostpc.diagnostics.distributions import chi2_isf, chi2_sf
 from hostpc.errors import InputError
-from hostpc.fitting import FitResult
+from hostpc.fitting import FitResult, analyse
 from hostpc.fitting.solver import evaluate
 from hostpc.json_object import JsonObject
 from hostpc.model.effect import Effect
+from hostpc.model.layout import Problem
 from hostpc.model.measurements.predict import predict
-from hostpc.model.problem import extend_problem
+from hostpc.model.problem import build_problem, extend_problem
+from hostpc.model.registry import available_effects
 
 DEFAULT_POWER = 0.8
 
@@ -82,6 +85,14 @@ class DetectableSize:
                 f"({self.shift * 1e6:.3g} um at the measured points) would not be seen "
                 "with these poses")
 
+    @property
+    def short(self) -> str:
+        """``parameter size unit (shift um)``, for a list on one line."""
+        if not math.isfinite(self.size):
+            return f"{self.parameter} unseen"
+        unit = "" if self.unit in ("", "1") else f" {self.unit}"
+        return f"{self.parameter} {self.size:.2g}{unit} ({self.shift * 1e6:.2g} um)"
+
     def to_dict(self) -> JsonObject:
         return {"effect": self.effect, "parameter": self.parameter,
                 "size": self.size if math.isfinite(self.size) else None,
@@ -93,16 +104,23 @@ def detectable_sizes(base: FitResult, effect: Effect, alpha: float,
     """The minimum detectable size of each parameter of ``effect`` added to ``base`` at
     significance ``alpha`` (the per-candidate threshold) and power ``target``."""
     problem = extend_problem(base.problem, [effect])
-    x0 = warm_start(base, problem)
+    scale = math.sqrt(max(base.chi2_dof, 1.0)) if base.dof > 0 else 1.0
+    return _sizes(problem, warm_start(base, problem), base.fixed, effect, alpha, target,
+                  scale)
+
+
+def _sizes(problem: Problem, x0: np.ndarray, fixed: np.ndarray, effect: Effect,
+           alpha: float, target: float, scale: float) -> tuple[DetectableSize, ...]:
+    """The sizes of ``effect``'s parameters in ``problem`` (the model's parameters first,
+    ``fixed`` of them held) linearised at x0, at the noise ``scale``."""
     J = evaluate(problem, x0).jacobian
     assert J is not None
-    n_base = base.x.size
-    fitted = J[:, :n_base][:, ~base.fixed]
+    n_base = fixed.size
+    fitted = J[:, :n_base][:, ~fixed]
     basis = np.linalg.qr(fitted)[0] if fitted.shape[1] else np.zeros((J.shape[0], 0))
     _, raw = predict(problem, x0, jacobian=True)
     assert raw is not None
     lengths = raw[:, problem.length_columns, :]
-    scale = math.sqrt(max(base.chi2_dof, 1.0)) if base.dof > 0 else 1.0
     root = math.sqrt(required_noncentrality(alpha, target))
     span = problem.layout.effect_slices[effect.name]
     units = list(effect.parameter_units(problem.context))
@@ -117,6 +135,35 @@ def detectable_sizes(base: FitResult, effect: Effect, alpha: float,
         sizes.append(DetectableSize(effect.name, problem.layout.names[k], size,
                                     units[index] if index < len(units) else "", shift))
     return tuple(sizes)
+
+
+def planned_sizes(design: Dataset, effects: str | Sequence[str] | None,
+                  plugins: Sequence[str], alpha: float, target: float = DEFAULT_POWER
+                  ) -> tuple[DetectableSize, ...]:
+    """Before measuring: the best-seen parameter of each candidate effect on the planned
+    poses (``design``: their nominal predictions and stated covariances), at the stated
+    noise and the candidates' threshold (``candidate_sizes``); the model's parameters
+    the design cannot see are held, as the fit would hold them."""
+    problem = build_problem(design, effects, plugins=plugins)
+    x0 = np.zeros(problem.layout.size)
+    J = evaluate(problem, x0).jacobian
+    assert J is not None
+    fixed = analyse(J, list(problem.layout.names), list(problem.layout.units)).fixed
+    registry = available_effects(tuple(plugins))
+    names = candidate_effects(problem, registry)
+    threshold = alpha / max(len(names), 1) / 2.0
+    found = []
+    for name in names:
+        effect = registry[name]()
+        try:
+            extended = extend_problem(problem, [effect])
+            sizes = _sizes(extended, np.zeros(extended.layout.size), fixed, effect,
+                           threshold, target, 1.0)
+        except InputError:
+            continue
+        if sizes:
+            found.append(min(sizes, key=lambda s: s.shift))
+    return tuple(found)
 
 
 def candidate_sizes(base: FitResult, registry: Mapping[str, type[Effect]],

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -18,6 +19,7 @@ from hostpc.diagnostics.detectable import DetectableSize
 from hostpc.diagnostics.interactions import Interaction
 from hostpc.diagnostics.outliers import Outlier
 from hostpc.diagnostics.residual_analysis import ResidualAnalysis
+from hostpc.diagnostics.separation import PairTest
 from hostpc.fitting import FitResult
 from hostpc.json_object import JsonObject
 
@@ -25,6 +27,8 @@ FORMAT = "zerocal-diagnosis/1"
 #: delta BIC difference below which two candidates are tied (``ModelCheck.best_candidate``)
 BIC_TIE = 2.0
 JSON_INTERACTIONS = 25
+#: the file that makes a folder a calibrate run (``hostpc.calibrate.journal``)
+RUN_JOURNAL = "journal.jsonl"
 
 
 def finite(value: float | None) -> float | None:
@@ -148,7 +152,10 @@ class Diagnosis:
     significance of every test; source: the dataset's path (for the commands in the
     advice), if known; ladder_stop: why the ladder stopped before the model was adequate, as
     a sentence (None when it did not, or without a ladder); detectable: each tried
-    candidate's minimum detectable size with these poses (``detectable``).
+    candidate's minimum detectable size with these poses (``detectable``); confounded:
+    pairs of significant candidates neither of which is significant given the other
+    (``separation``), with ``separate_command`` the command that measures what tells them
+    apart.
     """
 
     check: ModelCheck
@@ -160,6 +167,15 @@ class Diagnosis:
     plugins: tuple[str, ...]
     ladder_stop: str | None = None
     detectable: tuple[DetectableSize, ...] = ()
+    confounded: tuple[PairTest, ...] = ()
+
+    def separate_command(self, pair: PairTest) -> str:
+        """``hostpc calibrate --resume RUN --separate A,B`` for the run the dataset is
+        in (RUN: the dataset's folder when it holds a calibrate run's journal, else the
+        word RUN)."""
+        folder = Path(self.source).parent if self.source else None
+        run = str(folder) if folder is not None and (folder / RUN_JOURNAL).is_file() else "RUN"
+        return f"hostpc calibrate --resume {run} --separate {','.join(pair.names)}"
 
     # the headline numbers of the current model ------------------------------------------
     @property
@@ -273,6 +289,8 @@ class Diagnosis:
             "fit": fit.to_dict(),
             "advice": list(self.advice),
             "detectable": [d.to_dict() for d in self.detectable],
+            "confounded": [{**c.to_dict(), "next": self.separate_command(c)}
+                           for c in self.confounded],
         }
         if self.ladder is not None:
             document["ladder"] = [step.to_dict() for step in self.ladder]

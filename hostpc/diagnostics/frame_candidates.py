@@ -19,7 +19,14 @@ f is the centred variable (linear: ``k`` in m per unit of v); a step ``1[t > t0]
 variable is time and a step explains more of the residual than a line (a knocked marker,
 a bumped stand: t0 the best cut between two samples); or for a group label one indicator
 per level after the first ("per level": the frame's offset on that level's samples
-against the first level's). 0 where v is not recorded. Rotations are not written.
+against the first level's). 0 where v is not recorded.
+
+Rotations of the frame the measurement is expressed in (``world.rz``: the tracker's stand
+twisting as it settles) are written too, as a small turn ``y += k f(v) a x (y - o)``: a the
+frame's own axis in the measurement frame (``R a_local``, with R at the fit: the model's
+rotation delta is ``R exp(r)``, so this is the parameter's own column) and o the frame's
+origin at the fit (k in rad per unit of v). Rotations of a point carried by the flange
+or fixed in the base (a marker, the target) do not move the point: not written.
 """
 
 from __future__ import annotations
@@ -36,6 +43,7 @@ from hostpc.model.effect import Effect
 from hostpc.model.measurements.terms import frame_pose
 
 _AXES = ("x", "y", "z")
+_TURNS = ("rx", "ry", "rz")
 #: fewest samples on either side of a step
 MIN_STEP_SIDE = 3
 
@@ -65,9 +73,8 @@ _TEMPLATE = """\"\"\"{title}
 
 Written by `hostpc diagnose --ladder --write-plugins`: the effect-agnostic search found
 "{parameter} varies with {variable}" and no built-in effect models it. The frame's
-{axis} translation changes by {law}; every measured point{whose} moves by that much along
-the frame's {axis} axis as seen in the measurement frame{seen} (0 where {variable} is not
-recorded). Load it with
+{motion} changes by {law}; every measured point{whose} {moves}{seen} (0 where {variable}
+is not recorded). Load it with
     hostpc fit DATASET --plugin THIS_FILE --effects +{name}
 \"\"\"
 
@@ -82,7 +89,7 @@ class {class_name}(Effect):
     hook = "sensor"
     methods = ({method!r},)
     is_linear = True
-    unit = "m"
+    unit = "{unit}"
     description = "{parameter} {basis} {variable} (found by hostpc diagnose)"
     variable = "{variable}"
     axis = {axis_index}
@@ -93,6 +100,8 @@ class {class_name}(Effect):
     group = {group!r}
     #: None: the axis adds to the measurement; else (rotation at the fit, inverse)
     rotation = {rotation!r}
+    #: None: a translation; else (the turn's axis in the measurement frame, its origin)
+    pivot = {pivot!r}
 
     def parameter_names(self, ctx):
         return [{names}]
@@ -110,7 +119,10 @@ class {class_name}(Effect):
             F = F * (ctx.variable(self.group[0]) == self.group[1])[:, None]
         return F
 
-    def direction(self, ctx, m):
+    def direction(self, ctx, y):
+        m = y.shape[1]
+        if self.pivot is not None:
+            return np.cross(np.array(self.pivot[0]), y - np.array(self.pivot[1]))
         axis = np.eye(3)[self.axis]
         if self.rotation is None:
             return np.broadcast_to(np.eye(m)[self.axis], (ctx.n_samples, m))
@@ -121,12 +133,16 @@ class {class_name}(Effect):
         return np.einsum("ij,njk,k->ni", R, R_base_flange, axis)
 
     def sensor_apply(self, ctx, p, y):
-        return y + self.direction(ctx, y.shape[1]) * (self.modulators(ctx) @ p)[:, None]
+        return y + self.direction(ctx, y) * (self.modulators(ctx) @ p)[:, None]
 
     def sensor_jacobians(self, ctx, p, y):
         n, m = y.shape
         d_y = np.broadcast_to(np.eye(m), (n, m, m)).copy()
-        d_p = np.einsum("ni,np->nip", self.direction(ctx, m), self.modulators(ctx))
+        if self.pivot is not None:  # d(a x (y - o))/dy = [a]x
+            a = np.array(self.pivot[0])
+            turn = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+            d_y = d_y + (self.modulators(ctx) @ p)[:, None, None] * turn
+        d_p = np.einsum("ni,np->nip", self.direction(ctx, y), self.modulators(ctx))
         return d_y, d_p
 """
 
@@ -180,7 +196,9 @@ def frame_source(parameter: str, variable: str, fit: FitResult, values: np.ndarr
     head, _, local = parameter.partition(".")
     kind = FRAMES.get((context.method, head))
     point, _, axis = local.rpartition(".")
-    if kind is None or axis not in _AXES or bool(point) != kind.grouped:
+    turn = axis in _TURNS and kind is not None and kind.rotation_frame is None \
+        and not kind.grouped
+    if kind is None or (axis not in _AXES and not turn) or bool(point) != kind.grouped:
         return None
     group: tuple[str, float] | None = None
     if kind.grouped:
@@ -192,9 +210,14 @@ def frame_source(parameter: str, variable: str, fit: FitResult, values: np.ndarr
     if defined.size == 0:
         return None
     rotation = None
+    pivot = None
+    if turn:  # a small turn of the measurement frame about its own axis, at the fit
+        R, origin, _ = frame_pose(problem, head, fit.x)
+        pivot = (R[:, _TURNS.index(axis)].round(12).tolist(), origin.round(12).tolist())
     if kind.rotation_frame is not None:
         R = frame_pose(problem, kind.rotation_frame, fit.x)[0]
         rotation = ((R.T if kind.inverse else R).round(12).tolist(), kind.inverse)
+    unit = "rad" if turn else "m"
     level_names = context.categorical.get(variable)
     step = None
     if level_names is not None:
@@ -206,26 +229,35 @@ def frame_source(parameter: str, variable: str, fit: FitResult, values: np.ndarr
                   "basis": "per level of", "names": ", ".join(repr(level_names[i])
                                                              for i in indices),
                   "law": f"k_LEVEL on the samples of each {variable} level after "
-                         f"{level_names[present[0]]!r} (k in m)"}
+                         f"{level_names[present[0]]!r} (k in {unit})"}
     else:
         step = best_step(fit, parameter, values) if variable == "t" else None
         reference = float(defined.mean())
         fields = {"levels": (), "reference": reference, "names": "'k'"}
         if step is not None:
-            fields |= {"basis": "steps in", "law": f"k from {variable} > {step!r} on (k in m)"}
+            fields |= {"basis": "steps in",
+                       "law": f"k from {variable} > {step!r} on (k in {unit})"}
         else:
             fields |= {"basis": "linear in", "law": f"k * ({variable} - {reference!r}) "
-                                                     f"(k in m per unit of {variable})"}
+                                                     f"(k in {unit} per unit of {variable})"}
     name = frame_effect_name(parameter, variable, step is not None)
     seen = ("" if rotation is None else
             " (the camera's or instrument's rotation at the fit, the flange's at the "
             "commanded joints)")
     whose = "" if group is None else f" of marker {point!r}"
+    if turn:
+        motion = f"rotation about its {axis[1]} axis"
+        moves = "turns by that angle about the axis through the frame's origin"
+    else:
+        motion = f"{axis} translation"
+        moves = (f"moves by that much along the frame's {axis} axis as seen in the "
+                 "measurement frame")
     source = _TEMPLATE.format(
         title=f"{parameter} varies with {variable}: a generated zerocal effect.",
         parameter=parameter, variable=variable, name=name, method=context.method,
-        axis=axis, axis_index=_AXES.index(axis), step=step, group=group,
-        rotation=rotation, seen=seen, whose=whose,
+        axis=axis, axis_index=(_TURNS if turn else _AXES).index(axis), step=step,
+        group=group, rotation=rotation, pivot=pivot, seen=seen, whose=whose, unit=unit,
+        motion=motion, moves=moves,
         class_name="".join(p.capitalize() for p in name.split("_")), **fields)
     return name, source
 

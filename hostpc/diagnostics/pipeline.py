@@ -31,6 +31,7 @@ from hostpc.diagnostics.residual_analysis import (
     analyse_residuals,
     analysis_variables,
 )
+from hostpc.diagnostics.separation import confounded_pairs
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, solve
 from hostpc.fitting.solver import Loss
@@ -261,6 +262,9 @@ def diagnose(
     advice = advise(start, residuals, steps, source, plugin_paths, ladder_stop=stop)
     detectable = candidate_sizes(start.fit, registry, [c.effect for c in start.candidates],
                                  alpha)
+    ranked = start.ranked
+    confounded = confounded_pairs(ranked.fit, ranked.candidates, registry, alpha=alpha,
+                                  cv_folds=rank_cv_folds, loss=loss, plugins=plugin_paths)
     return Diagnosis(check=start, residuals=residuals, ladder=steps, advice=advice,
                      alpha=alpha, source=source, plugins=plugin_paths, ladder_stop=stop,
-                     detectable=detectable)
+                     detectable=detectable, confounded=confounded)

@@ -481,6 +481,13 @@ class Method(ABC):
         dataset's default model (joint offsets + the unknown frames)."""
         return None
 
+    def separation_candidates(self, state: RobotState, rng: np.random.Generator
+                              ) -> np.ndarray:
+        """(N_c, n) the pool a separating experiment chooses from (``hostpc calibrate
+        --separate``); the default is ``candidates``. A kind whose pool is persisted and
+        small may draw more (sphere_probe)."""
+        return self.candidates(state, rng)
+
     def pose_groups(self, pool: np.ndarray) -> PoseGroups | None:
         """Groups of the candidate poses (N_c, n) that are only measured together, or None
         (every pose stands alone). The default has none."""

@@ -110,6 +110,10 @@ def _ladder(diagnosis: Diagnosis) -> str:
     if diagnosis.detectable:
         seen = "".join(f"<li>{_e(d.sentence)}</li>" for d in diagnosis.detectable)
         notes += f"<p>What these poses can see (80 % power):</p><ul>{seen}</ul>"
+    if diagnosis.confounded:
+        pairs = "".join(f"<li>{_e(c.sentence)}: <code>{_e(diagnosis.separate_command(c))}"
+                        "</code></li>" for c in diagnosis.confounded)
+        notes += f"<p>Confounded candidates:</p><ul>{pairs}</ul>"
     return _img(plots.ladder_chart(diagnosis), "ladder chart") + notes + table
 
 

@@ -13,6 +13,7 @@ from hostpc.diagnostics import DEFAULT_ALPHA, diagnose
 from hostpc.diagnostics.candidates import candidate_effects, rank_candidates
 from hostpc.diagnostics.detectable import (
     candidate_sizes,
+    planned_sizes,
     power,
     required_noncentrality,
 )
@@ -54,3 +55,23 @@ def test_three_times_the_stated_size_is_found_and_a_third_is_not(seed: int) -> N
         ranked, _ = rank_candidates(extended, registry, names, alpha=DEFAULT_ALPHA,
                                     cv_folds=3, loss="linear")
         assert any(c.effect == "depth_scale" and c.significant for c in ranked) is expected
+
+
+def test_the_plan_states_the_sizes_before_measuring() -> None:
+    """From the design alone (the planned poses' nominal predictions and stated noise) the
+    sizes are those the data of the same poses give after measuring (noise at its stated
+    level): planning and diagnosis agree on what the poses can see."""
+    dataset = hidden_dataset({}, seed=3).dataset
+    base = fit(dataset, cv_folds=0)
+    registry = available_effects()
+    names = candidate_effects(base.problem, registry)
+    after = {s.effect: s for s in candidate_sizes(base, registry, names, DEFAULT_ALPHA)}
+    before = {s.effect: s for s in planned_sizes(dataset, None, (), DEFAULT_ALPHA)}
+    assert set(before) == set(after)
+    noise = math.sqrt(max(base.chi2_dof, 1.0))
+    for name, planned in before.items():  # the best-seen parameter's shift (near ties
+        # between parameters may pick another one of the effect: its shift is close)
+        assert math.isfinite(after[name].shift) and math.isfinite(planned.shift)
+        assert planned.shift * noise == pytest.approx(after[name].shift, rel=0.2), name
+        if planned.parameter == after[name].parameter:
+            assert planned.size * noise == pytest.approx(after[name].size, rel=0.1), name

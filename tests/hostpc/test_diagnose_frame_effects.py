@@ -57,6 +57,42 @@ def test_ladder_writes_the_drifting_tracker_frame(tmp_path: Path, seed: int) -> 
     assert abs(refit.x[k] - SETTLE) < 3 * refit.std[k]
 
 
+TILT = 1e-7  # rad per second: the tracker's stand tilts 0.36 mrad over the hour's run
+#: the world frame's (robot base's) x axis in the tracker frame and its origin, nominal
+TILT_AXIS = np.array([np.cos(2.6), np.sin(2.6), 0.0])
+TILT_ORIGIN = np.array([1.8, -0.6, 0.3])
+
+
+class StandTilts(Effect):
+    """The instrument frame turns about the robot base's x axis linearly with time (in no
+    library): every measured point turns about that axis through the base's origin."""
+
+    name = "stand_tilts"
+    hook = "sensor"
+    methods = ("world_point",)
+
+    def parameter_names(self, ctx: ModelContext) -> list[str]:
+        return ["k"]
+
+    def sensor_apply(self, ctx: ModelContext, p: np.ndarray, y: np.ndarray) -> np.ndarray:
+        t = ctx.variable("t")
+        return y + p[0] * (t - t[0])[:, None] * np.cross(TILT_AXIS, y - TILT_ORIGIN)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_ladder_writes_the_tilting_tracker_frame(tmp_path: Path, seed: int) -> None:
+    """A rotation of the measurement frame (world.rx varying with t) is written as a small
+    turn about the frame's own axis and closes the ladder."""
+    synthetic, _ = inject(hidden_world_point({}, seed=seed), StandTilts(),
+                          {"stand_tilts.k": TILT})
+    path = tmp_path / "tilt.json"
+    save_dataset(synthetic.dataset, path)
+    refit = closes(diagnose(path, ladder=True), "world_rx_with_t", synthetic.dataset,
+                   tmp_path)
+    k = refit.names.index("world_rx_with_t.k")
+    assert abs(refit.x[k] - TILT) < 3 * refit.std[k]
+
+
 def closes(diagnosis: Diagnosis, name: str, dataset: Dataset, tmp_path: Path) -> FitResult:
     """Assert the ladder added ``name`` and ended adequate at half its starting chi2/dof,
     and that the plugin source of ``name`` reproduces the final fit; return the refit."""

@@ -233,6 +233,34 @@ class SphereProbeMethod(Method):
             write_json_atomic(self.plan_path, plan_to_dict(self.plan))
         return self._poses()
 
+    def separation_candidates(self, state: RobotState, rng: np.random.Generator
+                              ) -> np.ndarray:
+        """This run's contacts and a fresh draw of as many orientations again (the same
+        planner, the next seed), appended to the probe plan once (persisted: a resume finds
+        them): the run's own pool keeps few orientations it did not measure."""
+        pool = self.candidates(state, rng)
+        assert self.plan is not None
+        if len(self.plan.orientations) > self.config.n_orientations:
+            return pool  # drawn before
+        last = self.plan.orientations[-1].q_hover if self.plan.orientations else state.q
+        try:
+            fresh = plan_sphere_probe(self.chain, self.setup,
+                                      replace(self.config, seed=self.config.seed + 1),
+                                      last, state.q_min, state.q_max)
+        except InputError:
+            return pool
+        fresh = balance_probe_plan(fresh, self.chain, self.setup.tip, self.settings.effects,
+                                   self.settings.plugins, state.q_min, state.q_max)
+        offset = 1 + max(o.group for o in self.plan.orientations)
+        more = tuple(replace(o, group=o.group + offset,
+                             contacts=tuple(replace(c, group=c.group + offset)
+                                            for c in o.contacts))
+                     for o in fresh.orientations)
+        self.plan = replace(self.plan, orientations=self.plan.orientations + more)
+        write_json_atomic(self.plan_path, plan_to_dict(self.plan))
+        self._contact_poses = None
+        return self._poses()
+
     def pose_groups(self, pool: np.ndarray) -> PoseGroups:
         """The orientation of each contact of the pool: the planner takes whole
         orientations (5 contacts, S1-S3), at least MIN_ORIENTATIONS of them (S6)."""
