@@ -57,6 +57,42 @@ def serial_chain(dataset: Dataset) -> Chain:
     )
 
 
+FINGERPRINT_DIGITS = 9
+"""Significant digits of each table entry in a robot's fingerprint: a JSON round trip or a
+mm/deg file of the same robot gives the same fingerprint, a changed dimension another."""
+
+
+def chain_fingerprint(chains: Sequence[Chain]) -> str:
+    """A short hash of the nominal kinematics of ``chains`` (convention, every table entry,
+    joint types, mounts): two robots with the same fingerprint move alike."""
+    import hashlib
+
+    parts: list[str] = []
+    for chain in chains:
+        assert chain.T_base_link0 is not None and chain.T_link_flange is not None
+        numbers = np.concatenate([chain.a, chain.alpha, chain.d, chain.theta, chain.beta,
+                                  chain.T_base_link0[:3].ravel(), chain.T_link_flange[:3].ravel()])
+        parts.append(chain.convention + ":" + "".join("P" if p else "R"
+                                                      for p in chain.joint_is_prismatic))
+        parts.append(",".join(f"{v + 0.0:.{FINGERPRINT_DIGITS}g}" for v in numbers))
+    return hashlib.sha256(";".join(parts).encode()).hexdigest()[:16]
+
+
+def robot_identity(dataset: Dataset) -> dict[str, str]:
+    """What a fit records of its robot, so that a fit is never applied to another robot:
+    ``name`` (a built-in's, the URDF chain's ``robot:base->tip``, or ``explicit table``)
+    and ``kinematics``, the fingerprint of its nominal chain(s) (:func:`chain_fingerprint`)."""
+    from hostpc.kinematics.humanoid import get_tree, tree_names
+
+    robot = dataset.robot
+    if robot.name is not None and robot.a is None and robot.name in tree_names():
+        chains = [branch.chain for branch in get_tree(robot.name).branches]
+        return {"name": robot.name, "kinematics": chain_fingerprint(chains)}
+    chain = serial_chain(dataset)
+    name = robot.name or (chain.name if robot.urdf is not None else "explicit table")
+    return {"name": name, "kinematics": chain_fingerprint([chain])}
+
+
 def sample_variables(samples: Samples, scalars: tuple[str, ...] = ("t", "temperature", "speed")
                      ) -> dict[str, np.ndarray]:
     """The per-sample variables every method shares, by contract name, each (N,): the
