@@ -112,7 +112,8 @@ def run(args: argparse.Namespace) -> int:
                             "free_parameters": m.free_parameters, "converged": m.converged,
                             "held_out_score": m.score, "standard_error": m.standard_error,
                             "cv_rms": m.cv_rms, "note": m.note or None}
-                           for m in choice.scores]}
+                           for m in choice.scores],
+                "outliers": choice.outlier_note or None}
         document["noise_scale"] = (math.sqrt(result.chi2_dof)
                                    if math.isfinite(result.chi2_dof) else None)
         for column, values in (("std_scaled", scaled), ("std_jackknife", jackknife)):
@@ -127,6 +128,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"model chosen by pose-grouped held-out error ({choice.folds} folds; the "
                   "fewest free parameters within one standard error of the best):")
             print("\n".join(choice.table()))
+            if choice.outlier_note:
+                print(f"outliers: {choice.outlier_note}")
             print()
         print(format_fit_summary(result, source=args.dataset, scaled=scaled,
                                  jackknife=jackknife))
