@@ -82,13 +82,13 @@ def _read(path: str | os.PathLike[str]) -> tuple[dict[str, Any], str]:
 
 def _rows(document: dict[str, Any], source: str) -> dict[str, Any]:
     """The table in SI: convention, name, columns a, alpha, d, theta (n,), types, limits."""
+    if document.get("format", FORMAT_TAG) != FORMAT_TAG:  # e.g. a dataset given as --robot
+        raise InputError(f"{source}: format {document.get('format')!r}, expected "
+                         f"{FORMAT_TAG!r} (a robot table file, docs/robots.md)")
     unknown = sorted(set(document) - _TOP_KEYS)
     if unknown:
         raise InputError(f"{source}: unknown key {unknown[0]!r} (a table has "
                          f"{', '.join(sorted(_TOP_KEYS))})")
-    if document.get("format", FORMAT_TAG) != FORMAT_TAG:
-        raise InputError(f"{source}: format {document.get('format')!r}, expected "
-                         f"{FORMAT_TAG!r}")
     if "convention" not in document:
         raise InputError(f"{source}: 'convention' missing ('dh' or 'mdh'; docs/conventions.md)")
     convention = _choice(document, "convention", ("dh", "mdh"), "", source)

@@ -99,6 +99,8 @@ def test_import_with_a_table_file(tmp_path: Path, capsys) -> None:
     ({"convention": "dh", "joints": [{"a": 0, "alpha": 0, "d": 0, "theta": 0, "min": 1}]},
      "give both 'min' and 'max'"),
     ({"convention": "xyz", "joints": []}, "convention 'xyz' is not one of dh, mdh"),
+    ({"format": "zerocal-dataset/1", "method": "world_point"},
+     "format 'zerocal-dataset/1', expected 'zerocal-robot-table/1'"),
 ])
 def test_a_broken_table_is_one_line_and_exit_2(ur5e_files, tmp_path, capsys, table,
                                                 message) -> None:
