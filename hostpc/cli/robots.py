@@ -88,7 +88,9 @@ def _describe(chain: Chain) -> dict[str, Any]:
             "mass_kg": None if chain.mass is None else float(chain.mass[i]),
         })
     description = {"name": chain.name, "convention": chain.convention, "joints": rows,
-                   "mounts": chain.has_mounts}
+                   "mounts": chain.has_mounts,
+                   "coupled": [{"joint": f + 1, "follows": leader + 1, "multiplier": m,
+                                "offset": c} for f, leader, m, c in chain.coupled]}
     if chain.has_mounts:  # T_base_link0 before the first row, T_link_flange after the last
         description["base_mount"] = _mount(chain.T_base_link0)
         description["flange_mount"] = _mount(chain.T_link_flange)
@@ -126,6 +128,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"{r['joint']:5d} {r['type']:>9s} {_number(r['a_mm'], 2):9.2f} "
               f"{_number(r['alpha_deg'], 3):9.3f} {_number(r['d_mm'], 2):9.2f} "
               f"{_number(r['theta_deg'], 3):9.3f} {mass:>8s}")
+    for c in description["coupled"]:
+        print(f"joint {c['joint']} follows joint {c['follows']} (<mimic>): q{c['joint']} = "
+              f"{c['multiplier']:g} q{c['follows']} + {c['offset']:g}; its zero offset is its "
+              "leader's")
     for key, label in (("base_mount", "base mount (T_base_link0, before joint 1)"),
                        ("flange_mount", "flange mount (T_link_flange, after the last joint)")):
         if key in description:
