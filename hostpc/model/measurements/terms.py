@@ -56,20 +56,14 @@ def kinematic_deltas(problem: Problem, x: np.ndarray, jacobian: bool
             if derivative is not None:
                 derivative[:, :basis.shape[1], term.slice] += basis
             continue
-        if hook == "joint":
-            joint += term.effect.joint_delta(ctx, p)
-            if d_joint is not None:
-                J = term.effect.joint_jacobian(ctx, p)
-                if J is None:
-                    J = numeric_jacobian(lambda v, e=term.effect: e.joint_delta(ctx, v), p)
-                d_joint[:, :, term.slice] += J
-        else:
-            delta += term.effect.kinematic_delta(ctx, p)
-            if d_delta is not None:
-                J = term.effect.kinematic_jacobian(ctx, p)
-                if J is None:
-                    J = numeric_jacobian(lambda v, e=term.effect: e.kinematic_delta(ctx, v), p)
-                d_delta[:, :, term.slice] += J
+        fun, jac = ((term.effect.joint_delta, term.effect.joint_jacobian) if hook == "joint"
+                    else (term.effect.kinematic_delta, term.effect.kinematic_jacobian))
+        value += fun(ctx, p)
+        if derivative is not None:
+            J = jac(ctx, p)
+            if J is None:
+                J = numeric_jacobian(lambda v, f=fun: f(ctx, v), p)
+            derivative[:, :, term.slice] += J
     if coupled:
         for follower, leader, multiplier, _ in coupled:
             joint[:, follower] += multiplier * joint[:, leader]
