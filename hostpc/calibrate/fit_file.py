@@ -90,12 +90,21 @@ class CorrelationEntry(_Strict):
     rho: Annotated[float, Field(allow_inf_nan=False, ge=-1.0 - 1e-9, le=1.0 + 1e-9)]
 
 
+class RobotIdentityEntry(_Strict):
+    """The fit's robot: its name and the fingerprint of its nominal kinematics
+    (hostpc.model.context.robot_identity)."""
+
+    name: StrictStr
+    kinematics: StrictStr
+
+
 class FitDocument(_Strict):
     """The fields of `FitResult.to_dict` (hostpc/fitting/result.py); unknown keys ignored.
     Required: what the push reads (parameters, chi2, dof, converged)."""
 
     method: StrictStr = ""
     robot: StrictStr | None = None
+    robot_identity: RobotIdentityEntry | None = None  # absent in fits made before it
     effects: list[StrictStr] = []
     parameters: Annotated[dict[StrictStr, ParameterEntry], Field(min_length=1)]
     rms: NonNegative | None = None

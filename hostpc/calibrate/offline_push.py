@@ -55,6 +55,9 @@ class SavedFit:
     effects: tuple[str, ...] = ()
     robot: str = ""  # the dataset's built-in robot name ("" if unknown: a table or URDF)
     chi2_dof_with_calibration: float | None = None  # the push guard's chi2, if the fit has it
+    #: the robot's name and kinematics fingerprint (hostpc.model.context.robot_identity);
+    #: None for a fit written before fits recorded it
+    robot_identity: dict[str, str] | None = None
 
     @property
     def chi2_dof(self) -> float:
@@ -92,6 +95,9 @@ def saved_fit_from_dict(document: Any, source: str) -> SavedFit:
         converged=fit.converged, message=fit.message, chi2=fit.chi2, dof=fit.dof,
         source=source, method=fit.method, effects=tuple(fit.effects), robot=fit.robot or "",
         chi2_dof_with_calibration=fit.chi2_dof_with_calibration,
+        robot_identity=(None if fit.robot_identity is None else
+                        {"name": fit.robot_identity.name,
+                         "kinematics": fit.robot_identity.kinematics}),
     )
 
 

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from hostpc.cli.fit import add_constraint_options, add_model_options
 from hostpc.cli.format import repeated_lines
+from hostpc.cli.robots import add_robot_override, load_dataset_as_asked
 from hostpc.diagnostics.advice import mm, without
 from hostpc.errors import InputError, ZerocalError
 
@@ -45,6 +46,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("dataset", help="dataset file (zerocal-dataset/1 JSON)")
     add_model_options(parser)
     add_constraint_options(parser)
+    add_robot_override(parser)
     parser.add_argument("--ladder", action="store_true",
                         help="fit the nested models, adding the best candidate while it is "
                         "significant and lowers the whitened held-out RMS, and show each step")
@@ -84,15 +86,15 @@ def _run(args: argparse.Namespace) -> int:
     if args.candidates:
         candidates = [c.strip() for c in args.candidates.split(",") if c.strip()]
     source: Any = args.dataset
-    if args.prior or args.hold:
-        from hostpc.dataset import load_dataset
+    if args.prior or args.hold or args.robot:
         from hostpc.fitting.priors import with_constraints
 
-        source = with_constraints(load_dataset(args.dataset), args.prior, args.hold)
+        source = with_constraints(load_dataset_as_asked(args.dataset, args), args.prior,
+                                  args.hold)
     diagnosis = diagnose(
         source, args.effects, plugins=args.plugin, ladder=args.ladder,
         candidates=candidates, alpha=DEFAULT_ALPHA if args.alpha is None else args.alpha,
-        cv_folds=args.cv_folds, loss=args.loss,
+        cv_folds=args.cv_folds, loss=args.loss, source=args.dataset,
     )
     if args.report:
         from hostpc.report import write_report

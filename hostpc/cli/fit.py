@@ -10,9 +10,8 @@ import sys
 from hostpc.cli.archive_options import add_archive_options, dataset_from_archive
 from hostpc.cli.format import format_fit_summary, model_adequacy
 from hostpc.cli.numbers import CV_FOLDS
-from hostpc.cli.robots import add_robot_override, load_dataset_with_robot, robot_document
+from hostpc.cli.robots import add_robot_override, load_dataset_as_asked
 from hostpc.cli.urdf_out import add_write_urdf_option, check_urdf_robot, write_calibrated_urdf
-from hostpc.dataset import load_dataset
 from hostpc.errors import InputError
 from hostpc.fitting import fit
 from hostpc.fitting.priors import with_constraints
@@ -80,10 +79,8 @@ def run(args: argparse.Namespace) -> int:
         args.dataset = dataset_from_archive(args)
     elif not args.dataset:
         raise InputError("a dataset file is required (or --db URL --run ID)")
-    robot = robot_document(args)
-    dataset = (load_dataset(args.dataset, plugins=args.plugin) if robot is None
-               else load_dataset_with_robot(args.dataset, robot, plugins=args.plugin))
-    dataset = with_constraints(dataset, args.prior, args.hold)
+    dataset = with_constraints(load_dataset_as_asked(args.dataset, args), args.prior,
+                               args.hold)
     if args.write_urdf:
         check_urdf_robot(dataset.robot, args.write_urdf, args.dataset)
     choice = None
@@ -115,7 +112,8 @@ def run(args: argparse.Namespace) -> int:
                             "free_parameters": m.free_parameters, "converged": m.converged,
                             "held_out_score": m.score, "standard_error": m.standard_error,
                             "cv_rms": m.cv_rms, "note": m.note or None}
-                           for m in choice.scores]}
+                           for m in choice.scores],
+                "outliers": choice.outlier_note or None}
         document["noise_scale"] = (math.sqrt(result.chi2_dof)
                                    if math.isfinite(result.chi2_dof) else None)
         for column, values in (("std_scaled", scaled), ("std_jackknife", jackknife)):
@@ -130,6 +128,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"model chosen by pose-grouped held-out error ({choice.folds} folds; the "
                   "fewest free parameters within one standard error of the best):")
             print("\n".join(choice.table()))
+            if choice.outlier_note:
+                print(f"outliers: {choice.outlier_note}")
             print()
         print(format_fit_summary(result, source=args.dataset, scaled=scaled,
                                  jackknife=jackknife))

@@ -64,6 +64,13 @@ def _converged_line(result: FitResult, source: str) -> str:
     how = f"({result.message}, {result.iterations} iterations)"
     if not result.converged:
         return f"  converged: NO {how}"
+    if result.dof <= 0:
+        n_samples, m = result.residuals_raw.shape
+        return (f"  converged (solver) {how}, but with {result.dof} degrees of freedom: the "
+                f"{int(np.count_nonzero(~result.fixed))} free parameters pass exactly through "
+                f"the {n_samples * m} measured numbers, so nothing tests the model or the "
+                "noise and the sigmas assume both; measure more poses (hostpc diagnose "
+                f"{source or 'DATASET'} says how many)")
     adequacy = model_adequacy(result, source or "DATASET")
     if adequacy["explains_data"] is False:
         return (f"  converged (solver) {how}, but the model does not explain the data: "

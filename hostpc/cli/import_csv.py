@@ -50,8 +50,9 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--method", required=True,
                         help="the dataset's measurement kind: one that reads metrology CSV "
                         "rows (world_point, world_pose)")
-    parser.add_argument("--robot", required=True, metavar="NAME|FILE.urdf",
-                        help="a built-in robot (hostpc robots) or a URDF file")
+    parser.add_argument("--robot", required=True, metavar="NAME|FILE.urdf|FILE.json",
+                        help="a built-in robot (hostpc robots), a URDF file or a DH/MDH "
+                        "table file (docs/robots.md)")
     parser.add_argument("--base-link", help="URDF: the chain's base link")
     parser.add_argument("--tip-link", help="URDF: the chain's tip link (the flange)")
     parser.add_argument("--columns", required=True, metavar="MAP",
@@ -86,8 +87,11 @@ def register(subparsers: Any) -> None:
 def _robot(args: argparse.Namespace, output: Path) -> tuple[dict[str, Any], Chain]:
     """The dataset's robot object and its chain."""
     from hostpc.cli.robots import resolve_chain
+    from hostpc.kinematics.table_file import is_table_file, table_robot_document
 
     chain = resolve_chain(args.robot, args.base_link, args.tip_link)
+    if is_table_file(args.robot):  # the table itself: the dataset is SI
+        return table_robot_document(args.robot), chain
     if args.robot.lower().endswith(".urdf"):
         relative = os.path.relpath(Path(args.robot).resolve(), output.resolve().parent)
         return {"urdf": relative, "base_link": args.base_link,

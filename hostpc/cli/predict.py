@@ -8,7 +8,10 @@ with its measurement: the position error (RMS, max, mm), the orientation error w
 measured (deg) and the whitened RMS (1 = at the stated noise). With --refit-frames the
 instrument's frames (a tracker registered anew, a target moved between days) are
 estimated on DATASET with the robot's parameters held at the fit's values, so the error
-that remains is the robot model's. Exit 0; 2 for a bad file or a model that does not match.
+that remains is the robot model's. The fit and DATASET must be the same robot (the fit
+records its robot's name and kinematics fingerprint; `--robot` reads DATASET with another
+robot, as `hostpc fit --robot` does). Exit 0; 2 for a bad file, another robot or a model
+that does not match.
 """
 
 from __future__ import annotations
@@ -18,9 +21,12 @@ import json
 import math
 from typing import Any
 
-from hostpc.calibrate.offline_push import load_saved_fit
-from hostpc.dataset import load_dataset
+from hostpc.calibrate.offline_push import SavedFit, load_saved_fit
+from hostpc.cli.robots import add_robot_override, load_dataset_as_asked
+from hostpc.dataset import Dataset
+from hostpc.errors import InputError
 from hostpc.fitting.prediction import FittedModel, predict
+from hostpc.model.context import robot_identity
 
 
 def register(subparsers: Any) -> None:
@@ -38,12 +44,36 @@ def register(subparsers: Any) -> None:
                         "parameters held at the fit's values")
     parser.add_argument("--json", action="store_true",
                         help="one JSON document with every sample's prediction")
+    add_robot_override(parser)
     parser.set_defaults(func=run)
+
+
+def check_same_robot(saved: SavedFit, dataset: Dataset, fit_path: str, dataset_path: str
+                     ) -> None:
+    """A fit predicts only the robot it was fitted on: its recorded identity (name and
+    kinematics fingerprint, hostpc.model.context.robot_identity) must be the dataset's; a
+    fit made before fits recorded it is compared by its built-in robot name, if it has one.
+    InputError (one line, exit 2) with the command that fits the dataset's robot."""
+    identity = robot_identity(dataset)
+    recorded = saved.robot_identity
+    if recorded is not None:
+        same = recorded["kinematics"] == identity["kinematics"]
+        theirs = f"{recorded['name']} (kinematics {recorded['kinematics']})"
+    else:
+        same = not saved.robot or dataset.robot.name in (None, saved.robot)
+        theirs = saved.robot
+    if not same:
+        raise InputError(
+            f"{fit_path} is a fit of robot {theirs}, {dataset_path} is robot "
+            f"{identity['name']} (kinematics {identity['kinematics']}): a fit predicts only "
+            f"the robot it was fitted on; fit this one instead: hostpc fit {dataset_path} "
+            "--json > FIT2.json")
 
 
 def run(args: argparse.Namespace) -> int:
     saved = load_saved_fit(args.fit)
-    dataset = load_dataset(args.dataset)
+    dataset = load_dataset_as_asked(args.dataset, args)
+    check_same_robot(saved, dataset, args.fit, args.dataset)
     model = FittedModel(saved.effects, dict(zip(saved.names, map(float, saved.x),
                                                 strict=True)))
     prediction = predict(model, dataset, refit_frames=args.refit_frames)

@@ -20,6 +20,7 @@ import numpy as np
 from hostpc.errors import InputError
 from hostpc.kinematics import Chain, get_robot, names
 from hostpc.kinematics.humanoid import get_tree, tree_names
+from hostpc.kinematics.table_file import is_table_file, load_table_chain, table_robot_document
 
 
 def register(subparsers: Any) -> None:
@@ -30,7 +31,9 @@ def register(subparsers: Any) -> None:
         description="List the built-in robots, or print one robot's kinematic table "
         "(a built-in name, or a URDF file with --base-link and --tip-link).",
     )
-    parser.add_argument("--robot", metavar="NAME|FILE.urdf", help="robot to describe")
+    parser.add_argument("--robot", metavar="NAME|FILE.urdf|FILE.json",
+                        help="robot to describe: a built-in name, a URDF or a DH/MDH table "
+                        "file (docs/robots.md)")
     parser.add_argument("--base-link", help="URDF: the chain's base link")
     parser.add_argument("--tip-link", help="URDF: the chain's tip link (the flange)")
     parser.add_argument("--json", action="store_true", help="print JSON instead of text")
@@ -38,7 +41,13 @@ def register(subparsers: Any) -> None:
 
 
 def resolve_chain(robot: str, base_link: str | None, tip_link: str | None) -> Chain:
-    """A built-in robot by name, or a URDF file's chain (both links required)."""
+    """A built-in robot by name, a DH/MDH table file's chain (`FILE.json`,
+    hostpc.kinematics.table_file) or a URDF file's chain (both links required)."""
+    if is_table_file(robot):
+        if base_link or tip_link:
+            raise InputError(f"--robot {robot}: --base-link / --tip-link are for a URDF; a "
+                             "table file is the whole chain")
+        return load_table_chain(robot)
     if robot.lower().endswith(".xacro"):
         from hostpc.kinematics.urdf import xacro_refusal
 
@@ -79,7 +88,9 @@ def _describe(chain: Chain) -> dict[str, Any]:
             "mass_kg": None if chain.mass is None else float(chain.mass[i]),
         })
     description = {"name": chain.name, "convention": chain.convention, "joints": rows,
-                   "mounts": chain.has_mounts}
+                   "mounts": chain.has_mounts,
+                   "coupled": [{"joint": f + 1, "follows": leader + 1, "multiplier": m,
+                                "offset": c} for f, leader, m, c in chain.coupled]}
     if chain.has_mounts:  # T_base_link0 before the first row, T_link_flange after the last
         description["base_mount"] = _mount(chain.T_base_link0)
         description["flange_mount"] = _mount(chain.T_link_flange)
@@ -100,8 +111,9 @@ def run(args: argparse.Namespace) -> int:
             detail = (f"{e['joints']} joints, {e['convention'].upper()}" if e["kind"] == "chain"
                       else f"kinematic tree: {', '.join(e['chains'])} ({e['joints']} joints)")
             print(f"{e['name']:16s} {detail}")
-        print("Any other robot: an explicit DH/MDH table in the dataset, or a URDF file "
-              "(--robot FILE.urdf --base-link NAME --tip-link NAME).")
+        print("Any other robot: a DH/MDH table file (--robot FILE.json, docs/robots.md), an "
+              "explicit table in the dataset, or a URDF file (--robot FILE.urdf --base-link "
+              "NAME --tip-link NAME).")
         return 0
     description = _describe(resolve_chain(args.robot, args.base_link, args.tip_link))
     if args.json:
@@ -116,6 +128,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"{r['joint']:5d} {r['type']:>9s} {_number(r['a_mm'], 2):9.2f} "
               f"{_number(r['alpha_deg'], 3):9.3f} {_number(r['d_mm'], 2):9.2f} "
               f"{_number(r['theta_deg'], 3):9.3f} {mass:>8s}")
+    for c in description["coupled"]:
+        print(f"joint {c['joint']} follows joint {c['follows']} (<mimic>): q{c['joint']} = "
+              f"{c['multiplier']:g} q{c['follows']} + {c['offset']:g}; its zero offset is its "
+              "leader's")
     for key, label in (("base_mount", "base mount (T_base_link0, before joint 1)"),
                        ("flange_mount", "flange mount (T_link_flange, after the last joint)")):
         if key in description:
@@ -126,11 +142,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def add_robot_override(parser: argparse.ArgumentParser) -> None:
-    """`--robot NAME|FILE.urdf [--base-link L --tip-link L]`: fit a dataset with another
-    robot than the one it names (`hostpc fit`)."""
-    parser.add_argument("--robot", metavar="NAME|FILE.urdf",
-                        help="use this robot instead of the dataset's: a built-in name or a "
-                        "URDF file (with --base-link and --tip-link)")
+    """`--robot NAME|FILE.urdf|FILE.json [--base-link L --tip-link L]`: fit a dataset with
+    another robot than the one it names (`hostpc fit`, `diagnose`, `predict`)."""
+    parser.add_argument("--robot", metavar="NAME|FILE.urdf|FILE.json",
+                        help="use this robot instead of the dataset's: a built-in name, a "
+                        "URDF file (with --base-link and --tip-link) or a DH/MDH table file "
+                        "(docs/robots.md)")
     parser.add_argument("--base-link", help="URDF: the chain's base link")
     parser.add_argument("--tip-link", help="URDF: the chain's tip link (the flange)")
 
@@ -143,6 +160,8 @@ def robot_document(args: argparse.Namespace) -> dict[str, Any] | None:
             raise InputError("--base-link / --tip-link: only with --robot FILE.urdf")
         return None
     chain = resolve_chain(robot, args.base_link, args.tip_link)  # checks it now: exit 2
+    if is_table_file(robot):  # the table itself, in the dataset's units when it is read
+        return {"_table": robot, "_n": chain.n}
     if robot.lower().endswith(".urdf"):
         from pathlib import Path
 
@@ -161,9 +180,22 @@ def load_dataset_with_robot(path: str, robot: dict[str, Any], **options: Any) ->
 
     load_dataset(path)  # the file as it is: readable, valid JSON, a valid dataset
     document = json.loads(read_input_text(path, DATASET, encoding="utf-8-sig"))
-    replacement = {k: v for k, v in robot.items() if not k.startswith("_")}
+    replacement = ({k: v for k, v in robot.items() if not k.startswith("_")}
+                   if "_table" not in robot else
+                   table_robot_document(robot["_table"], document.get("units")))
     q = [s.get("q") for s in document.get("samples", []) if isinstance(s, dict)]
     if q and isinstance(q[0], list) and len(q[0]) != robot["_n"]:
         raise DatasetError(f"{path}: --robot has {robot['_n']} joints, the samples "
                            f"{len(q[0])}")
     return dataset_from_dict({**document, "robot": replacement}, str(path), **options)
+
+
+def load_dataset_as_asked(path: str, args: argparse.Namespace) -> Any:
+    """The dataset at ``path`` with the robot of `--robot` (if given) and the kinds of
+    `--plugin` (if any): what fit, diagnose and predict read."""
+    from hostpc.dataset import load_dataset
+
+    plugins = getattr(args, "plugin", None) or []
+    robot = robot_document(args)
+    return (load_dataset(path, plugins=plugins) if robot is None
+            else load_dataset_with_robot(path, robot, plugins=plugins))

@@ -132,7 +132,11 @@ def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]],
     method = doc["method"]
     if not isinstance(method, str) or method not in kinds:
         expected = ", ".join(f"'{m}'" for m in kinds)
-        raise FieldError(("method",), f"unknown method {show(method)} (expected {expected})")
+        plugin = (f"; if a plugin folder defines the kind {method!r}, add --plugin FOLDER "
+                  "(the folder whose __init__.py declares it)" if isinstance(method, str)
+                  and method.isidentifier() else "")
+        raise FieldError(("method",), f"unknown method {show(method)} (expected {expected})"
+                         f"{plugin}")
     kind = kinds[method]()
 
     document: schema.DocumentSchema = schema.validate(schema.DocumentSchema, doc)

@@ -90,8 +90,9 @@ def without(check: ModelCheck) -> str:
     return f"without {samples_text(check.excluded)}"
 
 
-def outlier_sentence(check: ModelCheck) -> str:
-    """The outliers, what to do about them, and what the rest of the diagnosis did."""
+def outlier_note(check: ModelCheck) -> str:
+    """The outliers and what to do about them (diagnose's advice and `hostpc fit --effects
+    auto` print it)."""
     outliers = check.outliers
     listed = ", ".join(f"#{o.sample} ({o.sigma:.3g} sigma)" for o in outliers)
     one = len(outliers) == 1
@@ -101,9 +102,15 @@ def outlier_sentence(check: ModelCheck) -> str:
     loss = check.fit.loss
     fix = (f" (the {loss} loss of this fit already down-weights {it})" if loss != "linear"
            else ", or fit with --loss cauchy")
-    return (f"{head}: check {measurement}{fix}. The candidate effects, the effect-agnostic "
-            f"search, the binned residuals and the ladder below leave {it} out, so no effect "
-            f"is blamed for {it}.")
+    return f"{head}: check {measurement}{fix}."
+
+
+def outlier_sentence(check: ModelCheck) -> str:
+    """The outliers, what to do about them, and what the rest of the diagnosis did."""
+    it = "it" if len(check.outliers) == 1 else "them"
+    return (f"{outlier_note(check)} The candidate effects, the effect-agnostic search, the "
+            f"binned residuals and the ladder below leave {it} out, so no effect is blamed "
+            f"for {it}.")
 
 
 def needed_samples(check: ModelCheck) -> int:

@@ -57,12 +57,15 @@ class ModelScore:
 
 @dataclass(frozen=True)
 class ModelChoice:
-    """The table (in order of complexity), the chosen model's name and its fit."""
+    """The table (in order of complexity), the chosen model's name and its fit;
+    outlier_note: the diagnosis's outlier note (hostpc.diagnostics.advice.outlier_note),
+    "" when it found none or did not run."""
 
     scores: tuple[ModelScore, ...]
     chosen: str
     fit: FitResult
     folds: int
+    outlier_note: str = ""
 
     def table(self) -> list[str]:
         """The table as text lines (mm, whitened)."""
@@ -115,11 +118,14 @@ def choose_model(dataset: Dataset, *, plugins: Iterable[str | Path] = (),
     plugin_files = tuple(plugins)
     shared = SharedValues()  # the chain and the rig's sensitivity, once for every model
     models = _models(dataset, plugin_files, shared)
+    outliers = ""
     if ladder:
+        from hostpc.diagnostics.advice import outlier_note
         from hostpc.diagnostics.pipeline import diagnose
 
         diagnosis = diagnose(dataset, plugins=plugin_files, ladder=True, cv_folds=cv_folds,
                              auto_effects=False, interactions=False, loss=loss)
+        outliers = outlier_note(diagnosis.check) if diagnosis.check.outliers else ""
         steps = diagnosis.ladder or ()
         if steps and steps[-1].effects not in [effects for _, effects in models]:
             models.append(("ladder", tuple(steps[-1].effects)))
@@ -149,4 +155,4 @@ def choose_model(dataset: Dataset, *, plugins: Iterable[str | Path] = (),
         chosen = min(within, key=lambda s: (s.free_parameters, s.score or math.inf)).name
     else:  # no held-out score for any: the default model, as without --effects auto
         chosen = "offsets"
-    return ModelChoice(tuple(scores), chosen, fits[chosen], cv_folds)
+    return ModelChoice(tuple(scores), chosen, fits[chosen], cv_folds, outliers)

@@ -10,6 +10,7 @@ import numpy as np
 
 from hostpc.fitting.identifiability import NullDirection
 from hostpc.json_object import JsonObject
+from hostpc.model.context import robot_identity
 from hostpc.model.layout import Problem
 
 CORRELATION_THRESHOLD = 0.9
@@ -116,8 +117,8 @@ class FitResult:
 
         return {
             "method": self.problem.method,
-            "robot": getattr(getattr(getattr(self.problem, "dataset", None), "robot", None),
-                             "name", None),
+            "robot": self.problem.dataset.robot.name,
+            "robot_identity": robot_identity(self.problem.dataset),
             "effects": list(self.problem.effect_names),
             "parameters": {
                 p.name: {"value": p.value, "std": finite(p.std), "unit": p.unit,

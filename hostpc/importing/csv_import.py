@@ -241,10 +241,17 @@ def read_samples(csv_rows: CsvRows, mapping: ColumnMap, options: ImportOptions
     values = array("d")
     marker_index = array("q")
     marker_ids: dict[str, int] = {p.marker: k for k, p in enumerate(points) if p.marker}
+    mapped = sorted({k for group in indices for k in group}
+                    | ({cells.index[marker_column]} if marker_column is not None else set()))
     for line, row in chain([first] if first is not None else [], rows):
         if len(row) > width:
             raise InputError(f"{header.source}: row {line}: {len(row)} cells but the header "
                              f"has {width} columns")
+        if len(row) <= mapped[-1]:  # a line cut short: never read as a reflector not seen
+            missing = [header.columns[k] for k in mapped if k >= len(row)]
+            raise InputError(f"{header.source}: row {line}: {len(row)} cells but the header "
+                             f"has {width} columns: no cell for {', '.join(missing)} (a line "
+                             "cut short? complete it, or delete it)")
         for g, columns in enumerate(group_columns):
             if several and all(k >= len(row) or row[k] == "" for k in xyz_at[g]):
                 continue  # this reflector was not seen in this pose

@@ -96,6 +96,12 @@ class Chain:
             None on construction means the identity.
         T_link_flange: fixed pose of the flange in table frame ``n``, ``(4, 4)``; None on
             construction means the identity.
+        coupled: the joints that follow another (a URDF ``<mimic>``), each ``(follower,
+            leader, multiplier, offset)`` with 0-based joint indices: ``q_follower =
+            multiplier * q_leader + offset``. The joint vector still holds every joint (the
+            follower's value as the robot reports it); a joint-space correction of the
+            leader (its zero offset, compliance, ...) moves the follower by ``multiplier``
+            times as much (conventions.md, "Coupled joints").
     """
 
     name: str
@@ -113,6 +119,7 @@ class Chain:
     prismatic: BoolArray | None = None
     T_base_link0: FloatArray | None = None
     T_link_flange: FloatArray | None = None
+    coupled: tuple[tuple[int, int, float, float], ...] = ()
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -148,6 +155,18 @@ class Chain:
             ):
                 raise InputError(f"{field}: not a rigid transform")
             object.__setattr__(self, field, T)
+        couplings = tuple((int(f), int(leader), float(m), float(c))
+                          for f, leader, m, c in self.coupled)
+        followers = [f for f, _, _, _ in couplings]
+        for f, leader, m, c in couplings:
+            if not (0 <= f < n and 0 <= leader < n) or f == leader or leader in followers:
+                raise InputError(f"coupled: joint {f + 1} cannot follow joint {leader + 1} "
+                                 f"(joints 1..{n}; a leader is not itself a follower)")
+            if not (np.isfinite(m) and np.isfinite(c)):
+                raise InputError(f"coupled: joint {f + 1}: multiplier and offset must be finite")
+        if len(set(followers)) != len(followers):
+            raise InputError("coupled: a joint follows two leaders")
+        object.__setattr__(self, "coupled", couplings)
 
     @property
     def n(self) -> int:

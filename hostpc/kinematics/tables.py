@@ -56,6 +56,7 @@ def chain_from_table(
     joint_types: Sequence[str] | None = None,
     T_base_link0: ArrayLike | None = None,
     T_link_flange: ArrayLike | None = None,
+    coupled: Sequence[tuple[int, int, float, float]] = (),
 ) -> Chain:
     """Build a :class:`Chain` from a DH or MDH table (conventions.md, "DH and MDH").
 
@@ -74,6 +75,8 @@ def chain_from_table(
             revolute). A prismatic joint's ``q`` (m) adds to ``d``; ``theta`` stays fixed.
         T_base_link0, T_link_flange: fixed mounts before the first and after the last row,
             ``(4, 4)`` each, or None (identity).
+        coupled: joints that follow another, ``(follower, leader, multiplier, offset)``
+            (0-based; see :class:`Chain`).
 
     Returns:
         The chain; wrong shapes raise :class:`hostpc.errors.InputError` naming the field.
@@ -114,4 +117,5 @@ def chain_from_table(
         prismatic=prismatic,
         T_base_link0=None if T_base_link0 is None else np.asarray(T_base_link0, float),
         T_link_flange=None if T_link_flange is None else np.asarray(T_link_flange, float),
+        coupled=tuple((int(f), int(lead), float(m), float(c)) for f, lead, m, c in coupled),
     )

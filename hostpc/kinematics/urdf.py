@@ -19,6 +19,10 @@ fit names any remaining unidentifiable combination. Link masses and centres of m
 from the ``inertial`` tags (links fixed to a moving link, on the chain or off it, such as a
 wrist camera, are merged into it).
 
+A ``<mimic>`` joint on the chain is a coupled joint (``Chain.coupled``: ``q = multiplier *
+q_leader + offset``, its leader a movable joint of the same chain); one whose leader is off
+the chain is refused.
+
 The parser is ``xml.etree`` from the standard library: the kinematic subset of URDF is
 small, and the PyPI parsers either pull a mesh stack (yourdfpy needs ``trimesh[easy]``) or
 are unmaintained (urdf-parser-py, last release 2020).
@@ -63,6 +67,8 @@ class UrdfJoint:
     lower: float
     upper: float
     mimic: str | None = None  # the joint this one follows (<mimic joint=...>), if any
+    multiplier: float = 1.0  # <mimic multiplier=...>: q = multiplier * q_leader + offset
+    offset: float = 0.0  # <mimic offset=...>
 
 
 @dataclass(frozen=True)
@@ -170,10 +176,15 @@ def parse_urdf(text: str, source: str = "URDF") -> UrdfRobot:
             upper = _floats(limit.get("upper"), 1, f"{where} limit upper", [upper])[0]
             if lower > upper:
                 raise InputError(f"{where} limit: lower {lower} > upper {upper}")
+        mimic = joint.find("mimic")
+        multiplier, offset = (1.0, 0.0) if mimic is None else (
+            _floats(mimic.get("multiplier"), 1, f"{where} mimic multiplier", [1.0])[0],
+            _floats(mimic.get("offset"), 1, f"{where} mimic offset", [0.0])[0])
         joints[name] = UrdfJoint(
             name=name, type=kind, parent=parent.get("link") or "", child=child.get("link") or "",
             origin=_origin(joint, where), axis=axis / max(norm, 1e-300),
-            lower=lower, upper=upper, mimic=_mimicked(joint),
+            lower=lower, upper=upper, mimic=_mimicked(joint), multiplier=multiplier,
+            offset=offset,
         )
     _check_tree(links, joints, source)
     return UrdfRobot(name=root.get("name") or "urdf", joints=joints, inertials=inertials,
@@ -254,16 +265,23 @@ def _path(robot: UrdfRobot, base_link: str, tip_link: str, source: str) -> list[
         if joint.type not in _MOVABLE and joint.type != "fixed":
             raise InputError(f"{source}: joint {joint.name!r} has type {joint.type!r}; only "
                              "revolute, continuous, prismatic and fixed are supported")
-        if joint.mimic is not None and joint.type in _MOVABLE:
-            raise InputError(f"{source}: joint {joint.name!r} mimics joint {joint.mimic!r} "
-                             "(<mimic>); zerocal takes every joint of the chain as independent "
-                             "and does not model coupled joints: end the chain before it, "
-                             f"e.g. hostpc robots --robot {source} --base-link {base_link} "
-                             f"--tip-link {joint.parent}")
         path.append(joint)
         link = joint.parent
         if len(path) > len(robot.joints):
             raise InputError(f"{source}: the joints form a loop")
+    on_path = {j.name: j for j in path if j.type in _MOVABLE}
+    for joint in path[::-1]:  # a coupled joint needs its leader on the chain (base first)
+        if joint.mimic is None or joint.type not in _MOVABLE:
+            continue
+        leader = on_path.get(joint.mimic)
+        if leader is None or leader.mimic is not None:
+            why = ("itself follows another joint" if leader is not None
+                   else f"is not a movable joint between {base_link} and {tip_link}")
+            raise InputError(f"{source}: joint {joint.name!r} mimics joint {joint.mimic!r} "
+                             f"(<mimic>), which {why}; zerocal couples a joint only to a "
+                             "leader on the same chain: end the chain before it, e.g. hostpc "
+                             f"robots --robot {source} --base-link {base_link} --tip-link "
+                             f"{joint.parent}")
     return path[::-1]
 
 
@@ -359,12 +377,16 @@ def chain_from_urdf(robot: UrdfRobot, base_link: str, tip_link: str,
         rows[i] = (alpha, p[0], math.atan2(-R[0, 1], R[0, 0]),
                    float(np.dot(p, [0.0, -math.sin(alpha), math.cos(alpha)])))
     mass, com = _mass_model(robot, link_owner, link_pose, frames, n)
+    index = {j.name: k for k, j in enumerate(movable)}
+    coupled = [(index[j.name], index[j.mimic], j.multiplier, j.offset)
+               for j in movable if j.mimic is not None]
     return chain_from_table(
         f"{robot.name}:{base_link}->{tip_link}", "mdh",
         a=rows[:, 1], alpha=rows[:, 0], d=rows[:, 3], theta=rows[:, 2],
         q_min=[j.lower for j in movable], q_max=[j.upper for j in movable],
         mass=mass, com=com, joint_types=[_MOVABLE[j.type] for j in movable],
         T_base_link0=frames[0], T_link_flange=np.linalg.solve(frames[-1], T_base_tip),
+        coupled=coupled,
     )
 
 

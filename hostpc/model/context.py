@@ -12,6 +12,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from hostpc.dataset import Dataset, Samples
+from hostpc.errors import InputError
 from hostpc.kinematics import Chain, gravity_torque
 from hostpc.kinematics.robots import get_robot
 from hostpc.kinematics.tables import chain_from_table
@@ -55,6 +56,66 @@ def serial_chain(dataset: Dataset) -> Chain:
         com=robot.com,
         joint_types=robot.joint_types,
     )
+
+
+FINGERPRINT_DIGITS = 9
+"""Significant digits of each table entry in a robot's fingerprint: a JSON round trip or a
+mm/deg file of the same robot gives the same fingerprint, a changed dimension another."""
+
+
+def chain_fingerprint(chains: Sequence[Chain]) -> str:
+    """A short hash of the nominal kinematics of ``chains`` (convention, every table entry,
+    joint types, mounts, coupled joints): two robots with the same fingerprint move alike."""
+    import hashlib
+
+    parts: list[str] = []
+    for chain in chains:
+        assert chain.T_base_link0 is not None and chain.T_link_flange is not None
+        numbers = np.concatenate([chain.a, chain.alpha, chain.d, chain.theta, chain.beta,
+                                  chain.T_base_link0[:3].ravel(), chain.T_link_flange[:3].ravel()])
+        parts.append(chain.convention + ":" + "".join("P" if p else "R"
+                                                      for p in chain.joint_is_prismatic))
+        parts.append(",".join(f"{v + 0.0:.{FINGERPRINT_DIGITS}g}" for v in numbers))
+        parts.append(",".join(f"{f}<{leader}:{m:.{FINGERPRINT_DIGITS}g}:{c:.{FINGERPRINT_DIGITS}g}"
+                              for f, leader, m, c in chain.coupled))
+    return hashlib.sha256(";".join(parts).encode()).hexdigest()[:16]
+
+
+def robot_identity(dataset: Dataset) -> dict[str, str]:
+    """What a fit records of its robot, so that a fit is never applied to another robot:
+    ``name`` (a built-in's, the URDF chain's ``robot:base->tip``, or ``explicit table``)
+    and ``kinematics``, the fingerprint of its nominal chain(s) (:func:`chain_fingerprint`)."""
+    from hostpc.kinematics.humanoid import get_tree, tree_names
+
+    robot = dataset.robot
+    if robot.name is not None and robot.a is None and robot.name in tree_names():
+        chains = [branch.chain for branch in get_tree(robot.name).branches]
+        return {"name": robot.name, "kinematics": chain_fingerprint(chains)}
+    chain = serial_chain(dataset)
+    name = robot.name or (chain.name if robot.urdf is not None else "explicit table")
+    return {"name": name, "kinematics": chain_fingerprint([chain])}
+
+
+COUPLED_TOLERANCE = 1e-6
+"""How far (rad, or m for a prismatic joint) a coupled joint's recorded value may be from
+``multiplier * q_leader + offset``: the rounding of a CSV, not a different motion."""
+
+
+def check_coupled_joints(chain: Chain, q: np.ndarray) -> None:
+    """Every sample's coupled joint (``Chain.coupled``, a URDF ``<mimic>``) at its leader's
+    value times the multiplier plus the offset, as the robot reports it; InputError naming
+    the joints and the first sample that is not."""
+    for follower, leader, multiplier, offset in chain.coupled:
+        expected = multiplier * q[:, leader] + offset
+        off = np.abs(q[:, follower] - expected) > COUPLED_TOLERANCE
+        if np.any(off):
+            k = int(np.argmax(off))
+            raise InputError(
+                f"joint q{follower + 1} follows q{leader + 1} (<mimic>: q{follower + 1} = "
+                f"{multiplier:g} q{leader + 1} + {offset:g}), but sample #{k} has "
+                f"q{follower + 1} = {q[k, follower]:.9g} instead of {expected[k]:.9g}: record "
+                "the joint as the robot reports it (ROS joint_states do), or end the chain "
+                "before it")
 
 
 def sample_variables(samples: Samples, scalars: tuple[str, ...] = ("t", "temperature", "speed")
@@ -102,6 +163,7 @@ def serial_context(dataset: Dataset, chain: Chain,
     ``categorical``: which of the given variables are group labels, with their levels."""
     samples = dataset.samples
     q_cmd = np.asarray(samples.q, dtype=float)
+    check_coupled_joints(chain, q_cmd)
     if chain.mass is not None and chain.com is not None:  # once per build: views share it
         tau = gravity_torque(chain, q_cmd)
         tau.setflags(write=False)  # shared by the problem's views and extensions

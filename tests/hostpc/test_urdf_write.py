@@ -1,5 +1,6 @@
 """The calibrated robot out as a URDF (`hostpc fit --write-urdf`), and the URDF inputs that
-are refused rather than misread: mimic joints on the chain, xacro files."""
+are refused rather than misread: a mimic joint whose leader is off the chain, xacro
+files."""
 
 from __future__ import annotations
 
@@ -86,14 +87,18 @@ def _with_mimic(tmp_path: Path) -> Path:
     return path
 
 
-def test_mimic_joint_on_the_chain_is_refused(tmp_path, capsys):
+def test_mimic_joint_whose_leader_is_off_the_chain_is_refused(tmp_path, capsys):
+    """A coupled joint needs its leader on the chain (tests/hostpc/test_urdf_mimic.py for
+    the coupling itself): a chain that starts after joint1 cannot move joint2 with it."""
     path = _with_mimic(tmp_path)
-    assert main(["robots", "--robot", str(path), *LINKS]) == 2
+    assert main(["robots", "--robot", str(path), *LINKS]) == 0  # leader on the chain: fine
+    assert "joint 3 follows joint 2" in capsys.readouterr().out
+    assert main(["robots", "--robot", str(path), "--base-link", "shoulder",
+                 "--tip-link", "tool0"]) == 2
     err = capsys.readouterr().err.strip()
     assert "'joint2' mimics joint 'joint1'" in err and "\n" not in err
-    assert err.endswith("--tip-link shoulder")
-    assert main(["robots", "--robot", str(path), "--base-link", "base_link",
-                 "--tip-link", "shoulder"]) == 0  # before the mimic joint: fine
+    assert "is not a movable joint between shoulder and tool0" in err
+    assert err.endswith("--base-link shoulder --tip-link shoulder")
 
 
 def test_xacro_file_is_refused_with_the_command_that_expands_it(tmp_path, capsys):

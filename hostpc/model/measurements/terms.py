@@ -29,37 +29,49 @@ def _term_params(term: EffectTerm | None, x: np.ndarray) -> np.ndarray | None:
 def kinematic_deltas(problem: Problem, x: np.ndarray, jacobian: bool
                      ) -> tuple[np.ndarray, np.ndarray | None, slice]:
     """Per-pose kinematic deltas (N, 5n), their derivative by x (N, k, P) over the rows
-    that effects touch, and that row slice (the theta rows only, unless a geometry effect)."""
+    that effects touch, and that row slice (the theta rows only, unless a geometry effect).
+    A coupled joint (``Chain.coupled``) follows its leader's joint-space corrections."""
     ctx = problem.context
     n_samples, n_joints = ctx.q_cmd.shape
     geometric = any(t.effect.hook == "geometry" for t in problem.terms)
     rows = slice(0, 5 * n_joints) if geometric else slice(0, n_joints)
     delta = np.zeros((n_samples, 5 * n_joints))
     d_delta = np.zeros((n_samples, rows.stop, x.size)) if jacobian else None
+    # the joint effects' part, (N, n) and (N, n, P): what a coupled joint follows; without
+    # coupled joints, views of the theta rows (added there directly, no copy)
+    coupled = ctx.chain.coupled
+    joint = np.zeros((n_samples, n_joints)) if coupled else delta[:, :n_joints]
+    d_joint = (None if d_delta is None else
+               np.zeros((n_samples, n_joints, x.size)) if coupled else d_delta[:, :n_joints])
     for term, basis in zip(problem.terms, problem.linear_bases or (None,) * len(problem.terms),
                            strict=False):
         hook = term.effect.hook
         if hook not in ("joint", "geometry"):
             continue
         p = x[term.slice]
-        target = slice(0, n_joints) if hook == "joint" else slice(0, 5 * n_joints)
+        value, derivative = ((joint, d_joint) if hook == "joint" else
+                             (delta, d_delta))
         if basis is not None:
-            delta[:, target] += basis @ p
-            if d_delta is not None:
-                d_delta[:, target, term.slice] += basis
+            value[:, :basis.shape[1]] += basis @ p
+            if derivative is not None:
+                derivative[:, :basis.shape[1], term.slice] += basis
             continue
-        if hook == "joint":
-            delta[:, target] += term.effect.joint_delta(ctx, p)
-            J = term.effect.joint_jacobian(ctx, p) if d_delta is not None else None
-            if d_delta is not None and J is None:
-                J = numeric_jacobian(lambda v, e=term.effect: e.joint_delta(ctx, v), p)
-        else:
-            delta[:, target] += term.effect.kinematic_delta(ctx, p)
-            J = term.effect.kinematic_jacobian(ctx, p) if d_delta is not None else None
-            if d_delta is not None and J is None:
-                J = numeric_jacobian(lambda v, e=term.effect: e.kinematic_delta(ctx, v), p)
-        if d_delta is not None:
-            d_delta[:, target, term.slice] += J
+        fun, jac = ((term.effect.joint_delta, term.effect.joint_jacobian) if hook == "joint"
+                    else (term.effect.kinematic_delta, term.effect.kinematic_jacobian))
+        value += fun(ctx, p)
+        if derivative is not None:
+            J = jac(ctx, p)
+            if J is None:
+                J = numeric_jacobian(lambda v, f=fun: f(ctx, v), p)
+            derivative[:, :, term.slice] += J
+    if coupled:
+        for follower, leader, multiplier, _ in coupled:
+            joint[:, follower] += multiplier * joint[:, leader]
+            if d_joint is not None:
+                d_joint[:, follower] += multiplier * d_joint[:, leader]
+        delta[:, :n_joints] += joint
+        if d_delta is not None and d_joint is not None:
+            d_delta[:, :n_joints] += d_joint
     return delta, d_delta, rows
 
 
