@@ -30,18 +30,23 @@ import json
 import shlex
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, TypedDict
+from typing import Any
 
 import sqlalchemy as sa
 from sqlalchemy.engine import Connection, Engine
 
-from hostpc.archive.records import ArchivedRun, JointOffset, RunRecord
-from hostpc.calibrate.run_result import RunResult
+from hostpc.archive.records import JointOffset, RunRecord
+from hostpc.archive.rows import (
+    ArchivedRun,
+    Revision,
+    StoredRun,
+    archived_run,
+    as_utc,
+    stored_result,
+)
 from hostpc.errors import InputError, ZerocalError
-from hostpc.json_object import JsonObject
 from hostpc.kinematics.robots import canonical_name
 
 
@@ -229,10 +234,6 @@ def _store_offsets(connection: Connection, run_id: int,
              "new_deg": o.new_deg, "pushed": o.pushed} for o in offsets]))
 
 
-def _as_utc(value: datetime) -> datetime:
-    return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
-
-
 def _outcome_json(record: RunRecord) -> str | None:
     outcome = record.result.outcome if record.result is not None else None
     return None if outcome is None else json.dumps(outcome, allow_nan=True)
@@ -242,79 +243,6 @@ def _result_json(record: RunRecord) -> str:
     """The run's result.json as the archive stores it ({} for a run that wrote none)."""
     return json.dumps(record.result.to_dict() if record.result is not None else {},
                       allow_nan=True)
-
-
-class _RunColumns(TypedDict):
-    """A run's row of `runs` as `add` writes it (the table's columns, less id/revision)."""
-
-    run_uid: str
-    serial: str
-    model: str
-    station: str
-    started_at: datetime
-    archived_at: datetime
-    method: str
-    effects: str
-    verdict: str
-    exit_code: int
-    push_status: str
-    largest_correction_deg: float | None
-    software_version: str
-    run_dir: str
-    result_json: str
-    dataset_json: str | None
-    reason: str | None
-    report_path: str | None
-
-
-@dataclass(frozen=True)
-class Revision:
-    """One outcome a run has had (`Archive.revisions`): revision number, time (ISO 8601
-    UTC), verdict, exit code, push status, and the result's outcome block as stored
-    (None: the result had none)."""
-
-    run_id: int
-    revision: int
-    revised_at: str
-    verdict: str
-    exit_code: int
-    push_status: str
-    outcome: JsonObject | None
-
-
-@dataclass(frozen=True)
-class StoredRun:
-    """One archived run with its documents (`Archive.run`): the run, its result (None: the
-    run wrote none, or one this version cannot read) and its dataset.json as stored (None:
-    none)."""
-
-    run: ArchivedRun
-    result: RunResult | None
-    dataset_json: str | None
-
-
-def _archived_run(row: sa.Row[Any], offsets: tuple[JointOffset, ...]) -> ArchivedRun:
-    """A row of `runs` as its value (runs stored before the model was canonical get it)."""
-    return ArchivedRun(
-        id=int(row.id), run_uid=row.run_uid, serial=row.serial,
-        model=canonical_name(row.model), station=row.station,
-        started_at=_as_utc(row.started_at).isoformat(),
-        archived_at=_as_utc(row.archived_at).isoformat(), method=row.method,
-        effects=tuple(json.loads(row.effects)), verdict=row.verdict,
-        exit_code=int(row.exit_code), push_status=row.push_status,
-        largest_correction_deg=row.largest_correction_deg,
-        software_version=row.software_version, run_dir=row.run_dir,
-        revision=int(row.revision), reason=row.reason, report_path=row.report_path,
-        offsets=offsets)
-
-
-def _stored_result(text: str) -> RunResult | None:
-    """A stored result.json as its value (None: the run wrote none, or an older version
-    wrote one this version cannot read)."""
-    try:
-        return RunResult.from_dict(json.loads(text))
-    except (KeyError, TypeError, ValueError, AttributeError):
-        return None
 
 
 class Archive:
@@ -330,27 +258,34 @@ class Archive:
         """Store `record`; returns its archive id. A record whose run_uid (or run folder)
         is already stored is not stored twice: if its outcome (verdict, exit code, push
         status, result) changed, the stored record is revised (module docstring)."""
-        values = _RunColumns(
-            run_uid=record.run_uid, serial=record.serial, model=canonical_name(record.model),
-            station=record.station, started_at=_as_utc(record.started_at),
-            archived_at=datetime.now(UTC), method=record.method,
-            effects=json.dumps(list(record.effects)), verdict=record.verdict,
-            exit_code=record.exit_code, push_status=record.push_status,
-            largest_correction_deg=record.largest_correction_deg,
-            software_version=record.software_version, run_dir=record.run_dir,
-            result_json=_result_json(record), dataset_json=record.dataset_json,
-            reason=record.reason or None, report_path=record.report_path or None)
+        archived_at, result_json = datetime.now(UTC), _result_json(record)
+        values = {  # the runs row's columns (bind parameters, the database's boundary)
+            "run_uid": record.run_uid, "serial": record.serial,
+            "model": canonical_name(record.model),
+            "station": record.station, "started_at": as_utc(record.started_at),
+            "archived_at": archived_at, "method": record.method,
+            "effects": json.dumps(list(record.effects)), "verdict": record.verdict,
+            "exit_code": record.exit_code, "push_status": record.push_status,
+            "largest_correction_deg": record.largest_correction_deg,
+            "software_version": record.software_version, "run_dir": record.run_dir,
+            "result_json": result_json, "dataset_json": record.dataset_json,
+            "reason": record.reason or None, "report_path": record.report_path or None,
+        }
         try:
             with self.engine.begin() as connection:
                 existing = self._stored(connection, record)
                 if existing is not None:
-                    return self._revise(connection, existing, record, values)
+                    keep = ("run_uid", "serial", "model", "station", "started_at")
+                    update = runs_table.update().values(
+                        **{k: v for k, v in values.items() if k not in keep})
+                    return self._revise(connection, existing, record, update, archived_at,
+                                        result_json)
                 key = connection.execute(runs_table.insert().values(**values)).inserted_primary_key
                 assert key is not None  # an insert's result has its primary key
                 run_id = int(key[0])
                 _store_offsets(connection, run_id, record.offsets)
                 connection.execute(revisions_table.insert().values(
-                    run_id=run_id, revision=1, revised_at=values["archived_at"],
+                    run_id=run_id, revision=1, revised_at=archived_at,
                     verdict=record.verdict, exit_code=record.exit_code,
                     push_status=record.push_status, outcome_json=_outcome_json(record)))
                 return run_id
@@ -382,23 +317,22 @@ class Archive:
         return row
 
     @staticmethod
-    def _revise(connection: Connection, row: Any, record: RunRecord,
-                values: _RunColumns) -> int:
-        """Revise the stored run `row` to `record`'s outcome if it changed; its id."""
+    def _revise(connection: Connection, row: Any, record: RunRecord, update: sa.Update,
+                archived_at: datetime, result_json: str) -> int:
+        """Revise the stored run `row` to `record`'s outcome (`update`: its new columns)
+        if it changed; its id."""
         run_id = int(row.id)
         if (row.verdict, row.exit_code, row.push_status, row.result_json, row.reason,
                 row.report_path) == (record.verdict, record.exit_code, record.push_status,
-                                     values["result_json"], values["reason"],
-                                     values["report_path"]):
+                                     result_json, record.reason or None,
+                                     record.report_path or None):
             return run_id
         revision = int(row.revision or 1) + 1
-        keep = ("run_uid", "serial", "model", "station", "started_at")
-        connection.execute(runs_table.update().where(runs_table.c.id == run_id).values(
-            **{k: v for k, v in values.items() if k not in keep}, revision=revision))
+        connection.execute(update.where(runs_table.c.id == run_id).values(revision=revision))
         connection.execute(offsets_table.delete().where(offsets_table.c.run_id == run_id))
         _store_offsets(connection, run_id, record.offsets)
         connection.execute(revisions_table.insert().values(
-            run_id=run_id, revision=revision, revised_at=values["archived_at"],
+            run_id=run_id, revision=revision, revised_at=archived_at,
             verdict=record.verdict, exit_code=record.exit_code,
             push_status=record.push_status, outcome_json=_outcome_json(record)))
         return run_id
@@ -413,7 +347,7 @@ class Archive:
         except sa.exc.SQLAlchemyError as exc:
             raise ArchiveError(f"archive {self.url}: cannot read ({_first_line(exc)})") from None
         return [Revision(run_id=int(row.run_id), revision=int(row.revision),
-                         revised_at=_as_utc(row.revised_at).isoformat(), verdict=row.verdict,
+                         revised_at=as_utc(row.revised_at).isoformat(), verdict=row.verdict,
                          exit_code=int(row.exit_code), push_status=row.push_status,
                          outcome=None if row.outcome_json is None
                          else json.loads(row.outcome_json)) for row in rows]
@@ -432,7 +366,7 @@ class Archive:
                 offsets = self._offsets(connection, [int(row.id) for row in rows])
         except sa.exc.SQLAlchemyError as exc:
             raise ArchiveError(f"archive {self.url}: cannot read ({_first_line(exc)})") from None
-        return [_archived_run(row, offsets[int(row.id)]) for row in rows]
+        return [archived_run(row, offsets[int(row.id)]) for row in rows]
 
     @staticmethod
     def _offsets(connection: Connection, ids: list[int]
@@ -459,7 +393,7 @@ class Archive:
             raise ArchiveError(f"archive {self.url}: cannot read ({_first_line(exc)})") from None
         if row is None:
             raise InputError(f"--run {run_id}: no such run in the archive {self.url}")
-        return StoredRun(_archived_run(row, offsets), _stored_result(row.result_json),
+        return StoredRun(archived_run(row, offsets), stored_result(row.result_json),
                          row.dataset_json)
 
     def report_path(self, run_id: int) -> str | None:

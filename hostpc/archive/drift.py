@@ -14,7 +14,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
-from hostpc.archive.records import ArchivedRun
+from hostpc.archive.rows import ArchivedRun
 from hostpc.json_object import JsonObject
 
 DEFAULT_THRESHOLD_DEG = 0.02

@@ -19,7 +19,7 @@ from hostpc.archive.drift import (
     fleet_summary,
     zero_series,
 )
-from hostpc.archive.records import ArchivedRun
+from hostpc.archive.rows import ArchivedRun
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import uuid
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -33,40 +33,6 @@ class JointOffset:
     sigma_deg: float | None
     new_deg: float | None
     pushed: bool
-
-
-@dataclass(frozen=True)
-class ArchivedRun:
-    """One archived run as the history, drift and station views read it (`Archive.runs`):
-    its archive id, the record's fields (times as ISO 8601 UTC text, the model in the robot
-    library's spelling), its revision and its per-joint offsets."""
-
-    id: int
-    run_uid: str
-    serial: str
-    model: str
-    station: str
-    started_at: str
-    archived_at: str
-    method: str
-    effects: tuple[str, ...]
-    verdict: str
-    exit_code: int
-    push_status: str
-    largest_correction_deg: float | None
-    software_version: str
-    run_dir: str
-    revision: int
-    reason: str | None
-    report_path: str | None
-    offsets: tuple[JointOffset, ...]
-
-    def to_json(self) -> JsonObject:
-        """The run as `hostpc history --json` prints it (the table's column order)."""
-        document = {f.name: getattr(self, f.name) for f in fields(self)}
-        document["effects"] = list(self.effects)
-        document["offsets"] = [asdict(o) for o in self.offsets]
-        return document
 
 
 @dataclass(frozen=True)

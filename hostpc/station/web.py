@@ -35,7 +35,7 @@ from aiohttp import web
 
 from hostpc.archive.drift import drift_findings
 from hostpc.archive.history_page import drift_plot_png, local_time
-from hostpc.archive.records import ArchivedRun
+from hostpc.archive.rows import ArchivedRun
 from hostpc.json_object import JsonObject
 from hostpc.serving.guard import ConnectionGuard, GuardedConnection
 from hostpc.serving.log_limits import SERVER_LOGGERS, limit_logging

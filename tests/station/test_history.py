@@ -11,7 +11,8 @@ from pathlib import Path
 import pytest
 
 from hostpc.archive.drift import drift_findings, fleet_summary
-from hostpc.archive.records import ArchivedRun, JointOffset
+from hostpc.archive.records import JointOffset
+from hostpc.archive.rows import ArchivedRun
 from hostpc.robots.simulator import default_sim_scenario
 from tests.station.conftest import REPO, hostpc_command
 

@@ -12,7 +12,8 @@ from matplotlib.collections import PolyCollection
 
 from hostpc.archive.drift import drift_findings
 from hostpc.archive.history_page import drift_figure, drift_plot_png
-from hostpc.archive.records import ArchivedRun, JointOffset
+from hostpc.archive.records import JointOffset
+from hostpc.archive.rows import ArchivedRun
 
 
 def _runs() -> list[ArchivedRun]:

@@ -19,7 +19,7 @@ import pytest
 import yaml
 
 from hostpc.archive import open_archive
-from hostpc.archive.records import ArchivedRun
+from hostpc.archive.rows import ArchivedRun
 from hostpc.station import registers as reg
 from tests.station.plc_client import Plc
 from tests.station.test_station import StationProcess, _free_port
