@@ -27,9 +27,9 @@ VERIFY_ALPHA = 0.01
 
 
 def _measured_per_pose(args: argparse.Namespace) -> int:
-    """Coordinates the method's kind measures per sample (its measurement model's size;
-    stereo_target: a 3-D point), counted per pose: the verification's power per pose of a
-    kind that measures several samples per pose is then a lower bound."""
+    """Coordinates one verification pose adds to the chi-square test: the method's
+    measurement size (per sample; stereo_target: a 3-D point). A kind that measures several
+    samples per pose adds more, so its pose count is on the safe side."""
     return measurement_model(args.method, tuple(args.plugin)).measurement_size
 
 
