@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.errors import ControllerError
+from hostpc.json_object import JsonObject
 
 
 class ControllerRefusedError(ControllerError):
@@ -120,3 +121,16 @@ class TrackerReading:
     points: dict[str, tuple[np.ndarray, np.ndarray]]
     lost: tuple[str, ...]
     description: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class SensorReading:
+    """A reading of a measurement kind's own instrument (`sensor_read`): sensor: its name;
+    q (n,) rad at the reading; time (s); reading: the instrument's JSON answer, whose shape
+    is the contract between the kind's method and its sensor (docs/protocol.md), parsed
+    into the kind's typed sample by its method."""
+
+    sensor: str
+    q: np.ndarray
+    time: float
+    reading: JsonObject
