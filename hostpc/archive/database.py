@@ -38,6 +38,14 @@ import sqlalchemy as sa
 from sqlalchemy.engine import Connection, Engine
 
 from hostpc.archive.records import JointOffset, RunRecord
+from hostpc.archive.rows import (
+    ArchivedRun,
+    Revision,
+    StoredRun,
+    archived_run,
+    as_utc,
+    stored_result,
+)
 from hostpc.errors import InputError, ZerocalError
 from hostpc.kinematics.robots import canonical_name
 
@@ -217,25 +225,30 @@ def _migrate(engine: Engine, url: str, create: bool = True) -> None:
             connection.execute(schema_table.update().values(version=SCHEMA_VERSION))
 
 
-def _offset_rows(run_id: int, offsets: tuple[JointOffset, ...]) -> list[dict[str, Any]]:
-    return [{"run_id": run_id, "joint": o.joint, "label": o.label, "old_deg": o.old_deg,
+def _store_offsets(connection: Connection, run_id: int,
+                   offsets: tuple[JointOffset, ...]) -> None:
+    if offsets:
+        connection.execute(offsets_table.insert().values([
+            {"run_id": run_id, "joint": o.joint, "label": o.label, "old_deg": o.old_deg,
              "correction_deg": o.correction_deg, "sigma_deg": o.sigma_deg,
-             "new_deg": o.new_deg, "pushed": o.pushed} for o in offsets]
-
-
-def _as_utc(value: datetime) -> datetime:
-    return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
+             "new_deg": o.new_deg, "pushed": o.pushed} for o in offsets]))
 
 
 def _outcome_json(record: RunRecord) -> str | None:
-    outcome = record.result.get("outcome")
+    outcome = record.result.outcome if record.result is not None else None
     return None if outcome is None else json.dumps(outcome, allow_nan=True)
+
+
+def _result_json(record: RunRecord) -> str:
+    """The run's result.json as the archive stores it ({} for a run that wrote none)."""
+    return json.dumps(record.result.to_dict() if record.result is not None else {},
+                      allow_nan=True)
 
 
 class Archive:
     """An open archive. `add` stores a run (idempotent by run_uid; a changed outcome
-    revises the record); `runs` lists runs as plain dicts in time order; `run` returns one
-    with its dataset and result; `revisions` the outcomes a run has had."""
+    revises the record); `runs` lists runs (`ArchivedRun`) in time order; `run` returns one
+    with its result and dataset; `revisions` the outcomes a run has had."""
 
     def __init__(self, engine: Engine, url: str):
         self.engine = engine
@@ -245,32 +258,34 @@ class Archive:
         """Store `record`; returns its archive id. A record whose run_uid (or run folder)
         is already stored is not stored twice: if its outcome (verdict, exit code, push
         status, result) changed, the stored record is revised (module docstring)."""
-        values = {
+        archived_at, result_json = datetime.now(UTC), _result_json(record)
+        values = {  # the runs row's columns (bind parameters, the database's boundary)
             "run_uid": record.run_uid, "serial": record.serial,
             "model": canonical_name(record.model),
-            "station": record.station, "started_at": _as_utc(record.started_at),
-            "archived_at": datetime.now(UTC), "method": record.method,
+            "station": record.station, "started_at": as_utc(record.started_at),
+            "archived_at": archived_at, "method": record.method,
             "effects": json.dumps(list(record.effects)), "verdict": record.verdict,
             "exit_code": record.exit_code, "push_status": record.push_status,
             "largest_correction_deg": record.largest_correction_deg,
             "software_version": record.software_version, "run_dir": record.run_dir,
-            "result_json": json.dumps(record.result, allow_nan=True),
-            "dataset_json": None if record.dataset is None else json.dumps(record.dataset),
+            "result_json": result_json, "dataset_json": record.dataset_json,
             "reason": record.reason or None, "report_path": record.report_path or None,
         }
         try:
             with self.engine.begin() as connection:
                 existing = self._stored(connection, record)
                 if existing is not None:
-                    return self._revise(connection, existing, record, values)
+                    keep = ("run_uid", "serial", "model", "station", "started_at")
+                    update = runs_table.update().values(
+                        **{k: v for k, v in values.items() if k not in keep})
+                    return self._revise(connection, existing, record, update, archived_at,
+                                        result_json)
                 key = connection.execute(runs_table.insert().values(**values)).inserted_primary_key
                 assert key is not None  # an insert's result has its primary key
                 run_id = int(key[0])
-                if record.offsets:
-                    connection.execute(offsets_table.insert(),
-                                       _offset_rows(run_id, record.offsets))
+                _store_offsets(connection, run_id, record.offsets)
                 connection.execute(revisions_table.insert().values(
-                    run_id=run_id, revision=1, revised_at=values["archived_at"],
+                    run_id=run_id, revision=1, revised_at=archived_at,
                     verdict=record.verdict, exit_code=record.exit_code,
                     push_status=record.push_status, outcome_json=_outcome_json(record)))
                 return run_id
@@ -302,47 +317,44 @@ class Archive:
         return row
 
     @staticmethod
-    def _revise(connection: Connection, row: Any, record: RunRecord,
-                values: dict[str, Any]) -> int:
-        """Revise the stored run `row` to `record`'s outcome if it changed; its id."""
+    def _revise(connection: Connection, row: Any, record: RunRecord, update: sa.Update,
+                archived_at: datetime, result_json: str) -> int:
+        """Revise the stored run `row` to `record`'s outcome (`update`: its new columns)
+        if it changed; its id."""
         run_id = int(row.id)
         if (row.verdict, row.exit_code, row.push_status, row.result_json, row.reason,
                 row.report_path) == (record.verdict, record.exit_code, record.push_status,
-                                     values["result_json"], values["reason"],
-                                     values["report_path"]):
+                                     result_json, record.reason or None,
+                                     record.report_path or None):
             return run_id
         revision = int(row.revision or 1) + 1
-        keep = ("run_uid", "serial", "model", "station", "started_at")
-        connection.execute(runs_table.update().where(runs_table.c.id == run_id).values(
-            **{k: v for k, v in values.items() if k not in keep}, revision=revision))
+        connection.execute(update.where(runs_table.c.id == run_id).values(revision=revision))
         connection.execute(offsets_table.delete().where(offsets_table.c.run_id == run_id))
-        if record.offsets:
-            connection.execute(offsets_table.insert(), _offset_rows(run_id, record.offsets))
+        _store_offsets(connection, run_id, record.offsets)
         connection.execute(revisions_table.insert().values(
-            run_id=run_id, revision=revision, revised_at=values["archived_at"],
+            run_id=run_id, revision=revision, revised_at=archived_at,
             verdict=record.verdict, exit_code=record.exit_code,
             push_status=record.push_status, outcome_json=_outcome_json(record)))
         return run_id
 
-    def revisions(self, run_id: int) -> list[dict[str, Any]]:
-        """The outcomes run `run_id` has had, oldest first (revision, revised_at, verdict,
-        exit_code, push_status, outcome: the result's outcome block or None)."""
+    def revisions(self, run_id: int) -> list[Revision]:
+        """The outcomes run `run_id` has had, oldest first."""
         try:
             with self.engine.connect() as connection:
-                rows = [dict(r._mapping) for r in connection.execute(
+                rows = connection.execute(
                     sa.select(revisions_table).where(revisions_table.c.run_id == run_id)
-                    .order_by(revisions_table.c.revision))]
+                    .order_by(revisions_table.c.revision)).all()
         except sa.exc.SQLAlchemyError as exc:
             raise ArchiveError(f"archive {self.url}: cannot read ({_first_line(exc)})") from None
-        for row in rows:
-            text = row.pop("outcome_json")
-            row["outcome"] = None if text is None else json.loads(text)
-            row["revised_at"] = _as_utc(row["revised_at"]).isoformat()
-        return rows
+        return [Revision(run_id=int(row.run_id), revision=int(row.revision),
+                         revised_at=as_utc(row.revised_at).isoformat(), verdict=row.verdict,
+                         exit_code=int(row.exit_code), push_status=row.push_status,
+                         outcome=None if row.outcome_json is None
+                         else json.loads(row.outcome_json)) for row in rows]
 
-    def runs(self, serial: str | None = None) -> list[dict[str, Any]]:
+    def runs(self, serial: str | None = None) -> list[ArchivedRun]:
         """Every run (of one robot if `serial`), oldest first, with its per-joint offsets
-        under "offsets" (no dataset or result document: see `run`)."""
+        (no dataset or result document: see `run`)."""
         query = sa.select(*[c for c in runs_table.c
                             if c.name not in ("result_json", "dataset_json")])
         if serial is not None:
@@ -350,40 +362,39 @@ class Archive:
         query = query.order_by(runs_table.c.started_at, runs_table.c.id)
         try:
             with self.engine.connect() as connection:
-                rows = [dict(r._mapping) for r in connection.execute(query)]
-                ids = [r["id"] for r in rows]
-                offsets: dict[int, list[dict[str, Any]]] = {i: [] for i in ids}
-                if ids:
-                    for o in connection.execute(sa.select(offsets_table).where(
-                            offsets_table.c.run_id.in_(ids)).order_by(offsets_table.c.joint)):
-                        entry = dict(o._mapping)
-                        offsets[entry.pop("run_id")].append(entry)
+                rows = connection.execute(query).all()
+                offsets = self._offsets(connection, [int(row.id) for row in rows])
         except sa.exc.SQLAlchemyError as exc:
             raise ArchiveError(f"archive {self.url}: cannot read ({_first_line(exc)})") from None
-        for row in rows:
-            row["model"] = canonical_name(row["model"])  # runs stored before it was canonical
-            row["effects"] = json.loads(row["effects"])
-            row["started_at"] = _as_utc(row["started_at"]).isoformat()
-            row["archived_at"] = _as_utc(row["archived_at"]).isoformat()
-            row["offsets"] = offsets[row["id"]]
-        return rows
+        return [archived_run(row, offsets[int(row.id)]) for row in rows]
 
-    def run(self, run_id: int) -> dict[str, Any]:
-        """One run with its whole result document ("result") and dataset ("dataset")."""
+    @staticmethod
+    def _offsets(connection: Connection, ids: list[int]
+                 ) -> dict[int, tuple[JointOffset, ...]]:
+        """Run id -> its per-joint offsets, by joint."""
+        found: dict[int, list[JointOffset]] = {i: [] for i in ids}
+        if ids:
+            for o in connection.execute(sa.select(offsets_table).where(
+                    offsets_table.c.run_id.in_(ids)).order_by(offsets_table.c.joint)):
+                found[int(o.run_id)].append(JointOffset(
+                    joint=o.joint, label=o.label, old_deg=o.old_deg,
+                    correction_deg=o.correction_deg, sigma_deg=o.sigma_deg,
+                    new_deg=o.new_deg, pushed=o.pushed))
+        return {i: tuple(rows) for i, rows in found.items()}
+
+    def run(self, run_id: int) -> StoredRun:
+        """One run with its result and its dataset document."""
         try:
             with self.engine.connect() as connection:
                 row = connection.execute(sa.select(runs_table).where(
                     runs_table.c.id == run_id)).first()
+                offsets = self._offsets(connection, [run_id])[run_id]
         except sa.exc.SQLAlchemyError as exc:
             raise ArchiveError(f"archive {self.url}: cannot read ({_first_line(exc)})") from None
         if row is None:
             raise InputError(f"--run {run_id}: no such run in the archive {self.url}")
-        entry = dict(row._mapping)
-        entry["result"] = json.loads(entry.pop("result_json"))
-        dataset = entry.pop("dataset_json")
-        entry["dataset"] = None if dataset is None else json.loads(dataset)
-        entry["effects"] = json.loads(entry["effects"])
-        return entry
+        return StoredRun(archived_run(row, offsets), stored_result(row.result_json),
+                         row.dataset_json)
 
     def report_path(self, run_id: int) -> str | None:
         """The report.html path archived with run `run_id` (None: no such run or none)."""

@@ -11,8 +11,11 @@ own uncertainties say it could by chance.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+
+from hostpc.archive.rows import ArchivedRun
+from hostpc.json_object import JsonObject
 
 DEFAULT_THRESHOLD_DEG = 0.02
 DEFAULT_Z_LIMIT = 6.0
@@ -31,37 +34,59 @@ class DriftFinding:
     z: float | None
     reason: str
 
-    def as_dict(self) -> dict[str, Any]:
+    def to_json(self) -> JsonObject:
+        """The finding as `hostpc history --json` prints it."""
         return {"serial": self.serial, "joint": self.label, "from_run": self.from_run,
                 "to_run": self.to_run, "moved_deg": self.moved_deg, "z": self.z,
                 "reason": self.reason}
 
 
+@dataclass(frozen=True)
+class FleetRow:
+    """One robot in the fleet view: its last run's verdict and time (ISO 8601 UTC), its
+    run count, and its largest zero move between two consecutive calibrations (deg)."""
+
+    serial: str
+    model: str
+    runs: int
+    last_verdict: str
+    last_run: str
+    largest_zero_move_deg: float
+
+    def to_json(self) -> JsonObject:
+        """The row as `hostpc history --json` prints it."""
+        return asdict(self)
+
+
 ZeroPoint = tuple[int, str, float, float | None]
 
 
-def zero_series(runs: list[dict[str, Any]]) -> dict[str, list[ZeroPoint]]:
+def zero_series(runs: Sequence[ArchivedRun]) -> dict[str, list[ZeroPoint]]:
     """Per joint label: (run id, time, zero after the run in deg, sigma in deg) over the
     runs that determined it, in the order given."""
     series: dict[str, list[ZeroPoint]] = {}
     for run in runs:
-        for offset in run.get("offsets", []):
-            if offset.get("new_deg") is None or not offset.get("pushed", False):
+        for offset in run.offsets:
+            if offset.new_deg is None or not offset.pushed:
                 continue
-            series.setdefault(offset["label"], []).append(
-                (int(run["id"]), str(run["started_at"]), float(offset["new_deg"]),
-                 None if offset.get("sigma_deg") is None else float(offset["sigma_deg"])))
+            series.setdefault(offset.label, []).append(
+                (run.id, run.started_at, offset.new_deg, offset.sigma_deg))
     return series
 
 
-def drift_findings(runs: list[dict[str, Any]], threshold_deg: float = DEFAULT_THRESHOLD_DEG,
+def by_robot(runs: Sequence[ArchivedRun]) -> dict[str, list[ArchivedRun]]:
+    """The runs per robot serial (in the order given; robots in order of their first run)."""
+    robots: dict[str, list[ArchivedRun]] = {}
+    for run in runs:
+        robots.setdefault(run.serial, []).append(run)
+    return robots
+
+
+def drift_findings(runs: Sequence[ArchivedRun], threshold_deg: float = DEFAULT_THRESHOLD_DEG,
                    z_limit: float = DEFAULT_Z_LIMIT) -> list[DriftFinding]:
     """Drift findings over archived runs (any robots; each robot's runs in time order)."""
-    by_robot: dict[str, list[dict[str, Any]]] = {}
-    for run in runs:
-        by_robot.setdefault(str(run["serial"]), []).append(run)
     findings = []
-    for serial, robot_runs in by_robot.items():
+    for serial, robot_runs in by_robot(runs).items():
         for label, points in zero_series(robot_runs).items():
             for (run_a, _, zero_a, sigma_a), (run_b, _, zero_b, sigma_b) in zip(
                     points, points[1:], strict=False):
@@ -80,20 +105,16 @@ def drift_findings(runs: list[dict[str, Any]], threshold_deg: float = DEFAULT_TH
     return findings
 
 
-def fleet_summary(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+def fleet_summary(runs: Sequence[ArchivedRun]) -> list[FleetRow]:
     """Per robot: its last run's verdict and time, and its largest zero move between any
     two consecutive calibrations (deg), robots moving most first."""
-    by_robot: dict[str, list[dict[str, Any]]] = {}
-    for run in runs:
-        by_robot.setdefault(str(run["serial"]), []).append(run)
     rows = []
-    for serial, robot_runs in by_robot.items():
+    for serial, robot_runs in by_robot(runs).items():
         last = robot_runs[-1]
         largest = 0.0
         for points in zero_series(robot_runs).values():
             for a, b in zip(points, points[1:], strict=False):
                 largest = max(largest, abs(b[2] - a[2]))
-        rows.append({"serial": serial, "model": last.get("model", ""), "runs": len(robot_runs),
-                     "last_verdict": last["verdict"], "last_run": last["started_at"],
-                     "largest_zero_move_deg": largest})
-    return sorted(rows, key=lambda row: -float(row["largest_zero_move_deg"]))
+        rows.append(FleetRow(serial, last.model, len(robot_runs), last.verdict,
+                             last.started_at, largest))
+    return sorted(rows, key=lambda row: -row.largest_zero_move_deg)

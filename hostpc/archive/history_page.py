@@ -7,16 +7,19 @@ from __future__ import annotations
 import base64
 import html
 import io
+from collections.abc import Sequence
 from datetime import datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from hostpc.archive.drift import (
     DEFAULT_THRESHOLD_DEG,
     DriftFinding,
+    by_robot,
     fleet_summary,
     zero_series,
 )
+from hostpc.archive.rows import ArchivedRun
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -28,7 +31,7 @@ def local_time(stamp: str) -> str:
     return datetime.fromisoformat(stamp).astimezone().strftime("%Y-%m-%d %H:%M:%S %Z")
 
 
-def drift_plot_png(runs: list[dict[str, Any]], findings: list[DriftFinding],
+def drift_plot_png(runs: Sequence[ArchivedRun], findings: list[DriftFinding],
                    threshold_deg: float = DEFAULT_THRESHOLD_DEG) -> bytes:
     """`drift_figure` as a PNG."""
     figure = drift_figure(runs, findings, threshold_deg)  # selects the Agg backend first
@@ -40,7 +43,7 @@ def drift_plot_png(runs: list[dict[str, Any]], findings: list[DriftFinding],
     return buffer.getvalue()
 
 
-def drift_figure(runs: list[dict[str, Any]], findings: list[DriftFinding],
+def drift_figure(runs: Sequence[ArchivedRun], findings: list[DriftFinding],
                  threshold_deg: float = DEFAULT_THRESHOLD_DEG) -> Figure:
     """One robot's zero of each joint against the calibrations' dates (local time; deg,
     change from the first calibration, error bars = 1 sigma); joints with a drift finding
@@ -83,29 +86,31 @@ def drift_figure(runs: list[dict[str, Any]], findings: list[DriftFinding],
     axes[-1, 0].set_xlabel(f"date of the calibration ({datetime.now().astimezone():%Z})",
                            fontsize=9)
     if runs:
-        figure.suptitle(f"zero offsets of {runs[0]['serial']} (change since first "
+        figure.suptitle(f"zero offsets of {runs[0].serial} (change since first "
                         f"calibration; band: +-{threshold_deg:g} deg drift threshold from the "
                         "previous one)", fontsize=9)
     figure.tight_layout()
     return figure
 
 
-def _table(rows: list[dict[str, Any]], columns: list[tuple[str, str]]) -> str:
-    head = "".join(f"<th>{html.escape(title)}</th>" for _, title in columns)
-    body = []
-    for row in rows:
-        cells = []
-        for key, _ in columns:
-            value = row.get(key, "")
-            if key == "report":  # a link to the run's report.html (file URL), or nothing
-                link = (f"<a class='report' href='{html.escape(report_url(value))}'>report</a>"
-                        if value else "")
-                cells.append(f"<td>{link}</td>")
-                continue
-            text = f"{value:.4f}" if isinstance(value, float) else str(value)
-            css = f' class="{html.escape(text)}"' if key in ("verdict", "last_verdict") else ""
-            cells.append(f"<td{css}>{html.escape(text)}</td>")
-        body.append("<tr>" + "".join(cells) + "</tr>")
+def _cell(value: object, verdict: bool = False) -> str:
+    """A table cell: a float to 4 decimals, anything else as text; a verdict is styled."""
+    text = f"{value:.4f}" if isinstance(value, float) else str(value)
+    css = f' class="{html.escape(text)}"' if verdict else ""
+    return f"<td{css}>{html.escape(text)}</td>"
+
+
+def _report_cell(path: str | None) -> str:
+    """A cell linking a run's report.html (file URL), or an empty one."""
+    link = (f"<a class='report' href='{html.escape(report_url(path))}'>report</a>"
+            if path else "")
+    return f"<td>{link}</td>"
+
+
+def _table(titles: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    """An HTML table of `titles` over rows of rendered cells (`_cell`, `_report_cell`)."""
+    head = "".join(f"<th>{html.escape(title)}</th>" for title in titles)
+    body = ["<tr>" + "".join(cells) + "</tr>" for cells in rows]
     return f"<table><tr>{head}</tr>{''.join(body)}</table>"
 
 
@@ -120,7 +125,7 @@ def report_url(path: str) -> str:
     return Path(path).resolve().as_uri()
 
 
-def history_html(runs: list[dict[str, Any]], findings: list[DriftFinding],
+def history_html(runs: Sequence[ArchivedRun], findings: list[DriftFinding],
                  robot: str | None = None,
                  threshold_deg: float = DEFAULT_THRESHOLD_DEG) -> str:
     """The history page for `runs` (all robots, or the one named `robot`); each run links
@@ -129,11 +134,11 @@ def history_html(runs: list[dict[str, Any]], findings: list[DriftFinding],
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}"
              f"</title><style>{STYLE}</style></head><body><h1>{html.escape(title)}</h1>"]
     parts.append("<h2>Fleet: last verdict per robot, largest zero move first</h2>")
-    fleet = [{**row, "last_run": local_time(row["last_run"])} for row in fleet_summary(runs)]
-    parts.append(_table(fleet, [
-        ("serial", "robot"), ("model", "model"), ("runs", "runs"),
-        ("last_verdict", "last verdict"), ("last_run", "last run"),
-        ("largest_zero_move_deg", "largest zero move [deg]")]))
+    parts.append(_table(
+        ["robot", "model", "runs", "last verdict", "last run", "largest zero move [deg]"],
+        [[_cell(row.serial), _cell(row.model), _cell(row.runs),
+          _cell(row.last_verdict, verdict=True), _cell(local_time(row.last_run)),
+          _cell(row.largest_zero_move_deg)] for row in fleet_summary(runs)]))
     parts.append("<h2>Drift alarms</h2>")
     if findings:
         parts.append("<ul>" + "".join(
@@ -143,18 +148,14 @@ def history_html(runs: list[dict[str, Any]], findings: list[DriftFinding],
     else:
         parts.append("<p>none: no joint zero moved beyond its threshold or uncertainty.</p>")
     parts.append("<h2>Runs</h2>")
-    shown = [{**run, "started_at": local_time(run["started_at"]),
-              "reason": run.get("reason") or "",
-              "report": run.get("report_path") or ""} for run in runs]
-    parts.append(_table(shown, [("id", "id"), ("serial", "robot"), ("started_at", "started"),
-                               ("station", "station"), ("method", "method"),
-                               ("verdict", "verdict"), ("push_status", "push"),
-                               ("largest_correction_deg", "largest correction [deg]"),
-                               ("reason", "reason"), ("report", "report")]))
-    by_robot: dict[str, list[dict[str, Any]]] = {}
-    for run in runs:
-        by_robot.setdefault(str(run["serial"]), []).append(run)
-    for serial, robot_runs in by_robot.items():
+    parts.append(_table(
+        ["id", "robot", "started", "station", "method", "verdict", "push",
+         "largest correction [deg]", "reason", "report"],
+        [[_cell(run.id), _cell(run.serial), _cell(local_time(run.started_at)),
+          _cell(run.station), _cell(run.method), _cell(run.verdict, verdict=True),
+          _cell(run.push_status), _cell(run.largest_correction_deg), _cell(run.reason or ""),
+          _report_cell(run.report_path)] for run in runs]))
+    for serial, robot_runs in by_robot(runs).items():
         robot_findings = [f for f in findings if f.serial == serial]
         png = base64.b64encode(drift_plot_png(robot_runs, robot_findings,
                                               threshold_deg)).decode()

@@ -11,13 +11,15 @@ from __future__ import annotations
 
 import json
 import uuid
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
 from hostpc import __version__
+from hostpc.calibrate.run_result import RunResult
 from hostpc.errors import InputError
+from hostpc.json_object import JsonObject
 
 
 @dataclass(frozen=True)
@@ -34,12 +36,40 @@ class JointOffset:
 
 
 @dataclass(frozen=True)
+class VerifyFigures:
+    """The verification test the station's registers show: chi-square statistic, p-value
+    and degrees of freedom (None / 0 where the run verified nothing)."""
+
+    statistic: float | None = None
+    p_value: float | None = None
+    dof: int = 0
+
+
+@dataclass(frozen=True)
+class OutcomeFigures:
+    """What the station reads of a run's outcome (result.json "outcome",
+    hostpc.calibrate.outcome): verdict and headline, pushed / verified, and the joints
+    calibrated (from data and, if pushed, verified), not calibrated from data, and
+    required but missing, by 1-based number."""
+
+    verdict: str | None
+    headline: str
+    pushed: bool
+    verified: bool | None
+    calibrated: tuple[int, ...]
+    not_calibrated: tuple[int, ...]
+    missing_required: tuple[int, ...]
+
+
+@dataclass(frozen=True)
 class RunRecord:
     """One archived calibration run.
 
     verdict: the run's outcome verdict (result.json "outcome", hostpc.calibrate.outcome:
     PASS, FAIL, REFUSED, JOINTS_MISSING, NOT_PUSHED, NOT_VERIFIED, ROLLED_BACK, ERROR);
     for an older result without one see `verdict_of`. exit_code is `hostpc calibrate`'s.
+    result: the run's result.json (None: the run wrote none); dataset_json: its
+    dataset.json as the archive stores it (None: none).
     """
 
     run_uid: str
@@ -53,14 +83,12 @@ class RunRecord:
     exit_code: int
     push_status: str
     largest_correction_deg: float | None
-    verify: dict[str, Any]
-    fit: dict[str, Any]
+    verify: VerifyFigures
     offsets: tuple[JointOffset, ...]
     software_version: str
-    result: dict[str, Any]
-    dataset: dict[str, Any] | None
+    result: RunResult | None
+    dataset_json: str | None
     run_dir: str = ""
-    truth: dict[str, Any] | None = field(default=None)
     uid_from_folder: bool = False
     """True if run_uid derives from the run folder (no caller gave one): the archive then
     also finds the run by its folder (a station's run resumed by hand)."""
@@ -69,61 +97,97 @@ class RunRecord:
     report_path: str = ""
     """The run's report.html (empty if it has none)."""
 
+    @property
+    def outcome(self) -> OutcomeFigures | None:
+        """The result's outcome block (None: no result, or one written before outcomes)."""
+        return outcome_of(self.result)
 
-def verdict_of(result: dict[str, Any], exit_code: int) -> str:
+
+def outcome_of(result: RunResult | None) -> OutcomeFigures | None:
+    """The outcome figures of `result` (None: no result, or an older one without an
+    outcome block). Parses the block's JSON form (the result keeps it so)."""
+    block = result.outcome if result is not None else None
+    if not isinstance(block, Mapping):
+        return None
+    joints = [j for j in block.get("joints") or [] if isinstance(j, Mapping)]
+    verdict = block.get("verdict")
+    return OutcomeFigures(
+        verdict=verdict if isinstance(verdict, str) else None,
+        headline=str(block.get("headline") or ""), pushed=bool(block.get("pushed")),
+        verified=block.get("verified"),
+        calibrated=tuple(int(j["joint"]) for j in joints if j.get("status") == "calibrated"
+                         and (not j.get("pushed") or j.get("verified") is True)),
+        not_calibrated=tuple(int(j["joint"]) for j in joints if j.get("source") != "data"),
+        missing_required=tuple(int(n) for n in block.get("missing_required") or []))
+
+
+def verdict_of(result: RunResult | None, exit_code: int) -> str:
     """The archive verdict: the result's outcome verdict when it has one (the one source
     of truth; an ERROR exit still says ERROR). An older result without an outcome: a
     refused push is REFUSED, and a verification counts only if offsets were pushed (with
-    nothing pushed it is a model check, never a PASS)."""
-    verify = result.get("verify") or {}
-    push = result.get("push") or {}
-    outcome = result.get("outcome")
-    if isinstance(outcome, dict) and isinstance(outcome.get("verdict"), str):
-        if exit_code not in (0, 5, 6, 7) and outcome["verdict"] in ("PASS", "NOT_PUSHED"):
+    nothing pushed it is a model check, never a PASS); no result: by the exit code."""
+    verify = (result.verify if result is not None else None) or {}
+    push_status = result.push.status if result is not None else None
+    outcome = outcome_of(result)
+    if outcome is not None and outcome.verdict is not None:
+        if exit_code not in (0, 5, 6, 7) and outcome.verdict in ("PASS", "NOT_PUSHED"):
             return "ERROR"  # the process failed after writing its result
-        return str(outcome["verdict"])
-    if push.get("status") == "refused" or exit_code == 5:
+        return outcome.verdict
+    if push_status == "refused" or exit_code == 5:
         return "REFUSED"
-    if push.get("status") != "pushed" and exit_code == 0:
+    if push_status != "pushed" and exit_code == 0:
         return "NOT_PUSHED"  # a model check on fresh poses is no verification
-    if isinstance(verify, dict) and verify.get("verdict") in ("PASS", "FAIL"):
+    if verify.get("verdict") in ("PASS", "FAIL"):
         return str(verify["verdict"])
-    if isinstance(verify, dict) and "passed" in verify and verify.get("passed") is not None:
+    if "passed" in verify and verify.get("passed") is not None:
         return "PASS" if verify["passed"] else "FAIL"
     if exit_code in (5, 6):
         return "FAIL"
     if exit_code != 0:
         return "ERROR"
-    return "NOT_PUSHED" if push.get("status") != "pushed" else "PASS"
+    return "NOT_PUSHED" if push_status != "pushed" else "PASS"
 
 
-def _float_or_none(value: Any) -> float | None:
+def _float_or_none(value: float | None) -> float | None:
+    """A number of the result as a float (None: none, or not a number)."""
     try:
         return None if value is None else float(value)
     except (TypeError, ValueError):
         return None
 
 
-def _offsets(result: dict[str, Any]) -> tuple[JointOffset, ...]:
-    joints = (result.get("offsets") or {}).get("joints") or []
-    rows = []
-    for index, row in enumerate(joints):
-        if not isinstance(row, dict):
-            continue
-        rows.append(JointOffset(
-            joint=int(row.get("joint", index + 1)), label=str(row.get("label", f"q{index + 1}")),
-            old_deg=_float_or_none(row.get("old_deg")),
-            correction_deg=_float_or_none(row.get("correction_deg")),
-            sigma_deg=_float_or_none(row.get("sigma_deg")),
-            new_deg=_float_or_none(row.get("new_deg")), pushed=bool(row.get("pushed", False))))
-    return tuple(rows)
+def _offsets(result: RunResult | None) -> tuple[JointOffset, ...]:
+    rows = result.offsets if result is not None else ()
+    return tuple(JointOffset(joint=row.joint, label=row.label or f"q{row.joint}",
+                             old_deg=_float_or_none(row.old_deg),
+                             correction_deg=_float_or_none(row.correction_deg),
+                             sigma_deg=_float_or_none(row.sigma_deg),
+                             new_deg=_float_or_none(row.new_deg), pushed=row.pushed)
+                 for row in rows)
 
 
-def _read_json(path: Path) -> Any:
+def _verify_figures(result: RunResult | None) -> VerifyFigures:
+    verify = (result.verify if result is not None else None) or {}
+    return VerifyFigures(_float_or_none(verify.get("statistic")),
+                         _float_or_none(verify.get("p_value")), int(verify.get("dof") or 0))
+
+
+def _read_json(path: Path) -> JsonObject:
     try:
-        return json.loads(path.read_text())
+        document = json.loads(path.read_text())
     except (OSError, ValueError) as exc:
         raise InputError(f"{path}: cannot read run file ({exc})") from None
+    if not isinstance(document, dict):
+        raise InputError(f"{path}: not a {path.stem} document")
+    return document
+
+
+def read_result(path: Path) -> RunResult:
+    """A run's result.json as its value; InputError if it is not a calibration result."""
+    try:
+        return RunResult.from_dict(_read_json(path))
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise InputError(f"{path}: not a calibration result document ({exc!r})") from None
 
 
 def record_from_run(run_dir: str | Path, *, serial: str, model: str = "", station: str = "",
@@ -135,12 +199,11 @@ def record_from_run(run_dir: str | Path, *, serial: str, model: str = "", statio
     run that did not PASS; report_path is RUN/report.html when it exists."""
     folder = Path(run_dir)
     result_path = folder / "result.json"
-    result: dict[str, Any] = _read_json(result_path) if result_path.exists() else {}
-    if not isinstance(result, dict):
-        raise InputError(f"{result_path}: not a calibration result document")
-    code = int(exit_code if exit_code is not None else result.get("exit_code", 1))
+    result = read_result(result_path) if result_path.exists() else None
+    code = int(exit_code if exit_code is not None else
+               result.exit_code if result is not None else 1)
     dataset_path = folder / "dataset.json"
-    dataset = _read_json(dataset_path) if dataset_path.exists() else None
+    dataset_json = json.dumps(_read_json(dataset_path)) if dataset_path.exists() else None
     offsets = _offsets(result)
     corrections = [abs(o.correction_deg) for o in offsets
                    if o.correction_deg is not None and o.pushed]
@@ -149,19 +212,17 @@ def record_from_run(run_dir: str | Path, *, serial: str, model: str = "", statio
     # the same run folder archived twice is one record: its uid derives from the folder
     # and its creation time unless the caller (the station) gives one
     uid = run_uid or uuid.uuid5(uuid.NAMESPACE_URL, f"zerocal-run:{folder.resolve()}|{created}")
-    fit = result.get("fit") or {}
-    robot = result.get("robot") or {}
+    fit = result.fit if result is not None else {}
     return RunRecord(
         run_uid=str(uid or uuid.uuid4()), serial=serial,
-        model=model or str(robot.get("name", "")), station=station,
-        started_at=started_at or datetime.now(UTC),
-        method=str(result.get("method", "")),
+        model=model or str(result.robot.get("name", "") if result is not None else ""),
+        station=station, started_at=started_at or datetime.now(UTC),
+        method=result.method if result is not None else "",
         effects=tuple(str(e) for e in fit.get("effects", []) or []),
         verdict=verdict_of(result, code), exit_code=code,
-        push_status=str((result.get("push") or {}).get("status", "none")),
+        push_status=result.push.status if result is not None else "none",
         largest_correction_deg=max(corrections) if corrections else None,
-        verify=dict(result.get("verify") or {}), fit=dict(fit), offsets=offsets,
-        software_version=__version__, result=result, dataset=dataset,
-        run_dir=str(folder), truth=result.get("truth"), uid_from_folder=run_uid is None,
-        reason=reason,
+        verify=_verify_figures(result), offsets=offsets,
+        software_version=__version__, result=result, dataset_json=dataset_json,
+        run_dir=str(folder), uid_from_folder=run_uid is None, reason=reason,
         report_path=str(folder / "report.html") if (folder / "report.html").is_file() else "")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 from pathlib import Path
@@ -41,10 +40,10 @@ def dataset_from_archive(args: argparse.Namespace) -> str:
     if args.run is None:
         raise InputError("--db needs --run ID (the archived run to refit)")
     with open_archive(args.db, create=False) as archive:
-        entry = archive.run(args.run)
-    if entry["dataset"] is None:
+        stored = archive.run(args.run)
+    if stored.dataset_json is None:
         raise InputError(f"--run {args.run}: the archived run has no dataset")
     folder = Path(tempfile.mkdtemp(prefix="zerocal-archived-"))
     path = folder / f"run-{args.run}-dataset.json"
-    path.write_text(json.dumps(entry["dataset"]))
+    path.write_text(stored.dataset_json)
     return str(path)

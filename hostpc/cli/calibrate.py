@@ -55,6 +55,7 @@ from hostpc.cli.calibrate_checks import (
     check_reference_option,
 )
 from hostpc.cli.fit import add_constraint_options, add_model_options
+from hostpc.cli.kind_options import add_kind_options, kind_option_values
 from hostpc.cli.numbers import finite, integer
 from hostpc.cli.pose_counts import pose_counts
 from hostpc.cli.progress import StderrProgress
@@ -65,7 +66,7 @@ from hostpc.cli.termination import (
     cancel_on_sigterm,
     sigterm_as_interrupt,
 )
-from hostpc.dataset.kind_registry import DEFAULT_METHOD, kind_descriptors
+from hostpc.dataset.kind_registry import DEFAULT_METHOD
 from hostpc.errors import InputError, ZerocalError
 from hostpc.methods.base import RunSettings
 from hostpc.methods.cell import load_cell_file, parse_known
@@ -126,24 +127,7 @@ def register(subparsers: Any) -> None:
                         help="cell reference (hostpc reference record): its frames enter the "
                         "fit as priors so every joint is calibrated, and are checked against "
                         "the data; on --resume: replace the run's, or none to drop it")
-    parser.add_argument("--rig", metavar="FILE",
-                        help="calibrated stereo rig JSON (default: calibrate from chessboard "
-                        "captures through the controller)")
-    parser.add_argument("--rig-coverage", type=finite(least=0.5, most=1.0), metavar="F",
-                        help="rig calibration: chessboard coverage to plan for (default 0.5)")
-    parser.add_argument("--depth", choices=("triangulate", "sgbm"), default="triangulate",
-                        help="stereo depth method (default triangulate)")
-    parser.add_argument("--pixel-floor", type=finite(least=0.0), default=None, metavar="PX",
-                        help="systematic floor (px per image coordinate) added to each "
-                        "measured covariance for rig calibration and detection errors "
-                        "(default 0.01 for stereo_target, 0 for dual_loop; 0 = image "
-                        "noise only)")
-    parser.add_argument("--probe-io", choices=("guarded", "modbus"), default="guarded",
-                        help="sphere_probe contacts: the controller's latched guarded move "
-                        "(default) or stepping while polling the probe line over Modbus TCP")
-    parser.add_argument("--modbus", metavar="HOST[:PORT]",
-                        help="with --probe-io modbus: the Modbus server (default: the "
-                        "robot's host, port 502; with --robot sim the simulator's)")
+    add_kind_options(parser)  # the rig, --depth, --probe-io, ... (the kinds')
     parser.add_argument("--push", action=argparse.BooleanOptionalAction, default=None,
                         help="write the compensated offsets to the controller (default yes; "
                         "on a resume after a rollback: push again)")
@@ -232,26 +216,7 @@ def _settings(args: argparse.Namespace) -> RunSettings:
         raise InputError(f"--target-sigma {args.target_sigma}: must be positive")
     if args.timeout <= 0:
         raise InputError(f"--timeout {args.timeout}: must be positive")
-    if args.pixel_floor is not None and args.pixel_floor < 0:
-        raise InputError(f"--pixel-floor {args.pixel_floor}: must not be negative")
-    options: dict[str, Any] = {"depth": args.depth}
-    if args.pixel_floor is not None:  # else the method's own default (PIXEL_FLOOR_PX, 0)
-        options["pixel_floor"] = args.pixel_floor
-    if args.rig:
-        options["rig"] = str(Path(args.rig).resolve())
-    if args.rig_coverage is not None:
-        options["rig_coverage"] = args.rig_coverage
-    if args.probe_io != "guarded":
-        takers = [name for name, kind in kind_descriptors(args.plugin).items()
-                  if "probe_io" in kind.method_options]
-        if args.method not in takers:
-            raise InputError(f"--probe-io {args.probe_io}: only for --method "
-                             f"{', '.join(takers)}")
-        options["probe_io"] = args.probe_io
-    if args.modbus:
-        if args.probe_io != "modbus":
-            raise InputError("--modbus needs --probe-io modbus")
-        options["modbus"] = args.modbus
+    options = kind_option_values(args, args.method, tuple(args.plugin))
     return RunSettings(
         method=args.method, n_poses=args.poses, n_verify=args.verify_poses, seed=args.seed,
         effects=args.effects, plugins=tuple(args.plugin), loss=args.loss,

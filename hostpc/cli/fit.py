@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
                      cv_folds=args.cv_folds)
     adequacy = model_adequacy(result, args.dataset)  # chi2/dof against its band, once
     # above the band: the sigmas scaled by sqrt(chi2/dof) are shown beside the stated ones
-    scaled = scaled_std(result) if adequacy["explains_data"] is False else None
+    scaled = scaled_std(result) if adequacy.explains_data is False else None
     jackknife = jackknife_std(result) if args.jackknife else None
     if args.json:
         document = result.to_dict()
@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
             if values is not None:
                 for k, entry in enumerate(document["parameters"].values()):
                     entry[column] = float(values[k]) if math.isfinite(values[k]) else None
-        document["model_adequacy"] = adequacy
+        document["model_adequacy"] = adequacy.to_json()
         json.dump(document, sys.stdout, indent=2, allow_nan=False)
         sys.stdout.write("\n")
     else:

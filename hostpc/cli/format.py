@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import math
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
 from hostpc.diagnostics.adequacy import chi2_dof_upper
 from hostpc.display_units import DISPLAY_UNITS
 from hostpc.fitting import FitResult
+from hostpc.json_object import JsonObject
 from hostpc.model import joint_offsets
 from hostpc.model.joint_offsets import is_offset
 
@@ -45,18 +46,34 @@ def format_parameter_table(result: FitResult, scaled: np.ndarray | None = None,
     return lines
 
 
-def model_adequacy(result: FitResult, source: str = "DATASET") -> dict[str, Any]:
+@dataclass(frozen=True)
+class ModelAdequacy:
     """Whether the converged model explains the data: its chi2/dof against the chi-square
     band (hostpc.diagnostics.adequacy.chi2_dof_upper, the push guard's rule). A solver
     that converged far outside the band has found the best of a wrong model.
-    JSON-ready: chi2_dof, chi2_dof_upper, explains_data (None: no dof to judge), next."""
+    chi2_dof / chi2_dof_upper: None where not finite; explains_data: None with no dof to
+    judge; next_command: the diagnosis to run when it does not explain the data."""
+
+    chi2_dof: float | None
+    chi2_dof_upper: float | None
+    explains_data: bool | None
+    next_command: str | None
+
+    def to_json(self) -> JsonObject:
+        """`hostpc fit --json`'s "model_adequacy" block."""
+        return {"chi2_dof": self.chi2_dof, "chi2_dof_upper": self.chi2_dof_upper,
+                "explains_data": self.explains_data, "next": self.next_command}
+
+
+def model_adequacy(result: FitResult, source: str = "DATASET") -> ModelAdequacy:
+    """The fit's `ModelAdequacy`; `source` names the dataset in the next command."""
     band = chi2_dof_upper(result.dof)
     judged = math.isfinite(band) and math.isfinite(result.chi2_dof)
     explains = (result.chi2_dof <= band) if judged else None
-    return {"chi2_dof": result.chi2_dof if math.isfinite(result.chi2_dof) else None,
-            "chi2_dof_upper": band if math.isfinite(band) else None,
-            "explains_data": explains,
-            "next": None if explains is not False else f"hostpc diagnose {source} --ladder"}
+    return ModelAdequacy(
+        chi2_dof=result.chi2_dof if math.isfinite(result.chi2_dof) else None,
+        chi2_dof_upper=band if math.isfinite(band) else None, explains_data=explains,
+        next_command=None if explains is not False else f"hostpc diagnose {source} --ladder")
 
 
 def _converged_line(result: FitResult, source: str) -> str:
@@ -72,10 +89,10 @@ def _converged_line(result: FitResult, source: str) -> str:
                 "noise and the sigmas assume both; measure more poses (hostpc diagnose "
                 f"{source or 'DATASET'} says how many)")
     adequacy = model_adequacy(result, source or "DATASET")
-    if adequacy["explains_data"] is False:
+    if adequacy.explains_data is False:
         return (f"  converged (solver) {how}, but the model does not explain the data: "
                 f"chi2/dof {result.chi2_dof:.4g} far above its band "
-                f"{adequacy['chi2_dof_upper']:.4g}; next: {adequacy['next']}")
+                f"{adequacy.chi2_dof_upper:.4g}; next: {adequacy.next_command}")
     return f"  converged: yes {how}"
 
 

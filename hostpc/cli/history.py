@@ -49,15 +49,16 @@ def run(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise InputError(f"--html {args.html}: cannot write ({exc.strerror})") from None
     if args.json:
-        json.dump({"runs": runs, "drift": [f.as_dict() for f in findings],
-                   "fleet": fleet_summary(runs)}, sys.stdout, indent=1, default=str)
+        json.dump({"runs": [r.to_json() for r in runs],
+                   "drift": [f.to_json() for f in findings],
+                   "fleet": [row.to_json() for row in fleet_summary(runs)]},
+                  sys.stdout, indent=1, default=str)
         sys.stdout.write("\n")
     else:
         for row in fleet_summary(runs):
-            move = row["largest_zero_move_deg"]
-            print(f"{row['serial']:<20} {row['model']:<10} runs {row['runs']:>3}  last "
-                  f"{row['last_verdict']:<10} {local_time(row['last_run'])}  "
-                  f"largest zero move {move:.4f} deg")
+            print(f"{row.serial:<20} {row.model:<10} runs {row.runs:>3}  last "
+                  f"{row.last_verdict:<10} {local_time(row.last_run)}  "
+                  f"largest zero move {row.largest_zero_move_deg:.4f} deg")
         if not runs:
             print("no archived runs" + (f" of {args.robot}" if args.robot else ""))
         for finding in findings:

@@ -21,6 +21,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from hostpc.cli.robots import RobotChoice, resolve_chain
 from hostpc.errors import InputError
 from hostpc.importing.column_map import parse_column_map
 from hostpc.importing.csv_import import (
@@ -84,19 +85,19 @@ def register(subparsers: Any) -> None:
     parser.set_defaults(func=run)
 
 
-def _robot(args: argparse.Namespace, output: Path) -> tuple[dict[str, Any], Chain]:
-    """The dataset's robot object and its chain."""
-    from hostpc.cli.robots import resolve_chain
-    from hostpc.kinematics.table_file import is_table_file, table_robot_document
+def _robot(args: argparse.Namespace, output: Path) -> tuple[RobotChoice, Chain]:
+    """The dataset's robot (a URDF path relative to the dataset file, a table file's rows in
+    SI) and its chain."""
+    from hostpc.kinematics.table_file import is_table_file
 
     chain = resolve_chain(args.robot, args.base_link, args.tip_link)
     if is_table_file(args.robot):  # the table itself: the dataset is SI
-        return table_robot_document(args.robot), chain
+        return RobotChoice(chain.n, table=args.robot), chain
     if args.robot.lower().endswith(".urdf"):
         relative = os.path.relpath(Path(args.robot).resolve(), output.resolve().parent)
-        return {"urdf": relative, "base_link": args.base_link,
-                "tip_link": args.tip_link}, chain
-    return {"name": args.robot}, chain
+        return RobotChoice(chain.n, urdf=relative, base_link=args.base_link,
+                           tip_link=args.tip_link), chain
+    return RobotChoice(chain.n, name=args.robot), chain
 
 
 def _method_frames(method: str) -> tuple[str, ...]:
@@ -132,8 +133,8 @@ def run(args: argparse.Namespace) -> int:
     prismatic = tuple(bool(p) for p in chain.joint_is_prismatic)
     check_input_file(args.csv, CSV)  # a regular file (no FIFO, device) within the CSV limit
     options = ImportOptions(
-        method=args.method, robot=robot, prismatic=prismatic, length_unit=args.length_unit,
-        angle_unit=args.angle_unit, joint_unit=args.joint_unit,
+        method=args.method, robot=robot.to_json(), prismatic=prismatic,
+        length_unit=args.length_unit, angle_unit=args.angle_unit, joint_unit=args.joint_unit,
         sigma=args.sigma if args.sigma is not None else 1e-4 / LENGTH_UNITS[args.length_unit],
         sigma_angle=args.sigma_angle, known=known, decimal=args.decimal, euler=args.euler)
     samples = _read_csv_file(Path(args.csv), args, len(prismatic), options)
@@ -147,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
         output.unlink(missing_ok=True)
         raise InputError(f"{output}: cannot write ({exc.strerror or exc})") from None
     print(f"wrote {output}: {len(samples)} samples, method {args.method}, "
-          f"robot {robot.get('name') or robot.get('urdf')}")
+          f"robot {robot.name or robot.urdf}")
     return 0
 
 

@@ -15,6 +15,7 @@ import argparse
 
 from hostpc.errors import InputError
 from hostpc.methods import method_class
+from hostpc.model.measurements.registry import measurement_model
 from hostpc.planning.verify_poses import verify_poses_for_power
 
 DEFAULT_MAX_POSES = 60
@@ -23,8 +24,13 @@ DEFAULT_VERIFY_POSES = 10
 """Verification poses without --verify-poses and without a target sigma."""
 VERIFY_ALPHA = 0.01
 """The verification's false-FAIL rate without --verify-alpha (hostpc.calibrate.verify)."""
-MEASURED_PER_POSE = 3
-"""Coordinates a target-sigma method measures per pose (stereo_target: a 3-D point)."""
+
+
+def _measured_per_pose(args: argparse.Namespace) -> int:
+    """Coordinates one verification pose adds to the chi-square test: the method's
+    measurement size (per sample; stereo_target: a 3-D point). A kind that measures several
+    samples per pose adds more, so its pose count is on the safe side."""
+    return measurement_model(args.method, tuple(args.plugin)).measurement_size
 
 
 def pose_counts(args: argparse.Namespace) -> tuple[int, int, float | None]:
@@ -43,6 +49,6 @@ def pose_counts(args: argparse.Namespace) -> tuple[int, int, float | None]:
     verify = args.verify_poses
     if verify is None:
         alpha = VERIFY_ALPHA if args.verify_alpha is None else float(args.verify_alpha)
-        verify = (verify_poses_for_power(alpha=alpha, m=MEASURED_PER_POSE)
+        verify = (verify_poses_for_power(alpha=alpha, m=_measured_per_pose(args))
                   if target is not None else DEFAULT_VERIFY_POSES)
     return poses, verify, target

@@ -22,8 +22,8 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
-from typing import Any
 
+from hostpc.calibrate.run_result import RunResult
 from hostpc.errors import InputError
 
 
@@ -52,14 +52,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     show.set_defaults(func=run_show)
 
 
-def _refusal(run: Path, result: dict[str, Any], force: bool) -> str | None:
+def _refusal(run: Path, result: RunResult, force: bool) -> str | None:
     """Why this run cannot be a reference (None: it can)."""
-    if not result.get("fit", {}).get("converged"):
+    if not result.fit.get("converged"):
         return "its fit did not converge"
-    check = result.get("reference_check") or {}
+    check = result.reference_check or {}
     if check.get("moved"):
         return f"its own reference check found a moved frame ({check.get('likely_cause')})"
-    verdict = (result.get("verify") or {}).get("verdict")
+    verdict = (result.verify or {}).get("verdict")
     if verdict != "PASS" and not force:
         return (f"its verification is {verdict or 'missing'}, not PASS (its zeros are not "
                 "known good); verify first, or record anyway with --force")
@@ -79,7 +79,11 @@ def run_record(args: argparse.Namespace) -> int:
     run = Path(args.run)
     if not run.is_dir():
         raise InputError(f"--run {run}: not a run folder")
-    result = read_json(run / "result.json", "result document (result.json)")
+    path = run / "result.json"
+    try:
+        result = RunResult.from_dict(read_json(path, "result document (result.json)"))
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise InputError(f"{path}: not a calibration result document ({exc!r})") from None
     refused = _refusal(run, result, args.force)
     if refused:
         raise InputError(f"--run {run}: cannot be a reference: {refused}; calibrate and "
@@ -111,30 +115,29 @@ def run_record(args: argparse.Namespace) -> int:
     return 0
 
 
-def _fitted_effects(result: dict[str, Any]) -> list[str] | None:
+def _fitted_effects(result: RunResult) -> list[str] | None:
     """The effects the run's own fit used (result.json ``fit.effects``), None if it names
     none. Not the run's --effects: without one the method's default model applied
     (sphere_probe's + trigger_latency), and a refit without it biases the frames."""
-    effects = (result.get("fit") or {}).get("effects")
+    effects = result.fit.get("effects")
     if isinstance(effects, list) and effects and all(isinstance(e, str) for e in effects):
         return list(effects)
     return None
 
 
-def _zeros_taken_as_good(result: dict[str, Any]) -> list[str]:
+def _zeros_taken_as_good(result: RunResult) -> list[str]:
     """A line per joint the recording run did not calibrate: the reference fixes the frame
     that joint trades against, so that joint's present zero is taken as good for good."""
-    joints = (result.get("outcome") or {}).get("joints") or []
-    rows = {row.get("joint"): row for row in (result.get("offsets") or {}).get("joints", [])
-            if isinstance(row, dict)}
+    joints = (result.outcome or {}).get("joints") or []
+    zeros = {row.joint: row.new_deg for row in result.offsets}
     lines = []
     for joint in joints:
         if not isinstance(joint, dict) or joint.get("status") == "calibrated":
             continue
         number = joint.get("joint")
-        zero = rows.get(number, {}).get("new_deg")
+        zero = zeros.get(int(number)) if isinstance(number, int) else None
         value = f"{zero:+.5f} deg" if isinstance(zero, (int, float)) else "as it is"
-        lines.append(f"note: J{number} was not calibrated by {result.get('run_dir') or 'this run'}"
+        lines.append(f"note: J{number} was not calibrated by {result.run_dir or 'this run'}"
                      f" ({joint.get('reason') or 'not determined'}); the reference takes its "
                      f"present zero ({value}) as good, and every later run with it is only as "
                      "right as that zero: record at commissioning or right after a verified "

@@ -13,10 +13,10 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Any
 
 from hostpc.errors import InputError
 from hostpc.input_files import CONFIG, read_input_text
+from hostpc.json_object import JsonObject
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -35,7 +35,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.set_defaults(func=run)
 
 
-def read_json(path: Path, what: str) -> dict[str, Any]:
+def read_json(path: Path, what: str) -> JsonObject:
     """A JSON object from ``path``; InputError naming the file otherwise."""
     if not path.exists():
         raise InputError(f"{path}: no {what} here")

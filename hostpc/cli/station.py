@@ -38,10 +38,7 @@ async def _serve(args: argparse.Namespace) -> int:
     from hostpc.station.service import Station
     from hostpc.station.web import serve_page
 
-    overrides: dict[str, object] = {"db": args.db}
-    if args.modbus:
-        overrides["modbus"] = {"host": args.modbus[0], "port": args.modbus[1]}
-    config = load_station_config(args.config, overrides)
+    config = load_station_config(args.config, db=args.db, modbus=args.modbus)
     # the whole configuration, before anything listens or runs (docs/station.md)
     await asyncio.to_thread(check_station_config, config, args.config)
     station = Station(config, args.config)

@@ -17,6 +17,7 @@ from typing import Any
 
 from hostpc.cli.numbers import TIMEOUT_S
 from hostpc.errors import InputError
+from hostpc.json_object import JsonObject
 from hostpc.robots.connect import TOKEN_ENV, parse_robot, resolve_token
 from hostpc.transport import ControllerClient, ControllerState
 from protocol import DEFAULT_PORT
@@ -69,8 +70,8 @@ def _degrees(values: Any) -> list[float]:
     return [round(math.degrees(float(v)), 6) for v in values]
 
 
-def state_as_dict(state: ControllerState, address: str) -> dict[str, Any]:
-    """The state as JSON-ready values, angles in degrees."""
+def state_as_dict(state: ControllerState, address: str) -> JsonObject:
+    """`hostpc status --json`: the state's JSON form, angles in degrees."""
     return {
         "controller": address,
         "kind": "camera_service" if is_camera_service(state) else "controller",

@@ -19,7 +19,10 @@ import re
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from hostpc.errors import InputError
+from hostpc.json_object import JsonObject
 from hostpc.vision.rig import save_rig
 from hostpc.vision.rig_calibration import (
     ChessboardSpec,
@@ -67,16 +70,9 @@ def parse_board(board: str, square: str) -> ChessboardSpec:
         raise InputError(f"--board {board!r}: {exc}") from None
 
 
-def summary(calibration: RigCalibration, ids: list[str]) -> dict[str, Any]:
-    """JSON-ready summary (pixels, metres) of a calibration; view ids from the file names."""
+def summary(calibration: RigCalibration, ids: list[str]) -> JsonObject:
+    """`--json`: the calibration (pixels, metres); view ids from the file names."""
     rig = calibration.rig
-
-    def camera(K: Any, dist: Any) -> dict[str, Any]:
-        return {
-            "fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]),
-            "cy": float(K[1, 2]), "distortion": [float(v) for v in dist],
-        }
-
     return {
         "ok": calibration.ok,
         "rms_px": calibration.rms,
@@ -86,28 +82,35 @@ def summary(calibration: RigCalibration, ids: list[str]) -> dict[str, Any]:
             zip([ids[k] for k in calibration.used_views], calibration.per_view_rms, strict=True)
         ),
         "image_size": list(rig.image_size),
-        "left": camera(rig.K_left, rig.dist_left),
-        "right": camera(rig.K_right, rig.dist_right),
+        "left": _camera_json(rig.K_left, rig.dist_left),
+        "right": _camera_json(rig.K_right, rig.dist_right),
         "baseline_m": rig.baseline,
         "T": rig.T.tolist(),
         "warnings": list(calibration.warnings),
     }
 
 
-def _print_text(info: dict[str, Any], out: Path | None) -> None:
-    print(f"stereo rig: {len(info['views_used'])} views used, "
-          f"{len(info['views_skipped'])} skipped, image {info['image_size'][0]}x"
-          f"{info['image_size'][1]}")
-    print(f"  RMS reprojection error: {info['rms_px']:.3f} px")
-    for side in ("left", "right"):
-        cam = info[side]
-        dist = " ".join(f"{v:+.5f}" for v in cam["distortion"])
-        print(f"  {side:5s} fx {cam['fx']:.2f}  fy {cam['fy']:.2f}  cx {cam['cx']:.2f}  "
-              f"cy {cam['cy']:.2f} px   distortion {dist}")
-    print(f"  baseline: {1e3 * info['baseline_m']:.3f} mm")
-    for view, reason in info["views_skipped"].items():
-        print(f"  skipped view {view}: {reason}")
-    for warning in info["warnings"]:
+def _camera_json(K: np.ndarray, dist: np.ndarray) -> JsonObject:
+    """One camera's intrinsics (px) and distortion coefficients in `summary`."""
+    return {"fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]),
+            "cy": float(K[1, 2]), "distortion": [float(v) for v in dist]}
+
+
+def _print_text(calibration: RigCalibration, ids: list[str], out: Path | None) -> None:
+    rig = calibration.rig
+    print(f"stereo rig: {len(calibration.used_views)} views used, "
+          f"{len(calibration.skipped_views)} skipped, image {rig.image_size[0]}x"
+          f"{rig.image_size[1]}")
+    print(f"  RMS reprojection error: {calibration.rms:.3f} px")
+    for side, K, distortion in (("left", rig.K_left, rig.dist_left),
+                                ("right", rig.K_right, rig.dist_right)):
+        dist = " ".join(f"{float(v):+.5f}" for v in distortion)
+        print(f"  {side:5s} fx {float(K[0, 0]):.2f}  fy {float(K[1, 1]):.2f}  "
+              f"cx {float(K[0, 2]):.2f}  cy {float(K[1, 2]):.2f} px   distortion {dist}")
+    print(f"  baseline: {1e3 * rig.baseline:.3f} mm")
+    for k, reason in calibration.skipped_views:
+        print(f"  skipped view {ids[k]}: {reason}")
+    for warning in calibration.warnings:
         print(f"  WARNING: {warning}")
     if out is not None:
         print(f"  saved: {out}")
@@ -119,15 +122,15 @@ def run(args: argparse.Namespace) -> int:
     loaded = load_image_pairs(args.images)
     ids = [key for key, _, _ in loaded]
     calibration = calibrate_rig([(left, right) for _, left, right in loaded], board)
-    info = summary(calibration, ids)
     save = calibration.ok or args.accept_poor
     out = Path(args.out)
     if save:
         save_rig(calibration.rig, out)
     if args.json:
-        print(json.dumps({**info, "saved": str(out) if save else None}, indent=2))
+        print(json.dumps({**summary(calibration, ids), "saved": str(out) if save else None},
+                         indent=2))
     else:
-        _print_text(info, out if save else None)
+        _print_text(calibration, ids, out if save else None)
     if not save:
         raise InputError(
             f"poor calibration not saved ({'; '.join(calibration.warnings)}); "

@@ -50,6 +50,36 @@ class SimDefault:
 
 
 @dataclass(frozen=True)
+class KindOption:
+    """A ``hostpc calibrate`` option of a kind's acquisition (flag ``--key-with-dashes``),
+    recorded in the run's settings as ``RunSettings.options[key]``.
+
+    help: its help text; metavar / choices: as argparse's; number: a finite float within
+    [least, most]; path: a file, recorded as its absolute path. default: its value when not
+    given; it is recorded only when the value differs from it, or always with
+    record_default. exclusive: a value other than the default is refused for a method whose
+    kind does not declare the option. needs: (key, value) another option must have for this
+    one to be given."""
+
+    key: str
+    help: str
+    metavar: str | None = None
+    choices: tuple[str, ...] | None = None
+    default: str | None = None
+    record_default: bool = False
+    number: bool = False
+    least: float | None = None
+    most: float | None = None
+    path: bool = False
+    exclusive: bool = False
+    needs: tuple[str, str] | None = None
+
+    @property
+    def flag(self) -> str:
+        return "--" + self.key.replace("_", "-")
+
+
+@dataclass(frozen=True)
 class KindDescriptor:
     """Everything zerocal knows about one measurement kind, registered once.
 
@@ -59,7 +89,8 @@ class KindDescriptor:
     kind is measured offline and imported, no ``hostpc calibrate``);
     known_frames: the frames ``--known`` may hold (None: any);
     sim: its ``--robot sim`` world (None: stereo_target's);
-    method_options: the method's own ``hostpc calibrate`` options (e.g. ``probe_io``);
+    cli_options: the method's own ``hostpc calibrate`` options (``KindOption``, e.g.
+    ``--probe-io``; an option several kinds take is one object they share);
     csv_rows: what ``hostpc import`` reads from a metrology CSV row for it, ``"point"`` (x,
     y, z; a marker per reflector) or ``"pose"`` (x, y, z and an orientation); None: not
     imported from a CSV."""
@@ -69,8 +100,8 @@ class KindDescriptor:
     method: str | None = None
     known_frames: tuple[str, ...] | None = None
     sim: SimDefault | None = None
-    method_options: frozenset[str] = frozenset()
     csv_rows: str | None = None
+    cli_options: tuple[KindOption, ...] = ()
 
     @property
     def builtin(self) -> bool:
@@ -166,6 +197,19 @@ def csv_row_shape(method: str) -> str | None:
     """What a metrology CSV row of ``method`` holds (``KindDescriptor.csv_rows``)."""
     descriptor = kind_descriptor(method)
     return descriptor.csv_rows if descriptor is not None else None
+
+
+def kind_options() -> tuple[KindOption, ...]:
+    """The ``hostpc calibrate`` options of the registered kinds (plugin files' excluded:
+    the command line is built before ``--plugin`` is read), each once: the default kind's
+    first, then the others' in registry order."""
+    kinds = kind_descriptors()
+    ordered = [kinds[DEFAULT_METHOD], *(d for n, d in kinds.items() if n != DEFAULT_METHOD)]
+    found: dict[str, KindOption] = {}
+    for descriptor in ordered:
+        for option in descriptor.cli_options:
+            found.setdefault(option.key, option)
+    return tuple(found.values())
 
 
 def measurement_kinds(plugins: Iterable[str | os.PathLike[str]] = ()

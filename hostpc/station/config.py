@@ -26,7 +26,6 @@ The controller token comes from the environment (ZEROCAL_TOKEN) or `calibrate_ar
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
@@ -106,9 +105,10 @@ def http_address(text: str) -> tuple[str, int]:
     return host, int(port)
 
 
-def load_station_config(path: str | Path, overrides: dict[str, Any] | None = None
-                        ) -> StationConfig:
-    """Read and validate a station config; `overrides` (from the command line) win."""
+def load_station_config(path: str | Path, *, db: str | None = None,
+                        modbus: tuple[str, int] | None = None) -> StationConfig:
+    """Read and validate a station config; `db` and `modbus` (host, port), from the
+    command line, win over the file's."""
     file = Path(path)
     try:
         data = yaml.safe_load(read_input_text(file, CONFIG))  # regular file, bounded
@@ -117,7 +117,11 @@ def load_station_config(path: str | Path, overrides: dict[str, Any] | None = Non
                          ) from None
     if not isinstance(data, dict):
         raise InputError(f"{file}: station config must be a mapping")
-    data = {**data, **{k: v for k, v in (overrides or {}).items() if v is not None}}
+    data = dict(data)
+    if db is not None:
+        data["db"] = db
+    if modbus is not None:
+        data["modbus"] = {"host": modbus[0], "port": modbus[1]}
     data.setdefault("base_dir", str(file.resolve().parent))
     try:
         return StationConfig.model_validate(data)

@@ -14,9 +14,10 @@ programmer.
 from __future__ import annotations
 
 import enum
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import NamedTuple
+
+from hostpc.archive.records import OutcomeFigures
 
 N_REGISTERS = 96
 
@@ -155,24 +156,30 @@ class RunOutcome:
 FLAG_PUSHED, FLAG_VERIFIED, FLAG_ROLLED_BACK, FLAG_REFUSED = 1, 2, 4, 8
 
 
-def outcome_bits(outcome: Mapping[str, Any]) -> dict[str, int]:
-    """The bitmasks and flags (RunOutcome's last four fields) of a result.json outcome
-    block: joint j sets bit j-1 (joints beyond 16 are left out)."""
-    joints = [j for j in outcome.get("joints") or [] if isinstance(j, Mapping)]
+class OutcomeBits(NamedTuple):
+    """RunOutcome's last four fields: joint bitmasks (joint j sets bit j-1) and flags."""
 
-    def mask(numbers: list[int]) -> int:
+    joints_calibrated: int
+    joints_not_calibrated: int
+    joints_required_missing: int
+    outcome_flags: int
+
+
+def outcome_bits(outcome: OutcomeFigures | None) -> OutcomeBits:
+    """The bitmasks and flags of a run's outcome (none: all zero); joints beyond 16 are
+    left out."""
+    if outcome is None:
+        return OutcomeBits(0, 0, 0, 0)
+
+    def mask(numbers: tuple[int, ...]) -> int:
         return sum(1 << (n - 1) for n in numbers if 1 <= n <= 16)
 
-    calibrated = [int(j["joint"]) for j in joints if j.get("status") == "calibrated"
-                  and (not j.get("pushed") or j.get("verified") is True)]
-    not_calibrated = [int(j["joint"]) for j in joints if j.get("source") != "data"]
-    missing = [int(n) for n in outcome.get("missing_required") or []]
-    flags = ((FLAG_PUSHED if outcome.get("pushed") else 0)
-             | (FLAG_VERIFIED if outcome.get("verified") is True else 0)
-             | (FLAG_ROLLED_BACK if outcome.get("verdict") == "ROLLED_BACK" else 0)
-             | (FLAG_REFUSED if outcome.get("verdict") == "REFUSED" else 0))
-    return {"joints_calibrated": mask(calibrated), "joints_not_calibrated": mask(not_calibrated),
-            "joints_required_missing": mask(missing), "outcome_flags": flags}
+    flags = ((FLAG_PUSHED if outcome.pushed else 0)
+             | (FLAG_VERIFIED if outcome.verified is True else 0)
+             | (FLAG_ROLLED_BACK if outcome.verdict == "ROLLED_BACK" else 0)
+             | (FLAG_REFUSED if outcome.verdict == "REFUSED" else 0))
+    return OutcomeBits(mask(outcome.calibrated), mask(outcome.not_calibrated),
+                       mask(outcome.missing_required), flags)
 
 
 def outcome_registers(outcome: RunOutcome) -> dict[int, int]:

@@ -18,6 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from hostpc.json_object import JsonObject
 from hostpc.station.config import StationConfig
 
 _PROGRESS = re.compile(r"\]\s+(\S+)\s+(\d+)/(\d+)")
@@ -31,9 +32,10 @@ def seed_of(serial: str) -> int:
     return int.from_bytes(hashlib.sha256(serial.encode()).digest()[:4], "big") % (2**31 - 1)
 
 
-def sim_scenario(config: StationConfig, serial: str) -> dict[str, object]:
-    """The simulated world of robot `serial`: its own scenario if the config names one,
-    else the base scenario (or the packaged default) seeded by the serial."""
+def sim_scenario(config: StationConfig, serial: str) -> JsonObject:
+    """The scenario document of robot `serial`'s simulated world, as the run's scenario
+    file gets it: its own scenario if the config names one, else the base scenario (or the
+    packaged default) seeded by the serial."""
     from hostpc.robots.simulator import default_sim_scenario, load_scenario_file
 
     named = config.sim.scenarios_by_serial.get(serial)

@@ -35,18 +35,18 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import json
 import logging
 import uuid
-from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
 from hostpc.archive import open_archive, record_from_run
 from hostpc.archive.database import Archive
-from hostpc.archive.records import verdict_of
+from hostpc.archive.records import VerifyFigures, outcome_of, read_result, verdict_of
 from hostpc.calibrate.journal import JOURNAL_FILE
+from hostpc.calibrate.run_result import RunResult
 from hostpc.errors import InputError, ZerocalError
 from hostpc.files import write_json_atomic
 from hostpc.station import registers as reg
@@ -54,38 +54,10 @@ from hostpc.station.config import StationConfig
 from hostpc.station.plc import PlcServer
 from hostpc.station.run_report import write_station_report
 from hostpc.station.runner import ChildRun, calibrate_command, start_child
+from hostpc.station.status import CurrentRun, RecentRun, StationStatus
 
 logger = logging.getLogger("hostpc.station")
 EXIT_CONNECTION = 3  # `hostpc calibrate`: the controller could not be reached / link lost
-
-
-@dataclass
-class StationStatus:
-    """What the live page and the log show of the station: the robot, progress and output
-    line of the run in progress (RUNNING); the result of the last run until acknowledged
-    (PASS, FAIL, ERROR: result code, reason and its code, archive id, report); none of it
-    when IDLE."""
-
-    state: str = "IDLE"
-    serial: str = ""
-    model: str = ""
-    progress: int = 0
-    last_line: str = ""
-    run_dir: str = ""
-    result_code: int | None = None
-    reason: str = ""
-    reason_code: int = 0
-    archive_id: int | None = None
-    report: str = ""
-    """The last run's report.html as the live page serves it (/runs/ID/report.html)."""
-    runs_done: int = 0
-    recent: list[dict[str, Any]] = field(default_factory=list)
-
-    def clear_run(self) -> None:
-        """Nothing of the last run (the station is IDLE, or a new run starts)."""
-        self.serial = self.model = self.last_line = self.run_dir = ""
-        self.reason, self.reason_code, self.report = "", 0, ""
-        self.progress, self.result_code, self.archive_id = 0, None, None
 
 
 class Station:
@@ -201,31 +173,30 @@ class Station:
         stamp = datetime.now(UTC)
         safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in serial)
         run_dir = self.runs_dir / f"{safe}-{stamp:%Y%m%dT%H%M%S%f}"
-        current = {"run_uid": str(uuid.uuid4()), "serial": serial, "model": model,
-                   "run_dir": str(run_dir), "started_at": stamp.isoformat(), "attempts": 0}
+        current = CurrentRun(run_uid=str(uuid.uuid4()), serial=serial, model=model,
+                             run_dir=str(run_dir), started_at=stamp.isoformat())
         self._write_current(current)
         await self._execute(current, resume=False)
 
     async def _resume_interrupted(self) -> None:
         try:
-            current = json.loads(self.current_file.read_text())
-            current["serial"]
-        except (OSError, ValueError, KeyError, TypeError):
+            current = CurrentRun.from_json(json.loads(self.current_file.read_text()))
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
             logger.error("%s is damaged: the interrupted run is not resumed", self.current_file)
             self.current_file.unlink(missing_ok=True)
             return
-        logger.info("resuming the interrupted run of %s in %s", current["serial"],
-                    current["run_dir"])
-        await self._execute(current, resume=Path(current["run_dir"]).exists())
+        logger.info("resuming the interrupted run of %s in %s", current.serial,
+                    current.run_dir)
+        await self._execute(current, resume=Path(current.run_dir).exists())
 
     # -- one run ----------------------------------------------------------------------
-    def _write_current(self, current: dict[str, Any]) -> None:
-        write_json_atomic(self.current_file, current)
+    def _write_current(self, current: CurrentRun) -> None:
+        write_json_atomic(self.current_file, current.to_json())
 
-    async def _execute(self, current: dict[str, Any], resume: bool) -> None:
-        serial, run_dir = current["serial"], Path(current["run_dir"])
+    async def _execute(self, current: CurrentRun, resume: bool) -> None:
+        serial, run_dir = current.serial, Path(current.run_dir)
         self.status.clear_run()
-        self.status.serial, self.status.model = serial, current.get("model", "")
+        self.status.serial, self.status.model = serial, current.model
         self.status.run_dir, self.status.progress = str(run_dir), 0
         self.plc.set(reg.RUN_COUNTER, (self.plc.values[reg.RUN_COUNTER] + 1) & 0xFFFF)
         self.plc.set(reg.PROGRESS, 0)
@@ -237,10 +208,10 @@ class Station:
             return  # current.json stays: the next start resumes it
         await self._conclude(current, run_dir, code)
 
-    async def _attempts(self, current: dict[str, Any], run_dir: Path, resume: bool) -> int:
+    async def _attempts(self, current: CurrentRun, run_dir: Path, resume: bool) -> int:
         while True:
             try:
-                command = calibrate_command(self.config, run_dir, current["serial"], resume)
+                command = calibrate_command(self.config, run_dir, current.serial, resume)
             except (ZerocalError, OSError) as exc:
                 self._child_error = f"the calibration cannot start: {exc}"
                 return reg.RESULT_STATION_ERROR
@@ -261,13 +232,13 @@ class Station:
             if self._stopping.is_set():
                 return code
             if (code == EXIT_CONNECTION or in_flight) and run_dir.exists() \
-                    and current["attempts"] < self.config.resume_attempts:
-                current["attempts"] += 1
+                    and current.attempts < self.config.resume_attempts:
+                current = dataclasses.replace(current, attempts=current.attempts + 1)
                 self._write_current(current)
                 why = ("the controller holds pushed offsets not yet verified" if in_flight
                        else "link lost")
                 logger.warning("%s during the run of %s: resuming (attempt %d of %d)", why,
-                               current["serial"], current["attempts"],
+                               current.serial, current.attempts,
                                self.config.resume_attempts)
                 resume, self._aborted = True, False
                 continue
@@ -290,16 +261,16 @@ class Station:
         self.status.progress, self.status.last_line = progress, line
         self.plc.set(reg.PROGRESS, progress)
 
-    async def _conclude(self, current: dict[str, Any], run_dir: Path, code: int) -> None:
-        serial = current["serial"]
-        started_at = datetime.fromisoformat(current["started_at"])
+    async def _conclude(self, current: CurrentRun, run_dir: Path, code: int) -> None:
+        serial = current.serial
+        started_at = datetime.fromisoformat(current.started_at)
         result = _read_result(run_dir)
         reason = self._reason(code, result)
         log_path = run_dir.parent / f"{run_dir.name}.log"
         if not (run_dir / "report.html").is_file():  # ended before calibrate wrote one
             try:
                 write_station_report(
-                    run_dir / "report.html", serial=serial, model=current.get("model", ""),
+                    run_dir / "report.html", serial=serial, model=current.model,
                     station=self.config.station, started_at=started_at.isoformat(),
                     verdict=verdict_of(result, code), result_code=code,
                     reason=reason, log_path=log_path)
@@ -309,8 +280,8 @@ class Station:
         record = None
         try:
             record = record_from_run(
-                run_dir, serial=serial, model=current.get("model", ""),
-                station=self.config.station, exit_code=code, run_uid=current["run_uid"],
+                run_dir, serial=serial, model=current.model,
+                station=self.config.station, exit_code=code, run_uid=current.run_uid,
                 started_at=started_at, reason=reason)
             assert self.archive is not None
             archive_id = await asyncio.to_thread(self.archive.add, record)
@@ -325,15 +296,13 @@ class Station:
                              reg.State.ERROR if record.verdict == "ERROR" else reg.State.FAIL)
         if outcome_state == reg.State.PASS:
             reason = ""
-        verify = record.verify if record is not None else {}
-        block = record.result.get("outcome") if record is not None else None
+        verify = record.verify if record is not None else VerifyFigures()
         outcome = reg.RunOutcome(
             outcome_state, code,
             largest_correction_deg=record.largest_correction_deg if record else None,
-            verify_statistic=_number(verify.get("statistic")),
-            verify_p_value=_number(verify.get("p_value")),
-            verify_dof=int(verify.get("dof") or 0), archive_id=archive_id,
-            reason=reason, **reg.outcome_bits(block if isinstance(block, dict) else {}))
+            verify_statistic=verify.statistic, verify_p_value=verify.p_value,
+            verify_dof=verify.dof, archive_id=archive_id, reason=reason,
+            **reg.outcome_bits(record.outcome if record is not None else None)._asdict())
         self.status.last_line = ""  # the run's output: acted on, the result says the rest
         self.status.archive_id = archive_id
         self.status.report = (f"/runs/{archive_id}/report.html"
@@ -347,10 +316,8 @@ class Station:
         else:
             self.current_file.unlink(missing_ok=True)
         self.status.runs_done += 1
-        self.status.recent = ([{"serial": serial, "verdict": outcome_state.name,
-                                "result_code": code, "archive_id": archive_id,
-                                "run_dir": str(run_dir), "reason": reason}]
-                              + self.status.recent)[:20]
+        self.status.recent = ([RecentRun(serial, outcome_state.name, code, archive_id,
+                                          str(run_dir), reason)] + self.status.recent)[:20]
         if reason:
             logger.error("run of %s: %s (result code %d, archive id %s): %s", serial,
                          outcome_state.name, code, archive_id, reason)
@@ -358,16 +325,15 @@ class Station:
             logger.info("run of %s: %s (result code %d, archive id %s)", serial,
                         outcome_state.name, code, archive_id)
 
-    def _reason(self, code: int, result: dict[str, Any]) -> str:
+    def _reason(self, code: int, result: RunResult | None) -> str:
         """One line: why the run with exit `code` and `result` (result.json) did not PASS
         (empty when it did)."""
-        block = result.get("outcome")
-        outcome: dict[str, Any] = block if isinstance(block, dict) else {}
+        outcome = outcome_of(result)
         if code == reg.RESULT_ABORTED:
             return "aborted by the PLC before the push"
-        if code == 0 and outcome.get("verdict") == "PASS":
+        if code == 0 and outcome is not None and outcome.verdict == "PASS":
             return ""
-        text = self._child_error or str(outcome.get("headline") or "")
+        text = self._child_error or (outcome.headline if outcome is not None else "")
         if not text and code:
             text = f"hostpc calibrate ended with exit code {code}"
         return " ".join(text.split())
@@ -435,17 +401,9 @@ def push_in_flight(run_dir: Path) -> bool:
     return last in ("push_intent", "push")
 
 
-def _read_result(run_dir: Path) -> dict[str, Any]:
-    """The run's result.json, or {} (none yet, or unreadable: the archive says why)."""
+def _read_result(run_dir: Path) -> RunResult | None:
+    """The run's result.json, or None (none yet, or unreadable: the archive says why)."""
     try:
-        result = json.loads((run_dir / "result.json").read_text())
-    except (OSError, ValueError):
-        return {}
-    return result if isinstance(result, dict) else {}
-
-
-def _number(value: Any) -> float | None:
-    try:
-        return None if value is None else float(value)
-    except (TypeError, ValueError):
+        return read_result(run_dir / "result.json")
+    except InputError:
         return None

@@ -30,12 +30,13 @@ import logging
 from collections.abc import Awaitable, Callable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Any
 
 from aiohttp import web
 
 from hostpc.archive.drift import drift_findings
 from hostpc.archive.history_page import drift_plot_png, local_time
+from hostpc.archive.rows import ArchivedRun
+from hostpc.json_object import JsonObject
 from hostpc.serving.guard import ConnectionGuard, GuardedConnection
 from hostpc.serving.log_limits import SERVER_LOGGERS, limit_logging
 from hostpc.station.service import Station
@@ -133,8 +134,8 @@ class DriftPlots:
             collections.OrderedDict())
         self.rendered = 0
 
-    async def png(self, serial: str, runs: list[dict[str, Any]]) -> bytes:
-        key = (serial, len(runs), max(int(r["id"]) for r in runs))
+    async def png(self, serial: str, runs: list[ArchivedRun]) -> bytes:
+        key = (serial, len(runs), max(r.id for r in runs))
         plot = self._plots.get(key)
         if plot is None or (plot.done() and plot.exception() is not None):
             plot = asyncio.get_running_loop().run_in_executor(self._executor, self._render, runs)
@@ -144,12 +145,20 @@ class DriftPlots:
         self._plots.move_to_end(key)
         return await asyncio.shield(plot)
 
-    def _render(self, runs: list[dict[str, Any]]) -> bytes:
+    def _render(self, runs: list[ArchivedRun]) -> bytes:
         self.rendered += 1
         return drift_plot_png(runs, drift_findings(runs))
 
     def close(self) -> None:
         self._executor.shutdown(wait=False, cancel_futures=True)
+
+
+def _listed(run: ArchivedRun) -> JsonObject:
+    """A run as /api/state lists it (the page's table of last robots)."""
+    return {"id": run.id, "serial": run.serial, "model": run.model, "verdict": run.verdict,
+            "push_status": run.push_status, "reason": run.reason,
+            "started_at": local_time(run.started_at),
+            "report": f"/runs/{run.id}/report.html" if run.report_path else None}
 
 
 def build_app(station: Station, guard: ConnectionGuard | None = None,
@@ -171,16 +180,11 @@ def build_app(station: Station, guard: ConnectionGuard | None = None,
                             content_type="text/html")
 
     async def state(_request: web.Request) -> web.Response:
-        runs: list[dict[str, Any]] = []
+        runs: list[ArchivedRun] = []
         if station.archive is not None:
             runs = await asyncio.to_thread(station.archive.runs)
-        latest = list(reversed(runs))[:20]
         body = dataclasses.asdict(station.status)
-        body["runs"] = [{**{k: r[k] for k in ("id", "serial", "model", "verdict",
-                                              "push_status", "reason")},
-                         "started_at": local_time(r["started_at"]),
-                         "report": f"/runs/{r['id']}/report.html" if r.get("report_path")
-                         else None} for r in latest]
+        body["runs"] = [_listed(run) for run in list(reversed(runs))[:20]]
         return web.json_response(body)
 
     async def report(request: web.Request) -> web.StreamResponse:

@@ -126,14 +126,17 @@ def test_a_reference_of_another_method_is_refused_before_connecting(
 
 
 def test_recording_names_the_zeros_it_takes_as_good() -> None:
+    from hostpc.calibrate.run_result import RunResult
     from hostpc.cli.reference import _zeros_taken_as_good
 
-    result = {"run_dir": "runs/first",
-              "offsets": {"joints": [{"joint": 6, "new_deg": 0.0}, {"joint": 2, "new_deg": 0.1}]},
-              "outcome": {"joints": [
-                  {"joint": 2, "status": "calibrated"},
-                  {"joint": 6, "status": "not_calibrated",
-                   "reason": "unidentifiable with the tool frame estimated"}]}}
+    result = RunResult.from_dict({
+        "run_dir": "runs/first", "acquisition": {"n_planned": 0, "n_measured": 0}, "fit": {},
+        "offsets": {"joints": [{"joint": 6, "old_deg": 0.0, "new_deg": 0.0, "pushed": False},
+                               {"joint": 2, "old_deg": 0.0, "new_deg": 0.1, "pushed": True}]},
+        "outcome": {"joints": [
+            {"joint": 2, "status": "calibrated"},
+            {"joint": 6, "status": "not_calibrated",
+             "reason": "unidentifiable with the tool frame estimated"}]}})
     lines = _zeros_taken_as_good(result)
     assert len(lines) == 1 and lines[0].startswith("note: J6 was not calibrated by runs/first")
     assert "+0.00000 deg" in lines[0] and "as good" in lines[0]

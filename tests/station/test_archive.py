@@ -23,18 +23,21 @@ def test_a_run_is_stored_whole_and_read_back(archive_url: str, sim_run_dir: Path
         run_id = archive.add(record)
         assert archive.add(record) == run_id  # the same run is not stored twice
         runs = archive.runs()
-        assert [r["id"] for r in runs] == [run_id]
-        entry = archive.run(run_id)
-    assert entry["serial"] == "R-1" and entry["station"] == "cell-1"
-    assert entry["verdict"] == record.verdict == "PASS"
-    assert entry["result"] == result
-    assert entry["dataset"] == json.loads((sim_run_dir / "dataset.json").read_text())
+        assert [r.id for r in runs] == [run_id]
+        stored = archive.run(run_id)
+    entry = stored.run
+    assert entry.serial == "R-1" and entry.station == "cell-1"
+    assert entry.verdict == record.verdict == "PASS"
+    assert stored.result is not None and stored.result.to_dict() == result
+    assert stored.dataset_json is not None
+    assert json.loads(stored.dataset_json) == json.loads(
+        (sim_run_dir / "dataset.json").read_text())
     pushed = [j for j in result["offsets"]["joints"] if j["pushed"]]
-    stored = {o["label"]: o for o in runs[0]["offsets"]}
+    offsets = {o.label: o for o in runs[0].offsets}
     for joint in pushed:
-        assert stored[joint["label"]]["new_deg"] == pytest.approx(joint["new_deg"], abs=1e-12)
-        assert stored[joint["label"]]["sigma_deg"] == pytest.approx(joint["sigma_deg"])
-    assert runs[0]["largest_correction_deg"] == pytest.approx(
+        assert offsets[joint["label"]].new_deg == pytest.approx(joint["new_deg"], abs=1e-12)
+        assert offsets[joint["label"]].sigma_deg == pytest.approx(joint["sigma_deg"])
+    assert runs[0].largest_correction_deg == pytest.approx(
         max(abs(j["correction_deg"]) for j in pushed))
 
 
@@ -121,6 +124,6 @@ def test_four_writers_concurrently_lose_and_duplicate_nothing(archive_url: str,
     with open_archive(archive_url) as archive:
         runs = archive.runs()
     assert len(runs) == 100
-    assert len({r["run_uid"] for r in runs}) == 100
-    assert {r["serial"] for r in runs} == {f"W{w}-R{i:02d}" for w in range(4) for i in range(25)}
-    assert all(len(r["offsets"]) == 6 for r in runs)
+    assert len({r.run_uid for r in runs}) == 100
+    assert {r.serial for r in runs} == {f"W{w}-R{i:02d}" for w in range(4) for i in range(25)}
+    assert all(len(r.offsets) == 6 for r in runs)

@@ -11,15 +11,22 @@ from pathlib import Path
 import pytest
 
 from hostpc.archive.drift import drift_findings, fleet_summary
+from hostpc.archive.records import JointOffset
+from hostpc.archive.rows import ArchivedRun
 from hostpc.robots.simulator import default_sim_scenario
 from tests.station.conftest import REPO, hostpc_command
 
 
-def _run(run_id: int, serial: str, zeros: list[float], sigma: float = 1e-4) -> dict[str, object]:
-    return {"id": run_id, "serial": serial, "model": "ur5e", "verdict": "PASS",
-            "started_at": f"2026-01-0{run_id}T00:00:00+00:00",
-            "offsets": [{"label": f"q{j + 1}", "new_deg": z, "sigma_deg": sigma, "pushed": True}
-                        for j, z in enumerate(zeros)]}
+def _run(run_id: int, serial: str, zeros: list[float], sigma: float = 1e-4) -> ArchivedRun:
+    stamp = f"2026-01-0{run_id}T00:00:00+00:00"
+    return ArchivedRun(
+        id=run_id, run_uid=f"uid-{run_id}", serial=serial, model="ur5e", station="cell",
+        started_at=stamp, archived_at=stamp, method="stereo_target", effects=(),
+        verdict="PASS", exit_code=0, push_status="pushed", largest_correction_deg=None,
+        software_version="test", run_dir="", revision=1, reason=None, report_path=None,
+        offsets=tuple(JointOffset(joint=j + 1, label=f"q{j + 1}", old_deg=None,
+                                  correction_deg=None, sigma_deg=sigma, new_deg=z, pushed=True)
+                      for j, z in enumerate(zeros)))
 
 
 def test_drift_is_raised_on_the_joint_that_moved_and_only_there() -> None:
@@ -33,7 +40,7 @@ def test_drift_is_raised_on_the_joint_that_moved_and_only_there() -> None:
     assert drift_findings(precise, threshold_deg=0.02)[0].z == pytest.approx(0.005 / 1.414e-4,
                                                                             rel=1e-3)
     assert drift_findings([_run(1, "D", [0.0]), _run(2, "D", [0.0003])]) == []
-    assert fleet_summary(runs)[0]["serial"] == "A"
+    assert fleet_summary(runs)[0].serial == "A"
 
 
 @pytest.mark.slow
@@ -89,5 +96,5 @@ def test_a_relative_sqlite_archive_is_beside_the_config_file(tmp_path: Path) -> 
     config_file.write_text("robot: sim\ndb: sqlite:///station.db\n")
     config = load_station_config(config_file)
     assert config.database_url() == f"sqlite:///{(tmp_path / 'cell' / 'station.db').resolve()}"
-    absolute = load_station_config(config_file, {"db": "sqlite:////var/x.db"})
+    absolute = load_station_config(config_file, db="sqlite:////var/x.db")
     assert absolute.database_url() == "sqlite:////var/x.db"

@@ -9,6 +9,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from hostpc.archive import RunRecord, open_archive
+from hostpc.archive.records import VerifyFigures
 from hostpc.kinematics.robots import canonical_name
 from tests.station.conftest import REPO, hostpc_command
 
@@ -17,8 +18,8 @@ def _record(uid: str, model: str, started_at: datetime) -> RunRecord:
     return RunRecord(
         run_uid=uid, serial="SN-7", model=model, station="cell-1", started_at=started_at,
         method="stereo_target", effects=("joint_offsets",), verdict="PASS", exit_code=0,
-        push_status="pushed", largest_correction_deg=0.01, verify={}, fit={}, offsets=(),
-        software_version="test", result={}, dataset=None)
+        push_status="pushed", largest_correction_deg=0.01, verify=VerifyFigures(), offsets=(),
+        software_version="test", result=None, dataset_json=None)
 
 
 def test_model_names_are_the_robot_librarys_spelling():
@@ -32,7 +33,7 @@ def test_history_shows_local_seconds_and_one_model_name(tmp_path: Path) -> None:
     with open_archive(db) as archive:
         archive.add(_record("a", "UR5e", datetime(2026, 1, 5, 11, 30, 7, 654321, tzinfo=UTC)))
         archive.add(_record("b", "ur5e", datetime(2026, 1, 6, 11, 30, 8, 123456, tzinfo=UTC)))
-        assert {run["model"] for run in archive.runs()} == {"ur5e"}
+        assert {run.model for run in archive.runs()} == {"ur5e"}
     env = {**os.environ, "PYTHONPATH": str(REPO), "TZ": "CET-1"}
     page = tmp_path / "history.html"
     run = subprocess.run(hostpc_command("history", "--db", db, "--html", str(page)), cwd=REPO,

@@ -5,7 +5,6 @@ calibration's zero that the next one may reach without an alarm."""
 from __future__ import annotations
 
 from datetime import UTC, datetime, timedelta
-from typing import Any
 
 import matplotlib.dates as mdates
 import pytest
@@ -13,14 +12,22 @@ from matplotlib.collections import PolyCollection
 
 from hostpc.archive.drift import drift_findings
 from hostpc.archive.history_page import drift_figure, drift_plot_png
+from hostpc.archive.records import JointOffset
+from hostpc.archive.rows import ArchivedRun
 
 
-def _runs() -> list[dict[str, Any]]:
+def _runs() -> list[ArchivedRun]:
     start = datetime(2026, 3, 2, 9, 0, tzinfo=UTC)
     zeros = [0.100, 0.105, 0.140]  # the last step (35 mdeg) beyond the 20 mdeg threshold
-    return [{"id": k + 1, "serial": "SN-9", "started_at": (start + timedelta(days=7 * k))
-             .isoformat(), "offsets": [{"label": "q2", "new_deg": zero, "sigma_deg": 0.001,
-                                        "pushed": True}]} for k, zero in enumerate(zeros)]
+    stamps = [(start + timedelta(days=7 * k)).isoformat() for k in range(len(zeros))]
+    return [ArchivedRun(
+        id=k + 1, run_uid=f"uid-{k}", serial="SN-9", model="ur5e", station="cell",
+        started_at=stamp, archived_at=stamp, method="stereo_target", effects=(),
+        verdict="PASS", exit_code=0, push_status="pushed", largest_correction_deg=None,
+        software_version="test", run_dir="", revision=1, reason=None, report_path=None,
+        offsets=(JointOffset(joint=2, label="q2", old_deg=None, correction_deg=None,
+                             sigma_deg=0.001, new_deg=zero, pushed=True),))
+        for k, (zero, stamp) in enumerate(zip(zeros, stamps, strict=True))]
 
 
 def test_the_plot_is_against_dates_with_the_threshold_drawn() -> None:

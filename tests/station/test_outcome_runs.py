@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from hostpc.archive import open_archive
-from hostpc.archive.records import verdict_of
+from hostpc.archive.records import read_result, verdict_of
+from hostpc.calibrate.run_result import RunResult
 from hostpc.cli.main import main
 from hostpc.robots.simulator import SimulatedController
 from tests.integration.test_calibrate_sim import TOKEN, sim_scenario
@@ -45,7 +46,7 @@ def test_a_refused_push_is_refused_everywhere_and_a_forced_resume_revises_the_ar
     assert stdout.splitlines()[0].startswith("REFUSED: push refused, offsets unchanged")
     with open_archive(archive_url) as archive:
         (run,) = archive.runs("SN-1")
-        assert run["verdict"] == "REFUSED" and run["revision"] == 1
+        assert run.verdict == "REFUSED" and run.revision == 1
 
     code, stdout, stderr = _cli(capsys, "calibrate", "--resume", str(out), "--force",
                                 "--db", archive_url, "--robot-serial", "SN-1")
@@ -58,11 +59,11 @@ def test_a_refused_push_is_refused_everywhere_and_a_forced_resume_revises_the_ar
                                              "CALIBRATED (unidentifiable: tool frame")
     with open_archive(archive_url) as archive:
         (run,) = archive.runs("SN-1")  # the same record, revised
-        assert run["verdict"] == "PASS" and run["revision"] == 2 and run["exit_code"] == 0
-        assert run["push_status"] == "pushed"
-        history = archive.revisions(run["id"])
-    assert [(r["revision"], r["verdict"]) for r in history] == [(1, "REFUSED"), (2, "PASS")]
-    assert history[1]["outcome"]["verdict"] == "PASS"
+        assert run.verdict == "PASS" and run.revision == 2 and run.exit_code == 0
+        assert run.push_status == "pushed"
+        history = archive.revisions(run.id)
+    assert [(r.revision, r.verdict) for r in history] == [(1, "REFUSED"), (2, "PASS")]
+    assert history[1].outcome is not None and history[1].outcome["verdict"] == "PASS"
 
 
 def _offsets(sim: SimulatedController) -> np.ndarray:
@@ -101,8 +102,8 @@ def test_a_rollback_rewrites_result_summary_report_and_revises_the_archive(
     assert json.loads((out / "result.1.json").read_text())["outcome"]["verdict"] == "PASS"
     with open_archive(archive_url) as archive:
         (run,) = archive.runs("SN-2")
-        assert run["verdict"] == "ROLLED_BACK" and run["revision"] == 2
-        assert [r["verdict"] for r in archive.revisions(run["id"])] == ["PASS", "ROLLED_BACK"]
+        assert run.verdict == "ROLLED_BACK" and run.revision == 2
+        assert [r.verdict for r in archive.revisions(run.id)] == ["PASS", "ROLLED_BACK"]
     # `hostpc report RUN` renders the same outcome again
     (out / "report.html").unlink()
     code, _, stderr = _cli(capsys, "report", str(out), "--no-diagnosis")
@@ -134,7 +135,7 @@ def test_an_estimated_target_leaves_j1_and_j6_not_calibrated_exit_7(
     assert head.startswith("JOINTS_MISSING: J2-J5 calibrated and verified; J1 NOT CALIBRATED")
     report = (out / "report.html").read_text()
     assert 'id="joints"' in report and report.count("NOT CALIBRATED") >= 2
-    assert verdict_of(json.loads((out / "result.json").read_text()), 7) == "JOINTS_MISSING"
+    assert verdict_of(read_result(out / "result.json"), 7) == "JOINTS_MISSING"
 
 
 @pytest.mark.parametrize("constraint", ["--prior", "--hold"])
@@ -167,8 +168,14 @@ def test_held_and_prior_values_are_marked_and_never_pushed(
     assert mark in report and 'id="joints"' in report
 
 
+def _older(**blocks: dict[str, object]) -> RunResult:
+    """A result an older version wrote (no outcome block) with these blocks."""
+    return RunResult.from_dict({"acquisition": {"n_planned": 0, "n_measured": 0}, "fit": {},
+                                **blocks})
+
+
 def test_an_old_result_with_a_refused_push_is_never_pass() -> None:
-    old = {"push": {"status": "refused"}, "verify": {"verdict": "PASS", "pushed": False}}
+    old = _older(push={"status": "refused"}, verify={"verdict": "PASS", "pushed": False})
     assert verdict_of(old, 5) == "REFUSED"
-    model_check = {"push": {"status": "disabled"}, "verify": {"verdict": "PASS"}}
+    model_check = _older(push={"status": "disabled"}, verify={"verdict": "PASS"})
     assert verdict_of(model_check, 0) == "NOT_PUSHED"

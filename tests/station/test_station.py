@@ -155,12 +155,12 @@ def test_twenty_robots_in_a_row(station: tuple[StationProcess, dict[str, object]
     assert process.stop() == 0
     with open_archive(str(config["db"])) as archive:
         runs = archive.runs()
-    assert [r["serial"] for r in runs] == serials
+    assert [r.serial for r in runs] == serials
     # its model does not explain the data: the push is refused (offsets unchanged)
-    assert {r["serial"]: r["verdict"] for r in runs}["SN-HIDDEN"] == "REFUSED"
-    assert all(r["verdict"] == "PASS" for r in runs if r["serial"] != "SN-HIDDEN")
+    assert {r.serial: r.verdict for r in runs}["SN-HIDDEN"] == "REFUSED"
+    assert all(r.verdict == "PASS" for r in runs if r.serial != "SN-HIDDEN")
     assert "resuming (attempt 1 of 2)" in process.log.read_text()
-    assert len({r["run_uid"] for r in runs}) == 20
+    assert len({r.run_uid for r in runs}) == 20
 
 
 @pytest.mark.slow
@@ -193,7 +193,7 @@ def test_a_restarted_station_resumes_the_interrupted_run(
     assert process.stop() == 0
     with open_archive(str(config["db"])) as archive:
         runs = archive.runs()
-    assert [r["serial"] for r in runs] == ["SN-RESTART"]
+    assert [r.serial for r in runs] == ["SN-RESTART"]
     assert not (runs_dir / "current.json").exists()
 
 

@@ -181,11 +181,11 @@ def test_station_page_through_start_failure_abort_and_idle(tmp_path: Path,
     # the archive: every run, its reason, its report
     with open_archive(db, create=False) as archive:
         runs = archive.runs()
-    assert [(r["serial"], r["verdict"]) for r in runs] == [
+    assert [(r.serial, r.verdict) for r in runs] == [
         ("SN-LIFE-PASS", "PASS"), ("SN-LIFE-FAIL", "ERROR"), ("SN-LIFE-ABORT", "ERROR")]
-    assert runs[0]["reason"] is None and runs[1]["reason"] == reason
-    assert "aborted by the PLC" in runs[2]["reason"]
-    assert all(Path(r["report_path"]).is_file() for r in runs)
+    assert runs[0].reason is None and runs[1].reason == reason
+    assert "aborted by the PLC" in str(runs[2].reason)
+    assert all(Path(str(r.report_path)).is_file() for r in runs)
 
     # hostpc history --html links every run's report; Chromium opens one from it
     history = tmp_path / "history.html"

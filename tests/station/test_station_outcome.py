@@ -19,6 +19,7 @@ import pytest
 import yaml
 
 from hostpc.archive import open_archive
+from hostpc.archive.rows import ArchivedRun
 from hostpc.station import registers as reg
 from tests.station.plc_client import Plc
 from tests.station.test_station import StationProcess, _free_port
@@ -51,7 +52,7 @@ def make_station(tmp_path: Path, fast_rig: Path) -> Iterator[Factory]:
             process.stop(signal.SIGKILL)
 
 
-def _archived(config: dict[str, Any]) -> list[dict[str, Any]]:
+def _archived(config: dict[str, Any]) -> list[ArchivedRun]:
     with open_archive(str(config["db"])) as archive:
         return archive.runs()
 
@@ -73,8 +74,8 @@ def test_a_refused_push_is_fail_code_5_and_served_again_after_a_restart(
     assert values[reg.JOINTS_NOT_CALIBRATED] == 0b100000
     assert values[reg.JOINTS_REQUIRED_MISSING] == 0b100000  # the station requires all
     runs = _archived(config)
-    assert [r["verdict"] for r in runs] == ["REFUSED"]
-    run_dir = Path(runs[0]["run_dir"])
+    assert [r.verdict for r in runs] == ["REFUSED"]
+    run_dir = Path(runs[0].run_dir)
     outcome = json.loads((run_dir / "result.json").read_text())["outcome"]
     assert outcome["verdict"] == "REFUSED" and outcome["controller"] == "offsets unchanged"
 
@@ -115,7 +116,7 @@ def test_target_estimated_is_fail_code_7_with_the_joint_bitmasks(
     assert values[reg.JOINTS_NOT_CALIBRATED] == 0b100001  # J1 (target), J6 (tool)
     assert values[reg.JOINTS_REQUIRED_MISSING] == 0b100001
     assert values[reg.OUTCOME_FLAGS] == reg.FLAG_PUSHED | reg.FLAG_VERIFIED
-    assert [r["verdict"] for r in _archived(config)] == ["JOINTS_MISSING"]
+    assert [r.verdict for r in _archived(config)] == ["JOINTS_MISSING"]
 
 
 def test_an_abort_after_the_push_lets_verification_finish(make_station: Factory) -> None:
@@ -151,5 +152,5 @@ def test_an_abort_after_the_push_lets_verification_finish(make_station: Factory)
     np.testing.assert_allclose(result["offsets"], push["new_offsets"], rtol=0, atol=1e-12)
     outcome = json.loads((journal.parent / "result.json").read_text())["outcome"]
     assert outcome["controller"] == "new offsets, verified"
-    assert [r["verdict"] for r in _archived(config)] == ["PASS"]
+    assert [r.verdict for r in _archived(config)] == ["PASS"]
     assert not (runs_dir / "current.json").exists()

@@ -8,9 +8,10 @@ nothing known.
 
 from hostpc.dataset.kind_registry import KindDescriptor, SimDefault
 from hostpc.kinds.dual_loop.model import DualLoop
+from hostpc.kinds.stereo_target import PIXEL_FLOOR_OPTION
 
 KIND = KindDescriptor(
     name="dual_loop", model=DualLoop,
     method="hostpc.kinds.dual_loop.method:DualLoopMethod",
     known_frames=("camera", "left_base", "right_base", "left_target", "right_target"),
-    sim=SimDefault(scenario="humanoid.yaml"))
+    sim=SimDefault(scenario="humanoid.yaml"), cli_options=(PIXEL_FLOOR_OPTION,))
