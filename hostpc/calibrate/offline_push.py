@@ -7,7 +7,8 @@ exceeds the limit, unless forced), `execute_push` records the intent durably in 
 folder before writing the controller, and `hostpc rollback --run DIR` undoes it.
 
 :class:`SavedFit` is the part of a :class:`~hostpc.fitting.FitResult` that `plan_push`
-reads, rebuilt from the fit's JSON document; nothing else of the fit is needed.
+reads (both are a :class:`~hostpc.fitting.result.FitVerdict`), rebuilt from the fit's
+JSON document; nothing else of the fit is needed.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -61,11 +61,15 @@ class SavedFit:
         return self.chi2 / self.dof if self.dof > 0 else math.nan
 
     @property
-    def problem(self) -> Any:
-        """What plan_push reads of the problem: the joint labels (q1..qn, or a kinematic
-        tree's head.q1, ...), from the names of the fit's joint offsets."""
-        labels = tuple(offset_labels(self.names))
-        return SimpleNamespace(context=SimpleNamespace(joint_labels=labels))
+    def joint_labels(self) -> tuple[str, ...]:
+        """The joints' names (q1..qn, or a kinematic tree's head.q1, ...), from the names
+        of the fit's joint offsets."""
+        return tuple(offset_labels(self.names))
+
+    @property
+    def problem(self) -> None:
+        """A saved fit carries no problem (no priors, holds or dataset): see FitVerdict."""
+        return None
 
     def joint_offsets(self) -> list[str]:
         """The joint-offset parameters of the fit, in order."""

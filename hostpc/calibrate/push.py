@@ -42,7 +42,7 @@ from hostpc.calibrate.journal import Journal
 from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN, chi2_dof_upper
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
-from hostpc.fitting import FitResult
+from hostpc.fitting.result import FitVerdict
 from hostpc.model.joint_offsets import PushTable
 from hostpc.robots.base import RobotAdapter
 
@@ -111,7 +111,7 @@ class PushPlan:
         return rows
 
 
-def plan_push(result: FitResult, old_offsets: np.ndarray,
+def plan_push(result: FitVerdict, old_offsets: np.ndarray,
               max_correction_deg: float = DEFAULT_MAX_CORRECTION_DEG, force: bool = False,
               dataset_file: str = "DIR/dataset.json",
               limits_deg: np.ndarray | None = None) -> PushPlan:
@@ -129,7 +129,7 @@ def plan_push(result: FitResult, old_offsets: np.ndarray,
     pushed = np.zeros(n, dtype=bool)
     notes = []
     held = {d.fixed: d for d in result.unidentifiable}
-    table = PushTable.for_controller(n, result.problem.context.joint_labels)
+    table = PushTable.for_controller(n, result.joint_labels)
     sources = joint_sources(result, n)  # a held or prior-dominated joint is never pushed
     for j, name in enumerate(table.names):
         if name not in names:
@@ -164,22 +164,21 @@ def plan_push(result: FitResult, old_offsets: np.ndarray,
                     chi2_dof_tested=chi2_dof if shared else None)
 
 
-def adequacy_chi2(result: FitResult) -> tuple[float, bool]:
+def adequacy_chi2(result: FitVerdict) -> tuple[float, bool]:
     """(chi2/dof the guard tests, True if it includes the dataset's shared error).
 
     With a `rig_uncertainty` block in the fit's dataset: the chi2 with the shared error's
-    covariance inside (`FitResult.chi2_dof_with_calibration`; a saved fit,
-    `offline_push.SavedFit`, carries it under the same name); else the fit's plain
-    chi2/dof."""
+    covariance inside (`FitVerdict.chi2_dof_with_calibration`: a live fit computes it, a
+    saved fit carries it); else the fit's plain chi2/dof."""
     if not result.converged:
         return result.chi2_dof, False
-    full = getattr(result, "chi2_dof_with_calibration", None)
+    full = result.chi2_dof_with_calibration
     if full is not None:
         return float(full), True
     return result.chi2_dof, False
 
 
-def _refusal(result: FitResult, delta: np.ndarray, pushed: np.ndarray,
+def _refusal(result: FitVerdict, delta: np.ndarray, pushed: np.ndarray,
              labels: tuple[str, ...], max_correction_deg: float, limits: np.ndarray,
              dataset_file: str, chi2_dof: float, shared: bool) -> str | None:
     """Why the guard rails refuse the push (first reason that applies), or None.

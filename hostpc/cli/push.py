@@ -142,7 +142,7 @@ async def _push(args: argparse.Namespace, saved: SavedFit, address: RobotAddress
                              f"{args.fit} --robot HOST`")
         if not args.force:
             await _check_same_robot_and_not_pushed(robot, saved, args.fit, address, offsets)
-        plan = plan_push(saved, offsets, args.max_correction,  # type: ignore[arg-type]
+        plan = plan_push(saved, offsets, args.max_correction,
                          force=args.force, dataset_file=_dataset_file(args.fit))
         if plan.refused or args.dry_run:
             return plan, None
