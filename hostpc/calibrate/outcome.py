@@ -42,6 +42,7 @@ from hostpc.calibrate.summary import (
     EXIT_PUSH_REFUSED,
     EXIT_VERIFY_FAILED,
 )
+from hostpc.json_object import JsonObject
 
 VERDICTS = ("PASS", "FAIL", "REFUSED", "NOT_PUSHED", "NOT_VERIFIED", "ROLLED_BACK",
             "JOINTS_MISSING", "ERROR")
@@ -77,7 +78,7 @@ class JointOutcome:
         """Calibrated from data and, if pushed, verified (station register 14)."""
         return self.status == "calibrated" and (not self.pushed or self.verified is True)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {"joint": self.joint, "label": self.label, "status": self.status,
                 "source": self.source, "pushed": self.pushed, "verified": self.verified,
                 "reason": self.reason, "fix": self.fix}
@@ -92,7 +93,7 @@ class OutcomeEvent:
     event: str
     details: tuple[tuple[str, Any], ...] = ()
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {"at": self.at, "event": self.event, **dict(self.details)}
 
 
@@ -117,7 +118,7 @@ class RobotOutcome:
     def exit_code(self) -> int:
         return EXIT_CODES[self.verdict]
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {"verdict": self.verdict, "controller": self.controller, "pushed": self.pushed,
                 "verified": self.verified, "rolled_back_at": self.rolled_back_at,
                 "joints": [j.to_dict() for j in self.joints],

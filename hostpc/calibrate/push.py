@@ -43,6 +43,7 @@ from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN, chi2_dof_upper
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
 from hostpc.fitting.result import FitVerdict
+from hostpc.json_object import JsonObject
 from hostpc.model.joint_offsets import PushTable
 from hostpc.robots.base import RobotAdapter
 
@@ -223,7 +224,7 @@ class PushRecord:
     pushed: tuple[bool, ...]
     time: str = ""
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """JSON form (radians): the journal's `push` event and push.json."""
         return {
             "rollback_id": self.rollback_id,

@@ -40,6 +40,7 @@ import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, SphereFrame
 from hostpc.errors import InputError
+from hostpc.json_object import JsonObject
 from hostpc.kinematics.rotations import matrix_to_rotvec, rotvec_to_matrix
 
 REFERENCE_FORMAT = "zerocal-cell-reference/1"
@@ -86,7 +87,7 @@ class ReferenceFrame:
         vector of the rotation)."""
         return _absolute(self.parameters, self.nominal, self.delta)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {"parameters": list(self.parameters), "nominal": self.nominal.tolist(),
                 "delta": self.delta.tolist(), "covariance": self.covariance.tolist(),
                 "value": self.absolute().tolist()}
@@ -123,7 +124,7 @@ class CellReference:
         """The recording date (YYYY-MM-DD) for messages."""
         return self.recorded[:10]
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {"format": REFERENCE_FORMAT, "recorded": self.recorded,
                 "software": self.software,
                 "robot": {"model": self.robot_model, "serial": self.robot_serial},
@@ -357,7 +358,7 @@ class FramePrior:
     value: np.ndarray
     covariance: np.ndarray
 
-    def block(self) -> dict[str, Any]:
+    def block(self) -> JsonObject:
         """The dataset's `prior_blocks` entry (hostpc.fitting.priors)."""
         return {"names": list(self.names), "value": self.value.tolist(),
                 "covariance": self.covariance.tolist(), "reference_frame": self.frame}

@@ -11,6 +11,7 @@ from hostpc.calibrate.run_result import RunResult
 from hostpc.calibrate.verify import VerifyResult
 from hostpc.dataset import Dataset
 from hostpc.fitting import FitResult
+from hostpc.json_object import JsonObject
 
 
 @dataclass(frozen=True)
@@ -23,7 +24,7 @@ class RobotInfo:
     sim: bool = False
     scenario: str | None = None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {"address": self.address, "driver": self.driver, "sim": self.sim,
                 "scenario": self.scenario}
 

@@ -303,7 +303,7 @@ class Runner:
                               run_dir=self.run_dir, header=header,
                               require_joints=settings.require_joints, finished=True,
                               known=cell.known, swapped=settings.swapped)
-        run = run_result(self.journal, self.run_dir, self.robot_info.to_dict(), settings, cell,
+        run = run_result(self.journal, self.run_dir, self.robot_info, settings, cell,
                          plan, method, dataset, result, push_plan, push_status, verify_result,
                          truth, outcome=outcome.to_dict(), exports=exports,
                          reference_check=cell_reference.reference_check_block(

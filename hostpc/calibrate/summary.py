@@ -16,7 +16,6 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -31,10 +30,12 @@ from hostpc.calibrate.run_result import (
     RunResult,
     SkippedPose,
 )
+from hostpc.calibrate.run_values import RobotInfo
 from hostpc.calibrate.verify import VerifyResult, measured_noise_rms, noise_rms
 from hostpc.dataset import Dataset
 from hostpc.diagnostics.adequacy import chi2_dof_upper
 from hostpc.fitting import FitResult
+from hostpc.json_object import JsonObject
 from hostpc.methods.base import Method, Plan, RunSettings
 from hostpc.methods.cell import Cell
 
@@ -44,17 +45,17 @@ EXIT_VERIFY_FAILED = 6
 EXIT_JOINTS_NOT_CALIBRATED = 7
 
 
-def run_result(journal: Journal, run_dir: Path, robot: Mapping[str, Any], settings: RunSettings,
+def run_result(journal: Journal, run_dir: Path, robot: RobotInfo, settings: RunSettings,
                cell: Cell, plan: Plan, method: Method, dataset: Dataset, result: FitResult,
                push_plan: PushPlan, push_status: str, verify_result: VerifyResult | None,
-               truth: Mapping[str, Any] | None, *, outcome: Mapping[str, Any],
-               reference_check: Mapping[str, Any] | None,
+               truth: JsonObject | None, *, outcome: JsonObject,
+               reference_check: JsonObject | None,
                exports: Mapping[str, str] | None) -> RunResult:
     """The result (``result.json``, format ``RESULT_FORMAT``) of a run in `run_dir`, built
     once: settings, plan, acquisition (skipped poses from `journal`), fit, offsets, push
     (with the UR `exports` that are the push, if any), verification, files, the reference
-    check, the outcome (``RobotOutcome.to_dict()``) and its exit code; robot:
-    ``RobotInfo.to_dict()``; truth (simulation only) adds ``truth_comparison``."""
+    check, the outcome (``RobotOutcome.to_dict()``) and its exit code; truth (simulation
+    only: the simulator's truth document) adds ``truth_comparison``."""
     skipped = tuple(SkippedPose(r.phase, r.index, r.reason)
                     for phase in ("fit", "verify") for r in journal.records(phase)
                     if not r.ok)
@@ -81,7 +82,7 @@ def run_result(journal: Journal, run_dir: Path, robot: Mapping[str, Any], settin
     return RunResult(
         format=RESULT_FORMAT,
         run_dir=str(run_dir),
-        robot={**robot, "name": cell.robot},
+        robot={**robot.to_dict(), "name": cell.robot},
         method=settings.method,
         settings=settings.to_dict(),
         known=tuple(cell.known),
@@ -127,7 +128,7 @@ def run_result(journal: Journal, run_dir: Path, robot: Mapping[str, Any], settin
     )
 
 
-def truth_comparison(truth: Mapping[str, Any], push_plan: PushPlan) -> dict[str, Any]:
+def truth_comparison(truth: JsonObject, push_plan: PushPlan) -> JsonObject:
     """Fitted vs injected zero errors (simulation): `joint_offsets_error_deg` = fitted -
     true per joint, None where the joint is unidentifiable; also within 3 sigma."""
     true = np.asarray(truth.get("zero_errors", []), float)
@@ -228,7 +229,7 @@ def format_summary(run: RunResult) -> str:
     return "\n".join(lines)
 
 
-def plan_line(plan: Mapping[str, Any], acquisition: Mapping[str, Any]) -> str:
+def plan_line(plan: JsonObject, acquisition: JsonObject) -> str:
     """The summary's plan line: the poses planned and, when the model failed on them and
     the plan grew (more_poses.py), what it grew to, so it never disagrees with the
     "measured" line below it."""
@@ -245,7 +246,7 @@ SOURCE_MARK = {"hold": " (held)", "prior": " (prior)"}
 """How a value restated from a hold or a prior is marked wherever it is shown."""
 
 
-def joint_status_text(joint: Mapping[str, Any], said: str = "") -> str:
+def joint_status_text(joint: JsonObject, said: str = "") -> str:
     """One joint of the outcome in words: `calibrated, verified` / `NOT CALIBRATED: why`
     (without the why when `said`: the row already gives it)."""
     if joint.get("status") != "calibrated":
@@ -262,7 +263,7 @@ def _mm(value: float | None) -> str:
     return "-" if value is None else f"{value:.4f}"
 
 
-def _push_line(document: Mapping[str, Any]) -> str:
+def _push_line(document: JsonObject) -> str:
     """The summary's push line: what happened to the controller and how to undo it."""
     push = document["push"]
     status = push["status"]
@@ -293,7 +294,7 @@ def _push_line(document: Mapping[str, Any]) -> str:
     return "push: nothing to push (no identifiable joint offset)"
 
 
-def _verify_line(verify: Mapping[str, Any]) -> str:
+def _verify_line(verify: JsonObject) -> str:
     """The summary's verification line: the chi-square test (statistic, dof, p-value, the
     false-FAIL rate alpha) and the station tolerance. With nothing pushed it checks the model
     on fresh poses (no PASS: no offsets were verified)."""

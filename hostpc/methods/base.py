@@ -56,6 +56,7 @@ from typing import Any, ClassVar, Literal, Protocol
 import numpy as np
 
 from hostpc.dataset import Dataset, Samples
+from hostpc.json_object import JsonObject
 from hostpc.methods.cell import Cell
 from hostpc.planning.design import PoseGroups
 from hostpc.robots.base import MoveOutcome, Need, RobotAdapter, RobotState
@@ -112,7 +113,7 @@ class RunSettings:
     swapped: tuple[int, ...] = ()
     swap_limit_deg: float = 45.0
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """JSON form."""
         data = dataclasses.asdict(self)
         data["plugins"] = list(self.plugins)
@@ -122,7 +123,7 @@ class RunSettings:
         return data
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> RunSettings:
+    def from_dict(cls, data: JsonObject) -> RunSettings:
         """Inverse of to_dict (unknown keys ignored, so old run folders stay readable)."""
         names = {f.name for f in dataclasses.fields(cls)}
         values = {k: v for k, v in data.items() if k in names}
@@ -167,7 +168,7 @@ class Plan:
             return np.vstack([self.q_verify, self.q_verify_more])
         return self.q_verify
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """JSON form (radians)."""
         data = {"q": self.q.tolist(), "q_verify": self.q_verify.tolist(),
                 "info": dict(self.info)}
@@ -177,7 +178,7 @@ class Plan:
         return data
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> Plan:
+    def from_dict(cls, data: JsonObject) -> Plan:
         """Inverse of to_dict."""
         n = len(data["q"][0]) if data["q"] else len(data["q_verify"][0])
         q = np.asarray(data["q"], dtype=float).reshape(-1, n)
@@ -193,7 +194,7 @@ class Sample(Protocol):
     dataset-file form key for key as the journal has always held it (so an old run
     resumes), is what the journal holds; the kind reads it back with ``from_json``."""
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> JsonObject:
         """The sample's dataset-file form (SI)."""
 
 
@@ -299,7 +300,7 @@ class SampleRecord:
     reason: str | None = None
     q_end: Sequence[float] | None = None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """JSON form (one journal line)."""
         return {
             "event": "sample",
@@ -312,7 +313,7 @@ class SampleRecord:
         }
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> SampleRecord:
+    def from_dict(cls, data: JsonObject) -> SampleRecord:
         """Inverse of to_dict; ValueError naming the field if `data` is not a record."""
         phase, index, status = data.get("phase"), data.get("index"), data.get("status")
         if phase not in ("fit", "verify"):

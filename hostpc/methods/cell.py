@@ -34,6 +34,7 @@ from hostpc.dataset import FramePose
 from hostpc.dataset.kind_registry import kind_descriptors
 from hostpc.errors import InputError
 from hostpc.input_files import CONFIG, read_input_text
+from hostpc.json_object import JsonObject
 
 
 def frame_names(plugins: Iterable[str | Path] = ()) -> tuple[str, ...]:
@@ -67,7 +68,7 @@ class Cell:
     chessboard: Mapping[str, Any] | None = None
     raw: Mapping[str, Any] = field(default_factory=dict)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """JSON form (the cell file format; SI units)."""
         extra = {k: v for k, v in self.raw.items() if k not in _CELL_KEYS}
         return {
