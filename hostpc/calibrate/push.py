@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import datetime as _dt
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -39,6 +38,7 @@ import numpy as np
 
 from hostpc.calibrate.joint_status import joint_sources
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.journal_events import Pushed, PushIntent, PushRecord
 from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN, chi2_dof_upper
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
@@ -212,29 +212,6 @@ def _refusal(result: FitVerdict, delta: np.ndarray, pushed: np.ndarray,
     return None
 
 
-@dataclass(frozen=True)
-class PushRecord:
-    """What was written: previous and new offsets (n,) rad, the controller's rollback id
-    (None for a push recovered from its intent: the id was never received), which joints
-    changed, and when (ISO 8601, UTC)."""
-
-    previous: np.ndarray
-    new: np.ndarray
-    rollback_id: str | None
-    pushed: tuple[bool, ...]
-    time: str = ""
-
-    def to_dict(self) -> JsonObject:
-        """JSON form (radians): the journal's `push` event and push.json."""
-        return {
-            "rollback_id": self.rollback_id,
-            "previous_offsets": self.previous.tolist(),
-            "new_offsets": self.new.tolist(),
-            "pushed": list(self.pushed),
-            "time": self.time,
-        }
-
-
 def _now() -> str:
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
 
@@ -255,16 +232,14 @@ async def execute_push(robot: RobotAdapter, plan: PushPlan, run_dir: Path, addre
     write_json_atomic(run_dir / PUSH_FILE,
                       {"controller": address, "status": "intent", **intent.to_dict()})
     if journal is not None:
-        fields = intent.to_dict()
-        del fields["rollback_id"]
-        journal.event("push_intent", **fields)
+        journal.append(PushIntent(intent))
     previous, rollback_id = await robot.set_offsets(plan.new)
     record = PushRecord(previous=np.asarray(previous, float), new=plan.new.copy(),
                         rollback_id=str(rollback_id), pushed=pushed, time=_now())
     write_json_atomic(run_dir / PUSH_FILE,
                       {"controller": address, "status": "pushed", **record.to_dict()})
     if journal is not None:
-        journal.event("push", **record.to_dict())
+        journal.append(Pushed(record))
     return record
 
 
@@ -275,18 +250,18 @@ def same_offsets(a: Any, b: Any) -> bool:
     return a.shape == b.shape and bool(np.allclose(a, b, rtol=0.0, atol=OFFSET_MATCH_TOLERANCE))
 
 
-def intent_outcome(intent: Mapping[str, Any], offsets_now: np.ndarray) -> str | None:
+def intent_outcome(intent: PushRecord, offsets_now: np.ndarray) -> str | None:
     """Did a push whose result was never recorded reach the controller? From the offsets
     the controller reports now (n,) rad: "pushed" (they are the intended new ones),
     "not_pushed" (still the previous ones) or None (neither: changed by someone else)."""
-    if same_offsets(offsets_now, intent["new_offsets"]):
+    if same_offsets(offsets_now, intent.new):
         return "pushed"
-    if same_offsets(offsets_now, intent["previous_offsets"]):
+    if same_offsets(offsets_now, intent.previous):
         return "not_pushed"
     return None
 
 
-def read_push_file(run_dir: str | Path) -> dict[str, Any]:
+def read_push_file(run_dir: str | Path) -> JsonObject:
     """The push record of a run folder (status "pushed" with a rollback id, or "intent":
     written before the controller was, result unknown); InputError if the run pushed
     nothing."""
@@ -308,9 +283,8 @@ def read_push_file(run_dir: str | Path) -> dict[str, Any]:
     return data
 
 
-async def rollback_run(robot: RobotAdapter, record: Mapping[str, Any]
-                       ) -> tuple[np.ndarray, str]:
-    """Undo the push recorded in a run's push.json (`read_push_file`).
+async def rollback_run(robot: RobotAdapter, record: PushRecord) -> tuple[np.ndarray, str]:
+    """Undo the push recorded in a run's push.json (`read_push_file`, as a PushRecord).
 
     With a rollback id: `rollback` (falling back to writing the previous offsets). Without
     one (the run stopped between writing its intent and recording the result, or the push
@@ -318,9 +292,9 @@ async def rollback_run(robot: RobotAdapter, record: Mapping[str, Any]
     the previous ones are written ("previous_offsets_written"); still the previous ones ->
     nothing to do ("not_pushed"). Anything else is an InputError (someone else changed
     them). Returns (offsets now (n,) rad, how)."""
-    previous = np.asarray(record["previous_offsets"], float)
-    if record.get("rollback_id") is not None:
-        return await rollback(robot, str(record["rollback_id"]), previous)
+    previous = record.previous
+    if record.rollback_id is not None:
+        return await rollback(robot, record.rollback_id, previous)
     now = np.asarray(await robot.get_offsets(), float)
     outcome = intent_outcome(record, now)
     if outcome == "not_pushed":

@@ -29,6 +29,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.journal_events import RobotTimeSpent
 from hostpc.robots.base import RobotAdapter, RobotState
 
 PHASES = ("rig", "measure", "verify")
@@ -76,7 +77,7 @@ class RobotTimer:
             return 0.0
         seconds = max(0.0, now - last)
         if seconds > 0.0:
-            self.journal.event("robot_time", phase=phase, seconds=seconds, clock=clock)
+            self.journal.append(RobotTimeSpent(phase=phase, seconds=seconds, clock=clock))
         return seconds
 
 
@@ -85,12 +86,10 @@ def robot_time_document(journal: Journal) -> dict[str, Any]:
     over the run's sessions) and "clock" ("controller", "host", "mixed" or None)."""
     seconds = dict.fromkeys(PHASES, 0.0)
     clocks: set[str] = set()
-    for event in journal.events("robot_time"):
-        phase = event.get("phase")
-        value = event.get("seconds")
-        if phase in seconds and isinstance(value, int | float) and math.isfinite(value):
-            seconds[phase] += float(value)
-            clocks.add(str(event.get("clock", "controller")))
+    for event in journal.events(RobotTimeSpent):
+        if event.phase in seconds and math.isfinite(event.seconds):
+            seconds[event.phase] += event.seconds
+            clocks.add(event.clock)
     clock = None if not clocks else (clocks.pop() if len(clocks) == 1 else "mixed")
     return {**seconds, "total": sum(seconds.values()), "clock": clock}
 

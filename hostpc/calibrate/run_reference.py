@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.journal_events import Note
 from hostpc.calibrate.push import PushPlan, joint_display_name
 from hostpc.calibrate.reference import (
     REFERENCE_FILE,
@@ -73,12 +74,12 @@ def record_reference_choice(run_dir: Path, journal: Journal, reference: CellRefe
     copy = run_dir / REFERENCE_FILE
     if reference is None:
         copy.unlink(missing_ok=True)
-        journal.event("note", text="reference dropped (--reference none)")
+        journal.append(Note("reference dropped (--reference none)"))
         progress.message("reference: none (dropped on this resume)")
         return
     write_json_atomic(copy, reference.to_dict())
-    journal.event("note", text="reference loaded", reference=str(option),
-                  recorded=reference.recorded)
+    journal.append(Note("reference loaded", reference=str(option),
+                        recorded=reference.recorded))
     progress.message(f"reference: {option} (recorded {reference.date} on "
                      f"{reference.robot_serial or reference.robot_model}; frames "
                      f"{', '.join(f.name for f in reference.frames)})")
@@ -94,7 +95,7 @@ def resume_known(cell: Cell, known: tuple[str, ...] | None, header: RunHeader,
     cell = dataclasses.replace(cell, known=tuple(known))
     header = dataclasses.replace(header, cell=cell.to_dict())
     journal.write_header(header.to_dict())
-    journal.event("note", text="known frames changed on resume", known=list(known))
+    journal.append(Note("known frames changed on resume", known=tuple(known)))
     progress.message(f"resume with known frames: {', '.join(known) or 'none'} (the measured "
                      "samples are refitted)")
     return cell, header

@@ -31,6 +31,16 @@ import numpy as np
 from hostpc.calibrate import run_reference as cell_reference
 from hostpc.calibrate.joint_status import joint_sources
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.journal_events import (
+    MorePoses,
+    Pushed,
+    PushIntent,
+    PushRefused,
+    Resumed,
+    RunFinished,
+    Verified,
+    VerifyRoundLost,
+)
 from hostpc.calibrate.more_poses import more_poses_message, more_poses_reason
 from hostpc.calibrate.outcome import parse_required_joints
 from hostpc.calibrate.outcome_files import run_outcome
@@ -184,7 +194,7 @@ class Runner:
                                   stored.exit_code)
             settings = resume_settings(header.settings, self.resume_overrides, self.journal,
                                        progress)
-            self.journal.event("resumed", at=_now())
+            self.journal.append(Resumed(at=_now()))
             cell, header = cell_reference.resume_known(
                 cell_from_dict(header.cell, settings.plugins), self.known, header,
                 self.journal, progress)
@@ -317,10 +327,10 @@ class Runner:
         summary = format_summary(run)  # after the report: it names the report's path
         (self.run_dir / "summary.txt").write_text(summary + "\n", encoding="utf-8")
         write_json_atomic(self.run_dir / "result.json", run.to_dict())
-        self.journal.event("result", exit_code=run.exit_code, push=push_status,
-                           verdict=None if verify_result is None else verify_result.verdict,
-                           outcome=outcome.verdict, at=_now(),
-                           offsets=[float(v) for v in offsets])
+        self.journal.append(RunFinished(
+            exit_code=run.exit_code, push=push_status,
+            verdict=None if verify_result is None else verify_result.verdict,
+            outcome=outcome.verdict, at=_now(), offsets=tuple(float(v) for v in offsets)))
         progress.close()
         return RunOutcome(self.run_dir, run, summary, run.exit_code, result, dataset,
                           verify_result, push_plan)
@@ -418,7 +428,7 @@ class Runner:
                    if first <= r.index < first + n_verify):
             reasons = sorted({str(r.reason) for r in self.journal.records("verify")
                               if first <= r.index < first + n_verify})
-            self.journal.event("verify_lost", round=number)
+            self.journal.append(VerifyRoundLost(round=number))
             state = ("the pushed offsets stay in the controller"
                      if np.any(pushed_delta != 0.0) else "nothing was pushed")
             raise VerifyLost(f"verification lost: all {n_verify} verification poses were "
@@ -433,11 +443,11 @@ class Runner:
                                         alpha=settings.verify_alpha, tolerance=tolerance,
                                         factor=settings.verify_factor)
         write_json_atomic(self.run_dir / "verify.json", verify_result.to_dict())
-        self.journal.event("verify", round=number, verdict=verify_result.verdict, at=_now(),
-                           statistic=finite_or_none(verify_result.statistic),
-                           dof=verify_result.dof,
-                           p_value=finite_or_none(verify_result.p_value),
-                           offsets=[float(v) for v in offsets])
+        self.journal.append(Verified(round=number, verdict=verify_result.verdict, at=_now(),
+                                     statistic=finite_or_none(verify_result.statistic),
+                                     dof=verify_result.dof,
+                                     p_value=finite_or_none(verify_result.p_value),
+                                     offsets=tuple(float(v) for v in offsets)))
         return verify_result
 
     async def _push(self, plan: PushPlan, settings: RunSettings, offsets_now: np.ndarray
@@ -463,7 +473,7 @@ class Runner:
             return "disabled", zero, offsets_now
         if plan.refused:
             progress.message(f"push refused: {plan.refused}")
-            self.journal.event("push_refused", reason=plan.refused, at=_now())
+            self.journal.append(PushRefused(reason=plan.refused, at=_now()))
             return "refused", zero, offsets_now
         if not plan.anything:
             return "nothing_to_push", zero, offsets_now
@@ -477,7 +487,7 @@ class Runner:
                 raise
             self._controller_refusal = refused
             progress.message(f"push refused: {refused}")
-            self.journal.event("push_refused", reason=refused, by="controller", at=_now())
+            self.journal.append(PushRefused(reason=refused, by="controller", at=_now()))
             return "refused", zero, offsets_now
         labels = plan.display_names()
         progress.message("pushed zero offsets: " + ", ".join(
@@ -488,11 +498,11 @@ class Runner:
 
     def _verify_poses(self, plan: Plan) -> np.ndarray:
         """The plan's verification poses, with its further ones if it grew (more_poses)."""
-        return plan.verify_poses(self.journal.last_event("more_poses") is not None)
+        return plan.verify_poses(self.journal.last(MorePoses) is not None)
 
     def _pushed_ever(self) -> bool:
         """True if this run ever wrote (or meant to write) the controller's offsets."""
-        return self.journal.last_event("push_intent", "push") is not None
+        return self.journal.last_event(PushIntent, Pushed) is not None
 
     def _push_asked(self) -> bool:
         """True if this resume's command line asked for the push (--push or --force)."""

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.journal_events import MorePoses, Pushed
 from hostpc.calibrate.push import PUSH_FILE, PushPlan, joint_display_name
 from hostpc.calibrate.robot_time import format_robot_time, robot_time_document
 from hostpc.calibrate.run_reference import reference_summary_lines
@@ -63,13 +64,13 @@ def run_result(journal: Journal, run_dir: Path, robot: RobotInfo, settings: RunS
     rows = tuple(dataclasses.replace(row, pushed=row.pushed and written,
                                      new_deg=row.new_deg if written else row.old_deg)
                  for row in (OffsetRow.from_dict(r) for r in push_plan.joints()))
-    pushes = journal.events("push")
+    pushes = journal.events(Pushed)
     push = PushResult(push_status, push_plan.refused, push_plan.max_correction_deg,
-                      {"rollback_id": pushes[-1]["rollback_id"],
-                       "recovered": bool(pushes[-1].get("recovered", False)),
+                      {"rollback_id": pushes[-1].record.rollback_id,
+                       "recovered": pushes[-1].recovered,
                        "file": str(run_dir / PUSH_FILE)} if written and pushes else None,
                       exports)
-    more = journal.last_event("more_poses")
+    more = journal.last(MorePoses)
     files = {
         "run": str(journal.run_path),
         "journal": str(journal.journal_path),
@@ -94,7 +95,7 @@ def run_result(journal: Journal, run_dir: Path, robot: RobotInfo, settings: RunS
         },
         acquisition=Acquisition(
             n_planned=int(plan.q.shape[0]) + (int(plan.more.shape[0]) if more else 0),
-            more_poses=(more or {}).get("reason"),
+            more_poses=None if more is None else more.reason,
             n_measured=dataset.n_samples,
             n_poses_measured=sum(r.ok for r in journal.records("fit")),
             skipped=skipped),

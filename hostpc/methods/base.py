@@ -296,7 +296,7 @@ class SampleRecord:
     phase: Phase
     index: int
     ok: bool
-    sample: Mapping[str, Any] | None = None
+    sample: JsonObject | None = None
     reason: str | None = None
     q_end: Sequence[float] | None = None
 
