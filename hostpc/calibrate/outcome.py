@@ -29,6 +29,7 @@ its verification did not fail; a hold or prior value never is (joint_status.py).
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -151,7 +152,7 @@ def parse_required_joints(text: str | None, n_joints: int | None = None) -> tupl
     return tuple(sorted(joints))
 
 
-def sources_from_outcome(block: Mapping[str, Any]) -> tuple[JointSource, ...]:
+def sources_from_outcome(block: JsonObject) -> tuple[JointSource, ...]:
     """The fit's per-joint sources as a stored outcome block holds them (for a rollback or
     a later view to derive the outcome again without the fit)."""
     return tuple(JointSource(int(row["joint"]), str(row.get("label", f"q{row['joint']}")),
@@ -186,7 +187,7 @@ def _span(run: list[int]) -> str:
         f"J{run[0]}, J{run[1]}" if len(run) == 2 else f"J{run[0]}-J{run[-1]}")
 
 
-def derive_outcome(events: Sequence[Mapping[str, Any]], sources: Sequence[JointSource], *,
+def derive_outcome(events: Sequence[JsonObject], sources: Sequence[JointSource], *,
                    run_dir: str, finished: bool, required: Sequence[int] = (),
                    robot_arg: str = "ROBOT", known: Sequence[str] = ()) -> RobotOutcome:
     """The outcome from the journal's events (`Journal.timeline(*JOURNAL_KINDS)`, in
@@ -245,7 +246,7 @@ class _Replay:
     events: list[OutcomeEvent] = field(default_factory=list)
 
 
-def _replay(events: Sequence[Mapping[str, Any]]) -> _Replay:
+def _replay(events: Sequence[JsonObject]) -> _Replay:
     """Walk the journal's events in order: the last push, whether it was verified or
     rolled back since, a refusal after it."""
     state = _Replay()
@@ -361,18 +362,13 @@ def _with_words(outcome: RobotOutcome, run_dir: str, robot_arg: str, known: tupl
         next_command = f"hostpc calibrate --resume {run}"
     if intent_open and verdict == "ERROR":
         next_command = f"hostpc calibrate --resume {run}"
-    return RobotOutcome(**{**_fields(outcome), "headline": head,
-                           "next_command": next_command})
+    return dataclasses.replace(outcome, headline=head, next_command=next_command)
 
 
 def _model_check_failed(events: Sequence[OutcomeEvent]) -> bool:
     """True if the last check of the fitted model on fresh poses (nothing pushed) failed."""
     checks = [dict(e.details) for e in events if e.event == "model_check"]
     return bool(checks) and checks[-1].get("verdict") == "FAIL"
-
-
-def _fields(outcome: RobotOutcome) -> dict[str, Any]:
-    return {name: getattr(outcome, name) for name in outcome.__dataclass_fields__}
 
 
 def _not_calibrated_text(joints: Sequence[JointOutcome], bad: Sequence[JointOutcome]) -> str:

@@ -39,6 +39,7 @@ import numpy as np
 from hostpc.calibrate.joint_status import joint_sources
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.journal_events import Pushed, PushIntent, PushRecord
+from hostpc.calibrate.run_result import OffsetRow
 from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN, chi2_dof_upper
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
@@ -93,23 +94,23 @@ class PushPlan:
         return [joint_display_name(j, self.labels[j] if j < len(self.labels) else "")
                 for j in range(self.old.size)]
 
-    def joints(self) -> list[dict[str, Any]]:
-        """Per joint, JSON-ready, in degrees (for the result document and the summary)."""
+    def joints(self) -> tuple[OffsetRow, ...]:
+        """Per joint, in degrees (for the result document and the summary)."""
         rows = []
         for j in range(self.old.size):
             fitted = float(self.fitted[j]) if self.fitted.size else float(self.delta[j])
-            rows.append({
-                "joint": j + 1,
-                "label": self.labels[j] if j < len(self.labels) else f"q{j + 1}",
-                "old_deg": math.degrees(float(self.old[j])),
-                "correction_deg": math.degrees(fitted) if np.isfinite(self.sigma[j]) else None,
-                "sigma_deg": (math.degrees(float(self.sigma[j]))
-                              if np.isfinite(self.sigma[j]) else None),
-                "new_deg": math.degrees(float(self.new[j])),
-                "pushed": bool(self.pushed[j]),
-                "note": self.notes[j],
-            })
-        return rows
+            rows.append(OffsetRow(
+                joint=j + 1,
+                label=self.labels[j] if j < len(self.labels) else f"q{j + 1}",
+                old_deg=math.degrees(float(self.old[j])),
+                correction_deg=math.degrees(fitted) if np.isfinite(self.sigma[j]) else None,
+                sigma_deg=(math.degrees(float(self.sigma[j]))
+                           if np.isfinite(self.sigma[j]) else None),
+                new_deg=math.degrees(float(self.new[j])),
+                pushed=bool(self.pushed[j]),
+                note=self.notes[j],
+            ))
+        return tuple(rows)
 
 
 def plan_push(result: FitVerdict, old_offsets: np.ndarray,

@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +44,47 @@ measured dataset, then pushes and verifies)."""
 CLOCK_TOLERANCE_S = 1e-6
 
 
-def resume_settings(settings: RunSettings, overrides: Mapping[str, Any], journal: Journal,
+@dataclass(frozen=True)
+class ResumeOverrides:
+    """What a resume's command line gives (None: not given): the ``RESUME_OVERRIDABLE``
+    settings, and the model's known frames and cell reference (read by the runner)."""
+
+    push: bool | None = None
+    force: bool | None = None
+    max_correction_deg: float | None = None
+    verify_factor: float | None = None
+    verify_alpha: float | None = None
+    verify_tolerance_mm: float | None = None
+    effects: str | None = None
+    plugins: tuple[str, ...] | None = None
+    require_joints: str | None = None
+    swapped: tuple[int, ...] | None = None
+    swap_limit_deg: float | None = None
+    known: str | None = None
+    reference: str | None = None
+
+    def items(self) -> list[tuple[str, Any]]:
+        """(name, value) of every option, in order."""
+        return [(f.name, getattr(self, f.name)) for f in dataclasses.fields(self)]
+
+    @property
+    def asked(self) -> bool:
+        """True if the resume asks for anything beyond finishing the run (an option that
+        acts after the measurements: push, force, limits, verification, model)."""
+        return any(value not in (None, False, [], ()) for _, value in self.items())
+
+    @property
+    def push_asked(self) -> bool:
+        """True if the resume asks for the push (--push or --force)."""
+        return self.push is True or self.force is True
+
+    @property
+    def remodel(self) -> bool:
+        """True if the resume changes the model (effects, plugins, known frames, reference)."""
+        return any((self.effects, self.plugins, self.known, self.reference))
+
+
+def resume_settings(settings: RunSettings, overrides: ResumeOverrides, journal: Journal,
                     progress: Progress) -> RunSettings:
     """The run's settings with this resume's `overrides` applied (only the
     ``RESUME_OVERRIDABLE`` ones that are given and differ); a change is journaled."""
@@ -96,11 +136,11 @@ class SampleClock:
         whose controller clock went back (a restarted controller, e.g. a resumed `--robot
         sim` run) moved so that the new samples' t continue from the last journaled one."""
         t0 = float(started or 0.0)
-        now = state.extra.get("time")
-        if self.last_t is None or not isinstance(now, int | float) or not math.isfinite(now):
+        now = state.controller_time
+        if self.last_t is None or now is None:
             return t0
-        if float(now) < t0 + self.last_t - CLOCK_TOLERANCE_S:
-            origin = float(now) - self.last_t
+        if now < t0 + self.last_t - CLOCK_TOLERANCE_S:
+            origin = now - self.last_t
             self.journal.append(Note("controller clock restarted: new samples' t "
                                      "continue from the last journaled one",
                                      last_t=self.last_t, time_origin=origin))

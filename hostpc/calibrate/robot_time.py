@@ -26,10 +26,10 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping
-from typing import Any
 
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.journal_events import RobotTimeSpent
+from hostpc.json_object import JsonObject
 from hostpc.robots.base import RobotAdapter, RobotState
 
 PHASES = ("rig", "measure", "verify")
@@ -37,10 +37,9 @@ PHASES = ("rig", "measure", "verify")
 
 async def robot_clock(robot: RobotAdapter) -> tuple[float, str]:
     """(now in s, "controller") from the controller's clock, else (monotonic, "host")."""
-    state = await robot.state()
-    now = state.extra.get("time") if isinstance(state.extra, Mapping) else None
-    if isinstance(now, int | float) and math.isfinite(now):
-        return float(now), "controller"
+    now = (await robot.state()).controller_time
+    if now is not None:
+        return now, "controller"
     return time.monotonic(), "host"
 
 
@@ -56,9 +55,9 @@ class RobotTimer:
     def __init__(self, robot: RobotAdapter, journal: Journal, state: RobotState) -> None:
         self.robot = robot
         self.journal = journal
-        now = state.extra.get("time") if isinstance(state.extra, Mapping) else None
-        if isinstance(now, int | float) and math.isfinite(now):
-            self._last, self._clock = float(now), "controller"
+        now = state.controller_time
+        if now is not None:
+            self._last, self._clock = now, "controller"
         else:
             self._last, self._clock = time.monotonic(), "host"
 
@@ -81,7 +80,7 @@ class RobotTimer:
         return seconds
 
 
-def robot_time_document(journal: Journal) -> dict[str, Any]:
+def robot_time_document(journal: Journal) -> JsonObject:
     """result.json's `robot_time_s`: {"rig", "measure", "verify", "total"} in s (summed
     over the run's sessions) and "clock" ("controller", "host", "mixed" or None)."""
     seconds = dict.fromkeys(PHASES, 0.0)
@@ -94,7 +93,7 @@ def robot_time_document(journal: Journal) -> dict[str, Any]:
     return {**seconds, "total": sum(seconds.values()), "clock": clock}
 
 
-def format_robot_time(document: Mapping[str, Any]) -> str | None:
+def format_robot_time(document: JsonObject) -> str | None:
     """The summary's robot time line, or None if the document has no robot time."""
     rt = document.get("robot_time_s")
     if not rt:

@@ -14,11 +14,11 @@ random verification choice."""
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 
 from hostpc.errors import InputError
+from hostpc.json_object import JsonObject
 from hostpc.methods import method_class
 from hostpc.methods.base import Method, Plan, Progress, RunSettings
 from hostpc.planning.design import (
@@ -198,7 +198,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     for line in plan_warnings(type(method), settings.target_sigma_deg, sigmas,
                               len(fit_indices), short):
         progress.message(line)
-    info: dict[str, Any] = {
+    info: JsonObject = {
         "criterion": settings.criterion,
         "target_sigma_deg": settings.target_sigma_deg,
         "n_candidates": int(pool.shape[0]),

@@ -38,6 +38,7 @@ from hostpc.dataset import Dataset
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
 from hostpc.fitting.priors import analyse_with_constraints, constraints_for, with_prior_blocks
+from hostpc.json_object import JsonObject
 from hostpc.methods.base import Method, Plan, Progress, RunSettings
 from hostpc.methods.cell import Cell
 from hostpc.model.joint_offsets import PushTable
@@ -150,13 +151,13 @@ def refuse_if_moved(plan: PushPlan, check: ReferenceCheck | None,
 
 
 def reference_check_block(check: ReferenceCheck | None, reference: CellReference | None,
-                          run_dir: Path) -> dict[str, Any] | None:
+                          run_dir: Path) -> JsonObject | None:
     """The result's `reference_check` block (None without a reference)."""
     if reference is None:
         return None
-    block: dict[str, Any] = {"reference": str(run_dir / REFERENCE_FILE),
-                             "recorded": reference.recorded,
-                             "robot_serial": reference.robot_serial}
+    block: JsonObject = {"reference": str(run_dir / REFERENCE_FILE),
+                         "recorded": reference.recorded,
+                         "robot_serial": reference.robot_serial}
     if check is not None:
         block.update(check.to_dict())
         if check.moved:
@@ -186,9 +187,10 @@ def reference_summary_lines(run: RunResult) -> list[str]:
 
 
 def joint_coverage(method: Method, plan: Plan, settings: RunSettings, cell: Cell,
-                   reference: CellReference | None) -> dict[str, Any]:
+                   reference: CellReference | None) -> JsonObject:
     """Which joints the planned poses calibrate with this run's frames: from the
-    measurements (with the known frames), from the reference, or not at all (and why).
+    measurements (with the known frames), from the reference, or not at all (and why):
+    the plan's `joints` info, in its JSON form (run.json, result.json).
     Linear analysis at the nominal model of the fit poses; nothing moves."""
     from hostpc.model.measurements.predict import predict
     from hostpc.model.problem import build_problem

@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from hostpc.calibrate.push import PushPlan
 from hostpc.calibrate.run_result import RunResult
@@ -41,9 +40,8 @@ class RunOutcome:
     dataset: Dataset | None = None
     verify: VerifyResult | None = None
     push: PushPlan | None = None
-    extras: dict[str, Any] = field(default_factory=dict)
 
     @property
-    def document(self) -> dict[str, object]:
+    def document(self) -> JsonObject:
         """The result's JSON form (result.json; `hostpc calibrate --json` prints it)."""
         return self.run.to_dict()

@@ -22,7 +22,7 @@ from __future__ import annotations
 import dataclasses
 import datetime as _dt
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -54,6 +54,7 @@ from hostpc.calibrate.push import (
 from hostpc.calibrate.refusals import MAX_POSE_ATTEMPTS, RunStopped, refusal_text, stopped
 from hostpc.calibrate.resume import (
     PushLost,
+    ResumeOverrides,
     SampleClock,
     VerifyLost,
     archive_result,
@@ -86,6 +87,7 @@ from hostpc.errors import ConnectionFailed, ControllerError, InputError, Zerocal
 from hostpc.files import write_json_atomic
 from hostpc.fitting import FitResult, fit
 from hostpc.fitting.priors import with_constraints
+from hostpc.json_object import JsonObject
 from hostpc.methods import method_class
 from hostpc.methods.base import (
     Method,
@@ -113,13 +115,13 @@ class Runner:
         *,
         robot_info: RobotInfo,
         settings: RunSettings | None = None,
-        cell_file: Mapping[str, Any] | None = None,
+        cell_file: JsonObject | None = None,
         known: tuple[str, ...] | None = None,
         default_known: tuple[str, ...] = (),
         progress: Progress | None = None,
-        truth: Callable[[], dict[str, Any]] | None = None,
+        truth: Callable[[], JsonObject] | None = None,
         report: bool = True,
-        resume_overrides: Mapping[str, Any] | None = None,
+        resume_overrides: ResumeOverrides | None = None,
         reference: str | None = None,
         robot_serial: str | None = None,
     ) -> None:
@@ -133,7 +135,7 @@ class Runner:
         self.progress: Progress = progress or NullProgress()
         self.truth_reader = truth
         self.report = report
-        self.resume_overrides = dict(resume_overrides or {})
+        self.resume_overrides = resume_overrides or ResumeOverrides()
         self.reference_option = reference  # --reference FILE|none (run_reference.py)
         self.robot_serial = robot_serial
         self.reference: Any = None  # the CellReference the run uses, and its frames' priors
@@ -463,8 +465,7 @@ class Runner:
         zero = np.zeros_like(plan.old)
         journaled = push_state(self.journal, self.run_dir, progress, offsets_now,
                                self._push_asked(), zero)
-        remodel = any(self.resume_overrides.get(k)
-                      for k in ("effects", "plugins", "known", "reference"))
+        remodel = self.resume_overrides.remodel
         if journaled is not None and not (
                 remodel and journaled[0] == "pushed" and not plan.refused and plan.anything
                 and not same_offsets(plan.new, offsets_now)):
@@ -506,14 +507,12 @@ class Runner:
 
     def _push_asked(self) -> bool:
         """True if this resume's command line asked for the push (--push or --force)."""
-        return (self.resume_overrides.get("push") is True
-                or self.resume_overrides.get("force") is True)
+        return self.resume_overrides.push_asked
 
     def _asked(self) -> bool:
         """True if this resume asks for anything beyond finishing the run (an option that
         acts after the measurements: push, force, limits, verification, model)."""
-        return any(value not in (None, False, [], ())
-                   for value in self.resume_overrides.values())
+        return self.resume_overrides.asked
 
 
 def _now() -> str:

@@ -26,7 +26,6 @@ from hostpc.calibrate.robot_time import format_robot_time, robot_time_document
 from hostpc.calibrate.run_reference import reference_summary_lines
 from hostpc.calibrate.run_result import (
     Acquisition,
-    OffsetRow,
     PushResult,
     RunResult,
     SkippedPose,
@@ -63,7 +62,7 @@ def run_result(journal: Journal, run_dir: Path, robot: RobotInfo, settings: RunS
     written = push_status == "pushed"
     rows = tuple(dataclasses.replace(row, pushed=row.pushed and written,
                                      new_deg=row.new_deg if written else row.old_deg)
-                 for row in (OffsetRow.from_dict(r) for r in push_plan.joints()))
+                 for row in push_plan.joints())
     pushes = journal.events(Pushed)
     push = PushResult(push_status, push_plan.refused, push_plan.max_correction_deg,
                       {"rollback_id": pushes[-1].record.rollback_id,

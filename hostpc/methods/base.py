@@ -105,7 +105,7 @@ class RunSettings:
     verify_tolerance_mm: float | None = None
     criterion: str = "D"
     n_candidates: int = 1500
-    options: Mapping[str, Any] = field(default_factory=dict)
+    options: JsonObject = field(default_factory=dict)  # per kind: its own keys (run.json)
     target_sigma_deg: float | None = None
     priors: tuple[str, ...] = ()
     hold: tuple[str, ...] = ()
@@ -151,7 +151,7 @@ class Plan:
 
     q: np.ndarray
     q_verify: np.ndarray
-    info: Mapping[str, Any] = field(default_factory=dict)
+    info: JsonObject = field(default_factory=dict)
     q_more: np.ndarray | None = None
     q_verify_more: np.ndarray | None = None
 
@@ -208,7 +208,7 @@ def matrix(values: Sequence[Sequence[float]] | np.ndarray) -> tuple[tuple[float,
     return tuple(tuple(float(v) for v in row) for row in np.asarray(values, dtype=float))
 
 
-def optional_json(**fields: Any) -> dict[str, Any]:
+def optional_json(**fields: Any) -> JsonObject:
     """A typed sample's optional fields that are set, in order, as JSON (tuples as
     lists): what its ``to_json`` appends after the fields every sample has."""
     def plain(value: Any) -> Any:
@@ -465,7 +465,7 @@ class Method(ABC):
         A failed detection is a skipped record; a lost link raises ConnectionFailed."""
 
     @abstractmethod
-    def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> JsonObject:
         """The samples (dataset-file form, in order) as a `zerocal-dataset/1` document."""
 
     def dataset(self, samples: Sequence[Mapping[str, Any]]) -> Dataset:
@@ -492,7 +492,7 @@ class Method(ABC):
         sets it); None (the default): its samples are timed otherwise."""
         return None
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self) -> JsonObject:
         """JSON-ready facts about the method's set-up for the result document."""
         return {}
 

@@ -6,11 +6,11 @@ Angles are radians (reported frame), times seconds; arrays are numpy float64 (n,
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from hostpc.errors import ControllerError
+from hostpc.json_object import JsonObject
 
 
 class ControllerRefusedError(ControllerError):
@@ -40,7 +40,7 @@ class ControllerState:
     q_max: np.ndarray
     digital_inputs: tuple[bool, ...]
     digital_outputs: tuple[bool, ...]
-    camera: dict[str, Any]
+    camera: JsonObject  # the controller's camera description (open: RobotState.camera)
     authenticated: bool
 
 
@@ -119,4 +119,4 @@ class TrackerReading:
     time: float
     points: dict[str, tuple[np.ndarray, np.ndarray]]
     lost: tuple[str, ...]
-    description: dict[str, Any]
+    description: JsonObject  # open: each kind reads its own keys
