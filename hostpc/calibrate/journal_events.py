@@ -13,7 +13,7 @@ Offsets are radians; ``at`` / ``time`` are ISO 8601 UTC times.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
@@ -324,7 +324,7 @@ class Note:
     text: str
     reference: str | None = None
     recorded: str | None = None
-    known: Sequence[str] | None = None
+    known: tuple[str, ...] | None = None
     overrides: JsonObject | None = None  # the changed settings, in their JSON form
     last_t: float | None = None
     time_origin: float | None = None
@@ -339,7 +339,19 @@ class Note:
 
     @classmethod
     def from_json(cls, data: JsonObject) -> Note:
-        return cls(str(data.get("text", "")))
+        def text(key: str) -> str | None:
+            value = data.get(key)
+            return None if value is None else str(value)
+
+        def number(key: str) -> float | None:
+            value = data.get(key)
+            return None if value is None else _number(value)
+
+        known, overrides = data.get("known"), data.get("overrides")
+        return cls(str(data.get("text", "")), text("reference"), text("recorded"),
+                   tuple(str(k) for k in known) if isinstance(known, list) else None,
+                   overrides if isinstance(overrides, dict) else None,
+                   number("last_t"), number("time_origin"), number("t_shift"))
 
 
 EVENT_TYPES: tuple[type[Any], ...] = (PushIntent, Pushed, PushRefused, Rollback, VerifyStart,
