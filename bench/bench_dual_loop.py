@@ -30,10 +30,12 @@ from controller_stub.world.humanoid import HumanoidSimulation
 from hostpc.dataset import Dataset
 from hostpc.fitting import solve
 from hostpc.fitting.stepwise import fit_stepwise, gauge_equivalent, identity_weighted
-from hostpc.kinds.dual_loop.synthesize import PlannedPoses, make_dataset, plan_poses
+from hostpc.kinds.dual_loop.planning import PlannedPoses, plan_poses
+from hostpc.kinds.dual_loop.synthesize import make_dataset
 from hostpc.kinematics.rotations import matrix_to_rotvec, pose_to_transform, rotvec_to_matrix
+from hostpc.model.layout import Problem
 from hostpc.model.measurements.predict import predict
-from hostpc.model.problem import Problem, build_problem
+from hostpc.model.problem import build_problem
 
 POSE_FRAMES = ("camera", "left_base", "right_base")
 

@@ -44,6 +44,7 @@ from hostpc.calibrate.reference_check import check_reference  # noqa: E402
 from hostpc.dataset import Dataset, Samples  # noqa: E402
 from hostpc.fitting import fit  # noqa: E402
 from hostpc.fitting.priors import with_prior_blocks  # noqa: E402
+from hostpc.kinds.sphere_probe.file_face import reference_sphere, stylus_radius
 from hostpc.model.measurements.predict import predict  # noqa: E402
 from hostpc.model.problem import build_problem  # noqa: E402
 
@@ -100,7 +101,7 @@ def _move(method: str, frame: str, dataset: Dataset, truth: dict[str, float],
     z = np.array([0.0, 0.0, 1.0])
     if frame in ("target", "sphere"):  # the unseen direction: a turn about base z
         centre = (np.asarray(dataset.frames["target"], float) if frame == "target"
-                  else np.asarray(dataset.sphere().center, float))
+                  else np.asarray(reference_sphere(dataset).center, float))
         step = 5e-4 * _perpendicular(rng, np.cross(z, centre))
         for k, axis in enumerate("xyz"):
             moved[f"{frame}.{axis}"] += float(step[k])
@@ -141,7 +142,7 @@ def _contacts(template: Dataset, truth: dict[str, float], rng: np.random.Generat
     """sphere_probe: each pose moved along its distance gradient until the true tip touches
     the true sphere (distance = R + r + noise), as a latched contact would be."""
     effects = list(dict.fromkeys(n.split(".", 1)[0] for n in truth))
-    rho = float(template.sphere().radius) + float(template.probe_stylus_radius or 0.0)
+    rho = float(reference_sphere(template).radius) + float(stylus_radius(template) or 0.0)
     sigma = np.asarray(template.samples.sigma, float)
     target = rho + sigma * rng.standard_normal(sigma.size)
     q = np.asarray(template.samples.q, float).copy()

@@ -20,7 +20,10 @@ import numpy as np
 from controller_stub.network.modbus_io import ModbusIoServer
 from controller_stub.network.server import ControllerServer
 from controller_stub.scenario.spec import scenario_from_dict
-from hostpc.kinds.sphere_probe import method as sp
+from hostpc.kinds.sphere_probe.acquisition import acquire
+from hostpc.kinds.sphere_probe.dataset import build_dataset, solve
+from hostpc.kinds.sphere_probe.planning.contacts import ProbePlan, plan_sphere_probe
+from hostpc.kinds.sphere_probe.planning.setup import PlanConfig, ProbeSetup
 from hostpc.kinds.sphere_probe.probe_modbus import ModbusProbe, SteppedGuardedMove
 from hostpc.kinematics import get_robot
 from hostpc.robots.zerocal import ZerocalAdapter
@@ -37,43 +40,43 @@ async def _run(n_orientations: int, modbus_orientations: int) -> dict[str, Any]:
     modbus = ModbusIoServer(server.sim, host="127.0.0.1", port=0)
     modbus_host, modbus_port = await modbus.start()
     probe = scenario.probe
-    setup = sp.ProbeSetup(sphere_centre=probe.sphere_centre, sphere_radius=probe.sphere_radius,
+    setup = ProbeSetup(sphere_centre=probe.sphere_centre, sphere_radius=probe.sphere_radius,
                           stylus_radius=probe.stylus_radius, tip=probe.tip,
                           io_line=probe.io_line, repeatability=probe.repeatability_sigma)
-    config = sp.PlanConfig(n_orientations=n_orientations)
+    config = PlanConfig(n_orientations=n_orientations)
     host, port = server.address
     robot = await ZerocalAdapter.connect(host, port, token=TOKEN)
     try:
         state = await robot.state()
         t = time.perf_counter()
-        plan = sp.plan_sphere_probe(get_robot("ur5e"), setup, config, state.q, state.q_min,
+        plan = plan_sphere_probe(get_robot("ur5e"), setup, config, state.q, state.q_min,
                                     state.q_max)
         plan_s = time.perf_counter() - t
         n_contacts = len(plan.contacts)
         t = time.perf_counter()
-        records = await sp.acquire(robot, plan, setup, config)
+        records = await acquire(robot, plan, setup, config)
         acquire_s = time.perf_counter() - t
-        small = sp.ProbePlan(plan.orientations[:modbus_orientations], 0)
+        small = ProbePlan(plan.orientations[:modbus_orientations], 0)
         async with ModbusProbe(modbus_host, modbus_port, probe.io_line) as reader:
             stepped = SteppedGuardedMove(robot, reader)
             t = time.perf_counter()
-            modbus_records = await sp.acquire(robot, small, setup, config, guarded=stepped)
+            modbus_records = await acquire(robot, small, setup, config, guarded=stepped)
             modbus_s = time.perf_counter() - t
     finally:
         await robot.close()
         await modbus.close()
         await server.close()
     t = time.perf_counter()
-    dataset = sp.build_dataset("ur5e", setup, records)
+    dataset = build_dataset("ur5e", setup, records)
     dataset_s = time.perf_counter() - t
     t = time.perf_counter()
-    lean = sp.solve(dataset, estimate=False)
+    lean = solve(dataset, estimate=False)
     solve_s = time.perf_counter() - t
     t = time.perf_counter()
-    full = sp.solve(dataset, "+trigger_latency", estimate=False)
+    full = solve(dataset, "+trigger_latency", estimate=False)
     solve_latency_s = time.perf_counter() - t
     t = time.perf_counter()
-    sp.solve(dataset, "+trigger_latency", estimate=False, cv_folds=0)
+    solve(dataset, "+trigger_latency", estimate=False, cv_folds=0)
     solve_nocv_s = time.perf_counter() - t
     return {
         "contacts": n_contacts,

@@ -3,6 +3,7 @@
     controller-stub serve [--scenario FILE] [--host 127.0.0.1] [--port 47800]
                           [--truth-out FILE] [--modbus-port PORT] [--ur] [--log-level LEVEL]
                           [--token-file FILE] [--modbus-writable]
+                          [--sensor-plugin FOLDER ...]
 
 `serve` prints exactly `listening on HOST:PORT` (flushed) once it accepts connections; with
 `--port 0` the OS picks a free port and that line tells which. With `--modbus-port` the
@@ -11,7 +12,10 @@ line `modbus on HOST:PORT` is printed before `listening on`. With `--ur` the sam
 robot is also served as a Universal Robots controller (RTDE 30004, dashboard 29999, script
 port 30003 on --host; fixed ports, see docs/robots.md) and the line
 `ur on HOST (rtde 30004, dashboard 29999, script 30003)` is printed before `listening on`.
-Errors are one line on stderr.
+`--sensor-plugin FOLDER` (repeatable) loads the simulated sensors of a measurement kind's
+folder (`FOLDER/sim_sensor.py`, controller_stub/sensors/registry.py), read through
+`sensor_read`; a sensor module that imports hostpc is refused (exit 2): the simulator keeps
+its own models. Errors are one line on stderr.
 
 The token: `--token-file FILE` (a file readable by its owner only, mode 0600; its first
 line), else `$ZEROCAL_TOKEN`, else the scenario's `server.token`. `--token TOKEN` still works
@@ -32,10 +36,13 @@ import os
 import signal
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from protocol import DEFAULT_PORT
 from protocol.auth import read_token_file
+
+if TYPE_CHECKING:
+    from controller_stub.network.modbus_io import ModbusIoServer
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -77,6 +84,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="also serve the robot as a Universal Robots controller (RTDE 30004, dashboard "
         "29999, script 30003) for ur_rtde",
     )
+    serve.add_argument(
+        "--sensor-plugin",
+        type=Path,
+        action="append",
+        default=[],
+        metavar="FOLDER",
+        help="a measurement kind's folder whose sim_sensor.py simulates its instrument "
+        "(repeatable)",
+    )
     serve.add_argument("--log-level", default="WARNING", help="Python logging level")
     return parser
 
@@ -88,7 +104,6 @@ def _load_scenario(path: Path | None) -> object:
 
 
 async def _serve(args: argparse.Namespace) -> int:
-    from controller_stub.network.modbus_io import ModbusIoServer
     from controller_stub.network.server import ControllerServer
 
     scenario: Any = _load_scenario(args.scenario)
@@ -101,7 +116,19 @@ async def _serve(args: argparse.Namespace) -> int:
     if refusal is not None:
         print(f"controller-stub serve: error: {refusal}", file=sys.stderr)
         return 2
-    server = ControllerServer.from_scenario(scenario, truth_out=args.truth_out)
+    from controller_stub.sensors.registry import SensorPluginError
+
+    try:
+        server = ControllerServer.from_scenario(scenario, truth_out=args.truth_out,
+                                                sensor_folders=args.sensor_plugin)
+    except SensorPluginError as exc:
+        print(f"controller-stub serve: error: {exc}", file=sys.stderr)
+        return 2
+    if "hostpc" in sys.modules:  # a simulated sensor pulled the fitter's code in
+        print("controller-stub serve: error: a simulated sensor (--sensor-plugin or entry "
+              "point) imports hostpc; it may use numpy and controller_stub only (the simulator "
+              "keeps its own models)", file=sys.stderr)
+        return 2
     server.token = token
     modbus: ModbusIoServer | None = None
     ur: Any = None
@@ -112,6 +139,9 @@ async def _serve(args: argparse.Namespace) -> int:
             loop.add_signal_handler(signum, stop.set)
     try:
         if args.modbus_port:
+            # pymodbus only when asked for: its import is ~0.2 s of every stub's start-up
+            from controller_stub.network.modbus_io import ModbusIoServer
+
             modbus = ModbusIoServer(
                 server.sim,
                 host=args.host,

@@ -1,49 +1,11 @@
-"""zerocal wire protocol, sans-IO: messages, framing, the Connection state machine, auth.
+"""zerocal wire protocol, sans-IO: messages (`messages`), framing (`framing`), the
+Connection state machine (`connection`, its states in `session_states`), auth (`auth`),
+error codes (`errors`) and the admission policies every server shares (`admission`).
 
 Imports only the standard library and pydantic; no sockets, no asyncio. See
-docs/protocol.md for the message table, the byte layout and the error codes.
+docs/protocol.md for the message table, the byte layout and the error codes. Each name is
+imported from the module that defines it; this package defines only the default port.
 """
-
-from protocol.connection import (
-    Connection,
-    ConnectionClosed,
-    ConnectionState,
-    Event,
-    Rejected,
-    Role,
-    StateChanged,
-)
-from protocol.errors import (
-    FATAL_CODES,
-    ErrorCode,
-    LocalProtocolError,
-    ProtocolError,
-    RemoteProtocolError,
-)
-from protocol.framing import DEFAULT_MAX_FRAME_SIZE, Frame, FrameDecoder, encode_frame
-from protocol.messages import PROTOCOL_VERSION, Message
 
 DEFAULT_PORT = 47800
 """TCP port of the zerocal protocol when none is given (controller-stub, hostpc --robot)."""
-
-__all__ = [
-    "DEFAULT_MAX_FRAME_SIZE",
-    "DEFAULT_PORT",
-    "FATAL_CODES",
-    "PROTOCOL_VERSION",
-    "Connection",
-    "ConnectionClosed",
-    "ConnectionState",
-    "ErrorCode",
-    "Event",
-    "Frame",
-    "FrameDecoder",
-    "LocalProtocolError",
-    "Message",
-    "ProtocolError",
-    "Rejected",
-    "RemoteProtocolError",
-    "Role",
-    "StateChanged",
-    "encode_frame",
-]

@@ -28,9 +28,7 @@ from protocol.errors import (
     RemoteProtocolError,
 )
 from protocol.framing import DEFAULT_MAX_FRAME_SIZE, Frame, FrameDecoder, encode_frame
-from protocol.header_parsing import MAX_JSON_DEPTH as MAX_JSON_DEPTH
 from protocol.header_parsing import _find_id, parse_frame
-from protocol.header_parsing import json_nesting_depth as json_nesting_depth
 from protocol.messages import (
     EVENT_KINDS,
     PROTOCOL_VERSION,
@@ -44,17 +42,19 @@ from protocol.messages import (
     Request,
     _Message,
 )
-from protocol.session_states import ALLOWED_REQUESTS as ALLOWED_REQUESTS
-from protocol.session_states import REFUSAL_CODE as REFUSAL_CODE
-from protocol.session_states import TRANSITIONS as TRANSITIONS
-from protocol.session_states import ConnectionClosed as ConnectionClosed
-from protocol.session_states import ConnectionState as ConnectionState
-from protocol.session_states import Event as Event
-from protocol.session_states import Rejected as Rejected
-from protocol.session_states import Role as Role
-from protocol.session_states import S as S
-from protocol.session_states import StateChanged as StateChanged
-from protocol.session_states import refusal_text
+from protocol.session_states import (
+    ALLOWED_REQUESTS,
+    REFUSAL_CODE,
+    TRANSITIONS,
+    ConnectionClosed,
+    ConnectionState,
+    Event,
+    Rejected,
+    Role,
+    S,
+    StateChanged,
+    refusal_text,
+)
 
 
 class Connection:

@@ -1,4 +1,5 @@
-"""Measurement messages: camera capture, controller-triangulated targets, laser tracker.
+"""Measurement messages: camera capture, controller-triangulated targets, laser tracker, and
+the generic `sensor_read` of any other instrument.
 
 Images do not travel in JSON: a `capture_done` header describes them (`ImageInfo`) and the
 pixels follow as binary attachments of the same frame, in order. Units: m, m^2, rad, s.
@@ -6,9 +7,10 @@ pixels follow as binary attachments of the same frame, in order. Units: m, m^2, 
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
 from protocol.message_base import (
     FiniteFloat,
@@ -146,4 +148,74 @@ class TrackerMeasured(Reply):
     description: dict[str, Any] = {}
 
 
-# --- zero offsets --------------------------------------------------------------------------
+# --- any other instrument (a measurement kind's own simulated sensor) ---------------------
+
+MAX_SENSOR_NODES = 4096
+"""Most values (numbers, strings, booleans, nulls, arrays and objects, each counted) a
+`sensor_read` request or reading may hold: an instrument's reading is a few numbers, never
+a bulk transfer (images travel as `capture` attachments)."""
+MAX_SENSOR_STRING = 1000
+"""Longest string (characters) in a sensor request or reading, keys included."""
+
+SensorName = Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]{0,63}$")]
+"""A simulated or real instrument's name (the measurement kind's, e.g. `string_pot`)."""
+
+
+def _bounded_json(document: dict[str, Any]) -> dict[str, Any]:
+    """`document` if it is a small JSON object: at most MAX_SENSOR_NODES values, strings and
+    keys of at most MAX_SENSOR_STRING characters, finite numbers; ValueError otherwise.
+    (Its depth is already bounded by the header's MAX_JSON_DEPTH.)"""
+    stack: list[Any] = [document]
+    nodes = 0
+    while stack:
+        value = stack.pop()
+        nodes += 1
+        if nodes > MAX_SENSOR_NODES:
+            raise ValueError(f"more than {MAX_SENSOR_NODES} values")
+        if isinstance(value, dict):
+            for key, item in value.items():
+                if len(key) > MAX_SENSOR_STRING:
+                    raise ValueError(f"a key longer than {MAX_SENSOR_STRING} characters")
+                stack.append(item)
+        elif isinstance(value, list):
+            stack.extend(value)
+        elif isinstance(value, str):
+            if len(value) > MAX_SENSOR_STRING:
+                raise ValueError(f"a string longer than {MAX_SENSOR_STRING} characters")
+        elif isinstance(value, float):
+            if not math.isfinite(value):
+                raise ValueError("a number that is not finite")
+        elif not (value is None or isinstance(value, bool | int)):
+            raise ValueError(f"a {type(value).__name__}, not a JSON value")
+    return document
+
+
+SensorDocument = Annotated[dict[str, Any], AfterValidator(_bounded_json)]
+"""A sensor's request or reading: a small JSON object whose shape is the instrument's own
+contract (the kind's method and its simulated sensor agree on it; the protocol only bounds
+it)."""
+
+
+class SensorRead(Request):
+    """Ask the instrument `sensor` for a reading; `request` says what to read, in the
+    instrument's own terms (e.g. `{"what": "length", "average": 4}`).
+
+    Needs an authenticated session, like `capture`. A controller without that instrument
+    refuses with reason `unsupported`; a request the instrument cannot read is answered
+    with `bad_message` and the instrument's reason.
+    """
+
+    kind: Literal["sensor_read"] = "sensor_read"
+    sensor: SensorName
+    request: SensorDocument = {}
+
+
+class SensorReading(Reply):
+    """The instrument's `reading` (its own JSON contract), with the joint angles q (n,) rad
+    at the reading and controller time (s)."""
+
+    kind: Literal["sensor_reading"] = "sensor_reading"
+    sensor: SensorName
+    q: JointVector
+    time: FiniteFloat
+    reading: SensorDocument

@@ -38,6 +38,12 @@ from protocol.measurement_messages import (
     ReflectorObservation as ReflectorObservation,
 )
 from protocol.measurement_messages import (
+    SensorRead as SensorRead,
+)
+from protocol.measurement_messages import (
+    SensorReading as SensorReading,
+)
+from protocol.measurement_messages import (
     TargetObservation as TargetObservation,
 )
 from protocol.measurement_messages import (
@@ -351,6 +357,8 @@ Message = Annotated[
     | TargetsMeasured
     | MeasureTracker
     | TrackerMeasured
+    | SensorRead
+    | SensorReading
     | GetOffsets
     | Offsets
     | SetOffsets
@@ -379,6 +387,7 @@ REQUEST_TYPES: dict[str, type[Request]] = {
         Capture,
         MeasureTargets,
         MeasureTracker,
+        SensorRead,
         GetOffsets,
         SetOffsets,
         RollbackOffsets,
@@ -398,6 +407,7 @@ REPLY_KIND: dict[str, str] = {
     "capture": "capture_done",
     "measure_targets": "targets_measured",
     "measure_tracker": "tracker_measured",
+    "sensor_read": "sensor_reading",
     "get_offsets": "offsets",
     "set_offsets": "offsets_set",
     "rollback_offsets": "offsets_rolled_back",

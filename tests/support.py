@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from hostpc.dataset import Dataset, RobotDescription, Samples, SphereFrame
+from hostpc.kinds.sphere_probe.file_face import probe_blocks
 
 
 def sphere_dataset(robot: str = "ur5e", n: int = 40, seed: int = 0) -> Dataset:
@@ -18,5 +19,5 @@ def sphere_dataset(robot: str = "ur5e", n: int = 40, seed: int = 0) -> Dataset:
     return Dataset(
         method="sphere_probe", robot=RobotDescription(name=robot),
         frames={"tool": DEFAULT_TOOL, "sphere": SphereFrame(default_target(robot), 0.0125)},
-        samples=samples, probe_stylus_radius=0.0015,
+        samples=samples, blocks=probe_blocks(0.0015),
     )

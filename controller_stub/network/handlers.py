@@ -18,6 +18,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from controller_stub.errors import SimulationRefused
+from controller_stub.sensors.registry import SensorRequestError, SimSensors, UnknownSensor
 from controller_stub.world.controller_state import SimulatedController
 from controller_stub.world.motion import GuardedMoveResult, MotionPlan, MoveResult
 from protocol import messages as m
@@ -53,6 +54,8 @@ class MotionHost(Protocol):
     async def execute_motion(self, plan: MotionPlan) -> MoveResult | GuardedMoveResult: ...
     def abort_motion(self) -> bool: ...
     def write_truth(self) -> None: ...
+    @property
+    def sensors(self) -> SimSensors: ...
 
 
 ROLLBACK_ID_PREFIX = "rb-"
@@ -85,6 +88,7 @@ class RequestHandlers:
             "capture": self._capture,
             "measure_targets": self._measure_targets,
             "measure_tracker": self._measure_tracker,
+            "sensor_read": self._sensor_read,
             "get_offsets": self._get_offsets,
             "set_offsets": self._set_offsets,
             "rollback_offsets": self._rollback,
@@ -245,6 +249,22 @@ class RequestHandlers:
                                  time=float(result["time"]), reflectors=reflectors,
                                  lost=[str(n) for n in result["lost"]],
                                  description=json.loads(json.dumps(result["description"])))
+
+    async def _sensor_read(self, request: m.SensorRead) -> m.SensorReading:
+        """A reading of a kind's own simulated sensor (controller_stub/sensors/registry.py)
+        with the joint angles and clock at the reading: `unsupported` for a sensor this
+        stub does not simulate, `bad_message` for a request the sensor cannot read."""
+        try:
+            reading = self.server.sensors.read(request.sensor, request.request)
+        except UnknownSensor as exc:
+            raise SimulationRefused("unsupported", f"{self.sim.robot_name}: {exc}") from None
+        except SensorRequestError as exc:
+            raise RequestRefusedError(ErrorCode.BAD_MESSAGE,
+                                      f"sensor_read {request.sensor}: {exc}") from None
+        return m.SensorReading(reply_to=request.id, sensor=request.sensor,
+                               q=float_list(self.sim.joint_positions()),
+                               time=float(self.sim.time),
+                               reading=json.loads(json.dumps(reading, default=json_default)))
 
     async def _get_offsets(self, request: m.GetOffsets) -> m.Offsets:
         return m.Offsets(reply_to=request.id, offsets=float_list(self.sim.zero_offsets()))

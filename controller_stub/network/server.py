@@ -42,7 +42,7 @@ session. The server binds 127.0.0.1 unless told otherwise.
 
 This module holds `ControllerServer` (accepting, the session limit, motion pacing, rollback
 ids, the truth file); one client connection is a `session.Session`, and its request handlers
-are in `handlers.py`. The limits' constants are importable from here.
+are in `handlers.py`; the session's limits (frame sizes, buffers) are `session.py`'s.
 """
 
 from __future__ import annotations
@@ -53,6 +53,7 @@ import json
 import logging
 import os
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -60,35 +61,20 @@ import numpy as np
 from controller_stub.network.handlers import RequestRefusedError, float_list, json_default
 from controller_stub.network.session import (
     CLOSE_DRAIN_S,
-    EVENT_DROP_BYTES,
-    PRE_AUTH_MAX_FRAME_SIZE,
-    SERVER_NAME,
     SESSION_READ_CHUNK,
-    WRITE_HIGH_WATER,
     Session,
 )
 from controller_stub.scenario.spec import Scenario
+from controller_stub.sensors.registry import SimSensors, sensor_factories
 from controller_stub.world.controller_state import SimulatedController
 from controller_stub.world.motion import GuardedMoveResult, MotionPlan, MoveResult
-from controller_stub.world.simulation import create_simulation
+from controller_stub.world.simulation import Simulation, create_simulation
 from protocol import messages as m
 from protocol.admission import AuthThrottle, LogBudget, SessionSlots
-from protocol.connection import Connection, Role
+from protocol.connection import Connection
 from protocol.errors import ErrorCode
 from protocol.framing import DEFAULT_MAX_FRAME_SIZE
-
-__all__ = [
-    "CLOSE_DRAIN_S",
-    "DEFAULT_HOST",
-    "EVENT_DROP_BYTES",
-    "PRE_AUTH_MAX_FRAME_SIZE",
-    "READ_CHUNK",
-    "SERVER_NAME",
-    "SESSION_READ_CHUNK",
-    "WRITE_HIGH_WATER",
-    "ControllerServer",
-    "RequestRefusedError",
-]
+from protocol.session_states import Role
 
 logger = logging.getLogger(__name__)
 
@@ -107,7 +93,8 @@ class ControllerServer:
     injected faults (see the module docstring). truth_out: file rewritten with `sim.truth()`
     as JSON at start and whenever the offsets change. handshake_timeout_s, idle_timeout_s
     (s), max_sessions, max_unauthenticated_sessions, max_requests_in_flight: the limits of
-    the module docstring.
+    the module docstring. sensors: the kinds' own simulated sensors (`sensor_read`,
+    controller_stub/sensors/registry.py; default: none).
     """
 
     def __init__(
@@ -124,6 +111,7 @@ class ControllerServer:
         max_sessions: int = 32,
         max_unauthenticated_sessions: int = 16,
         max_requests_in_flight: int = 8,
+        sensors: SimSensors | None = None,
     ) -> None:
         if not token:
             raise ValueError("the controller needs a non-empty token")
@@ -141,6 +129,7 @@ class ControllerServer:
         self.drop_after_requests = drop_after_requests
         self.reply_delay_s = reply_delay_s
         self.truth_out = Path(truth_out) if truth_out else None
+        self.sensors = sensors if sensors is not None else SimSensors({}, None, {}, 0)
         self.requests_seen = 0
         self._dropped = False
         self._server: asyncio.Server | None = None
@@ -155,11 +144,18 @@ class ControllerServer:
 
     @classmethod
     def from_scenario(
-        cls, scenario: Scenario, truth_out: str | Path | None = None
+        cls, scenario: Scenario, truth_out: str | Path | None = None,
+        sensor_folders: Iterable[str | Path] = (),
     ) -> ControllerServer:
-        """Build the simulation of `scenario` and a server with its token and faults."""
+        """Build the simulation of `scenario` and a server with its token and faults, and
+        its simulated sensors: the installed ones and those of `sensor_folders` (a kind's
+        folder with its `sim_sensor.py`), measuring the arm (not the humanoid)."""
+        sim = create_simulation(scenario)
+        sensors = SimSensors(sensor_factories(sensor_folders),
+                             sim if isinstance(sim, Simulation) else None,
+                             scenario.sensors, scenario.seed)
         return cls(
-            create_simulation(scenario),
+            sim,
             token=scenario.server.token,
             max_frame_size=scenario.server.max_frame_bytes,
             drop_after_requests=scenario.faults.drop_after_requests,
@@ -170,6 +166,7 @@ class ControllerServer:
             max_sessions=scenario.server.max_sessions,
             max_unauthenticated_sessions=scenario.server.max_unauthenticated_sessions,
             max_requests_in_flight=scenario.server.max_requests_in_flight,
+            sensors=sensors,
         )
 
     # ----------------------------------------------------------------------- lifecycle
@@ -321,7 +318,10 @@ class ControllerServer:
         """Rewrite the --truth-out file atomically (no-op without one)."""
         if self.truth_out is None:
             return
-        text = json.dumps(self.sim.truth(), indent=2, default=json_default)
+        truth = self.sim.truth()
+        if self.sensors.truth():  # the kinds' sensors that have been read
+            truth["sensors"] = self.sensors.truth()
+        text = json.dumps(truth, indent=2, default=json_default)
         directory = self.truth_out.parent
         directory.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=directory, prefix=".truth-", suffix=".json")

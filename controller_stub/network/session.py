@@ -21,15 +21,9 @@ from controller_stub.errors import SimulationRefused
 from controller_stub.network.handlers import MotionHost, RequestHandlers, RequestRefusedError
 from controller_stub.world.controller_state import SimulatedController
 from protocol import messages as m
-from protocol.connection import (
-    Connection,
-    ConnectionClosed,
-    ConnectionState,
-    Rejected,
-    Role,
-    StateChanged,
-)
+from protocol.connection import Connection
 from protocol.errors import ErrorCode, LocalProtocolError
+from protocol.session_states import ConnectionClosed, ConnectionState, Rejected, Role, StateChanged
 
 # the server's logger: log records keep the name they had before the server was split
 logger = logging.getLogger("controller_stub.network.server")

@@ -282,6 +282,9 @@ class Scenario(_Model):
     faults: FaultSpec = FaultSpec()
     humanoid: HumanoidSpec = HumanoidSpec()
     tracker: TrackerSpec = TrackerSpec()  # the laser tracker (sensors/world_point.py)
+    sensors: dict[str, dict[str, Any]] = {}
+    """Settings of the kinds' own simulated sensors by name, each the sensor's own
+    (controller_stub/sensors/registry.py: `setup.settings`)."""
 
     @model_validator(mode="after")
     def _check_lengths(self) -> Scenario:

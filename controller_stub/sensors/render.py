@@ -22,9 +22,14 @@ a copy, not 2.6 M fresh Gaussians.
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import math
+import os
+import tempfile
 from dataclasses import dataclass
 from functools import lru_cache
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -107,14 +112,49 @@ def undistort_pixels(camera: CameraModel, uv: np.ndarray, tol: float = 1e-14) ->
     return np.stack([x, y], axis=1)
 
 
+RAY_MAP_VERSION = 1
+"""Part of the ray map cache's key: raise it when `undistort_pixels` or `ray_map` changes."""
+
+
+def ray_map_cache_file(camera: CameraModel) -> Path:
+    """Where `ray_map` keeps a camera's map between processes: $ZEROCAL_CACHE_DIR, else
+    $XDG_CACHE_HOME/zerocal, else ~/.cache/zerocal; the name is a hash of every intrinsic
+    (floats by their exact repr) and RAY_MAP_VERSION."""
+    root = os.environ.get("ZEROCAL_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "zerocal")
+    key = repr((RAY_MAP_VERSION, camera.width, camera.height, camera.fx, camera.fy,
+                camera.cx, camera.cy, tuple(camera.distortion)))
+    return Path(root) / f"ray_map-{hashlib.sha256(key.encode()).hexdigest()[:32]}.npy"
+
+
 @lru_cache(maxsize=8)
 def ray_map(camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
-    """Normalised ray coordinates (x, y) of every pixel centre: two (H, W) float32 arrays."""
-    v, u = np.mgrid[0 : camera.height, 0 : camera.width]
-    xy = undistort_pixels(camera, np.stack([u.ravel(), v.ravel()], axis=1).astype(float))
+    """Normalised ray coordinates (x, y) of every pixel centre: two (H, W) float32 arrays.
+
+    Solving the undistortion for every pixel is about a third of a second, the same in every
+    stub process for the same camera, so the map is kept on disk (`ray_map_cache_file`) and
+    read back (a few milliseconds); a missing, unreadable or wrongly shaped file is solved
+    anew and rewritten (atomically: parallel stubs may race), a cache that cannot be written
+    (read-only home) is skipped."""
     shape = (camera.height, camera.width)
-    x = xy[:, 0].reshape(shape).astype(np.float32)
-    y = xy[:, 1].reshape(shape).astype(np.float32)
+    path = ray_map_cache_file(camera)
+    xy_map: np.ndarray | None = None
+    with contextlib.suppress(OSError, ValueError):
+        loaded = np.load(path, allow_pickle=False)
+        if loaded.shape == (2, *shape) and loaded.dtype == np.float32 and np.all(
+                np.isfinite(loaded)):
+            xy_map = loaded
+    if xy_map is None:
+        v, u = np.mgrid[0 : camera.height, 0 : camera.width]
+        xy = undistort_pixels(camera, np.stack([u.ravel(), v.ravel()], axis=1).astype(float))
+        xy_map = np.stack([xy[:, 0].reshape(shape), xy[:, 1].reshape(shape)]).astype(np.float32)
+        with contextlib.suppress(OSError):
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".npy",
+                                             delete=False) as handle:
+                np.save(handle, xy_map, allow_pickle=False)
+            os.replace(handle.name, path)
+    x, y = np.ascontiguousarray(xy_map[0]), np.ascontiguousarray(xy_map[1])
     x.setflags(write=False)
     y.setflags(write=False)
     return x, y

@@ -44,18 +44,6 @@ from controller_stub.ur.paced_motion import CYCLE_S, PacedMotion
 from controller_stub.ur.registers import UrRegisters
 from controller_stub.ur.rtde_server import RtdeServer
 from controller_stub.ur.rtde_values import (
-    JOINT_MODE_RUNNING,
-    ROBOT_MODE_RUNNING,
-    RUNTIME_PLAYING,
-    RUNTIME_STOPPED,
-    SAFETY_BIT_EMERGENCY_STOPPED,
-    SAFETY_BIT_NORMAL,
-    SAFETY_BIT_PROTECTIVE_STOPPED,
-    SAFETY_MODE_NORMAL,
-    SAFETY_MODE_PROTECTIVE_STOP,
-    SAFETY_MODE_ROBOT_EMERGENCY_STOP,
-    STATUS_BIT_POWER_ON,
-    STATUS_BIT_PROGRAM_RUNNING,
     RtdeValues,
 )
 from controller_stub.ur.rtde_wire import N_REGISTERS
@@ -67,13 +55,6 @@ from controller_stub.world.simulation import Simulation
 
 logger = logging.getLogger(__name__)
 
-__all__ = [  # the RTDE state codes are re-exported: they lived here before rtde_values.py
-    "CONTROLLER_VERSION", "DASHBOARD_PORT", "JOINT_MODE_RUNNING", "ROBOT_MODE_RUNNING",
-    "RTDE_PORT", "RUNTIME_PLAYING", "RUNTIME_STOPPED", "SAFETY_BIT_EMERGENCY_STOPPED",
-    "SAFETY_BIT_NORMAL", "SAFETY_BIT_PROTECTIVE_STOPPED", "SAFETY_MODE_NORMAL",
-    "SAFETY_MODE_PROTECTIVE_STOP", "SAFETY_MODE_ROBOT_EMERGENCY_STOP", "SCRIPT_PORT",
-    "SERIAL_NUMBER", "STATUS_BIT_POWER_ON", "STATUS_BIT_PROGRAM_RUNNING", "UrPersonality",
-]
 
 RTDE_PORT = 30004
 DASHBOARD_PORT = 29999
@@ -320,7 +301,7 @@ class UrPersonality:
         simulation's refusal code ("joint_limit", "estop", ...) which also raises a
         protective stop.
         """
-        from controller_stub.network.server import RequestRefusedError
+        from controller_stub.network.handlers import RequestRefusedError
 
         max_speed = float(np.min(self.sim.max_joint_speed()))
         slider = max(self.registers.speed_slider, 1e-3)

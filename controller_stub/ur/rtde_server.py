@@ -33,34 +33,19 @@ from controller_stub.ur.rtde_wire import (
     DATA_PACKAGE,
     GET_URCONTROL_VERSION,
     HEADER,
-    INPUT_TYPES,
-    MAX_PACKAGE_SIZE,
-    N_REGISTERS,
-    OUTPUT_TYPES,
     PROTOCOL_VERSION,
     REQUEST_PROTOCOL_VERSION,
     TEXT_MESSAGE,
-    TYPE_FORMATS,
     input_type,
     output_type,
     pack,
     pack_values,
-    register_field,
-    text_message,
     unpack_values,
 )
 from controller_stub.ur.tcp_service import TcpService
 
 logger = logging.getLogger(__name__)
 
-__all__ = [  # the wire format is re-exported: it lived here before rtde_wire.py
-    "CONTROLLER_HZ", "CONTROL_PACKAGE_PAUSE", "CONTROL_PACKAGE_SETUP_INPUTS",
-    "CONTROL_PACKAGE_SETUP_OUTPUTS", "CONTROL_PACKAGE_START", "DATA_PACKAGE",
-    "GET_URCONTROL_VERSION", "HEADER", "INPUT_TYPES", "MAX_PACKAGE_SIZE", "MAX_WRITE_BUFFER",
-    "N_REGISTERS", "OUTPUT_TYPES", "PROTOCOL_VERSION", "REQUEST_PROTOCOL_VERSION",
-    "RtdeDataSource", "RtdeServer", "TEXT_MESSAGE", "TYPE_FORMATS", "input_type", "output_type",
-    "pack", "pack_values", "register_field", "text_message", "unpack_values",
-]
 
 MAX_WRITE_BUFFER = 1 << 20
 

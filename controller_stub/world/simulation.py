@@ -18,7 +18,8 @@ in types), `body` (`arm.ArmBody`: the forward model, the hidden physics, the bac
 approach), `motion` (`joint_motion.JointMotion`: joint moves and their fault counters),
 `guarded` (`guarded.GuardedMoves`: the probe input along a path, guarded-move plans),
 and the sensors `probe` (`sensors/sphere_probe.py`), `stereo` (`sensors/stereo_target.py`)
-and `tracker` (`sensors/world_point.py`). The names of the contract are importable from here.
+and `tracker` (`sensors/world_point.py`). The contract's types live where they are defined
+(`controller_state.py`, `motion.py`, `controller_stub.errors`).
 
 INTERFACE CONTRACT (the server depends on exactly these names):
 
@@ -61,7 +62,6 @@ from typing import Any
 
 import numpy as np
 
-from controller_stub.errors import SimulationRefused
 from controller_stub.scenario.spec import RandomSpec, Scenario
 from controller_stub.sensors.sphere_probe import TouchProbe
 from controller_stub.sensors.stereo_target import StereoCamera, StereoFrame, camera_description
@@ -71,7 +71,6 @@ from controller_stub.world.arm import ArmBody
 from controller_stub.world.controller_base import ControllerBase
 from controller_stub.world.controller_state import (
     ControllerState,
-    OnIoEdge,
     SimulatedController,
     TargetSensor,
 )
@@ -79,28 +78,12 @@ from controller_stub.world.guarded import GuardedMoves
 from controller_stub.world.humanoid import HumanoidSimulation
 from controller_stub.world.joint_motion import JointMotion
 from controller_stub.world.motion import (
-    GuardedContact,
     GuardedMoveResult,
     MotionPlan,
     MoveResult,
-    PathEdge,
 )
 from controller_stub.world.physics import HiddenEffects, Physics
 from controller_stub.world.robot_model import RobotModel, get_robot
-
-__all__ = [
-    "GuardedContact",
-    "GuardedMoveResult",
-    "MotionPlan",
-    "MoveResult",
-    "OnIoEdge",
-    "PathEdge",
-    "SimulatedController",
-    "Simulation",
-    "SimulationRefused",
-    "StereoFrame",
-    "create_simulation",
-]
 
 
 def create_simulation(scenario: Scenario) -> SimulatedController:

@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.calibrate.joint_status import JointSource
+from hostpc.calibrate.refusals import PushRefusal
 from hostpc.calibrate.summary import (
     EXIT_JOINTS_NOT_CALIBRATED,
     EXIT_PUSH_REFUSED,
@@ -51,8 +52,9 @@ EXIT_CODES = {"PASS": 0, "NOT_PUSHED": 0, "NOT_VERIFIED": 0, "ROLLED_BACK": 0,
               "REFUSED": EXIT_PUSH_REFUSED, "FAIL": EXIT_VERIFY_FAILED,
               "JOINTS_MISSING": EXIT_JOINTS_NOT_CALIBRATED, "ERROR": 1}
 """`hostpc calibrate`'s exit code per verdict (ERROR: the error's own code at the CLI)."""
-_SWAP_HINT = re.compile(r"declare it with --swapped (J\d+)")
-"""The push guard's words for a correction beyond the default limit (hostpc.calibrate.push)."""
+_LEGACY_SWAP_HINT = re.compile(r"declare it with --swapped (J\d+)")
+"""The push guard's words for a correction beyond the default limit, read only from a
+journal whose `push_refused` event has no structured next command (written before it)."""
 JOURNAL_KINDS = ("push_intent", "push", "verify", "rollback", "push_refused", "resumed",
                  "result")
 """The journal events an outcome reads (Journal.timeline)."""
@@ -114,6 +116,9 @@ class RobotOutcome:
     next_command: str | None
     events: tuple[OutcomeEvent, ...] = field(default=())
     refused_reason: str | None = None
+    refusal: PushRefusal | None = None
+    """The refusal's structured form (which guard, the next command), None when the
+    journal predates it."""
 
     @property
     def exit_code(self) -> int:
@@ -189,11 +194,12 @@ def _span(run: list[int]) -> str:
 
 def derive_outcome(events: Sequence[JsonObject], sources: Sequence[JointSource], *,
                    run_dir: str, finished: bool, required: Sequence[int] = (),
-                   robot_arg: str = "ROBOT", known: Sequence[str] = ()) -> RobotOutcome:
+                   new_run: str = "--robot ROBOT", known: Sequence[str] = ()) -> RobotOutcome:
     """The outcome from the journal's events (`Journal.timeline(*JOURNAL_KINDS)`, in
     order) and the fit's per-joint sources. finished: the run wrote (or is writing) its
-    result; run_dir / robot_arg / known: for the next command (robot_arg: `sim` or the
-    address; known: the run's known frames, kept in a new run's `--known`)."""
+    result; run_dir / new_run / known: for the next command (new_run: a new run's
+    options for this robot and cell, `RunHeader.new_run_options`; known: the run's known
+    frames, kept in a new run's `--known`)."""
     state = _replay(events)
     active = state.pushed_new is not None and state.rolled_at is None
     pushed_mask = state.pushed_mask if active else ()
@@ -231,8 +237,8 @@ def derive_outcome(events: Sequence[JsonObject], sources: Sequence[JointSource],
         verified=state.verified if active else None, rolled_back_at=state.rolled_at,
         joints=tuple(joints), required_joints=required, missing_required=missing,
         headline="", next_command=None, events=tuple(state.events),
-        refused_reason=state.refused)
-    return _with_words(outcome, run_dir, robot_arg, tuple(known), state.intent_open)
+        refused_reason=state.refused, refusal=state.refusal if state.refused else None)
+    return _with_words(outcome, run_dir, new_run, tuple(known), state.intent_open)
 
 
 @dataclass
@@ -242,6 +248,7 @@ class _Replay:
     verified: bool | None = None
     rolled_at: str | None = None
     refused: str | None = None
+    refusal: PushRefusal | None = None
     intent_open: bool = False
     events: list[OutcomeEvent] = field(default_factory=list)
 
@@ -280,6 +287,7 @@ def _replay(events: Sequence[JsonObject]) -> _Replay:
             state.events.append(OutcomeEvent(at, "rolled_back", (("how", e.get("how")),)))
         elif kind == "push_refused":
             state.refused = str(e.get("reason") or "refused by a guard rail")
+            state.refusal = PushRefusal.from_event(e)
             state.intent_open = False  # refused: the offsets were not written
             state.events.append(OutcomeEvent(at, "refused", (("reason", state.refused),)))
         elif kind == "resumed":
@@ -302,7 +310,7 @@ def _controller_text(state: _Replay, active: bool) -> str:
     return "offsets unchanged"
 
 
-def _with_words(outcome: RobotOutcome, run_dir: str, robot_arg: str, known: tuple[str, ...],
+def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[str, ...],
                 intent_open: bool) -> RobotOutcome:
     """The outcome with its headline and next command filled in."""
     joints = outcome.joints
@@ -324,7 +332,7 @@ def _with_words(outcome: RobotOutcome, run_dir: str, robot_arg: str, known: tupl
     elif verdict == "JOINTS_MISSING":
         missing = joint_names(joints, outcome.missing_required)
         head = f"JOINTS_MISSING: {good_text}; {bad_text} (required: {missing})"
-        next_command = _fix_command(joints, outcome, robot_arg, known)
+        next_command = _fix_command(joints, outcome, new_run, known)
     elif verdict == "NOT_VERIFIED":
         head = f"PUSHED, NOT VERIFIED: {good_text} (no verification poses)" + (
             f"; {bad_text}" if bad_text else "")
@@ -338,17 +346,8 @@ def _with_words(outcome: RobotOutcome, run_dir: str, robot_arg: str, known: tupl
         next_command = f"hostpc calibrate --resume {run} --push"
     elif verdict == "REFUSED":
         head = f"REFUSED: push refused, offsets unchanged ({outcome.refused_reason})"
-        reason = outcome.refused_reason or ""
-        swapped = _SWAP_HINT.search(reason)
-        next_command = (f"hostpc diagnose {run}/dataset.json" if "hostpc diagnose" in reason
-                        # the controller's own limit: --force would meet it again
-                        else f"hostpc calibrate --resume {run} --push"
-                        if "controller's own offset limit" in reason
-                        # a correction beyond the 2 deg limit: a declared swap raises that
-                        # joint's limit only, where --force would drop every guard rail
-                        else f"hostpc calibrate --resume {run} --swapped {swapped.group(1)}"
-                        if swapped is not None
-                        else f"hostpc calibrate --resume {run} --force")
+        next_command = (outcome.refusal.next_command(run) if outcome.refusal is not None
+                        else _legacy_refusal_command(outcome.refused_reason or "", run))
     elif verdict == "NOT_PUSHED":
         head = f"NOT PUSHED: offsets unchanged; {good_text}" + (
             f"; {bad_text}" if bad_text else "")
@@ -363,6 +362,19 @@ def _with_words(outcome: RobotOutcome, run_dir: str, robot_arg: str, known: tupl
     if intent_open and verdict == "ERROR":
         next_command = f"hostpc calibrate --resume {run}"
     return dataclasses.replace(outcome, headline=head, next_command=next_command)
+
+
+def _legacy_refusal_command(reason: str, run: str) -> str:
+    """The next command of a refusal journaled without its structured form (an older
+    zerocal's journal), from the refusal's words."""
+    swapped = _LEGACY_SWAP_HINT.search(reason)
+    if "hostpc diagnose" in reason:
+        return f"hostpc diagnose {run}/dataset.json"
+    if "controller's own offset limit" in reason:  # --force would meet it again
+        return f"hostpc calibrate --resume {run} --push"
+    if swapped is not None:
+        return f"hostpc calibrate --resume {run} --swapped {swapped.group(1)}"
+    return f"hostpc calibrate --resume {run} --force"
 
 
 def _model_check_failed(events: Sequence[OutcomeEvent]) -> bool:
@@ -394,7 +406,7 @@ def _short_reason(joint: JointOutcome) -> str:
 
 
 def _fix_command(joints: Sequence[JointOutcome], outcome: RobotOutcome,
-                 robot_arg: str, known: tuple[str, ...]) -> str | None:
+                 new_run: str, known: tuple[str, ...]) -> str | None:
     """A new run that would calibrate the missing joints (their `--known` frames added to
     the run's own)."""
     frames: list[str] = [f for f in known if f != "none"]
@@ -409,5 +421,5 @@ def _fix_command(joints: Sequence[JointOutcome], outcome: RobotOutcome,
         return None
     required = ("all" if len(outcome.required_joints) == len(joints)
                 else ",".join(str(n) for n in outcome.required_joints))
-    return (f"hostpc calibrate --robot {robot_arg} --known {','.join(frames)} "
+    return (f"hostpc calibrate {new_run} --known {','.join(frames)} "
             f"--require-joints {required}")

@@ -39,6 +39,7 @@ import numpy as np
 from hostpc.calibrate.joint_status import joint_sources
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.journal_events import Pushed, PushIntent, PushRecord
+from hostpc.calibrate.refusals import PushRefusal, resume_with
 from hostpc.calibrate.run_result import OffsetRow
 from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN, chi2_dof_upper
 from hostpc.errors import InputError
@@ -83,6 +84,8 @@ class PushPlan:
     chi2_dof_tested: float | None = None
     """The chi2/dof the adequacy guard tested when it is not the fit's plain one (the chi2
     with the dataset's shared error inside, `adequacy_chi2`), else None."""
+    refusal: PushRefusal | None = None
+    """`refused` as a structured value (which guard, which joint, the next command)."""
 
     @property
     def anything(self) -> bool:
@@ -158,12 +161,12 @@ def plan_push(result: FitVerdict, old_offsets: np.ndarray,
     chi2_dof, shared = adequacy_chi2(result)
     limits = (np.full(n, float(max_correction_deg)) if limits_deg is None
               else np.asarray(limits_deg, float))
-    refused = None if force else _refusal(result, delta, pushed, labels, max_correction_deg,
+    refusal = None if force else _refusal(result, delta, pushed, labels, max_correction_deg,
                                           limits, dataset_file, chi2_dof, shared)
     return PushPlan(old=old, delta=delta, new=old + delta, sigma=sigma, pushed=pushed,
-                    notes=tuple(notes), refused=refused, max_correction_deg=max_correction_deg,
-                    fitted=fitted, labels=labels,
-                    chi2_dof_tested=chi2_dof if shared else None)
+                    notes=tuple(notes), refused=None if refusal is None else refusal.reason,
+                    max_correction_deg=max_correction_deg, fitted=fitted, labels=labels,
+                    chi2_dof_tested=chi2_dof if shared else None, refusal=refusal)
 
 
 def adequacy_chi2(result: FitVerdict) -> tuple[float, bool]:
@@ -182,21 +185,23 @@ def adequacy_chi2(result: FitVerdict) -> tuple[float, bool]:
 
 def _refusal(result: FitVerdict, delta: np.ndarray, pushed: np.ndarray,
              labels: tuple[str, ...], max_correction_deg: float, limits: np.ndarray,
-             dataset_file: str, chi2_dof: float, shared: bool) -> str | None:
+             dataset_file: str, chi2_dof: float, shared: bool) -> PushRefusal | None:
     """Why the guard rails refuse the push (first reason that applies), or None.
 
     delta: (n,) rad corrections, zero where not pushed; pushed: (n,) bool; chi2_dof,
     shared: what `adequacy_chi2` returned."""
     if not result.converged:
-        return (f"the fit did not converge ({result.message}); not pushing "
-                "(--force to push anyway)")
+        return PushRefusal(f"the fit did not converge ({result.message}); not pushing "
+                           "(--force to push anyway)", "not_converged",
+                           resume_with("--force"))
     band = chi2_dof_upper(result.dof)
     if math.isfinite(chi2_dof) and math.isfinite(band) and chi2_dof > band:
         what = " with the camera calibration's covariance" if shared else ""
-        return (f"the model does not explain the measurements (chi2/dof{what} "
-                f"{chi2_dof:.3g} above its band {band:.3g}); run `hostpc diagnose "
-                f"{dataset_file}` and rerun with the effect it names, or push anyway "
-                "with --force")
+        return PushRefusal(
+            f"the model does not explain the measurements (chi2/dof{what} "
+            f"{chi2_dof:.3g} above its band {band:.3g}); run `hostpc diagnose "
+            f"{dataset_file}` and rerun with the effect it names, or push anyway "
+            "with --force", "model", ("diagnose", dataset_file))
     too_big = pushed & (np.abs(delta) > np.radians(limits))
     if np.any(too_big):
         j = int(np.argmax(np.where(too_big, np.abs(delta), 0.0)))
@@ -204,12 +209,19 @@ def _refusal(result: FitVerdict, delta: np.ndarray, pushed: np.ndarray,
         declared = limits[j] != max_correction_deg
         own = " of a declared swap (--swap-limit)" if declared else ""
         swap_sized = abs(math.degrees(delta[j])) > DEFAULT_MAX_CORRECTION_DEG
-        swap = ("" if declared or not swap_sized or labels[j] != f"q{j + 1}" else
+        declare = (None if declared or not swap_sized or labels[j] != f"q{j + 1}"
+                   else j + 1)
+        swap = ("" if declare is None else
                 f"; if its motor was swapped or re-mastered, declare it with --swapped J{j + 1}"
                 " (raises that joint's limit only)")
-        return (f"joint {joint} correction {math.degrees(delta[j]):+.4f} deg exceeds the "
-                f"limit{own} of {limits[j]:g} deg{swap}; {'else ' if swap else ''}check the "
-                "cell and the data, and rerun with --force to push anyway")
+        # a declared swap raises that joint's limit only, where --force drops every rail
+        return PushRefusal(
+            f"joint {joint} correction {math.degrees(delta[j]):+.4f} deg exceeds the "
+            f"limit{own} of {limits[j]:g} deg{swap}; {'else ' if swap else ''}check the "
+            "cell and the data, and rerun with --force to push anyway", "correction_limit",
+            resume_with("--force") if declare is None else resume_with("--swapped",
+                                                                        f"J{declare}"),
+            joint=j + 1, limit_deg=float(limits[j]), declare=declare)
     return None
 
 

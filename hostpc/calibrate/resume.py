@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -30,6 +31,7 @@ from hostpc.calibrate.journal_events import (
     VerifyStart,
 )
 from hostpc.calibrate.push import PUSH_FILE, intent_outcome, same_offsets
+from hostpc.calibrate.refusals import stopped
 from hostpc.calibrate.run_result import RunResult
 from hostpc.errors import ControllerError, InputError
 from hostpc.files import write_json_atomic
@@ -87,7 +89,10 @@ class ResumeOverrides:
 def resume_settings(settings: RunSettings, overrides: ResumeOverrides, journal: Journal,
                     progress: Progress) -> RunSettings:
     """The run's settings with this resume's `overrides` applied (only the
-    ``RESUME_OVERRIDABLE`` ones that are given and differ); a change is journaled."""
+    ``RESUME_OVERRIDABLE`` ones that are given and differ); a change is journaled, and
+    the runner writes the changed settings into run.json, so a later resume keeps them
+    (--swapped, --swap-limit, --force, ... ; --known is kept in its cell); the same
+    `settings` object when nothing changed."""
     changed = {k: v for k, v in overrides.items()
                if k in RESUME_OVERRIDABLE and v is not None
                and getattr(settings, k) != v}
@@ -200,6 +205,28 @@ class PushLost(ControllerError):
 
 class VerifyLost(ControllerError):
     """Every verification pose of this round was skipped: no verdict (resumable)."""
+
+
+def verify_lost_line(lost: Sequence[SampleRecord], n_verify: int, pushed: bool,
+                     run_dir: Path) -> str:
+    """The one line of a lost verification round (`lost`: its skipped records) and its
+    next command. Only moves stopped on the way (an abort storm) are worth measuring again
+    (a resume); a pose lost to what the robot found there (no contact, out of view) is lost
+    again by a resume: with offsets pushed, the next command restores the previous ones;
+    with nothing pushed, it diagnoses the fit's data."""
+    reasons = sorted({str(r.reason) for r in lost})
+    state = "the pushed offsets stay in the controller" if pushed else "nothing was pushed"
+    line = (f"verification lost: all {n_verify} verification poses were skipped "
+            f"({'; '.join(reasons)}); {state}")
+    if lost and all(stopped(r) for r in lost):
+        return f"{line}; measure them again with: hostpc calibrate --resume {run_dir}"
+    if pushed:
+        return (f"{line}; measured again they would be lost again (the robot does not reach "
+                "what the fitted offsets predict): restore the previous offsets with: "
+                f"hostpc rollback --run {run_dir}")
+    return (f"{line}; measured again they would be lost again (the robot does not reach "
+            "what the fit predicts): look at the fit's data with: hostpc diagnose "
+            f"{run_dir}/dataset.json")
 
 
 def push_state(journal: Journal, run_dir: Path, progress: Progress, offsets_now: np.ndarray,

@@ -18,6 +18,7 @@ import numpy as np
 
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.run_values import RobotInfo
+from hostpc.calibrate.swaps import DEFAULT_SWAP_LIMIT_DEG
 from hostpc.errors import InputError
 from hostpc.json_object import JsonObject
 from hostpc.methods.base import Plan, RunSettings
@@ -94,6 +95,19 @@ class RunHeader:
     def robot_argument(self) -> str:
         """How a new run would name this run's robot: `sim` or its address."""
         return "sim" if self.robot.sim else (self.robot.address or "ROBOT")
+
+    def new_run_options(self) -> str:
+        """The options of a new run of this robot and cell (a next command's start):
+        the robot, the method, a simulated run's world (its scenario, as the run kept it)
+        and a declared swap."""
+        words = ["--robot", self.robot_argument(), "--method", self.settings.method]
+        if self.robot.sim and self.robot.scenario:
+            words += ["--scenario", str(self.robot.scenario)]
+        if self.settings.swapped:
+            words += ["--swapped", ",".join(f"J{j}" for j in self.settings.swapped)]
+            if self.settings.swap_limit_deg != DEFAULT_SWAP_LIMIT_DEG:
+                words += ["--swap-limit", f"{self.settings.swap_limit_deg:g}"]
+        return " ".join(words)
 
 
 def read_run_header(journal: Journal) -> RunHeader:

@@ -32,6 +32,7 @@ from hostpc.calibrate.reference import (
     load_reference,
 )
 from hostpc.calibrate.reference_check import ReferenceCheck, check_reference
+from hostpc.calibrate.refusals import PushRefusal, resume_with
 from hostpc.calibrate.run_header import RunHeader
 from hostpc.calibrate.run_result import RunResult
 from hostpc.dataset import Dataset
@@ -147,7 +148,9 @@ def refuse_if_moved(plan: PushPlan, check: ReferenceCheck | None,
     """The push plan, refused (even with --force) when a referenced frame moved."""
     if check is None or not check.moved or reference is None:
         return plan
-    return dataclasses.replace(plan, refused=moved_line(check, reference, run_dir))
+    line = moved_line(check, reference, run_dir)
+    return dataclasses.replace(plan, refused=line, refusal=PushRefusal(
+        line, "reference_moved", resume_with("--reference", "none")))
 
 
 def reference_check_block(check: ReferenceCheck | None, reference: CellReference | None,

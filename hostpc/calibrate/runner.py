@@ -35,7 +35,6 @@ from hostpc.calibrate.journal_events import (
     MorePoses,
     Pushed,
     PushIntent,
-    PushRefused,
     Resumed,
     RunFinished,
     Verified,
@@ -45,13 +44,20 @@ from hostpc.calibrate.more_poses import more_poses_message, more_poses_reason
 from hostpc.calibrate.outcome import parse_required_joints
 from hostpc.calibrate.outcome_files import run_outcome
 from hostpc.calibrate.push import (
+    PUSH_FILE,
     PushPlan,
     execute_push,
     export_offsets,
     plan_push,
     same_offsets,
 )
-from hostpc.calibrate.refusals import MAX_POSE_ATTEMPTS, RunStopped, refusal_text, stopped
+from hostpc.calibrate.refusals import (
+    MAX_POSE_ATTEMPTS,
+    PushRefusal,
+    RunStopped,
+    refusal_text,
+    stopped,
+)
 from hostpc.calibrate.resume import (
     PushLost,
     ResumeOverrides,
@@ -63,6 +69,7 @@ from hostpc.calibrate.resume import (
     resume_settings,
     settle_push_intent,
     stored_result,
+    verify_lost_line,
     verify_round,
 )
 from hostpc.calibrate.robot_time import RobotTimer
@@ -79,6 +86,7 @@ from hostpc.calibrate.swaps import (
     Staging,
     controller_limit_refusal,
     joint_limits_deg,
+    lost_plan_line,
     swap_message,
 )
 from hostpc.calibrate.verify import VerifyResult, evaluate_verify
@@ -142,7 +150,7 @@ class Runner:
         self._priors: list[Any] = []
         self.journal = Journal(self.run_dir)
         self._clock = SampleClock(self.journal, self.progress)  # resume: sample t continues
-        self._controller_refusal: str | None = None  # the controller's own offset limit
+        self._controller_refusal: PushRefusal | None = None  # the controller's own limit
 
     # ------------------------------------------------------------------ top level
 
@@ -196,6 +204,9 @@ class Runner:
                                   stored.exit_code)
             settings = resume_settings(header.settings, self.resume_overrides, self.journal,
                                        progress)
+            if settings is not header.settings:  # kept for the next resume (resume.py)
+                header = dataclasses.replace(header, settings=settings)
+                self.journal.write_header(header.to_dict())
             self.journal.append(Resumed(at=_now()))
             cell, header = cell_reference.resume_known(
                 cell_from_dict(header.cell, settings.plugins), self.known, header,
@@ -276,8 +287,10 @@ class Runner:
                              "poses measured, their moves were stopped (aborted) again and "
                              "again")
         if n_measured < 3:
-            raise ZerocalError(f"only {n_measured} of {plan.q.shape[0]} poses measured; "
-                               "nothing to fit (see the skipped reasons in journal.jsonl)")
+            raise ZerocalError(lost_plan_line(
+                n_measured, plan.q.shape[0], [r.reason for r in self.journal.records("fit")
+                                              if not r.ok], settings, self.run_dir,
+                staged=method.staged))
         last = self._staging.last_fit  # the staging's fit of these poses, if it made one
         result, dataset = (last[1] if last is not None and last[0] == self._staging.first
                            else self._fit(method, settings, self._staging.first))
@@ -301,7 +314,8 @@ class Runner:
                                                    self.run_dir)
         push_status, pushed_delta, offsets = await self._push(push_plan, settings, offsets)
         if self._controller_refusal is not None:
-            push_plan = dataclasses.replace(push_plan, refused=self._controller_refusal)
+            push_plan = dataclasses.replace(push_plan, refused=self._controller_refusal.reason,
+                                            refusal=self._controller_refusal)
         exports = export_offsets(self.robot, self.run_dir, cell.robot, push_plan,
                                  push_status, progress)
 
@@ -428,14 +442,11 @@ class Runner:
         await self._timer.end("verify")
         if not any(r.ok for r in self.journal.records("verify")
                    if first <= r.index < first + n_verify):
-            reasons = sorted({str(r.reason) for r in self.journal.records("verify")
-                              if first <= r.index < first + n_verify})
+            lost = [r for r in self.journal.records("verify")
+                    if first <= r.index < first + n_verify]
             self.journal.append(VerifyRoundLost(round=number))
-            state = ("the pushed offsets stay in the controller"
-                     if np.any(pushed_delta != 0.0) else "nothing was pushed")
-            raise VerifyLost(f"verification lost: all {n_verify} verification poses were "
-                             f"skipped ({'; '.join(reasons)}); {state}; measure them again "
-                             f"with: hostpc calibrate --resume {self.run_dir}")
+            raise VerifyLost(verify_lost_line(lost, n_verify, bool(np.any(pushed_delta != 0.0)),
+                                              self.run_dir))
         verify_dataset = self._dataset(method, "verify", first, first + n_verify)
         save_dataset(verify_dataset, self.run_dir / "verify_dataset.json",
                      plugins=method.settings.plugins)
@@ -474,7 +485,9 @@ class Runner:
             return "disabled", zero, offsets_now
         if plan.refused:
             progress.message(f"push refused: {plan.refused}")
-            self.journal.append(PushRefused(reason=plan.refused, at=_now()))
+            fields = ({"reason": plan.refused} if plan.refusal is None
+                      else plan.refusal.to_event())
+            self.journal.event("push_refused", **fields, at=_now())
             return "refused", zero, offsets_now
         if not plan.anything:
             return "nothing_to_push", zero, offsets_now
@@ -487,8 +500,10 @@ class Runner:
             if refused is None:
                 raise
             self._controller_refusal = refused
-            progress.message(f"push refused: {refused}")
-            self.journal.append(PushRefused(reason=refused, by="controller", at=_now()))
+            (self.run_dir / PUSH_FILE).unlink(missing_ok=True)  # its intent: never written
+            progress.message(f"push refused: {refused.reason}")
+            self.journal.event("push_refused", **refused.to_event(), by="controller",
+                               at=_now())
             return "refused", zero, offsets_now
         labels = plan.display_names()
         progress.message("pushed zero offsets: " + ", ".join(

@@ -209,7 +209,12 @@ def format_summary(run: RunResult) -> str:
     lines.append(_push_line({"push": run.push.to_dict(), "robot": robot,
                              "run_dir": run.run_dir}))
     if run.verify:
-        lines.append(_verify_line(run.verify))
+        verify_line = _verify_line(run.verify)
+        if outcome and outcome.get("verdict") == "ROLLED_BACK":  # no longer the robot's
+            verify_line = verify_line.replace(
+                "verify:", "verify (of the offsets since rolled back, no longer in the "
+                "controller):", 1)
+        lines.append(verify_line)
     truth = run.truth
     if truth:
         errors = ", ".join(

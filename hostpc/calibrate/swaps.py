@@ -9,14 +9,17 @@ joint is estimated more than ``COARSE_DEG`` off it measures the same plan again 
 pose shifted by the estimate (commanded ``q - estimate``: the robot is where the plan meant
 it to be), fits that stage alone, and repeats until the estimate moves less than
 ``SETTLED_DEG`` (at most ``MAX_STAGES`` extra stages). The final fit uses the last stage's
-poses only. When the plan's own poses gave too little to fit (fewer than a quarter measured:
-a sphere_probe touch misses the 12.5 mm sphere after a 2 deg J1 error) and a swap is
-declared, a coarse search comes first: the plan's first pose is tried with the swapped
-joint shifted by +-1, +-2, ... deg (``SEARCH_STEP_DEG``, up to --swap-limit) until it is
-measured, then on while it is: the middle of the measured range is the first stage's
-shift (the first hit is a touch on the flank). Each stage is journaled (`stage` event:
-its number, the estimate it is shifted by, the index of its first pose), so a resume
-replays the stages and measures only what no stage journaled yet.
+poses only. When more than a quarter of the plan's poses were lost (a sphere_probe touch
+misses the 12.5 mm sphere after a 2 deg J1 error), ``LOST_DEG`` instead of ``COARSE_DEG``
+starts the stages. When the plan's own poses gave too little to fit (fewer than a quarter
+measured: a 15 deg swap) and a swap is declared, a coarse search comes first: the plan's
+first pose is tried with the swapped joint shifted by +-1, +-2, ... deg
+(``SEARCH_STEP_DEG``, up to --swap-limit) until it is measured, then on while it is: the
+middle of the measured range is the first stage's shift (the first hit is a touch on the
+flank). Each stage is journaled (`stage` event: its number, the estimate it is shifted by,
+the index of its first pose), so a resume replays the stages and measures only what no
+stage journaled yet. Undeclared, nothing is searched: the run ends with the command that
+declares the swap (`lost_plan_line`).
 
 A method opts in through `Method.staged` and follows the shift through its planning hook
 `Method.set_joint_estimate` (stereo_target, world_point, sphere_probe: its contacts are
@@ -33,13 +36,15 @@ from __future__ import annotations
 
 import datetime as _dt
 import math
-from collections.abc import Awaitable, Callable
+from collections import Counter
+from collections.abc import Awaitable, Callable, Sequence
 from typing import Any
 
 import numpy as np
 
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.journal_events import Stage
+from hostpc.calibrate.refusals import PushRefusal, resume_with
 from hostpc.dataset import Dataset
 from hostpc.errors import ControllerError, InputError
 from hostpc.fitting import FitResult
@@ -48,12 +53,17 @@ from hostpc.model import joint_offsets
 from hostpc.model.problem import build_problem
 
 __all__ = ["DEFAULT_SWAP_LIMIT_DEG", "Staging", "controller_limit_refusal",
-           "joint_limits_deg", "parse_swapped", "swap_message"]
+           "joint_limits_deg", "lost_plan_line", "parse_swapped", "swap_message"]
 
 DEFAULT_SWAP_LIMIT_DEG = 45.0
 """The push limit of a joint declared swapped (--swap-limit), deg."""
 COARSE_DEG = 3.0
 """A joint estimated farther off than this (deg) makes the runner measure again, shifted."""
+LOST_FRACTION = 0.25
+LOST_DEG = 0.2
+"""When more than LOST_FRACTION of the plan's poses were lost (a sphere_probe contact
+misses the 12.5 mm sphere after 2 deg on J1), a joint estimated more than LOST_DEG off
+(deg) is enough to measure again, shifted."""
 SETTLED_DEG = 0.05
 """The stages stop when no joint's estimate moved more than this (deg) since the last."""
 MAX_STAGES = 3
@@ -100,18 +110,41 @@ def swap_message(settings: RunSettings) -> str | None:
             "(--max-correction)")
 
 
-def controller_limit_refusal(exc: ControllerError, run_dir: Any) -> str | None:
-    """The refusal text of a push the controller refused for its own offset limit, or
-    None for any other error. It says whose limit it is and what to do; the command it
-    ends with pushes only after the limit was raised (never the same refusal again)."""
+def controller_limit_refusal(exc: ControllerError, run_dir: Any) -> PushRefusal | None:
+    """The refusal of a push the controller refused for its own offset limit, or None
+    for any other error. It says whose limit it is and what to do; its next command pushes
+    only after the limit was raised (never the same refusal again)."""
     name = getattr(exc, "reason", None) or getattr(exc, "code", None)
     if name != "offset_limit":
         return None
-    return (f"the controller's own offset limit refused the push ({exc}): this is the "
-            "controller's setting, not zerocal's --max-correction or --swap-limit; the "
-            f"fitted offsets are kept in {run_dir}/fit.json; raise the controller's offset "
-            "limit (or set the joint's zero with the robot maker's zeroing procedure), "
-            f"then push and verify with: hostpc calibrate --resume {run_dir} --push")
+    return PushRefusal(
+        f"the controller's own offset limit refused the push ({exc}): this is the "
+        "controller's setting, not zerocal's --max-correction or --swap-limit; the "
+        f"fitted offsets are kept in {run_dir}/fit.json; raise the controller's offset "
+        "limit (or set the joint's zero with the robot maker's zeroing procedure), "
+        f"then push and verify with: hostpc calibrate --resume {run_dir} --push",
+        "controller_limit", resume_with("--push"))
+
+
+def lost_plan_line(n_measured: int, n_planned: int, reasons: Sequence[str | None],
+                   settings: RunSettings, run_dir: Any, *, staged: bool) -> str:
+    """The one line of a run that measured too few of its poses to fit, ending with the
+    next command: a joint far off loses every pose (a sphere_probe touch misses the sphere
+    after a 15 deg swap), and only a declared swap searches for it."""
+    counts = Counter(str(r) for r in reasons if r)
+    why = f" (mostly: {counts.most_common(1)[0][0]})" if counts else ""
+    line = f"only {n_measured} of {n_planned} poses measured{why}; nothing to fit"
+    if not staged:
+        return line + " (see the skipped reasons in journal.jsonl)"
+    if not settings.swapped:
+        return (line + "; if a joint's zero is far off (a motor swapped or re-mastered), "
+                "declare that joint, and the run searches for it; e.g. for J1: "
+                f"hostpc calibrate --resume {run_dir} --swapped J1")
+    joints = ",".join(f"J{j}" for j in settings.swapped)
+    farther = min(2.0 * float(settings.swap_limit_deg), 180.0)
+    return (line + f"; the search of the swapped {joints} found nothing up to "
+            f"{settings.swap_limit_deg:g} deg: declare the joint that was swapped, or search "
+            f"farther: hostpc calibrate --resume {run_dir} --swap-limit {farther:g}")
 
 
 def _now() -> str:
@@ -207,6 +240,8 @@ class Staging:
                 moved = float(np.max(np.abs(new - estimate))) if new.size else 0.0
                 far = float(np.max(np.abs(new))) if new.size else 0.0
                 limit = COARSE_DEG if number == 1 else SETTLED_DEG
+                if number == 1 and self._measured() < (1.0 - LOST_FRACTION) * q_plan.shape[0]:
+                    limit = LOST_DEG  # the poses were lost to a smaller error
                 if (far if number == 1 else moved) <= math.radians(limit):
                     break
                 first = number * STAGE_STRIDE

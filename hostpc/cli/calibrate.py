@@ -400,7 +400,9 @@ def _run_with_robot(args: argparse.Namespace, address: RobotAddress, driver: str
     token = args.token or (scenario.get("server") or {}).get("token") or resolve_token(None)
     modbus_port, settings = _sim_modbus(settings, run_dir)
     progress.stage("start simulator")
-    with SimulatedController(scenario, sim_dir, modbus_port=modbus_port, token=token) as simulator:
+    with SimulatedController(scenario, sim_dir, modbus_port=modbus_port, token=token,
+                             plugins=settings.plugins if settings is not None else ()
+                             ) as simulator:
         info = RobotInfo(address=f"{simulator.address.host}:{simulator.address.port}",
                          driver=SIM_DRIVER, sim=True, scenario=str(simulator.scenario_path))
         return asyncio.run(cancel_on_sigterm(_calibrate(

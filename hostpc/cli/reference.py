@@ -87,8 +87,8 @@ def run_record(args: argparse.Namespace) -> int:
     header = read_run_header(Journal(run))
     settings = header.settings
     dataset = load_dataset(run / "dataset.json")
-    fitted = fit(dataset, settings.effects, plugins=settings.plugins, loss=settings.loss,
-                 cv_folds=0)
+    fitted = fit(dataset, _fitted_effects(result) or settings.effects,
+                 plugins=settings.plugins, loss=settings.loss, cv_folds=0)
     serial = args.robot_serial or header.robot_serial or ""
     reference = reference_from_fit(fitted, robot_serial=str(serial),
                                    cell=header.cell, source_run=str(run.resolve()),
@@ -109,6 +109,16 @@ def run_record(args: argparse.Namespace) -> int:
     for line in _zeros_taken_as_good(result):
         print(line)
     return 0
+
+
+def _fitted_effects(result: dict[str, Any]) -> list[str] | None:
+    """The effects the run's own fit used (result.json ``fit.effects``), None if it names
+    none. Not the run's --effects: without one the method's default model applied
+    (sphere_probe's + trigger_latency), and a refit without it biases the frames."""
+    effects = (result.get("fit") or {}).get("effects")
+    if isinstance(effects, list) and effects and all(isinstance(e, str) for e in effects):
+        return list(effects)
+    return None
 
 
 def _zeros_taken_as_good(result: dict[str, Any]) -> list[str]:

@@ -8,7 +8,10 @@ controller no longer knows the rollback id (it restarted) the previous offsets s
 push.json are written directly. A push.json without a rollback id (the run stopped between
 recording its intent and the controller's answer) is settled from the controller's offsets:
 the intended new ones -> the previous ones are written; still the previous ones -> nothing
-to undo. Offsets are printed in degrees.
+to undo. A run whose journal shows that no push reached the controller (refused, e.g. by
+the controller's own offset limit) is answered from the journal; a run against `--robot
+sim` has no controller left (its simulator ended with the run): both without connecting.
+Offsets are printed in degrees.
 
 With --run, the rollback is journaled and the run's outcome is derived again: result.json
 (outcome verdict ROLLED_BACK), summary.txt and report.html say so; with --db the archived
@@ -79,6 +82,14 @@ def run(args: argparse.Namespace) -> int:
     address: RobotAddress | None = parse_robot(args.robot) if args.robot else None
     if args.run:
         _refuse_if_rolled_back(Path(args.run))
+        nothing = _nothing_pushed(Path(args.run))
+        if nothing is not None:  # known from the journal: no controller to ask
+            print(nothing)
+            return 0
+        if address is None and _ran_simulated(Path(args.run)):
+            raise InputError(f"--run {args.run}: it ran against `--robot sim`, whose "
+                             "simulated controller lived only as long as the run: there is "
+                             "nothing left to roll back")
         record = read_push_file(Path(args.run))
         rollback_id = str(record.get("rollback_id") or "(none: push recorded as intent)")
         previous = np.asarray(record.get("previous_offsets"), float)
@@ -155,6 +166,30 @@ def _refuse_if_rolled_back(run_dir: Path) -> None:
                          f"({last.time or 'at an unrecorded time'}); nothing of it is "
                          "left to undo (to see what the controller holds now: hostpc status "
                          "--robot HOST)")
+
+
+def _ran_simulated(run_dir: Path) -> bool:
+    """True if the run's run.json says it ran against `--robot sim`."""
+    try:
+        return read_run_header(Journal(run_dir)).robot.sim
+    except InputError:
+        return False
+
+
+def _nothing_pushed(run_dir: Path) -> str | None:
+    """The line saying the run's journal shows no push that reached the controller (a
+    push the controller refused leaves its intent in push.json), or None: then push.json
+    and the controller decide."""
+    journal = Journal(run_dir)
+    if not journal.exists or journal.events("push"):
+        return None
+    last = journal.last_event("push_intent", "push_refused")
+    if last is not None and last.get("event") == "push_intent":
+        return None  # cut short: only the controller's offsets tell
+    if last is None and not (run_dir / "push.json").is_file():
+        return None  # read_push_file says so
+    return (f"nothing to roll back: {run_dir} wrote no offsets to the controller (its push "
+            "was refused); the controller's offsets are the ones the run found")
 
 
 def _journal_rollback(run_dir: Path, now: np.ndarray, how: str, controller: str) -> None:

@@ -15,14 +15,25 @@ write them into ``Samples.fields`` (each (N,) or (N, k), NaN where an optional o
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
+from numpy.typing import NDArray
 
 from hostpc.dataset import schema
 from hostpc.dataset.file_units import Units
-from hostpc.dataset.model import FloatArray, Samples
+from hostpc.dataset.model import (
+    Dataset,
+    FloatArray,
+    Frame,
+    IntArray,
+    KindBlock,
+    Samples,
+    StrArray,
+)
 from hostpc.dataset.schema import FieldError, Loc, show
+from hostpc.json_object import JsonObject
 
 #: per-sample context fields every kind accepts (read and written by the dataset layer)
 CONTEXT_FIELDS = frozenset({"t", "approach", "temperature", "speed", "extra"})
@@ -39,8 +50,13 @@ class Columns:
     def __init__(self, n_samples: int) -> None:
         self.n_samples = n_samples
         self.values: dict[str, list[Any]] = {}
-        #: a kind's own bookkeeping while reading (e.g. the first sample of each chain)
-        self.state: dict[str, Any] = {}
+        self._widths: dict[str, tuple[int, int]] = {}
+
+    def first_width(self, key: str, width: int, index: int) -> tuple[int, int]:
+        """The row width of group ``key`` and the sample that set it: the first sample to
+        ask (``width`` and ``index`` if none did). A kind checks with it that the rows of one
+        group (dual_loop: the head, each arm) have one length."""
+        return self._widths.setdefault(key, (width, index))
 
     def put(self, name: str, index: int, value: Any) -> None:
         column = self.values.get(name)
@@ -62,6 +78,35 @@ class Columns:
             if row is not None:
                 out[i, : len(row)] = row
         return out
+
+
+@dataclass(frozen=True)
+class KindArrays:
+    """A kind's own arrays of every sample, SI (the ``Samples`` fields besides ``q`` and the
+    context the dataset layer reads): what ``samples_arguments`` and ``read_columns`` give.
+
+    q: the joint angles where the kind reads them itself (a kinematic tree's arms,
+    NaN-padded rows), else None; group: the probe groups where the kind's column reader read
+    them, else None (the dataset layer reads them); the others as in ``Samples``."""
+
+    p: FloatArray | None = None
+    cov: FloatArray | None = None
+    sigma: FloatArray | None = None
+    uv: FloatArray | None = None
+    chain: StrArray | None = None
+    q_head: FloatArray | None = None
+    fields: Mapping[str, NDArray[Any]] = field(default_factory=dict)
+    q: FloatArray | None = None
+    group: IntArray | None = None
+
+    def samples(self, q: FloatArray, *, t: FloatArray, temperature: FloatArray,
+                speed: FloatArray, approach: FloatArray, group: IntArray,
+                extra: Mapping[str, FloatArray]) -> Samples:
+        """The ``Samples`` of these arrays with the joint angles and the shared context."""
+        return Samples(q=q, p=self.p, cov=self.cov, sigma=self.sigma, t=t,
+                       temperature=temperature, speed=speed, approach=approach, group=group,
+                       extra=extra, uv=self.uv, chain=self.chain, q_head=self.q_head,
+                       fields=self.fields)
 
 
 def require(sample: schema.SampleSchema, loc: Loc, name: str, hint: str = "") -> Any:
@@ -141,7 +186,8 @@ class MeasurementKind:
     Class attributes a kind sets: ``name``; ``frames`` (frame name -> kind, one of
     ``FRAME_KINDS``); ``optional_frames``; ``sample_fields`` (name -> unit kind; ``q`` is
     implied); ``optional_fields``; ``sample_hints`` (field -> hint appended to "not a
-    field of method"); ``uses_probe`` (the document carries ``probe``); ``robot_tree``
+    field of method"); ``document_blocks`` (top-level fields of the document the kind reads
+    itself, ``read_block``: sphere_probe's ``probe``); ``robot_tree``
     (the robot is a built-in kinematic tree by name; samples give the joint counts).
     """
 
@@ -152,7 +198,7 @@ class MeasurementKind:
     sample_fields: ClassVar[Mapping[str, str]] = {}
     optional_fields: ClassVar[frozenset[str]] = frozenset()
     sample_hints: ClassVar[Mapping[str, str]] = {}
-    uses_probe: ClassVar[bool] = False
+    document_blocks: ClassVar[tuple[str, ...]] = ()
     robot_tree: ClassVar[bool] = False
     #: optional fields some samples of a regular file leave out (its column reader reads
     #: them at ``SampleTable.present``); any other field varying sends the file to the
@@ -184,16 +230,16 @@ class MeasurementKind:
             columns.put(f"field.{name}", sample_index(loc), number)
         return list(q)
 
-    def read_columns(self, table: Any, units: Units) -> dict[str, Any] | None:
+    def read_columns(self, table: Any, units: Units) -> KindArrays | None:
         """The fast path (``hostpc.dataset.reading_columns``): ``samples_arguments`` for
         every sample at once from ``table`` (a ``SampleTable``: one list per field), or None
         to have the samples read one by one. Raise ``reading_columns.NotColumnar`` where a
         check fails (the slow path then names the sample). Default: None."""
         return None
 
-    def samples_arguments(self, columns: Columns, units: Units) -> dict[str, Any]:
-        """Keyword arguments of ``Samples`` for this kind's fields (besides q and context).
-        The default gives ``fields``: each declared field stacked, NaN where absent."""
+    def samples_arguments(self, columns: Columns, units: Units) -> KindArrays:
+        """This kind's arrays of every sample (besides q and the context), SI. The default
+        gives ``fields``: each declared field stacked, NaN where absent."""
         fields: dict[str, FloatArray] = {}
         for name in self.sample_fields:
             column = columns.values.get(f"field.{name}")
@@ -206,11 +252,21 @@ class MeasurementKind:
                                      f"expected shape {shape} as the other samples")
             fields[name] = np.stack([np.full(shape, np.nan) if v is None else v
                                      for v in column])
-        return {"fields": fields}
+        return KindArrays(fields=fields)
 
-    def check_samples(self, samples: Samples, frames: Mapping[str, Any]) -> None:
+    def check_samples(self, samples: Samples, frames: Mapping[str, Frame]) -> None:
         """Checks across samples and against the frames (after reading); raise FieldError.
         Default: none."""
+
+    def read_block(self, name: str, value: Any, units: Units) -> KindBlock | None:
+        """The kind's top-level block ``name`` (one of ``document_blocks``) from the file's
+        JSON ``value`` (None: absent), SI; None to leave it out; raise FieldError."""
+        return None
+
+    def check_loaded(self, dataset: Dataset, source: str) -> None:
+        """Checks of the kind's own top-level blocks (``dataset.extra_fields``) once the
+        dataset is read, e.g. the stereo kinds' ``rig_uncertainty``; raise DatasetError
+        ``source: field: ...``. Default: none."""
 
     # writing ------------------------------------------------------------------------
     def write_columns(self, samples: Samples) -> WrittenColumns | None:
@@ -228,11 +284,11 @@ class MeasurementKind:
             fields.append((name, values.tolist(), finite.tolist()))
         return WrittenColumns(fields, [samples.q.shape[1]] * samples.n)
 
-    def write_sample(self, samples: Samples, index: int) -> tuple[dict[str, Any], int]:
+    def write_sample(self, samples: Samples, index: int) -> tuple[JsonObject, int]:
         """This kind's fields of sample ``index`` as JSON (SI), and its joint count. The
         context fields (t, approach, ...) are written by the dataset layer after these."""
         q = samples.q[index]
-        out: dict[str, Any] = {"q": q.tolist()}
+        out: JsonObject = {"q": q.tolist()}
         for name in self.sample_fields:
             if name not in samples.fields:
                 continue
@@ -255,17 +311,17 @@ class PointSampleKind(MeasurementKind):
         if sample.uv is not None:
             columns.put("uv", int(loc[1]), sample.uv)
 
-    def point_arguments(self, columns: Columns, units: Units) -> dict[str, Any]:
+    def point_arguments(self, columns: Columns, units: Units) -> KindArrays:
         uv = None
         if columns.given("uv"):
             uv = np.full((columns.n_samples, 2, 2), np.nan)
             for i, value in enumerate(columns.values["uv"]):
                 if value is not None:
                     uv[i] = value
-        return {"p": units.length(columns.values["p"]),
-                "cov": np.asarray(columns.values["cov"]), "uv": uv}
+        return KindArrays(p=units.length(columns.values["p"]),
+                          cov=np.asarray(columns.values["cov"]), uv=uv)
 
-    def write_point(self, samples: Samples, index: int, out: dict[str, Any]) -> None:
+    def write_point(self, samples: Samples, index: int, out: JsonObject) -> None:
         if samples.p is not None:
             out["p"] = samples.p[index].tolist()
         if samples.cov is not None:
@@ -282,7 +338,7 @@ class WrittenColumns:
         self.fields = fields
         self.n_joints = n_joints
 
-    def sample(self, index: int) -> dict[str, Any]:
+    def sample(self, index: int) -> JsonObject:
         """Sample ``index`` as ``write_sample`` gives it."""
         return {name: values[index] for name, values, written in self.fields
                 if written is None or written[index]}

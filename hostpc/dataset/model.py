@@ -13,13 +13,15 @@ Shapes use ``N`` for the number of samples, ``n`` for the number of joints (of t
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from hostpc.json_object import JsonObject
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -105,7 +107,8 @@ class FramePose:
 
 @dataclass(frozen=True, eq=False)
 class SphereFrame:
-    """The reference sphere of ``sphere_probe``.
+    """A frame of kind ``"sphere"``: a sphere's centre and radius (sphere_probe's reference
+    sphere).
 
     Attributes:
         center: (3,) sphere centre in the robot base frame, m.
@@ -122,6 +125,12 @@ class SphereFrame:
         object.__setattr__(self, "radius", float(self.radius))
 
     __eq__ = _dataclass_eq
+
+
+#: a nominal frame's value in a ``Dataset``: a pose, a (3,) point (m), the sphere, named
+#: points (name -> (3,) m), or a JSON object kept as the file gave it (the stereo camera
+#: model: zerocal reads nothing of it and writes it back unchanged)
+Frame = FramePose | FloatArray | SphereFrame | Mapping[str, FloatArray] | JsonObject
 
 
 @dataclass(frozen=True, eq=False)
@@ -332,6 +341,23 @@ class Samples:
 
 
 @dataclass(frozen=True, eq=False)
+class KindBlock:
+    """A measurement kind's own top-level block of a dataset file (sphere_probe's ``probe``),
+    read by the kind's file face (``MeasurementKind.read_block``) and written back with
+    ``to_json``. A kind subclasses it with its fields (SI)."""
+
+    def to_json(self) -> JsonObject:
+        """The block as the file holds it (SI)."""
+        raise NotImplementedError
+
+    def lengths(self) -> Iterable[tuple[str, float]]:
+        """(field, value in m) of each length, range-checked on load (default: none)."""
+        return ()
+
+    __eq__ = _dataclass_eq
+
+
+@dataclass(frozen=True, eq=False)
 class Dataset:
     """One calibration dataset in SI units (the value of a ``zerocal-dataset/1`` file).
 
@@ -346,24 +372,25 @@ class Dataset:
             model ``camera`` is kept as the plain dict of the file.
         samples: the samples.
         known: names of frames held fixed in the fit.
-        probe_stylus_radius: stylus ball radius, m (``sphere_probe``), else None.
+        blocks: the kind's own top-level blocks by field name (``KindBlock``; sphere_probe's
+            ``probe``, the stylus radius: ``hostpc.kinds.sphere_probe.file_face``).
         extra_fields: unknown top-level fields of the file, kept for a round trip.
     """
 
     method: Method
     robot: RobotDescription
-    frames: Mapping[str, FramePose | FloatArray | SphereFrame | dict[str, Any]]
+    frames: Mapping[str, Frame]
     samples: Samples
     known: tuple[str, ...] = ()
-    probe_stylus_radius: float | None = None
+    blocks: Mapping[str, KindBlock] = field(default_factory=dict)
     extra_fields: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not isinstance(self.method, str) or not self.method.isidentifier():
             raise ValueError(f"Dataset.method: not a method name: {self.method!r}")
-        frames: dict[str, Any] = {}
+        frames: dict[str, Frame] = {}
         for name, value in self.frames.items():
-            if isinstance(value, FramePose | SphereFrame | dict):
+            if isinstance(value, FramePose | SphereFrame | Mapping):
                 frames[name] = value
             else:
                 point = _frozen(value)
@@ -371,9 +398,8 @@ class Dataset:
                 frames[name] = point
         object.__setattr__(self, "frames", MappingProxyType(frames))
         object.__setattr__(self, "known", tuple(self.known))
+        object.__setattr__(self, "blocks", MappingProxyType(dict(self.blocks)))
         object.__setattr__(self, "extra_fields", MappingProxyType(dict(self.extra_fields)))
-        if self.probe_stylus_radius is not None:
-            object.__setattr__(self, "probe_stylus_radius", float(self.probe_stylus_radius))
 
     @property
     def n_samples(self) -> int:
@@ -397,13 +423,6 @@ class Dataset:
         value = self.frames[name]
         if not isinstance(value, np.ndarray):
             raise TypeError(f"frames[{name!r}] is not a point: {type(value).__name__}")
-        return value
-
-    def sphere(self) -> SphereFrame:
-        """The reference sphere of ``sphere_probe``."""
-        value = self.frames["sphere"]
-        if not isinstance(value, SphereFrame):
-            raise TypeError(f"frames['sphere'] is not a sphere: {type(value).__name__}")
         return value
 
     def with_samples(self, samples: Samples) -> Dataset:

@@ -4,7 +4,7 @@ Loading converts the file's units to SI (``units.Units``) and checks everything 
 relies on; a file that breaks the contract raises ``hostpc.errors.DatasetError`` with one
 line naming the file, the field and the sample index, e.g.
 ``data.json: samples[3].cov: not positive definite``. The document level (format, method,
-robot, frames, known, probe) is checked here, the samples in ``reading_samples``.
+robot, frames, known, the kind's blocks) is checked here, the samples in ``reading_samples``.
 """
 
 from __future__ import annotations
@@ -23,11 +23,20 @@ from hostpc.dataset import schema, validation
 from hostpc.dataset.file_units import Units
 from hostpc.dataset.kind_registry import measurement_kinds
 from hostpc.dataset.measurement_kind import MeasurementKind
-from hostpc.dataset.model import Dataset, FramePose, RobotDescription, Samples, SphereFrame
+from hostpc.dataset.model import (
+    Dataset,
+    Frame,
+    FramePose,
+    KindBlock,
+    RobotDescription,
+    Samples,
+    SphereFrame,
+)
 from hostpc.dataset.reading_columns import NotColumnar, read_columns
 from hostpc.dataset.reading_samples import read_samples
 from hostpc.dataset.schema import FORMAT_TAG, FieldError, Loc, show
 from hostpc.errors import DatasetError, InputError
+from hostpc.json_object import JsonObject
 from hostpc.kinematics.robots import get_robot
 
 PathLike = str | os.PathLike[str]
@@ -137,7 +146,7 @@ def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]],
         robot, n_joints, robot_label = _read_robot(document.robot, kind, units)
     frames = _read_frames(document.frames, kind, units)
     known = _read_known(document.known, frames)
-    stylus_radius = _read_probe(document.probe, kind, units)
+    blocks = _read_blocks(doc, kind, kinds, units)
     if columnar_samples is not None:
         fast = read_columns(columnar_samples, kind, n_joints, units)
         if fast is None:
@@ -147,14 +156,15 @@ def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]],
     else:
         samples = read_samples(document.samples, kind, n_joints, robot_label, units, frames)
     samples = prismatic_q_to_length(samples, robot, units)
-    extra_fields = {k: v for k, v in doc.items() if k not in schema.DOCUMENT_FIELDS}
+    extra_fields = {k: v for k, v in doc.items()
+                    if k not in schema.DOCUMENT_FIELDS and k not in kind.document_blocks}
     return Dataset(
         method=method,
         robot=robot,
         frames=frames,
         samples=samples,
         known=known,
-        probe_stylus_radius=stylus_radius,
+        blocks=blocks,
         extra_fields=extra_fields,
     )
 
@@ -273,8 +283,8 @@ def _check_count(loc: Loc, values: Sequence[Any], n: int, what: str) -> None:
         raise FieldError(loc, f"expected {n} values ({what}), got {len(values)}")
 
 
-def _read_frames(frames: dict[str, Any], method: MeasurementKind, units: Units
-                 ) -> dict[str, Any]:
+def _read_frames(frames: JsonObject, method: MeasurementKind, units: Units
+                 ) -> dict[str, Frame]:
     """The nominal frames of ``method`` in SI."""
     kinds = method.frames
     for name in frames:
@@ -284,7 +294,7 @@ def _read_frames(frames: dict[str, Any], method: MeasurementKind, units: Units
                 ("frames", name),
                 f"unknown frame for method '{method.name}' (expected {expected})",
             )
-    result: dict[str, Any] = {}
+    result: dict[str, Frame] = {}
     for name, kind in kinds.items():
         loc: Loc = ("frames", name)
         if name not in frames:
@@ -302,7 +312,7 @@ def _read_frames(frames: dict[str, Any], method: MeasurementKind, units: Units
         elif kind == "point":
             result[name] = units.length(schema.validate(schema.Vec3, value, loc))
         elif kind == "points":
-            points: dict[str, Any] = schema.validate(dict[str, schema.Vec3], value, loc)
+            points: dict[str, list[float]] = schema.validate(dict[str, schema.Vec3], value, loc)
             if not points:
                 raise FieldError(loc, "expected at least one named point")
             result[name] = {key: units.length(point) for key, point in points.items()}
@@ -320,7 +330,7 @@ def _read_frames(frames: dict[str, Any], method: MeasurementKind, units: Units
     return result
 
 
-def _read_known(known: list[str], frames: Mapping[str, Any]) -> tuple[str, ...]:
+def _read_known(known: list[str], frames: Mapping[str, Frame]) -> tuple[str, ...]:
     seen: set[str] = set()
     for i, name in enumerate(known):
         if name not in frames:
@@ -334,16 +344,18 @@ def _read_known(known: list[str], frames: Mapping[str, Any]) -> tuple[str, ...]:
     return tuple(known)
 
 
-def _read_probe(probe: schema.ProbeSchema | None, kind: MeasurementKind, units: Units
-                ) -> float | None:
-    if not kind.uses_probe:
-        if probe is not None:
-            raise FieldError(("probe",), f"not a field of method '{kind.name}'")
-        return None
-    if probe is None:
-        raise FieldError(("probe",), 'required field missing ({"stylus_radius": r})')
-    if probe.stylus_radius < 0:
-        raise FieldError(
-            ("probe", "stylus_radius"), f"must be >= 0, got {show(probe.stylus_radius)}"
-        )
-    return float(units.length(probe.stylus_radius))
+def _read_blocks(doc: JsonObject, kind: MeasurementKind,
+                 kinds: Mapping[str, type[MeasurementKind]], units: Units
+                 ) -> dict[str, KindBlock]:
+    """The kind's own top-level blocks (``MeasurementKind.read_block``); another kind's
+    block in this kind's file is an error."""
+    for other in kinds.values():
+        for name in other.document_blocks:
+            if name in doc and name not in kind.document_blocks:
+                raise FieldError((name,), f"not a field of method '{kind.name}'")
+    blocks = {}
+    for name in kind.document_blocks:
+        block = kind.read_block(name, doc.get(name), units)
+        if block is not None:
+            blocks[name] = block
+    return blocks

@@ -16,14 +16,13 @@ and names its index and field exactly as before. Both paths give identical array
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from hostpc.dataset import schema
 from hostpc.dataset.file_units import Units
-from hostpc.dataset.measurement_kind import MeasurementKind
+from hostpc.dataset.measurement_kind import KindArrays, MeasurementKind
 from hostpc.dataset.model import FloatArray, Samples
 
 _SYMMETRY_TOLERANCE = 1e-6  # as hostpc.dataset.measurement_kind.check_covariance
@@ -147,7 +146,7 @@ def read_columns(samples: list[Any], kind: MeasurementKind, n_joints: int | None
         own = kind.read_columns(table, units)
         if own is None:
             raise NotColumnar
-        q = own.pop("q", None)
+        q = own.q
         if q is None:
             if n_joints is None or "q" not in table.names:
                 raise NotColumnar
@@ -169,11 +168,10 @@ def read_columns(samples: list[Any], kind: MeasurementKind, n_joints: int | None
             approach = table.numbers("approach", list[list[float]], (n_joints,))
             if not np.all(np.abs(approach) == 1.0):
                 raise NotColumnar
-        return Samples(
-            q=q, t=context["t"], temperature=context["temperature"],
-            speed=context["speed"], approach=approach,
-            group=own.pop("group", np.full(table.n_samples, -1, dtype=np.int64)), extra={},
-            **own)
+        group = own.group if own.group is not None else np.full(table.n_samples, -1,
+                                                                     dtype=np.int64)
+        return own.samples(q, t=context["t"], temperature=context["temperature"],
+                           speed=context["speed"], approach=approach, group=group, extra={})
     except NotColumnar:
         return None
 
@@ -193,7 +191,7 @@ def _reads_columns(cls: type[MeasurementKind]) -> bool:
             and issubclass(owner, _owner(cls, "check_samples")))
 
 
-def point_columns(table: SampleTable, units: Units) -> Mapping[str, Any]:
+def point_columns(table: SampleTable, units: Units) -> KindArrays:
     """``p`` (length), ``cov`` (area) or ``sigma`` (length), ``uv`` of every sample, SI."""
     if "p" not in table.names or ("cov" in table.names) == ("sigma" in table.names):
         raise NotColumnar
@@ -212,4 +210,4 @@ def point_columns(table: SampleTable, units: Units) -> Mapping[str, Any]:
         cov = variance[:, None, None] * np.eye(3)
     uv = (table.numbers("uv", list[list[list[float]]], (2, 2))
           if "uv" in table.names else None)
-    return {"p": units.length(p), "cov": checked_covariances(cov), "uv": uv}
+    return KindArrays(p=units.length(p), cov=checked_covariances(cov), uv=uv)

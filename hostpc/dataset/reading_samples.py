@@ -18,7 +18,7 @@ import numpy as np
 from hostpc.dataset import schema
 from hostpc.dataset.file_units import Units
 from hostpc.dataset.measurement_kind import Columns, MeasurementKind
-from hostpc.dataset.model import Samples
+from hostpc.dataset.model import Frame, Samples
 from hostpc.dataset.schema import FieldError, Loc, show
 
 
@@ -39,7 +39,7 @@ def read_samples(
     n_joints: int | None,
     robot_label: str,
     units: Units,
-    frames: Mapping[str, Any] | None = None,
+    frames: Mapping[str, Frame] | None = None,
 ) -> Samples:
     """Check every sample against ``kind`` and build the arrays in SI."""
     columns = Columns(len(samples))
@@ -73,15 +73,15 @@ def read_samples(
         raise FieldError(("samples", int(index), "speed"), "out of range after unit conversion")
 
     width = max(len(row) for row in columns.values["q"])
-    result = Samples(
-        q=units.angle(columns.rows("q", width)),
+    own = kind.samples_arguments(columns, units)
+    result = own.samples(
+        units.angle(columns.rows("q", width)),
         t=columns.floats("t", units.time),
         temperature=columns.floats("temperature", np.asarray),
         speed=speed,
         approach=columns.rows("approach", width),
-        group=_groups(columns),
+        group=_groups(columns) if own.group is None else own.group,
         extra={k: columns.floats("extra." + k, np.asarray) for k in extra_names},
-        **kind.samples_arguments(columns, units),
     )
     kind.check_samples(result, frames or {})
     return result

@@ -30,6 +30,8 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
+from hostpc.json_object import JsonObject
+
 FORMAT_TAG = "zerocal-dataset/1"
 
 Loc = tuple[str | int, ...]
@@ -134,11 +136,13 @@ Mat2 = Annotated[list[Vec2], _matrix(2, 2)]
 Covariance = Annotated[list[list[float]], _square(3, 6)]
 
 
-class _Strict(BaseModel):
+class StrictSchema(BaseModel):
+    """A JSON object with exactly these fields (a kind's own blocks subclass it too)."""
+
     model_config = ConfigDict(strict=True, extra="forbid", frozen=True)
 
 
-class UnitsSchema(_Strict):
+class UnitsSchema(StrictSchema):
     """``units``: the units of the file's numbers (default SI)."""
 
     length: Literal["m", "mm"] = "m"
@@ -146,7 +150,7 @@ class UnitsSchema(_Strict):
     time: Literal["s", "ms"] = "s"
 
 
-class JointRowSchema(_Strict):
+class JointRowSchema(StrictSchema):
     """One row of an explicit DH/MDH table (lengths and angles in the file's units)."""
 
     a: float
@@ -156,7 +160,7 @@ class JointRowSchema(_Strict):
     type: Literal["revolute", "prismatic"] = "revolute"  # extension A: prismatic q adds to d
 
 
-class RobotSchema(_Strict):
+class RobotSchema(StrictSchema):
     """``robot``: ``{"name": ...}`` or ``{"convention", "joints", "mass"?, "com"?}``."""
 
     name: str | None = None
@@ -169,31 +173,25 @@ class RobotSchema(_Strict):
     tip_link: str | None = None
 
 
-class FramePoseSchema(_Strict):
+class FramePoseSchema(StrictSchema):
     """A frame as ``xyz`` (length) and ``rpy`` (angle)."""
 
     xyz: Vec3
     rpy: Vec3
 
 
-class TipFrameSchema(_Strict):
+class TipFrameSchema(StrictSchema):
     """``frames.tool`` of sphere_probe: only ``xyz`` matters, ``rpy`` may be omitted."""
 
     xyz: Vec3
     rpy: Vec3 | None = None
 
 
-class SphereSchema(_Strict):
+class SphereSchema(StrictSchema):
     """``frames.sphere``: centre (length, base frame) and radius (length)."""
 
     center: Vec3
     radius: float
-
-
-class ProbeSchema(_Strict):
-    """``probe``: the stylus ball radius (length)."""
-
-    stylus_radius: float
 
 
 class SampleSchema(BaseModel):
@@ -228,9 +226,8 @@ class DocumentSchema(BaseModel):
     method: str
     units: UnitsSchema = UnitsSchema()
     robot: RobotSchema
-    frames: dict[str, Any]
+    frames: JsonObject
     known: list[str] = []
-    probe: ProbeSchema | None = None
     samples: list[SampleSchema]
 
 
@@ -282,7 +279,7 @@ def validate(kind: Any, value: Any, loc: Loc = ()) -> Any:
         raise FieldError(loc + tuple(first["loc"]), _describe(first)) from None
 
 
-class DuplicateKeys(dict[str, Any]):
+class DuplicateKeys(JsonObject):
     """A JSON object in which some key appeared more than once (see ``pairs_hook``)."""
 
     duplicates: tuple[str, ...] = ()
@@ -295,9 +292,9 @@ class NonFinite:
         self.token = token
 
 
-def pairs_hook(pairs: Sequence[tuple[str, Any]]) -> dict[str, Any]:
+def pairs_hook(pairs: Sequence[tuple[str, Any]]) -> JsonObject:
     """``json`` object hook that remembers duplicate keys instead of keeping the last."""
-    result: dict[str, Any] = {}
+    result: JsonObject = {}
     duplicates: list[str] = []
     for key, value in pairs:
         if key in result:
@@ -346,7 +343,7 @@ def normalize(value: Any, loc: Loc = (), depth: int = 0) -> Any:
     if isinstance(value, dict):
         if isinstance(value, DuplicateKeys):
             raise FieldError(loc, f"duplicate key {show(value.duplicates[0])}")
-        result: dict[str, Any] = {}
+        result: JsonObject = {}
         for key, item in value.items():
             if not isinstance(key, str):
                 raise FieldError(loc, f"keys must be strings, got {show(key)}")

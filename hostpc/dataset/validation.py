@@ -7,8 +7,9 @@ file, the sample and the field instead of overflowing inside the solver:
 
 - ``read_dataset_bytes``: a size limit (``ZEROCAL_MAX_DATASET_MB``, default 512 MB); a
   device (``/dev/zero``), a FIFO or a directory is refused at once (``hostpc.input_files``).
-- ``rig_block.check_rig_uncertainty`` (called by ``check_dataset``): the ``rig_uncertainty``
-  block (the rig's calibration covariance the push guard's chi2 includes) well formed.
+- the kind's own blocks (``MeasurementKind.check_loaded``, called by ``check_dataset``): e.g.
+  the stereo kinds' ``rig_uncertainty`` block (the rig's calibration covariance the push
+  guard's chi2 includes, ``hostpc.kinds.stereo_target.rig_block``) well formed.
 - ``check_dataset``: every number (in SI, after unit conversion) within a physical range:
   positions below ``MAX_POSITION_M``, angles below ``MAX_ANGLE_RAD``, covariance standard
   deviations (square roots of the eigenvalues) between ``MIN_STD_M`` and ``MAX_STD_M``, and,
@@ -27,7 +28,6 @@ import numpy as np
 
 from hostpc.dataset.measurement_kind import MeasurementKind
 from hostpc.dataset.model import Dataset, FramePose, SphereFrame
-from hostpc.dataset.rig_block import BLOCK, check_rig_uncertainty
 from hostpc.errors import DatasetError
 from hostpc.input_files import DATASET, read_input_bytes
 
@@ -69,7 +69,8 @@ def check_dataset(dataset: Dataset, source: str = "<dataset>",
                   kind: type[MeasurementKind] | None = None) -> Dataset:
     """Return `dataset` if every value is within its physical range; else DatasetError with
     one line: ``source: samples[i].field: value ... outside ...`` (SI units). kind: the
-    dataset's measurement kind (a kinematic-tree kind's robot must be a built-in tree)."""
+    dataset's measurement kind (a kinematic-tree kind's robot must be a built-in tree; the
+    kind checks its own blocks, ``MeasurementKind.check_loaded``)."""
     for field, value, limit, unit in _ranged_values(dataset):
         array = np.asarray(value, dtype=np.float64)
         bad = ~(np.abs(array) < limit) & ~np.isnan(array)  # NaN: padding of absent values
@@ -81,8 +82,8 @@ def check_dataset(dataset: Dataset, source: str = "<dataset>",
     _check_covariances(dataset, source)
     if kind is not None and kind.robot_tree:
         _check_tree_robot(dataset, source)
-    if BLOCK in dataset.extra_fields:
-        check_rig_uncertainty(dataset.extra_fields[BLOCK], source)
+    if kind is not None:
+        kind().check_loaded(dataset, source)
     return dataset
 
 
@@ -127,8 +128,9 @@ def _ranged_values(dataset: Dataset) -> Iterator[tuple[str, Any, float, str]]:
             yield f"frames.{name}.radius", frame.radius, MAX_POSITION_M, "m"
         elif isinstance(frame, np.ndarray):
             yield f"frames.{name}", frame, MAX_POSITION_M, "m"
-    if dataset.probe_stylus_radius is not None:
-        yield "probe.stylus_radius", dataset.probe_stylus_radius, MAX_POSITION_M, "m"
+    for name, block in dataset.blocks.items():
+        for length, value in block.lengths():
+            yield f"{name}.{length}", value, MAX_POSITION_M, "m"
 
 
 def _check_covariances(dataset: Dataset, source: str) -> None:

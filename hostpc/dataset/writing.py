@@ -17,10 +17,18 @@ import numpy as np
 
 from hostpc.dataset.kind_registry import measurement_kinds
 from hostpc.dataset.measurement_kind import MeasurementKind
-from hostpc.dataset.model import Dataset, FramePose, RobotDescription, Samples, SphereFrame
+from hostpc.dataset.model import (
+    Dataset,
+    Frame,
+    FramePose,
+    RobotDescription,
+    Samples,
+    SphereFrame,
+)
 from hostpc.dataset.reading import PathLike, dataset_from_dict
 from hostpc.dataset.schema import FORMAT_TAG
 from hostpc.errors import InputError
+from hostpc.json_object import JsonObject
 
 _SI_UNITS = {"length": "m", "angle": "rad", "time": "s"}
 #: one encoder for every value (``json.dumps`` with options builds a new one per call)
@@ -28,13 +36,13 @@ _ENCODER = json.JSONEncoder(ensure_ascii=False, allow_nan=False)
 
 
 def dataset_to_dict(dataset: Dataset, plugins: Iterable[str | os.PathLike[str]] = ()
-                    ) -> dict[str, Any]:
+                    ) -> JsonObject:
     """The JSON document of ``dataset`` in SI units (inverse of ``dataset_from_dict``).
 
     Absent optional values (NaN, group -1) are left out; unknown top-level fields that
     were read with the dataset are written back.
     """
-    doc: dict[str, Any] = {
+    doc: JsonObject = {
         "format": FORMAT_TAG,
         "method": dataset.method,
         "units": dict(_SI_UNITS),
@@ -42,8 +50,8 @@ def dataset_to_dict(dataset: Dataset, plugins: Iterable[str | os.PathLike[str]] 
         "frames": {name: _frame_to_json(value) for name, value in dataset.frames.items()},
         "known": list(dataset.known),
     }
-    if dataset.probe_stylus_radius is not None:
-        doc["probe"] = {"stylus_radius": float(dataset.probe_stylus_radius)}
+    for name, block in dataset.blocks.items():
+        doc[name] = block.to_json()
     kinds = measurement_kinds(plugins)
     if dataset.method not in kinds:
         raise InputError(f"method {dataset.method!r}: no measurement model of that name "
@@ -87,14 +95,14 @@ def save_dataset(dataset: Dataset, path: PathLike,
         raise InputError(f"{target}: cannot write file ({exc.strerror or exc})") from exc
 
 
-def _robot_to_dict(robot: RobotDescription) -> dict[str, Any]:
+def _robot_to_dict(robot: RobotDescription) -> JsonObject:
     if robot.name is not None:
         return {"name": robot.name}
     if robot.urdf is not None:  # extension A; written as an absolute path
         return {"urdf": robot.urdf, "base_link": robot.base_link, "tip_link": robot.tip_link}
     assert robot.a is not None and robot.alpha is not None
     assert robot.d is not None and robot.theta is not None
-    out: dict[str, Any] = {
+    out: JsonObject = {
         "convention": robot.convention,
         "joints": [
             {"a": float(a), "alpha": float(alpha), "d": float(d), "theta": float(theta)}
@@ -111,7 +119,7 @@ def _robot_to_dict(robot: RobotDescription) -> dict[str, Any]:
     return out
 
 
-def _frame_to_json(value: Any) -> Any:
+def _frame_to_json(value: Frame) -> Any:
     if isinstance(value, FramePose):
         return {"xyz": value.xyz.tolist(), "rpy": value.rpy.tolist()}
     if isinstance(value, SphereFrame):
@@ -123,7 +131,7 @@ def _frame_to_json(value: Any) -> Any:
     return copy.deepcopy(value)
 
 
-def _samples_to_json(kind: MeasurementKind, samples: Samples) -> list[dict[str, Any]]:
+def _samples_to_json(kind: MeasurementKind, samples: Samples) -> list[JsonObject]:
     """Every sample as JSON: the kind's own fields, then the context fields. Both are
     converted column by column (one finiteness test and one ``tolist`` per array, not per
     sample: the kind's ``write_columns``, where it has its own)."""

@@ -47,10 +47,11 @@ from hostpc.errors import InputError
 from hostpc.fitting import FitResult, solve
 from hostpc.fitting.fitting import held_out_by_fold
 from hostpc.fitting.solver import Evaluation, Loss, SolverOutcome, evaluate, levenberg_marquardt
+from hostpc.json_object import JsonObject
 from hostpc.model import joint_offsets
 from hostpc.model.effect import Effect
 from hostpc.model.layout import Problem
-from hostpc.model.problem import extend_problem as extend_with_effects
+from hostpc.model.problem import extend_problem
 
 
 @dataclass(frozen=True)
@@ -94,7 +95,7 @@ class Candidate:
         """Whether the ladder would add it: significant and no identifiable parameter lost."""
         return self.significant and not self.unidentifiable
 
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self) -> JsonObject:
         return {
             "effect": self.effect,
             "delta_bic": _finite(self.delta_bic),
@@ -187,12 +188,6 @@ def check_candidate_names(names: Sequence[str], registry: Mapping[str, type[Effe
                 else "{} are frames, not candidate effects").format(listed)
         raise InputError(f"--candidates: {what}; frames are part of the model (choose them "
                          f"with --effects): remove {listed} from the candidates")
-
-
-def extend_problem(problem: Problem, effect: Effect) -> Problem:
-    """The problem with one more effect, reusing its built context (raises
-    EffectError/InputError if it cannot apply)."""
-    return extend_with_effects(problem, [effect])
 
 
 def warm_start(base: FitResult, problem: Problem) -> np.ndarray:
@@ -354,7 +349,7 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
     """Fit the base model plus ``effect``, warm-started at the base solution; find the
     subset of its parameters the data need and the evidence for it (not testable, see the
     module doc, when the samples leave no degrees of freedom)."""
-    problem = extend_problem(base.problem, effect)
+    problem = extend_problem(base.problem, [effect])
     x0 = warm_start(base, problem)
     start = evaluate(problem, x0)  # shared by the fit, the subset choice and the subset fit
     extended = solve(problem, x0=x0, loss=loss, cv_folds=0, max_iterations=50, initial=start)

@@ -28,13 +28,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hostpc.diagnostics.candidates import extend_problem, warm_start
+from hostpc.diagnostics.candidates import warm_start
 from hostpc.diagnostics.distributions import chi2_isf, chi2_sf
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult
 from hostpc.fitting.solver import evaluate
+from hostpc.json_object import JsonObject
 from hostpc.model.effect import Effect
 from hostpc.model.measurements.predict import predict
+from hostpc.model.problem import extend_problem
 
 DEFAULT_POWER = 0.8
 
@@ -80,7 +82,7 @@ class DetectableSize:
                 f"({self.shift * 1e6:.3g} um at the measured points) would not be seen "
                 "with these poses")
 
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self) -> JsonObject:
         return {"effect": self.effect, "parameter": self.parameter,
                 "size": self.size if math.isfinite(self.size) else None,
                 "unit": self.unit, "shift": self.shift if math.isfinite(self.shift) else None}
@@ -90,7 +92,7 @@ def detectable_sizes(base: FitResult, effect: Effect, alpha: float,
                      target: float = DEFAULT_POWER) -> tuple[DetectableSize, ...]:
     """The minimum detectable size of each parameter of ``effect`` added to ``base`` at
     significance ``alpha`` (the per-candidate threshold) and power ``target``."""
-    problem = extend_problem(base.problem, effect)
+    problem = extend_problem(base.problem, [effect])
     x0 = warm_start(base, problem)
     J = evaluate(problem, x0).jacobian
     assert J is not None

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -20,6 +19,7 @@ from hostpc.diagnostics.interactions import Interaction
 from hostpc.diagnostics.outliers import Outlier
 from hostpc.diagnostics.residual_analysis import ResidualAnalysis
 from hostpc.fitting import FitResult
+from hostpc.json_object import JsonObject
 
 FORMAT = "zerocal-diagnosis/1"
 #: delta BIC difference below which two candidates are tied (``ModelCheck.best_candidate``)
@@ -126,7 +126,7 @@ class LadderStep:
             return None
         return self.added + "".join(f", without {r}" for r in self.removed)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {
             "step": self.step, "effects": list(self.effects), "added": self.added,
             "removed": list(self.removed),
@@ -210,7 +210,7 @@ class Diagnosis:
         """The last model of the ladder (the current model without a ladder)."""
         return self.ladder[-1].check if self.ladder else self.check
 
-    def to_dict(self, max_interactions: int = JSON_INTERACTIONS) -> dict[str, Any]:
+    def to_dict(self, max_interactions: int = JSON_INTERACTIONS) -> JsonObject:
         """One JSON document (see docs/diagnostics.md for the schema)."""
         check = self.check
         a = check.adequacy
@@ -218,7 +218,7 @@ class Diagnosis:
         shown = [i for i in check.interactions[:max_interactions]]
         shown += [i for i in check.interactions[max_interactions:] if i.significant]
         held = check.held_out
-        document: dict[str, Any] = {
+        document: JsonObject = {
             "format": FORMAT,
             "source": self.source,
             "method": fit.problem.method,

@@ -9,6 +9,8 @@ of the F functions broadcast like numpy arrays.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from hostpc.diagnostics.special_functions import (
@@ -34,6 +36,24 @@ def chi2_ppf(q: float, dof: float) -> float:
 def chi2_isf(q: float, dof: float) -> float:
     """The x with P(X > x) = q."""
     return 2.0 * gamma_inverse(dof / 2.0, q, upper=True)
+
+
+def ncx2_sf(x: float, dof: float, nc: float) -> float:
+    """P(X > x) for X ~ non-central chi-square (dof degrees of freedom, non-centrality nc):
+    the Poisson(nc / 2) mixture of central chi-square tails with dof + 2 j degrees of
+    freedom, summed over the weights that matter (out to 40 standard deviations of the
+    Poisson either side of its mean, which leaves less than 1e-300 out)."""
+    x, dof, nc = max(float(x), 0.0), float(dof), max(float(nc), 0.0)
+    if nc == 0.0:
+        return chi2_sf(x, dof)
+    mean = nc / 2.0
+    spread = 40.0 * math.sqrt(mean) + 40.0
+    total = 0.0
+    for j in range(max(0, int(mean - spread)), int(mean + spread) + 1):
+        log_weight = -mean + j * math.log(mean) - math.lgamma(j + 1.0)
+        if log_weight > -745.0:
+            total += math.exp(log_weight) * chi2_sf(x, dof + 2.0 * j)
+    return min(total, 1.0)
 
 
 def f_sf(statistic: np.ndarray | float, dfn: np.ndarray | float, dfd: np.ndarray | float

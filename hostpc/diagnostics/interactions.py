@@ -34,6 +34,7 @@ from hostpc.diagnostics.residual_analysis import is_angle, usable_variables
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult
 from hostpc.fitting.solver import evaluate
+from hostpc.json_object import JsonObject
 from hostpc.model.effects import Geometry
 from hostpc.model.problem import extend_problem
 
@@ -69,7 +70,7 @@ class Interaction:
                     f"{self.variable}")
         return f"{self.parameter} varies with {self.variable}"
 
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self) -> JsonObject:
         return {
             "parameter": self.parameter, "variable": self.variable, "score": self.score,
             "chi2": self.chi2, "dof": self.dof, "p_value": self.p_value,

@@ -33,6 +33,7 @@ from hostpc.diagnostics.distributions import f_sf
 from hostpc.diagnostics.repeats import check_repeats
 from hostpc.fitting import FitResult
 from hostpc.fitting.solver import evaluate
+from hostpc.json_object import JsonObject
 
 #: directions of a sample's residual that its own leverage fixes (1 - h below this) are
 #: not testable: the fit reproduces them whatever the measurement says
@@ -55,7 +56,7 @@ class Outlier:
     #: explains worse)
     test: str = "leave-one-out"
 
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self) -> JsonObject:
         return {"sample": self.sample, "sigma": self.sigma, "p_value": self.p_value,
                 "test": self.test}
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hostpc.json_object import JsonObject
 from hostpc.model.registry import builtin_effects
 
 RELATIVE_RANK_TOLERANCE = 1e-7
@@ -42,7 +43,7 @@ class NullDirection:
     coefficients: tuple[float, ...]
     description: str
 
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self) -> JsonObject:
         return {
             "fixed": self.fixed,
             "parameters": list(self.parameters),

@@ -17,7 +17,6 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -26,6 +25,7 @@ from hostpc.errors import InputError
 from hostpc.fitting.fitting import fit
 from hostpc.fitting.result import FitResult
 from hostpc.fitting.solver import evaluate
+from hostpc.json_object import JsonObject
 from hostpc.model.problem import build_problem
 
 
@@ -88,7 +88,7 @@ class Prediction:
         """RMS whitened residual per scalar component (1 = at the stated noise)."""
         return float(np.sqrt(np.mean(self.whitened**2))) if self.whitened.size else math.nan
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """JSON document (SI units, radians): the summary and every sample's figures."""
         angle = self.angle_rms
         return {

@@ -45,6 +45,7 @@ import numpy as np
 
 from hostpc.dataset.validation import MAX_ABS_CONTEXT, MAX_ANGLE_RAD, MAX_POSITION_M
 from hostpc.errors import InputError
+from hostpc.json_object import JsonObject
 
 _SCALE = {"m": ("m", 1.0), "mm": ("m", 1e-3), "um": ("m", 1e-6),
           "rad": ("rad", 1.0), "mrad": ("rad", 1e-3), "urad": ("rad", 1e-6),
@@ -229,13 +230,14 @@ def constraints_for(extra_fields: Mapping[str, Any], names: tuple[str, ...],
                        np.array([p.sigma for p in priors], float), held, whitening)
 
 
-def _block_entries(raw: Any) -> list[Mapping[str, Any]]:
-    if not isinstance(raw, list | tuple) or not all(isinstance(e, Mapping) for e in raw):
+def _block_entries(raw: Any) -> list[JsonObject]:
+    """The dataset's ``prior_blocks`` JSON: a list of objects."""
+    if not isinstance(raw, list | tuple) or not all(isinstance(e, dict) for e in raw):
         raise InputError("prior_blocks: expected a list of {names, value, covariance}")
     return list(raw)
 
 
-def prior_block(entry: Mapping[str, Any], units: Mapping[str, str]
+def prior_block(entry: JsonObject, units: Mapping[str, str]
                 ) -> tuple[list[Prior], np.ndarray]:
     """One prior block -> (its Priors with marginal sigmas, its (K, K) whitening L^-1).
     InputError if a name is unknown, the sizes disagree or the covariance is not positive
@@ -279,7 +281,7 @@ def block_whitening(blocks: list[np.ndarray]) -> np.ndarray:
     return out
 
 
-def with_prior_blocks(dataset: Any, blocks: list[Mapping[str, Any]]) -> Any:
+def with_prior_blocks(dataset: Any, blocks: list[JsonObject]) -> Any:
     """A copy of `dataset` whose `prior_blocks` also hold these (added to the file's)."""
     if not blocks:
         return dataset

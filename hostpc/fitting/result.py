@@ -5,11 +5,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 
 from hostpc.fitting.identifiability import NullDirection
+from hostpc.json_object import JsonObject
 from hostpc.model.layout import Problem
 
 CORRELATION_THRESHOLD = 0.9
@@ -146,7 +147,7 @@ class FitResult:
         """(N,) norm of each sample's raw residual (m; its length components)."""
         return np.linalg.norm(self.residuals_raw[:, self.problem.length_columns], axis=1)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """JSON document (SI units and radians) with the keys of the CLI's --json."""
 
         def finite(v: float | None) -> float | None:
@@ -185,7 +186,7 @@ class FitResult:
             **self._shared_chi2_entry(),
         }
 
-    def _shared_chi2_entry(self) -> dict[str, Any]:
+    def _shared_chi2_entry(self) -> JsonObject:
         """{"chi2_dof_with_calibration": ...} when the fit has it (an offline `hostpc push`
         reads it from this document), else nothing."""
         full = self.chi2_dof_with_calibration

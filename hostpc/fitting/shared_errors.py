@@ -5,8 +5,8 @@ point was itself estimated (from chessboard views) and errs by some delta with c
 S (24 x 24, `hostpc.vision.rig_uncertainty`). That delta moves every measured point by
 D_i @ delta (D_i = dp_i/drig, (3, 24)), the SAME delta for all samples: the measurement
 errors are correlated across samples and do not average out. The measurement model supplies
-D (`shared_error_sensitivity`) and the per-sample floor (`shared_error_floor`): the rig is
-its knowledge (hostpc.kinds.stereo_target.shared_error), not this module's.
+D, S and the per-sample floor (`shared_error`, a `hostpc.model.layout.SharedError`): the rig
+is its knowledge (hostpc.kinds.stereo_target.shared_error), not this module's.
 
 The fit's estimator is unchanged (weighted by the per-sample covariances); its covariance is
 the sandwich for the full, correlated measurement covariance. To first order the estimate
@@ -38,7 +38,6 @@ from hostpc.fitting.shared_chi2 import (
 )
 from hostpc.model.layout import Problem
 
-BLOCK = "rig_uncertainty"
 SCALE_ALPHA = 0.02
 """S is scaled up (`residual_scale`) only when the fit's residual chi-square exceeds the upper
 SCALE_ALPHA quantile of its exact law under the stated S (`shared_chi2.shared_excess`): with
@@ -48,20 +47,10 @@ one-sided level of the earlier "2 standard deviations" gate, which assumed a Gau
 
 def shared_covariance(problem: Problem) -> tuple[np.ndarray, np.ndarray] | None:
     """(D (N, m, K) raw sensitivity of the measurements, S (K, K)) of the problem's shared
-    error, or None if its dataset declares none (or cannot: no uv, wrong shapes)."""
-    block = problem.dataset.extra_fields.get(BLOCK)
-    if not isinstance(block, dict):
-        return None
-    try:
-        S = np.asarray(block.get("covariance"), dtype=float)
-    except (TypeError, ValueError):
-        return None
-    D = problem.measurement.shared_error_sensitivity(problem, block)
-    if D is None or S.ndim != 2 or S.shape != (D.shape[2], D.shape[2]):
-        return None
-    if not (np.all(np.isfinite(S)) and np.all(np.isfinite(D))):
-        return None
-    return D, S
+    error, or None if its measurement model states none for its dataset (no block, no uv,
+    wrong shapes)."""
+    shared = problem.measurement.shared_error(problem)
+    return None if shared is None else (shared.sensitivity, shared.covariance)
 
 
 def residual_scale(jacobian_free: np.ndarray, D_whitened: np.ndarray, S: np.ndarray,
@@ -113,13 +102,12 @@ def added_parameter_covariance(problem: Problem, jacobian_free: np.ndarray,
     covariance to stand for the shared error in the weights and in chi2), the floor is a
     weighting only: the covariance is the sandwich for the samples' noise without the floor
     plus the (scaled) shared error, and the returned change can be negative."""
-    shared = shared_covariance(problem)
+    shared = problem.measurement.shared_error(problem)
     if shared is None:
         return None
-    D, S = shared
+    D, S, floor = shared.sensitivity, shared.covariance, shared.floor
     W = problem.sqrt_information  # (N, m, m)
     D_whitened = np.einsum("nij,njk->nik", W, D).reshape(-1, D.shape[2]) * row_weight[:, None]
-    floor = problem.measurement.shared_error_floor(problem, problem.dataset.extra_fields[BLOCK])
     change = np.zeros_like(covariance_free)
     noise_blocks = None
     if floor is not None:

@@ -39,6 +39,7 @@ from hostpc.importing.column_map import (
 from hostpc.importing.csv_table import CsvHeader, CsvRows, Row
 from hostpc.importing.euler import euler_to_matrix, parse_euler
 from hostpc.importing.imported import FloatArray, ImportedSamples
+from hostpc.json_object import JsonObject
 from hostpc.kinematics.rotations import matrix_to_rpy, rotvec_to_matrix
 
 __all__ = [
@@ -295,7 +296,7 @@ def read_samples(csv_rows: CsvRows, mapping: ColumnMap, options: ImportOptions
     )
 
 
-def document_head(samples: ImportedSamples, options: ImportOptions) -> dict[str, Any]:
+def document_head(samples: ImportedSamples, options: ImportOptions) -> JsonObject:
     """The dataset document of ``samples`` without them (``"samples": []``, written by
     :func:`~hostpc.importing.imported.write_document`): format, method, units, robot,
     frames (``options.frames``; zero where it gives none), known."""

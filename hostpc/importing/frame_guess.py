@@ -22,15 +22,13 @@ all in SI units.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
-
 import numpy as np
 from numpy.typing import NDArray
 
 from hostpc.dataset.kind_registry import csv_row_shape
 from hostpc.errors import InputError
 from hostpc.importing.imported import ImportedSamples
+from hostpc.json_object import JsonObject
 from hostpc.kinematics.chain import Chain
 
 __all__ = ["GUESS_MAX_SAMPLES", "guess_sample_indices", "guess_world_point",
@@ -199,11 +197,11 @@ def _pose_json(T: FloatArray) -> dict[str, list[float]]:
             "rpy": [float(v) for v in matrix_to_rpy(T[:3, :3])]}
 
 
-def guessed_frames(samples: ImportedSamples, chain: Chain, frames: Mapping[str, Any]
-                   ) -> dict[str, Any]:
-    """``frames`` (a document's, SI) with ``world`` and ``tool`` (world_pose) or ``markers``
-    (world_point, every name of ``frames["markers"]``) set to the estimates above, from at
-    most :data:`GUESS_MAX_SAMPLES` of ``samples``."""
+def guessed_frames(samples: ImportedSamples, chain: Chain, frames: JsonObject) -> JsonObject:
+    """``frames`` (the ``frames`` object of the document ``hostpc import`` writes, SI)
+    with ``world`` and ``tool`` (world_pose) or ``markers`` (world_point, every name of
+    ``frames["markers"]``) set to the estimates above, from at most
+    :data:`GUESS_MAX_SAMPLES` of ``samples``."""
     from hostpc.kinematics import forward
     from hostpc.kinematics.rotations import pose_to_transform
 

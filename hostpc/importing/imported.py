@@ -9,12 +9,14 @@ about 100 bytes a row. The document is written to the file one sample at a time
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any, TextIO
 
 import numpy as np
 from numpy.typing import NDArray
+
+from hostpc.json_object import JsonObject
 
 __all__ = ["ImportedSamples", "write_document"]
 
@@ -50,7 +52,7 @@ class ImportedSamples:
     def __len__(self) -> int:
         return len(self.q)
 
-    def sample_dicts(self) -> Iterator[dict[str, Any]]:
+    def sample_dicts(self) -> Iterator[JsonObject]:
         """The samples as the dataset file's objects (keys in the file's order), built a
         chunk at a time."""
         for start in range(0, len(self), _CHUNK):
@@ -91,7 +93,7 @@ class ImportedSamples:
         return list(cov.tolist())
 
 
-def write_document(out: TextIO, head: Mapping[str, Any], samples: ImportedSamples) -> None:
+def write_document(out: TextIO, head: JsonObject, samples: ImportedSamples) -> None:
     """Write ``head`` with ``samples`` to ``out``: the head indented, one sample per line."""
     text = json.dumps({**head, "samples": _SAMPLES_SLOT}, indent=1)
     before, after = text.split(json.dumps(_SAMPLES_SLOT), 1)

@@ -40,4 +40,4 @@ def method_class(name: str, plugins: Iterable[str | Path] = ()) -> type[Method]:
     return cls
 
 
-__all__ = ["Method", "method_class", "method_names"]
+__all__ = ["method_class", "method_names"]

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 
@@ -18,6 +18,20 @@ from hostpc.dataset import Dataset
 from hostpc.kinematics import Chain
 from hostpc.model.effect import Effect, EffectTerm, ModelContext
 from hostpc.model.memo import ProblemMemo, SharedValues
+
+
+@dataclass(frozen=True)
+class SharedError:
+    """An error every sample shares (a stereo rig's calibration error), as its measurement
+    model states it for the fit's covariance (``hostpc.fitting.shared_errors``).
+
+    sensitivity: (N, m, K) how each measurement moves with the K shared parameters;
+    covariance: (K, K) their covariance; floor: (N, m, m) the part of each sample's
+    covariance the method added to stand for the shared error (a weighting only), or None."""
+
+    sensitivity: np.ndarray
+    covariance: np.ndarray
+    floor: np.ndarray | None = None
 
 
 class MeasurementPredictor(Protocol):
@@ -40,11 +54,7 @@ class MeasurementPredictor(Protocol):
     def predict(self, problem: Problem, x: np.ndarray, jacobian: bool = True
                 ) -> tuple[np.ndarray, np.ndarray | None]: ...
 
-    def shared_error_sensitivity(self, problem: Problem, block: Mapping[str, Any]
-                                 ) -> np.ndarray | None: ...
-
-    def shared_error_floor(self, problem: Problem, block: Mapping[str, Any]
-                           ) -> np.ndarray | None: ...
+    def shared_error(self, problem: Problem) -> SharedError | None: ...
 
 
 @dataclass(frozen=True)

@@ -151,21 +151,30 @@ def unwrap_path(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray, q_max: np
     n_poses = out.shape[0]
     if n_poses == 0:
         return out
+    joints = np.flatnonzero(full_turn_joints(q_min, q_max))
+    if joints.size == 0:
+        return out
+    # every full-turn joint's dynamic programme at once: (N, J, 5) options
     shifts = 2 * np.pi * np.arange(-2, 3)
-    for j in np.flatnonzero(full_turn_joints(q_min, q_max)):
-        options = out[:, j, None] + shifts[None, :]                     # (N, 5)
-        allowed = (options >= q_min[j]) & (options <= q_max[j])
-        allowed[~allowed.any(axis=1), 2] = True  # none within the limits: keep it as it is
-        cost = np.where(allowed[0], _joint_cost(options[0] - q_start[j]), np.inf)
-        choice = np.zeros((n_poses, shifts.size), dtype=int)
-        for k in range(1, n_poses):
-            step = cost[:, None] + _joint_cost(options[k][None, :] - options[k - 1][:, None])
-            choice[k] = np.argmin(step, axis=0)
-            cost = np.where(allowed[k], step[choice[k], np.arange(shifts.size)], np.inf)
-        best = int(np.argmin(cost))
-        for k in range(n_poses - 1, -1, -1):
-            out[k, j] = options[k, best]
-            best = choice[k, best]
+    options = out[:, joints, None] + shifts[None, None, :]
+    lo, hi = np.asarray(q_min, float)[joints, None], np.asarray(q_max, float)[joints, None]
+    allowed = (options >= lo) & (options <= hi)
+    none = ~allowed.any(axis=2)
+    allowed[:, :, 2] |= none  # none within the limits: keep it as it is
+    start = np.asarray(q_start, float)[joints, None]
+    cost = np.where(allowed[0], _joint_cost(options[0] - start), np.inf)  # (J, 5)
+    choice = np.zeros((n_poses, joints.size, shifts.size), dtype=int)
+    rows = np.arange(joints.size)[:, None]
+    cols = np.arange(shifts.size)[None, :]
+    for k in range(1, n_poses):
+        # step[j, a, b]: cost of reaching option b of pose k from option a of pose k-1
+        step = cost[:, :, None] + _joint_cost(options[k][:, None, :] - options[k - 1][:, :, None])
+        choice[k] = np.argmin(step, axis=1)
+        cost = np.where(allowed[k], step[rows, choice[k], cols], np.inf)
+    best = np.argmin(cost, axis=1)
+    for k in range(n_poses - 1, -1, -1):
+        out[k, joints] = options[k, np.arange(joints.size), best]
+        best = choice[k, np.arange(joints.size), best]
     return out
 
 

@@ -24,9 +24,8 @@ Shapes: pool (N, n) rad; q_from (n,) rad; joint_speed (n,) rad/s or None (equal 
 from __future__ import annotations
 
 import numpy as np
-from scipy import special
 
-from hostpc.diagnostics.distributions import chi2_isf
+from hostpc.diagnostics.distributions import chi2_isf, ncx2_sf
 from hostpc.planning.tour import nearest_neighbour, plan_tour
 
 DETECTABLE_D2 = 10.0
@@ -47,8 +46,7 @@ def verify_power(n_poses: int, d2: float, alpha: float, m: int = 3) -> float:
     n = int(n_poses) * int(m)
     if n < 1:
         return 0.0
-    # 1 - the non-central chi-square CDF (scipy.stats.ncx2.sf, without importing stats)
-    return float(1.0 - special.chndtr(chi2_isf(alpha, n), n, n_poses * d2))
+    return ncx2_sf(chi2_isf(alpha, n), n, n_poses * d2)
 
 
 def verify_poses_for_power(d2: float = DETECTABLE_D2, power: float = DETECTABLE_POWER,

@@ -26,8 +26,8 @@ import numpy as np
 from hostpc.errors import InputError
 from hostpc.json_object import JsonObject
 
-if TYPE_CHECKING:  # the I/O layer's value type; loaded with the adapter that returns it
-    from hostpc.transport import TrackerReading
+if TYPE_CHECKING:  # the I/O layer's value types; loaded with the adapter that returns them
+    from hostpc.transport import SensorReading, TrackerReading
 
 
 @dataclass(frozen=True)
@@ -155,6 +155,8 @@ class RobotAdapter(Protocol):
 #
 #     TargetCamera    measure_targets()   the controller triangulates targets itself (dual_loop)
 #     LaserTracker    measure_tracker()   the cell's laser tracker (world_point)
+#     SensorPort      read_sensor()       any other instrument by name (`sensor_read`): a
+#                                         measurement kind's own, e.g. a plugin's
 #     OffsetExport    export_offsets()    a robot that keeps no zero offsets writes them as
 #                                         files for its own software (UR; calibrate/push.py)
 #     CaptureTiming   last_timing         host cameras: stamps and skew of the last pair
@@ -181,6 +183,16 @@ class LaserTracker(Protocol):
 
     async def measure_tracker(self) -> TrackerReading:
         """Each reflector's point in the tracker frame now (hostpc.transport.TrackerReading)."""
+        ...
+
+
+class SensorPort(Protocol):
+    """Any instrument by name (`sensor_read`): how a measurement kind brings its own
+    instrument without a protocol call of its own (docs/measurement-models.md)."""
+
+    async def read_sensor(self, sensor: str, request: JsonObject) -> SensorReading:
+        """A reading of `sensor`: `request` and the reading's `reading` are the
+        instrument's own small JSON objects (hostpc.transport.SensorReading)."""
         ...
 
 
@@ -233,6 +245,7 @@ class Capabilities:
 
     targets: TargetCamera | None = None
     tracker: LaserTracker | None = None
+    sensors: SensorPort | None = None
     offset_export: OffsetExport | None = None
     capture_timing: CaptureTiming | None = None
 
@@ -242,11 +255,13 @@ class Need(Enum):
 
     TARGETS = "measure_targets"
     TRACKER = "measure_tracker"
+    SENSORS = "sensor_read"
 
 
 _WHAT = {
     Need.TARGETS: "a controller that measures targets",
     Need.TRACKER: "a controller with a laser tracker",
+    Need.SENSORS: "a controller that reads the kind's own instrument",
 }
 
 
@@ -270,7 +285,8 @@ def check_needs(robot: RobotAdapter, needs: Iterable[Need], who: str) -> None:
     """MissingCapability naming `who` (e.g. `--method dual_loop`), the call and the driver
     for the first need `robot` does not offer."""
     capabilities = _capabilities(robot)
-    offered = {Need.TARGETS: capabilities.targets, Need.TRACKER: capabilities.tracker}
+    offered = {Need.TARGETS: capabilities.targets, Need.TRACKER: capabilities.tracker,
+               Need.SENSORS: capabilities.sensors}
     for need in needs:
         if offered[need] is None:
             raise _missing(robot, need, who)
@@ -290,3 +306,11 @@ def tracker_of(robot: RobotAdapter, who: str) -> LaserTracker:
     if tracker is None:
         raise _missing(robot, Need.TRACKER, who)
     return tracker
+
+
+def sensors_of(robot: RobotAdapter, who: str) -> SensorPort:
+    """The robot's `SensorPort` (MissingCapability if it has none: `check_needs` first)."""
+    sensors = _capabilities(robot).sensors
+    if sensors is None:
+        raise _missing(robot, Need.SENSORS, who)
+    return sensors

@@ -16,6 +16,10 @@ take no wall time) and one surveyed frame, declared known by the simulated cell:
   identifiable).
 dual_loop uses the packaged humanoid world (`humanoid.yaml`) with nothing known.
 
+A kind that brings its own instrument (a plugin folder with a `sim_sensor.py`, docs/
+measurement-models.md) has it simulated too: every `--plugin FOLDER` holding one is passed
+to the stub as `--sensor-plugin FOLDER` (the stub imports only that file, never hostpc).
+
 The token never touches the run folder or the process list: `scenario.json` is written
 without `server.token`, and the stub gets the token in its environment ($ZEROCAL_TOKEN).
 
@@ -51,6 +55,8 @@ from hostpc.robots.connect import TOKEN_ENV, RobotAddress, resolve_token
 
 START_TIMEOUT_S = 30.0
 STUB_LOG = "stub.log"
+SENSOR_FILE = "sim_sensor.py"
+"""A plugin folder's simulated sensor module (controller_stub/sensors/registry.py)."""
 PR_SET_PDEATHSIG = 1
 """prctl option (linux/prctl.h): the signal this process gets when its parent dies."""
 
@@ -173,11 +179,13 @@ class SimulatedController:
     (read-only; None: no Modbus server); token: the stub's token (default: the scenario's
     `server.token`, else $ZEROCAL_TOKEN, else the simulator's default), handed to the stub
     in its environment. `stop()` terminates only this process; the stub also ends when
-    hostpc dies (Linux).
+    hostpc dies (Linux). plugins: the run's `--plugin` files and folders; the folders with
+    a `sim_sensor.py` are the stub's `--sensor-plugin`s.
     """
 
     def __init__(self, scenario: JsonObject, workdir: str | Path,
-                 modbus_port: int | None = None, token: str | None = None) -> None:
+                 modbus_port: int | None = None, token: str | None = None,
+                 plugins: Iterable[str | Path] = ()) -> None:
         server = scenario.get("server")
         scenario_token = server.get("token") if isinstance(server, dict) else None
         self.token = token or (str(scenario_token) if scenario_token else resolve_token(None))
@@ -187,6 +195,8 @@ class SimulatedController:
         self.truth_path = self.workdir / "truth.json"
         self.log_path = self.workdir / STUB_LOG
         self.modbus_port = modbus_port
+        self.sensor_folders = [Path(p).resolve() for p in plugins
+                               if (Path(p) / SENSOR_FILE).is_file()]
         self.modbus_address: RobotAddress | None = None
         self.process: subprocess.Popen[str] | None = None
         self._address: RobotAddress | None = None
@@ -211,6 +221,8 @@ class SimulatedController:
         ]  # fmt: skip
         if self.modbus_port is not None:
             command += ["--modbus-port", str(int(self.modbus_port))]
+        for folder in self.sensor_folders:
+            command += ["--sensor-plugin", str(folder)]
         self._log = log = open(self.log_path, "a", encoding="utf-8")  # noqa: SIM115
         self.process = subprocess.Popen(
             command, stdout=subprocess.PIPE, stderr=log, text=True,

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hostpc.json_object import JsonObject
 from hostpc.robots.base import (
     Capabilities,
     ContactOutcome,
@@ -22,19 +23,19 @@ from hostpc.robots.base import (
     StereoCapture,
     TargetMeasurement,
 )
-from hostpc.transport import ControllerClient, TrackerReading
+from hostpc.transport import ControllerClient, SensorReading, TrackerReading
 
 
 class ZerocalAdapter:
     """A `RobotAdapter` for one `ControllerClient` session (the adapter owns the client).
-    capabilities: the protocol's `measure_targets` and `measure_tracker` (a controller
-    without the sensor refuses the call)."""
+    capabilities: the protocol's `measure_targets`, `measure_tracker` and `sensor_read` (a
+    controller without the sensor refuses the call)."""
 
     driver = "zerocal"
 
     def __init__(self, client: ControllerClient) -> None:
         self.client = client
-        self.capabilities = Capabilities(targets=self, tracker=self)
+        self.capabilities = Capabilities(targets=self, tracker=self, sensors=self)
 
     @property
     def address(self) -> str:
@@ -97,6 +98,10 @@ class ZerocalAdapter:
     async def measure_tracker(self) -> TrackerReading:
         """The cell's laser tracker reading (hostpc.transport.TrackerReading)."""
         return await self.client.measure_tracker()
+
+    async def read_sensor(self, sensor: str, request: JsonObject) -> SensorReading:
+        """A reading of the controller's instrument `sensor` (`sensor_read`)."""
+        return await self.client.sensor_read(sensor, request)
 
     async def get_offsets(self) -> np.ndarray:
         """The zero offsets (n,) rad."""

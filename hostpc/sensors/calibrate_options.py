@@ -107,19 +107,15 @@ def replay_inputs(args: argparse.Namespace, default_out: Callable[[str], Path]
                   ) -> tuple[Any, str, Any, Any, tuple[str, ...] | None, Path]:
     """For `--replay DIR`: (address, driver, settings, cell_file, known, run_dir) of the
     recorded run (known resolved as the recorded run resolved it)."""
-    from hostpc.methods.base import RunSettings
     from hostpc.robots.connect import RobotAddress
     from hostpc.sensors.recording import TAPE_FILE, read_header
 
     folder = Path(args.replay)
     header = read_header(folder)
-    try:
-        settings = RunSettings.from_dict(header["settings"])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"--replay {folder}: recorded settings unreadable ({exc})") from None
-    cell_file = header.get("cell_file")
-    known = header.get("known")
-    default_known = tuple(header.get("default_known") or ())
+    settings, cell_file, known = header.settings, header.cell_file, header.known
+    if settings is None:
+        raise InputError(f"--replay {folder}: the recording holds no settings")
+    default_known = header.default_known
     if known is None and default_known:
         listed = (cell_file or {}).get("known")
         if listed is None:
@@ -178,16 +174,13 @@ async def open_with_sensors(args: argparse.Namespace, run_dir: Path, settings: A
         run_dir.mkdir(parents=True, exist_ok=True)
         robot = HostCameraAdapter(robot, camera, run_dir / TIMING_FILE)
     if getattr(args, "record", None) is not None:
-        from hostpc.sensors.recording import RecordingAdapter
+        from hostpc.sensors.recording import RecordingAdapter, RecordingHeader
 
         folder = Path(args.record) if args.record else run_dir / RECORDING_FOLDER
-        header = {
-            "settings": settings.to_dict() if settings is not None else None,
-            "cell_file": cell_file, "known": None if known is None else list(known),
-            "default_known": list(default_known),
-            "robot": robot_info.to_dict(),
-            "cameras": None if camera is None else [s.text for s in camera.sources],
-        }
+        header = RecordingHeader(
+            settings=settings, cell_file=cell_file, known=known, default_known=default_known,
+            robot=robot_info,
+            cameras=None if camera is None else tuple(s.text for s in camera.sources))
         try:
             robot = RecordingAdapter(robot, folder, header)
         except BaseException:

@@ -43,8 +43,9 @@ from hostpc.json_object import JsonObject
 from hostpc.sensors.stereo_camera import StereoCamera, StereoPair
 from protocol import messages as m
 from protocol.admission import AuthThrottle, LogBudget, SessionSlots
-from protocol.connection import Connection, ConnectionState, Rejected, Role, StateChanged
+from protocol.connection import Connection
 from protocol.errors import ErrorCode, LocalProtocolError
+from protocol.session_states import ConnectionState, Rejected, Role, StateChanged
 
 logger = logging.getLogger(__name__)
 

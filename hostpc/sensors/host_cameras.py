@@ -17,12 +17,12 @@ from __future__ import annotations
 import asyncio
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from hostpc.robots.base import (
-    Capabilities,
     ContactOutcome,
     MoveOutcome,
     PairTiming,
@@ -47,10 +47,7 @@ class HostCameraAdapter:
         self.timing_log = timing_log
         self.last_timing: PairTiming | None = None
         self._lock = asyncio.Lock()
-        inner = robot.capabilities
-        self.capabilities = Capabilities(
-            targets=inner.targets, tracker=inner.tracker, offset_export=inner.offset_export,
-            capture_timing=self)
+        self.capabilities = replace(robot.capabilities, capture_timing=self)
 
     @property
     def driver(self) -> str:

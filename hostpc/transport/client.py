@@ -31,6 +31,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from hostpc.errors import ConnectionFailed, ProtocolViolation, RequestTimeout
+from hostpc.json_object import JsonObject
 from hostpc.transport.error_mapping import _os_error_text, _reply_error
 from hostpc.transport.io_events import IoEventSubscription
 from hostpc.transport.link import READ_CHUNK, _Link, _LinkLostError
@@ -41,20 +42,22 @@ from hostpc.transport.types import (
     IoEdgeEvent,
     IoSnapshot,
     MoveOutcome,
+    SensorReading,
     TargetPoint,
     TargetsMeasurement,
     TrackerReading,
 )
 from protocol import DEFAULT_PORT
 from protocol import messages as m
-from protocol.connection import Connection, Role
+from protocol.connection import Connection
 from protocol.errors import LocalProtocolError
+from protocol.session_states import Role
 
 logger = logging.getLogger(__name__)
 
 IDEMPOTENT_KINDS = frozenset(
     {"get_state", "get_offsets", "read_io", "capture", "measure_targets", "measure_tracker",
-     "heartbeat"}
+     "sensor_read", "heartbeat"}
 )
 """Requests re-sent after a reconnection; everything else raises instead."""
 MOTION_KINDS = frozenset({"move_joints", "guarded_move"})
@@ -265,6 +268,18 @@ class ControllerClient:
                   for r in reply.reflectors}
         return TrackerReading(q=_array(reply.q), time=reply.time, points=points,
                               lost=tuple(reply.lost), description=dict(reply.description))
+
+    async def sensor_read(self, sensor: str, request: JsonObject,
+                          timeout: float | None = None) -> SensorReading:
+        """A reading of the instrument `sensor` (`sensor_read`, docs/protocol.md): `request`
+        and the reading are the instrument's own small JSON objects; q (n,) rad and the
+        controller time at the reading. A controller without the instrument refuses
+        (reason `unsupported`), a request it cannot read is a `bad_message` error."""
+        reply = await self._request(
+            lambda i: m.SensorRead(id=i, sensor=sensor, request=request), m.SensorReading,
+            timeout)
+        return SensorReading(sensor=reply.sensor, q=_array(reply.q), time=reply.time,
+                             reading=reply.reading)
 
     async def read_io(self, timeout: float | None = None) -> IoSnapshot:
         """Digital inputs and outputs."""

@@ -17,7 +17,8 @@ from typing import Any
 from hostpc.errors import ConnectionFailed, ProtocolViolation
 from hostpc.transport.error_mapping import _handshake_error
 from protocol import messages as m
-from protocol.connection import Connection, ConnectionState, Rejected, StateChanged
+from protocol.connection import Connection
+from protocol.session_states import ConnectionState, Rejected, StateChanged
 
 # the client's logger: log records keep the name they had before the client was split
 logger = logging.getLogger("hostpc.transport.client")

@@ -120,3 +120,16 @@ class TrackerReading:
     points: dict[str, tuple[np.ndarray, np.ndarray]]
     lost: tuple[str, ...]
     description: JsonObject  # open: each kind reads its own keys
+
+
+@dataclass(frozen=True)
+class SensorReading:
+    """A reading of a measurement kind's own instrument (`sensor_read`): sensor: its name;
+    q (n,) rad at the reading; time (s); reading: the instrument's JSON answer, whose shape
+    is the contract between the kind's method and its sensor (docs/protocol.md), parsed
+    into the kind's typed sample by its method."""
+
+    sensor: str
+    q: np.ndarray
+    time: float
+    reading: JsonObject

@@ -10,7 +10,8 @@ import pytest
 from controller_stub.network.server import ControllerServer
 from protocol import messages as m
 from protocol.admission import AuthThrottle, SessionSlots
-from protocol.connection import Connection, ConnectionState, Role
+from protocol.connection import Connection
+from protocol.session_states import ConnectionState, Role
 from tests.controller_stub.test_server import RawClient
 from tests.controller_stub.test_server_limits import (
     StartServer,

@@ -7,15 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from controller_stub.errors import SimulationRefused
 from controller_stub.scenario.spec import scenario_from_dict
-from controller_stub.world.controller_state import ControllerState
+from controller_stub.world.controller_state import ControllerState, SimulatedController
 from controller_stub.world.humanoid import HumanoidSimulation
-from controller_stub.world.simulation import (
-    SimulatedController,
-    Simulation,
-    SimulationRefused,
-    create_simulation,
-)
+from controller_stub.world.simulation import Simulation, create_simulation
 
 ROBOTS = ["ur5e", "humanoid_upper"]
 

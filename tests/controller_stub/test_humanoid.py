@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from controller_stub.errors import SimulationRefused
 from controller_stub.geometry import make_transform
 from controller_stub.scenario.spec import ScenarioError, scenario_from_dict
 from controller_stub.sensors.dual_loop import StereoTriangulator
@@ -20,7 +21,7 @@ from controller_stub.world.humanoid import (
     head_model,
 )
 from controller_stub.world.robot_model import forward
-from controller_stub.world.simulation import SimulationRefused, create_simulation
+from controller_stub.world.simulation import create_simulation
 
 
 def dh(a: float, alpha: float, d: float, q: float) -> np.ndarray:

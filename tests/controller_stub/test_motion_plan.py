@@ -7,13 +7,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+from controller_stub.errors import SimulationRefused
 from controller_stub.scenario.spec import scenario_from_dict
-from controller_stub.world.simulation import (
-    GuardedMoveResult,
-    MoveResult,
-    Simulation,
-    SimulationRefused,
-)
+from controller_stub.world.motion import GuardedMoveResult, MoveResult
+from controller_stub.world.simulation import Simulation
 
 STEP = np.array([0.3, 0.0, 0.0, 0.0, 0.0, 0.0])
 

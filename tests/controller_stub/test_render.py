@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -182,3 +183,31 @@ def test_target_out_of_view_is_background(make_sim: Callable[..., Simulation]) -
     frame = sim.capture_stereo("target")  # home pose does not look at the target
     assert abs(float(frame.left.mean()) - 120.0) < 1.0
     assert frame.left.dtype == np.uint8 and frame.left.shape == (1024, 1280)
+
+
+def test_ray_map_is_kept_between_processes_and_a_broken_cache_is_solved_anew(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The stub's ray map (a third of a second per process) comes from its disk cache the
+    second time, equal to the solved one bit for bit; a truncated or wrongly shaped file is
+    solved again and rewritten, never used."""
+    from controller_stub.sensors import render
+
+    monkeypatch.setenv("ZEROCAL_CACHE_DIR", str(tmp_path))
+    camera = render.CameraModel(64, 48, 70.0, 71.0, 31.5, 23.5, (-0.2, 0.08, 1e-3, -2e-3, 0.01))
+    render.ray_map.cache_clear()
+    solved = render.ray_map(camera)
+    path = render.ray_map_cache_file(camera)
+    assert path.parent == tmp_path and path.is_file()
+    render.ray_map.cache_clear()
+    cached = render.ray_map(camera)
+    assert all(np.array_equal(a, b) for a, b in zip(solved, cached, strict=True))
+    for broken in (b"not a numpy file", None):
+        if broken is None:  # a valid file of the wrong shape
+            np.save(path, np.zeros((2, 4, 4), np.float32))
+        else:
+            path.write_bytes(broken)
+        render.ray_map.cache_clear()
+        again = render.ray_map(camera)
+        assert all(np.array_equal(a, b) for a, b in zip(solved, again, strict=True))
+        assert np.load(path).shape == (2, 48, 64)
+    render.ray_map.cache_clear()

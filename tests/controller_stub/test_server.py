@@ -15,8 +15,9 @@ from controller_stub.network.server import ControllerServer
 from controller_stub.scenario.spec import scenario_from_dict
 from controller_stub.world.simulation import Simulation
 from protocol import messages as m
-from protocol.connection import Connection, ConnectionState, Role
+from protocol.connection import Connection
 from protocol.framing import encode_frame
+from protocol.session_states import ConnectionState, Role
 
 TOKEN = "server-test"
 SCENARIO = {

@@ -26,8 +26,9 @@ from hypothesis import strategies as st
 from controller_stub.network.server import ControllerServer
 from controller_stub.scenario.spec import scenario_from_dict
 from protocol import messages as m
-from protocol.connection import Connection, ConnectionState, Role
+from protocol.connection import Connection
 from protocol.framing import MAGIC, FrameDecoder, encode_frame
+from protocol.session_states import ConnectionState, Role
 
 TOKEN = "fuzz-token"
 SCENARIO = {

@@ -11,16 +11,17 @@ from typing import Any
 
 import pytest
 
-from controller_stub.network.server import (
+from controller_stub.network.server import ControllerServer
+from controller_stub.network.session import (
     PRE_AUTH_MAX_FRAME_SIZE,
     SESSION_READ_CHUNK,
     WRITE_HIGH_WATER,
-    ControllerServer,
 )
 from controller_stub.scenario.spec import scenario_from_dict
 from protocol import messages as m
-from protocol.connection import Connection, ConnectionState, Role
+from protocol.connection import Connection
 from protocol.framing import MAGIC, FrameDecoder, encode_frame
+from protocol.session_states import ConnectionState, Role
 from tests.controller_stub.test_server import SCENARIO, TOKEN, RawClient
 
 StartServer = Callable[..., Awaitable[ControllerServer]]

@@ -16,8 +16,9 @@ import sys
 from pathlib import Path
 
 from protocol import messages as m
-from protocol.connection import Connection, Role
+from protocol.connection import Connection
 from protocol.framing import MAGIC, encode_frame
+from protocol.session_states import Role
 from tests.controller_stub.test_server_fuzz import (
     HUGE,
     WRONG_TYPES,

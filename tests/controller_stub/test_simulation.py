@@ -9,8 +9,9 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
+from controller_stub.errors import SimulationRefused
 from controller_stub.world.robot_model import gravity_torque
-from controller_stub.world.simulation import Simulation, SimulationRefused
+from controller_stub.world.simulation import Simulation
 
 MakeSim = Callable[..., Simulation]
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from hostpc.dataset import Dataset, RobotDescription, Samples, SphereFrame
 from hostpc.fitting.solver import evaluate
+from hostpc.kinds.sphere_probe.file_face import probe_blocks
 from hostpc.model.effect import Effect
 from hostpc.model.layout import Problem
 from hostpc.model.measurements.predict import predict
@@ -122,7 +123,7 @@ def sphere_contact_dataset(truth: Mapping[str, float], *, n_samples: int = 60, s
                       approach=np.sign(rng.uniform(-1, 1, (n_samples, 6))))
     dataset = Dataset(method="sphere_probe", robot=RobotDescription(name="ur5e"),
                       frames={"tool": DEFAULT_TOOL, "sphere": SphereFrame(centre, radius)},
-                      samples=samples, probe_stylus_radius=stylus)
+                      samples=samples, blocks=probe_blocks(stylus))
     effects = list(dict.fromkeys(["joint_offsets"] + [k.split(".")[0] for k in truth]))
     goal = radius + stylus + rng.normal(0.0, sigma, n_samples)
     for _ in range(20):
@@ -150,7 +151,8 @@ def coupled_dual_loop(truth: Mapping[str, float], n_per_arm: int = 50, seed: int
                       ) -> Dataset:
     """A dual_loop dataset (hostpc's own model) with a hidden coupling of any neighbouring
     joints, ``joint_coupling.left.k4_3`` (the built-in effect couples only the wrist)."""
-    from hostpc.kinds.dual_loop.synthesize import make_dataset, plan_poses
+    from hostpc.kinds.dual_loop.planning import plan_poses
+    from hostpc.kinds.dual_loop.synthesize import make_dataset
     from hostpc.model.effects import JointCoupling
     from hostpc.model.registry import available_effects, instantiate
     from hostpc.synthesize import noisy_measurements

@@ -21,6 +21,7 @@ from hostpc.sensors.recording import (
     RECORDING_FORMAT,
     TAPE_FILE,
     RecordingAdapter,
+    RecordingHeader,
     ReplayAdapter,
 )
 
@@ -53,7 +54,7 @@ def test_a_missing_capability_names_the_method_the_call_and_the_driver(tmp_path:
 async def test_a_recording_records_the_wrapped_target_camera(tmp_path: Path) -> None:
     replay = ReplayAdapter(_tape(tmp_path / "tape", measure_targets=True))
     check_needs(replay, (Need.TARGETS,), "--method dual_loop")
-    recording = RecordingAdapter(replay, tmp_path / "again", {"settings": None})
+    recording = RecordingAdapter(replay, tmp_path / "again", RecordingHeader(settings=None))
     assert recording.driver == "replay"
     camera = targets_of(recording, "--method dual_loop")
     measurement = await camera.measure_targets()

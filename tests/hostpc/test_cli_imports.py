@@ -47,6 +47,15 @@ def test_offline_commands_import_no_scipy(args: tuple[str, ...]) -> None:
     assert not heavy, heavy[:5]
 
 
+def test_calibrate_against_the_simulator_imports_no_scipy(tmp_path: Path) -> None:
+    """The main job: a whole `hostpc calibrate --robot sim` (plan, rig, fit, push, verify,
+    report) runs without scipy (its verification power imported scipy.special: ~0.3 s of
+    the command's start-up)."""
+    code, modules = imported_by("calibrate", "--robot", "sim", "--out", str(tmp_path / "run"))
+    assert code == 0
+    assert not [m for m in modules if m.split(".")[0] in ("scipy", "matplotlib")]
+
+
 def test_fit_of_a_dataset_with_a_shared_error_imports_no_scipy(tmp_path: Path) -> None:
     """A dual_loop dataset with its head camera's calibration (`rig_uncertainty`): the
     shared-error scale gate and the guard's chi2 run in the fit, without scipy (its

@@ -12,9 +12,9 @@ from hostpc.dataset import load_dataset
 from hostpc.fitting.fitting import (
     _leave_out_steps,
     cross_validated_rms,
-    fold_indices,
     solve,
 )
+from hostpc.fitting.folds import fold_indices
 from hostpc.fitting.solver import evaluate, levenberg_marquardt
 from hostpc.model.problem import build_problem
 

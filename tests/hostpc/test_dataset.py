@@ -21,6 +21,7 @@ from hostpc.dataset import (
     load_dataset,
     save_dataset,
 )
+from hostpc.kinds.sphere_probe.file_face import reference_sphere, stylus_radius
 
 RNG_SEED = 20240601
 
@@ -224,8 +225,8 @@ def test_sphere_probe_fields() -> None:
     assert dataset.samples.group.tolist() == [0, -1, 0, -1, 0, -1, 1, -1, 1, -1]
     assert dataset.frames["sphere"] == SphereFrame(center=np.array([0.8, 0.1, 0.3]), radius=0.0127)
     assert dataset.frames["tool"] == FramePose(xyz=np.array([0, 0, 0.125]), rpy=np.zeros(3))
-    assert dataset.probe_stylus_radius == 0.0015
-    assert dataset.sphere().radius == 0.0127
+    assert stylus_radius(dataset) == 0.0015
+    assert reference_sphere(dataset).radius == 0.0127
     assert dataset.robot.convention == "mdh" and dataset.robot.n_joints == 6
     assert dataset.robot.mass is not None and dataset.robot.mass[2] == 6.25
     assert dataset.n_joints == 6 and dataset.n_samples == 10

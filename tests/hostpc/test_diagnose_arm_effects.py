@@ -14,7 +14,8 @@ import pytest
 
 import hostpc
 from hostpc.dataset import Dataset
-from hostpc.kinds.dual_loop.synthesize import plan_poses, synthesize_dual_loop
+from hostpc.kinds.dual_loop.planning import plan_poses
+from hostpc.kinds.dual_loop.synthesize import synthesize_dual_loop
 from hostpc.model.measurements.predict import predict
 
 OFFSETS = {"joint_offsets.left.q3": 1e-3, "joint_offsets.right.q4": -1e-3}

@@ -16,7 +16,7 @@ import pytest
 from hostpc.dataset import Dataset, save_dataset
 from hostpc.diagnostics import diagnose
 from hostpc.diagnostics.auto_effects import generated_sources
-from hostpc.diagnostics.pipeline import Diagnosis
+from hostpc.diagnostics.diagnosis import Diagnosis
 from hostpc.fitting import FitResult, fit
 from hostpc.model.effect import Effect, ModelContext
 from tests.hostpc.diagnose_support import (

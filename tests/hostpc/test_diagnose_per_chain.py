@@ -12,7 +12,8 @@ from hostpc.diagnostics.interactions import modulators, search_interactions
 from hostpc.diagnostics.pipeline import variables_of
 from hostpc.diagnostics.residual_analysis import analyse_residuals, usable_variables
 from hostpc.fitting import fit
-from hostpc.kinds.dual_loop.synthesize import plan_poses, synthesize_dual_loop
+from hostpc.kinds.dual_loop.planning import plan_poses
+from hostpc.kinds.dual_loop.synthesize import synthesize_dual_loop
 from tests.hostpc.diagnose_support import coupled_dual_loop
 
 HIDDEN = {"joint_coupling.left.k4_3": 4e-3}  # the left elbow reads off by 4e-3 rad per rad

@@ -8,7 +8,8 @@ import pytest
 from hostpc.dataset import dataset_from_dict, save_dataset
 from hostpc.errors import InputError
 from hostpc.fitting import solve
-from hostpc.kinds.dual_loop.synthesize import plan_poses, synthesize_dual_loop
+from hostpc.kinds.dual_loop.planning import plan_poses
+from hostpc.kinds.dual_loop.synthesize import synthesize_dual_loop
 from hostpc.kinematics import forward, get_robot
 from hostpc.kinematics.humanoid import HUMANOID_HOME, get_tree, humanoid_upper, tree_names
 from hostpc.kinematics.tree import Branch, KinematicTree, tree_gravity_torque

@@ -18,7 +18,7 @@ from controller_stub.scenario.spec import scenario_from_dict
 from controller_stub.world.humanoid import HumanoidSimulation
 from hostpc.fitting import solve
 from hostpc.fitting.stepwise import fit_stepwise, gauge_equivalent
-from hostpc.kinds.dual_loop.synthesize import plan_poses
+from hostpc.kinds.dual_loop.planning import plan_poses
 from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
 

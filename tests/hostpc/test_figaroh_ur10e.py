@@ -71,7 +71,8 @@ def _held_out(result) -> tuple[float, float]:
     (rad), each fold refit from the full solution as `fit` does for cv_rms."""
     import numpy as np
 
-    from hostpc.fitting.fitting import evaluate, fold_indices, levenberg_marquardt
+    from hostpc.fitting.folds import fold_indices
+    from hostpc.fitting.solver import evaluate, levenberg_marquardt
 
     problem, free = result.problem, ~result.fixed
     n = problem.measured.shape[0]

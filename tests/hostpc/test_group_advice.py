@@ -8,8 +8,9 @@ import math
 
 import pytest
 
-from hostpc.diagnostics.advice import group_sentence, quantity
+from hostpc.diagnostics.advice import group_sentence
 from hostpc.diagnostics.interactions import Interaction
+from hostpc.display_units import quantity
 
 
 def _interaction(shifts: dict[str, float], unit: str = "m", parameter: str = "world.x",

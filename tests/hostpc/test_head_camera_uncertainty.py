@@ -228,8 +228,8 @@ def test_method_floor_is_the_floor_the_fit_takes_back_out(tmp_path: Any) -> None
     """The floor dual_loop adds to each sample (calibrated focal length and baseline) is
     the covariance the fit's shared error removes (the stereo kinds' floor_covariance), for a
     calibration far from the nominal 1400 px / 0.12 m."""
-    from hostpc.fitting.shared_errors import BLOCK
     from hostpc.kinds.dual_loop.method import DualLoopMethod
+    from hostpc.kinds.stereo_target.rig_block import BLOCK
     from hostpc.kinds.stereo_target.shared_error import rig_floor_covariance as floor_covariance
     from hostpc.methods.base import RunSettings
     from hostpc.methods.cell import build_cell

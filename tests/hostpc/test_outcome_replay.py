@@ -59,3 +59,26 @@ def test_a_failed_model_check_without_a_push_sends_to_diagnose() -> None:
     outcome = derive_outcome([check, {"event": "resumed", "at": "t2"}, passed], SOURCES,
                              run_dir="runs/x", finished=True)
     assert outcome.next_command == "hostpc calibrate --resume runs/x --push"
+
+
+def test_a_refusals_next_command_is_read_from_its_structured_fields_not_its_words() -> None:
+    """The push_refused event carries which guard refused and the next command's words;
+    the outcome reads those (a reworded reason changes nothing)."""
+    from hostpc.calibrate.refusals import PushRefusal, resume_with
+
+    declared = PushRefusal("joint 3 is 15 deg off (reworded)", "correction_limit",
+                           resume_with("--swapped", "J3"), joint=3, limit_deg=2.0, declare=3)
+    event = {"event": "push_refused", "at": "t1", **declared.to_event()}
+    outcome = derive_outcome([event], SOURCES, run_dir="runs/x", finished=True)
+    assert outcome.next_command == "hostpc calibrate --resume runs/x --swapped J3"
+    assert outcome.refusal == declared
+    # a moved reference refuses even with --force: its next command drops the reference
+    moved = PushRefusal("the sphere frame moved 0.5 mm since the reference of 2026-11-28",
+                        "reference_moved", resume_with("--reference", "none"))
+    event = {"event": "push_refused", "at": "t1", **moved.to_event()}
+    outcome = derive_outcome([event], SOURCES, run_dir="runs/x", finished=True)
+    assert outcome.next_command == "hostpc calibrate --resume runs/x --reference none"
+    limit = PushRefusal("the controller said no", "controller_limit", resume_with("--push"))
+    event = {"event": "push_refused", "at": "t1", **limit.to_event(), "by": "controller"}
+    outcome = derive_outcome([event], SOURCES, run_dir="runs/x", finished=True)
+    assert outcome.next_command == "hostpc calibrate --resume runs/x --push"

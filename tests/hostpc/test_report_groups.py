@@ -12,7 +12,8 @@ import pytest
 
 import hostpc
 from hostpc.dataset import Dataset
-from hostpc.kinds.dual_loop.synthesize import plan_poses, synthesize_dual_loop
+from hostpc.kinds.dual_loop.planning import plan_poses
+from hostpc.kinds.dual_loop.synthesize import synthesize_dual_loop
 from hostpc.report import render_html
 from tests.hostpc.diagnose_support import sphere_contact_dataset
 from tests.hostpc.test_diagnose_groups import tracker_dataset

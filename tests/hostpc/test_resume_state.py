@@ -62,3 +62,22 @@ def test_a_push_again_of_the_same_offsets_starts_a_new_verify_round(tmp_path: Pa
     assert verify_round(journal, NEW, NEW - OLD, K) == (0, 0)  # no new push: continue
     journal.event("push", **push)  # pushed again (same offsets, same delta)
     assert verify_round(Journal(tmp_path), NEW, NEW - OLD, K) == (1, K)
+
+
+def test_a_lost_verification_sends_to_a_resume_only_when_measuring_again_can_help(
+        tmp_path: Path) -> None:
+    """An abort storm passes: resume. Poses lost to what the robot found there (a touch
+    that misses the sphere) are lost again by a resume: rollback the push, or diagnose."""
+    from hostpc.calibrate.resume import verify_lost_line
+
+    storm = [SampleRecord("verify", i, False, reason="move stopped: aborted") for i in range(K)]
+    line = verify_lost_line(storm, K, True, tmp_path)
+    assert line.endswith(f"measure them again with: hostpc calibrate --resume {tmp_path}")
+    missed = [SampleRecord("verify", i, False, reason="no probe contact before the end of "
+                           "travel (no_contact)") for i in range(K)]
+    line = verify_lost_line(missed, K, True, tmp_path)
+    assert "the pushed offsets stay in the controller" in line
+    assert line.endswith(f"hostpc rollback --run {tmp_path}") and "--resume" not in line
+    line = verify_lost_line(missed, K, False, tmp_path)
+    assert "nothing was pushed" in line
+    assert line.endswith(f"hostpc diagnose {tmp_path}/dataset.json") and "--resume" not in line

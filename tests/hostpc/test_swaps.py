@@ -49,8 +49,11 @@ class _Refused(ControllerError):
 
 
 def test_the_controllers_own_limit_says_whose_it_is_and_what_to_do(tmp_path: Path) -> None:
-    text = controller_limit_refusal(_Refused("offset_limit"), tmp_path / "run")
-    assert text is not None
+    refusal = controller_limit_refusal(_Refused("offset_limit"), tmp_path / "run")
+    assert refusal is not None and refusal.rule == "controller_limit"
+    assert refusal.next_command(str(tmp_path / "run")) == (
+        f"hostpc calibrate --resume {tmp_path / 'run'} --push")
+    text = refusal.reason
     assert "controller's own offset limit" in text
     assert "not zerocal's --max-correction or --swap-limit" in text
     assert text.endswith(f"hostpc calibrate --resume {tmp_path / 'run'} --push")

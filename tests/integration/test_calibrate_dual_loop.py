@@ -23,7 +23,7 @@ from hostpc.dataset import load_dataset
 from hostpc.errors import InputError
 from hostpc.fitting.stepwise import gauge_equivalent
 from hostpc.kinds.dual_loop.method import DualLoopMethod
-from hostpc.kinds.dual_loop.synthesize import plan_poses
+from hostpc.kinds.dual_loop.planning import plan_poses
 from hostpc.methods.base import NullProgress, RunSettings
 from hostpc.methods.cell import build_cell
 from hostpc.model.layout import Problem

@@ -82,3 +82,39 @@ def test_rollback_needs_a_run_or_an_id(capsys: pytest.CaptureFixture[str],
     assert code == 2 and stderr.count("\n") == 1
     code, _, stderr = run_cli(capsys, "rollback", "--run", str(tmp_path))
     assert code == 2 and "pushed no offsets" in stderr and stderr.count("\n") == 1
+
+
+@pytest.mark.slow
+def test_a_rolled_back_runs_summary_no_longer_reads_its_verification_as_the_robots(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
+    out = tmp_path / "run"
+    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:
+        address = f"{sim.address.host}:{sim.address.port}"
+        code, stdout, stderr = run_cli(
+            capsys, "calibrate", "--robot", address, "--token", TOKEN, "--rig", str(rig),
+            "--known", "target", "--poses", "24", "--verify-poses", "4", "--no-report",
+            "--out", str(out))
+        assert code == 0, stderr
+        assert "\nverify: 4 fresh poses" in stdout and ": PASS" in stdout
+        code, stdout, stderr = run_cli(capsys, "rollback", "--run", str(out), "--token", TOKEN)
+        assert code == 0, stderr
+    summary = (out / "summary.txt").read_text()
+    assert summary.startswith("ROLLED BACK at ")
+    verify = [line for line in summary.splitlines() if line.startswith("verify")]
+    assert verify and all(line.startswith("verify (of the offsets since rolled back, no "
+                                          "longer in the controller): ") for line in verify)
+
+
+def test_rollback_of_a_simulated_run_needs_no_controller(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`--robot sim`'s controller lived only as long as its run: one line, nothing dialled
+    (push.json names the dead simulator's port)."""
+    out = tmp_path / "run"
+    code, _, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--poses", "12",
+                              "--verify-poses", "0", "--no-report", "--out", str(out))
+    assert code == 0, stderr
+    assert json.loads((out / "push.json").read_text())["status"] == "pushed"
+    code, stdout, stderr = run_cli(capsys, "rollback", "--run", str(out), "--timeout", "30")
+    assert code == 2 and stderr.count("\n") == 1, stderr
+    assert "ran against `--robot sim`" in stderr and "nothing left to roll back" in stderr

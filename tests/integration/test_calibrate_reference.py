@@ -16,6 +16,7 @@ from typing import Any
 
 import pytest
 
+from hostpc.calibrate.journal import Journal
 from hostpc.cli.main import main
 from hostpc.robots.simulator import default_sim_scenario
 from tests.integration.test_calibrate_sim import run_cli
@@ -62,17 +63,8 @@ def recorded(tmp: Path, method: str, tip_off_axis: bool = False
     return reference, document, (("--rig", str(rig)) if rig.is_file() else ())
 
 
-SPHERE_SWAP = "open, sphere_probe's acquisition after a large J1 error (not the reference): "
-"2 deg on J1 moves the tip 16 mm at the sphere's 0.47 m from the base axis, so the "
-"contacts planned on the nominal model land on the flank of the 12.5 mm sphere or miss it"
-OFF_AXIS_TIP = pytest.param("sphere_probe", True, marks=pytest.mark.xfail(
-    strict=True, reason=SPHERE_SWAP + "; with the tip off the flange axis the swapped "
-    "world's contacts are not explained by the model (chi2/dof 6-20 even without a "
-    "reference, also at 0.5 deg)"))
-ON_AXIS_TIP = pytest.param("sphere_probe", False, marks=pytest.mark.xfail(
-    strict=False, reason=SPHERE_SWAP + "; on the axis J1 is recovered (0.0003 deg) but the "
-    "tip's estimate is biased by about 0.08 mm, which the reference check flags as a moved "
-    "tip in some worlds"))
+OFF_AXIS_TIP = pytest.param("sphere_probe", True, id="sphere_probe-tip-off-axis")
+ON_AXIS_TIP = pytest.param("sphere_probe", False, id="sphere_probe-tip-on-axis")
 
 
 @pytest.mark.slow
@@ -138,6 +130,11 @@ def test_a_moved_target_is_named_nothing_is_pushed_and_a_resume_drops_the_refere
     assert document["push"]["status"] == "refused"
     assert "the target frame moved" in document["push"]["reason"]
     assert f"hostpc calibrate --resume {run} --reference none" in document["push"]["reason"]
+    # refused even with --force: the next command drops the reference, never --force
+    assert document["outcome"]["next_command"] == (
+        f"hostpc calibrate --resume {run} --reference none")
+    refused = Journal(run).events("push_refused")[-1]
+    assert refused["rule"] == "reference_moved"
     summary = (run / "summary.txt").read_text()
     assert "reference check: the target frame moved" in summary
     # the resume refits the same samples without the reference: J1 and J6 unidentifiable

@@ -112,6 +112,13 @@ def test_the_controllers_own_limit_is_reported_once_with_what_to_do(
     assert main(["calibrate", "--resume", str(out), "--no-report"]) == 5
     assert len(Journal(out).events("push_refused")) == 1
     assert "controller's own offset limit" in capsys.readouterr().out
+    refused = Journal(out).events("push_refused")[0]
+    assert refused["rule"] == "controller_limit" and refused["by"] == "controller"
+    # nothing reached the controller: a rollback says so from the journal, dialling nothing
+    # (the simulated controller's port in the run is closed by now)
+    assert not (out / "push.json").exists()
+    assert main(["rollback", "--run", str(out)]) == 0
+    assert "nothing to roll back" in capsys.readouterr().out
 
 
 @pytest.mark.slow
@@ -159,6 +166,11 @@ def test_a_declared_swap_on_a_joint_the_run_cannot_calibrate_is_never_a_pass(
     assert code == 7, document["outcome"]["headline"]
     assert document["outcome"]["verdict"] == "JOINTS_MISSING"
     assert document["outcome"]["missing_required"] == [6]
+    # the new run it suggests is this robot's and cell's: the same method, simulated world
+    # and declared swap, with the frame J6 needs known
+    assert document["outcome"]["next_command"] == (
+        f"hostpc calibrate --robot sim --method stereo_target --scenario "
+        f"{out / 'sim' / 'scenario.json'} --swapped J6 --known target,tool --require-joints 6")
 
 
 def test_a_swapped_joint_the_robot_does_not_have_is_refused_before_moving(
@@ -167,3 +179,72 @@ def test_a_swapped_joint_the_robot_does_not_have_is_refused_before_moving(
     assert main(["calibrate", "--robot", "sim", "--swapped", "J9", "--out", str(out)]) == 2
     assert "--swapped J9: the robot has 6 joints" in capsys.readouterr().err
     assert not (out / "rig.json").exists()  # nothing measured
+
+
+@pytest.mark.slow
+def test_a_resumes_overrides_are_kept_for_the_next_resume(tmp_path: Path) -> None:
+    """Refused at 2 deg -> resume with --swapped J3 -> the controller's own 5 deg limit
+    refuses -> the limit is raised -> `--resume RUN --push` (the next command as given)
+    pushes J3 with the swap still declared, instead of the 2 deg refusal again."""
+    out = tmp_path / "run"
+    code, document = calibrate(out, swap_world("world_point", 3, 15.0,
+                                               controller_limit_deg=5.0), "world_point")
+    assert code == 5 and "exceeds the limit of 2 deg" in document["push"]["reason"]
+    first = document["outcome"]["next_command"]
+    assert first == f"hostpc calibrate --resume {out} --swapped J3"
+    assert main([*first.split()[1:], "--no-report"]) == 5
+    document = json.loads((out / "result.json").read_text())
+    assert "controller's own offset limit" in document["push"]["reason"]
+    header = json.loads((out / "run.json").read_text())
+    assert header["settings"]["swapped"] == [3]  # kept in run.json
+    second = document["outcome"]["next_command"]
+    assert second == f"hostpc calibrate --resume {out} --push"
+    # the technician raises the controller's limit (here: the simulated controller's)
+    scenario_path = out / "sim" / "scenario.json"
+    scenario = json.loads(scenario_path.read_text())
+    scenario["server"]["offset_limit_rad"] = math.radians(40.0)
+    scenario_path.write_text(json.dumps(scenario))
+    assert main([*second.split()[1:], "--no-report"]) == 0
+    document = json.loads((out / "result.json").read_text())
+    assert document["outcome"]["verdict"] == "PASS", document["outcome"]["headline"]
+    assert document["settings"]["swapped"] == [3]
+    assert all(abs(e) < TOLERANCE_DEG for e in document["truth"]["joint_offsets_error_deg"])
+
+
+@pytest.mark.slow
+def test_an_undeclared_swap_that_loses_every_pose_ends_with_the_command_that_finds_it(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """sphere_probe with J1 15 deg off, not declared: every touch misses the sphere; the
+    one line says so and ends with the resume that declares the swap, which finds it."""
+    out = tmp_path / "run"
+    scenario_file = tmp_path / "world.json"
+    scenario_file.write_text(json.dumps(swap_world("sphere_probe", 1, 15.0)))
+    capsys.readouterr()
+    code = main(["calibrate", "--robot", "sim", "--method", "sphere_probe", "--scenario",
+                 str(scenario_file), "--out", str(out), "--no-report", "--known",
+                 KNOWN["sphere_probe"]])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1
+    line = err[-1]
+    assert "0 of 100 poses measured" in line and "no probe contact" in line
+    command = f"hostpc calibrate --resume {out} --swapped J1"
+    assert line.endswith(command)
+    assert main([*command.split()[1:], "--no-report"]) == 0
+    document = json.loads((out / "result.json").read_text())
+    assert document["outcome"]["verdict"] == "PASS"
+    assert all(abs(e) < TOLERANCE_DEG for e in document["truth"]["joint_offsets_error_deg"])
+
+
+@pytest.mark.slow
+def test_the_model_check_of_a_staged_run_is_measured_where_the_robot_is(
+        tmp_path: Path) -> None:
+    """Nothing pushed after a 15 deg swap: the verification poses are commanded less the
+    estimate, and the detector's plate normal is taken where the robot is, not 15 deg off
+    where it reads (a 0.06 mm disk-centre bias failed the model check)."""
+    out = tmp_path / "run"
+    code, document = calibrate(out, swap_world("stereo_target", 3, 15.0), "stereo_target",
+                               "--swapped", "J3", "--no-push")
+    assert code == 0, document["outcome"]["headline"]
+    assert document["verify"]["kind"] == "model_check"
+    assert document["verify"]["verdict"] == "PASS", document["verify"]
+    assert "model check FAIL" not in document["outcome"]["headline"]

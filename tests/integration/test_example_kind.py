@@ -25,19 +25,22 @@ TRUTH = {"joint_offsets.q2": 0.0012, "joint_offsets.q3": -0.0008, "joint_offsets
          "joint_offsets.q5": -0.0006}
 
 
-def synthetic_file(tmp_path: Path) -> Path:
-    """A tracker_range dataset measured at TRUTH with the tracker's 8 um distance noise;
-    both frames known (a surveyed tracker and a pinned nest), as the simulated cell says."""
-    dataset = measurement_models([KIND])["tracker_range"].example(np.random.default_rng(3))
+def synthetic_file(tmp_path: Path, kind: str = KIND, name: str = "tracker_range",
+                   field: str = "distance", sigma: float = 8e-6,
+                   truth: dict[str, float] = TRUTH) -> Path:
+    """A dataset of the folder kind `kind` (its model's example poses) measured at `truth`
+    with noise `sigma` in its scalar `field`; both frames known (a surveyed instrument and a
+    pinned nest), as the simulated cell says. Default: tracker_range, the tracker's 8 um."""
+    dataset = measurement_models([kind])[name].example(np.random.default_rng(3))
     dataset = replace(dataset, known=("tool", "anchor"))
-    problem = build_problem(dataset, plugins=[KIND])
-    x = np.array([TRUTH.get(name, 0.0) for name in problem.layout.names])
+    problem = build_problem(dataset, plugins=[kind])
+    x = np.array([truth.get(p, 0.0) for p in problem.layout.names])
     clean, _ = predict(problem, x, jacobian=False)
-    noise = np.random.default_rng(4).normal(0.0, 8e-6, clean.shape[0])
-    fields = dict(dataset.samples.fields, distance=clean[:, 0] + noise)
-    path = tmp_path / "range.json"
+    noise = np.random.default_rng(4).normal(0.0, sigma, clean.shape[0])
+    fields = dict(dataset.samples.fields, **{field: clean[:, 0] + noise})
+    path = tmp_path / f"{name}.json"
     save_dataset(dataset.with_samples(replace(dataset.samples, fields=fields)), path,
-                 plugins=[KIND])
+                 plugins=[kind])
     return path
 
 

@@ -22,7 +22,8 @@ import pytest
 
 from hostpc.robots.simulator import SimulatedController
 from protocol import messages as m
-from protocol.connection import Connection, ConnectionState, Role
+from protocol.connection import Connection
+from protocol.session_states import ConnectionState, Role
 from tests.integration.test_calibrate_sim import TOKEN, sim_scenario, truth_rig_file
 
 ROOT = Path(__file__).resolve().parents[2]

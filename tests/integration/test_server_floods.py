@@ -29,7 +29,8 @@ from hostpc.station.service import Station
 from hostpc.station.web import serve_page
 from hostpc.transport import ControllerClient
 from protocol import messages as m
-from protocol.connection import Connection, Role
+from protocol.connection import Connection
+from protocol.session_states import Role
 from tests.controller_stub.test_server import SCENARIO, TOKEN, RawClient
 from tests.hostpc.test_sensors import noise_images, write_sequence
 

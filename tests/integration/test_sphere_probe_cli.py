@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from hostpc.kinds.sphere_probe.method import CONTACTS_PER_ORIENTATION, MIN_ORIENTATIONS
+from hostpc.kinds.sphere_probe.planning.setup import CONTACTS_PER_ORIENTATION, MIN_ORIENTATIONS
 
 
 def _calibrate(tmp_path: Path, *extra: str) -> tuple[subprocess.CompletedProcess[str],
@@ -60,9 +60,10 @@ def test_default_sim_run_fits_the_latency_and_recovers_the_offsets(tmp_path: Pat
     run_dir = Path(document["run_dir"])
     probe_plan = json.loads((run_dir / "probe_plan.json").read_text())
     header = json.loads((run_dir / "run.json").read_text())
-    from hostpc.kinds.sphere_probe.method import PlanConfig, _plan_from_dict, contact_pose
+    from hostpc.kinds.sphere_probe.planning.contacts import contact_pose, plan_from_dict
+    from hostpc.kinds.sphere_probe.planning.setup import PlanConfig
 
-    plan = _plan_from_dict(probe_plan)
+    plan = plan_from_dict(probe_plan)
     poses = np.array([contact_pose(c, PlanConfig()) for c in plan.contacts])
     groups = np.array([c.group for c in plan.contacts])
     for phase in ("q", "q_verify"):

@@ -11,17 +11,17 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from protocol import messages as m
-from protocol.connection import (
+from protocol.connection import Connection
+from protocol.errors import ErrorCode, LocalProtocolError
+from protocol.framing import FrameDecoder, encode_frame
+from protocol.session_states import (
     ALLOWED_REQUESTS,
-    Connection,
     ConnectionClosed,
     ConnectionState,
     Rejected,
     Role,
     StateChanged,
 )
-from protocol.errors import ErrorCode, LocalProtocolError
-from protocol.framing import FrameDecoder, encode_frame
 
 TOKEN = "shared-secret"
 Q = [0.1, -1.2, 1.3, -0.4, 0.5, 2.6]
@@ -74,6 +74,7 @@ def request_samples(next_id: Callable[[], int]) -> list[m.Request]:
         m.Capture(id=next_id(), pattern="chessboard", view=4, encoding="png"),
         m.MeasureTargets(id=next_id()),
         m.MeasureTracker(id=next_id()),
+        m.SensorRead(id=next_id(), sensor="string_pot", request={"what": "length", "average": 4}),
         m.GetOffsets(id=next_id()),
         m.SetOffsets(id=next_id(), offsets=[0.001] * 6),
         m.RollbackOffsets(id=next_id(), rollback_id="rb-7"),
@@ -134,6 +135,8 @@ def reply_for(request: m.Request) -> m._Message:
                                                cov=[[1e-10, 0, 0], [0, 1e-10, 0], [0, 0, 1e-10]])],
             description={"acceptance_deg": 55.0, "reflectors": {"smr1": [0.0, 0.0, 0.05]}},
         ),
+        "sensor_read": m.SensorReading(reply_to=i, sensor="string_pot", q=Q, time=3.7,
+                                       reading={"length": 0.8125, "sigma": 1e-5}),
         "get_offsets": m.Offsets(reply_to=i, offsets=[0.002] * 6),
         "set_offsets": m.OffsetsSet(
             reply_to=i, offsets=[0.001] * 6, previous=[0.0] * 6, rollback_id="rb-1"

@@ -127,8 +127,9 @@ def test_an_estimated_target_leaves_j1_and_j6_not_calibrated_exit_7(
     assert "target frame estimated" in joints[1]["reason"]
     assert joints[1]["fix"].startswith("--known target")
     assert "tool frame estimated" in joints[6]["reason"]
-    assert outcome["next_command"] == ("hostpc calibrate --robot sim --known target,tool "
-                                       "--require-joints all")
+    assert outcome["next_command"] == (
+        f"hostpc calibrate --robot sim --method stereo_target --scenario "
+        f"{out / 'sim' / 'scenario.json'} --known target,tool --require-joints all")
     head = stdout.splitlines()[0]
     assert head.startswith("JOINTS_MISSING: J2-J5 calibrated and verified; J1 NOT CALIBRATED")
     report = (out / "report.html").read_text()

@@ -3,6 +3,7 @@ target on each arm; extended by its model (``model.py``) with the prediction."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -11,14 +12,17 @@ from hostpc.dataset import schema
 from hostpc.dataset.file_units import Units
 from hostpc.dataset.measurement_kind import (
     Columns,
+    KindArrays,
     PointSampleKind,
     WrittenColumns,
     check_joint_count,
     point_columns_out,
     require,
 )
-from hostpc.dataset.model import Samples
+from hostpc.dataset.model import Dataset, Samples
 from hostpc.dataset.schema import FieldError, Loc
+from hostpc.json_object import JsonObject
+from hostpc.kinds.stereo_target.rig_block import check_rig_block
 
 
 class DualLoopFile(PointSampleKind):
@@ -44,11 +48,10 @@ class DualLoopFile(PointSampleKind):
             if not values:
                 raise FieldError((*loc, name), "expected at least one joint angle")
         index = int(loc[1])
-        widths: dict[str, tuple[int, int]] = columns.state.setdefault("widths", {})
-        head_width, head_first = widths.setdefault("head", (len(q_head), index))
+        head_width, head_first = columns.first_width("head", len(q_head), index)
         check_joint_count((*loc, "q_head"), q_head, head_width,
                           f"the head (as in samples[{head_first}].q_head)")
-        width, first = widths.setdefault(chain, (len(q), index))
+        width, first = columns.first_width(chain, len(q), index)
         check_joint_count((*loc, "q_arm"), q, width,
                           f"chain '{chain}' (as in samples[{first}].q_arm)")
         columns.put("chain", index, chain)
@@ -57,12 +60,12 @@ class DualLoopFile(PointSampleKind):
         self.read_uv(sample, loc, columns)
         return list(q)
 
-    def samples_arguments(self, columns: Columns, units: Units) -> dict[str, Any]:
-        return {**self.point_arguments(columns, units),
-                "chain": np.asarray(columns.values["chain"], dtype=np.str_),
-                "q_head": units.angle(columns.values["q_head"])}
+    def samples_arguments(self, columns: Columns, units: Units) -> KindArrays:
+        return replace(self.point_arguments(columns, units),
+                       chain=np.asarray(columns.values["chain"], dtype=np.str_),
+                       q_head=units.angle(columns.values["q_head"]))
 
-    def read_columns(self, table: Any, units: Units) -> dict[str, Any] | None:
+    def read_columns(self, table: Any, units: Units) -> KindArrays | None:
         """Every sample at once: one head width, one arm width per chain (else the samples
         are read one by one, which names the first that differs)."""
         from hostpc.dataset.reading_columns import point_columns
@@ -83,15 +86,15 @@ class DualLoopFile(PointSampleKind):
             if arm.shape[1] == 0:
                 return None
             q[rows, :arm.shape[1]] = arm
-        return {**point_columns(table, units), "chain": chain,
-                "q_head": units.angle(q_head), "q": units.angle(q)}
+        return replace(point_columns(table, units), chain=chain, q_head=units.angle(q_head),
+                       q=units.angle(q))
 
-    def write_sample(self, samples: Samples, index: int) -> tuple[dict[str, Any], int]:
+    def write_sample(self, samples: Samples, index: int) -> tuple[JsonObject, int]:
         assert samples.chain is not None and samples.q_head is not None
         q_row = samples.q[index]
         q = q_row[~np.isnan(q_row)]
-        out: dict[str, Any] = {"chain": str(samples.chain[index]),
-                               "q_head": samples.q_head[index].tolist(), "q_arm": q.tolist()}
+        out: JsonObject = {"chain": str(samples.chain[index]),
+                           "q_head": samples.q_head[index].tolist(), "q_arm": q.tolist()}
         self.write_point(samples, index, out)
         return out, len(q)
 
@@ -104,3 +107,6 @@ class DualLoopFile(PointSampleKind):
         return WrittenColumns([("chain", chain, None), ("q_head", samples.q_head.tolist(), None),
                                ("q_arm", q_arm, None), *point_columns_out(samples)],
                               measured.sum(axis=1).tolist())
+
+    def check_loaded(self, dataset: Dataset, source: str) -> None:
+        check_rig_block(dataset, source)

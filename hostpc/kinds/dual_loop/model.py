@@ -34,7 +34,6 @@ arm's ``q7`` (a rotation of its target point about the last axis).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from functools import lru_cache
 
 import numpy as np
 
@@ -42,7 +41,7 @@ from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
 from hostpc.errors import InputError
 from hostpc.kinds.dual_loop.file_face import DualLoopFile
 from hostpc.kinds.dual_loop.frames import DUAL_LOOP_FRAME_EFFECTS
-from hostpc.kinds.stereo_target.shared_error import rig_floor_covariance, rig_point_sensitivity
+from hostpc.kinds.stereo_target.shared_error import rig_shared_error
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
 from hostpc.kinematics.humanoid import HUMANOID_FRAMES, HUMANOID_HOME, get_tree
 from hostpc.kinematics.rotations import pose_to_transform, skew
@@ -62,6 +61,7 @@ __all__ = [
     "combined_q",
     "dual_loop_context",
     "predict_dual_loop",
+    "problem_tree",
     "tree_of",
 ]
 
@@ -69,18 +69,22 @@ DUAL_LOOP_FRAMES = ("camera", "left_base", "right_base", "left_target", "right_t
 ARMS = ("left", "right")
 
 
-@lru_cache(maxsize=8)
-def _cached_tree(name: str) -> KinematicTree:
-    return get_tree(name)
-
-
 def tree_of(dataset: Dataset) -> KinematicTree:
-    """The kinematic tree of a dual_loop dataset (built-in by name; InputError otherwise)."""
+    """The kinematic tree of a dual_loop dataset (built-in by name; InputError otherwise),
+    built anew (about half a millisecond: a problem's build asks for it a few times; its
+    prediction asks ``problem_tree``)."""
     name = dataset.robot.name
     if name is None:
         raise InputError("robot: dual_loop needs a built-in kinematic tree by name "
                          "(e.g. humanoid_upper)")
-    return _cached_tree(name)
+    return get_tree(name)
+
+
+def problem_tree(problem: Problem) -> KinematicTree:
+    """The problem's kinematic tree, built once for its dataset's robot and kept in
+    ``problem.shared`` (every evaluation of the prediction asks for it)."""
+    dataset = problem.dataset
+    return problem.shared.value(dataset.robot, ("dual_loop_tree",), lambda: tree_of(dataset))
 
 
 def check_dual_loop(dataset: Dataset, tree: KinematicTree) -> None:
@@ -198,7 +202,7 @@ def predict_dual_loop(problem: Problem, x: np.ndarray, jacobian: bool = True
         ``y`` (m), shape ``(N, 3)``, and ``dy_dx``, shape ``(N, 3, P)`` (or None). Columns
         of the arm a sample did not observe are zero.
     """
-    tree = tree_of(problem.dataset)
+    tree = problem_tree(problem)
     ctx = problem.context
     chain_of = problem.dataset.samples.chain
     assert chain_of is not None
@@ -293,8 +297,7 @@ class DualLoop(DualLoopFile, MeasurementModel):
     own_frame_effects = DUAL_LOOP_FRAME_EFFECTS
     sensor_effects = ("depth_scale",)
     # the stereo rig's shared error (hostpc.kinds.stereo_target.shared_error)
-    shared_error_sensitivity = staticmethod(rig_point_sensitivity)
-    shared_error_floor = staticmethod(rig_floor_covariance)
+    shared_error = staticmethod(rig_shared_error)
 
     def chain(self, dataset: Dataset) -> Chain:
         """The tree's stacked bookkeeping chain (``KinematicTree.stacked_chain``)."""

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.dataset.model import Samples
+from hostpc.json_object import JsonObject
 from hostpc.methods.base import (
     floats,
     matrix,
@@ -44,7 +45,7 @@ class TargetObservation:
     approach: tuple[float, ...] | None = None
     uv: tuple[tuple[float, ...], ...] | None = None
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> JsonObject:
         """The dataset-file form (one entry of ``samples``)."""
         return {"chain": self.chain, "q_head": list(self.q_head), "q_arm": list(self.q_arm),
                 "p": list(self.p), "cov": [list(row) for row in self.cov], "t": self.t,
@@ -65,7 +66,7 @@ class PoseObservations:
 
     observations: tuple[TargetObservation, ...]
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> JsonObject:
         """The journal's form: ``{"observations": [...]}``."""
         return {"observations": [o.to_json() for o in self.observations]}
 

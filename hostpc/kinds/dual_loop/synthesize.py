@@ -17,17 +17,10 @@ from collections.abc import Mapping
 import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
-from hostpc.kinds.dual_loop.planning import (
-    PlannedPoses,
-    head_look_at,
-    nominal_frames,
-    plan_poses,
-)
+from hostpc.kinds.dual_loop.planning import PlannedPoses, nominal_frames
 from hostpc.model.problem import build_problem
 from hostpc.synthesize import noisy_measurements
 
-__all__ = ["PlannedPoses", "head_look_at", "make_dataset", "nominal_frames", "plan_poses",
-           "synthesize_dual_loop"]
 
 def make_dataset(poses: PlannedPoses, p: np.ndarray, cov: np.ndarray, *,
                  robot: str = "humanoid_upper",

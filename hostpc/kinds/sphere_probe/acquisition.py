@@ -10,7 +10,6 @@ from __future__ import annotations
 import time
 from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -48,29 +47,6 @@ class ContactRecord:
     reason: str | None = None
     direction: np.ndarray | None = None
     q_end: np.ndarray | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON form (journal lines)."""
-        return {
-            "group": self.group, "index": self.index, "contact": self.contact,
-            "q_latched": None if self.q_latched is None else self.q_latched.tolist(),
-            "speed": self.speed, "approach": self.approach.tolist(), "t": self.t,
-            "reason": self.reason,
-            "direction": None if self.direction is None else self.direction.tolist(),
-            "q_end": None if self.q_end is None else np.asarray(self.q_end).tolist(),
-        }
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> ContactRecord:
-        q = d.get("q_latched")
-        return cls(group=int(d["group"]), index=int(d["index"]), contact=bool(d["contact"]),
-                   q_latched=None if q is None else np.asarray(q, float),
-                   speed=None if d.get("speed") is None else float(d["speed"]),
-                   approach=np.asarray(d["approach"], float), t=float(d["t"]),
-                   reason=d.get("reason"),
-                   direction=None if d.get("direction") is None
-                   else np.asarray(d["direction"], float),
-                   q_end=None if d.get("q_end") is None else np.asarray(d["q_end"], float))
 
 
 def nominal_tip_speed(chain: Chain, contact: PlannedContact, tip: np.ndarray,

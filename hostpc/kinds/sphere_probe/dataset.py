@@ -16,16 +16,25 @@ from typing import Any
 import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples, SphereFrame
+from hostpc.dataset.model import Frame
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, fit
+from hostpc.json_object import JsonObject
 from hostpc.kinds.sphere_probe.acquisition import ContactRecord
-from hostpc.kinds.sphere_probe.planning.geometry import InitialEstimate, initial_estimate
+from hostpc.kinds.sphere_probe.file_face import probe_blocks, reference_sphere, stylus_radius
+from hostpc.kinds.sphere_probe.planning.geometry import (
+    MIN_POINTS_KNOWN_RADIUS,
+    InitialEstimate,
+    SphereFitError,
+    fit_sphere,
+    initial_estimate,
+)
 from hostpc.kinds.sphere_probe.planning.setup import METHOD, ProbeSetup
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
 
 
 def build_dataset(robot_name: str, setup: ProbeSetup, records: Sequence[ContactRecord],
-                  *, estimate: bool = True, extra: dict[str, Any] | None = None,
+                  *, estimate: bool = True, extra: JsonObject | None = None,
                   start_frames: Mapping[str, np.ndarray] | None = None) -> Dataset:
     """The sphere_probe dataset of the contacts that touched (missed ones are listed in
     ``extra_fields["sphere_probe"]["missed"]``).
@@ -53,11 +62,11 @@ def build_dataset(robot_name: str, setup: ProbeSetup, records: Sequence[ContactR
     tip = setup.tip if start_frames is None else np.asarray(start_frames["tool"], float)
     centre = (setup.sphere_centre if start_frames is None
               else np.asarray(start_frames["sphere"], float))
-    frames: dict[str, Any] = {
+    frames: dict[str, Frame] = {
         "tool": FramePose(xyz=tip, rpy=np.zeros(3)),
         "sphere": SphereFrame(centre, setup.sphere_radius),
     }
-    info: dict[str, Any] = {
+    info: JsonObject = {
         "missed": missed,
         "nominal_frames": {"tip": setup.tip.tolist(),
                            "sphere_centre": setup.sphere_centre.tolist()},
@@ -66,7 +75,7 @@ def build_dataset(robot_name: str, setup: ProbeSetup, records: Sequence[ContactR
     }
     dataset = Dataset(method=METHOD, robot=RobotDescription(name=robot_name), frames=frames,
                       samples=samples, known=setup.known,
-                      probe_stylus_radius=setup.stylus_radius,
+                      blocks=probe_blocks(setup.stylus_radius),
                       extra_fields={"sphere_probe": info, **(extra or {})})
     if estimate and start_frames is None:
         dataset, guess = with_initial_estimate(dataset)
@@ -95,7 +104,9 @@ def normal_speeds(dataset: Dataset, directions: np.ndarray, tip_speed: np.ndarra
     of the guarded moves; tip_speed: (N,) the controller's tip speed (m/s). The geometry
     comes from a preliminary fit (joint offsets and frames, no cross-validation) of the
     dataset, so the contact normals are accurate to the fit's residuals (preliminary_fit
-    False: the dataset's nominal frames and the joints as latched).
+    False, a verification set: the dataset's nominal tip and the joints as latched, and
+    the sphere centre these contacts touched, fitted with the known radius, since the
+    nominal one is off by whatever joint error the latched joints still carry).
     """
     chain = robot_chain_of(dataset)
     q = np.asarray(dataset.samples.q, float).copy()
@@ -106,10 +117,18 @@ def normal_speeds(dataset: Dataset, directions: np.ndarray, tip_speed: np.ndarra
             q = q + preliminary.effect_values("joint_offsets")[None, :]
     else:
         frames = {"tool": np.asarray(dataset.pose("tool").xyz, float),
-                  "sphere": np.asarray(dataset.sphere().center, float)}
+                  "sphere": np.asarray(reference_sphere(dataset).center, float)}
     poses = forward(chain, q)
     T = poses.T_base_flange
     tip = np.einsum("nij,j->ni", T[:, :3, :3], frames["tool"]) + T[:, :3, 3]
+    if not preliminary_fit and tip.shape[0] >= MIN_POINTS_KNOWN_RADIUS:
+        # the centre these contacts touched (the nominal one can be millimetres off: a
+        # joint's error moves every contact alike); the radius is known
+        rho = float(reference_sphere(dataset).radius) + float(stylus_radius(dataset) or 0.0)
+        try:
+            frames["sphere"] = fit_sphere(tip, rho, centre_guess=frames["sphere"]).centre
+        except SphereFitError:
+            pass
     J = point_jacobian(screws(chain, poses), tip)[:, :, : chain.n]
     velocity = np.einsum("nij,nj->ni", J, directions)
     velocity /= np.maximum(np.linalg.norm(velocity, axis=1, keepdims=True), 1e-300)
@@ -134,9 +153,9 @@ def with_initial_estimate(dataset: Dataset) -> tuple[Dataset, InitialEstimate]:
         raise InputError(f"expected a {METHOD} dataset, got {dataset.method!r}")
     chain = robot_chain_of(dataset)
     T = forward(chain, np.asarray(dataset.samples.q, float)).T_base_flange
-    sphere = dataset.sphere()
+    sphere = reference_sphere(dataset)
     tool = dataset.pose("tool")
-    rho = float(sphere.radius) + float(dataset.probe_stylus_radius or 0.0)
+    rho = float(sphere.radius) + float(stylus_radius(dataset) or 0.0)
     guess = initial_estimate(
         T, np.asarray(dataset.samples.group), rho,
         known_sphere_centre=np.asarray(sphere.center) if "sphere" in dataset.known else None,
@@ -161,7 +180,7 @@ def solve(dataset: Dataset, effects: str | Iterable[str] | None = None, *,
 def frames_from_result(result: FitResult) -> dict[str, np.ndarray]:
     """Fitted P_b (``sphere``, base, m) and P_t (``tool``, flange, m)."""
     dataset = result.problem.dataset
-    out = {"sphere": np.asarray(dataset.sphere().center, float).copy(),
+    out = {"sphere": np.asarray(reference_sphere(dataset).center, float).copy(),
            "tool": np.asarray(dataset.pose("tool").xyz, float).copy()}
     for name in ("sphere", "tool"):
         if name in result.problem.layout.effect_slices:

@@ -42,37 +42,25 @@ from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples, Sphere
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
 from hostpc.kinds.sphere_probe.acquisition import (
-    ContactCallback,
     ContactRecord,
-    GuardedMove,
-    acquire,
-    nominal_tip_speed,
     probe_contact,
 )
 from hostpc.kinds.sphere_probe.dataset import (
     build_dataset,
-    frames_from_result,
-    normal_speeds,
-    robot_chain_of,
-    solve,
-    with_initial_estimate,
 )
+from hostpc.kinds.sphere_probe.file_face import probe_blocks, reference_sphere
 from hostpc.kinds.sphere_probe.planning.contacts import (
-    DESIGN_JOINT_SPEED,
     PlannedContact,
     PlannedOrientation,
     ProbePlan,
     balance_probe_plan,
-    contact_normals,
     contact_pose,
     design_speeds,
-    flange_rotation,
     path_clearance,
+    plan_from_dict,
     plan_sphere_probe,
-    tip_positions,
+    plan_to_dict,
 )
-from hostpc.kinds.sphere_probe.planning.contacts import plan_from_dict as _plan_from_dict
-from hostpc.kinds.sphere_probe.planning.contacts import plan_to_dict as _plan_to_dict
 from hostpc.kinds.sphere_probe.planning.setup import (
     CONTACTS_PER_ORIENTATION,
     METHOD,
@@ -88,17 +76,6 @@ from hostpc.planning.approach import travel_signs
 from hostpc.planning.design import PoseGroups
 from hostpc.planning.robot_time import Waypoints
 from hostpc.robots.base import RobotAdapter, RobotState
-
-__all__ = [
-    "CONTACTS_PER_ORIENTATION", "DEFAULT_EFFECTS", "DEFAULT_MODBUS_PORT", "DESIGN_JOINT_SPEED",
-    "FRAMES_FILE", "METHOD", "MIN_ORIENTATIONS", "PLAN_FILE", "POOL_FACTOR", "PROBE_IO",
-    "ContactCallback", "ContactRecord", "GuardedMove", "PlanConfig", "PlannedContact",
-    "PlannedOrientation", "ProbePlan", "ProbeSetup", "SphereProbeMethod", "acquire",
-    "build_dataset", "contact_normals", "contact_pose", "design_speeds", "flange_rotation",
-    "frames_from_result", "get_robot_chain", "nominal_tip_speed", "normal_speeds",
-    "parse_modbus_address", "path_clearance", "plan_sphere_probe", "probe_contact",
-    "robot_chain_of", "solve", "tip_positions", "with_initial_estimate",
-]
 
 POOL_FACTOR = 2
 """The candidate pool holds this many times the fit's orientations (plus the verification
@@ -232,7 +209,7 @@ class SphereProbeMethod(Method):
         import json
 
         if self.plan_path.is_file():
-            self.plan = _plan_from_dict(json.loads(self.plan_path.read_text()))
+            self.plan = plan_from_dict(json.loads(self.plan_path.read_text()))
             progress.message(f"probe plan: {self.plan_path} (from this run)")
         if self.modbus is not None:
             from hostpc.kinds.sphere_probe.probe_modbus import ModbusProbe
@@ -253,7 +230,7 @@ class SphereProbeMethod(Method):
             self.plan = balance_probe_plan(plan, self.chain, self.setup.tip,
                                            self.settings.effects, self.settings.plugins,
                                            state.q_min, state.q_max)
-            write_json_atomic(self.plan_path, _plan_to_dict(self.plan))
+            write_json_atomic(self.plan_path, plan_to_dict(self.plan))
         return self._poses()
 
     def pose_groups(self, pool: np.ndarray) -> PoseGroups:
@@ -313,7 +290,7 @@ class SphereProbeMethod(Method):
                                "sphere": SphereFrame(self.setup.sphere_centre,
                                                      self.setup.sphere_radius)},
                        samples=samples, known=self.setup.known,
-                       probe_stylus_radius=self.setup.stylus_radius)
+                       blocks=probe_blocks(self.setup.stylus_radius))
 
     def _check_transfer(self, q_from: np.ndarray | None,
                         orientation: PlannedOrientation) -> None:
@@ -411,17 +388,29 @@ class SphereProbeMethod(Method):
                                  start_frames={k: np.asarray(saved[k], float)
                                                for k in ("tool", "sphere")})
         try:
-            if np.any(self._joint_estimate != 0.0):  # staged: the closed-form start
-                raise SphereFitError("frames assume zero joint offsets; start nominal")
-            dataset = build_dataset(self.cell.robot, self.setup, records)
+            dataset = self._estimated_dataset(records)
         except (SphereFitError, np.linalg.LinAlgError):
             dataset = build_dataset(self.cell.robot, self.setup,
                                     [replace(r, direction=None) for r in records],
                                     estimate=False)
         write_json_atomic(self.frames_path, {
             "samples": digest, "tool": dataset.pose("tool").xyz.tolist(),
-            "sphere": dataset.sphere().center.tolist()})
+            "sphere": reference_sphere(dataset).center.tolist()})
         return dataset
+
+    def _estimated_dataset(self, records: Sequence[ContactRecord]) -> Dataset:
+        """The dataset with the closed-form frames and the contacts' normal speeds. A staged
+        run's contacts are latched about the joints' estimate off (the robot is where
+        latched + estimate reads): the closed form and the normals are computed there, so
+        the frames are the ones the fit, started at the estimate, sets out from."""
+        shift = self._joint_estimate
+        if not np.any(shift != 0.0):
+            return build_dataset(self.cell.robot, self.setup, records)
+        dataset = build_dataset(self.cell.robot, self.setup, [
+            r if r.q_latched is None else replace(r, q_latched=r.q_latched + shift)
+            for r in records])
+        return dataset.with_samples(replace(dataset.samples,
+                                            q=np.asarray(dataset.samples.q) - shift))
 
     def describe(self) -> dict[str, Any]:
         """The probe set-up for the result document (SI)."""

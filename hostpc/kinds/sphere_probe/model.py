@@ -11,7 +11,13 @@ from __future__ import annotations
 import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples, SphereFrame
-from hostpc.kinds.sphere_probe.file_face import SphereProbeFile
+from hostpc.kinds.sphere_probe.file_face import (
+    SphereProbeFile,
+    probe_blocks,
+    reference_sphere,
+    stylus_radius,
+)
+from hostpc.kinds.sphere_probe.frames import SphereCentreFrame
 from hostpc.kinematics import Chain, get_robot, point_jacobian
 from hostpc.model.context import group_variable, sample_variables, serial_context
 from hostpc.model.effect import ModelContext
@@ -42,6 +48,7 @@ class SphereProbe(SphereProbeFile, MeasurementModel):
     frame_effects = {"tool": POINT, "sphere": POINT, "base": POSE}
     default_frames = ("tool", "sphere")
     measurement_size = 1
+    own_frame_effects = (SphereCentreFrame,)
     sensor_effects = ("trigger_latency",)
 
     def context(self, dataset: Dataset, chain: Chain) -> ModelContext:
@@ -59,8 +66,8 @@ class SphereProbe(SphereProbeFile, MeasurementModel):
 
     def measurements(self, dataset: Dataset) -> tuple[np.ndarray, np.ndarray]:
         """Every contact measures R + r; W = 1 / sigma."""
-        sphere = dataset.sphere()
-        stylus = dataset.probe_stylus_radius or 0.0
+        sphere = reference_sphere(dataset)
+        stylus = stylus_radius(dataset) or 0.0
         n = dataset.samples.n
         measured = np.full((n, 1), float(sphere.radius) + float(stylus))
         W = (1.0 / np.asarray(dataset.samples.sigma, dtype=float)).reshape(n, 1, 1)
@@ -73,7 +80,7 @@ class SphereProbe(SphereProbeFile, MeasurementModel):
         poses, R_base_flange, t_base_flange, d_delta, rows = flange(problem, x, jacobian)
         _, t_flange_tool, _ = frame_pose(problem, "tool", x)
         tip = np.einsum("nij,j->ni", R_base_flange, t_flange_tool) + t_base_flange
-        sphere = problem.dataset.sphere()
+        sphere = reference_sphere(problem.dataset)
         c_b, d_cb = world_point_in_base(problem, x, "sphere", np.asarray(sphere.center, float))
         diff = tip - c_b[None, :]
         distance = np.linalg.norm(diff, axis=1)
@@ -106,4 +113,4 @@ class SphereProbe(SphereProbeFile, MeasurementModel):
         tool = FramePose(xyz=EXAMPLE_TOOL_XYZ, rpy=np.zeros(3))
         return Dataset(method=cls.name, robot=RobotDescription(name="ur5e"),
                        frames={"tool": tool, "sphere": SphereFrame(centre, 0.0125)},
-                       samples=samples, probe_stylus_radius=0.0015)
+                       samples=samples, blocks=probe_blocks(0.0015))

@@ -10,6 +10,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from hostpc.json_object import JsonObject
 from hostpc.methods.base import floats, optional_json
 
 
@@ -29,7 +30,7 @@ class ProbeSample:
     contact: int
     speed: float | None = None
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> JsonObject:
         """The dataset-file form (one entry of ``samples``; the contact number and the tip
         speed in ``extra``)."""
         return {"q": list(self.q), "group": self.group, "sigma": self.sigma,

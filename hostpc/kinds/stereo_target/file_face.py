@@ -9,14 +9,17 @@ from hostpc.dataset import schema
 from hostpc.dataset.file_units import Units
 from hostpc.dataset.measurement_kind import (
     Columns,
+    KindArrays,
     PointSampleKind,
     WrittenColumns,
     check_joint_count,
     point_columns_out,
     require,
 )
-from hostpc.dataset.model import Samples
+from hostpc.dataset.model import Dataset, Samples
 from hostpc.dataset.schema import Loc
+from hostpc.json_object import JsonObject
+from hostpc.kinds.stereo_target.rig_block import check_rig_block
 
 
 class StereoTargetFile(PointSampleKind):
@@ -37,19 +40,22 @@ class StereoTargetFile(PointSampleKind):
         self.read_uv(sample, loc, columns)
         return list(q)
 
-    def samples_arguments(self, columns: Columns, units: Units) -> dict[str, Any]:
+    def samples_arguments(self, columns: Columns, units: Units) -> KindArrays:
         return self.point_arguments(columns, units)
 
-    def read_columns(self, table: Any, units: Units) -> dict[str, Any] | None:
+    def read_columns(self, table: Any, units: Units) -> KindArrays | None:
         from hostpc.dataset.reading_columns import point_columns
 
-        return dict(point_columns(table, units))
+        return point_columns(table, units)
 
-    def write_sample(self, samples: Samples, index: int) -> tuple[dict[str, Any], int]:
-        out: dict[str, Any] = {"q": samples.q[index].tolist()}
+    def write_sample(self, samples: Samples, index: int) -> tuple[JsonObject, int]:
+        out: JsonObject = {"q": samples.q[index].tolist()}
         self.write_point(samples, index, out)
         return out, samples.q.shape[1]
 
     def write_columns(self, samples: Samples) -> WrittenColumns | None:
         return WrittenColumns([("q", samples.q.tolist(), None), *point_columns_out(samples)],
                               [samples.q.shape[1]] * samples.n)
+
+    def check_loaded(self, dataset: Dataset, source: str) -> None:
+        check_rig_block(dataset, source)

@@ -16,6 +16,7 @@ the cell), `target` = target centre in base (nominal from the cell); `known` fro
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -101,6 +102,14 @@ class StereoTargetMethod(Method):
         # an approach-dependent effect (backlash) in the model: each joint arrives from
         # both sides, through via-points where needed (methods/approach_moves.py)
         self._moves = ApproachMoves(settings, self._chain)
+        self._joint_estimate = np.zeros(self._chain.n)  # set_joint_estimate
+
+    def set_joint_estimate(self, estimate: np.ndarray, new_stage: bool = False) -> None:
+        """The joints are about `estimate` off (staging): the plate normal the detector
+        corrects the disk centre with is taken where the robot is, not where it reads (a
+        staged run's model check reads 15 deg off; its verify set is too small for the
+        refinement's own fit)."""
+        self._joint_estimate = np.asarray(estimate, float)
 
     # ---------------------------------------------------------------- set-up
 
@@ -313,8 +322,10 @@ class StereoTargetMethod(Method):
         capture = await robot.capture("target")
         if self._measurer is None:
             raise ControllerError("stereo_target: prepare() was not run")
-        observation = self._measurer.measure(capture.left, capture.right,
-                                             normal_hint=self.normal_in_camera(capture.q))
+        observation = self._measurer.measure(
+            capture.left, capture.right,
+            normal_hint=self.normal_in_camera(np.asarray(capture.q, float)
+                                              + self._joint_estimate))
         if isinstance(observation, TargetRejected):
             return SampleRecord(phase, index, False,
                                 reason=f"target rejected: {observation.reason}",
@@ -358,10 +369,14 @@ class StereoTargetMethod(Method):
 
         # each set by its own preliminary fit (never the fit set's model: after a push it
         # would be wrong for the verify set); a set too small for its own fit (a short
-        # plan's 4 verify poses) is left as measured (stereo_refinement.MIN_SAMPLES)
-        refined, _ = refine_dataset(dataset, self.rig, self.cell.target_radius,
-                                    self.cell.target_normal)
-        return refined
+        # plan's 4 verify poses) is left as measured (stereo_refinement.MIN_SAMPLES).
+        # Staged: refined where the robot is (the detector's normal hint was taken there)
+        shift = self._joint_estimate
+        q = np.asarray(dataset.samples.q, float)
+        refined, _ = refine_dataset(
+            dataset.with_samples(dataclasses.replace(dataset.samples, q=q + shift)),
+            self.rig, self.cell.target_radius, self.cell.target_normal)
+        return refined.with_samples(dataclasses.replace(refined.samples, q=q))
 
     def _rig_uncertainty(self) -> dict[str, Any]:
         """The dataset's `rig_uncertainty` block (the rig and its calibration covariance,

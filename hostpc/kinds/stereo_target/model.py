@@ -13,7 +13,8 @@ import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, RobotDescription, Samples
 from hostpc.kinds.stereo_target.file_face import StereoTargetFile
-from hostpc.kinds.stereo_target.shared_error import rig_floor_covariance, rig_point_sensitivity
+from hostpc.kinds.stereo_target.frames import TargetFrame
+from hostpc.kinds.stereo_target.shared_error import rig_shared_error
 from hostpc.kinematics import get_robot, point_jacobian
 from hostpc.model.frame_math import inverse_point_derivatives
 from hostpc.model.layout import Problem
@@ -43,10 +44,10 @@ class StereoTarget(StereoTargetFile, MeasurementModel):
     frame_effects = {"tool": POSE, "target": POINT, "base": POSE}
     default_frames = ("tool", "target")
     measurement_size = 3
+    own_frame_effects = (TargetFrame,)
     sensor_effects = ("depth_scale",)
     # the stereo rig's shared error (hostpc.kinds.stereo_target.shared_error)
-    shared_error_sensitivity = staticmethod(rig_point_sensitivity)
-    shared_error_floor = staticmethod(rig_floor_covariance)
+    shared_error = staticmethod(rig_shared_error)
 
     def predict(self, problem: Problem, x: np.ndarray, jacobian: bool = True
                 ) -> tuple[np.ndarray, np.ndarray | None]:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from hostpc.dataset.model import Samples
+from hostpc.json_object import JsonObject
 from hostpc.methods.base import (
     floats,
     matrix,
@@ -37,7 +38,7 @@ class StereoSample:
     approach: tuple[float, ...] | None = None
     uv: tuple[tuple[float, ...], ...] | None = None
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> JsonObject:
         """The dataset-file form (one entry of ``samples``)."""
         return {"q": list(self.q), "p": list(self.p), "cov": [list(row) for row in self.cov],
                 **optional_json(t=self.t, approach=self.approach, uv=self.uv)}

@@ -1,27 +1,46 @@
 """The stereo rig's shared error, as the stereo kinds' models answer it (stereo_target, and
 dual_loop's head camera, whose datasets carry the same ``rig_uncertainty`` block).
 
-The generic side (``hostpc.fitting.shared_errors``) asks a measurement model two things and
-knows nothing of rigs: how a shared error moves each measured point (D = dp/drig, from the
-samples' raw pixel centres ``uv`` and the block's rig, ``hostpc.vision.rig_uncertainty``), and
-the per-sample pixel floor the method added to each covariance. Both live here, with the rig.
+The generic side (``hostpc.fitting.shared_errors``) asks a measurement model for its shared
+error (``SharedError``) and knows nothing of rigs: how it moves each measured point (D =
+dp/drig, from the samples' raw pixel centres ``uv`` and the block's rig,
+``hostpc.vision.rig_uncertainty``), its covariance (the block's), and the per-sample pixel
+floor the method added to each covariance. All read here from the dataset's block (the
+functions taking ``block`` read its JSON), with the rig.
 """
 
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
 from hostpc.errors import InputError
-from hostpc.model.layout import Problem
+from hostpc.json_object import JsonObject
+from hostpc.kinds.stereo_target.rig_block import BLOCK
+from hostpc.model.layout import Problem, SharedError
 
-BLOCK = "rig_uncertainty"
+
+def rig_shared_error(problem: Problem) -> SharedError | None:
+    """The rig's shared error of the problem's dataset (its ``rig_uncertainty`` block), or
+    None: no block, a covariance that does not read or does not match the sensitivity, no
+    uv, or values that are not finite."""
+    block = problem.dataset.extra_fields.get(BLOCK)
+    if not isinstance(block, dict):
+        return None
+    try:
+        S = np.asarray(block.get("covariance"), dtype=float)
+    except (TypeError, ValueError):
+        return None
+    D = rig_point_sensitivity(problem, block)
+    if D is None or S.ndim != 2 or S.shape != (D.shape[2], D.shape[2]):
+        return None
+    if not (np.all(np.isfinite(S)) and np.all(np.isfinite(D))):
+        return None
+    return SharedError(D, S, rig_floor_covariance(problem, block))
 
 
-def rig_point_sensitivity(problem: Problem, block: Mapping[str, Any]) -> np.ndarray | None:
+def rig_point_sensitivity(problem: Problem, block: JsonObject) -> np.ndarray | None:
     """(N, 3, 24) dp/drig for the samples' uv, or None (no uv, not 3-D points, a rig that
     does not read); kept in the problem's shared values by the content of uv and the rig
     (candidate fits and folds of one dataset reuse it)."""
@@ -37,7 +56,7 @@ def rig_point_sensitivity(problem: Problem, block: Mapping[str, Any]) -> np.ndar
     return sensitivity
 
 
-def _compute_sensitivity(block: Mapping[str, Any], uv: np.ndarray) -> np.ndarray | None:
+def _compute_sensitivity(block: JsonObject, uv: np.ndarray) -> np.ndarray | None:
     from hostpc.vision.rig import rig_from_dict
     from hostpc.vision.rig_uncertainty import point_sensitivity
 
@@ -48,7 +67,7 @@ def _compute_sensitivity(block: Mapping[str, Any], uv: np.ndarray) -> np.ndarray
     return point_sensitivity(rig, uv)
 
 
-def rig_floor_covariance(problem: Problem, block: Mapping[str, Any]) -> np.ndarray | None:
+def rig_floor_covariance(problem: Problem, block: JsonObject) -> np.ndarray | None:
     """(N, 3, 3) the per-sample `pixel_floor_px` part of the samples' covariance (the
     diagonal lateral z s/f, depth z^2 sqrt(2) s/(f b) model of stereo_target), or None if the
     block declares no floor."""

@@ -12,6 +12,7 @@ names, ``fields["mask"]`` (N, 3) of 0/1.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -20,6 +21,7 @@ from hostpc.dataset import schema
 from hostpc.dataset.file_units import Units
 from hostpc.dataset.measurement_kind import (
     Columns,
+    KindArrays,
     PointSampleKind,
     WrittenColumns,
     check_joint_count,
@@ -27,8 +29,9 @@ from hostpc.dataset.measurement_kind import (
     require,
     sample_value,
 )
-from hostpc.dataset.model import Samples
+from hostpc.dataset.model import Frame, Samples
 from hostpc.dataset.schema import FieldError, Loc, show
+from hostpc.json_object import JsonObject
 
 
 def read_q(sample: schema.SampleSchema, loc: Loc, n_joints: int | None, label: str
@@ -72,23 +75,19 @@ class WorldPointFile(PointSampleKind):
             columns.put("mask", index, values)
         return q
 
-    def samples_arguments(self, columns: Columns, units: Units) -> dict[str, Any]:
-        arguments = self.point_arguments(columns, units)
-        arguments.pop("uv")
+    def samples_arguments(self, columns: Columns, units: Units) -> KindArrays:
         markers = columns.values.get("marker", [None] * columns.n_samples)
         masks = columns.values.get("mask", [None] * columns.n_samples)
-        arguments["fields"] = {
+        return replace(self.point_arguments(columns, units), uv=None, fields={
             "marker": np.asarray(["" if m is None else m for m in markers], dtype=np.str_),
             "mask": np.asarray([[1.0, 1.0, 1.0] if m is None else m for m in masks]),
-        }
-        return arguments
+        })
 
-    def read_columns(self, table: Any, units: Units) -> dict[str, Any] | None:
+    def read_columns(self, table: Any, units: Units) -> KindArrays | None:
         """Every sample at once (``reading_columns``): p, cov or sigma, marker, mask."""
         from hostpc.dataset.reading_columns import NotColumnar, point_columns
 
-        arguments = dict(point_columns(table, units))
-        arguments.pop("uv")
+        points = point_columns(table, units)
         n = table.n_samples
         markers = table.strings("marker") if "marker" in table.names else [""] * n
         mask = np.ones((n, 3))
@@ -98,12 +97,13 @@ class WorldPointFile(PointSampleKind):
             if not (np.all((given == 0.0) | (given == 1.0)) and np.all(given.any(axis=1))):
                 raise NotColumnar
             mask[rows] = given
-        arguments["fields"] = {"marker": np.asarray(markers, dtype=np.str_), "mask": mask}
-        return arguments
+        return replace(points, uv=None,
+                       fields={"marker": np.asarray(markers, dtype=np.str_), "mask": mask})
 
-    def check_samples(self, samples: Samples, frames: Mapping[str, Any]) -> None:
+    def check_samples(self, samples: Samples, frames: Mapping[str, Frame]) -> None:
         """Every sample names a marker of ``frames.markers`` (or there is only one)."""
-        names = list(frames.get("markers", {}))
+        markers = frames.get("markers")
+        names = list(markers) if isinstance(markers, Mapping) else []
         for i, marker in enumerate(samples.fields["marker"]):
             if not marker and len(names) != 1:
                 raise FieldError(("samples", i, "marker"), "required field missing (there "
@@ -113,8 +113,8 @@ class WorldPointFile(PointSampleKind):
                                  f"no marker {show(str(marker))} in frames.markers "
                                  f"(markers: {', '.join(names)})")
 
-    def write_sample(self, samples: Samples, index: int) -> tuple[dict[str, Any], int]:
-        out: dict[str, Any] = {"q": samples.q[index].tolist()}
+    def write_sample(self, samples: Samples, index: int) -> tuple[JsonObject, int]:
+        out: JsonObject = {"q": samples.q[index].tolist()}
         marker = str(samples.fields["marker"][index]) if "marker" in samples.fields else ""
         if marker:
             out["marker"] = marker

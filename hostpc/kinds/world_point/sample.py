@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.dataset.model import Samples
+from hostpc.json_object import JsonObject
 from hostpc.methods.base import (
     floats,
     matrix,
@@ -36,7 +37,7 @@ class WorldPointSample:
     t: float | None = None
     approach: tuple[float, ...] | None = None
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> JsonObject:
         """The dataset-file form (one entry of ``samples``)."""
         return {"q": list(self.q), "marker": self.marker, "p": list(self.p),
                 "cov": [list(row) for row in self.cov],

@@ -17,6 +17,7 @@ from hostpc.dataset import schema
 from hostpc.dataset.file_units import Units
 from hostpc.dataset.measurement_kind import (
     Columns,
+    KindArrays,
     PointSampleKind,
     WrittenColumns,
     check_covariance,
@@ -26,6 +27,7 @@ from hostpc.dataset.measurement_kind import (
 )
 from hostpc.dataset.model import Samples
 from hostpc.dataset.schema import FieldError, Loc
+from hostpc.json_object import JsonObject
 from hostpc.kinds.world_point.file_face import read_q
 
 
@@ -82,7 +84,7 @@ class WorldPoseFile(PointSampleKind):
         check_covariance((*loc, "sigma"), cov)
         return cov
 
-    def read_columns(self, table: Any, units: Units) -> dict[str, Any] | None:
+    def read_columns(self, table: Any, units: Units) -> KindArrays | None:
         """Every sample at once (``reading_columns``): p, rpy, and cov (6x6, file units)
         or sigma and sigma_angle."""
         from hostpc.dataset.reading_columns import NotColumnar, checked_covariances
@@ -107,16 +109,17 @@ class WorldPoseFile(PointSampleKind):
             cov[:, np.arange(6), np.arange(6)] = variances
         else:
             raise NotColumnar
-        return {"p": units.length(p),
-                "fields": {"rpy": np.asarray(units.angle(rpy), dtype=float),
-                           "pose_cov": checked_covariances(cov)}}
+        return KindArrays(p=units.length(p),
+                          fields={"rpy": np.asarray(units.angle(rpy), dtype=float),
+                                  "pose_cov": checked_covariances(cov)})
 
-    def samples_arguments(self, columns: Columns, units: Units) -> dict[str, Any]:
-        return {"p": units.length(columns.values["p"]),
-                "fields": {"rpy": np.asarray(columns.values["rpy"], dtype=float),
-                           "pose_cov": np.asarray(columns.values["pose_cov"], dtype=float)}}
+    def samples_arguments(self, columns: Columns, units: Units) -> KindArrays:
+        return KindArrays(p=units.length(columns.values["p"]),
+                          fields={"rpy": np.asarray(columns.values["rpy"], dtype=float),
+                                  "pose_cov": np.asarray(columns.values["pose_cov"],
+                                                         dtype=float)})
 
-    def write_sample(self, samples: Samples, index: int) -> tuple[dict[str, Any], int]:
+    def write_sample(self, samples: Samples, index: int) -> tuple[JsonObject, int]:
         assert samples.p is not None
         return ({"q": samples.q[index].tolist(), "p": samples.p[index].tolist(),
                  "rpy": samples.fields["rpy"][index].tolist(),

@@ -3,7 +3,7 @@ the frame effects the built-in kinds declare for their own frames
 (``MeasurementModel.own_frame_effects``)."""
 
 from hostpc.model.effects.coupling import JointCoupling
-from hostpc.model.effects.frames import BaseFrame, SphereFrame, TargetFrame, ToolFrame
+from hostpc.model.effects.frames import BaseFrame, ToolFrame
 from hostpc.model.effects.geometry import Geometry
 from hostpc.model.effects.joint_space import (
     Backlash,
@@ -19,8 +19,6 @@ BUILTIN_EFFECTS = (
     JointOffsets,
     ToolFrame,
     BaseFrame,
-    TargetFrame,
-    SphereFrame,
     Geometry,
     JointCompliance,
     EncoderScale,
@@ -41,8 +39,6 @@ __all__ = [
     "JointCompliance",
     "JointCoupling",
     "JointOffsets",
-    "SphereFrame",
-    "TargetFrame",
     "ThermalExpansion",
     "ToolFrame",
     "TransmissionHarmonic",

@@ -1,5 +1,8 @@
 """Frame effects: the unknown frames of a method. Their math lives in the measurement
-models (hostpc.model.measurements); here they only declare their parameters."""
+models (hostpc.model.measurements); here they only declare their parameters. The frames every
+serial kind shares (``tool``, ``base``) are here; a kind's own frames (stereo_target's
+``target``, sphere_probe's ``sphere``, dual_loop's) are in its folder (``frames.py``,
+declared by its model's ``own_frame_effects``)."""
 
 from __future__ import annotations
 
@@ -40,22 +43,6 @@ class BaseFrame(FrameEffect):
 
     name = "base"
     description = "robot base frame in the frame of the fixed target"
-
-
-class TargetFrame(FrameEffect):
-    """Target point delta in the base frame (m)."""
-
-    name = "target"
-    description = "fixed target point"
-    parameters = POINT_PARAMETERS
-
-
-class SphereFrame(FrameEffect):
-    """Reference sphere centre delta in the base frame (m); the radius is known."""
-
-    name = "sphere"
-    description = "reference sphere centre"
-    parameters = POINT_PARAMETERS
 
 
 def frame_effect(name: str, parameters: tuple[str, ...]) -> type[FrameEffect]:

@@ -17,9 +17,9 @@ here it adds what a fit needs:
   and the ModelContext (contract variables for diagnostics), computed once per problem;
 - ``predict(problem, x, jacobian) -> (prediction (N, m), d prediction / dx (N, m, P))``
   with analytic Jacobians (the contract test checks them against finite differences);
-- ``shared_error_sensitivity`` and ``shared_error_floor``: how an error shared by every
-  sample (a stereo rig's calibration) moves the measurements, for the fit's covariance
-  (default: none);
+- ``shared_error(problem)``: an error shared by every sample (a stereo rig's calibration):
+  how it moves the measurements, its covariance, the floor the method added for it
+  (``SharedError``), for the fit's covariance (default: none);
 - ``example(rng) -> Dataset``: a small plausible dataset of this method, which the contract
   test fits, differentiates and writes to a file and back.
 
@@ -31,7 +31,7 @@ a method's name; they ask its model.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
@@ -42,7 +42,7 @@ from hostpc.kinematics import Chain, forward
 from hostpc.kinematics.rotations import pose_to_transform
 from hostpc.model.context import serial_chain, serial_context
 from hostpc.model.effect import Effect, ModelContext
-from hostpc.model.layout import Problem
+from hostpc.model.layout import Problem, SharedError
 
 POSE = ("x", "y", "z", "rx", "ry", "rz")
 POINT = ("x", "y", "z")
@@ -105,17 +105,10 @@ class MeasurementModel(MeasurementKind):
         raise NotImplementedError
 
     # the instrument's shared error (hostpc.fitting.shared_errors) ----------------------
-    def shared_error_sensitivity(self, problem: Problem, block: Mapping[str, Any]
-                                 ) -> np.ndarray | None:
-        """(N, m, K) how the instrument's shared error (K parameters with the covariance of
-        the dataset's ``rig_uncertainty`` block) moves each measurement, or None (default:
-        the instrument declares no shared error)."""
-        return None
-
-    def shared_error_floor(self, problem: Problem, block: Mapping[str, Any]
-                           ) -> np.ndarray | None:
-        """(N, m, m) the part of each sample's covariance the method added to stand for the
-        shared error (a weighting only), or None (default: none added)."""
+    def shared_error(self, problem: Problem) -> SharedError | None:
+        """The instrument's error shared by every sample of the problem's dataset (e.g. the
+        stereo rig's, from its ``rig_uncertainty`` block), or None (default: the instrument
+        declares none)."""
         return None
 
     @classmethod

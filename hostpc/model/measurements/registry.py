@@ -8,11 +8,11 @@ from __future__ import annotations
 from collections.abc import Iterable
 from pathlib import Path
 
-from hostpc.dataset.kind_registry import ENTRY_POINT_GROUP, measurement_kinds
+from hostpc.dataset.kind_registry import measurement_kinds
 from hostpc.errors import InputError
 from hostpc.model.measurements.base import MeasurementModel
 
-__all__ = ["ENTRY_POINT_GROUP", "measurement_model", "measurement_models"]
+__all__ = ["measurement_model", "measurement_models"]
 
 
 def measurement_models(plugins: Iterable[str | Path] = ()) -> dict[str, type[MeasurementModel]]:

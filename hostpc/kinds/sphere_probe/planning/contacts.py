@@ -14,11 +14,11 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from hostpc.errors import InputError
+from hostpc.json_object import JsonObject
 from hostpc.kinds.sphere_probe.planning.setup import (
     CONTACTS_PER_ORIENTATION,
     PlanConfig,
@@ -233,7 +233,7 @@ def _check_transfers(chain: Chain, orientations: Sequence[PlannedOrientation],
                 "increase hover")
 
 
-def plan_to_dict(plan: ProbePlan) -> dict[str, Any]:
+def plan_to_dict(plan: ProbePlan) -> JsonObject:
     return {"rejected": plan.rejected, "orientations": [
         {"group": o.group, "rotation": o.rotation.tolist(),
          "stylus_direction": o.stylus_direction.tolist(), "q_hover": o.q_hover.tolist(),
@@ -243,7 +243,7 @@ def plan_to_dict(plan: ProbePlan) -> dict[str, Any]:
         for o in plan.orientations]}
 
 
-def plan_from_dict(data: dict[str, Any]) -> ProbePlan:
+def plan_from_dict(data: JsonObject) -> ProbePlan:
     orientations = []
     for o in data["orientations"]:
         contacts = tuple(PlannedContact(int(o["group"]), int(c["index"]),

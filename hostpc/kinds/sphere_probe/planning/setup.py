@@ -13,6 +13,7 @@ from typing import Any, Final
 import numpy as np
 
 from hostpc.errors import InputError
+from hostpc.json_object import JsonObject
 
 METHOD: Final = "sphere_probe"
 CONTACTS_PER_ORIENTATION = 5
@@ -64,7 +65,7 @@ class ProbeSetup:
         return np.sqrt(self.repeatability**2 + (self.latency_jitter * speed) ** 2)
 
     @classmethod
-    def from_description(cls, description: dict[str, Any], **overrides: Any) -> ProbeSetup:
+    def from_description(cls, description: JsonObject, **overrides: Any) -> ProbeSetup:
         """From a dict with keys sphere_centre, sphere_radius, stylus_radius, tip, io_line,
         repeatability, latency_jitter, known (SI); ``overrides`` win."""
         values = {k: v for k, v in description.items() if k in cls.__dataclass_fields__}

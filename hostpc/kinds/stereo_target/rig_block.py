@@ -1,4 +1,5 @@
-"""The dataset's `rig_uncertainty` block, checked on load.
+"""The dataset's `rig_uncertainty` block, checked on load by the stereo kinds' file faces
+(stereo_target's and dual_loop's ``check_loaded``; the dataset layer never imports vision).
 
 A stereo_target or dual_loop dataset may carry the calibration of the camera that measured
 it and that calibration's covariance (`hostpc.vision.rig_uncertainty.uncertainty_document`):
@@ -30,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.dataset.model import Dataset
 from hostpc.errors import DatasetError, InputError
 
 BLOCK = "rig_uncertainty"
@@ -45,6 +47,12 @@ SYMMETRY_TOLERANCE = 1e-9
 def _units(n_intrinsics: int) -> list[str]:
     per_camera = ["px"] * 4 + ["1"] * (n_intrinsics - 4)
     return per_camera * 2 + ["rad"] * 3 + ["m"] * 3
+
+
+def check_rig_block(dataset: Dataset, source: str) -> None:
+    """The dataset's `rig_uncertainty` block, if it has one, well formed (DatasetError)."""
+    if BLOCK in dataset.extra_fields:
+        check_rig_uncertainty(dataset.extra_fields[BLOCK], source)
 
 
 def check_rig_uncertainty(block: Any, source: str) -> None:
