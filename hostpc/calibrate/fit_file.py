@@ -42,6 +42,7 @@ from pydantic import (
 )
 
 from hostpc.errors import InputError
+from hostpc.json_object import JsonObject
 from hostpc.model.joint_offsets import is_offset, offset_name
 from hostpc.model.joint_offsets import labels as offset_labels
 
@@ -132,8 +133,8 @@ class _Refused(ValueError):
     """A JSON text refused by the parser hooks (duplicated key, non-finite literal)."""
 
 
-def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    result: dict[str, Any] = {}
+def _no_duplicates(pairs: list[tuple[str, Any]]) -> JsonObject:
+    result: JsonObject = {}
     for key, value in pairs:
         if key in result:
             raise _Refused(f"key {key!r} appears twice in one object")

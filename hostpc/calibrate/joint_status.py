@@ -14,18 +14,19 @@ journal. Per joint offset parameter `joint_offsets.q<j>`:
   unidentifiable direction held at nominal, e.g. J6 with the tool frame estimated).
 
 Only "data" joints are calibrated. `reason` says why a joint is not, `fix` what would make
-it identifiable (`--known tool`, a cell reference). Pure: reads a FitResult (or a saved
-fit with the same attributes), touches no file.
+it identifiable (`--known tool`, a cell reference). Pure: reads a fit (a FitResult or a
+saved fit: `hostpc.fitting.result.FitVerdict`), touches no file.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
+from hostpc.fitting.identifiability import NullDirection
+from hostpc.fitting.result import FitVerdict
 from hostpc.model.joint_offsets import PushTable
 
 PRIOR_DOMINATED_RATIO = 1.0 / math.sqrt(2.0)
@@ -59,7 +60,7 @@ def _frames_of(parameters: tuple[str, ...]) -> list[str]:
     return frames
 
 
-def _unidentifiable(direction: Any) -> tuple[str, str]:
+def _unidentifiable(direction: NullDirection | None) -> tuple[str, str]:
     """(reason, fix) of a joint offset held by an unidentifiable direction."""
     others = tuple(direction.parameters[1:]) if direction is not None else ()
     frames = _frames_of(others)
@@ -77,10 +78,10 @@ def _unidentifiable(direction: Any) -> tuple[str, str]:
             "more varied poses, or a reference measurement")
 
 
-def _prior_sigmas(result: Any) -> tuple[dict[str, float], set[str]]:
+def _prior_sigmas(result: FitVerdict) -> tuple[dict[str, float], set[str]]:
     """(prior sigma per parameter name, names held by --hold) of the fit's problem."""
-    problem: Any = getattr(result, "problem", None)
-    if getattr(problem, "dataset", None) is None or getattr(problem, "layout", None) is None:
+    problem = result.problem
+    if problem is None:
         return {}, set()  # a saved fit (offline push) carries no constraints
     from hostpc.fitting.priors import problem_constraints
 
@@ -92,12 +93,11 @@ def _prior_sigmas(result: Any) -> tuple[dict[str, float], set[str]]:
     return sigmas, held
 
 
-def joint_sources(result: Any, n_joints: int) -> tuple[JointSource, ...]:
+def joint_sources(result: FitVerdict, n_joints: int) -> tuple[JointSource, ...]:
     """Per joint (n_joints of the controller), where its fitted offset comes from (see the
-    module docstring). result: a FitResult (names, fixed, std, unidentifiable, problem)."""
+    module docstring)."""
     names = list(result.names)
-    labels = tuple(getattr(result.problem.context, "joint_labels", ()) or ())
-    table = PushTable.for_controller(n_joints, labels)
+    table = PushTable.for_controller(n_joints, result.joint_labels)
     held_by = {d.fixed: d for d in result.unidentifiable}
     prior_sigma, user_held = _prior_sigmas(result)
     out = []

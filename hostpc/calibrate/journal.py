@@ -24,36 +24,40 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar, overload
 
+from hostpc.calibrate.journal_events import JournalEvent, event_from_json
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
+from hostpc.json_object import JsonObject
 from hostpc.methods.base import SampleRecord
 
 RUN_FORMAT = "zerocal-run/1"
 RUN_FILE = "run.json"
 JOURNAL_FILE = "journal.jsonl"
 
+EventT = TypeVar("EventT", bound=JournalEvent)
 
-def _t_holders(sample: Mapping[str, Any] | None) -> list[Mapping[str, Any]]:
+
+def _t_holders(sample: JsonObject | None) -> list[JsonObject]:
     """The sample itself and, for a dual_loop pose record, its `observations`."""
     if not sample:
         return []
     nested = sample.get("observations") or ()
-    return [sample, *(item for item in nested if isinstance(item, Mapping))]
+    return [sample, *(item for item in nested if isinstance(item, dict))]
 
 
-def sample_times(sample: Mapping[str, Any] | None) -> list[float]:
+def sample_times(sample: JsonObject | None) -> list[float]:
     """The `t` values (s) of one journaled sample (dual_loop: of its observations)."""
     return [float(item["t"]) for item in _t_holders(sample)
             if isinstance(item.get("t"), int | float)]
 
 
-def shift_sample_t(sample: Mapping[str, Any], dt: float) -> dict[str, Any]:
-    """A copy of a journaled sample with every `t` moved by dt (s)."""
-    def moved(item: Mapping[str, Any]) -> dict[str, Any]:
+def shift_sample_t(sample: JsonObject, dt: float) -> JsonObject:
+    """A copy of a journaled sample (its JSON form) with every `t` moved by dt (s)."""
+    def moved(item: JsonObject) -> JsonObject:
         out = dict(item)
         if isinstance(out.get("t"), int | float):
             out["t"] = float(out["t"]) + dt
@@ -61,7 +65,7 @@ def shift_sample_t(sample: Mapping[str, Any], dt: float) -> dict[str, Any]:
 
     out = moved(sample)
     if isinstance(sample.get("observations"), list):
-        out["observations"] = [moved(item) if isinstance(item, Mapping) else item
+        out["observations"] = [moved(item) if isinstance(item, dict) else item
                                for item in sample["observations"]]
     return out
 
@@ -81,7 +85,7 @@ def _numbers(value: Any) -> bool:
         isinstance(v, int | float) and not isinstance(v, bool) for v in value)
 
 
-def _event_problem(obj: Mapping[str, Any]) -> str:
+def _event_problem(obj: JsonObject) -> str:
     """Why a journaled event cannot be used ("" if it can): the events resume reads must
     carry their offsets as lists of numbers (and a verify round its integer indices)."""
     kind = obj.get("event")
@@ -105,7 +109,9 @@ class Journal:
         self.run_path = self.run_dir / RUN_FILE
         self.journal_path = self.run_dir / JOURNAL_FILE
         self._samples: dict[tuple[str, int], SampleRecord] = {}
-        self._events: list[dict[str, Any]] = []
+        # per non-sample line: its typed event (None: a kind this version does not write)
+        # and the line as written (outcome.py replays those)
+        self._events: list[tuple[JournalEvent | None, JsonObject]] = []
         self._loaded = False
 
     # ------------------------------------------------------------------ header
@@ -115,7 +121,7 @@ class Journal:
         """True if the folder holds a run header."""
         return self.run_path.is_file()
 
-    def read_header(self) -> dict[str, Any]:
+    def read_header(self) -> JsonObject:
         """The run header; InputError naming the folder if it is missing or broken."""
         try:
             data = json.loads(self.run_path.read_text(encoding="utf-8"))
@@ -128,13 +134,13 @@ class Journal:
             raise InputError(f"{self.run_path}: not a {RUN_FORMAT} header")
         return data
 
-    def write_header(self, header: Mapping[str, Any]) -> None:
+    def write_header(self, header: JsonObject) -> None:
         """Write (or rewrite) the run header atomically."""
         write_json_atomic(self.run_path, {"format": RUN_FORMAT, **header})
 
     # ------------------------------------------------------------------ records
 
-    def _lines(self) -> Iterator[tuple[int, int, bool, dict[str, Any] | None]]:
+    def _lines(self) -> Iterator[tuple[int, int, bool, JsonObject | None]]:
         """(line number, byte offset where the line starts, is last line, parsed object or
         None if unreadable) per line."""
         try:
@@ -179,17 +185,21 @@ class Journal:
                     self._samples[key] = record  # a skipped pose measured again later
             else:
                 problem = _event_problem(obj)
+                try:
+                    event = None if problem else event_from_json(obj)
+                except (KeyError, TypeError, ValueError) as exc:
+                    problem = f"{obj['event']} event: {exc!r}"
                 if problem:
                     raise InputError(f"{self.journal_path}: line {number}: {problem}; "
                                      "repair or remove it to resume")
-                self._events.append(obj)
+                self._events.append((event, obj))
         self._loaded = True
 
     def _ensure_loaded(self) -> None:
         if not self._loaded:
             self.load()
 
-    def _append(self, obj: Mapping[str, Any]) -> None:
+    def _append(self, obj: JsonObject) -> None:
         self.run_dir.mkdir(parents=True, exist_ok=True)
         line = json.dumps(obj, allow_nan=False, separators=(",", ":")) + "\n"
         with open(self.journal_path, "a", encoding="utf-8") as handle:
@@ -209,12 +219,20 @@ class Journal:
         self._samples[key] = record
         return True
 
+    def append(self, event: JournalEvent) -> None:
+        """Append another event (journal_events.py: `Pushed`, `Note`, ...)."""
+        self._add(event, {"event": event.kind, **event.to_json()})
+
     def event(self, kind: str, **fields: Any) -> None:
-        """Append another event (`push`, `note`, ...)."""
+        """Append an event line given as its JSON fields (the line codec: an older
+        journal's line, a test's input); the run appends typed events (`append`)."""
+        line = {"event": kind, **fields}
+        self._add(event_from_json(line), line)
+
+    def _add(self, event: JournalEvent | None, line: JsonObject) -> None:
         self._ensure_loaded()
-        obj = {"event": kind, **fields}
-        self._append(obj)
-        self._events.append(obj)
+        self._append(line)
+        self._events.append((event, line))
 
     def get(self, phase: str, index: int) -> SampleRecord | None:
         """The record of pose (phase, index), or None."""
@@ -232,33 +250,56 @@ class Journal:
         return sorted((r for (p, _), r in self._samples.items() if p == phase),
                       key=lambda r: r.index)
 
-    def events(self, kind: str) -> list[dict[str, Any]]:
-        """The non-sample events of one kind, in order."""
-        self._ensure_loaded()
-        return [e for e in self._events if e.get("event") == kind]
+    @overload
+    def events(self, kind: type[EventT]) -> list[EventT]: ...
+    @overload
+    def events(self, kind: str) -> list[JsonObject]: ...
 
-    def timeline(self, *kinds: str) -> list[dict[str, Any]]:
-        """The non-sample events whose kind is one of `kinds`, in journal order (what
-        happened to the controller: push, verify, rollback, ... for outcome.py)."""
+    def events(self, kind: type[EventT] | str) -> list[EventT] | list[JsonObject]:
+        """The non-sample events of one type, in order (of one kind name: their lines as
+        written)."""
         self._ensure_loaded()
-        return [e for e in self._events if e.get("event") in kinds]
+        if isinstance(kind, str):
+            return self.timeline(kind)
+        return [e for e, _ in self._events if isinstance(e, kind)]
 
-    def last_event(self, *kinds: str) -> dict[str, Any] | None:
-        """The last non-sample event whose kind is one of `kinds` (None if there is none):
-        e.g. `last_event("push_intent", "push")` tells an intent whose result is missing."""
+    def last(self, kind: type[EventT]) -> EventT | None:
+        """The last event of one kind (None if there is none)."""
+        found = self.events(kind)
+        return found[-1] if found else None
+
+    def timeline(self, *kinds: str) -> list[JsonObject]:
+        """The lines of the non-sample events whose kind is one of `kinds`, as written, in
+        journal order (what happened to the controller: push, verify, rollback, ...; read
+        by outcome.py's replay)."""
         self._ensure_loaded()
-        for event in reversed(self._events):
-            if event.get("event") in kinds:
+        return [line for _, line in self._events if line.get("event") in kinds]
+
+    @overload
+    def last_event(self, *kinds: type[JournalEvent]) -> JournalEvent | None: ...
+    @overload
+    def last_event(self, *kinds: str) -> JsonObject | None: ...
+
+    def last_event(self, *kinds: type[JournalEvent] | str) -> JournalEvent | JsonObject | None:
+        """The last non-sample event of one of the types `kinds` (None if there is none):
+        e.g. `last_event(PushIntent, Pushed)` tells an intent whose result is missing.
+        Given kind names: the last such line as written."""
+        self._ensure_loaded()
+        types = tuple(k for k in kinds if not isinstance(k, str))
+        for event, line in reversed(self._events):
+            if types and isinstance(event, types):
                 return event
+            if line.get("event") in kinds:
+                return line
         return None
 
-    def last_position(self, *kinds: str) -> int:
+    def last_position(self, *kinds: type[JournalEvent]) -> int:
         """The position (among the non-sample events, in journal order) of the last event
         whose kind is one of `kinds`; -1 if there is none. Tells which of two events came
         later, e.g. a `verify_start` before or after the last `push`."""
         self._ensure_loaded()
         for position in range(len(self._events) - 1, -1, -1):
-            if self._events[position].get("event") in kinds:
+            if isinstance(self._events[position][0], kinds):
                 return position
         return -1
 

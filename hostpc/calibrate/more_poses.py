@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.journal_events import MorePoses
 from hostpc.calibrate.push import adequacy_chi2
 from hostpc.diagnostics.adequacy import chi2_dof_upper
 from hostpc.fitting import FitResult
@@ -31,9 +32,9 @@ def more_poses_reason(journal: Journal, plan: Plan, result: FitResult,
     fails never grows after a push (its push is refused by the model check instead)."""
     if plan.more.shape[0] == 0:
         return None
-    asked = journal.last_event("more_poses")
+    asked = journal.last(MorePoses)
     if asked is not None:
-        return str(asked.get("reason", "asked before"))
+        return asked.reason
     if pushed:
         return None
     upper = chi2_dof_upper(result.dof)
@@ -43,7 +44,7 @@ def more_poses_reason(journal: Journal, plan: Plan, result: FitResult,
     what = " with the camera calibration's covariance" if shared else ""
     reason = (f"the model does not explain the {plan.q.shape[0]} poses (chi2/dof{what} "
               f"{chi2_dof:.3g} above its band {upper:.3g})")
-    journal.event("more_poses", reason=reason, n=int(plan.more.shape[0]))
+    journal.append(MorePoses(reason=reason, n=int(plan.more.shape[0])))
     return reason
 
 

@@ -7,7 +7,8 @@ exceeds the limit, unless forced), `execute_push` records the intent durably in 
 folder before writing the controller, and `hostpc rollback --run DIR` undoes it.
 
 :class:`SavedFit` is the part of a :class:`~hostpc.fitting.FitResult` that `plan_push`
-reads, rebuilt from the fit's JSON document; nothing else of the fit is needed.
+reads (both are a :class:`~hostpc.fitting.result.FitVerdict`), rebuilt from the fit's
+JSON document; nothing else of the fit is needed.
 """
 
 from __future__ import annotations
@@ -15,10 +16,8 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -27,10 +26,12 @@ from hostpc.calibrate.fit_file import REMEDY, parse_fit_text, validate_fit_docum
 from hostpc.errors import InputError
 from hostpc.fitting.identifiability import NullDirection
 from hostpc.input_files import FIT, read_input_bytes, read_input_text
+from hostpc.json_object import JsonObject
 from hostpc.model.joint_offsets import is_offset
 from hostpc.model.joint_offsets import labels as offset_labels
 
-__all__ = ["SavedFit", "already_pushed", "ledger_path", "load_saved_fit", "record_push"]
+__all__ = ["LedgerEntry", "SavedFit", "already_pushed", "ledger_path", "load_saved_fit",
+           "record_push"]
 
 
 @dataclass(frozen=True)
@@ -64,11 +65,15 @@ class SavedFit:
         return self.chi2 / self.dof if self.dof > 0 else math.nan
 
     @property
-    def problem(self) -> Any:
-        """What plan_push reads of the problem: the joint labels (q1..qn, or a kinematic
-        tree's head.q1, ...), from the names of the fit's joint offsets."""
-        labels = tuple(offset_labels(self.names))
-        return SimpleNamespace(context=SimpleNamespace(joint_labels=labels))
+    def joint_labels(self) -> tuple[str, ...]:
+        """The joints' names (q1..qn, or a kinematic tree's head.q1, ...), from the names
+        of the fit's joint offsets."""
+        return tuple(offset_labels(self.names))
+
+    @property
+    def problem(self) -> None:
+        """A saved fit carries no problem (no priors, holds or dataset): see FitVerdict."""
+        return None
 
     def joint_offsets(self) -> list[str]:
         """The joint-offset parameters of the fit, in order."""
@@ -124,7 +129,37 @@ def ledger_path(fit_path: str | Path) -> Path:
     return fit_path.with_name(fit_path.name + LEDGER_SUFFIX)
 
 
-def _ledger_entries(fit_path: str | Path) -> list[dict[str, Any]]:
+@dataclass(frozen=True)
+class LedgerEntry:
+    """One offline push of a fit: the controller, the push's run folder, when (ISO 8601
+    UTC), the offsets (n,) rad before and after. A field an older line lacks is None."""
+
+    controller: str | None
+    run_dir: str | None
+    time: str | None
+    before: tuple[float, ...]
+    after: tuple[float, ...]
+
+    def to_json(self) -> JsonObject:
+        """One ledger line."""
+        return {"controller": self.controller, "run_dir": self.run_dir, "time": self.time,
+                "before": list(self.before), "after": list(self.after)}
+
+    @classmethod
+    def from_json(cls, data: JsonObject) -> LedgerEntry:
+        """A ledger line read back (`after` checked by the reader)."""
+        def text(key: str) -> str | None:
+            value = data.get(key)
+            return None if value is None else str(value)
+
+        before = data.get("before")
+        return cls(text("controller"), text("run_dir"), text("time"),
+                   tuple(float(v) for v in before)
+                   if isinstance(before, list) and _offsets_list(before) else (),
+                   tuple(float(v) for v in data["after"]))
+
+
+def _ledger_entries(fit_path: str | Path) -> list[LedgerEntry]:
     path = ledger_path(fit_path)
     if not os.path.lexists(path):
         return []
@@ -134,8 +169,8 @@ def _ledger_entries(fit_path: str | Path) -> list[dict[str, Any]]:
             entry = json.loads(line)
         except (ValueError, RecursionError):
             continue  # a line cut by a crash: the others still count
-        if isinstance(entry, Mapping) and _offsets_list(entry.get("after")):
-            entries.append(dict(entry))
+        if isinstance(entry, dict) and _offsets_list(entry.get("after")):
+            entries.append(LedgerEntry.from_json(entry))
     return entries
 
 
@@ -146,24 +181,24 @@ def _offsets_list(value: Any) -> bool:
         for v in value)
 
 
-def already_pushed(fit_path: str | Path, offsets: np.ndarray) -> dict[str, Any] | None:
+def already_pushed(fit_path: str | Path, offsets: np.ndarray) -> LedgerEntry | None:
     """The ledger entry whose offsets after the push equal ``offsets`` (rad), if any: the
     controller already carries this fit's corrections, so pushing again would double them."""
     offsets = np.asarray(offsets, float)
     for entry in _ledger_entries(fit_path):
-        after = np.asarray(entry["after"], float)
+        after = np.asarray(entry.after, float)
         if after.shape == offsets.shape and np.all(np.abs(after - offsets) <= SAME_OFFSETS_RAD):
             return entry
     return None
 
 
-def record_push(fit_path: str | Path, entry: Mapping[str, Any]) -> None:
+def record_push(fit_path: str | Path, entry: LedgerEntry) -> None:
     """Append one push (controller, before, after, run_dir, time) to the fit's ledger;
     written before the controller is, so a push cut half-way is still recorded."""
     path = ledger_path(fit_path)
     try:
         with path.open("a", encoding="utf-8") as handle:
-            handle.write(json.dumps(dict(entry)) + "\n")
+            handle.write(json.dumps(entry.to_json()) + "\n")
             handle.flush()
     except OSError as exc:
         raise InputError(f"{path}: cannot write the push ledger ({exc.strerror or exc}); "

@@ -29,6 +29,7 @@ its verification did not fail; a hold or prior value never is (joint_status.py).
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -43,6 +44,7 @@ from hostpc.calibrate.summary import (
     EXIT_PUSH_REFUSED,
     EXIT_VERIFY_FAILED,
 )
+from hostpc.json_object import JsonObject
 
 VERDICTS = ("PASS", "FAIL", "REFUSED", "NOT_PUSHED", "NOT_VERIFIED", "ROLLED_BACK",
             "JOINTS_MISSING", "ERROR")
@@ -79,7 +81,7 @@ class JointOutcome:
         """Calibrated from data and, if pushed, verified (station register 14)."""
         return self.status == "calibrated" and (not self.pushed or self.verified is True)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {"joint": self.joint, "label": self.label, "status": self.status,
                 "source": self.source, "pushed": self.pushed, "verified": self.verified,
                 "reason": self.reason, "fix": self.fix}
@@ -94,7 +96,7 @@ class OutcomeEvent:
     event: str
     details: tuple[tuple[str, Any], ...] = ()
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {"at": self.at, "event": self.event, **dict(self.details)}
 
 
@@ -122,7 +124,7 @@ class RobotOutcome:
     def exit_code(self) -> int:
         return EXIT_CODES[self.verdict]
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {"verdict": self.verdict, "controller": self.controller, "pushed": self.pushed,
                 "verified": self.verified, "rolled_back_at": self.rolled_back_at,
                 "joints": [j.to_dict() for j in self.joints],
@@ -155,7 +157,7 @@ def parse_required_joints(text: str | None, n_joints: int | None = None) -> tupl
     return tuple(sorted(joints))
 
 
-def sources_from_outcome(block: Mapping[str, Any]) -> tuple[JointSource, ...]:
+def sources_from_outcome(block: JsonObject) -> tuple[JointSource, ...]:
     """The fit's per-joint sources as a stored outcome block holds them (for a rollback or
     a later view to derive the outcome again without the fit)."""
     return tuple(JointSource(int(row["joint"]), str(row.get("label", f"q{row['joint']}")),
@@ -190,7 +192,7 @@ def _span(run: list[int]) -> str:
         f"J{run[0]}, J{run[1]}" if len(run) == 2 else f"J{run[0]}-J{run[-1]}")
 
 
-def derive_outcome(events: Sequence[Mapping[str, Any]], sources: Sequence[JointSource], *,
+def derive_outcome(events: Sequence[JsonObject], sources: Sequence[JointSource], *,
                    run_dir: str, finished: bool, required: Sequence[int] = (),
                    new_run: str = "--robot ROBOT", known: Sequence[str] = ()) -> RobotOutcome:
     """The outcome from the journal's events (`Journal.timeline(*JOURNAL_KINDS)`, in
@@ -251,7 +253,7 @@ class _Replay:
     events: list[OutcomeEvent] = field(default_factory=list)
 
 
-def _replay(events: Sequence[Mapping[str, Any]]) -> _Replay:
+def _replay(events: Sequence[JsonObject]) -> _Replay:
     """Walk the journal's events in order: the last push, whether it was verified or
     rolled back since, a refusal after it."""
     state = _Replay()
@@ -359,8 +361,7 @@ def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[
         next_command = f"hostpc calibrate --resume {run}"
     if intent_open and verdict == "ERROR":
         next_command = f"hostpc calibrate --resume {run}"
-    return RobotOutcome(**{**_fields(outcome), "headline": head,
-                           "next_command": next_command})
+    return dataclasses.replace(outcome, headline=head, next_command=next_command)
 
 
 def _legacy_refusal_command(reason: str, run: str) -> str:
@@ -380,10 +381,6 @@ def _model_check_failed(events: Sequence[OutcomeEvent]) -> bool:
     """True if the last check of the fitted model on fresh poses (nothing pushed) failed."""
     checks = [dict(e.details) for e in events if e.event == "model_check"]
     return bool(checks) and checks[-1].get("verdict") == "FAIL"
-
-
-def _fields(outcome: RobotOutcome) -> dict[str, Any]:
-    return {name: getattr(outcome, name) for name in outcome.__dataclass_fields__}
 
 
 def _not_calibrated_text(joints: Sequence[JointOutcome], bad: Sequence[JointOutcome]) -> str:

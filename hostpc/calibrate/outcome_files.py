@@ -17,6 +17,7 @@ from pathlib import Path
 
 from hostpc.calibrate.joint_status import JointSource
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.journal_events import RunFinished
 from hostpc.calibrate.outcome import (
     JOURNAL_KINDS,
     RobotOutcome,
@@ -64,7 +65,7 @@ def rewrite_outcome(run_dir: Path) -> RobotOutcome | None:
     outcome = run_outcome(journal, sources_from_outcome(document["outcome"]), run_dir=run_dir,
                           header=header, require_joints=header.settings.require_joints,
                           swapped=tuple(int(j) for j in stored.settings.get("swapped", ())),
-                          finished=journal.last_event("result") is not None,
+                          finished=journal.last(RunFinished) is not None,
                           known=stored.known)
     run = dataclasses.replace(stored, outcome=outcome.to_dict(), exit_code=outcome.exit_code)
     if outcome.verdict == "ROLLED_BACK":

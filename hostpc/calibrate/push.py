@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import datetime as _dt
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -39,11 +38,14 @@ import numpy as np
 
 from hostpc.calibrate.joint_status import joint_sources
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.journal_events import Pushed, PushIntent, PushRecord
 from hostpc.calibrate.refusals import PushRefusal, resume_with
+from hostpc.calibrate.run_result import OffsetRow
 from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN, chi2_dof_upper
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
-from hostpc.fitting import FitResult
+from hostpc.fitting.result import FitVerdict
+from hostpc.json_object import JsonObject
 from hostpc.model.joint_offsets import PushTable
 from hostpc.robots.base import RobotAdapter
 
@@ -95,26 +97,26 @@ class PushPlan:
         return [joint_display_name(j, self.labels[j] if j < len(self.labels) else "")
                 for j in range(self.old.size)]
 
-    def joints(self) -> list[dict[str, Any]]:
-        """Per joint, JSON-ready, in degrees (for the result document and the summary)."""
+    def joints(self) -> tuple[OffsetRow, ...]:
+        """Per joint, in degrees (for the result document and the summary)."""
         rows = []
         for j in range(self.old.size):
             fitted = float(self.fitted[j]) if self.fitted.size else float(self.delta[j])
-            rows.append({
-                "joint": j + 1,
-                "label": self.labels[j] if j < len(self.labels) else f"q{j + 1}",
-                "old_deg": math.degrees(float(self.old[j])),
-                "correction_deg": math.degrees(fitted) if np.isfinite(self.sigma[j]) else None,
-                "sigma_deg": (math.degrees(float(self.sigma[j]))
-                              if np.isfinite(self.sigma[j]) else None),
-                "new_deg": math.degrees(float(self.new[j])),
-                "pushed": bool(self.pushed[j]),
-                "note": self.notes[j],
-            })
-        return rows
+            rows.append(OffsetRow(
+                joint=j + 1,
+                label=self.labels[j] if j < len(self.labels) else f"q{j + 1}",
+                old_deg=math.degrees(float(self.old[j])),
+                correction_deg=math.degrees(fitted) if np.isfinite(self.sigma[j]) else None,
+                sigma_deg=(math.degrees(float(self.sigma[j]))
+                           if np.isfinite(self.sigma[j]) else None),
+                new_deg=math.degrees(float(self.new[j])),
+                pushed=bool(self.pushed[j]),
+                note=self.notes[j],
+            ))
+        return tuple(rows)
 
 
-def plan_push(result: FitResult, old_offsets: np.ndarray,
+def plan_push(result: FitVerdict, old_offsets: np.ndarray,
               max_correction_deg: float = DEFAULT_MAX_CORRECTION_DEG, force: bool = False,
               dataset_file: str = "DIR/dataset.json",
               limits_deg: np.ndarray | None = None) -> PushPlan:
@@ -132,7 +134,7 @@ def plan_push(result: FitResult, old_offsets: np.ndarray,
     pushed = np.zeros(n, dtype=bool)
     notes = []
     held = {d.fixed: d for d in result.unidentifiable}
-    table = PushTable.for_controller(n, result.problem.context.joint_labels)
+    table = PushTable.for_controller(n, result.joint_labels)
     sources = joint_sources(result, n)  # a held or prior-dominated joint is never pushed
     for j, name in enumerate(table.names):
         if name not in names:
@@ -167,22 +169,21 @@ def plan_push(result: FitResult, old_offsets: np.ndarray,
                     chi2_dof_tested=chi2_dof if shared else None, refusal=refusal)
 
 
-def adequacy_chi2(result: FitResult) -> tuple[float, bool]:
+def adequacy_chi2(result: FitVerdict) -> tuple[float, bool]:
     """(chi2/dof the guard tests, True if it includes the dataset's shared error).
 
     With a `rig_uncertainty` block in the fit's dataset: the chi2 with the shared error's
-    covariance inside (`FitResult.chi2_dof_with_calibration`; a saved fit,
-    `offline_push.SavedFit`, carries it under the same name); else the fit's plain
-    chi2/dof."""
+    covariance inside (`FitVerdict.chi2_dof_with_calibration`: a live fit computes it, a
+    saved fit carries it); else the fit's plain chi2/dof."""
     if not result.converged:
         return result.chi2_dof, False
-    full = getattr(result, "chi2_dof_with_calibration", None)
+    full = result.chi2_dof_with_calibration
     if full is not None:
         return float(full), True
     return result.chi2_dof, False
 
 
-def _refusal(result: FitResult, delta: np.ndarray, pushed: np.ndarray,
+def _refusal(result: FitVerdict, delta: np.ndarray, pushed: np.ndarray,
              labels: tuple[str, ...], max_correction_deg: float, limits: np.ndarray,
              dataset_file: str, chi2_dof: float, shared: bool) -> PushRefusal | None:
     """Why the guard rails refuse the push (first reason that applies), or None.
@@ -224,29 +225,6 @@ def _refusal(result: FitResult, delta: np.ndarray, pushed: np.ndarray,
     return None
 
 
-@dataclass(frozen=True)
-class PushRecord:
-    """What was written: previous and new offsets (n,) rad, the controller's rollback id
-    (None for a push recovered from its intent: the id was never received), which joints
-    changed, and when (ISO 8601, UTC)."""
-
-    previous: np.ndarray
-    new: np.ndarray
-    rollback_id: str | None
-    pushed: tuple[bool, ...]
-    time: str = ""
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON form (radians): the journal's `push` event and push.json."""
-        return {
-            "rollback_id": self.rollback_id,
-            "previous_offsets": self.previous.tolist(),
-            "new_offsets": self.new.tolist(),
-            "pushed": list(self.pushed),
-            "time": self.time,
-        }
-
-
 def _now() -> str:
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
 
@@ -267,16 +245,14 @@ async def execute_push(robot: RobotAdapter, plan: PushPlan, run_dir: Path, addre
     write_json_atomic(run_dir / PUSH_FILE,
                       {"controller": address, "status": "intent", **intent.to_dict()})
     if journal is not None:
-        fields = intent.to_dict()
-        del fields["rollback_id"]
-        journal.event("push_intent", **fields)
+        journal.append(PushIntent(intent))
     previous, rollback_id = await robot.set_offsets(plan.new)
     record = PushRecord(previous=np.asarray(previous, float), new=plan.new.copy(),
                         rollback_id=str(rollback_id), pushed=pushed, time=_now())
     write_json_atomic(run_dir / PUSH_FILE,
                       {"controller": address, "status": "pushed", **record.to_dict()})
     if journal is not None:
-        journal.event("push", **record.to_dict())
+        journal.append(Pushed(record))
     return record
 
 
@@ -287,18 +263,18 @@ def same_offsets(a: Any, b: Any) -> bool:
     return a.shape == b.shape and bool(np.allclose(a, b, rtol=0.0, atol=OFFSET_MATCH_TOLERANCE))
 
 
-def intent_outcome(intent: Mapping[str, Any], offsets_now: np.ndarray) -> str | None:
+def intent_outcome(intent: PushRecord, offsets_now: np.ndarray) -> str | None:
     """Did a push whose result was never recorded reach the controller? From the offsets
     the controller reports now (n,) rad: "pushed" (they are the intended new ones),
     "not_pushed" (still the previous ones) or None (neither: changed by someone else)."""
-    if same_offsets(offsets_now, intent["new_offsets"]):
+    if same_offsets(offsets_now, intent.new):
         return "pushed"
-    if same_offsets(offsets_now, intent["previous_offsets"]):
+    if same_offsets(offsets_now, intent.previous):
         return "not_pushed"
     return None
 
 
-def read_push_file(run_dir: str | Path) -> dict[str, Any]:
+def read_push_file(run_dir: str | Path) -> JsonObject:
     """The push record of a run folder (status "pushed" with a rollback id, or "intent":
     written before the controller was, result unknown); InputError if the run pushed
     nothing."""
@@ -320,9 +296,8 @@ def read_push_file(run_dir: str | Path) -> dict[str, Any]:
     return data
 
 
-async def rollback_run(robot: RobotAdapter, record: Mapping[str, Any]
-                       ) -> tuple[np.ndarray, str]:
-    """Undo the push recorded in a run's push.json (`read_push_file`).
+async def rollback_run(robot: RobotAdapter, record: PushRecord) -> tuple[np.ndarray, str]:
+    """Undo the push recorded in a run's push.json (`read_push_file`, as a PushRecord).
 
     With a rollback id: `rollback` (falling back to writing the previous offsets). Without
     one (the run stopped between writing its intent and recording the result, or the push
@@ -330,9 +305,9 @@ async def rollback_run(robot: RobotAdapter, record: Mapping[str, Any]
     the previous ones are written ("previous_offsets_written"); still the previous ones ->
     nothing to do ("not_pushed"). Anything else is an InputError (someone else changed
     them). Returns (offsets now (n,) rad, how)."""
-    previous = np.asarray(record["previous_offsets"], float)
-    if record.get("rollback_id") is not None:
-        return await rollback(robot, str(record["rollback_id"]), previous)
+    previous = record.previous
+    if record.rollback_id is not None:
+        return await rollback(robot, record.rollback_id, previous)
     now = np.asarray(await robot.get_offsets(), float)
     outcome = intent_outcome(record, now)
     if outcome == "not_pushed":

@@ -40,6 +40,8 @@ import numpy as np
 
 from hostpc.dataset import Dataset, FramePose, SphereFrame
 from hostpc.errors import InputError
+from hostpc.fitting import FitResult
+from hostpc.json_object import JsonObject
 from hostpc.kinematics.rotations import matrix_to_rotvec, rotvec_to_matrix
 
 REFERENCE_FORMAT = "zerocal-cell-reference/1"
@@ -86,7 +88,7 @@ class ReferenceFrame:
         vector of the rotation)."""
         return _absolute(self.parameters, self.nominal, self.delta)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {"parameters": list(self.parameters), "nominal": self.nominal.tolist(),
                 "delta": self.delta.tolist(), "covariance": self.covariance.tolist(),
                 "value": self.absolute().tolist()}
@@ -102,9 +104,9 @@ class CellReference:
     recorded: str
     software: str
     frames: tuple[ReferenceFrame, ...]
-    cell: Mapping[str, Any] = field(default_factory=dict)
+    cell: JsonObject = field(default_factory=dict)  # the run's cell, `Cell.to_dict()`
     source_run: str = ""
-    rig: Mapping[str, Any] | None = None
+    rig: JsonObject | None = None
     """The stereo rig the camera frame was measured with (the dataset's
     rig_uncertainty.rig document), or None."""
 
@@ -123,7 +125,7 @@ class CellReference:
         """The recording date (YYYY-MM-DD) for messages."""
         return self.recorded[:10]
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {"format": REFERENCE_FORMAT, "recorded": self.recorded,
                 "software": self.software,
                 "robot": {"model": self.robot_model, "serial": self.robot_serial},
@@ -134,7 +136,7 @@ class CellReference:
                 **({"rig": dict(self.rig)} if self.rig is not None else {})}
 
 
-def _digest(document: Mapping[str, Any]) -> str:
+def _digest(document: JsonObject) -> str:
     import hashlib
 
     return hashlib.sha256(json.dumps(document, sort_keys=True).encode()).hexdigest()
@@ -210,7 +212,7 @@ def _rpy_matrix(rpy: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------ record
 
 
-def reference_from_fit(result: Any, *, robot_serial: str, cell: Mapping[str, Any],
+def reference_from_fit(result: FitResult, *, robot_serial: str, cell: JsonObject,
                        source_run: str, software: str,
                        recorded: str | None = None) -> CellReference:
     """The reference of a fit: every frame it estimated, with its delta and covariance
@@ -246,7 +248,7 @@ def reference_from_fit(result: Any, *, robot_serial: str, cell: Mapping[str, Any
 # ------------------------------------------------------------------ load
 
 
-def _field(data: Mapping[str, Any], key: str, kind: type, where: str) -> Any:
+def _field(data: JsonObject, key: str, kind: type, where: str) -> Any:
     value = data.get(key)
     if not isinstance(value, kind):
         raise InputError(f"{where}: {key!r} missing or not a {kind.__name__}")
@@ -357,7 +359,7 @@ class FramePrior:
     value: np.ndarray
     covariance: np.ndarray
 
-    def block(self) -> dict[str, Any]:
+    def block(self) -> JsonObject:
         """The dataset's `prior_blocks` entry (hostpc.fitting.priors)."""
         return {"names": list(self.names), "value": self.value.tolist(),
                 "covariance": self.covariance.tolist(), "reference_frame": self.frame}

@@ -34,6 +34,7 @@ import numpy as np
 from hostpc.calibrate.reference import FramePrior
 from hostpc.diagnostics.adequacy import chi2_dof_upper, chi2_p_value
 from hostpc.fitting import FitResult, fit
+from hostpc.json_object import JsonObject
 
 DEFAULT_ALPHA = 0.01
 """False-alarm rate of the whole reference check (all frames together)."""
@@ -70,7 +71,7 @@ class FrameCheck:
             parts.append(f"{self.rotation_deg:.3f} deg")
         return " and ".join(parts) or "an unknown amount"
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {"frame": self.frame, "distance2": _finite(self.distance2), "dof": self.dof,
                 "threshold": _finite(self.threshold), "p_value": _finite(self.p_value),
                 "moved": self.moved, "translation_mm": self.translation_mm,
@@ -92,7 +93,7 @@ class ReferenceCheck:
     def cause(self) -> FrameCheck | None:
         return next((f for f in self.frames if f.frame == self.likely_cause), None)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {"alpha": self.alpha, "moved": self.moved, "likely_cause": self.likely_cause,
                 "frames": [f.to_dict() for f in self.frames]}
 

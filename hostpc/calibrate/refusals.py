@@ -4,11 +4,10 @@ push as one structured value (`PushRefusal`), the journal's `push_refused` event
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 from hostpc.errors import ControllerError
+from hostpc.json_object import JsonObject
 from hostpc.methods.base import SampleRecord
 
 MAX_POSE_ATTEMPTS = 3
@@ -65,13 +64,13 @@ class PushRefusal:
         """The next command, copy-pasteable, for the run folder `run_dir`."""
         return " ".join(["hostpc", *(str(run_dir) if w == RUN else w for w in self.next)])
 
-    def to_event(self) -> dict[str, Any]:
+    def to_event(self) -> JsonObject:
         """The `push_refused` event's fields (the journal adds its name)."""
         return {"reason": self.reason, "rule": self.rule, "joint": self.joint,
                 "limit_deg": self.limit_deg, "declare": self.declare, "next": list(self.next)}
 
     @classmethod
-    def from_event(cls, event: Mapping[str, Any]) -> PushRefusal | None:
+    def from_event(cls, event: JsonObject) -> PushRefusal | None:
         """The refusal of a `push_refused` event; None for a journal written before the
         event had its ``rule`` and ``next`` (the outcome then reads its text)."""
         words = event.get("next")

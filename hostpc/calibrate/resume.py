@@ -13,14 +13,24 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from hostpc.calibrate.journal import Journal, sample_times, shift_sample_t
-from hostpc.calibrate.push import PUSH_FILE, PushRecord, intent_outcome, same_offsets
+from hostpc.calibrate.journal_events import (
+    Note,
+    Pushed,
+    PushIntent,
+    Rollback,
+    RunFinished,
+    Verified,
+    VerifyStart,
+)
+from hostpc.calibrate.push import PUSH_FILE, intent_outcome, same_offsets
 from hostpc.calibrate.refusals import stopped
 from hostpc.calibrate.run_result import RunResult
 from hostpc.errors import ControllerError, InputError
@@ -36,7 +46,48 @@ measured dataset, then pushes and verifies)."""
 CLOCK_TOLERANCE_S = 1e-6
 
 
-def resume_settings(settings: RunSettings, overrides: Mapping[str, Any], journal: Journal,
+@dataclass(frozen=True)
+class ResumeOverrides:
+    """What a resume's command line gives (None: not given): the ``RESUME_OVERRIDABLE``
+    settings, and the model's known frames and cell reference (read by the runner)."""
+
+    push: bool | None = None
+    force: bool | None = None
+    max_correction_deg: float | None = None
+    verify_factor: float | None = None
+    verify_alpha: float | None = None
+    verify_tolerance_mm: float | None = None
+    effects: str | None = None
+    plugins: tuple[str, ...] | None = None
+    require_joints: str | None = None
+    swapped: tuple[int, ...] | None = None
+    swap_limit_deg: float | None = None
+    known: str | None = None
+    reference: str | None = None
+    separate: tuple[str, str] | None = None  # --separate A,B (hostpc.calibrate.separate)
+
+    def items(self) -> list[tuple[str, Any]]:
+        """(name, value) of every option, in order."""
+        return [(f.name, getattr(self, f.name)) for f in dataclasses.fields(self)]
+
+    @property
+    def asked(self) -> bool:
+        """True if the resume asks for anything beyond finishing the run (an option that
+        acts after the measurements: push, force, limits, verification, model)."""
+        return any(value not in (None, False, [], ()) for _, value in self.items())
+
+    @property
+    def push_asked(self) -> bool:
+        """True if the resume asks for the push (--push or --force)."""
+        return self.push is True or self.force is True
+
+    @property
+    def remodel(self) -> bool:
+        """True if the resume changes the model (effects, plugins, known frames, reference)."""
+        return any((self.effects, self.plugins, self.known, self.reference))
+
+
+def resume_settings(settings: RunSettings, overrides: ResumeOverrides, journal: Journal,
                     progress: Progress) -> RunSettings:
     """The run's settings with this resume's `overrides` applied (only the
     ``RESUME_OVERRIDABLE`` ones that are given and differ); a change is journaled, and
@@ -48,7 +99,7 @@ def resume_settings(settings: RunSettings, overrides: Mapping[str, Any], journal
                and getattr(settings, k) != v}
     if changed:
         settings = dataclasses.replace(settings, **changed)
-        journal.event("note", text="settings changed on resume", overrides=changed)
+        journal.append(Note("settings changed on resume", overrides=changed))
         progress.message("resume with " + ", ".join(
             f"{k}={v}" for k, v in changed.items()))
     return settings
@@ -58,14 +109,13 @@ def check_resume_offsets(journal: Journal, run_dir: Path, initial: np.ndarray,
                          now: np.ndarray) -> None:
     """A resume continues only if the controller's offsets are the run's initial ones,
     the ones it pushed, or the ones a push cut short meant to write."""
-    pushes = journal.events("push")
+    pushes = journal.events(Pushed)
     if same_offsets(now, initial):
         return
-    if pushes and same_offsets(now, pushes[-1]["new_offsets"]):
+    if pushes and same_offsets(now, pushes[-1].record.new):
         return
-    last = journal.last_event("push_intent", "push")
-    if last is not None and last["event"] == "push_intent" and same_offsets(
-            now, last["new_offsets"]):
+    last = journal.last_event(PushIntent, Pushed)
+    if isinstance(last, PushIntent) and same_offsets(now, last.record.new):
         return
     raise InputError(
         f"the controller's zero offsets changed since the run in {run_dir} started "
@@ -92,14 +142,14 @@ class SampleClock:
         whose controller clock went back (a restarted controller, e.g. a resumed `--robot
         sim` run) moved so that the new samples' t continue from the last journaled one."""
         t0 = float(started or 0.0)
-        now = state.extra.get("time")
-        if self.last_t is None or not isinstance(now, int | float) or not math.isfinite(now):
+        now = state.controller_time
+        if self.last_t is None or now is None:
             return t0
-        if float(now) < t0 + self.last_t - CLOCK_TOLERANCE_S:
-            origin = float(now) - self.last_t
-            self.journal.event("note", text="controller clock restarted: new samples' t "
-                               "continue from the last journaled one", last_t=self.last_t,
-                               time_origin=origin)
+        if now < t0 + self.last_t - CLOCK_TOLERANCE_S:
+            origin = now - self.last_t
+            self.journal.append(Note("controller clock restarted: new samples' t "
+                                     "continue from the last journaled one",
+                                     last_t=self.last_t, time_origin=origin))
             self.progress.message(f"the controller's clock restarted: sample t continues "
                                   f"from {self.last_t:.1f} s")
             return origin
@@ -114,8 +164,8 @@ class SampleClock:
         if self.t_shift is None:
             self.t_shift = max(0.0, self.last_t - min(times))
             if self.t_shift > 0.0:
-                self.journal.event("note", text="sample t went backwards on resume; new "
-                                   "samples' t shifted", t_shift=self.t_shift)
+                self.journal.append(Note("sample t went backwards on resume; new "
+                                         "samples' t shifted", t_shift=self.t_shift))
         if self.t_shift == 0.0:
             return record
         return dataclasses.replace(record, sample=shift_sample_t(record.sample,
@@ -128,16 +178,13 @@ def settle_push_intent(journal: Journal, run_dir: Path, address: str, progress: 
     the controller's offsets say whether the write happened. Written: journal it as the
     push (no rollback id; `hostpc rollback --run` writes the previous offsets). Not
     written: note it and drop the intent's push.json."""
-    last = journal.last_event("push_intent", "push")
-    if last is None or last["event"] != "push_intent":
+    last = journal.last_event(PushIntent, Pushed)
+    if not isinstance(last, PushIntent):
         return
-    outcome = intent_outcome(last, offsets_now)
+    record = last.record
+    outcome = intent_outcome(record, offsets_now)
     if outcome == "pushed":
-        record = PushRecord(previous=np.asarray(last["previous_offsets"], float),
-                            new=np.asarray(last["new_offsets"], float), rollback_id=None,
-                            pushed=tuple(bool(v) for v in last.get("pushed", ())),
-                            time=str(last.get("time", "")))
-        journal.event("push", **record.to_dict(), recovered=True)
+        journal.append(Pushed(record, recovered=True))
         write_json_atomic(run_dir / PUSH_FILE,
                           {"controller": address, "status": "pushed",
                            **record.to_dict(), "recovered": True})
@@ -145,8 +192,8 @@ def settle_push_intent(journal: Journal, run_dir: Path, address: str, progress: 
                          "controller (it has the intended offsets): recorded as "
                          "pushed, without a rollback id")
     elif outcome == "not_pushed":
-        journal.event("note", text="the push cut short in the last session did not "
-                      "reach the controller")
+        journal.append(Note("the push cut short in the last session did not reach the "
+                            "controller"))
         (run_dir / PUSH_FILE).unlink(missing_ok=True)
         progress.message("the push cut short in the last session did not reach the "
                          "controller (it has the previous offsets)")
@@ -191,24 +238,22 @@ def push_state(journal: Journal, run_dir: Path, progress: Progress, offsets_now:
     `zero`) if it has the previous ones and `hostpc rollback --run` journaled a rollback
     since; PushLost if it has the previous ones without a journaled rollback; None if there
     is no journaled push, or the resume asks for the push again (`push_asked`)."""
-    pushes = journal.events("push")
+    pushes = journal.events(Pushed)
     if not pushes:
         return None
-    new = np.asarray(pushes[-1]["new_offsets"], float)
-    previous = np.asarray(pushes[-1]["previous_offsets"], float)
+    new, previous = pushes[-1].record.new, pushes[-1].record.previous
     if same_offsets(offsets_now, new):
-        verified = any(same_offsets(e.get("offsets", ()), new)
-                       for e in journal.events("verify"))
+        verified = any(same_offsets(e.offsets, new) for e in journal.events(Verified))
         progress.message("resume after the push: the controller has the pushed offsets; "
                          + ("already verified" if verified
                             else "not verified yet: verifying now on fresh poses"))
         return "pushed", new - previous
     if push_asked:
         return None
-    last = journal.last_event("push", "rollback")
-    if last is not None and last["event"] == "rollback":
+    last = journal.last_event(Pushed, Rollback)
+    if isinstance(last, Rollback):
         progress.message(
-            f"the push journaled in {run_dir} was rolled back ({last.get('time', '')}, the "
+            f"the push journaled in {run_dir} was rolled back ({last.time or ''}, the "
             "controller has its previous offsets again): not pushing again; resume with "
             "--push (or --force) to push again")
         return "rolled_back", zero
@@ -229,20 +274,20 @@ def verify_round(journal: Journal, offsets: np.ndarray, pushed_delta: np.ndarray
     same offsets, e.g. after a restarted controller lost them, starts a new round) and is
     not lost (every pose skipped); else a new round starts, so a verdict only ever uses
     poses measured after the push it judges."""
-    rounds = journal.events("verify_start")
-    if rounds and journal.last_position("verify_start") > journal.last_position("push"):
+    rounds = journal.events(VerifyStart)
+    if rounds and journal.last_position(VerifyStart) > journal.last_position(Pushed):
         last = rounds[-1]
-        first = int(last["first"])
+        first = last.first
         records = [r for r in journal.records("verify") if first <= r.index < first + n_verify]
         lost = len(records) == n_verify and not any(r.ok for r in records)
-        if (same_offsets(last["offsets"], offsets)
-                and same_offsets(last["pushed_delta"], pushed_delta) and not lost):
-            return int(last["round"]), first
+        if (same_offsets(last.offsets, offsets)
+                and same_offsets(last.pushed_delta, pushed_delta) and not lost):
+            return last.round, first
     used = [r.index for r in journal.records("verify")]
     number = len(rounds) if not used else max(len(rounds), max(used) // n_verify + 1)
-    journal.event("verify_start", round=number, first=number * n_verify,
-                  offsets=[float(v) for v in offsets],
-                  pushed_delta=[float(v) for v in pushed_delta])
+    journal.append(VerifyStart(round=number, first=number * n_verify,
+                               offsets=tuple(float(v) for v in offsets),
+                               pushed_delta=tuple(float(v) for v in pushed_delta)))
     return number, number * n_verify
 
 
@@ -255,18 +300,18 @@ def stored_result(journal: Journal, run_dir: Path, offsets_now: np.ndarray, aske
     a run that pushed nothing (refused, --no-push) is only a model check on a few fresh
     poses: a resume that asks for something (the README's `--effects +joint_compliance
     --push` after a refused push) continues. None: continue the run."""
-    final = journal.last_event("result")
+    final = journal.last(RunFinished)
     path = run_dir / "result.json"
-    if final is None or not path.is_file() or not same_offsets(final["offsets"], offsets_now):
+    if final is None or not path.is_file() or not same_offsets(final.offsets, offsets_now):
         return None
-    if asked and not (final.get("verdict") == "PASS" and final.get("push") == "pushed"):
+    if asked and not (final.verdict == "PASS" and final.push == "pushed"):
         return None
     try:
         stored = RunResult.from_dict(json.loads(path.read_text(encoding="utf-8")))
     except (OSError, ValueError, KeyError, TypeError):
         return None
     status = stored.push.status
-    verdict = final.get("verdict")
+    verdict = final.verdict
     if status == "pushed" and verdict is not None:
         what = f"already pushed and verified ({verdict})"
     else:

@@ -26,9 +26,10 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping
-from typing import Any
 
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.journal_events import RobotTimeSpent
+from hostpc.json_object import JsonObject
 from hostpc.robots.base import RobotAdapter, RobotState
 
 PHASES = ("rig", "measure", "verify")
@@ -36,10 +37,9 @@ PHASES = ("rig", "measure", "verify")
 
 async def robot_clock(robot: RobotAdapter) -> tuple[float, str]:
     """(now in s, "controller") from the controller's clock, else (monotonic, "host")."""
-    state = await robot.state()
-    now = state.extra.get("time") if isinstance(state.extra, Mapping) else None
-    if isinstance(now, int | float) and math.isfinite(now):
-        return float(now), "controller"
+    now = (await robot.state()).controller_time
+    if now is not None:
+        return now, "controller"
     return time.monotonic(), "host"
 
 
@@ -55,9 +55,9 @@ class RobotTimer:
     def __init__(self, robot: RobotAdapter, journal: Journal, state: RobotState) -> None:
         self.robot = robot
         self.journal = journal
-        now = state.extra.get("time") if isinstance(state.extra, Mapping) else None
-        if isinstance(now, int | float) and math.isfinite(now):
-            self._last, self._clock = float(now), "controller"
+        now = state.controller_time
+        if now is not None:
+            self._last, self._clock = now, "controller"
         else:
             self._last, self._clock = time.monotonic(), "host"
 
@@ -76,26 +76,24 @@ class RobotTimer:
             return 0.0
         seconds = max(0.0, now - last)
         if seconds > 0.0:
-            self.journal.event("robot_time", phase=phase, seconds=seconds, clock=clock)
+            self.journal.append(RobotTimeSpent(phase=phase, seconds=seconds, clock=clock))
         return seconds
 
 
-def robot_time_document(journal: Journal) -> dict[str, Any]:
+def robot_time_document(journal: Journal) -> JsonObject:
     """result.json's `robot_time_s`: {"rig", "measure", "verify", "total"} in s (summed
     over the run's sessions) and "clock" ("controller", "host", "mixed" or None)."""
     seconds = dict.fromkeys(PHASES, 0.0)
     clocks: set[str] = set()
-    for event in journal.events("robot_time"):
-        phase = event.get("phase")
-        value = event.get("seconds")
-        if phase in seconds and isinstance(value, int | float) and math.isfinite(value):
-            seconds[phase] += float(value)
-            clocks.add(str(event.get("clock", "controller")))
+    for event in journal.events(RobotTimeSpent):
+        if event.phase in seconds and math.isfinite(event.seconds):
+            seconds[event.phase] += event.seconds
+            clocks.add(event.clock)
     clock = None if not clocks else (clocks.pop() if len(clocks) == 1 else "mixed")
     return {**seconds, "total": sum(seconds.values()), "clock": clock}
 
 
-def format_robot_time(document: Mapping[str, Any]) -> str | None:
+def format_robot_time(document: JsonObject) -> str | None:
     """The summary's robot time line, or None if the document has no robot time."""
     rt = document.get("robot_time_s")
     if not rt:

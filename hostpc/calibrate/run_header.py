@@ -11,7 +11,6 @@ run's plugins (``cell_from_dict``).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,6 +20,7 @@ from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.run_values import RobotInfo
 from hostpc.calibrate.swaps import DEFAULT_SWAP_LIMIT_DEG
 from hostpc.errors import InputError
+from hostpc.json_object import JsonObject
 from hostpc.methods.base import Plan, RunSettings
 
 
@@ -42,13 +42,13 @@ class InitialState:
         """(n,) rad the controller's zero offsets at the start."""
         return np.asarray(self.zero_offsets, float)
 
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self) -> JsonObject:
         return {"robot": self.robot, "q": list(self.q), "zero_offsets": list(self.zero_offsets),
                 "q_min": list(self.q_min), "q_max": list(self.q_max), "time": self.time,
                 "camera": self.camera}
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> InitialState:
+    def from_dict(cls, data: JsonObject) -> InitialState:
         return cls(str(data.get("robot", "")), tuple(data.get("q", ())),
                    tuple(data["zero_offsets"]), tuple(data.get("q_min", ())),
                    tuple(data.get("q_max", ())), data.get("time"), data.get("camera"))
@@ -62,7 +62,7 @@ class RunHeader:
     robot: RobotInfo
     robot_serial: str | None
     settings: RunSettings
-    cell: Mapping[str, Any]  # Cell.to_dict()
+    cell: JsonObject  # Cell.to_dict()
     initial: InitialState
     plan: Plan | None = None
 
@@ -70,8 +70,8 @@ class RunHeader:
     def seed(self) -> int:
         return self.settings.seed
 
-    def to_dict(self) -> dict[str, object]:
-        document: dict[str, object] = {
+    def to_dict(self) -> JsonObject:
+        document: JsonObject = {
             "created": self.created, "robot": self.robot.to_dict(),
             "robot_serial": self.robot_serial, "settings": self.settings.to_dict(),
             "seed": self.seed, "cell": dict(self.cell), "initial": self.initial.to_dict()}
@@ -80,7 +80,7 @@ class RunHeader:
         return document
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> RunHeader:
+    def from_dict(cls, data: JsonObject) -> RunHeader:
         """run.json read back (an older version's too: absent values take their defaults)."""
         robot = data.get("robot") or {}
         return cls(
@@ -115,7 +115,7 @@ def read_run_header(journal: Journal) -> RunHeader:
     return parse_run_header(journal.read_header(), journal)
 
 
-def parse_run_header(data: Mapping[str, Any], journal: Journal) -> RunHeader:
+def parse_run_header(data: JsonObject, journal: Journal) -> RunHeader:
     """`data` (``journal.read_header()``) as a RunHeader (InputError if it is broken)."""
     try:
         return RunHeader.from_dict(data)

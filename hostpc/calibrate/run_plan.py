@@ -14,13 +14,13 @@ random verification choice."""
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 
 from hostpc.diagnostics.detectable import planned_sizes
 from hostpc.diagnostics.pipeline import DEFAULT_ALPHA
 from hostpc.errors import InputError
+from hostpc.json_object import JsonObject
 from hostpc.methods import method_class
 from hostpc.methods.base import Method, Plan, Progress, RunSettings
 from hostpc.planning.design import (
@@ -200,7 +200,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     for line in plan_warnings(type(method), settings.target_sigma_deg, sigmas,
                               len(fit_indices), short):
         progress.message(line)
-    info: dict[str, Any] = {
+    info: JsonObject = {
         "criterion": settings.criterion,
         "target_sigma_deg": settings.target_sigma_deg,
         "n_candidates": int(pool.shape[0]),

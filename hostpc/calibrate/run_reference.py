@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.journal_events import Note
 from hostpc.calibrate.push import PushPlan, joint_display_name
 from hostpc.calibrate.reference import (
     REFERENCE_FILE,
@@ -38,6 +39,7 @@ from hostpc.dataset import Dataset
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
 from hostpc.fitting.priors import analyse_with_constraints, constraints_for, with_prior_blocks
+from hostpc.json_object import JsonObject
 from hostpc.methods.base import Method, Plan, Progress, RunSettings
 from hostpc.methods.cell import Cell
 from hostpc.model.joint_offsets import PushTable
@@ -74,12 +76,12 @@ def record_reference_choice(run_dir: Path, journal: Journal, reference: CellRefe
     copy = run_dir / REFERENCE_FILE
     if reference is None:
         copy.unlink(missing_ok=True)
-        journal.event("note", text="reference dropped (--reference none)")
+        journal.append(Note("reference dropped (--reference none)"))
         progress.message("reference: none (dropped on this resume)")
         return
     write_json_atomic(copy, reference.to_dict())
-    journal.event("note", text="reference loaded", reference=str(option),
-                  recorded=reference.recorded)
+    journal.append(Note("reference loaded", reference=str(option),
+                        recorded=reference.recorded))
     progress.message(f"reference: {option} (recorded {reference.date} on "
                      f"{reference.robot_serial or reference.robot_model}; frames "
                      f"{', '.join(f.name for f in reference.frames)})")
@@ -95,7 +97,7 @@ def resume_known(cell: Cell, known: tuple[str, ...] | None, header: RunHeader,
     cell = dataclasses.replace(cell, known=tuple(known))
     header = dataclasses.replace(header, cell=cell.to_dict())
     journal.write_header(header.to_dict())
-    journal.event("note", text="known frames changed on resume", known=list(known))
+    journal.append(Note("known frames changed on resume", known=tuple(known)))
     progress.message(f"resume with known frames: {', '.join(known) or 'none'} (the measured "
                      "samples are refitted)")
     return cell, header
@@ -152,13 +154,13 @@ def refuse_if_moved(plan: PushPlan, check: ReferenceCheck | None,
 
 
 def reference_check_block(check: ReferenceCheck | None, reference: CellReference | None,
-                          run_dir: Path) -> dict[str, Any] | None:
+                          run_dir: Path) -> JsonObject | None:
     """The result's `reference_check` block (None without a reference)."""
     if reference is None:
         return None
-    block: dict[str, Any] = {"reference": str(run_dir / REFERENCE_FILE),
-                             "recorded": reference.recorded,
-                             "robot_serial": reference.robot_serial}
+    block: JsonObject = {"reference": str(run_dir / REFERENCE_FILE),
+                         "recorded": reference.recorded,
+                         "robot_serial": reference.robot_serial}
     if check is not None:
         block.update(check.to_dict())
         if check.moved:
@@ -188,9 +190,10 @@ def reference_summary_lines(run: RunResult) -> list[str]:
 
 
 def joint_coverage(method: Method, plan: Plan, settings: RunSettings, cell: Cell,
-                   reference: CellReference | None) -> dict[str, Any]:
+                   reference: CellReference | None) -> JsonObject:
     """Which joints the planned poses calibrate with this run's frames: from the
-    measurements (with the known frames), from the reference, or not at all (and why).
+    measurements (with the known frames), from the reference, or not at all (and why):
+    the plan's `joints` info, in its JSON form (run.json, result.json).
     Linear analysis at the nominal model of the fit poses; nothing moves."""
     from hostpc.model.measurements.predict import predict
     from hostpc.model.problem import build_problem

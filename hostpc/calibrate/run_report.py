@@ -3,19 +3,18 @@ the diagnosis of its dataset. An extra: a failure to write it never loses a run.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 from hostpc.calibrate.run_result import RunResult
 from hostpc.dataset import Dataset
 from hostpc.diagnostics import diagnose
+from hostpc.json_object import JsonObject
 from hostpc.methods.base import Progress, RunSettings
 from hostpc.report import write_calibration_report
 
 
 def write_run_report(run_dir: Path, dataset: Dataset, settings: RunSettings,
-                     run: RunResult, truth: Mapping[str, Any] | None,
+                     run: RunResult, truth: JsonObject | None,
                      progress: Progress) -> str | None:
     """Write RUN/report.html; returns its path, or None (the reason as a progress message)."""
     progress.stage("report")

@@ -18,10 +18,8 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
 
-JsonObject = Mapping[str, Any]
-"""A block of result.json kept in its JSON form (module docstring)."""
+from hostpc.json_object import JsonObject
 
 
 @dataclass(frozen=True)
@@ -32,7 +30,7 @@ class SkippedPose:
     index: int
     reason: str | None
 
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self) -> JsonObject:
         return {"phase": self.phase, "index": self.index, "reason": self.reason}
 
 
@@ -47,8 +45,8 @@ class Acquisition:
     n_poses_measured: int | None  # None: an older result without it
     skipped: tuple[SkippedPose, ...]
 
-    def to_dict(self) -> dict[str, object]:
-        block: dict[str, object] = {"n_planned": self.n_planned, "more_poses": self.more_poses,
+    def to_dict(self) -> JsonObject:
+        block: JsonObject = {"n_planned": self.n_planned, "more_poses": self.more_poses,
                                     "n_measured": self.n_measured}
         if self.n_poses_measured is not None:
             block["n_poses_measured"] = self.n_poses_measured
@@ -78,7 +76,7 @@ class OffsetRow:
     pushed: bool
     note: str
 
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self) -> JsonObject:
         return dataclasses.asdict(self)
 
     @classmethod
@@ -101,9 +99,9 @@ class PushResult:
     written: JsonObject | None = None  # {"rollback_id", "recovered", "file"} of a push
     exports: Mapping[str, str] | None = None
 
-    def to_dict(self) -> dict[str, object]:
-        block: dict[str, object] = {"status": self.status, "reason": self.reason,
-                                    "max_correction_deg": self.max_correction_deg}
+    def to_dict(self) -> JsonObject:
+        block: JsonObject = {"status": self.status, "reason": self.reason,
+                             "max_correction_deg": self.max_correction_deg}
         block.update(self.written or {})
         if self.exports is not None:
             block.update(on_controller=False, exports=dict(self.exports))
@@ -111,8 +109,8 @@ class PushResult:
 
     @classmethod
     def from_dict(cls, data: JsonObject) -> PushResult:
-        written = {key: data[key] for key in ("rollback_id", "recovered", "file")
-                   if key in data}
+        written: JsonObject = {key: data[key] for key in ("rollback_id", "recovered", "file")
+                               if key in data}
         return cls(str(data.get("status", "nothing")), data.get("reason"),
                    data.get("max_correction_deg"), written or None, data.get("exports"))
 
@@ -147,8 +145,8 @@ class RunResult:
     outcome: JsonObject | None = None
     absent: frozenset[str] = field(default=frozenset())
 
-    def to_dict(self) -> dict[str, object]:
-        document: dict[str, object] = {
+    def to_dict(self) -> JsonObject:
+        document: JsonObject = {
             "format": self.format, "run_dir": self.run_dir, "robot": dict(self.robot),
             "method": self.method, "settings": dict(self.settings), "known": list(self.known),
             "method_setup": dict(self.method_setup), "plan": dict(self.plan),

@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from hostpc.calibrate.push import PushPlan
 from hostpc.calibrate.run_result import RunResult
 from hostpc.calibrate.verify import VerifyResult
 from hostpc.dataset import Dataset
 from hostpc.fitting import FitResult
+from hostpc.json_object import JsonObject
 
 
 @dataclass(frozen=True)
@@ -23,7 +23,7 @@ class RobotInfo:
     sim: bool = False
     scenario: str | None = None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {"address": self.address, "driver": self.driver, "sim": self.sim,
                 "scenario": self.scenario}
 
@@ -40,9 +40,8 @@ class RunOutcome:
     dataset: Dataset | None = None
     verify: VerifyResult | None = None
     push: PushPlan | None = None
-    extras: dict[str, Any] = field(default_factory=dict)
 
     @property
-    def document(self) -> dict[str, object]:
+    def document(self) -> JsonObject:
         """The result's JSON form (result.json; `hostpc calibrate --json` prints it)."""
         return self.run.to_dict()

@@ -22,7 +22,7 @@ from __future__ import annotations
 import dataclasses
 import datetime as _dt
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +31,15 @@ import numpy as np
 from hostpc.calibrate import run_reference as cell_reference
 from hostpc.calibrate.joint_status import joint_sources
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.journal_events import (
+    MorePoses,
+    Pushed,
+    PushIntent,
+    Resumed,
+    RunFinished,
+    Verified,
+    VerifyRoundLost,
+)
 from hostpc.calibrate.more_poses import more_poses_message, more_poses_reason
 from hostpc.calibrate.outcome import parse_required_joints
 from hostpc.calibrate.outcome_files import run_outcome
@@ -51,6 +60,7 @@ from hostpc.calibrate.refusals import (
 )
 from hostpc.calibrate.resume import (
     PushLost,
+    ResumeOverrides,
     SampleClock,
     VerifyLost,
     archive_result,
@@ -86,6 +96,7 @@ from hostpc.errors import ConnectionFailed, ControllerError, InputError, Zerocal
 from hostpc.files import write_json_atomic
 from hostpc.fitting import FitResult, fit
 from hostpc.fitting.priors import with_constraints
+from hostpc.json_object import JsonObject
 from hostpc.methods import method_class
 from hostpc.methods.base import (
     Method,
@@ -113,13 +124,13 @@ class Runner:
         *,
         robot_info: RobotInfo,
         settings: RunSettings | None = None,
-        cell_file: Mapping[str, Any] | None = None,
+        cell_file: JsonObject | None = None,
         known: tuple[str, ...] | None = None,
         default_known: tuple[str, ...] = (),
         progress: Progress | None = None,
-        truth: Callable[[], dict[str, Any]] | None = None,
+        truth: Callable[[], JsonObject] | None = None,
         report: bool = True,
-        resume_overrides: Mapping[str, Any] | None = None,
+        resume_overrides: ResumeOverrides | None = None,
         reference: str | None = None,
         robot_serial: str | None = None,
     ) -> None:
@@ -133,7 +144,7 @@ class Runner:
         self.progress: Progress = progress or NullProgress()
         self.truth_reader = truth
         self.report = report
-        self.resume_overrides = dict(resume_overrides or {})
+        self.resume_overrides = resume_overrides or ResumeOverrides()
         self.reference_option = reference  # --reference FILE|none (run_reference.py)
         self.robot_serial = robot_serial
         self.reference: Any = None  # the CellReference the run uses, and its frames' priors
@@ -184,7 +195,7 @@ class Runner:
             self.journal.load()
             initial = header.initial
             check_resume_offsets(self.journal, self.run_dir, initial.offsets, offsets)
-            if self.resume_overrides.get("separate") and self._pushed_ever():
+            if self.resume_overrides.separate and self._pushed_ever():
                 raise InputError(
                     "--separate: this run pushed offsets, and poses measured under them "
                     "cannot join its data; separate on a run that pushed nothing (e.g. "
@@ -203,7 +214,7 @@ class Runner:
             if settings is not header.settings:  # kept for the next resume (resume.py)
                 header = dataclasses.replace(header, settings=settings)
                 self.journal.write_header(header.to_dict())
-            self.journal.event("resumed", at=_now())
+            self.journal.append(Resumed(at=_now()))
             cell, header = cell_reference.resume_known(
                 cell_from_dict(header.cell, settings.plugins), self.known, header,
                 self.journal, progress)
@@ -296,7 +307,7 @@ class Runner:
             q_now = await self._measure(method, self._staging.shifted(plan.more), q_now,
                                         self._staging.first + plan.q.shape[0])
             result, dataset = self._fit(method, settings, self._staging.first)
-        separate = self.resume_overrides.get("separate")
+        separate = self.resume_overrides.separate
         if separate:  # --separate A,B: the poses that tell them apart (separate.py)
             q_now, result, dataset = await self._separate(method, state, plan, settings,
                                                           result, dataset, separate, q_now)
@@ -329,7 +340,7 @@ class Runner:
                               run_dir=self.run_dir, header=header,
                               require_joints=settings.require_joints, finished=True,
                               known=cell.known, swapped=settings.swapped)
-        run = run_result(self.journal, self.run_dir, self.robot_info.to_dict(), settings, cell,
+        run = run_result(self.journal, self.run_dir, self.robot_info, settings, cell,
                          plan, method, dataset, result, push_plan, push_status, verify_result,
                          truth, outcome=outcome.to_dict(), exports=exports,
                          reference_check=cell_reference.reference_check_block(
@@ -343,10 +354,10 @@ class Runner:
         summary = format_summary(run)  # after the report: it names the report's path
         (self.run_dir / "summary.txt").write_text(summary + "\n", encoding="utf-8")
         write_json_atomic(self.run_dir / "result.json", run.to_dict())
-        self.journal.event("result", exit_code=run.exit_code, push=push_status,
-                           verdict=None if verify_result is None else verify_result.verdict,
-                           outcome=outcome.verdict, at=_now(),
-                           offsets=[float(v) for v in offsets])
+        self.journal.append(RunFinished(
+            exit_code=run.exit_code, push=push_status,
+            verdict=None if verify_result is None else verify_result.verdict,
+            outcome=outcome.verdict, at=_now(), offsets=tuple(float(v) for v in offsets)))
         progress.close()
         return RunOutcome(self.run_dir, run, summary, run.exit_code, result, dataset,
                           verify_result, push_plan)
@@ -463,7 +474,7 @@ class Runner:
                    if first <= r.index < first + n_verify):
             lost = [r for r in self.journal.records("verify")
                     if first <= r.index < first + n_verify]
-            self.journal.event("verify_lost", round=number)
+            self.journal.append(VerifyRoundLost(round=number))
             raise VerifyLost(verify_lost_line(lost, n_verify, bool(np.any(pushed_delta != 0.0)),
                                               self.run_dir))
         verify_dataset = self._dataset(method, "verify", first, first + n_verify)
@@ -475,11 +486,11 @@ class Runner:
                                         alpha=settings.verify_alpha, tolerance=tolerance,
                                         factor=settings.verify_factor)
         write_json_atomic(self.run_dir / "verify.json", verify_result.to_dict())
-        self.journal.event("verify", round=number, verdict=verify_result.verdict, at=_now(),
-                           statistic=finite_or_none(verify_result.statistic),
-                           dof=verify_result.dof,
-                           p_value=finite_or_none(verify_result.p_value),
-                           offsets=[float(v) for v in offsets])
+        self.journal.append(Verified(round=number, verdict=verify_result.verdict, at=_now(),
+                                     statistic=finite_or_none(verify_result.statistic),
+                                     dof=verify_result.dof,
+                                     p_value=finite_or_none(verify_result.p_value),
+                                     offsets=tuple(float(v) for v in offsets)))
         return verify_result
 
     async def _push(self, plan: PushPlan, settings: RunSettings, offsets_now: np.ndarray
@@ -495,8 +506,7 @@ class Runner:
         zero = np.zeros_like(plan.old)
         journaled = push_state(self.journal, self.run_dir, progress, offsets_now,
                                self._push_asked(), zero)
-        remodel = any(self.resume_overrides.get(k)
-                      for k in ("effects", "plugins", "known", "reference"))
+        remodel = self.resume_overrides.remodel
         if journaled is not None and not (
                 remodel and journaled[0] == "pushed" and not plan.refused and plan.anything
                 and not same_offsets(plan.new, offsets_now)):
@@ -534,22 +544,20 @@ class Runner:
 
     def _verify_poses(self, plan: Plan) -> np.ndarray:
         """The plan's verification poses, with its further ones if it grew (more_poses)."""
-        return plan.verify_poses(self.journal.last_event("more_poses") is not None)
+        return plan.verify_poses(self.journal.last(MorePoses) is not None)
 
     def _pushed_ever(self) -> bool:
         """True if this run ever wrote (or meant to write) the controller's offsets."""
-        return self.journal.last_event("push_intent", "push") is not None
+        return self.journal.last_event(PushIntent, Pushed) is not None
 
     def _push_asked(self) -> bool:
         """True if this resume's command line asked for the push (--push or --force)."""
-        return (self.resume_overrides.get("push") is True
-                or self.resume_overrides.get("force") is True)
+        return self.resume_overrides.push_asked
 
     def _asked(self) -> bool:
         """True if this resume asks for anything beyond finishing the run (an option that
         acts after the measurements: push, force, limits, verification, model)."""
-        return any(value not in (None, False, [], ())
-                   for value in self.resume_overrides.values())
+        return self.resume_overrides.asked
 
 
 def _now() -> str:

@@ -16,25 +16,26 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.journal_events import MorePoses, Pushed
 from hostpc.calibrate.push import PUSH_FILE, PushPlan, joint_display_name
 from hostpc.calibrate.robot_time import format_robot_time, robot_time_document
 from hostpc.calibrate.run_reference import reference_summary_lines
 from hostpc.calibrate.run_result import (
     Acquisition,
-    OffsetRow,
     PushResult,
     RunResult,
     SkippedPose,
 )
+from hostpc.calibrate.run_values import RobotInfo
 from hostpc.calibrate.verify import VerifyResult, measured_noise_rms, noise_rms
 from hostpc.dataset import Dataset
 from hostpc.diagnostics.adequacy import chi2_dof_upper
 from hostpc.fitting import FitResult
+from hostpc.json_object import JsonObject
 from hostpc.methods.base import Method, Plan, RunSettings
 from hostpc.methods.cell import Cell
 
@@ -44,31 +45,31 @@ EXIT_VERIFY_FAILED = 6
 EXIT_JOINTS_NOT_CALIBRATED = 7
 
 
-def run_result(journal: Journal, run_dir: Path, robot: Mapping[str, Any], settings: RunSettings,
+def run_result(journal: Journal, run_dir: Path, robot: RobotInfo, settings: RunSettings,
                cell: Cell, plan: Plan, method: Method, dataset: Dataset, result: FitResult,
                push_plan: PushPlan, push_status: str, verify_result: VerifyResult | None,
-               truth: Mapping[str, Any] | None, *, outcome: Mapping[str, Any],
-               reference_check: Mapping[str, Any] | None,
+               truth: JsonObject | None, *, outcome: JsonObject,
+               reference_check: JsonObject | None,
                exports: Mapping[str, str] | None) -> RunResult:
     """The result (``result.json``, format ``RESULT_FORMAT``) of a run in `run_dir`, built
     once: settings, plan, acquisition (skipped poses from `journal`), fit, offsets, push
     (with the UR `exports` that are the push, if any), verification, files, the reference
-    check, the outcome (``RobotOutcome.to_dict()``) and its exit code; robot:
-    ``RobotInfo.to_dict()``; truth (simulation only) adds ``truth_comparison``."""
+    check, the outcome (``RobotOutcome.to_dict()``) and its exit code; truth (simulation
+    only: the simulator's truth document) adds ``truth_comparison``."""
     skipped = tuple(SkippedPose(r.phase, r.index, r.reason)
                     for phase in ("fit", "verify") for r in journal.records(phase)
                     if not r.ok)
     written = push_status == "pushed"
     rows = tuple(dataclasses.replace(row, pushed=row.pushed and written,
                                      new_deg=row.new_deg if written else row.old_deg)
-                 for row in (OffsetRow.from_dict(r) for r in push_plan.joints()))
-    pushes = journal.events("push")
+                 for row in push_plan.joints())
+    pushes = journal.events(Pushed)
     push = PushResult(push_status, push_plan.refused, push_plan.max_correction_deg,
-                      {"rollback_id": pushes[-1]["rollback_id"],
-                       "recovered": bool(pushes[-1].get("recovered", False)),
+                      {"rollback_id": pushes[-1].record.rollback_id,
+                       "recovered": pushes[-1].recovered,
                        "file": str(run_dir / PUSH_FILE)} if written and pushes else None,
                       exports)
-    more = journal.last_event("more_poses")
+    more = journal.last(MorePoses)
     files = {
         "run": str(journal.run_path),
         "journal": str(journal.journal_path),
@@ -81,7 +82,7 @@ def run_result(journal: Journal, run_dir: Path, robot: Mapping[str, Any], settin
     return RunResult(
         format=RESULT_FORMAT,
         run_dir=str(run_dir),
-        robot={**robot, "name": cell.robot},
+        robot={**robot.to_dict(), "name": cell.robot},
         method=settings.method,
         settings=settings.to_dict(),
         known=tuple(cell.known),
@@ -93,7 +94,7 @@ def run_result(journal: Journal, run_dir: Path, robot: Mapping[str, Any], settin
         },
         acquisition=Acquisition(
             n_planned=int(plan.q.shape[0]) + (int(plan.more.shape[0]) if more else 0),
-            more_poses=(more or {}).get("reason"),
+            more_poses=None if more is None else more.reason,
             n_measured=dataset.n_samples,
             n_poses_measured=sum(r.ok for r in journal.records("fit")),
             skipped=skipped),
@@ -127,7 +128,7 @@ def run_result(journal: Journal, run_dir: Path, robot: Mapping[str, Any], settin
     )
 
 
-def truth_comparison(truth: Mapping[str, Any], push_plan: PushPlan) -> dict[str, Any]:
+def truth_comparison(truth: JsonObject, push_plan: PushPlan) -> JsonObject:
     """Fitted vs injected zero errors (simulation): `joint_offsets_error_deg` = fitted -
     true per joint, None where the joint is unidentifiable; also within 3 sigma."""
     true = np.asarray(truth.get("zero_errors", []), float)
@@ -233,7 +234,7 @@ def format_summary(run: RunResult) -> str:
     return "\n".join(lines)
 
 
-def plan_line(plan: Mapping[str, Any], acquisition: Mapping[str, Any]) -> str:
+def plan_line(plan: JsonObject, acquisition: JsonObject) -> str:
     """The summary's plan line: the poses planned and, when the model failed on them and
     the plan grew (more_poses.py), what it grew to, so it never disagrees with the
     "measured" line below it."""
@@ -250,7 +251,7 @@ SOURCE_MARK = {"hold": " (held)", "prior": " (prior)"}
 """How a value restated from a hold or a prior is marked wherever it is shown."""
 
 
-def joint_status_text(joint: Mapping[str, Any], said: str = "") -> str:
+def joint_status_text(joint: JsonObject, said: str = "") -> str:
     """One joint of the outcome in words: `calibrated, verified` / `NOT CALIBRATED: why`
     (without the why when `said`: the row already gives it)."""
     if joint.get("status") != "calibrated":
@@ -267,7 +268,7 @@ def _mm(value: float | None) -> str:
     return "-" if value is None else f"{value:.4f}"
 
 
-def _push_line(document: Mapping[str, Any]) -> str:
+def _push_line(document: JsonObject) -> str:
     """The summary's push line: what happened to the controller and how to undo it."""
     push = document["push"]
     status = push["status"]
@@ -298,7 +299,7 @@ def _push_line(document: Mapping[str, Any]) -> str:
     return "push: nothing to push (no identifiable joint offset)"
 
 
-def _verify_line(verify: Mapping[str, Any]) -> str:
+def _verify_line(verify: JsonObject) -> str:
     """The summary's verification line: the chi-square test (statistic, dof, p-value, the
     false-FAIL rate alpha) and the station tolerance. With nothing pushed it checks the model
     on fresh poses (no PASS: no offsets were verified)."""

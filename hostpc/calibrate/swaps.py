@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.journal_events import Stage
 from hostpc.calibrate.refusals import PushRefusal, resume_with
 from hostpc.dataset import Dataset
 from hostpc.errors import ControllerError, InputError
@@ -220,7 +221,7 @@ class Staging:
         """After the plan's own poses were measured: stage while a joint is far off or the
         estimate still moves; returns where the robot is. Journaled stages are replayed
         (their poses measured only where missing), never re-planned or searched again."""
-        journaled = {int(e["number"]): e for e in self.journal.events("stage")}
+        journaled = {e.number: e for e in self.journal.events(Stage)}
         estimate = np.zeros(q_plan.shape[1])
         for number in range(1, MAX_STAGES + 1):
             event = journaled.get(number)
@@ -244,8 +245,8 @@ class Staging:
                 if (far if number == 1 else moved) <= math.radians(limit):
                     break
                 first = number * STAGE_STRIDE
-                self.journal.event("stage", number=number, first=first, at=_now(),
-                                   estimate=[float(v) for v in new])
+                self.journal.append(Stage(number=number, first=first, at=_now(),
+                                          estimate=tuple(float(v) for v in new)))
                 self.progress.message(
                     f"stage {number}: joints estimated off by "
                     + ", ".join(f"J{j + 1} {math.degrees(v):+.3f}" for j, v in enumerate(new)
@@ -254,8 +255,8 @@ class Staging:
                     "estimate (coarse to fine)")
                 estimate = new
             else:
-                estimate = np.asarray(event["estimate"], float)
-                first = int(event["first"])
+                estimate = np.asarray(event.estimate, float)
+                first = event.first
             before = (self.first, self.estimate)
             self.first, self.estimate = first, estimate
             q_now = await acquire(self._shift(q_plan, estimate, new_stage=True), q_now,

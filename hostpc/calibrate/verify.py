@@ -35,13 +35,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from hostpc.dataset import Dataset
 from hostpc.diagnostics.distributions import chi2_sf
 from hostpc.fitting import FitResult
+from hostpc.json_object import JsonObject
 from hostpc.model.joint_offsets import PushTable
 from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
@@ -115,7 +115,7 @@ class VerifyResult:
                            f"{self.tolerance * 1e3:g} mm")
         return "; ".join(reasons)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """JSON form in millimetres (result.json's `verify`, verify.json)."""
         return {
             "verdict": self.verdict,

@@ -41,6 +41,7 @@ from typing import Any, NoReturn
 
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.outcome import parse_required_joints
+from hostpc.calibrate.resume import ResumeOverrides
 from hostpc.calibrate.run_header import parse_run_header, read_run_header
 from hostpc.calibrate.run_plan import PlanningError
 from hostpc.calibrate.run_values import RobotInfo, RunOutcome
@@ -428,18 +429,13 @@ async def _calibrate(args: argparse.Namespace, address: RobotAddress, driver: st
         lambda: open_robot(address, driver, token=token, timeout=args.timeout,
                            camera=robot_camera(args, driver)))
     try:
-        overrides = {"push": args.push, "force": args.force,
-                     "max_correction_deg": args.max_correction,
-                     "verify_factor": args.verify_factor,
-                     "verify_alpha": args.verify_alpha,
-                     "verify_tolerance_mm": args.verify_tolerance,
-                     "effects": args.effects,
-                     "plugins": tuple(args.plugin) or None,
-                     "require_joints": args.require_joints,
-                     "swapped": parse_swapped(args.swapped) or None,
-                     "swap_limit_deg": args.swap_limit,
-                     "known": args.known, "reference": args.reference,
-                     "separate": args.separate}
+        overrides = ResumeOverrides(
+            push=args.push, force=args.force, max_correction_deg=args.max_correction,
+            verify_factor=args.verify_factor, verify_alpha=args.verify_alpha,
+            verify_tolerance_mm=args.verify_tolerance, effects=args.effects,
+            plugins=tuple(args.plugin) or None, require_joints=args.require_joints,
+            swapped=parse_swapped(args.swapped) or None, swap_limit_deg=args.swap_limit,
+            known=args.known, reference=args.reference, separate=args.separate)
         runner = Runner(robot, run_dir, robot_info=info, settings=settings,
                         cell_file=cell_file, known=known, default_known=default_known,
                         progress=progress, truth=truth, report=not args.no_report,

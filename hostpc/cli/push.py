@@ -28,6 +28,7 @@ import numpy as np
 
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.offline_push import (
+    LedgerEntry,
     SavedFit,
     already_pushed,
     ledger_path,
@@ -97,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
         "dry_run": bool(args.dry_run),
         "status": ("refused" if plan.refused else "planned" if args.dry_run else "pushed"),
         "refused": plan.refused,
-        "joints": plan.joints(),
+        "joints": [row.to_dict() for row in plan.joints()],
         "run_dir": None if args.dry_run else str(run_dir),
         "rollback_id": None if record is None else record.rollback_id,
     }
@@ -142,7 +143,7 @@ async def _push(args: argparse.Namespace, saved: SavedFit, address: RobotAddress
                              f"{args.fit} --robot HOST`")
         if not args.force:
             await _check_same_robot_and_not_pushed(robot, saved, args.fit, address, offsets)
-        plan = plan_push(saved, offsets, args.max_correction,  # type: ignore[arg-type]
+        plan = plan_push(saved, offsets, args.max_correction,
                          force=args.force, dataset_file=_dataset_file(args.fit))
         if plan.refused or args.dry_run:
             return plan, None
@@ -150,10 +151,10 @@ async def _push(args: argparse.Namespace, saved: SavedFit, address: RobotAddress
         journal = Journal(run_dir)
         journal.write_header({"kind": "offline_push", "fit": str(Path(args.fit).resolve()),
                               "robot": {"address": str(address), "driver": args.driver}})
-        record_push(args.fit, {
-            "controller": str(address), "run_dir": str(run_dir.resolve()),
-            "time": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
-            "before": plan.old.tolist(), "after": plan.new.tolist()})
+        record_push(args.fit, LedgerEntry(
+            controller=str(address), run_dir=str(run_dir.resolve()),
+            time=_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+            before=tuple(plan.old.tolist()), after=tuple(plan.new.tolist())))
         record = await execute_push(robot, plan, run_dir, str(address), journal)
         return plan, record
     finally:
@@ -173,9 +174,9 @@ async def _check_same_robot_and_not_pushed(robot: RobotAdapter, saved: SavedFit,
     if entry is not None:
         raise PushRefused(
             f"push refused: the controller at {address} already carries this fit (pushed to "
-            f"{entry.get('controller', '?')} at {entry.get('time', '?')}, "
+            f"{entry.controller or '?'} at {entry.time or '?'}, "
             f"{ledger_path(fit)}); pushing again would double the corrections; roll back with "
-            f"`hostpc rollback --run {entry.get('run_dir', 'DIR')}` or use --force")
+            f"`hostpc rollback --run {entry.run_dir or 'DIR'}` or use --force")
 
 
 def _dataset_file(fit_file: str) -> str:

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.journal_events import Pushed, PushRecord, Rollback
 from hostpc.calibrate.outcome_files import rewrite_outcome
 from hostpc.calibrate.push import read_push_file, rollback, rollback_run
 from hostpc.calibrate.run_header import read_run_header
@@ -146,7 +147,7 @@ async def _rollback(address: RobotAddress, args: argparse.Namespace, rollback_id
     try:
         if record is not None:
             _warn_later_push(np.asarray(await robot.get_offsets(), float), record)
-            return await rollback_run(robot, record)
+            return await rollback_run(robot, PushRecord.from_dict(record))
         return await rollback(robot, rollback_id, previous)
     finally:
         await robot.close()
@@ -159,10 +160,10 @@ def _refuse_if_rolled_back(run_dir: Path) -> None:
     journal = Journal(run_dir)
     if not journal.exists:
         return
-    last = journal.last_event("push", "rollback")  # reads the journal on first use
-    if last is not None and last.get("event") == "rollback":
+    last = journal.last_event(Pushed, Rollback)  # reads the journal on first use
+    if isinstance(last, Rollback):
         raise InputError(f"--run {run_dir}: its push was rolled back already "
-                         f"({last.get('time') or 'at an unrecorded time'}); nothing of it is "
+                         f"({last.time or 'at an unrecorded time'}); nothing of it is "
                          "left to undo (to see what the controller holds now: hostpc status "
                          "--robot HOST)")
 
@@ -199,9 +200,9 @@ def _journal_rollback(run_dir: Path, now: np.ndarray, how: str, controller: str)
 
     journal = Journal(run_dir)
     if journal.exists:
-        journal.event("rollback", how=how, controller=controller,
-                      offsets=[float(v) for v in now],
-                      time=_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"))
+        journal.append(Rollback(how=how, controller=controller,
+                                offsets=tuple(float(v) for v in now),
+                                time=_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")))
 
 
 def _warn_later_push(now: np.ndarray, record: dict[str, Any]) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Protocol
 
 import numpy as np
 
@@ -14,6 +15,40 @@ from hostpc.model.context import robot_identity
 from hostpc.model.layout import Problem
 
 CORRELATION_THRESHOLD = 0.9
+
+
+class FitVerdict(Protocol):
+    """What the push guard and the joint status read of a fit: a live `FitResult`, or a fit
+    saved by `hostpc fit --json` and read back (`hostpc.calibrate.offline_push.SavedFit`).
+
+    names: parameter names; x, std (NaN where fixed), fixed: (P,); joint_labels: the
+    joints' names (q1..qn, or a kinematic tree's head.q1, ...); problem: the problem that
+    produced the fit, None for a saved fit (it carries no priors, holds or dataset)."""
+
+    @property
+    def names(self) -> tuple[str, ...]: ...
+    @property
+    def joint_labels(self) -> tuple[str, ...]: ...
+    @property
+    def problem(self) -> Problem | None: ...
+    @property
+    def x(self) -> np.ndarray: ...
+    @property
+    def std(self) -> np.ndarray: ...
+    @property
+    def fixed(self) -> np.ndarray: ...
+    @property
+    def unidentifiable(self) -> tuple[NullDirection, ...]: ...
+    @property
+    def converged(self) -> bool: ...
+    @property
+    def message(self) -> str: ...
+    @property
+    def dof(self) -> int: ...
+    @property
+    def chi2_dof(self) -> float: ...
+    @property
+    def chi2_dof_with_calibration(self) -> float | None: ...
 
 
 @dataclass(frozen=True)
@@ -75,6 +110,10 @@ class FitResult:
     @property
     def names(self) -> tuple[str, ...]:
         return self.problem.layout.names
+
+    @property
+    def joint_labels(self) -> tuple[str, ...]:
+        return self.problem.context.joint_labels
 
     @property
     def chi2_dof(self) -> float:
@@ -163,7 +202,7 @@ class FitResult:
         (then the plain chi2 is judged). Computed once per result."""
         from hostpc.fitting.shared_errors import result_shared_chi2
 
-        if not self.converged or not hasattr(self.problem, "dataset"):
+        if not self.converged:
             return None
         full = result_shared_chi2(self)
         if full is None or full.dof != self.dof or not math.isfinite(full.chi2_dof):

@@ -27,6 +27,7 @@ test (docs/vision.md 3.3).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -175,13 +176,18 @@ def shared_error_chi2(problem: Problem, x: np.ndarray, free: np.ndarray
     return SharedChi2(chi2=chi2, dof=dof, plain_chi2=float(r @ r))
 
 
-def result_shared_chi2(result: object) -> SharedChi2 | None:
-    """`shared_error_chi2` of a FitResult (None for anything else, e.g. a saved fit that
-    carries no problem, or a dataset without a shared error)."""
-    problem = getattr(result, "problem", None)
-    if not isinstance(problem, Problem):
-        return None
-    x, fixed = (getattr(result, k, None) for k in ("x", "fixed"))
-    if x is None or fixed is None:
-        return None
-    return shared_error_chi2(problem, np.asarray(x), ~np.asarray(fixed, dtype=bool))
+class _Fitted(Protocol):
+    """What `result_shared_chi2` reads of a FitResult (named structurally: fitting.result
+    imports this module)."""
+
+    @property
+    def problem(self) -> Problem: ...
+    @property
+    def x(self) -> np.ndarray: ...
+    @property
+    def fixed(self) -> np.ndarray: ...
+
+
+def result_shared_chi2(result: _Fitted) -> SharedChi2 | None:
+    """`shared_error_chi2` of a fit (None for a dataset without a shared error)."""
+    return shared_error_chi2(result.problem, result.x, ~result.fixed)

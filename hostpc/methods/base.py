@@ -56,6 +56,7 @@ from typing import Any, ClassVar, Literal, Protocol
 import numpy as np
 
 from hostpc.dataset import Dataset, Samples
+from hostpc.json_object import JsonObject
 from hostpc.methods.cell import Cell
 from hostpc.planning.design import PoseGroups
 from hostpc.robots.base import MoveOutcome, Need, RobotAdapter, RobotState
@@ -104,7 +105,7 @@ class RunSettings:
     verify_tolerance_mm: float | None = None
     criterion: str = "D"
     n_candidates: int = 1500
-    options: Mapping[str, Any] = field(default_factory=dict)
+    options: JsonObject = field(default_factory=dict)  # per kind: its own keys (run.json)
     target_sigma_deg: float | None = None
     priors: tuple[str, ...] = ()
     hold: tuple[str, ...] = ()
@@ -112,7 +113,7 @@ class RunSettings:
     swapped: tuple[int, ...] = ()
     swap_limit_deg: float = 45.0
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """JSON form."""
         data = dataclasses.asdict(self)
         data["plugins"] = list(self.plugins)
@@ -122,7 +123,7 @@ class RunSettings:
         return data
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> RunSettings:
+    def from_dict(cls, data: JsonObject) -> RunSettings:
         """Inverse of to_dict (unknown keys ignored, so old run folders stay readable)."""
         names = {f.name for f in dataclasses.fields(cls)}
         values = {k: v for k, v in data.items() if k in names}
@@ -150,7 +151,7 @@ class Plan:
 
     q: np.ndarray
     q_verify: np.ndarray
-    info: Mapping[str, Any] = field(default_factory=dict)
+    info: JsonObject = field(default_factory=dict)
     q_more: np.ndarray | None = None
     q_verify_more: np.ndarray | None = None
 
@@ -167,7 +168,7 @@ class Plan:
             return np.vstack([self.q_verify, self.q_verify_more])
         return self.q_verify
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """JSON form (radians)."""
         data = {"q": self.q.tolist(), "q_verify": self.q_verify.tolist(),
                 "info": dict(self.info)}
@@ -177,7 +178,7 @@ class Plan:
         return data
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> Plan:
+    def from_dict(cls, data: JsonObject) -> Plan:
         """Inverse of to_dict."""
         n = len(data["q"][0]) if data["q"] else len(data["q_verify"][0])
         q = np.asarray(data["q"], dtype=float).reshape(-1, n)
@@ -193,7 +194,7 @@ class Sample(Protocol):
     dataset-file form key for key as the journal has always held it (so an old run
     resumes), is what the journal holds; the kind reads it back with ``from_json``."""
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> JsonObject:
         """The sample's dataset-file form (SI)."""
 
 
@@ -207,7 +208,7 @@ def matrix(values: Sequence[Sequence[float]] | np.ndarray) -> tuple[tuple[float,
     return tuple(tuple(float(v) for v in row) for row in np.asarray(values, dtype=float))
 
 
-def optional_json(**fields: Any) -> dict[str, Any]:
+def optional_json(**fields: Any) -> JsonObject:
     """A typed sample's optional fields that are set, in order, as JSON (tuples as
     lists): what its ``to_json`` appends after the fields every sample has."""
     def plain(value: Any) -> Any:
@@ -295,11 +296,11 @@ class SampleRecord:
     phase: Phase
     index: int
     ok: bool
-    sample: Mapping[str, Any] | None = None
+    sample: JsonObject | None = None
     reason: str | None = None
     q_end: Sequence[float] | None = None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """JSON form (one journal line)."""
         return {
             "event": "sample",
@@ -312,7 +313,7 @@ class SampleRecord:
         }
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> SampleRecord:
+    def from_dict(cls, data: JsonObject) -> SampleRecord:
         """Inverse of to_dict; ValueError naming the field if `data` is not a record."""
         phase, index, status = data.get("phase"), data.get("index"), data.get("status")
         if phase not in ("fit", "verify"):
@@ -464,7 +465,7 @@ class Method(ABC):
         A failed detection is a skipped record; a lost link raises ConnectionFailed."""
 
     @abstractmethod
-    def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    def dataset_document(self, samples: Sequence[Mapping[str, Any]]) -> JsonObject:
         """The samples (dataset-file form, in order) as a `zerocal-dataset/1` document."""
 
     def dataset(self, samples: Sequence[Mapping[str, Any]]) -> Dataset:
@@ -498,7 +499,7 @@ class Method(ABC):
         sets it); None (the default): its samples are timed otherwise."""
         return None
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self) -> JsonObject:
         """JSON-ready facts about the method's set-up for the result document."""
         return {}
 

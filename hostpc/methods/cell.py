@@ -34,6 +34,7 @@ from hostpc.dataset import FramePose
 from hostpc.dataset.kind_registry import kind_descriptors
 from hostpc.errors import InputError
 from hostpc.input_files import CONFIG, read_input_text
+from hostpc.json_object import JsonObject
 
 
 def frame_names(plugins: Iterable[str | Path] = ()) -> tuple[str, ...]:
@@ -64,10 +65,10 @@ class Cell:
     known: tuple[str, ...] = ()
     image_size: tuple[int, int] | None = None
     baseline: float | None = None
-    chessboard: Mapping[str, Any] | None = None
-    raw: Mapping[str, Any] = field(default_factory=dict)
+    chessboard: JsonObject | None = None
+    raw: JsonObject = field(default_factory=dict)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """JSON form (the cell file format; SI units)."""
         extra = {k: v for k, v in self.raw.items() if k not in _CELL_KEYS}
         return {
@@ -106,17 +107,17 @@ def require_camera_cell(cell: Cell) -> tuple[FramePose, np.ndarray]:
     return cell.tool, cell.target
 
 
-def _merge(base: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
+def _merge(base: JsonObject, overrides: JsonObject) -> JsonObject:
     merged = dict(base)
     for key, value in overrides.items():
-        if isinstance(value, Mapping) and isinstance(merged.get(key), Mapping):
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
             merged[key] = _merge(merged[key], value)
         else:
             merged[key] = value
     return merged
 
 
-def load_cell_file(path: str | Path) -> dict[str, Any]:
+def load_cell_file(path: str | Path) -> JsonObject:
     """Read a --cell JSON file as a mapping; InputError naming the file if unreadable."""
     path = Path(path)
     try:
@@ -145,7 +146,7 @@ def parse_known(text: str | None, plugins: Iterable[str | Path] = ()) -> tuple[s
     return tuple(dict.fromkeys(names))
 
 
-def _vector(description: Mapping[str, Any], where: str, value: Any, size: int = 3) -> np.ndarray:
+def _vector(where: str, value: Any, size: int = 3) -> np.ndarray:
     try:
         array = np.asarray(value, dtype=float).reshape(-1)
     except (TypeError, ValueError):
@@ -156,9 +157,9 @@ def _vector(description: Mapping[str, Any], where: str, value: Any, size: int = 
 
 
 def build_cell(
-    camera_description: Mapping[str, Any],
+    camera_description: JsonObject,
     robot: str,
-    cell_file: Mapping[str, Any] | None = None,
+    cell_file: JsonObject | None = None,
     known: tuple[str, ...] | None = None,
     default_known: tuple[str, ...] = (),
     plugins: Iterable[str | Path] = (),
@@ -172,14 +173,14 @@ def build_cell(
     tool_spec = raw.get("tool") or raw.get("T_flange_camera_nominal")
     tool = None
     if isinstance(tool_spec, Mapping):
-        tool = FramePose(xyz=_vector(raw, "tool.xyz", tool_spec.get("xyz")),
-                         rpy=_vector(raw, "tool.rpy", tool_spec.get("rpy", [0.0, 0.0, 0.0])))
+        tool = FramePose(xyz=_vector("tool.xyz", tool_spec.get("xyz")),
+                         rpy=_vector("tool.rpy", tool_spec.get("rpy", [0.0, 0.0, 0.0])))
     target_spec = raw.get("target")
     if not isinstance(target_spec, Mapping):
         target_spec = {}
     centre = target_spec.get("centre", target_spec.get("centre_nominal"))
-    target = None if centre is None else _vector(raw, "target.centre", centre)
-    normal = _vector(raw, "target.normal", target_spec.get("normal", [0.0, 0.0, 1.0]))
+    target = None if centre is None else _vector("target.centre", centre)
+    normal = _vector("target.normal", target_spec.get("normal", [0.0, 0.0, 1.0]))
     if np.linalg.norm(normal) < 1e-9:
         raise InputError("cell target.normal: must be non-zero")
     radius = float(target_spec.get("radius", 0.01))
@@ -210,7 +211,7 @@ def build_cell(
     )
 
 
-def cell_from_dict(data: Mapping[str, Any], plugins: Iterable[str | Path] = ()) -> Cell:
+def cell_from_dict(data: JsonObject, plugins: Iterable[str | Path] = ()) -> Cell:
     """Rebuild a Cell from `Cell.to_dict()` (the run folder's copy)."""
     return build_cell({}, str(data.get("robot", "")), data, tuple(data.get("known", ())),
                       plugins=plugins)

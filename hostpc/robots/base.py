@@ -14,11 +14,12 @@ reported ("commanded") angles, `q_cmd`.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -34,7 +35,10 @@ class RobotState:
     """q: (n,) joint angles; zero_offsets: (n,) the controller's zero offsets (conventions.md);
     q_min, q_max: (n,) joint limits; digital_inputs / digital_outputs: IO lines;
     camera: what the controller reports of its camera and cell (image size, nominal mount,
-    target, chessboard geometry), or {}; robot: model name; extra: anything else reported."""
+    target, chessboard geometry), or {}; robot: model name; extra: anything else reported.
+    camera and extra are the controller's report as it sent it (a JSON object the protocol
+    leaves open: each driver, kind and plugin reads its own keys; run.json and a recording
+    keep it as sent): `build_cell` parses camera, `controller_time` reads the clock."""
 
     q: np.ndarray
     zero_offsets: np.ndarray
@@ -42,9 +46,15 @@ class RobotState:
     q_max: np.ndarray
     digital_inputs: tuple[bool, ...] = ()
     digital_outputs: tuple[bool, ...] = ()
-    camera: dict[str, Any] = field(default_factory=dict)
+    camera: JsonObject = field(default_factory=dict)
     robot: str = ""
-    extra: dict[str, Any] = field(default_factory=dict)
+    extra: JsonObject = field(default_factory=dict)
+
+    @property
+    def controller_time(self) -> float | None:
+        """The controller's clock (s) when it reports one (`extra["time"]`), else None."""
+        now = self.extra.get("time")
+        return float(now) if isinstance(now, int | float) and math.isfinite(now) else None
 
 
 @dataclass(frozen=True)
@@ -197,11 +207,33 @@ class OffsetExport(Protocol):
         ...
 
 
+@dataclass(frozen=True)
+class PairTiming:
+    """When a stereo pair was grabbed on the host: index (0-based capture count); t_left /
+    t_right: host clock (s) at each grab; stamp_left / stamp_right: backend timestamps (s,
+    0 when the backend reports none); skew_s: right minus left exposure time (s); t: the
+    controller time (s) the capture is stamped with."""
+
+    index: int
+    t_left: float
+    t_right: float
+    stamp_left: float
+    stamp_right: float
+    skew_s: float
+    t: float
+
+    def to_json(self) -> JsonObject:
+        """The timing log's and the recording's form."""
+        return {"index": self.index, "t_left": self.t_left, "t_right": self.t_right,
+                "stamp_left": self.stamp_left, "stamp_right": self.stamp_right,
+                "skew_s": self.skew_s, "t": self.t}
+
+
 class CaptureTiming(Protocol):
     """Cameras on the host: the timing of the last stereo pair (stamps, skew), or None."""
 
     @property
-    def last_timing(self) -> dict[str, Any] | None:
+    def last_timing(self) -> PairTiming | None:
         """Host grab times, backend timestamps and skew of the last capture."""
         ...
 

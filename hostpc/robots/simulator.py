@@ -43,13 +43,14 @@ import threading
 from collections.abc import Callable, Iterable
 from importlib import resources
 from pathlib import Path
-from typing import IO, Any
+from typing import IO
 
 import yaml
 
 from hostpc.dataset.kind_registry import DEFAULT_METHOD, SimDefault, kind_descriptor
 from hostpc.errors import ConnectionFailed, InputError
 from hostpc.input_files import CONFIG, read_input_text
+from hostpc.json_object import JsonObject
 from hostpc.robots.connect import TOKEN_ENV, RobotAddress, resolve_token
 
 START_TIMEOUT_S = 30.0
@@ -60,7 +61,7 @@ PR_SET_PDEATHSIG = 1
 """prctl option (linux/prctl.h): the signal this process gets when its parent dies."""
 
 
-def _merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
+def _merge(base: JsonObject, overrides: JsonObject) -> JsonObject:
     """Deep-merge `overrides` into a copy of `base`."""
     merged = copy.deepcopy(base)
     for key, value in overrides.items():
@@ -71,7 +72,7 @@ def _merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
     return merged
 
 
-def packaged_default_scenario(name: str = "default.yaml") -> dict[str, Any]:
+def packaged_default_scenario(name: str = "default.yaml") -> JsonObject:
     """The stub's packaged scenario `name` (default: the default scenario) as a plain
     mapping (read as data, not code)."""
     text = (resources.files("controller_stub") / "scenarios" / name).read_text()
@@ -91,7 +92,7 @@ def sim_default(method: str | None = None, plugins: Iterable[str | Path] = ()) -
 
 
 def default_sim_scenario(time_scale: float | None = None, method: str | None = None,
-                         plugins: Iterable[str | Path] = ()) -> dict[str, Any]:
+                         plugins: Iterable[str | Path] = ()) -> JsonObject:
     """The default world of `--robot sim --method METHOD` (see the module docstring), with
     the motion time scale set to `time_scale` if given."""
     default = sim_default(method, plugins)
@@ -107,7 +108,7 @@ def sim_default_known(method: str | None = None, plugins: Iterable[str | Path] =
     return sim_default(method, plugins).known
 
 
-def load_scenario_file(path: str | Path, time_scale: float | None = 0.0) -> dict[str, Any]:
+def load_scenario_file(path: str | Path, time_scale: float | None = 0.0) -> JsonObject:
     """A user's scenario file (YAML/JSON) as a mapping, with the motion time scale set
     (None keeps the file's). InputError naming the file if it cannot be read."""
     path = Path(path)
@@ -126,7 +127,7 @@ def load_scenario_file(path: str | Path, time_scale: float | None = 0.0) -> dict
     return data
 
 
-def _without_token(scenario: dict[str, Any]) -> dict[str, Any]:
+def _without_token(scenario: JsonObject) -> JsonObject:
     """A copy of `scenario` without `server.token` (what may be written to a run folder)."""
     server = scenario.get("server")
     if not isinstance(server, dict) or "token" not in server:
@@ -182,7 +183,7 @@ class SimulatedController:
     a `sim_sensor.py` are the stub's `--sensor-plugin`s.
     """
 
-    def __init__(self, scenario: dict[str, Any], workdir: str | Path,
+    def __init__(self, scenario: JsonObject, workdir: str | Path,
                  modbus_port: int | None = None, token: str | None = None,
                  plugins: Iterable[str | Path] = ()) -> None:
         server = scenario.get("server")
@@ -287,7 +288,7 @@ class SimulatedController:
         if log is not None:
             log.close()
 
-    def truth(self) -> dict[str, Any]:
+    def truth(self) -> JsonObject:
         """The stub's hidden truth as last written (zero errors w.r.t. the CURRENT offsets)."""
         try:
             data = json.loads(self.truth_path.read_text())

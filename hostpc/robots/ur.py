@@ -54,6 +54,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.errors import ConnectionFailed, ControllerError, InputError
+from hostpc.json_object import JsonObject
 from hostpc.robots.base import Capabilities, ContactOutcome, MoveOutcome, RobotState, StereoCapture
 from hostpc.robots.ur_guarded import N_DIGITAL_IO, LatchTiming, UrGuardedMove, rtde_frequency
 from hostpc.robots.ur_link import UrLink, check_joints, joint_velocity
@@ -139,7 +140,7 @@ class UrAdapter:
     async def state(self) -> RobotState:
         """Reported angles (measured + host offsets), limits, IO, camera description."""
         stamp, q, inputs, outputs = await self.link.call(self.link.sample)
-        camera: dict[str, Any] = {}
+        camera: JsonObject = {}
         if self.camera is not None:
             camera_state = await self.camera.state()
             camera = dict(camera_state.camera)

@@ -164,7 +164,7 @@ def kinematics_yaml(
     """The ur_description kinematics yaml (text) with the offsets folded into the origins."""
     _require_six(chain)
     origins, _ = joint_origins(chain, joint_offsets)
-    kinematics: dict[str, object] = {}
+    kinematics: dict[str, dict[str, float] | str] = {}
     for key, origin in zip(UR_KINEMATICS_KEYS, origins, strict=True):
         kinematics[key] = {
             "x": _clean(origin.xyz[0]),

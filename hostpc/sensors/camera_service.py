@@ -35,12 +35,11 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
 from hostpc.errors import ZerocalError
+from hostpc.json_object import JsonObject
 from hostpc.sensors.stereo_camera import StereoCamera, StereoPair
 from protocol import messages as m
 from protocol.admission import AuthThrottle, LogBudget, SessionSlots
@@ -87,7 +86,7 @@ class CameraService:
     keys of the `camera` mapping in get_state (e.g. the cell's nominal mount and target)."""
 
     def __init__(self, camera: StereoCamera, token: str,
-                 description: Mapping[str, Any] | None = None) -> None:
+                 description: JsonObject | None = None) -> None:
         self.camera = camera
         self.token = token
         self.description = dict(description or {})
@@ -194,7 +193,7 @@ class CameraService:
         return time.monotonic() - self._t0
 
     def _state(self, request: m.GetState) -> m.State:
-        camera: dict[str, Any] = dict(self.description)
+        camera: JsonObject = dict(self.description)  # the wire's camera object
         if self.image_size is not None:
             camera.setdefault("image_width", self.image_size[0])
             camera.setdefault("image_height", self.image_size[1])

@@ -19,13 +19,13 @@ import json
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from hostpc.robots.base import (
     ContactOutcome,
     MoveOutcome,
+    PairTiming,
     RobotAdapter,
     RobotState,
     StereoCapture,
@@ -45,7 +45,7 @@ class HostCameraAdapter:
         self.robot = robot
         self.camera = camera
         self.timing_log = timing_log
-        self.last_timing: dict[str, Any] | None = None
+        self.last_timing: PairTiming | None = None
         self._lock = asyncio.Lock()
         self.capabilities = replace(robot.capabilities, capture_timing=self)
 
@@ -70,9 +70,11 @@ class HostCameraAdapter:
             pair: StereoPair = await asyncio.to_thread(self.camera.capture)
         state = await self.robot.state()
         t = float(state.extra.get("time", pair.t_left))
-        self.last_timing = {**pair.timing(), "t": t}
+        self.last_timing = PairTiming(pair.index, pair.t_left, pair.t_right, pair.stamp_left,
+                                      pair.stamp_right, pair.skew_s, t)
         if self.timing_log is not None:
-            entry = {"pattern": pattern, "view": view, **self.last_timing, "wall": time.time()}
+            entry = {"pattern": pattern, "view": view, **self.last_timing.to_json(),
+                     "wall": time.time()}
             with self.timing_log.open("a", encoding="utf-8") as out:
                 out.write(json.dumps(entry) + "\n")
         return StereoCapture(left=pair.left, right=pair.right, q=np.asarray(state.q, float),

@@ -264,7 +264,7 @@ class RecordingAdapter:
         clock = self.capabilities.capture_timing  # host cameras: stamps and skew
         timing = None if clock is None else clock.last_timing
         if timing is not None:
-            result["timing"] = timing
+            result["timing"] = timing.to_json()
         return result
 
     async def get_offsets(self) -> np.ndarray:

@@ -78,7 +78,7 @@ class _Connect:
         return self._open().__await__()
 
     async def _open(self) -> ControllerClient:
-        await self._client._ensure_link()
+        await self._client.open()
         return self._client
 
     async def __aenter__(self) -> ControllerClient:
@@ -148,6 +148,10 @@ class ControllerClient:
     def authenticated(self) -> bool:
         """True if the current session proved the token."""
         return self._link is not None and self._link.alive and self._link.conn.authenticated
+
+    async def open(self) -> None:
+        """Open the connection now (requests also open it, and reopen a lost one, on demand)."""
+        await self._ensure_link()
 
     async def close(self) -> None:
         """Close the connection (pending requests fail with ConnectionFailed)."""
@@ -318,7 +322,7 @@ class ControllerClient:
 
     def subscribe_io(self, maxsize: int = 10000) -> IoEventSubscription:
         """Receive IO edge events from now on (see IoEventSubscription)."""
-        subscription = IoEventSubscription(self, maxsize)
+        subscription = IoEventSubscription(maxsize, on_close=self._subscriptions.discard)
         self._subscriptions.add(subscription)
         return subscription
 
@@ -439,4 +443,4 @@ class ControllerClient:
     def _on_io_edge(self, event: m.IoEdge) -> None:
         edge = IoEdgeEvent(event.line, event.value, event.time, _array(event.q_latched))
         for subscription in list(self._subscriptions):
-            subscription._put(edge)
+            subscription.deliver(edge)

@@ -9,20 +9,13 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import AsyncIterator
-from typing import Protocol
+from collections.abc import AsyncIterator, Callable
 
 from hostpc.errors import RequestTimeout
 from hostpc.transport.types import IoEdgeEvent
 
 # the client's logger: log records keep the name they had before the client was split
 logger = logging.getLogger("hostpc.transport.client")
-
-
-class _SubscriptionOwner(Protocol):
-    """What a subscription needs of its client (the `ControllerClient`)."""
-
-    _subscriptions: set[IoEventSubscription]
 
 
 class IoEventSubscription:
@@ -32,11 +25,13 @@ class IoEventSubscription:
     unsubscribes. Events arrive only on an authenticated session.
     """
 
-    def __init__(self, client: _SubscriptionOwner, maxsize: int) -> None:
-        self._client = client
+    def __init__(self, maxsize: int, on_close: Callable[[IoEventSubscription], None]) -> None:
+        """on_close: called once by `close()` (the client forgets the subscription)."""
+        self._on_close = on_close
         self.queue: asyncio.Queue[IoEdgeEvent] = asyncio.Queue(maxsize)
 
-    def _put(self, event: IoEdgeEvent) -> None:
+    def deliver(self, event: IoEdgeEvent) -> None:
+        """Queue one pushed edge (called by the client's receive loop; never blocks)."""
         try:
             self.queue.put_nowait(event)
         except asyncio.QueueFull:
@@ -51,7 +46,7 @@ class IoEventSubscription:
 
     def close(self) -> None:
         """Stop receiving events."""
-        self._client._subscriptions.discard(self)
+        self._on_close(self)
 
     def __aiter__(self) -> AsyncIterator[IoEdgeEvent]:
         return self

@@ -6,7 +6,6 @@ Angles are radians (reported frame), times seconds; arrays are numpy float64 (n,
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -41,7 +40,7 @@ class ControllerState:
     q_max: np.ndarray
     digital_inputs: tuple[bool, ...]
     digital_outputs: tuple[bool, ...]
-    camera: dict[str, Any]
+    camera: JsonObject  # the controller's camera description (open: RobotState.camera)
     authenticated: bool
 
 
@@ -120,7 +119,7 @@ class TrackerReading:
     time: float
     points: dict[str, tuple[np.ndarray, np.ndarray]]
     lost: tuple[str, ...]
-    description: dict[str, Any]
+    description: JsonObject  # open: each kind reads its own keys
 
 
 @dataclass(frozen=True)

@@ -27,6 +27,7 @@ import numpy as np
 
 from hostpc.errors import InputError
 from hostpc.input_files import RIG, read_input_text
+from hostpc.json_object import JsonObject
 
 RIG_FORMAT = "zerocal-stereo-rig"
 RIG_VERSION = 1
@@ -118,7 +119,7 @@ class StereoRig:
             digest.update(np.ascontiguousarray(a).tobytes())
         return digest.hexdigest()[:16]
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """JSON-serialisable mapping in the file format of the module docstring."""
         return {
             "format": RIG_FORMAT,

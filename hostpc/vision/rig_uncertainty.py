@@ -27,6 +27,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from hostpc.json_object import JsonObject
 from hostpc.vision.rectification import rectification_for
 from hostpc.vision.rig import StereoRig
 from hostpc.vision.triangulation import triangulate
@@ -170,12 +171,12 @@ def point_sensitivity(rig: StereoRig, uv: np.ndarray) -> np.ndarray:
 
 
 def uncertainty_document(rig: StereoRig, covariance: np.ndarray,
-                         pixel_floor_px: float = 0.0) -> dict[str, Any]:
+                         pixel_floor_px: float = 0.0) -> JsonObject:
     """The dataset's `rig_uncertainty` block: the rig, its parameter names and covariance,
     and the pixel floor the samples' covariances include (a weighting the fit's covariance
     takes back out: hostpc.fitting.shared_errors)."""
-    document: dict[str, Any] = {"rig": rig.to_dict(), "parameters": list(RIG_PARAMETERS),
-                                "covariance": np.asarray(covariance, float).tolist()}
+    document: JsonObject = {"rig": rig.to_dict(), "parameters": list(RIG_PARAMETERS),
+                            "covariance": np.asarray(covariance, float).tolist()}
     if pixel_floor_px > 0:
         document["pixel_floor_px"] = float(pixel_floor_px)
     return document
