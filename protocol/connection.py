@@ -29,18 +29,15 @@ from protocol.errors import (
 )
 from protocol.framing import DEFAULT_MAX_FRAME_SIZE, Frame, FrameDecoder, encode_frame
 from protocol.header_parsing import _find_id, parse_frame
+from protocol.message_base import PROTOCOL_VERSION, Reply, Request, _Message
 from protocol.messages import (
     EVENT_KINDS,
-    PROTOCOL_VERSION,
     REPLY_KIND,
     Auth,
     AuthReply,
     ErrorReply,
     Hello,
     HelloReply,
-    Reply,
-    Request,
-    _Message,
 )
 from protocol.session_states import (
     ALLOWED_REQUESTS,

@@ -15,7 +15,8 @@ from pydantic import ValidationError
 
 from protocol.errors import ErrorCode, RemoteProtocolError
 from protocol.framing import Frame
-from protocol.messages import MESSAGE_ADAPTER, _Message
+from protocol.message_base import _Message
+from protocol.messages import MESSAGE_ADAPTER
 
 MAX_JSON_DEPTH = 32
 """Deepest nesting of arrays/objects accepted in a header (the protocol's messages nest at

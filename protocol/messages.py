@@ -17,85 +17,27 @@ from typing import Annotated, Any, ClassVar, Literal
 from pydantic import Field, TypeAdapter
 
 from protocol.measurement_messages import (
-    Capture as Capture,
-)
-from protocol.measurement_messages import (
-    CaptureDone as CaptureDone,
-)
-from protocol.measurement_messages import (
-    ImageInfo as ImageInfo,
-)
-from protocol.measurement_messages import (
-    Matrix3 as Matrix3,
-)
-from protocol.measurement_messages import (
-    MeasureTargets as MeasureTargets,
-)
-from protocol.measurement_messages import (
-    MeasureTracker as MeasureTracker,
-)
-from protocol.measurement_messages import (
-    ReflectorObservation as ReflectorObservation,
-)
-from protocol.measurement_messages import (
-    SensorRead as SensorRead,
-)
-from protocol.measurement_messages import (
-    SensorReading as SensorReading,
-)
-from protocol.measurement_messages import (
-    TargetObservation as TargetObservation,
-)
-from protocol.measurement_messages import (
-    TargetsMeasured as TargetsMeasured,
-)
-from protocol.measurement_messages import (
-    TrackerMeasured as TrackerMeasured,
-)
-from protocol.measurement_messages import (
-    Vector3 as Vector3,
+    Capture,
+    CaptureDone,
+    MeasureTargets,
+    MeasureTracker,
+    SensorRead,
+    SensorReading,
+    TargetsMeasured,
+    TrackerMeasured,
 )
 from protocol.message_base import (
-    PROTOCOL_VERSION as PROTOCOL_VERSION,
-)
-from protocol.message_base import (
-    Bits as Bits,
-)
-from protocol.message_base import (
-    Digest as Digest,
-)
-from protocol.message_base import (
-    FiniteFloat as FiniteFloat,
-)
-from protocol.message_base import (
-    ImageEncoding as ImageEncoding,
-)
-from protocol.message_base import (
-    JointVector as JointVector,
-)
-from protocol.message_base import (
-    Nonce as Nonce,
-)
-from protocol.message_base import (
-    Pattern as Pattern,
-)
-from protocol.message_base import (
-    Reply as Reply,
-)
-from protocol.message_base import (
-    Request as Request,
-)
-from protocol.message_base import (
-    RequestId as RequestId,
-)
-from protocol.message_base import (
-    ShortText as ShortText,
-)
-from protocol.message_base import (
-    Text as Text,
-)
-from protocol.message_base import (
-    _Message as _Message,
+    Bits,
+    Digest,
+    FiniteFloat,
+    JointVector,
+    Nonce,
+    Reply,
+    Request,
+    RequestId,
+    ShortText,
+    Text,
+    _Message,
 )
 
 

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 from protocol.errors import ErrorCode
-from protocol.messages import READ_ONLY_KINDS, REQUEST_TYPES, _Message
+from protocol.message_base import _Message
+from protocol.messages import READ_ONLY_KINDS, REQUEST_TYPES
 
 
 class Role(StrEnum):

@@ -24,11 +24,25 @@ from controller_stub.world.motion import GuardedMoveResult, MotionPlan, MoveResu
 from protocol import messages as m
 from protocol.connection import Connection
 from protocol.errors import ErrorCode
+from protocol.measurement_messages import (
+    Capture,
+    CaptureDone,
+    ImageInfo,
+    MeasureTargets,
+    MeasureTracker,
+    ReflectorObservation,
+    SensorRead,
+    SensorReading,
+    TargetObservation,
+    TargetsMeasured,
+    TrackerMeasured,
+)
+from protocol.message_base import _Message
 
 # the server's logger: log records keep the name they had before the server was split
 logger = logging.getLogger("controller_stub.network.server")
 
-Handler = Callable[[Any], Awaitable[m._Message]]
+Handler = Callable[[Any], Awaitable[_Message]]
 
 MIN_MOTION_SPEED = 1e-3
 """Slowest speed fraction a motion may ask for: slower ones are refused (reason "speed"),
@@ -182,9 +196,9 @@ class RequestHandlers:
     async def _abort(self, request: m.Abort) -> m.Aborted:
         return m.Aborted(reply_to=request.id, was_moving=self.server.abort_motion())
 
-    async def _capture(self, request: m.Capture) -> m.CaptureDone:
+    async def _capture(self, request: Capture) -> CaptureDone:
         frame = self.sim.capture_stereo(pattern=request.pattern, view=request.view)
-        infos: list[m.ImageInfo] = []
+        infos: list[ImageInfo] = []
         payloads: list[bytes | memoryview] = []
         for camera, image in (("left", frame.left), ("right", frame.right)):
             pixels = np.ascontiguousarray(image, dtype=np.uint8)
@@ -193,7 +207,7 @@ class RequestHandlers:
             height, width = pixels.shape
             payload = _encode_png(pixels) if request.encoding == "png" else pixels.reshape(-1).data
             infos.append(
-                m.ImageInfo(
+                ImageInfo(
                     camera=camera,  # type: ignore[arg-type]
                     width=width,
                     height=height,
@@ -202,7 +216,7 @@ class RequestHandlers:
                 )
             )
             payloads.append(payload)
-        reply = m.CaptureDone(
+        reply = CaptureDone(
             reply_to=request.id,
             pattern=request.pattern,
             view=request.view,
@@ -213,7 +227,7 @@ class RequestHandlers:
         reply.with_attachments(*payloads)
         return reply
 
-    async def _measure_targets(self, request: m.MeasureTargets) -> m.TargetsMeasured:
+    async def _measure_targets(self, request: MeasureTargets) -> TargetsMeasured:
         """The simulation's triangulated targets (its `targets` sensor); a simulation
         without that sensor refuses with reason `unsupported`."""
         sensor = self.sim.targets
@@ -223,16 +237,16 @@ class RequestHandlers:
         # during a motion: at its start pose, with that q (as capture)
         result = sensor.measure_targets()
         targets = [
-            m.TargetObservation(chain=str(chain), p=float_list(seen["p"]),
+            TargetObservation(chain=str(chain), p=float_list(seen["p"]),
                                 cov=np.asarray(seen["cov"], dtype=float).reshape(3, 3).tolist(),
                                 uv=(None if seen.get("uv") is None else
                                     np.asarray(seen["uv"], dtype=float).reshape(2, 2).tolist()))
             for chain, seen in result["targets"].items()
         ]
-        return m.TargetsMeasured(reply_to=request.id, q=float_list(result["q"]),
+        return TargetsMeasured(reply_to=request.id, q=float_list(result["q"]),
                                  time=float(result["time"]), targets=targets)
 
-    async def _measure_tracker(self, request: m.MeasureTracker) -> m.TrackerMeasured:
+    async def _measure_tracker(self, request: MeasureTracker) -> TrackerMeasured:
         """The laser tracker's reflectors (the simulation's `tracker` sensor,
         controller_stub/sensors/world_point.py); a simulation without a tracker refuses with
         reason `unsupported`."""
@@ -241,16 +255,16 @@ class RequestHandlers:
             raise SimulationRefused("unsupported", f"{self.sim.robot_name} has no tracker")
         result = tracker.measure_tracker()
         reflectors = [
-            m.ReflectorObservation(name=str(name), p=float_list(seen["p"]),
+            ReflectorObservation(name=str(name), p=float_list(seen["p"]),
                                    cov=np.asarray(seen["cov"], dtype=float).reshape(3, 3).tolist())
             for name, seen in result["seen"].items()
         ]
-        return m.TrackerMeasured(reply_to=request.id, q=float_list(result["q"]),
+        return TrackerMeasured(reply_to=request.id, q=float_list(result["q"]),
                                  time=float(result["time"]), reflectors=reflectors,
                                  lost=[str(n) for n in result["lost"]],
                                  description=json.loads(json.dumps(result["description"])))
 
-    async def _sensor_read(self, request: m.SensorRead) -> m.SensorReading:
+    async def _sensor_read(self, request: SensorRead) -> SensorReading:
         """A reading of a kind's own simulated sensor (controller_stub/sensors/registry.py)
         with the joint angles and clock at the reading: `unsupported` for a sensor this
         stub does not simulate, `bad_message` for a request the sensor cannot read."""
@@ -261,7 +275,7 @@ class RequestHandlers:
         except SensorRequestError as exc:
             raise RequestRefusedError(ErrorCode.BAD_MESSAGE,
                                       f"sensor_read {request.sensor}: {exc}") from None
-        return m.SensorReading(reply_to=request.id, sensor=request.sensor,
+        return SensorReading(reply_to=request.id, sensor=request.sensor,
                                q=float_list(self.sim.joint_positions()),
                                time=float(self.sim.time),
                                reading=json.loads(json.dumps(reading, default=json_default)))

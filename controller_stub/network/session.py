@@ -23,6 +23,7 @@ from controller_stub.world.controller_state import SimulatedController
 from protocol import messages as m
 from protocol.connection import Connection
 from protocol.errors import ErrorCode, LocalProtocolError
+from protocol.message_base import Request, _Message
 from protocol.session_states import ConnectionClosed, ConnectionState, Rejected, Role, StateChanged
 
 # the server's logger: log records keep the name they had before the server was split
@@ -153,7 +154,7 @@ class Session:
             task.cancel()
         self._close_transport(abort=True)
 
-    def push(self, event: m._Message) -> None:
+    def push(self, event: _Message) -> None:
         """Push an event if this session is authenticated (dropped, with a warning, if the
         client has not read EVENT_DROP_BYTES of earlier output)."""
         if self.conn.state is not ConnectionState.READY or self.writer.is_closing():
@@ -244,7 +245,7 @@ class Session:
     # ------------------------------------------------------------------------ events
 
     async def _dispatch(self, event: object) -> None:
-        if isinstance(event, m.Request):
+        if isinstance(event, Request):
             if self.conn.state is not ConnectionState.READY:
                 self.server.session_loitering(self)
             if self.server.count_request():
@@ -273,7 +274,7 @@ class Session:
         elif isinstance(event, ConnectionClosed):
             pass
 
-    async def _serve(self, request: m.Request) -> None:
+    async def _serve(self, request: Request) -> None:
         handler = self._handlers[request.kind]
         try:
             reply = await handler(request)
@@ -317,7 +318,7 @@ class Session:
 
 
 def _error(
-    request: m.Request, code: ErrorCode, message: str, reason: str | None = None
+    request: Request, code: ErrorCode, message: str, reason: str | None = None
 ) -> m.ErrorReply:
     return m.ErrorReply(reply_to=request.id, code=code, message=message[:4000], reason=reason)
 

@@ -45,6 +45,8 @@ from protocol import messages as m
 from protocol.admission import AuthThrottle, LogBudget, SessionSlots
 from protocol.connection import Connection
 from protocol.errors import ErrorCode, LocalProtocolError
+from protocol.measurement_messages import Capture, CaptureDone, ImageInfo
+from protocol.message_base import Request, _Message
 from protocol.session_states import ConnectionState, Rejected, Role, StateChanged
 
 logger = logging.getLogger(__name__)
@@ -158,7 +160,7 @@ class CameraService:
             events = conn.receive_data(data)
             writer.write(conn.data_to_send())
             for event in events:
-                if isinstance(event, m.Request):
+                if isinstance(event, Request):
                     if conn.state is not ConnectionState.READY:
                         self._slots.loitering(session)
                     writer.write(conn.send(await self._answer(event)))
@@ -173,9 +175,9 @@ class CameraService:
             if not data:
                 break
 
-    async def _answer(self, request: m.Request) -> m._Message:
+    async def _answer(self, request: Request) -> _Message:
         try:
-            if isinstance(request, m.Capture):
+            if isinstance(request, Capture):
                 return await self._capture(request)
             if isinstance(request, m.GetState):
                 return self._state(request)
@@ -202,7 +204,7 @@ class CameraService:
                        digital_inputs=[], digital_outputs=[], camera=camera,
                        authenticated=True)
 
-    async def _capture(self, request: m.Capture) -> m.CaptureDone:
+    async def _capture(self, request: Capture) -> CaptureDone:
         async with self._capture_lock:
             pair: StereoPair = await asyncio.to_thread(self.camera.capture)
         self.captures += 1
@@ -216,11 +218,11 @@ class CameraService:
             pixels = np.ascontiguousarray(image, dtype=np.uint8)
             payload: bytes | memoryview = _png(pixels) if request.encoding == "png" \
                 else pixels.reshape(-1).data
-            infos.append(m.ImageInfo(camera=camera, width=pixels.shape[1],  # type: ignore[arg-type]
+            infos.append(ImageInfo(camera=camera, width=pixels.shape[1],  # type: ignore[arg-type]
                                      height=pixels.shape[0], encoding=request.encoding,
                                      nbytes=memoryview(payload).nbytes))
             payloads.append(payload)
-        reply = m.CaptureDone(reply_to=request.id, pattern=request.pattern, view=request.view,
+        reply = CaptureDone(reply_to=request.id, pattern=request.pattern, view=request.view,
                               q=[], time=pair.t_left - self._t0, images=infos)
         reply.with_attachments(*payloads)
         return reply

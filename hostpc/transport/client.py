@@ -47,10 +47,20 @@ from hostpc.transport.types import (
     TargetsMeasurement,
     TrackerReading,
 )
-from protocol import DEFAULT_PORT
+from protocol import DEFAULT_PORT, measurement_messages
 from protocol import messages as m
 from protocol.connection import Connection
 from protocol.errors import LocalProtocolError
+from protocol.measurement_messages import (
+    Capture,
+    CaptureDone,
+    MeasureTargets,
+    MeasureTracker,
+    SensorRead,
+    TargetsMeasured,
+    TrackerMeasured,
+)
+from protocol.message_base import Reply, Request
 from protocol.session_states import Role
 
 logger = logging.getLogger(__name__)
@@ -65,7 +75,7 @@ MOTION_KINDS = frozenset({"move_joints", "guarded_move"})
 ABORT_AFTER_TIMEOUT_S = 2.0
 """How long the abort sent after a motion timeout may take (s)."""
 
-ReplyT = TypeVar("ReplyT", bound=m.Reply)
+ReplyT = TypeVar("ReplyT", bound=Reply)
 
 
 class _Connect:
@@ -230,8 +240,8 @@ class ControllerClient:
         Raw images are read-only views of the received frame (no copy).
         """
         reply = await self._request(
-            lambda i: m.Capture(id=i, pattern=pattern, view=view, encoding=encoding),  # type: ignore[arg-type]
-            m.CaptureDone,
+            lambda i: Capture(id=i, pattern=pattern, view=view, encoding=encoding),  # type: ignore[arg-type]
+            CaptureDone,
             timeout,
         )
         images = [
@@ -249,7 +259,7 @@ class ControllerClient:
         """The targets the controller's camera sees now, triangulated by the controller:
         each with its chain, p (3,) m in the camera frame and cov (3, 3) m^2, and the joint
         angles q (n,) rad at the measurement."""
-        reply = await self._request(lambda i: m.MeasureTargets(id=i), m.TargetsMeasured,
+        reply = await self._request(lambda i: MeasureTargets(id=i), TargetsMeasured,
                                     timeout)
         targets = tuple(
             TargetPoint(chain=t.chain, p=_array(t.p), cov=np.asarray(t.cov, dtype=float),
@@ -262,7 +272,7 @@ class ControllerClient:
         """The cell's laser tracker now: each reflector's point (3,) m in the tracker frame
         and covariance (3, 3) m^2, the lost ones, q (n,) rad and the tracker's nominal
         description (`measure_tracker`, docs/protocol.md)."""
-        reply = await self._request(lambda i: m.MeasureTracker(id=i), m.TrackerMeasured,
+        reply = await self._request(lambda i: MeasureTracker(id=i), TrackerMeasured,
                                     timeout)
         points = {r.name: (_array(r.p), np.asarray(r.cov, dtype=float))
                   for r in reply.reflectors}
@@ -276,7 +286,8 @@ class ControllerClient:
         controller time at the reading. A controller without the instrument refuses
         (reason `unsupported`), a request it cannot read is a `bad_message` error."""
         reply = await self._request(
-            lambda i: m.SensorRead(id=i, sensor=sensor, request=request), m.SensorReading,
+            lambda i: SensorRead(id=i, sensor=sensor, request=request),
+            measurement_messages.SensorReading,
             timeout)
         return SensorReading(sensor=reply.sensor, q=_array(reply.q), time=reply.time,
                              reading=reply.reading)
@@ -330,7 +341,7 @@ class ControllerClient:
 
     async def _request(
         self,
-        make: Callable[[int], m.Request],
+        make: Callable[[int], Request],
         reply_type: type[ReplyT],
         timeout: float | None,
     ) -> ReplyT:

@@ -18,6 +18,7 @@ from hostpc.errors import ConnectionFailed, ProtocolViolation
 from hostpc.transport.error_mapping import _handshake_error
 from protocol import messages as m
 from protocol.connection import Connection
+from protocol.message_base import Reply, Request, _Message
 from protocol.session_states import ConnectionState, Rejected, StateChanged
 
 # the client's logger: log records keep the name they had before the client was split
@@ -43,7 +44,7 @@ class _Link:
         self.reader = reader
         self.writer = writer
         self.conn = conn
-        self.pending: dict[int, asyncio.Future[m._Message]] = {}
+        self.pending: dict[int, asyncio.Future[_Message]] = {}
         self.handshake: asyncio.Future[None] = asyncio.get_running_loop().create_future()
         # The opener waits on a shield of the handshake; if it gave up (timeout), a later
         # failure set here must not be reported as "Future exception was never retrieved".
@@ -56,9 +57,9 @@ class _Link:
     def alive(self) -> bool:
         return self.closed_reason is None and self.conn.state is not ConnectionState.CLOSED
 
-    def send(self, request: m.Request) -> asyncio.Future[m._Message]:
+    def send(self, request: Request) -> asyncio.Future[_Message]:
         data = self.conn.send(request)
-        future: asyncio.Future[m._Message] = asyncio.get_running_loop().create_future()
+        future: asyncio.Future[_Message] = asyncio.get_running_loop().create_future()
         self.pending[request.id] = future
         self.writer.write(data)
         return future
@@ -86,7 +87,7 @@ class _Link:
     def _dispatch(self, event: object) -> None:
         if isinstance(event, m.IoEdge):
             self._on_event(event)
-        elif isinstance(event, (m.Reply, m.ErrorReply)):
+        elif isinstance(event, (Reply, m.ErrorReply)):
             future = self.pending.pop(event.reply_to, None) if event.reply_to is not None else None
             if future is not None:
                 if not future.done():

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.errors import ProtocolViolation
-from protocol import messages as m
+from protocol.measurement_messages import ImageInfo
 
 
 def _array(values: list[float]) -> np.ndarray:
@@ -22,7 +22,7 @@ def _floats(values: Any) -> list[float]:
     return [float(v) for v in np.asarray(values, dtype=float).reshape(-1)]
 
 
-def _decode_image(info: m.ImageInfo, data: bytes | memoryview) -> np.ndarray:
+def _decode_image(info: ImageInfo, data: bytes | memoryview) -> np.ndarray:
     if info.encoding == "png":
         import cv2
 

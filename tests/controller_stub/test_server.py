@@ -17,6 +17,8 @@ from controller_stub.world.simulation import Simulation
 from protocol import messages as m
 from protocol.connection import Connection
 from protocol.framing import encode_frame
+from protocol.measurement_messages import Capture
+from protocol.message_base import Request
 from protocol.session_states import ConnectionState, Role
 
 TOKEN = "server-test"
@@ -51,7 +53,7 @@ class RawClient:
         self.events += events
         return events
 
-    async def request(self, request: m.Request) -> Any:
+    async def request(self, request: Request) -> Any:
         self.writer.write(self.conn.send(request))
         while True:
             for event in await self.pump():
@@ -103,7 +105,7 @@ async def test_handler_failure_becomes_an_error_reply_and_serving_goes_on(
 ) -> None:
     client = await RawClient.open(server)
     try:
-        reply = await client.request(m.Capture(id=client.conn.next_id()))
+        reply = await client.request(Capture(id=client.conn.next_id()))
         assert reply.kind == "error" and reply.code == "internal"
         assert "camera exploded" in reply.message
         state = await client.request(m.GetState(id=client.conn.next_id()))

@@ -28,6 +28,8 @@ from controller_stub.scenario.spec import scenario_from_dict
 from protocol import messages as m
 from protocol.connection import Connection
 from protocol.framing import MAGIC, FrameDecoder, encode_frame
+from protocol.measurement_messages import Capture
+from protocol.message_base import Request, _Message
 from protocol.session_states import ConnectionState, Role
 
 TOKEN = "fuzz-token"
@@ -94,12 +96,12 @@ class BlockingClient:
             self.sock.sendall(outgoing)
         return events
 
-    def request(self, request: m.Request) -> m._Message:
+    def request(self, request: Request) -> _Message:
         self.sock.sendall(self.conn.send(request))
         while True:
             for event in self._pump():
                 if getattr(event, "reply_to", None) == request.id:
-                    return typing.cast(m._Message, event)
+                    return typing.cast(_Message, event)
 
     def heartbeat(self) -> float:
         reply = self.request(m.Heartbeat(id=self.conn.next_id()))
@@ -161,7 +163,7 @@ def valid_request_frame(kind: str) -> bytes:
     samples = {
         "get_state": m.GetState(id=1),
         "move_joints": m.MoveJoints(id=2, q=[0.0] * 6, speed=0.5),
-        "capture": m.Capture(id=3),
+        "capture": Capture(id=3),
         "set_offsets": m.SetOffsets(id=4, offsets=[0.0] * 6),
     }
     return encode_frame(samples[kind].model_dump_json().encode())
@@ -298,7 +300,7 @@ def test_fuzzed_clients_get_errors_or_closed_and_others_keep_working(
     decoder.feed(received)
     while (frame := decoder.next_frame()) is not None:
         message = m.MESSAGE_ADAPTER.validate_json(frame.header)  # replies are valid messages
-        assert not isinstance(message, m.Request)
+        assert not isinstance(message, Request)
         assert getattr(message, "code", None) != "internal"  # no handler crashed
     assert decoder.buffered == 0  # no partial frame: every reply was complete
     assert running_stub.unhandled == []  # no session died of an exception, nothing logged
@@ -340,15 +342,15 @@ def test_stalled_half_frame_does_not_block_others(
         stalled.close()
 
 
-def exchange(address: tuple[str, int], frame: bytes) -> list[m._Message]:
+def exchange(address: tuple[str, int], frame: bytes) -> list[_Message]:
     """Authenticate, send `frame`, then a heartbeat; every message received until its reply."""
     client = BlockingClient(address)
     try:
         client.sock.sendall(frame)
         client.sock.sendall(client.conn.send(m.Heartbeat(id=99)))
-        received: list[m._Message] = []
+        received: list[_Message] = []
         while not any(getattr(e, "reply_to", None) == 99 for e in received):
-            received += [e for e in client._pump() if isinstance(e, m._Message)]
+            received += [e for e in client._pump() if isinstance(e, _Message)]
         return received
     finally:
         client.close()

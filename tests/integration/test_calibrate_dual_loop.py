@@ -32,6 +32,7 @@ from hostpc.robots.simulator import SimulatedController, default_sim_scenario, s
 from hostpc.robots.zerocal import ZerocalAdapter
 from hostpc.transport import ControllerClient, ControllerRefusedError
 from protocol import messages as m
+from protocol.measurement_messages import TargetsMeasured
 from tests.integration.conftest import TOKEN, StartStub
 from tests.integration.test_calibrate_sim import run_cli
 
@@ -104,7 +105,7 @@ def test_targets_measured_message_is_strict() -> None:
             "targets": [{"chain": "left", "p": [0.0, 0.1, 0.5],
                          "cov": [[1e-8, 0, 0], [0, 1e-8, 0], [0, 0, 1e-7]]}]}
     message = m.MESSAGE_ADAPTER.validate_python(good)
-    assert isinstance(message, m.TargetsMeasured)
+    assert isinstance(message, TargetsMeasured)
     assert m.REPLY_KIND["measure_targets"] == "targets_measured"
     for broken in (
         {**good, "targets": [{**good["targets"][0], "cov": [[1e-8, 0, 0], [0, 1e-8, 0]]}]},

@@ -23,6 +23,7 @@ import pytest
 from hostpc.robots.simulator import SimulatedController
 from protocol import messages as m
 from protocol.connection import Connection
+from protocol.message_base import Request
 from protocol.session_states import ConnectionState, Role
 from tests.integration.test_calibrate_sim import TOKEN, sim_scenario, truth_rig_file
 
@@ -43,7 +44,7 @@ class Anonymous:
         self.replies: dict[str, int] = {}
         self.sessions = 0
 
-    async def run(self, request: type[m.Request], every_s: float) -> None:
+    async def run(self, request: type[Request], every_s: float) -> None:
         """Until `stop`: connect, hello, send `request` every `every_s`; reconnect when
         closed. (Stops on the event, not only on cancellation: asyncio.wait_for of Python
         3.11 can swallow a cancellation that races with a completed read.)"""
@@ -52,7 +53,7 @@ class Anonymous:
                 await self._session(request, every_s)
             await asyncio.sleep(0.05)
 
-    async def _session(self, request: type[m.Request], every_s: float) -> None:
+    async def _session(self, request: type[Request], every_s: float) -> None:
         reader, writer = await asyncio.open_connection(self.host, self.port,
                                                        local_addr=(self.source, 0))
         self.sessions += 1

@@ -27,7 +27,7 @@ from hostpc.model.measurements import measurement_models
 from hostpc.sensors.recording import read_header
 from hostpc.transport import ControllerClient, ControllerRefusedError
 from protocol import messages as m
-from protocol.measurement_messages import MAX_SENSOR_NODES
+from protocol.measurement_messages import MAX_SENSOR_NODES, SensorRead
 from tests.controller_stub.test_server import RawClient
 from tests.hostpc.measurement_contract import check_model
 from tests.integration.test_calibrate_sim import run_cli
@@ -197,7 +197,7 @@ async def test_a_broken_sensor_read_is_a_bad_message(stub: ControllerServer,
     answers each with `bad_message` naming the field, and keeps serving."""
     client = await RawClient.open(stub)
     try:
-        broken = m.SensorRead.model_construct(id=client.conn.next_id(), kind="sensor_read",
+        broken = SensorRead.model_construct(id=client.conn.next_id(), kind="sensor_read",
                                               **fields)
         reply = await client.request(broken)
         assert reply.kind == "error" and reply.code == "bad_message", reply

@@ -14,6 +14,20 @@ from protocol import messages as m
 from protocol.connection import Connection
 from protocol.errors import ErrorCode, LocalProtocolError
 from protocol.framing import FrameDecoder, encode_frame
+from protocol.measurement_messages import (
+    Capture,
+    CaptureDone,
+    ImageInfo,
+    MeasureTargets,
+    MeasureTracker,
+    ReflectorObservation,
+    SensorRead,
+    SensorReading,
+    TargetObservation,
+    TargetsMeasured,
+    TrackerMeasured,
+)
+from protocol.message_base import PROTOCOL_VERSION, Request, _Message
 from protocol.session_states import (
     ALLOWED_REQUESTS,
     ConnectionClosed,
@@ -45,8 +59,8 @@ def deliver(data: bytes, receiver: Connection, chunker: Chunker = whole) -> list
     return events
 
 
-def messages_only(events: list[object]) -> list[m._Message]:
-    return [e for e in events if isinstance(e, m._Message)]
+def messages_only(events: list[object]) -> list[_Message]:
+    return [e for e in events if isinstance(e, _Message)]
 
 
 def connected_pair(
@@ -64,17 +78,17 @@ def connected_pair(
     return client, server
 
 
-def request_samples(next_id: Callable[[], int]) -> list[m.Request]:
+def request_samples(next_id: Callable[[], int]) -> list[Request]:
     return [
         m.GetState(id=next_id()),
         m.ReadIo(id=next_id()),
         m.MoveJoints(id=next_id(), q=Q, speed=0.25),
         m.GuardedMove(id=next_id(), q=Q, speed=0.1, io_line=3),
         m.Abort(id=next_id()),
-        m.Capture(id=next_id(), pattern="chessboard", view=4, encoding="png"),
-        m.MeasureTargets(id=next_id()),
-        m.MeasureTracker(id=next_id()),
-        m.SensorRead(id=next_id(), sensor="string_pot", request={"what": "length", "average": 4}),
+        Capture(id=next_id(), pattern="chessboard", view=4, encoding="png"),
+        MeasureTargets(id=next_id()),
+        MeasureTracker(id=next_id()),
+        SensorRead(id=next_id(), sensor="string_pot", request={"what": "length", "average": 4}),
         m.GetOffsets(id=next_id()),
         m.SetOffsets(id=next_id(), offsets=[0.001] * 6),
         m.RollbackOffsets(id=next_id(), rollback_id="rb-7"),
@@ -82,9 +96,9 @@ def request_samples(next_id: Callable[[], int]) -> list[m.Request]:
     ]
 
 
-def reply_for(request: m.Request) -> m._Message:
+def reply_for(request: Request) -> _Message:
     i = request.id
-    replies: dict[str, m._Message] = {
+    replies: dict[str, _Message] = {
         "get_state": m.State(
             reply_to=i,
             robot_name="ur5e",
@@ -106,36 +120,36 @@ def reply_for(request: m.Request) -> m._Message:
             reply_to=i, contact=True, q_latched=Q, q=Q, io_line=3, duration_s=1.0, speed_mps=0.01
         ),
         "abort": m.Aborted(reply_to=i, was_moving=True),
-        "capture": m.CaptureDone(
+        "capture": CaptureDone(
             reply_to=i,
             pattern="chessboard",
             view=4,
             q=Q,
             time=3.0,
             images=[
-                m.ImageInfo(camera="left", width=4, height=2, nbytes=8),
-                m.ImageInfo(camera="right", width=4, height=2, nbytes=8),
+                ImageInfo(camera="left", width=4, height=2, nbytes=8),
+                ImageInfo(camera="right", width=4, height=2, nbytes=8),
             ],
         ).with_attachments(bytes(range(8)), bytes(range(8, 16))),
-        "measure_targets": m.TargetsMeasured(
+        "measure_targets": TargetsMeasured(
             reply_to=i,
             q=Q,
             time=3.5,
             targets=[
-                m.TargetObservation(
+                TargetObservation(
                     chain="left",
                     p=[0.01, -0.02, 0.45],
                     cov=[[1e-9, 0.0, 2e-10], [0.0, 1e-9, 0.0], [2e-10, 0.0, 4e-8]],
                 )
             ],
         ),
-        "measure_tracker": m.TrackerMeasured(
+        "measure_tracker": TrackerMeasured(
             reply_to=i, q=Q, time=3.6, lost=["smr2"],
-            reflectors=[m.ReflectorObservation(name="smr1", p=[2.1, 0.4, 0.3],
+            reflectors=[ReflectorObservation(name="smr1", p=[2.1, 0.4, 0.3],
                                                cov=[[1e-10, 0, 0], [0, 1e-10, 0], [0, 0, 1e-10]])],
             description={"acceptance_deg": 55.0, "reflectors": {"smr1": [0.0, 0.0, 0.05]}},
         ),
-        "sensor_read": m.SensorReading(reply_to=i, sensor="string_pot", q=Q, time=3.7,
+        "sensor_read": SensorReading(reply_to=i, sensor="string_pot", q=Q, time=3.7,
                                        reading={"length": 0.8125, "sigma": 1e-5}),
         "get_offsets": m.Offsets(reply_to=i, offsets=[0.002] * 6),
         "set_offsets": m.OffsetsSet(
@@ -160,7 +174,7 @@ def test_handshake_authenticates_both_ends(chunker: Chunker) -> None:
     assert client.state is server.state is ConnectionState.READY
     assert client.authenticated and server.authenticated
     assert client.robot_name == "ur5e" and server.peer_name == "zerocal"
-    assert client.peer_version == server.peer_version == m.PROTOCOL_VERSION
+    assert client.peer_version == server.peer_version == PROTOCOL_VERSION
 
 
 @pytest.mark.parametrize("chunker", [whole, byte_by_byte], ids=["whole", "byte-by-byte"])
@@ -218,7 +232,7 @@ def test_version_mismatch_is_a_clear_error_on_both_sides() -> None:
     client = Connection(Role.CLIENT, token=TOKEN)
     server = Connection(Role.SERVER, token=TOKEN)
     hello = json.loads(first_header(client.initiate()))
-    hello["protocol_version"] = m.PROTOCOL_VERSION + 1
+    hello["protocol_version"] = PROTOCOL_VERSION + 1
     events = server.receive_data(encode_frame(json.dumps(hello).encode()))
     rejected = [e for e in events if isinstance(e, Rejected)]
     assert rejected and rejected[0].code is ErrorCode.VERSION_MISMATCH and rejected[0].fatal
@@ -236,7 +250,7 @@ def test_client_refuses_a_server_with_another_version() -> None:
     hello = json.loads(first_header(client.initiate()))
     reply = m.HelloReply(
         reply_to=hello["id"],
-        protocol_version=m.PROTOCOL_VERSION + 5,
+        protocol_version=PROTOCOL_VERSION + 5,
         server_name="future",
         robot_name="ur5e",
         server_nonce="ab" * 16,
@@ -406,14 +420,14 @@ def test_pre_auth_frame_limit_is_small_and_grows_after_auth() -> None:
 
 def test_capture_needs_an_authenticated_session() -> None:
     client, server = connected_pair(client_token=None)
-    events = server.receive_data(client.send(m.Capture(id=client.next_id())))
+    events = server.receive_data(client.send(Capture(id=client.next_id())))
     assert [e.code for e in events if isinstance(e, Rejected)] == [ErrorCode.AUTH_REQUIRED]
     assert "capture" not in ALLOWED_REQUESTS[ConnectionState.AUTHENTICATING]
 
 
 def test_wrong_attachment_count_is_rejected() -> None:
     client, server = connected_pair()
-    request = m.Capture(id=client.next_id())
+    request = Capture(id=client.next_id())
     server.receive_data(client.send(request))
     reply = reply_for(request)
     header = reply.model_dump_json().encode()
@@ -438,7 +452,7 @@ def test_local_protocol_errors() -> None:
         server.send(m.Aborted(reply_to=request.id, was_moving=False))
     with pytest.raises(LocalProtocolError, match="already in flight"):
         client.send(m.Heartbeat(id=request.id))
-    capture = m.Capture(id=client.next_id())
+    capture = Capture(id=client.next_id())
     server.receive_data(client.send(capture))
     with pytest.raises(LocalProtocolError, match="attachments"):
         server.send(reply_for(capture).with_attachments())
