@@ -87,14 +87,14 @@ def _converged_line(result: FitResult, source: str, options: str = "") -> str:
         return f"  converged: NO {how}"
     if result.dof <= 0:
         n_samples, m = result.residuals_raw.shape
-        # a pose adds m measured numbers: this many more poses give a positive dof
+        # a sample adds m measured numbers: this many more give a positive dof
         more = max(1, math.ceil((1 - result.dof) / m))
         return (f"  converged (solver) {how}, but with {result.dof} degrees of freedom: the "
                 f"{int(np.count_nonzero(~result.fixed))} free parameters pass exactly through "
                 f"the {n_samples * m} measured numbers, so nothing tests the model or the "
                 "noise and the sigmas assume both; measure more poses: at least "
-                f"{more} more for one degree of freedom ({m} numbers a pose), several times "
-                "that to test the model")
+                f"{more} more sample{'s' if more > 1 else ''} for one degree of freedom ({m} "
+                "numbers each), several times that to test the model")
     adequacy = model_adequacy(result, source or "DATASET", options)
     if adequacy.explains_data is False and adequacy.chi2_dof_upper is not None:
         ratio = result.chi2_dof / adequacy.chi2_dof_upper  # > 1; said, never "far" at 1.001
