@@ -157,7 +157,7 @@ def run(args: argparse.Namespace) -> int:
         output.unlink(missing_ok=True)
         raise InputError(f"{output}: cannot write ({exc.strerror or exc})") from None
     print(f"wrote {output}: {len(samples)} samples, method {args.method}, "
-          f"robot {robot.name or robot.urdf}")
+          f"robot {robot.name or robot.urdf or robot.table}")
     return 0
 
 
