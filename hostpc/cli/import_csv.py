@@ -40,6 +40,7 @@ from hostpc.importing.frame_guess import guessed_frames
 from hostpc.importing.imported import ImportedSamples, write_document
 from hostpc.input_files import CSV, check_input_file
 from hostpc.kinematics import Chain
+from hostpc.model.context import check_coupled_joints
 
 
 def register(subparsers: Any) -> None:
@@ -147,6 +148,8 @@ def run(args: argparse.Namespace) -> int:
         sigma_angle=args.sigma_angle, known=known, decimal=args.decimal, euler=args.euler)
     samples = _read_csv_file(Path(args.csv), args, len(prismatic), options)
     _warn_short_prismatic_travel(samples, prismatic, args)
+    check_coupled_joints(chain, samples.q, (str(Path(args.robot).resolve()), args.base_link,
+                                            args.tip_link) if robot.urdf else None)
     head = document_head(samples, options)
     if not args.no_guess:
         head["frames"] = guessed_frames(samples, chain, head["frames"])
