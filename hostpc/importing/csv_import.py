@@ -129,6 +129,10 @@ class _Cells:
         except ValueError:
             hint = (" (this file writes decimal commas, 1,5; a decimal point is ambiguous "
                     "here)" if self.decimal_comma and "." in raw else "")
+            if (not self.decimal_comma and self.header.delimiter != ","
+                    and _DECIMAL_COMMA.fullmatch(raw)):  # the first row had no decimals
+                hint = (" (a decimal comma? the first row showed none, so the numbers were "
+                        "read with a decimal point; give --decimal ,)")
             raise InputError(f"{self.header.source}: row {line}, column {column!r}: "
                              f"{raw!r} is not a number{hint}") from None
         if not math.isfinite(value):
