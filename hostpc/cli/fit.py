@@ -81,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("a dataset file is required (or --db URL --run ID)")
     dataset = with_constraints(load_dataset_as_asked(args.dataset, args), args.prior,
                                args.hold)
+    options = data_options(args)  # carried into every next command
     if args.write_urdf:
         check_urdf_robot(dataset.robot, args.write_urdf, args.dataset)
     choice = None
@@ -97,7 +98,6 @@ def run(args: argparse.Namespace) -> int:
     else:
         result = fit(dataset, args.effects, plugins=args.plugin, loss=args.loss,
                      cv_folds=args.cv_folds)
-    options = data_options(args)  # carried into every next command
     adequacy = model_adequacy(result, args.dataset, options)  # chi2/dof vs its band, once
     # above the band: the sigmas scaled by sqrt(chi2/dof) are shown beside the stated ones
     scaled = scaled_std(result) if adequacy.explains_data is False else None
@@ -135,6 +135,6 @@ def run(args: argparse.Namespace) -> int:
         print(format_fit_summary(result, source=args.dataset, scaled=scaled,
                                  jackknife=jackknife, options=options))
     if args.write_urdf:
-        write_calibrated_urdf(result, args.write_urdf, args.dataset, args.json)
+        write_calibrated_urdf(result, args.write_urdf, args.dataset + options, args.json)
     return 0
 
