@@ -10,10 +10,10 @@ frames are the fit's, as fitted (absolute, from FIT.json), not DATASET's own (an
 estimates those from the very file it reads). With --refit-frames the instrument's frames
 (a tracker registered anew, a target moved between days) are estimated on DATASET with
 the robot's parameters held at the fit's values, so the error that remains is the robot
-model's. The output says which frames were used. The fit and DATASET must be the same robot (the fit
-records its robot's name and kinematics fingerprint; `--robot` reads DATASET with another
-robot, as `hostpc fit --robot` does). Exit 0; 2 for a bad file, another robot or a model
-that does not match.
+model's. The output says which frames were used. The fit and DATASET must be the same
+robot (the fit records its robot's name and kinematics fingerprint; `--robot` reads
+DATASET with another robot, as `hostpc fit --robot` does). Exit 0; 2 for a bad file,
+another robot or a model that does not match.
 """
 
 from __future__ import annotations
