@@ -107,6 +107,9 @@ class FitDocument(_Strict):
     robot: StrictStr | None = None
     robot_identity: RobotIdentityEntry | None = None  # absent in fits made before it
     effects: list[StrictStr] = []
+    #: the fit dataset's nominal frames, SI (hostpc.dataset.writing.frames_to_json); absent
+    #: in fits made before it
+    frames: dict[StrictStr, Any] | None = None
     parameters: Annotated[dict[StrictStr, ParameterEntry], Field(min_length=1)]
     rms: NonNegative | None = None
     max: NonNegative | None = None

@@ -59,6 +59,9 @@ class SavedFit:
     #: the robot's name and kinematics fingerprint (hostpc.model.context.robot_identity);
     #: None for a fit written before fits recorded it
     robot_identity: dict[str, str] | None = None
+    #: the fit dataset's nominal frames as saved (SI JSON; hostpc.dataset.writing.
+    #: frames_from_json reads them); None for a fit written before fits recorded them
+    frames: dict[str, Any] | None = None
 
     @property
     def chi2_dof(self) -> float:
@@ -103,6 +106,7 @@ def saved_fit_from_dict(document: Any, source: str) -> SavedFit:
         robot_identity=(None if fit.robot_identity is None else
                         {"name": fit.robot_identity.name,
                          "kinematics": fit.robot_identity.kinematics}),
+        frames=fit.frames,
     )
 
 

@@ -10,7 +10,7 @@ import sys
 from hostpc.cli.archive_options import add_archive_options, dataset_from_archive
 from hostpc.cli.format import format_fit_summary, model_adequacy
 from hostpc.cli.numbers import CV_FOLDS
-from hostpc.cli.robots import add_robot_override, load_dataset_as_asked
+from hostpc.cli.robots import add_robot_override, data_options, load_dataset_as_asked
 from hostpc.cli.urdf_out import add_write_urdf_option, check_urdf_robot, write_calibrated_urdf
 from hostpc.errors import InputError
 from hostpc.fitting import fit
@@ -81,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("a dataset file is required (or --db URL --run ID)")
     dataset = with_constraints(load_dataset_as_asked(args.dataset, args), args.prior,
                                args.hold)
+    options = data_options(args)  # carried into every next command
     if args.write_urdf:
         check_urdf_robot(dataset.robot, args.write_urdf, args.dataset)
     choice = None
@@ -97,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         result = fit(dataset, args.effects, plugins=args.plugin, loss=args.loss,
                      cv_folds=args.cv_folds)
-    adequacy = model_adequacy(result, args.dataset)  # chi2/dof against its band, once
+    adequacy = model_adequacy(result, args.dataset, options)  # chi2/dof vs its band, once
     # above the band: the sigmas scaled by sqrt(chi2/dof) are shown beside the stated ones
     scaled = scaled_std(result) if adequacy.explains_data is False else None
     jackknife = jackknife_std(result) if args.jackknife else None
@@ -132,8 +133,8 @@ def run(args: argparse.Namespace) -> int:
                 print(f"outliers: {choice.outlier_note}")
             print()
         print(format_fit_summary(result, source=args.dataset, scaled=scaled,
-                                 jackknife=jackknife))
+                                 jackknife=jackknife, options=options))
     if args.write_urdf:
-        write_calibrated_urdf(result, args.write_urdf, args.dataset, args.json)
+        write_calibrated_urdf(result, args.write_urdf, args.dataset + options, args.json)
     return 0
 

@@ -65,48 +65,59 @@ class ModelAdequacy:
                 "explains_data": self.explains_data, "next": self.next_command}
 
 
-def model_adequacy(result: FitResult, source: str = "DATASET") -> ModelAdequacy:
-    """The fit's `ModelAdequacy`; `source` names the dataset in the next command."""
+def model_adequacy(result: FitResult, source: str = "DATASET", options: str = ""
+                   ) -> ModelAdequacy:
+    """The fit's `ModelAdequacy`; `source` names the dataset in the next command and
+    `options` are the options that define its data (hostpc.cli.robots.data_options: --robot,
+    --base-link, --tip-link, --plugin), carried into it."""
     band = chi2_dof_upper(result.dof)
     judged = math.isfinite(band) and math.isfinite(result.chi2_dof)
     explains = (result.chi2_dof <= band) if judged else None
     return ModelAdequacy(
         chi2_dof=result.chi2_dof if math.isfinite(result.chi2_dof) else None,
         chi2_dof_upper=band if math.isfinite(band) else None, explains_data=explains,
-        next_command=None if explains is not False else f"hostpc diagnose {source} --ladder")
+        next_command=(None if explains is not False
+                      else f"hostpc diagnose {source}{options} --ladder"))
 
 
-def _converged_line(result: FitResult, source: str) -> str:
+def _converged_line(result: FitResult, source: str, options: str = "") -> str:
     """Never a plain "converged: yes" for a model that does not explain the data."""
     how = f"({result.message}, {result.iterations} iterations)"
     if not result.converged:
         return f"  converged: NO {how}"
     if result.dof <= 0:
         n_samples, m = result.residuals_raw.shape
+        # a sample adds m measured numbers: this many more give a positive dof
+        more = max(1, math.ceil((1 - result.dof) / m))
         return (f"  converged (solver) {how}, but with {result.dof} degrees of freedom: the "
                 f"{int(np.count_nonzero(~result.fixed))} free parameters pass exactly through "
                 f"the {n_samples * m} measured numbers, so nothing tests the model or the "
-                "noise and the sigmas assume both; measure more poses (hostpc diagnose "
-                f"{source or 'DATASET'} says how many)")
-    adequacy = model_adequacy(result, source or "DATASET")
-    if adequacy.explains_data is False:
+                "noise and the sigmas assume both; measure more poses: at least "
+                f"{more} more sample{'s' if more > 1 else ''} for one degree of freedom ({m} "
+                "numbers each), several times that to test the model")
+    adequacy = model_adequacy(result, source or "DATASET", options)
+    if adequacy.explains_data is False and adequacy.chi2_dof_upper is not None:
+        ratio = result.chi2_dof / adequacy.chi2_dof_upper  # > 1; said, never "far" at 1.001
+        by = f"{ratio:.3g} times" if ratio >= 2 else f"by {ratio - 1:.2%}"
         return (f"  converged (solver) {how}, but the model does not explain the data: "
-                f"chi2/dof {result.chi2_dof:.4g} far above its band "
-                f"{adequacy.chi2_dof_upper:.4g}; next: {adequacy.next_command}")
+                f"chi2/dof {result.chi2_dof:.4g} above its band "
+                f"{adequacy.chi2_dof_upper:.4g} ({by}); next: "
+                f"{adequacy.next_command}")
     return f"  converged: yes {how}"
 
 
 def format_fit_summary(result: FitResult, source: str = "",
                        scaled: np.ndarray | None = None,
-                       jackknife: np.ndarray | None = None) -> str:
+                       jackknife: np.ndarray | None = None, options: str = "") -> str:
     """The fit as text; `scaled` / `jackknife`: further sigma columns (see
-    format_parameter_table), with a line that says which sigma is which."""
+    format_parameter_table), with a line that says which sigma is which; `options`: as for
+    model_adequacy."""
     n_samples = result.residuals_raw.shape[0]
     head = f"fit of {source}" if source else "fit"
     lines = [
         f"{head}: method {result.problem.method}, {n_samples} samples, "
         f"effects {', '.join(result.problem.effect_names)}",
-        _converged_line(result, source),
+        _converged_line(result, source, options),
         f"  residual RMS {result.rms * 1e3:.4f} mm, max {result.max * 1e3:.4f} mm, "
         f"chi2/dof {result.chi2_dof:.3f} (dof {result.dof})"
         + (f", {result.cv_folds}-fold cross-validated RMS {result.cv_rms * 1e3:.4f} mm"

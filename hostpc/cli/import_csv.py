@@ -18,8 +18,11 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from hostpc.cli.robots import RobotChoice, resolve_chain
 from hostpc.errors import InputError
@@ -37,6 +40,7 @@ from hostpc.importing.frame_guess import guessed_frames
 from hostpc.importing.imported import ImportedSamples, write_document
 from hostpc.input_files import CSV, check_input_file
 from hostpc.kinematics import Chain
+from hostpc.model.context import check_coupled_joints
 
 
 def register(subparsers: Any) -> None:
@@ -71,7 +75,10 @@ def register(subparsers: Any) -> None:
                         help="decimal mark of the numbers (auto: a comma when the fields are "
                         "separated by ';' or tabs and the first row writes 1,5)")
     parser.add_argument("--joint-unit", default="rad",
-                        help="revolute joint columns (prismatic use --length-unit)")
+                        help=f"revolute joint columns: {'/'.join(ANGLE_UNITS)}")
+    parser.add_argument("--prismatic-unit", default=None,
+                        help=f"prismatic joint columns: {'/'.join(LENGTH_UNITS)} (default: "
+                        "the --length-unit)")
     parser.add_argument("--sigma", type=float, default=None,
                         help="position sigma, length unit (default 0.1 mm)")
     parser.add_argument("--sigma-angle", type=float, default=None,
@@ -115,8 +122,9 @@ def run(args: argparse.Namespace) -> int:
                          f"{', '.join(csv_row_kinds())})")
     for option, value, units in (("--length-unit", args.length_unit, LENGTH_UNITS),
                                  ("--angle-unit", args.angle_unit, ANGLE_UNITS),
-                                 ("--joint-unit", args.joint_unit, ANGLE_UNITS)):
-        if value not in units:
+                                 ("--joint-unit", args.joint_unit, ANGLE_UNITS),
+                                 ("--prismatic-unit", args.prismatic_unit, LENGTH_UNITS)):
+        if value is not None and value not in units:
             raise InputError(f"{option}: unknown unit {value!r} (expected one of "
                              f"{', '.join(units)})")
     for option, value in (("--sigma", args.sigma), ("--sigma-angle", args.sigma_angle)):
@@ -135,9 +143,13 @@ def run(args: argparse.Namespace) -> int:
     options = ImportOptions(
         method=args.method, robot=robot.to_json(), prismatic=prismatic,
         length_unit=args.length_unit, angle_unit=args.angle_unit, joint_unit=args.joint_unit,
+        prismatic_unit=args.prismatic_unit,
         sigma=args.sigma if args.sigma is not None else 1e-4 / LENGTH_UNITS[args.length_unit],
         sigma_angle=args.sigma_angle, known=known, decimal=args.decimal, euler=args.euler)
     samples = _read_csv_file(Path(args.csv), args, len(prismatic), options)
+    _warn_short_prismatic_travel(samples, prismatic, args)
+    check_coupled_joints(chain, samples.q, (str(Path(args.robot).resolve()), args.base_link,
+                                            args.tip_link) if robot.urdf else None)
     head = document_head(samples, options)
     if not args.no_guess:
         head["frames"] = guessed_frames(samples, chain, head["frames"])
@@ -148,8 +160,28 @@ def run(args: argparse.Namespace) -> int:
         output.unlink(missing_ok=True)
         raise InputError(f"{output}: cannot write ({exc.strerror or exc})") from None
     print(f"wrote {output}: {len(samples)} samples, method {args.method}, "
-          f"robot {robot.name or robot.urdf}")
+          f"robot {robot.name or robot.urdf or robot.table}")
     return 0
+
+
+SHORT_PRISMATIC_TRAVEL_M = 1e-3
+"""A prismatic joint whose column spans less than this (m) after conversion is likely
+read in the wrong unit (a lift's travel in m read as mm)."""
+
+
+def _warn_short_prismatic_travel(samples: ImportedSamples, prismatic: tuple[bool, ...],
+                                 args: argparse.Namespace) -> None:
+    """One warning line (stderr) per prismatic joint whose column spans under 1 mm after
+    conversion, naming the unit it was read in and the option that sets it."""
+    unit = args.prismatic_unit or args.length_unit
+    for j, is_prismatic in enumerate(prismatic):
+        if not is_prismatic or not len(samples):
+            continue
+        span = float(np.ptp(samples.q[:, j]))
+        if span < SHORT_PRISMATIC_TRAVEL_M:
+            print(f"warning: prismatic joint q{j + 1} spans only {span * 1e3:.3g} mm read "
+                  f"in {unit}: a unit mix-up? its unit is --prismatic-unit "
+                  f"{'/'.join(LENGTH_UNITS)} (default: the --length-unit)", file=sys.stderr)
 
 
 def _read_csv_file(path: Path, args: argparse.Namespace, n_joints: int,

@@ -5,13 +5,15 @@
 
 Every sample of DATASET is predicted by the fit's model at the fit's values and compared
 with its measurement: the position error (RMS, max, mm), the orientation error where it is
-measured (deg) and the whitened RMS (1 = at the stated noise). With --refit-frames the
-instrument's frames (a tracker registered anew, a target moved between days) are
-estimated on DATASET with the robot's parameters held at the fit's values, so the error
-that remains is the robot model's. The fit and DATASET must be the same robot (the fit
-records its robot's name and kinematics fingerprint; `--robot` reads DATASET with another
-robot, as `hostpc fit --robot` does). Exit 0; 2 for a bad file, another robot or a model
-that does not match.
+measured (deg) and the whitened RMS (1 = at the stated noise). By default the instrument's
+frames are the fit's, as fitted (absolute, from FIT.json), not DATASET's own (an import
+estimates those from the very file it reads). With --refit-frames the instrument's frames
+(a tracker registered anew, a target moved between days) are estimated on DATASET with
+the robot's parameters held at the fit's values, so the error that remains is the robot
+model's. The output says which frames were used. The fit and DATASET must be the same
+robot (the fit records its robot's name and kinematics fingerprint; `--robot` reads
+DATASET with another robot, as `hostpc fit --robot` does). Exit 0; 2 for a bad file,
+another robot or a model that does not match.
 """
 
 from __future__ import annotations
@@ -22,8 +24,9 @@ import math
 from typing import Any
 
 from hostpc.calibrate.offline_push import SavedFit, load_saved_fit
-from hostpc.cli.robots import add_robot_override, load_dataset_as_asked
+from hostpc.cli.robots import add_robot_override, data_options, load_dataset_as_asked
 from hostpc.dataset import Dataset
+from hostpc.dataset.writing import frames_from_json
 from hostpc.errors import InputError
 from hostpc.fitting.prediction import FittedModel, predict
 from hostpc.model.context import robot_identity
@@ -74,11 +77,18 @@ def run(args: argparse.Namespace) -> int:
     saved = load_saved_fit(args.fit)
     dataset = load_dataset_as_asked(args.dataset, args)
     check_same_robot(saved, dataset, args.fit, args.dataset)
+    frames = None
+    if saved.frames is not None:
+        try:
+            frames = frames_from_json(saved.frames, dataset.frames)
+        except ValueError as exc:
+            raise InputError(f"{args.fit}: {exc}") from None
     model = FittedModel(saved.effects, dict(zip(saved.names, map(float, saved.x),
-                                                strict=True)))
+                                                strict=True)), frames)
     prediction = predict(model, dataset, refit_frames=args.refit_frames)
     if args.json:
         print(json.dumps({"fit": args.fit, "dataset": args.dataset,
+                          "frames": "refitted" if args.refit_frames else "fit",
                           **_finite(prediction.to_dict())}, indent=2))
         return 0
     angle = prediction.angle_rms
@@ -88,11 +98,13 @@ def run(args: argparse.Namespace) -> int:
           f"{prediction.max * 1e3:.4f} mm"
           + (f"; orientation RMS {math.degrees(angle):.4f} deg" if angle is not None else ""))
     print(f"  whitened RMS {prediction.whitened_rms:.3f} (1 = the dataset's stated noise)")
-    if prediction.refitted:
-        print(f"  frames estimated on this dataset: {', '.join(prediction.refitted)}")
-    elif not args.refit_frames:
-        print(f"  (the fit's frames as they were; if the instrument was set up anew: hostpc "
-              f"predict {args.fit} {args.dataset} --refit-frames)")
+    if args.refit_frames:
+        print("  frames: estimated on this dataset (--refit-frames), the robot held at the "
+              f"fit's values: {', '.join(prediction.refitted) or 'none to estimate'}")
+    else:
+        print(f"  frames: the fit's, as fitted (from {args.fit}); if the instrument was set "
+              f"up anew: hostpc predict {args.fit} {args.dataset} --refit-frames"
+              f"{data_options(args)}")
     return 0
 
 

@@ -220,6 +220,22 @@ def add_robot_override(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tip-link", help="URDF: the chain's tip link (the flange)")
 
 
+def data_options(args: argparse.Namespace) -> str:
+    """The options that define how a command read its dataset (--robot, --base-link,
+    --tip-link, --plugin), as text to append to a next command (" --robot ur10e"; "" when
+    none): a command it suggests reads the same data."""
+    import shlex
+
+    words: list[str] = []
+    for option in ("robot", "base_link", "tip_link"):
+        value = getattr(args, option, None)
+        if value:
+            words += [f"--{option.replace('_', '-')}", shlex.quote(str(value))]
+    for plugin in getattr(args, "plugin", None) or []:
+        words += ["--plugin", shlex.quote(str(plugin))]
+    return "".join(f" {w}" for w in words)
+
+
 @dataclass(frozen=True)
 class RobotChoice:
     """A robot named on the command line: a built-in ``name``, a ``urdf`` file with its

@@ -10,7 +10,7 @@ import copy
 import json
 import os
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
@@ -117,6 +117,42 @@ def _robot_to_dict(robot: RobotDescription) -> JsonObject:
     if robot.com is not None:
         out["com"] = robot.com.tolist()
     return out
+
+
+def frames_to_json(frames: Mapping[str, Frame]) -> JsonObject:
+    """Frames as the JSON of a dataset's ``frames`` object, in SI (m, rad): what a saved fit
+    records of its dataset (``FitResult.to_dict``; read back by ``frames_from_json``)."""
+    return {name: _frame_to_json(value) for name, value in frames.items()}
+
+
+def frames_from_json(document: Mapping[str, Any], like: Mapping[str, Frame]
+                     ) -> dict[str, Frame]:
+    """The frames of ``frames_to_json`` (SI) back as values, each read as the frame of the
+    same name in ``like`` is (a pose, a point, named points, a sphere); names ``like`` has
+    not are left out. ValueError for a value of the wrong shape."""
+    frames: dict[str, Frame] = {}
+    for name, value in document.items():
+        if name not in like:
+            continue
+        template = like[name]
+        try:
+            if isinstance(template, FramePose):
+                frames[name] = FramePose(xyz=np.asarray(value["xyz"], dtype=float),
+                                         rpy=np.asarray(value["rpy"], dtype=float))
+            elif isinstance(template, SphereFrame):
+                frames[name] = SphereFrame(center=np.asarray(value["center"], dtype=float),
+                                           radius=float(value["radius"]))
+            elif isinstance(template, np.ndarray):
+                frames[name] = np.asarray(value, dtype=float).reshape(3)
+            elif isinstance(template, Mapping) and all(
+                    isinstance(v, np.ndarray) for v in template.values()):
+                frames[name] = {k: np.asarray(v, dtype=float).reshape(3)
+                                for k, v in value.items()}
+            else:
+                frames[name] = copy.deepcopy(value)
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise ValueError(f"frames.{name}: not a frame of this kind ({exc})") from None
+    return frames
 
 
 def _frame_to_json(value: Frame) -> Any:

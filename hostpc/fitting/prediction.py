@@ -2,10 +2,13 @@
 
 ``predict(fitted, dataset)`` builds the fit's model (its effects) on the new dataset, sets
 every parameter to the fit's value by name and compares predicted with measured sample by
-sample; `fitted` is a ``FitResult`` or the ``FittedModel`` of a saved fit. The robot (joint
-offsets, geometry, any joint-space effect) is the fit's; the instrument's frames (a
-tracker's registration, a target, a camera mount) often are not the same on another day,
-so ``refit_frames`` re-estimates the frame effects alone on the new data, with the robot's
+sample; `fitted` is a ``FitResult`` or the ``FittedModel`` of a saved fit. The model is the
+fit's whole model: the robot (joint offsets, geometry, any joint-space effect) and the
+instrument's frames as fitted, absolute (the fit dataset's nominal frames with the fitted
+frame corrections), never the new dataset's own nominal frames (an import estimates those
+from the file it reads, so they are registered to that very data). When the instrument was
+set up anew (a tracker moved, a target remounted), ``refit_frames`` re-estimates the frame
+effects alone on the new data, starting from its own nominal frames, with the robot's
 parameters held at the fit's values: the error that remains is the robot model's, not the
 set-up's.
 
@@ -14,6 +17,7 @@ Pure numerics: the CLI (`hostpc predict FIT.json DATASET`) reads the files.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -21,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hostpc.dataset import Dataset
+from hostpc.dataset.model import Frame
 from hostpc.errors import InputError
 from hostpc.fitting.fitting import fit
 from hostpc.fitting.result import FitResult
@@ -31,16 +36,20 @@ from hostpc.model.problem import build_problem
 
 @dataclass(frozen=True)
 class FittedModel:
-    """What a prediction needs of a fit: its effects and its parameter values by full
-    name (SI, rad); the part of a saved fit (FIT.json) that predicts."""
+    """What a prediction needs of a fit: its effects, its parameter values by full name
+    (SI, rad) and the nominal frames of the dataset it was fitted on (the frame parameters
+    are corrections to them; None: unknown, a fit saved before fits recorded them); the part
+    of a saved fit (FIT.json) that predicts."""
 
     effects: tuple[str, ...]
     values: Mapping[str, float]
+    frames: Mapping[str, Frame] | None = None
 
     @classmethod
     def of(cls, result: FitResult) -> FittedModel:
         return cls(tuple(result.problem.effect_names),
-                   {n: float(v) for n, v in zip(result.names, result.x, strict=True)})
+                   {n: float(v) for n, v in zip(result.names, result.x, strict=True)},
+                   dict(result.problem.dataset.frames))
 
 
 @dataclass(frozen=True)
@@ -105,11 +114,21 @@ class Prediction:
 
 def predict(fitted: FitResult | FittedModel, dataset: Dataset, *,
             refit_frames: bool = False) -> Prediction:
-    """The prediction of `dataset` by the fitted model: its effects at its parameter values.
-    A parameter of the model the fit has no value for is an InputError, unless it is a
-    frame parameter and ``refit_frames`` is set (then it starts at nominal)."""
+    """The prediction of `dataset` by the fitted model: its effects at its parameter values,
+    in the fit's frames (module docstring). With ``refit_frames`` the frames are estimated
+    on `dataset` instead, from its own nominal frames. A parameter of the model the fit has
+    no value for is an InputError, unless it is a frame parameter and ``refit_frames`` is
+    set. A model without recorded frames (``FittedModel.frames`` None) predicts only with
+    ``refit_frames``: InputError."""
     model = FittedModel.of(fitted) if isinstance(fitted, FitResult) else fitted
     values, effect_names = model.values, model.effects
+    if not refit_frames:
+        if model.frames is None:
+            raise InputError("the fit records no frames (a fit saved before fits recorded "
+                             "them): fit again with hostpc fit DATASET --json, or estimate "
+                             "the frames on this dataset with --refit-frames")
+        dataset = dataclasses.replace(dataset, frames=fits_frames(dataset.frames,
+                                                                   model.frames))
     problem = build_problem(dataset, list(effect_names))
     names = problem.layout.names
     frame_effects = set(problem.frame_names)
@@ -121,7 +140,9 @@ def predict(fitted: FitResult | FittedModel, dataset: Dataset, *,
                 if any(n.split(".", 1)[0] in frame_effects for n in missing) else "")
         raise InputError(f"the fit has no value for {listed}: its model does not match "
                          f"this dataset's{hint}")
-    x = np.array([float(values.get(n, 0.0)) for n in names])
+    # refitting starts the frames at the dataset's own nominal frames (corrections zero)
+    x = np.array([0.0 if refit_frames and n.split(".", 1)[0] in frame_effects
+                  else float(values.get(n, 0.0)) for n in names])
     refitted: dict[str, float] = {}
     if refit_frames and frame_effects:
         hold = [n for n in names if n.split(".", 1)[0] not in frame_effects]
@@ -139,3 +160,18 @@ def predict(fitted: FitResult | FittedModel, dataset: Dataset, *,
                       residuals=evaluation.raw, whitened=evaluation.whitened,
                       length_columns=problem.length_columns, angle_columns=angles,
                       refitted=refitted)
+
+
+def fits_frames(own: Mapping[str, Frame], fitted: Mapping[str, Frame]) -> dict[str, Frame]:
+    """The dataset's frames with the fit's in their place: every frame the fit has replaces
+    the dataset's of that name (named points point by point, so a point only the dataset
+    has stays and the fit has no value for it); frames the fit has not stay the dataset's."""
+    frames = dict(own)
+    for name, value in fitted.items():
+        mine = frames.get(name)
+        if isinstance(value, Mapping) and isinstance(mine, Mapping) and all(
+                isinstance(v, np.ndarray) for v in (*value.values(), *mine.values())):
+            frames[name] = {**mine, **value}
+        elif name in frames:
+            frames[name] = value
+    return frames

@@ -9,6 +9,7 @@ from typing import Protocol
 
 import numpy as np
 
+from hostpc.dataset.writing import frames_to_json
 from hostpc.fitting.identifiability import NullDirection
 from hostpc.json_object import JsonObject
 from hostpc.model.context import robot_identity
@@ -159,6 +160,9 @@ class FitResult:
             "robot": self.problem.dataset.robot.name,
             "robot_identity": robot_identity(self.problem.dataset),
             "effects": list(self.problem.effect_names),
+            # the dataset's nominal frames (SI): with the frame parameters below they are the
+            # fitted frames, absolute, that `hostpc predict` applies to another dataset
+            "frames": frames_to_json(self.problem.dataset.frames),
             "parameters": {
                 p.name: {"value": p.value, "std": finite(p.std), "unit": p.unit,
                          "fixed": p.fixed}

@@ -63,7 +63,8 @@ class ImportOptions:
     method: a kind that reads metrology CSV rows (``csv_rows``: world_point,
     world_pose); robot: the dataset's ``robot`` object;
     prismatic: per joint, True where the joint variable is a length;
-    length_unit, angle_unit, joint_unit: defaults for columns whose header names no unit;
+    length_unit, angle_unit, joint_unit (revolute joints), prismatic_unit (prismatic joints;
+    None: the length unit): defaults for columns whose header names no unit;
     sigma (length unit) and sigma_angle (angle unit): measurement noise; frames and known
     as in the dataset contract (SI); decimal: the decimal mark of the numbers ("auto",
     "." or ","); euler: the convention of the e1, e2, e3 columns (``SEQ-intrinsic`` or
@@ -75,6 +76,7 @@ class ImportOptions:
     length_unit: str = "m"
     angle_unit: str = "rad"
     joint_unit: str = "rad"
+    prismatic_unit: str | None = None  # None: length_unit
     sigma: float = 1e-4
     sigma_angle: float | None = None
     frames: Mapping[str, Any] = field(default_factory=dict)
@@ -104,9 +106,10 @@ class _Cells:
     def unit_of(self, column: str, kind: str) -> float:
         """SI factor of ``column``: its header unit, else the option's default."""
         default = {"length": self.options.length_unit, "angle": self.options.angle_unit,
-                   "joint": self.options.joint_unit}[kind]
+                   "joint": self.options.joint_unit,
+                   "prismatic": self.options.prismatic_unit or self.options.length_unit}[kind]
         unit = self.header.units.get(column, default)
-        units = LENGTH_UNITS if kind == "length" else ANGLE_UNITS
+        units = LENGTH_UNITS if kind in ("length", "prismatic") else ANGLE_UNITS
         if unit not in units and column in self.header.units:
             raise InputError(f"{self.header.source}: row 1, column {column!r}: unknown unit "
                              f"{unit!r} (expected one of {', '.join(units)})")
@@ -126,6 +129,10 @@ class _Cells:
         except ValueError:
             hint = (" (this file writes decimal commas, 1,5; a decimal point is ambiguous "
                     "here)" if self.decimal_comma and "." in raw else "")
+            if (not self.decimal_comma and self.header.delimiter != ","
+                    and _DECIMAL_COMMA.fullmatch(raw)):  # the first row had no decimals
+                hint = (" (a decimal comma? the first row showed none, so the numbers were "
+                        "read with a decimal point; give --decimal ,)")
             raise InputError(f"{self.header.source}: row {line}, column {column!r}: "
                              f"{raw!r} is not a number{hint}") from None
         if not math.isfinite(value):
@@ -226,7 +233,7 @@ def read_samples(csv_rows: CsvRows, mapping: ColumnMap, options: ImportOptions
     cells.decimal_comma = _uses_decimal_comma(options.decimal, header, first,
                                               [k for group in indices for k in group])
     factors = np.array([
-        [*(cells.unit_of(c, "length" if prismatic else "joint")
+        [*(cells.unit_of(c, "prismatic" if prismatic else "joint")
            for c, prismatic in zip(mapping.joints, options.prismatic, strict=True)),
          *(cells.unit_of(c, "length") for c in (*point.xyz, *point.sigma)),
          *(1.0 for _ in optional),

@@ -45,8 +45,12 @@ _TOP_KEYS = {"format", "name", "convention", "units", "joints"}
 _JOINT_KEYS = {"a", "alpha", "d", "theta", "type", "min", "max"}
 MAX_JOINTS = 64
 """More joints than any serial robot has: a larger table is a wrong file."""
-MAX_LENGTH_M = 100.0
-"""Largest |a| or |d| (m), as a URDF origin (hostpc.kinematics.urdf.MAX_ORIGIN_M)."""
+MAX_LENGTH_M = 10.0
+"""Largest |a| or |d| and prismatic joint limit (m): no serial arm's link is longer, and a
+table in mm or cm read as m (the common slip) is far beyond it."""
+MAX_ANGLE_RAD = 2.0 * math.pi
+"""Largest |alpha| or |theta| (rad): beyond a full turn the table's angles are degrees
+read as radians (90 deg read as rad is 5157 deg)."""
 
 
 def is_table_file(robot: str) -> bool:
@@ -96,8 +100,9 @@ def _rows(document: dict[str, Any], source: str) -> dict[str, Any]:
     if not isinstance(units, dict) or set(units) - {"length", "angle"}:
         raise InputError(f"{source}: units: expected {{\"length\": \"m\"|\"mm\", "
                          f"\"angle\": \"rad\"|\"deg\"}}, got {units!r}")
-    length = _LENGTH[_choice(units, "length", _LENGTH, "m", f"{source}: units")]
-    angle = _ANGLE[_choice(units, "angle", _ANGLE, "rad", f"{source}: units")]
+    length_unit = _choice(units, "length", _LENGTH, "m", f"{source}: units")
+    angle_unit = _choice(units, "angle", _ANGLE, "rad", f"{source}: units")
+    length, angle = _LENGTH[length_unit], _ANGLE[angle_unit]
     name = document.get("name", os.path.basename(source))
     if not isinstance(name, str) or not name.strip():
         raise InputError(f"{source}: name: expected a non-empty text, got {name!r}")
@@ -122,9 +127,13 @@ def _rows(document: dict[str, Any], source: str) -> dict[str, Any]:
             if key not in row:
                 raise InputError(f"{where}: '{key}' missing")
             value = _number(row[key], f"{where} {key}") * factor
-            if key in ("a", "d") and abs(value) > MAX_LENGTH_M:
-                raise InputError(f"{where} {key}: {row[key]!r} is outside the physical range "
-                                 f"(|{key}| <= {MAX_LENGTH_M:g} m)")
+            if key in ("a", "d"):
+                _check_length(value, f"|{key}|", row[key], length_unit, where)
+            elif abs(value) > MAX_ANGLE_RAD:
+                raise InputError(
+                    f"{where}: |{key}| {row[key]!r} {angle_unit} > 2 pi rad: " + (
+                        "the angles look like degrees; set units.angle deg"
+                        if angle_unit == "rad" else "more than a full turn"))
             columns[key].append(value)
         if ("min" in row) != ("max" in row):
             raise InputError(f"{where}: give both 'min' and 'max' (the joint limits) or neither")
@@ -133,9 +142,22 @@ def _rows(document: dict[str, Any], source: str) -> dict[str, Any]:
         high = _number(row["max"], f"{where} max") * limit if "max" in row else 2.0 * math.pi
         if low > high:
             raise InputError(f"{where}: min {row['min']!r} > max {row['max']!r}")
+        if kind == "prismatic":
+            for key, value in (("min", low), ("max", high)):
+                if key in row:
+                    _check_length(value, f"|{key}|", row[key], length_unit, where)
         columns["min"].append(low)
         columns["max"].append(high)
     return {"name": name.strip(), "convention": convention, "types": types, **columns}
+
+
+def _check_length(value: float, what: str, written: Any, unit: str, where: str) -> None:
+    """InputError (one line) for a length beyond MAX_LENGTH_M (m): in a table in m, most
+    likely mm or cm read as m."""
+    if abs(value) > MAX_LENGTH_M:
+        hint = ("looks like mm/cm; set units.length mm (and the numbers in mm)"
+                if unit == "m" else "no serial robot's link or travel is that long")
+        raise InputError(f"{where}: {what} {written!r} {unit} > {MAX_LENGTH_M:g} m: {hint}")
 
 
 def load_table_chain(path: str | os.PathLike[str]) -> Chain:

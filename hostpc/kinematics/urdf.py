@@ -427,6 +427,15 @@ def _mass_model(robot: UrdfRobot, link_owner: dict[str, int],
     return mass, com
 
 
+def chain_joints(path: str | os.PathLike[str], base_link: str, tip_link: str
+                 ) -> tuple[UrdfJoint, ...]:
+    """The movable joints of the chain ``base_link`` .. ``tip_link`` of a URDF file, in the
+    order of the chain's joint vector (q1 first): their URDF names and links for messages."""
+    source = os.fspath(path)
+    robot = parse_urdf(read_input_text(path, URDF, source), source)
+    return tuple(j for j in _path(robot, base_link, tip_link, source) if j.type in _MOVABLE)
+
+
 def load_urdf_chain(path: str | os.PathLike[str], base_link: str, tip_link: str) -> Chain:
     """Read a URDF file and return its chain from ``base_link`` to ``tip_link``.
 

@@ -16,6 +16,7 @@ from hostpc.errors import InputError
 from hostpc.kinematics import Chain, gravity_torque
 from hostpc.kinematics.robots import get_robot
 from hostpc.kinematics.tables import chain_from_table
+from hostpc.kinematics.urdf import chain_joints
 from hostpc.model.effect import ModelContext
 
 
@@ -101,21 +102,33 @@ COUPLED_TOLERANCE = 1e-6
 ``multiplier * q_leader + offset``: the rounding of a CSV, not a different motion."""
 
 
-def check_coupled_joints(chain: Chain, q: np.ndarray) -> None:
+def check_coupled_joints(chain: Chain, q: np.ndarray,
+                         urdf: tuple[str, str, str] | None = None) -> None:
     """Every sample's coupled joint (``Chain.coupled``, a URDF ``<mimic>``) at its leader's
-    value times the multiplier plus the offset, as the robot reports it; InputError naming
-    the joints and the first sample that is not."""
+    value times the multiplier plus the offset, as the robot reports it; InputError (one
+    line) naming the joints (by their URDF names when ``urdf``, the chain's (URDF file,
+    base link, tip link), is given), the first sample that is not and what to do (`hostpc
+    import` and every fit check it)."""
     for follower, leader, multiplier, offset in chain.coupled:
         expected = multiplier * q[:, leader] + offset
         off = np.abs(q[:, follower] - expected) > COUPLED_TOLERANCE
-        if np.any(off):
-            k = int(np.argmax(off))
-            raise InputError(
-                f"joint q{follower + 1} follows q{leader + 1} (<mimic>: q{follower + 1} = "
-                f"{multiplier:g} q{leader + 1} + {offset:g}), but sample #{k} has "
-                f"q{follower + 1} = {q[k, follower]:.9g} instead of {expected[k]:.9g}: record "
-                "the joint as the robot reports it (ROS joint_states do), or end the chain "
-                "before it")
+        if not np.any(off):
+            continue
+        k = int(np.argmax(off))
+        name_f, name_l = f"q{follower + 1}", f"q{leader + 1}"
+        end = "or end the chain before it"
+        if urdf is not None:
+            path, base_link, _ = urdf
+            joints = chain_joints(*urdf)
+            name_f = f"{joints[follower].name} (q{follower + 1})"
+            name_l = f"{joints[leader].name} (q{leader + 1})"
+            end = (f"or end the chain before it: --robot {path} --base-link {base_link} "
+                   f"--tip-link {joints[follower].parent}")
+        raise InputError(
+            f"joint {name_f} follows {name_l} (<mimic>: {multiplier:g} x leader + "
+            f"{offset:g}), but sample #{k} has {q[k, follower]:.9g} instead of "
+            f"{expected[k]:.9g}: record the joint as the robot reports it (ROS joint_states "
+            "do; check which column --columns maps to it) and import again, " + end)
 
 
 def sample_variables(samples: Samples, scalars: tuple[str, ...] = ("t", "temperature", "speed")
@@ -163,7 +176,9 @@ def serial_context(dataset: Dataset, chain: Chain,
     ``categorical``: which of the given variables are group labels, with their levels."""
     samples = dataset.samples
     q_cmd = np.asarray(samples.q, dtype=float)
-    check_coupled_joints(chain, q_cmd)
+    robot = dataset.robot
+    check_coupled_joints(chain, q_cmd, None if robot.urdf is None else
+                         (robot.urdf, str(robot.base_link), str(robot.tip_link)))
     if chain.mass is not None and chain.com is not None:  # once per build: views share it
         tau = gravity_torque(chain, q_cmd)
         tau.setflags(write=False)  # shared by the problem's views and extensions

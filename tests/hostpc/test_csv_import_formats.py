@@ -122,6 +122,12 @@ def test_decimal_comma_errors_are_one_line(tmp_path, capsys):
             "-o", tmp_path / "o.json"]
     code, _, err = _run(capsys, comma_csv, *args)
     _one_line_exit_2(code, err, "row 5", "'y1'", "'0.25' is not a number", "decimal commas")
+    # a first row of whole numbers shows no decimal comma: the next row's says --decimal ,
+    lines = comma_csv.read_text().splitlines()
+    lines[1] = ";".join(str(k - 3) for k in range(len(lines[1].split(";"))))
+    comma_csv.write_text("\n".join(lines) + "\n")
+    code, _, err = _run(capsys, comma_csv, *args)
+    _one_line_exit_2(code, err, "row 3", "is not a number", "give --decimal ,")
     dot_csv = tmp_path / "dot.csv"
     _three_reflector_csv(dot_csv)
     code, _, err = _run(capsys, dot_csv, *args, "--decimal", ",")

@@ -33,6 +33,8 @@ def test_converged_outside_the_band_is_not_a_plain_yes(
         assert "converged: yes" not in text
         assert "converged (solver)" in text and "the model does not explain the data" in text
         assert f"next: hostpc diagnose {path} --ladder" in text
+        # how far above, never "far above" at the band's own display precision
+        assert "far above" not in text and (" times);" in text or "(by " in text)
         assert adequacy["explains_data"] is False
         assert adequacy["chi2_dof"] > adequacy["chi2_dof_upper"]
     else:

@@ -51,6 +51,49 @@ def test_a_tracker_set_up_anew_is_refitted_with_the_robot_held(two_days) -> None
     assert not any(name.startswith("joint_offsets.") for name in refitted.refitted)
 
 
+def test_a_second_day_registered_to_itself_is_predicted_in_the_fits_frames(two_days) -> None:
+    """An import estimates the frames from the file it reads: a second day's dataset with
+    the tracker moved (x +0.5 m, z -0.2 m) comes with its world frame registered to itself.
+    The fit's own frames predict it ~540 mm off; only --refit-frames re-registers it."""
+    from hostpc.dataset import FramePose
+
+    day1, day2 = two_days
+    shift = np.array([0.5, 0.0, -0.2])
+    world = day2.pose("world")
+    day2_self = dataclasses.replace(
+        day2.with_samples(dataclasses.replace(day2.samples, p=day2.samples.p + shift)),
+        frames={**day2.frames, "world": FramePose(xyz=world.xyz + shift, rpy=world.rpy)})
+    result = hostpc.fit(day1)
+    as_fitted = hostpc.predict(result, day2_self)
+    assert as_fitted.rms == pytest.approx(np.linalg.norm(shift), rel=0.02)
+    assert hostpc.predict(result, day2_self, refit_frames=True).whitened_rms < 1.5
+
+
+def test_cli_predict_of_a_fit_with_another_robot_agrees_with_the_fit(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The real UR10e file imported as a ur5e (its frames estimated with the wrong robot),
+    fitted with --robot ur10e: predicting the same samples imported as the ur10e gives the
+    fit's own residual RMS (the fit's frames, not the ones the second import estimated)."""
+    data = Path(__file__).parents[1] / "data" / "figaroh_ur10e_calibration.csv"
+    columns = ("q=shoulder_pan_joint:wrist_3_joint,x=x1,y=y1,z=z1,roll=phix1,pitch=phiy1,"
+               "yaw=phiz1")
+    for robot in ("ur5e", "ur10e"):
+        assert main(["import", str(data), "--method", "world_pose", "--robot", robot,
+                     "--columns", columns, "-o", str(tmp_path / f"{robot}.json")]) == 0
+    capsys.readouterr()
+    assert main(["fit", str(tmp_path / "ur5e.json"), "--robot", "ur10e", "--json"]) == 0
+    fitted = json.loads(capsys.readouterr().out)
+    (tmp_path / "fit.json").write_text(json.dumps(fitted))
+    assert main(["predict", str(tmp_path / "fit.json"), str(tmp_path / "ur10e.json"),
+                 "--json"]) == 0
+    document = json.loads(capsys.readouterr().out)
+    assert document["frames"] == "fit"
+    assert document["rms"] == pytest.approx(fitted["rms"], rel=1e-6)
+    # the fit's next command reads the data as the fit did: with --robot ur10e
+    assert fitted["model_adequacy"]["next"] == (
+        f"hostpc diagnose {tmp_path / 'ur5e.json'} --robot ur10e --ladder")
+
+
 def test_cli_predict_reports_the_error_and_refuses_a_mismatched_model(
         two_days, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     day1, day2 = two_days
@@ -65,7 +108,8 @@ def test_cli_predict_reports_the_error_and_refuses_a_mismatched_model(
     assert document["n_samples"] == 60
     assert document["rms"] == pytest.approx(expected.rms, rel=1e-6)
     assert main(["predict", str(tmp_path / "fit.json"), str(tmp_path / "day2.json")]) == 0
-    assert "position error RMS" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "position error RMS" in out and "frames: the fit's, as fitted" in out
     # a dataset with a reflector the fit never saw: one line, exit 2, names the parameter
     markers = {**day2.frames["markers"], "d": np.array([0.01, 0.02, 0.05])}
     fields = {**day2.samples.fields,

@@ -83,6 +83,7 @@ def test_import_with_a_table_file(tmp_path: Path, capsys) -> None:
     out = tmp_path / "t.json"
     assert main(["import", str(tmp_path / "t.csv"), "--method", "world_point", "--robot",
                  str(UR5E_TABLE), "--columns", "q=q1:q6,x=x,y=y,z=z", "-o", str(out)]) == 0
+    assert f"robot {UR5E_TABLE}" in capsys.readouterr().out  # the table file, never None
     robot = json.loads(out.read_text())["robot"]
     assert robot["convention"] == "dh" and len(robot["joints"]) == 6
     assert robot["joints"][0]["d"] == pytest.approx(0.1625)
@@ -101,6 +102,15 @@ def test_import_with_a_table_file(tmp_path: Path, capsys) -> None:
     ({"convention": "xyz", "joints": []}, "convention 'xyz' is not one of dh, mdh"),
     ({"format": "zerocal-dataset/1", "method": "world_point"},
      "format 'zerocal-dataset/1', expected 'zerocal-robot-table/1'"),
+    # implausible units (review item 4): UR's table in degrees without units.angle deg
+    ({k: v for k, v in json.loads(UR5E_TABLE.read_text()).items() if k != "units"},
+     "joint 1: |alpha| 90 rad > 2 pi rad: the angles look like degrees; set units.angle deg"),
+    ({"convention": "dh", "joints": [{"a": 0, "alpha": 0, "d": 0, "theta": 0},
+                                     {"a": 42.5, "alpha": 0, "d": 0, "theta": 0}]},
+     "joint 2: |a| 42.5 m > 10 m: looks like mm/cm; set units.length mm"),
+    ({"convention": "dh", "joints": [{"a": 0, "alpha": 0, "d": 0, "theta": 0,
+                                      "type": "prismatic", "min": 0, "max": 500}]},
+     "joint 1: |max| 500 m > 10 m: looks like mm/cm"),
 ])
 def test_a_broken_table_is_one_line_and_exit_2(ur5e_files, tmp_path, capsys, table,
                                                 message) -> None:

@@ -94,7 +94,26 @@ def test_a_follower_off_its_coupling_is_one_line(mimic_urdf: Path, tmp_path: Pat
     path.write_text(json.dumps(_document(mimic_urdf, follower_error=0.01)))
     assert main(["fit", str(path)]) == 2
     err = capsys.readouterr().err.strip()
-    assert "\n" not in err and "q4 follows q3" in err and "sample #5" in err
+    # the URDF's names (the joint vector's q4/q3 beside them) and the command's options
+    assert "\n" not in err and "joint3 (q4) follows joint2 (q3)" in err and "sample #5" in err
+    assert (f"--robot {mimic_urdf} --base-link base_link --tip-link upper_arm" in err
+            and "import again" in err)
+
+
+def test_import_refuses_a_follower_off_its_coupling(mimic_urdf: Path, tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """`hostpc import` checks the follower's column as fit does, one line with its name."""
+    document = _document(mimic_urdf, follower_error=0.01)
+    rows = ["j1,j2,j3,j4,j5,j6,j7,x,y,z"] + [
+        ",".join(f"{v:.12g}" for v in (*s["q"], *s["p"])) for s in document["samples"]]
+    (tmp_path / "off.csv").write_text("\n".join(rows) + "\n")
+    argv = ["import", str(tmp_path / "off.csv"), "--method", "world_point", "--robot",
+            str(mimic_urdf), "--base-link", "base_link", "--tip-link", "tool0", "--columns",
+            "q=j1:j7,x=x,y=y,z=z", "-o", str(tmp_path / "off.json")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "joint3 (q4) follows joint2 (q3)" in err and "sample #5" in err
+    assert not (tmp_path / "off.json").exists()
 
 
 def test_the_calibrated_urdf_keeps_the_coupling(mimic_urdf: Path, tmp_path: Path,
