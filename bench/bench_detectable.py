@@ -31,7 +31,7 @@ def found(effect: str, parameter: str, size: float, seed: int) -> bool:
     ``size`` in world ``seed``."""
     from hostpc.diagnostics import DEFAULT_ALPHA
     from hostpc.diagnostics.candidates import candidate_effects, rank_candidates
-    from hostpc.diagnostics.pipeline import DEFAULT_RANK_CV_FOLDS
+    from hostpc.diagnostics.pipeline import DEFAULT_CV_FOLDS
     from hostpc.fitting import fit
     from hostpc.model.registry import available_effects
     from tests.hostpc.diagnose_support import hidden_dataset
@@ -41,7 +41,7 @@ def found(effect: str, parameter: str, size: float, seed: int) -> bool:
     registry = available_effects()
     names = candidate_effects(base.problem, registry)
     ranked, _ = rank_candidates(base, registry, names, alpha=DEFAULT_ALPHA,
-                                cv_folds=DEFAULT_RANK_CV_FOLDS, loss="linear")
+                                cv_folds=DEFAULT_CV_FOLDS, loss="linear")
     return any(c.effect == effect and c.significant for c in ranked)
 
 

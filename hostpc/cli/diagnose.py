@@ -223,7 +223,9 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
                      f"{cell(pattern.chi2, 10, 1)} / {pattern.dof:<3} p = {_p(pattern.p_value)}")
         if pattern.levels and pattern.significant:
             lines.append(f"      {pattern.sentence}")
-    lines += ["", "candidate effects (best first; * significant and better held out):",
+    folds = f" on the current model's {a.cv_folds} folds" if a.cv_folds else ""
+    lines += ["", "candidate effects (best first; * significant and better held out"
+              f"{folds}; each row's figures are one model's):",
               f"    {name_cell('effect', 24)}{'dBIC':>9}{'dBIC all':>10}{'RMS mm':>10}"
               f"{'held-out':>10}{'chi2/dof':>10}{'p':>11}"]
     for c in check.candidates:
@@ -232,6 +234,11 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
                      f"{cell(c.delta_bic_full, 10, 1)}{_mm_cell(c.rms)}{_mm_cell(c.cv_rms)}"
                      f"{cell(c.chi2_dof, 10, 3)}"
                      f"{cell(_p(c.p_value) if c.testable else 'untestable', 11)}")
+        if c.held:
+            others = sum(name.startswith(f"{c.effect}.") for name in c.held)
+            lines.append(f"      model: {', '.join(c.selected)} free, the other {others} "
+                         f"{c.effect} parameters the data determine held at nominal "
+                         "(predicts better held out than all of them)")
         if c.not_taken is not None and c.not_taken.startswith(("significant", "adding")):
             lines.append(f"      not taken: {c.not_taken}")
     for s in check.skipped:

@@ -16,10 +16,13 @@ ones the fit could identify: unidentifiable geometry parameters cost nothing):
   the smaller of the two doubled. A candidate is significant when ``p_value`` is below
   ``alpha`` divided by the number of candidates tried (Bonferroni) *and* the model with it
   predicts held-out samples better (lower whitened held-out RMS, same folds as the current
-  model's, with all its parameters or with its selected subset - the better of the two, as
-  the p-value takes the better form: an effect of six parameters the data need two of may
-  overfit a small fold while its two predict better; without held-out residuals the
-  p-value alone decides).
+  model's). A candidate with no parameter selected is never significant.
+- The row's model: the effect with its selected subset free and the rest held at nominal
+  (``held``) when that predicts held-out samples better than the effect with all its
+  parameters, else the full effect. Every figure of the row (RMS, chi2/dof, held-out RMS,
+  the star) and the fit the ladder adopts are that one model's: an effect of six
+  parameters the data need two of may overfit a small fold while its two predict better.
+  The p-value takes the better of the two forms (doubled, as above).
 - ``unidentifiable``: parameters the current model identifies that the model with the
   candidate cannot (the fit holds them at nominal): adding backlash to probe data whose
   joint 4 always arrives from one side hides joint 4's offset in the backlash. Such a
@@ -45,8 +48,8 @@ from hostpc.diagnostics.adequacy import held_out_residuals
 from hostpc.diagnostics.distributions import f_sf
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, solve
-from hostpc.fitting.fitting import held_out_by_fold
-from hostpc.fitting.solver import Evaluation, Loss, SolverOutcome, evaluate, levenberg_marquardt
+from hostpc.fitting.priors import with_constraints
+from hostpc.fitting.solver import Evaluation, Loss, evaluate
 from hostpc.json_object import JsonObject
 from hostpc.model import joint_offsets
 from hostpc.model.effect import Effect
@@ -67,7 +70,11 @@ class Candidate:
     significant: p_value below the corrected threshold; strongest: its most telling
     parameter (the first selected, else the largest |value / sigma|) and its value / sigma;
     fit: the fit with it added (not serialised); testable: False when the samples leave no
-    degrees of freedom to judge it (then delta_bic, delta_bic_full and p_value are None).
+    degrees of freedom to judge it (then delta_bic, delta_bic_full and p_value are None);
+    held: the effect's parameters held at nominal in the row's model (its selected subset
+    predicts better held out than all of them; see ``try_candidate``), empty when the row is
+    the full effect's. Every figure of the row (rms, max, chi2_dof, cv_rms, the star) and
+    ``fit`` belong to that one model.
     """
 
     effect: str
@@ -89,6 +96,7 @@ class Candidate:
     cv_whitened_rms: float | None = None
     unidentifiable: tuple[str, ...] = ()
     not_taken: str | None = None
+    held: tuple[str, ...] = ()
 
     @property
     def taken(self) -> bool:
@@ -116,6 +124,8 @@ class Candidate:
             "cv_whitened_rms": _finite(self.cv_whitened_rms),
             "unidentifiable": list(self.unidentifiable),
             "not_taken": self.not_taken,
+            "model": "subset" if self.held else "full",
+            "held": list(self.held),
         }
 
 
@@ -233,8 +243,11 @@ def remedy(effect: str, lost: Sequence[str], effect_names: Sequence[str],
         if offset is None:
             continue
         joints.append(f"{offset.branch}{offset.joint}")
-        own = re.compile(rf"{re.escape(effect)}\.{re.escape(offset.branch)}"
-                         rf"[a-z]+{offset.joint}$")
+        # a per-joint parameter (backlash.b4, backlash.left.b4) or a per-joint term
+        # (transmission_harmonic.sin1_q4, transmission_harmonic.sin1_left.q4)
+        branch = re.escape(offset.branch)
+        own = re.compile(rf"{re.escape(effect)}\.({branch}[a-z]+{offset.joint}"
+                         rf"|[a-z]+\d+_{branch}q{offset.joint})$")
         partners += [n for n in effect_names if own.match(n)]
     plural = "s" if len(joints) > 1 else ""
     if approach_dependent and joints:
@@ -257,6 +270,8 @@ def not_taken_reason(candidate: Candidate, p_significant: bool, threshold: float
     if not candidate.fit.converged:
         return (f"the fit with it did not converge ({candidate.fit.message}): never adopted; "
                 "add poses that move its parameters, or hold the weak ones with --hold")
+    if not candidate.selected:
+        return "the data select none of its parameters (delta BIC 0): nothing to add"
     if not p_significant:
         return f"not significant (p = {candidate.p_value:.2g}, threshold {threshold:.2g})"
     if candidate.cv_whitened_rms is not None and base_cv is not None \
@@ -348,13 +363,18 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
                   threshold: float, base_cv: float | None = None) -> Candidate:
     """Fit the base model plus ``effect``, warm-started at the base solution; find the
     subset of its parameters the data need and the evidence for it (not testable, see the
-    module doc, when the samples leave no degrees of freedom)."""
+    module doc, when the samples leave no degrees of freedom).
+
+    The candidate's figures (RMS, max, chi2/dof, held-out RMS, the star) and its ``fit``
+    all belong to one model: the effect with its selected subset free and its other
+    parameters held at nominal (``held``) when that model predicts held-out samples
+    better than the effect with all its parameters, else the full effect (``held`` empty).
+    Held out on the same pose-grouped folds (``cv_folds``) as ``base_cv``."""
     problem = extend_problem(base.problem, [effect])
     x0 = warm_start(base, problem)
     start = evaluate(problem, x0)  # shared by the fit, the subset choice and the subset fit
     extended = solve(problem, x0=x0, loss=loss, cv_folds=0, max_iterations=50, initial=start)
     extended, cv_whitened = with_held_out(extended, cv_folds)
-    held_rms = extended.cv_rms
     delta_chi2, p_full, added = f_test(base, extended)
     testable = base.dof > 0 and extended.dof > 0
     chosen, penalty = select_subset(base, extended, x0, start) if testable else ([], 0.0)
@@ -362,6 +382,7 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
     delta_bic = 0.0
     p_subset = 1.0
     dof_subset = 0
+    model, held = extended, tuple[str, ...]()
     if chosen:
         free = np.zeros(problem.layout.size, dtype=bool)
         free[: base.x.size] = ~extended.fixed[: base.x.size]
@@ -369,16 +390,20 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
         dof_subset = n_rows - int(np.count_nonzero(free))
         testable = dof_subset > 0
     if chosen and testable:
-        outcome = levenberg_marquardt(problem, x0, free, loss=loss, max_iterations=50,
-                                      initial=start)
-        chi2_subset = float(np.sum(outcome.evaluation.whitened**2))
-        subset_held = subset_held_out(problem, outcome, free, cv_folds)
-        if subset_held is not None and (cv_whitened is None or subset_held[1] < cv_whitened):
-            # the subset model predicts better held out: its figures, both of them, are
-            # the candidate's (the star and the mm column come from one model)
-            held_rms, cv_whitened = subset_held
+        # held: the effect's parameters left out of the subset, and the base model's
+        # parameters the full effect left undetermined (its subset is judged on the same
+        # base parameters as the full effect: ``unidentifiable`` says which)
+        hold = tuple(problem.layout.names[k] for k in np.flatnonzero(~free)
+                     if not extended.fixed[k] or (k < base.x.size and not base.fixed[k]))
+        subset = _subset_fit(problem, hold, x0, loss, start)
+        subset, subset_whitened = with_held_out(subset, cv_folds)
+        if hold and subset_whitened is not None and (
+                cv_whitened is None or subset_whitened < cv_whitened):
+            # the subset predicts better held out: the row is the subset model's
+            model, held, cv_whitened = subset, hold, subset_whitened
+        chi2_subset = subset.chi2
         delta_bic = (n_rows * math.log(max(chi2_subset, 1e-300) / max(base.chi2, 1e-300))
-                     + penalty - 0.0)
+                     + penalty)
         drop = base.chi2 - chi2_subset
         if drop > 0:
             statistic = (drop / len(chosen)) / (chi2_subset / dof_subset)
@@ -387,33 +412,32 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
                            * math.exp(_log_choose(n_new, len(chosen))))
     p_value = min(1.0, 2.0 * min(p_full, p_subset))
     selected = tuple(problem.layout.names[k] for k in chosen) if testable else ()
-    p_significant = bool(testable and p_value < threshold)
+    # nothing selected: the data need none of its parameters, so it is never starred
+    p_significant = bool(testable and selected and p_value < threshold)
     held_out_better = (cv_whitened is None or base_cv is None or cv_whitened < base_cv)
     candidate = Candidate(
         effect=effect.name, delta_bic=delta_bic if testable else None,
         delta_bic_full=bic(extended) - bic(base) if testable else None,
-        selected=selected, delta_chi2=delta_chi2, added_parameters=added, rms=extended.rms,
-        max=extended.max, cv_rms=held_rms, cv_folds=extended.cv_folds,
-        chi2_dof=extended.chi2_dof, p_value=p_value if testable else None,
-        significant=p_significant and held_out_better and extended.converged,
-        strongest=_strongest(extended, effect.name, selected), fit=extended,
+        selected=selected, delta_chi2=delta_chi2, added_parameters=added, rms=model.rms,
+        max=model.max, cv_rms=model.cv_rms, cv_folds=model.cv_folds,
+        chi2_dof=model.chi2_dof, p_value=p_value if testable else None,
+        significant=p_significant and held_out_better and model.converged,
+        strongest=_strongest(model, effect.name, selected), fit=model,
         testable=testable, cv_whitened_rms=cv_whitened,
-        unidentifiable=lost_parameters(base, extended),
+        unidentifiable=lost_parameters(base, model), held=held,
     )
     return replace(candidate, not_taken=not_taken_reason(candidate, p_significant, threshold,
                                                          base_cv))
 
 
-def subset_held_out(problem: Problem, outcome: SolverOutcome, free: np.ndarray,
-                    folds: int) -> tuple[float, float] | None:
-    """The held-out RMS (m, over the length components) and whitened held-out RMS of the
-    model with only the selected subset free (None without held-out residuals)."""
-    held = held_out_by_fold(problem, outcome.x, free, folds, evaluation=outcome.evaluation)
-    if held is None:
-        return None
-    raw, whitened = held
-    norms = np.linalg.norm(raw[:, problem.length_columns], axis=1)
-    return float(np.sqrt(np.mean(norms**2))), float(np.sqrt(np.mean(whitened**2)))
+def _subset_fit(problem: Problem, hold: Sequence[str], x0: np.ndarray, loss: Loss,
+                start: Evaluation) -> FitResult:
+    """The extended model fitted with ``hold`` (the effect's parameters the subset leaves
+    out) held at nominal: a dataset-level hold (``hostpc.fitting.priors``), so the fit, its
+    held-out residuals and every model built on it (a ladder step) keep them held, exactly
+    as ``--hold`` does."""
+    held = replace(problem, dataset=with_constraints(problem.dataset, hold=list(hold)))
+    return solve(held, x0=x0, loss=loss, cv_folds=0, max_iterations=50, initial=start)
 
 
 def ranking_key(candidate: Candidate) -> tuple[bool, bool, float, float]:

@@ -64,6 +64,19 @@ def required_noncentrality(alpha: float, target: float = DEFAULT_POWER, dof: int
     return high
 
 
+UNSEEN_SHIFT = 0.05
+"""m: a detectable size that moves a measured point by more than this is reported as not
+seen at all (50 mm, the bound beyond which the fit holds a length as undetermined,
+``hostpc.fitting.identifiability.WEAK_SIGMA_LIMIT``: far beyond any calibration)."""
+
+
+def length_text(value: float, digits: int) -> str:
+    """A length (m) in um below 1 mm, else in mm."""
+    if value < 1e-3:
+        return f"{value * 1e6:.{digits}g} um"
+    return f"{value * 1e3:.{digits}g} mm"
+
+
 @dataclass(frozen=True)
 class DetectableSize:
     """The smallest value of one candidate parameter the test would find (``size``, in
@@ -77,21 +90,32 @@ class DetectableSize:
     shift: float
 
     @property
+    def seen(self) -> bool:
+        """False when no size the calibration could meet would be seen: the model absorbs
+        it, or the size moves a measured point by more than ``UNSEEN_SHIFT`` (a design that
+        barely moves the effect at all, e.g. compliance on three poses)."""
+        return math.isfinite(self.size) and math.isfinite(self.shift) \
+            and self.shift <= UNSEEN_SHIFT
+
+    @property
     def sentence(self) -> str:
         if not math.isfinite(self.size):
             return f"{self.parameter} cannot be seen with these poses (the model absorbs it)"
+        if not self.seen:
+            return (f"{self.parameter} cannot be seen with these poses (it would have to move "
+                    f"a measured point by more than {UNSEEN_SHIFT * 1e3:.0f} mm)")
         unit = "" if self.unit in ("", "1") else f" {self.unit}"
         return (f"{self.parameter} below {self.size:.3g}{unit} "
-                f"({self.shift * 1e6:.3g} um at the measured points) would not be seen "
+                f"({length_text(self.shift, 3)} at the measured points) would not be seen "
                 "with these poses")
 
     @property
     def short(self) -> str:
-        """``parameter size unit (shift um)``, for a list on one line."""
-        if not math.isfinite(self.size):
+        """``parameter size unit (shift)``, for a list on one line."""
+        if not self.seen:
             return f"{self.parameter} unseen"
         unit = "" if self.unit in ("", "1") else f" {self.unit}"
-        return f"{self.parameter} {self.size:.2g}{unit} ({self.shift * 1e6:.2g} um)"
+        return f"{self.parameter} {self.size:.2g}{unit} ({length_text(self.shift, 2)})"
 
     def to_dict(self) -> JsonObject:
         return {"effect": self.effect, "parameter": self.parameter,

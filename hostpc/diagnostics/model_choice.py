@@ -6,7 +6,9 @@ user will be judged, on poses the fit never saw:
 
 - the models compared: ``nominal`` (the frames alone: the robot as drawn), ``offsets``
   (the default model: joint zero offsets and the frames), ``offsets + geometry``, and, when
-  the diagnosis ladder ends on a richer model of registered effects, the ``ladder``'s;
+  the ladder of `hostpc diagnose --ladder` (the same function, options and folds) ends on
+  another model, the ``ladder``'s: its final model as it stands (generated effects and the
+  parameters a step held at nominal included), refitted on every sample;
 - each is scored by its pose-grouped held-out error (``hostpc.fitting.folds``; the same
   folds for every model): per pose, the mean squared whitened held-out residual per scalar
   row (1 at the stated noise), averaged over the poses, with its standard error over them;
@@ -19,20 +21,22 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import cast
 
 import numpy as np
 
 from hostpc.dataset import Dataset
+from hostpc.diagnostics.candidates import warm_start
 from hostpc.errors import InputError
-from hostpc.fitting import FitResult, fit
+from hostpc.fitting import FitResult, fit, solve
 from hostpc.fitting.fitting import DEFAULT_CV_FOLDS, held_out_by_fold
 from hostpc.fitting.folds import pose_groups
+from hostpc.fitting.priors import hold_names
 from hostpc.fitting.solver import Loss
 from hostpc.model.memo import SharedValues
-from hostpc.model.problem import build_problem
+from hostpc.model.problem import build_problem, extend_problem
 
 
 @dataclass(frozen=True)
@@ -109,6 +113,34 @@ def _models(dataset: Dataset, plugins: tuple[str | Path, ...], shared: SharedVal
     return models
 
 
+def _held_beyond(result: FitResult, dataset: Dataset) -> tuple[str, ...]:
+    """The parameters ``result`` holds at nominal beyond the dataset's own holds (those of
+    a candidate's subset model the ladder took)."""
+    own = set(hold_names(dataset.extra_fields.get("hold")))
+    return tuple(n for n in hold_names(result.problem.dataset.extra_fields.get("hold"))
+                 if n not in own)
+
+
+def _same_model(result: FitResult, effects: tuple[str, ...], dataset: Dataset) -> bool:
+    """Whether ``result`` is the plain model of ``effects`` (nothing held beyond the
+    dataset's own holds)."""
+    return (tuple(result.problem.effect_names) == tuple(effects)
+            and not _held_beyond(result, dataset))
+
+
+def _on_every_sample(final: FitResult, start: FitResult, loss: Loss, cv_folds: int
+                     ) -> FitResult:
+    """The ladder's final model refitted on every sample of the dataset (the ladder climbs
+    without the diagnosis's outliers; the table compares every model on the same samples
+    and folds): its effects, generated ones included, and the parameters a step held at
+    nominal (a candidate's subset model) kept held; warm-started at the ladder's values."""
+    added = [t.effect for t in final.problem.terms[len(start.problem.terms):]]
+    problem = extend_problem(start.problem, added)
+    problem = replace(problem, dataset=replace(
+        problem.dataset, extra_fields=final.problem.dataset.extra_fields))
+    return solve(problem, x0=warm_start(final, problem), loss=loss, cv_folds=cv_folds)
+
+
 def choose_model(dataset: Dataset, *, plugins: Iterable[str | Path] = (),
                  cv_folds: int = DEFAULT_CV_FOLDS, ladder: bool = True,
                  loss: Loss = "linear") -> ModelChoice:
@@ -119,22 +151,28 @@ def choose_model(dataset: Dataset, *, plugins: Iterable[str | Path] = (),
     shared = SharedValues()  # the chain and the rig's sensitivity, once for every model
     models = _models(dataset, plugin_files, shared)
     outliers = ""
+    fitted: dict[str, FitResult] = {}
     if ladder:
         from hostpc.diagnostics.advice import outlier_note
         from hostpc.diagnostics.pipeline import diagnose
 
+        # the ladder of `hostpc diagnose --ladder`: the same function, options and folds
         diagnosis = diagnose(dataset, plugins=plugin_files, ladder=True, cv_folds=cv_folds,
-                             auto_effects=False, interactions=False, loss=loss)
+                             loss=loss)
         outliers = outlier_note(diagnosis.check) if diagnosis.check.outliers else ""
         steps = diagnosis.ladder or ()
-        if steps and steps[-1].effects not in [effects for _, effects in models]:
-            models.append(("ladder", tuple(steps[-1].effects)))
+        if steps and len(steps) > 1:
+            final = _on_every_sample(steps[-1].check.fit, diagnosis.check.fit, loss,
+                                     cv_folds)
+            if not any(_same_model(final, effects, dataset) for _, effects in models):
+                models.append(("ladder", final.problem.effect_names))
+                fitted["ladder"] = final
     scores: list[ModelScore] = []
     fits: dict[str, FitResult] = {}
     for name, effects in models:
         try:
-            result = fit(dataset, list(effects), plugins=plugin_files, cv_folds=cv_folds,
-                         shared=shared, loss=loss)
+            result = fitted.get(name) or fit(dataset, list(effects), plugins=plugin_files,
+                                             cv_folds=cv_folds, shared=shared, loss=loss)
         except InputError as exc:  # e.g. a nominal model with every frame known: nothing free
             scores.append(ModelScore(name, tuple(effects), 0, False, None, None, None,
                                      f"not fitted: {exc}"))
@@ -144,6 +182,9 @@ def choose_model(dataset: Dataset, *, plugins: Iterable[str | Path] = (),
         note = "" if result.converged else "did not converge: not chosen"
         if result.converged and score is None:
             note = "too few poses for a held-out score"
+        held = _held_beyond(result, dataset)
+        if held and not note:
+            note = f"held at nominal as the ladder chose: --hold {','.join(held)}"
         scores.append(ModelScore(name, tuple(effects), int(np.count_nonzero(~result.fixed)),
                                  result.converged, score, error, result.cv_rms, note))
     scored = [s for s in scores if s.score is not None and s.standard_error is not None]

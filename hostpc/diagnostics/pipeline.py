@@ -44,8 +44,6 @@ from hostpc.model.registry import available_effects
 #: interactions, binned patterns); Bonferroni-corrected inside each family
 DEFAULT_ALPHA = 1e-3
 DEFAULT_CV_FOLDS = 5
-#: folds of the held-out RMS of each candidate while ranking (the ladder uses cv_folds)
-DEFAULT_RANK_CV_FOLDS = 3
 #: significant unexplained patterns the ladder turns into effects and tries, per step
 MAX_PROPOSALS = 3
 
@@ -212,7 +210,7 @@ def diagnose(
     candidates: Sequence[str] | None = None,
     alpha: float = DEFAULT_ALPHA,
     cv_folds: int = DEFAULT_CV_FOLDS,
-    rank_cv_folds: int = DEFAULT_RANK_CV_FOLDS,
+    rank_cv_folds: int | None = None,
     loss: Loss = "linear",
     interactions: bool = True,
     max_ladder_steps: int = DEFAULT_MAX_STEPS,
@@ -228,7 +226,10 @@ def diagnose(
     held-out whitened RMS (without the outlier samples, if any). candidates:
     the effects to try (default: every registered effect that applies). alpha: family-wise
     significance of each family of tests. cv_folds: folds of the held-out residuals (0 to
-    skip); rank_cv_folds: folds of each candidate's held-out RMS. interactions: run the
+    skip); rank_cv_folds: None (the default) or cv_folds judges each candidate on the
+    current model's folds (one fold assignment per table: every held-out figure and star
+    comparable), 0 skips the candidates' held-out RMS (the p-value alone decides); no other
+    value. interactions: run the
     effect-agnostic search. source: the dataset's path, used in the suggested commands.
     auto_effects: let the ladder build the interaction effect of a significant pattern no
     built-in effect models (``auto_effects``; ``Diagnosis.generated_effects`` holds their
@@ -240,8 +241,13 @@ def diagnose(
         dataset = load_dataset(dataset, plugins=plugin_paths)
     if not 0.0 < alpha < 1.0:
         raise InputError(f"alpha {alpha}: must be between 0 and 1")
-    if cv_folds < 0 or rank_cv_folds < 0:
-        raise InputError("cv_folds and rank_cv_folds must not be negative")
+    if cv_folds < 0:
+        raise InputError("cv_folds must not be negative")
+    if rank_cv_folds is None:
+        rank_cv_folds = cv_folds
+    elif rank_cv_folds not in (0, cv_folds):
+        raise InputError(f"rank_cv_folds {rank_cv_folds}: must be 0 or cv_folds "
+                         f"({cv_folds}): candidates are held out on the current model's folds")
     registry = available_effects(plugin_paths)
     if candidates is not None:
         check_candidate_names(candidates, registry)

@@ -78,17 +78,36 @@ class PairTest:
     second: NestedTest
     noncentrality: tuple[float, float] | None = None
     needed: tuple[float, float] | None = None
+    sizes: tuple[int, int] = (1, 1)
+
+    def gain(self, k: int) -> tuple[float | None, float]:
+        """Test ``k``'s (0: A given B, 1: B given A) observed chi-square gain and the gain at
+        which it passes its threshold, on the one-parameter scale of ``pair_threshold``
+        (the p-value's doubling and Bonferroni over the effect's ``sizes[k]`` parameters
+        undone alike): the gain passes exactly when the p-value passes the threshold. The
+        observed gain is None when the test was untestable."""
+        test = (self.first, self.second)[k]
+        passing = chi2_isf(test.threshold / 2.0 / self.sizes[k], 1)
+        if test.p_value is None:
+            return None, passing
+        if test.p_value >= 1.0:  # no chi-square drop at all (the p-value is capped at 1)
+            return 0.0, passing
+        one = max(test.p_value / 2.0 / self.sizes[k], 1e-300)
+        return chi2_isf(min(one, 1.0), 1), passing
 
     @property
     def gain_sentence(self) -> str | None:
-        """The predicted separation in words, or None."""
+        """The observed and predicted separation in words, on one scale, or None."""
         if self.noncentrality is None or self.needed is None:
             return None
-        a, b = self.names
-        now, need = self.noncentrality, self.needed
-        return (f"if {a} is what is there, its test given {b} sees a chi-square gain of "
-                f"{now[0]:.3g} on these data (it needs {need[0]:.3g} for "
-                f"{DEFAULT_POWER:.0%} power); if {b}, {now[1]:.3g} (needs {need[1]:.3g})")
+        parts = []
+        for k, (a, b) in enumerate((self.names, self.names[::-1])):
+            seen, passing = self.gain(k)
+            observed = "" if seen is None else f"gains {seen:.3g} on these data, "
+            parts.append(f"{a} given {b} {observed}passes its threshold at {passing:.3g}; "
+                         f"{a} at its fitted size would give {self.noncentrality[k]:.3g} on "
+                         f"average (needs {self.needed[k]:.3g} for {DEFAULT_POWER:.0%} power)")
+        return "chi-square gains (one-parameter scale of the p-values): " + "; ".join(parts)
 
     @property
     def names(self) -> tuple[str, str]:
@@ -172,7 +191,7 @@ def confounded_pairs(base: FitResult, candidates: Sequence[Candidate],
             pairs.append(test)
             continue
         pairs.append(replace(test, noncentrality=noncentralities(model, rows),
-                             needed=needed_noncentralities(model, alpha)))
+                             needed=needed_noncentralities(model, alpha), sizes=model.sizes))
     return tuple(pairs)
 
 
@@ -239,7 +258,10 @@ def pair_model(base: FitResult, a: Candidate, b: Candidate,
                                 for n in names]))
         signals.append(signal)
         scales.append(max(own.fit.chi2_dof, 1.0) if own.fit.dof > 0 else 1.0)
-        sizes.append(max(1, int(np.count_nonzero(~own.fit.fixed[span]))))
+        # the effect's parameters the data determine, those a subset model holds
+        # included: the Bonferroni of its p-value (try_candidate) counts all of them
+        own_held = sum(n.startswith(f"{own.effect}.") for n in own.held)
+        sizes.append(max(1, int(np.count_nonzero(~own.fit.fixed[span])) + own_held))
     return PairModel((a.effect, b.effect), effects, base.problem.effect_names,
                      tuple(str(p) for p in plugins), names, x,
                      (signals[0], signals[1]), (absorb[0], absorb[1]),

@@ -78,10 +78,10 @@ def test_too_few_poses_for_the_folds_gives_no_held_out_figure() -> None:
 
 
 def test_a_candidate_row_takes_both_held_out_figures_from_one_model() -> None:
-    """The star (whitened held-out RMS) and the held-out mm column of a candidate come from
-    the same model: where the subset of geometry's parameters predicts better held out than
-    the whole effect, both are the subset's (before: the star from the subset, the mm from
-    the whole effect)."""
+    """The star (whitened held-out RMS), the held-out mm column, the RMS and chi2/dof of a
+    candidate, and the fit the ladder adopts, all come from one model: here the subset of
+    geometry's parameters, which predicts better held out than the whole effect (before: the
+    star and the mm from the subset, the RMS and chi2/dof from the whole effect)."""
     from pathlib import Path
 
     from hostpc.dataset import load_dataset
@@ -89,12 +89,18 @@ def test_a_candidate_row_takes_both_held_out_figures_from_one_model() -> None:
     from hostpc.model.registry import available_effects
 
     example = Path(__file__).parents[2] / "examples" / "ur5e_stereo_hidden_compliance.json"
-    base = fit(load_dataset(example))
+    dataset = load_dataset(example)
+    base = fit(dataset)
     _, base_cv = with_held_out(base, 3)
     candidate = try_candidate(base, available_effects(())["geometry"](), cv_folds=3,
                               loss="linear", threshold=0.01, base_cv=base_cv)
-    _, whole_effect_whitened = with_held_out(candidate.fit, 3)
-    assert candidate.cv_whitened_rms is not None and whole_effect_whitened is not None
-    assert candidate.cv_whitened_rms < whole_effect_whitened  # the subset model is better
-    assert candidate.cv_rms is not None and candidate.fit.cv_rms is not None
-    assert candidate.cv_rms < candidate.fit.cv_rms  # and its mm figure is shown, not the other
+    assert candidate.held  # the subset model is the row's
+    whole = fit(dataset, "+geometry", cv_folds=0)
+    _, whole_whitened = with_held_out(whole, 3)
+    assert candidate.cv_whitened_rms is not None and whole_whitened is not None
+    assert candidate.cv_whitened_rms < whole_whitened
+    _, row_whitened = with_held_out(candidate.fit, 3)
+    assert candidate.cv_whitened_rms == row_whitened
+    assert (candidate.rms, candidate.chi2_dof, candidate.cv_rms) == (
+        candidate.fit.rms, candidate.fit.chi2_dof, candidate.fit.cv_rms)
+    assert candidate.chi2_dof != whole.chi2_dof
