@@ -165,6 +165,24 @@ def _is_used(q: np.ndarray, used: np.ndarray) -> bool:
     return bool(used.size and np.min(np.max(np.abs(used - q[None, :]), axis=1)) < 1e-9)
 
 
+def untestable(journal: Journal, planned: SeparationPlan, result: FitResult) -> str | None:
+    """Why the pair cannot be tested on what was measured (the plan's prediction does not
+    hold), or None: more than half the separating poses lost, or no degree of freedom left
+    in the fit."""
+    n = planned.q.shape[0]
+    measured = sum(r.ok for r in journal.records("fit")
+                   if planned.first <= r.index < planned.first + n)
+    dof = int(getattr(result, "dof", 0) or 0)
+    if n and 2 * measured < n:
+        return (f"the test could not be done: {n - measured} of {n} separating poses were "
+                f"lost (see their skipped reasons in journal.jsonl); the predicted power does "
+                "not hold, no verdict")
+    if dof <= 0:
+        return (f"the test could not be done: the fit has no degree of freedom left "
+                f"(dof {dof}), no verdict")
+    return None
+
+
 def retest(journal: Journal, run_dir: Path, result: FitResult, settings: RunSettings,
            effects: tuple[str, str], alpha: float = SEPARATION_ALPHA) -> PairTest:
     """The pair tested again on the run's data with the separating poses; written to

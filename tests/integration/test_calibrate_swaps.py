@@ -168,9 +168,12 @@ def test_a_declared_swap_on_a_joint_the_run_cannot_calibrate_is_never_a_pass(
     assert document["outcome"]["missing_required"] == [6]
     # the new run it suggests is this robot's and cell's: the same method, simulated world
     # and declared swap, with the frame J6 needs known
+    # (the frames were estimated, so not --known: a reference, and the run's seed kept)
+    seed = document["settings"]["seed"]
     assert document["outcome"]["next_command"] == (
-        f"hostpc calibrate --robot sim --method stereo_target --scenario "
-        f"{out / 'sim' / 'scenario.json'} --swapped J6 --known target,tool --require-joints 6")
+        f"hostpc reference record --run {out} --out {out}.cell_ref.json && hostpc calibrate "
+        f"--robot sim --method stereo_target --scenario {out / 'sim' / 'scenario.json'} "
+        f"--swapped J6 --seed {seed} --reference {out}.cell_ref.json --require-joints 6")
 
 
 def test_a_swapped_joint_the_robot_does_not_have_is_refused_before_moving(
