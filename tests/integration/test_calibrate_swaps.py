@@ -173,7 +173,8 @@ def test_a_declared_swap_on_a_joint_the_run_cannot_calibrate_is_never_a_pass(
     assert document["outcome"]["next_command"] == (
         f"hostpc reference record --run {out} --out {out}.cell_ref.json && hostpc calibrate "
         f"--robot sim --method stereo_target --scenario {out / 'sim' / 'scenario.json'} "
-        f"--swapped J6 --seed {seed} --reference {out}.cell_ref.json --require-joints 6")
+        f"--swapped J6 --seed {seed} --known target --reference {out}.cell_ref.json "
+        "--require-joints 6")
 
 
 def test_a_swapped_joint_the_robot_does_not_have_is_refused_before_moving(
