@@ -231,9 +231,9 @@ def test_an_undeclared_swap_that_loses_every_pose_ends_with_the_command_that_fin
     assert code == 1
     line = err[-1]
     assert "0 of 100 poses measured" in line and "no probe contact" in line
-    command = f"hostpc calibrate --resume {out} --swapped J1"
-    assert line.endswith(command)
-    assert main([*command.split()[1:], "--no-report"]) == 0
+    # the data do not say which joint: the command's JN is filled in by the technician
+    assert line.endswith(f"hostpc calibrate --resume {out} --swapped JN")
+    assert main(["calibrate", "--resume", str(out), "--swapped", "J1", "--no-report"]) == 0
     document = json.loads((out / "result.json").read_text())
     assert document["outcome"]["verdict"] == "PASS"
     assert all(abs(e) < TOLERANCE_DEG for e in document["truth"]["joint_offsets_error_deg"])
@@ -252,3 +252,21 @@ def test_the_model_check_of_a_staged_run_is_measured_where_the_robot_is(
     assert document["verify"]["kind"] == "model_check"
     assert document["verify"]["verdict"] == "PASS", document["verify"]
     assert "model check FAIL" not in document["outcome"]["headline"]
+
+
+def test_two_joints_over_the_limit_are_declared_by_one_next_command(tmp_path: Path) -> None:
+    """J1 +2.3 deg and J6 +2.1 deg (issue 24, item 6): the refusal's next command declares
+    both at once (it used to name one, whose resume then refused the other, forever), and
+    that command PASSes."""
+    scenario = swap_world("stereo_target", 1, 2.3)
+    scenario["truth"]["zero_errors"][5] += math.radians(2.1)
+    out = tmp_path / "run"
+    code, document = calibrate(out, scenario, "stereo_target", "--poses", "16",
+                               "--verify-poses", "6")
+    assert code == 5, document["outcome"]["headline"]
+    command = document["outcome"]["next_command"]
+    assert command == f"hostpc calibrate --resume {out} --swapped J1,J6"
+    assert main([*command.split()[1:], "--no-report"]) == 0
+    document = json.loads((out / "result.json").read_text())
+    assert document["outcome"]["verdict"] == "PASS", document["outcome"]["headline"]
+    assert document["settings"]["swapped"] == [1, 6]
