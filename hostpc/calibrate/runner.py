@@ -431,7 +431,7 @@ class Runner:
             q_now = await self._measure(method, self._staging.shifted(planned.q), q_now,
                                         planned.first)
             result, dataset = self._fit(method, settings, self._staging.first)
-        why_not = untestable(self.journal, planned, result)
+        why_not = untestable(self.journal, planned, int(result.dof))
         if why_not is not None:
             write_json_atomic(self.run_dir / SEPARATION_FILE,
                               {"effects": list(effects), "tested": False, "sentence": why_not})

@@ -165,14 +165,13 @@ def _is_used(q: np.ndarray, used: np.ndarray) -> bool:
     return bool(used.size and np.min(np.max(np.abs(used - q[None, :]), axis=1)) < 1e-9)
 
 
-def untestable(journal: Journal, planned: SeparationPlan, result: FitResult) -> str | None:
+def untestable(journal: Journal, planned: SeparationPlan, dof: int) -> str | None:
     """Why the pair cannot be tested on what was measured (the plan's prediction does not
     hold), or None: more than half the separating poses lost, or no degree of freedom left
-    in the fit."""
+    in the fit (`dof`: the fit's residual degrees of freedom)."""
     n = planned.q.shape[0]
     measured = sum(r.ok for r in journal.records("fit")
                    if planned.first <= r.index < planned.first + n)
-    dof = int(getattr(result, "dof", 0) or 0)
     if n and 2 * measured < n:
         return (f"the test could not be done: {n - measured} of {n} separating poses were "
                 f"lost (see their skipped reasons in journal.jsonl); the predicted power does "

@@ -129,3 +129,22 @@ def test_joints_missing_sends_to_a_reference_not_to_a_false_known() -> None:
         "hostpc reference record --run /abs/runs/x --out /abs/runs/x.cell_ref.json && "
         "hostpc calibrate --robot sim --method stereo_target --seed 7 --reference "
         "/abs/runs/x.cell_ref.json --require-joints all")
+
+
+def test_a_separation_with_its_poses_lost_or_no_dof_left_is_not_tested(tmp_path: Path) -> None:
+    from hostpc.calibrate.separate import SeparationPlan, untestable
+    from hostpc.methods.base import SampleRecord
+
+    journal = Journal(tmp_path)
+    planned = SeparationPlan(("joint_compliance", "geometry"), 100, np.zeros((5, 6)), {})
+    journal.record(SampleRecord("fit", 100, True, {"q": [0.0] * 6}))
+    for index in range(101, 105):
+        journal.record(SampleRecord("fit", index, False, reason="no contact"))
+    lost = untestable(journal, planned, dof=40)
+    assert lost is not None and "4 of 5 separating poses were lost" in lost
+    assert "could not be done" in lost
+    for index in range(101, 105):
+        journal.record(SampleRecord("fit", index, True, {"q": [0.0] * 6}))
+    assert untestable(journal, planned, dof=40) is None
+    no_dof = untestable(journal, planned, dof=0)
+    assert no_dof is not None and "no degree of freedom left" in no_dof
