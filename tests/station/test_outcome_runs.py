@@ -99,6 +99,9 @@ def test_a_rollback_rewrites_result_summary_report_and_revises_the_archive(
     assert summary.startswith("ROLLED BACK at ") and "controller: offsets restored" in summary
     report = (out / "report.html").read_text()
     assert "ROLLED BACK at " in report and "offsets pushed and verified" not in report
+    # the verification section: of offsets the controller no longer has
+    assert "Verification of the pushed offsets on fresh poses passed" not in report
+    assert "they were rolled back, and the controller has its previous offsets" in report
     assert json.loads((out / "result.1.json").read_text())["outcome"]["verdict"] == "PASS"
     with open_archive(archive_url) as archive:
         (run,) = archive.runs("SN-2")
