@@ -63,8 +63,9 @@ def parse_separate(text: str, plugins: Sequence[str], run_dir: str | None) -> tu
                          "confounded ones)")
     try:
         check_candidate_names(names, available_effects(tuple(plugins)))
-    except InputError as exc:
-        raise InputError(f"--separate: {exc}; then: {example}") from None
+    except InputError as exc:  # its words name diagnose's option: say them as ours
+        words = str(exc).removeprefix("--candidates: ").replace(" from the candidates", "")
+        raise InputError(f"--separate: {words}; then: {example}") from None
     return names[0], names[1]
 
 

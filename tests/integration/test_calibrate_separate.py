@@ -93,3 +93,4 @@ def test_a_bad_separate_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixtur
     lines = err.strip().splitlines()
     assert len(lines) == 1 and words in lines[0], err
     assert "hostpc calibrate --resume" in lines[0]
+    assert "--candidates" not in lines[0]  # an option the user did not give

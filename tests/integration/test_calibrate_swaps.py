@@ -136,6 +136,10 @@ def test_a_resume_replays_the_stages_and_measures_nothing_again(tmp_path: Path) 
     journal.load()
     assert len(journal.records("fit")) == fit_poses
     assert journal.events("stage") == stages
+    # the summary counts the stages' poses as such, never "N of fewer planned"
+    measured = next(line for line in (out / "summary.txt").read_text().splitlines()
+                    if line.startswith("measured: "))
+    assert "fit poses for a plan of" in measured and "coarse-to-fine stages" in measured
     document = json.loads((out / "result.json").read_text())
     assert document["outcome"]["verdict"] == "PASS"
     assert all(abs(e) < TOLERANCE_DEG for e in document["truth"]["joint_offsets_error_deg"])
