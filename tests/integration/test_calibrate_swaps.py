@@ -190,7 +190,8 @@ def test_a_swapped_joint_the_robot_does_not_have_is_refused_before_moving(
 
 
 @pytest.mark.slow
-def test_a_resumes_overrides_are_kept_for_the_next_resume(tmp_path: Path) -> None:
+def test_a_resumes_overrides_are_kept_for_the_next_resume(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Refused at 2 deg -> resume with --swapped J3 -> the controller's own 5 deg limit
     refuses -> the limit is raised -> `--resume RUN --push` (the next command as given)
     pushes J3 with the swap still declared, instead of the 2 deg refusal again."""
@@ -207,6 +208,19 @@ def test_a_resumes_overrides_are_kept_for_the_next_resume(tmp_path: Path) -> Non
     assert header["settings"]["swapped"] == [3]  # kept in run.json
     second = document["outcome"]["next_command"]
     assert second == f"hostpc calibrate --resume {out} --push"
+    # a simulated controller's limit: the scenario key, in the file a resume starts from
+    assert (f"server.offset_limit_rad in {(out / 'sim' / 'scenario.json').resolve()}"
+            in document["push"]["reason"])
+    # unchanged, the same push is refused again: said so, not advised as if new
+    capsys.readouterr()
+    assert main([*second.split()[1:], "--no-report"]) == 5
+    err = capsys.readouterr().err
+    assert "unchanged since the last refusal: it was not raised" in err
+    assert "cut short" not in err  # the controller refused the write; nothing was cut short
+    # ... and a refused push is no push: --separate is not turned away for it
+    main(["calibrate", "--resume", str(out), "--separate", "joint_compliance,geometry",
+          "--no-report"])
+    assert "this run pushed offsets" not in capsys.readouterr().err
     # the technician raises the controller's limit (here: the simulated controller's)
     scenario_path = out / "sim" / "scenario.json"
     scenario = json.loads(scenario_path.read_text())
