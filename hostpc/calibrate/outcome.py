@@ -332,7 +332,11 @@ def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[
     elif verdict == "JOINTS_MISSING":
         missing = joint_names(joints, outcome.missing_required)
         head = f"JOINTS_MISSING: {good_text}; {bad_text} (required: {missing})"
-        next_command = _fix_command(joints, outcome, new_run, known)
+        next_command = _fix_command(joints, outcome, run, new_run, known)
+        if next_command is not None:  # the reference: only from zeros known good
+            head += ("; record the cell's reference from a run whose zeros are known "
+                     "good (this one, if no zero was disturbed since the cell was "
+                     "last verified), then every joint is calibrated")
     elif verdict == "NOT_VERIFIED":
         head = f"PUSHED, NOT VERIFIED: {good_text} (no verification poses)" + (
             f"; {bad_text}" if bad_text else "")
@@ -405,21 +409,17 @@ def _short_reason(joint: JointOutcome) -> str:
     return reason.split(" (")[0]
 
 
-def _fix_command(joints: Sequence[JointOutcome], outcome: RobotOutcome,
+def _fix_command(joints: Sequence[JointOutcome], outcome: RobotOutcome, run: str,
                  new_run: str, known: tuple[str, ...]) -> str | None:
-    """A new run that would calibrate the missing joints (their `--known` frames added to
-    the run's own)."""
-    frames: list[str] = [f for f in known if f != "none"]
-    added = False
-    for j in joints:
-        if j.joint in outcome.missing_required and j.fix and j.fix.startswith("--known "):
-            for frame in j.fix.split()[1].split(","):
-                if frame not in frames:
-                    frames.append(frame)
-                    added = True
-    if not added:
+    """The commands that would calibrate the missing joints: the frames that would make
+    them identifiable were estimated, not surveyed (a `--known` would be false), so a cell
+    reference is recorded (from a run whose zeros are known good) and a new run uses it."""
+    if not any(j.joint in outcome.missing_required and j.fix for j in joints):
         return None
     required = ("all" if len(outcome.required_joints) == len(joints)
                 else ",".join(str(n) for n in outcome.required_joints))
-    return (f"hostpc calibrate {new_run} --known {','.join(frames)} "
-            f"--require-joints {required}")
+    reference = f"{run.rstrip('/')}.cell_ref.json"
+    frames = [f for f in known if f != "none"]  # the run's own surveyed frames stay known
+    kept = f" --known {','.join(frames)}" if frames else ""
+    return (f"hostpc reference record --run {run} --out {reference} && hostpc calibrate "
+            f"{new_run}{kept} --reference {reference} --require-joints {required}")

@@ -41,6 +41,7 @@ from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.journal_events import Pushed, PushIntent, PushRecord
 from hostpc.calibrate.refusals import PushRefusal, resume_with
 from hostpc.calibrate.run_result import OffsetRow
+from hostpc.calibrate.swaps import MAX_SWAP_LIMIT_DEG
 from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN, chi2_dof_upper
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
@@ -204,25 +205,46 @@ def _refusal(result: FitVerdict, delta: np.ndarray, pushed: np.ndarray,
             "with --force", "model", ("diagnose", dataset_file))
     too_big = pushed & (np.abs(delta) > np.radians(limits))
     if np.any(too_big):
-        j = int(np.argmax(np.where(too_big, np.abs(delta), 0.0)))
-        joint = labels[j] if labels[j] != f"q{j + 1}" else str(j + 1)  # head.q2, else 2
-        declared = limits[j] != max_correction_deg
-        own = " of a declared swap (--swap-limit)" if declared else ""
-        swap_sized = abs(math.degrees(delta[j])) > DEFAULT_MAX_CORRECTION_DEG
-        declare = (None if declared or not swap_sized or labels[j] != f"q{j + 1}"
-                   else j + 1)
-        swap = ("" if declare is None else
-                f"; if its motor was swapped or re-mastered, declare it with --swapped J{j + 1}"
-                " (raises that joint's limit only)")
-        # a declared swap raises that joint's limit only, where --force drops every rail
-        return PushRefusal(
-            f"joint {joint} correction {math.degrees(delta[j]):+.4f} deg exceeds the "
-            f"limit{own} of {limits[j]:g} deg{swap}; {'else ' if swap else ''}check the "
-            "cell and the data, and rerun with --force to push anyway", "correction_limit",
-            resume_with("--force") if declare is None else resume_with("--swapped",
-                                                                        f"J{declare}"),
-            joint=j + 1, limit_deg=float(limits[j]), declare=declare)
+        return _limit_refusal(delta, too_big, labels, max_correction_deg, limits)
     return None
+
+
+def _limit_refusal(delta: np.ndarray, too_big: np.ndarray, labels: tuple[str, ...],
+                   max_correction_deg: float, limits: np.ndarray) -> PushRefusal:
+    """The refusal of corrections beyond their push limits (`too_big`: (n,) bool), named
+    by the largest. Its next command never sends the user back into it: every undeclared
+    joint over the default limit by a swap's size is declared at once, with the joints
+    declared already (`--swapped J1,J6`); a declared joint over its own limit gets a
+    larger `--swap-limit`; else `--force`."""
+    j = int(np.argmax(np.where(too_big, np.abs(delta), 0.0)))
+    joint = labels[j] if labels[j] != f"q{j + 1}" else str(j + 1)  # head.q2, else 2
+    declared = [k + 1 for k in range(delta.size) if limits[k] != max_correction_deg]
+    over = [k + 1 for k in range(delta.size) if too_big[k] and labels[k] == f"q{k + 1}"
+            and k + 1 not in declared
+            and abs(math.degrees(delta[k])) > DEFAULT_MAX_CORRECTION_DEG]
+    own = " of a declared swap (--swap-limit)" if j + 1 in declared else ""
+    text = (f"joint {joint} correction {math.degrees(delta[j]):+.4f} deg exceeds the "
+            f"limit{own} of {limits[j]:g} deg")
+    if over:  # a declared swap raises its joints' limits only, where --force drops every rail
+        joints = ",".join(f"J{k}" for k in sorted({*declared, *over}))
+        others = [f"J{k + 1}" for k in range(delta.size) if too_big[k] and k + 1 != j + 1]
+        text += ((f" (and {', '.join(others)} beyond theirs)" if others else "")
+                 + f"; if their motors were swapped or re-mastered, declare them with "
+                 f"--swapped {joints} (raises those joints' limits only); else check the cell "
+                 "and the data, and rerun with --force to push anyway")
+        return PushRefusal(text, "correction_limit", resume_with("--swapped", joints),
+                           joint=j + 1, limit_deg=float(limits[j]), declare=over[0])
+    own_over = [k for k in range(delta.size) if too_big[k] and k + 1 in declared]
+    largest = max(abs(math.degrees(delta[k])) for k in own_over) if own_over else 0.0
+    if own_over and largest < MAX_SWAP_LIMIT_DEG:
+        wider = min(MAX_SWAP_LIMIT_DEG, float(max(2.0 * limits[j], math.ceil(1.5 * largest))))
+        text += (f"; if the swap is that large, raise the declared swap's limit with "
+                 f"--swap-limit {wider:g}; else check the cell and the data")
+        return PushRefusal(text, "correction_limit", resume_with("--swap-limit", f"{wider:g}"),
+                           joint=j + 1, limit_deg=float(limits[j]))
+    text += "; check the cell and the data, and rerun with --force to push anyway"
+    return PushRefusal(text, "correction_limit", resume_with("--force"), joint=j + 1,
+                       limit_deg=float(limits[j]))
 
 
 def _now() -> str:

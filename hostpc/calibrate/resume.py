@@ -91,18 +91,35 @@ def resume_settings(settings: RunSettings, overrides: ResumeOverrides, journal: 
                     progress: Progress) -> RunSettings:
     """The run's settings with this resume's `overrides` applied (only the
     ``RESUME_OVERRIDABLE`` ones that are given and differ); a change is journaled, and
-    the runner writes the changed settings into run.json, so a later resume keeps them
-    (--swapped, --swap-limit, --force, ... ; --known is kept in its cell); the same
-    `settings` object when nothing changed."""
+    the runner writes the changed settings into run.json (`persisted`), so a later resume
+    keeps them (--swapped, --swap-limit, --max-correction, ... ; --known is kept in its
+    cell). --force is one push's decision: never kept, so only a resume that gives it
+    forces. A --separate resume measures and tests, and pushes only with its own --push.
+    The same `settings` object when nothing changed."""
     changed = {k: v for k, v in overrides.items()
                if k in RESUME_OVERRIDABLE and v is not None
                and getattr(settings, k) != v}
+    if settings.force and not overrides.force:
+        changed["force"] = False  # an earlier session's --force does not carry over
+    if overrides.separate and settings.push and overrides.push is not True \
+            and not overrides.force:
+        changed["push"] = False  # this session only: the runner does not persist it
     if changed:
         settings = dataclasses.replace(settings, **changed)
         journal.append(Note("settings changed on resume", overrides=changed))
         progress.message("resume with " + ", ".join(
             f"{k}={v}" for k, v in changed.items()))
     return settings
+
+
+def persisted(settings: RunSettings, stored: RunSettings,
+              overrides: ResumeOverrides) -> RunSettings:
+    """What run.json keeps of a resume's `settings` (`stored`: what it held): never
+    --force, and not the push a --separate resume left out."""
+    kept = dataclasses.replace(settings, force=False)
+    if overrides.separate and overrides.push is None:
+        kept = dataclasses.replace(kept, push=stored.push)
+    return kept
 
 
 def check_resume_offsets(journal: Journal, run_dir: Path, initial: np.ndarray,
@@ -181,6 +198,9 @@ def settle_push_intent(journal: Journal, run_dir: Path, address: str, progress: 
     last = journal.last_event(PushIntent, Pushed)
     if not isinstance(last, PushIntent):
         return
+    latest = journal.last_event("push_intent", "push", "push_refused")
+    if latest is not None and latest.get("event") == "push_refused":
+        return  # the controller refused the write (its own limit): nothing was cut short
     record = last.record
     outcome = intent_outcome(record, offsets_now)
     if outcome == "pushed":

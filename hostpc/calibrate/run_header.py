@@ -99,7 +99,7 @@ class RunHeader:
     def new_run_options(self) -> str:
         """The options of a new run of this robot and cell (a next command's start):
         the robot, the method, a simulated run's world (its scenario, as the run kept it)
-        and a declared swap."""
+        its seed, and a declared swap."""
         words = ["--robot", self.robot_argument(), "--method", self.settings.method]
         if self.robot.sim and self.robot.scenario:
             words += ["--scenario", str(self.robot.scenario)]
@@ -107,6 +107,7 @@ class RunHeader:
             words += ["--swapped", ",".join(f"J{j}" for j in self.settings.swapped)]
             if self.settings.swap_limit_deg != DEFAULT_SWAP_LIMIT_DEG:
                 words += ["--swap-limit", f"{self.settings.swap_limit_deg:g}"]
+        words += ["--seed", str(self.seed)]
         return " ".join(words)
 
 

@@ -34,7 +34,6 @@ from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.journal_events import (
     MorePoses,
     Pushed,
-    PushIntent,
     Resumed,
     RunFinished,
     Verified,
@@ -65,6 +64,7 @@ from hostpc.calibrate.resume import (
     VerifyLost,
     archive_result,
     check_resume_offsets,
+    persisted,
     push_state,
     resume_settings,
     settle_push_intent,
@@ -77,7 +77,12 @@ from hostpc.calibrate.run_header import InitialState, RunHeader, read_run_header
 from hostpc.calibrate.run_plan import plan_run
 from hostpc.calibrate.run_report import write_run_report
 from hostpc.calibrate.run_values import RobotInfo, RunOutcome
-from hostpc.calibrate.separate import plan_separation, retest
+from hostpc.calibrate.separate import (
+    SEPARATION_FILE,
+    plan_separation,
+    retest,
+    untestable,
+)
 from hostpc.calibrate.summary import (
     finite_or_none,
     format_summary,
@@ -195,14 +200,14 @@ class Runner:
             self.journal.load()
             initial = header.initial
             check_resume_offsets(self.journal, self.run_dir, initial.offsets, offsets)
+            settle_push_intent(self.journal, self.run_dir, self.robot_info.address, progress,
+                               offsets)
             if self.resume_overrides.separate and self._pushed_ever():
                 raise InputError(
                     "--separate: this run pushed offsets, and poses measured under them "
                     "cannot join its data; separate on a run that pushed nothing (e.g. "
                     f"hostpc calibrate ... --no-push), or roll back (hostpc rollback --run "
                     f"{self.run_dir}) and start a new run")
-            settle_push_intent(self.journal, self.run_dir, self.robot_info.address, progress,
-                               offsets)
             stored = stored_result(self.journal, self.run_dir, offsets, self._asked(),
                                    progress)
             if stored is not None:
@@ -212,7 +217,8 @@ class Runner:
             settings = resume_settings(header.settings, self.resume_overrides, self.journal,
                                        progress)
             if settings is not header.settings:  # kept for the next resume (resume.py)
-                header = dataclasses.replace(header, settings=settings)
+                header = dataclasses.replace(header, settings=persisted(
+                    settings, header.settings, self.resume_overrides))
                 self.journal.write_header(header.to_dict())
             self.journal.append(Resumed(at=_now()))
             cell, header = cell_reference.resume_known(
@@ -425,6 +431,13 @@ class Runner:
             q_now = await self._measure(method, self._staging.shifted(planned.q), q_now,
                                         planned.first)
             result, dataset = self._fit(method, settings, self._staging.first)
+        why_not = untestable(self.journal, planned, int(result.dof))
+        if why_not is not None:
+            write_json_atomic(self.run_dir / SEPARATION_FILE,
+                              {"effects": list(effects), "tested": False, "sentence": why_not})
+            self.journal.event("separated", effects=list(effects), tested=False)
+            self.progress.message(f"separation: {why_not}")
+            return q_now, result, dataset
         test = retest(self.journal, self.run_dir, result, settings, effects)
         self.progress.message(f"separation: {test.sentence}")
         return q_now, result, dataset
@@ -526,7 +539,11 @@ class Runner:
             record = await execute_push(self.robot, plan, self.run_dir,
                                         self.robot_info.address, journal=self.journal)
         except ControllerError as exc:  # the controller's own limit: said once (swaps.py)
-            refused = controller_limit_refusal(exc, self.run_dir)
+            refused = controller_limit_refusal(
+                exc, self.run_dir,
+                scenario=self.robot_info.scenario if self.robot_info.sim else None,
+                refused_before=[str(e.get("reason")) for e in self.journal.events(
+                    "push_refused") if e.get("rule") == "controller_limit"])
             if refused is None:
                 raise
             self._controller_refusal = refused
@@ -547,8 +564,10 @@ class Runner:
         return plan.verify_poses(self.journal.last(MorePoses) is not None)
 
     def _pushed_ever(self) -> bool:
-        """True if this run ever wrote (or meant to write) the controller's offsets."""
-        return self.journal.last_event(PushIntent, Pushed) is not None
+        """True if this run ever wrote the controller's offsets (a journaled `push`; an
+        intent the controller refused, or that a resume settled as not written, wrote
+        nothing). Called after `settle_push_intent`."""
+        return self.journal.last(Pushed) is not None
 
     def _push_asked(self) -> bool:
         """True if this resume's command line asked for the push (--push or --force)."""

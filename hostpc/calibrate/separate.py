@@ -63,8 +63,9 @@ def parse_separate(text: str, plugins: Sequence[str], run_dir: str | None) -> tu
                          "confounded ones)")
     try:
         check_candidate_names(names, available_effects(tuple(plugins)))
-    except InputError as exc:
-        raise InputError(f"--separate: {exc}; then: {example}") from None
+    except InputError as exc:  # its words name diagnose's option: say them as ours
+        words = str(exc).removeprefix("--candidates: ").replace(" from the candidates", "")
+        raise InputError(f"--separate: {words}; then: {example}") from None
     return names[0], names[1]
 
 
@@ -163,6 +164,23 @@ def plan_separation(journal: Journal, method: Method, state: RobotState, plan: P
 
 def _is_used(q: np.ndarray, used: np.ndarray) -> bool:
     return bool(used.size and np.min(np.max(np.abs(used - q[None, :]), axis=1)) < 1e-9)
+
+
+def untestable(journal: Journal, planned: SeparationPlan, dof: int) -> str | None:
+    """Why the pair cannot be tested on what was measured (the plan's prediction does not
+    hold), or None: more than half the separating poses lost, or no degree of freedom left
+    in the fit (`dof`: the fit's residual degrees of freedom)."""
+    n = planned.q.shape[0]
+    measured = sum(r.ok for r in journal.records("fit")
+                   if planned.first <= r.index < planned.first + n)
+    if n and 2 * measured < n:
+        return (f"the test could not be done: {n - measured} of {n} separating poses were "
+                f"lost (see their skipped reasons in journal.jsonl); the predicted power does "
+                "not hold, no verdict")
+    if dof <= 0:
+        return (f"the test could not be done: the fit has no degree of freedom left "
+                f"(dof {dof}), no verdict")
+    return None
 
 
 def retest(journal: Journal, run_dir: Path, result: FitResult, settings: RunSettings,

@@ -168,7 +168,9 @@ def format_summary(run: RunResult) -> str:
         f"run folder: {run.run_dir}",
         f"known frames: {', '.join(run.known) or 'none (every frame estimated)'}",
         plan_line(plan, acq.to_dict()),
-        f"measured: {n_poses} of {acq.n_planned} fit poses"
+        (f"measured: {n_poses} of {acq.n_planned} fit poses" if n_poses <= acq.n_planned
+         else f"measured: {n_poses} fit poses for a plan of {acq.n_planned} (the plan's "
+         "poses measured again, shifted, in coarse-to-fine stages, or further poses)")
         + (f" ({acq.n_measured} samples)" if n_poses != acq.n_measured else "")
         + (f", {len(acq.skipped)} skipped" if acq.skipped else "")
         + (f" (more poses measured: {acq.more_poses})" if acq.more_poses else ""),

@@ -52,11 +52,13 @@ from hostpc.methods.base import Method, Progress, RunSettings
 from hostpc.model import joint_offsets
 from hostpc.model.problem import build_problem
 
-__all__ = ["DEFAULT_SWAP_LIMIT_DEG", "Staging", "controller_limit_refusal",
+__all__ = ["DEFAULT_SWAP_LIMIT_DEG", "MAX_SWAP_LIMIT_DEG", "Staging", "controller_limit_refusal",
            "joint_limits_deg", "lost_plan_line", "parse_swapped", "swap_message"]
 
 DEFAULT_SWAP_LIMIT_DEG = 45.0
 """The push limit of a joint declared swapped (--swap-limit), deg."""
+MAX_SWAP_LIMIT_DEG = 180.0
+"""The largest --swap-limit worth asking for: a joint's zero is at most half a turn off."""
 COARSE_DEG = 3.0
 """A joint estimated farther off than this (deg) makes the runner measure again, shifted."""
 LOST_FRACTION = 0.25
@@ -110,20 +112,39 @@ def swap_message(settings: RunSettings) -> str | None:
             "(--max-correction)")
 
 
-def controller_limit_refusal(exc: ControllerError, run_dir: Any) -> PushRefusal | None:
+def controller_limit_refusal(exc: ControllerError, run_dir: Any, *,
+                             scenario: str | None = None,
+                             refused_before: Sequence[str] = ()) -> PushRefusal | None:
     """The refusal of a push the controller refused for its own offset limit, or None
-    for any other error. It says whose limit it is and what to do; its next command pushes
-    only after the limit was raised (never the same refusal again)."""
+    for any other error. It says whose limit it is and what to do. scenario: a simulated
+    run's scenario file (its ``server.offset_limit_rad`` is the limit, and a resume
+    starts the simulated controller from that file); refused_before: the reasons of this
+    run's earlier controller-limit refusals (the same one again: the limit was not
+    raised, and the refusal says so instead of advising itself again)."""
     name = getattr(exc, "reason", None) or getattr(exc, "code", None)
     if name != "offset_limit":
         return None
-    return PushRefusal(
-        f"the controller's own offset limit refused the push ({exc}): this is the "
-        "controller's setting, not zerocal's --max-correction or --swap-limit; the "
-        f"fitted offsets are kept in {run_dir}/fit.json; raise the controller's offset "
-        "limit (or set the joint's zero with the robot maker's zeroing procedure), "
-        f"then push and verify with: hostpc calibrate --resume {run_dir} --push",
-        "controller_limit", resume_with("--push"))
+    again = any(str(exc) in r for r in refused_before)
+    head = (f"the controller's own offset limit refused the push ({exc})"
+            + (" again, unchanged since the last refusal: it was not raised" if again else "")
+            + ": this is the controller's setting, not zerocal's --max-correction or "
+            f"--swap-limit; the fitted offsets are kept in {run_dir}/fit.json")
+    if scenario:
+        text = (f"{head}; the simulated controller's limit is server.offset_limit_rad in "
+                f"{scenario} (a resume starts the simulated controller from that file): "
+                "raise it there above the largest correction (e.g. 3.2 rad), then push and "
+                f"verify with: hostpc calibrate --resume {run_dir} --push")
+    elif again:
+        text = (f"{head}; pushing again meets the same refusal: raise the limit on the "
+                "controller (its configuration, or the robot maker's tool), or set the "
+                "joint's zero with the robot maker's zeroing procedure using the fitted "
+                "offsets; once raised, push and verify with: "
+                f"hostpc calibrate --resume {run_dir} --push")
+    else:
+        text = (f"{head}; raise the controller's offset limit (or set the joint's zero with "
+                "the robot maker's zeroing procedure), then push and verify with: "
+                f"hostpc calibrate --resume {run_dir} --push")
+    return PushRefusal(text, "controller_limit", resume_with("--push"))
 
 
 def lost_plan_line(n_measured: int, n_planned: int, reasons: Sequence[str | None],
@@ -138,13 +159,21 @@ def lost_plan_line(n_measured: int, n_planned: int, reasons: Sequence[str | None
         return line + " (see the skipped reasons in journal.jsonl)"
     if not settings.swapped:
         return (line + "; if a joint's zero is far off (a motor swapped or re-mastered), "
-                "declare that joint, and the run searches for it; e.g. for J1: "
-                f"hostpc calibrate --resume {run_dir} --swapped J1")
+                "declare that joint, and the run searches for it (the data do not say which "
+                f"joint: replace JN with it): hostpc calibrate --resume {run_dir} --swapped JN")
     joints = ",".join(f"J{j}" for j in settings.swapped)
-    farther = min(2.0 * float(settings.swap_limit_deg), 180.0)
+    limit = float(settings.swap_limit_deg)
+    if limit >= MAX_SWAP_LIMIT_DEG:  # searched half a turn: the declaration is wrong
+        return (line + f"; the search of the swapped {joints} found nothing up to "
+                f"{limit:g} deg (the largest limit): {joints} is probably not the joint "
+                "whose motor was swapped; declare the swapped joint instead (replace JN with "
+                f"it): hostpc calibrate --resume {run_dir} --swapped JN --swap-limit "
+                f"{DEFAULT_SWAP_LIMIT_DEG:g}")
+    farther = min(2.0 * limit, MAX_SWAP_LIMIT_DEG)
     return (line + f"; the search of the swapped {joints} found nothing up to "
-            f"{settings.swap_limit_deg:g} deg: declare the joint that was swapped, or search "
-            f"farther: hostpc calibrate --resume {run_dir} --swap-limit {farther:g}")
+            f"{limit:g} deg: if {joints} is the swapped joint, search farther: "
+            f"hostpc calibrate --resume {run_dir} --swap-limit {farther:g} (else declare the "
+            f"swapped joint instead: --swapped JN --swap-limit {limit:g}, JN the joint)")
 
 
 def _now() -> str:

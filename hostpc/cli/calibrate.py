@@ -388,7 +388,8 @@ def _run_with_robot(args: argparse.Namespace, address: RobotAddress, driver: str
                              plugins=settings.plugins if settings is not None else ()
                              ) as simulator:
         info = RobotInfo(address=f"{simulator.address.host}:{simulator.address.port}",
-                         driver=SIM_DRIVER, sim=True, scenario=str(simulator.scenario_path))
+                         driver=SIM_DRIVER, sim=True,
+                         scenario=str(Path(simulator.scenario_path).resolve()))
         return asyncio.run(cancel_on_sigterm(_calibrate(
             args, simulator.address, SIM_DRIVER, run_dir, settings, cell_file, known,
             default_known, info, progress, simulator.truth, token)))

@@ -164,8 +164,19 @@ def _refuse_if_rolled_back(run_dir: Path) -> None:
     if isinstance(last, Rollback):
         raise InputError(f"--run {run_dir}: its push was rolled back already "
                          f"({last.time or 'at an unrecorded time'}); nothing of it is "
-                         "left to undo (to see what the controller holds now: hostpc status "
-                         "--robot HOST)")
+                         f"left to undo ({_status_hint(run_dir)})")
+
+
+def _status_hint(run_dir: Path) -> str:
+    """How to see what the run's controller holds now, with its address."""
+    try:
+        robot = read_run_header(Journal(run_dir)).robot
+    except InputError:
+        return "to see what the controller holds now: hostpc status --robot HOST"
+    if robot.sim:
+        return ("a --robot sim run: its simulated controller starts from the run's initial "
+                f"offsets again; to push again: hostpc calibrate --resume {run_dir} --push")
+    return f"to see what the controller holds now: hostpc status --robot {robot.address}"
 
 
 def _ran_simulated(run_dir: Path) -> bool:

@@ -236,6 +236,13 @@ def verification_section(result: Document) -> str:
     what = ("the pushed offsets on fresh poses" if pushed
             else "the fitted model on fresh poses (nothing was pushed: a model check)")
     outcome = "" if passed is None else (" passed" if passed else " FAILED")
+    rolled = (result.get("outcome") or {}).get("rolled_back_at")
+    if pushed and rolled:  # the verdict was of offsets the controller no longer has
+        return (f"<p>ROLLED BACK at {escape(str(rolled))}: the verification below "
+                f"({'PASS' if passed else 'FAIL' if passed is not None else 'none'}) was of "
+                "the offsets this run pushed; they were rolled back, and the controller has "
+                "its previous offsets again, so it no longer describes the robot.</p>"
+                + table(("quantity", "value"), rows, table_id="verification"))
     return (f"<p>Verification of {what}{outcome}.</p>"
             + table(("quantity", "value"), rows, table_id="verification"))
 

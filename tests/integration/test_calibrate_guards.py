@@ -159,6 +159,7 @@ def test_push_intent_is_journaled_first_and_settled_on_resume(
         # run's verified offsets by now, which it would silently discard
         code, stdout, stderr = run_cli(capsys, "rollback", "--run", str(out), "--token", TOKEN)
         assert code == 2 and "rolled back already" in stderr, stderr
+        assert f"hostpc status --robot {address}" in stderr  # the run's own controller
 
         # the deliberate rollback is not undone by a plain resume ...
         journal_before = (out / "journal.jsonl").read_text()

@@ -33,9 +33,9 @@ def test_separating_poses_choose_the_hidden_effect(tmp_path: Path,
     run = tmp_path / "run"
     code, _, err = run_cli(capsys, "calibrate", "--robot", "sim", "--scenario", str(scenario),
                            "--method", "sphere_probe", "--poses", "100", "--verify-poses", "0",
-                           "--seed", "3", "--no-push", "--cv-folds", "0", "--out", str(run),
+                           "--seed", "3", "--cv-folds", "0", "--out", str(run),
                            "--no-report")
-    assert code == 0, err
+    assert code == 5, err  # the model guard refuses the push: the model misses an effect
 
     # the default single-sphere plan: both significant, neither given the other
     code, out, err = run_cli(capsys, "diagnose", str(run / "dataset.json"), "--json")
@@ -62,6 +62,11 @@ def test_separating_poses_choose_the_hidden_effect(tmp_path: Path,
     assert geometry["effect"] == "geometry" and not geometry["significant"]
     assert result["samples"] == len(added)
     assert result["next"] == f"hostpc calibrate --resume {run} --effects +joint_compliance"
+    # a --separate resume measures and tests; it pushes only with its own --push
+    events = [json.loads(line).get("event") for line in
+              (run / "journal.jsonl").read_text().splitlines()]
+    assert "push" not in events and "push_intent" not in events
+    assert json.loads((run / "run.json").read_text())["settings"]["push"] is True
 
     # a resume with the same pair measures nothing again and comes to the same verdict
     code, _, err = run_cli(capsys, "calibrate", "--resume", str(run), "--separate",
@@ -88,3 +93,4 @@ def test_a_bad_separate_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixtur
     lines = err.strip().splitlines()
     assert len(lines) == 1 and words in lines[0], err
     assert "hostpc calibrate --resume" in lines[0]
+    assert "--candidates" not in lines[0]  # an option the user did not give

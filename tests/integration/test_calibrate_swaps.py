@@ -136,6 +136,10 @@ def test_a_resume_replays_the_stages_and_measures_nothing_again(tmp_path: Path) 
     journal.load()
     assert len(journal.records("fit")) == fit_poses
     assert journal.events("stage") == stages
+    # the summary counts the stages' poses as such, never "N of fewer planned"
+    measured = next(line for line in (out / "summary.txt").read_text().splitlines()
+                    if line.startswith("measured: "))
+    assert "fit poses for a plan of" in measured and "coarse-to-fine stages" in measured
     document = json.loads((out / "result.json").read_text())
     assert document["outcome"]["verdict"] == "PASS"
     assert all(abs(e) < TOLERANCE_DEG for e in document["truth"]["joint_offsets_error_deg"])
@@ -168,9 +172,13 @@ def test_a_declared_swap_on_a_joint_the_run_cannot_calibrate_is_never_a_pass(
     assert document["outcome"]["missing_required"] == [6]
     # the new run it suggests is this robot's and cell's: the same method, simulated world
     # and declared swap, with the frame J6 needs known
+    # (the frames were estimated, so not --known: a reference, and the run's seed kept)
+    seed = document["settings"]["seed"]
     assert document["outcome"]["next_command"] == (
-        f"hostpc calibrate --robot sim --method stereo_target --scenario "
-        f"{out / 'sim' / 'scenario.json'} --swapped J6 --known target,tool --require-joints 6")
+        f"hostpc reference record --run {out} --out {out}.cell_ref.json && hostpc calibrate "
+        f"--robot sim --method stereo_target --scenario {out / 'sim' / 'scenario.json'} "
+        f"--swapped J6 --seed {seed} --known target --reference {out}.cell_ref.json "
+        "--require-joints 6")
 
 
 def test_a_swapped_joint_the_robot_does_not_have_is_refused_before_moving(
@@ -182,7 +190,8 @@ def test_a_swapped_joint_the_robot_does_not_have_is_refused_before_moving(
 
 
 @pytest.mark.slow
-def test_a_resumes_overrides_are_kept_for_the_next_resume(tmp_path: Path) -> None:
+def test_a_resumes_overrides_are_kept_for_the_next_resume(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Refused at 2 deg -> resume with --swapped J3 -> the controller's own 5 deg limit
     refuses -> the limit is raised -> `--resume RUN --push` (the next command as given)
     pushes J3 with the swap still declared, instead of the 2 deg refusal again."""
@@ -199,6 +208,19 @@ def test_a_resumes_overrides_are_kept_for_the_next_resume(tmp_path: Path) -> Non
     assert header["settings"]["swapped"] == [3]  # kept in run.json
     second = document["outcome"]["next_command"]
     assert second == f"hostpc calibrate --resume {out} --push"
+    # a simulated controller's limit: the scenario key, in the file a resume starts from
+    assert (f"server.offset_limit_rad in {(out / 'sim' / 'scenario.json').resolve()}"
+            in document["push"]["reason"])
+    # unchanged, the same push is refused again: said so, not advised as if new
+    capsys.readouterr()
+    assert main([*second.split()[1:], "--no-report"]) == 5
+    err = capsys.readouterr().err
+    assert "unchanged since the last refusal: it was not raised" in err
+    assert "cut short" not in err  # the controller refused the write; nothing was cut short
+    # ... and a refused push is no push: --separate is not turned away for it
+    main(["calibrate", "--resume", str(out), "--separate", "joint_compliance,geometry",
+          "--no-report"])
+    assert "this run pushed offsets" not in capsys.readouterr().err
     # the technician raises the controller's limit (here: the simulated controller's)
     scenario_path = out / "sim" / "scenario.json"
     scenario = json.loads(scenario_path.read_text())
@@ -227,9 +249,9 @@ def test_an_undeclared_swap_that_loses_every_pose_ends_with_the_command_that_fin
     assert code == 1
     line = err[-1]
     assert "0 of 100 poses measured" in line and "no probe contact" in line
-    command = f"hostpc calibrate --resume {out} --swapped J1"
-    assert line.endswith(command)
-    assert main([*command.split()[1:], "--no-report"]) == 0
+    # the data do not say which joint: the command's JN is filled in by the technician
+    assert line.endswith(f"hostpc calibrate --resume {out} --swapped JN")
+    assert main(["calibrate", "--resume", str(out), "--swapped", "J1", "--no-report"]) == 0
     document = json.loads((out / "result.json").read_text())
     assert document["outcome"]["verdict"] == "PASS"
     assert all(abs(e) < TOLERANCE_DEG for e in document["truth"]["joint_offsets_error_deg"])
@@ -248,3 +270,21 @@ def test_the_model_check_of_a_staged_run_is_measured_where_the_robot_is(
     assert document["verify"]["kind"] == "model_check"
     assert document["verify"]["verdict"] == "PASS", document["verify"]
     assert "model check FAIL" not in document["outcome"]["headline"]
+
+
+def test_two_joints_over_the_limit_are_declared_by_one_next_command(tmp_path: Path) -> None:
+    """J1 +2.3 deg and J6 +2.1 deg (issue 24, item 6): the refusal's next command declares
+    both at once (it used to name one, whose resume then refused the other, forever), and
+    that command PASSes."""
+    scenario = swap_world("stereo_target", 1, 2.3)
+    scenario["truth"]["zero_errors"][5] += math.radians(2.1)
+    out = tmp_path / "run"
+    code, document = calibrate(out, scenario, "stereo_target", "--poses", "16",
+                               "--verify-poses", "6")
+    assert code == 5, document["outcome"]["headline"]
+    command = document["outcome"]["next_command"]
+    assert command == f"hostpc calibrate --resume {out} --swapped J1,J6"
+    assert main([*command.split()[1:], "--no-report"]) == 0
+    document = json.loads((out / "result.json").read_text())
+    assert document["outcome"]["verdict"] == "PASS", document["outcome"]["headline"]
+    assert document["settings"]["swapped"] == [1, 6]

@@ -99,6 +99,9 @@ def test_a_rollback_rewrites_result_summary_report_and_revises_the_archive(
     assert summary.startswith("ROLLED BACK at ") and "controller: offsets restored" in summary
     report = (out / "report.html").read_text()
     assert "ROLLED BACK at " in report and "offsets pushed and verified" not in report
+    # the verification section: of offsets the controller no longer has
+    assert "Verification of the pushed offsets on fresh poses passed" not in report
+    assert "they were rolled back, and the controller has its previous offsets" in report
     assert json.loads((out / "result.1.json").read_text())["outcome"]["verdict"] == "PASS"
     with open_archive(archive_url) as archive:
         (run,) = archive.runs("SN-2")
@@ -128,9 +131,12 @@ def test_an_estimated_target_leaves_j1_and_j6_not_calibrated_exit_7(
     assert "target frame estimated" in joints[1]["reason"]
     assert joints[1]["fix"].startswith("--known target")
     assert "tool frame estimated" in joints[6]["reason"]
+    seed = json.loads((out / "result.json").read_text())["settings"]["seed"]
     assert outcome["next_command"] == (
-        f"hostpc calibrate --robot sim --method stereo_target --scenario "
-        f"{out / 'sim' / 'scenario.json'} --known target,tool --require-joints all")
+        f"hostpc reference record --run {out} --out {out}.cell_ref.json && hostpc calibrate "
+        f"--robot sim --method stereo_target --scenario {out / 'sim' / 'scenario.json'} "
+        f"--seed {seed} --reference {out}.cell_ref.json --require-joints all")
+    assert "--known" not in outcome["next_command"]  # the frames were never surveyed
     head = stdout.splitlines()[0]
     assert head.startswith("JOINTS_MISSING: J2-J5 calibrated and verified; J1 NOT CALIBRATED")
     report = (out / "report.html").read_text()
