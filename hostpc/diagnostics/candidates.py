@@ -17,11 +17,10 @@ ones the fit could identify: unidentifiable geometry parameters cost nothing):
   ``alpha`` divided by the number of candidates tried (Bonferroni) *and* the model with it
   predicts held-out samples better (lower whitened held-out RMS, same folds as the current
   model's). A candidate with no parameter selected is never significant.
-- The row's model: the effect with its selected subset free and the rest held at nominal
-  (``held``) when that predicts held-out samples better than the effect with all its
-  parameters, else the full effect. Every figure of the row (RMS, chi2/dof, held-out RMS,
-  the star) and the fit the ladder adopts are that one model's: an effect of six
-  parameters the data need two of may overfit a small fold while its two predict better.
+- The row's model: the whole effect, the model its advice (``--effects +E``) fits. Every
+  figure of the row (RMS, chi2/dof, held-out RMS, the star) and the fit the ladder adopts
+  are that one model's. The selected subset only ranks: held at nominal, the parameters the
+  data determine but did not select would bias the zero offsets.
   The p-value takes the better of the two forms (doubled, as above).
 - ``unidentifiable``: parameters the current model identifies that the model with the
   candidate cannot (the fit holds them at nominal): adding backlash to probe data whose
@@ -366,10 +365,11 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
     module doc, when the samples leave no degrees of freedom).
 
     The candidate's figures (RMS, max, chi2/dof, held-out RMS, the star) and its ``fit``
-    all belong to one model: the effect with its selected subset free and its other
-    parameters held at nominal (``held``) when that model predicts held-out samples
-    better than the effect with all its parameters, else the full effect (``held`` empty).
-    Held out on the same pose-grouped folds (``cv_folds``) as ``base_cv``."""
+    all belong to one model, the whole effect (``held`` stays empty): the model its advice
+    (``--effects +E``) fits. The selected subset ranks it (delta BIC, its p) but is not the
+    row's model: holding at nominal parameters the data determine biases the zero offsets
+    (a 4 sigma error with compliance and geometry hidden together). Held out on the same
+    pose-grouped folds (``cv_folds``) as ``base_cv``."""
     problem = extend_problem(base.problem, [effect])
     x0 = warm_start(base, problem)
     start = evaluate(problem, x0)  # shared by the fit, the subset choice and the subset fit
@@ -396,11 +396,6 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
         hold = tuple(problem.layout.names[k] for k in np.flatnonzero(~free)
                      if not extended.fixed[k] or (k < base.x.size and not base.fixed[k]))
         subset = _subset_fit(problem, hold, x0, loss, start)
-        subset, subset_whitened = with_held_out(subset, cv_folds)
-        if hold and subset_whitened is not None and (
-                cv_whitened is None or subset_whitened < cv_whitened):
-            # the subset predicts better held out: the row is the subset model's
-            model, held, cv_whitened = subset, hold, subset_whitened
         chi2_subset = subset.chi2
         delta_bic = (n_rows * math.log(max(chi2_subset, 1e-300) / max(base.chi2, 1e-300))
                      + penalty)
