@@ -27,7 +27,6 @@ import json
 import os
 import subprocess
 import sys
-import tarfile
 import tempfile
 import time
 from pathlib import Path
@@ -38,6 +37,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
+
+from bench.harness import old_tree  # noqa: E402
 
 OPTIONAL = True
 SIZES = (10_000, 100_000, 1_000_000)
@@ -91,18 +92,6 @@ def write_csv(path: Path, method: str, n_rows: int, seed: int = 7) -> None:
                 np.savetxt(out, table, delimiter=",", fmt="%.10f")
 
 
-def _old_tree(commit: str, folder: Path) -> Path:
-    """The ``hostpc`` package of ``commit`` unpacked under ``folder`` (no worktree, no
-    change to the repository)."""
-    archive = folder / "old.tar"
-    with archive.open("wb") as out:
-        subprocess.run(["git", "-C", str(ROOT), "archive", commit, "hostpc"], stdout=out,
-                       check=True)
-    with tarfile.open(archive) as tar:
-        tar.extractall(folder / "old", filter="data")
-    return folder / "old"
-
-
 #: run in a fresh, small Python: the command's peak RSS is its RUSAGE_CHILDREN maximum
 #: (measured from this bench's process, a forked child would inherit the bench's own
 #: high-water mark, which Linux carries across exec)
@@ -146,7 +135,7 @@ def run(sizes: tuple[int, ...] = SIZES, old_commit: str | None = None
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        old_root = _old_tree(old_commit, folder) if old_commit else None
+        old_root = old_tree(old_commit, folder) if old_commit else None
         all_sizes = sorted(set(sizes) | (set(OLD_SIZES) if old_root else set()))
         for method in CASES:
             for n in all_sizes:

@@ -25,7 +25,6 @@ import os
 import statistics
 import subprocess
 import sys
-import tarfile
 import tempfile
 import time
 from pathlib import Path
@@ -33,17 +32,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 LADDER_DATASET = ROOT / "examples" / "ur5e_stereo_hidden_compliance.json"
 PACKAGES = ("hostpc", "controller_stub", "protocol")
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
 
-
-def old_tree(commit: str, folder: Path) -> Path:
-    """The packages of ``commit`` unpacked under ``folder`` (the repository is not touched)."""
-    archive = folder / "old.tar"
-    with archive.open("wb") as out:
-        subprocess.run(["git", "-C", str(ROOT), "archive", commit, *PACKAGES], stdout=out,
-                       check=True)
-    with tarfile.open(archive) as tar:
-        tar.extractall(folder / "old", filter="data")
-    return folder / "old"
+from bench.harness import old_tree  # noqa: E402
 
 
 def wall_s(source_root: Path, args: list[str], work: Path) -> float:
@@ -66,7 +58,7 @@ def run(runs: int, old_commit: str | None) -> dict[str, dict[str, list[float]]]:
         folder = Path(tmp)
         trees = {"now": ROOT}
         if old_commit:
-            trees[old_commit] = old_tree(old_commit, folder)
+            trees[old_commit] = old_tree(old_commit, folder, PACKAGES)
         commands = {
             "calibrate --robot sim": lambda k: ["calibrate", "--robot", "sim", "--out",
                                                 str(folder / f"run-{k}")],

@@ -1,5 +1,5 @@
-"""What several benches share: a timer, the stereo_target fit cases, the scipy baseline and
-the ``--seeds`` / ``--quick`` command line.
+"""What several benches share: a timer, the stereo_target fit cases, the scipy baseline,
+the ``--seeds`` / ``--quick`` command line and an older commit's tree to run alongside.
 
 Not a bench itself (no ``bench_`` prefix: ``bench/run.py`` does not run it). A bench imports
 it after putting the repository root on ``sys.path`` (so ``python bench/bench_X.py`` works
@@ -12,8 +12,11 @@ from any folder, and ``bench/run.py`` finds the same module)::
 from __future__ import annotations
 
 import argparse
+import subprocess
+import tarfile
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -98,3 +101,17 @@ def seeds_argument(description: str, default: int, quick: int,
     parser.add_argument("--quick", action="store_true", help=f"{quick} seeds")
     args = parser.parse_args(argv)
     return quick if args.quick else int(args.seeds)
+
+
+def old_tree(commit: str, folder: Path, packages: Sequence[str] = ("hostpc",)) -> Path:
+    """The ``packages`` of ``commit`` unpacked under ``folder`` / old (``git archive``: no
+    worktree, no change to the repository), to put first on PYTHONPATH and run interleaved
+    with the current tree."""
+    root = Path(__file__).resolve().parents[1]
+    archive = folder / "old.tar"
+    with archive.open("wb") as out:
+        subprocess.run(["git", "-C", str(root), "archive", commit, *packages], stdout=out,
+                       check=True)
+    with tarfile.open(archive) as tar:
+        tar.extractall(folder / "old", filter="data")
+    return folder / "old"
