@@ -40,6 +40,7 @@ from hostpc.importing.frame_guess import guessed_frames
 from hostpc.importing.imported import ImportedSamples, write_document
 from hostpc.input_files import CSV, check_input_file
 from hostpc.kinematics import Chain
+from hostpc.kinematics.table_file import is_table_file
 from hostpc.model.context import check_coupled_joints
 
 
@@ -95,8 +96,6 @@ def register(subparsers: Any) -> None:
 def _robot(args: argparse.Namespace, output: Path) -> tuple[RobotChoice, Chain]:
     """The dataset's robot (a URDF path relative to the dataset file, a table file's rows in
     SI) and its chain."""
-    from hostpc.kinematics.table_file import is_table_file
-
     chain = resolve_chain(args.robot, args.base_link, args.tip_link)
     if is_table_file(args.robot):  # the table itself: the dataset is SI
         return RobotChoice(chain.n, table=args.robot), chain
