@@ -27,18 +27,22 @@ from hostpc.planning.design import (
     Travel,
     check_plan,
     design_matrix,
+    group_selection,
+    groups_for_target_sigma,
+    in_pool_order,
     joint_offset_sigmas,
     make_design,
     order_for_travel,
     poses_for_target_sigma,
     select,
-    select_groups,
+    tour_groups,
     verify_groups,
 )
 from hostpc.planning.robot_time import (
     RobotPath,
     TimeLimits,
     Waypoints,
+    measuring_motion,
     predicted_robot_time,
 )
 from hostpc.planning.tour import full_turn_joints, short_path, unwrap_plan
@@ -147,9 +151,21 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         if more.size:  # measured only if the model fails (runner): a tour from the last
             order, q_more = short_path(pool[more], q_short[-1], *limits)
             more = more[order]
-    else:  # whole groups (sphere_probe: an orientation's 5 contacts), in the pool order
-        fit_indices = select_groups(design, groups, settings.n_poses, settings.criterion,
-                                    rng)
+    else:  # whole groups (sphere_probe: an orientation's 5 contacts)
+        ordered = group_selection(design, groups, settings.n_poses, settings.criterion, rng)
+        enough = groups_for_target_sigma(
+            design, ordered, math.radians(settings.target_sigma_deg or FLOOR_SIGMA_DEG),
+            state.q.size, groups.min_groups)
+        floor_groups = ordered[:enough or len(ordered)]
+        if settings.target_sigma_deg is not None and enough is not None:
+            # the fewest groups that reach it as a tour; the rest if the model fails
+            fit_indices = tour_groups(pool, groups, np.concatenate(ordered[:enough]), state.q)
+            if enough < len(ordered):
+                more = tour_groups(pool, groups, np.concatenate(ordered[enough:]),
+                                   pool[fit_indices[-1]])
+                q_more = pool[more]
+        else:  # in the pool order (the method's safe visiting order)
+            fit_indices = in_pool_order(ordered)
         selection = fit_indices
     plan_design = design.subset(fit_indices)
     check = check_plan(plan_design)
@@ -190,7 +206,15 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
                                     replace=False)
         verify_indices = verify_indices[order_for_travel(pool[verify_indices], last)]
     else:
-        verify_indices = verify_groups(groups, fit_indices, settings.n_verify, rng)
+        used = np.concatenate([fit_indices, more])
+        verify_indices = verify_groups(groups, used, settings.n_verify, rng)
+        if settings.target_sigma_deg is not None:
+            verify_indices = tour_groups(pool, groups, verify_indices, last)
+        if more.size:  # a grown plan verifies with a fixed plan's count
+            extra = verify_groups(groups, np.concatenate([used, verify_indices]),
+                                  EXTENDED_VERIFY_POSES - verify_indices.size, rng)
+            from_pose = pool[verify_indices[-1]] if verify_indices.size else last
+            q_verify_more = pool[tour_groups(pool, groups, extra, from_pose)]
     if not short:
         q_verify = pool[verify_indices]
     if not short and groups is None:  # full-turn joints: no unwinding (tour.unwrap_plan)
@@ -210,13 +234,20 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         "structural_unidentifiable": [d.description for d in structural],
         "structural_fixed": [d.fixed for d in structural],
     }
-    fewest = poses_for_target_sigma(
-        design, selection, math.radians(settings.target_sigma_deg or FLOOR_SIGMA_DEG),
-        state.q.size)
     path = method.robot_path if isinstance(method, RobotPath) else Waypoints.plain
+    time_limits = TimeLimits.from_extra(state.extra, state.q.size)
+    floor_motion = 0.0
+    if groups is None:
+        fewest = poses_for_target_sigma(
+            design, selection, math.radians(settings.target_sigma_deg or FLOOR_SIGMA_DEG),
+            state.q.size)
+    else:  # the fewest whole groups, with their measuring moves (guarded approaches)
+        floor_q = np.vstack([pool[np.concatenate(floor_groups)], q_verify])
+        fewest = floor_q.shape[0] - q_verify.shape[0]
+        floor_motion = measuring_motion(path(floor_q), settings.speed, time_limits)
     planned = predicted_robot_time(state.q, path(q_fit), path(q_verify), settings.speed,
-                                   TimeLimits.from_extra(state.extra, state.q.size),
-                                   (fewest or len(selection)) + q_verify.shape[0])
+                                   time_limits, (fewest or len(selection)) + q_verify.shape[0],
+                                   floor_motion)
     info["predicted_robot_time_s"] = planned
     progress.message(
         f"plan: {len(fit_indices)} poses from {pool.shape[0]} candidates "

@@ -5,15 +5,15 @@
   count (the behaviour before the short plan: exactly N poses);
 - with a target sigma the verification takes the fewest poses whose chi-square test has
   95 % power for an error of d2 = 10 per pose at the run's --verify-alpha
-  (hostpc.planning.verify_poses: 4 at alpha 0.01, 5 at 0.001), else 10;
-- a method that plans whole groups of poses (sphere_probe) refuses --target-sigma.
+  (hostpc.planning.verify_poses: 4 at alpha 0.01, 5 at 0.001), else 10; a method that
+  plans whole groups of poses (sphere_probe) takes whole groups for both (the fewest
+  orientations that reach the sigma; verification: 3 contacts, one orientation).
 """
 
 from __future__ import annotations
 
 import argparse
 
-from hostpc.errors import InputError
 from hostpc.methods import method_class
 from hostpc.model.measurements.registry import measurement_model
 from hostpc.planning.verify_poses import verify_poses_for_power
@@ -40,9 +40,6 @@ def pose_counts(args: argparse.Namespace) -> tuple[int, int, float | None]:
     takes the poses its power needs (hostpc.planning.verify_poses), else 10."""
     method = method_class(args.method, tuple(args.plugin))
     target = args.target_sigma
-    if target is not None and method.plans_whole_groups:
-        raise InputError(f"--target-sigma: {args.method} plans whole groups of poses (a probe "
-                         "orientation's contacts), not pose by pose; use --poses N")
     if target is None and args.poses is None:
         target = method.default_target_sigma_deg
     poses = DEFAULT_MAX_POSES if args.poses is None else args.poses

@@ -26,8 +26,10 @@ information a pose adds: `M = sum_k A_k^T A_k`.
 - Grouped candidates (`PoseGroups`, e.g. sphere_probe's 5 contacts per probe orientation):
   selection, order and verification take whole groups. D-optimal gain of a group is
   `log det(I + A_g M^-1 A_g^T)` with `A_g` its poses' blocks stacked (the gain in
-  `log det M` from adding the sum of the group's information); groups are visited in the
-  method's pool order (the method plans a safe visiting order of its groups).
+  `log det M` from adding the sum of the group's information); with a target sigma the
+  fewest leading groups that reach it (`groups_for_target_sigma`), visited as a tour of
+  the groups (the runner's plan), else groups visited in the method's pool order (the
+  method plans a safe visiting order of its groups).
 
 Shapes: q (N, n) rad; A (N, m, P); sigmas in SI (rad for joint offsets).
 """
@@ -234,11 +236,12 @@ def groups_to_select(groups: PoseGroups, n_poses: int) -> int:
     return max(groups.min_groups, -(-int(n_poses) // largest))
 
 
-def select_groups(design: Design, groups: PoseGroups, n_poses: int, criterion: str,
-                  rng: np.random.Generator) -> np.ndarray:
-    """Pool indices of the whole groups selected by `criterion` ("D": greedy D-optimal over
-    groups, "random": a seeded random choice), `groups_to_select` of them, in visiting
-    order: the groups in their pool order, each group's poses in theirs."""
+def group_selection(design: Design, groups: PoseGroups, n_poses: int, criterion: str,
+                    rng: np.random.Generator) -> list[np.ndarray]:
+    """The whole groups selected by `criterion` ("D": greedy D-optimal over groups, nested:
+    a prefix of it is the selection of that size; "random": a seeded random choice),
+    `groups_to_select` of them, in the order chosen: each group's pool indices (its poses
+    in their pool order)."""
     members = groups.members()
     n_groups = min(groups_to_select(groups, n_poses), len(members))
     if criterion == "D":
@@ -248,7 +251,33 @@ def select_groups(design: Design, groups: PoseGroups, n_poses: int, criterion: s
     else:
         raise ValueError(f"unknown planning criterion {criterion!r} (expected one of "
                          f"{CRITERIA})")
-    return _concatenate([members[i] for i in sorted(int(k) for k in chosen)])
+    return [members[int(k)] for k in chosen]
+
+
+def select_groups(design: Design, groups: PoseGroups, n_poses: int, criterion: str,
+                  rng: np.random.Generator) -> np.ndarray:
+    """Pool indices of the whole groups of `group_selection`, in visiting order: the groups
+    in their pool order, each group's poses in theirs."""
+    return in_pool_order(group_selection(design, groups, n_poses, criterion, rng))
+
+
+def in_pool_order(chosen: Sequence[np.ndarray]) -> np.ndarray:
+    """Pool indices of the groups `chosen` (each group's pool indices), the groups in
+    their pool order."""
+    return _concatenate(sorted(chosen, key=lambda g: int(g[0])))
+
+
+def groups_for_target_sigma(design: Design, chosen: Sequence[np.ndarray],
+                            target_sigma: float, n_joints: int, min_groups: int = 1
+                            ) -> int | None:
+    """The fewest leading groups of `chosen` (a nested group selection, `group_selection`)
+    whose poses reach `target_sigma` (rad) on every identifiable joint offset
+    (`poses_for_target_sigma`), at least `min_groups`; None if all of them do not."""
+    fewest = poses_for_target_sigma(design, _concatenate(chosen), target_sigma, n_joints)
+    if fewest is None:
+        return None
+    ends = np.cumsum([len(g) for g in chosen])
+    return min(len(chosen), max(int(min_groups), int(np.searchsorted(ends, fewest)) + 1))
 
 
 def verify_groups(groups: PoseGroups, used: np.ndarray, n_verify: int,
@@ -266,6 +295,22 @@ def verify_groups(groups: PoseGroups, used: np.ndarray, n_verify: int,
     return _concatenate([members[i] for i in sorted(int(k) for k in picked)])
 
 
+def tour_groups(pool: np.ndarray, groups: PoseGroups, indices: np.ndarray,
+                q_from: np.ndarray) -> np.ndarray:
+    """`indices` (pool indices of whole groups) in visiting order: the groups as a tour
+    from q_from (n,) by their first pose (`tour.plan_tour` on the joint move time), each
+    group's poses in their order in `indices`."""
+    indices = np.asarray(indices, dtype=int)
+    if indices.size == 0:
+        return indices
+    labels = np.asarray(groups.labels)[indices]
+    _, first = np.unique(labels, return_index=True)
+    first = np.sort(first)
+    parts = [indices[labels == labels[i]] for i in first]
+    order = plan_tour(pool[indices[first]], np.asarray(q_from, float))
+    return _concatenate([parts[int(k)] for k in order])
+
+
 def _concatenate(parts: Sequence[np.ndarray]) -> np.ndarray:
     return (np.concatenate(parts).astype(int) if parts else np.zeros(0, dtype=int))
 
@@ -279,7 +324,7 @@ def predicted_covariance(design: Design) -> np.ndarray:
     if A.shape[0] == 0:
         return cov
     _, s, Vt = np.linalg.svd(A, full_matrices=False)
-    if s.size == 0 or s[-1] <= s[0] * 1e-10:
+    if s.size < A.shape[1] or s.size == 0 or s[-1] <= s[0] * 1e-10:  # fewer rows: rank-poor
         return cov
     free_cov = (Vt.T / s**2) @ Vt
     index = np.flatnonzero(design.free)

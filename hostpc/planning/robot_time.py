@@ -14,7 +14,9 @@ The controller's limits come from its state when it reports them (`RobotState.ex
 `max_joint_speed` (n,) rad/s, `settle_s`, `capture_s`), else a UR's: 180 deg/s on every
 joint, 0.3 s settling, 0.1 s a capture (the simulator's defaults). The floor is what no
 tour can save: settle and capture of the fewest poses that reach the target sigma and of
-the verification poses, no motion (the planner counts the poses: hostpc.calibrate.run_plan).
+the verification poses, no motion (the planner counts the poses: hostpc.calibrate.run_plan),
+plus the moves that are the measurement itself (`measuring_motion`: sphere_probe's guarded
+approaches from the start pose to the contact at the contact's speed).
 """
 
 from __future__ import annotations
@@ -96,12 +98,12 @@ def waypoints_time(q_start: np.ndarray, path: Waypoints, speed: float, limits: T
 
 
 def predicted_robot_time(q_start: np.ndarray, fit: Waypoints, verify: Waypoints,
-                         speed: float, limits: TimeLimits, floor_poses: int
-                         ) -> dict[str, float]:
+                         speed: float, limits: TimeLimits, floor_poses: int,
+                         floor_motion: float = 0.0) -> dict[str, float]:
     """{"motion", "settle", "capture", "total", "floor"} in s of the fit's waypoints then
     the verification's from q_start (n,) at the run's speed fraction `speed`; the floor
     that of `floor_poses` poses (the planner's: the fewest that reach the target sigma,
-    and the verification poses)."""
+    and the verification poses) plus `floor_motion` (s, their `measuring_motion`)."""
     start = np.asarray(q_start, float)
     first = waypoints_time(start, fit, speed, limits)
     last = fit.q[-1] if fit.q.shape[0] else start
@@ -109,7 +111,19 @@ def predicted_robot_time(q_start: np.ndarray, fit: Waypoints, verify: Waypoints,
     motion, settle, capture = (a + b for a, b in zip(first, second, strict=True))
     return {"motion": motion, "settle": settle, "capture": capture,
             "total": motion + settle + capture,
-            "floor": robot_time_floor(floor_poses, limits)}
+            "floor": robot_time_floor(floor_poses, limits) + floor_motion}
+
+
+def measuring_motion(path: Waypoints, speed: float, limits: TimeLimits) -> float:
+    """Time (s) of the moves of `path` that measure in motion (no settling after them:
+    sphere_probe's guarded approach from the start pose to the contact, at the contact's
+    speed): the measurement itself, which no tour saves."""
+    if path.q.shape[0] < 2:
+        return 0.0
+    fraction = np.where(np.isnan(path.speed), speed, path.speed)[1:]
+    moves = move_times(path.q[:-1], path.q[1:], limits.joint_speed) / np.maximum(fraction,
+                                                                                 1e-9)
+    return float(np.sum(moves[~path.settle[1:]]))
 
 
 def robot_time_floor(n_poses: int, limits: TimeLimits) -> float:

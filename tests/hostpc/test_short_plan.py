@@ -31,7 +31,9 @@ def test_default_pose_counts_and_the_old_behaviour_with_poses() -> None:
     assert _counts("--poses", "30") == (30, 10, None)  # --poses alone: exactly 30, as before
     assert _counts("--poses", "30", "--target-sigma", "0.001") == (30, 4, 0.001)
     assert _counts("--verify-poses", "7") == (60, 7, 0.002)
-    assert _counts("--method", "sphere_probe") == (60, 10, None)  # no default target
+    # sphere_probe: its own default target (whole orientations), 3 verification contacts
+    assert _counts("--method", "sphere_probe") == (60, 3, 0.002)
+    assert _counts("--method", "sphere_probe", "--poses", "100") == (100, 10, None)
 
 
 @pytest.mark.parametrize(("d2", "power", "expected"), [
@@ -127,14 +129,12 @@ def test_verify_pose_count_follows_the_runs_alpha() -> None:
     assert verify_power(5, DETECTABLE_D2, 0.001) >= DETECTABLE_POWER
 
 
-def test_target_sigma_on_a_method_that_plans_whole_groups_is_refused() -> None:
-    """sphere_probe plans whole probe orientations: a --target-sigma was silently ignored
-    while it still cut the verification to 4 poses (one orientation)."""
-    from hostpc.errors import InputError
-
-    with pytest.raises(InputError, match="whole groups"):
-        _counts("--method", "sphere_probe", "--target-sigma", "0.002")
-    assert _counts("--method", "sphere_probe")[1] == 10
+def test_target_sigma_on_a_method_that_plans_whole_groups_is_its_default() -> None:
+    """sphere_probe plans whole probe orientations: a target sigma (its default, or
+    --target-sigma) picks the fewest orientations that reach it
+    (hostpc.calibrate.run_plan); the verification's 3 contacts are one orientation."""
+    assert _counts("--method", "sphere_probe", "--target-sigma", "0.001") == (60, 3, 0.001)
+    assert _counts("--method", "sphere_probe", "--poses", "100")[1] == 10
 
 
 def test_a_target_sigma_plan_is_never_too_small_for_the_centre_refinement() -> None:

@@ -1,22 +1,25 @@
 """sphere_probe acquisition (I/O, through a ``RobotAdapter``): driving the planned contacts.
 
-Per contact a joint move to the start pose and a guarded move toward the target (S1-S3,
-S6). A missed contact (no IO edge before the end of travel, or a lost edge) stops that move
-at the travel limit, is recorded, and the run goes on. Units SI (m, rad, s).
+Per contact the free moves to its start pose (`planning.contacts.free_moves`: the hover
+only where the orientation changes or a direct move would pass near the sphere), a guarded
+move toward the target (S1-S3, S6) and the retract to the start. A missed contact (no IO
+edge before the end of travel, or a lost edge) stops that move at the travel limit, is
+recorded, and the run goes on. Units SI (m, rad, s).
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Awaitable, Callable, Iterable
+from collections.abc import Awaitable, Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from hostpc.kinds.sphere_probe.planning.contacts import (
+    Location,
     PlannedContact,
-    PlannedOrientation,
     ProbePlan,
+    free_moves,
 )
 from hostpc.kinds.sphere_probe.planning.setup import PlanConfig, ProbeSetup
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
@@ -79,8 +82,11 @@ async def acquire(robot: RobotAdapter, plan: ProbePlan, setup: ProbeSetup, confi
                   *, done: Iterable[tuple[int, int]] = (),
                   on_contact: ContactCallback | None = None,
                   guarded: GuardedMove | None = None,
-                  clock: Callable[[], float] = time.monotonic) -> list[ContactRecord]:
-    """Drive the plan: per contact, hover -> start -> guarded move -> start -> hover
+                  clock: Callable[[], float] = time.monotonic,
+                  chain: Chain | None = None) -> list[ContactRecord]:
+    """Drive the plan: per contact its free moves to the start (`free_moves`: with
+    `chain`, straight from the previous contact's start where that keeps clear of the
+    sphere, else through the hover), the guarded move, the retract to the start
     (``probe_contact``); every free move was checked on the nominal model at planning.
 
     done: (group, index) pairs already recorded (a resumed run skips them); on_contact:
@@ -91,17 +97,23 @@ async def acquire(robot: RobotAdapter, plan: ProbePlan, setup: ProbeSetup, confi
     skip = set(done)
     records: list[ContactRecord] = []
     t0 = clock()
+    here: Location | None = None
     for orientation in plan.orientations:
         for contact in orientation.contacts:
             if (contact.group, contact.index) in skip:
                 continue
-            record = await probe_contact(robot, orientation, contact, setup, config,
-                                         clock() - t0, guarded)
+            via = free_moves(orientation, contact, here, chain, setup, config)
+            record = await probe_contact(robot, via, contact, setup, config,
+                                         clock() - t0, guarded, chain)
+            here = (orientation, contact)
             records.append(record)
             if on_contact is not None:
                 result = on_contact(record)
                 if result is not None:
                     await result
+        if here is not None and here[0] is orientation:  # leave it as planned: its hover
+            await _move(robot, orientation.q_hover, config.move_speed)
+            here = (orientation, None)
     return records
 
 
@@ -114,16 +126,17 @@ async def _move(robot: RobotAdapter, q: np.ndarray, speed: float) -> None:
                               f"{outcome.reason}")
 
 
-async def probe_contact(robot: RobotAdapter, orientation: PlannedOrientation,
+async def probe_contact(robot: RobotAdapter, via: Sequence[np.ndarray],
                         contact: PlannedContact, setup: ProbeSetup, config: PlanConfig,
                         t: float, guarded: GuardedMove | None = None,
                         chain: Chain | None = None) -> ContactRecord:
-    """One contact: hover -> start -> guarded move -> start -> hover (see ``acquire``).
+    """One contact: the free moves `via` (ending at the contact's start, `free_moves`), the
+    guarded move, the retract to the start (see ``acquire``); the robot ends at the start.
 
     chain: the nominal model, to turn the joint velocities a controller measured at the
     edge (``ContactOutcome.qd``) into the tip speed when it does not report that itself."""
-    await _move(robot, orientation.q_hover, config.move_speed)
-    await _move(robot, contact.q_start, config.move_speed)
+    for q in via:
+        await _move(robot, q, config.move_speed)
     if guarded is None:
         outcome = await robot.guarded_move(contact.q_target, contact.speed, setup.io_line)
     else:
@@ -136,7 +149,6 @@ async def probe_contact(robot: RobotAdapter, orientation: PlannedOrientation,
     if speed is None and latched is not None and outcome.qd is not None and chain is not None:
         speed = tip_speed_at(chain, np.asarray(latched, float), setup.tip, outcome.qd)
     await _move(robot, contact.q_start, config.move_speed)
-    await _move(robot, orientation.q_hover, config.move_speed)
     return ContactRecord(
         group=contact.group, index=contact.index,
         contact=bool(outcome.contact and latched is not None),

@@ -50,12 +50,14 @@ from hostpc.kinds.sphere_probe.dataset import (
 )
 from hostpc.kinds.sphere_probe.file_face import probe_blocks, reference_sphere
 from hostpc.kinds.sphere_probe.planning.contacts import (
+    Location,
     PlannedContact,
     PlannedOrientation,
     ProbePlan,
     balance_probe_plan,
     contact_pose,
     design_speeds,
+    free_moves,
     path_clearance,
     plan_from_dict,
     plan_sphere_probe,
@@ -65,6 +67,7 @@ from hostpc.kinds.sphere_probe.planning.setup import (
     CONTACTS_PER_ORIENTATION,
     METHOD,
     MIN_ORIENTATIONS,
+    MIN_TARGET_ORIENTATIONS,
     PlanConfig,
     ProbeSetup,
 )
@@ -150,6 +153,7 @@ class SphereProbeMethod(Method):
     """
 
     name: ClassVar[str] = METHOD
+    default_target_sigma_deg: ClassVar[float | None] = 0.002
     plans_whole_groups: ClassVar[bool] = True
     staged: ClassVar[bool] = True
 
@@ -176,6 +180,8 @@ class SphereProbeMethod(Method):
         self._contact_poses: np.ndarray | None = None
         self._t0 = time.monotonic()
         self._joint_estimate = np.zeros(self.chain.n)  # set_joint_estimate
+        self._left: tuple[np.ndarray, np.ndarray] | None = None
+        """(commanded start, commanded hover) of the last contact probed (acquire)."""
 
     def set_joint_estimate(self, estimate: np.ndarray, new_stage: bool = False) -> None:
         """A contact is looked up at the pose the robot reaches and its hover, start and
@@ -263,9 +269,13 @@ class SphereProbeMethod(Method):
 
     def pose_groups(self, pool: np.ndarray) -> PoseGroups:
         """The orientation of each contact of the pool: the planner takes whole
-        orientations (5 contacts, S1-S3), at least MIN_ORIENTATIONS of them (S6)."""
+        orientations (5 contacts, S1-S3): with a target sigma (the default) the fewest
+        that reach it, at least MIN_TARGET_ORIENTATIONS; else at least MIN_ORIENTATIONS
+        (S6)."""
+        fewest = (MIN_ORIENTATIONS if self.settings.target_sigma_deg is None
+                  else MIN_TARGET_ORIENTATIONS)
         return PoseGroups(labels=np.array([self._lookup(q)[1].group for q in pool]),
-                          min_groups=MIN_ORIENTATIONS)
+                          min_groups=fewest)
 
     def _poses(self) -> np.ndarray:
         """(N_contacts, n) nominal contact pose of every planned contact, plan order."""
@@ -286,17 +296,40 @@ class SphereProbeMethod(Method):
         orientation = next(o for o in self.plan.orientations if o.group == contact.group)
         return orientation, contact
 
+    def _located(self, q: np.ndarray | None) -> Location | None:
+        """Where the stylus is at the plan-frame pose q (n,): at a contact's start (the
+        retract point) or at an orientation's hover; None if elsewhere (or q None)."""
+        if q is None or self.plan is None:
+            return None
+        q = np.asarray(q, float)
+        for orientation in self.plan.orientations:
+            if np.max(np.abs(orientation.q_hover - q)) < 1e-6:
+                return orientation, None
+            for contact in orientation.contacts:
+                if np.max(np.abs(contact.q_start - q)) < 1e-6:
+                    return orientation, contact
+        return None
+
+    def _free_moves(self, orientation: PlannedOrientation, contact: PlannedContact,
+                    here: Location | None) -> list[np.ndarray]:
+        return free_moves(orientation, contact, here, self.chain, self.setup, self.config)
+
     def robot_path(self, q: np.ndarray) -> Waypoints:
-        """The moves that probe the contacts q (N, n) (``probe_contact``): per contact
-        hover, start, the guarded approach to the contact (no settling), start, hover; the
-        free moves at the plan's move speed, the approach at the contact's."""
+        """The moves that probe the contacts q (N, n) in order (``probe_contact``): per
+        contact the free moves to its start (``free_moves``: the hover only where the
+        orientation changes or a direct move would pass near the sphere), the guarded
+        approach to the contact (no settling), the retract to the start; the free moves
+        at the plan's move speed, the approach at the contact's."""
         rows, speeds, settles = [], [], []
+        here: Location | None = None
         for row in np.asarray(q, float):
             orientation, contact = self._lookup(row)
-            rows += [orientation.q_hover, contact.q_start, row, contact.q_start,
-                     orientation.q_hover]
-            speeds += [self.config.move_speed] * 2 + [contact.speed] + [self.config.move_speed] * 2
-            settles += [True, True, False, True, True]
+            via = self._free_moves(orientation, contact, here)
+            rows += [*via, row, contact.q_start]
+            speeds += [self.config.move_speed] * len(via) + [contact.speed,
+                                                             self.config.move_speed]
+            settles += [True] * len(via) + [False, True]
+            here = (orientation, contact)
         n = np.size(q, 1) if np.ndim(q) == 2 else 0
         return Waypoints(np.asarray(rows, float).reshape(-1, n), np.asarray(speeds, float),
                          np.asarray(settles, bool), 0)
@@ -340,27 +373,42 @@ class SphereProbeMethod(Method):
 
     async def acquire(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
                       q_from: np.ndarray | None) -> SampleRecord:
-        """One contact (hover, start, guarded move, back); a missed one is skipped."""
+        """One contact (free moves to its start, guarded move, retract to the start); a
+        missed one is skipped. The robot ends at the contact's start (`q_end`)."""
         shift = self._joint_estimate
         orientation, contact = self._lookup(np.asarray(q, float) + shift)
-        self._check_transfer(None if q_from is None else np.asarray(q_from, float) + shift,
-                             orientation)
-        if np.any(shift != 0.0):  # commanded where the robot reaches the planned poses
+        q_here = None if q_from is None else np.asarray(q_from, float) + shift
+        here = self._located(q_here)
+        back: list[np.ndarray] = []
+        if (here is None and q_from is not None and self._left is not None
+                and np.max(np.abs(np.asarray(q_from, float) - self._left[0])) < 1e-9):
+            # at the last contact's start, commanded under another shift (a new stage):
+            # first back out to its hover as commanded then
+            back = [self._left[1]]
+            q_here = self._left[1] + shift
+        via = self._free_moves(orientation, contact, here)
+        if here is None:  # from elsewhere: the move to the hover must keep off the sphere
+            self._check_transfer(q_here, orientation)
+        elif here[0].group != orientation.group:
+            self._check_transfer(here[0].q_hover, orientation)
+        # commanded where the robot reaches the planned poses
+        via = back + [v - shift for v in via]
+        self._left = (contact.q_start - shift, orientation.q_hover - shift)
+        if np.any(shift != 0.0):
             contact = replace(contact, q_start=contact.q_start - shift,
                               q_target=contact.q_target - shift)
-            orientation = replace(orientation, q_hover=orientation.q_hover - shift)
         t = time.monotonic() - self._t0
         if self.modbus is None:
-            record = await probe_contact(robot, orientation, contact, self.setup,
-                                         self.config, t, chain=self.chain)
+            record = await probe_contact(robot, via, contact, self.setup, self.config, t,
+                                         chain=self.chain)
         else:
             from hostpc.kinds.sphere_probe.probe_modbus import ModbusProbe, SteppedGuardedMove
 
             host, port = self.modbus
             async with ModbusProbe(host, port, self.setup.io_line) as probe:
-                record = await probe_contact(robot, orientation, contact, self.setup,
-                                             self.config, t, SteppedGuardedMove(robot, probe))
-        q_end = orientation.q_hover.tolist()
+                record = await probe_contact(robot, via, contact, self.setup, self.config, t,
+                                             SteppedGuardedMove(robot, probe))
+        q_end = contact.q_start.tolist()
         if not record.contact or record.q_latched is None:
             return SampleRecord(phase, index, False, q_end=q_end,
                                 reason=f"no probe contact before the end of travel "

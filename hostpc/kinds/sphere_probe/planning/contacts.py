@@ -233,6 +233,43 @@ def _check_transfers(chain: Chain, orientations: Sequence[PlannedOrientation],
                 "increase hover")
 
 
+Location = tuple[PlannedOrientation, PlannedContact | None]
+"""Where the stylus is between contacts: at a contact's start pose (its retract point),
+or at an orientation's hover (contact None)."""
+
+
+def free_moves(orientation: PlannedOrientation, contact: PlannedContact,
+               here: Location | None, chain: Chain | None = None,
+               setup: ProbeSetup | None = None, config: PlanConfig | None = None
+               ) -> list[np.ndarray]:
+    """The free moves (joint targets (n,), each at the move speed and settled) that bring
+    the stylus from `here` to the start of `contact` (its guarded approach follows).
+
+    Hover only where needed: the hover is the orientation change (the stylus 60 mm off the
+    sphere while the wrist turns). Between two contacts of one orientation the stylus
+    goes from one start pose (the previous contact's retract point, `standoff` off the
+    surface) straight to the next when that joint move keeps the tip at least half the
+    standoff off the nominal surface (the planner's rule for hover -> start moves); else
+    through the hover. Between orientations: the previous orientation's hover, this one's,
+    then the start. `here` None (robot elsewhere): this orientation's hover, the start.
+    Without `chain`, `setup` and `config` (no clearance check) every contact starts from
+    its hover."""
+    if here is None:
+        return [orientation.q_hover, contact.q_start]
+    at, previous = here
+    if at.group != orientation.group:
+        via = [] if previous is None else [at.q_hover]
+        return [*via, orientation.q_hover, contact.q_start]
+    if previous is None:
+        return [contact.q_start]
+    if chain is not None and setup is not None and config is not None:
+        clear = path_clearance(chain, previous.q_start, contact.q_start, setup.tip,
+                               setup.sphere_centre)
+        if clear >= setup.contact_distance + 0.5 * config.standoff:
+            return [contact.q_start]
+    return [orientation.q_hover, contact.q_start]
+
+
 def plan_to_dict(plan: ProbePlan) -> JsonObject:
     return {"rejected": plan.rejected, "orientations": [
         {"group": o.group, "rotation": o.rotation.tolist(),

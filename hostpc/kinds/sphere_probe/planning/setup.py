@@ -18,6 +18,11 @@ from hostpc.json_object import JsonObject
 METHOD: Final = "sphere_probe"
 CONTACTS_PER_ORIENTATION = 5
 MIN_ORIENTATIONS = 20
+"""Probe orientations of a fixed-count plan (``--poses N`` alone; patent S6: >= 20)."""
+MIN_TARGET_ORIENTATIONS = 2
+"""The fewest probe orientations of a target-sigma plan (the default): 10 contacts for the
+9 parameters of the default model with the sphere known (5 joint offsets, the tip, the
+trigger latency); the target itself asks for 3 (docs/sphere-probe.md)."""
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,140 @@
+"""sphere_probe's default plan against its robot time (issue 28): the fewest whole probe
+orientations that reach the target sigma, the hover only where the orientation changes,
+and a floor that holds the guarded approaches. Planning only, no robot."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from hostpc.calibrate.run_plan import plan_run
+from hostpc.kinds.sphere_probe.method import SphereProbeMethod
+from hostpc.kinds.sphere_probe.planning.contacts import path_clearance
+from hostpc.kinds.sphere_probe.planning.setup import (
+    CONTACTS_PER_ORIENTATION,
+    MIN_TARGET_ORIENTATIONS,
+)
+from hostpc.methods.base import NullProgress, Plan, RunSettings
+from hostpc.methods.cell import Cell
+from hostpc.planning.design import (
+    PoseGroups,
+    design_matrix,
+    groups_for_target_sigma,
+    joint_offset_sigmas,
+    make_design,
+    predicted_covariance,
+)
+from hostpc.planning.robot_time import DEFAULT_CAPTURE_S, DEFAULT_SETTLE_S, move_times
+from hostpc.robots.base import RobotState
+
+UR5E_HOME = np.array([0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0])
+PROBE = {"sphere_centre": [0.45, -0.15, 0.05], "sphere_radius": 0.0125,
+         "stylus_radius": 0.0015, "tip": [0.0, 0.0, 0.12]}  # the simulator's default cell
+
+
+def _planned(tmp_path: Path, **settings: object) -> tuple[SphereProbeMethod, RobotState, Plan]:
+    run = RunSettings(method="sphere_probe", **settings)  # type: ignore[arg-type]
+    cell = Cell(robot="ur5e", tool=None, target=None, target_normal=np.array([0, 0, 1.0]),
+                target_radius=0.0, known=("sphere",), raw={"probe": PROBE})
+    method = SphereProbeMethod(run, cell, tmp_path)
+    limit = np.array([2, 2, 1, 2, 2, 2]) * np.pi
+    state = RobotState(q=UR5E_HOME.copy(), zero_offsets=np.zeros(6), q_min=-limit,
+                       q_max=limit)
+    return method, state, plan_run(method, state, run, NullProgress())
+
+
+def test_the_default_plan_takes_the_fewest_orientations_that_reach_the_target(
+        tmp_path: Path) -> None:
+    method, state, plan = _planned(tmp_path, target_sigma_deg=0.002, n_verify=3)
+    q, q_verify = plan.q, plan.q_verify
+    assert method.plan is not None
+    pool_groups = {c.group for c in method.plan.contacts}
+    labels = np.array([method._lookup(row)[1].group for row in q])
+    for label in set(labels.tolist()):  # whole orientations, one after the other
+        where = np.flatnonzero(labels == label)
+        assert where.size == CONTACTS_PER_ORIENTATION and np.all(np.diff(where) == 1)
+    n_fit = len(set(labels.tolist()))
+    assert MIN_TARGET_ORIENTATIONS <= n_fit < 20  # was 20 (the fixed plan's S6 count)
+    # every identifiable offset reaches 0.002 deg; one orientation fewer does not
+    A, names, units = design_matrix(method.design_dataset(q), method.default_effects(), ())
+    sigmas = joint_offset_sigmas(make_design(A, names, units), 6)
+    assert np.nanmax(np.degrees(sigmas)) <= 0.002
+    if n_fit > MIN_TARGET_ORIENTATIONS:
+        fewer = joint_offset_sigmas(make_design(A[:-CONTACTS_PER_ORIENTATION], names, units),
+                                    6)[:5]
+        assert not np.all(np.degrees(fewer) <= 0.002)
+    # verification: one whole fresh orientation (3 contacts asked), none of the further ones
+    verify_labels = {method._lookup(row)[1].group for row in q_verify}
+    assert len(verify_labels) == 1 and q_verify.shape[0] == CONTACTS_PER_ORIENTATION
+    more_labels = {method._lookup(row)[1].group for row in plan.more}
+    assert not verify_labels & (more_labels | set(labels.tolist()))
+    assert len(pool_groups) > n_fit
+
+
+def test_the_path_hovers_only_between_orientations_and_keeps_off_the_sphere(
+        tmp_path: Path) -> None:
+    method, state, plan = _planned(tmp_path, target_sigma_deg=0.002, n_verify=3)
+    q = plan.q
+    path = method.robot_path(q)
+    assert method.plan is not None
+    hovers = {o.group: o.q_hover for o in method.plan.orientations}
+    setup, config = method.setup, method.config
+    previous = None
+    k = 0
+    for row in q:
+        orientation, contact = method._lookup(row)
+        # the waypoints of this contact: free moves ... start, approach, retract
+        end = k + int(np.flatnonzero(np.all(path.q[k:] == row, axis=1))[0])
+        via = path.q[k:end]
+        is_hover = [bool(np.all(v == hovers[orientation.group])) for v in via]
+        if previous is not None and previous[0] == orientation.group:
+            assert not any(is_hover), "a hover between two contacts of one orientation"
+            clear = path_clearance(method.chain, previous[1], contact.q_start, setup.tip,
+                                   setup.sphere_centre)
+            assert clear >= setup.contact_distance + 0.5 * config.standoff
+        else:
+            assert any(is_hover)  # an orientation change goes through its hover
+        assert not path.settle[end] and path.speed[end] == contact.speed  # the approach
+        assert np.all(path.q[end + 1] == contact.q_start)  # the retract
+        previous = (orientation.group, contact.q_start)
+        k = end + 2
+    # 2 settles per contact (start, retract) and the hovers only where orientations change
+    n_orientations = len({method._lookup(row)[1].group for row in q})
+    assert np.count_nonzero(path.settle) <= 2 * q.shape[0] + 2 * n_orientations
+
+
+def test_the_floor_holds_the_guarded_approaches_of_the_fewest_orientations(
+        tmp_path: Path) -> None:
+    method, state, plan = _planned(tmp_path, target_sigma_deg=0.002, n_verify=3)
+    q, q_verify = plan.q, plan.q_verify
+    planned = plan.info["predicted_robot_time_s"]
+    approach = 0.0
+    for row in np.vstack([q, q_verify]):
+        contact = method._lookup(row)[1]
+        approach += float(move_times(contact.q_start[None, :], row[None, :],
+                                     np.full(6, np.pi))[0]) / contact.speed
+    contacts = q.shape[0] + q_verify.shape[0]
+    expected = contacts * (DEFAULT_SETTLE_S + DEFAULT_CAPTURE_S) + approach
+    assert math.isclose(planned["floor"], expected, rel_tol=1e-9)
+    assert planned["total"] < 2.0 * planned["floor"]
+
+
+def test_fewest_groups_for_a_target_sigma_and_no_sigma_from_too_few_rows() -> None:
+    rng = np.random.default_rng(3)
+    n_params, size, n_groups = 4, 3, 8
+    A = rng.normal(size=(n_groups * size, 1, n_params))
+    names = tuple(f"joint_offsets.q{k + 1}" for k in range(n_params))
+    design = make_design(A, names, ("rad",) * n_params)
+    groups = PoseGroups(labels=np.repeat(np.arange(n_groups), size))
+    chosen = groups.members()
+    sigma_of = [np.max(joint_offset_sigmas(design.subset(np.concatenate(chosen[:k])),
+                                           n_params)) for k in range(2, n_groups + 1)]
+    target = float(sigma_of[2]) * 1.0001  # reached with 4 groups, not with 3
+    assert not sigma_of[1] <= target
+    assert groups_for_target_sigma(design, chosen, target, n_params) == 4
+    assert groups_for_target_sigma(design, chosen, target, n_params, min_groups=6) == 6
+    assert groups_for_target_sigma(design, chosen, 1e-12, n_params) is None
+    # one group (3 rows) cannot determine 4 parameters: no sigma, not a pseudo-inverse's
+    assert np.all(np.isnan(predicted_covariance(design.subset(chosen[0]))))
