@@ -9,7 +9,11 @@ tour, and the verification poses a random choice visited as a tour from the last
 (TRAVEL_SLACK). The rest of the selection (up to --poses) is kept as `q_more`, a tour from
 the last fit pose, which the runner measures only if the fit does not explain the
 measurements. Without one (`--poses N` alone) N poses nearest-neighbour ordered and a plain
-random verification choice."""
+random verification choice. A method that plans whole groups (sphere_probe's probe
+orientations) takes, with a target sigma (its default), the fewest leading groups of the
+nested group selection that reach it as a tour of groups, the rest as `q_more`, and a
+random choice of fresh whole groups for verification, toured; its floor counts those
+groups' poses and their measuring moves (the guarded approaches)."""
 
 from __future__ import annotations
 

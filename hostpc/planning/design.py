@@ -254,13 +254,6 @@ def group_selection(design: Design, groups: PoseGroups, n_poses: int, criterion:
     return [members[int(k)] for k in chosen]
 
 
-def select_groups(design: Design, groups: PoseGroups, n_poses: int, criterion: str,
-                  rng: np.random.Generator) -> np.ndarray:
-    """Pool indices of the whole groups of `group_selection`, in visiting order: the groups
-    in their pool order, each group's poses in theirs."""
-    return in_pool_order(group_selection(design, groups, n_poses, criterion, rng))
-
-
 def in_pool_order(chosen: Sequence[np.ndarray]) -> np.ndarray:
     """Pool indices of the groups `chosen` (each group's pool indices), the groups in
     their pool order."""

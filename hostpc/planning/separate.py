@@ -24,7 +24,7 @@ Noncentralities = Callable[[np.ndarray], tuple[float, float]]
 @dataclass(frozen=True)
 class SeparatingPlan:
     """indices: pool indices of the chosen poses, their groups in pool order (the kind's
-    safe visiting order of its groups, like ``design.select_groups``);
+    safe visiting order of its groups, like ``design.in_pool_order``);
     before / after: the two noncentralities with the measured data alone and with the
     chosen poses added; reached: both reach the needed noncentrality."""
 

@@ -18,12 +18,13 @@ from hostpc.planning.design import (
     check_plan,
     design_matrix,
     greedy_d_optimal,
+    group_selection,
+    in_pool_order,
     joint_offset_sigmas,
     make_design,
     order_for_travel,
     poses_for_target_sigma,
     random_selection,
-    select_groups,
     verify_groups,
 )
 from hostpc.planning.tour import (
@@ -152,13 +153,15 @@ def _logdet(design: Design, indices: np.ndarray) -> float:
 def test_group_selection_takes_whole_groups_by_their_summed_information() -> None:
     design, groups = _grouped_design()
     rng = np.random.default_rng(0)
-    chosen = select_groups(design, groups, n_poses=12, criterion="D", rng=rng)
+    chosen = in_pool_order(group_selection(design, groups, n_poses=12, criterion="D",
+                                           rng=rng))
     labels = groups.labels[chosen]
     # ceil(12 / 5) = 3 groups, but at least min_groups = 4; each complete, one after another
     assert len(set(labels.tolist())) == 4 and chosen.size == 20
     assert np.all(np.diff(labels) >= 0) and np.all(np.bincount(labels)[np.unique(labels)] == 5)
     # D-optimal over groups beats random whole groups
-    random = [select_groups(design, groups, 12, "random", np.random.default_rng(s))
+    random = [in_pool_order(group_selection(design, groups, 12, "random",
+                                            np.random.default_rng(s)))
               for s in range(20)]
     assert _logdet(design, chosen) > max(_logdet(design, r) for r in random)
     # verification: whole groups the plan did not use
