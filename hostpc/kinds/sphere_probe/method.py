@@ -310,6 +310,17 @@ class SphereProbeMethod(Method):
                     return orientation, contact
         return None
 
+    def _retreat(self, q_from: np.ndarray) -> np.ndarray | None:
+        """The commanded hover to back out to when the robot is at a contact's start
+        commanded under another shift than the current one (a new stage, or a resume with
+        --swapped): the last contact this process probed (`_left`), or a contact's start
+        of the unshifted plan (a journal's last pose); None if neither."""
+        q_from = np.asarray(q_from, float)
+        if self._left is not None and np.max(np.abs(q_from - self._left[0])) < 1e-9:
+            return self._left[1]
+        unshifted = self._located(q_from)
+        return None if unshifted is None or unshifted[1] is None else unshifted[0].q_hover
+
     def _free_moves(self, orientation: PlannedOrientation, contact: PlannedContact,
                     here: Location | None) -> list[np.ndarray]:
         return free_moves(orientation, contact, here, self.chain, self.setup, self.config)
@@ -380,12 +391,10 @@ class SphereProbeMethod(Method):
         q_here = None if q_from is None else np.asarray(q_from, float) + shift
         here = self._located(q_here)
         back: list[np.ndarray] = []
-        if (here is None and q_from is not None and self._left is not None
-                and np.max(np.abs(np.asarray(q_from, float) - self._left[0])) < 1e-9):
-            # at the last contact's start, commanded under another shift (a new stage):
-            # first back out to its hover as commanded then
-            back = [self._left[1]]
-            q_here = self._left[1] + shift
+        retreat = None if here is not None or q_from is None else self._retreat(q_from)
+        if retreat is not None:  # first back out to its hover, as commanded then
+            back = [retreat]
+            q_here = retreat + shift
         via = self._free_moves(orientation, contact, here)
         if here is None:  # from elsewhere: the move to the hover must keep off the sphere
             self._check_transfer(q_here, orientation)
