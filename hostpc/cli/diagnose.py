@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from hostpc.cli.fit import add_constraint_options, add_model_options
 from hostpc.cli.format import repeated_lines
-from hostpc.cli.robots import add_robot_override, load_dataset_as_asked
+from hostpc.cli.robots import add_robot_override, load_dataset_as_asked, robot_options
 from hostpc.diagnostics.advice import mm, without
 from hostpc.errors import InputError, ZerocalError
 
@@ -95,6 +95,7 @@ def _run(args: argparse.Namespace) -> int:
         source, args.effects, plugins=args.plugin, ladder=args.ladder,
         candidates=candidates, alpha=DEFAULT_ALPHA if args.alpha is None else args.alpha,
         cv_folds=args.cv_folds, loss=args.loss, source=args.dataset,
+        data_options=robot_options(args),
     )
     if args.report:
         from hostpc.report import write_report
