@@ -235,11 +235,6 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
                      f"{cell(c.delta_bic_full, 10, 1)}{_mm_cell(c.rms)}{_mm_cell(c.cv_rms)}"
                      f"{cell(c.chi2_dof, 10, 3)}"
                      f"{cell(_p(c.p_value) if c.testable else 'untestable', 11)}")
-        if c.held:
-            others = sum(name.startswith(f"{c.effect}.") for name in c.held)
-            lines.append(f"      model: {', '.join(c.selected)} free, the other {others} "
-                         f"{c.effect} parameters the data determine held at nominal "
-                         "(predicts better held out than all of them)")
         if c.not_taken is not None and c.not_taken.startswith(("significant", "adding")):
             lines.append(f"      not taken: {c.not_taken}")
     for s in check.skipped:
