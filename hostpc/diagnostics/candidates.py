@@ -379,7 +379,6 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
     delta_bic = 0.0
     p_subset = 1.0
     dof_subset = 0
-    model = extended
     if chosen:
         free = np.zeros(problem.layout.size, dtype=bool)
         free[: base.x.size] = ~extended.fixed[: base.x.size]
@@ -410,13 +409,13 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
     candidate = Candidate(
         effect=effect.name, delta_bic=delta_bic if testable else None,
         delta_bic_full=bic(extended) - bic(base) if testable else None,
-        selected=selected, delta_chi2=delta_chi2, added_parameters=added, rms=model.rms,
-        max=model.max, cv_rms=model.cv_rms, cv_folds=model.cv_folds,
-        chi2_dof=model.chi2_dof, p_value=p_value if testable else None,
-        significant=p_significant and held_out_better and model.converged,
-        strongest=_strongest(model, effect.name, selected), fit=model,
+        selected=selected, delta_chi2=delta_chi2, added_parameters=added, rms=extended.rms,
+        max=extended.max, cv_rms=extended.cv_rms, cv_folds=extended.cv_folds,
+        chi2_dof=extended.chi2_dof, p_value=p_value if testable else None,
+        significant=p_significant and held_out_better and extended.converged,
+        strongest=_strongest(extended, effect.name, selected), fit=extended,
         testable=testable, cv_whitened_rms=cv_whitened,
-        unidentifiable=lost_parameters(base, model),
+        unidentifiable=lost_parameters(base, extended),
     )
     return replace(candidate, not_taken=not_taken_reason(candidate, p_significant, threshold,
                                                          base_cv))

@@ -33,6 +33,7 @@ from hostpc.diagnostics.candidates import candidate_effects, warm_start
 from hostpc.diagnostics.distributions import chi2_isf, chi2_sf
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, analyse
+from hostpc.fitting.identifiability import WEAK_SIGMA_LIMIT
 from hostpc.fitting.solver import evaluate
 from hostpc.json_object import JsonObject
 from hostpc.model.effect import Effect
@@ -70,8 +71,8 @@ seen at all (50 mm, the bound beyond which the fit holds a length as undetermine
 ``hostpc.fitting.identifiability.WEAK_SIGMA_LIMIT``: far beyond any calibration)."""
 
 
-PLAUSIBLE_SIZE = {"rad": math.radians(5.0), "m": 0.05, "rad/(N m)": 1e-3, "rad/rad": 0.1,
-                  "": 0.1, "1": 0.1, "1/K": 1e-3, "1/s": 1e-4, "s": 1.0}
+PLAUSIBLE_SIZE = {**WEAK_SIGMA_LIMIT, "rad/(N m)": 1e-3, "rad/rad": 0.1, "": 0.1, "1": 0.1,
+                  "1/K": 1e-3, "1/s": 1e-4, "s": 1.0}
 """The largest size of a parameter, by unit, that a real robot could need calibrated: 5 deg
 and 50 mm (the fit's bounds, ``hostpc.fitting.identifiability.WEAK_SIGMA_LIMIT``), a
 compliance of 1e-3 rad/(N m) (0.057 deg per N m; real joints bend 1e-6..1e-4), a coupling

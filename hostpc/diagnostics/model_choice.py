@@ -112,8 +112,6 @@ def _models(dataset: Dataset, plugins: tuple[str | Path, ...], shared: SharedVal
     return models
 
 
-
-
 def _on_every_sample(final: FitResult, start: FitResult, loss: Loss, cv_folds: int
                      ) -> FitResult:
     """The ladder's final model refitted on every sample of the dataset (the ladder climbs
