@@ -185,8 +185,10 @@ def _field(loc: tuple[int | str, ...]) -> str:
     return text or "(top level)"
 
 
-def validate_fit_document(document: Any, source: str) -> FitDocument:
-    """The validated document (see the module docstring); InputError naming the field."""
+def validate_fit_document(document: Any, source: str, *, offsets: bool = True) -> FitDocument:
+    """The validated document (see the module docstring); InputError naming the field.
+    ``offsets=False`` accepts a fit without joint offsets (a nominal model predicts too:
+    `hostpc predict`); a push needs them."""
     if not isinstance(document, dict):
         raise InputError(f"{source}: expected a JSON object (the output of "
                          f"`hostpc fit DATASET --json`), got {type(document).__name__}")
@@ -204,7 +206,7 @@ def validate_fit_document(document: Any, source: str) -> FitDocument:
         got = "" if first["type"] == "missing" else f", got {shown[:80]}"
         raise InputError(f"{source}: {_field(tuple(first['loc']))}: {why}{got}; "
                          f"{REMEDY}") from None
-    _check_consistency(fit, source)
+    _check_consistency(fit, source, offsets)
     return fit
 
 
@@ -212,7 +214,7 @@ def _fail(source: str, where: str, why: str) -> InputError:
     return InputError(f"{source}: {where}: {why}; {REMEDY}")
 
 
-def _check_consistency(fit: FitDocument, source: str) -> None:
+def _check_consistency(fit: FitDocument, source: str, offsets: bool) -> None:
     """Raise InputError if the fields of a well-typed document disagree with each other."""
     if fit.dof <= 0:
         raise InputError(f"{source}: dof: {fit.dof}, a fit without degrees of freedom cannot "
@@ -253,7 +255,7 @@ def _check_consistency(fit: FitDocument, source: str) -> None:
         for side in (pair.a, pair.b):
             if side not in fit.parameters:
                 raise _fail(source, f"correlations[{k}]", f"{side!r} is not a parameter")
-    _check_joint_offsets(fit, source)
+    _check_joint_offsets(fit, source, offsets)
 
 
 def _check_range(name: str, entry: ParameterEntry, source: str) -> None:
@@ -276,8 +278,10 @@ def joint_offset_labels(fit: FitDocument) -> list[str]:
     return offset_labels(fit.parameters)
 
 
-def _check_joint_offsets(fit: FitDocument, source: str) -> None:
+def _check_joint_offsets(fit: FitDocument, source: str, required: bool) -> None:
     labels = joint_offset_labels(fit)
+    if not labels and not required:
+        return
     if not labels:
         raise InputError(f"{source}: the fit has no joint_offsets parameters: nothing to "
                          "push; fit with them: `hostpc fit DATASET --effects joint_offsets,"

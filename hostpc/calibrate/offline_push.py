@@ -83,11 +83,12 @@ class SavedFit:
         return [n for n in self.names if is_offset(n)]
 
 
-def saved_fit_from_dict(document: Any, source: str) -> SavedFit:
+def saved_fit_from_dict(document: Any, source: str, *, offsets: bool = True) -> SavedFit:
     """Rebuild a SavedFit from `FitResult.to_dict()`, validated first
     (`hostpc.calibrate.fit_file`: strict types, finite statistics, consistent fields, the
-    robot's joint count); InputError naming the field."""
-    fit = validate_fit_document(document, source)
+    robot's joint count; joint offsets required unless ``offsets`` is False, as for a
+    prediction); InputError naming the field."""
+    fit = validate_fit_document(document, source, offsets=offsets)
     names = tuple(fit.parameters)
     entries = list(fit.parameters.values())
     return SavedFit(
@@ -110,16 +111,17 @@ def saved_fit_from_dict(document: Any, source: str) -> SavedFit:
     )
 
 
-def load_saved_fit(path: str | Path) -> SavedFit:
+def load_saved_fit(path: str | Path, *, offsets: bool = True) -> SavedFit:
     """Read FIT.json (the output of `hostpc fit --json`): a regular file within the fit size
-    limit (`hostpc.input_files`), then validated; InputError naming the file and field."""
+    limit (`hostpc.input_files`), then validated (``offsets``: see saved_fit_from_dict);
+    InputError naming the file and field."""
     source = str(path)
     data = read_input_bytes(path, FIT, source)
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise InputError(f"{source}: not UTF-8 text (byte {exc.start}); {REMEDY}") from None
-    return saved_fit_from_dict(parse_fit_text(text, source), source)
+    return saved_fit_from_dict(parse_fit_text(text, source), source, offsets=offsets)
 
 
 LEDGER_SUFFIX = ".pushes.jsonl"

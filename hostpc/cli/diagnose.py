@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from hostpc.cli.fit import add_constraint_options, add_model_options
 from hostpc.cli.format import repeated_lines
-from hostpc.cli.robots import add_robot_override, load_dataset_as_asked
+from hostpc.cli.robots import add_robot_override, load_dataset_as_asked, robot_options
 from hostpc.diagnostics.advice import mm, without
 from hostpc.errors import InputError, ZerocalError
 
@@ -95,6 +95,7 @@ def _run(args: argparse.Namespace) -> int:
         source, args.effects, plugins=args.plugin, ladder=args.ladder,
         candidates=candidates, alpha=DEFAULT_ALPHA if args.alpha is None else args.alpha,
         cv_folds=args.cv_folds, loss=args.loss, source=args.dataset,
+        data_options=robot_options(args),
     )
     if args.report:
         from hostpc.report import write_report
@@ -234,11 +235,6 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
                      f"{cell(c.delta_bic_full, 10, 1)}{_mm_cell(c.rms)}{_mm_cell(c.cv_rms)}"
                      f"{cell(c.chi2_dof, 10, 3)}"
                      f"{cell(_p(c.p_value) if c.testable else 'untestable', 11)}")
-        if c.held:
-            others = sum(name.startswith(f"{c.effect}.") for name in c.held)
-            lines.append(f"      model: {', '.join(c.selected)} free, the other {others} "
-                         f"{c.effect} parameters the data determine held at nominal "
-                         "(predicts better held out than all of them)")
         if c.not_taken is not None and c.not_taken.startswith(("significant", "adding")):
             lines.append(f"      not taken: {c.not_taken}")
     for s in check.skipped:

@@ -145,7 +145,12 @@ def run(args: argparse.Namespace) -> int:
         prismatic_unit=args.prismatic_unit,
         sigma=args.sigma if args.sigma is not None else 1e-4 / LENGTH_UNITS[args.length_unit],
         sigma_angle=args.sigma_angle, known=known, decimal=args.decimal, euler=args.euler)
-    samples = _read_csv_file(Path(args.csv), args, len(prismatic), options)
+    samples, derived = _read_csv_file(Path(args.csv), args, chain, options)
+    for follower, leader, multiplier, offset in chain.coupled:
+        if follower in derived:  # left out of --columns: computed from its leader
+            samples.q[:, follower] = multiplier * samples.q[:, leader] + offset
+            print(f"q{follower + 1} follows q{leader + 1} (<mimic>: {multiplier:g} x leader "
+                  f"+ {offset:g}): computed from it")
     _warn_short_prismatic_travel(samples, prismatic, args)
     check_coupled_joints(chain, samples.q, (str(Path(args.robot).resolve()), args.base_link,
                                             args.tip_link) if robot.urdf else None)
@@ -183,16 +188,18 @@ def _warn_short_prismatic_travel(samples: ImportedSamples, prismatic: tuple[bool
                   f"{'/'.join(LENGTH_UNITS)} (default: the --length-unit)", file=sys.stderr)
 
 
-def _read_csv_file(path: Path, args: argparse.Namespace, n_joints: int,
-                   options: ImportOptions) -> ImportedSamples:
+def _read_csv_file(path: Path, args: argparse.Namespace, chain: Chain,
+                   options: ImportOptions) -> tuple[ImportedSamples, tuple[int, ...]]:
     """The samples of the CSV at ``path``, read row by row from the open file (never the
-    whole text at once: a tracker export may have millions of rows)."""
+    whole text at once: a tracker export may have millions of rows), and the coupled
+    joints --columns left out (0-based; their values are still to be computed)."""
+    followers = {f + 1: leader + 1 for f, leader, _, _ in chain.coupled}
     try:
         with path.open(encoding="utf-8-sig", newline="") as stream:
             table = read_csv(stream, args.csv)
-            mapping = parse_column_map(args.columns, table.header.columns, n_joints,
-                                       args.method, args.csv)
-            return read_samples(table, mapping, options)
+            mapping = parse_column_map(args.columns, table.header.columns, chain.n,
+                                       args.method, args.csv, followers)
+            return read_samples(table, mapping, options), mapping.derived
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{args.csv}: cannot read ({getattr(exc, 'strerror', None) or exc})"
                          ) from None

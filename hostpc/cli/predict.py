@@ -1,7 +1,7 @@
 """`hostpc predict FIT.json DATASET`: how well a saved fit predicts data it never saw.
 
     hostpc fit day1.json --effects +geometry --json > fit.json
-    hostpc predict fit.json day2.json [--refit-frames] [--json]
+    hostpc predict fit.json day2.json [--refit-frames] [--json] [--plugin FILE]
 
 Every sample of DATASET is predicted by the fit's model at the fit's values and compared
 with its measurement: the position error (RMS, max, mm), the orientation error where it is
@@ -12,7 +12,9 @@ estimates those from the very file it reads). With --refit-frames the instrument
 the robot's parameters held at the fit's values, so the error that remains is the robot
 model's. The output says which frames were used. The fit and DATASET must be the same
 robot (the fit records its robot's name and kinematics fingerprint; `--robot` reads
-DATASET with another robot, as `hostpc fit --robot` does). Exit 0; 2 for a bad file,
+DATASET with another robot, as `hostpc fit --robot` does); a fit with a plugin effect
+predicts with the same `--plugin FILE` it was fitted with. Any fit predicts, with or without
+joint offsets (`--effects auto` may choose the nominal model). Exit 0; 2 for a bad file,
 another robot or a model that does not match.
 """
 
@@ -27,7 +29,7 @@ from hostpc.calibrate.offline_push import SavedFit, load_saved_fit
 from hostpc.cli.robots import add_robot_override, data_options, load_dataset_as_asked
 from hostpc.dataset import Dataset
 from hostpc.dataset.writing import frames_from_json
-from hostpc.errors import InputError
+from hostpc.errors import EffectError, InputError
 from hostpc.fitting.prediction import FittedModel, predict
 from hostpc.model.context import robot_identity
 
@@ -47,6 +49,9 @@ def register(subparsers: Any) -> None:
                         "parameters held at the fit's values")
     parser.add_argument("--json", action="store_true",
                         help="one JSON document with every sample's prediction")
+    parser.add_argument("--plugin", action="append", default=[], metavar="FILE",
+                        help="Python file defining the fit's plugin effects or measurement "
+                        "model, as given to `hostpc fit --plugin` (repeatable)")
     add_robot_override(parser)
     parser.set_defaults(func=run)
 
@@ -74,7 +79,7 @@ def check_same_robot(saved: SavedFit, dataset: Dataset, fit_path: str, dataset_p
 
 
 def run(args: argparse.Namespace) -> int:
-    saved = load_saved_fit(args.fit)
+    saved = load_saved_fit(args.fit, offsets=False)
     dataset = load_dataset_as_asked(args.dataset, args)
     check_same_robot(saved, dataset, args.fit, args.dataset)
     frames = None
@@ -85,7 +90,13 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"{args.fit}: {exc}") from None
     model = FittedModel(saved.effects, dict(zip(saved.names, map(float, saved.x),
                                                 strict=True)), frames)
-    prediction = predict(model, dataset, refit_frames=args.refit_frames)
+    try:
+        prediction = predict(model, dataset, refit_frames=args.refit_frames,
+                             plugins=args.plugin)
+    except EffectError as exc:  # an effect of the fit that no built-in or plugin defines
+        raise InputError(f"{args.fit}: {str(exc).split(';')[0]}: give the plugin file the fit "
+                         f"was fitted with: hostpc predict {args.fit} {args.dataset} "
+                         "--plugin FILE") from None
     if args.json:
         print(json.dumps({"fit": args.fit, "dataset": args.dataset,
                           "frames": "refitted" if args.refit_frames else "fit",

@@ -220,10 +220,9 @@ def add_robot_override(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tip-link", help="URDF: the chain's tip link (the flange)")
 
 
-def data_options(args: argparse.Namespace) -> str:
-    """The options that define how a command read its dataset (--robot, --base-link,
-    --tip-link, --plugin), as text to append to a next command (" --robot ur10e"; "" when
-    none): a command it suggests reads the same data."""
+def robot_options(args: argparse.Namespace) -> str:
+    """The robot a command read its dataset with (--robot, --base-link, --tip-link), as
+    text to append to a next command (" --robot ur10e"; "" when none)."""
     import shlex
 
     words: list[str] = []
@@ -231,9 +230,17 @@ def data_options(args: argparse.Namespace) -> str:
         value = getattr(args, option, None)
         if value:
             words += [f"--{option.replace('_', '-')}", shlex.quote(str(value))]
-    for plugin in getattr(args, "plugin", None) or []:
-        words += ["--plugin", shlex.quote(str(plugin))]
     return "".join(f" {w}" for w in words)
+
+
+def data_options(args: argparse.Namespace) -> str:
+    """The options that define how a command read its dataset (--robot, --base-link,
+    --tip-link, --plugin), as text to append to a next command (" --robot ur10e"; "" when
+    none): a command it suggests reads the same data."""
+    import shlex
+
+    plugins = getattr(args, "plugin", None) or []
+    return robot_options(args) + "".join(f" --plugin {shlex.quote(str(p))}" for p in plugins)
 
 
 @dataclass(frozen=True)

@@ -49,15 +49,11 @@ def effects_option(check: ModelCheck, name: str) -> str:
     return ",".join(current + [name])
 
 
-def command(check: ModelCheck, name: str, source: str | None, plugins: Sequence[str],
-            hold: Sequence[str] = ()) -> str:
-    """The command that diagnoses the model with ``name`` added (``hold``: its parameters
-    held at nominal, the candidate's subset model); without a dataset file (a Dataset given
-    from Python) only its options, never a placeholder."""
+def command(check: ModelCheck, name: str, source: str | None, plugins: Sequence[str]) -> str:
+    """The command that diagnoses the model with ``name`` added; without a dataset file (a
+    Dataset given from Python) only its options, never a placeholder."""
     parts = ["hostpc diagnose", source] if source else []
     parts += ["--effects", effects_option(check, name)]
-    if hold:
-        parts += ["--hold", ",".join(hold)]
     parts += [f"--plugin {p}" for p in plugins]
     return " ".join(parts)
 
@@ -80,7 +76,7 @@ def candidate_sentence(check: ModelCheck, candidate: Candidate, source: str | No
     if check.outliers:
         evidence += f" ({without(check)})"
     return (f"{phrase}: add {candidate.effect} "
-            f"({command(check, candidate.effect, source, plugins, candidate.held)}); {evidence}.")
+            f"({command(check, candidate.effect, source, plugins)}); {evidence}.")
 
 
 def samples_text(indices: Sequence[int]) -> str:
@@ -286,10 +282,8 @@ def ladder_sentences(check: ModelCheck, ladder: Sequence[LadderStep],
         dropped = (f" (and dropping {', '.join(removed)} again: once the later effects were "
                    f"in, the model no longer needed {'them' if len(removed) > 1 else 'it'})"
                    if removed else "")
-        held = (f" (parameters held at nominal: --hold {','.join(last.held)})"
-                if last.held else "")
         sentences.append(f"{head}: adding {', '.join(added)}{dropped} takes the held-out RMS "
-                         f"{path}; the final model{held} is {verdict}.")
+                         f"{path}; the final model is {verdict}.")
     elif not last.adequate and ladder_stop is None:
         sentences.append(f"{head}: no candidate effect is significant, so nothing was "
                          "added.")

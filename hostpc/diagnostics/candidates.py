@@ -95,7 +95,6 @@ class Candidate:
     cv_whitened_rms: float | None = None
     unidentifiable: tuple[str, ...] = ()
     not_taken: str | None = None
-    held: tuple[str, ...] = ()
 
     @property
     def taken(self) -> bool:
@@ -123,8 +122,6 @@ class Candidate:
             "cv_whitened_rms": _finite(self.cv_whitened_rms),
             "unidentifiable": list(self.unidentifiable),
             "not_taken": self.not_taken,
-            "model": "subset" if self.held else "full",
-            "held": list(self.held),
         }
 
 
@@ -365,8 +362,8 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
     module doc, when the samples leave no degrees of freedom).
 
     The candidate's figures (RMS, max, chi2/dof, held-out RMS, the star) and its ``fit``
-    all belong to one model, the whole effect (``held`` stays empty): the model its advice
-    (``--effects +E``) fits. The selected subset ranks it (delta BIC, its p) but is not the
+    all belong to one model, the whole effect: the model its advice (``--effects +E``)
+    fits. The selected subset ranks it (delta BIC, its p) but is not the
     row's model: holding at nominal parameters the data determine biases the zero offsets
     (a 4 sigma error with compliance and geometry hidden together). Held out on the same
     pose-grouped folds (``cv_folds``) as ``base_cv``."""
@@ -382,7 +379,6 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
     delta_bic = 0.0
     p_subset = 1.0
     dof_subset = 0
-    model, held = extended, tuple[str, ...]()
     if chosen:
         free = np.zeros(problem.layout.size, dtype=bool)
         free[: base.x.size] = ~extended.fixed[: base.x.size]
@@ -413,13 +409,13 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
     candidate = Candidate(
         effect=effect.name, delta_bic=delta_bic if testable else None,
         delta_bic_full=bic(extended) - bic(base) if testable else None,
-        selected=selected, delta_chi2=delta_chi2, added_parameters=added, rms=model.rms,
-        max=model.max, cv_rms=model.cv_rms, cv_folds=model.cv_folds,
-        chi2_dof=model.chi2_dof, p_value=p_value if testable else None,
-        significant=p_significant and held_out_better and model.converged,
-        strongest=_strongest(model, effect.name, selected), fit=model,
+        selected=selected, delta_chi2=delta_chi2, added_parameters=added, rms=extended.rms,
+        max=extended.max, cv_rms=extended.cv_rms, cv_folds=extended.cv_folds,
+        chi2_dof=extended.chi2_dof, p_value=p_value if testable else None,
+        significant=p_significant and held_out_better and extended.converged,
+        strongest=_strongest(extended, effect.name, selected), fit=extended,
         testable=testable, cv_whitened_rms=cv_whitened,
-        unidentifiable=lost_parameters(base, model), held=held,
+        unidentifiable=lost_parameters(base, extended),
     )
     return replace(candidate, not_taken=not_taken_reason(candidate, p_significant, threshold,
                                                          base_cv))

@@ -33,6 +33,7 @@ from hostpc.diagnostics.candidates import candidate_effects, warm_start
 from hostpc.diagnostics.distributions import chi2_isf, chi2_sf
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, analyse
+from hostpc.fitting.identifiability import WEAK_SIGMA_LIMIT
 from hostpc.fitting.solver import evaluate
 from hostpc.json_object import JsonObject
 from hostpc.model.effect import Effect
@@ -70,11 +71,26 @@ seen at all (50 mm, the bound beyond which the fit holds a length as undetermine
 ``hostpc.fitting.identifiability.WEAK_SIGMA_LIMIT``: far beyond any calibration)."""
 
 
+PLAUSIBLE_SIZE = {**WEAK_SIGMA_LIMIT, "rad/(N m)": 1e-3, "rad/rad": 0.1, "": 0.1, "1": 0.1,
+                  "1/K": 1e-3, "1/s": 1e-4, "s": 1.0}
+"""The largest size of a parameter, by unit, that a real robot could need calibrated: 5 deg
+and 50 mm (the fit's bounds, ``hostpc.fitting.identifiability.WEAK_SIGMA_LIMIT``), a
+compliance of 1e-3 rad/(N m) (0.057 deg per N m; real joints bend 1e-6..1e-4), a coupling
+or a scale of 10 %, an expansion of 1e-3 per K (80 times steel's), 1e-4 per s, a latency of
+1 s. A detectable size beyond it means the poses barely move the effect (a wrist joint's
+compliance with no gravity torque on it): not detectable with these poses."""
+
+
+def _significant(value: float, digits: int) -> str:
+    """``value`` to ``digits`` significant digits, never in exponent form (320, not 3.2e+02)."""
+    return f"{float(f'{value:.{digits}g}'):g}"
+
+
 def length_text(value: float, digits: int) -> str:
     """A length (m) in um below 1 mm, else in mm."""
     if value < 1e-3:
-        return f"{value * 1e6:.{digits}g} um"
-    return f"{value * 1e3:.{digits}g} mm"
+        return f"{_significant(value * 1e6, digits)} um"
+    return f"{_significant(value * 1e3, digits)} mm"
 
 
 @dataclass(frozen=True)
@@ -90,22 +106,38 @@ class DetectableSize:
     shift: float
 
     @property
+    def limit(self) -> float:
+        """The largest plausible size in this unit (``PLAUSIBLE_SIZE``; inf if unlisted)."""
+        return PLAUSIBLE_SIZE.get(self.unit, math.inf)
+
+    @property
     def seen(self) -> bool:
         """False when no size the calibration could meet would be seen: the model absorbs
-        it, or the size moves a measured point by more than ``UNSEEN_SHIFT`` (a design that
-        barely moves the effect at all, e.g. compliance on three poses)."""
-        return math.isfinite(self.size) and math.isfinite(self.shift) \
-            and self.shift <= UNSEEN_SHIFT
+        it, the size is beyond any real robot's (``PLAUSIBLE_SIZE``), or it moves a measured
+        point by more than ``UNSEEN_SHIFT`` (a design that barely moves the effect at all,
+        e.g. compliance on three poses)."""
+        return math.isfinite(self.size) and self.size <= self.limit \
+            and math.isfinite(self.shift) and self.shift <= UNSEEN_SHIFT
+
+    @property
+    def _unit(self) -> str:
+        return "" if self.unit in ("", "1") else f" {self.unit}"
+
+    @property
+    def _why_not(self) -> str:
+        """Why it is not detectable, with the threshold it misses (the size unseen)."""
+        if not math.isfinite(self.size):
+            return "the model absorbs it"
+        if self.size > self.limit:
+            return (f"only above {_significant(self.limit, 2)}{self._unit}, more than any "
+                    "real robot's")
+        return f"only by moving a measured point more than {UNSEEN_SHIFT * 1e3:.0f} mm"
 
     @property
     def sentence(self) -> str:
-        if not math.isfinite(self.size):
-            return f"{self.parameter} cannot be seen with these poses (the model absorbs it)"
         if not self.seen:
-            return (f"{self.parameter} cannot be seen with these poses (it would have to move "
-                    f"a measured point by more than {UNSEEN_SHIFT * 1e3:.0f} mm)")
-        unit = "" if self.unit in ("", "1") else f" {self.unit}"
-        return (f"{self.parameter} below {self.size:.3g}{unit} "
+            return f"{self.parameter} is not detectable with these poses ({self._why_not})"
+        return (f"{self.parameter} below {self.size:.3g}{self._unit} "
                 f"({length_text(self.shift, 3)} at the measured points) would not be seen "
                 "with these poses")
 
@@ -113,14 +145,20 @@ class DetectableSize:
     def short(self) -> str:
         """``parameter size unit (shift)``, for a list on one line."""
         if not self.seen:
-            return f"{self.parameter} unseen"
-        unit = "" if self.unit in ("", "1") else f" {self.unit}"
-        return f"{self.parameter} {self.size:.2g}{unit} ({length_text(self.shift, 2)})"
+            return f"{self.parameter} not detectable with these poses ({self._why_not})"
+        return (f"{self.parameter} {self.size:.2g}{self._unit} "
+                f"({length_text(self.shift, 2)})")
 
     def to_dict(self) -> JsonObject:
         return {"effect": self.effect, "parameter": self.parameter,
                 "size": self.size if math.isfinite(self.size) else None,
                 "unit": self.unit, "shift": self.shift if math.isfinite(self.shift) else None}
+
+
+def best_seen(sizes: Sequence[DetectableSize]) -> DetectableSize:
+    """The parameter of an effect the poses see best: the smallest shift among the
+    detectable ones (a plausible size), else among all."""
+    return min(sizes, key=lambda s: (not s.seen, s.shift))
 
 
 def detectable_sizes(base: FitResult, effect: Effect, alpha: float,
@@ -186,7 +224,7 @@ def planned_sizes(design: Dataset, effects: str | Sequence[str] | None,
         except InputError:
             continue
         if sizes:
-            found.append(min(sizes, key=lambda s: s.shift))
+            found.append(best_seen(sizes))
     return tuple(found)
 
 
@@ -204,5 +242,5 @@ def candidate_sizes(base: FitResult, registry: Mapping[str, type[Effect]],
         except InputError:
             continue
         if sizes:
-            found.append(min(sizes, key=lambda s: s.shift))
+            found.append(best_seen(sizes))
     return tuple(found)

@@ -21,7 +21,6 @@ from hostpc.diagnostics.outliers import Outlier
 from hostpc.diagnostics.residual_analysis import ResidualAnalysis
 from hostpc.diagnostics.separation import PairTest
 from hostpc.fitting import FitResult
-from hostpc.fitting.priors import hold_names
 from hostpc.json_object import JsonObject
 
 FORMAT = "zerocal-diagnosis/1"
@@ -131,17 +130,10 @@ class LadderStep:
             return None
         return self.added + "".join(f", without {r}" for r in self.removed)
 
-    @property
-    def held(self) -> tuple[str, ...]:
-        """The parameters this step's model holds at nominal (the dataset's own holds and
-        those of a candidate's subset model a step took): with its effects, what
-        ``hostpc fit --effects ... --hold ...`` needs to fit this model again."""
-        return tuple(hold_names(self.check.fit.problem.dataset.extra_fields.get("hold")))
-
     def to_dict(self) -> JsonObject:
         return {
             "step": self.step, "effects": list(self.effects), "added": self.added,
-            "removed": list(self.removed), "held": list(self.held),
+            "removed": list(self.removed),
             "rms": self.rms, "max": self.max, "cv_rms": finite(self.cv_rms),
             "cv_max": finite(self.cv_max), "cv_whitened_rms": finite(self.cv_whitened_rms),
             "chi2_dof": finite(self.chi2_dof),

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
 
@@ -33,7 +33,6 @@ from hostpc.errors import InputError
 from hostpc.fitting import FitResult, fit, solve
 from hostpc.fitting.fitting import DEFAULT_CV_FOLDS, held_out_by_fold
 from hostpc.fitting.folds import pose_groups
-from hostpc.fitting.priors import hold_names
 from hostpc.fitting.solver import Loss
 from hostpc.model.memo import SharedValues
 from hostpc.model.problem import build_problem, extend_problem
@@ -113,31 +112,14 @@ def _models(dataset: Dataset, plugins: tuple[str | Path, ...], shared: SharedVal
     return models
 
 
-def _held_beyond(result: FitResult, dataset: Dataset) -> tuple[str, ...]:
-    """The parameters ``result`` holds at nominal beyond the dataset's own holds (those of
-    a candidate's subset model the ladder took)."""
-    own = set(hold_names(dataset.extra_fields.get("hold")))
-    return tuple(n for n in hold_names(result.problem.dataset.extra_fields.get("hold"))
-                 if n not in own)
-
-
-def _same_model(result: FitResult, effects: tuple[str, ...], dataset: Dataset) -> bool:
-    """Whether ``result`` is the plain model of ``effects`` (nothing held beyond the
-    dataset's own holds)."""
-    return (tuple(result.problem.effect_names) == tuple(effects)
-            and not _held_beyond(result, dataset))
-
-
 def _on_every_sample(final: FitResult, start: FitResult, loss: Loss, cv_folds: int
                      ) -> FitResult:
     """The ladder's final model refitted on every sample of the dataset (the ladder climbs
     without the diagnosis's outliers; the table compares every model on the same samples
-    and folds): its effects, generated ones included, and the parameters a step held at
-    nominal (a candidate's subset model) kept held; warm-started at the ladder's values."""
+    and folds): its effects, generated ones included; warm-started at the ladder's
+    values."""
     added = [t.effect for t in final.problem.terms[len(start.problem.terms):]]
     problem = extend_problem(start.problem, added)
-    problem = replace(problem, dataset=replace(
-        problem.dataset, extra_fields=final.problem.dataset.extra_fields))
     return solve(problem, x0=warm_start(final, problem), loss=loss, cv_folds=cv_folds)
 
 
@@ -164,7 +146,8 @@ def choose_model(dataset: Dataset, *, plugins: Iterable[str | Path] = (),
         if steps and len(steps) > 1:
             final = _on_every_sample(steps[-1].check.fit, diagnosis.check.fit, loss,
                                      cv_folds)
-            if not any(_same_model(final, effects, dataset) for _, effects in models):
+            if not any(tuple(final.problem.effect_names) == tuple(effects)
+                       for _, effects in models):
                 models.append(("ladder", final.problem.effect_names))
                 fitted["ladder"] = final
     scores: list[ModelScore] = []
@@ -182,9 +165,6 @@ def choose_model(dataset: Dataset, *, plugins: Iterable[str | Path] = (),
         note = "" if result.converged else "did not converge: not chosen"
         if result.converged and score is None:
             note = "too few poses for a held-out score"
-        held = _held_beyond(result, dataset)
-        if held and not note:
-            note = f"held at nominal as the ladder chose: --hold {','.join(held)}"
         scores.append(ModelScore(name, tuple(effects), int(np.count_nonzero(~result.fixed)),
                                  result.converged, score, error, result.cv_rms, note))
     scored = [s for s in scores if s.score is not None and s.standard_error is not None]

@@ -215,6 +215,7 @@ def diagnose(
     interactions: bool = True,
     max_ladder_steps: int = DEFAULT_MAX_STEPS,
     source: str | None = None,
+    data_options: str = "",
     auto_effects: bool = True,
 ) -> Diagnosis:
     """Fit the model to the dataset and diagnose it.
@@ -230,7 +231,9 @@ def diagnose(
     current model's folds (one fold assignment per table: every held-out figure and star
     comparable), 0 skips the candidates' held-out RMS (the p-value alone decides); no other
     value. interactions: run the
-    effect-agnostic search. source: the dataset's path, used in the suggested commands.
+    effect-agnostic search. source: the dataset's path, used in the suggested commands;
+    data_options: the options that read it as this diagnosis did (" --robot FILE.urdf
+    --base-link L --tip-link L"), carried into them so that they run as printed.
     auto_effects: let the ladder build the interaction effect of a significant pattern no
     built-in effect models (``auto_effects``; ``Diagnosis.generated_effects`` holds their
     plugin sources).
@@ -265,7 +268,8 @@ def diagnose(
         steps, stop = climb(start.ranked, climber, max_ladder_steps,
                             propose=climber.propose if auto_effects else None,
                             prune=lambda check, keep: climber.prune(check, base, keep))
-    advice = advise(start, residuals, steps, source, plugin_paths, ladder_stop=stop)
+    advice = advise(start, residuals, steps, source + data_options if source else None,
+                    plugin_paths, ladder_stop=stop)
     detectable = candidate_sizes(start.fit, registry, [c.effect for c in start.candidates],
                                  alpha)
     ranked = start.ranked

@@ -258,10 +258,9 @@ def pair_model(base: FitResult, a: Candidate, b: Candidate,
                                 for n in names]))
         signals.append(signal)
         scales.append(max(own.fit.chi2_dof, 1.0) if own.fit.dof > 0 else 1.0)
-        # the effect's parameters the data determine, those a subset model holds
-        # included: the Bonferroni of its p-value (try_candidate) counts all of them
-        own_held = sum(n.startswith(f"{own.effect}.") for n in own.held)
-        sizes.append(max(1, int(np.count_nonzero(~own.fit.fixed[span])) + own_held))
+        # the effect's parameters the data determine: the Bonferroni of its p-value
+        # (try_candidate) counts all of them
+        sizes.append(max(1, int(np.count_nonzero(~own.fit.fixed[span]))))
     return PairModel((a.effect, b.effect), effects, base.problem.effect_names,
                      tuple(str(p) for p in plugins), names, x,
                      (signals[0], signals[1]), (absorb[0], absorb[1]),

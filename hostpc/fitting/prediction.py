@@ -19,8 +19,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -113,10 +114,11 @@ class Prediction:
 
 
 def predict(fitted: FitResult | FittedModel, dataset: Dataset, *,
-            refit_frames: bool = False) -> Prediction:
+            refit_frames: bool = False, plugins: Iterable[str | Path] = ()) -> Prediction:
     """The prediction of `dataset` by the fitted model: its effects at its parameter values,
     in the fit's frames (module docstring). With ``refit_frames`` the frames are estimated
-    on `dataset` instead, from its own nominal frames. A parameter of the model the fit has
+    on `dataset` instead, from its own nominal frames. ``plugins``: the Python files that
+    define the fit's plugin effects (`hostpc fit --plugin`). A parameter of the model the fit has
     no value for is an InputError, unless it is a frame parameter and ``refit_frames`` is
     set. A model without recorded frames (``FittedModel.frames`` None) predicts only with
     ``refit_frames``: InputError."""
@@ -129,7 +131,8 @@ def predict(fitted: FitResult | FittedModel, dataset: Dataset, *,
                              "the frames on this dataset with --refit-frames")
         dataset = dataclasses.replace(dataset, frames=fits_frames(dataset.frames,
                                                                    model.frames))
-    problem = build_problem(dataset, list(effect_names))
+    plugins = tuple(plugins)
+    problem = build_problem(dataset, list(effect_names), plugins=plugins)
     names = problem.layout.names
     frame_effects = set(problem.frame_names)
     missing = [n for n in names if n not in values
@@ -146,8 +149,8 @@ def predict(fitted: FitResult | FittedModel, dataset: Dataset, *,
     refitted: dict[str, float] = {}
     if refit_frames and frame_effects:
         hold = [n for n in names if n.split(".", 1)[0] not in frame_effects]
-        result = fit(dataset, list(effect_names), hold=hold, x0=x, cv_folds=0,
-                     shared=problem.shared)
+        result = fit(dataset, list(effect_names), plugins=plugins, hold=hold, x0=x,
+                     cv_folds=0, shared=problem.shared)
         x = result.x
         problem = result.problem
         refitted = {n: float(v) for n, v in zip(names, x, strict=True)

@@ -55,6 +55,9 @@ class ColumnMap:
     fields: Mapping[str, str]
     orientation: str | None  # "rpy", "quat", "rotvec", "euler" or None
     points: tuple[PointColumns, ...] = ()
+    #: coupled joints (0-based) the mapping left out: read from their leader's column, to
+    #: be computed from it (hostpc.cli.import_csv), never a value of their own
+    derived: tuple[int, ...] = ()
 
 
 def _header_range(key: str, column: str, header: Sequence[str]) -> list[str]:
@@ -109,8 +112,11 @@ def _groups(groups: Mapping[str, dict[str, str]], fields: Mapping[str, str],
 
 
 def parse_column_map(spec: str, header: Sequence[str], n_joints: int, method: str,
-                     source: str = "CSV") -> ColumnMap:
-    """Parse ``--columns`` against the CSV header; InputError naming the offending pair."""
+                     source: str = "CSV", followers: Mapping[int, int] | None = None
+                     ) -> ColumnMap:
+    """Parse ``--columns`` against the CSV header; InputError naming the offending pair.
+    ``followers``: coupled joints (a URDF ``<mimic>``), follower -> leader, 1-based: a
+    follower left out of the mapping is computed from its leader (``ColumnMap.derived``)."""
     joints: dict[int, str] = {}
     fields: dict[str, str] = {}
     groups: dict[str, dict[str, str]] = {}  # reflector -> {"marker": range, "sigma": ...}
@@ -154,11 +160,21 @@ def parse_column_map(spec: str, header: Sequence[str], n_joints: int, method: st
         if column not in header:
             raise InputError(f"{source}: row 1 (header): no column {column!r} for --columns "
                              f"{key}={column} (columns: {listed_columns(header)})")
+    followers = followers or {}
+    derived = tuple(k - 1 for k in range(1, n_joints + 1)
+                    if k not in joints and followers.get(k) in joints)
+    for k in derived:
+        joints[k + 1] = joints[followers[k + 1]]
     missing = [f"q{k}" for k in range(1, n_joints + 1) if k not in joints]
     extra = [f"q{k}" for k in joints if not 1 <= k <= n_joints]
     if missing or extra:
         problem = f"missing {', '.join(missing)}" if missing else f"extra {', '.join(extra)}"
-        raise InputError(f"--columns: the robot has {n_joints} joints; mapping {problem}")
+        coupled = ", ".join(f"q{f} follows q{leader}" for f, leader in followers.items())
+        hint = (f"; {coupled} (URDF <mimic>): a follower may be left out (map the others "
+                "one by one, q1=COL,...), import computes it from its leader"
+                if coupled else "")
+        raise InputError(f"--columns: the robot has {n_joints} joints; mapping "
+                         f"{problem}{hint}")
     axes = [k for k in ("sx", "sy", "sz") if k in fields]
     if axes and len(axes) != 3:
         raise InputError(f"--columns: per-axis sigmas need all of sx, sy, sz (given "
@@ -186,7 +202,7 @@ def parse_column_map(spec: str, header: Sequence[str], n_joints: int, method: st
         raise InputError(f"--columns: {method} measures points; drop the orientation "
                          f"columns or use --method {', '.join(csv_row_kinds('pose'))}")
     return ColumnMap(joints=tuple(joints[k] for k in range(1, n_joints + 1)), fields=fields,
-                     orientation=orientation, points=points)
+                     orientation=orientation, points=points, derived=derived)
 
 
 def listed_columns(header: Sequence[str], most: int = 40) -> str:

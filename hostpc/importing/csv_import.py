@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.dataset.kind_registry import csv_row_shape
+from hostpc.dataset.validation import MAX_ABS_CONTEXT
 from hostpc.errors import InputError
 from hostpc.importing.column_map import (
     ORIENTATIONS,
@@ -297,7 +298,8 @@ def read_samples(csv_rows: CsvRows, mapping: ColumnMap, options: ImportOptions
         sigma=(np.sqrt(np.mean(sigmas**2, axis=1)) if n_sigma else
                np.full(len(table), default_sigma)),
         sigma_xyz=sigmas if n_sigma == 3 else None,
-        t=scaled[:, ndof + 3 + n_sigma + optional.index("t")] if "t" in optional else None,
+        t=(_run_time(scaled[:, ndof + 3 + n_sigma + optional.index("t")])
+           if "t" in optional else None),
         temperature=(scaled[:, ndof + 3 + n_sigma + optional.index("temperature")]
                      if "temperature" in optional else None),
         rpy=(_rotations_to_rpy(table[:, at:], mapping.orientation, factors[0, at:],
@@ -308,6 +310,13 @@ def read_samples(csv_rows: CsvRows, mapping: ColumnMap, options: ImportOptions
         marker_index=group,
         marker_names=tuple(marker_ids),
     )
+
+
+def _run_time(t: FloatArray) -> FloatArray:
+    """The `t=` column as a dataset's time (s since the start of the run): a clock time
+    (Unix seconds, beyond the dataset's range of MAX_ABS_CONTEXT) is taken from the
+    earliest row, any other time is kept as written."""
+    return t - np.min(t) if t.size and np.max(np.abs(t)) > MAX_ABS_CONTEXT else t
 
 
 def document_head(samples: ImportedSamples, options: ImportOptions) -> JsonObject:

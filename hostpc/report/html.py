@@ -52,9 +52,7 @@ def _summary(diagnosis: Diagnosis) -> str:
 def _candidates(diagnosis: Diagnosis) -> str:
     rows = [(_e(c.effect), _num(c.delta_bic, 1), _num(c.delta_bic_full, 1), _mm(c.rms),
              _mm(c.cv_rms), _num(c.chi2_dof), _p(c.p_value),
-             _e((", ".join(c.selected) or "-")
-                + (" (the row's model: these free, the rest held at nominal)"
-                   if c.held else "")) if c.testable
+             _e(", ".join(c.selected) or "-") if c.testable
              else "not testable: no degrees of freedom left",
              _e(c.not_taken or "taken") if c.testable else "-")
             for c in diagnosis.candidates]

@@ -248,3 +248,25 @@ def test_bad_sigma_and_temperature_are_one_line(tmp_path, capsys, columns, cell,
                         "--columns", f"q=J1:J6,x=X,y=Y,z=Z,{columns}", "-o", tmp_path / "o.json")
     _one_line_exit_2(code, err, *fragments)
     assert not (tmp_path / "o.json").exists()
+
+
+def test_a_clock_time_column_is_taken_from_the_earliest_row(tmp_path: Path, capsys) -> None:
+    """A `t=` column of Unix seconds (a motion-capture or robot clock, 1.6e9 s) is beyond a
+    dataset's range of recorded context: the import writes the time since the earliest row
+    (so the file it writes loads), differences kept; a run time is kept as written."""
+    q, points = _tracker_truth()
+    clock = 1637924760.607069 + 15.0 * np.arange(len(q))[::-1]  # rows not in time order
+    for name, times, expected in (("clock", clock, clock - clock.min()),
+                                  ("run", 3.0 + np.arange(len(q)), 3.0 + np.arange(len(q)))):
+        csv = tmp_path / f"{name}.csv"
+        rows = ["J1,J2,J3,J4,J5,J6,x,y,z,t"] + [
+            ",".join(repr(float(v)) for v in (*q[i], *points["a"][i], times[i]))
+            for i in range(len(q))]
+        csv.write_text("\n".join(rows) + "\n")
+        out = tmp_path / f"{name}.json"
+        code, _, err = _run(capsys, csv, "--method", "world_point", "--robot", "ur5e",
+                            "--columns", "q=J1:J6,x=x,y=y,z=z,t=t", "-o", out)
+        assert code == 0, err
+        t = load_dataset(out).samples.t
+        assert t is not None
+        assert np.allclose(t, expected, rtol=0, atol=1e-6)

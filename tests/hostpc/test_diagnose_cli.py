@@ -150,3 +150,36 @@ def test_exit_codes_a_ci_job_can_gate_on(capsys: pytest.CaptureFixture[str],
                  "--report", str(tmp_path)]) == 2  # a folder, not a file
     err = capsys.readouterr().err
     assert "--report" in err and "Traceback" not in err
+
+
+def test_the_advised_command_keeps_the_robot_and_runs_as_printed(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A dataset read with --robot (here a DH table file, the ur5e the data was taken
+    with, while the file names a ur10e): the advice's command carries the --robot, and run
+    as printed it fits the very model of the advised row (it used to drop the option, and
+    the command then fitted the file's ur10e)."""
+    import shlex
+
+    from hostpc.dataset import save_dataset
+    from tests.hostpc.diagnose_support import hidden_world_point
+
+    hidden = {"encoder_scale.s2": 1e-3, "encoder_scale.s3": 1e-3}
+    save_dataset(hidden_world_point(hidden, seed=3, n_samples=120).dataset,
+                 tmp_path / "data.json")
+    document = json.loads((tmp_path / "data.json").read_text())
+    document["robot"] = {"name": "ur10e"}
+    (tmp_path / "data.json").write_text(json.dumps(document))
+    table = Path(__file__).resolve().parents[1] / "data" / "ur5e_dh.json"
+
+    assert main(["diagnose", str(tmp_path / "data.json"), "--robot", str(table),
+                 "--json"]) == 1
+    diagnosis = json.loads(capsys.readouterr().out)
+    row = next(c for c in diagnosis["candidates"] if c["effect"] == "encoder_scale")
+    advice = next(s for s in diagnosis["advice"] if "add encoder_scale" in s)
+    printed = re.search(r"\((hostpc diagnose [^)]*)\)", advice)
+    assert printed is not None
+    argv = shlex.split(printed.group(1))[1:]
+    assert argv[argv.index("--robot") + 1] == str(table)
+    assert main([*argv, "--json"]) == 0  # the advised model explains the data
+    advised = json.loads(capsys.readouterr().out)
+    assert advised["rms"] == pytest.approx(row["rms"], rel=1e-6)

@@ -75,3 +75,35 @@ def test_the_plan_states_the_sizes_before_measuring() -> None:
         assert planned.shift * noise == pytest.approx(after[name].shift, rel=0.2), name
         if planned.parameter == after[name].parameter:
             assert planned.size * noise == pytest.approx(after[name].size, rel=0.1), name
+
+
+def test_an_implausible_size_is_not_detectable_and_states_its_threshold() -> None:
+    """Six planned poses of the hidden-compliance example: joint 6 carries almost no gravity
+    torque, so its compliance would show only at 6.8e13 rad/(N m) (a shift of 0.28 mm:
+    the measured points move by the noise, whatever the size). The plan line printed that
+    size as joint compliance's best-seen; now it names the best-seen plausible parameter
+    (joint 2's), and a size beyond PLAUSIBLE_SIZE reads as not detectable, with the
+    threshold."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from hostpc.dataset import load_dataset
+    from hostpc.diagnostics.detectable import PLAUSIBLE_SIZE, DetectableSize
+
+    example = Path(__file__).parents[2] / "examples" / "ur5e_stereo_hidden_compliance.json"
+    dataset = load_dataset(example)
+    design = dataset.with_samples(dataset.samples.subset(np.arange(6)))
+    planned = {s.effect: s for s in planned_sizes(design, None, (), DEFAULT_ALPHA)}
+    compliance = planned["joint_compliance"]
+    assert compliance.parameter != "joint_compliance.c6"
+    assert compliance.seen and compliance.size <= PLAUSIBLE_SIZE["rad/(N m)"]
+    for size in planned.values():
+        assert size.seen or "not detectable with these poses" in size.short
+        assert "e+" not in size.short, size.short  # no 6e+12, no 3.2e+02 um
+    absurd = DetectableSize("joint_compliance", "joint_compliance.c6", 6.8e13, "rad/(N m)",
+                            2.8e-4)
+    assert not absurd.seen
+    assert absurd.short == ("joint_compliance.c6 not detectable with these poses (only "
+                            "above 0.001 rad/(N m), more than any real robot's)")
+    assert absurd.sentence.startswith("joint_compliance.c6 is not detectable with these poses")

@@ -52,7 +52,6 @@ def test_ur10e_geometry_row_is_one_model_and_the_advice_fits_it(ur10e: Path) -> 
     check = diagnosis.check
     current = check.adequacy
     row = _row(check.candidates, "geometry")
-    assert row.held == ()  # the whole effect: the model `--effects +geometry` fits
     assert row.cv_folds == current.cv_folds == 5  # the current model's folds
     advised = hostpc.fit(hostpc.load_dataset(ur10e), "+geometry", cv_folds=current.cv_folds)
     assert advised.converged
@@ -125,5 +124,7 @@ def test_detectable_sizes_read_in_mm_and_an_unseeable_one_says_so() -> None:
     # before: "joint_compliance.c6 below 4.55e+13 rad/(N m) ... would not be seen"
     absurd = DetectableSize("joint_compliance", "joint_compliance.c6", 4.55e13, "rad/(N m)",
                             2.0e9)
-    assert absurd.sentence.startswith("joint_compliance.c6 cannot be seen with these poses")
-    assert "e+13" not in absurd.sentence and absurd.short == "joint_compliance.c6 unseen"
+    assert absurd.sentence.startswith("joint_compliance.c6 is not detectable with these "
+                                      "poses")
+    assert "e+13" not in absurd.sentence and absurd.short.startswith(
+        "joint_compliance.c6 not detectable with these poses")

@@ -120,3 +120,50 @@ def test_cli_predict_reports_the_error_and_refuses_a_mismatched_model(
     assert main(["predict", str(tmp_path / "fit.json"), str(tmp_path / "other.json")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "markers.d" in err[0] and "--refit-frames" in err[0]
+
+
+def test_cli_predicts_with_a_fit_of_the_nominal_model(
+        two_days, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A fit without joint offsets (the frames alone: what `--effects auto` chooses when
+    nothing beats the nominal robot held out) predicts like any other; only a push needs
+    joint offsets."""
+    day1, day2 = two_days
+    save_dataset(day1, tmp_path / "day1.json")
+    save_dataset(day2, tmp_path / "day2.json")
+    assert main(["fit", str(tmp_path / "day1.json"), "--effects", "world,markers",
+                 "--json"]) == 0
+    (tmp_path / "fit.json").write_text(capsys.readouterr().out)
+    assert main(["predict", str(tmp_path / "fit.json"), str(tmp_path / "day2.json"),
+                 "--json"]) == 0
+    document = json.loads(capsys.readouterr().out)
+    expected = hostpc.predict(hostpc.fit(day1, ["world", "markers"]), day2)
+    assert document["rms"] == pytest.approx(expected.rms, rel=1e-6)
+    from hostpc.calibrate.offline_push import load_saved_fit
+    from hostpc.errors import InputError
+
+    with pytest.raises(InputError, match="no joint_offsets parameters: nothing to push"):
+        load_saved_fit(tmp_path / "fit.json")  # what `hostpc push` reads
+
+
+def test_cli_predicts_a_fit_with_a_plugin_effect_given_the_plugin(
+        two_days, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from tests.hostpc.test_plugins import WRIST_COUPLING
+
+    day1, day2 = two_days
+    plugin = tmp_path / "wrist.py"
+    plugin.write_text(WRIST_COUPLING)
+    save_dataset(day1, tmp_path / "day1.json")
+    save_dataset(day2, tmp_path / "day2.json")
+    assert main(["fit", str(tmp_path / "day1.json"), "--effects", "+wrist_coupling",
+                 "--plugin", str(plugin), "--json"]) == 0
+    (tmp_path / "fit.json").write_text(capsys.readouterr().out)
+    assert main(["predict", str(tmp_path / "fit.json"), str(tmp_path / "day2.json"),
+                 "--plugin", str(plugin), "--json"]) == 0
+    document = json.loads(capsys.readouterr().out)
+    result = hostpc.fit(day1, "+wrist_coupling", plugins=[plugin])
+    expected = hostpc.predict(result, day2, plugins=[plugin])
+    assert document["rms"] == pytest.approx(expected.rms, rel=1e-6)
+    # without the plugin: one line, exit 2, saying what to give
+    assert main(["predict", str(tmp_path / "fit.json"), str(tmp_path / "day2.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "wrist_coupling" in err[0] and "--plugin" in err[0]

@@ -134,3 +134,47 @@ def test_the_calibrated_urdf_keeps_the_coupling(mimic_urdf: Path, tmp_path: Path
     measured = np.array([s["p"] for s in document["samples"]])
     assert np.max(np.abs(got - measured)) < 1e-9
     assert load_dataset(path).robot.urdf == str(mimic_urdf)
+
+
+def test_import_computes_a_follower_the_csv_does_not_have(
+        mimic_urdf: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A controller that logs only the independent joints (the follower, joint3 = q4, has
+    no column): mapping the others one by one, import computes the follower from its leader
+    and the fit recovers the truth; a range over too few columns is one line saying what
+    to give."""
+    document = _document(mimic_urdf)
+    header = ["j1", "j2", "j3", "j5", "j6", "j7", "x", "y", "z"]  # no j4: joint3 (q4)
+    rows = [",".join(header)] + [
+        ",".join(f"{v:.17g}" for v in (*(q for k, q in enumerate(s["q"]) if k != FOLLOWER),
+                                        *s["p"])) for s in document["samples"]]
+    (tmp_path / "leaders.csv").write_text("\n".join(rows) + "\n")
+    out = tmp_path / "leaders.json"
+    argv = ["import", str(tmp_path / "leaders.csv"), "--method", "world_point", "--robot",
+            str(mimic_urdf), "--base-link", "base_link", "--tip-link", "tool0", "--no-guess",
+            "-o", str(out), "--columns"]
+    assert main([*argv, "q=j1:j7,x=x,y=y,z=z"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "missing q7" in err and "q4 follows q3" in err
+    assert main([*argv, "q1=j1,q2=j2,q3=j3,q5=j5,q6=j6,q7=j7,x=x,y=y,z=z"]) == 0
+    assert "q4 follows q3" in capsys.readouterr().out
+    imported = load_dataset(out).samples.q
+    np.testing.assert_allclose(imported, [s["q"] for s in document["samples"]], atol=1e-12)
+    for sample, q in zip(document["samples"], imported, strict=True):
+        sample["q"] = q.tolist()  # the imported joints, the truth's frames (known)
+    result = fit(dataset_from_dict(document), ["joint_offsets"], cv_folds=0)
+    np.testing.assert_allclose(result.x, TRUTH, atol=1e-9)
+
+
+def test_a_follower_has_no_joint_space_parameters_of_its_own(mimic_urdf: Path) -> None:
+    """Not its offset, and not its compliance, encoder scale or transmission harmonics
+    either: the follower moves only with its leader (whose corrections it follows m times),
+    so each of its own joint-space parameters moves nothing and the fit holds it."""
+    effects = ["joint_offsets", "joint_compliance", "encoder_scale", "transmission_harmonic"]
+    result = fit(dataset_from_dict(_document(mimic_urdf)), effects, cv_folds=0)
+    own = [n for n in result.names if n.split(".", 1)[1] in
+           ("q4", "c4", "s4", "sin1_q4", "cos1_q4", "sin2_q4", "cos2_q4")]
+    assert len(own) == 7
+    held = dict(zip(result.names, result.fixed, strict=True))
+    assert all(held[n] for n in own), [n for n in own if not held[n]]
+    assert not held["joint_compliance.c3"] and not held["encoder_scale.s3"]  # the leader's
+    assert {d.fixed for d in result.unidentifiable} >= set(own)

@@ -38,7 +38,7 @@ class _LinearJointEffect(Effect):
 class JointOffsets(_LinearJointEffect):
     """Joint zero offsets: dq_i = p_i (rad). A coupled joint (``Chain.coupled``, a URDF
     ``<mimic>``) has no offset of its own: it follows its leader's (its parameter moves
-    nothing and the fit holds it at 0)."""
+    nothing and the fit holds it at 0; hostpc.model.measurements.terms.kinematic_deltas)."""
 
     name = "joint_offsets"
     unit = "rad"
@@ -48,10 +48,7 @@ class JointOffsets(_LinearJointEffect):
         return ctx.per_joint_names("q")
 
     def basis(self, ctx: ModelContext) -> np.ndarray:
-        ones = np.ones_like(ctx.q_cmd)
-        for follower, _, _, _ in ctx.chain.coupled:
-            ones[:, follower] = 0.0
-        return _diagonal_basis(ones)
+        return _diagonal_basis(np.ones_like(ctx.q_cmd))
 
 
 class JointCompliance(_LinearJointEffect):

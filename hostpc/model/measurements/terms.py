@@ -30,7 +30,9 @@ def kinematic_deltas(problem: Problem, x: np.ndarray, jacobian: bool
                      ) -> tuple[np.ndarray, np.ndarray | None, slice]:
     """Per-pose kinematic deltas (N, 5n), their derivative by x (N, k, P) over the rows
     that effects touch, and that row slice (the theta rows only, unless a geometry effect).
-    A coupled joint (``Chain.coupled``) follows its leader's joint-space corrections."""
+    A coupled joint (``Chain.coupled``) follows its leader's joint-space corrections and
+    has none of its own: its own parameters of every joint effect (offset, compliance,
+    encoder scale, a plugin's) move nothing, and the fit holds them ("no effect")."""
     ctx = problem.context
     n_samples, n_joints = ctx.q_cmd.shape
     geometric = any(t.effect.hook == "geometry" for t in problem.terms)
@@ -64,11 +66,11 @@ def kinematic_deltas(problem: Problem, x: np.ndarray, jacobian: bool
             if J is None:
                 J = numeric_jacobian(lambda v, f=fun: f(ctx, v), p)
             derivative[:, :, term.slice] += J
-    if coupled:
+    if coupled:  # a follower moves only with its leader: no joint-space change of its own
         for follower, leader, multiplier, _ in coupled:
-            joint[:, follower] += multiplier * joint[:, leader]
+            joint[:, follower] = multiplier * joint[:, leader]
             if d_joint is not None:
-                d_joint[:, follower] += multiplier * d_joint[:, leader]
+                d_joint[:, follower] = multiplier * d_joint[:, leader]
         delta[:, :n_joints] += joint
         if d_delta is not None and d_joint is not None:
             d_delta[:, :n_joints] += d_joint
