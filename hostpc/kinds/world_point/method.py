@@ -80,6 +80,7 @@ class WorldPointMethod(Method):
     """See the module docstring. options: none beyond the run settings."""
 
     name: ClassVar[str] = "world_point"
+    default_target_sigma_deg: ClassVar[float | None] = 0.002
     needs: ClassVar[tuple[Need, ...]] = (Need.TRACKER,)
     staged: ClassVar[bool] = True
 
