@@ -89,6 +89,8 @@ class State(Reply):
 
     mode: "idle", "moving" (a motion is in progress) or "estop".
     camera: what the controller reports of its stereo camera (image size, nominal mount).
+    max_joint_speed: (n,) rad/s, each joint's speed at speed fraction 1, when the controller
+    reports it (the host plans robot time with it; absent: a UR's 180 deg/s).
     """
 
     kind: Literal["state"] = "state"
@@ -104,6 +106,7 @@ class State(Reply):
     digital_outputs: Bits
     camera: dict[str, Any]
     authenticated: bool
+    max_joint_speed: JointVector | None = None
 
 
 class ReadIo(Request):

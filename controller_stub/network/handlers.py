@@ -126,6 +126,7 @@ class RequestHandlers:
             digital_outputs=[bool(v) for v in sim.digital_outputs()],
             camera=json.loads(json.dumps(sim.camera_description(), default=json_default)),
             authenticated=self.conn.authenticated,
+            max_joint_speed=float_list(sim.max_joint_speed()),
         )
 
     async def _read_io(self, request: m.ReadIo) -> m.IoState:

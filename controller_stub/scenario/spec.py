@@ -186,7 +186,8 @@ class MotionSpec(_Model):
     initial_q: (n,) reported start pose (default per robot).
     settle_s: simulated time the robot stands still after a completed joint move before it
     is measured (vibrations die out; a guarded move latches in motion and has none).
-    capture_s: simulated time of one stereo capture (exposure and readout of the pair).
+    capture_s: simulated time of one stereo capture (exposure and readout of the pair) or
+    one laser tracker reading.
     Both advance the simulated clock (robot time), not the wall-time pacing of motions.
     """
 

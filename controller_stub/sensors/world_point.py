@@ -49,6 +49,8 @@ class TrackedArm(Protocol):
     def time(self) -> float: ...
     def flange_pose(self) -> np.ndarray: ...
     def joint_positions(self) -> np.ndarray: ...
+    def hold_for_capture(self) -> None:
+        """Stand still for one measurement (the clock advances by `motion.capture_s`)."""
 
 
 class Tracker:
@@ -100,8 +102,10 @@ class Tracker:
         if self.arm is None:
             raise RuntimeError("this tracker measures no robot (constructed without `arm`)")
         seen, lost = self.measure(self.arm.flange_pose())
-        return {"q": self.arm.joint_positions(), "time": float(self.arm.time), "seen": seen,
-                "lost": lost, "description": self.description()}
+        measured = {"q": self.arm.joint_positions(), "time": float(self.arm.time),
+                    "seen": seen, "lost": lost, "description": self.description()}
+        self.arm.hold_for_capture()  # a reading takes robot time, as a stereo capture does
+        return measured
 
     def _noisy(self, p: np.ndarray) -> dict[str, Any]:
         r = float(np.linalg.norm(p))

@@ -165,7 +165,7 @@ class ControllerState:
     def time(self) -> float:
         """Simulated clock (s): robot time. Advances by motion durations, by the settling
         after each completed joint move (`motion.settle_s`) and by each stereo capture
-        (`motion.capture_s`)."""
+        or tracker reading (`motion.capture_s`)."""
         return self._time
 
     @property

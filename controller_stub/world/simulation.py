@@ -170,6 +170,11 @@ class Simulation(ControllerBase):
         """(4, 4) true T_base_flange at the current pose."""
         return self.body.flange_pose()
 
+    def hold_for_capture(self) -> None:
+        """The robot stands still for one measurement: the clock advances by the
+        scenario's `motion.capture_s` (a stereo capture, a tracker reading)."""
+        self.state.advance_clock(float(self.scenario.motion.capture_s))
+
     def camera_pose(self) -> np.ndarray:
         """(4, 4) true T_base_leftcamera at the current pose."""
         return self.flange_pose() @ self.stereo.T_flange_camera
@@ -208,7 +213,7 @@ class Simulation(ControllerBase):
         left, right = self.stereo.render(pattern, view, self.camera_pose)
         frame = StereoFrame(left=left, right=right, q=self.state.joint_positions(),
                             time=self.state.time)
-        self.state.advance_clock(float(self.scenario.motion.capture_s))  # exposure + readout
+        self.hold_for_capture()  # exposure + readout
         return frame
 
     def camera_description(self) -> dict[str, Any]:

@@ -62,7 +62,9 @@ class ZerocalAdapter:
             digital_outputs=s.digital_outputs,
             camera=dict(s.camera),
             robot=s.robot_name,
-            extra={"mode": s.mode, "time": s.time, "authenticated": s.authenticated},
+            extra={"mode": s.mode, "time": s.time, "authenticated": s.authenticated,
+                   **({} if s.max_joint_speed is None
+                      else {"max_joint_speed": [float(v) for v in s.max_joint_speed]})},
         )
 
     async def move_joints(self, q: np.ndarray, speed: float) -> MoveOutcome:

@@ -187,6 +187,8 @@ class ControllerClient:
             digital_outputs=tuple(reply.digital_outputs),
             camera=reply.camera,
             authenticated=reply.authenticated,
+            max_joint_speed=(None if reply.max_joint_speed is None
+                             else _array(reply.max_joint_speed)),
         )
 
     async def move_joints(self, q: Any, speed: float, timeout: float | None = None) -> MoveOutcome:

@@ -42,6 +42,7 @@ class ControllerState:
     digital_outputs: tuple[bool, ...]
     camera: JsonObject  # the controller's camera description (open: RobotState.camera)
     authenticated: bool
+    max_joint_speed: np.ndarray | None = None  # (n,) rad/s at speed 1, if reported
 
 
 @dataclass(frozen=True)

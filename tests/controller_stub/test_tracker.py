@@ -71,3 +71,15 @@ def test_scenario_errors_move_the_truth_not_the_description() -> None:
     truth = sim.truth()["tracker"]
     np.testing.assert_allclose(truth["reflectors"]["a"], [0.0002, 0.0, 0.05])
     assert truth["T_world_base"]["xyz"] != description["world_base"]["xyz"]
+
+
+def test_a_reading_takes_robot_time_as_a_capture_does() -> None:
+    """The robot stands still for a tracker reading: the clock advances by
+    `motion.capture_s` after the reading, which is stamped at its start (the host's plan
+    charges each pose a capture: hostpc.planning.robot_time)."""
+    sim = Simulation(scenario_from_dict({"motion": {"capture_s": 0.25}}))
+    start = sim.time
+    first = sim.tracker.measure_tracker()
+    second = sim.tracker.measure_tracker()
+    assert first["time"] == start and second["time"] == start + 0.25
+    assert sim.time == start + 0.5

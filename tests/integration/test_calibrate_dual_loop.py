@@ -28,6 +28,8 @@ from hostpc.methods.base import NullProgress, RunSettings
 from hostpc.methods.cell import build_cell
 from hostpc.model.layout import Problem
 from hostpc.model.problem import build_problem
+from hostpc.planning.robot_time import TimeLimits
+from hostpc.planning.verify_poses import verify_poses_for_power
 from hostpc.robots.simulator import SimulatedController, default_sim_scenario, sim_default_known
 from hostpc.robots.zerocal import ZerocalAdapter
 from hostpc.transport import ControllerClient, ControllerRefusedError
@@ -85,6 +87,24 @@ async def test_measure_targets_over_loopback(start_stub: StartStub) -> None:
         assert measured.q.shape == (16,)
     finally:
         await adapter.close()
+
+
+async def test_state_reports_the_joint_speeds_the_plan_times_with(start_stub: StartStub
+                                                                 ) -> None:
+    """The controller reports each joint's top speed (the humanoid's arms 2 rad/s, its
+    head 3 rad/s, slower than the UR's 180 deg/s the host assumed before): the plan's
+    robot time is predicted with them."""
+    server = await start_stub({"robot": "humanoid_upper"})
+    adapter = await ZerocalAdapter.connect(*server.address, token=TOKEN)
+    try:
+        state = await adapter.state()
+    finally:
+        await adapter.close()
+    speeds = np.asarray(state.extra["max_joint_speed"], float)
+    np.testing.assert_array_equal(speeds, server.sim.max_joint_speed())
+    np.testing.assert_array_equal(speeds, [3.0, 3.0] + [2.0] * 14)
+    limits = TimeLimits.from_extra(state.extra, 16)
+    np.testing.assert_array_equal(limits.joint_speed, speeds)
 
 
 async def test_measure_targets_needs_auth_and_a_target_sensor(start_stub: StartStub) -> None:
@@ -212,7 +232,17 @@ def test_calibrate_sim_dual_loop_recovers_truth_pushes_and_verifies(
             assert abs(remaining) <= 3 * joints[j]["sigma_deg"], (label, remaining)
 
     verify = document["verify"]
-    assert verify["passed"] is True and verify["n_measured"] >= 8
+    # the default plan: the fewest poses that reach the kind's target sigma, the
+    # verification poses its power needs; robot time as planned (the controller's speeds)
+    plan = document["plan"]
+    assert plan["target_sigma_deg"] == DualLoopMethod.default_target_sigma_deg
+    assert all(s is None or s <= plan["target_sigma_deg"]
+               for s in plan["predicted_joint_sigma_deg"])
+    assert plan["n_verify"] == verify_poses_for_power()
+    spent = document["robot_time_s"]
+    assert spent["measure"] + spent["verify"] == pytest.approx(
+        plan["predicted_robot_time_s"]["total"], rel=0.01)
+    assert verify["passed"] is True and verify["n_measured"] >= plan["n_verify"]
     assert verify["verdict"] == "PASS" and verify["p_value"] >= verify["alpha"]
     # the summary names the joints as the model does
     summary = (out / "summary.txt").read_text()

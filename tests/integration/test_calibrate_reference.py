@@ -50,11 +50,18 @@ def calibrate(out: Path, scenario: dict[str, Any], method: str, *extra: str
     return code, json.loads((out / "result.json").read_text())
 
 
+FIXED = {"world_point": ("--poses", "60", "--verify-poses", "10")}
+"""A fixed plan where the default one stops at the target sigma of the joints its own design
+identifies (world_point: J2-J5), not of those a reference resolves: recorded and used with
+the default plan, J6 came 0.012-0.021 deg off (within 3 sigma), not within 0.005 deg."""
+
+
 def recorded(tmp: Path, method: str, tip_off_axis: bool = False
              ) -> tuple[Path, dict[str, Any], tuple[str, ...]]:
     """Run the recording world and record its reference: (file, result, --rig option)."""
     code, document = calibrate(tmp / "record",
-                               world(method, 3, SMALL, tip_off_axis=tip_off_axis), method)
+                               world(method, 3, SMALL, tip_off_axis=tip_off_axis), method,
+                               *FIXED.get(method, ()))
     assert code == 0
     reference = tmp / "cell_ref.json"
     assert main(["reference", "record", "--run", str(tmp / "record"), "--out",
@@ -87,7 +94,7 @@ def test_motor_swap_on_j1_and_j6_is_recovered_with_a_reference(
     swapped = [SWAP, *SMALL[1:5], SWAP]
     code, document = calibrate(tmp_path / "swap",
                                world(method, 4, swapped, tip_off_axis=tip_off_axis), method,
-                               "--reference", str(reference), *rig)
+                               "--reference", str(reference), *rig, *FIXED.get(method, ()))
     capsys.readouterr()
     assert code == 0, (document["push"]["reason"], document["reference_check"])
     joints = document["plan"]["joints"]

@@ -15,6 +15,7 @@ import pytest
 from hostpc.kinds.world_point.method import WorldPointMethod, identifiable_offsets
 from hostpc.methods.base import NullProgress, RunSettings
 from hostpc.methods.cell import build_cell
+from hostpc.planning.verify_poses import verify_poses_for_power
 from hostpc.robots.zerocal import ZerocalAdapter
 from hostpc.transport import ControllerClient
 from tests.integration.conftest import TOKEN, StartStub
@@ -129,3 +130,30 @@ def test_calibrate_sim_world_point_recovers_every_offset(tmp_path, capsys) -> No
     assert errors[5] is None and all(abs(e) <= 0.005 for e in errors[:5])
     assert "joint 6's zero needs a reflector known in the flange frame" in stderr
     assert math.isfinite(errors[0])
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not _world_point_registered(),
+                    reason="needs the world_point measurement model")
+def test_default_sim_world_point_plans_to_the_target_sigma_in_the_planned_time(
+        tmp_path, capsys) -> None:
+    """Without --poses the plan stops at the kind's default target sigma (the fewest
+    travel-aware poses that reach it, far fewer than the fixed 60), with the verification
+    poses its power needs; the robot time spent is the one planned (each tracker reading
+    costs a capture); the offsets stay within 3 of their sigmas."""
+    out = tmp_path / "run"
+    code, stdout, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--method",
+                                   "world_point", "--out", str(out), "--json", "--no-report")
+    assert code == 0, stderr
+    document = json.loads(stdout)
+    plan = document["plan"]
+    assert plan["target_sigma_deg"] == WorldPointMethod.default_target_sigma_deg
+    assert plan["n_poses"] < 60 and plan["n_verify"] == verify_poses_for_power()
+    assert max(plan["predicted_joint_sigma_deg"]) <= plan["target_sigma_deg"]
+    spent = document["robot_time_s"]
+    assert spent["measure"] + spent["verify"] == pytest.approx(
+        plan["predicted_robot_time_s"]["total"], rel=0.01)
+    joints = document["offsets"]["joints"]
+    errors = document["truth"]["joint_offsets_error_deg"]
+    assert all(abs(e) <= 3 * j["sigma_deg"] for e, j in zip(errors, joints, strict=True))
+    assert document["verify"]["passed"] is True

@@ -179,6 +179,7 @@ class DualLoopMethod(Method):
     stereo_target; 0 = the controller's covariance as reported)."""
 
     name: ClassVar[str] = "dual_loop"
+    default_target_sigma_deg: ClassVar[float | None] = 0.02
     needs: ClassVar[tuple[Need, ...]] = (Need.TARGETS,)
 
     def __init__(self, settings: RunSettings, cell: Cell, run_dir: Path) -> None:
