@@ -23,6 +23,7 @@ import typing  # noqa: E402
 import warnings  # noqa: E402
 
 from hostpc.errors import InputError, ZerocalError  # noqa: E402
+from hostpc.robots import warm_stub  # noqa: E402
 
 COMMAND_MODULES = (
     "fit",
@@ -110,7 +111,17 @@ def _token_from_options(args: argparse.Namespace) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     words = sys.argv[1:] if argv is None else argv
-    parser = build_parser(next((w for w in words if not w.startswith("-")), None))
+    command = next((w for w in words if not w.startswith("-")), None)
+    if warm_stub.wants_simulator(command, words):  # its start-up overlaps ours (warm_stub.py)
+        warm_stub.prestart()
+    try:
+        return _main(argv, command)
+    finally:
+        warm_stub.discard()  # a simulator the command did not take
+
+
+def _main(argv: list[str] | None, command: str | None) -> int:
+    parser = build_parser(command)
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # a bad option (one line already printed) or --help
