@@ -41,9 +41,13 @@ def main() -> int:
         log = os.open(order["stderr"], os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
         os.dup2(log, 2)
         os.close(log)
+    from controller_stub.cli import exit_without_collecting
     from controller_stub.cli import main as stub_main
 
-    return stub_main([str(word) for word in order["argv"]])
+    try:
+        return stub_main([str(word) for word in order["argv"]])
+    finally:
+        exit_without_collecting()
 
 
 if __name__ == "__main__":
