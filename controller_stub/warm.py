@@ -16,6 +16,7 @@ exit code 0 and no output.
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import sys
@@ -30,7 +31,10 @@ def _import_the_simulator() -> None:
 
 
 def main() -> int:
+    gc.disable()  # imports make no garbage; their objects live as long as the process
     _import_the_simulator()
+    gc.freeze()  # and no collection need visit them
+    gc.enable()
     line = sys.stdin.readline()
     if not line.strip():
         return 0
