@@ -249,7 +249,7 @@ class SimulatedController:
             ) from None
         process, self.process = self.process, None
         try:
-            returncode = process.wait(timeout=10)
+            returncode = warm_stub.wait_for_exit(process, timeout=10)
         except subprocess.TimeoutExpired:
             process.kill()
             returncode = process.wait(timeout=5)
@@ -288,7 +288,7 @@ class SimulatedController:
             if process.poll() is None:
                 process.terminate()
                 try:
-                    process.wait(timeout=10)
+                    warm_stub.wait_for_exit(process, timeout=10)
                 except subprocess.TimeoutExpired:
                     process.kill()
                     process.wait(timeout=5)

@@ -7,8 +7,8 @@ and the simulator it then starts spends ~0.4 s importing its own modules before 
 on stdin (controller_stub/warm.py); `SimulatedController.start` (simulator.py) hands it the
 same `serve` arguments, token and log it would give a fresh process (`hand_over`), or starts
 a fresh one when there is no warm process. A warm process nobody took is ended by `discard`
-(its stdin closed: it exits without output). Standard library only: this module is imported
-before everything else.
+(terminated). `wait_for_exit` waits for a simulator's end without polling. Standard
+library only: this module is imported before everything else.
 
 On Linux the process gets PR_SET_PDEATHSIG (SIGTERM): if hostpc dies, even by SIGKILL, the
 simulator is terminated too.
@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -109,11 +110,28 @@ def discard() -> None:
         return
     process.terminate()
     try:
-        process.wait(timeout=5)
+        wait_for_exit(process, timeout=5)
     except subprocess.TimeoutExpired:
         process.kill()
         process.wait()
     _close(process)
+
+
+def wait_for_exit(process: subprocess.Popen[str], timeout: float) -> int:
+    """`process.wait(timeout)`, woken the moment the process ends (a pidfd, Linux): Popen's
+    own wait polls with sleeps growing to 50 ms, which hostpc would spend after every run's
+    simulator ended. subprocess.TimeoutExpired if it has not ended within `timeout` s."""
+    try:
+        handle = os.pidfd_open(process.pid)
+    except (AttributeError, OSError):  # not Linux, or the process is reaped already
+        return process.wait(timeout=timeout)
+    try:
+        ended = select.select([handle], [], [], timeout)[0]
+    finally:
+        os.close(handle)
+    if not ended:
+        raise subprocess.TimeoutExpired(process.args, timeout)
+    return process.wait()  # it has ended: reaped at once
 
 
 def _close(process: subprocess.Popen[str]) -> None:

@@ -79,3 +79,18 @@ def test_a_dead_warm_process_is_replaced_by_a_fresh_one(tmp_path: Path) -> None:
 ])
 def test_which_command_lines_start_a_simulator(words: list[str], wanted: bool) -> None:
     assert warm_stub.wants_simulator(words[0], words) is wanted
+
+
+def test_waiting_for_a_process_to_end_returns_its_exit_code_or_times_out() -> None:
+    import subprocess
+    import sys
+
+    process = subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.read()"],
+                               stdin=subprocess.PIPE, text=True)
+    with pytest.raises(subprocess.TimeoutExpired):
+        warm_stub.wait_for_exit(process, timeout=0.2)
+    assert process.returncode is None
+    assert process.stdin is not None
+    process.stdin.close()  # it ends
+    assert warm_stub.wait_for_exit(process, timeout=30) == 0
+    assert warm_stub.wait_for_exit(process, timeout=1) == 0  # reaped already
