@@ -164,10 +164,10 @@ class StereoCamera:
                ) -> tuple[np.ndarray, np.ndarray]:
         """Render a stereo pair (left, right (H, W) uint8).
 
-        The two patterns are drawn in two threads, and a chessboard view's successor is
-        drawn ahead while the host looks at this one (a rig calibration asks for views 0, 1,
-        ... in turn); the noise is added here, in capture order, so the images are the same
-        bits as drawn one after the other.
+        The left and right patterns are drawn in two threads, and a chessboard view's
+        successor is drawn ahead while the host looks at this one (a rig calibration asks
+        for views 0, 1, ... in turn); the noise is added here, in capture order, so the
+        images are the same bits as drawn one after the other.
 
         pattern "target": the circular target seen from the left camera's true pose
         `T_base_camera()` (4, 4), asked only for this pattern. pattern "chessboard": the
