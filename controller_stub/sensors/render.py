@@ -36,6 +36,10 @@ import numpy as np
 
 _NOISE_MARGIN = 128  # the noise bank is this many pixels larger than the image
 
+Drawn = tuple[np.ndarray, tuple[int, int, int, int]] | None
+"""A pattern drawn before the noise: its blurred float32 patch and the box (y0, y1, x0, x1)
+it covers, or None if nothing of it is visible."""
+
 
 @dataclass(frozen=True)
 class CameraModel:
@@ -317,19 +321,24 @@ class Renderer:
             view = view[:, ::-1]
         return view
 
-    def _compose(
-        self, patch: np.ndarray | None, box: tuple[int, int, int, int] | None
-    ) -> np.ndarray:
-        """Background+noise frame with the (blurred) float patch pasted at box (y0, y1, x0, x1)."""
-        win = self._noise_window()
-        image = np.ascontiguousarray(self._window(self._background_bank, win))
-        if patch is None or box is None:
-            return image
-        y0, y1, x0, x1 = box
+    def _blurred(self, patch: np.ndarray) -> np.ndarray:
+        """The float patch after the lens blur (no randomness: any thread may call it)."""
         if self.blur_sigma > 0:
             patch = cv2.GaussianBlur(
                 patch, (0, 0), self.blur_sigma, borderType=cv2.BORDER_REPLICATE
             )
+        return patch
+
+    def compose(self, drawn: Drawn) -> np.ndarray:
+        """(H, W) uint8 frame: background plus noise with the blurred float patch of `drawn`
+        (from `disk_patch` / `chessboard_patch`, None: nothing visible) pasted at its box
+        (y0, y1, x0, x1). Draws the frame's noise window from the renderer's RNG: frames
+        must be composed in capture order."""
+        win = self._noise_window()
+        image = np.ascontiguousarray(self._window(self._background_bank, win))
+        if drawn is None:
+            return image
+        patch, (y0, y1, x0, x1) = drawn
         patch += self._window(self._noise, win)[y0:y1, x0:x1]
         np.rint(patch, out=patch)
         np.clip(patch, 0, 255, out=patch)
@@ -338,7 +347,7 @@ class Renderer:
 
     def background(self) -> np.ndarray:
         """(H, W) uint8: flat background plus noise."""
-        return self._compose(None, None)
+        return self.compose(None)
 
     # -------------------------------------------------------------- geometry helpers
 
@@ -388,11 +397,16 @@ class Renderer:
     def render_disk(self, T_cam_target: np.ndarray, pattern: DiskPattern) -> np.ndarray:
         """(H, W) uint8 image of the disk target; T_cam_target (4, 4): the target frame has
         the disk centre at its origin and the plate normal as its z axis."""
+        return self.compose(self.disk_patch(T_cam_target, pattern))
+
+    def disk_patch(self, T_cam_target: np.ndarray, pattern: DiskPattern) -> Drawn:
+        """The blurred float patch and box of `render_disk` before the noise (None: nothing
+        visible). Deterministic and free of the RNG: it may be drawn in another thread."""
         angles = np.linspace(0.0, 2 * math.pi, 73)
         ring = pattern.plate_radius * np.column_stack([np.cos(angles), np.sin(angles)])
         box = self._bbox(T_cam_target, ring)
         if box is None:
-            return self.background()
+            return None
         u, v, valid = self._plane_coords(T_cam_target, box)
         rho = np.hypot(u, v)
         grad_x, grad_y = _gradient(rho)
@@ -402,16 +416,22 @@ class Renderer:
         patch = bg + np.float32(pattern.plate_level - self.background_level) * plate
         patch += np.float32(pattern.dot_level - pattern.plate_level) * dot
         patch[~valid] = bg
-        return self._compose(patch, box)
+        return self._blurred(patch), box
 
     def render_chessboard(self, T_cam_board: np.ndarray, pattern: ChessboardPattern) -> np.ndarray:
         """(H, W) uint8 image of the chessboard; T_cam_board (4, 4): board frame with the first
         inner corner at its origin, x along a row of corners, z the board normal."""
+        return self.compose(self.chessboard_patch(T_cam_board, pattern))
+
+    def chessboard_patch(self, T_cam_board: np.ndarray, pattern: ChessboardPattern) -> Drawn:
+        """The blurred float patch and box of `render_chessboard` before the noise (None:
+        nothing visible). Deterministic and free of the RNG: it may be drawn in another
+        thread."""
         u_min, u_max, v_min, v_max = pattern.outline()
         outline = pattern.outline_points(17)
         box = self._bbox(T_cam_board, outline)
         if box is None:
-            return self.background()
+            return None
         u, v, valid = self._plane_coords(T_cam_board, box)
         wu = _gradient_norm(u)
         wv = _gradient_norm(v)
@@ -446,4 +466,4 @@ class Renderer:
         patch = bg + f32(pattern.light_level - self.background_level) * plate
         patch += f32(pattern.dark_level - pattern.light_level) * dark * squares
         patch[~valid] = bg
-        return self._compose(patch.astype(np.float32), box)
+        return self._blurred(patch.astype(np.float32)), box

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -27,6 +28,7 @@ from controller_stub.sensors.render import (
     CameraModel,
     ChessboardPattern,
     DiskPattern,
+    Drawn,
     Renderer,
 )
 from controller_stub.streams import STREAM_LEFT, STREAM_RIGHT, STREAM_VIEWS, stream_rng
@@ -103,28 +105,22 @@ class StereoCamera:
         self._board_views: np.ndarray | None = None  # drawn lazily (rejection sampling)
         self._extra_board_views: np.ndarray | None = None
         self._renderers: tuple[Renderer, Renderer] | None = None  # built on first capture
+        self._pool: ThreadPoolExecutor | None = None  # draws the patches (`_draw`)
+        self._board_ahead: dict[int, tuple[Future[Drawn], Future[Drawn]]] = {}
 
     def renderers(self) -> tuple[Renderer, Renderer]:
         """(left, right) renderers with the truth intrinsics (built on first use)."""
         if self._renderers is None:
             cam = self.scenario.camera
             level = self.scenario.target.background_level
-            self._renderers = (
-                Renderer(
-                    self.camera,
-                    cam.pixel_noise_sigma,
-                    cam.blur_sigma,
-                    level,
-                    stream_rng(self.scenario.seed, STREAM_LEFT),
-                ),
-                Renderer(
-                    self.camera,
-                    cam.pixel_noise_sigma,
-                    cam.blur_sigma,
-                    level,
-                    stream_rng(self.scenario.seed, STREAM_RIGHT),
-                ),
-            )
+
+            def build(stream: int) -> Renderer:
+                return Renderer(self.camera, cam.pixel_noise_sigma, cam.blur_sigma, level,
+                                stream_rng(self.scenario.seed, stream))
+
+            # each from its own random stream: built side by side (their noise banks)
+            left, right = (self._threads().submit(build, s) for s in (STREAM_LEFT, STREAM_RIGHT))
+            self._renderers = (left.result(), right.result())
         return self._renderers
 
     def chessboard_poses(self) -> np.ndarray:
@@ -168,17 +164,20 @@ class StereoCamera:
                ) -> tuple[np.ndarray, np.ndarray]:
         """Render a stereo pair (left, right (H, W) uint8).
 
+        The left and right patterns are drawn in two threads, and a chessboard view's
+        successor is drawn ahead while the host looks at this one (a rig calibration asks
+        for views 0, 1, ... in turn); the noise is added here, in capture order, so the
+        images are the same bits as drawn one after the other.
+
         pattern "target": the circular target seen from the left camera's true pose
         `T_base_camera()` (4, 4), asked only for this pattern. pattern "chessboard": the
         `view`-th chessboard pose (relative to the left camera, independent of the robot).
         Raises SimulationRefused("invalid_argument") otherwise.
         """
-        T_right_left = np.linalg.inv(self.T_left_right)
         left_r, right_r = self.renderers()
         if pattern == "target":
             T_left_target = np.linalg.inv(T_base_camera()) @ self.T_base_target
-            left = left_r.render_disk(T_left_target, self.disk_pattern)
-            right = right_r.render_disk(T_right_left @ T_left_target, self.disk_pattern)
+            drawn = self._draw(Renderer.disk_patch, T_left_target, self.disk_pattern)
         elif pattern == "chessboard":
             n_views = self.scenario.chessboard.n_views
             max_views = (1 + EXTRA_VIEW_FACTOR) * n_views
@@ -186,13 +185,35 @@ class StereoCamera:
                 raise SimulationRefused(
                     "invalid_argument", f"chessboard view {view!r} not in 0..{max_views - 1}"
                 )
-            T_left_board = (self.chessboard_poses()[view] if view < n_views
-                            else self.extra_chessboard_poses()[view - n_views])
-            left = left_r.render_chessboard(T_left_board, self.board_pattern)
-            right = right_r.render_chessboard(T_right_left @ T_left_board, self.board_pattern)
+            ahead, self._board_ahead = self._board_ahead, {}
+            drawn = ahead[view] if view in ahead else self._board_patches(view)
+            if view + 1 < n_views:  # a rig calibration asks for the views in turn
+                self._board_ahead[view + 1] = self._board_patches(view + 1)
         else:
             raise SimulationRefused("invalid_argument", f"unknown pattern {pattern!r}")
-        return left, right
+        # the noise in capture order, left then right: the renderers' RNGs as ever
+        return left_r.compose(drawn[0].result()), right_r.compose(drawn[1].result())
+
+    def _draw(self, draw: Callable[[Renderer, np.ndarray, Any], Drawn], T_left: np.ndarray,
+              pattern: Any) -> tuple[Future[Drawn], Future[Drawn]]:
+        """The left and right patches of `pattern` at `T_left` (4, 4, in the left camera),
+        drawn by `draw` in two threads (numpy and OpenCV release the GIL: both cores)."""
+        left_r, right_r = self.renderers()
+        T_right_left = np.linalg.inv(self.T_left_right)
+        return (self._threads().submit(draw, left_r, T_left, pattern),
+                self._threads().submit(draw, right_r, T_right_left @ T_left, pattern))
+
+    def _threads(self) -> ThreadPoolExecutor:
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="render")
+        return self._pool
+
+    def _board_patches(self, view: int) -> tuple[Future[Drawn], Future[Drawn]]:
+        """The patches of chessboard view `view` (being) drawn."""
+        n_views = self.scenario.chessboard.n_views
+        T_left_board = (self.chessboard_poses()[view] if view < n_views
+                        else self.extra_chessboard_poses()[view - n_views])
+        return self._draw(Renderer.chessboard_patch, T_left_board, self.board_pattern)
 
     def truth(self) -> dict[str, Any]:
         """The camera's and the target's hidden truth (for `Simulation.truth()`)."""

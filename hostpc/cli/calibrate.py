@@ -343,7 +343,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         progress.close()
     if args.json:
-        json.dump(outcome.document, sys.stdout, indent=2, allow_nan=False)
+        sys.stdout.write(json.dumps(outcome.document, indent=2, allow_nan=False))
         sys.stdout.write("\n")
     else:
         print(outcome.summary)
@@ -405,13 +405,13 @@ def _sim_modbus(settings: RunSettings | None, run_dir: Path
     """The simulator's Modbus port for `--probe-io modbus` (None: the run does not poll
     over Modbus) and the settings pointing at it. A new run takes --modbus's port or a free
     one; a resume restarts the simulator on the port its run recorded."""
-    from hostpc.kinds.sphere_probe.method import parse_modbus_address
-    from hostpc.robots.simulator import free_local_port
-
     options = (settings.options if settings is not None
                else read_run_header(Journal(run_dir)).settings.options)
     if options.get("probe_io") != "modbus":
         return None, settings
+    from hostpc.kinds.sphere_probe.method import parse_modbus_address
+    from hostpc.robots.simulator import free_local_port
+
     given = options.get("modbus")
     port = parse_modbus_address(str(given), "127.0.0.1")[1] if given else free_local_port()
     if settings is not None:

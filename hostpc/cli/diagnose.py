@@ -107,7 +107,8 @@ def _run(args: argparse.Namespace) -> int:
                              f"({exc.strerror or exc})") from exc
     written = write_plugins(args.write_plugins, diagnosis) if args.write_plugins else []
     if args.json:
-        json.dump(diagnosis.to_dict(), sys.stdout, indent=2, allow_nan=False)
+        # one write: json.dump would write each of its ~10^4 pieces
+        sys.stdout.write(json.dumps(diagnosis.to_dict(), indent=2, allow_nan=False))
         sys.stdout.write("\n")
     else:
         print(format_diagnosis(diagnosis))

@@ -122,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
                 for k, entry in enumerate(document["parameters"].values()):
                     entry[column] = float(values[k]) if math.isfinite(values[k]) else None
         document["model_adequacy"] = adequacy.to_json()
-        json.dump(document, sys.stdout, indent=2, allow_nan=False)
+        sys.stdout.write(json.dumps(document, indent=2, allow_nan=False))
         sys.stdout.write("\n")
     else:
         if choice is not None:

@@ -26,6 +26,8 @@ without `server.token`, and the stub gets the token in its environment ($ZEROCAL
 The stub's stdout (after its `listening on` line) and stderr go to `stub.log` in the
 simulator's folder, so a chatty stub can never fill a pipe and block. On Linux the stub gets
 PR_SET_PDEATHSIG (SIGTERM): if hostpc dies, even by SIGKILL, the stub is terminated too.
+`hostpc calibrate --robot sim` starts the stub's process before its own imports and hands it
+its arguments here (warm_stub.py): the same stub, its start-up overlapped with hostpc's.
 """
 
 from __future__ import annotations
@@ -35,12 +37,11 @@ import copy
 import json
 import os
 import queue
-import signal
 import socket
 import subprocess
 import sys
 import threading
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from importlib import resources
 from pathlib import Path
 from typing import IO
@@ -51,14 +52,13 @@ from hostpc.dataset.kind_registry import DEFAULT_METHOD, SimDefault, kind_descri
 from hostpc.errors import ConnectionFailed, InputError
 from hostpc.input_files import CONFIG, read_input_text
 from hostpc.json_object import JsonObject
+from hostpc.robots import warm_stub
 from hostpc.robots.connect import TOKEN_ENV, RobotAddress, resolve_token
 
 START_TIMEOUT_S = 30.0
 STUB_LOG = "stub.log"
 SENSOR_FILE = "sim_sensor.py"
 """A plugin folder's simulated sensor module (controller_stub/sensors/registry.py)."""
-PR_SET_PDEATHSIG = 1
-"""prctl option (linux/prctl.h): the signal this process gets when its parent dies."""
 
 
 def _merge(base: JsonObject, overrides: JsonObject) -> JsonObject:
@@ -144,28 +144,6 @@ def free_local_port(host: str = "127.0.0.1") -> int:
     return port
 
 
-def _die_with_parent() -> Callable[[], None] | None:
-    """A preexec_fn that makes the child get SIGTERM when hostpc dies (Linux prctl
-    PR_SET_PDEATHSIG), or None where that does not exist."""
-    if not sys.platform.startswith("linux"):
-        return None
-    import ctypes
-
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        prctl = libc.prctl
-    except (OSError, AttributeError):
-        return None
-    parent = os.getpid()
-
-    def preexec() -> None:
-        prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
-        if os.getppid() != parent:  # the parent died before prctl took effect
-            os.kill(os.getpid(), signal.SIGTERM)
-
-    return preexec
-
-
 class SimulatedController:
     """A `controller-stub serve` subprocess on 127.0.0.1 (port chosen by the OS).
 
@@ -224,11 +202,16 @@ class SimulatedController:
         for folder in self.sensor_folders:
             command += ["--sensor-plugin", str(folder)]
         self._log = log = open(self.log_path, "a", encoding="utf-8")  # noqa: SIM115
-        self.process = subprocess.Popen(
-            command, stdout=subprocess.PIPE, stderr=log, text=True,
-            env={**os.environ, TOKEN_ENV: self.token},
-            start_new_session=False, preexec_fn=_die_with_parent(),  # noqa: PLW1509
-        )
+        warm = warm_stub.take()
+        if warm is not None and warm_stub.hand_over(warm, command[3:], {TOKEN_ENV: self.token},
+                                                    self.log_path):
+            self.process = warm  # started at hostpc's start (warm_stub.py)
+        else:
+            self.process = subprocess.Popen(
+                command, stdout=subprocess.PIPE, stderr=log, text=True,
+                env={**os.environ, TOKEN_ENV: self.token},
+                start_new_session=False, preexec_fn=warm_stub.die_with_parent(),  # noqa: PLW1509
+            )
         lines: queue.Queue[str] = queue.Queue()
         stdout = self.process.stdout
         assert stdout is not None
@@ -266,7 +249,7 @@ class SimulatedController:
             ) from None
         process, self.process = self.process, None
         try:
-            returncode = process.wait(timeout=10)
+            returncode = warm_stub.wait_for_exit(process, timeout=10)
         except subprocess.TimeoutExpired:
             process.kill()
             returncode = process.wait(timeout=5)
@@ -305,7 +288,7 @@ class SimulatedController:
             if process.poll() is None:
                 process.terminate()
                 try:
-                    process.wait(timeout=10)
+                    warm_stub.wait_for_exit(process, timeout=10)
                 except subprocess.TimeoutExpired:
                     process.kill()
                     process.wait(timeout=5)

@@ -211,3 +211,34 @@ def test_ray_map_is_kept_between_processes_and_a_broken_cache_is_solved_anew(
         assert all(np.array_equal(a, b) for a, b in zip(solved, again, strict=True))
         assert np.load(path).shape == (2, 48, 64)
     render.ray_map.cache_clear()
+
+
+def test_captures_drawn_in_threads_and_ahead_are_the_images_drawn_in_turn(
+        make_sim: Callable[..., Simulation], pose_looking_at: Callable[..., np.ndarray]) -> None:
+    """`StereoCamera.render` draws left and right in two threads and the next chessboard view
+    ahead (the rig calibration's waits overlap); the noise is added in capture order, so any
+    sequence of captures (views in turn, a skipped view, an extra view, the target between
+    them) is bit for bit what one renderer pair drawing one image after the other makes."""
+    sim, plain = make_sim(seed=3), make_sim(seed=3)
+    left_r, right_r = plain.stereo.renderers()
+    T_right_left = np.linalg.inv(plain.stereo.T_left_right)
+    n_views = sim.scenario.chessboard.n_views
+    q = pose_looking_at(sim, sim.stereo.target_centre, sim.scenario.target.normal, 0.35)
+    for sim_ in (sim, plain):
+        sim_.move_joints(q, 0.5)
+    for pattern, view in (("chessboard", 0), ("chessboard", 1), ("target", 0),
+                          ("chessboard", 2), ("chessboard", 4), ("chessboard", n_views + 1),
+                          ("chessboard", 5)):
+        frame = sim.capture_stereo(pattern, view)
+        if pattern == "target":
+            T = np.linalg.inv(plain.camera_pose()) @ plain.stereo.T_base_target
+            expected = (left_r.render_disk(T, plain.stereo.disk_pattern),
+                        right_r.render_disk(T_right_left @ T, plain.stereo.disk_pattern))
+        else:
+            T = (plain.stereo.chessboard_poses()[view] if view < n_views
+                 else plain.stereo.extra_chessboard_poses()[view - n_views])
+            expected = (left_r.render_chessboard(T, plain.stereo.board_pattern),
+                        right_r.render_chessboard(T_right_left @ T, plain.stereo.board_pattern))
+            assert (view + 1 in sim.stereo._board_ahead) is (view + 1 < n_views)
+        assert np.array_equal(frame.left, expected[0]), (pattern, view)
+        assert np.array_equal(frame.right, expected[1]), (pattern, view)
