@@ -24,6 +24,7 @@ from hostpc.json_object import JsonObject
 from hostpc.methods import method_class
 from hostpc.methods.base import Method, Plan, Progress, RunSettings
 from hostpc.planning.design import (
+    Design,
     Travel,
     check_plan,
     design_matrix,
@@ -42,7 +43,7 @@ from hostpc.planning.robot_time import (
     predicted_robot_time,
 )
 from hostpc.planning.tour import full_turn_joints, short_path, unwrap_plan
-from hostpc.planning.verify_poses import nearby_verify_poses
+from hostpc.planning.verify_poses import POWER_EFFECTS, PowerDesign, nearby_verify_poses
 from hostpc.robots.base import RobotState
 
 EXTENDED_VERIFY_POSES = 10
@@ -106,6 +107,27 @@ def plan_warnings(method: str | type[Method], target_sigma_deg: float | None,
     return lines
 
 
+def power_design(method: Method, design: Design, pool: np.ndarray, settings: RunSettings
+                 ) -> PowerDesign | None:
+    """The verification's power against the effects the model lacks
+    (verify_poses.POWER_EFFECTS) over the pool; None when the model has them all or the
+    method's measurements cannot carry them."""
+    base = list(dict.fromkeys(name.split(".", 1)[0] for name in design.names))
+    missing = [e for e in POWER_EFFECTS if e not in base]
+    if settings.n_verify < 1 or not missing:
+        return None
+    try:
+        A, names, _ = design_matrix(method.design_dataset(pool), base + missing,
+                                    settings.plugins)
+    except InputError:  # an effect the method's measurements cannot carry
+        return None
+    if not set(design.names) <= set(names):
+        return None
+    own = [names.index(n) for n in design.names]
+    extra = [k for k, n in enumerate(names) if n not in design.names]
+    return PowerDesign.scaled(A[:, :, own], A[:, :, extra], settings.verify_alpha)
+
+
 def plan_run(method: Method, state: RobotState, settings: RunSettings, progress: Progress
              ) -> Plan:
     """Candidate pool, informative selection, order, verification poses, check."""
@@ -162,9 +184,18 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     q_fit = q_short if short else pool[fit_indices]
     last = q_fit[-1] if q_fit.shape[0] else state.q
     q_verify_more: np.ndarray | None = None
+    predicted_power: float | None = None
     if short:
         rest = np.setdiff1d(np.arange(pool.shape[0]), np.concatenate([fit_indices, more]))
-        verify_indices = nearby_verify_poses(pool, rest, last, settings.n_verify, rng)
+        power = power_design(method, design, pool, settings)
+        if power is not None:  # the most signal against a missing effect per second
+            time_limits = TimeLimits.from_extra(state.extra, state.q.size)
+            verify_indices, predicted_power = power.choose(
+                fit_indices, rest, settings.n_verify, pool, last,
+                time_limits.joint_speed * settings.speed,
+                time_limits.settle_s + time_limits.capture_s)
+        else:  # a random choice, toured
+            verify_indices = nearby_verify_poses(pool, rest, last, settings.n_verify, rng)
         order, q_verify = short_path(pool[verify_indices], last, *limits)
         verify_indices = verify_indices[order]
         if more.size:  # if the model fails: the verification with a fixed plan's count
@@ -235,5 +266,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
                          "before measuring): " + "; ".join(d.short for d in detectable))
     if more.size:
         info["more_poses"] = int(more.size)
+    if predicted_power is not None:
+        info["predicted_verify_power"] = predicted_power
     return Plan(q=q_fit, q_verify=q_verify, info=info, q_more=q_more,
                 q_verify_more=q_verify_more)

@@ -23,10 +23,12 @@ Shapes: pool (N, n) rad; q_from (n,) rad; joint_speed (n,) rad/s or None (equal 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from hostpc.diagnostics.distributions import chi2_isf, ncx2_sf
-from hostpc.planning.tour import nearest_neighbour, plan_tour
+from hostpc.planning.tour import move_times, nearest_neighbour, plan_tour
 
 DETECTABLE_D2 = 10.0
 """The error size the default verification must detect: expected whitened squared error
@@ -73,3 +75,81 @@ def nearby_verify_poses(pool: np.ndarray, unused: np.ndarray, q_from: np.ndarray
                        replace=False)
     nearest = drawn[nearest_neighbour(pool[drawn], q_from, joint_speed)[:n_verify]]
     return nearest[plan_tour(pool[nearest], q_from, joint_speed)]
+
+
+POWER_EFFECTS = ("joint_compliance",)
+"""The effects a short plan's verification poses are chosen to catch when the model lacks
+them (`PowerDesign`): a joint bending under its gravity load varies over the workspace, so
+a short fit absorbs it into its offsets where it measured, and the verification must look
+where that no longer holds."""
+
+POWER_D2 = 2.5
+"""The size each missing effect parameter is scaled to: its whitened squared error per
+pose, RMS over the pool. Only the ranking of the poses depends on it (each pose's signal
+is proportional to it); the predicted power is reported, not used to size the plan."""
+
+
+@dataclass(frozen=True)
+class PowerDesign:
+    """The verification's power against effects the model lacks, from the designs before
+    anything moves. A: (N, m, P) the model's whitened Jacobian at the pool's poses; B: (N,
+    m, Q) the missing effects' (POWER_EFFECTS), each parameter scaled so that its whitened
+    squared error per pose is POWER_D2 in RMS over the pool (parameters the pool cannot see
+    dropped); alpha: the verification's false-FAIL rate.
+
+    A fit of the poses F moves the model by K = A_F^+ B_F per unit of each missing
+    parameter, so a verification pose v keeps the error r = (B_v - A_v K) e_j, and the test
+    (hostpc.calibrate.verify) weighs it with the noise plus the fit's prediction
+    uncertainty, S_v = I + A_v (A_F^T A_F)^+ A_v^T (whitened): a pose far from a compact fit
+    extrapolates, and its uncertain prediction hides the error. The pose's signal is the
+    mean over j of r^T S_v^-1 r."""
+
+    A: np.ndarray
+    B: np.ndarray
+    alpha: float
+
+    @classmethod
+    def scaled(cls, A: np.ndarray, B: np.ndarray, alpha: float) -> PowerDesign:
+        """B's parameters scaled to POWER_D2 (class docstring)."""
+        size = np.mean(np.sum(B**2, axis=1), axis=0)
+        largest = float(np.max(size, initial=0.0))
+        seen = size > 1e-12 * max(largest, 1e-300)
+        return cls(A, B[:, :, seen] * np.sqrt(POWER_D2 / max(largest, 1e-300)), float(alpha))
+
+    def signal(self, fit: np.ndarray) -> np.ndarray:
+        """(N,) each pool pose's signal after a fit of the pool poses `fit` (indices); 0
+        at the fit poses."""
+        fit = np.asarray(fit, dtype=int)
+        P, Q = self.A.shape[2], self.B.shape[2]
+        A_fit = self.A[fit].reshape(-1, P)
+        K = np.linalg.lstsq(A_fit, self.B[fit].reshape(-1, Q), rcond=None)[0]
+        R = self.B - self.A @ K
+        G = np.linalg.pinv(A_fit.T @ A_fit)
+        S = np.eye(self.A.shape[1]) + (self.A @ G) @ np.swapaxes(self.A, 1, 2)
+        out = np.einsum("nmq,nmq->n", R, np.linalg.solve(S, R)) / max(Q, 1)
+        out[fit] = 0.0
+        return np.asarray(out)
+
+    def choose(self, fit: np.ndarray, unused: np.ndarray, n_verify: int, q: np.ndarray,
+               q_from: np.ndarray, joint_speed: np.ndarray, per_pose_s: float,
+               periodic: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+        """(pool indices of n_verify verification poses among `unused`, in the order
+        chosen; their predicted power): from q_from (n,) each step takes the pose with the
+        most signal per second of its move (q (N, n) the pool, joint_speed (n,) rad/s at
+        the run's speed), settle and capture (per_pose_s)."""
+        unused = np.asarray(unused, dtype=int)
+        signal = self.signal(fit)
+        chosen: list[int] = []
+        total = 0.0
+        current = np.asarray(q_from, float)
+        for _ in range(min(int(n_verify), unused.size)):
+            cost = move_times(current, q[unused], joint_speed, periodic) + per_pose_s
+            score = signal[unused] / cost
+            score[np.isin(unused, chosen)] = -np.inf
+            k = int(unused[int(np.argmax(score))])
+            chosen.append(k)
+            total += float(signal[k])
+            current = q[k]
+        m = self.A.shape[1]
+        power = verify_power(len(chosen), total / max(len(chosen), 1), self.alpha, m)
+        return np.asarray(chosen, dtype=int), power
