@@ -107,6 +107,13 @@ def plan_warnings(method: str | type[Method], target_sigma_deg: float | None,
     return lines
 
 
+CHECK_POSES = 2
+"""Fit poses a short plan adds to the fewest that reach the target sigma so that the fit's
+own chi-square sees a missing joint compliance (`PowerDesign.check_poses`): the poses
+that reach the sigma at least travel are compact, a compact fit absorbs the bending into
+its offsets, and the plan would not grow when the model fails."""
+
+
 def power_design(method: Method, design: Design, pool: np.ndarray, settings: RunSettings
                  ) -> PowerDesign | None:
     """The verification's power against the effects the model lacks
@@ -114,7 +121,7 @@ def power_design(method: Method, design: Design, pool: np.ndarray, settings: Run
     method's measurements cannot carry them."""
     base = list(dict.fromkeys(name.split(".", 1)[0] for name in design.names))
     missing = [e for e in POWER_EFFECTS if e not in base]
-    if settings.n_verify < 1 or not missing:
+    if not missing:
         return None
     try:
         A, names, _ = design_matrix(method.design_dataset(pool), base + missing,
@@ -161,6 +168,15 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
                                             state.q.size, min_poses=MIN_TARGET_POSES)
             more = np.zeros(0, dtype=int) if enough is None else chosen[enough:]
             chosen = chosen if enough is None else chosen[:enough]
+        power = power_design(method, design, pool, settings) if short else None
+        time_limits = TimeLimits.from_extra(state.extra, state.q.size)
+        if power is not None and CHECK_POSES > 0:  # fit poses that see a missing effect
+            unused = np.setdiff1d(np.arange(pool.shape[0]), chosen)
+            check_poses = power.check_poses(chosen, unused, CHECK_POSES, pool,
+                                            time_limits.joint_speed * settings.speed,
+                                            time_limits.settle_s + time_limits.capture_s)
+            chosen = np.concatenate([chosen, check_poses])
+            more = more[~np.isin(more, check_poses)][:max(0, settings.n_poses - chosen.size)]
         if short:  # a tour, full-turn joints the short way round (tour.short_path)
             order, q_short = short_path(pool[chosen], state.q, *limits)
             fit_indices = chosen[order]
@@ -187,13 +203,11 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     predicted_power: float | None = None
     if short:
         rest = np.setdiff1d(np.arange(pool.shape[0]), np.concatenate([fit_indices, more]))
-        power = power_design(method, design, pool, settings)
-        if power is not None:  # the most signal against a missing effect per second
-            time_limits = TimeLimits.from_extra(state.extra, state.q.size)
+        if power is not None and settings.n_verify > 0:  # most signal per second
             verify_indices, predicted_power = power.choose(
                 fit_indices, rest, settings.n_verify, pool, last,
                 time_limits.joint_speed * settings.speed,
-                time_limits.settle_s + time_limits.capture_s)
+                time_limits.settle_s + time_limits.capture_s, limits)
         else:  # a random choice, toured
             verify_indices = nearby_verify_poses(pool, rest, last, settings.n_verify, rng)
         order, q_verify = short_path(pool[verify_indices], last, *limits)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hostpc.diagnostics.distributions import chi2_isf, ncx2_sf
-from hostpc.planning.tour import move_times, nearest_neighbour, plan_tour
+from hostpc.planning.tour import move_times, nearest_equivalents, nearest_neighbour, plan_tour
 
 DETECTABLE_D2 = 10.0
 """The error size the default verification must detect: expected whitened squared error
@@ -132,24 +132,49 @@ class PowerDesign:
 
     def choose(self, fit: np.ndarray, unused: np.ndarray, n_verify: int, q: np.ndarray,
                q_from: np.ndarray, joint_speed: np.ndarray, per_pose_s: float,
-               periodic: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+               limits: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, float]:
         """(pool indices of n_verify verification poses among `unused`, in the order
         chosen; their predicted power): from q_from (n,) each step takes the pose with the
         most signal per second of its move (q (N, n) the pool, joint_speed (n,) rad/s at
-        the run's speed), settle and capture (per_pose_s)."""
+        the run's speed; a full-turn joint to its equivalent nearest within `limits`
+        (q_min, q_max), `tour.nearest_equivalents`: no move that unwinds looks short),
+        settle and capture (per_pose_s)."""
         unused = np.asarray(unused, dtype=int)
         signal = self.signal(fit)
         chosen: list[int] = []
         total = 0.0
         current = np.asarray(q_from, float)
         for _ in range(min(int(n_verify), unused.size)):
-            cost = move_times(current, q[unused], joint_speed, periodic) + per_pose_s
+            reached = nearest_equivalents(current, q[unused], *limits)
+            cost = move_times(current, reached, joint_speed) + per_pose_s
             score = signal[unused] / cost
             score[np.isin(unused, chosen)] = -np.inf
-            k = int(unused[int(np.argmax(score))])
+            best = int(np.argmax(score))
+            k = int(unused[best])
             chosen.append(k)
             total += float(signal[k])
-            current = q[k]
+            current = reached[best]
         m = self.A.shape[1]
         power = verify_power(len(chosen), total / max(len(chosen), 1), self.alpha, m)
         return np.asarray(chosen, dtype=int), power
+
+
+    def check_poses(self, fit: np.ndarray, unused: np.ndarray, n_check: int, q: np.ndarray,
+                    joint_speed: np.ndarray, per_pose_s: float) -> np.ndarray:
+        """Pool indices (among `unused`) of n_check further FIT poses that let the fit's
+        own chi-square see a missing effect: adding pose v to the fit raises the
+        chi-square's non-centrality by exactly v's signal (the innovation r^T S_v^-1 r of
+        the class docstring), so each step takes the pose with the most signal per second
+        of its detour (its move from the nearest pose of the fit so far, q (N, n) the pool,
+        joint_speed (n,) rad/s at the run's speed) with its settle and capture."""
+        measured = [int(k) for k in np.asarray(fit, dtype=int)]
+        unused = np.asarray(unused, dtype=int)
+        added: list[int] = []
+        for _ in range(min(int(n_check), unused.size)):
+            signal = self.signal(np.asarray(measured + added, dtype=int))
+            detour = np.min(move_times(q[unused][:, None, :],
+                                       q[measured + added][None, :, :], joint_speed), axis=1)
+            score = signal[unused] / (detour + per_pose_s)
+            score[np.isin(unused, added)] = -np.inf
+            added.append(int(unused[int(np.argmax(score))]))
+        return np.asarray(added, dtype=int)

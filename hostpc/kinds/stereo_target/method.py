@@ -292,6 +292,13 @@ class StereoTargetMethod(Method):
         return cov
 
     @property
+    def planning_sigma_px(self) -> float:
+        """The pixel noise the plan assumes: the rig calibration's measured reprojection
+        RMS when there is one, else CENTROID_SIGMA_PX."""
+        rms = float(getattr(self.rig, "rms", 0.0) or 0.0)
+        return rms if rms > 0.0 else CENTROID_SIGMA_PX
+
+    @property
     def pixel_floor(self) -> float:
         """The systematic floor (px) added to measured covariances (option pixel_floor)."""
         return float(self.settings.options.get("pixel_floor", PIXEL_FLOOR_PX))
@@ -304,7 +311,7 @@ class StereoTargetMethod(Method):
              for row in q])
         problem = build_problem(placeholder, "joint_offsets")
         p, _ = predict(problem, np.zeros(problem.layout.size), jacobian=False)
-        cov = self.expected_covariance(p)
+        cov = self.expected_covariance(p, self.planning_sigma_px)
         return self.samples_dataset(
             [StereoSample(q=floats(q[k]), p=floats(p[k]), cov=matrix(cov[k]), t=float(k))
              for k in range(n)])
