@@ -3,13 +3,15 @@ verification poses (none of them a fit pose), and the identifiability check BEFO
 moves. Pure numerics apart from the progress messages.
 
 With a target sigma (stereo_target's default) the fit poses are the fewest that reach it
-(at least MIN_TARGET_POSES, which stereo_target's centre refinement needs), visited as a
-tour, and the verification poses a random choice visited as a tour from the last fit pose
-(`hostpc.planning.verify_poses`): the short-robot-time plan; the selection is travel-aware
-(TRAVEL_SLACK). The rest of the selection (up to --poses) is kept as `q_more`, a tour from
-the last fit pose, which the runner measures only if the fit does not explain the
-measurements. Without one (`--poses N` alone) N poses nearest-neighbour ordered and a plain
-random verification choice."""
+(at least MIN_TARGET_POSES, which stereo_target's centre refinement needs; the selection is
+travel-aware, TRAVEL_SLACK) and CHECK_POSES more that let the fit's own chi-square see a
+missing joint compliance, visited as a tour; the verification poses are chosen after them
+for the most signal against that missing effect per second of robot time
+(`hostpc.planning.verify_poses.PowerDesign`), random where the model has it: the
+short-robot-time plan. The rest of the selection (up to --poses) is kept as `q_more`, a
+tour from the last fit pose, which the runner measures only if the fit does not explain
+the measurements. Without one (`--poses N` alone) N poses nearest-neighbour ordered and a
+plain random verification choice."""
 
 from __future__ import annotations
 
@@ -111,7 +113,11 @@ CHECK_POSES = 2
 """Fit poses a short plan adds to the fewest that reach the target sigma so that the fit's
 own chi-square sees a missing joint compliance (`PowerDesign.check_poses`): the poses
 that reach the sigma at least travel are compact, a compact fit absorbs the bending into
-its offsets, and the plan would not grow when the model fails."""
+its offsets, and the plan would not grow when the model fails (the hidden-compliance
+walk-through of README and docs/diagnostics.md; tests/integration/test_diagnose_from_stub.py
+failed without them once the plan was planned with the rig's measured pixel noise: 6-7
+poses). Two check poses raise the fit's non-centrality against that bending 2-4x more
+than two more selected poses (tests/hostpc/test_verify_power.py)."""
 
 
 def power_design(method: Method, design: Design, pool: np.ndarray, settings: RunSettings

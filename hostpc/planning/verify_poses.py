@@ -18,6 +18,12 @@ their measurements). With sample_factor 1 (the default, SAMPLE_FACTOR) it is the
 random choice, toured; a larger factor shortens the travel but clusters the poses, which
 costs power against effects that vary over the workspace.
 
+With a target sigma the plan (hostpc.calibrate.run_plan) chooses its verification poses
+for their power against a missing joint compliance instead (`PowerDesign.choose`: the
+most signal per second of move, settle and capture), and adds fit poses that let the
+fit's own chi-square see it (`PowerDesign.check_poses`); the random choice above serves
+the plans whose model has that effect and a grown plan's further verification poses.
+
 Shapes: pool (N, n) rad; q_from (n,) rad; joint_speed (n,) rad/s or None (equal speeds).
 """
 
