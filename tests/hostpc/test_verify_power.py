@@ -20,6 +20,25 @@ HIDDEN = {"joint_compliance.c2": 3e-6, "joint_compliance.c3": 4e-6}
 """rad/(N m): the bending of controller_stub/scenarios/stereo_hidden_compliance.yaml."""
 
 
+class World:
+    """The planning pool of seed `seed` (nominal rig, home pose), its design without and
+    with joint_compliance, and the hidden bending's whitened effect per pose (N, m)."""
+
+    def __init__(self, seed: int, tmp_path: Path) -> None:
+        self.method = stereo_method(("target",), tmp_path)
+        self.state = home_state()
+        self.pool = self.method.candidates(self.state, np.random.default_rng(seed))
+        self.settings = RunSettings(method="stereo_target", seed=seed, n_verify=4,
+                                    target_sigma_deg=0.002)
+        dataset = self.method.design_dataset(self.pool)
+        self.design = make_design(*design_matrix(dataset, None))
+        self.full, names, _ = design_matrix(dataset,
+                                            ["joint_offsets", "tool", "joint_compliance"])
+        self.full_names = list(names)
+        self.bending = sum(self.full[:, :, self.full_names.index(n)] * c
+                           for n, c in HIDDEN.items())
+
+
 def test_a_move_is_costed_to_the_angle_the_robot_can_reach() -> None:
     # wrist 3 wound to 350 deg (limits +-360): a pose at 10 deg is NOT 20 deg away (370 is
     # beyond the limit), it is 340 deg back
@@ -43,17 +62,10 @@ def test_check_poses_let_a_short_fit_see_a_missing_compliance(seed: int,
     # non-centrality ||(I - P_A) b||^2 over the fit poses (b: the bending's whitened
     # effect). A compact, travel-aware fit absorbs the bending into its offsets; two check
     # poses (PowerDesign.check_poses) must show it far better than two more selected poses
-    method = stereo_method(("target",), tmp_path)
-    state = home_state()
-    pool = method.candidates(state, np.random.default_rng(seed))
-    settings = RunSettings(method="stereo_target", seed=seed, n_verify=4,
-                           target_sigma_deg=0.002)
-    A, names, units = design_matrix(method.design_dataset(pool), None)
-    design = make_design(A, names, units)
-    full, full_names, _ = design_matrix(method.design_dataset(pool),
-                                        ["joint_offsets", "tool", "joint_compliance"])
-    own = [full_names.index(n) for n in names]
-    bending = sum(full[:, :, full_names.index(n)] * c for n, c in HIDDEN.items())
+    w = World(seed, tmp_path)
+    method, state, pool, settings, design = w.method, w.state, w.pool, w.settings, w.design
+    full, bending = w.full, w.bending
+    own = [w.full_names.index(n) for n in design.names]
 
     def noncentrality(fit: np.ndarray) -> float:
         A_fit = full[fit][:, :, own].reshape(-1, len(own))
@@ -84,16 +96,9 @@ def test_verification_poses_chosen_for_power_see_more_of_a_missing_compliance(
     # choice of the same count (the choice before), drawn 5 times
     from hostpc.planning.verify_poses import nearby_verify_poses
 
-    method = stereo_method(("target",), tmp_path)
-    state = home_state()
-    pool = method.candidates(state, np.random.default_rng(seed))
-    settings = RunSettings(method="stereo_target", seed=seed, n_verify=4,
-                           target_sigma_deg=0.002)
-    A, names, units = design_matrix(method.design_dataset(pool), None)
-    design = make_design(A, names, units)
-    full, full_names, _ = design_matrix(method.design_dataset(pool),
-                                        ["joint_offsets", "tool", "joint_compliance"])
-    bending = sum(full[:, :, full_names.index(n)] * c for n, c in HIDDEN.items())
+    w = World(seed, tmp_path)
+    method, state, pool, settings, design = w.method, w.state, w.pool, w.settings, w.design
+    A, bending = design.A, w.bending
     travel = Travel(pool, state.q, full_turn_joints(state.q_min, state.q_max), TRAVEL_SLACK)
     fit = select(design, 9, "D", np.random.default_rng(0), travel)
     A_fit = A[fit].reshape(-1, A.shape[2])
