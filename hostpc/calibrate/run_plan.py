@@ -122,9 +122,9 @@ than two more selected poses (tests/hostpc/test_verify_power.py)."""
 
 def power_design(method: Method, design: Design, pool: np.ndarray, settings: RunSettings
                  ) -> PowerDesign | None:
-    """The verification's power against the effects the model lacks
-    (verify_poses.POWER_EFFECTS) over the pool; None when the model has them all or the
-    method's measurements cannot carry them."""
+    """Where the pool's poses see the effects the model lacks (verify_poses.POWER_EFFECTS):
+    for the check poses and the verification poses of a short plan; None when the model
+    has them all or the method's measurements cannot carry them."""
     base = list(dict.fromkeys(name.split(".", 1)[0] for name in design.names))
     missing = [e for e in POWER_EFFECTS if e not in base]
     if not missing:
@@ -138,7 +138,7 @@ def power_design(method: Method, design: Design, pool: np.ndarray, settings: Run
         return None
     own = [names.index(n) for n in design.names]
     extra = [k for k, n in enumerate(names) if n not in design.names]
-    return PowerDesign.scaled(A[:, :, own], A[:, :, extra], settings.verify_alpha)
+    return PowerDesign.scaled(A[:, :, own], A[:, :, extra])
 
 
 def plan_run(method: Method, state: RobotState, settings: RunSettings, progress: Progress
@@ -206,11 +206,10 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     q_fit = q_short if short else pool[fit_indices]
     last = q_fit[-1] if q_fit.shape[0] else state.q
     q_verify_more: np.ndarray | None = None
-    predicted_power: float | None = None
     if short:
         rest = np.setdiff1d(np.arange(pool.shape[0]), np.concatenate([fit_indices, more]))
         if power is not None and settings.n_verify > 0:  # most signal per second
-            verify_indices, predicted_power = power.choose(
+            verify_indices = power.choose(
                 fit_indices, rest, settings.n_verify, pool, last,
                 time_limits.joint_speed * settings.speed,
                 time_limits.settle_s + time_limits.capture_s, limits)
@@ -286,7 +285,5 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
                          "before measuring): " + "; ".join(d.short for d in detectable))
     if more.size:
         info["more_poses"] = int(more.size)
-    if predicted_power is not None:
-        info["predicted_verify_power"] = predicted_power
     return Plan(q=q_fit, q_verify=q_verify, info=info, q_more=q_more,
                 q_verify_more=q_verify_more)

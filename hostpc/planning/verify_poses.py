@@ -89,19 +89,17 @@ them (`PowerDesign`): a joint bending under its gravity load varies over the wor
 a short fit absorbs it into its offsets where it measured, and the verification must look
 where that no longer holds."""
 
-POWER_D2 = 2.5
-"""The size each missing effect parameter is scaled to: its whitened squared error per
-pose, RMS over the pool. Only the ranking of the poses depends on it (each pose's signal
-is proportional to it); the predicted power is reported, not used to size the plan."""
-
 
 @dataclass(frozen=True)
 class PowerDesign:
-    """The verification's power against effects the model lacks, from the designs before
-    anything moves. A: (N, m, P) the model's whitened Jacobian at the pool's poses; B: (N,
-    m, Q) the missing effects' (POWER_EFFECTS), each parameter scaled so that its whitened
-    squared error per pose is POWER_D2 in RMS over the pool (parameters the pool cannot see
-    dropped); alpha: the verification's false-FAIL rate.
+    """Where a verification (or a fit's own chi-square) sees effects the model lacks, from
+    the designs before anything moves. A: (N, m, P) the model's whitened Jacobian at the
+    pool's poses; B: (N, m, Q) the missing effects' (POWER_EFFECTS), all parameters scaled
+    by ONE factor (`scaled`: the parameter the pool sees most leaves a whitened squared
+    error of 1 per pose in RMS), so a joint the gravity hardly loads counts as little as it
+    bends (scaling each parameter alone made a wrist's compliance count as much as the
+    shoulder's, and the chosen poses missed the hidden compliance: docs/performance.md).
+    Only the ranking of poses is used, never the scale.
 
     A fit of the poses F moves the model by K = A_F^+ B_F per unit of each missing
     parameter, so a verification pose v keeps the error r = (B_v - A_v K) e_j, and the test
@@ -112,15 +110,15 @@ class PowerDesign:
 
     A: np.ndarray
     B: np.ndarray
-    alpha: float
 
     @classmethod
-    def scaled(cls, A: np.ndarray, B: np.ndarray, alpha: float) -> PowerDesign:
-        """B's parameters scaled to POWER_D2 (class docstring)."""
+    def scaled(cls, A: np.ndarray, B: np.ndarray) -> PowerDesign:
+        """B's parameters scaled by one factor, those the pool cannot see dropped (class
+        docstring)."""
         size = np.mean(np.sum(B**2, axis=1), axis=0)
-        largest = float(np.max(size, initial=0.0))
-        seen = size > 1e-12 * max(largest, 1e-300)
-        return cls(A, B[:, :, seen] * np.sqrt(POWER_D2 / max(largest, 1e-300)), float(alpha))
+        largest = max(float(np.max(size, initial=0.0)), 1e-300)
+        seen = size > 1e-12 * largest
+        return cls(A, B[:, :, seen] / np.sqrt(largest))
 
     def signal(self, fit: np.ndarray) -> np.ndarray:
         """(N,) each pool pose's signal after a fit of the pool poses `fit` (indices); 0
@@ -138,9 +136,9 @@ class PowerDesign:
 
     def choose(self, fit: np.ndarray, unused: np.ndarray, n_verify: int, q: np.ndarray,
                q_from: np.ndarray, joint_speed: np.ndarray, per_pose_s: float,
-               limits: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, float]:
-        """(pool indices of n_verify verification poses among `unused`, in the order
-        chosen; their predicted power): from q_from (n,) each step takes the pose with the
+               limits: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        """Pool indices of n_verify verification poses among `unused`, in the order
+        chosen: from q_from (n,) each step takes the pose with the
         most signal per second of its move (q (N, n) the pool, joint_speed (n,) rad/s at
         the run's speed; a full-turn joint to its equivalent nearest within `limits`
         (q_min, q_max), `tour.nearest_equivalents`: no move that unwinds looks short),
@@ -148,7 +146,6 @@ class PowerDesign:
         unused = np.asarray(unused, dtype=int)
         signal = self.signal(fit)
         chosen: list[int] = []
-        total = 0.0
         current = np.asarray(q_from, float)
         for _ in range(min(int(n_verify), unused.size)):
             reached = nearest_equivalents(current, q[unused], *limits)
@@ -158,11 +155,8 @@ class PowerDesign:
             best = int(np.argmax(score))
             k = int(unused[best])
             chosen.append(k)
-            total += float(signal[k])
             current = reached[best]
-        m = self.A.shape[1]
-        power = verify_power(len(chosen), total / max(len(chosen), 1), self.alpha, m)
-        return np.asarray(chosen, dtype=int), power
+        return np.asarray(chosen, dtype=int)
 
 
     def check_poses(self, fit: np.ndarray, unused: np.ndarray, n_check: int, q: np.ndarray,

@@ -114,7 +114,7 @@ def test_verification_poses_chosen_for_power_see_more_of_a_missing_compliance(
     assert power is not None
     limits = TimeLimits.from_extra({}, 6)
     unused = np.setdiff1d(np.arange(pool.shape[0]), fit)
-    chosen, _ = power.choose(fit, unused, 4, pool, pool[fit[-1]], limits.joint_speed * 0.5,
+    chosen = power.choose(fit, unused, 4, pool, pool[fit[-1]], limits.joint_speed * 0.5,
                              limits.settle_s + limits.capture_s, (state.q_min, state.q_max))
     assert chosen.size == 4 and not np.isin(chosen, fit).any()
     rng = np.random.default_rng(seed)
