@@ -21,8 +21,9 @@ costs power against effects that vary over the workspace.
 With a target sigma the plan (hostpc.calibrate.run_plan) chooses its verification poses
 for their power against a missing joint compliance instead (`PowerDesign.choose`: the
 most signal per second of move, settle and capture), and adds fit poses that let the
-fit's own chi-square see it (`PowerDesign.check_poses`); the random choice above serves
-the plans whose model has that effect and a grown plan's further verification poses.
+fit's own chi-square see it (`PowerDesign.check_poses`); a grown plan's further
+verification poses are chosen the same way against what the grown fit leaves. The random
+choice above serves the plans whose model has that effect.
 
 Shapes: pool (N, n) rad; q_from (n,) rad; joint_speed (n,) rad/s or None (equal speeds).
 """
@@ -157,7 +158,6 @@ class PowerDesign:
             chosen.append(k)
             current = reached[best]
         return np.asarray(chosen, dtype=int)
-
 
     def check_poses(self, fit: np.ndarray, unused: np.ndarray, n_check: int, q: np.ndarray,
                     joint_speed: np.ndarray, per_pose_s: float) -> np.ndarray:
