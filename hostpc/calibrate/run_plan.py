@@ -220,13 +220,9 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         if more.size:  # if the model fails: the verification with a fixed plan's count
             rest = np.setdiff1d(rest, verify_indices)
             from_pose = q_verify[-1] if verify_indices.size else last
-            n_extra = max(0, EXTENDED_VERIFY_POSES - verify_indices.size)
-            if power is not None:  # against what the grown fit (all its poses) leaves
-                extra = power.choose(np.concatenate([fit_indices, more]), rest, n_extra,
-                                     pool, from_pose, time_limits.joint_speed * settings.speed,
-                                     time_limits.settle_s + time_limits.capture_s, limits)
-            else:
-                extra = nearby_verify_poses(pool, rest, from_pose, n_extra, rng)
+            extra = nearby_verify_poses(
+                pool, rest, from_pose, max(0, EXTENDED_VERIFY_POSES - verify_indices.size),
+                rng)
             q_verify_more = short_path(pool[extra], from_pose, *limits)[1]
         # the whole plan as one path: a joint wound up by the fit tour must not unwind on
         # the way to the verification poses (tour.unwrap_plan)
