@@ -21,9 +21,10 @@ costs power against effects that vary over the workspace.
 With a target sigma the plan (hostpc.calibrate.run_plan) chooses its verification poses
 for their power against a missing joint compliance instead (`PowerDesign.choose`: the
 most signal per second of move, settle and capture), and adds fit poses that let the
-fit's own chi-square see it (`PowerDesign.check_poses`); a grown plan's further
-verification poses are chosen the same way against what the grown fit leaves. The random
-choice above serves the plans whose model has that effect.
+fit's own chi-square see it (`PowerDesign.check_poses`); the random choice above serves
+the plans whose model has that effect and a grown plan's further verification poses
+(chosen for power against the grown fit they caught the same 39 of 40 forced pushes,
+docs/performance.md).
 
 Shapes: pool (N, n) rad; q_from (n,) rad; joint_speed (n,) rad/s or None (equal speeds).
 """
