@@ -3,17 +3,19 @@ verification poses (none of them a fit pose), and the identifiability check BEFO
 moves. Pure numerics apart from the progress messages.
 
 With a target sigma (stereo_target's default) the fit poses are the fewest that reach it
-(at least MIN_TARGET_POSES, which stereo_target's centre refinement needs), visited as a
-tour, and the verification poses a random choice visited as a tour from the last fit pose
-(`hostpc.planning.verify_poses`): the short-robot-time plan; the selection is travel-aware
-(TRAVEL_SLACK). The rest of the selection (up to --poses) is kept as `q_more`, a tour from
-the last fit pose, which the runner measures only if the fit does not explain the
-measurements. Without one (`--poses N` alone) N poses nearest-neighbour ordered and a plain
-random verification choice. A method that plans whole groups (sphere_probe's probe
-orientations) takes, with a target sigma (its default), the fewest leading groups of the
-nested group selection that reach it as a tour of groups, the rest as `q_more`, and a
-random choice of fresh whole groups for verification, toured; its floor counts those
-groups' poses and their measuring moves (the guarded approaches)."""
+(at least MIN_TARGET_POSES, which stereo_target's centre refinement needs; the selection is
+travel-aware, TRAVEL_SLACK) and CHECK_POSES more that let the fit's own chi-square see a
+missing joint compliance, visited as a tour; the verification poses are chosen after them
+for the most signal against that missing effect per second of robot time
+(`hostpc.planning.verify_poses.PowerDesign`), random where the model has it: the
+short-robot-time plan. The rest of the selection (up to --poses) is kept as `q_more`, a
+tour from the last fit pose, which the runner measures only if the fit does not explain
+the measurements. Without one (`--poses N` alone) N poses nearest-neighbour ordered and a
+plain random verification choice. A method that plans
+whole groups (sphere_probe's probe orientations) takes, with a target sigma (its default),
+the fewest leading groups of the nested group selection that reach it as a tour of groups,
+the rest as `q_more`, and a random choice of fresh whole groups for verification, toured;
+its floor counts those groups' poses and their measuring moves (the guarded approaches)."""
 
 from __future__ import annotations
 
@@ -28,6 +30,7 @@ from hostpc.json_object import JsonObject
 from hostpc.methods import method_class
 from hostpc.methods.base import Method, Plan, Progress, RunSettings
 from hostpc.planning.design import (
+    Design,
     Travel,
     check_plan,
     design_matrix,
@@ -50,7 +53,7 @@ from hostpc.planning.robot_time import (
     predicted_robot_time,
 )
 from hostpc.planning.tour import full_turn_joints, short_path, unwrap_plan
-from hostpc.planning.verify_poses import nearby_verify_poses
+from hostpc.planning.verify_poses import POWER_EFFECTS, PowerDesign, nearby_verify_poses
 from hostpc.robots.base import RobotState
 
 EXTENDED_VERIFY_POSES = 10
@@ -114,6 +117,38 @@ def plan_warnings(method: str | type[Method], target_sigma_deg: float | None,
     return lines
 
 
+CHECK_POSES = 2
+"""Fit poses a short plan adds to the fewest that reach the target sigma so that the fit's
+own chi-square sees a missing joint compliance (`PowerDesign.check_poses`): the poses
+that reach the sigma at least travel are compact, a compact fit absorbs the bending into
+its offsets, and the plan would not grow when the model fails (the hidden-compliance
+walk-through of README and docs/diagnostics.md; tests/integration/test_diagnose_from_stub.py
+failed without them once the plan was planned with the rig's measured pixel noise: 6-7
+poses). Two check poses raise the fit's non-centrality against that bending 2-4x more
+than two more selected poses (tests/hostpc/test_verify_power.py)."""
+
+
+def power_design(method: Method, design: Design, pool: np.ndarray, settings: RunSettings
+                 ) -> PowerDesign | None:
+    """Where the pool's poses see the effects the model lacks (verify_poses.POWER_EFFECTS):
+    for the check poses and the verification poses of a short plan; None when the model
+    has them all or the method's measurements cannot carry them."""
+    base = list(dict.fromkeys(name.split(".", 1)[0] for name in design.names))
+    missing = [e for e in POWER_EFFECTS if e not in base]
+    if not missing:
+        return None
+    try:
+        A, names, _ = design_matrix(method.design_dataset(pool), base + missing,
+                                    settings.plugins)
+    except InputError:  # an effect the method's measurements cannot carry
+        return None
+    if not set(design.names) <= set(names):
+        return None
+    own = [names.index(n) for n in design.names]
+    extra = [k for k, n in enumerate(names) if n not in design.names]
+    return PowerDesign.scaled(A[:, :, own], A[:, :, extra])
+
+
 def plan_run(method: Method, state: RobotState, settings: RunSettings, progress: Progress
              ) -> Plan:
     """Candidate pool, informative selection, order, verification poses, check."""
@@ -147,6 +182,15 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
                                             state.q.size, min_poses=MIN_TARGET_POSES)
             more = np.zeros(0, dtype=int) if enough is None else chosen[enough:]
             chosen = chosen if enough is None else chosen[:enough]
+        power = power_design(method, design, pool, settings) if short else None
+        time_limits = TimeLimits.from_extra(state.extra, state.q.size)
+        if power is not None and CHECK_POSES > 0:  # fit poses that see a missing effect
+            unused = np.setdiff1d(np.arange(pool.shape[0]), chosen)
+            check_poses = power.check_poses(chosen, unused, CHECK_POSES, pool,
+                                            time_limits.joint_speed * settings.speed,
+                                            time_limits.settle_s + time_limits.capture_s)
+            chosen = np.concatenate([chosen, check_poses])
+            more = more[~np.isin(more, check_poses)][:max(0, settings.n_poses - chosen.size)]
         if short:  # a tour, full-turn joints the short way round (tour.short_path)
             order, q_short = short_path(pool[chosen], state.q, *limits)
             fit_indices = chosen[order]
@@ -184,7 +228,13 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     q_verify_more: np.ndarray | None = None
     if short:
         rest = np.setdiff1d(np.arange(pool.shape[0]), np.concatenate([fit_indices, more]))
-        verify_indices = nearby_verify_poses(pool, rest, last, settings.n_verify, rng)
+        if power is not None and settings.n_verify > 0:  # most signal per second
+            verify_indices = power.choose(
+                fit_indices, rest, settings.n_verify, pool, last,
+                time_limits.joint_speed * settings.speed,
+                time_limits.settle_s + time_limits.capture_s, limits)
+        else:  # a random choice, toured
+            verify_indices = nearby_verify_poses(pool, rest, last, settings.n_verify, rng)
         order, q_verify = short_path(pool[verify_indices], last, *limits)
         verify_indices = verify_indices[order]
         if more.size:  # if the model fails: the verification with a fixed plan's count

@@ -51,6 +51,27 @@ def move_times(q_from: np.ndarray, q_to: np.ndarray,
     return np.asarray(np.max(dq, axis=-1))
 
 
+def nearest_equivalents(q_from: np.ndarray, q: np.ndarray, q_min: np.ndarray,
+                        q_max: np.ndarray) -> np.ndarray:
+    """q (N, n) with each full-turn joint's angle replaced by its equivalent q + 2 pi m
+    nearest q_from (n,) within [q_min, q_max] (as it is where none is within): the angles
+    a move from q_from really reaches, so its time is that of a move that never unwinds."""
+    q = np.asarray(q, float).copy()
+    joints = np.flatnonzero(full_turn_joints(q_min, q_max))
+    if joints.size == 0 or q.shape[0] == 0:
+        return q
+    options = q[:, joints, None] + 2 * np.pi * np.arange(-2, 3)[None, None, :]
+    lo = np.asarray(q_min, float)[joints, None]
+    hi = np.asarray(q_max, float)[joints, None]
+    distance = np.abs(options - np.asarray(q_from, float)[joints, None])
+    distance = np.where((options >= lo) & (options <= hi), distance, np.inf)
+    best = np.argmin(distance, axis=2)
+    within = np.isfinite(np.min(distance, axis=2))
+    chosen = np.take_along_axis(options, best[:, :, None], axis=2)[:, :, 0]
+    q[:, joints] = np.where(within, chosen, q[:, joints])
+    return q
+
+
 def path_time(q: np.ndarray, q_start: np.ndarray | None = None,
               joint_speed: np.ndarray | None = None,
               periodic: np.ndarray | None = None) -> float:
