@@ -184,9 +184,11 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
             chosen = chosen if enough is None else chosen[:enough]
         power = power_design(method, design, pool, settings) if short else None
         time_limits = TimeLimits.from_extra(state.extra, state.q.size)
-        if power is not None and CHECK_POSES > 0:  # fit poses that see a missing effect
+        # fit poses that see a missing effect, within --poses (the most the plan measures)
+        n_check = min(CHECK_POSES, max(0, settings.n_poses - chosen.size))
+        if power is not None and n_check > 0:
             unused = np.setdiff1d(np.arange(pool.shape[0]), chosen)
-            check_poses = power.check_poses(chosen, unused, CHECK_POSES, pool,
+            check_poses = power.check_poses(chosen, unused, n_check, pool,
                                             time_limits.joint_speed * settings.speed,
                                             time_limits.settle_s + time_limits.capture_s)
             chosen = np.concatenate([chosen, check_poses])

@@ -111,9 +111,9 @@ def register(subparsers: Any) -> None:
                         help=f"measurement method: a kind with a live acquisition, built in "
                         f"or a plugin's (--plugin); default {DEFAULT_METHOD}")
     parser.add_argument("--poses", type=COUNT, default=None,
-                        help="fit poses (default: stereo_target the fewest, >= 20, reaching "
-                        "--target-sigma, at most 60; other methods 60); --poses N alone "
-                        "measures exactly N")
+                        help="fit poses (default: the fewest that reach --target-sigma, at "
+                        "least 6, plus 2 check poses, at most 60; sphere_probe whole probe "
+                        "orientations); --poses N alone measures exactly N")
     parser.add_argument("--verify-poses", type=integer(least=0), default=None,
                         help="fresh verification poses after the push (default: 4 with a "
                         "target sigma, chosen for the chi-square test's power, else 10; "
@@ -166,7 +166,8 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--target-sigma", type=POSITIVE, default=None, metavar="DEG",
                         help="stop adding fit poses once every identifiable joint offset's "
                         "predicted sigma is <= DEG (then --poses is the most; default "
-                        "stereo_target 0.002 unless --poses is given)")
+                        "unless --poses is given: the method's own; built-in 0.002 deg, "
+                        "dual_loop 0.02)")
     parser.add_argument("--candidates", type=COUNT, default=1500,
                         help="candidate pool size of the planner (default 1500)")
     parser.add_argument("--scenario", metavar="FILE", help="with --robot sim: scenario file")

@@ -77,3 +77,19 @@ def test_no_joint_moves_more_than_half_a_turn_on_a_default_plan(seed: int,
     assert np.degrees(largest_joint_moves(state.q, path)).max() <= 180
     planned = plan.info["predicted_robot_time_s"]
     assert planned["floor"] < planned["total"]
+
+
+def test_poses_is_the_most_a_target_sigma_plan_measures_check_poses_included(
+        tmp_path: Path) -> None:
+    """`--poses 8 --target-sigma 0.0005` (a sigma 8 poses do not reach): 8 fit poses, not
+    8 plus the 2 check poses (review: the plan measured 10 though --poses is 'the most');
+    with room left under --poses the check poses are still added."""
+    method = stereo_method(("target",), tmp_path)
+    state = home_state()
+    tight = RunSettings(method="stereo_target", seed=0, n_poses=8, n_verify=4,
+                        target_sigma_deg=0.0005, n_candidates=600)
+    assert plan_run(method, state, tight, NullProgress()).q.shape[0] == 8
+    roomy = RunSettings(method="stereo_target", seed=0, n_poses=60, n_verify=4,
+                        target_sigma_deg=0.002, n_candidates=600)
+    plan = plan_run(stereo_method(("target",), tmp_path / "b"), state, roomy, NullProgress())
+    assert plan.q.shape[0] >= 6 + 2
