@@ -87,16 +87,29 @@ def station(tmp_path: Path, fast_rig: Path) -> Iterator[tuple[StationProcess, di
 
 
 def _kill_controller_of(run_dir: Path) -> None:
-    """Kill the simulated controller serving the run in `run_dir` (its scenario lives there)."""
+    """Kill the simulated controller serving the run in `run_dir`: a controller_stub process
+    whose own command line names the run's scenario, or (a warm simulator, handed its
+    arguments on stdin: hostpc/robots/warm_stub.py) whose parent's names the run folder."""
     marker = str(run_dir / "sim" / "scenario.json")
+
+    def cmdline(pid: str) -> str:
+        try:
+            return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+        except OSError:
+            return ""
+
+    def parent(pid: str) -> str:
+        try:
+            return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1]
+        except (OSError, IndexError):
+            return ""
+
     for pid in os.listdir("/proc"):
         if not pid.isdigit():
             continue
-        try:
-            cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
-        except OSError:
-            continue
-        if "controller_stub" in cmdline and marker in cmdline:
+        line = cmdline(pid)
+        if "controller_stub" in line and (marker in line
+                                          or str(run_dir) in cmdline(parent(pid))):
             os.kill(int(pid), signal.SIGKILL)
             return
     raise AssertionError(f"no simulated controller for {run_dir}")
