@@ -310,7 +310,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         f"({settings.criterion}-optimal), {q_verify.shape[0]} verification poses; "
         "predicted joint offset sigma "
         + ", ".join("-" if not np.isfinite(s) else f"{math.degrees(s):.4f}"
-                    for s in sigmas) + " deg; predicted robot time "
+                    for s in sigmas) + " deg; predicted robot time of measure + verify "
         f"{planned['total']:.1f} s (motion {planned['motion']:.1f}, settle "
         f"{planned['settle']:.1f}, capture {planned['capture']:.1f}; floor "
         f"{planned['floor']:.1f})")
