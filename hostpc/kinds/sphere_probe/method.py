@@ -352,7 +352,7 @@ class SphereProbeMethod(Method):
             if self._clear is None:
                 raise  # nowhere clear known
         self._check_transfer(hover + then, orientation, q_to=self._clear + then,
-                             target="the robot's start pose")
+                             target="the pose the run found the robot at")
         self._check_transfer(self._clear + shift, orientation)
         return [self._clear]
 
@@ -439,11 +439,10 @@ class SphereProbeMethod(Method):
         if retreat is not None:  # first back out to its hover, as commanded then
             hover, then = retreat
             back = [hover, *self._between_shifts(hover, then, orientation)]
-        else:
-            if here is None:  # from elsewhere: the move to the hover must keep off the sphere
-                self._check_transfer(q_here, orientation)
-            elif here is not None and here[0].group != orientation.group:
-                self._check_transfer(here[0].q_hover, orientation)
+        elif here is None:  # from elsewhere: the move to the hover must keep off the sphere
+            self._check_transfer(q_here, orientation)
+        elif here[0].group != orientation.group:
+            self._check_transfer(here[0].q_hover, orientation)
         via = self._free_moves(orientation, contact, here)
         # commanded where the robot reaches the planned poses
         via = back + [v - shift for v in via]
