@@ -19,6 +19,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from hostpc.calibrate.journal import Journal
@@ -344,3 +345,64 @@ def test_a_known_target_that_is_off_is_refused_swapped_or_not(tmp_path: Path) ->
     # the stages did settle on the swapped joint: the refusal is the known frame's
     stages = Journal(out).events("stage")
     assert math.degrees(stages[-1]["estimate"][2]) == pytest.approx(15.0, abs=0.5)
+
+
+def test_sphere_probe_searches_a_swapped_j2_in_the_default_cell(tmp_path: Path) -> None:
+    """The simulator's default sphere_probe cell (the sphere known, the tip on the flange
+    axis, small zero errors) with J2 15 deg off, declared: every touch misses, and the
+    coarse search steps J2 at the hover of the first pose's orientation, +1, -1, +2, ...
+    deg. Seen under the new step's shift, the hover the robot was backed out to (60 mm
+    off the sphere under the shift it was commanded with) is 9 mm off from +-2 deg on:
+    the transfer goes out through the run's start pose instead of stopping (exit 2 with
+    'would pass 9.0 mm from the sphere'), and the run finds J2 and PASSes."""
+    scenario = default_sim_scenario(method="sphere_probe")
+    scenario["truth"] = {**scenario["truth"], "zero_errors": [
+        0.003, -0.004 + math.radians(15.0), 0.002, -0.005, 0.004, 0.006]}
+    scenario["server"] = {**scenario["server"], "offset_limit_rad": math.radians(40.0)}
+    out = tmp_path / "run"
+    scenario_file = tmp_path / "world.json"
+    scenario_file.write_text(json.dumps(scenario))
+    code = main(["calibrate", "--robot", "sim", "--method", "sphere_probe", "--scenario",
+                 str(scenario_file), "--out", str(out), "--no-report", "--known", "sphere",
+                 "--swapped", "J2"])
+    assert code == 0
+    document = json.loads((out / "result.json").read_text())
+    errors = document["truth"]["joint_offsets_error_deg"]
+    assert document["outcome"]["verdict"] == "PASS"
+    assert errors[5] is None  # the tip on J6's axis: J6 has no effect
+    assert all(abs(e) < TOLERANCE_DEG for e in errors[:5]), errors
+    stages = Journal(out).events("stage")
+    assert math.degrees(stages[0]["estimate"][1]) == pytest.approx(15.0, abs=1.0)
+
+
+def test_sphere_probe_still_stops_a_run_that_starts_next_to_the_sphere(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The transfer guard stays: the robot starts with the stylus 10 mm above the sphere
+    (not a pose of the plan, so nothing to back out to), a swap declared; the first move
+    to a probe orientation would pass that close, and the run stops before it moves
+    (exit 2, saying what to do), also when the search could route through the start."""
+    from hostpc.kinds.sphere_probe.planning.contacts import flange_rotation
+    from hostpc.kinematics import get_robot
+    from hostpc.kinematics.inverse import solve_ik
+
+    scenario = default_sim_scenario(method="sphere_probe")
+    tip = np.asarray(scenario["probe"]["tip"], float)
+    above = np.asarray(scenario["probe"]["sphere_centre"], float) + [0.0, 0.0, 0.024]
+    goal = np.eye(4)
+    goal[:3, :3] = flange_rotation(np.array([0.0, 0.0, -1.0]), 0.0, tip)
+    goal[:3, 3] = above - goal[:3, :3] @ tip
+    half = math.pi / 2
+    q, ok = solve_ik(get_robot("ur5e"), goal[None],
+                     np.array([[0.0, -half, half, -half, -half, 0.0]]), iterations=100)
+    assert ok[0]
+    scenario["motion"] = {**scenario["motion"], "initial_q": q[0].tolist()}
+    scenario_file = tmp_path / "world.json"
+    scenario_file.write_text(json.dumps(scenario))
+    capsys.readouterr()
+    code = main(["calibrate", "--robot", "sim", "--method", "sphere_probe", "--scenario",
+                 str(scenario_file), "--out", str(tmp_path / "run"), "--no-report",
+                 "--swapped", "J2"])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert "mm from the sphere (nominal model); move the robot away from the sphere first" \
+        in err

@@ -180,8 +180,13 @@ class SphereProbeMethod(Method):
         self._contact_poses: np.ndarray | None = None
         self._t0 = time.monotonic()
         self._joint_estimate = np.zeros(self.chain.n)  # set_joint_estimate
-        self._left: tuple[np.ndarray, np.ndarray] | None = None
-        """(commanded start, commanded hover) of the last contact probed (acquire)."""
+        self._left: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        """(commanded start, commanded hover, the shift they were commanded under) of the
+        last contact probed (acquire)."""
+        self._clear: np.ndarray | None = None
+        """Where this process found the robot (`prepare`: the run's start pose, or where a
+        resume finds it) when that is clear of the sphere on the nominal model (unshifted);
+        the transfers between two shifts go through it (`_between_shifts`)."""
 
     def set_joint_estimate(self, estimate: np.ndarray, new_stage: bool = False) -> None:
         """A contact is looked up at the pose the robot reaches and its hover, start and
@@ -210,10 +215,14 @@ class SphereProbeMethod(Method):
         return DEFAULT_EFFECTS if self.probe_io == "guarded" else None
 
     async def prepare(self, robot: RobotAdapter, progress: Progress) -> None:
-        """Reload this run's probe plan on resume; with ``probe_io`` modbus, check that the
-        probe line can be read (before anything moves)."""
+        """Reload this run's probe plan on resume; note where the robot is if it is clear
+        of the sphere (`_clear`); with ``probe_io`` modbus, check that the probe line can
+        be read (before anything moves)."""
         import json
 
+        q = np.asarray((await robot.state()).q, float)
+        if self._clearance(q, q) >= self._transfer_margin:
+            self._clear = q
         if self.plan_path.is_file():
             self.plan = plan_from_dict(json.loads(self.plan_path.read_text()))
             progress.message(f"probe plan: {self.plan_path} (from this run)")
@@ -310,16 +319,42 @@ class SphereProbeMethod(Method):
                     return orientation, contact
         return None
 
-    def _retreat(self, q_from: np.ndarray) -> np.ndarray | None:
-        """The commanded hover to back out to when the robot is at a contact's start
-        commanded under another shift than the current one (a new stage, or a resume with
-        --swapped): the last contact this process probed (`_left`), or a contact's start
-        of the unshifted plan (a journal's last pose); None if neither."""
+    def _retreat(self, q_from: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """The commanded hover to back out to, and the shift it is commanded under, when
+        the robot is at a contact's start commanded under another shift than the current
+        one (a new stage, a step of the coarse search, or a resume with --swapped): the
+        last contact this process probed (`_left`), or a contact's start of the unshifted
+        plan (a journal's last pose); None if neither."""
         q_from = np.asarray(q_from, float)
         if self._left is not None and np.max(np.abs(q_from - self._left[0])) < 1e-9:
-            return self._left[1]
+            return self._left[1], self._left[2]
         unshifted = self._located(q_from)
-        return None if unshifted is None or unshifted[1] is None else unshifted[0].q_hover
+        if unshifted is None or unshifted[1] is None:
+            return None
+        return unshifted[0].q_hover, np.zeros_like(q_from)
+
+    def _between_shifts(self, hover: np.ndarray, then: np.ndarray,
+                        orientation: PlannedOrientation) -> list[np.ndarray]:
+        """The commanded moves from `hover` (commanded under the shift `then`) toward
+        `orientation`'s hover under the current shift, each checked on the nominal model
+        under the shift its near-sphere end is commanded under: the robot is where `then`
+        puts it, the target where the current shift does. A direct move clear under the
+        current shift goes straight ([]); else through the clear pose (`_clear`), the leg
+        out under `then`, the leg in under the current shift ([the clear pose]). A J2 step
+        of the search moves the stylus several cm at the hover: the direct move, seen
+        under the new shift, starts next to the sphere although the robot is 60 mm off
+        under the one it was commanded with."""
+        shift = self._joint_estimate
+        try:
+            self._check_transfer(hover + shift, orientation)
+            return []
+        except InputError:
+            if self._clear is None:
+                raise  # nowhere clear known
+        self._check_transfer(hover + then, orientation, q_to=self._clear + then,
+                             target="the pose the run found the robot at")
+        self._check_transfer(self._clear + shift, orientation)
+        return [self._clear]
 
     def _free_moves(self, orientation: PlannedOrientation, contact: PlannedContact,
                     here: Location | None) -> list[np.ndarray]:
@@ -364,22 +399,31 @@ class SphereProbeMethod(Method):
                        samples=samples, known=self.setup.known,
                        blocks=probe_blocks(self.setup.stylus_radius))
 
-    def _check_transfer(self, q_from: np.ndarray | None,
-                        orientation: PlannedOrientation) -> None:
-        """The free move from where the robot is to this orientation's hover keeps the tip
-        off the sphere (nominal model); the planner checked moves between consecutive
-        planned orientations only, and the runner may skip some."""
-        if q_from is None:
+    @property
+    def _transfer_margin(self) -> float:
+        """The least tip-to-centre distance (m) of a free move from elsewhere."""
+        return self.setup.contact_distance + self.config.standoff
+
+    def _clearance(self, q_from: np.ndarray, q_to: np.ndarray) -> float:
+        """Smallest tip-to-centre distance (m) of the joint move q_from -> q_to (plan frame,
+        nominal model)."""
+        return path_clearance(self.chain, q_from, q_to, self.setup.tip,
+                              self.setup.sphere_centre)
+
+    def _check_transfer(self, q_from: np.ndarray | None, orientation: PlannedOrientation,
+                        q_to: np.ndarray | None = None, target: str | None = None) -> None:
+        """The free move from where the robot is to this orientation's hover (or `q_to`,
+        named `target`) keeps the tip off the sphere (nominal model); the planner checked
+        moves between consecutive planned orientations only, and the runner may skip
+        some."""
+        q_to = orientation.q_hover if q_to is None else q_to
+        if q_from is None or np.max(np.abs(np.asarray(q_from, float) - q_to)) < 1e-9:
             return
-        q_from = np.asarray(q_from, float)
-        if np.max(np.abs(q_from - orientation.q_hover)) < 1e-9:
-            return
-        clear = path_clearance(self.chain, q_from, orientation.q_hover, self.setup.tip,
-                               self.setup.sphere_centre)
-        if clear < self.setup.contact_distance + self.config.standoff:
+        clear = self._clearance(np.asarray(q_from, float), q_to)
+        if clear < self._transfer_margin:
             raise InputError(
-                f"the move to probe orientation {orientation.group} would pass "
-                f"{(clear - self.setup.contact_distance) * 1e3:.1f} mm from the sphere "
+                f"the move to {target or f'probe orientation {orientation.group}'} would "
+                f"pass {(clear - self.setup.contact_distance) * 1e3:.1f} mm from the sphere "
                 "(nominal model); move the robot away from the sphere first")
 
     async def acquire(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
@@ -393,16 +437,16 @@ class SphereProbeMethod(Method):
         back: list[np.ndarray] = []
         retreat = None if here is not None or q_from is None else self._retreat(q_from)
         if retreat is not None:  # first back out to its hover, as commanded then
-            back = [retreat]
-            q_here = retreat + shift
-        via = self._free_moves(orientation, contact, here)
-        if here is None:  # from elsewhere: the move to the hover must keep off the sphere
+            hover, then = retreat
+            back = [hover, *self._between_shifts(hover, then, orientation)]
+        elif here is None:  # from elsewhere: the move to the hover must keep off the sphere
             self._check_transfer(q_here, orientation)
         elif here[0].group != orientation.group:
             self._check_transfer(here[0].q_hover, orientation)
+        via = self._free_moves(orientation, contact, here)
         # commanded where the robot reaches the planned poses
         via = back + [v - shift for v in via]
-        self._left = (contact.q_start - shift, orientation.q_hover - shift)
+        self._left = (contact.q_start - shift, orientation.q_hover - shift, shift.copy())
         if np.any(shift != 0.0):
             contact = replace(contact, q_start=contact.q_start - shift,
                               q_target=contact.q_target - shift)
