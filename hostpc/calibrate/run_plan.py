@@ -168,6 +168,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     more = np.zeros(0, dtype=int)
     short = groups is None and settings.target_sigma_deg is not None  # short robot time
     limits = (state.q_min, state.q_max)
+    time_limits = TimeLimits.from_extra(state.extra, state.q.size)
     q_more: np.ndarray | None = None
     if groups is None:
         travel = None
@@ -183,7 +184,6 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
             more = np.zeros(0, dtype=int) if enough is None else chosen[enough:]
             chosen = chosen if enough is None else chosen[:enough]
         power = power_design(method, design, pool, settings) if short else None
-        time_limits = TimeLimits.from_extra(state.extra, state.q.size)
         # fit poses that see a missing effect, within --poses (the most the plan measures)
         n_check = min(CHECK_POSES, max(0, settings.n_poses - chosen.size))
         if power is not None and n_check > 0:
@@ -291,7 +291,6 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         "structural_fixed": [d.fixed for d in structural],
     }
     path = method.robot_path if isinstance(method, RobotPath) else Waypoints.plain
-    time_limits = TimeLimits.from_extra(state.extra, state.q.size)
     floor_motion = 0.0
     if groups is None:
         fewest = poses_for_target_sigma(

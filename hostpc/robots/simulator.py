@@ -192,23 +192,23 @@ class SimulatedController:
         """Start the stub and wait for its `listening on HOST:PORT` line."""
         self.workdir.mkdir(parents=True, exist_ok=True)
         self.scenario_path.write_text(json.dumps(_without_token(self.scenario), indent=2) + "\n")
-        command = [
-            sys.executable, "-m", "controller_stub", "serve",
-            "--scenario", str(self.scenario_path), "--host", "127.0.0.1", "--port", "0",
-            "--truth-out", str(self.truth_path),
+        serve = [
+            "serve", "--scenario", str(self.scenario_path), "--host", "127.0.0.1",
+            "--port", "0", "--truth-out", str(self.truth_path),
         ]  # fmt: skip
         if self.modbus_port is not None:
-            command += ["--modbus-port", str(int(self.modbus_port))]
+            serve += ["--modbus-port", str(int(self.modbus_port))]
         for folder in self.sensor_folders:
-            command += ["--sensor-plugin", str(folder)]
+            serve += ["--sensor-plugin", str(folder)]
         self._log = log = open(self.log_path, "a", encoding="utf-8")  # noqa: SIM115
         warm = warm_stub.take()
-        if warm is not None and warm_stub.hand_over(warm, command[3:], {TOKEN_ENV: self.token},
+        if warm is not None and warm_stub.hand_over(warm, serve, {TOKEN_ENV: self.token},
                                                     self.log_path):
             self.process = warm  # started at hostpc's start (warm_stub.py)
         else:
             self.process = subprocess.Popen(
-                command, stdout=subprocess.PIPE, stderr=log, text=True,
+                [sys.executable, "-m", "controller_stub", *serve], stdout=subprocess.PIPE,
+                stderr=log, text=True,
                 env={**os.environ, TOKEN_ENV: self.token},
                 start_new_session=False, preexec_fn=warm_stub.die_with_parent(),  # noqa: PLW1509
             )
