@@ -149,6 +149,21 @@ def power_design(method: Method, design: Design, pool: np.ndarray, settings: Run
     return PowerDesign.scaled(A[:, :, own], A[:, :, extra])
 
 
+def grown_path(pool: np.ndarray, more: np.ndarray, q_more: np.ndarray,
+               verify: np.ndarray, q_from: np.ndarray, limits: tuple[np.ndarray, np.ndarray]
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The path a short plan takes once it grew, from its last fit pose q_from (n,): the
+    further fit poses (`more`, pool indices, visited as q_more (M, n)), then every
+    verification pose of the grown plan (`verify`, pool indices) as a tour from the last
+    of them, the whole unwrapped as one path (`tour.unwrap_plan`): the verification poses'
+    angles of the short path are the equivalents nearest the fit tour's end, and from
+    q_more's end one of them can be more than half a turn away (a wrist unwinding).
+    Returns (q_more, the verification poses, more), each in the grown path's order."""
+    order, _ = short_path(pool[verify], q_more[-1], *limits)
+    orders, (q_more, q_verify) = unwrap_plan([q_more, pool[verify[order]]], q_from, *limits)
+    return q_more, q_verify, more[orders[0]]
+
+
 def plan_run(method: Method, state: RobotState, settings: RunSettings, progress: Progress
              ) -> Plan:
     """Candidate pool, informative selection, order, verification poses, check."""
@@ -227,7 +242,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
             "(--poses), fewer effects (--effects), or a wider pose range")
     q_fit = q_short if short else pool[fit_indices]
     last = q_fit[-1] if q_fit.shape[0] else state.q
-    q_verify_more: np.ndarray | None = None
+    q_verify_grown: np.ndarray | None = None
     if short:
         rest = np.setdiff1d(np.arange(pool.shape[0]), np.concatenate([fit_indices, more]))
         if power is not None and settings.n_verify > 0:  # most signal per second
@@ -239,23 +254,18 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
             verify_indices = nearby_verify_poses(pool, rest, last, settings.n_verify, rng)
         order, q_verify = short_path(pool[verify_indices], last, *limits)
         verify_indices = verify_indices[order]
-        if more.size:  # if the model fails: the verification with a fixed plan's count
+        # the whole plan as one path: a joint wound up by the fit tour must not unwind on
+        # the way to the verification poses (tour.unwrap_plan)
+        orders, (q_fit, q_verify) = unwrap_plan([q_fit, q_verify], state.q, *limits)
+        fit_indices, verify_indices = fit_indices[orders[0]], verify_indices[orders[1]]
+        if q_more is not None:  # if the model fails: q_more, then a fixed plan's count
             rest = np.setdiff1d(rest, verify_indices)
             from_pose = q_verify[-1] if verify_indices.size else last
             extra = nearby_verify_poses(
                 pool, rest, from_pose, max(0, EXTENDED_VERIFY_POSES - verify_indices.size),
                 rng)
-            q_verify_more = short_path(pool[extra], from_pose, *limits)[1]
-        # the whole plan as one path: a joint wound up by the fit tour must not unwind on
-        # the way to the verification poses (tour.unwrap_plan)
-        tail = [] if q_verify_more is None else [q_verify_more]
-        orders, (q_fit, q_verify, *tail) = unwrap_plan([q_fit, q_verify, *tail], state.q,
-                                                       *limits)
-        fit_indices, verify_indices = fit_indices[orders[0]], verify_indices[orders[1]]
-        q_verify_more = tail[0] if tail else None
-        if q_more is not None:  # from the last fit pose, if the model fails
-            orders, (q_more,) = unwrap_plan([q_more], q_fit[-1], *limits)
-            more = more[orders[0]]
+            q_more, q_verify_grown, more = grown_path(pool, more, q_more, np.concatenate(
+                [verify_indices, extra]), q_fit[-1], limits)
     elif groups is None:
         rest = np.setdiff1d(np.arange(pool.shape[0]), fit_indices)
         verify_indices = rng.choice(rest, size=min(settings.n_verify, rest.size),
@@ -270,7 +280,8 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
             extra = verify_groups(groups, np.concatenate([used, verify_indices]),
                                   EXTENDED_VERIFY_POSES - verify_indices.size, rng)
             from_pose = pool[verify_indices[-1]] if verify_indices.size else last
-            q_verify_more = pool[tour_groups(pool, groups, extra, from_pose)]
+            q_verify_grown = pool[np.concatenate(
+                [verify_indices, tour_groups(pool, groups, extra, from_pose)])]
     if not short:
         q_verify = pool[verify_indices]
     if not short and groups is None:  # full-turn joints: no unwinding (tour.unwrap_plan)
@@ -322,4 +333,4 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     if more.size:
         info["more_poses"] = int(more.size)
     return Plan(q=q_fit, q_verify=q_verify, info=info, q_more=q_more,
-                q_verify_more=q_verify_more)
+                q_verify_grown=q_verify_grown)

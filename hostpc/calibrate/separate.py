@@ -133,7 +133,7 @@ def plan_separation(journal: Journal, method: Method, state: RobotState, plan: P
     a, b = _candidates(result, effects, registry, alpha, cast(Loss, settings.loss))
     model = pair_model(result, a, b, registry, settings.plugins)
     pool = method.separation_candidates(state, np.random.default_rng(settings.seed))
-    used = np.vstack([q for q in (plan.q, plan.q_verify, plan.q_more, plan.q_verify_more,
+    used = np.vstack([q for q in (plan.q, plan.q_verify, plan.q_more, plan.q_verify_grown,
                                   *(np.asarray(e["q"], float).reshape(-1, pool.shape[1])
                                     for e in journal.events("separate")))
                       if q is not None and q.size])

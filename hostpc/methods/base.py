@@ -144,16 +144,19 @@ class Plan:
     joint-offset sigmas, structural null directions) as JSON-ready values; q_more: (M, n)
     further fit poses measured only if the fit of q does not explain its measurements (a
     target-sigma plan: the rest of the nested selection, so diagnostics get the data to
-    see the missing effect), none of them a verification pose; q_verify_more: (L, n)
-    further verification poses, measured with q_verify when q_more was (a model that failed
-    its fit needs a verification with more power, docs/calibrate.md).
+    see the missing effect), none of them a verification pose; q_verify_grown: (K + L, n)
+    the verification poses of the plan once it grew by q_more: q_verify's poses and L
+    further ones (a model that failed its fit needs a verification with more power,
+    docs/calibrate.md), in the grown path's visiting order and with its angles (a
+    full-turn joint's angle is the 2 pi equivalent nearest the path after q_more, not
+    after q: `hostpc.planning.tour.unwrap_plan`).
     """
 
     q: np.ndarray
     q_verify: np.ndarray
     info: JsonObject = field(default_factory=dict)
     q_more: np.ndarray | None = None
-    q_verify_more: np.ndarray | None = None
+    q_verify_grown: np.ndarray | None = None
 
     @property
     def more(self) -> np.ndarray:
@@ -162,17 +165,17 @@ class Plan:
                 else np.zeros((0, self.q.shape[1] if self.q.ndim == 2 else 0)))
 
     def verify_poses(self, extended: bool) -> np.ndarray:
-        """(K, n) this run's verification poses: q_verify, and q_verify_more after the
+        """(K, n) this run's verification poses: q_verify, or q_verify_grown after the
         plan was extended by q_more."""
-        if extended and self.q_verify_more is not None and self.q_verify_more.shape[0]:
-            return np.vstack([self.q_verify, self.q_verify_more])
+        if extended and self.q_verify_grown is not None and self.q_verify_grown.shape[0]:
+            return self.q_verify_grown
         return self.q_verify
 
     def to_dict(self) -> JsonObject:
         """JSON form (radians)."""
         data = {"q": self.q.tolist(), "q_verify": self.q_verify.tolist(),
                 "info": dict(self.info)}
-        for key, value in (("q_more", self.q_more), ("q_verify_more", self.q_verify_more)):
+        for key, value in (("q_more", self.q_more), ("q_verify_grown", self.q_verify_grown)):
             if value is not None and value.shape[0]:
                 data[key] = value.tolist()
         return data
@@ -184,7 +187,10 @@ class Plan:
         q = np.asarray(data["q"], dtype=float).reshape(-1, n)
         q_verify = np.asarray(data["q_verify"], dtype=float).reshape(-1, n)
         more = {key: np.asarray(data[key], dtype=float).reshape(-1, n)
-                for key in ("q_more", "q_verify_more") if data.get(key)}
+                for key in ("q_more", "q_verify_grown") if data.get(key)}
+        if data.get("q_verify_more"):  # an older run's plan: the further poses alone
+            more["q_verify_grown"] = np.vstack([q_verify, np.asarray(
+                data["q_verify_more"], dtype=float).reshape(-1, n)])
         return cls(q=q, q_verify=q_verify, info=dict(data.get("info", {})), **more)
 
 

@@ -233,7 +233,8 @@ def unwrap_plan(parts: list[np.ndarray], q_start: np.ndarray, q_min: np.ndarray,
     wound up so far that an equivalent angle of the next pose lies beyond the limit); then
     2-opt reversals inside each tour, judged by the unwrapped whole's travel time plus
     UNWIND_PENALTY x its `unwinding`, until none helps; only the reversals that replace an
-    unwinding move are tried (each trial unwraps the whole path). So the IK branch of every
+    unwinding move are tried (each trial unwraps the whole path; a move into a tour's first
+    pose is also replaced by reversing the end of the tour before it). So the IK branch of every
     full-turn joint is chosen over the whole plan, not pose by pose."""
     q_start = np.asarray(q_start, float)
     blocks = [np.asarray(p, float).reshape(-1, q_start.size) for p in parts]
@@ -254,14 +255,19 @@ def unwrap_plan(parts: list[np.ndarray], q_start: np.ndarray, q_min: np.ndarray,
         improved = False
         for m in unwinding_moves(path, q_start, q_min, q_max):
             k = int(np.searchsorted(first, m, side="right")) - 1
-            local, order = int(m - first[k]), orders[k]
+            local, size = int(m - first[k]), orders[k].size
             # the reversals of part k that end just before the pose the move reaches, or
-            # start at it: only they replace that move
-            spans = [(i, local - 1) for i in range(local - 1)]
-            spans += [(local, j) for j in range(local + 1, order.size)]
-            for i, j in spans:
-                trial = orders.copy()
-                trial[k] = np.concatenate([order[:i], order[i:j + 1][::-1], order[j + 1:]])
+            # start at it: only they replace that move; a move into a part's first pose
+            # also by the reversals of the previous part that end at its last pose
+            spans = [(k, i, local - 1) for i in range(local - 1)]
+            spans += [(k, local, j) for j in range(local + 1, size)]
+            if local == 0 and k > 0:
+                spans += [(k - 1, i, orders[k - 1].size - 1)
+                          for i in range(orders[k - 1].size - 1)]
+            for part, i, j in spans:
+                trial, order = orders.copy(), orders[part]
+                trial[part] = np.concatenate([order[:i], order[i:j + 1][::-1],
+                                              order[j + 1:]])
                 trial_cost = cost(whole(trial))
                 if trial_cost < best - 1e-12:
                     orders, best, improved = trial, trial_cost, True

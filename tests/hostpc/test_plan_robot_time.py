@@ -9,8 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from controller_stub.network.server import ControllerServer
+from controller_stub.scenario.spec import scenario_from_dict
 from hostpc.calibrate.run_plan import plan_run
-from hostpc.methods.base import NullProgress, RunSettings
+from hostpc.methods import method_class
+from hostpc.methods.base import NullProgress, Plan, RunSettings
+from hostpc.methods.cell import build_cell
 from hostpc.planning.robot_time import (
     TimeLimits,
     Waypoints,
@@ -19,6 +23,9 @@ from hostpc.planning.robot_time import (
     robot_time_floor,
 )
 from hostpc.planning.tour import unwinding, unwrap_plan
+from hostpc.robots.base import RobotState
+from hostpc.robots.simulator import default_sim_scenario, sim_default_known
+from hostpc.robots.zerocal import ZerocalAdapter
 from tests.hostpc.test_planning import home_state, stereo_method
 
 LIMIT = np.full(6, 2 * np.pi)
@@ -77,6 +84,59 @@ def test_no_joint_moves_more_than_half_a_turn_on_a_default_plan(seed: int,
     assert np.degrees(largest_joint_moves(state.q, path)).max() <= 180
     planned = plan.info["predicted_robot_time_s"]
     assert planned["floor"] < planned["total"]
+
+
+async def _plans(name: str, tmp_path: Path) -> tuple[RobotState, list[Plan]]:
+    """The default plans (planning seeds 0-9, 4 verification poses) of `name` in its
+    default simulated cell: the controller's state and the method's set-up read from a
+    simulator on a free loopback port (stereo_target with a nominal rig, no robot)."""
+    if name == "stereo_target":
+        settings = [RunSettings(method=name, seed=seed, n_verify=4, target_sigma_deg=0.002,
+                                n_candidates=600) for seed in range(10)]
+        return home_state(), [plan_run(stereo_method(("target",), tmp_path / str(s.seed)),
+                                       home_state(), s, NullProgress()) for s in settings]
+    scenario = default_sim_scenario(method=name)
+    scenario["server"] = {**scenario.get("server", {}), "token": "plan-test"}
+    server = ControllerServer.from_scenario(scenario_from_dict(scenario))
+    await server.start("127.0.0.1", 0)
+    robot = await ZerocalAdapter.connect(*server.address, token="plan-test")
+    try:
+        state = await robot.state()
+        cls = method_class(name)
+        plans = []
+        for seed in range(10):
+            settings = RunSettings(method=name, seed=seed, n_verify=4,
+                                   target_sigma_deg=cls.default_target_sigma_deg)
+            cell = build_cell(state.camera, state.robot, None, sim_default_known(name))
+            method = cls(settings, cell, tmp_path / str(seed))
+            await method.prepare(robot, NullProgress())
+            plans.append(plan_run(method, state, settings, NullProgress()))
+        return state, plans
+    finally:
+        await robot.close()
+        await server.close()
+
+
+@pytest.mark.parametrize("name", ["stereo_target", "sphere_probe", "world_point", "dual_loop"])
+async def test_no_joint_moves_more_than_half_a_turn_on_a_grown_plan(name: str,
+                                                                   tmp_path: Path) -> None:
+    """The path of a plan that grew (its model failed the fit): the fit poses, the further
+    poses, then the grown plan's verification poses. Its verification poses had the short
+    path's angles: stereo_target's wrist 3 moved 199-424 deg into the first of them after
+    the further poses in 3 of these 10 plans, world_point's 181-225 deg in 3."""
+    state, plans = await _plans(name, tmp_path)
+    largest = []
+    for plan in plans:
+        assert plan.more.shape[0] > 0  # the plan can grow
+        grown = np.vstack([plan.q, plan.more, plan.verify_poses(True)])
+        largest.append(float(np.degrees(largest_joint_moves(state.q, grown)).max()))
+        # the grown verification measures the short one's poses and more (2 pi equivalents)
+        wrapped = np.mod(plan.verify_poses(True) + np.pi, 2 * np.pi)
+        for pose in np.mod(plan.q_verify + np.pi, 2 * np.pi):
+            gap = np.abs(np.mod(wrapped - pose + np.pi, 2 * np.pi) - np.pi)
+            assert np.min(np.max(gap, axis=1)) < 1e-9
+        assert plan.verify_poses(True).shape[0] > plan.q_verify.shape[0]
+    assert max(largest) <= 180, largest
 
 
 def test_poses_is_the_most_a_target_sigma_plan_measures_check_poses_included(

@@ -79,11 +79,17 @@ def test_nearby_verification_poses_are_fresh_and_shorten_the_travel() -> None:
 
 def test_plan_round_trip_with_further_poses() -> None:
     q = np.arange(12.0).reshape(2, 6)
-    plan = Plan(q=q, q_verify=q + 1, info={"a": 1}, q_more=q + 2, q_verify_more=q + 3)
+    grown = np.vstack([q + 3, q + 1])  # the grown path's verification: its own order
+    plan = Plan(q=q, q_verify=q + 1, info={"a": 1}, q_more=q + 2, q_verify_grown=grown)
     again = Plan.from_dict(plan.to_dict())
     np.testing.assert_array_equal(again.more, q + 2)
     np.testing.assert_array_equal(again.verify_poses(False), q + 1)
-    np.testing.assert_array_equal(again.verify_poses(True), np.vstack([q + 1, q + 3]))
+    np.testing.assert_array_equal(again.verify_poses(True), grown)
+    # a plan written before q_verify_grown: its further verification poses after q_verify
+    older = {**plan.to_dict(), "q_verify_more": (q + 3).tolist()}
+    del older["q_verify_grown"]
+    np.testing.assert_array_equal(Plan.from_dict(older).verify_poses(True),
+                                  np.vstack([q + 1, q + 3]))
     old = Plan.from_dict({"q": q.tolist(), "q_verify": q.tolist(), "info": {}})  # old run
     assert old.q_more is None and old.more.shape == (0, 6)
     np.testing.assert_array_equal(old.verify_poses(True), q)
