@@ -14,10 +14,12 @@ the plan's further poses (`Plan.q_more`: the rest of the nested D-optimal select
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.journal_events import MorePoses
 from hostpc.calibrate.push import adequacy_chi2
+from hostpc.calibrate.run_result import GROWN_TIME
 from hostpc.diagnostics.adequacy import chi2_dof_upper
 from hostpc.fitting import FitResult
 from hostpc.methods.base import Plan
@@ -54,10 +56,13 @@ def more_poses_message(reason: str, journal: Journal, plan: Plan) -> str:
     reads them back)."""
     first, total = plan.q.shape[0], plan.more.shape[0]
     journaled = sum(first <= r.index < first + total for r in journal.records("fit"))
+    grown = plan.info.get(GROWN_TIME)
+    time = (f"; the plan's predicted robot time of measure + verify is now "
+            f"{grown['total']:.1f} s" if isinstance(grown, Mapping) else "")
     if journaled == 0:
-        return f"{reason}: measuring {total} more poses"
+        return f"{reason}: measuring {total} more poses{time}"
     if journaled >= total:
         return (f"{reason}: the {total} more poses were measured before; replaying them "
-                "from the journal")
+                f"from the journal{time}")
     return (f"{reason}: {total} more poses, {journaled} replayed from the journal, measuring "
-            f"{total - journaled}")
+            f"{total - journaled}{time}")

@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from hostpc.calibrate.run_result import GROWN_TIME
 from hostpc.diagnostics.detectable import planned_sizes
 from hostpc.diagnostics.pipeline import DEFAULT_ALPHA
 from hostpc.errors import InputError
@@ -315,6 +316,10 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
                                    time_limits, (fewest or len(selection)) + q_verify.shape[0],
                                    floor_motion)
     info["predicted_robot_time_s"] = planned
+    if q_more is not None and q_verify_grown is not None:  # the plan if its model fails
+        info[GROWN_TIME] = predicted_robot_time(
+            state.q, path(np.vstack([q_fit, q_more])), path(q_verify_grown), settings.speed,
+            time_limits, (fewest or len(selection)) + q_verify_grown.shape[0], floor_motion)
     progress.message(
         f"plan: {len(fit_indices)} poses from {pool.shape[0]} candidates "
         f"({settings.criterion}-optimal), {q_verify.shape[0]} verification poses; "

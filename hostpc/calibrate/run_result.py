@@ -21,6 +21,22 @@ from dataclasses import dataclass, field
 
 from hostpc.json_object import JsonObject
 
+GROWN_TIME = "predicted_robot_time_grown_s"
+"""The plan info's key of the predicted robot time of measure + verify if the plan grows
+(the fit poses, the further ones, the grown verification); result.json shows the
+prediction of the plan that ran (`plan_as_run`)."""
+
+
+def plan_as_run(info: JsonObject, grown: bool) -> JsonObject:
+    """The plan's info as result.json shows it: `predicted_robot_time_s` is the prediction
+    of the plan that ran; when it grew, the grown plan's, with the short plan's beside it
+    (`predicted_robot_time_short_s`)."""
+    shown = {k: v for k, v in info.items() if k != GROWN_TIME}
+    if grown and info.get(GROWN_TIME) is not None:
+        shown["predicted_robot_time_short_s"] = info.get("predicted_robot_time_s")
+        shown["predicted_robot_time_s"] = info[GROWN_TIME]
+    return shown
+
 
 @dataclass(frozen=True)
 class SkippedPose:

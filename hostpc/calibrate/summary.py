@@ -29,6 +29,7 @@ from hostpc.calibrate.run_result import (
     PushResult,
     RunResult,
     SkippedPose,
+    plan_as_run,
 )
 from hostpc.calibrate.run_values import RobotInfo
 from hostpc.calibrate.verify import VerifyResult, measured_noise_rms, noise_rms
@@ -90,7 +91,8 @@ def run_result(journal: Journal, run_dir: Path, robot: RobotInfo, settings: RunS
         plan={
             "n_poses": int(plan.q.shape[0]),
             "n_verify": int(plan.verify_poses(more is not None).shape[0]),
-            **{k: v for k, v in plan.info.items() if k != "parameters"},
+            **{k: v for k, v in plan_as_run(plan.info, more is not None).items()
+               if k != "parameters"},
         },
         acquisition=Acquisition(
             n_planned=int(plan.q.shape[0]) + (int(plan.more.shape[0]) if more else 0),
@@ -243,9 +245,12 @@ def plan_line(plan: JsonObject, acquisition: JsonObject) -> str:
     source = (f"{plan.get('criterion', '?')}-optimal from {plan.get('n_candidates', '?')} "
               "candidates")
     if acquisition.get("more_poses"):
+        planned = plan.get("predicted_robot_time_s")
+        time = (f" (predicted robot time of measure + verify {planned['total']:.1f} s)"
+                if isinstance(planned, Mapping) else "")
         return (f"plan: {plan['n_poses']} poses ({source}), grown to "
                 f"{acquisition['n_planned']} fit and {plan['n_verify']} verification poses "
-                f"when the model did not explain the first {plan['n_poses']}")
+                f"when the model did not explain the first {plan['n_poses']}{time}")
     return f"plan: {plan['n_poses']} poses ({source}), {plan['n_verify']} verification poses"
 
 
