@@ -20,13 +20,17 @@ its floor counts those groups' poses and their measuring moves (the guarded appr
 from __future__ import annotations
 
 import math
+from collections.abc import Collection
 
 import numpy as np
 
+from hostpc.calibrate.reference import CellReference
+from hostpc.calibrate.run_reference import reference_priors
 from hostpc.calibrate.run_result import GROWN_TIME
 from hostpc.diagnostics.detectable import planned_sizes
 from hostpc.diagnostics.pipeline import DEFAULT_ALPHA
 from hostpc.errors import InputError
+from hostpc.fitting.priors import constraints_for
 from hostpc.json_object import JsonObject
 from hostpc.methods import method_class
 from hostpc.methods.base import Method, Plan, Progress, RunSettings
@@ -42,6 +46,7 @@ from hostpc.planning.design import (
     make_design,
     order_for_travel,
     poses_for_target_sigma,
+    prior_bounded_joints,
     select,
     tour_groups,
     verify_groups,
@@ -97,13 +102,23 @@ moves between them."""
 
 
 def plan_warnings(method: str | type[Method], target_sigma_deg: float | None,
-                  sigmas: np.ndarray, n_fit: int, short: bool) -> list[str]:
+                  sigmas: np.ndarray, n_fit: int, short: bool,
+                  by_reference: Collection[int] = ()) -> list[str]:
     """What a plan does not deliver, one line each: a target sigma the planned poses do not
-    reach (sigmas: (n,) predicted joint-offset sigmas, rad, NaN where not identifiable), and
-    what a short plan lacks for its method (``Method.short_plan_warning``: stereo_target's
-    below the centre refinement's MIN_TARGET_POSES, whose centres then keep the nominal
-    normal's bias, docs/vision.md 3.2). method: the Method class, or a built-in's name."""
+    reach (sigmas: (n,) predicted joint-offset sigmas, rad, NaN where not identifiable;
+    by_reference: the joints only a cell reference's frames identify, whose sigma those
+    frames bound: said apart, more poses do not help), and what a short plan lacks for its
+    method (``Method.short_plan_warning``: stereo_target's below the centre refinement's
+    MIN_TARGET_POSES, whose centres then keep the nominal normal's bias, docs/vision.md
+    3.2). method: the Method class, or a built-in's name."""
     lines: list[str] = []
+    sigmas = np.asarray(sigmas, float).copy()
+    for j in sorted(by_reference):
+        lines.append(f"plan: joint {j + 1} reaches a predicted sigma of "
+                     f"{math.degrees(float(sigmas[j])):.2g} deg: only the cell reference's "
+                     "frames identify it, and their uncertainty bounds it (more poses do not "
+                     "lower it)")
+        sigmas[j] = np.nan
     finite = np.isfinite(sigmas)
     if target_sigma_deg is not None and np.any(finite):
         worst = int(np.argmax(np.where(finite, sigmas, -np.inf)))
@@ -165,9 +180,11 @@ def grown_path(pool: np.ndarray, more: np.ndarray, q_more: np.ndarray,
     return q_more, q_verify, more[orders[0]]
 
 
-def plan_run(method: Method, state: RobotState, settings: RunSettings, progress: Progress
-             ) -> Plan:
-    """Candidate pool, informative selection, order, verification poses, check."""
+def plan_run(method: Method, state: RobotState, settings: RunSettings, progress: Progress,
+             reference: CellReference | None = None) -> Plan:
+    """Candidate pool, informative selection, order, verification poses, check; with a
+    cell reference its frames' priors are part of every plan's information (the target
+    sigma then holds for the joints they resolve, `hostpc.planning.design.Design.prior`)."""
     progress.stage("plan")
     rng = np.random.default_rng(settings.seed)
     pool = method.candidates(state, rng)
@@ -176,9 +193,15 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         raise PlanningError(
             f"only {pool.shape[0]} reachable poses see the target (need {needed}); check "
             "the cell (target position, camera mount) and the joint limits")
-    A, names, units = design_matrix(method.design_dataset(pool), settings.effects,
-                                    settings.plugins)
-    design = make_design(A, names, units)
+    dataset = method.design_dataset(pool)
+    try:  # a --reference's frames: the joints they resolve get the target sigma too
+        dataset = reference_priors(reference, dataset, settings)[0]
+    except (InputError, ValueError, np.linalg.LinAlgError):
+        pass  # unusable here (e.g. another rig's camera frame): with_joint_coverage says why
+    A, names, units = design_matrix(dataset, settings.effects, settings.plugins)
+    constraints = constraints_for(dataset.extra_fields, names, units)
+    design = make_design(A, names, units, None if constraints is None or not
+                         constraints.index.size else constraints.jacobian(len(names)))
     structural = design.structural
     groups = method.pose_groups(pool)
     more = np.zeros(0, dtype=int)
@@ -289,8 +312,10 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         orders, (q_fit, q_verify) = unwrap_plan([q_fit, q_verify], state.q, *limits)
         fit_indices, verify_indices = fit_indices[orders[0]], verify_indices[orders[1]]
     sigmas = joint_offset_sigmas(plan_design, state.q.size)
+    bounded = ({} if settings.target_sigma_deg is None else prior_bounded_joints(
+        design, fit_indices, math.radians(settings.target_sigma_deg), state.q.size))
     for line in plan_warnings(type(method), settings.target_sigma_deg, sigmas,
-                              len(fit_indices), short):
+                              len(fit_indices), short, bounded):
         progress.message(line)
     info: JsonObject = {
         "criterion": settings.criterion,

@@ -270,7 +270,7 @@ class Runner:
         if header.plan is not None:
             plan = header.plan
         else:
-            plan = plan_run(method, state, settings, progress)
+            plan = plan_run(method, state, settings, progress, self.reference)
             header = dataclasses.replace(header, plan=plan)
             self.journal.write_header(header.to_dict())
         plan = cell_reference.with_joint_coverage(plan, method, settings, cell, self.reference,

@@ -24,6 +24,7 @@ from hostpc.planning.design import (
     make_design,
     order_for_travel,
     poses_for_target_sigma,
+    prior_bounded_joints,
     random_selection,
     verify_groups,
 )
@@ -283,3 +284,37 @@ def test_travel_aware_selection_is_nested_and_its_tour_shorter(pool_and_design) 
         return path_time(q, UR5E_HOME)
 
     assert tour_time(chosen) < 0.8 * tour_time(plain)
+
+
+def test_a_joint_only_a_prior_identifies_is_planned_with_the_prior() -> None:
+    """q1 and a frame's rotation f enter every pose only as q1 + f (a joint a frame hides,
+    as world_point's J6 behind the markers' frame); a cell reference's prior on f
+    identifies q1, with a floor no pose lowers. The plan counts q1 (its sigma is finite,
+    not in the gauge): a target the prior allows is reached on q1 too; a target below the
+    prior's floor adds no pose for q1 (the plain count of q2, q3 stands)."""
+    rng = np.random.default_rng(2)
+    n_pool = 200
+    rows = rng.normal(size=(n_pool, 2, 3)) * 30.0
+    A = np.zeros((n_pool, 2, 4))
+    A[:, :, 0] = A[:, :, 3] = rows[:, :, 0]  # q1 and f: always together
+    A[:, :, 1:3] = rows[:, :, 1:]             # q2, q3: seen by the poses
+    names = ("joint_offsets.q1", "joint_offsets.q2", "joint_offsets.q3", "f.rz")
+    units = ("rad",) * 4
+    plain = make_design(A, names, units)
+    design = make_design(A, names, units, np.array([[0.0, 0.0, 0.0, 1.0 / 0.01]]))
+    assert design.free.sum() == 3  # the poses alone: one of q1, f is the gauge
+    assert design.by_prior is not None
+    assert design.by_prior.tolist() == [True, False, False, True]
+    order = greedy_d_optimal(design, 120)
+    floor = joint_offset_sigmas(design.subset(order), 3)[0]
+    assert 0.01 <= floor < 0.0105  # the prior's sigma bounds q1
+    assert np.isnan(joint_offset_sigmas(plain.subset(order), 3)[0])  # the plain design
+    # a target above the floor: q1 needs more poses than q2 and q3 do
+    assert prior_bounded_joints(design, order, 0.0125, 3) == {}
+    fewest = poses_for_target_sigma(design, order, 0.0125, 3)
+    assert fewest is not None and fewest > poses_for_target_sigma(plain, order, 0.0125, 3)
+    assert joint_offset_sigmas(design.subset(order[:fewest]), 3)[0] <= 0.0125
+    # below the floor: q1 is bounded and adds nothing
+    assert prior_bounded_joints(design, order, 0.005, 3) == {0: pytest.approx(floor)}
+    assert (poses_for_target_sigma(design, order, 0.005, 3)
+            == poses_for_target_sigma(plain, order, 0.005, 3))
