@@ -187,7 +187,7 @@ def format_summary(run: RunResult) -> str:
     for text in fitd["unidentifiable"]:
         lines.append(f"  unidentifiable: {text}")
     lines += reference_summary_lines(run)  # joints calibrated, reference check
-    robot_time = format_robot_time({"robot_time_s": run.robot_time_s})
+    robot_time = format_robot_time({"robot_time_s": run.robot_time_s, "plan": run.plan})
     if robot_time:
         lines.append(robot_time)
     for item in acq.skipped[:10]:

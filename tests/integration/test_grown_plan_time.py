@@ -38,3 +38,5 @@ def test_a_grown_plan_predicts_the_robot_time_it_spends(
             f"{grown['total']:.1f} s") in stderr
     summary = (run / "summary.txt").read_text()
     assert f"(predicted robot time of measure + verify {grown['total']:.1f} s)" in summary
+    # the robot time line: what was spent, beside the grown plan's prediction
+    assert f"planned {grown['total']:.1f} s for measure + verify" in summary
