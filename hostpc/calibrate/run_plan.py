@@ -15,7 +15,13 @@ plain random verification choice. A method that plans
 whole groups (sphere_probe's probe orientations) takes, with a target sigma (its default),
 the fewest leading groups of the nested group selection that reach it as a tour of groups,
 the rest as `q_more`, and a random choice of fresh whole groups for verification, toured;
-its floor counts those groups' poses and their measuring moves (the guarded approaches)."""
+its floor counts those groups' poses and their measuring moves (the guarded approaches).
+
+A plan that can grow has its own path for it: `q_more` then `q_verify_grown` (every
+verification pose, toured and unwrapped after the further poses), and its own predicted
+robot time (GROWN_TIME). With a cell reference (`--reference`) the reference's frames are
+priors in the design, so the joints they resolve count toward the target sigma too
+(`hostpc.planning.design.Design.prior`)."""
 
 from __future__ import annotations
 

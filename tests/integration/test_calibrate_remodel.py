@@ -16,6 +16,20 @@ REPO = Path(__file__).resolve().parents[2]
 HIDDEN = REPO / "controller_stub" / "scenarios" / "stereo_hidden_compliance.yaml"
 
 
+def calibrate_hidden(tmp_path: Path, capsys: pytest.CaptureFixture[str], *options: str
+                     ) -> tuple[Path, int, str, str]:
+    """`hostpc calibrate --robot sim` in the hidden-compliance world (its true rig, the
+    target known, no cross-validation, no report, --json) with `options`: (run folder,
+    exit code, stdout, stderr)."""
+    rig = truth_rig_file(load_scenario_file(HIDDEN), tmp_path / "rig.json")
+    run = tmp_path / "run"
+    code, stdout, stderr = run_cli(
+        capsys, "calibrate", "--robot", "sim", "--scenario", str(HIDDEN), "--known", "target",
+        "--rig", str(rig), "--cv-folds", "0", "--no-report", "--json", "--out", str(run),
+        *options)
+    return run, code, stdout, stderr
+
+
 def _fit_lines(run: Path) -> list[str]:
     return [line for line in (run / "journal.jsonl").read_text().splitlines()
             if '"phase":"fit"' in line]
@@ -24,12 +38,7 @@ def _fit_lines(run: Path) -> list[str]:
 @pytest.mark.slow
 def test_resume_with_the_missing_effect_refits_pushes_and_verifies(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    rig = truth_rig_file(load_scenario_file(HIDDEN), tmp_path / "rig.json")
-    run = tmp_path / "run"
-    code, stdout, stderr = run_cli(
-        capsys, "calibrate", "--robot", "sim", "--scenario", str(HIDDEN), "--known", "target",
-        "--rig", str(rig), "--poses", "40", "--cv-folds", "0", "--no-report", "--json",
-        "--out", str(run))
+    run, code, stdout, stderr = calibrate_hidden(tmp_path, capsys, "--poses", "40")
     assert code == 5, stderr  # the lean model does not explain the data: push refused
     lean = json.loads(stdout)
     assert lean["push"]["status"] == "refused" and lean["verify"]["verdict"] == "FAIL"
@@ -55,12 +64,8 @@ def test_a_resume_after_a_push_never_measures_more_fit_poses(
     ones. Session 1 fits the right model on the short plan and pushes; the resume drops
     joint_compliance, so its model fails the chi2 band: it must refit the journaled poses
     only (the old runner measured the plan's further poses under the pushed offsets)."""
-    rig = truth_rig_file(load_scenario_file(HIDDEN), tmp_path / "rig.json")
-    run = tmp_path / "run"
-    code, stdout, stderr = run_cli(
-        capsys, "calibrate", "--robot", "sim", "--scenario", str(HIDDEN), "--known", "target",
-        "--rig", str(rig), "--effects", "+joint_compliance", "--cv-folds", "0", "--no-report",
-        "--json", "--out", str(run))
+    run, code, stdout, stderr = calibrate_hidden(tmp_path, capsys, "--effects",
+                                                 "+joint_compliance")
     first = json.loads(stdout)
     assert first["push"]["status"] == "pushed", (code, stderr)
     measured = _fit_lines(run)

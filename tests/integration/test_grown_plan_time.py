@@ -11,19 +11,13 @@ from pathlib import Path
 
 import pytest
 
-from hostpc.robots.simulator import load_scenario_file
-from tests.integration.test_calibrate_remodel import HIDDEN
-from tests.integration.test_calibrate_sim import run_cli, truth_rig_file
+from tests.integration.test_calibrate_remodel import calibrate_hidden
 
 
 @pytest.mark.slow
 def test_a_grown_plan_predicts_the_robot_time_it_spends(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    rig = truth_rig_file(load_scenario_file(HIDDEN), tmp_path / "rig.json")
-    run = tmp_path / "run"
-    code, stdout, stderr = run_cli(
-        capsys, "calibrate", "--robot", "sim", "--scenario", str(HIDDEN), "--known", "target",
-        "--rig", str(rig), "--cv-folds", "0", "--no-report", "--json", "--out", str(run))
+    run, code, stdout, stderr = calibrate_hidden(tmp_path, capsys)  # the default plan
     assert code == 5, stderr  # the lean model does not explain the data: push refused
     result = json.loads(stdout)
     assert result["acquisition"]["more_poses"] is not None  # the plan grew
