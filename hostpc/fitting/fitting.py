@@ -70,7 +70,9 @@ def held_out_by_fold(problem: Problem, x: np.ndarray, free: np.ndarray, folds: i
     perturbation of it), as is a fold whose remaining samples do not determine the
     parameters."""
     n_samples, m = problem.measured.shape
-    fold_sets = fold_indices(problem.dataset.samples, folds)
+    samples = problem.dataset.samples  # every model of one dataset: the same folds
+    fold_sets = problem.shared.value(samples, ("fold_indices", folds),
+                                     lambda: fold_indices(samples, folds))
     if fold_sets is None:
         return None
     steps: list[np.ndarray | None] = [None] * folds
