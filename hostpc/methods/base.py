@@ -200,12 +200,12 @@ class Sample(Protocol):
 
 def floats(values: Sequence[float] | np.ndarray) -> tuple[float, ...]:
     """A typed sample's vector field from a list or array (JSON numbers, floats)."""
-    return tuple(float(v) for v in np.asarray(values, dtype=float).reshape(-1))
+    return tuple(np.asarray(values, dtype=float).reshape(-1).tolist())
 
 
 def matrix(values: Sequence[Sequence[float]] | np.ndarray) -> tuple[tuple[float, ...], ...]:
     """A typed sample's matrix field from nested lists or a 2-D array (floats)."""
-    return tuple(tuple(float(v) for v in row) for row in np.asarray(values, dtype=float))
+    return tuple(tuple(row) for row in np.asarray(values, dtype=float).tolist())
 
 
 def optional_json(**fields: Any) -> JsonObject:
