@@ -143,14 +143,15 @@ class ResidualAnalysis:
 def sorted_distinct(values: np.ndarray) -> np.ndarray:
     """``np.unique(values)`` (sorted distinct values) by its sorting path: plain
     ``np.unique`` (and ``np.quantile``, which calls it) asks ``np.ma.is_masked`` first,
-    and importing numpy.ma costs ``hostpc diagnose`` ~16 ms of its 0.3 s."""
+    and importing numpy.ma costs ``hostpc diagnose`` ~16 ms of start-up."""
     return np.unique(values, return_index=True)[0]
 
 
 def quantiles(values: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """``np.quantile(values, q)`` of finite 1-D ``values``, to the bit (the default
+    """``np.quantile(values, q)`` of finite 1-D ``values``, the same doubles (the default
     'linear' rule: position (n - 1) q in the sorted values, interpolated between its two
-    neighbours from the nearer one), without numpy.ma (``sorted_distinct``)."""
+    neighbours from the nearer one; a zero may differ in sign), without numpy.ma
+    (``sorted_distinct``)."""
     ordered = np.sort(values)
     position = (ordered.size - 1) * q
     below = np.floor(position).astype(np.intp)
