@@ -17,7 +17,9 @@ from tests.integration.test_transport import connect, probe_scenario
 
 pytestmark = pytest.mark.asyncio
 
-SLOW = {"motion": {"time_scale": 1.0, "max_joint_speed": 0.5}}  # 1 rad takes 2 s
+SLOW = {"motion": {"time_scale": 1.0, "max_joint_speed": 0.5, "max_joint_acceleration": 2.0}}
+"""1 rad takes 2.25 s: 0.25 s ramping up to 0.5 rad/s (0.0625 rad), cruise, 0.25 s down."""
+RAMP_S = 0.25
 STEP = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
 
 
@@ -42,12 +44,14 @@ async def test_abort_stops_the_robot_where_it_was(start_stub: StartStub) -> None
         outcome = await asyncio.wait_for(move, 1.0)
         assert not outcome.completed and outcome.reason == "aborted"
         stopped_at = between(outcome.q, before.q, q_end)
-        assert 0.2 < stopped_at < 0.5
+        assert 0.15 < stopped_at < 0.5  # 0.5 s and more: past the ramp
         after = await other.state()
         assert after.mode == "idle"
         np.testing.assert_array_equal(after.q, outcome.q)  # the robot stays where it stopped
         assert after.time - before.time == pytest.approx(outcome.duration_s)
-        assert outcome.duration_s == pytest.approx(stopped_at * 2.0)
+        # stopped at cruise where the profile is: half the ramp's time behind a move at
+        # speed from the first instant (0.5 rad/s x (t - RAMP_S / 2))
+        assert outcome.duration_s == pytest.approx(stopped_at * 2.0 + RAMP_S / 2)
 
 
 async def test_aborted_guarded_move_reports_no_later_contact(start_stub: StartStub) -> None:
