@@ -38,7 +38,8 @@ DEFAULT_JOINT_SPEED = math.pi
 """rad/s of a joint at speed fraction 1 when the controller does not report it (a UR's)."""
 DEFAULT_JOINT_ACCELERATION = 1.4
 """rad/s^2 of a joint when the controller does not report it: a UR's default movej
-acceleration, which the UR driver commands (hostpc.robots.ur_link.JOINT_ACCELERATION)."""
+acceleration, which the UR driver commands (hostpc.robots.ur_link.JOINT_ACCELERATION is
+this)."""
 DEFAULT_SETTLE_S = 0.3
 DEFAULT_CAPTURE_S = 0.1
 
