@@ -49,7 +49,7 @@ from hostpc.model import joint_offsets
 from hostpc.model.joint_offsets import PushTable
 from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
-from hostpc.planning.tour import move_times, nearest_neighbour, plan_tour
+from hostpc.planning.tour import Rates, move_times, nearest_neighbour, plan_tour
 
 CRITERIA = ("D", "random")
 DEFAULT_RIDGE = 1e-6
@@ -289,10 +289,10 @@ def verify_groups(groups: PoseGroups, used: np.ndarray, n_verify: int,
 
 
 def tour_groups(pool: np.ndarray, groups: PoseGroups, indices: np.ndarray,
-                q_from: np.ndarray) -> np.ndarray:
+                q_from: np.ndarray, joint_speed: Rates = None) -> np.ndarray:
     """`indices` (pool indices of whole groups) in visiting order: the groups as a tour
-    from q_from (n,) by their first pose (`tour.plan_tour` on the joint move time), each
-    group's poses in their order in `indices`."""
+    from q_from (n,) by their first pose (`tour.plan_tour` on the joint move time with
+    joint_speed, `tour.move_times`), each group's poses in their order in `indices`."""
     indices = np.asarray(indices, dtype=int)
     if indices.size == 0:
         return indices
@@ -300,7 +300,7 @@ def tour_groups(pool: np.ndarray, groups: PoseGroups, indices: np.ndarray,
     _, first = np.unique(labels, return_index=True)
     first = np.sort(first)
     parts = [indices[labels == labels[i]] for i in first]
-    order = plan_tour(pool[indices[first]], np.asarray(q_from, float))
+    order = plan_tour(pool[indices[first]], np.asarray(q_from, float), joint_speed)
     return _concatenate([parts[int(k)] for k in order])
 
 
@@ -350,10 +350,10 @@ def check_plan(plan: Design) -> PlanCheck:
 
 
 def order_for_travel(q: np.ndarray, q_start: np.ndarray | None,
-                     joint_speed: np.ndarray | None = None, *, tour: bool = False
+                     joint_speed: Rates = None, *, tour: bool = False
                      ) -> np.ndarray:
     """Visiting order (indices into q (N, n)) from q_start (or from the first pose):
-    nearest neighbour by the move time max_i |dq_i| / v_i; with `tour`, nearest neighbour
+    nearest neighbour by the move time (`tour.move_times`); with `tour`, nearest neighbour
     improved by 2-opt (`hostpc.planning.tour`), never longer than q's own order nor than
     nearest neighbour."""
     if tour:
