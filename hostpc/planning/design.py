@@ -91,15 +91,27 @@ class PlanCheck:
 
 
 def design_matrix(dataset: Dataset, effects: str | Iterable[str] | None,
-                  plugins: Iterable[str] = ()) -> tuple[np.ndarray, tuple[str, ...],
-                                                        tuple[str, ...]]:
+                  plugins: Iterable[str] = (), poses: int | None = None
+                  ) -> tuple[np.ndarray, tuple[str, ...], tuple[str, ...]]:
     """Whitened Jacobian blocks (N, m, P) of the model at the nominal parameters, with the
-    parameter names and units."""
+    parameter names and units. poses: the number of poses the dataset's samples measure
+    (None: one per sample); a design dataset with k samples per pose, pose-major
+    (dual_loop: both arms' targets seen at one pose), gives one (k m, P) block per pose."""
     problem = build_problem(dataset, effects, plugins=plugins)
     _, J = predict(problem, np.zeros(problem.layout.size), jacobian=True)
     assert J is not None
     A = np.einsum("nij,njp->nip", problem.sqrt_information, J)
-    return A, problem.layout.names, problem.layout.units
+    return per_pose(A, poses), problem.layout.names, problem.layout.units
+
+
+def per_pose(A: np.ndarray, poses: int | None) -> np.ndarray:
+    """Blocks A (k N, m, P) of a pose-major design dataset, k samples per pose, as
+    (N, k m, P) (one block per pose); None: A as it is."""
+    if poses is None or A.shape[0] == poses:
+        return A
+    if poses <= 0 or A.shape[0] % poses:
+        raise ValueError(f"{A.shape[0]} design samples do not divide into {poses} poses")
+    return A.reshape(poses, -1, A.shape[2])
 
 
 def make_design(A: np.ndarray, names: Sequence[str], units: Sequence[str]) -> Design:

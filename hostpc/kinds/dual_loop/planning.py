@@ -1,8 +1,10 @@
 """The humanoid's dual_loop poses, pure numerics: arm poses around
 :data:`~hostpc.kinematics.humanoid.HUMANOID_HOME` whose target is in front of the robot,
 each with head angles that aim the camera near the target (nominal model), alternating left
-and right (:func:`plan_poses`), and the nominal frames of the cell (:func:`nominal_frames`).
-Used by the dual_loop acquisition method and by the synthesis of test datasets."""
+and right (:func:`plan_poses`, the synthesis of test datasets); poses that move BOTH arms
+with the head aimed between their targets, so one settle and one capture measure both
+(:func:`plan_paired_poses`, the acquisition method's candidates); and the nominal frames of
+the cell (:func:`nominal_frames`)."""
 
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ from hostpc.kinds.dual_loop.model import humanoid_frames
 from hostpc.kinematics.humanoid import HUMANOID_HOME, get_tree
 from hostpc.kinematics.tree import KinematicTree
 
-__all__ = ["PlannedPoses", "head_look_at", "nominal_frames", "plan_poses"]
+__all__ = ["PlannedPoses", "head_look_at", "nominal_frames", "plan_paired_poses", "plan_poses"]
 
 ARM_SPREAD = np.array([0.35, 0.35, 0.5, 0.35, 0.6, 0.5, 0.9])
 """Half-width (rad) of the uniform arm-joint spread around the home pose."""
@@ -48,7 +50,12 @@ def nominal_frames(name: str = "humanoid_upper") -> dict[str, FramePose | np.nda
 
 
 def _camera_points(tree: KinematicTree, q: np.ndarray, side: str) -> np.ndarray:
-    """(N, 3) nominal target of arm ``side`` in the nominal camera frame, q combined."""
+    """(N, 3) nominal target of arm ``side`` in the nominal camera frame, q combined;
+    ``side`` ``"both"``: the midpoint of the two arms' targets."""
+    if side == "both":
+        both: np.ndarray = 0.5 * (_camera_points(tree, q, "left")
+                                  + _camera_points(tree, q, "right"))
+        return both
     frames = tree.root_transforms(q)
     T_hb_cam = frames["head"][1] @ tree.frames["camera"]
     p = frames[side][1][:, :3, :3] @ tree.frames[f"{side}_target"] + frames[side][1][:, :3, 3]
@@ -64,7 +71,7 @@ def head_look_at(tree: KinematicTree, q: np.ndarray, side: str, iterations: int 
     Args:
         tree: the tree (nominal model).
         q: combined joint angles (N, n); the head columns are the starting guess.
-        side: ``"left"`` or ``"right"``.
+        side: ``"left"``, ``"right"`` or ``"both"`` (the midpoint of the two targets).
 
     Newton iterations on the normalised image coordinates ``(x/z, y/z)``.
     """
@@ -130,3 +137,53 @@ def plan_poses(n_per_arm: int, rng: np.random.Generator, *, tree: KinematicTree 
     q_arm[0::2] = left[:, tree.joint_slice("left")]
     q_arm[1::2] = right[:, tree.joint_slice("right")]
     return PlannedPoses(chain=chain, q_head=q_head, q_arm=q_arm)
+
+
+PAIRED_ARM_SPREAD = ARM_SPREAD.copy()
+"""Half-width (rad) of a paired pose's arm-joint swing about the home pose."""
+PAIRED_FREQUENCIES = {"left": (3.0, 2.5, 2.0, 4.0, 1.5, 3.5, 1.0),
+                      "right": (2.7, 2.2, 1.7, 3.7, 1.2, 3.2, 0.7)}
+"""Swings per cycle of each arm joint along the paired poses' path: all different (so the
+joints' angles are not correlated over the path), the wide joints the slow ones (so each
+joint's share of a move is alike)."""
+PAIRED_CYCLES = 2.0
+"""Cycles of the path (see :func:`plan_paired_poses`)."""
+
+
+def plan_paired_poses(n: int, rng: np.random.Generator, *, tree: KinematicTree | None = None,
+                      spread: np.ndarray | None = None, cycles: float | None = None,
+                      depth: tuple[float, float] = (0.3, 0.75), max_tan: float = 0.42
+                      ) -> np.ndarray:
+    """Up to n (N, tree.n) combined poses that measure both arms at once (nominal model),
+    in order along one smooth path.
+
+    Each arm joint j swings about the home pose as ``spread_j sin(2 pi cycles f_j t +
+    phase_j)`` (``f_j`` :data:`PAIRED_FREQUENCIES`, random phases, ``t`` n steps over
+    [0, 1)), the head aimed at the midpoint of the two targets. Neighbours on the path differ
+    by little in every joint, so the planner's selection from these poses makes a tour of
+    short moves (a move's time is its largest joint motion: between two random poses some
+    joint always swings far), while over the path every joint reaches both ends of its
+    swing in ever different combinations with the others. Kept when all joints are inside
+    their limits and each target's depth is in ``depth`` (m) and its normalised image
+    coordinates within ``max_tan`` (the acquisition checks both images with their margin).
+    """
+    tree = get_tree("humanoid_upper") if tree is None else tree
+    spread = PAIRED_ARM_SPREAD if spread is None else np.asarray(spread, float)
+    cycles = PAIRED_CYCLES if cycles is None else float(cycles)
+    home = np.concatenate([HUMANOID_HOME[b] for b in ("head", "left", "right")])
+    q_min = np.concatenate([b.chain.q_min for b in tree.branches])
+    q_max = np.concatenate([b.chain.q_max for b in tree.branches])
+    t = np.arange(n) / max(n, 1)
+    q = np.broadcast_to(home, (n, tree.n)).copy()
+    for side in ("left", "right"):
+        frequency = cycles * np.asarray(PAIRED_FREQUENCIES[side])
+        phase = rng.uniform(0.0, 2 * np.pi, frequency.size)
+        q[:, tree.joint_slice(side)] += spread * np.sin(2 * np.pi * np.outer(t, frequency)
+                                                        + phase)
+    q[:, tree.joint_slice("head")] = head_look_at(tree, q, "both")
+    ok = np.all((q >= q_min) & (q <= q_max), axis=1)
+    for side in ("left", "right"):
+        p = _camera_points(tree, q, side)
+        ok &= (p[:, 2] > depth[0]) & (p[:, 2] < depth[1])
+        ok &= np.all(np.abs(p[:, :2] / p[:, 2:3]) < max_tan, axis=1)
+    return q[ok]
