@@ -139,22 +139,20 @@ def plan_poses(n_per_arm: int, rng: np.random.Generator, *, tree: KinematicTree 
     return PlannedPoses(chain=chain, q_head=q_head, q_arm=q_arm)
 
 
-PAIRED_ARM_SPREAD = ARM_SPREAD.copy()
-"""Half-width (rad) of a paired pose's arm-joint swing about the home pose."""
 PAIRED_FREQUENCIES = {"left": (3.0, 2.5, 2.0, 4.0, 1.5, 3.5, 1.0),
                       "right": (2.7, 2.2, 1.7, 3.7, 1.2, 3.2, 0.7)}
 """Swings per cycle of each arm joint along the paired poses' path: all different (so the
-joints' angles are not correlated over the path), the wide joints the slow ones (so each
-joint's share of a move is alike)."""
+joints' angles are not correlated over the path), the widest (joints 5 and 7 of
+:data:`ARM_SPREAD`) among the slowest."""
 PAIRED_CYCLES = 2.0
 """Cycles of the path (see :func:`plan_paired_poses`)."""
 
 
 def plan_paired_poses(n: int, rng: np.random.Generator, *, tree: KinematicTree | None = None,
-                      spread: np.ndarray | None = None, cycles: float | None = None,
+                      spread: np.ndarray = ARM_SPREAD, cycles: float = PAIRED_CYCLES,
                       depth: tuple[float, float] = (0.3, 0.75), max_tan: float = 0.42
                       ) -> np.ndarray:
-    """Up to n (N, tree.n) combined poses that measure both arms at once (nominal model),
+    """(N, tree.n) combined poses, N <= n, that measure both arms at once (nominal model),
     in order along one smooth path.
 
     Each arm joint j swings about the home pose as ``spread_j sin(2 pi cycles f_j t +
@@ -168,8 +166,6 @@ def plan_paired_poses(n: int, rng: np.random.Generator, *, tree: KinematicTree |
     coordinates within ``max_tan`` (the acquisition checks both images with their margin).
     """
     tree = get_tree("humanoid_upper") if tree is None else tree
-    spread = PAIRED_ARM_SPREAD if spread is None else np.asarray(spread, float)
-    cycles = PAIRED_CYCLES if cycles is None else float(cycles)
     home = np.concatenate([HUMANOID_HOME[b] for b in ("head", "left", "right")])
     q_min = np.concatenate([b.chain.q_min for b in tree.branches])
     q_max = np.concatenate([b.chain.q_max for b in tree.branches])
