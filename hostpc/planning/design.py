@@ -401,6 +401,17 @@ def poses_for_target_sigma(design: Design, order: np.ndarray, target_sigma: floa
     return low
 
 
+def sine_swings(n: int, frequencies: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(n, k) values in [-1, 1] along one smooth path: column j a sine of frequencies[j]
+    periods over the n steps, its phase random. A candidate pool on such a path (each joint
+    swinging between its bounds) has neighbours that differ by little in every joint, which
+    a tour of poses selected from it turns into short moves (a move takes as long as its
+    largest joint motion)."""
+    t = np.arange(n) / max(n, 1)
+    phase = rng.uniform(0.0, 2 * np.pi, len(frequencies))
+    return np.asarray(np.sin(2 * np.pi * np.outer(t, frequencies) + phase))
+
+
 def look_at_candidates(
     chain: Chain,
     T_flange_sensor: np.ndarray,

@@ -60,7 +60,7 @@ from hostpc.kinds.dual_loop.sample import (
     TargetObservation,
     observation_samples,
 )
-from hostpc.kinematics.humanoid import HUMANOID_HOME, get_tree
+from hostpc.kinematics.humanoid import get_tree
 from hostpc.kinematics.rotations import pose_to_transform
 from hostpc.kinematics.tree import KinematicTree
 from hostpc.methods.base import (
@@ -205,7 +205,6 @@ class DualLoopMethod(Method):
             raise InputError("dual_loop: focal length, baseline and pixel_sigma must be "
                              "positive")
         self.calibration = camera_calibration(raw.get("calibration"))
-        self._home = np.concatenate([HUMANOID_HOME[b.name] for b in self.tree.branches])
         self._t0 = 0.0
         self._progress: Progress | None = None  # prepare's, for the dataset's notes
 

@@ -16,6 +16,7 @@ from hostpc.dataset import FramePose
 from hostpc.kinds.dual_loop.model import humanoid_frames
 from hostpc.kinematics.humanoid import HUMANOID_HOME, get_tree
 from hostpc.kinematics.tree import KinematicTree
+from hostpc.planning.design import sine_swings
 
 __all__ = ["PlannedPoses", "head_look_at", "nominal_frames", "plan_paired_poses", "plan_poses"]
 
@@ -155,11 +156,11 @@ def plan_paired_poses(n: int, rng: np.random.Generator, *, tree: KinematicTree |
     """(N, tree.n) combined poses, N <= n, that measure both arms at once (nominal model),
     in order along one smooth path.
 
-    Each arm joint j swings about the home pose as ``spread_j sin(2 pi cycles f_j t +
-    phase_j)`` (``f_j`` :data:`PAIRED_FREQUENCIES`, random phases, ``t`` n steps over
-    [0, 1)), the head aimed at the midpoint of the two targets. Neighbours on the path differ
-    by little in every joint, so the planner's selection from these poses makes a tour of
-    short moves (a move's time is its largest joint motion: between two random poses some
+    Each arm joint j swings about the home pose by ``spread_j`` as a sine of ``cycles f_j``
+    periods over the path (``f_j`` :data:`PAIRED_FREQUENCIES`, random phases:
+    :func:`hostpc.planning.design.sine_swings`), the head aimed at the midpoint of the two
+    targets. Neighbours on the path differ by little in every joint, so the planner's
+    selection from these poses makes a tour of short moves (between two random poses some
     joint always swings far), while over the path every joint reaches both ends of its
     swing in ever different combinations with the others. Kept when all joints are inside
     their limits and each target's depth is in ``depth`` (m) and its normalised image
@@ -169,13 +170,10 @@ def plan_paired_poses(n: int, rng: np.random.Generator, *, tree: KinematicTree |
     home = np.concatenate([HUMANOID_HOME[b] for b in ("head", "left", "right")])
     q_min = np.concatenate([b.chain.q_min for b in tree.branches])
     q_max = np.concatenate([b.chain.q_max for b in tree.branches])
-    t = np.arange(n) / max(n, 1)
     q = np.broadcast_to(home, (n, tree.n)).copy()
     for side in ("left", "right"):
-        frequency = cycles * np.asarray(PAIRED_FREQUENCIES[side])
-        phase = rng.uniform(0.0, 2 * np.pi, frequency.size)
-        q[:, tree.joint_slice(side)] += spread * np.sin(2 * np.pi * np.outer(t, frequency)
-                                                        + phase)
+        q[:, tree.joint_slice(side)] += spread * sine_swings(
+            n, cycles * np.asarray(PAIRED_FREQUENCIES[side]), rng)
     q[:, tree.joint_slice("head")] = head_look_at(tree, q, "both")
     ok = np.all((q >= q_min) & (q <= q_max), axis=1)
     for side in ("left", "right"):

@@ -41,6 +41,7 @@ from hostpc.methods.base import (
     floats,
     matrix,
 )
+from hostpc.planning.design import sine_swings
 from hostpc.robots.base import Need, RobotAdapter, RobotState, tracker_of
 
 TRACKER_FILE = "tracker.json"
@@ -73,10 +74,8 @@ def smooth_path(low: np.ndarray, high: np.ndarray, n: int, rng: np.random.Genera
     """(n, len(low)) poses along one smooth path through the box [low, high]: joint j
     swings between its bounds as a sine of PATH_CYCLES * PATH_FREQUENCIES[j] periods over
     the path (random phases), so neighbours on the path differ by little in every joint."""
-    t = np.arange(n) / max(n, 1)
-    frequency = PATH_CYCLES * np.resize(np.asarray(PATH_FREQUENCIES), low.size)
-    phase = rng.uniform(0.0, 2 * np.pi, low.size)
-    swing = np.sin(2 * np.pi * np.outer(t, frequency) + phase)
+    swing = sine_swings(n, PATH_CYCLES * np.resize(np.asarray(PATH_FREQUENCIES), low.size),
+                        rng)
     return np.asarray(0.5 * (low + high) + 0.5 * (high - low) * swing)
 
 
