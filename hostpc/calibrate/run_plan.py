@@ -139,7 +139,7 @@ def power_design(method: Method, design: Design, pool: np.ndarray, settings: Run
         return None
     try:
         A, names, _ = design_matrix(method.design_dataset(pool), base + missing,
-                                    settings.plugins)
+                                    settings.plugins, pool.shape[0])
     except InputError:  # an effect the method's measurements cannot carry
         return None
     if not set(design.names) <= set(names):
@@ -161,7 +161,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
             f"only {pool.shape[0]} reachable poses see the target (need {needed}); check "
             "the cell (target position, camera mount) and the joint limits")
     A, names, units = design_matrix(method.design_dataset(pool), settings.effects,
-                                    settings.plugins)
+                                    settings.plugins, pool.shape[0])
     design = make_design(A, names, units)
     structural = design.structural
     groups = method.pose_groups(pool)

@@ -91,15 +91,27 @@ class PlanCheck:
 
 
 def design_matrix(dataset: Dataset, effects: str | Iterable[str] | None,
-                  plugins: Iterable[str] = ()) -> tuple[np.ndarray, tuple[str, ...],
-                                                        tuple[str, ...]]:
+                  plugins: Iterable[str] = (), poses: int | None = None
+                  ) -> tuple[np.ndarray, tuple[str, ...], tuple[str, ...]]:
     """Whitened Jacobian blocks (N, m, P) of the model at the nominal parameters, with the
-    parameter names and units."""
+    parameter names and units. poses: the number of poses the dataset's samples measure
+    (None: one per sample); a design dataset with k samples per pose, pose-major
+    (dual_loop: both arms' targets seen at one pose), gives one (k m, P) block per pose."""
     problem = build_problem(dataset, effects, plugins=plugins)
     _, J = predict(problem, np.zeros(problem.layout.size), jacobian=True)
     assert J is not None
     A = np.einsum("nij,njp->nip", problem.sqrt_information, J)
-    return A, problem.layout.names, problem.layout.units
+    return per_pose(A, poses), problem.layout.names, problem.layout.units
+
+
+def per_pose(A: np.ndarray, poses: int | None) -> np.ndarray:
+    """Blocks A (k N, m, P) of a pose-major design dataset, k samples per pose, as
+    (N, k m, P) (one block per pose); None: A as it is."""
+    if poses is None or A.shape[0] == poses:
+        return A
+    if poses <= 0 or A.shape[0] % poses:
+        raise ValueError(f"{A.shape[0]} design samples do not divide into {poses} poses")
+    return A.reshape(poses, -1, A.shape[2])
 
 
 def make_design(A: np.ndarray, names: Sequence[str], units: Sequence[str]) -> Design:
@@ -387,6 +399,17 @@ def poses_for_target_sigma(design: Design, order: np.ndarray, target_sigma: floa
         else:
             low = middle + 1
     return low
+
+
+def sine_swings(n: int, frequencies: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(n, k) values in [-1, 1] along one smooth path: column j a sine of frequencies[j]
+    periods over the n steps, its phase random. A candidate pool on such a path (each joint
+    swinging between its bounds) has neighbours that differ by little in every joint, which
+    a tour of poses selected from it turns into short moves (a move takes as long as its
+    largest joint motion)."""
+    t = np.arange(n) / max(n, 1)
+    phase = rng.uniform(0.0, 2 * np.pi, len(frequencies))
+    return np.asarray(np.sin(2 * np.pi * np.outer(t, frequencies) + phase))
 
 
 def look_at_candidates(
