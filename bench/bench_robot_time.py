@@ -15,7 +15,10 @@ one default `hostpc calibrate --robot sim --method M --scenario <the method's wo
   the stereo_hidden_compliance world with --force: FAILs of --worlds forced pushes).
 
     python bench/bench_robot_time.py [--worlds 40] [--first-seed 201] [--methods ...]
-                                     [--jobs 2] [--json OUT]
+                                     [--jobs 2] [--json OUT] [--speed S]
+
+(--speed: the calibrations' `--speed`, default the CLI's; the verdict power's forced pushes
+keep the default.)
 
 Slow (one simulated calibration per world and method, 5-20 s each): bench/run.py runs it
 only when named (`python bench/run.py robot_time`, 8 worlds by default).
@@ -47,15 +50,18 @@ OPTIONAL = True
 """bench/run.py skips this module unless its name is asked for (slow)."""
 
 
-def run_world(method: str, seed: int, folder: Path) -> dict[str, Any]:
-    """One default calibration in `method`'s world `seed`: robot time, plan, errors."""
+def run_world(method: str, seed: int, folder: Path, speed: float | None = None
+              ) -> dict[str, Any]:
+    """One default calibration in `method`'s world `seed` (at `speed`, None: the CLI's
+    default): robot time, plan, errors."""
     scenario, options = world(method, seed)
     scenario_path = folder / f"{method}_{seed}.yaml"
     scenario_path.write_text(yaml.safe_dump(scenario))
     out = folder / f"{method}_{seed}"
     subprocess.run([sys.executable, "-m", "hostpc.cli.main", "calibrate", "--robot", "sim",
                     "--method", method, "--scenario", str(scenario_path), "--no-report",
-                    "--out", str(out), *options],
+                    "--out", str(out), *options,
+                    *(() if speed is None else ("--speed", str(speed)))],
                    cwd=ROOT, capture_output=True, text=True, check=False, timeout=900)
     try:
         document = json.loads((out / "result.json").read_text())
@@ -82,7 +88,7 @@ def run_world(method: str, seed: int, folder: Path) -> dict[str, Any]:
 
 
 def run(worlds: int = 8, methods: tuple[str, ...] = METHODS, first_seed: int = 201,
-        jobs: int = 2) -> dict[str, Any]:
+        jobs: int = 2, speed: float | None = None) -> dict[str, Any]:
     """{method: figures}; see the module docstring."""
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory(prefix="zerocal-robot-time-") as tmp:
@@ -90,7 +96,8 @@ def run(worlds: int = 8, methods: tuple[str, ...] = METHODS, first_seed: int = 2
         for method in methods:
             seeds = range(first_seed, first_seed + worlds)
             with ThreadPoolExecutor(jobs) as pool:
-                runs = list(pool.map(lambda s, m=method: run_world(m, s, folder), seeds))
+                runs = list(pool.map(lambda s, m=method: run_world(m, s, folder, speed),
+                                     seeds))
             good = [r for r in runs if "failed" not in r]
             times = np.array([r["robot_time"] for r in good])
             floors = np.array([r["floor"] for r in good if r["floor"] is not None])
@@ -139,9 +146,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--methods", default=",".join(METHODS))
     parser.add_argument("--jobs", type=int, default=2, help="calibrations at a time")
     parser.add_argument("--json", metavar="OUT", help="also write the figures as JSON")
+    parser.add_argument("--speed", type=float, help="the calibrations' --speed")
     args = parser.parse_args(argv)
     figures = run(args.worlds, tuple(m for m in args.methods.split(",") if m),
-                  args.first_seed, args.jobs)
+                  args.first_seed, args.jobs, args.speed)
     print_table(figures)
     if args.json:
         Path(args.json).write_text(json.dumps(figures, indent=1))

@@ -91,6 +91,9 @@ class State(Reply):
     camera: what the controller reports of its stereo camera (image size, nominal mount).
     max_joint_speed: (n,) rad/s, each joint's speed at speed fraction 1, when the controller
     reports it (the host plans robot time with it; absent: a UR's 180 deg/s).
+    max_joint_acceleration: (n,) rad/s^2, each joint's acceleration in every move (a move
+    ramps up to its speed and down to rest: a trapezoidal velocity profile), when the
+    controller reports it (absent: a UR's default movej acceleration, 1.4 rad/s^2).
     """
 
     kind: Literal["state"] = "state"
@@ -107,6 +110,7 @@ class State(Reply):
     camera: dict[str, Any]
     authenticated: bool
     max_joint_speed: JointVector | None = None
+    max_joint_acceleration: JointVector | None = None
 
 
 class ReadIo(Request):

@@ -127,6 +127,7 @@ class RequestHandlers:
             camera=json.loads(json.dumps(sim.camera_description(), default=json_default)),
             authenticated=self.conn.authenticated,
             max_joint_speed=float_list(sim.max_joint_speed()),
+            max_joint_acceleration=float_list(sim.max_joint_acceleration()),
         )
 
     async def _read_io(self, request: m.ReadIo) -> m.IoState:

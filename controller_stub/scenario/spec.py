@@ -182,6 +182,11 @@ class MotionSpec(_Model):
     """Joint limits (rad, reported frame; default per robot), speed and pacing.
 
     max_joint_speed: rad/s, a scalar or per joint (default per robot).
+    max_joint_acceleration: rad/s^2, a scalar or per joint: every joint move ramps up to its
+    speed and down to rest at it (a trapezoidal velocity profile, docs/simulator.md). The
+    default 4.0 is a UR e-Series arm's with a light flange payload (a probe, a target);
+    UR's own movej default is 1.4, which a UR host sends (the UR personality moves at the
+    smaller of the two).
     time_scale: wall seconds per simulated second (0 = instantaneous).
     initial_q: (n,) reported start pose (default per robot).
     settle_s: simulated time the robot stands still after a completed joint move before it
@@ -196,6 +201,9 @@ class MotionSpec(_Model):
     max_joint_speed: (
         Annotated[float, Field(gt=0.0)] | list[Annotated[float, Field(gt=0.0)]] | None
     ) = None
+    max_joint_acceleration: (
+        Annotated[float, Field(gt=0.0)] | list[Annotated[float, Field(gt=0.0)]]
+    ) = 4.0
     time_scale: NonNegative = 0.0
     initial_q: list[float] | None = None
     settle_s: NonNegative = 0.3
@@ -303,6 +311,8 @@ class Scenario(_Model):
         ]
         if isinstance(self.motion.max_joint_speed, list):
             checks.append(("motion.max_joint_speed", self.motion.max_joint_speed))
+        if isinstance(self.motion.max_joint_acceleration, list):
+            checks.append(("motion.max_joint_acceleration", self.motion.max_joint_acceleration))
         for name, spec in (
             ("truth.link_length_errors", self.truth.link_length_errors),
             ("truth.thermal_drift", self.truth.thermal_drift),

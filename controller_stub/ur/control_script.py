@@ -64,7 +64,8 @@ class ScriptedRobot(Protocol):
     def protective_stop(self, reason: str) -> None: ...
     def tcp_pose(self, q: np.ndarray | None = None) -> list[float]: ...
     async def move_joints(
-        self, q_target: np.ndarray, velocity: float, *, watch_probe: bool = False
+        self, q_target: np.ndarray, velocity: float, acceleration: float | None = None, *,
+        watch_probe: bool = False
     ) -> tuple[bool, str | None]: ...
     def stop_motion(self) -> bool: ...
 
@@ -219,23 +220,26 @@ class ControlScript:
     async def _move(self, cmd: int) -> None:
         q = self._q_from_inputs()
         velocity = self._in_double(6)
+        acceleration = self._in_double(7)
         is_async = self._in_int(1) == 1
         if cmd == MOVEL_FK:
             logger.info("control script: movel_fk executed as a joint move (same end pose)")
         await self._stop_async_move()
         if not is_async:
-            completed, reason = await self.robot.move_joints(q, velocity)
+            completed, reason = await self.robot.move_joints(q, velocity, acceleration)
             if not completed and reason != "stopped":
                 raise ScriptStopped(f"movej refused: {reason}")
             return
         self._write_async_progress(0)
-        self._async_move = asyncio.create_task(self._run_async_move(q, velocity))
+        self._async_move = asyncio.create_task(self._run_async_move(q, velocity, acceleration))
 
-    async def _run_async_move(self, q: np.ndarray, velocity: float) -> None:
+    async def _run_async_move(self, q: np.ndarray, velocity: float, acceleration: float
+                              ) -> None:
         """An asynchronous movej: paced in real time with the probe input following the
         path, until its end, a stopj / stopl, or the stop point past a probe contact."""
         try:
-            completed, reason = await self.robot.move_joints(q, velocity, watch_probe=True)
+            completed, reason = await self.robot.move_joints(q, velocity, acceleration,
+                                                             watch_probe=True)
             if not completed and reason not in ("stopped", "contact", "no_contact"):
                 self._async_fault = reason
         finally:

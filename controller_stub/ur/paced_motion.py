@@ -9,9 +9,11 @@ slows the controller down rather than skipping cycles), and `PacedMotion` shows 
 when the motion ends or is stopped) at a cycle k:
 
     controller time    t_k = k * CYCLE_S
-    path parameter     s_k = simulated time elapsed since the start / path duration,
-                       in [0, s_end]; wall_per_sim controller seconds per simulated second
+    path parameter     s_k = the plan's velocity profile (`motion.PathProfile`: ramp,
+                       cruise, ramp) at the simulated time elapsed since the start, in
+                       [0, s_end]; wall_per_sim controller seconds per simulated second
     joint angles       q(s_k) = q_start + s_k (q_target - q_start)
+    joint speeds       (q_target - q_start) ds/dt, per controller second
     probe input        the input line's level at s_k: the plan's edges up to s_k, and for a
                        watched (guarded) plan high from the latch point on (the probe's
                        trigger latency after the touch)
@@ -42,23 +44,21 @@ class PacedMotion:
     wall_per_sim: float
     probe_line: int
 
+    def fraction_at(self, cycle: int) -> float:
+        """The fraction of the motion's time (for `finish_move`) reached at `cycle`."""
+        duration = self.plan.duration_s
+        if duration <= 0.0 or self.wall_per_sim <= 0.0:
+            return 1.0
+        sim_elapsed = max(0, cycle - self.start_cycle) * CYCLE_S / self.wall_per_sim
+        return min(1.0, sim_elapsed / duration)
+
     def s_at(self, cycle: int) -> float:
         """Path parameter at controller cycle `cycle`."""
-        plan = self.plan
-        if plan.path_duration_s <= 0.0 or self.wall_per_sim <= 0.0:
-            return plan.s_end
-        sim_elapsed = max(0, cycle - self.start_cycle) * CYCLE_S / self.wall_per_sim
-        return min(plan.s_end, sim_elapsed / plan.path_duration_s)
-
-    def fraction_at(self, cycle: int) -> float:
-        """The fraction of the motion (for `finish_move`) reached at `cycle`."""
-        if self.plan.s_end <= 0.0:
-            return 1.0
-        return min(1.0, self.s_at(cycle) / self.plan.s_end)
+        return self.plan.s_at(self.fraction_at(cycle))
 
     def finished(self, cycle: int) -> bool:
         """True once the motion reached its end."""
-        return self.s_at(cycle) >= self.plan.s_end
+        return self.fraction_at(cycle) >= 1.0
 
     def q_at(self, cycle: int) -> np.ndarray:
         """(n,) reported joint angles at `cycle`."""
@@ -68,10 +68,10 @@ class PacedMotion:
     def qd_at(self, cycle: int) -> np.ndarray:
         """(n,) joint speeds (rad per controller second) at `cycle`; zeros at the end."""
         plan = self.plan
-        if self.finished(cycle) or self.wall_per_sim <= 0.0 or plan.path_duration_s <= 0.0:
+        if self.finished(cycle):
             return np.zeros_like(plan.q_start)
-        speed = (plan.q_target - plan.q_start) / (plan.path_duration_s * self.wall_per_sim)
-        return np.asarray(speed)
+        rate = plan.profile.rate_at(self.fraction_at(cycle) * plan.duration_s)
+        return np.asarray((plan.q_target - plan.q_start) * rate / self.wall_per_sim)
 
     def probe_level(self, cycle: int, level_at_start: bool) -> bool:
         """The probe input's level at `cycle`: edges along the path (a watched plan's

@@ -284,10 +284,13 @@ class UrPersonality:
     # ------------------------------------------------------------------ motion
 
     async def move_joints(
-        self, q_target: np.ndarray, velocity: float, *, watch_probe: bool = False
+        self, q_target: np.ndarray, velocity: float, acceleration: float | None = None, *,
+        watch_probe: bool = False
     ) -> tuple[bool, str | None]:
-        """A movej to q_target (6,) reported rad at joint `velocity` (rad/s), paced cycle by
-        cycle (`PacedMotion`) until its end or `stop_motion`.
+        """A movej to q_target (6,) reported rad at joint `velocity` (rad/s) and joint
+        `acceleration` (rad/s^2, capped by the scenario's motion.max_joint_acceleration;
+        None: the scenario's), paced cycle by cycle (`PacedMotion`) until its end or
+        `stop_motion`.
 
         The speed fraction handed to the simulation is velocity over the slowest joint's
         maximum speed (clipped to (0, 1]). watch_probe (an asynchronous movej, which a host
@@ -313,7 +316,9 @@ class UrPersonality:
             if self.server is not None:
                 self.server.begin_motion()
             plan = self.sim.begin_move(np.asarray(q_target, float), min(fraction, 1.0),
-                                       probe_line if watch_probe else None)
+                                       probe_line if watch_probe else None,
+                                       None if acceleration is None or acceleration <= 0.0
+                                       else float(acceleration))
         except RequestRefusedError:
             return False, "busy"
         except SimulationRefused as exc:
@@ -336,8 +341,8 @@ class UrPersonality:
         if plan.contact is not None:
             logger.info("probe contact: latched q %s, edge time %.6f s, stopped %.1f ms later",
                         np.round(plan.contact.q_latched, 9).tolist(), plan.contact.time_latch,
-                        1e3 * (fraction_done * plan.s_end - plan.contact.s_latch)
-                        * plan.path_duration_s)
+                        1e3 * (fraction_done * plan.duration_s
+                               - float(plan.profile.time_at(plan.contact.s_latch))))
         if fraction_done < 1.0:
             return False, "stopped"
         if plan.contact is not None:

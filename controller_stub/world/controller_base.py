@@ -73,6 +73,9 @@ class ControllerBase:
     def max_joint_speed(self) -> np.ndarray:
         return self.state.max_joint_speed()
 
+    def max_joint_acceleration(self) -> np.ndarray:
+        return self.state.max_joint_acceleration()
+
     def zero_offsets(self) -> np.ndarray:
         return self.state.zero_offsets()
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from controller_stub.errors import SimulationRefused
 from controller_stub.scenario.spec import Scenario
-from controller_stub.world.motion import GuardedMoveResult, MotionPlan, MoveResult
+from controller_stub.world.motion import GuardedMoveResult, MotionPlan, MoveResult, PathProfile
 
 __all__ = [
     "ControllerState", "OnIoEdge", "SimulatedController", "TargetSensor", "TrackerSensor",
@@ -79,6 +79,7 @@ class SimulatedController(Protocol):
     def joint_positions(self) -> np.ndarray: ...
     def joint_limits(self) -> tuple[np.ndarray, np.ndarray]: ...
     def max_joint_speed(self) -> np.ndarray: ...
+    def max_joint_acceleration(self) -> np.ndarray: ...
     def zero_offsets(self) -> np.ndarray: ...
     def set_zero_offsets(self, offsets: Any) -> np.ndarray: ...
     def offset_history(self) -> list[tuple[int, np.ndarray]]: ...
@@ -93,7 +94,8 @@ class SimulatedController(Protocol):
     def reset_estop(self) -> None: ...
     def move_joints(self, q_target: Any, speed: float) -> MoveResult: ...
     def guarded_move(self, q_target: Any, speed: float, io_line: int) -> GuardedMoveResult: ...
-    def begin_move(self, q_target: Any, speed: float, io_line: int | None = None) -> MotionPlan:
+    def begin_move(self, q_target: Any, speed: float, io_line: int | None = None,
+                   acceleration: float | None = None) -> MotionPlan:
         ...
     def finish_move(
         self, plan: MotionPlan, fraction: float = 1.0
@@ -137,6 +139,8 @@ class ControllerState:
         self._n = n
         self._zero_error_initial = np.asarray(zero_errors, dtype=float)
         self._max_speed = np.asarray(max_speed, dtype=float)
+        self._max_acceleration = np.broadcast_to(
+            np.asarray(scenario.motion.max_joint_acceleration, float), (n,)).copy()
         server = scenario.server
         self._offsets_initial = (
             np.zeros(n)
@@ -199,6 +203,22 @@ class ControllerState:
     def max_joint_speed(self) -> np.ndarray:
         """(n,) maximum joint speeds (rad/s)."""
         return self._max_speed.copy()
+
+    def max_joint_acceleration(self) -> np.ndarray:
+        """(n,) joint accelerations (rad/s^2) of every move (scenario
+        motion.max_joint_acceleration)."""
+        return self._max_acceleration.copy()
+
+    def move_profile(self, q_from: np.ndarray, q_to: np.ndarray, speed: float,
+                     acceleration: float | None = None) -> PathProfile:
+        """The time law of a move q_from -> q_to (n,) at `speed` (fraction of the top
+        speeds): each joint at most speed x max_joint_speed and max_joint_acceleration
+        (capped at `acceleration` rad/s^2 if given: what a UR host commands)."""
+        accel = self._max_acceleration
+        if acceleration is not None:
+            accel = np.minimum(accel, float(acceleration))
+        return PathProfile.of_move(np.asarray(q_to, float) - np.asarray(q_from, float),
+                                   float(speed) * self._max_speed, accel)
 
     # ------------------------------------------------------------------ zero offsets
 

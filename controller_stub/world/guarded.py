@@ -3,7 +3,9 @@
 The touch probe's input follows contact of the stylus tip sphere with the reference sphere
 along every path (rising and falling edges, reported through `on_io_edge`); a guarded move
 stops at the first rising edge on its IO line, latched `probe_trigger_latency_s` after the true
-contact. Lengths are metres, angles radians (reported frame), times seconds of the simulated
+contact, and stops `probe.stop_time_s` after the latch, where the move's velocity profile
+has carried it by then (a guarded approach is slow: mostly at cruise, its short ramp
+included). Lengths are metres, angles radians (reported frame), times seconds of the simulated
 clock. The contact search itself is in `sensors/sphere_probe.py`; `joint_motion.py` finishes
 a guarded move (the latch and the stop) through `latch` and `update_input` here.
 """
@@ -17,7 +19,7 @@ from controller_stub.sensors import sphere_probe as probe_mod
 from controller_stub.sensors.sphere_probe import TouchProbe
 from controller_stub.world.arm import ArmBody
 from controller_stub.world.controller_state import ControllerState
-from controller_stub.world.motion import GuardedContact, MotionPlan, PathEdge
+from controller_stub.world.motion import GuardedContact, MotionPlan, PathEdge, PathProfile
 
 
 class GuardedMoves:
@@ -38,7 +40,8 @@ class GuardedMoves:
         self._count = 0
 
     def _gap_function(
-        self, q_start: np.ndarray, target: np.ndarray, t_start: float, duration: float, extra: float
+        self, q_start: np.ndarray, target: np.ndarray, t_start: float, profile: PathProfile,
+        extra: float
     ) -> probe_mod.GapFunction:
         """Gap (m) along the path s in [0, 1]: |tip - P_b| - (R + r + extra), < 0 inside.
 
@@ -51,7 +54,7 @@ class GuardedMoves:
         def gap(s: np.ndarray) -> np.ndarray:
             s = np.asarray(s, float)
             q_rep = q_start[None, :] + s[:, None] * (target - q_start)[None, :]
-            times = t_start + s * duration if drifting else t_start
+            times = t_start + profile.time_at(s) if drifting else t_start
             qp = self.body.physical_along(q_rep, approach, times)
             return self.probe.gaps(physics.flange_pose(qp, times), extra)
 
@@ -72,15 +75,15 @@ class GuardedMoves:
         self,
         q_start: np.ndarray,
         target: np.ndarray,
-        duration: float,
+        profile: PathProfile,
         t_start: float,
         extra: float = 0.0,
     ) -> list[probe_mod.Crossing]:
         """Where the probe's input changes along the path from q_start to target (n,)
-        reported rad over `duration` s from `t_start` (extra: contact distance noise, m)."""
-        if duration <= 0.0:
+        reported rad moved by `profile` from `t_start` (extra: contact distance noise, m)."""
+        if profile.duration_s <= 0.0:
             return []
-        gap = self._gap_function(q_start, target, t_start, duration, extra)
+        gap = self._gap_function(q_start, target, t_start, profile, extra)
         return probe_mod.find_crossings(gap, self._tip_lipschitz(q_start, target))
 
     def set_input(self, value: bool, t: float, q: np.ndarray, emit: bool) -> None:
@@ -97,7 +100,7 @@ class GuardedMoves:
         """The trigger latched `contact`: the input is high, the edge reported."""
         self.state.latch_input(self.probe.io_line, contact.time_latch, contact.q_latched)
 
-    def plan(self, target: np.ndarray, duration: float, io_line: int) -> MotionPlan:
+    def plan(self, target: np.ndarray, profile: PathProfile, io_line: int) -> MotionPlan:
         """A guarded move (see `Simulation.guarded_move`): the edges up to the contact, and
         the contact."""
         index = self._count
@@ -107,11 +110,11 @@ class GuardedMoves:
         q_start = self.state.joint_positions()
         t_start = self.state.time
         noise = float(self._rng.normal(0.0, self.scenario.probe.repeatability_sigma))
-        crossings = self.path_crossings(q_start, target, duration, t_start, extra=noise)
+        crossings = self.path_crossings(q_start, target, profile, t_start, extra=noise)
         latency = self.body.effects.probe_trigger_latency_s
         edges: list[PathEdge] = []
         for c in crossings:
-            t_c = t_start + c.s * duration
+            t_c = t_start + float(profile.time_at(c.s))
             q_c = q_start + c.s * (target - q_start)
             if not c.rising:
                 edges.append(PathEdge(c.s, False, t_c, q_c))
@@ -120,25 +123,27 @@ class GuardedMoves:
                 # the edge happens on the probe line, but the guarded move does not see it
                 edges.append(PathEdge(c.s, True, t_c, q_c, emit=not lose_edge))
                 continue
-            s_latch = min(1.0, c.s + latency / duration)
-            s_stop = min(1.0, s_latch + self.scenario.probe.stop_time_s / duration)
+            t_latch = min(t_c - t_start + latency, profile.duration_s)
+            s_latch = float(profile.s_at(t_latch))
+            s_stop = float(profile.s_at(t_latch + self.scenario.probe.stop_time_s))
             contact = GuardedContact(
                 s_contact=c.s,
                 s_latch=s_latch,
                 s_stop=s_stop,
                 q_latched=q_start + s_latch * (target - q_start),
-                time_latch=t_start + s_latch * duration,
-                speed_mps=self.tip_speed(q_start, target, c.s, duration),
+                time_latch=t_start + t_latch,
+                speed_mps=self.tip_speed(q_start, target, c.s, profile),
             )
             return MotionPlan(
-                q_start, target, t_start, duration, s_stop, io_line, tuple(edges), contact
+                q_start, target, t_start, profile, s_stop, io_line, tuple(edges), contact
             )
-        return MotionPlan(q_start, target, t_start, duration, 1.0, io_line, tuple(edges))
+        return MotionPlan(q_start, target, t_start, profile, 1.0, io_line, tuple(edges))
 
     def tip_speed(
-        self, q_start: np.ndarray, target: np.ndarray, s: float, duration: float
+        self, q_start: np.ndarray, target: np.ndarray, s: float, profile: PathProfile
     ) -> float:
-        """Cartesian tip speed (m/s) at path parameter s (central difference)."""
+        """Cartesian tip speed (m/s) at path parameter s: |d tip / d s| (central
+        difference) x the profile's ds/dt there."""
         h = 1e-6
         s_pair = np.array([max(0.0, s - h), min(1.0, s + h)])
         q_rep = q_start[None, :] + s_pair[:, None] * (target - q_start)[None, :]
@@ -146,4 +151,5 @@ class GuardedMoves:
         t_now = self.state.time
         qp = self.body.physical_along(q_rep, approach, t_now)
         tips = self.probe.tips(self.body.physics.flange_pose(qp, t_now))
-        return float(np.linalg.norm(tips[1] - tips[0]) / ((s_pair[1] - s_pair[0]) * duration))
+        rate = profile.rate_at(float(profile.time_at(s)))
+        return float(np.linalg.norm(tips[1] - tips[0]) / (s_pair[1] - s_pair[0]) * rate)

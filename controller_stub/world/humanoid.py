@@ -201,9 +201,12 @@ class HumanoidSimulation(ControllerBase):
 
     # ------------------------------------------------------------------ motion
 
-    def begin_move(self, q_target: Any, speed: float, io_line: int | None = None) -> MotionPlan:
+    def begin_move(self, q_target: Any, speed: float, io_line: int | None = None,
+                   acceleration: float | None = None) -> MotionPlan:
         """Plan a straight joint-space move to q_target (16,) reported rad at `speed`
-        (fraction of max joint speed); nothing moves until :meth:`finish_move`. Refused:
+        (fraction of max joint speed), ramped like the arm's (`motion.PathProfile`, the
+        scenario's motion.max_joint_acceleration, capped at `acceleration` rad/s^2 if given);
+        nothing moves until :meth:`finish_move`. Refused:
         "busy" (a motion is in progress), "estop", "invalid_argument", "joint_limit",
         "unsupported" for a guarded move (no touch probe)."""
         state = self.state
@@ -217,8 +220,8 @@ class HumanoidSimulation(ControllerBase):
             raise SimulationRefused("invalid_argument", f"speed {speed} not in (0, 1]")
         state.check_joint_limits(target)
         q = state.joint_positions()
-        duration = float(np.max(np.abs(target - q) / (speed * state.max_joint_speed())))
-        plan = MotionPlan(q, target, state.time, duration, 1.0, None, ())
+        profile = state.move_profile(q, target, float(speed), acceleration)
+        plan = MotionPlan(q, target, state.time, profile, 1.0, None, ())
         state.hold_plan(plan)
         return plan
 

@@ -4,7 +4,9 @@ part-way.
 A motion is planned (`begin_move`: checks, counters, faults and the IO edges along the path,
 nothing moves yet) and then executed (`finish_move`), so the server can pace it in wall time
 and an abort stops the robot where it was. The path is a straight line in reported joint
-space, q(s) = q_start + s * (q_target - q_start), s in [0, 1] (`motion.py` has the values).
+space, q(s) = q_start + s * (q_target - q_start), s in [0, 1], s(t) the move's trapezoidal
+velocity profile (`motion.PathProfile`: every joint ramps at the scenario's
+motion.max_joint_acceleration; `motion.py` has the values and the law).
 Guarded moves are planned by `guarded.GuardedMoves`; finishing one (the latch, the stop
 past it) happens here. Angles radians (reported frame), times seconds of the simulated clock.
 """
@@ -20,7 +22,13 @@ from controller_stub.scenario.spec import Scenario
 from controller_stub.world.arm import ArmBody
 from controller_stub.world.controller_state import ControllerState
 from controller_stub.world.guarded import GuardedMoves
-from controller_stub.world.motion import GuardedMoveResult, MotionPlan, MoveResult, PathEdge
+from controller_stub.world.motion import (
+    GuardedMoveResult,
+    MotionPlan,
+    MoveResult,
+    PathEdge,
+    PathProfile,
+)
 
 
 class JointMotion:
@@ -42,8 +50,9 @@ class JointMotion:
         self._completed_moves = 0
         self._estop_fault_fired = False
 
-    def _begin_motion(self, q_target: Any, speed: float) -> tuple[np.ndarray, float]:
-        """Common checks; returns (target (n,), duration (s)). Counts the move."""
+    def _begin_motion(self, q_target: Any, speed: float, acceleration: float | None
+                      ) -> tuple[np.ndarray, PathProfile]:
+        """Common checks; returns (target (n,), its time law). Counts the move."""
         state = self.state
         target = state.check_vector(q_target, "q_target")
         if not (isinstance(speed, int | float) and 0.0 < float(speed) <= 1.0):
@@ -55,12 +64,13 @@ class JointMotion:
         if index in self.scenario.faults.refuse_move_indices:
             raise SimulationRefused("refused_fault", f"move {index} refused (injected fault)")
         state.check_joint_limits(target)
-        return target, self.motion_duration(state.joint_positions(), target, float(speed))
+        return target, state.move_profile(state.joint_positions(), target, float(speed),
+                                          acceleration)
 
     def motion_duration(self, q_from: np.ndarray, q_to: np.ndarray, speed: float) -> float:
-        """Simulated time (s) of a joint move: max_i |dq_i| / (speed * max_speed_i)."""
-        max_speed = self.state.max_joint_speed()
-        return float(np.max(np.abs(np.asarray(q_to) - q_from) / (speed * max_speed)))
+        """Simulated time (s) of a joint move q_from -> q_to at `speed` (the ramped law of
+        `motion.PathProfile`)."""
+        return self.state.move_profile(q_from, q_to, speed).duration_s
 
     def arrive(self, q_start: np.ndarray, q_end: np.ndarray, duration: float) -> None:
         """A motion from q_start ended at q_end (n,) after `duration` s: the body's approach,
@@ -84,9 +94,11 @@ class JointMotion:
         assert isinstance(result, MoveResult)
         return result
 
-    def begin_move(self, q_target: Any, speed: float, io_line: int | None = None) -> MotionPlan:
+    def begin_move(self, q_target: Any, speed: float, io_line: int | None = None,
+                   acceleration: float | None = None) -> MotionPlan:
         """Plan a motion without executing it: a joint move (io_line None, see move_joints)
-        or a guarded move until a rising edge on `io_line` (see guarded_move).
+        or a guarded move until a rising edge on `io_line` (see guarded_move); acceleration:
+        rad/s^2 the caller commands (a UR movej's), capped by the scenario's.
 
         The checks, move counters, faults and the probe noise draw happen here, exactly as
         in the immediate calls; the robot does not move (joint_positions() still reports
@@ -99,11 +111,11 @@ class JointMotion:
             raise SimulationRefused(
                 "invalid_argument", f"io_line {io_line} out of range 0..{state.n_io - 1}"
             )
-        target, duration = self._begin_motion(q_target, speed)
+        target, profile = self._begin_motion(q_target, speed, acceleration)
         if io_line is None:
-            plan = self._plan_move(target, duration)
+            plan = self._plan_move(target, profile)
         else:
-            plan = self.guarded.plan(target, duration, int(io_line))
+            plan = self.guarded.plan(target, profile, int(io_line))
         state.hold_plan(plan)
         return plan
 
@@ -112,8 +124,8 @@ class JointMotion:
     ) -> MoveResult | GuardedMoveResult:
         """Execute `plan` up to `fraction` (clipped to [0, 1]) of it; 1 = to its end.
 
-        The robot stops at q = q_start + s * (q_target - q_start), s = fraction * s_end; the
-        clock advances by s * path_duration_s; only the IO edges with s_edge <= s happen. A
+        The robot stops where the profile is after fraction x duration_s (the clock advances
+        by that), s = plan.s_at(fraction); only the IO edges with s_edge <= s happen. A
         move stopped early (fraction < 1, e.g. an abort) reports completed=False /
         reason "aborted"; a stopped guarded move reports a contact only if the trigger
         latched before the stop (a touch after the latch point is not reported; a touch
@@ -123,14 +135,14 @@ class JointMotion:
         self.state.release_plan(plan)
         fraction = min(max(float(fraction), 0.0), 1.0)
         stopped = fraction < 1.0
-        s = fraction * plan.s_end
+        s = plan.s_at(fraction)
+        duration = fraction * plan.duration_s
         for edge in plan.edges:
             if edge.s <= s:
                 self.guarded.set_input(edge.value, edge.time, edge.q, emit=edge.emit)
         if plan.io_line is not None:
-            return self._finish_guarded(plan, s, stopped)
+            return self._finish_guarded(plan, s, duration, stopped)
         q_end = plan.q_start + s * (plan.q_target - plan.q_start) if stopped else plan.q_target
-        duration = s * plan.path_duration_s
         self.arrive(plan.q_start, q_end, duration)
         settle = self.settle_time(duration, stopped)
         self.state.advance_clock(settle)
@@ -149,15 +161,16 @@ class JointMotion:
             return 0.0
         return float(self.scenario.motion.settle_s)
 
-    def _plan_move(self, target: np.ndarray, duration: float) -> MotionPlan:
+    def _plan_move(self, target: np.ndarray, profile: PathProfile) -> MotionPlan:
         """A joint move: the probe IO line follows contact along the path."""
         q_start = self.state.joint_positions()
         t_start = self.state.time
         edges = tuple(
-            PathEdge(c.s, c.rising, t_start + c.s * duration, q_start + c.s * (target - q_start))
-            for c in self.guarded.path_crossings(q_start, target, duration, t_start)
+            PathEdge(c.s, c.rising, t_start + float(profile.time_at(c.s)),
+                     q_start + c.s * (target - q_start))
+            for c in self.guarded.path_crossings(q_start, target, profile, t_start)
         )
-        return MotionPlan(q_start, target, t_start, duration, 1.0, None, edges)
+        return MotionPlan(q_start, target, t_start, profile, 1.0, None, edges)
 
     def guarded_move(self, q_target: Any, speed: float, io_line: int) -> GuardedMoveResult:
         """Move toward q_target until a rising edge on `io_line` (the probe trigger).
@@ -174,11 +187,12 @@ class JointMotion:
         assert isinstance(result, GuardedMoveResult)
         return result
 
-    def _finish_guarded(self, plan: MotionPlan, s: float, stopped: bool) -> GuardedMoveResult:
-        """The end of a guarded move stopped at path parameter s (edges already applied)."""
+    def _finish_guarded(self, plan: MotionPlan, s: float, duration: float, stopped: bool
+                        ) -> GuardedMoveResult:
+        """The end of a guarded move stopped at path parameter s after `duration` s (edges
+        already applied)."""
         assert plan.io_line is not None
         contact = plan.contact
-        duration = s * plan.path_duration_s
         q_end = plan.q_start + s * (plan.q_target - plan.q_start)
         if contact is not None and contact.s_latch <= s:
             self.guarded.latch(contact)
@@ -196,7 +210,7 @@ class JointMotion:
         if contact is not None and contact.s_contact <= s:
             # touched, but stopped before the trigger latched: no contact reported
             q_touch = plan.q_start + contact.s_contact * (plan.q_target - plan.q_start)
-            t_touch = plan.t_start + contact.s_contact * plan.path_duration_s
+            t_touch = plan.t_start + float(plan.profile.time_at(contact.s_contact))
             self.guarded.set_input(True, t_touch, q_touch, emit=False)
         if not stopped:
             q_end = plan.q_target.copy()

@@ -34,7 +34,7 @@ INTERFACE CONTRACT (the server depends on exactly these names):
     sim.set_digital_output(index, value) -> None
     sim.move_joints(q_target, speed) -> MoveResult            # speed: fraction of max (0, 1]
     sim.guarded_move(q_target, speed, io_line) -> GuardedMoveResult
-    sim.begin_move(q_target, speed, io_line=None) -> MotionPlan   # deferred motion (server):
+    sim.begin_move(q_target, speed, io_line=None, acceleration=None) -> MotionPlan  # deferred:
     sim.finish_move(plan, fraction=1.0) -> MoveResult | GuardedMoveResult  # stop part-way
     sim.capture_stereo(pattern="target", view=0) -> StereoFrame   # pattern: target|chessboard
     sim.camera_description() -> dict          # what the controller reports of its camera
@@ -193,9 +193,10 @@ class Simulation(ControllerBase):
         """See `JointMotion.guarded_move`."""
         return self.motion.guarded_move(q_target, speed, io_line)
 
-    def begin_move(self, q_target: Any, speed: float, io_line: int | None = None) -> MotionPlan:
+    def begin_move(self, q_target: Any, speed: float, io_line: int | None = None,
+                   acceleration: float | None = None) -> MotionPlan:
         """See `JointMotion.begin_move`."""
-        return self.motion.begin_move(q_target, speed, io_line)
+        return self.motion.begin_move(q_target, speed, io_line, acceleration)
 
     def finish_move(
         self, plan: MotionPlan, fraction: float = 1.0

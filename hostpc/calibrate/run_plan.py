@@ -64,7 +64,7 @@ from hostpc.planning.robot_time import (
     measuring_motion,
     predicted_robot_time,
 )
-from hostpc.planning.tour import full_turn_joints, short_path, unwrap_plan
+from hostpc.planning.tour import Rates, full_turn_joints, short_path, unwrap_plan
 from hostpc.planning.verify_poses import POWER_EFFECTS, PowerDesign, nearby_verify_poses
 from hostpc.robots.base import RobotState
 
@@ -161,7 +161,7 @@ def power_design(method: Method, design: Design, pool: np.ndarray, settings: Run
         return None
     try:
         A, names, _ = design_matrix(method.design_dataset(pool), base + missing,
-                                    settings.plugins)
+                                    settings.plugins, pool.shape[0])
     except InputError:  # an effect the method's measurements cannot carry
         return None
     if not set(design.names) <= set(names):
@@ -172,17 +172,19 @@ def power_design(method: Method, design: Design, pool: np.ndarray, settings: Run
 
 
 def grown_path(pool: np.ndarray, more: np.ndarray, q_more: np.ndarray,
-               verify: np.ndarray, q_from: np.ndarray, limits: tuple[np.ndarray, np.ndarray]
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               verify: np.ndarray, q_from: np.ndarray, limits: tuple[np.ndarray, np.ndarray],
+               rates: Rates = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The path a short plan takes once it grew, from its last fit pose q_from (n,): the
     further fit poses (`more`, pool indices, visited as q_more (M, n)), then every
     verification pose of the grown plan (`verify`, pool indices) as a tour from the last
     of them, the whole unwrapped as one path (`tour.unwrap_plan`): the verification poses'
     angles of the short path are the equivalents nearest the fit tour's end, and from
     q_more's end one of them can be more than half a turn away (a wrist unwinding).
-    Returns (q_more, the verification poses, more), each in the grown path's order."""
-    order, _ = short_path(pool[verify], q_more[-1], *limits)
-    orders, (q_more, q_verify) = unwrap_plan([q_more, pool[verify[order]]], q_from, *limits)
+    Returns (q_more, the verification poses, more), each in the grown path's order;
+    rates: the moves' speeds and accelerations (`tour.move_times`)."""
+    order, _ = short_path(pool[verify], q_more[-1], *limits, rates)
+    orders, (q_more, q_verify) = unwrap_plan([q_more, pool[verify[order]]], q_from, *limits,
+                                             rates)
     return q_more, q_verify, more[orders[0]]
 
 
@@ -204,7 +206,8 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         dataset = reference_priors(reference, dataset, settings)[0]
     except (InputError, ValueError, np.linalg.LinAlgError):
         pass  # unusable here (e.g. another rig's camera frame): with_joint_coverage says why
-    A, names, units = design_matrix(dataset, settings.effects, settings.plugins)
+    A, names, units = design_matrix(dataset, settings.effects, settings.plugins,
+                                    pool.shape[0])
     constraints = constraints_for(dataset.extra_fields, names, units)
     design = make_design(A, names, units, None if constraints is None or not
                          constraints.index.size else constraints.jacobian(len(names)))
@@ -214,6 +217,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     short = groups is None and settings.target_sigma_deg is not None  # short robot time
     limits = (state.q_min, state.q_max)
     time_limits = TimeLimits.from_extra(state.extra, state.q.size)
+    rates = time_limits.rates(settings.speed)  # every move's time (tour.move_times)
     q_more: np.ndarray | None = None
     if groups is None:
         travel = None
@@ -233,18 +237,17 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         n_check = min(CHECK_POSES, max(0, settings.n_poses - chosen.size))
         if power is not None and n_check > 0:
             unused = np.setdiff1d(np.arange(pool.shape[0]), chosen)
-            check_poses = power.check_poses(chosen, unused, n_check, pool,
-                                            time_limits.joint_speed * settings.speed,
+            check_poses = power.check_poses(chosen, unused, n_check, pool, rates,
                                             time_limits.settle_s + time_limits.capture_s)
             chosen = np.concatenate([chosen, check_poses])
             more = more[~np.isin(more, check_poses)][:max(0, settings.n_poses - chosen.size)]
         if short:  # a tour, full-turn joints the short way round (tour.short_path)
-            order, q_short = short_path(pool[chosen], state.q, *limits)
+            order, q_short = short_path(pool[chosen], state.q, *limits, rates)
             fit_indices = chosen[order]
         else:
-            fit_indices = chosen[order_for_travel(pool[chosen], state.q)]
+            fit_indices = chosen[order_for_travel(pool[chosen], state.q, rates)]
         if more.size:  # measured only if the model fails (runner): a tour from the last
-            order, q_more = short_path(pool[more], q_short[-1], *limits)
+            order, q_more = short_path(pool[more], q_short[-1], *limits, rates)
             more = more[order]
     else:  # whole groups (sphere_probe: an orientation's 5 contacts)
         ordered = group_selection(design, groups, settings.n_poses, settings.criterion, rng)
@@ -254,10 +257,11 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         floor_groups = ordered[:enough or len(ordered)]
         if settings.target_sigma_deg is not None and enough is not None:
             # the fewest groups that reach it as a tour; the rest if the model fails
-            fit_indices = tour_groups(pool, groups, np.concatenate(ordered[:enough]), state.q)
+            fit_indices = tour_groups(pool, groups, np.concatenate(ordered[:enough]), state.q,
+                                      rates)
             if enough < len(ordered):
                 more = tour_groups(pool, groups, np.concatenate(ordered[enough:]),
-                                   pool[fit_indices[-1]])
+                                   pool[fit_indices[-1]], rates)
                 q_more = pool[more]
         else:  # in the pool order (the method's safe visiting order)
             fit_indices = in_pool_order(ordered)
@@ -277,16 +281,15 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         rest = np.setdiff1d(np.arange(pool.shape[0]), np.concatenate([fit_indices, more]))
         if power is not None and settings.n_verify > 0:  # most signal per second
             verify_indices = power.choose(
-                fit_indices, rest, settings.n_verify, pool, last,
-                time_limits.joint_speed * settings.speed,
+                fit_indices, rest, settings.n_verify, pool, last, rates,
                 time_limits.settle_s + time_limits.capture_s, limits)
         else:  # a random choice, toured
             verify_indices = nearby_verify_poses(pool, rest, last, settings.n_verify, rng)
-        order, q_verify = short_path(pool[verify_indices], last, *limits)
+        order, q_verify = short_path(pool[verify_indices], last, *limits, rates)
         verify_indices = verify_indices[order]
         # the whole plan as one path: a joint wound up by the fit tour must not unwind on
         # the way to the verification poses (tour.unwrap_plan)
-        orders, (q_fit, q_verify) = unwrap_plan([q_fit, q_verify], state.q, *limits)
+        orders, (q_fit, q_verify) = unwrap_plan([q_fit, q_verify], state.q, *limits, rates)
         fit_indices, verify_indices = fit_indices[orders[0]], verify_indices[orders[1]]
         if q_more is not None:  # if the model fails: q_more, then a fixed plan's count
             rest = np.setdiff1d(rest, verify_indices)
@@ -295,27 +298,27 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
                 pool, rest, from_pose, max(0, EXTENDED_VERIFY_POSES - verify_indices.size),
                 rng)
             q_more, q_verify_grown, more = grown_path(pool, more, q_more, np.concatenate(
-                [verify_indices, extra]), q_fit[-1], limits)
+                [verify_indices, extra]), q_fit[-1], limits, rates)
     elif groups is None:
         rest = np.setdiff1d(np.arange(pool.shape[0]), fit_indices)
         verify_indices = rng.choice(rest, size=min(settings.n_verify, rest.size),
                                     replace=False)
-        verify_indices = verify_indices[order_for_travel(pool[verify_indices], last)]
+        verify_indices = verify_indices[order_for_travel(pool[verify_indices], last, rates)]
     else:
         used = np.concatenate([fit_indices, more])
         verify_indices = verify_groups(groups, used, settings.n_verify, rng)
         if settings.target_sigma_deg is not None:
-            verify_indices = tour_groups(pool, groups, verify_indices, last)
+            verify_indices = tour_groups(pool, groups, verify_indices, last, rates)
         if more.size:  # a grown plan verifies with a fixed plan's count
             extra = verify_groups(groups, np.concatenate([used, verify_indices]),
                                   EXTENDED_VERIFY_POSES - verify_indices.size, rng)
             from_pose = pool[verify_indices[-1]] if verify_indices.size else last
             q_verify_grown = pool[np.concatenate(
-                [verify_indices, tour_groups(pool, groups, extra, from_pose)])]
+                [verify_indices, tour_groups(pool, groups, extra, from_pose, rates)])]
     if not short:
         q_verify = pool[verify_indices]
     if not short and groups is None:  # full-turn joints: no unwinding (tour.unwrap_plan)
-        orders, (q_fit, q_verify) = unwrap_plan([q_fit, q_verify], state.q, *limits)
+        orders, (q_fit, q_verify) = unwrap_plan([q_fit, q_verify], state.q, *limits, rates)
         fit_indices, verify_indices = fit_indices[orders[0]], verify_indices[orders[1]]
     sigmas = joint_offset_sigmas(plan_design, state.q.size)
     bounded = ({} if settings.target_sigma_deg is None else prior_bounded_joints(

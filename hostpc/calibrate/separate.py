@@ -39,6 +39,7 @@ from hostpc.fitting.solver import Loss
 from hostpc.methods.base import Method, Plan, RunSettings
 from hostpc.model.effect import Effect
 from hostpc.model.registry import available_effects
+from hostpc.planning.design import per_pose
 from hostpc.planning.separate import separating_poses
 from hostpc.robots.base import RobotState
 
@@ -142,8 +143,8 @@ def plan_separation(journal: Journal, method: Method, state: RobotState, plan: P
                else [np.array([i]) for i in range(pool.shape[0])])
     members = [g for g in members if not any(_is_used(pool[i], used) for i in g)]
     measured = measured_rows(result, model)
-    blocks = (model.blocks(method.design_dataset(pool)) if pool.shape[0]
-              else np.zeros((0, 1, len(model.layout))))
+    blocks = (per_pose(model.blocks(method.design_dataset(pool)), pool.shape[0])
+              if pool.shape[0] else np.zeros((0, 1, len(model.layout))))
     needed = needed_noncentralities(model, alpha)
     chosen = separating_poses(measured, blocks, members,
                               lambda rows: noncentralities(model, rows), needed,

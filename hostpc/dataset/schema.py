@@ -139,7 +139,8 @@ Covariance = Annotated[list[list[float]], _square(3, 6)]
 class StrictSchema(BaseModel):
     """A JSON object with exactly these fields (a kind's own blocks subclass it too)."""
 
-    model_config = ConfigDict(strict=True, extra="forbid", frozen=True)
+    # built on first use: a file reads only some of them (defer_build: no behaviour change)
+    model_config = ConfigDict(strict=True, extra="forbid", frozen=True, defer_build=True)
 
 
 class UnitsSchema(StrictSchema):

@@ -30,7 +30,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from hostpc.diagnostics.distributions import f_logsf
-from hostpc.diagnostics.residual_analysis import is_angle, usable_variables
+from hostpc.diagnostics.residual_analysis import is_angle, sorted_distinct, usable_variables
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult
 from hostpc.fitting.solver import evaluate
@@ -91,7 +91,7 @@ def modulators(name: str, values: np.ndarray, categorical: bool = False
     defined = np.isfinite(values)
     present = values[defined]
     if categorical:
-        indicators = (present[:, None] == np.unique(present)[None, :]).astype(float)
+        indicators = (present[:, None] == sorted_distinct(present)[None, :]).astype(float)
         F = np.zeros((values.size, indicators.shape[1]))
         F[defined] = indicators - indicators.mean(axis=0)
         return F, "per level"
@@ -225,7 +225,7 @@ def level_shifts(column: np.ndarray, codes: np.ndarray, levels: Sequence[str], m
     Z = column[:, None] * np.repeat(F, m, axis=0)
     Z = Z - Q @ (Q.T @ Z)
     coefficients = -np.linalg.lstsq(Z, r, rcond=None)[0]
-    present = np.unique(codes[np.isfinite(codes)])
+    present = sorted_distinct(codes[np.isfinite(codes)])
     return tuple((levels[int(code)], float(c)) for code, c in
                  zip(present, coefficients, strict=True))
 

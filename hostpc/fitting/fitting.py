@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -70,7 +70,9 @@ def held_out_by_fold(problem: Problem, x: np.ndarray, free: np.ndarray, folds: i
     perturbation of it), as is a fold whose remaining samples do not determine the
     parameters."""
     n_samples, m = problem.measured.shape
-    fold_sets = fold_indices(problem.dataset.samples, folds)
+    samples = problem.dataset.samples  # every model of one dataset: the same folds
+    fold_sets = problem.shared.value(samples, ("fold_indices", folds),
+                                     lambda: fold_indices(samples, folds))
     if fold_sets is None:
         return None
     steps: list[np.ndarray | None] = [None] * folds
@@ -251,14 +253,7 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
         covariance[np.ix_(free, free)] = np.nan
     std = np.sqrt(np.diag(covariance))
     std[~free] = np.nan
-    correlations = []
-    free_index = np.flatnonzero(free)
-    for i_pos, i in enumerate(free_index):
-        for j in free_index[i_pos + 1:]:
-            rho = covariance[i, j] / max(std[i] * std[j], 1e-300)
-            if abs(rho) > CORRELATION_THRESHOLD:
-                correlations.append((layout.names[i], layout.names[j], float(rho)))
-    correlations.sort(key=lambda c: -abs(c[2]))
+    correlations = _strong_correlations(covariance, std, free, layout.names)
     norms = np.linalg.norm(final.raw[:, problem.length_columns], axis=1)
     n_rows = final.whitened.size
     cv = (cross_validated_rms(problem, outcome.x, free, cv_folds, loss, loss_scale, final)
@@ -288,6 +283,20 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
         cv_folds=cv_folds if cv is not None else 0,
         loss=loss,
     )
+
+
+def _strong_correlations(covariance: np.ndarray, std: np.ndarray, free: np.ndarray,
+                         names: Sequence[str]) -> list[tuple[str, str, float]]:
+    """(name i, name j, rho) of the free pairs i < j with |rho| above
+    ``CORRELATION_THRESHOLD``, strongest first (pairs of equal |rho| in index order)."""
+    index = np.flatnonzero(free)
+    first, second = np.triu_indices(index.size, k=1)
+    i, j = index[first], index[second]
+    rho = covariance[i, j] / np.maximum(std[i] * std[j], 1e-300)
+    strong = np.flatnonzero(np.abs(rho) > CORRELATION_THRESHOLD)
+    found = [(names[i[k]], names[j[k]], float(rho[k])) for k in strong]
+    found.sort(key=lambda c: -abs(c[2]))
+    return found
 
 
 def fit(dataset: Dataset, effects: str | Iterable[str] | None = None, *,

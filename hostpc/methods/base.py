@@ -10,7 +10,8 @@ procedure around it:
                                     the planner picks the informative ones
     design_dataset(q)               a Dataset at poses q with predicted measurements and their
                                     expected covariances (nominal model): the planner's and the
-                                    identifiability check's Jacobian comes from it
+                                    identifiability check's Jacobian comes from it; k samples
+                                    per pose (the same k for every pose), pose-major
     acquire(robot, phase, index, q, q_from)
                                     drive to one pose and measure: the kind's typed sample
                                     (a frozen dataclass, `Sample`) journaled through its
@@ -206,12 +207,12 @@ class Sample(Protocol):
 
 def floats(values: Sequence[float] | np.ndarray) -> tuple[float, ...]:
     """A typed sample's vector field from a list or array (JSON numbers, floats)."""
-    return tuple(float(v) for v in np.asarray(values, dtype=float).reshape(-1))
+    return tuple(np.asarray(values, dtype=float).reshape(-1).tolist())
 
 
 def matrix(values: Sequence[Sequence[float]] | np.ndarray) -> tuple[tuple[float, ...], ...]:
     """A typed sample's matrix field from nested lists or a 2-D array (floats)."""
-    return tuple(tuple(float(v) for v in row) for row in np.asarray(values, dtype=float))
+    return tuple(tuple(row) for row in np.asarray(values, dtype=float).tolist())
 
 
 def optional_json(**fields: Any) -> JsonObject:
@@ -460,7 +461,9 @@ class Method(ABC):
     @abstractmethod
     def design_dataset(self, q: np.ndarray) -> Dataset:
         """A dataset at poses q (N, n) with nominal predicted measurements and expected
-        covariances, for Jacobians (planning, identifiability). Not a measurement."""
+        covariances, for Jacobians (planning, identifiability). Not a measurement. k
+        samples per pose (the same k for every pose; dual_loop: 2, both arms), pose-major:
+        the planner stacks a pose's samples into one block (`planning.design.per_pose`)."""
 
     @abstractmethod
     async def acquire(

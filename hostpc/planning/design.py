@@ -50,7 +50,7 @@ from hostpc.model import joint_offsets
 from hostpc.model.joint_offsets import PushTable
 from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
-from hostpc.planning.tour import move_times, nearest_neighbour, plan_tour
+from hostpc.planning.tour import Rates, move_times, nearest_neighbour, plan_tour
 
 CRITERIA = ("D", "random")
 DEFAULT_RIDGE = 1e-6
@@ -104,15 +104,27 @@ class PlanCheck:
 
 
 def design_matrix(dataset: Dataset, effects: str | Iterable[str] | None,
-                  plugins: Iterable[str] = ()) -> tuple[np.ndarray, tuple[str, ...],
-                                                        tuple[str, ...]]:
+                  plugins: Iterable[str] = (), poses: int | None = None
+                  ) -> tuple[np.ndarray, tuple[str, ...], tuple[str, ...]]:
     """Whitened Jacobian blocks (N, m, P) of the model at the nominal parameters, with the
-    parameter names and units."""
+    parameter names and units. poses: the number of poses the dataset's samples measure
+    (None: one per sample); a design dataset with k samples per pose, pose-major
+    (dual_loop: both arms' targets seen at one pose), gives one (k m, P) block per pose."""
     problem = build_problem(dataset, effects, plugins=plugins)
     _, J = predict(problem, np.zeros(problem.layout.size), jacobian=True)
     assert J is not None
     A = np.einsum("nij,njp->nip", problem.sqrt_information, J)
-    return A, problem.layout.names, problem.layout.units
+    return per_pose(A, poses), problem.layout.names, problem.layout.units
+
+
+def per_pose(A: np.ndarray, poses: int | None) -> np.ndarray:
+    """Blocks A (k N, m, P) of a pose-major design dataset, k samples per pose, as
+    (N, k m, P) (one block per pose); None: A as it is."""
+    if poses is None or A.shape[0] == poses:
+        return A
+    if poses <= 0 or A.shape[0] % poses:
+        raise ValueError(f"{A.shape[0]} design samples do not divide into {poses} poses")
+    return A.reshape(poses, -1, A.shape[2])
 
 
 def make_design(A: np.ndarray, names: Sequence[str], units: Sequence[str],
@@ -311,10 +323,10 @@ def verify_groups(groups: PoseGroups, used: np.ndarray, n_verify: int,
 
 
 def tour_groups(pool: np.ndarray, groups: PoseGroups, indices: np.ndarray,
-                q_from: np.ndarray) -> np.ndarray:
+                q_from: np.ndarray, joint_speed: Rates = None) -> np.ndarray:
     """`indices` (pool indices of whole groups) in visiting order: the groups as a tour
-    from q_from (n,) by their first pose (`tour.plan_tour` on the joint move time), each
-    group's poses in their order in `indices`."""
+    from q_from (n,) by their first pose (`tour.plan_tour` on the joint move time with
+    joint_speed, `tour.move_times`), each group's poses in their order in `indices`."""
     indices = np.asarray(indices, dtype=int)
     if indices.size == 0:
         return indices
@@ -322,7 +334,7 @@ def tour_groups(pool: np.ndarray, groups: PoseGroups, indices: np.ndarray,
     _, first = np.unique(labels, return_index=True)
     first = np.sort(first)
     parts = [indices[labels == labels[i]] for i in first]
-    order = plan_tour(pool[indices[first]], np.asarray(q_from, float))
+    order = plan_tour(pool[indices[first]], np.asarray(q_from, float), joint_speed)
     return _concatenate([parts[int(k)] for k in order])
 
 
@@ -375,10 +387,10 @@ def check_plan(plan: Design) -> PlanCheck:
 
 
 def order_for_travel(q: np.ndarray, q_start: np.ndarray | None,
-                     joint_speed: np.ndarray | None = None, *, tour: bool = False
+                     joint_speed: Rates = None, *, tour: bool = False
                      ) -> np.ndarray:
     """Visiting order (indices into q (N, n)) from q_start (or from the first pose):
-    nearest neighbour by the move time max_i |dq_i| / v_i; with `tour`, nearest neighbour
+    nearest neighbour by the move time (`tour.move_times`); with `tour`, nearest neighbour
     improved by 2-opt (`hostpc.planning.tour`), never longer than q's own order nor than
     nearest neighbour."""
     if tour:
@@ -442,6 +454,17 @@ def poses_for_target_sigma(design: Design, order: np.ndarray, target_sigma: floa
         else:
             low = middle + 1
     return low
+
+
+def sine_swings(n: int, frequencies: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(n, k) values in [-1, 1] along one smooth path: column j a sine of frequencies[j]
+    periods over the n steps, its phase random. A candidate pool on such a path (each joint
+    swinging between its bounds) has neighbours that differ by little in every joint, which
+    a tour of poses selected from it turns into short moves (a move takes as long as its
+    largest joint motion)."""
+    t = np.arange(n) / max(n, 1)
+    phase = rng.uniform(0.0, 2 * np.pi, len(frequencies))
+    return np.asarray(np.sin(2 * np.pi * np.outer(t, frequencies) + phase))
 
 
 def look_at_candidates(

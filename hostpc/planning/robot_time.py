@@ -3,16 +3,20 @@
 Pure numerics. A plan keeps the robot busy for its moves, the settling after each move and
 the captures at each pose (docs/simulator.md charges exactly these):
 
-- motion: each joint move takes `max_i |dq_i| / (speed * v_i)` (v_i the joint's top speed,
-  rad/s; speed the run's fraction of it, `--speed`), from the robot's pose along the fit
-  poses, then along the verification poses;
+- motion: each joint move ramps every joint up to speed x v_i (v_i the joint's top speed,
+  rad/s; speed the run's fraction of it, `--speed`) at a_i (its acceleration, rad/s^2) and
+  down to rest, all joints finishing together (`hostpc.planning.tour.move_times`, the
+  trapezoidal law the simulator moves by), from the robot's pose along the fit poses, then
+  along the verification poses;
 - settle: `settle_s` after every move that goes somewhere (none after a guarded approach,
   which latches in motion);
 - capture: `capture_s` per measurement (`Waypoints`: a method's moves per pose).
 
 The controller's limits come from its state when it reports them (`RobotState.extra`:
-`max_joint_speed` (n,) rad/s, `settle_s`, `capture_s`), else a UR's: 180 deg/s on every
-joint, 0.3 s settling, 0.1 s a capture (the simulator's defaults). The floor is what no
+`max_joint_speed` (n,) rad/s, `max_joint_acceleration` (n,) rad/s^2, `settle_s`,
+`capture_s`), else a UR's: 180 deg/s and 1.4 rad/s^2 (UR's default movej acceleration) on
+every joint, 0.3 s settling, 0.1 s a capture (the simulator's defaults but its
+acceleration, 4.0 rad/s^2, which it reports). The floor is what no
 tour can save: settle and capture of the fewest poses that reach the target sigma and of
 the verification poses, no motion (the planner counts the poses: hostpc.calibrate.run_plan),
 plus the moves that are the measurement itself (`measuring_motion`: sphere_probe's guarded
@@ -28,32 +32,46 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from hostpc.planning.tour import move_times
+from hostpc.planning.tour import JointRates, move_times
 
 DEFAULT_JOINT_SPEED = math.pi
 """rad/s of a joint at speed fraction 1 when the controller does not report it (a UR's)."""
+DEFAULT_JOINT_ACCELERATION = 1.4
+"""rad/s^2 of a joint when the controller does not report it: a UR's default movej
+acceleration, which the UR driver commands (hostpc.robots.ur_link.JOINT_ACCELERATION is
+this)."""
 DEFAULT_SETTLE_S = 0.3
 DEFAULT_CAPTURE_S = 0.1
 
 
 @dataclass(frozen=True)
 class TimeLimits:
-    """joint_speed: (n,) rad/s at speed fraction 1; settle_s after each move; capture_s per
-    pose."""
+    """joint_speed: (n,) rad/s at speed fraction 1; joint_acceleration: (n,) rad/s^2;
+    settle_s after each move; capture_s per pose."""
 
     joint_speed: np.ndarray
+    joint_acceleration: np.ndarray
     settle_s: float = DEFAULT_SETTLE_S
     capture_s: float = DEFAULT_CAPTURE_S
 
     @classmethod
     def from_extra(cls, extra: Mapping[str, Any], n_joints: int) -> TimeLimits:
         """The controller's reported limits (`RobotState.extra`), defaults for the rest."""
-        speed = extra.get("max_joint_speed")
-        joint_speed = (np.broadcast_to(np.asarray(speed, float), (n_joints,)).copy()
-                       if speed is not None else np.full(n_joints, DEFAULT_JOINT_SPEED))
-        return cls(joint_speed,
+        def per_joint(key: str, default: float) -> np.ndarray:
+            value = extra.get(key)
+            return np.broadcast_to(np.asarray(default if value is None else value, float),
+                                   (n_joints,)).copy()
+
+        return cls(per_joint("max_joint_speed", DEFAULT_JOINT_SPEED),
+                   per_joint("max_joint_acceleration", DEFAULT_JOINT_ACCELERATION),
                    float(extra.get("settle_s", DEFAULT_SETTLE_S)),
                    float(extra.get("capture_s", DEFAULT_CAPTURE_S)))
+
+    def rates(self, speed: float | np.ndarray) -> JointRates:
+        """The joints' limits of moves at speed fraction(s) `speed` (scalar, or (M,): one
+        per move, giving (M, n) speeds)."""
+        fraction = np.maximum(np.asarray(speed, float), 1e-9)
+        return JointRates(self.joint_speed * fraction[..., None], self.joint_acceleration)
 
 
 @dataclass(frozen=True)
@@ -91,8 +109,7 @@ def waypoints_time(q_start: np.ndarray, path: Waypoints, speed: float, limits: T
     """(motion, settle, capture) in s of `path` from q_start (n,); speed: the run's."""
     q = np.vstack([np.asarray(q_start, float)[None, :], path.q])
     fraction = np.where(np.isnan(path.speed), speed, path.speed)
-    moves = move_times(q[:-1], q[1:], limits.joint_speed)
-    moves = moves / np.maximum(fraction, 1e-9)
+    moves = move_times(q[:-1], q[1:], limits.rates(fraction))
     settle = limits.settle_s * int(np.count_nonzero(path.settle & (moves > 0.0)))
     return float(np.sum(moves)), settle, limits.capture_s * path.captures
 
@@ -121,8 +138,7 @@ def measuring_motion(path: Waypoints, speed: float, limits: TimeLimits) -> float
     if path.q.shape[0] < 2:
         return 0.0
     fraction = np.where(np.isnan(path.speed), speed, path.speed)[1:]
-    moves = move_times(path.q[:-1], path.q[1:], limits.joint_speed) / np.maximum(fraction,
-                                                                                 1e-9)
+    moves = move_times(path.q[:-1], path.q[1:], limits.rates(fraction))
     return float(np.sum(moves[~path.settle[1:]]))
 
 

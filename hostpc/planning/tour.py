@@ -1,11 +1,25 @@
 """Tours: the visiting order of planned poses that shortens the robot's travel time.
 
-Pure numerics (no robot, no I/O). A joint move to the next pose takes as long as its slowest
-joint: `t(a, b) = max_i |b_i - a_i| / v_i` (v_i the joint's speed, rad/s; only ratios
-matter, so equal speeds give the largest joint motion in rad). A tour is an open path that
-starts at the robot's current pose and visits every planned pose once; its cost is the sum
-of the moves' times. The travelling-salesman problem behind it is hard, and a good tour is
-enough:
+Pure numerics (no robot, no I/O). A joint move to the next pose is synchronized along the
+straight joint-space line, every joint ramping up to its speed and down to rest (a
+trapezoidal velocity profile; `move_times`, the one motion-time law of the host):
+
+    tau_v = max_i |dq_i| / v_i      (the move at top speed from the first instant)
+    tau_a = max_i |dq_i| / a_i      (s^2)
+    t(a, b) = 2 sqrt(tau_a)                  if tau_v^2 <= tau_a (too short to reach speed)
+              tau_v + tau_a / tau_v          otherwise
+
+(v_i the joint's speed at the run's speed fraction, rad/s; a_i its acceleration, rad/s^2).
+The path parameter's speed and acceleration are the tightest of the joints' v_i / |dq_i|
+and a_i / |dq_i|, so no joint exceeds its own; with equal limits on every joint this is
+the slowest joint's d / v + v / a (or 2 sqrt(d / a) for a triangular profile). The
+simulator moves by the same law (`controller_stub.world.motion.PathProfile`, its own
+copy). Without accelerations (`joint_speed` a plain array: a_i infinite) a move takes
+tau_v, without speeds (None: v_i = 1) the largest joint motion (rad: only ratios matter).
+
+A tour is an open path that starts at the robot's current pose and visits every planned
+pose once; its cost is the sum of the moves' times (symmetric: a move back takes as long).
+The travelling-salesman problem behind it is hard, and a good tour is enough:
 
 1. start from the shorter of the nearest-neighbour path and the given (selection) order;
 2. improve it by 2-opt (reverse the segment between two moves when that shortens the path,
@@ -21,11 +35,14 @@ way round, min(|dq|, 2 pi - |dq|), and `unwrap_path` then picks, pose after pose
 equivalent angle nearest the previous one (within the limits), so the robot really moves
 the short way. The kinematics is 2 pi periodic, so the measurement does not change.
 
-Shapes: q (N, n) rad; q_start (n,) rad; joint_speed (n,) rad/s (or None: all equal);
-periodic (n,) bool (or None: no joint).
+Shapes: q (N, n) rad; q_start (n,) rad; joint_speed: `JointRates` ((n,) rad/s and
+rad/s^2), or (n,) rad/s (no ramp), or None (all equal, no ramp); periodic (n,) bool (or
+None: no joint).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -36,19 +53,36 @@ excess: it avoids unwinding moves (a UR's wrist 3 turning 228-298 deg between tw
 against its +-360 deg limit) wherever an equivalent angle allows it."""
 
 
-def move_times(q_from: np.ndarray, q_to: np.ndarray,
-               joint_speed: np.ndarray | None = None,
+@dataclass(frozen=True)
+class JointRates:
+    """A move's joint limits: speed (n,) rad/s (the top speeds x the move's speed
+    fraction), acceleration (n,) rad/s^2 (each broadcasts against the moves: (..., n))."""
+
+    speed: np.ndarray
+    acceleration: np.ndarray
+
+
+Rates = JointRates | np.ndarray | None
+"""What the tour functions time moves with (the module docstring)."""
+
+
+def move_times(q_from: np.ndarray, q_to: np.ndarray, joint_speed: Rates = None,
                periodic: np.ndarray | None = None) -> np.ndarray:
-    """Times of joint moves q_from[k] -> q_to[k] ((..., n) each, broadcast) as
-    max_i |dq_i| / v_i; with joint_speed None, the largest joint motion (rad); a periodic
-    joint's |dq| the shorter way round."""
+    """Times (s) of joint moves q_from[k] -> q_to[k] ((..., n) each, broadcast) by the
+    module's law (speeds alone: no ramp, tau_v; joint_speed None: the largest joint motion,
+    rad); a periodic joint's |dq| the shorter way round."""
     dq = np.abs(np.asarray(q_to, float) - np.asarray(q_from, float))
     if periodic is not None and np.any(periodic):
         around = np.mod(dq, 2 * np.pi)
         dq = np.where(periodic, np.minimum(around, 2 * np.pi - around), dq)
-    if joint_speed is not None:
-        dq = dq / np.asarray(joint_speed, float)
-    return np.asarray(np.max(dq, axis=-1))
+    rates = (joint_speed if isinstance(joint_speed, JointRates)
+             else JointRates(np.asarray(1.0 if joint_speed is None else joint_speed, float),
+                             np.asarray(np.inf)))
+    tau_v = np.max(dq / np.asarray(rates.speed, float), axis=-1)
+    tau_a = np.max(dq / np.asarray(rates.acceleration, float), axis=-1)
+    triangular = tau_v * tau_v <= tau_a
+    cruising = tau_v + tau_a / np.where(triangular, 1.0, tau_v)
+    return np.asarray(np.where(triangular, 2.0 * np.sqrt(tau_a), cruising))
 
 
 def nearest_equivalents(q_from: np.ndarray, q: np.ndarray, q_min: np.ndarray,
@@ -73,7 +107,7 @@ def nearest_equivalents(q_from: np.ndarray, q: np.ndarray, q_min: np.ndarray,
 
 
 def path_time(q: np.ndarray, q_start: np.ndarray | None = None,
-              joint_speed: np.ndarray | None = None,
+              joint_speed: Rates = None,
               periodic: np.ndarray | None = None) -> float:
     """Travel time (s; rad with equal speeds) of visiting q (N, n) in its order from
     q_start (none: from the first pose)."""
@@ -85,7 +119,7 @@ def path_time(q: np.ndarray, q_start: np.ndarray | None = None,
 
 
 def nearest_neighbour(q: np.ndarray, q_start: np.ndarray | None,
-                      joint_speed: np.ndarray | None = None,
+                      joint_speed: Rates = None,
                       periodic: np.ndarray | None = None) -> np.ndarray:
     """Indices into q (N, n): always move to the nearest unvisited pose, from q_start (or
     from the first pose)."""
@@ -104,7 +138,7 @@ def nearest_neighbour(q: np.ndarray, q_start: np.ndarray | None,
 
 
 def two_opt(q: np.ndarray, order: np.ndarray, q_start: np.ndarray | None,
-            joint_speed: np.ndarray | None = None,
+            joint_speed: Rates = None,
             periodic: np.ndarray | None = None) -> np.ndarray:
     """`order` (indices into q) improved by 2-opt segment reversals until none shortens
     the open path from q_start (with q_start None the first pose of `order` stays first)."""
@@ -139,7 +173,7 @@ def two_opt(q: np.ndarray, order: np.ndarray, q_start: np.ndarray | None,
 
 
 def plan_tour(q: np.ndarray, q_start: np.ndarray | None,
-              joint_speed: np.ndarray | None = None,
+              joint_speed: Rates = None,
               periodic: np.ndarray | None = None) -> np.ndarray:
     """Visiting order (indices into q (N, n)) of a short tour from q_start (see the module
     docstring): never longer than the given order nor than nearest neighbour."""
@@ -223,7 +257,7 @@ def unwinding_moves(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray,
 
 
 def unwrap_plan(parts: list[np.ndarray], q_start: np.ndarray, q_min: np.ndarray,
-                q_max: np.ndarray, joint_speed: np.ndarray | None = None
+                q_max: np.ndarray, joint_speed: Rates = None
                 ) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """The consecutive tours `parts` ((N_k, n) each, visited one after the other from
     q_start) as one path with no joint unwinding where their orders allow it: (orders (N_k,)
@@ -232,10 +266,10 @@ def unwrap_plan(parts: list[np.ndarray], q_start: np.ndarray, q_min: np.ndarray,
     Each tour is kept as it is unless the unwrapped whole still unwinds a joint (a tour
     wound up so far that an equivalent angle of the next pose lies beyond the limit); then
     2-opt reversals inside each tour, judged by the unwrapped whole's travel time plus
-    UNWIND_PENALTY x its `unwinding`, until none helps; only the reversals that replace an
-    unwinding move are tried (each trial unwraps the whole path; a move into a tour's first
-    pose is also replaced by reversing the end of the tour before it). So the IK branch of every
-    full-turn joint is chosen over the whole plan, not pose by pose."""
+    UNWIND_PENALTY x the time of a move of its `unwinding`, until none helps: first the
+    reversals that replace an unwinding move, then any (a tour that ends wound up less;
+    each trial unwraps the whole path). So the IK branch of every full-turn joint is chosen
+    over the whole plan, not pose by pose."""
     q_start = np.asarray(q_start, float)
     blocks = [np.asarray(p, float).reshape(-1, q_start.size) for p in parts]
     orders = [np.arange(b.shape[0]) for b in blocks]
@@ -245,34 +279,34 @@ def unwrap_plan(parts: list[np.ndarray], q_start: np.ndarray, q_min: np.ndarray,
                            q_start, q_min, q_max)
 
     def cost(path: np.ndarray) -> float:
+        # the unwinding charged as UNWIND_PENALTY moves of its size (time, like the path)
+        excess = np.full(q_start.size, unwinding(path, q_start, q_min, q_max))
         return (path_time(path, q_start, joint_speed)
-                + UNWIND_PENALTY * unwinding(path, q_start, q_min, q_max))
+                + UNWIND_PENALTY * float(move_times(0.0 * excess, excess, joint_speed)))
 
     path = whole(orders)
     best = cost(path)
     first = np.cumsum([0] + [b.shape[0] for b in blocks])[:-1]  # each part's first pose
     for _ in range(MAX_PASSES):
-        improved = False
-        for m in unwinding_moves(path, q_start, q_min, q_max):
+        moves = unwinding_moves(path, q_start, q_min, q_max)
+        spans: list[tuple[int, int, int]] = []  # (part, i, j): reverse orders[part][i..j]
+        for m in moves:
             k = int(np.searchsorted(first, m, side="right")) - 1
             local, size = int(m - first[k]), orders[k].size
             # the reversals of part k that end just before the pose the move reaches, or
-            # start at it: only they replace that move; a move into a part's first pose
-            # also by the reversals of the previous part that end at its last pose
-            spans = [(k, i, local - 1) for i in range(local - 1)]
+            # start at it: they replace that move
+            spans += [(k, i, local - 1) for i in range(local - 1)]
             spans += [(k, local, j) for j in range(local + 1, size)]
-            if local == 0 and k > 0:
-                spans += [(k - 1, i, orders[k - 1].size - 1)
-                          for i in range(orders[k - 1].size - 1)]
-            for part, i, j in spans:
-                trial, order = orders.copy(), orders[part]
-                trial[part] = np.concatenate([order[:i], order[i:j + 1][::-1],
-                                              order[j + 1:]])
-                trial_cost = cost(whole(trial))
-                if trial_cost < best - 1e-12:
-                    orders, best, improved = trial, trial_cost, True
-                    break
-            if improved:
+        if moves.size:  # then any reversal: one earlier may wind the joint less
+            spans += [(k, i, j) for k, order in enumerate(orders)
+                      for i in range(order.size - 1) for j in range(i + 1, order.size)]
+        improved = False
+        for k, i, j in spans:
+            order, trial = orders[k], orders.copy()
+            trial[k] = np.concatenate([order[:i], order[i:j + 1][::-1], order[j + 1:]])
+            trial_cost = cost(whole(trial))
+            if trial_cost < best - 1e-12:
+                orders, best, improved = trial, trial_cost, True
                 break
         if not improved:
             break
@@ -289,7 +323,7 @@ def _joint_cost(dq: np.ndarray) -> np.ndarray:
 
 
 def short_path(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray, q_max: np.ndarray,
-               joint_speed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+               joint_speed: Rates = None) -> tuple[np.ndarray, np.ndarray]:
     """(order (N,) into q, the poses (N, n) in that order) of the shorter of two tours from
     q_start: the plain one, and the one that turns full-turn joints the short way round
     (`periodic`, then `unwrap_path`), by the real move time. Never longer than the plain

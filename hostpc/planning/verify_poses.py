@@ -26,7 +26,8 @@ the plans whose model has that effect and a grown plan's further verification po
 (chosen for power against the grown fit they caught the same 39 of 40 forced pushes,
 docs/performance.md).
 
-Shapes: pool (N, n) rad; q_from (n,) rad; joint_speed (n,) rad/s or None (equal speeds).
+Shapes: pool (N, n) rad; q_from (n,) rad; joint_speed: the moves' `tour.JointRates` at the
+run's speed (the trapezoidal law), (n,) rad/s, or None (equal speeds).
 """
 
 from __future__ import annotations
@@ -36,7 +37,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from hostpc.diagnostics.distributions import chi2_isf, ncx2_sf
-from hostpc.planning.tour import move_times, nearest_equivalents, nearest_neighbour, plan_tour
+from hostpc.planning.tour import (
+    Rates,
+    move_times,
+    nearest_equivalents,
+    nearest_neighbour,
+    plan_tour,
+)
 
 DETECTABLE_D2 = 10.0
 """The error size the default verification must detect: expected whitened squared error
@@ -72,7 +79,7 @@ def verify_poses_for_power(d2: float = DETECTABLE_D2, power: float = DETECTABLE_
 def nearby_verify_poses(pool: np.ndarray, unused: np.ndarray, q_from: np.ndarray,
                         n_verify: int, rng: np.random.Generator,
                         sample_factor: int = SAMPLE_FACTOR,
-                        joint_speed: np.ndarray | None = None) -> np.ndarray:
+                        joint_speed: Rates = None) -> np.ndarray:
     """Indices into pool (N, n) of n_verify verification poses among `unused` (indices),
     in visiting order from q_from (module docstring)."""
     unused = np.asarray(unused, dtype=int)
@@ -137,12 +144,12 @@ class PowerDesign:
         return np.asarray(out)
 
     def choose(self, fit: np.ndarray, unused: np.ndarray, n_verify: int, q: np.ndarray,
-               q_from: np.ndarray, joint_speed: np.ndarray, per_pose_s: float,
+               q_from: np.ndarray, joint_speed: Rates, per_pose_s: float,
                limits: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
         """Pool indices of n_verify verification poses among `unused`, in the order
-        chosen: from q_from (n,) each step takes the pose with the
-        most signal per second of its move (q (N, n) the pool, joint_speed (n,) rad/s at
-        the run's speed; a full-turn joint to its equivalent nearest within `limits`
+        chosen: from q_from (n,) each step takes the pose with the most signal per second
+        of its move (q (N, n) the pool, joint_speed the joints' rates at the run's speed,
+        `tour.move_times`; a full-turn joint to its equivalent nearest within `limits`
         (q_min, q_max), `tour.nearest_equivalents`: no move that unwinds looks short),
         settle and capture (per_pose_s)."""
         unused = np.asarray(unused, dtype=int)
@@ -161,13 +168,13 @@ class PowerDesign:
         return np.asarray(chosen, dtype=int)
 
     def check_poses(self, fit: np.ndarray, unused: np.ndarray, n_check: int, q: np.ndarray,
-                    joint_speed: np.ndarray, per_pose_s: float) -> np.ndarray:
+                    joint_speed: Rates, per_pose_s: float) -> np.ndarray:
         """Pool indices (among `unused`) of n_check further FIT poses that let the fit's
         own chi-square see a missing effect: adding pose v to the fit raises the
         chi-square's non-centrality by exactly v's signal (the innovation r^T S_v^-1 r of
         the class docstring), so each step takes the pose with the most signal per second
         of its detour (its move from the nearest pose of the fit so far, q (N, n) the pool,
-        joint_speed (n,) rad/s at the run's speed) with its settle and capture."""
+        joint_speed the joints' rates at the run's speed) with its settle and capture."""
         measured = [int(k) for k in np.asarray(fit, dtype=int)]
         unused = np.asarray(unused, dtype=int)
         added: list[int] = []

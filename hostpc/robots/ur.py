@@ -57,7 +57,13 @@ from hostpc.errors import ConnectionFailed, ControllerError, InputError
 from hostpc.json_object import JsonObject
 from hostpc.robots.base import Capabilities, ContactOutcome, MoveOutcome, RobotState, StereoCapture
 from hostpc.robots.ur_guarded import N_DIGITAL_IO, LatchTiming, UrGuardedMove, rtde_frequency
-from hostpc.robots.ur_link import UrLink, check_joints, joint_velocity
+from hostpc.robots.ur_link import (
+    JOINT_ACCELERATION,
+    MAX_JOINT_SPEED,
+    UrLink,
+    check_joints,
+    joint_velocity,
+)
 from hostpc.robots.ur_offsets import UrHostOffsets
 from hostpc.robots.ur_precheck import UrControllerInfo, check_controller
 
@@ -167,6 +173,10 @@ class UrAdapter:
                 "polyscope": self.info.polyscope,
                 "serial_number": self.info.serial_number,
                 "offsets_applied_on_host": True,
+                # what this driver commands: speed fraction 1 is MAX_JOINT_SPEED, every
+                # moveJ ramps at JOINT_ACCELERATION (the host's robot time, robot_time.py)
+                "max_joint_speed": [MAX_JOINT_SPEED] * 6,
+                "max_joint_acceleration": [JOINT_ACCELERATION] * 6,
             },
         )
 

@@ -20,6 +20,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from hostpc.errors import ControllerError, InputError, RequestTimeout
+from hostpc.planning.robot_time import DEFAULT_JOINT_ACCELERATION
 from hostpc.robots.base import MoveOutcome
 
 logger = logging.getLogger("hostpc.robots.ur")
@@ -29,8 +30,9 @@ Sample = tuple[float, np.ndarray, int, int]
 
 MAX_JOINT_SPEED = 3.14
 """rad/s; ur_rtde's UR_JOINT_VELOCITY_MAX, `speed` 1.0 maps to it."""
-JOINT_ACCELERATION = 1.4
-"""rad/s^2, UR's default movej acceleration."""
+JOINT_ACCELERATION = DEFAULT_JOINT_ACCELERATION
+"""rad/s^2, UR's default movej acceleration (1.4; the robot time's default when a
+controller does not report one, written once there)."""
 SETTLE_TOLERANCE_RAD = 1e-3
 SETTLE_TIMEOUT_S = 2.0
 T = TypeVar("T")

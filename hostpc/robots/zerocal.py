@@ -63,8 +63,10 @@ class ZerocalAdapter:
             camera=dict(s.camera),
             robot=s.robot_name,
             extra={"mode": s.mode, "time": s.time, "authenticated": s.authenticated,
-                   **({} if s.max_joint_speed is None
-                      else {"max_joint_speed": [float(v) for v in s.max_joint_speed]})},
+                   **{key: [float(v) for v in value] for key, value in (
+                       ("max_joint_speed", s.max_joint_speed),
+                       ("max_joint_acceleration", s.max_joint_acceleration))
+                      if value is not None}},
         )
 
     async def move_joints(self, q: np.ndarray, speed: float) -> MoveOutcome:

@@ -189,6 +189,8 @@ class ControllerClient:
             authenticated=reply.authenticated,
             max_joint_speed=(None if reply.max_joint_speed is None
                              else _array(reply.max_joint_speed)),
+            max_joint_acceleration=(None if reply.max_joint_acceleration is None
+                                    else _array(reply.max_joint_acceleration)),
         )
 
     async def move_joints(self, q: Any, speed: float, timeout: float | None = None) -> MoveOutcome:

@@ -43,6 +43,7 @@ class ControllerState:
     camera: JsonObject  # the controller's camera description (open: RobotState.camera)
     authenticated: bool
     max_joint_speed: np.ndarray | None = None  # (n,) rad/s at speed 1, if reported
+    max_joint_acceleration: np.ndarray | None = None  # (n,) rad/s^2, if reported
 
 
 @dataclass(frozen=True)

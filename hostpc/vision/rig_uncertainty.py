@@ -28,9 +28,9 @@ import cv2
 import numpy as np
 
 from hostpc.json_object import JsonObject
-from hostpc.vision.rectification import rectification_for
+from hostpc.vision.rectification import Rectification, rectification_for
 from hostpc.vision.rig import StereoRig
-from hostpc.vision.triangulation import triangulate
+from hostpc.vision.triangulation import point_from_rectified
 
 _INTRINSICS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 RIG_PARAMETERS: tuple[str, ...] = (
@@ -158,16 +158,24 @@ def point_sensitivity(rig: StereoRig, uv: np.ndarray) -> np.ndarray:
     theta = rig_vector(rig)
     ok = np.all(np.isfinite(uv.reshape(len(uv), -1)), axis=1)
     out = np.zeros((len(uv), 3, N_RIG))
+    rows = np.flatnonzero(ok)
     for k in range(N_RIG):
         step = np.zeros(N_RIG)
         step[k] = _STEPS[k]
-        plus = rectification_for(rig_with_vector(rig, theta + step))
-        minus = rectification_for(rig_with_vector(rig, theta - step))
-        for i in np.flatnonzero(ok):
-            p_plus = triangulate(plus, uv[i, 0], uv[i, 1]).p
-            p_minus = triangulate(minus, uv[i, 0], uv[i, 1]).p
-            out[i, :, k] = (p_plus - p_minus) / (2 * _STEPS[k])
+        plus = _points(rectification_for(rig_with_vector(rig, theta + step)), uv[rows])
+        minus = _points(rectification_for(rig_with_vector(rig, theta - step)), uv[rows])
+        for n, i in enumerate(rows):
+            out[i, :, k] = (plus[n] - minus[n]) / (2 * _STEPS[k])
     return out
+
+
+def _points(rect: Rectification, uv: np.ndarray) -> list[np.ndarray]:
+    """The points ``triangulate`` gives for the (N, 2, 2) raw centres ``uv``: every centre
+    rectified in one call per camera (each point alone: the same values), without the
+    derivative by uv (point_sensitivity needs only the points)."""
+    left = rect.rectify_points(uv[:, 0], "left")
+    right = rect.rectify_points(uv[:, 1], "right")
+    return [point_from_rectified(rect, l, r)[0] for l, r in zip(left, right, strict=True)]
 
 
 def uncertainty_document(rig: StereoRig, covariance: np.ndarray,

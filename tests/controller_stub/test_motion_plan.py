@@ -58,14 +58,19 @@ def test_stopped_move_ends_part_way_with_only_the_edges_before_the_stop() -> Non
     sim, edges = recording_sim(probe_world())
     q_start = sim.joint_positions()
     plan = sim.begin_move(q_start + STEP, 0.5)
-    first_edge = plan.edges[0].s
-    assert 0.1 < first_edge < 0.9
-    result = sim.finish_move(plan, first_edge / 2)
+    first_edge = plan.edges[0]
+    assert 0.1 < first_edge.s < 0.9
+    # stopped half-way (in time) to the first edge: still ramping up at the default 4 rad/s^2
+    t_stop = first_edge.time / 2
+    acceleration = float(sim.max_joint_acceleration()[0])
+    assert acceleration == 4.0 and t_stop < plan.profile.ramp_s
+    result = sim.finish_move(plan, t_stop / plan.duration_s)
     assert isinstance(result, MoveResult)
     assert not result.completed and result.reason == "aborted"
-    np.testing.assert_allclose(result.q, q_start + first_edge / 2 * STEP, atol=1e-15)
+    np.testing.assert_allclose(result.q - q_start, [0.5 * acceleration * t_stop**2, 0, 0, 0, 0, 0],
+                               atol=1e-14)
     np.testing.assert_allclose(sim.joint_positions(), result.q)
-    assert result.duration_s == pytest.approx(first_edge / 2 * plan.duration_s)
+    assert result.duration_s == pytest.approx(t_stop)
     assert sim.time == pytest.approx(result.duration_s)
     assert edges == [] and sim.digital_inputs()[0] is False
 

@@ -57,11 +57,14 @@ def test_contact_distance_and_overtravel(make_sim: MakeSim) -> None:
     assert result.contact and result.q_latched is not None
     assert edges and edges[0][0] == 0 and edges[0][1] is True
     assert sim.digital_inputs()[0] is True
-    full = sim.motion.motion_duration(q_above, q_below, 0.05)
-    rate = (q_below - q_above) / full  # rad/s per joint
+    # a slow approach: past its short ramp (4 rad/s^2) at cruise when it touches, where
+    # it has lost half the ramp's time against a move at speed from the first instant
+    profile = sim.state.move_profile(q_above, q_below, 0.05)
+    rate = (q_below - q_above) * profile.cruise  # rad/s per joint at cruise
     t_latch = edges[0][2]
     t_contact = t_latch - LATENCY
-    q_contact = q_above + (t_contact - t0) * rate
+    assert t_contact - t0 > profile.ramp_s > 0.0
+    q_contact = q_above + (t_contact - t0 - profile.ramp_s / 2) * rate
     # at the exact contact the tip-sphere distance is R + r to 1e-9 m
     T = sim.physics.flange_pose(sim.physical_angles(q_contact)[None], sim.time)[0]
     tip = T[:3, :3] @ sim.probe.tip_flange + T[:3, 3]

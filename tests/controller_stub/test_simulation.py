@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from controller_stub.errors import SimulationRefused
+from controller_stub.world.motion import PathProfile
 from controller_stub.world.robot_model import gravity_torque
 from controller_stub.world.simulation import Simulation
 
@@ -23,13 +24,49 @@ def test_motion_duration_and_clock(make_sim: MakeSim) -> None:
     q0 = sim.joint_positions()
     target = q0 + np.array([0.5, -0.2, 0.0, 0.1, 0.0, -1.0])
     result = sim.move_joints(target, 0.5)
-    expected = float(np.max(np.abs(target - q0) / (0.5 * sim.max_joint_speed())))
+    # joint 6 leads (1 rad; all joints pi rad/s, 4 rad/s^2): it reaches 0.5 pi rad/s,
+    # cruises, and brakes: d / v + v / a (the others scaled to finish with it)
+    v, a = 0.5 * np.pi, 4.0
+    np.testing.assert_array_equal(sim.max_joint_speed(), np.pi)
+    np.testing.assert_array_equal(sim.max_joint_acceleration(), a)
+    expected = 1.0 / v + v / a
     assert result.completed
     assert result.duration_s == pytest.approx(expected, rel=1e-12)
     # robot time: the motion, then the settling before the robot may be measured
     assert result.settle_s == sim.scenario.motion.settle_s == 0.3
     assert sim.time == pytest.approx(expected + 0.3, rel=1e-12)
     np.testing.assert_array_equal(sim.joint_positions(), target)
+
+
+def test_profile_is_a_continuous_trapezoid_or_triangle_of_the_stated_duration() -> None:
+    """PathProfile against the closed form: duration, s(t) and its slope continuous (finite
+    differences), ramps at A, cruise at V, triangular when the move is short."""
+    speed, accel = np.full(6, 0.5 * np.pi), np.full(6, 1.4)
+    for d, triangular in ((np.radians(30.0), True), (3.0, False)):
+        dq = np.array([0.0, d, -0.3 * d, 0.0, 0.1 * d, 0.0])
+        profile = PathProfile.of_move(dq, speed, accel)
+        v, a = 0.5 * np.pi, 1.4
+        expected = 2 * np.sqrt(d / a) if triangular else d / v + v / a
+        assert (d <= v * v / a) == triangular
+        assert profile.duration_s == pytest.approx(expected, rel=1e-14)
+        t = np.linspace(0.0, profile.duration_s, 20001)
+        s = profile.s_at(t)
+        assert s[0] == 0.0 and s[-1] == pytest.approx(1.0, abs=1e-14)
+        rate = np.diff(s) / np.diff(t)  # ds/dt: continuous, never above V
+        assert np.max(np.abs(np.diff(rate))) < 1e-3 * np.max(rate)
+        assert np.max(rate) * d <= v * (1 + 1e-9)
+        assert (np.max(rate) * d < 0.999 * v) == triangular
+        accel_fd = np.diff(rate) / np.diff(t)[1:]
+        assert np.max(np.abs(accel_fd)) * d <= a * (1 + 1e-6)
+        np.testing.assert_allclose(profile.time_at(s), t, atol=1e-9)  # the inverse
+        mid = profile.duration_s / 2
+        assert profile.rate_at(mid) == pytest.approx(np.max(rate), rel=1e-3)
+        # the leading joint's own profile: 0.5 a t^2 in the ramp
+        assert profile.s_at(0.01) * d == pytest.approx(0.5 * a * 0.01**2, rel=1e-12)
+    # a joint that ramps slower than the leader binds the path's acceleration
+    slow = PathProfile.of_move(np.array([1.0, 0.5]), np.array([1.0, 1.0]), np.array([4.0, 0.5]))
+    assert slow.acceleration == pytest.approx(1.0) and slow.cruise == pytest.approx(1.0)
+    assert PathProfile.of_move(np.zeros(6), speed, accel).duration_s == 0.0
 
 
 def test_settle_and_capture_time_charged_to_the_clock(make_sim: MakeSim) -> None:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from controller_stub.ur.paced_motion import CYCLE_S, PacedMotion
-from controller_stub.world.motion import GuardedContact, MotionPlan, PathEdge
+from controller_stub.world.motion import GuardedContact, MotionPlan, PathEdge, PathProfile
 
 Q0 = np.zeros(6)
 Q1 = np.array([0.2, -0.1, 0.0, 0.05, 0.0, 0.0])
@@ -14,7 +14,9 @@ Q1 = np.array([0.2, -0.1, 0.0, 0.05, 0.0, 0.0])
 
 def _plan(duration: float = 0.1, contact: GuardedContact | None = None,
           edges: tuple[PathEdge, ...] = (), s_end: float = 1.0) -> MotionPlan:
-    return MotionPlan(Q0, Q1, 0.0, duration, s_end, 0 if contact else None, edges, contact)
+    """A plan at constant path speed (no ramp: infinite acceleration) over `duration` s."""
+    profile = PathProfile.of_move(Q1 - Q0, np.abs(Q1 - Q0).max() / duration, np.inf)
+    return MotionPlan(Q0, Q1, 0.0, profile, s_end, 0 if contact else None, edges, contact)
 
 
 def test_the_path_advances_one_cycle_at_a_time_in_controller_time() -> None:

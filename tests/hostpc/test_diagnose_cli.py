@@ -183,3 +183,38 @@ def test_the_advised_command_keeps_the_robot_and_runs_as_printed(
     assert main([*argv, "--json"]) == 0  # the advised model explains the data
     advised = json.loads(capsys.readouterr().out)
     assert advised["rms"] == pytest.approx(row["rms"], rel=1e-6)
+
+
+def test_ladder_text_pins_the_chosen_effects_and_their_figures(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """The 120-pose hidden-compliance example's diagnosis as printed (to the printed
+    precision): the verdict, the ranked candidates with their figures, the ladder's steps.
+    Work that makes the diagnosis quicker (issue 28) must leave every line here as it is."""
+    assert main(["diagnose", str(EXAMPLE), "--ladder"]) == 1
+    text = capsys.readouterr().out
+    for line in (
+        "  chi2/dof 1.287 (band 0.782..1.251 for 347 dof, p = 0.00024)",
+        "  in-sample RMS 0.2086 mm, max 0.7667 mm",
+        "  held-out (5-fold) RMS 0.2123 mm, max 0.7674 mm, whitened 1.180 sigma (1 = the "
+        "stated noise)",
+        "  - adding joint_compliance is significant (p = 4.3e-12, delta BIC -44.5)",
+        "  - the residuals say joint_offsets.q2 varies with tau2 (p = 1.1e-12)",
+        "    tau4           chi2      32.4 / 18  p = 0.019",
+        "  * joint_compliance            -44.5     -38.8    0.2059    0.2112     1.095    4.3e-12",
+        "  * encoder_scale               -39.4     -22.0    0.2064    0.2125     1.116    8.9e-11",
+        "  * transmission_harmonic       -36.2      58.7    0.2025    0.2138     1.099    4.5e-10",
+        "  * geometry                    -12.1      29.5    0.2100    0.2179     1.157    1.3e-05",
+        "    thermal_expansion             0.0       3.5    0.2082    0.2119     1.282       0.26",
+        "    backlash                      0.0      28.5    0.2086    0.2128     1.285       0.75",
+        "  * joint_offsets.q2 varies with tau2            score   12.0  p = 1.1e-12",
+        "  0    (current model)             0.2086    0.2123    0.7674   1.180     1.287  "
+        "NOT adequate",
+        "  1    joint_compliance            0.2059    0.2112    0.7815   1.087     1.095  "
+        "adequate",
+        "  joint_compliance.c5 below 0.000734 rad/(N m) (156 um at the measured points) would "
+        "not be seen with these poses",
+    ):
+        assert line in text.splitlines(), line
+    assert ("(joint_compliance given transmission_harmonic: not significant (p = 0.06, "
+            "threshold 0.0005); transmission_harmonic given joint_compliance: not significant "
+            "(p = 0.4, threshold 0.0005))") in text

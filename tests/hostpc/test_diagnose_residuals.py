@@ -11,6 +11,8 @@ from hostpc.diagnostics.residual_analysis import (
     analyse_residuals,
     analysis_variables,
     is_angle,
+    quantiles,
+    sorted_distinct,
     usable_variables,
 )
 from hostpc.fitting import fit
@@ -90,3 +92,19 @@ def test_duplicate_geometry_columns_are_not_listed() -> None:
     parameters = {i.parameter for i in found}
     assert "geometry.d1" not in parameters and "target.z" in parameters
     assert "geometry.a2" in parameters  # a length the default model cannot absorb
+
+
+def test_quantiles_and_sorted_distinct_give_numpys_values() -> None:
+    """The residual bins' own quantile and unique (no numpy.ma import): numpy's values on
+    random, rounded (ties) and integer-valued data of every small size."""
+    rng = np.random.default_rng(7)
+    for trial in range(3000):
+        n = int(rng.integers(1, 200))
+        values = rng.standard_normal(n) * 10 ** rng.uniform(-8, 8)
+        if trial % 3 == 0:
+            values = np.round(values, int(rng.integers(0, 3)))
+        if trial % 5 == 0:
+            values = rng.integers(-3, 4, n).astype(float)
+        q = np.linspace(0.0, 1.0, int(rng.integers(2, 12)))
+        assert np.array_equal(quantiles(values, q), np.quantile(values, q))
+        assert np.array_equal(sorted_distinct(values), np.unique(values))

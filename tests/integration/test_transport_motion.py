@@ -4,6 +4,7 @@ connection errors read well. hostpc transport against a real stub on 127.0.0.1."
 from __future__ import annotations
 
 import asyncio
+import math
 import socket
 
 import numpy as np
@@ -11,13 +12,16 @@ import pytest
 
 from controller_stub.network.server import ControllerServer
 from hostpc.errors import ConnectionFailed, RequestTimeout
+from hostpc.planning.robot_time import TimeLimits, Waypoints, waypoints_time
 from hostpc.transport import ControllerClient
 from tests.integration.conftest import TOKEN, StartStub
 from tests.integration.test_transport import connect, probe_scenario
 
 pytestmark = pytest.mark.asyncio
 
-SLOW = {"motion": {"time_scale": 1.0, "max_joint_speed": 0.5}}  # 1 rad takes 2 s
+SLOW = {"motion": {"time_scale": 1.0, "max_joint_speed": 0.5, "max_joint_acceleration": 2.0}}
+"""1 rad takes 2.25 s: 0.25 s ramping up to 0.5 rad/s (0.0625 rad), cruise, 0.25 s down."""
+RAMP_S = 0.25
 STEP = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
 
 
@@ -42,12 +46,14 @@ async def test_abort_stops_the_robot_where_it_was(start_stub: StartStub) -> None
         outcome = await asyncio.wait_for(move, 1.0)
         assert not outcome.completed and outcome.reason == "aborted"
         stopped_at = between(outcome.q, before.q, q_end)
-        assert 0.2 < stopped_at < 0.5
+        assert 0.15 < stopped_at < 0.5  # 0.5 s and more: past the ramp
         after = await other.state()
         assert after.mode == "idle"
         np.testing.assert_array_equal(after.q, outcome.q)  # the robot stays where it stopped
         assert after.time - before.time == pytest.approx(outcome.duration_s)
-        assert outcome.duration_s == pytest.approx(stopped_at * 2.0)
+        # stopped at cruise where the profile is: half the ramp's time behind a move at
+        # speed from the first instant (0.5 rad/s x (t - RAMP_S / 2))
+        assert outcome.duration_s == pytest.approx(stopped_at * 2.0 + RAMP_S / 2)
 
 
 async def test_aborted_guarded_move_reports_no_later_contact(start_stub: StartStub) -> None:
@@ -106,3 +112,27 @@ async def test_pipelined_requests_beyond_the_in_flight_cap_are_all_answered(
     async with connect(stub) as client:
         replies = await asyncio.gather(*(client.heartbeat() for _ in range(100)))
         assert len(replies) == 100
+
+
+async def test_a_30_degree_move_ramps_at_the_reported_acceleration(
+        start_stub: StartStub) -> None:
+    """30 deg at speed 0.5 of 180 deg/s, ramped at 1.4 rad/s^2 (a UR's movej default):
+    too short to reach 90 deg/s, so a triangle of 2 sqrt(d / a) = 1.22 s (0.33 s at speed
+    from the first instant); the host's prediction (TimeLimits from the state) says the
+    same."""
+    server = await start_stub({"motion": {"max_joint_acceleration": 1.4, "settle_s": 0.0}})
+    d = math.radians(30.0)
+    async with connect(server) as client:
+        before = await client.state()
+        np.testing.assert_array_equal(before.max_joint_acceleration, 1.4)
+        outcome = await client.move_joints(before.q + d * np.eye(6)[1], 0.5)
+        after = await client.state()
+    assert outcome.completed
+    expected = 2 * math.sqrt(d / 1.4)
+    assert outcome.duration_s == pytest.approx(expected, rel=1e-12)
+    assert after.time - before.time == pytest.approx(expected, rel=1e-12)
+    limits = TimeLimits.from_extra(
+        {"max_joint_speed": before.max_joint_speed,
+         "max_joint_acceleration": before.max_joint_acceleration}, 6)
+    planned, _, _ = waypoints_time(before.q, Waypoints.plain(after.q[None, :]), 0.5, limits)
+    assert planned == pytest.approx(expected, rel=1e-12)

@@ -15,6 +15,7 @@ import pytest
 pytest.importorskip("rtde_control")
 
 from hostpc.errors import ControllerError, InputError  # noqa: E402
+from hostpc.planning.robot_time import TimeLimits, Waypoints, waypoints_time  # noqa: E402
 from hostpc.robots.ur import UrAdapter, connect_ur  # noqa: E402
 from hostpc.transport import ControllerClient  # noqa: E402
 from tests.integration.ur_stub import TOKEN, UrStub, ur_stub_process  # noqa: E402
@@ -50,6 +51,28 @@ async def test_state_reports_the_ur(adapter: UrAdapter, ur_stub: UrStub) -> None
     assert state.camera["image_width"] == 320
     assert state.extra["offsets_applied_on_host"] is True
     assert len(state.digital_inputs) == 16
+
+
+async def test_a_move_spends_the_robot_time_the_driver_predicts(
+        adapter: UrAdapter, ur_stub: UrStub) -> None:
+    """The driver reports what it commands (speed 1 = 3.14 rad/s, moveJ at 1.4 rad/s^2):
+    the host's prediction of a move (TimeLimits, the trapezoidal law) is the robot time the
+    UR spends (a 120 deg wrist move reaches its speed: d / v + v / a; then settling)."""
+    state = await adapter.state()
+    limits = TimeLimits.from_extra(state.extra, 6)
+    np.testing.assert_array_equal(limits.joint_acceleration, 1.4)
+    np.testing.assert_array_equal(limits.joint_speed, 3.14)
+    target = state.q + np.radians([20.0, -10.0, 15.0, 0.0, 5.0, 120.0])
+    async with ControllerClient.connect(ur_stub.host, ur_stub.port, token=TOKEN,
+                                        timeout=5.0) as client:
+        t0 = (await client.state()).time
+        assert (await adapter.move_joints(target, 0.5)).completed
+        spent = (await client.state()).time - t0
+    motion, settle, _ = waypoints_time(state.q, Waypoints.plain(target[None, :]), 0.5, limits)
+    v, d = 0.5 * 3.14, np.radians(120.0)
+    assert motion == pytest.approx(d / v + v / 1.4, rel=1e-12)
+    assert spent == pytest.approx(motion + settle, rel=1e-9)
+    await adapter.move_joints(state.q, 0.5)
 
 
 async def test_host_offsets_command_and_report(adapter: UrAdapter, ur_stub: UrStub) -> None:

@@ -14,13 +14,15 @@ hostpc.kinds.dual_loop.sample). The journal keeps one record per pose,
 `PoseObservations` in its JSON form `{"observations": [...]}`; `dataset` flattens them into
 the samples of a Dataset. A pose with no target in view is journaled as skipped.
 
-Planning: candidates come from `hostpc.kinds.dual_loop.planning.plan_poses` (an arm pose around
-the home pose, the head aimed at that arm's target, nominal model), as combined poses with
-the other arm at its home pose, kept when the aimed target falls inside both images (the
-camera's nominal focal length, baseline and image size) and all joints are inside the
-controller's limits. The design dataset has one sample per pose (the aimed arm) with the
-expected stereo covariance: lateral `z s / f`, depth `sqrt(2) z^2 s / (f b)` for a centroid
-precision `s` (option `pixel_sigma`, default 0.15 px).
+Planning: every candidate measures both arms in one move, one settle and one capture:
+`hostpc.kinds.dual_loop.planning.plan_paired_poses` (both arms around the home pose, the
+head aimed between their targets, nominal model), kept when both targets fall inside both
+images (the camera's nominal focal length, baseline and image size) and all joints are
+inside the controller's limits. The design dataset has two samples per pose, left then
+right (`Method.design_dataset`'s pose-major form: the planner stacks them into one block
+per pose), each with the expected stereo covariance: lateral `z s / f`, depth
+`sqrt(2) z^2 s / (f b)` for a centroid precision `s` (option `pixel_sigma`, default 0.15
+px).
 
 Frames (docs/dual-loop.md): `camera` (`T_headend_camera`), `left_base`, `right_base`
 (`T_headbase_armbase`) and `left_target`, `right_target` (point in the flange), nominal from
@@ -52,13 +54,13 @@ import numpy as np
 from hostpc.dataset import Dataset, FramePose, RobotDescription, dataset_to_dict
 from hostpc.errors import InputError
 from hostpc.kinds.dual_loop.model import ARMS, DUAL_LOOP_FRAMES
-from hostpc.kinds.dual_loop.planning import nominal_frames, plan_poses
+from hostpc.kinds.dual_loop.planning import nominal_frames, plan_paired_poses
 from hostpc.kinds.dual_loop.sample import (
     PoseObservations,
     TargetObservation,
     observation_samples,
 )
-from hostpc.kinematics.humanoid import HUMANOID_HOME, get_tree
+from hostpc.kinematics.humanoid import get_tree
 from hostpc.kinematics.rotations import pose_to_transform
 from hostpc.kinematics.tree import KinematicTree
 from hostpc.methods.base import (
@@ -203,7 +205,6 @@ class DualLoopMethod(Method):
             raise InputError("dual_loop: focal length, baseline and pixel_sigma must be "
                              "positive")
         self.calibration = camera_calibration(raw.get("calibration"))
-        self._home = np.concatenate([HUMANOID_HOME[b.name] for b in self.tree.branches])
         self._t0 = 0.0
         self._progress: Progress | None = None  # prepare's, for the dataset's notes
 
@@ -262,40 +263,21 @@ class DualLoopMethod(Method):
             ok &= (u > m) & (u < width - 1 - m)
         return np.asarray(ok)
 
-    def aimed_chain(self, q: np.ndarray) -> np.ndarray:
-        """(N,) the arm ("left"/"right") whose nominal target is nearest the optical axis
-        at poses q (N, n): the arm a plan pose observes."""
-        points = self.camera_points(q)
-        off_axis = {}
-        for side in ARMS:
-            p = points[side]
-            zs = np.where(p[:, 2] > 0.05, p[:, 2], np.nan)
-            off_axis[side] = np.nan_to_num(np.hypot(p[:, 0], p[:, 1]) / zs, nan=np.inf)
-        return np.where(off_axis["left"] <= off_axis["right"], "left", "right")
-
     def candidates(self, state: RobotState, rng: np.random.Generator) -> np.ndarray:
-        """(N_c, n) combined poses: one arm around home, the head aimed at its target, the
-        other arm at home; the aimed target inside both images, all joints within the
-        controller's limits."""
+        """(N_c, n) combined poses that measure both arms, in order along one smooth path
+        (`plan_paired_poses`: both arms swinging about home, the head aimed between their
+        targets); both targets inside both images, all joints within the controller's
+        limits."""
         self._check_joints(int(state.q.size))
-        n_wanted = int(self.settings.n_candidates)
-        n_per_arm = max(1, math.ceil(0.75 * n_wanted))  # visibility keeps about two thirds
-        try:
-            poses = plan_poses(n_per_arm, rng, tree=self.planning_tree)
-        except ValueError as exc:
-            raise InputError(f"dual_loop planning: {exc}; check the cell frames") from None
-        q = np.broadcast_to(self._home, (poses.n, self.tree.n)).copy()
-        q[:, self.tree.joint_slice("head")] = poses.q_head
-        for side in ARMS:
-            rows = poses.chain == side
-            q[np.ix_(rows, np.arange(self.tree.n)[self.tree.joint_slice(side)])] = \
-                poses.q_arm[rows]
+        q = plan_paired_poses(int(self.settings.n_candidates), rng, tree=self.planning_tree)
         points = self.camera_points(q)
-        aimed = np.array([points[str(side)][k] for k, side in enumerate(poses.chain)])
-        keep = self.visible(aimed)
-        keep &= np.all((q >= state.q_min) & (q <= state.q_max), axis=1)
-        keep &= self.aimed_chain(q) == poses.chain
-        return q[keep][:n_wanted]
+        keep = np.all((q >= state.q_min) & (q <= state.q_max), axis=1)
+        for side in ARMS:
+            keep &= self.visible(points[side])
+        if not np.any(keep):
+            raise InputError("dual_loop planning: no pose sees both arms' targets; check "
+                             "the cell frames")
+        return q[keep]
 
     def expected_covariance(self, p: np.ndarray, sigma_px: float) -> np.ndarray:
         """(N, 3, 3) covariance of points p (N, 3) (camera frame) triangulated from image
@@ -321,17 +303,17 @@ class DualLoopMethod(Method):
         return np.diag([lateral, lateral, depth])
 
     def design_dataset(self, q: np.ndarray) -> Dataset:
-        """One sample per pose q (N, n) (the aimed arm) with the nominal predicted point
-        and the planning covariance."""
+        """Two samples per pose q (N, n), left then right (pose-major: the planner stacks
+        a pose's samples into one block), with the nominal predicted points and the
+        planning covariance."""
         q = np.asarray(q, dtype=float)
-        chains = self.aimed_chain(q)
 
         def samples(p: np.ndarray, cov: np.ndarray) -> list[TargetObservation]:
-            return [self._observation(str(chains[k]), q[k], p[k], cov[k], float(k), None,
-                                      None) for k in range(q.shape[0])]
+            return [self._observation(ARMS[k % 2], q[k // 2], p[k], cov[k], float(k // 2),
+                                      None, None) for k in range(2 * q.shape[0])]
 
-        placeholder = np.broadcast_to(np.array([0.0, 0.0, 0.5]), (q.shape[0], 3))
-        eye = np.broadcast_to(np.eye(3) * 1e-8, (q.shape[0], 3, 3))
+        placeholder = np.broadcast_to(np.array([0.0, 0.0, 0.5]), (2 * q.shape[0], 3))
+        eye = np.broadcast_to(np.eye(3) * 1e-8, (2 * q.shape[0], 3, 3))
         problem = build_problem(self.observations_dataset(samples(placeholder, eye)),
                                 "joint_offsets")
         p, _ = predict(problem, np.zeros(problem.layout.size), jacobian=False)

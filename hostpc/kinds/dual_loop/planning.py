@@ -1,8 +1,10 @@
 """The humanoid's dual_loop poses, pure numerics: arm poses around
 :data:`~hostpc.kinematics.humanoid.HUMANOID_HOME` whose target is in front of the robot,
 each with head angles that aim the camera near the target (nominal model), alternating left
-and right (:func:`plan_poses`), and the nominal frames of the cell (:func:`nominal_frames`).
-Used by the dual_loop acquisition method and by the synthesis of test datasets."""
+and right (:func:`plan_poses`, the synthesis of test datasets); poses that move BOTH arms
+with the head aimed between their targets, so one settle and one capture measure both
+(:func:`plan_paired_poses`, the acquisition method's candidates); and the nominal frames of
+the cell (:func:`nominal_frames`)."""
 
 from __future__ import annotations
 
@@ -14,8 +16,9 @@ from hostpc.dataset import FramePose
 from hostpc.kinds.dual_loop.model import humanoid_frames
 from hostpc.kinematics.humanoid import HUMANOID_HOME, get_tree
 from hostpc.kinematics.tree import KinematicTree
+from hostpc.planning.design import sine_swings
 
-__all__ = ["PlannedPoses", "head_look_at", "nominal_frames", "plan_poses"]
+__all__ = ["PlannedPoses", "head_look_at", "nominal_frames", "plan_paired_poses", "plan_poses"]
 
 ARM_SPREAD = np.array([0.35, 0.35, 0.5, 0.35, 0.6, 0.5, 0.9])
 """Half-width (rad) of the uniform arm-joint spread around the home pose."""
@@ -48,7 +51,12 @@ def nominal_frames(name: str = "humanoid_upper") -> dict[str, FramePose | np.nda
 
 
 def _camera_points(tree: KinematicTree, q: np.ndarray, side: str) -> np.ndarray:
-    """(N, 3) nominal target of arm ``side`` in the nominal camera frame, q combined."""
+    """(N, 3) nominal target of arm ``side`` in the nominal camera frame, q combined;
+    ``side`` ``"both"``: the midpoint of the two arms' targets."""
+    if side == "both":
+        both: np.ndarray = 0.5 * (_camera_points(tree, q, "left")
+                                  + _camera_points(tree, q, "right"))
+        return both
     frames = tree.root_transforms(q)
     T_hb_cam = frames["head"][1] @ tree.frames["camera"]
     p = frames[side][1][:, :3, :3] @ tree.frames[f"{side}_target"] + frames[side][1][:, :3, 3]
@@ -64,7 +72,7 @@ def head_look_at(tree: KinematicTree, q: np.ndarray, side: str, iterations: int 
     Args:
         tree: the tree (nominal model).
         q: combined joint angles (N, n); the head columns are the starting guess.
-        side: ``"left"`` or ``"right"``.
+        side: ``"left"``, ``"right"`` or ``"both"`` (the midpoint of the two targets).
 
     Newton iterations on the normalised image coordinates ``(x/z, y/z)``.
     """
@@ -130,3 +138,46 @@ def plan_poses(n_per_arm: int, rng: np.random.Generator, *, tree: KinematicTree 
     q_arm[0::2] = left[:, tree.joint_slice("left")]
     q_arm[1::2] = right[:, tree.joint_slice("right")]
     return PlannedPoses(chain=chain, q_head=q_head, q_arm=q_arm)
+
+
+PAIRED_FREQUENCIES = {"left": (3.0, 2.5, 2.0, 4.0, 1.5, 3.5, 1.0),
+                      "right": (2.7, 2.2, 1.7, 3.7, 1.2, 3.2, 0.7)}
+"""Swings per cycle of each arm joint along the paired poses' path: all different (so the
+joints' angles are not correlated over the path), the widest (joints 5 and 7 of
+:data:`ARM_SPREAD`) among the slowest."""
+PAIRED_CYCLES = 2.0
+"""Cycles of the path (see :func:`plan_paired_poses`)."""
+
+
+def plan_paired_poses(n: int, rng: np.random.Generator, *, tree: KinematicTree | None = None,
+                      spread: np.ndarray = ARM_SPREAD, cycles: float = PAIRED_CYCLES,
+                      depth: tuple[float, float] = (0.3, 0.75), max_tan: float = 0.42
+                      ) -> np.ndarray:
+    """(N, tree.n) combined poses, N <= n, that measure both arms at once (nominal model),
+    in order along one smooth path.
+
+    Each arm joint j swings about the home pose by ``spread_j`` as a sine of ``cycles f_j``
+    periods over the path (``f_j`` :data:`PAIRED_FREQUENCIES`, random phases:
+    :func:`hostpc.planning.design.sine_swings`), the head aimed at the midpoint of the two
+    targets. Neighbours on the path differ by little in every joint, so the planner's
+    selection from these poses makes a tour of short moves (between two random poses some
+    joint always swings far), while over the path every joint reaches both ends of its
+    swing in ever different combinations with the others. Kept when all joints are inside
+    their limits and each target's depth is in ``depth`` (m) and its normalised image
+    coordinates within ``max_tan`` (the acquisition checks both images with their margin).
+    """
+    tree = get_tree("humanoid_upper") if tree is None else tree
+    home = np.concatenate([HUMANOID_HOME[b] for b in ("head", "left", "right")])
+    q_min = np.concatenate([b.chain.q_min for b in tree.branches])
+    q_max = np.concatenate([b.chain.q_max for b in tree.branches])
+    q = np.broadcast_to(home, (n, tree.n)).copy()
+    for side in ("left", "right"):
+        q[:, tree.joint_slice(side)] += spread * sine_swings(
+            n, cycles * np.asarray(PAIRED_FREQUENCIES[side]), rng)
+    q[:, tree.joint_slice("head")] = head_look_at(tree, q, "both")
+    ok = np.all((q >= q_min) & (q <= q_max), axis=1)
+    for side in ("left", "right"):
+        p = _camera_points(tree, q, side)
+        ok &= (p[:, 2] > depth[0]) & (p[:, 2] < depth[1])
+        ok &= np.all(np.abs(p[:, :2] / p[:, 2:3]) < max_tan, axis=1)
+    return q[ok]

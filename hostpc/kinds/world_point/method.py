@@ -41,6 +41,7 @@ from hostpc.methods.base import (
     floats,
     matrix,
 )
+from hostpc.planning.design import sine_swings
 from hostpc.robots.base import Need, RobotAdapter, RobotState, tracker_of
 
 TRACKER_FILE = "tracker.json"
@@ -56,6 +57,26 @@ docs/performance.md, "world_point and dual_loop"), and the sigma of that plan wa
 (MSE / sigma^2 1.77 on joint 4 over 40 worlds). The last joint keeps its whole range: its
 turn carries the reflector about its axis, which is all that defines its zero with a
 known nest."""
+
+
+PATH_FREQUENCIES = (2.0, 3.0, 2.5, 3.5, 4.0, 1.5)
+"""Swings of each joint (from the first) along one candidate path (`smooth_path`): all
+different, so the joints' angles are not correlated along it."""
+PATH_CYCLES = 1.0
+"""Each joint swings PATH_CYCLES x its PATH_FREQUENCIES along one path."""
+PATHS = 20
+"""At most this many paths (random phases) fill the candidate pool: the reflector faces the
+tracker along about a fifth of a path."""
+
+
+def smooth_path(low: np.ndarray, high: np.ndarray, n: int, rng: np.random.Generator
+                ) -> np.ndarray:
+    """(n, len(low)) poses along one smooth path through the box [low, high]: joint j
+    swings between its bounds as a sine of PATH_CYCLES * PATH_FREQUENCIES[j] periods over
+    the path (random phases), so neighbours on the path differ by little in every joint."""
+    swing = sine_swings(n, PATH_CYCLES * np.resize(np.asarray(PATH_FREQUENCIES), low.size),
+                        rng)
+    return np.asarray(0.5 * (low + high) + 0.5 * (high - low) * swing)
 
 
 def identifiable_offsets(n_joints: int, known: Sequence[str]) -> tuple[list[int], list[str]]:
@@ -183,8 +204,14 @@ class WorldPointMethod(Method):
         return best
 
     def candidates(self, state: RobotState, rng: np.random.Generator) -> np.ndarray:
-        """Random poses near the robot's pose (POOL_SPREAD) and within the limits (10 deg
-        margin) that see a reflector."""
+        """Poses near the robot's pose (POOL_SPREAD) and within the limits (10 deg margin)
+        that see a reflector: the pieces of smooth paths through that box (`smooth_path`,
+        up to PATHS of them) where the reflector faces the tracker, each piece in its path
+        order. Neighbours on a path differ by little in every joint, so the travel-aware
+        selection finds informative poses a short move apart (a move's time is its largest
+        joint motion: between two random poses of the box some joint always moves far):
+        robot time 14.3-17.3 s in world 201 for planning seeds 0-5, against 15.6-21.2 s
+        from uniform random poses (docs/performance.md)."""
         self._moves.bound(state.q_min, state.q_max)
         margin = math.radians(10.0)
         spread = np.full(state.q.size, POOL_SPREAD)
@@ -193,8 +220,8 @@ class WorldPointMethod(Method):
         high = np.minimum(np.minimum(state.q_max - margin, math.pi), state.q + spread)
         pool = []
         wanted = self.settings.n_candidates
-        for _ in range(20):
-            q = rng.uniform(low, high, size=(wanted, low.size))
+        for _ in range(PATHS):
+            q = smooth_path(low, high, wanted, rng)
             pool.append(q[self._visible_marker(q) >= 0])
             if sum(len(p) for p in pool) >= wanted:
                 break
