@@ -66,6 +66,7 @@ from hostpc.calibrate.resume import (
     check_resume_offsets,
     persisted,
     push_state,
+    resume_pose,
     resume_settings,
     settle_push_intent,
     stored_result,
@@ -281,8 +282,8 @@ class Runner:
         if (text := swap_message(settings)) is not None:
             progress.message(text)
 
-        q_from = self.journal.last_q()
-        q_now = np.asarray(q_from, float) if q_from is not None else state.q
+        q_now = (resume_pose(self.journal, state.q, offsets, initial.offsets, progress)
+                 if resume else np.asarray(state.q, float))
         self._timer.begin()
         q_now = await self._acquire(method, "fit", plan.q, q_now)
         await self._timer.end("measure")
