@@ -3,8 +3,10 @@
 A run folder that holds a journal is resumed (`hostpc calibrate --resume`). Before anything
 moves the runner checks that the controller still has the run's offsets (or the ones the
 run pushed, or meant to push), settles a push cut short (``push_intent`` without its
-result) from the controller's offsets, and keeps the samples' time ``t`` from going
-backwards when the controller's (or the host's) clock restarted. All of it reads and
+result) from the controller's offsets, takes the robot to be where the controller reads
+it (`resume_pose`: a robot moved since its last journaled pose is never taken to be
+there), and keeps the samples' time ``t`` from going backwards when the controller's (or
+the host's) clock restarted. All of it reads and
 appends to the run's `Journal`; nothing here talks to the robot.
 """
 
