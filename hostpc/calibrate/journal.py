@@ -309,11 +309,13 @@ class Journal:
         times = [t for record in self._samples.values() for t in sample_times(record.sample)]
         return max(times) if times else None
 
-    def last_q(self) -> list[float] | None:
-        """Where the robot was after the last journaled pose (None if none)."""
+    def last_end(self) -> tuple[str, list[float]] | None:
+        """The phase ("fit"/"verify") of the last journaled pose and where the robot was
+        after it, commanded (reported frame of the offsets it was measured under); None if
+        none."""
         self._ensure_loaded()
-        last: list[float] | None = None
+        last: tuple[str, list[float]] | None = None
         for _, _, _, obj in self._lines():
             if obj and obj.get("event") == "sample" and obj.get("q_end") is not None:
-                last = obj["q_end"]
+                last = (str(obj.get("phase")), obj["q_end"])
         return last

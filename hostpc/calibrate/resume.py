@@ -3,8 +3,10 @@
 A run folder that holds a journal is resumed (`hostpc calibrate --resume`). Before anything
 moves the runner checks that the controller still has the run's offsets (or the ones the
 run pushed, or meant to push), settles a push cut short (``push_intent`` without its
-result) from the controller's offsets, and keeps the samples' time ``t`` from going
-backwards when the controller's (or the host's) clock restarted. All of it reads and
+result) from the controller's offsets, takes the robot to be where the controller reads
+it (`resume_pose`: a robot moved since its last journaled pose is never taken to be
+there), and keeps the samples' time ``t`` from going backwards when the controller's (or
+the host's) clock restarted. All of it reads and
 appends to the run's `Journal`; nothing here talks to the robot.
 """
 
@@ -44,6 +46,8 @@ RESUME_OVERRIDABLE = frozenset({"push", "force", "max_correction_deg", "verify_f
 """Settings a resume may change (they act after the measurements: a new model refits the
 measured dataset, then pushes and verifies)."""
 CLOCK_TOLERANCE_S = 1e-6
+AT_POSE_RAD = 1e-4
+"""A controller reading this close (every joint, rad) to the journaled pose is that pose."""
 
 
 @dataclass(frozen=True)
@@ -138,6 +142,40 @@ def check_resume_offsets(journal: Journal, run_dir: Path, initial: np.ndarray,
         f"the controller's zero offsets changed since the run in {run_dir} started "
         f"(now {_deg_list(now)} deg, then {_deg_list(initial)} deg); the journaled "
         "samples cannot be combined with new ones: start a new run")
+
+
+def resume_pose(journal: Journal, reading: Sequence[float] | np.ndarray,
+                offsets_now: np.ndarray, initial: np.ndarray,
+                progress: Progress) -> np.ndarray:
+    """Where a resumed run's robot is, in the frame of its last journaled pose: that pose
+    (``Journal.last_end``) when the controller reads it, else the reading. A moved robot
+    (jogged, a move the journal does not hold such as the coarse swap search, a restarted
+    simulator at its start pose) is never taken to be where the journal left it: the
+    first moves are checked from where it is.
+
+    The controller reports ``encoder + offset``, so the reading under the offsets it holds
+    now (`offsets_now`) is converted, here and only here, to the offsets the last pose was
+    measured under: a fit pose under the run's `initial` ones, a verification pose under
+    the last pushed ones. Nothing journaled: the reading as it is."""
+    q_read = np.asarray(reading, float)
+    last = journal.last_end()
+    if last is None:
+        return q_read
+    phase, q_end = last
+    pushes = journal.events(Pushed)
+    held = (np.asarray(initial, float) if phase == "fit" or not pushes
+            else np.asarray(pushes[-1].record.new, float))
+    q_read = q_read - (np.asarray(offsets_now, float) - held)
+    journaled = np.asarray(q_end, float)
+    if journaled.shape != q_read.shape:
+        return q_read
+    moved = float(np.max(np.abs(q_read - journaled))) if q_read.size else 0.0
+    if moved <= AT_POSE_RAD:
+        return journaled
+    progress.message(f"the robot is not where the journal left it (a joint "
+                     f"{math.degrees(moved):.3f} deg away): going on from where the "
+                     "controller reads it")
+    return q_read
 
 
 class SampleClock:

@@ -66,6 +66,7 @@ from hostpc.calibrate.resume import (
     check_resume_offsets,
     persisted,
     push_state,
+    resume_pose,
     resume_settings,
     settle_push_intent,
     stored_result,
@@ -157,6 +158,9 @@ class Runner:
         self.journal = Journal(self.run_dir)
         self._clock = SampleClock(self.journal, self.progress)  # resume: sample t continues
         self._controller_refusal: PushRefusal | None = None  # the controller's own limit
+        self._read_pushed = False
+        """q_now is under the pushed offsets already (resume_pose after a verification
+        pose): the staging's `reading_after_push` must not add them again."""
 
     # ------------------------------------------------------------------ top level
 
@@ -281,8 +285,10 @@ class Runner:
         if (text := swap_message(settings)) is not None:
             progress.message(text)
 
-        q_from = self.journal.last_q()
-        q_now = np.asarray(q_from, float) if q_from is not None else state.q
+        q_now = (resume_pose(self.journal, state.q, offsets, initial.offsets, progress)
+                 if resume else np.asarray(state.q, float))
+        last_end = self.journal.last_end() if resume else None
+        self._read_pushed = last_end is not None and last_end[0] == "verify"
         self._timer.begin()
         q_now = await self._acquire(method, "fit", plan.q, q_now)
         await self._timer.end("measure")
@@ -477,7 +483,8 @@ class Runner:
         """Measure this round's verification poses (all measured under `offsets`, the
         controller's now) and test them; VerifyLost if every pose was skipped."""
         q_verify = self._staging.shifted(self._verify_poses(plan), pushed_delta)
-        q_now = self._staging.reading_after_push(q_now, pushed_delta)
+        if not self._read_pushed:  # a resume after a verification pose: read so already
+            q_now = self._staging.reading_after_push(q_now, pushed_delta)
         n_verify = q_verify.shape[0]
         number, first = verify_round(self.journal, offsets, pushed_delta, n_verify)
         self._timer.begin()

@@ -30,7 +30,7 @@ def test_records_persist_and_are_never_replaced(tmp_path: Path) -> None:
     assert [r.ok for r in again.records("fit")] == [True, True, False]
     assert again.records("fit")[2].reason == "target rejected: no disk"
     assert again.has("verify", 0) and not again.has("verify", 1)
-    assert again.last_q() == [0.0] * 6  # the verify pose 0 came last
+    assert again.last_end() == ("verify", [0.0] * 6)  # the verify pose 0 came last
     assert len((tmp_path / "journal.jsonl").read_text().splitlines()) == 4
 
 
