@@ -6,8 +6,10 @@
         left, right, q_exposure, t = await robot.capture("target")
 
 Every request has a timeout (`RequestTimeout`); motions have their own, longer one
-(`motion_timeout`), and a motion that times out is followed by a best-effort `abort` so the
-robot does not keep moving unattended. If the connection drops, requests that are
+(`motion_timeout`), and a motion that times out, or whose caller is cancelled (Ctrl-C,
+SIGTERM: hostpc.cli.termination), is followed by a best-effort `abort` (at most
+ABORT_AFTER_TIMEOUT_S) so the robot does not keep moving unattended; a cancelled motion's
+CancelledError carries a note saying what the abort did. If the connection drops, requests that are
 safe to repeat (state, get_offsets, read_io, capture, heartbeat) are re-sent on a new
 connection; a motion, an offset write, a rollback or an abort is NEVER re-sent: the caller
 gets `ConnectionFailed` and decides (the robot may or may not have executed it). A request
@@ -73,7 +75,7 @@ IDEMPOTENT_KINDS = frozenset(
 MOTION_KINDS = frozenset({"move_joints", "guarded_move"})
 """Requests that move the robot: timed by `motion_timeout`, aborted when they time out."""
 ABORT_AFTER_TIMEOUT_S = 2.0
-"""How long the abort sent after a motion timeout may take (s)."""
+"""How long the abort sent after a motion timeout or interruption may take (s)."""
 
 ReplyT = TypeVar("ReplyT", bound=Reply)
 
@@ -357,11 +359,18 @@ class ControllerClient:
             future = link.send(request)
             try:
                 reply = await asyncio.wait_for(future, timeout)
+            except asyncio.CancelledError as exc:  # Ctrl-C / SIGTERM (hostpc.cli.termination)
+                link.pending.pop(request.id, None)
+                if request.kind in MOTION_KINDS:
+                    stopped = await self._abort_motion(link)
+                    logger.info("%s interrupted: %s", request.kind, stopped)
+                    exc.add_note(f"{request.kind} interrupted: {stopped}")
+                raise
             except TimeoutError:
                 link.pending.pop(request.id, None)
                 stopped = ""
                 if request.kind in MOTION_KINDS:
-                    stopped = "; " + await self._abort_after_timeout(link)
+                    stopped = "; " + await self._abort_motion(link)
                 raise RequestTimeout(
                     f"{request.kind} (request {request.id}) got no reply within {timeout} s "
                     f"from {self.host}:{self.port}{stopped}"
@@ -386,15 +395,16 @@ class ControllerClient:
                 raise ProtocolViolation(f"{request.kind} answered by {reply.kind}")
             return reply
 
-    async def _abort_after_timeout(self, link: _Link) -> str:
-        """Best effort: stop the robot after a motion timed out; says what happened."""
+    async def _abort_motion(self, link: _Link) -> str:
+        """Best effort, within ABORT_AFTER_TIMEOUT_S: stop the robot after a motion timed out
+        or was interrupted (its caller cancelled); says what happened."""
         if not link.alive:
             return "the link is down, abort not sent"
         try:
             future = link.send(m.Abort(id=link.conn.next_id()))
             reply = await asyncio.wait_for(future, ABORT_AFTER_TIMEOUT_S)
         except (TimeoutError, _LinkLostError, OSError, LocalProtocolError) as exc:
-            logger.warning("abort after a motion timeout failed: %s", exc or type(exc).__name__)
+            logger.warning("abort of a motion failed: %s", exc or type(exc).__name__)
             return "abort sent, not confirmed"
         if isinstance(reply, m.Aborted):
             return "abort sent: motion stopped" if reply.was_moving else "abort sent: not moving"
