@@ -77,7 +77,8 @@ IDEMPOTENT_KINDS = frozenset(
 )
 """Requests re-sent after a reconnection; everything else raises instead."""
 MOTION_KINDS = frozenset({"move_joints", "guarded_move"})
-"""Requests that move the robot: timed by `motion_timeout`, aborted when they time out."""
+"""Requests that move the robot: timed by their prediction (`_motion_timeout`), aborted
+when they time out or are cancelled."""
 MOTION_TIMEOUT_MARGIN = 3.0
 """A motion's default timeout is this many times the host's prediction of it (`_motion_timeout`),
 never below `motion_timeout`."""
@@ -115,8 +116,8 @@ class ControllerClient:
 
     token: shared secret (None = read-only session: motions, captures and writes are
     refused). timeout: default per-request timeout (s); motion_timeout: the least default
-    timeout of move_joints / guarded_move (s), which wait until the robot has stopped; on a motion
-    timeout the client sends `abort` (best effort) before raising RequestTimeout.
+    timeout of move_joints / guarded_move (s), which wait until the robot has stopped; on a
+    motion timeout the client sends `abort` (best effort) before raising RequestTimeout.
     connect_timeout: TCP connect + handshake (s). reconnect_attempts: how often an
     idempotent request is re-sent after a lost link.
     """
