@@ -81,6 +81,7 @@ def test_ctrl_c_during_a_move_aborts_it(tmp_path: Path) -> None:
             f"stopped): continue with hostpc calibrate --resume {out}")
 
 
+@pytest.mark.slow
 def test_a_resume_on_a_controller_that_ran_on_counts_all_its_robot_time(tmp_path: Path
                                                                        ) -> None:
     """Interrupted in the move to the third pose, resumed against the same controller (its
