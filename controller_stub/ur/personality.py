@@ -300,8 +300,9 @@ class UrPersonality:
         paced in real time (one cycle per 2 ms, so a 500 Hz RTDE client sees every cycle);
         otherwise paced by the scenario's time_scale. Returns (completed, reason): reason
         "busy" (another motion runs), "stopped" (stop_motion, or the program ended),
-        "contact" (a watched move that reached its stop point past the contact), or the
-        simulation's refusal code ("joint_limit", "estop", ...) which also raises a
+        "contact" (a watched move that reached its stop point past the contact),
+        "invalid_acceleration" (an acceleration of 0, negative or not finite), or the
+        simulation's refusal code ("joint_limit", "estop", ...); the last two also raise a
         protective stop.
         """
         from controller_stub.network.handlers import RequestRefusedError
@@ -311,14 +312,18 @@ class UrPersonality:
         fraction = float(np.clip(velocity / max_speed, 1e-3, 1.0)) * slider
         if self._protective_stop or self.emergency_stopped():
             return False, "estop" if self.emergency_stopped() else "protective_stop"
+        if acceleration is not None and not (math.isfinite(acceleration) and acceleration > 0.0):
+            # a real controller refuses a movej with a = 0 (no motion profile) or a < 0
+            self.protective_stop(f"movej refused: acceleration {acceleration!r} rad/s^2 is "
+                                 "not a positive number")
+            return False, "invalid_acceleration"
         probe_line = int(self.sim.scenario.probe.io_line)
         try:
             if self.server is not None:
                 self.server.begin_motion()
             plan = self.sim.begin_move(np.asarray(q_target, float), min(fraction, 1.0),
                                        probe_line if watch_probe else None,
-                                       None if acceleration is None or acceleration <= 0.0
-                                       else float(acceleration))
+                                       None if acceleration is None else float(acceleration))
         except RequestRefusedError:
             return False, "busy"
         except SimulationRefused as exc:

@@ -277,20 +277,25 @@ class MorePoses:
 @dataclass(frozen=True)
 class RobotTimeSpent:
     """Robot time (s) of one phase since the clock's last reading, by the controller's
-    or the host's clock (robot_time.py); seconds NaN in a line that lacks a number."""
+    or the host's clock (robot_time.py); seconds NaN in a line that lacks a number. at: the
+    controller clock's reading (s) that ended it (None: the host's clock, or an older run)."""
 
     kind: ClassVar[str] = "robot_time"
     phase: str
     seconds: float
     clock: str
+    at: float | None = None
 
     def to_json(self) -> JsonObject:
-        return {"phase": self.phase, "seconds": self.seconds, "clock": self.clock}
+        at = {} if self.at is None else {"at": self.at}
+        return {"phase": self.phase, "seconds": self.seconds, "clock": self.clock, **at}
 
     @classmethod
     def from_json(cls, data: JsonObject) -> RobotTimeSpent:
+        at = data.get("at")
         return cls(str(data.get("phase", "")), _number(data.get("seconds")),
-                   str(data.get("clock", "controller")))
+                   str(data.get("clock", "controller")),
+                   None if at is None else _number(at))
 
 
 @dataclass(frozen=True)

@@ -14,8 +14,12 @@ clock, which charges motion, settle and capture time, see docs/simulator.md), el
 host's monotonic clock (a real robot is busy for the wall time of the phase). Each reading
 journals the time since the previous one (`{"event": "robot_time", "phase": ...,
 "seconds": ..., "clock": "controller"|"host"}`), right after the pose's own record, so a
-resumed run adds the time of every session, and a session killed mid-phase (kill -9, power
-cut) loses at most the pose it was measuring.
+resumed run adds the time of every session. A controller-clock entry also journals the
+reading (`"at"`): a resume whose controller clock ran on (its first reading not before the
+journal's last: the same controller, not restarted) first journals the time since that
+reading to the phase it was in (the move and settling into the pose being measured when
+the session stopped); after a restart (a resumed `--robot sim`) or by the host's clock, a
+session killed mid-phase (Ctrl-C, kill -9, power cut) loses at most that pose's time.
 
 `robot_time_document(journal)` is result.json's `robot_time_s`: seconds per phase and
 `total` (their sum), with the clock used.
@@ -58,8 +62,21 @@ class RobotTimer:
         now = state.controller_time
         if now is not None:
             self._last, self._clock = now, "controller"
+            self._since_last_session(now)
         else:
             self._last, self._clock = time.monotonic(), "host"
+
+    def _since_last_session(self, now: float) -> None:
+        """On a resume whose controller clock ran on (not before the journal's last reading:
+        not restarted), journal the time from that reading to `now` to the phase it was in:
+        the move and settling into the pose being measured when the session stopped."""
+        readings = [(event.phase, event.at) for event in self.journal.events(RobotTimeSpent)
+                    if event.clock == "controller" and event.at is not None]
+        if readings:
+            phase, at = readings[-1]
+            if at is not None and math.isfinite(at) and now > at:
+                self.journal.append(RobotTimeSpent(phase=phase, seconds=now - at,
+                                                   clock="controller", at=now))
 
     def begin(self) -> None:
         """A phase starts now (the host's clock only; the controller's is not read)."""
@@ -76,7 +93,8 @@ class RobotTimer:
             return 0.0
         seconds = max(0.0, now - last)
         if seconds > 0.0:
-            self.journal.append(RobotTimeSpent(phase=phase, seconds=seconds, clock=clock))
+            self.journal.append(RobotTimeSpent(phase=phase, seconds=seconds, clock=clock,
+                                               at=now if clock == "controller" else None))
         return seconds
 
 

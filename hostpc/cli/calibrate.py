@@ -65,6 +65,7 @@ from hostpc.cli.termination import (
     EXIT_TERMINATED,
     Terminated,
     cancel_on_sigterm,
+    interrupt_notes,
     sigterm_as_interrupt,
 )
 from hostpc.dataset.kind_registry import DEFAULT_METHOD
@@ -325,12 +326,14 @@ def run(args: argparse.Namespace) -> int:
                                       known, scenario_file, progress)
     except KeyboardInterrupt as exc:
         progress.close()
+        stopped = interrupt_notes(exc)
+        interrupted = f"interrupted ({stopped})" if stopped else "interrupted"
         if Journal(run_dir).exists:
-            print(f"hostpc calibrate: interrupted: continue with hostpc calibrate --resume "
+            print(f"hostpc calibrate: {interrupted}: continue with hostpc calibrate --resume "
                   f"{run_dir}", file=sys.stderr)
         else:
-            print("hostpc calibrate: interrupted before the run started (nothing to resume)",
-                  file=sys.stderr)
+            print(f"hostpc calibrate: {interrupted} before the run started (nothing to "
+                  "resume)", file=sys.stderr)
         return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
     except PlanningError as exc:
         if created and not Journal(run_dir).records("fit"):  # nothing measured: no run

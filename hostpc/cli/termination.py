@@ -31,7 +31,10 @@ async def cancel_on_sigterm(run: Coroutine[Any, Any, T]) -> T:
 
     Inside the event loop a signal must not raise into whatever frame happens to run (it can
     land in the transport's reader task and read as a lost link); the loop's own signal
-    handler cancels the main task cleanly instead, and every `finally` still runs."""
+    handler cancels the main task cleanly instead, and every `finally` still runs. A motion
+    in progress is aborted by the client (hostpc.transport.client) before it lets the
+    cancellation go on; its note ("move_joints interrupted: abort sent: motion stopped") is
+    carried onto the Terminated, or the KeyboardInterrupt of a Ctrl-C (`interrupt_notes`)."""
     loop = asyncio.get_running_loop()
     task = asyncio.current_task()
     terminated = False
@@ -48,13 +51,25 @@ async def cancel_on_sigterm(run: Coroutine[Any, Any, T]) -> T:
         return await run
     try:
         return await run
-    except asyncio.CancelledError:
+    except asyncio.CancelledError as exc:
+        notes = getattr(exc, "__notes__", [])
         if terminated:
-            raise Terminated(f"signal {int(signal.SIGTERM)}") from None
-        raise
+            interrupt: KeyboardInterrupt = Terminated(f"signal {int(signal.SIGTERM)}")
+        elif notes:  # Ctrl-C (asyncio.run cancels the task): keep what the client did
+            interrupt = KeyboardInterrupt()
+        else:
+            raise
+        for note in notes:
+            interrupt.add_note(note)
+        raise interrupt from None
     finally:
         loop.remove_signal_handler(signal.SIGTERM)
         signal.signal(signal.SIGTERM, _raise_terminated)  # back to the synchronous handler
+
+
+def interrupt_notes(interrupt: BaseException) -> str:
+    """What was done about the motion an interrupt cut short ("" when none was moving)."""
+    return "; ".join(getattr(interrupt, "__notes__", []))
 
 
 @contextmanager

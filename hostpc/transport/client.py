@@ -6,8 +6,12 @@
         left, right, q_exposure, t = await robot.capture("target")
 
 Every request has a timeout (`RequestTimeout`); motions have their own, longer one
-(`motion_timeout`), and a motion that times out is followed by a best-effort `abort` so the
-robot does not keep moving unattended. If the connection drops, requests that are
+(MOTION_TIMEOUT_MARGIN times the host's prediction of the move from the controller's
+reported limits and the pace of the last move, at least `motion_timeout`), and a motion
+that times out, or whose caller is cancelled (Ctrl-C, SIGTERM: hostpc.cli.termination), is
+followed by a best-effort `abort` (at most ABORT_AFTER_TIMEOUT_S) so the robot does not
+keep moving unattended; a cancelled motion's CancelledError carries a note saying what the
+abort did. If the connection drops, requests that are
 safe to repeat (state, get_offsets, read_io, capture, heartbeat) are re-sent on a new
 connection; a motion, an offset write, a rollback or an abort is NEVER re-sent: the caller
 gets `ConnectionFailed` and decides (the robot may or may not have executed it). A request
@@ -32,6 +36,8 @@ import numpy as np
 
 from hostpc.errors import ConnectionFailed, ProtocolViolation, RequestTimeout
 from hostpc.json_object import JsonObject
+from hostpc.planning.robot_time import TimeLimits
+from hostpc.planning.tour import move_times
 from hostpc.transport.error_mapping import _os_error_text, _reply_error
 from hostpc.transport.io_events import IoEventSubscription
 from hostpc.transport.link import READ_CHUNK, _Link, _LinkLostError
@@ -71,9 +77,16 @@ IDEMPOTENT_KINDS = frozenset(
 )
 """Requests re-sent after a reconnection; everything else raises instead."""
 MOTION_KINDS = frozenset({"move_joints", "guarded_move"})
-"""Requests that move the robot: timed by `motion_timeout`, aborted when they time out."""
+"""Requests that move the robot: timed by their prediction (`_motion_timeout`), aborted
+when they time out or are cancelled."""
+MOTION_TIMEOUT_MARGIN = 3.0
+"""A motion's default timeout is this many times the host's prediction of it (`_motion_timeout`),
+never below `motion_timeout`."""
+PACE_MIN_MOVE_S = 0.5
+"""Moves at least this long (controller time, s) measure the wall seconds per controller
+second of motion (a simulator's time_scale; 1 for a real robot)."""
 ABORT_AFTER_TIMEOUT_S = 2.0
-"""How long the abort sent after a motion timeout may take (s)."""
+"""How long the abort sent after a motion timeout or interruption may take (s)."""
 
 ReplyT = TypeVar("ReplyT", bound=Reply)
 
@@ -102,9 +115,9 @@ class ControllerClient:
     """A session with a zerocal controller (see the module docstring).
 
     token: shared secret (None = read-only session: motions, captures and writes are
-    refused). timeout: default per-request timeout (s); motion_timeout: default timeout of
-    move_joints / guarded_move (s), which wait until the robot has stopped; on a motion
-    timeout the client sends `abort` (best effort) before raising RequestTimeout.
+    refused). timeout: default per-request timeout (s); motion_timeout: the least default
+    timeout of move_joints / guarded_move (s), which wait until the robot has stopped; on a
+    motion timeout the client sends `abort` (best effort) before raising RequestTimeout.
     connect_timeout: TCP connect + handshake (s). reconnect_attempts: how often an
     idempotent request is re-sent after a lost link.
     """
@@ -135,6 +148,9 @@ class ControllerClient:
         self._link: _Link | None = None
         self._connecting: asyncio.Lock | None = None
         self._subscriptions: set[IoEventSubscription] = set()
+        self._q: np.ndarray | None = None  # the last reported joint angles (n,) rad
+        self._limits: TimeLimits | None = None  # the controller's, from its last state
+        self._wall_per_robot_s = 1.0  # of the last move of at least PACE_MIN_MOVE_S
 
     @classmethod
     def connect(
@@ -174,7 +190,7 @@ class ControllerClient:
     async def state(self, timeout: float | None = None) -> ControllerState:
         """The controller state."""
         reply = await self._request(lambda i: m.GetState(id=i), m.State, timeout)
-        return ControllerState(
+        state = ControllerState(
             robot_name=reply.robot_name,
             n_joints=reply.n_joints,
             mode=reply.mode,
@@ -192,19 +208,27 @@ class ControllerClient:
             max_joint_acceleration=(None if reply.max_joint_acceleration is None
                                     else _array(reply.max_joint_acceleration)),
         )
+        self._q = state.q
+        self._limits = TimeLimits.from_extra(
+            {"max_joint_speed": state.max_joint_speed,
+             "max_joint_acceleration": state.max_joint_acceleration}, state.n_joints)
+        return state
 
     async def move_joints(self, q: Any, speed: float, timeout: float | None = None) -> MoveOutcome:
         """Move to q (n,) rad at speed (fraction of max, (0, 1]); returns when it stopped.
 
-        timeout: default `motion_timeout`; when it passes, `abort` is sent and
+        timeout: default `MOTION_TIMEOUT_MARGIN` times the host's prediction of the move,
+        at least `motion_timeout` (`_motion_timeout`); when it passes, `abort` is sent and
         RequestTimeout raised.
         """
         q_list = _floats(q)
+        started = asyncio.get_running_loop().time()
         reply = await self._request(
             lambda i: m.MoveJoints(id=i, q=q_list, speed=speed),
             m.MoveDone,
-            self.motion_timeout if timeout is None else timeout,
+            self._motion_timeout(q_list, speed) if timeout is None else timeout,
         )
+        self._moved(reply.q, reply.duration_s, started)
         return MoveOutcome(reply.completed, _array(reply.q), reply.duration_s, reply.reason)
 
     async def guarded_move(
@@ -212,15 +236,16 @@ class ControllerClient:
     ) -> GuardedMoveOutcome:
         """Move toward q (n,) rad until a rising edge on input `io_line`.
 
-        timeout: default `motion_timeout`; when it passes, `abort` is sent and
-        RequestTimeout raised.
+        timeout: as move_joints'; when it passes, `abort` is sent and RequestTimeout raised.
         """
         q_list = _floats(q)
+        started = asyncio.get_running_loop().time()
         reply = await self._request(
             lambda i: m.GuardedMove(id=i, q=q_list, speed=speed, io_line=io_line),
             m.GuardedMoveDone,
-            self.motion_timeout if timeout is None else timeout,
+            self._motion_timeout(q_list, speed) if timeout is None else timeout,
         )
+        self._moved(reply.q, reply.duration_s, started)
         return GuardedMoveOutcome(
             contact=reply.contact,
             q_latched=None if reply.q_latched is None else _array(reply.q_latched),
@@ -343,6 +368,25 @@ class ControllerClient:
 
     # ------------------------------------------------------------------- internals
 
+    def _motion_timeout(self, q: list[float], speed: float) -> float:
+        """A motion's timeout (s): MOTION_TIMEOUT_MARGIN x the host's prediction of the move
+        from the last reported angles to q at `speed` with the controller's reported limits
+        (hostpc.planning.tour.move_times, the robot time's law) x the wall seconds per
+        controller second the last move took; never below `motion_timeout` (nor when the
+        client has no state of the controller yet)."""
+        if self._q is None or self._limits is None or len(q) != self._q.size:
+            return self.motion_timeout
+        predicted = float(move_times(self._q, np.asarray(q, float), self._limits.rates(speed)))
+        return max(self.motion_timeout,
+                   MOTION_TIMEOUT_MARGIN * predicted * self._wall_per_robot_s)
+
+    def _moved(self, q: list[float], duration_s: float, started: float) -> None:
+        """Note where a motion ended and, for one of at least PACE_MIN_MOVE_S, its pace."""
+        self._q = _array(q)
+        if duration_s >= PACE_MIN_MOVE_S:
+            wall = asyncio.get_running_loop().time() - started
+            self._wall_per_robot_s = max(1.0, wall / duration_s)
+
     async def _request(
         self,
         make: Callable[[int], Request],
@@ -357,11 +401,18 @@ class ControllerClient:
             future = link.send(request)
             try:
                 reply = await asyncio.wait_for(future, timeout)
+            except asyncio.CancelledError as exc:  # Ctrl-C / SIGTERM (hostpc.cli.termination)
+                link.pending.pop(request.id, None)
+                if request.kind in MOTION_KINDS:
+                    stopped = await self._abort_motion(link)
+                    logger.info("%s interrupted: %s", request.kind, stopped)
+                    exc.add_note(f"{request.kind} interrupted: {stopped}")
+                raise
             except TimeoutError:
                 link.pending.pop(request.id, None)
                 stopped = ""
                 if request.kind in MOTION_KINDS:
-                    stopped = "; " + await self._abort_after_timeout(link)
+                    stopped = "; " + await self._abort_motion(link)
                 raise RequestTimeout(
                     f"{request.kind} (request {request.id}) got no reply within {timeout} s "
                     f"from {self.host}:{self.port}{stopped}"
@@ -386,15 +437,16 @@ class ControllerClient:
                 raise ProtocolViolation(f"{request.kind} answered by {reply.kind}")
             return reply
 
-    async def _abort_after_timeout(self, link: _Link) -> str:
-        """Best effort: stop the robot after a motion timed out; says what happened."""
+    async def _abort_motion(self, link: _Link) -> str:
+        """Best effort, within ABORT_AFTER_TIMEOUT_S: stop the robot after a motion timed out
+        or was interrupted (its caller cancelled); says what happened."""
         if not link.alive:
             return "the link is down, abort not sent"
         try:
             future = link.send(m.Abort(id=link.conn.next_id()))
             reply = await asyncio.wait_for(future, ABORT_AFTER_TIMEOUT_S)
         except (TimeoutError, _LinkLostError, OSError, LocalProtocolError) as exc:
-            logger.warning("abort after a motion timeout failed: %s", exc or type(exc).__name__)
+            logger.warning("abort of a motion failed: %s", exc or type(exc).__name__)
             return "abort sent, not confirmed"
         if isinstance(reply, m.Aborted):
             return "abort sent: motion stopped" if reply.was_moving else "abort sent: not moving"

@@ -136,3 +136,16 @@ async def test_a_30_degree_move_ramps_at_the_reported_acceleration(
          "max_joint_acceleration": before.max_joint_acceleration}, 6)
     planned, _, _ = waypoints_time(before.q, Waypoints.plain(after.q[None, :]), 0.5, limits)
     assert planned == pytest.approx(expected, rel=1e-12)
+
+
+async def test_a_slow_move_is_timed_by_its_prediction(start_stub: StartStub) -> None:
+    """Half a radian at SLOW's limits: 1.25 s of controller time, paced 2 wall s per
+    controller s (time_scale 2): 2.5 s. A fixed motion timeout (1 s here, 120 s in use)
+    would abort it; the default timeout is 3 x the host's prediction of the move from the
+    reported limits (3.75 s), so it finishes."""
+    server = await start_stub({"motion": {**SLOW["motion"], "time_scale": 2.0}})
+    async with connect(server, motion_timeout=1.0) as client:
+        q0 = (await client.state()).q
+        outcome = await client.move_joints(q0 + STEP / 2, 1.0)
+    assert outcome.completed
+    assert outcome.duration_s == pytest.approx(0.5 / 0.5 + RAMP_S, rel=1e-9)

@@ -1,0 +1,104 @@
+"""Ctrl-C during a move stops the robot: `hostpc calibrate` (a real subprocess) against a
+real stub at time_scale 1 gets SIGINT while the stub reports "moving"; the client sends the
+controller's `abort` before the link closes, so the stub stands still short of the target
+(not "moving", its q unchanged afterwards), and the interrupt line says what was done."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hostpc.robots.simulator import SimulatedController, default_sim_scenario
+from hostpc.transport import ControllerClient, ControllerState
+from tests.integration.test_calibrate_sim import TOKEN, sim_scenario, truth_rig_file
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _state(host: str, port: int) -> ControllerState:
+    async def read() -> ControllerState:
+        async with ControllerClient.connect(host, port, token=TOKEN, timeout=5.0) as client:
+            return await client.state()
+    return asyncio.run(read())
+
+
+ENV = {**os.environ, "PYTHONPATH": str(REPO), "ZEROCAL_TOKEN": TOKEN}
+
+
+def _interrupt_a_move(host: str, port: int, rig: Path, out: Path, poses_first: int
+                      ) -> tuple[int, str]:
+    """Run `hostpc calibrate` against the stub; once
+    `poses_first` fit poses are journaled, SIGINT it 0.1 s into a move -> (exit code, stderr)."""
+    command = [sys.executable, "-m", "hostpc.cli.main", "calibrate",
+               "--robot", f"{host}:{port}", "--rig", str(rig),
+               "--known", "target", "--poses", "8", "--verify-poses", "0",
+               "--cv-folds", "0", "--no-report", "--speed", "0.05", "--out", str(out)]
+    process = subprocess.Popen(command, cwd=REPO, env=ENV, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    journal = out / "journal.jsonl"
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and process.poll() is None:
+            lines = journal.read_text().replace(" ", "").splitlines() if journal.is_file() else []
+            measured = sum('"event":"robot_time","phase":"measure"' in line for line in lines)
+            if measured >= poses_first and _state(host, port).mode == "moving":
+                break
+            time.sleep(0.05)
+        time.sleep(0.1)  # inside the move: at speed 0.05 it takes seconds of robot time
+        assert _state(host, port).mode == "moving"
+        process.send_signal(signal.SIGINT)
+        _, stderr = process.communicate(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    return process.returncode, stderr
+
+
+def test_ctrl_c_during_a_move_aborts_it(tmp_path: Path) -> None:
+    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
+    out = tmp_path / "run"
+    with SimulatedController(default_sim_scenario(time_scale=1.0), tmp_path / "stub") as sim:
+        host, port = sim.address.host, sim.address.port
+        code, stderr = _interrupt_a_move(host, port, rig, out, 0)
+        assert code == 130, stderr
+        after = _state(host, port)
+        time.sleep(0.5)
+        later = _state(host, port)
+        assert after.mode == later.mode == "idle", stderr
+        np.testing.assert_array_equal(later.q, after.q)  # stopped, not finishing the move
+        assert stderr.strip().splitlines()[-1] == (
+            "hostpc calibrate: interrupted (move_joints interrupted: abort sent: motion "
+            f"stopped): continue with hostpc calibrate --resume {out}")
+
+
+@pytest.mark.slow
+def test_a_resume_on_a_controller_that_ran_on_counts_all_its_robot_time(tmp_path: Path
+                                                                       ) -> None:
+    """Interrupted in the move to the third pose, resumed against the same controller (its
+    clock ran on): the run's robot time is all the controller clock advanced, the move and
+    settling into the interrupted pose included."""
+    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
+    out = tmp_path / "run"
+    with SimulatedController(default_sim_scenario(time_scale=0.5), tmp_path / "stub") as sim:
+        host, port = sim.address.host, sim.address.port
+        start = _state(host, port).time
+        code, stderr = _interrupt_a_move(host, port, rig, out, 2)
+        assert code == 130, stderr
+        done = subprocess.run([sys.executable, "-m", "hostpc.cli.main", "calibrate",
+                               "--resume", str(out)], cwd=REPO, env=ENV,
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stderr[-2000:]
+        spent = _state(host, port).time - start
+    robot_time = json.loads((out / "result.json").read_text())["robot_time_s"]
+    assert robot_time["clock"] == "controller"
+    assert robot_time["total"] == pytest.approx(spent, rel=1e-9), (robot_time, spent)
