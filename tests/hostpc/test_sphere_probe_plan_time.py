@@ -11,7 +11,7 @@ import numpy as np
 
 from hostpc.calibrate.run_plan import plan_run
 from hostpc.kinds.sphere_probe.method import SphereProbeMethod
-from hostpc.kinds.sphere_probe.planning.contacts import path_clearance
+from hostpc.kinds.sphere_probe.planning.contacts import path_clearance, retract
 from hostpc.kinds.sphere_probe.planning.setup import (
     CONTACTS_PER_ORIENTATION,
     MIN_TARGET_ORIENTATIONS,
@@ -97,15 +97,41 @@ def test_the_path_hovers_only_between_orientations_and_keeps_off_the_sphere(
             clear = path_clearance(method.chain, previous[1], contact.q_start, setup.tip,
                                    setup.sphere_centre)
             assert clear >= setup.contact_distance + 0.5 * config.standoff
+        elif previous is not None and not any(is_hover):
+            # straight from the last orientation's hover to this start: the wrist turns, so
+            # the stylus (its half next to the tip) keeps half the standoff off the sphere
+            assert np.all(previous[1] == hovers[previous[0]]) and via.shape[0] == 1
+            clear = min(path_clearance(method.chain, previous[1], contact.q_start,
+                                       f * setup.tip, setup.sphere_centre)
+                        for f in np.linspace(0.5, 1.0, 6))
+            assert clear >= setup.contact_distance + 0.5 * config.standoff
         else:
             assert any(is_hover)  # an orientation change goes through its hover
         assert not path.settle[end] and path.speed[end] == contact.speed  # the approach
-        assert np.all(path.q[end + 1] == contact.q_start)  # the retract
-        previous = (orientation.group, contact.q_start)
+        # the retract: to the start; the orientation's last contact (the pole, along its
+        # approach line) on to the hover, where the orientation change starts
+        q_back, _ = retract(orientation, contact)
+        assert np.all(path.q[end + 1] == q_back)
+        last = contact.index == CONTACTS_PER_ORIENTATION - 1
+        assert np.all(q_back == (hovers[orientation.group] if last else contact.q_start))
+        previous = (orientation.group, q_back)
         k = end + 2
-    # 2 settles per contact (start, retract) and the hovers only where orientations change
+    # 2 settles per contact (start, retract) and at most one hover where orientations change
     n_orientations = len({method._lookup(row)[1].group for row in q})
-    assert np.count_nonzero(path.settle) <= 2 * q.shape[0] + 2 * n_orientations
+    assert np.count_nonzero(path.settle) <= 2 * q.shape[0] + n_orientations
+
+
+def test_the_wrist_turns_at_most_a_quarter_turn_from_the_robot_between_orientations(
+        tmp_path: Path) -> None:
+    """Every orientation's last joint within a quarter turn of the robot's (the roll half a
+    turn on where it was not): the tour's wrist moves are at most half a turn."""
+    method, state, plan = _planned(tmp_path, target_sigma_deg=0.002, n_verify=3)
+    assert method.plan is not None
+    wrist = np.array([o.q_hover[-1] for o in method.plan.orientations]) - state.q[-1]
+    assert np.max(np.abs(wrist)) <= np.pi / 2 + 1e-6
+    rows = np.vstack([plan.q, plan.q_verify])
+    hovers = [method._lookup(row)[0].q_hover for row in rows]
+    assert np.max(np.abs(np.diff(np.array(hovers)[:, -1]))) <= np.pi + 1e-6
 
 
 def test_the_floor_holds_the_guarded_approaches_of_the_fewest_orientations(

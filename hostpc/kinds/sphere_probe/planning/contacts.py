@@ -92,17 +92,19 @@ def flange_rotation(stylus_direction: np.ndarray, roll: float, tip: np.ndarray) 
 
 
 def contact_normals(stylus_direction: np.ndarray, ring_deg: float, phase: float) -> np.ndarray:
-    """(5, 3) unit contact normals: the pole (facing the stylus, -direction) and 4 on a ring
-    ring_deg from it. Pole + ring are not coplanar, so each group fixes a sphere."""
+    """(5, 3) unit contact normals: 4 on a ring ring_deg from the pole, then the pole (facing
+    the stylus, -direction; last: its approach line runs through the hover, so its retract
+    leaves the orientation, `retract_pose`). Pole + ring are not coplanar, so each group
+    fixes a sphere."""
     pole = -stylus_direction / np.linalg.norm(stylus_direction)
     frame = _frame_with_z(pole, phase)
     a = math.radians(ring_deg)
-    normals = [pole]
+    normals = []
     for j in range(4):
         b = j * math.pi / 2
         normals.append(math.cos(a) * pole + math.sin(a) * (math.cos(b) * frame[:, 0]
                                                            + math.sin(b) * frame[:, 1]))
-    return np.array(normals)
+    return np.array([*normals, pole])
 
 
 def tip_positions(chain: Chain, q: np.ndarray, tip: np.ndarray) -> np.ndarray:
@@ -131,6 +133,31 @@ def _ik(chain: Chain, R: np.ndarray, tips: np.ndarray, tip: np.ndarray, seed: np
     return q, ok
 
 
+def _turned_to(chain: Chain, setup: ProbeSetup, direction: np.ndarray, roll: float,
+               hover: np.ndarray, q_hover: np.ndarray, q_robot: np.ndarray, seed: np.ndarray,
+               q_min: np.ndarray, q_max: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The flange rotation, hover pose (1, n) and ok (1,) of an orientation whose last joint
+    (the flange's turn; about the stylus for a tip on its axis) is within a quarter turn of
+    the robot's q_robot (n,): the roll half a turn on where it is not (the tip's contacts are
+    the same; the tip's own offset is seen from the other side), then that joint's angle
+    the full turn nearest the robot's within its limits. The tour's wrist moves are then at
+    most half a turn (a roll drawn over the whole turn made them up to a whole one)."""
+    last = q_hover[0, -1]
+    if abs(math.remainder(float(last - q_robot[-1]), 2 * math.pi)) > math.pi / 2:
+        R = flange_rotation(direction, roll + math.pi, setup.tip)
+        q_hover, ok = _ik(chain, R, hover[None, :], setup.tip, seed, q_min, q_max)
+    else:
+        R = flange_rotation(direction, roll, setup.tip)
+        ok = np.ones(1, bool)
+    if ok[0]:
+        nearest = q_hover[0, -1] + 2 * math.pi * round((q_robot[-1] - q_hover[0, -1])
+                                                         / (2 * math.pi))
+        if q_min[-1] <= nearest <= q_max[-1]:
+            q_hover[0, -1] = nearest
+    return R, q_hover, ok
+
+
 def plan_sphere_probe(chain: Chain, setup: ProbeSetup, config: PlanConfig, q_seed: np.ndarray,
                       q_min: np.ndarray | None = None, q_max: np.ndarray | None = None
                       ) -> ProbePlan:
@@ -138,7 +165,8 @@ def plan_sphere_probe(chain: Chain, setup: ProbeSetup, config: PlanConfig, q_see
 
     chain: nominal robot; q_seed: (n,) IK seed (the robot's current pose); q_min / q_max: (n,)
     controller joint limits (default: the chain's). Candidate orientations (stylus tilt and
-    azimuth on a golden-angle spiral, roll spread) are kept when all 11 poses (hover, 5
+    azimuth on a golden-angle spiral, roll spread; the last joint within a quarter turn of
+    q_seed's, `_turned_to`) are kept when all 11 poses (hover, 5
     starts, 5 targets) solve within limits on one IK branch and no free move comes near the
     sphere; they are then ordered greedily by joint travel. Raises InputError if fewer than
     ``config.n_orientations`` survive.
@@ -171,6 +199,9 @@ def plan_sphere_probe(chain: Chain, setup: ProbeSetup, config: PlanConfig, q_see
             continue
         hover = centre - config.hover * direction
         q_hover, ok_hover = _ik(chain, R, hover[None, :], setup.tip, seed, q_min, q_max)
+        if ok_hover[0]:
+            R, q_hover, ok_hover = _turned_to(chain, setup, direction, roll, hover, q_hover,
+                                              np.asarray(q_seed, float), seed, q_min, q_max)
         if not ok_hover[0]:
             rejected += 1
             continue
@@ -238,6 +269,18 @@ Location = tuple[PlannedOrientation, PlannedContact | None]
 or at an orientation's hover (contact None)."""
 
 
+def retract(orientation: PlannedOrientation, contact: PlannedContact
+            ) -> tuple[np.ndarray, Location]:
+    """Where the retract after `contact`'s guarded move goes: (n,) joint target and where
+    the stylus then is. To its start; the orientation's last contact (the pole,
+    `contact_normals`) on along its approach line to the hover, where the next
+    orientation's moves start (one settled move instead of the retract and the move to the
+    hover)."""
+    if contact.index == len(orientation.contacts) - 1:
+        return orientation.q_hover, (orientation, None)
+    return contact.q_start, (orientation, contact)
+
+
 def free_moves(orientation: PlannedOrientation, contact: PlannedContact,
                here: Location | None, chain: Chain | None = None,
                setup: ProbeSetup | None = None, config: PlanConfig | None = None
@@ -250,24 +293,40 @@ def free_moves(orientation: PlannedOrientation, contact: PlannedContact,
     goes from one start pose (the previous contact's retract point, `standoff` off the
     surface) straight to the next when that joint move keeps the tip at least half the
     standoff off the nominal surface (the planner's rule for hover -> start moves); else
-    through the hover. Between orientations: the previous orientation's hover, this one's,
-    then the start. `here` None (robot elsewhere): this orientation's hover, the start.
+    through the hover. Between orientations from the previous one's hover (where its last
+    contact's retract ends, `retract`): straight to the start when the whole move keeps the
+    half of the stylus next to the tip at least half the standoff off the nominal surface
+    (the wrist turns on the way), else through this orientation's hover; from a start of
+    the previous orientation: its hover, this one's, the start. `here` None (robot
+    elsewhere): this orientation's hover, the start.
     Without `chain`, `setup` and `config` (no clearance check) every contact starts from
     its hover."""
     if here is None:
         return [orientation.q_hover, contact.q_start]
     at, previous = here
+    checked = chain is not None and setup is not None and config is not None
     if at.group != orientation.group:
-        via = [] if previous is None else [at.q_hover]
-        return [*via, orientation.q_hover, contact.q_start]
+        if previous is not None:
+            return [at.q_hover, orientation.q_hover, contact.q_start]
+        if checked and _clear(at.q_hover, contact.q_start, chain, setup, config, stylus=True):
+            return [contact.q_start]
+        return [orientation.q_hover, contact.q_start]
     if previous is None:
         return [contact.q_start]
-    if chain is not None and setup is not None and config is not None:
-        clear = path_clearance(chain, previous.q_start, contact.q_start, setup.tip,
-                               setup.sphere_centre)
-        if clear >= setup.contact_distance + 0.5 * config.standoff:
-            return [contact.q_start]
+    if checked and _clear(previous.q_start, contact.q_start, chain, setup, config):
+        return [contact.q_start]
     return [orientation.q_hover, contact.q_start]
+
+
+def _clear(q_from: np.ndarray, q_to: np.ndarray, chain: Chain | None,
+           setup: ProbeSetup | None, config: PlanConfig | None, stylus: bool = False) -> bool:
+    """The joint move q_from -> q_to keeps the tip (`stylus`: the half of the stylus next to
+    the tip, the wrist turns) at least half the standoff off the nominal surface."""
+    assert chain is not None and setup is not None and config is not None
+    points = np.linspace(0.5, 1.0, 6) if stylus else np.ones(1)
+    clear = min(path_clearance(chain, q_from, q_to, f * setup.tip, setup.sphere_centre)
+                for f in points)
+    return clear >= setup.contact_distance + 0.5 * config.standoff
 
 
 def plan_to_dict(plan: ProbePlan) -> JsonObject:
