@@ -121,19 +121,6 @@ def test_the_path_hovers_only_between_orientations_and_keeps_off_the_sphere(
     assert np.count_nonzero(path.settle) <= 2 * q.shape[0] + n_orientations
 
 
-def test_the_wrist_turns_at_most_a_quarter_turn_from_the_robot_between_orientations(
-        tmp_path: Path) -> None:
-    """Every orientation's last joint within a quarter turn of the robot's (the roll half a
-    turn on where it was not): the tour's wrist moves are at most half a turn."""
-    method, state, plan = _planned(tmp_path, target_sigma_deg=0.002, n_verify=3)
-    assert method.plan is not None
-    wrist = np.array([o.q_hover[-1] for o in method.plan.orientations]) - state.q[-1]
-    assert np.max(np.abs(wrist)) <= np.pi / 2 + 1e-6
-    rows = np.vstack([plan.q, plan.q_verify])
-    hovers = [method._lookup(row)[0].q_hover for row in rows]
-    assert np.max(np.abs(np.diff(np.array(hovers)[:, -1]))) <= np.pi + 1e-6
-
-
 def test_the_floor_holds_the_guarded_approaches_of_the_fewest_orientations(
         tmp_path: Path) -> None:
     method, state, plan = _planned(tmp_path, target_sigma_deg=0.002, n_verify=3)
@@ -148,9 +135,11 @@ def test_the_floor_holds_the_guarded_approaches_of_the_fewest_orientations(
     contacts = q.shape[0] + q_verify.shape[0]
     expected = contacts * (DEFAULT_SETTLE_S + DEFAULT_CAPTURE_S) + approach
     assert math.isclose(planned["floor"], expected, rel_tol=1e-9)
-    # issue 28 asks for 2x the floor; with every move ramped (4 rad/s^2) this plan is 2.09x:
-    # the short start / approach / retract moves of each contact are mostly ramp
-    assert planned["total"] < 2.2 * planned["floor"]
+    # issue 28 asks for 2x the floor; with every move ramped (4 rad/s^2) this plan is 2.07x
+    # (2.09x before the pole's retract went on to the hover, and that prediction left out
+    # the move to the hover before the verification): the short start / approach / retract
+    # moves of each contact are mostly ramp, and each settles
+    assert planned["total"] < 2.1 * planned["floor"]
 
 
 def test_fewest_groups_for_a_target_sigma_and_no_sigma_from_too_few_rows() -> None:

@@ -133,31 +133,6 @@ def _ik(chain: Chain, R: np.ndarray, tips: np.ndarray, tip: np.ndarray, seed: np
     return q, ok
 
 
-def _turned_to(chain: Chain, setup: ProbeSetup, direction: np.ndarray, roll: float,
-               hover: np.ndarray, q_hover: np.ndarray, q_robot: np.ndarray, seed: np.ndarray,
-               q_min: np.ndarray, q_max: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The flange rotation, hover pose (1, n) and ok (1,) of an orientation whose last joint
-    (the flange's turn; about the stylus for a tip on its axis) is within a quarter turn of
-    the robot's q_robot (n,): the roll half a turn on where it is not (the tip's contacts are
-    the same; the tip's own offset is seen from the other side), then that joint's angle
-    the full turn nearest the robot's within its limits. The tour's wrist moves are then at
-    most half a turn (a roll drawn over the whole turn made them up to a whole one)."""
-    last = q_hover[0, -1]
-    if abs(math.remainder(float(last - q_robot[-1]), 2 * math.pi)) > math.pi / 2:
-        R = flange_rotation(direction, roll + math.pi, setup.tip)
-        q_hover, ok = _ik(chain, R, hover[None, :], setup.tip, seed, q_min, q_max)
-    else:
-        R = flange_rotation(direction, roll, setup.tip)
-        ok = np.ones(1, bool)
-    if ok[0]:
-        nearest = q_hover[0, -1] + 2 * math.pi * round((q_robot[-1] - q_hover[0, -1])
-                                                         / (2 * math.pi))
-        if q_min[-1] <= nearest <= q_max[-1]:
-            q_hover[0, -1] = nearest
-    return R, q_hover, ok
-
-
 def plan_sphere_probe(chain: Chain, setup: ProbeSetup, config: PlanConfig, q_seed: np.ndarray,
                       q_min: np.ndarray | None = None, q_max: np.ndarray | None = None
                       ) -> ProbePlan:
@@ -165,8 +140,7 @@ def plan_sphere_probe(chain: Chain, setup: ProbeSetup, config: PlanConfig, q_see
 
     chain: nominal robot; q_seed: (n,) IK seed (the robot's current pose); q_min / q_max: (n,)
     controller joint limits (default: the chain's). Candidate orientations (stylus tilt and
-    azimuth on a golden-angle spiral, roll spread; the last joint within a quarter turn of
-    q_seed's, `_turned_to`) are kept when all 11 poses (hover, 5
+    azimuth on a golden-angle spiral, roll spread) are kept when all 11 poses (hover, 5
     starts, 5 targets) solve within limits on one IK branch and no free move comes near the
     sphere; they are then ordered greedily by joint travel. Raises InputError if fewer than
     ``config.n_orientations`` survive.
@@ -199,9 +173,6 @@ def plan_sphere_probe(chain: Chain, setup: ProbeSetup, config: PlanConfig, q_see
             continue
         hover = centre - config.hover * direction
         q_hover, ok_hover = _ik(chain, R, hover[None, :], setup.tip, seed, q_min, q_max)
-        if ok_hover[0]:
-            R, q_hover, ok_hover = _turned_to(chain, setup, direction, roll, hover, q_hover,
-                                              np.asarray(q_seed, float), seed, q_min, q_max)
         if not ok_hover[0]:
             rejected += 1
             continue
@@ -229,10 +200,13 @@ def plan_sphere_probe(chain: Chain, setup: ProbeSetup, config: PlanConfig, q_see
     orientations = []
     for group, i in enumerate(order):
         direction, R, q_hover, normals, q_starts, q_targets = accepted[i]
+        # the speeds cycle from the pole (probed last, `contact_normals`) round the ring
+        speeds = [config.guarded_speeds[(group + (j + 1) % CONTACTS_PER_ORIENTATION)
+                                        % len(config.guarded_speeds)]
+                  for j in range(CONTACTS_PER_ORIENTATION)]
         contacts = tuple(
             PlannedContact(group=group, index=j, normal=normals[j], q_start=q_starts[j],
-                           q_target=q_targets[j],
-                           speed=config.guarded_speeds[(group + j) % len(config.guarded_speeds)])
+                           q_target=q_targets[j], speed=speeds[j])
             for j in range(CONTACTS_PER_ORIENTATION))
         orientations.append(PlannedOrientation(group, R, direction, q_hover, contacts))
     _check_transfers(chain, orientations, setup, config)
