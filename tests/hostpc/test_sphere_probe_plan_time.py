@@ -11,7 +11,11 @@ import numpy as np
 
 from hostpc.calibrate.run_plan import plan_run
 from hostpc.kinds.sphere_probe.method import SphereProbeMethod
-from hostpc.kinds.sphere_probe.planning.contacts import path_clearance, retract
+from hostpc.kinds.sphere_probe.planning.contacts import (
+    STYLUS_POINTS,
+    path_clearance,
+    retract,
+)
 from hostpc.kinds.sphere_probe.planning.setup import (
     CONTACTS_PER_ORIENTATION,
     MIN_TARGET_ORIENTATIONS,
@@ -103,7 +107,7 @@ def test_the_path_hovers_only_between_orientations_and_keeps_off_the_sphere(
             assert np.all(previous[1] == hovers[previous[0]]) and via.shape[0] == 1
             clear = min(path_clearance(method.chain, previous[1], contact.q_start,
                                        f * setup.tip, setup.sphere_centre)
-                        for f in np.linspace(0.5, 1.0, 6))
+                        for f in STYLUS_POINTS)
             assert clear >= setup.contact_distance + 0.5 * config.standoff
         else:
             assert any(is_hover)  # an orientation change goes through its hover

@@ -182,8 +182,8 @@ class SphereProbeMethod(Method):
         self._t0 = time.monotonic()
         self._joint_estimate = np.zeros(self.chain.n)  # set_joint_estimate
         self._left: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        """(commanded start, commanded hover, the shift they were commanded under) of the
-        last contact probed (acquire)."""
+        """(commanded retract point: its start or its hover, `retract`; commanded hover; the
+        shift they were commanded under) of the last contact probed (acquire)."""
         self._clear: np.ndarray | None = None
         """Where this process found the robot (`prepare`: the run's start pose, or where a
         resume finds it) when that is clear of the sphere on the nominal model (unshifted);
@@ -322,10 +322,11 @@ class SphereProbeMethod(Method):
 
     def _retreat(self, q_from: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """The commanded hover to back out to, and the shift it is commanded under, when
-        the robot is at a contact's start commanded under another shift than the current
-        one (a new stage, a step of the coarse search, or a resume with --swapped): the
-        last contact this process probed (`_left`), or a contact's start of the unshifted
-        plan (a journal's last pose); None if neither."""
+        the robot is at a contact's retract point (its start or its orientation's hover)
+        commanded under another shift than the current one (a new stage, a step of the
+        coarse search, or a resume with --swapped): the last contact this process probed
+        (`_left`), or a start or hover of the unshifted plan (a journal's last pose); None
+        if neither."""
         q_from = np.asarray(q_from, float)
         if self._left is not None and np.max(np.abs(q_from - self._left[0])) < 1e-9:
             return self._left[1], self._left[2]

@@ -94,7 +94,7 @@ def flange_rotation(stylus_direction: np.ndarray, roll: float, tip: np.ndarray) 
 def contact_normals(stylus_direction: np.ndarray, ring_deg: float, phase: float) -> np.ndarray:
     """(5, 3) unit contact normals: 4 on a ring ring_deg from the pole, then the pole (facing
     the stylus, -direction; last: its approach line runs through the hover, so its retract
-    leaves the orientation, `retract_pose`). Pole + ring are not coplanar, so each group
+    leaves the orientation, `retract`). Pole + ring are not coplanar, so each group
     fixes a sphere."""
     pole = -stylus_direction / np.linalg.norm(stylus_direction)
     frame = _frame_with_z(pole, phase)
@@ -292,12 +292,17 @@ def free_moves(orientation: PlannedOrientation, contact: PlannedContact,
     return [orientation.q_hover, contact.q_start]
 
 
+STYLUS_POINTS = np.linspace(0.5, 1.0, 6)
+"""Points of the stylus a wrist-turning move is checked at (`free_moves`), as fractions of
+flange -> tip: its half next to the tip (the other half is 60 mm or more off the tip)."""
+
+
 def _clear(q_from: np.ndarray, q_to: np.ndarray, chain: Chain | None,
            setup: ProbeSetup | None, config: PlanConfig | None, stylus: bool = False) -> bool:
     """The joint move q_from -> q_to keeps the tip (`stylus`: the half of the stylus next to
     the tip, the wrist turns) at least half the standoff off the nominal surface."""
     assert chain is not None and setup is not None and config is not None
-    points = np.linspace(0.5, 1.0, 6) if stylus else np.ones(1)
+    points = STYLUS_POINTS if stylus else np.ones(1)
     clear = min(path_clearance(chain, q_from, q_to, f * setup.tip, setup.sphere_centre)
                 for f in points)
     return clear >= setup.contact_distance + 0.5 * config.standoff
