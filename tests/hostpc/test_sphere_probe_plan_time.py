@@ -11,7 +11,11 @@ import numpy as np
 
 from hostpc.calibrate.run_plan import plan_run
 from hostpc.kinds.sphere_probe.method import SphereProbeMethod
-from hostpc.kinds.sphere_probe.planning.contacts import path_clearance
+from hostpc.kinds.sphere_probe.planning.contacts import (
+    STYLUS_POINTS,
+    path_clearance,
+    retract,
+)
 from hostpc.kinds.sphere_probe.planning.setup import (
     CONTACTS_PER_ORIENTATION,
     MIN_TARGET_ORIENTATIONS,
@@ -97,15 +101,28 @@ def test_the_path_hovers_only_between_orientations_and_keeps_off_the_sphere(
             clear = path_clearance(method.chain, previous[1], contact.q_start, setup.tip,
                                    setup.sphere_centre)
             assert clear >= setup.contact_distance + 0.5 * config.standoff
+        elif previous is not None and not any(is_hover):
+            # straight from the last orientation's hover to this start: the wrist turns, so
+            # the stylus (its half next to the tip) keeps half the standoff off the sphere
+            assert np.all(previous[1] == hovers[previous[0]]) and via.shape[0] == 1
+            clear = min(path_clearance(method.chain, previous[1], contact.q_start,
+                                       f * setup.tip, setup.sphere_centre)
+                        for f in STYLUS_POINTS)
+            assert clear >= setup.contact_distance + 0.5 * config.standoff
         else:
             assert any(is_hover)  # an orientation change goes through its hover
         assert not path.settle[end] and path.speed[end] == contact.speed  # the approach
-        assert np.all(path.q[end + 1] == contact.q_start)  # the retract
-        previous = (orientation.group, contact.q_start)
+        # the retract: to the start; the orientation's last contact (the pole, along its
+        # approach line) on to the hover, where the orientation change starts
+        q_back, _ = retract(orientation, contact)
+        assert np.all(path.q[end + 1] == q_back)
+        last = contact.index == CONTACTS_PER_ORIENTATION - 1
+        assert np.all(q_back == (hovers[orientation.group] if last else contact.q_start))
+        previous = (orientation.group, q_back)
         k = end + 2
-    # 2 settles per contact (start, retract) and the hovers only where orientations change
+    # 2 settles per contact (start, retract) and at most one hover where orientations change
     n_orientations = len({method._lookup(row)[1].group for row in q})
-    assert np.count_nonzero(path.settle) <= 2 * q.shape[0] + 2 * n_orientations
+    assert np.count_nonzero(path.settle) <= 2 * q.shape[0] + n_orientations
 
 
 def test_the_floor_holds_the_guarded_approaches_of_the_fewest_orientations(
@@ -122,9 +139,11 @@ def test_the_floor_holds_the_guarded_approaches_of_the_fewest_orientations(
     contacts = q.shape[0] + q_verify.shape[0]
     expected = contacts * (DEFAULT_SETTLE_S + DEFAULT_CAPTURE_S) + approach
     assert math.isclose(planned["floor"], expected, rel_tol=1e-9)
-    # issue 28 asks for 2x the floor; with every move ramped (4 rad/s^2) this plan is 2.09x:
-    # the short start / approach / retract moves of each contact are mostly ramp
-    assert planned["total"] < 2.2 * planned["floor"]
+    # issue 28 asks for 2x the floor; with every move ramped (4 rad/s^2) this plan is 2.07x
+    # (2.09x before the pole's retract went on to the hover, and that prediction left out
+    # the move to the hover before the verification): the short start / approach / retract
+    # moves of each contact are mostly ramp, and each settles
+    assert planned["total"] < 2.1 * planned["floor"]
 
 
 def test_fewest_groups_for_a_target_sigma_and_no_sigma_from_too_few_rows() -> None:

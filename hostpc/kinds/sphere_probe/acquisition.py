@@ -2,7 +2,8 @@
 
 Per contact the free moves to its start pose (`planning.contacts.free_moves`: the hover
 only where the orientation changes or a direct move would pass near the sphere), a guarded
-move toward the target (S1-S3, S6) and the retract to the start. A missed contact (no IO
+move toward the target (S1-S3, S6) and the retract (`retract`: to the start, after an
+orientation's last contact on to its hover). A missed contact (no IO
 edge before the end of travel, or a lost edge) stops that move at the travel limit, is
 recorded, and the run goes on. Units SI (m, rad, s).
 """
@@ -20,6 +21,7 @@ from hostpc.kinds.sphere_probe.planning.contacts import (
     PlannedContact,
     ProbePlan,
     free_moves,
+    retract,
 )
 from hostpc.kinds.sphere_probe.planning.setup import PlanConfig, ProbeSetup
 from hostpc.kinematics import Chain, forward, point_jacobian, screws
@@ -86,8 +88,8 @@ async def acquire(robot: RobotAdapter, plan: ProbePlan, setup: ProbeSetup, confi
                   chain: Chain | None = None) -> list[ContactRecord]:
     """Drive the plan: per contact its free moves to the start (`free_moves`: with
     `chain`, straight from the previous contact's start where that keeps clear of the
-    sphere, else through the hover), the guarded move, the retract to the start
-    (``probe_contact``); every free move was checked on the nominal model at planning.
+    sphere, else through the hover), the guarded move, the retract (``probe_contact``,
+    `retract`); every free move was checked on the nominal model at planning.
 
     done: (group, index) pairs already recorded (a resumed run skips them); on_contact:
     called after every guarded move (the journal); guarded: replaces the robot's guarded
@@ -103,15 +105,17 @@ async def acquire(robot: RobotAdapter, plan: ProbePlan, setup: ProbeSetup, confi
             if (contact.group, contact.index) in skip:
                 continue
             via = free_moves(orientation, contact, here, chain, setup, config)
+            q_back, there = retract(orientation, contact)
             record = await probe_contact(robot, via, contact, setup, config,
-                                         clock() - t0, guarded, chain)
-            here = (orientation, contact)
+                                         clock() - t0, guarded, chain, q_back)
+            here = there
             records.append(record)
             if on_contact is not None:
                 result = on_contact(record)
                 if result is not None:
                     await result
-        if here is not None and here[0] is orientation:  # leave it as planned: its hover
+        if here is not None and here[0] is orientation and here[1] is not None:
+            # leave it as planned: its hover
             await _move(robot, orientation.q_hover, config.move_speed)
             here = (orientation, None)
     return records
@@ -129,9 +133,11 @@ async def _move(robot: RobotAdapter, q: np.ndarray, speed: float) -> None:
 async def probe_contact(robot: RobotAdapter, via: Sequence[np.ndarray],
                         contact: PlannedContact, setup: ProbeSetup, config: PlanConfig,
                         t: float, guarded: GuardedMove | None = None,
-                        chain: Chain | None = None) -> ContactRecord:
+                        chain: Chain | None = None, q_back: np.ndarray | None = None
+                        ) -> ContactRecord:
     """One contact: the free moves `via` (ending at the contact's start, `free_moves`), the
-    guarded move, the retract to the start (see ``acquire``); the robot ends at the start.
+    guarded move, the retract to `q_back` (`retract`; None: the start), where the robot
+    ends (see ``acquire``).
 
     chain: the nominal model, to turn the joint velocities a controller measured at the
     edge (``ContactOutcome.qd``) into the tip speed when it does not report that itself."""
@@ -148,7 +154,7 @@ async def probe_contact(robot: RobotAdapter, via: Sequence[np.ndarray],
     speed = None if outcome.speed is None else float(outcome.speed)
     if speed is None and latched is not None and outcome.qd is not None and chain is not None:
         speed = tip_speed_at(chain, np.asarray(latched, float), setup.tip, outcome.qd)
-    await _move(robot, contact.q_start, config.move_speed)
+    await _move(robot, contact.q_start if q_back is None else q_back, config.move_speed)
     return ContactRecord(
         group=contact.group, index=contact.index,
         contact=bool(outcome.contact and latched is not None),

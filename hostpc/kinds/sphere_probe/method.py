@@ -62,6 +62,7 @@ from hostpc.kinds.sphere_probe.planning.contacts import (
     plan_from_dict,
     plan_sphere_probe,
     plan_to_dict,
+    retract,
 )
 from hostpc.kinds.sphere_probe.planning.setup import (
     CONTACTS_PER_ORIENTATION,
@@ -181,8 +182,8 @@ class SphereProbeMethod(Method):
         self._t0 = time.monotonic()
         self._joint_estimate = np.zeros(self.chain.n)  # set_joint_estimate
         self._left: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        """(commanded start, commanded hover, the shift they were commanded under) of the
-        last contact probed (acquire)."""
+        """(commanded retract point: its start or its hover, `retract`; commanded hover; the
+        shift they were commanded under) of the last contact probed (acquire)."""
         self._clear: np.ndarray | None = None
         """Where this process found the robot (`prepare`: the run's start pose, or where a
         resume finds it) when that is clear of the sphere on the nominal model (unshifted);
@@ -321,15 +322,16 @@ class SphereProbeMethod(Method):
 
     def _retreat(self, q_from: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """The commanded hover to back out to, and the shift it is commanded under, when
-        the robot is at a contact's start commanded under another shift than the current
-        one (a new stage, a step of the coarse search, or a resume with --swapped): the
-        last contact this process probed (`_left`), or a contact's start of the unshifted
-        plan (a journal's last pose); None if neither."""
+        the robot is at a contact's retract point (its start or its orientation's hover)
+        commanded under another shift than the current one (a new stage, a step of the
+        coarse search, or a resume with --swapped): the last contact this process probed
+        (`_left`), or a start or hover of the unshifted plan (a journal's last pose); None
+        if neither."""
         q_from = np.asarray(q_from, float)
         if self._left is not None and np.max(np.abs(q_from - self._left[0])) < 1e-9:
             return self._left[1], self._left[2]
         unshifted = self._located(q_from)
-        if unshifted is None or unshifted[1] is None:
+        if unshifted is None:
             return None
         return unshifted[0].q_hover, np.zeros_like(q_from)
 
@@ -364,18 +366,20 @@ class SphereProbeMethod(Method):
         """The moves that probe the contacts q (N, n) in order (``probe_contact``): per
         contact the free moves to its start (``free_moves``: the hover only where the
         orientation changes or a direct move would pass near the sphere), the guarded
-        approach to the contact (no settling), the retract to the start; the free moves
-        at the plan's move speed, the approach at the contact's."""
+        approach to the contact (no settling), the retract (`retract`: to the start, after an
+        orientation's last contact on to its hover); the free moves at the plan's move
+        speed, the approach at the contact's."""
         rows, speeds, settles = [], [], []
         here: Location | None = None
         for row in np.asarray(q, float):
             orientation, contact = self._lookup(row)
             via = self._free_moves(orientation, contact, here)
-            rows += [*via, row, contact.q_start]
+            q_back, there = retract(orientation, contact)
+            rows += [*via, row, q_back]
             speeds += [self.config.move_speed] * len(via) + [contact.speed,
                                                              self.config.move_speed]
             settles += [True] * len(via) + [False, True]
-            here = (orientation, contact)
+            here = there
         n = np.size(q, 1) if np.ndim(q) == 2 else 0
         return Waypoints(np.asarray(rows, float).reshape(-1, n), np.asarray(speeds, float),
                          np.asarray(settles, bool), 0)
@@ -428,8 +432,8 @@ class SphereProbeMethod(Method):
 
     async def acquire(self, robot: RobotAdapter, phase: Phase, index: int, q: np.ndarray,
                       q_from: np.ndarray | None) -> SampleRecord:
-        """One contact (free moves to its start, guarded move, retract to the start); a
-        missed one is skipped. The robot ends at the contact's start (`q_end`)."""
+        """One contact (free moves to its start, guarded move, retract: `retract`); a
+        missed one is skipped. The robot ends where the retract went (`q_end`)."""
         shift = self._joint_estimate
         orientation, contact = self._lookup(np.asarray(q, float) + shift)
         q_here = None if q_from is None else np.asarray(q_from, float) + shift
@@ -446,22 +450,23 @@ class SphereProbeMethod(Method):
         via = self._free_moves(orientation, contact, here)
         # commanded where the robot reaches the planned poses
         via = back + [v - shift for v in via]
-        self._left = (contact.q_start - shift, orientation.q_hover - shift, shift.copy())
+        q_back = retract(orientation, contact)[0] - shift
+        self._left = (q_back, orientation.q_hover - shift, shift.copy())
         if np.any(shift != 0.0):
             contact = replace(contact, q_start=contact.q_start - shift,
                               q_target=contact.q_target - shift)
         t = time.monotonic() - self._t0
         if self.modbus is None:
             record = await probe_contact(robot, via, contact, self.setup, self.config, t,
-                                         chain=self.chain)
+                                         chain=self.chain, q_back=q_back)
         else:
             from hostpc.kinds.sphere_probe.probe_modbus import ModbusProbe, SteppedGuardedMove
 
             host, port = self.modbus
             async with ModbusProbe(host, port, self.setup.io_line) as probe:
                 record = await probe_contact(robot, via, contact, self.setup, self.config, t,
-                                             SteppedGuardedMove(robot, probe))
-        q_end = contact.q_start.tolist()
+                                             SteppedGuardedMove(robot, probe), q_back=q_back)
+        q_end = q_back.tolist()
         if not record.contact or record.q_latched is None:
             return SampleRecord(phase, index, False, q_end=q_end,
                                 reason=f"no probe contact before the end of travel "

@@ -92,17 +92,19 @@ def flange_rotation(stylus_direction: np.ndarray, roll: float, tip: np.ndarray) 
 
 
 def contact_normals(stylus_direction: np.ndarray, ring_deg: float, phase: float) -> np.ndarray:
-    """(5, 3) unit contact normals: the pole (facing the stylus, -direction) and 4 on a ring
-    ring_deg from it. Pole + ring are not coplanar, so each group fixes a sphere."""
+    """(5, 3) unit contact normals: 4 on a ring ring_deg from the pole, then the pole (facing
+    the stylus, -direction; last: its approach line runs through the hover, so its retract
+    leaves the orientation, `retract`). Pole + ring are not coplanar, so each group
+    fixes a sphere."""
     pole = -stylus_direction / np.linalg.norm(stylus_direction)
     frame = _frame_with_z(pole, phase)
     a = math.radians(ring_deg)
-    normals = [pole]
+    normals = []
     for j in range(4):
         b = j * math.pi / 2
         normals.append(math.cos(a) * pole + math.sin(a) * (math.cos(b) * frame[:, 0]
                                                            + math.sin(b) * frame[:, 1]))
-    return np.array(normals)
+    return np.array([*normals, pole])
 
 
 def tip_positions(chain: Chain, q: np.ndarray, tip: np.ndarray) -> np.ndarray:
@@ -198,10 +200,13 @@ def plan_sphere_probe(chain: Chain, setup: ProbeSetup, config: PlanConfig, q_see
     orientations = []
     for group, i in enumerate(order):
         direction, R, q_hover, normals, q_starts, q_targets = accepted[i]
+        # the speeds cycle from the pole (probed last, `contact_normals`) round the ring
+        speeds = [config.guarded_speeds[(group + (j + 1) % CONTACTS_PER_ORIENTATION)
+                                        % len(config.guarded_speeds)]
+                  for j in range(CONTACTS_PER_ORIENTATION)]
         contacts = tuple(
             PlannedContact(group=group, index=j, normal=normals[j], q_start=q_starts[j],
-                           q_target=q_targets[j],
-                           speed=config.guarded_speeds[(group + j) % len(config.guarded_speeds)])
+                           q_target=q_targets[j], speed=speeds[j])
             for j in range(CONTACTS_PER_ORIENTATION))
         orientations.append(PlannedOrientation(group, R, direction, q_hover, contacts))
     _check_transfers(chain, orientations, setup, config)
@@ -238,6 +243,18 @@ Location = tuple[PlannedOrientation, PlannedContact | None]
 or at an orientation's hover (contact None)."""
 
 
+def retract(orientation: PlannedOrientation, contact: PlannedContact
+            ) -> tuple[np.ndarray, Location]:
+    """Where the retract after `contact`'s guarded move goes: (n,) joint target and where
+    the stylus then is. To its start; the orientation's last contact (the pole,
+    `contact_normals`) on along its approach line to the hover, where the next
+    orientation's moves start (one settled move instead of the retract and the move to the
+    hover)."""
+    if contact.index == len(orientation.contacts) - 1:
+        return orientation.q_hover, (orientation, None)
+    return contact.q_start, (orientation, contact)
+
+
 def free_moves(orientation: PlannedOrientation, contact: PlannedContact,
                here: Location | None, chain: Chain | None = None,
                setup: ProbeSetup | None = None, config: PlanConfig | None = None
@@ -250,24 +267,45 @@ def free_moves(orientation: PlannedOrientation, contact: PlannedContact,
     goes from one start pose (the previous contact's retract point, `standoff` off the
     surface) straight to the next when that joint move keeps the tip at least half the
     standoff off the nominal surface (the planner's rule for hover -> start moves); else
-    through the hover. Between orientations: the previous orientation's hover, this one's,
-    then the start. `here` None (robot elsewhere): this orientation's hover, the start.
+    through the hover. Between orientations from the previous one's hover (where its last
+    contact's retract ends, `retract`): straight to the start when the whole move keeps the
+    half of the stylus next to the tip at least half the standoff off the nominal surface
+    (the wrist turns on the way), else through this orientation's hover; from a start of
+    the previous orientation: its hover, this one's, the start. `here` None (robot
+    elsewhere): this orientation's hover, the start.
     Without `chain`, `setup` and `config` (no clearance check) every contact starts from
     its hover."""
     if here is None:
         return [orientation.q_hover, contact.q_start]
     at, previous = here
+    checked = chain is not None and setup is not None and config is not None
     if at.group != orientation.group:
-        via = [] if previous is None else [at.q_hover]
-        return [*via, orientation.q_hover, contact.q_start]
+        if previous is not None:
+            return [at.q_hover, orientation.q_hover, contact.q_start]
+        if checked and _clear(at.q_hover, contact.q_start, chain, setup, config, stylus=True):
+            return [contact.q_start]
+        return [orientation.q_hover, contact.q_start]
     if previous is None:
         return [contact.q_start]
-    if chain is not None and setup is not None and config is not None:
-        clear = path_clearance(chain, previous.q_start, contact.q_start, setup.tip,
-                               setup.sphere_centre)
-        if clear >= setup.contact_distance + 0.5 * config.standoff:
-            return [contact.q_start]
+    if checked and _clear(previous.q_start, contact.q_start, chain, setup, config):
+        return [contact.q_start]
     return [orientation.q_hover, contact.q_start]
+
+
+STYLUS_POINTS = np.linspace(0.5, 1.0, 6)
+"""Points of the stylus a wrist-turning move is checked at (`free_moves`), as fractions of
+flange -> tip: its half next to the tip (the other half is 60 mm or more off the tip)."""
+
+
+def _clear(q_from: np.ndarray, q_to: np.ndarray, chain: Chain | None,
+           setup: ProbeSetup | None, config: PlanConfig | None, stylus: bool = False) -> bool:
+    """The joint move q_from -> q_to keeps the tip (`stylus`: the half of the stylus next to
+    the tip, the wrist turns) at least half the standoff off the nominal surface."""
+    assert chain is not None and setup is not None and config is not None
+    points = STYLUS_POINTS if stylus else np.ones(1)
+    clear = min(path_clearance(chain, q_from, q_to, f * setup.tip, setup.sphere_centre)
+                for f in points)
+    return clear >= setup.contact_distance + 0.5 * config.standoff
 
 
 def plan_to_dict(plan: ProbePlan) -> JsonObject:
