@@ -28,6 +28,9 @@ simulator's folder, so a chatty stub can never fill a pipe and block. On Linux t
 PR_SET_PDEATHSIG (SIGTERM): if hostpc dies, even by SIGKILL, the stub is terminated too.
 `hostpc calibrate --robot sim` starts the stub's process before its own imports and hands it
 its arguments here (warm_stub.py): the same stub, its start-up overlapped with hostpc's.
+`hostpc calibrate --robot sim --check` has the stub check the scenario instead
+(`SimulatedController.check`: `serve --check`, which loads it as serving would and listens
+on nothing), so the check refuses what the run would, by the simulator's own rules.
 """
 
 from __future__ import annotations
