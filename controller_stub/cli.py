@@ -94,6 +94,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="a measurement kind's folder whose sim_sensor.py simulates its instrument "
         "(repeatable)",
     )
+    serve.add_argument(
+        "--check",
+        action="store_true",
+        help="load and check the scenario (and sensor plugins) as serving would, print "
+        "'scenario checked' and exit without listening (2: refused)",
+    )
     serve.add_argument("--log-level", default="WARNING", help="Python logging level")
     return parser
 
@@ -130,6 +136,9 @@ async def _serve(args: argparse.Namespace) -> int:
               "point) imports hostpc; it may use numpy and controller_stub only (the simulator "
               "keeps its own models)", file=sys.stderr)
         return 2
+    if args.check:
+        print("scenario checked", flush=True)
+        return 0
     server.token = token
     modbus: ModbusIoServer | None = None
     ur: Any = None

@@ -70,6 +70,7 @@ from hostpc.cli.termination import (
 )
 from hostpc.dataset.kind_registry import DEFAULT_METHOD
 from hostpc.errors import InputError, ZerocalError
+from hostpc.json_object import JsonObject
 from hostpc.methods.base import RunSettings
 from hostpc.methods.cell import load_cell_file, parse_known
 from hostpc.robots.connect import RobotAddress, open_robot, parse_robot, resolve_token
@@ -316,6 +317,8 @@ def run(args: argparse.Namespace) -> int:
     if args.scenario and not address.sim:
         raise InputError("--scenario needs --robot sim")
     if args.check:  # every pre-flight check above passed; nothing connects or moves
+        if address.sim:  # the simulator's world, loaded and checked by the simulator
+            _check_sim_scenario(args, settings, run_dir, scenario_file)
         print("hostpc calibrate: options and files checked")
         return 0
     progress = StderrProgress()
@@ -364,28 +367,11 @@ def _run_with_robot(args: argparse.Namespace, address: RobotAddress, driver: str
         return asyncio.run(cancel_on_sigterm(_calibrate(
             args, address, driver, run_dir, settings, cell_file, known, (), info, progress,
             None, args.token)))
-    from hostpc.robots.simulator import (
-        SimulatedController,
-        default_sim_scenario,
-        load_scenario_file,
-        sim_default_known,
-    )
+    from hostpc.robots.simulator import SimulatedController
 
     sim_dir = run_dir / SIM_FOLDER
-    recorded_scenario = sim_dir / "scenario.json"
-    if args.resume and recorded_scenario.is_file():
-        scenario = load_scenario_file(recorded_scenario, time_scale=None)
-        default_known: tuple[str, ...] = ()
-    elif scenario_file:
-        scenario = load_scenario_file(scenario_file, time_scale=args.time_scale)
-        default_known = ()
-    else:
-        method = settings.method if settings is not None else None
-        plugins = settings.plugins if settings is not None else ()
-        scenario = default_sim_scenario(time_scale=args.time_scale, method=method,
-                                        plugins=plugins)
-        default_known = sim_default_known(method, plugins)
-    token = args.token or (scenario.get("server") or {}).get("token") or resolve_token(None)
+    scenario, default_known = _sim_scenario(args, settings, run_dir, scenario_file)
+    token = _sim_token(args, scenario)
     modbus_port, settings = _sim_modbus(settings, run_dir)
     progress.stage("start simulator")
     with SimulatedController(scenario, sim_dir, modbus_port=modbus_port, token=token,
@@ -397,6 +383,49 @@ def _run_with_robot(args: argparse.Namespace, address: RobotAddress, driver: str
         return asyncio.run(cancel_on_sigterm(_calibrate(
             args, simulator.address, SIM_DRIVER, run_dir, settings, cell_file, known,
             default_known, info, progress, simulator.truth, token)))
+
+
+def _sim_scenario(args: argparse.Namespace, settings: RunSettings | None, run_dir: Path,
+                  scenario_file: str | None) -> tuple[JsonObject, tuple[str, ...]]:
+    """The simulated world of the run and the frames its cell declares known: a resumed
+    run's recorded scenario, else --scenario FILE, else the method's default world."""
+    from hostpc.robots.simulator import (
+        default_sim_scenario,
+        load_scenario_file,
+        sim_default_known,
+    )
+
+    recorded_scenario = run_dir / SIM_FOLDER / "scenario.json"
+    if args.resume and recorded_scenario.is_file():
+        return load_scenario_file(recorded_scenario, time_scale=None), ()
+    if scenario_file:
+        return load_scenario_file(scenario_file, time_scale=args.time_scale), ()
+    method = settings.method if settings is not None else None
+    plugins = settings.plugins if settings is not None else ()
+    return (default_sim_scenario(time_scale=args.time_scale, method=method, plugins=plugins),
+            sim_default_known(method, plugins))
+
+
+def _sim_token(args: argparse.Namespace, scenario: JsonObject) -> str:
+    """The simulator's token: --token, else the scenario's, else the default."""
+    return str(args.token or (scenario.get("server") or {}).get("token")
+               or resolve_token(None))
+
+
+def _check_sim_scenario(args: argparse.Namespace, settings: RunSettings | None,
+                        run_dir: Path, scenario_file: str | None) -> None:
+    """--check with --robot sim: the scenario the run would start the simulator with, read
+    and checked by the simulator itself (one line, exit 2 if it is refused), in a
+    temporary folder: the run folder is not created."""
+    import tempfile
+
+    from hostpc.robots.simulator import SimulatedController
+
+    scenario, _ = _sim_scenario(args, settings, run_dir, scenario_file)
+    plugins = settings.plugins if settings is not None else ()  # as the run's simulator
+    with tempfile.TemporaryDirectory(prefix="zerocal-check-") as folder:
+        SimulatedController(scenario, folder, token=_sim_token(args, scenario),
+                            plugins=plugins).check()
 
 
 def _with_option(settings: RunSettings, key: str, value: Any) -> RunSettings:

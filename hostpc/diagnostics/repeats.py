@@ -59,11 +59,11 @@ def repeat_pairs(problem: Problem) -> np.ndarray:
     samples = problem.dataset.samples
     groups = pose_groups(samples)
     identity = np.zeros(samples.n, dtype=np.int64)
-    for name in ("marker",):
-        if name in samples.fields:
-            _, codes = np.unique(np.asarray(samples.fields[name]).astype(str),
-                                 return_inverse=True)
-            identity = codes.astype(np.int64)
+    # what one pose measures more than once: a marker (world_point), an arm (dual_loop)
+    measured = samples.fields.get("marker", samples.chain)
+    if measured is not None:
+        _, codes = np.unique(np.asarray(measured).astype(str), return_inverse=True)
+        identity = np.ravel(codes).astype(np.int64)
     key = groups * (int(identity.max(initial=0)) + 1) + identity
     order = np.argsort(key, kind="stable")
     bounds = np.flatnonzero(np.diff(key[order])) + 1

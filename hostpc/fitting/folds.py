@@ -10,7 +10,10 @@ assigns whole poses to folds:
 - ``pose_groups``: samples whose joint state (``q``, ``q_head``, the observed arm of a
   dual-loop sample) agrees within ``POSE_TOLERANCE_RAD`` in every joint belong to one pose
   (transitively: a chain of near-equal samples is one pose). Distinct poses of a plan differ
-  by degrees; encoder read-backs of one commanded pose by far less than the tolerance.
+  by degrees; encoder read-backs of one commanded pose by far less than the tolerance. A
+  sample that holds only part of the robot's state (dual_loop: the observed arm's joints)
+  also shares its pose with the other samples of its capture (``capture_keys``: the same
+  head state ``q_head`` at the same time ``t``): dual_loop's two arms seen at one pose.
 - ``fold_indices``: the poses, ordered by their smallest joint vector (so the order of the
   rows in the file does not matter), are dealt to the folds by a seeded permutation, one
   pose at a time: the folds hold equal numbers of poses (+-1), and every model compared on
@@ -51,13 +54,25 @@ def pose_keys(samples: Samples) -> np.ndarray:
     return np.where(np.isfinite(keys), keys, _NAN_STANDIN)
 
 
-def pose_groups(samples: Samples, tolerance: float = POSE_TOLERANCE_RAD) -> np.ndarray:
-    """(N,) int: the pose of each sample, numbered 0.. in the order of each pose's smallest
-    joint vector (lexicographic), so the numbering does not depend on the row order."""
-    keys = pose_keys(samples)
+def capture_keys(samples: Samples) -> tuple[np.ndarray, np.ndarray] | None:
+    """Rows (K,) and their keys (K, k) of the samples that hold only part of the robot's
+    joint state, one robot state being one capture: dual_loop's observed arm, whose capture
+    is its head state ``q_head`` and time ``t`` (both arms' targets seen in one capture
+    share both; another pose differs in ``t`` by a move). None: each sample holds the whole
+    state (no ``chain``); a sample without ``t`` joins no capture."""
+    if samples.chain is None or samples.q_head is None:
+        return None
+    t = np.asarray(samples.t, float).reshape(-1, 1)
+    keys = np.concatenate([np.asarray(samples.q_head, float), t], axis=1)
+    rows = np.flatnonzero(np.all(np.isfinite(keys), axis=1))
+    return rows, keys[rows]
+
+
+def _close_pairs(keys: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Index pairs (a, b) of the rows of keys (N, k) that agree within tolerance in every
+    column (each pair once): the rows sorted along one fixed random direction, only
+    neighbours within the tolerance window compared."""
     n = keys.shape[0]
-    if n == 0:
-        return np.zeros(0, dtype=np.int64)
     direction = np.random.default_rng(FOLD_SEED).standard_normal(keys.shape[1])
     direction /= np.sum(np.abs(direction))  # |projection difference| <= max-abs difference
     projection = keys @ direction
@@ -78,9 +93,26 @@ def pose_groups(samples: Samples, tolerance: float = POSE_TOLERANCE_RAD) -> np.n
         second.append(b[same])
         candidates = candidates[candidates + step + 1 < n]
         step += 1
+    if not first:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    return np.concatenate(first), np.concatenate(second)
+
+
+def pose_groups(samples: Samples, tolerance: float = POSE_TOLERANCE_RAD) -> np.ndarray:
+    """(N,) int: the pose of each sample, numbered 0.. in the order of each pose's smallest
+    joint vector (lexicographic), so the numbering does not depend on the row order."""
+    keys = pose_keys(samples)
+    n = keys.shape[0]
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    left, right = _close_pairs(keys, tolerance)
+    captures = capture_keys(samples)
+    if captures is not None and captures[0].size:
+        rows, capture = captures
+        a, b = _close_pairs(capture, tolerance)
+        left, right = np.concatenate([left, rows[a]]), np.concatenate([right, rows[b]])
     label = np.arange(n)
-    if first:
-        left, right = np.concatenate(first), np.concatenate(second)
+    if left.size:
         while True:  # connected components by label propagation (edges are few)
             low = np.minimum(label[left], label[right])
             before = label.copy()

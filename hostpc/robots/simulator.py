@@ -28,6 +28,9 @@ simulator's folder, so a chatty stub can never fill a pipe and block. On Linux t
 PR_SET_PDEATHSIG (SIGTERM): if hostpc dies, even by SIGKILL, the stub is terminated too.
 `hostpc calibrate --robot sim` starts the stub's process before its own imports and hands it
 its arguments here (warm_stub.py): the same stub, its start-up overlapped with hostpc's.
+`hostpc calibrate --robot sim --check` has the stub check the scenario instead
+(`SimulatedController.check`: `serve --check`, which loads it as serving would and listens
+on nothing), so the check refuses what the run would, by the simulator's own rules.
 """
 
 from __future__ import annotations
@@ -144,6 +147,15 @@ def free_local_port(host: str = "127.0.0.1") -> int:
     return port
 
 
+def _start_failure(returncode: int, message: str) -> InputError | ConnectionFailed:
+    """The error of a stub that ended before listening: exit code 2 is its refusal of the
+    scenario (one line, the stub's last)."""
+    message = message or f"exit code {returncode}"
+    if returncode == 2:  # the stub's exit code for a bad scenario
+        return InputError(f"simulated controller refused the scenario: {message}")
+    return ConnectionFailed(f"simulated controller failed to start: {message}")
+
+
 class SimulatedController:
     """A `controller-stub serve` subprocess on 127.0.0.1 (port chosen by the OS).
 
@@ -191,15 +203,9 @@ class SimulatedController:
     def start(self, timeout: float = START_TIMEOUT_S) -> RobotAddress:
         """Start the stub and wait for its `listening on HOST:PORT` line."""
         self.workdir.mkdir(parents=True, exist_ok=True)
-        self.scenario_path.write_text(json.dumps(_without_token(self.scenario), indent=2) + "\n")
-        serve = [
-            "serve", "--scenario", str(self.scenario_path), "--host", "127.0.0.1",
-            "--port", "0", "--truth-out", str(self.truth_path),
-        ]  # fmt: skip
+        serve = [*self._serve_arguments(), "--truth-out", str(self.truth_path)]
         if self.modbus_port is not None:
             serve += ["--modbus-port", str(int(self.modbus_port))]
-        for folder in self.sensor_folders:
-            serve += ["--sensor-plugin", str(folder)]
         self._log = log = open(self.log_path, "a", encoding="utf-8")  # noqa: SIM115
         warm = warm_stub.take()
         if warm is not None and warm_stub.hand_over(warm, serve, {TOKEN_ENV: self.token},
@@ -254,10 +260,35 @@ class SimulatedController:
             process.kill()
             returncode = process.wait(timeout=5)
         self._close_log()
-        message = self._last_log_line() or f"exit code {returncode}"
-        if returncode == 2:  # the stub's exit code for a bad scenario
-            raise InputError(f"simulated controller refused the scenario: {message}")
-        raise ConnectionFailed(f"simulated controller failed to start: {message}")
+        raise _start_failure(returncode, self._last_log_line())
+
+    def check(self, timeout: float = START_TIMEOUT_S) -> None:
+        """Have the stub load and check the scenario as `start` would (`serve --check`:
+        nothing listens, no truth is written); InputError (one line) if it refuses it,
+        ConnectionFailed if it cannot run. The scenario is written to `workdir`."""
+        self.workdir.mkdir(parents=True, exist_ok=True)
+        try:
+            done = subprocess.run(
+                [sys.executable, "-m", "controller_stub", *self._serve_arguments(), "--check"],
+                capture_output=True, text=True, timeout=timeout,
+                env={**os.environ, TOKEN_ENV: self.token})
+        except subprocess.TimeoutExpired:
+            raise ConnectionFailed(
+                f"simulated controller did not check its scenario within {timeout:.0f} s"
+            ) from None
+        if done.returncode != 0:
+            lines = done.stderr.strip().splitlines()
+            raise _start_failure(done.returncode, lines[-1] if lines else "")
+
+    def _serve_arguments(self) -> list[str]:
+        """The stub's `serve` arguments for this scenario (written to `scenario_path`
+        without its token), bound to 127.0.0.1 on a port the OS chooses."""
+        self.scenario_path.write_text(json.dumps(_without_token(self.scenario), indent=2) + "\n")
+        serve = ["serve", "--scenario", str(self.scenario_path), "--host", "127.0.0.1",
+                 "--port", "0"]
+        for folder in self.sensor_folders:
+            serve += ["--sensor-plugin", str(folder)]
+        return serve
 
     def _last_log_line(self) -> str:
         try:
