@@ -59,7 +59,9 @@ def capture_keys(samples: Samples) -> tuple[np.ndarray, np.ndarray] | None:
     joint state, one robot state being one capture: dual_loop's observed arm, whose capture
     is its head state ``q_head`` and time ``t`` (both arms' targets seen in one capture
     share both; another pose differs in ``t`` by a move). None: each sample holds the whole
-    state (no ``chain``); a sample without ``t`` joins no capture."""
+    state (no ``chain``); a sample without ``t`` joins no capture. `pose_groups` uses the
+    keys only where no key holds one chain twice (else they name no capture: a fixed head
+    and one ``t`` for every sample)."""
     if samples.chain is None or samples.q_head is None:
         return None
     t = np.asarray(samples.t, float).reshape(-1, 1)
@@ -110,7 +112,11 @@ def pose_groups(samples: Samples, tolerance: float = POSE_TOLERANCE_RAD) -> np.n
     if captures is not None and captures[0].size:
         rows, capture = captures
         a, b = _close_pairs(capture, tolerance)
-        left, right = np.concatenate([left, rows[a]]), np.concatenate([right, rows[b]])
+        chain = np.asarray(samples.chain)
+        if not np.any(chain[rows[a]] == chain[rows[b]]):
+            # a capture sees each chain once; where one key holds a chain twice (a file
+            # with a fixed head and the same t everywhere) the key names no capture
+            left, right = np.concatenate([left, rows[a]]), np.concatenate([right, rows[b]])
     label = np.arange(n)
     if left.size:
         while True:  # connected components by label propagation (edges are few)

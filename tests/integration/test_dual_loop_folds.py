@@ -80,3 +80,17 @@ def test_one_arm_per_pose_folds_each_sample_alone(dual_run: Dataset) -> None:
     pairs = repeat_pairs(build_problem(replace(dual_run, samples=both), "joint_offsets"))
     assert {tuple(sorted(p)) for p in pairs.tolist()} == {
         (int(i), samples.n + k) for k, i in enumerate(again)}
+
+
+def test_one_time_and_head_for_every_sample_names_no_capture(dual_run: Dataset) -> None:
+    """A file with a fixed head and the same ``t`` on every sample (a user's export without
+    times) does not become one pose: its key holds each arm many times, so it names no
+    capture and the samples group by their joints alone, as before captures were known."""
+    samples = dual_run.samples
+    assert samples.q_head is not None
+    flat = replace(samples, t=np.zeros(samples.n),
+                   q_head=np.repeat(samples.q_head[:1], samples.n, axis=0))
+    groups = pose_groups(flat)
+    assert int(groups.max()) + 1 == samples.n
+    folds = fold_indices(flat, 5)
+    assert folds is not None and len(folds) == 5
