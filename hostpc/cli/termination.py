@@ -74,10 +74,15 @@ def interrupt_notes(interrupt: BaseException) -> str:
 
 @contextmanager
 def sigterm_as_interrupt() -> Iterator[None]:
-    """While inside: SIGTERM raises `Terminated` (a KeyboardInterrupt). Outside the main
+    """While inside: SIGTERM raises `Terminated` (a KeyboardInterrupt), and SIGINT raises
+    KeyboardInterrupt even where the process inherited it ignored (a command started in the
+    background by a shell script, `cmd &`, or by a station that was: Python then keeps
+    SIGINT ignored and asyncio.run installs no handler, so Ctrl-C and the station's
+    "stop at a safe point" did nothing while the run went on to push). Outside the main
     thread (no signal handlers there) it does nothing."""
     try:
         previous = signal.signal(signal.SIGTERM, _raise_terminated)
+        previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
     except ValueError:  # not the main thread
         yield
         return
@@ -85,3 +90,4 @@ def sigterm_as_interrupt() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+        signal.signal(signal.SIGINT, previous_int)

@@ -34,8 +34,14 @@ def _state(host: str, port: int) -> ControllerState:
 ENV = {**os.environ, "PYTHONPATH": str(REPO), "ZEROCAL_TOKEN": TOKEN}
 
 
-def _interrupt_a_move(host: str, port: int, rig: Path, out: Path, poses_first: int
-                      ) -> tuple[int, str]:
+def _ignore_sigint() -> None:
+    """In the child before exec: SIGINT ignored, as a shell starts a background command
+    (`hostpc calibrate ... &` in a script) and as every child of such a process inherits."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _interrupt_a_move(host: str, port: int, rig: Path, out: Path, poses_first: int,
+                      sigint_ignored: bool = False) -> tuple[int, str]:
     """Run `hostpc calibrate` against the stub; once
     `poses_first` fit poses are journaled, SIGINT it 0.1 s into a move -> (exit code, stderr)."""
     command = [sys.executable, "-m", "hostpc.cli.main", "calibrate",
@@ -43,7 +49,8 @@ def _interrupt_a_move(host: str, port: int, rig: Path, out: Path, poses_first: i
                "--known", "target", "--poses", "8", "--verify-poses", "0",
                "--cv-folds", "0", "--no-report", "--speed", "0.05", "--out", str(out)]
     process = subprocess.Popen(command, cwd=REPO, env=ENV, stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True)
+                               stderr=subprocess.PIPE, text=True,
+                               preexec_fn=_ignore_sigint if sigint_ignored else None)
     journal = out / "journal.jsonl"
     try:
         deadline = time.monotonic() + 60
@@ -64,12 +71,16 @@ def _interrupt_a_move(host: str, port: int, rig: Path, out: Path, poses_first: i
     return process.returncode, stderr
 
 
-def test_ctrl_c_during_a_move_aborts_it(tmp_path: Path) -> None:
+@pytest.mark.parametrize("sigint_ignored", [False, True], ids=["foreground", "inherited-ignored"])
+def test_ctrl_c_during_a_move_aborts_it(tmp_path: Path, sigint_ignored: bool) -> None:
+    """Also when the process inherited SIGINT ignored (started in the background by a
+    script, or by a station that was): the command takes SIGINT back, so Ctrl-C and the
+    station's stop still stop it (before, it ran on for the 30 s and pushed)."""
     rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
     out = tmp_path / "run"
     with SimulatedController(default_sim_scenario(time_scale=1.0), tmp_path / "stub") as sim:
         host, port = sim.address.host, sim.address.port
-        code, stderr = _interrupt_a_move(host, port, rig, out, 0)
+        code, stderr = _interrupt_a_move(host, port, rig, out, 0, sigint_ignored)
         assert code == 130, stderr
         after = _state(host, port)
         time.sleep(0.5)
