@@ -104,12 +104,19 @@ class RobotPath(Protocol):
         """The waypoints that measure the poses q (N, n), in order."""
 
 
+def _move_times(q_start: np.ndarray, path: Waypoints, speed: float, limits: TimeLimits
+                ) -> np.ndarray:
+    """(M,) s: the move into each waypoint of `path` from q_start (n,), each at its own
+    speed fraction (NaN: the run's `speed`)."""
+    q = np.vstack([np.asarray(q_start, float)[None, :], path.q])
+    fraction = np.where(np.isnan(path.speed), speed, path.speed)
+    return move_times(q[:-1], q[1:], limits.rates(fraction))
+
+
 def waypoints_time(q_start: np.ndarray, path: Waypoints, speed: float, limits: TimeLimits
                    ) -> tuple[float, float, float]:
     """(motion, settle, capture) in s of `path` from q_start (n,); speed: the run's."""
-    q = np.vstack([np.asarray(q_start, float)[None, :], path.q])
-    fraction = np.where(np.isnan(path.speed), speed, path.speed)
-    moves = move_times(q[:-1], q[1:], limits.rates(fraction))
+    moves = _move_times(q_start, path, speed, limits)
     settle = limits.settle_s * int(np.count_nonzero(path.settle & (moves > 0.0)))
     return float(np.sum(moves)), settle, limits.capture_s * path.captures
 
@@ -137,9 +144,8 @@ def measuring_motion(path: Waypoints, speed: float, limits: TimeLimits) -> float
     speed): the measurement itself, which no tour saves."""
     if path.q.shape[0] < 2:
         return 0.0
-    fraction = np.where(np.isnan(path.speed), speed, path.speed)[1:]
-    moves = move_times(path.q[:-1], path.q[1:], limits.rates(fraction))
-    return float(np.sum(moves[~path.settle[1:]]))
+    moves = _move_times(path.q[0], path, speed, limits)  # the first: none (from itself)
+    return float(np.sum(moves[~path.settle]))
 
 
 def robot_time_floor(n_poses: int, limits: TimeLimits) -> float:
