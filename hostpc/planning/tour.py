@@ -202,43 +202,65 @@ def unwrap_path(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray, q_max: np
     joint does not wind itself into its limit and then unwind. Unwrap a whole plan (fit and
     verification poses) in one call: a tour unwrapped alone can end wound up so far that
     the next tour must unwind. The same poses."""
-    out = np.asarray(q, float).copy()
-    n_poses = out.shape[0]
-    if n_poses == 0:
-        return out
+    q = np.asarray(q, float)
+    return _unwrap_paths(q, np.arange(q.shape[0])[None], q_start, q_min, q_max)[0]
+
+
+def _unwrap_paths(poses: np.ndarray, visits: np.ndarray, q_start: np.ndarray,
+                  q_min: np.ndarray, q_max: np.ndarray) -> np.ndarray:
+    """`unwrap_path` of T paths at once, path t visiting poses[visits[t]] (poses (P, n),
+    visits (T, N) indices): (T, N, n). One dynamic programme over every path and full-turn
+    joint, each move's costs computed once per pair of poses: the same arithmetic on each
+    element as one path alone, so the same choices."""
+    out = poses[visits]
+    n_paths, n_poses = visits.shape
     joints = np.flatnonzero(full_turn_joints(q_min, q_max))
-    if joints.size == 0:
+    if n_poses == 0 or joints.size == 0:
         return out
-    # every full-turn joint's dynamic programme at once: (N, J, 5) options
+    # options[p, j, b]: pose p's joint j as its equivalent b (5 of them)
     shifts = 2 * np.pi * np.arange(-2, 3)
-    options = out[:, joints, None] + shifts[None, None, :]
+    options = poses[:, joints, None] + shifts
     lo, hi = np.asarray(q_min, float)[joints, None], np.asarray(q_max, float)[joints, None]
     allowed = (options >= lo) & (options <= hi)
     none = ~allowed.any(axis=2)
     allowed[:, :, 2] |= none  # none within the limits: keep it as it is
     start = np.asarray(q_start, float)[joints, None]
-    cost = np.where(allowed[0], _joint_cost(options[0] - start), np.inf)  # (J, 5)
-    choice = np.zeros((n_poses, joints.size, shifts.size), dtype=int)
-    rows = np.arange(joints.size)[:, None]
-    cols = np.arange(shifts.size)[None, :]
+    first = visits[:, 0]
+    cost = np.where(allowed[first], _joint_cost(options[first] - start), np.inf)  # (T, J, 5)
+    # moves[m, j, a, b]: cost of reaching option b of a pose from option a of the one before,
+    # for each pair m of consecutive poses of the paths (pair[t, k - 1])
+    pairs, pair = np.unique(visits[:, :-1] * poses.shape[0] + visits[:, 1:],
+                            return_inverse=True)
+    pair = pair.reshape(n_paths, n_poses - 1)
+    before, after = np.divmod(pairs, poses.shape[0])
+    moves = _joint_cost(options[after][:, :, None, :] - options[before][:, :, :, None])
+    choice = np.zeros((n_poses, n_paths, joints.size, shifts.size), dtype=np.int8)
     for k in range(1, n_poses):
-        # step[j, a, b]: cost of reaching option b of pose k from option a of pose k-1
-        step = cost[:, :, None] + _joint_cost(options[k][:, None, :] - options[k - 1][:, :, None])
-        choice[k] = np.argmin(step, axis=1)
-        cost = np.where(allowed[k], step[rows, choice[k], cols], np.inf)
-    best = np.argmin(cost, axis=1)
+        # the cheapest way into each option: the first of the 5 that gives the least (argmin)
+        step = moves[pair[:, k - 1]]  # (T, J, 5, 5)
+        reached = cost[:, :, 0, None] + step[:, :, 0]
+        for option in range(1, shifts.size):
+            trial = cost[:, :, option, None] + step[:, :, option]
+            less = trial < reached
+            reached = np.where(less, trial, reached)
+            choice[k][less] = option
+        cost = np.where(allowed[visits[:, k]], reached, np.inf)
+    paths, rows = np.ogrid[:n_paths, :joints.size]
+    best = np.argmin(cost, axis=2)  # (T, J)
     for k in range(n_poses - 1, -1, -1):
-        out[k, joints] = options[k, np.arange(joints.size), best]
-        best = choice[k, np.arange(joints.size), best]
+        out[:, k, joints] = options[visits[:, k, None], rows, best]
+        best = choice[k, paths, rows, best]
     return out
 
 
 def _excess(q: np.ndarray, q_start: np.ndarray, q_min: np.ndarray, q_max: np.ndarray
             ) -> np.ndarray:
-    """(N, k) rad: what each full-turn joint's move to each pose of q (N, n), from the
-    previous one (q_start for the first), exceeds half a turn by (0 if it does not)."""
-    path = np.vstack([np.asarray(q_start, float)[None, :], np.asarray(q, float)])
-    size = np.abs(np.diff(path, axis=0))[:, full_turn_joints(q_min, q_max)]
+    """(..., N, k) rad: what each full-turn joint's move to each pose of q (..., N, n), from
+    the previous one (q_start for the first), exceeds half a turn by (0 if it does not)."""
+    q = np.asarray(q, float)
+    start = np.broadcast_to(np.asarray(q_start, float), (*q.shape[:-2], 1, q.shape[-1]))
+    path = np.concatenate([start, q], axis=-2)
+    size = np.abs(np.diff(path, axis=-2))[..., full_turn_joints(q_min, q_max)]
     return np.maximum(size - np.pi, 0.0)
 
 
@@ -278,15 +300,21 @@ def unwrap_plan(parts: list[np.ndarray], q_start: np.ndarray, q_min: np.ndarray,
         return unwrap_path(np.vstack([b[o] for b, o in zip(blocks, orders, strict=True)]),
                            q_start, q_min, q_max)
 
-    def cost(path: np.ndarray) -> float:
-        # the unwinding charged as UNWIND_PENALTY moves of its size (time, like the path)
-        excess = np.full(q_start.size, unwinding(path, q_start, q_min, q_max))
-        return (path_time(path, q_start, joint_speed)
-                + UNWIND_PENALTY * float(move_times(0.0 * excess, excess, joint_speed)))
+    def costs(paths: np.ndarray) -> np.ndarray:
+        # (T,) of T unwrapped paths (T, N, n): `path_time` plus the `unwinding` charged as
+        # UNWIND_PENALTY moves of its size (each path's own sums, as for one path alone)
+        steps = np.concatenate([np.broadcast_to(q_start, (paths.shape[0], 1, q_start.size)),
+                                paths], axis=1)
+        times = move_times(steps[:, :-1], steps[:, 1:], joint_speed)
+        unwound = np.array([np.sum(e) for e in _excess(paths, q_start, q_min, q_max)])
+        excess = np.repeat(unwound[:, None], q_start.size, axis=1)
+        return (np.array([np.sum(t) for t in times])
+                + UNWIND_PENALTY * move_times(0.0 * excess, excess, joint_speed))
 
     path = whole(orders)
-    best = cost(path)
+    best = float(costs(path[None])[0])
     first = np.cumsum([0] + [b.shape[0] for b in blocks])[:-1]  # each part's first pose
+    poses = np.vstack(blocks)
     for _ in range(MAX_PASSES):
         moves = unwinding_moves(path, q_start, q_min, q_max)
         spans: list[tuple[int, int, int]] = []  # (part, i, j): reverse orders[part][i..j]
@@ -301,13 +329,24 @@ def unwrap_plan(parts: list[np.ndarray], q_start: np.ndarray, q_min: np.ndarray,
             spans += [(k, i, j) for k, order in enumerate(orders)
                       for i in range(order.size - 1) for j in range(i + 1, order.size)]
         improved = False
-        for k, i, j in spans:
-            order, trial = orders[k], orders.copy()
-            trial[k] = np.concatenate([order[:i], order[i:j + 1][::-1], order[j + 1:]])
-            trial_cost = cost(whole(trial))
-            if trial_cost < best - 1e-12:
-                orders, best, improved = trial, trial_cost, True
-                break
+        done, batch = 0, 16
+        while done < len(spans) and not improved:
+            # the spans' trials in batches (each the whole path unwrapped), the first that
+            # helps taken, as one trial after the other would
+            trials = []
+            for k, i, j in spans[done:done + batch]:
+                order, trial = orders[k], orders.copy()
+                trial[k] = np.concatenate([order[:i], order[i:j + 1][::-1], order[j + 1:]])
+                trials.append(trial)
+            visits = np.stack([np.concatenate([at + o for at, o in zip(first, trial,
+                                                                        strict=True)])
+                               for trial in trials])
+            paths = _unwrap_paths(poses, visits, q_start, q_min, q_max)
+            trial_costs = costs(paths)
+            better = np.flatnonzero(trial_costs < best - 1e-12)
+            if better.size:
+                orders, best, improved = trials[better[0]], float(trial_costs[better[0]]), True
+            done, batch = done + len(trials), 2 * batch
         if not improved:
             break
         path = whole(orders)
