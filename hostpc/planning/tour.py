@@ -224,32 +224,45 @@ def _unwrap_paths(poses: np.ndarray, visits: np.ndarray, q_start: np.ndarray,
     allowed = (options >= lo) & (options <= hi)
     none = ~allowed.any(axis=2)
     allowed[:, :, 2] |= none  # none within the limits: keep it as it is
+    # only the equivalents some pose may take (a UR's +-360 deg: q - 2 pi, q, q + 2 pi): one
+    # never allowed costs inf at every step, so it is never the cheapest (every joint has an
+    # allowed one) and dropping it changes no choice
+    keep = np.flatnonzero(allowed.any(axis=(0, 1)))
+    options, allowed = options[:, :, keep], allowed[:, :, keep]
+    barrier = np.where(allowed, 0.0, np.inf)  # added: cost + 0 is the cost, + inf is inf
     start = np.asarray(q_start, float)[joints, None]
     first = visits[:, 0]
-    cost = np.where(allowed[first], _joint_cost(options[first] - start), np.inf)  # (T, J, 5)
+    cost = _joint_cost(options[first] - start) + barrier[first]  # (T, J, options)
     # moves[m, j, a, b]: cost of reaching option b of a pose from option a of the one before,
     # for each pair m of consecutive poses of the paths (pair[t, k - 1])
-    pairs, pair = np.unique(visits[:, :-1] * poses.shape[0] + visits[:, 1:],
-                            return_inverse=True)
-    pair = pair.reshape(n_paths, n_poses - 1)
-    before, after = np.divmod(pairs, poses.shape[0])
+    if n_paths == 1:
+        before, after, pair = visits[0, :-1], visits[0, 1:], np.arange(n_poses - 1)[None]
+    else:  # the pairs the paths share once
+        keys = visits[:, :-1] * poses.shape[0] + visits[:, 1:]
+        used = np.zeros(poses.shape[0] ** 2, dtype=bool)
+        used[keys] = True
+        before, after = np.divmod(np.flatnonzero(used), poses.shape[0])
+        pair = (np.cumsum(used) - 1)[keys]
     moves = _joint_cost(options[after][:, :, None, :] - options[before][:, :, :, None])
-    choice = np.zeros((n_poses, n_paths, joints.size, shifts.size), dtype=np.int8)
+    choice = np.zeros((n_poses, n_paths, joints.size, keep.size), dtype=np.int8)
     for k in range(1, n_poses):
-        # the cheapest way into each option: the first of the 5 that gives the least (argmin)
-        step = moves[pair[:, k - 1]]  # (T, J, 5, 5)
+        # the cheapest way into each option: the first that gives the least (argmin)
+        step = moves[pair[:, k - 1]]  # (T, J, options, options)
         reached = cost[:, :, 0, None] + step[:, :, 0]
-        for option in range(1, shifts.size):
+        for option in range(1, keep.size):
             trial = cost[:, :, option, None] + step[:, :, option]
             less = trial < reached
-            reached = np.where(less, trial, reached)
-            choice[k][less] = option
-        cost = np.where(allowed[visits[:, k]], reached, np.inf)
-    paths, rows = np.ogrid[:n_paths, :joints.size]
+            reached = np.minimum(reached, trial)
+            np.putmask(choice[k], less, option)
+        cost = reached + barrier[visits[:, k]]
+    # back from the cheapest last option, by flat indices into choice[k] and options
+    size = keep.size
+    cell = np.arange(n_paths * joints.size).reshape(n_paths, joints.size) * size
+    joint = np.arange(joints.size) * size
     best = np.argmin(cost, axis=2)  # (T, J)
     for k in range(n_poses - 1, -1, -1):
-        out[:, k, joints] = options[visits[:, k, None], rows, best]
-        best = choice[k, paths, rows, best]
+        out[:, k, joints] = options.take(visits[:, k, None] * (joints.size * size) + joint + best)
+        best = choice[k].take(cell + best)
     return out
 
 
@@ -302,13 +315,13 @@ def unwrap_plan(parts: list[np.ndarray], q_start: np.ndarray, q_min: np.ndarray,
 
     def costs(paths: np.ndarray) -> np.ndarray:
         # (T,) of T unwrapped paths (T, N, n): `path_time` plus the `unwinding` charged as
-        # UNWIND_PENALTY moves of its size (each path's own sums, as for one path alone)
+        # UNWIND_PENALTY moves of its size (sums along each path's own row: as for one path alone)
         steps = np.concatenate([np.broadcast_to(q_start, (paths.shape[0], 1, q_start.size)),
                                 paths], axis=1)
         times = move_times(steps[:, :-1], steps[:, 1:], joint_speed)
-        unwound = np.array([np.sum(e) for e in _excess(paths, q_start, q_min, q_max)])
+        unwound = np.sum(_excess(paths, q_start, q_min, q_max), axis=(1, 2))
         excess = np.repeat(unwound[:, None], q_start.size, axis=1)
-        return (np.array([np.sum(t) for t in times])
+        return (np.sum(times, axis=1)
                 + UNWIND_PENALTY * move_times(0.0 * excess, excess, joint_speed))
 
     path = whole(orders)
