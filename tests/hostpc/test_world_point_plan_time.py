@@ -11,8 +11,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controller_stub.network.server import ControllerServer
-from controller_stub.scenario.spec import scenario_from_dict
 from hostpc.calibrate.run_plan import plan_run
 from hostpc.kinds.world_point.method import WorldPointMethod
 from hostpc.methods.base import NullProgress, RunSettings
@@ -27,20 +25,14 @@ from hostpc.planning.design import (
 from hostpc.planning.robot_time import TimeLimits
 from hostpc.planning.tour import full_turn_joints, path_time
 from hostpc.robots.base import RobotState
-from hostpc.robots.simulator import default_sim_scenario
-from hostpc.robots.zerocal import ZerocalAdapter
+from tests.hostpc.test_plan_robot_time import default_simulator
 
 TARGET_DEG = 0.002
 
 
 async def _method_and_state(tmp_path: Path, seed: int
                             ) -> tuple[WorldPointMethod, RunSettings, RobotState]:
-    scenario = default_sim_scenario(method="world_point")
-    scenario["server"] = {**scenario.get("server", {}), "token": "plan-test"}
-    server = ControllerServer.from_scenario(scenario_from_dict(scenario))
-    await server.start("127.0.0.1", 0)
-    robot = await ZerocalAdapter.connect(*server.address, token="plan-test")
-    try:
+    async with default_simulator("world_point") as robot:
         state = await robot.state()
         # bench/bench_robot_time.py's run: `calibrate --scenario FILE`, no frame known
         settings = RunSettings(method="world_point", seed=seed, n_poses=60, n_verify=4,
@@ -49,9 +41,6 @@ async def _method_and_state(tmp_path: Path, seed: int
                                   tmp_path)
         await method.prepare(robot, NullProgress())
         return method, settings, state
-    finally:
-        await robot.close()
-        await server.close()
 
 
 @pytest.mark.parametrize("seed", range(3))
