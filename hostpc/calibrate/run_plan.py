@@ -5,7 +5,9 @@ moves. Pure numerics apart from the progress messages.
 With a target sigma (stereo_target's default) the fit poses are the fewest that reach it
 (at least MIN_TARGET_POSES, which stereo_target's centre refinement needs; the selection is
 travel-aware, TRAVEL_SLACK) and CHECK_POSES more that let the fit's own chi-square see a
-missing joint compliance, visited as a tour; the verification poses are chosen after them
+missing joint compliance, visited as a tour (which a method with `shortens_tour`,
+world_point, has shortened: `hostpc.planning.design.shorten_tour`; its floor then counts
+the shortened plan's poses when fewer); the verification poses are chosen after them
 for the most signal against that missing effect per second of robot time
 (`hostpc.planning.verify_poses.PowerDesign`), random where the model has it: the
 short-robot-time plan. The rest of the selection (up to --poses) is kept as `q_more`, a

@@ -19,7 +19,9 @@ information a pose adds: `M = sum_k A_k^T A_k`.
   poses): the run stops before moving and says which parameters and what would fix it.
 - Order: nearest neighbour in joint space from the robot's current pose; with a target
   sigma a tour (`tour.py`: nearest neighbour + 2-opt on the joint move time), never longer
-  than the selection order nor than nearest neighbour.
+  than the selection order nor than nearest neighbour; a method may then have the tour
+  shortened (`shorten_tour`: poses dropped or swapped for nearer ones while every
+  identifiable offset keeps the target sigma).
 - Target sigma (`poses_for_target_sigma`): the fewest leading poses of the (nested) greedy
   selection whose predicted sigma of every identifiable joint offset reaches a target.
 - Verification poses: a seeded random choice among the candidates the plan did not use.
