@@ -5,7 +5,9 @@ moves. Pure numerics apart from the progress messages.
 With a target sigma (stereo_target's default) the fit poses are the fewest that reach it
 (at least MIN_TARGET_POSES, which stereo_target's centre refinement needs; the selection is
 travel-aware, TRAVEL_SLACK) and CHECK_POSES more that let the fit's own chi-square see a
-missing joint compliance, visited as a tour; the verification poses are chosen after them
+missing joint compliance, visited as a tour (which a method with `shortens_tour`,
+world_point, has shortened: `hostpc.planning.design.shorten_tour`; its floor then counts
+the shortened plan's poses when fewer); the verification poses are chosen after them
 for the most signal against that missing effect per second of robot time
 (`hostpc.planning.verify_poses.PowerDesign`), random where the model has it: the
 short-robot-time plan. The rest of the selection (up to --poses) is kept as `q_more`, a
@@ -54,6 +56,7 @@ from hostpc.planning.design import (
     poses_for_target_sigma,
     prior_bounded_joints,
     select,
+    shorten_tour,
     tour_groups,
     verify_groups,
 )
@@ -235,6 +238,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         power = power_design(method, design, pool, settings) if short else None
         # fit poses that see a missing effect, within --poses (the most the plan measures)
         n_check = min(CHECK_POSES, max(0, settings.n_poses - chosen.size))
+        check_poses = np.zeros(0, dtype=int)
         if power is not None and n_check > 0:
             unused = np.setdiff1d(np.arange(pool.shape[0]), chosen)
             check_poses = power.check_poses(chosen, unused, n_check, pool, rates,
@@ -244,6 +248,15 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         if short:  # a tour, full-turn joints the short way round (tour.short_path)
             order, q_short = short_path(pool[chosen], state.q, *limits, rates)
             fit_indices = chosen[order]
+            if method.shortens_tour and enough is not None:  # fewer, nearer poses
+                fit_indices = shorten_tour(
+                    design, pool, fit_indices, state.q,
+                    math.radians(settings.target_sigma_deg or FLOOR_SIGMA_DEG), state.q.size,
+                    time_limits.settle_s + time_limits.capture_s, rates,
+                    full_turn_joints(*limits), check_poses)
+                order, q_short = short_path(pool[fit_indices], state.q, *limits, rates)
+                fit_indices = fit_indices[order]
+                more = more[~np.isin(more, fit_indices)]
         else:
             fit_indices = chosen[order_for_travel(pool[chosen], state.q, rates)]
         if more.size:  # measured only if the model fails (runner): a tour from the last
@@ -342,6 +355,8 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         fewest = poses_for_target_sigma(
             design, selection, math.radians(settings.target_sigma_deg or FLOOR_SIGMA_DEG),
             state.q.size)
+        if short and method.shortens_tour and fewest is not None:  # fewer poses reach it
+            fewest = min(fewest, len(fit_indices))
     else:  # the fewest whole groups, with their measuring moves (guarded approaches)
         floor_q = np.vstack([pool[np.concatenate(floor_groups)], q_verify])
         fewest = floor_q.shape[0] - q_verify.shape[0]

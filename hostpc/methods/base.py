@@ -418,6 +418,10 @@ class Method(ABC):
     needs: ClassVar[tuple[Need, ...]] = ()
     """Calls beyond `RobotAdapter` the method makes (hostpc.robots.base capabilities),
     checked by the runner before `prepare`."""
+    shortens_tour: ClassVar[bool] = False
+    """A target-sigma plan's tour is shortened after the selection
+    (`hostpc.planning.design.shorten_tour`: poses dropped or swapped for nearer ones while
+    the target sigma holds): world_point."""
     staged: ClassVar[bool] = False
     """The runner may measure the plan again in stages, its poses shifted by the current
     joint offset estimate, when a joint is found far off (hostpc.calibrate.swaps: a motor

@@ -19,7 +19,9 @@ information a pose adds: `M = sum_k A_k^T A_k`.
   poses): the run stops before moving and says which parameters and what would fix it.
 - Order: nearest neighbour in joint space from the robot's current pose; with a target
   sigma a tour (`tour.py`: nearest neighbour + 2-opt on the joint move time), never longer
-  than the selection order nor than nearest neighbour.
+  than the selection order nor than nearest neighbour; a method may then have the tour
+  shortened (`shorten_tour`: poses dropped or swapped for nearer ones while every
+  identifiable offset keeps the target sigma).
 - Target sigma (`poses_for_target_sigma`): the fewest leading poses of the (nested) greedy
   selection whose predicted sigma of every identifiable joint offset reaches a target.
 - Verification poses: a seeded random choice among the candidates the plan did not use.
@@ -142,10 +144,13 @@ def make_design(A: np.ndarray, names: Sequence[str], units: Sequence[str],
                   prior, by_prior)
 
 
-def _normalised_free(design: Design) -> np.ndarray:
+def _normalised_free(design: Design) -> tuple[np.ndarray, np.ndarray]:
+    """(the free parameters' blocks (N, m, p) with each column's RMS over the pool 1, the
+    scales (p,) divided out)."""
     A = design.A[:, :, design.free]
     scale = np.sqrt(np.mean(np.sum(A**2, axis=1), axis=0))
-    return A / np.where(scale > 0, scale, 1.0)
+    scale = np.where(scale > 0, scale, 1.0)
+    return A / scale, scale
 
 
 @dataclass(frozen=True)
@@ -172,7 +177,7 @@ def greedy_d_optimal(design: Design, n_select: int, ridge: float = DEFAULT_RIDGE
                      ) -> np.ndarray:
     """Indices of `n_select` poses in the order greedy D-optimal design picks them; with
     `travel`, travel-aware (see `Travel`)."""
-    return _greedy_d_optimal_blocks(_normalised_free(design), n_select, ridge, forbidden,
+    return _greedy_d_optimal_blocks(_normalised_free(design)[0], n_select, ridge, forbidden,
                                     travel)
 
 
@@ -202,7 +207,7 @@ def greedy_d_optimal_groups(design: Design, members: Sequence[np.ndarray], n_sel
     """Indices into `members` (each an index array of the design's poses) of `n_select`
     groups in the order greedy D-optimal design picks them; a group's information is the
     sum of its poses' (their Jacobian blocks stacked, zero rows padding smaller groups)."""
-    A = _normalised_free(design)
+    A = _normalised_free(design)[0]
     _, m, p = A.shape
     size = max((len(g) for g in members), default=0)
     blocks = np.zeros((len(members), size * m, p))
@@ -400,9 +405,14 @@ def order_for_travel(q: np.ndarray, q_start: np.ndarray | None,
 
 def _joints(design: Design, n_joints: int, mask: np.ndarray) -> list[int]:
     """The joint indices whose offset is a parameter of the design with `mask` (P,) set."""
+    return [j for j, k in _joint_parameters(design, n_joints).items() if mask[k]]
+
+
+def _joint_parameters(design: Design, n_joints: int) -> dict[int, int]:
+    """{joint index: index into design.names} of the joint offsets the design has."""
     table = PushTable.for_controller(n_joints, joint_offsets.labels(design.names))
-    return [j for j, name in enumerate(table.names)
-            if name in design.names and mask[design.names.index(name)]]
+    return {j: design.names.index(name) for j, name in enumerate(table.names)
+            if name in design.names}
 
 
 def prior_bounded_joints(design: Design, order: np.ndarray, target_sigma: float,
@@ -454,6 +464,80 @@ def poses_for_target_sigma(design: Design, order: np.ndarray, target_sigma: floa
         else:
             low = middle + 1
     return low
+
+
+def shorten_tour(design: Design, q: np.ndarray, tour: Sequence[int], q_start: np.ndarray,
+                 target_sigma: float, n_joints: int, per_pose_s: float,
+                 joint_speed: Rates = None, periodic: np.ndarray | None = None,
+                 fixed: Iterable[int] = ()) -> np.ndarray:
+    """`tour` (pool indices into q (N, n), in visiting order from q_start (n,)) made
+    shorter in robot time while every identifiable joint offset keeps its predicted sigma
+    <= target_sigma (rad, the poses alone): a local search that, while one saves time,
+    makes the exchange that saves the most, either dropping a pose (its two moves become
+    one, and its settle and capture, per_pose_s, go) or replacing it with a pool pose
+    nearer its neighbours in the tour (`tour.move_times` with joint_speed; periodic:
+    joints timed the short way round). The poses in `fixed` (a short plan's check poses)
+    stay. A selection picks poses for their information and a tour then visits them; this
+    trades information the plan does not need for shorter moves (world_point: 14 poses in
+    14.2 s of motion became 9 in 8.1 s, docs/performance.md). A design with a prior (a
+    cell reference) is returned unchanged (its joints' sigmas are counted with the prior,
+    `poses_for_target_sigma`)."""
+    tour_list = [int(k) for k in tour]
+    if design.prior is not None or len(tour_list) == 0:
+        return np.asarray(tour_list, dtype=int)
+    A, scale = _normalised_free(design)
+    joints = set(_joint_parameters(design, n_joints).values())
+    wanted = [i for i, k in enumerate(np.flatnonzero(design.free)) if int(k) in joints]
+    # sigma_j^2 = (M^-1)_jj / scale_j^2 with M the normalised information
+    limit = target_sigma**2 * scale[wanted] ** 2
+    info = np.einsum("nmp,nmq->npq", A, A)
+    kept = {int(k) for k in fixed}
+    q = np.asarray(q, float)
+
+    def times(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return move_times(a, b, joint_speed, periodic)
+
+    def reaches(M: np.ndarray) -> np.ndarray:
+        sign, logdet = np.linalg.slogdet(M)
+        good = (sign > 0) & np.isfinite(logdet)
+        inverse = np.linalg.inv(np.where(good[..., None, None], M, np.eye(M.shape[-1])))
+        variance = np.diagonal(inverse, axis1=-2, axis2=-1)[..., wanted]
+        return np.asarray(good & np.all((variance > 0) & (variance <= limit), axis=-1))
+
+    while True:
+        M = info[tour_list].sum(axis=0)
+        path = np.vstack([np.asarray(q_start, float)[None, :], q[tour_list]])
+        best_saving, best_step = 1e-3, None
+        for i, k in enumerate(tour_list):
+            if k in kept:
+                continue
+            last = i + 1 == len(tour_list)
+            nxt = None if last else q[tour_list[i + 1]]
+            now = float(times(path[i], q[k])) + (0.0 if nxt is None else
+                                                 float(times(q[k], nxt)))
+            without = M - info[k]
+            if reaches(without):  # drop it
+                saving = now + per_pose_s - (0.0 if nxt is None else
+                                              float(times(path[i], nxt)))
+                if saving > best_saving:
+                    best_saving, best_step = saving, (i, -1)
+            via = times(path[i], q) + (0.0 if nxt is None else times(q, nxt))
+            saving_by = now - via
+            saving_by[tour_list] = -np.inf
+            better = np.flatnonzero(saving_by > best_saving)
+            if better.size == 0:
+                continue
+            ok = better[reaches(without[None] + info[better])]
+            if ok.size:
+                j = int(ok[np.argmax(saving_by[ok])])
+                best_saving, best_step = float(saving_by[j]), (i, j)
+        if best_step is None:
+            return np.asarray(tour_list, dtype=int)
+        i, j = best_step
+        if j < 0:
+            tour_list.pop(i)
+        else:
+            tour_list[i] = j
 
 
 def sine_swings(n: int, frequencies: np.ndarray, rng: np.random.Generator) -> np.ndarray:

@@ -4,6 +4,8 @@ joint unwinds (hostpc.planning.tour.unwrap_plan, issue 28): no robot."""
 from __future__ import annotations
 
 import math
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from pathlib import Path
 
 import numpy as np
@@ -107,12 +109,7 @@ async def _plans(name: str, tmp_path: Path) -> tuple[RobotState, list[Plan]]:
                                 n_candidates=600) for seed in range(10)]
         return home_state(), [plan_run(stereo_method(("target",), tmp_path / str(s.seed)),
                                        home_state(), s, NullProgress()) for s in settings]
-    scenario = default_sim_scenario(method=name)
-    scenario["server"] = {**scenario.get("server", {}), "token": "plan-test"}
-    server = ControllerServer.from_scenario(scenario_from_dict(scenario))
-    await server.start("127.0.0.1", 0)
-    robot = await ZerocalAdapter.connect(*server.address, token="plan-test")
-    try:
+    async with default_simulator(name) as robot:
         state = await robot.state()
         cls = method_class(name)
         plans = []
@@ -124,8 +121,21 @@ async def _plans(name: str, tmp_path: Path) -> tuple[RobotState, list[Plan]]:
             await method.prepare(robot, NullProgress())
             plans.append(plan_run(method, state, settings, NullProgress()))
         return state, plans
+
+
+@asynccontextmanager
+async def default_simulator(name: str) -> AsyncIterator[ZerocalAdapter]:
+    """A connection to `name`'s default simulated cell on a free loopback port."""
+    scenario = default_sim_scenario(method=name)
+    scenario["server"] = {**scenario.get("server", {}), "token": "plan-test"}
+    server = ControllerServer.from_scenario(scenario_from_dict(scenario))
+    await server.start("127.0.0.1", 0)
+    robot = await ZerocalAdapter.connect(*server.address, token="plan-test")
+    try:
+        yield robot
     finally:
         await robot.close()
+        await server.close()
         await server.close()
 
 

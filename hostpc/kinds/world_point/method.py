@@ -113,6 +113,7 @@ class WorldPointMethod(Method):
     default_target_sigma_deg: ClassVar[float | None] = 0.002
     needs: ClassVar[tuple[Need, ...]] = (Need.TRACKER,)
     staged: ClassVar[bool] = True
+    shortens_tour: ClassVar[bool] = True
 
     def __init__(self, settings: Any, cell: Any, run_dir: Path) -> None:
         super().__init__(settings, cell, run_dir)
