@@ -37,7 +37,8 @@ class _Status:
 
 class ScriptedUr:
     """receive + control of a controller whose input rises `edge_after` cycles into a move;
-    hide_cycle_before_edge: the sample of the cycle before the edge is never shown."""
+    hide_cycle_before_edge: the sample of the cycle before the edge is never shown. A move
+    to the start pose (zeros: the move back before a retried contact) is there at once."""
 
     def __init__(self, edge_after: int = 7, hide_cycle_before_edge: bool = False) -> None:
         self.t0 = time.monotonic()
@@ -77,6 +78,15 @@ class ScriptedUr:
     def getActualDigitalOutputBits(self) -> int:  # noqa: N802
         return 0
 
+    def isEmergencyStopped(self) -> bool:  # noqa: N802
+        return False
+
+    def isProtectiveStopped(self) -> bool:  # noqa: N802
+        return False
+
+    def isProgramRunning(self) -> bool:  # noqa: N802
+        return True
+
     # control
     def moveJ(self, q: list[float], speed: float, acceleration: float,  # noqa: N802
               asynchronous: bool = False) -> bool:
@@ -84,11 +94,11 @@ class ScriptedUr:
             if self.start is not None:  # a new move starts where the last one stopped
                 end = self._cycle() if self.stop is None else self.stop
                 self.base = self.base + SPEED * max(0, end - self.start) * PERIOD_S
-            if not asynchronous:  # a move back: instantly at the target
+            self.op += 1
+            if not np.any(q):  # the move back to the start (zeros): instantly there
                 self.base, self.start, self.stop = np.asarray(q, float), None, None
                 return True
             self.start, self.stop = self._cycle(), None
-            self.op += 1
             self.moves += 1
         return True
 
