@@ -157,11 +157,7 @@ class UrLink:
             if ok:
                 await self._wait_async(op0)
         except asyncio.CancelledError as exc:
-            with contextlib.suppress(Exception):
-                await command  # the moveJ lands first: one ur_rtde command at a time
-            stopped = await self.stop_interrupted(target)
-            logger.info("UR %s: move_joints interrupted: %s", self.host, stopped)
-            exc.add_note(f"move_joints interrupted: {stopped}")
+            await self.interrupted(exc, "move_joints", target, command)
             raise
         # a sample from after the end: its safety flags say whether the move was refused
         after = float(await self.call(self.receive.getTimestamp))
@@ -188,6 +184,20 @@ class UrLink:
                     return
                 check_at = loop.time() + PROGRAM_CHECK_S
             await asyncio.sleep(POLL_INTERVAL_S)
+
+    async def interrupted(self, exc: asyncio.CancelledError, kind: str, target: np.ndarray,
+                          *commands: asyncio.Future[Any] | None) -> None:
+        """A `kind` motion toward the UR angles target (6,) was cancelled (`exc`): let its
+        ur_rtde `commands` in flight finish (one ur_rtde command at a time), stop the arm
+        (`stop_interrupted`) and note on `exc` what was done, as the zerocal client does
+        ("move_joints interrupted: ..."). The caller re-raises."""
+        for command in commands:
+            if command is not None:
+                with contextlib.suppress(Exception):
+                    await command
+        stopped = await self.stop_interrupted(target)
+        logger.info("UR %s: %s interrupted: %s", self.host, kind, stopped)
+        exc.add_note(f"{kind} interrupted: {stopped}")
 
     async def stop_interrupted(self, target: np.ndarray) -> str:
         """Best effort, within STOP_TIMEOUT_S: stopJ(INTERRUPT_DECELERATION) after a move to

@@ -148,3 +148,29 @@ def test_an_input_already_high_refuses_to_move() -> None:
     adapter = _adapter(ur)
     outcome = asyncio.run(adapter.guarded_move(np.full(6, 0.5), 0.05, 0))
     assert not outcome.contact and outcome.reason == "probe_already_triggered"
+
+
+def test_a_cancelled_guarded_move_stops_the_arm() -> None:
+    """Ctrl-C / SIGTERM (the run's task cancelled) during a guarded move: the watcher thread
+    lets go, the arm is stopped with stopJ, and the cancellation carries a note saying so
+    (before, the watcher ran on until the input rose or its 60 s deadline)."""
+    ur = ScriptedUr(edge_after=10_000)  # no contact
+    adapter = _adapter(ur)
+
+    async def cancel_mid_move() -> asyncio.CancelledError:
+        task = asyncio.create_task(adapter.guarded_move(np.full(6, 0.5), 0.05, 0))
+        await asyncio.sleep(10 * PERIOD_S)
+        assert ur.start is not None and ur.stop is None  # moving
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError) as caught:
+            await task
+        return caught.value
+
+    exc = asyncio.run(cancel_mid_move())
+    assert ur.stop is not None
+    q = np.array(ur.getActualQ())
+    time.sleep(3 * PERIOD_S)
+    np.testing.assert_array_equal(ur.getActualQ(), q)  # at rest
+    short = np.degrees(np.max(np.abs(0.5 - q)))
+    assert exc.__notes__ == [f"guarded_move interrupted: stopJ sent: motion stopped "
+                             f"{short:.1f} deg short of the target"]
