@@ -132,8 +132,8 @@ class PacedMotion:
         s0 = self._plan_s(t0)
         v0 = plan.profile.rate_at(t0) if s0 < plan.s_end else 0.0
         lead = float(np.max(np.abs(plan.q_target - plan.q_start)))
-        if v0 <= 0.0 or lead <= 0.0:
-            return replace(self, stop=_Stop(t0, s0, 0.0, math.inf, s0, t0))
+        if v0 <= 0.0 or lead <= 0.0:  # at rest already
+            return replace(self, stop=_Stop(t0, s0, 0.0, 1.0, s0, t0))
         path_deceleration = deceleration / lead
         s_final = min(s0 + 0.5 * v0 * v0 / path_deceleration, plan.s_end)
         # the ramp reaches s_final at tau_ramp, the plan at its own time; rest at the later

@@ -350,11 +350,11 @@ class UrPersonality:
             # the plan ends where the arm is; a ramp took longer than the plan would have
             motion = self._motion or motion
             fraction_done = motion.fraction_at(self.cycle)
-            ramp_s = motion.sim_time_at(self.cycle) - fraction_done * plan.duration_s
             self._motion = None
             result = self.sim.finish_move(plan, fraction_done)
-            if ramp_s > 0.0:
-                self.sim.state.advance_clock(ramp_s)
+            if motion.stop is not None:
+                ramp_s = motion.sim_time_at(self.cycle) - fraction_done * plan.duration_s
+                self.sim.state.advance_clock(max(ramp_s, 0.0))
         if plan.contact is not None:
             logger.info("probe contact: latched q %s, edge time %.6f s, stopped %.1f ms later",
                         np.round(plan.contact.q_latched, 9).tolist(), plan.contact.time_latch,
