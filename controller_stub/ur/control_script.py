@@ -24,9 +24,11 @@ Its main loop, which this class reproduces cycle by cycle (2 ms)::
                             (process ends with signal_done unless cmd == 255)
 
 Emulated commands: movej (1, synchronous and async; an async movej moves in real time
-with the probe input following the path, so a host can stop it on the input edge), movel_fk
-(4, executed as a joint move: same end pose, joint-space path), stopl / stopj (33, 34: end
-an async move at the controller cycle reached), stop script
+with the probe input following the path, so a host can stop it on the input edge, or poll
+its progress in the async status word), movel_fk (4, executed as a joint move: same end pose,
+joint-space path), stopl / stopj (33, 34: an async move decelerates at input double 0 rad/s^2
+from the cycle reached; a synchronous stop, input int 1 = 0, is done once the arm is at rest,
+an asynchronous one at once), stop script
 (255), protective stop (31), get step time (26), is steady (47), joints within safety
 limits (37), forward kinematics at the current pose (43), get TCP offset (40, zero), and as
 no-ops the settings that do not change the simulated robot (zero_ftsensor 8, set_payload 17,
@@ -40,6 +42,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import re
 from typing import Protocol
 
@@ -67,7 +70,7 @@ class ScriptedRobot(Protocol):
         self, q_target: np.ndarray, velocity: float, acceleration: float | None = None, *,
         watch_probe: bool = False
     ) -> tuple[bool, str | None]: ...
-    def stop_motion(self) -> bool: ...
+    def stop_motion(self, deceleration: float | None = None) -> bool: ...
 
 CYCLE_S = 0.002
 READY, DONE = 1, 2
@@ -191,7 +194,7 @@ class ControlScript:
         if cmd in (MOVEJ, MOVEL_FK):
             await self._move(cmd)
         elif cmd in (STOPJ, STOPL):
-            await self._stop_async_move()
+            await self._stop_command()
         elif cmd == PROTECTIVE_STOP:
             robot.protective_stop("protective stop requested by the control script")
             raise ScriptStopped("protective stop")
@@ -245,8 +248,23 @@ class ControlScript:
         finally:
             self._write_async_progress(-1)
 
+    async def _stop_command(self) -> None:
+        """stopj / stopl: the async move decelerates at input double 0 (rad/s^2, > 0, else
+        a runtime error like a real controller's); a synchronous stop (input int 1 = 0)
+        waits until the arm is at rest."""
+        deceleration = self._in_double(0)
+        if not (math.isfinite(deceleration) and deceleration > 0.0):
+            raise ScriptStopped(f"stopj / stopl: deceleration {deceleration!r} rad/s^2 is not "
+                                "a positive number")
+        task = self._async_move
+        if task is None or task.done() or not self.robot.stop_motion(deceleration):
+            return
+        if self._in_int(1) != 1:
+            await asyncio.shield(task)  # the ramp is finite: at rest when the move returns
+
     async def _stop_async_move(self) -> None:
-        """stopj / stopl: the motion ends at the controller cycle it has reached."""
+        """The program ends or a new move replaces the async one: the motion ends at the
+        controller cycle it has reached."""
         task, self._async_move = self._async_move, None
         if task is not None and not task.done():
             self.robot.stop_motion()

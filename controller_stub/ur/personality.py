@@ -294,11 +294,14 @@ class UrPersonality:
 
         The speed fraction handed to the simulation is velocity over the slowest joint's
         maximum speed (clipped to (0, 1]). watch_probe (an asynchronous movej, which a host
-        watches over RTDE to stop it on the probe input): planned as the simulation's guarded
-        move on the probe line (the probe's trigger latency and repeatability, the contact
-        and the stop point past it: a move nobody stops ends there, stylus overtravelled) and
-        paced in real time (one cycle per 2 ms, so a 500 Hz RTDE client sees every cycle);
-        otherwise paced by the scenario's time_scale. Returns (completed, reason): reason
+        may watch over RTDE to stop it on the probe input): if the stylus touches the sphere
+        along the path, planned as the simulation's guarded move on the probe line (the
+        probe's trigger latency and repeatability, the contact and the stop point past it: a
+        move nobody stops ends there, stylus overtravelled) and paced in real time (one cycle
+        per 2 ms, so a 500 Hz RTDE client sees every cycle). Any other movej, synchronous or
+        not, is a joint move like the zerocal protocol's (settling charged), paced by the
+        scenario's time_scale: a real UR moves the same way whether the host waits for the
+        move or polls its progress. Returns (completed, reason): reason
         "busy" (another motion runs), "stopped" (stop_motion, or the program ended),
         "contact" (a watched move that reached its stop point past the contact),
         "invalid_acceleration" (an acceleration of 0, negative or not finite), or the
@@ -318,10 +321,12 @@ class UrPersonality:
                                  "not a positive number")
             return False, "invalid_acceleration"
         probe_line = int(self.sim.scenario.probe.io_line)
+        target = np.asarray(q_target, float)
+        watch_probe = watch_probe and self._touches(target, min(fraction, 1.0), acceleration)
         try:
             if self.server is not None:
                 self.server.begin_motion()
-            plan = self.sim.begin_move(np.asarray(q_target, float), min(fraction, 1.0),
+            plan = self.sim.begin_move(target, min(fraction, 1.0),
                                        probe_line if watch_probe else None,
                                        None if acceleration is None else float(acceleration))
         except RequestRefusedError:
@@ -332,17 +337,24 @@ class UrPersonality:
             self.protective_stop(f"movej refused: {exc}")
             return False, exc.code
         pace = max(1.0, float(self.sim.time_scale)) if watch_probe else float(self.sim.time_scale)
-        motion = PacedMotion(plan, self.cycle, pace, probe_line)
-        self._motion = motion
+        motion = self._motion = PacedMotion(plan, self.cycle, pace, probe_line)
         self._stop = asyncio.Event()
         try:
-            while not motion.finished(self.cycle) and not self._stop.is_set():
+            while not self._stop.is_set():
+                motion = self._motion or motion  # stop_motion may have added a stop ramp
+                if motion.finished(self.cycle):
+                    break
                 await self.next_cycle(self.cycle)
         finally:
-            # at its end, stopped, or cancelled (program ended): it ends at the cycle reached
+            # at its end, at the end of a stop's ramp, or at once (program ended, cancelled):
+            # the plan ends where the arm is; a ramp took longer than the plan would have
+            motion = self._motion or motion
             fraction_done = motion.fraction_at(self.cycle)
             self._motion = None
             result = self.sim.finish_move(plan, fraction_done)
+            if motion.stop is not None:
+                ramp_s = motion.sim_time_at(self.cycle) - fraction_done * plan.duration_s
+                self.sim.state.advance_clock(max(ramp_s, 0.0))
         if plan.contact is not None:
             logger.info("probe contact: latched q %s, edge time %.6f s, stopped %.1f ms later",
                         np.round(plan.contact.q_latched, 9).tolist(), plan.contact.time_latch,
@@ -355,9 +367,27 @@ class UrPersonality:
             return False, "contact" if contact else "no_contact"
         return True, None
 
-    def stop_motion(self) -> bool:
-        """stopj / stopl: end the paced motion at the cycle it has reached; True if one ran."""
+    def _touches(self, q_target: np.ndarray, fraction: float, acceleration: float | None
+                 ) -> bool:
+        """True if the stylus would touch the sphere along a move to q_target (6,) from where
+        the arm is (a rising probe edge on the path, without the probe's noise draw)."""
+        sim = self.sim
+        q_start = sim.joint_positions()
+        if q_target.shape != q_start.shape:
+            return False  # begin_move refuses it
+        profile = sim.state.move_profile(q_start, q_target, fraction, acceleration)
+        return any(crossing.rising for crossing in
+                   sim.guarded.path_crossings(q_start, q_target, profile, sim.state.time))
+
+    def stop_motion(self, deceleration: float | None = None) -> bool:
+        """stopj / stopl: the paced motion decelerates at `deceleration` (rad/s^2 of the
+        leading joint, > 0) from the cycle reached (`PacedMotion.stopped`; move_joints
+        returns at rest), or with None ends at that cycle at once (the program ended, a new
+        movej); True if one ran."""
         if self._motion is None:
             return False
-        self._stop.set()
+        if deceleration is None:
+            self._stop.set()
+        else:
+            self._motion = self._motion.stopped(self.cycle, deceleration)
         return True

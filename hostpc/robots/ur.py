@@ -3,9 +3,11 @@
     RTDEReceiveInterface   joint angles (getActualQ), digital IO bits, timestamps (500 Hz
                            on e-Series, 125 Hz on CB3)
     RTDEControlInterface   moveJ / stopJ (ur_rtde uploads its control script to 30003);
-                           guarded moves for the touch probe are an asynchronous moveJ
-                           watched sample by sample and stopped on the input edge
-                           (`guarded_move`, docs/ur-probe.md)
+                           every moveJ is asynchronous, its progress polled, so a
+                           cancelled move (Ctrl-C, SIGTERM) is stopped with stopJ
+                           (`ur_link.py`); guarded moves for the touch probe are watched
+                           sample by sample and stopped on the input edge (`guarded_move`,
+                           docs/ur-probe.md)
     RTDEIOInterface        standard digital outputs
     ControllerClient       stereo captures from the camera service (zerocal protocol,
                            `--camera HOST:PORT`, default the robot's host, port 47800)
@@ -18,9 +20,9 @@ Two hazards of ur_rtde shape this module (both measured):
    request on 30004, the dashboard greeting and queries on 29999, a TCP connect to 30003.
    Only a controller that answered all three gets a ur_rtde interface. Every ur_rtde call
    runs in a worker thread (`asyncio.to_thread`), never on the event loop.
-2. Right after `moveJ` returns, the receive interface may still hold a sample from before
+2. Right after a move ends, the receive interface may still hold a sample from before
    the end of the motion. `move_joints` therefore waits for a sample whose RTDE timestamp
-   is newer than the one held when moveJ returned and that is at the target (within
+   is newer than the one held when the move ended and that is at the target (within
    `SETTLE_TOLERANCE_RAD`, up to `SETTLE_TIMEOUT_S`; `ur_link.py`).
 
 The adapter is composed of collaborators that own their state: `UrLink` (ur_link.py: the

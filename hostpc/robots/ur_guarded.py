@@ -11,8 +11,10 @@ sample with the input low, the first with it high) and every contact's timing is
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import math
+import threading
 import time
 from dataclasses import dataclass
 
@@ -123,15 +125,25 @@ class UrGuardedMove:
                 if start[2] >> io_line & 1:
                     return ContactOutcome(False, None, self.offsets.reported(start[1]),
                                           reason="probe_already_triggered")
-                ok = await link.call(
-                    link.control.moveJ, target.tolist(), velocity, JOINT_ACCELERATION, True
-                )
+                command = asyncio.ensure_future(link.call(
+                    link.control.moveJ, target.tolist(), velocity, JOINT_ACCELERATION, True))
+                cancel = threading.Event()
+                watching: asyncio.Future[_Watch] | None = None
+                try:
+                    ok = await asyncio.shield(command)
+                    if ok:
+                        watching = asyncio.ensure_future(
+                            link.call(self._watch, io_line, start, cancel))
+                        watch = await asyncio.shield(watching)
+                except asyncio.CancelledError as exc:  # Ctrl-C, SIGTERM: stop the arm
+                    cancel.set()
+                    await link.interrupted(exc, "guarded_move", target, command, watching)
+                    raise
                 if not ok:
                     reason = await link.failure_reason()
                     _, q_now, _, _ = await link.call(link.sample)
                     return ContactOutcome(False, None, self.offsets.reported(q_now),
                                           reason=reason)
-                watch = await link.call(self._watch, io_line, start)
                 if watch.edge is None:
                     measured = await link.fresh_q(watch.last[0] - 1e-9, None)
                     return ContactOutcome(False, None, self.offsets.reported(measured),
@@ -164,9 +176,10 @@ class UrGuardedMove:
             return ContactOutcome(False, None, self.offsets.reported(q_stop),
                                   reason="edge_window_missed_samples")
 
-    def _watch(self, io_line: int, start: Sample) -> _Watch:
+    def _watch(self, io_line: int, start: Sample, cancel: threading.Event) -> _Watch:
         """Blocking (a worker thread): read every new RTDE sample of the asynchronous move
-        until the input rises (stopJ at once) or the move ends."""
+        until the input rises (stopJ at once), the move ends, or `cancel` is set (the
+        caller stops the arm)."""
         low = start
         period = math.inf
         deadline = time.monotonic() + max(self.link.timeout, 60.0)
@@ -194,6 +207,8 @@ class UrGuardedMove:
                     if not final[2] >> io_line & 1:
                         return _Watch(None, final, period, 0.0)
                     continue  # the edge came with the last samples
+            if cancel.is_set():
+                return _Watch(None, sample, period, 0.0)
             if now > deadline:
                 self.link.control.stopJ(STOP_DECELERATION, False)
                 raise RuntimeError("guarded move did not end")

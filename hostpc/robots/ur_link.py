@@ -4,16 +4,25 @@
 knows nothing of the host zero offsets (`ur_offsets.py`) and hands the guarded move
 (`ur_guarded.py`) its samples and moves. Every ur_rtde call runs in a worker thread
 (`asyncio.to_thread`), never on the event loop (ur.py's module docstring: its calls hold
-the GIL). Right after `moveJ` returns, the receive interface may still hold a sample from
-before the end of the motion, so `move` waits for a sample newer than the one held when
-moveJ returned and at the target (within SETTLE_TOLERANCE_RAD, up to SETTLE_TIMEOUT_S).
-Angles rad, times s.
+the GIL).
+
+`move` issues moveJ asynchronously and polls its progress (getAsyncOperationProgressEx), so
+that a move whose caller is cancelled (Ctrl-C, SIGTERM: `hostpc.cli.termination`) is stopped
+on the robot: stopJ(INTERRUPT_DECELERATION) decelerates the arm to rest, and the
+cancellation carries a note saying where it stopped ("move_joints interrupted: stopJ sent:
+motion stopped ... short of the target"), which the interrupt line shows. A blocking moveJ
+could not be stopped: the control script runs it to its end before it reads another
+command. When the move has ended, the receive interface may still hold a sample from before
+its end, so `move` waits for a sample newer than the one held then and at the target (within
+SETTLE_TOLERANCE_RAD, up to SETTLE_TIMEOUT_S). Angles rad, times s.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
+import math
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -35,6 +44,15 @@ JOINT_ACCELERATION = DEFAULT_JOINT_ACCELERATION
 controller does not report one, written once there)."""
 SETTLE_TOLERANCE_RAD = 1e-3
 SETTLE_TIMEOUT_S = 2.0
+INTERRUPT_DECELERATION = 2.0
+"""rad/s^2 of the stopJ that ends a move whose caller was cancelled (ur_rtde's default stopJ
+rate; above JOINT_ACCELERATION, so the arm stops sooner than the move's own ramp would)."""
+STOP_TIMEOUT_S = 10.0
+"""How long that stopJ may take (a 3.14 rad/s joint stops in 1.6 s at 2 rad/s^2)."""
+POLL_INTERVAL_S = 0.004
+"""Pause between two reads of a move's progress."""
+PROGRAM_CHECK_S = 0.25
+"""While a move's operation has not started, how often to check the control script runs."""
 T = TypeVar("T")
 
 
@@ -51,6 +69,11 @@ def joint_velocity(speed: float) -> float:
     if not 0.0 < float(speed) <= 1.0:
         raise InputError(f"speed {speed!r}: expected a fraction in (0, 1]")
     return max(1e-3, float(speed) * MAX_JOINT_SPEED)
+
+
+def _at(q: np.ndarray, target: np.ndarray) -> bool:
+    """True if q is at target (6,) within SETTLE_TOLERANCE_RAD."""
+    return bool(np.max(np.abs(q - target)) <= SETTLE_TOLERANCE_RAD)
 
 
 class UrLink:
@@ -99,7 +122,7 @@ class UrLink:
             stamp, q, _, _ = await self.call(self.sample)
             if stamp > after:
                 fresh = q
-                if target is None or np.max(np.abs(q - target)) <= SETTLE_TOLERANCE_RAD:
+                if target is None or _at(q, target):
                     return q
             if loop.time() > deadline:
                 if fresh is not None:
@@ -111,28 +134,91 @@ class UrLink:
                 )
             await asyncio.sleep(0.002)
 
-    async def failure_reason(self) -> str:
-        """Why the controller refused a move: estop, protective_stop, control_script_stopped
-        or refused."""
+    async def failure_reason(self, otherwise: str | None = "refused") -> str | None:
+        """Why the controller refused (or ended) a move: estop, protective_stop,
+        control_script_stopped, or `otherwise` when none of these holds."""
         if await self.call(self.receive.isEmergencyStopped):
             return "estop"
         if await self.call(self.receive.isProtectiveStopped):
             return "protective_stop"
         if not await self.call(self.control.isProgramRunning):
             return "control_script_stopped"
-        return "refused"
+        return otherwise
 
     async def move(self, target: np.ndarray, velocity: float) -> MoveOutcome:
         """moveJ to the UR angles target (6,) at velocity rad/s, the motion lock held by the
-        caller; the outcome's q is a measured sample in UR angles."""
-        ok = await self.call(
-            self.control.moveJ, target.tolist(), velocity, JOINT_ACCELERATION, False
-        )
+        caller; the outcome's q is a measured sample in UR angles. Asynchronous moveJ, its
+        end polled; cancelled, the arm is stopped first (the module docstring)."""
+        op0 = (await self.call(self.control.getAsyncOperationProgressEx)).operationId()
+        command = asyncio.ensure_future(
+            self.call(self.control.moveJ, target.tolist(), velocity, JOINT_ACCELERATION, True))
+        try:
+            ok = await asyncio.shield(command)
+            if ok:
+                await self._wait_async(op0)
+        except asyncio.CancelledError as exc:
+            await self.interrupted(exc, "move_joints", target, command)
+            raise
+        # a sample from after the end: its safety flags say whether the move was refused
         after = float(await self.call(self.receive.getTimestamp))
-        if not ok:
-            reason = await self.failure_reason()
-            return MoveOutcome(completed=False, q=await self.fresh_q(after, None), reason=reason)
-        return MoveOutcome(completed=True, q=await self.fresh_q(after, target))
+        q = await self.fresh_q(after, None)
+        reason = await self.failure_reason(None if ok else "refused")
+        if reason is None and not _at(q, target):
+            q = await self.fresh_q(after, target)
+            reason = None if _at(q, target) else "stopped"
+        return MoveOutcome(completed=reason is None, q=q, reason=reason)
+
+    async def _wait_async(self, op0: int) -> None:
+        """Poll the asynchronous operation after `op0` until it has started and ended (or the
+        control script stopped: a refused move ends the program)."""
+        loop = asyncio.get_running_loop()
+        started = False
+        check_at = loop.time() + PROGRAM_CHECK_S
+        while True:
+            status = await self.call(self.control.getAsyncOperationProgressEx)
+            started = started or status.operationId() != op0
+            if started and not status.isAsyncOperationRunning():
+                return
+            if not started and loop.time() > check_at:
+                if not await self.call(self.control.isProgramRunning):
+                    return
+                check_at = loop.time() + PROGRAM_CHECK_S
+            await asyncio.sleep(POLL_INTERVAL_S)
+
+    async def interrupted(self, exc: asyncio.CancelledError, kind: str, target: np.ndarray,
+                          *commands: asyncio.Future[Any] | None) -> None:
+        """A `kind` motion toward the UR angles target (6,) was cancelled (`exc`): let its
+        ur_rtde `commands` in flight finish (one ur_rtde command at a time), stop the arm
+        (`stop_interrupted`) and note on `exc` what was done, as the zerocal client does
+        ("move_joints interrupted: ..."). The caller re-raises."""
+        for command in commands:
+            if command is not None:
+                with contextlib.suppress(Exception):
+                    await command
+        stopped = await self.stop_interrupted(target)
+        logger.info("UR %s: %s interrupted: %s", self.host, kind, stopped)
+        exc.add_note(f"{kind} interrupted: {stopped}")
+
+    async def stop_interrupted(self, target: np.ndarray) -> str:
+        """Best effort, within STOP_TIMEOUT_S: stopJ(INTERRUPT_DECELERATION) after a move to
+        the UR angles target (6,) was cancelled, and wait for the arm at rest; says what
+        happened and where the arm stopped (logged in UR angles)."""
+        try:
+            await asyncio.wait_for(
+                self.call(self.control.stopJ, INTERRUPT_DECELERATION, False), STOP_TIMEOUT_S)
+            after = float(await self.call(self.receive.getTimestamp))
+            q = await asyncio.wait_for(self.fresh_q(after, None), STOP_TIMEOUT_S)
+        except (ControllerError, RequestTimeout, TimeoutError) as exc:
+            logger.warning("UR %s: stopJ after an interrupted move failed: %s", self.host,
+                           exc or type(exc).__name__)
+            return "stopJ sent, not confirmed"
+        short = float(np.degrees(np.max(np.abs(target - q))))
+        logger.info("UR %s: stopJ(%.1f rad/s^2): the arm stopped at %s deg (UR angles), %.2f "
+                    "deg from the target", self.host, INTERRUPT_DECELERATION,
+                    np.round(np.degrees(q), 3).tolist(), short)
+        if short <= math.degrees(SETTLE_TOLERANCE_RAD):
+            return "stopJ sent: not moving (at the target)"
+        return f"stopJ sent: motion stopped {short:.1f} deg short of the target"
 
     async def close(self) -> None:
         """Stop the control script and disconnect every interface (each failure logged,

@@ -50,3 +50,37 @@ def test_the_probe_input_rises_at_the_latch_point_and_follows_path_edges() -> No
     leaving = PacedMotion(_plan(0.1, edges=(falling,)), start_cycle=0, wall_per_sim=1.0,
                           probe_line=0)
     assert leaving.probe_level(4, True) and not leaving.probe_level(5, True)
+
+
+def test_a_stop_decelerates_at_its_rate_from_the_cycle_it_arrives_at() -> None:
+    """stopj(a) mid-cruise: the leading joint (0.2 rad) slows at a rad/s^2, so the path at
+    D = a / 0.2; it rests at s0 + v0^2 / 2D after v0 / D, and the plan's fraction there is
+    where the plan itself reaches that s (the ramp took longer: sim_time_at)."""
+    motion = PacedMotion(_plan(0.1), start_cycle=0, wall_per_sim=1.0, probe_line=0)
+    stopping = motion.stopped(10, deceleration=40.0)  # s0 = 0.2, v0 = 10 / s, D = 200 / s^2
+    assert stopping.stopped(12, 1.0) is stopping  # a second stop keeps the first
+    v0, path_d = 10.0, 40.0 / 0.2
+    s_final = 0.2 + v0**2 / (2 * path_d)  # 0.45
+    t_end = 0.02 + v0 / path_d  # 0.07 s: cycle 35
+    tau = 5 * CYCLE_S
+    assert stopping.s_at(15) == pytest.approx(0.2 + v0 * tau - 0.5 * path_d * tau**2)
+    np.testing.assert_allclose(stopping.qd_at(15), Q1 * (v0 - path_d * tau))
+    assert not stopping.finished(34) and stopping.finished(35)
+    assert stopping.s_at(35) == pytest.approx(s_final) == stopping.s_at(500)
+    np.testing.assert_allclose(stopping.q_at(500), s_final * Q1)
+    np.testing.assert_allclose(stopping.qd_at(35), 0.0)
+    assert stopping.fraction_at(500) == pytest.approx(s_final)  # constant plan speed
+    assert stopping.sim_time_at(500) == pytest.approx(t_end)
+
+
+def test_a_stop_never_runs_ahead_of_the_plan() -> None:
+    """A gentle stop late in a ramped plan: the plan's own deceleration ends first, so the
+    motion ends where and when the plan does (completed: fraction 1)."""
+    profile = PathProfile.of_move(Q1 - Q0, np.full(6, 1.0), np.full(6, 4.0))
+    plan = MotionPlan(Q0, Q1, 0.0, profile, 1.0, None, ())
+    motion = PacedMotion(plan, start_cycle=0, wall_per_sim=1.0, probe_line=0)
+    end_cycle = int(np.ceil(profile.duration_s / CYCLE_S))
+    stopping = motion.stopped(end_cycle - 20, deceleration=0.1)
+    for cycle in range(end_cycle - 20, end_cycle + 5):
+        assert stopping.s_at(cycle) == pytest.approx(motion.s_at(cycle))
+    assert stopping.finished(end_cycle) and stopping.fraction_at(end_cycle) == 1.0

@@ -37,7 +37,8 @@ class _Status:
 
 class ScriptedUr:
     """receive + control of a controller whose input rises `edge_after` cycles into a move;
-    hide_cycle_before_edge: the sample of the cycle before the edge is never shown."""
+    hide_cycle_before_edge: the sample of the cycle before the edge is never shown. A move
+    to the start pose (zeros: the move back before a retried contact) is there at once."""
 
     def __init__(self, edge_after: int = 7, hide_cycle_before_edge: bool = False) -> None:
         self.t0 = time.monotonic()
@@ -77,6 +78,15 @@ class ScriptedUr:
     def getActualDigitalOutputBits(self) -> int:  # noqa: N802
         return 0
 
+    def isEmergencyStopped(self) -> bool:  # noqa: N802
+        return False
+
+    def isProtectiveStopped(self) -> bool:  # noqa: N802
+        return False
+
+    def isProgramRunning(self) -> bool:  # noqa: N802
+        return True
+
     # control
     def moveJ(self, q: list[float], speed: float, acceleration: float,  # noqa: N802
               asynchronous: bool = False) -> bool:
@@ -84,11 +94,11 @@ class ScriptedUr:
             if self.start is not None:  # a new move starts where the last one stopped
                 end = self._cycle() if self.stop is None else self.stop
                 self.base = self.base + SPEED * max(0, end - self.start) * PERIOD_S
-            if not asynchronous:  # a move back: instantly at the target
+            self.op += 1
+            if not np.any(q):  # the move back to the start (zeros): instantly there
                 self.base, self.start, self.stop = np.asarray(q, float), None, None
                 return True
             self.start, self.stop = self._cycle(), None
-            self.op += 1
             self.moves += 1
         return True
 
@@ -138,3 +148,29 @@ def test_an_input_already_high_refuses_to_move() -> None:
     adapter = _adapter(ur)
     outcome = asyncio.run(adapter.guarded_move(np.full(6, 0.5), 0.05, 0))
     assert not outcome.contact and outcome.reason == "probe_already_triggered"
+
+
+def test_a_cancelled_guarded_move_stops_the_arm() -> None:
+    """Ctrl-C / SIGTERM (the run's task cancelled) during a guarded move: the watcher thread
+    lets go, the arm is stopped with stopJ, and the cancellation carries a note saying so
+    (before, the watcher ran on until the input rose or its 60 s deadline)."""
+    ur = ScriptedUr(edge_after=10_000)  # no contact
+    adapter = _adapter(ur)
+
+    async def cancel_mid_move() -> asyncio.CancelledError:
+        task = asyncio.create_task(adapter.guarded_move(np.full(6, 0.5), 0.05, 0))
+        await asyncio.sleep(10 * PERIOD_S)
+        assert ur.start is not None and ur.stop is None  # moving
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError) as caught:
+            await task
+        return caught.value
+
+    exc = asyncio.run(cancel_mid_move())
+    assert ur.stop is not None
+    q = np.array(ur.getActualQ())
+    time.sleep(3 * PERIOD_S)
+    np.testing.assert_array_equal(ur.getActualQ(), q)  # at rest
+    short = np.degrees(np.max(np.abs(0.5 - q)))
+    assert exc.__notes__ == [f"guarded_move interrupted: stopJ sent: motion stopped "
+                             f"{short:.1f} deg short of the target"]

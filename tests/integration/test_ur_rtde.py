@@ -98,6 +98,38 @@ async def test_control_movej_moves_the_simulation(ur_stub: UrStub, receive: obje
         await asyncio.to_thread(control.disconnect)
 
 
+async def test_stopj_decelerates_at_its_rate_and_the_clock_counts_the_ramp(
+    ur_stub: UrStub, receive: object
+) -> None:
+    """An asynchronous 0.6 rad moveJ at 0.5 rad/s and 1.4 rad/s^2, stopped mid-cruise by
+    stopJ(2.0): the arm ramps up (v^2 / 2 x 1.4), cruises, and ramps down at 2.0 rad/s^2
+    (v^2 / 2 x 2.0), so over the T seconds of robot time the move took (no settling: it did
+    not arrive) it covered d = v T - v^2 / (2 x 1.4) - v^2 / (2 x 2.0). A stop at the cycle
+    reached (no ramp down) would cover v^2 / 4 = 0.0625 rad more in the same time."""
+    v, up, down = 0.5, 1.4, 2.0
+    control = await asyncio.to_thread(rtde_control.RTDEControlInterface, HOST)
+    try:
+        before = await zerocal_state(ur_stub)
+        q0 = np.array(before.q)  # type: ignore[attr-defined]
+        far = q0 + np.array([-0.6, 0.0, 0.0, 0.0, 0.0, 0.0])
+        assert await asyncio.to_thread(control.moveJ, far.tolist(), v, up, True)
+        await asyncio.sleep(0.35)  # time_scale 0.5: cruising from 0.18 s to 0.6 s
+        await asyncio.to_thread(control.stopJ, down, False)  # returns at rest
+        assert await asyncio.to_thread(control.isSteady)
+        after = await zerocal_state(ur_stub)
+        q1 = np.array(after.q)  # type: ignore[attr-defined]
+        await wait_for(lambda: np.allclose(receive.getActualQ(), q1, atol=1e-12))  # type: ignore[attr-defined]
+        spent = after.time - before.time  # type: ignore[attr-defined]
+        covered = float(q0[0] - q1[0])
+        assert 0.1 < covered < 0.6 - v * v / (2 * down)  # stopped in the cruise, short
+        assert covered == pytest.approx(v * spent - v * v / (2 * up) - v * v / (2 * down),
+                                        abs=1e-8)  # the clock is a sum of floats
+        await asyncio.to_thread(control.moveJ, q0.tolist(), 1.0, 1.4)
+    finally:
+        await asyncio.to_thread(control.stopScript)
+        await asyncio.to_thread(control.disconnect)
+
+
 async def test_movej_ramps_at_the_acceleration_the_host_sends(
     ur_stub: UrStub, receive: object
 ) -> None:
