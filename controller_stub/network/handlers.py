@@ -271,9 +271,12 @@ class RequestHandlers:
         with the joint angles and clock at the reading: `unsupported` for a sensor this
         stub does not simulate, `bad_message` for a request the sensor cannot read."""
         try:
-            reading = self.server.sensors.read(request.sensor, request.request)
+            sensor = self.server.sensors.sensor(request.sensor)
         except UnknownSensor as exc:
             raise SimulationRefused("unsupported", f"{self.sim.robot_name}: {exc}") from None
+        self.sim.settle_for_measurement()  # a reading of the robot: it stands still first
+        try:
+            reading = sensor.read(request.request)
         except SensorRequestError as exc:
             raise RequestRefusedError(ErrorCode.BAD_MESSAGE,
                                       f"sensor_read {request.sensor}: {exc}") from None

@@ -189,10 +189,13 @@ class MotionSpec(_Model):
     smaller of the two).
     time_scale: wall seconds per simulated second (0 = instantaneous).
     initial_q: (n,) reported start pose (default per robot).
-    settle_s: simulated time the robot stands still after a completed joint move before it
-    is measured (vibrations die out; a guarded move latches in motion and has none).
-    capture_s: simulated time of one stereo capture (exposure and readout of the pair) or
-    one laser tracker reading.
+    settle_s: simulated time the robot must have stood still since its last completed
+    motion before it is measured (vibrations die out): charged at the measurement (a
+    capture, a target measurement, a tracker or sensor reading, the start of a guarded
+    move), as much of it as the robot has not stood still already; none after a move
+    that a move follows (docs/simulator.md "Robot time").
+    capture_s: simulated time of one stereo capture (exposure and readout of the pair),
+    target measurement or laser tracker reading.
     Both advance the simulated clock (robot time), not the wall-time pacing of motions.
     """
 

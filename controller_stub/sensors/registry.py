@@ -27,7 +27,9 @@ The interface, all a sensor sees of the simulation::
                                                      # this sensor reads (-> bad_message)
     sensor.truth() -> dict                           # its hidden truth (for tests)
 
-The server adds the joint angles and the clock to every reading. Never imports hostpc.
+The server settles the robot before every reading (it measures the robot, as a capture
+does: the clock waits out what is left of `motion.settle_s` since the robot last moved) and
+adds the joint angles and the clock to it. Never imports hostpc.
 """
 
 from __future__ import annotations
@@ -186,10 +188,6 @@ class SimSensors:
                                    rng=sensor_stream(self.seed, name)))
         self._made[name] = made
         return made
-
-    def read(self, name: str, request: Mapping[str, Any]) -> dict[str, Any]:
-        """One reading of sensor `name` (UnknownSensor, SensorRequestError)."""
-        return self.sensor(name).read(request)
 
     def truth(self) -> dict[str, Any]:
         """The hidden truth of every sensor made so far, by name."""

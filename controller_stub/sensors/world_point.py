@@ -49,6 +49,8 @@ class TrackedArm(Protocol):
     def time(self) -> float: ...
     def flange_pose(self) -> np.ndarray: ...
     def joint_positions(self) -> np.ndarray: ...
+    def settle_for_measurement(self) -> float:
+        """Settle before a measurement if the robot moved (the clock waits; s waited)."""
     def hold_for_capture(self) -> None:
         """Stand still for one measurement (the clock advances by `motion.capture_s`)."""
 
@@ -101,6 +103,7 @@ class Tracker:
         facts}."""
         if self.arm is None:
             raise RuntimeError("this tracker measures no robot (constructed without `arm`)")
+        self.arm.settle_for_measurement()  # the flange stands still before it is measured
         seen, lost = self.measure(self.arm.flange_pose())
         measured = {"q": self.arm.joint_positions(), "time": float(self.arm.time),
                     "seen": seen, "lost": lost, "description": self.description()}

@@ -61,6 +61,10 @@ class ControllerBase:
     def estop(self) -> None:
         self.state.estop()
 
+    def settle_for_measurement(self) -> float:
+        """See `ControllerState.settle_for_measurement`."""
+        return self.state.settle_for_measurement()
+
     def reset_estop(self) -> None:
         self.state.reset_estop()
 

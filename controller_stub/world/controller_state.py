@@ -100,6 +100,7 @@ class SimulatedController(Protocol):
     def finish_move(
         self, plan: MotionPlan, fraction: float = 1.0
     ) -> MoveResult | GuardedMoveResult: ...
+    def settle_for_measurement(self) -> float: ...
     def capture_stereo(self, pattern: str = "target", view: int = 0) -> Any: ...
     def camera_description(self) -> dict[str, Any]: ...
     def truth(self) -> dict[str, Any]: ...
@@ -152,6 +153,7 @@ class ControllerState:
         self._next_history_id = 1
         self._q = np.clip(np.asarray(start, float), self._q_min, self._q_max)
         self._time = 0.0
+        self._settled_at = 0.0  # the clock when the robot has stood still settle_s since it moved
         self._n_io = server.n_digital_io
         self._inputs = [False] * self._n_io
         self._outputs = [False] * self._n_io
@@ -168,8 +170,8 @@ class ControllerState:
     @property
     def time(self) -> float:
         """Simulated clock (s): robot time. Advances by motion durations, by the settling
-        after each completed joint move (`motion.settle_s`) and by each stereo capture
-        or tracker reading (`motion.capture_s`)."""
+        before a measurement that follows motion (`settle_for_measurement`) and by each
+        stereo capture, target measurement or tracker reading (`motion.capture_s`)."""
         return self._time
 
     @property
@@ -310,8 +312,23 @@ class ControllerState:
         self._q = np.asarray(q, dtype=float).copy()
 
     def advance_clock(self, dt: float) -> None:
-        """Advance the simulated clock by `dt` s (motion, settling, capture)."""
+        """Advance the simulated clock by `dt` s (motion, capture)."""
         self._time += dt
+
+    def end_motion(self) -> None:
+        """A completed motion that went somewhere ended now: the robot is at rest but still
+        vibrating; a measurement waits until it has stood still `motion.settle_s`."""
+        self._settled_at = self._time + float(self.scenario.motion.settle_s)
+
+    def settle_for_measurement(self) -> float:
+        """Settle before a measurement: the clock waits max(0, settle_s - the time the robot
+        has stood still since its last motion ended, `end_motion`); returns that wait (s).
+        Called by every measuring request (a stereo capture, a target measurement, a
+        tracker or sensor reading, the start of a guarded move): settling is charged
+        where a measurement needs it, not after every move."""
+        wait = max(0.0, self._settled_at - self._time)
+        self._time = max(self._time, self._settled_at)
+        return wait
 
     def hold_plan(self, plan: MotionPlan) -> None:
         """`plan` is the motion in progress (begun, not finished); busy until released."""

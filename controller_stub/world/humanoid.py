@@ -228,18 +228,21 @@ class HumanoidSimulation(ControllerBase):
     def finish_move(self, plan: MotionPlan, fraction: float = 1.0) -> MoveResult:
         """Execute `plan` up to `fraction` (clipped to [0, 1]) of it: the robot stops there
         and a move stopped early reports completed=False / reason "aborted". A completed
-        move that went somewhere is followed by the settling time (`motion.settle_s`)."""
+        move that went somewhere leaves the robot to settle before its next measurement
+        (`ControllerState.end_motion`: charged by `measure_targets`, not here); an aborted
+        one charges no settling of its own, as on the arm."""
         self.state.release_plan(plan)
         fraction = min(max(float(fraction), 0.0), 1.0)
         stopped = fraction < 1.0
         q_end = plan.q_at(fraction)
         duration = fraction * plan.duration_s
-        settle = float(self.scenario.motion.settle_s) if duration > 0.0 and not stopped else 0.0
         self.state.set_position(q_end)
-        self.state.advance_clock(duration + settle)  # robot time: the motion, then the settling
+        self.state.advance_clock(duration)
+        if duration > 0.0 and not stopped:
+            self.state.end_motion()
         self._moves += 1
         return MoveResult(completed=not stopped, q=q_end, duration_s=duration,
-                          reason="aborted" if stopped else None, settle_s=settle)
+                          reason="aborted" if stopped else None)
 
     def move_joints(self, q_target: Any, speed: float) -> MoveResult:
         """Move to q_target (16,) reported rad at `speed` (fraction of max joint speed)."""
@@ -350,6 +353,7 @@ class HeadCamera:
         state = self.state
         if state.estopped:
             raise SimulationRefused("estop", "emergency stop is active")
+        state.settle_for_measurement()  # the head and arms stand still before the capture
         targets: dict[str, dict[str, np.ndarray]] = {}
         for side in ARMS:
             p_true = self._target_in_camera(side)

@@ -72,12 +72,19 @@ class JointMotion:
         `motion.PathProfile`)."""
         return self.state.move_profile(q_from, q_to, speed).duration_s
 
-    def arrive(self, q_start: np.ndarray, q_end: np.ndarray, duration: float) -> None:
-        """A motion from q_start ended at q_end (n,) after `duration` s: the body's approach,
-        the reported angles and the clock follow; counts the move (estop fault)."""
+    def arrive(self, q_start: np.ndarray, q_end: np.ndarray, duration: float,
+               stopped: bool) -> None:
+        """A motion from q_start ended at q_end (n,) after `duration` s (`stopped`: cut
+        short, an abort): the body's approach, the reported angles and the clock follow;
+        counts the move (estop fault). A completed motion that went somewhere leaves the
+        robot to settle before its next measurement (`ControllerState.end_motion`); an
+        aborted one charges no settling of its own (the settling the moves before it owe
+        stays owed)."""
         self.body.note_motion(q_start, q_end)
         self.state.set_position(q_end)
         self.state.advance_clock(duration)
+        if duration > 0.0 and not stopped:
+            self.state.end_motion()
         self._completed_moves += 1
         after = self.scenario.faults.estop_after_moves
         if after is not None and not self._estop_fault_fired and self._completed_moves >= after:
@@ -114,7 +121,8 @@ class JointMotion:
         target, profile = self._begin_motion(q_target, speed, acceleration)
         if io_line is None:
             plan = self._plan_move(target, profile)
-        else:
+        else:  # a guarded move measures: it starts settled
+            state.settle_for_measurement()
             plan = self.guarded.plan(target, profile, int(io_line))
         state.hold_plan(plan)
         return plan
@@ -143,23 +151,13 @@ class JointMotion:
         if plan.io_line is not None:
             return self._finish_guarded(plan, s, duration, stopped)
         q_end = plan.q_start + s * (plan.q_target - plan.q_start) if stopped else plan.q_target
-        self.arrive(plan.q_start, q_end, duration)
-        settle = self.settle_time(duration, stopped)
-        self.state.advance_clock(settle)
+        self.arrive(plan.q_start, q_end, duration, stopped)
         return MoveResult(
             completed=not stopped,
             q=q_end.copy(),
             duration_s=duration,
             reason="aborted" if stopped else None,
-            settle_s=settle,
         )
-
-    def settle_time(self, duration: float, stopped: bool) -> float:
-        """Settling time (s) after a joint move: the scenario's `motion.settle_s` once the
-        robot arrived somewhere new; none for an aborted or a zero-length move."""
-        if stopped or duration <= 0.0:
-            return 0.0
-        return float(self.scenario.motion.settle_s)
 
     def _plan_move(self, target: np.ndarray, profile: PathProfile) -> MotionPlan:
         """A joint move: the probe IO line follows contact along the path."""
@@ -196,7 +194,7 @@ class JointMotion:
         q_end = plan.q_start + s * (plan.q_target - plan.q_start)
         if contact is not None and contact.s_latch <= s:
             self.guarded.latch(contact)
-            self.arrive(plan.q_start, q_end, duration)
+            self.arrive(plan.q_start, q_end, duration, stopped)
             self.guarded.update_input(emit=True)
             return GuardedMoveResult(
                 contact=True,
@@ -214,7 +212,7 @@ class JointMotion:
             self.guarded.set_input(True, t_touch, q_touch, emit=False)
         if not stopped:
             q_end = plan.q_target.copy()
-        self.arrive(plan.q_start, q_end, duration)
+        self.arrive(plan.q_start, q_end, duration, stopped)
         return GuardedMoveResult(
             contact=False,
             q_latched=None,

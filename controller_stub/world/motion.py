@@ -102,17 +102,15 @@ class MoveResult:
 
     completed: True if the target was reached; False with `reason` (code) if aborted.
     q: (n,) reported joint angles where the robot stopped.
-    duration_s: simulated motion time (the server sleeps duration_s * time_scale).
-    settle_s: simulated settling time charged after the motion (scenario motion.settle_s
-    for a completed move that went somewhere, else 0); the clock advanced by
-    duration_s + settle_s.
+    duration_s: simulated motion time (the server sleeps duration_s * time_scale); the
+    clock advanced by it. No settling is charged after a move: the next measurement
+    settles (`ControllerState.settle_for_measurement`).
     """
 
     completed: bool
     q: np.ndarray
     duration_s: float
     reason: str | None = None
-    settle_s: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -171,8 +171,9 @@ class Simulation(ControllerBase):
         return self.body.flange_pose()
 
     def hold_for_capture(self) -> None:
-        """The robot stands still for one measurement: the clock advances by the
-        scenario's `motion.capture_s` (a stereo capture, a tracker reading)."""
+        """The robot stands still for one measurement (settled before it,
+        `settle_for_measurement`): the clock advances by the scenario's `motion.capture_s`
+        (a stereo capture, a tracker reading)."""
         self.state.advance_clock(float(self.scenario.motion.capture_s))
 
     def camera_pose(self) -> np.ndarray:
@@ -208,9 +209,11 @@ class Simulation(ControllerBase):
 
     def capture_stereo(self, pattern: str = "target", view: int = 0) -> StereoFrame:
         """Render a stereo pair (`StereoCamera.render`): pattern "target" from the robot's
-        physical pose, "chessboard" the `view`-th rig-calibration view. The frame is stamped
-        at the start of the exposure; the clock then advances by the scenario's
-        `motion.capture_s` (robot time spent standing still for the capture)."""
+        physical pose, "chessboard" the `view`-th rig-calibration view. The robot first
+        settles if it moved (`settle_for_measurement`); the frame is stamped at the start
+        of the exposure; the clock then advances by the scenario's `motion.capture_s`
+        (robot time spent standing still for the capture)."""
+        self.settle_for_measurement()
         left, right = self.stereo.render(pattern, view, self.camera_pose)
         frame = StereoFrame(left=left, right=right, q=self.state.joint_positions(),
                             time=self.state.time)

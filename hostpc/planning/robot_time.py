@@ -1,15 +1,18 @@
 """The plan's robot time, predicted before anything moves, and its physical floor.
 
-Pure numerics. A plan keeps the robot busy for its moves, the settling after each move and
-the captures at each pose (docs/simulator.md charges exactly these):
+Pure numerics. A plan keeps the robot busy for its moves, the settling before each
+measurement and the captures at each pose (docs/simulator.md charges exactly these):
 
 - motion: each joint move ramps every joint up to speed x v_i (v_i the joint's top speed,
   rad/s; speed the run's fraction of it, `--speed`) at a_i (its acceleration, rad/s^2) and
   down to rest, all joints finishing together (`hostpc.planning.tour.move_times`, the
   trapezoidal law the simulator moves by), from the robot's pose along the fit poses, then
   along the verification poses;
-- settle: `settle_s` after every move that goes somewhere (none after a guarded approach,
-  which latches in motion);
+- settle: `settle_s` before a measurement that follows motion (a capture, a tracker or
+  sensor reading, the start of a guarded approach), where a real arm waits for its
+  vibration to die out: once per measured pose, none after a move that another move
+  follows (a via point, a retract, a move to a hover: a move ends at rest), none before a
+  second measurement at the same pose;
 - capture: `capture_s` per measurement (`Waypoints`: a method's moves per pose).
 
 The controller's limits come from its state when it reports them (`RobotState.extra`:
@@ -47,7 +50,7 @@ DEFAULT_CAPTURE_S = 0.1
 @dataclass(frozen=True)
 class TimeLimits:
     """joint_speed: (n,) rad/s at speed fraction 1; joint_acceleration: (n,) rad/s^2;
-    settle_s after each move; capture_s per pose."""
+    settle_s before a measurement after motion; capture_s per capture."""
 
     joint_speed: np.ndarray
     joint_acceleration: np.ndarray
@@ -78,21 +81,35 @@ class TimeLimits:
 class Waypoints:
     """The robot's moves that measure some planned poses, in order: q (M, n) the joint
     targets; speed (M,) the speed fraction of the move into each (NaN: the run's --speed);
-    settle (M,) bool: the controller settles after that move; captures: measurements taken
-    (each `capture_s`). A plain pose is one waypoint at the run's speed, settled, one
-    capture; a guarded approach (sphere_probe) is a move that latches in motion: no
-    settling, no capture."""
+    settle (M,) bool: a measurement starts at that waypoint (a capture there, a guarded
+    approach from it), so the robot settles there if it moved since it last settled;
+    measuring (M,) bool: the move into that waypoint is itself the measurement (a guarded
+    approach, which latches in motion); captures: measurements taken (each `capture_s`).
+    A plain pose is one waypoint at the run's speed, measured there (settled, one
+    capture); sphere_probe's free moves to a contact's start measure nothing, the start
+    settles, the approach measures in motion, and its retract measures nothing."""
 
     q: np.ndarray
     speed: np.ndarray
     settle: np.ndarray
+    measuring: np.ndarray
     captures: int
 
     @classmethod
     def plain(cls, q: np.ndarray) -> Waypoints:
         """Each pose of q (N, n) visited at the run's speed, settled and captured once."""
         q = np.asarray(q, float)
-        return cls(q, np.full(q.shape[0], np.nan), np.ones(q.shape[0], bool), q.shape[0])
+        n = q.shape[0]
+        return cls(q, np.full(n, np.nan), np.ones(n, bool), np.zeros(n, bool), n)
+
+    def then(self, other: Waypoints) -> Waypoints:
+        """These waypoints, then `other`'s."""
+        n = max(np.shape(self.q)[-1], np.shape(other.q)[-1])
+        return Waypoints(np.vstack([self.q.reshape(-1, n), other.q.reshape(-1, n)]),
+                         np.concatenate([self.speed, other.speed]),
+                         np.concatenate([self.settle, other.settle]),
+                         np.concatenate([self.measuring, other.measuring]),
+                         self.captures + other.captures)
 
 
 @runtime_checkable
@@ -113,11 +130,23 @@ def _move_times(q_start: np.ndarray, path: Waypoints, speed: float, limits: Time
     return move_times(q[:-1], q[1:], limits.rates(fraction))
 
 
+def settles(moves: np.ndarray, settle: np.ndarray) -> int:
+    """How many times a robot settles along a path whose moves take `moves` (M,) s: at each
+    measuring waypoint (`settle` (M,) bool) it reached by motion since it last settled
+    (the simulator's `settle_for_measurement`; the robot starts at rest, settled)."""
+    count, moved = 0, False
+    for moving, measures in zip(np.asarray(moves) > 0.0, settle, strict=True):
+        moved = moved or bool(moving)
+        if measures and moved:
+            count, moved = count + 1, False
+    return count
+
+
 def waypoints_time(q_start: np.ndarray, path: Waypoints, speed: float, limits: TimeLimits
                    ) -> tuple[float, float, float]:
     """(motion, settle, capture) in s of `path` from q_start (n,); speed: the run's."""
     moves = _move_times(q_start, path, speed, limits)
-    settle = limits.settle_s * int(np.count_nonzero(path.settle & (moves > 0.0)))
+    settle = limits.settle_s * settles(moves, path.settle)
     return float(np.sum(moves)), settle, limits.capture_s * path.captures
 
 
@@ -128,28 +157,26 @@ def predicted_robot_time(q_start: np.ndarray, fit: Waypoints, verify: Waypoints,
     the verification's from q_start (n,) at the run's speed fraction `speed`; the floor
     that of `floor_poses` poses (the planner's: the fewest that reach the target sigma,
     and the verification poses) plus `floor_motion` (s, their `measuring_motion`)."""
-    start = np.asarray(q_start, float)
-    first = waypoints_time(start, fit, speed, limits)
-    last = fit.q[-1] if fit.q.shape[0] else start
-    second = waypoints_time(last, verify, speed, limits)
-    motion, settle, capture = (a + b for a, b in zip(first, second, strict=True))
+    motion, settle, capture = waypoints_time(np.asarray(q_start, float), fit.then(verify),
+                                             speed, limits)
     return {"motion": motion, "settle": settle, "capture": capture,
             "total": motion + settle + capture,
             "floor": robot_time_floor(floor_poses, limits) + floor_motion}
 
 
 def measuring_motion(path: Waypoints, speed: float, limits: TimeLimits) -> float:
-    """Time (s) of the moves of `path` that measure in motion (no settling after them:
+    """Time (s) of the moves of `path` that measure in motion (`Waypoints.measuring`:
     sphere_probe's guarded approach from the start pose to the contact, at the contact's
     speed): the measurement itself, which no tour saves."""
     if path.q.shape[0] < 2:
         return 0.0
     moves = _move_times(path.q[0], path, speed, limits)  # the first: none (from itself)
-    return float(np.sum(moves[~path.settle]))
+    return float(np.sum(moves[path.measuring]))
 
 
 def robot_time_floor(n_poses: int, limits: TimeLimits) -> float:
-    """The physical floor (s) of a plan of n_poses poses: settle + capture each, no motion."""
+    """The physical floor (s) of a plan of n_poses poses: settle + capture each (every
+    measured pose settles once, as the simulator charges), no motion."""
     return n_poses * (limits.settle_s + limits.capture_s)
 
 

@@ -52,7 +52,7 @@ def test_contact_distance_and_overtravel(make_sim: MakeSim) -> None:
     sim.move_joints(q_above, 1.0)
     edges: list[tuple[int, bool, float, np.ndarray]] = []
     sim.on_io_edge = lambda line, value, t, q: edges.append((line, value, t, q))
-    t0 = sim.time
+    t0 = sim.time + sim.scenario.motion.settle_s  # a guarded move starts settled
     result = sim.guarded_move(q_below, 0.05, io_line=0)
     assert result.contact and result.q_latched is not None
     assert edges and edges[0][0] == 0 and edges[0][1] is True

@@ -32,9 +32,8 @@ def test_motion_duration_and_clock(make_sim: MakeSim) -> None:
     expected = 1.0 / v + v / a
     assert result.completed
     assert result.duration_s == pytest.approx(expected, rel=1e-12)
-    # robot time: the motion, then the settling before the robot may be measured
-    assert result.settle_s == sim.scenario.motion.settle_s == 0.3
-    assert sim.time == pytest.approx(expected + 0.3, rel=1e-12)
+    # robot time: the motion only (the settling comes before the next measurement)
+    assert sim.time == pytest.approx(expected, rel=1e-12)
     np.testing.assert_array_equal(sim.joint_positions(), target)
 
 
@@ -70,29 +69,63 @@ def test_profile_is_a_continuous_trapezoid_or_triangle_of_the_stated_duration() 
 
 
 def test_settle_and_capture_time_charged_to_the_clock(make_sim: MakeSim) -> None:
+    """Settling is charged before a measurement that follows motion, not after every move:
+    a move that another move follows (a via point) pays none, a second capture at the same
+    pose none; the frame is stamped after the settling, at the exposure's start."""
     sim = make_sim(truth={"zero_errors": [0.0] * 6},
                    motion={"settle_s": 0.5, "capture_s": 0.25})
     q0 = sim.joint_positions()
-    target = q0 + np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.4])
-    motion = sim.motion.motion_duration(q0, target, 1.0)
-    sim.move_joints(target, 1.0)
-    assert sim.time == pytest.approx(motion + 0.5, rel=1e-12)
+    via = q0 + np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.4])
+    target = q0 + np.array([0.0, 0.1, 0.0, 0.0, 0.0, 0.2])
+    motion = sim.motion.motion_duration(q0, via, 1.0) + sim.motion.motion_duration(
+        via, target, 1.0)
+    sim.move_joints(via, 1.0)
+    sim.move_joints(target, 1.0)  # the via move ended at rest: no settling between
+    assert sim.time == pytest.approx(motion, rel=1e-12)
     still = sim.move_joints(target, 1.0)  # already there: no motion, nothing to settle
-    assert still.duration_s == 0.0 and still.settle_s == 0.0
-    t_before = sim.time
+    assert still.duration_s == 0.0 and sim.time == pytest.approx(motion, rel=1e-12)
     frame = sim.capture_stereo("target")
-    assert frame.time == t_before  # stamped at the exposure's start
-    assert sim.time == pytest.approx(t_before + 0.25, rel=1e-12)
-    sim.capture_stereo("chessboard", 0)  # the robot waits for rig captures too
-    assert sim.time == pytest.approx(t_before + 0.5, rel=1e-12)
+    assert frame.time == pytest.approx(motion + 0.5, rel=1e-12)  # settled, then exposed
+    assert sim.time == pytest.approx(motion + 0.75, rel=1e-12)
+    sim.capture_stereo("chessboard", 0)  # the robot waits for rig captures too; settled
+    assert sim.time == pytest.approx(motion + 1.0, rel=1e-12)
+    assert sim.settle_for_measurement() == 0.0  # standing still longer than settle_s
+
+
+def test_settling_before_a_tracker_reading_and_a_guarded_move(make_sim: MakeSim) -> None:
+    """A tracker reading and the start of a guarded move are measurements: each waits out
+    what is left of settle_s since the last motion ended (0 after a capture there)."""
+    sim = make_sim(truth={"zero_errors": [0.0] * 6}, motion={"capture_s": 0.1})
+    q0 = sim.joint_positions()
+    up = q0 + np.array([0.0, -0.05, 0.0, 0.0, 0.0, 0.0])
+    moved = sim.move_joints(up, 1.0)
+    reading = sim.tracker.measure_tracker()
+    assert reading["time"] == pytest.approx(moved.duration_s + 0.3, rel=1e-12)
+    t = sim.time
+    guarded = sim.guarded_move(q0, 0.1, sim.scenario.probe.io_line)
+    assert sim.time == pytest.approx(t + guarded.duration_s, rel=1e-12)  # settled already
+    back = sim.move_joints(up, 1.0)
+    t = sim.time
+    again = sim.guarded_move(q0, 0.1, sim.scenario.probe.io_line)
+    assert sim.time == pytest.approx(t + 0.3 + again.duration_s, rel=1e-12)
+    assert back.duration_s > 0.0
 
 
 def test_aborted_move_charges_no_settling(make_sim: MakeSim) -> None:
+    """An aborted move owes no settling of its own (the rule before settling moved to the
+    measurement); what the moves before it owe stays owed, from their end."""
     sim = make_sim(truth={"zero_errors": [0.0] * 6})
     plan = sim.begin_move(sim.joint_positions() + 0.3, 1.0)
     result = sim.finish_move(plan, 0.5)
-    assert not result.completed and result.settle_s == 0.0  # type: ignore[union-attr]
+    assert not result.completed
     assert sim.time == pytest.approx(result.duration_s, rel=1e-12)
+    assert sim.settle_for_measurement() == 0.0  # it stood settled before the abort
+    done = sim.move_joints(sim.joint_positions() + 0.01, 1.0)
+    plan = sim.begin_move(sim.joint_positions() + 0.3, 1.0)
+    cut = sim.finish_move(plan, 0.5)
+    assert cut.duration_s < 0.3
+    assert sim.settle_for_measurement() == pytest.approx(0.3 - cut.duration_s, rel=1e-9)
+    assert done.completed
 
 
 def test_joint_limit_and_bad_arguments_refused(make_sim: MakeSim) -> None:

@@ -149,3 +149,30 @@ async def test_a_slow_move_is_timed_by_its_prediction(start_stub: StartStub) -> 
         outcome = await client.move_joints(q0 + STEP / 2, 1.0)
     assert outcome.completed
     assert outcome.duration_s == pytest.approx(0.5 / 0.5 + RAMP_S, rel=1e-9)
+
+
+async def test_a_via_move_that_a_move_follows_is_not_settled(start_stub: StartStub) -> None:
+    """Settling is charged before a measurement, not after every move: a via point, then a
+    pose that is captured, then a second captured pose. The host's prediction (settle only
+    where a capture follows motion) is the controller time spent (the old stub settled
+    0.3 s after the via move too)."""
+    server = await start_stub({})
+    async with connect(server) as client:
+        before = await client.state()
+        via = before.q + np.radians([20.0, 0.0, 0.0, 0.0, 0.0, -15.0])
+        poses = [before.q + np.radians([20.0, -10.0, 5.0, 0.0, 0.0, -15.0]),
+                 before.q + np.radians([25.0, -10.0, 5.0, 0.0, 0.0, -20.0])]
+        assert (await client.move_joints(via, 0.5)).completed
+        for q in poses:
+            assert (await client.move_joints(q, 0.5)).completed
+            *_, t = await client.capture()
+        after = await client.state()
+    limits = TimeLimits.from_extra(
+        {"max_joint_speed": before.max_joint_speed,
+         "max_joint_acceleration": before.max_joint_acceleration}, 6)
+    path = Waypoints(np.array([via, *poses]), np.full(3, np.nan),
+                     np.array([False, True, True]), np.zeros(3, bool), 2)
+    motion, settle, capture = waypoints_time(before.q, path, 0.5, limits)
+    assert settle == pytest.approx(2 * 0.3) and capture == pytest.approx(2 * 0.1)
+    assert after.time - before.time == pytest.approx(motion + settle + capture, rel=1e-9)
+    assert t - before.time == pytest.approx(motion + settle + 0.1, rel=1e-9)  # exposed

@@ -366,10 +366,12 @@ class SphereProbeMethod(Method):
         """The moves that probe the contacts q (N, n) in order (``probe_contact``): per
         contact the free moves to its start (``free_moves``: the hover only where the
         orientation changes or a direct move would pass near the sphere), the guarded
-        approach to the contact (no settling), the retract (`retract`: to the start, after an
+        approach to the contact, the retract (`retract`: to the start, after an
         orientation's last contact on to its hover); the free moves at the plan's move
-        speed, the approach at the contact's."""
-        rows, speeds, settles = [], [], []
+        speed, the approach at the contact's. The robot settles once per contact, at its
+        start, before the guarded approach (a measurement); the free moves before it and
+        the retract end at rest and measure nothing, so no settling follows them."""
+        rows, speeds, settles, measuring = [], [], [], []
         here: Location | None = None
         for row in np.asarray(q, float):
             orientation, contact = self._lookup(row)
@@ -378,11 +380,12 @@ class SphereProbeMethod(Method):
             rows += [*via, row, q_back]
             speeds += [self.config.move_speed] * len(via) + [contact.speed,
                                                              self.config.move_speed]
-            settles += [True] * len(via) + [False, True]
+            settles += [False] * (len(via) - 1) + [True, False, False]
+            measuring += [False] * len(via) + [True, False]
             here = there
         n = np.size(q, 1) if np.ndim(q) == 2 else 0
         return Waypoints(np.asarray(rows, float).reshape(-1, n), np.asarray(speeds, float),
-                         np.asarray(settles, bool), 0)
+                         np.asarray(settles, bool), np.asarray(measuring, bool), 0)
 
     def design_dataset(self, q: np.ndarray) -> Dataset:
         """Contacts at q (N, n) on the nominal sphere, sigma = repeatability, with the
