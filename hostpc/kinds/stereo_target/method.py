@@ -51,7 +51,13 @@ RIG_REPORT_FILE = "rig_calibration.json"
 CENTROID_SIGMA_PX = 0.05
 """Planning noise model without a calibrated rig: pixel precision of the dot centre in
 each image (conservative, a real camera's; the simulator's images are better);
-`planning_sigma_px` takes the rig's measured RMS instead."""
+`planning_sigma_px` takes the rig's measured RMS instead (CENTRE_PER_CORNER)."""
+CENTRE_PER_CORNER = 0.25
+"""The dot centre's pixel sigma per unit of the rig calibration's reprojection RMS (a
+chessboard corner's). Both scale with the camera's grey-level noise over its edge
+gradient; the dot's centroid averages some hundred edge pixels, a corner a few. Measured
+in the simulator: the detector states 0.0057-0.0083 px per image coordinate (a 47-23 px
+radius dot at 0.3-0.6 m) against a rig RMS of 0.030 px, 0.19-0.28 of it."""
 PIXEL_FLOOR_PX = 0.01
 """Floor added to every measured covariance, in px per image coordinate (independent per
 sample): a weighting, and what the push's chi2/dof band sees. The reported covariance takes
@@ -76,6 +82,7 @@ class StereoTargetMethod(Method):
     name: ClassVar[str] = "stereo_target"
     default_target_sigma_deg: ClassVar[float | None] = 0.002
     staged: ClassVar[bool] = True
+    selection_per_second: ClassVar[bool] = True
 
     @classmethod
     def short_plan_warning(cls, n_fit: int) -> str | None:
@@ -294,14 +301,17 @@ class StereoTargetMethod(Method):
 
     @property
     def planning_sigma_px(self) -> float:
-        """The pixel noise the plan assumes: the rig calibration's reprojection RMS when
-        there is one (measured on this camera, this run or the station's --rig file: 0.03
-        px in the simulator, a real camera's more, which plans more poses), else
-        CENTROID_SIGMA_PX. Still conservative: a dot centre is a centroid of many edge
-        pixels, and the fit's reported sigma is about 7x below the plan's prediction
-        (docs/performance.md "Robot time against its physical floor")."""
+        """The pixel noise the plan assumes per image coordinate: what each sample's
+        covariance will hold, the dot centre's noise and the systematic floor added to it
+        (`pixel_floor`) in quadrature. The dot centre's is CENTRE_PER_CORNER x the rig
+        calibration's reprojection RMS when there is one (measured on this camera, this run
+        or the station's --rig file: 0.030 px in the simulator, 0.0075 px for the centre,
+        0.0125 px with the floor; a real camera's more, which plans more poses), else
+        CENTROID_SIGMA_PX. The fit reports its own sigma from the measurements; the bench
+        (bench/bench_robot_time.py) prints both."""
         rms = float(getattr(self.rig, "rms", 0.0) or 0.0)
-        return rms if rms > 0.0 else CENTROID_SIGMA_PX
+        centre = CENTRE_PER_CORNER * rms if rms > 0.0 else CENTROID_SIGMA_PX
+        return float(np.hypot(centre, self.pixel_floor))
 
     @property
     def pixel_floor(self) -> float:
