@@ -156,7 +156,13 @@ class StereoTargetMethod(Method):
             save_rig(self.rig, self.rig_path)
             progress.message(f"rig: {self.settings.options['rig']}")
         else:
-            self.rig = await self._calibrate_rig(robot, progress)
+            self.rig = await self._cached_rig(robot, progress)
+            if self.rig is None:
+                self.rig = await self._calibrate_rig(robot, progress)
+                if self._rig_cache_file is not None:
+                    self._rig_cache_file.parent.mkdir(parents=True, exist_ok=True)
+                    save_rig(self.rig, self._rig_cache_file)
+                    progress.message(f"rig: stored in the cache as {self._rig_cache_file}")
             save_rig(self.rig, self.rig_path)
         if self.cell.image_size and tuple(self.rig.image_size) != tuple(self.cell.image_size):
             raise InputError(
@@ -166,6 +172,54 @@ class StereoTargetMethod(Method):
             )
         depth = self.settings.options.get("depth", "triangulate")
         self._measurer = TargetMeasurer(self.rig, self.cell.target_radius, depth=depth)
+
+    @property
+    def _rig_cache_file(self) -> Path | None:
+        """The cached rig of this camera (option rig_cache, the controller's camera_serial:
+        rig_cache.py), None without either."""
+        from hostpc.kinds.stereo_target.rig_cache import cache_path
+
+        folder = self.settings.options.get("rig_cache")
+        serial = self.cell.raw.get("camera_serial")
+        if not folder or not isinstance(serial, str) or not serial.strip():
+            return None
+        return cache_path(folder, serial)
+
+    async def _cached_rig(self, robot: RobotAdapter, progress: Progress) -> Any:
+        """The cached rig of this camera if it still fits chessboard view 0 (rig_cache.py),
+        else None (the run then calibrates one)."""
+        from hostpc.kinds.stereo_target.rig_cache import fits, view_fit
+        from hostpc.vision import ChessboardSpec, load_rig
+        from hostpc.vision.rig_calibration import as_gray, find_chessboard
+
+        path, board = self._rig_cache_file, self.cell.chessboard
+        if path is None or not board:
+            return None
+        if not path.is_file():
+            progress.message(f"rig: none cached for camera {self.cell.raw['camera_serial']} "
+                             f"({path}): calibrating")
+            return None
+        rig = load_rig(path)
+        spec = ChessboardSpec(int(board["cols"]), int(board["rows"]),
+                              float(board["square_size"]))
+        capture = await robot.capture("chessboard", 0)
+        left = find_chessboard(as_gray(capture.left, "left"), spec)
+        right = find_chessboard(as_gray(capture.right, "right"), spec)
+        rms = ((float("inf"), float("inf")) if left is None or right is None
+               else view_fit(rig, spec.object_points(), left, right))
+        self.rig_report = {"cached": str(path), "check_view": 0,
+                           "check_rms_px": [None if not np.isfinite(r) else r for r in rms]}
+        if not fits(rig, rms):
+            progress.message(f"rig: the cached rig {path} does not fit chessboard view 0 "
+                             f"(RMS {rms[0]:.3f} / {rms[1]:.3f} px): calibrating anew")
+            self.rig_report["fits"] = False
+            return None
+        self.rig_report["fits"] = True
+        write_json_atomic(self.run_dir / RIG_REPORT_FILE, self.rig_report)
+        progress.message(f"rig: cached for camera {self.cell.raw['camera_serial']} ({path}), "
+                         f"fits chessboard view 0: RMS {rms[0]:.3f} / {rms[1]:.3f} px "
+                         "(left / right)")
+        return rig
 
     async def _calibrate_rig(self, robot: RobotAdapter, progress: Progress) -> Any:
         from hostpc.vision import ChessboardSpec, calibrate_rig
@@ -418,7 +472,9 @@ class StereoTargetMethod(Method):
             "rig": {"file": str(self.rig_path), "rms_px": float(self.rig.rms),
                     "baseline_mm": self.rig.baseline * 1e3,
                     "image_size": list(self.rig.image_size),
-                    "calibrated_in_this_run": bool(self.rig_report)},
+                    "calibrated_in_this_run": "rms_px" in self.rig_report,
+                    "cached": self.rig_report.get("cached") if self.rig_report.get(
+                        "fits") else None},
             "depth": self.settings.options.get("depth", "triangulate"),
             "pixel_floor_px": self.pixel_floor,
         }
