@@ -54,6 +54,9 @@ def test_a_cached_rig_is_reused_when_it_fits_and_replaced_when_it_does_not(
                               "--rig-cache", str(cache), "--no-report", "--no-push")
     assert code == 0, stderr
     assert "does not fit chessboard view 0" in stderr and "rig calibrated" in stderr
+    report = json.loads((out / "rig_calibration.json").read_text())
+    assert report["ok"] and report["cache_check"]["fits"] is False
+    assert max(report["cache_check"]["check_rms_px"]) > 0.1  # the right image: 0.84 px
     assert json.loads((out / "result.json").read_text())["robot_time_s"]["rig"] > 1.5
     stored = load_rig(cached)  # replaced by this run's calibration
     assert stored.rms > 0.0 and abs(stored.K_left[0, 0] - 1400.0) < 1.0

@@ -6,9 +6,11 @@ sample `q` (joint angles at exposure), `p` (m), `cov` (m^2), `uv` (px), `t` (s s
 run started) and `approach` (sign of each joint's last motion). A target the vision
 rejects is journaled as skipped with the reason.
 
-The rig: `--rig FILE` (copied into the run folder), else calibrated first from the
-controller's chessboard captures (`capture("chessboard", view)` for every view the cell's
-chessboard description lists) and saved as `rig.json` in the run folder; a resume reuses it.
+The rig: `--rig FILE` (copied into the run folder), else with `--rig-cache DIR` the cached
+rig of the camera the controller names if it still fits a fresh chessboard view
+(`rig_cache.py`), else calibrated first from the controller's chessboard captures
+(`capture("chessboard", view)` for every view the cell's chessboard description lists); saved
+as `rig.json` in the run folder; a resume reuses it.
 
 Dataset frames: `tool` = left camera optical frame in the flange frame (nominal mount from
 the cell), `target` = target centre in base (nominal from the cell); `known` from the cell.
@@ -263,6 +265,7 @@ class StereoTargetMethod(Method):
         progress.stage("rig solve")
         result = calibrate_rig(pairs, spec, corners)
         self.rig_report = {
+            **({"cache_check": self.rig_report} if self.rig_report else {}),  # did not fit
             "ok": bool(result.ok),
             "rms_px": float(result.rms),
             "per_view_rms_px": [float(v) for v in result.per_view_rms],
