@@ -12,6 +12,7 @@ by the simulation (`Simulation.camera_pose`).
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -244,6 +245,7 @@ def camera_description(sc: Scenario) -> dict[str, Any]:
     """What the controller reports about its camera (and probe): never the hidden truth."""
     cam, tgt, board = sc.camera, sc.target, sc.chessboard
     return {
+        "camera_serial": camera_serial(sc),
         "image_width": cam.image_width,
         "image_height": cam.image_height,
         "baseline_nominal": cam.baseline,
@@ -272,3 +274,14 @@ def camera_description(sc: Scenario) -> dict[str, Any]:
             "latency_jitter": 0.0,
         },
     }
+
+
+def camera_serial(sc: Scenario) -> str:
+    """The simulated camera's identity, as a real one reports its serial number: the same
+    for the same camera (its intrinsics, distortion and stereo pose; not its mount, which
+    is the robot's), whichever robot and world it is mounted in."""
+    cam = sc.camera
+    unit = [cam.image_width, cam.image_height, cam.fx, cam.fy, cam.cx, cam.cy,
+            *cam.distortion, cam.baseline, *cam.right_rpy]
+    digest = hashlib.sha256(repr([float(v) for v in unit]).encode()).hexdigest()
+    return f"sim-{digest[:12]}"

@@ -225,8 +225,12 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     if groups is None:
         travel = None
         if short:  # prefer informative poses near the ones already chosen
-            travel = Travel(pool, np.asarray(state.q, float),
-                            full_turn_joints(*limits), TRAVEL_SLACK)
+            travel = (Travel(pool, np.asarray(state.q, float), full_turn_joints(*limits),
+                             rates=rates,
+                             per_pose_s=time_limits.settle_s + time_limits.capture_s)
+                      if method.selection_per_second else
+                      Travel(pool, np.asarray(state.q, float), full_turn_joints(*limits),
+                             TRAVEL_SLACK))
         chosen = select(design, settings.n_poses, settings.criterion, rng, travel)
         selection = chosen
         if settings.target_sigma_deg is not None:  # the fewest poses that reach it

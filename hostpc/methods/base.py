@@ -415,6 +415,10 @@ class Method(ABC):
     plans_whole_groups: ClassVar[bool] = False
     """The plan takes whole groups of poses (`pose_groups`: sphere_probe's orientations of
     5 contacts), so it has no per-pose stop at a target sigma (--target-sigma refused)."""
+    selection_per_second: ClassVar[bool] = False
+    """A target-sigma plan selects its fit poses as a path, the most information per
+    second of move, settle and capture (`hostpc.planning.design.Travel.per_pose_s`:
+    stereo_target), instead of the nearest within `run_plan.TRAVEL_SLACK` of the best."""
     needs: ClassVar[tuple[Need, ...]] = ()
     """Calls beyond `RobotAdapter` the method makes (hostpc.robots.base capabilities),
     checked by the runner before `prepare`."""

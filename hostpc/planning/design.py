@@ -194,12 +194,20 @@ class Travel:
     the slack and the first picks are simply the poses nearest the start; the selection
     therefore depends on `ridge` (plain D-optimal does not). TRAVEL_SLACK was chosen, and its
     sigmas checked on held-out worlds, with DEFAULT_RIDGE as it is; a ratio of determinants
-    (gain >= best + log(1 - slack)) would be the ridge-free rule, not yet re-tuned."""
+    (gain >= best + log(1 - slack)) would be the ridge-free rule, not yet re-tuned.
+
+    Per second instead (`per_pose_s` set, slack unused): a path. Each step takes the
+    candidate with the most information gain per second of its move from the LAST pose
+    chosen (from q_start for the first; `move_times` at `rates`, the run's trapezoidal law)
+    plus its settle and capture (`per_pose_s`), so the selection is itself a short tour
+    through informative poses (stereo_target, `Method.selection_per_second`). Nested too."""
 
     q: np.ndarray
     q_start: np.ndarray
     periodic: np.ndarray | None = None
     slack: float = 0.0
+    rates: Rates = None
+    per_pose_s: float | None = None
 
 
 def greedy_d_optimal_groups(design: Design, members: Sequence[np.ndarray], n_select: int,
@@ -224,6 +232,9 @@ def _greedy_d_optimal_blocks(A: np.ndarray, n_select: int, ridge: float,
     near = None
     if travel is not None and travel.slack > 0:
         near = move_times(travel.q, travel.q_start[None, :], periodic=travel.periodic)
+    path = travel is not None and travel.per_pose_s is not None
+    if path and travel is not None:  # the move time from the last pose chosen
+        near = move_times(travel.q, travel.q_start[None, :], travel.rates, travel.periodic)
     n_select = min(n_select, n_pool)
     Minv = np.eye(p) / ridge
     available = np.ones(n_pool, dtype=bool)
@@ -238,7 +249,12 @@ def _greedy_d_optimal_blocks(A: np.ndarray, n_select: int, ridge: float,
         k = int(np.argmax(gain))
         if not np.isfinite(gain[k]):
             break
-        if near is not None and travel is not None:
+        if path and near is not None and travel is not None:
+            per_second = np.where(np.isfinite(gain), gain, 0.0) / (
+                near + float(travel.per_pose_s or 0.0))
+            k = int(np.argmax(np.where(np.isfinite(gain), per_second, -np.inf)))
+            near = move_times(travel.q, travel.q[k][None, :], travel.rates, travel.periodic)
+        elif near is not None and travel is not None:
             eligible = gain >= (1.0 - travel.slack) * gain[k]
             k = int(np.flatnonzero(eligible)[np.argmin(near[eligible])])
             near = np.minimum(near, move_times(travel.q, travel.q[k][None, :],

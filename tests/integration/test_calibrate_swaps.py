@@ -306,13 +306,14 @@ def default_cell_swap(centre_error: list[float] | None = None) -> dict[str, Any]
 
 def declare_and_resume(tmp_path: Path, scenario: dict[str, Any]) -> tuple[Path, int]:
     """The default cell's run (the rig calibrated in the run, the tool frame estimated):
-    undeclared it measures too little to fit and names the resume that declares the swap;
-    that resume's exit code."""
+    undeclared, its stages fit and the push is refused (exit 5; with the plan before
+    stereo_target's per-second path it measured too little to fit, exit 1); the resume
+    that declares the swap; that resume's exit code."""
     out = tmp_path / "run"
     scenario_file = tmp_path / "world.json"
     scenario_file.write_text(json.dumps(scenario))
     assert main(["calibrate", "--robot", "sim", "--scenario", str(scenario_file), "--out",
-                 str(out), "--no-report", "--known", "target"]) == 1
+                 str(out), "--no-report", "--known", "target"]) == 5
     return out, main(["calibrate", "--resume", str(out), "--swapped", "J3", "--no-report"])
 
 

@@ -22,6 +22,11 @@ RIG_OPTION = KindOption(
     "rig", metavar="FILE", path=True,
     help="calibrated stereo rig JSON (default: calibrate from chessboard captures through "
     "the controller)")
+RIG_CACHE_OPTION = KindOption(
+    "rig_cache", metavar="DIR", path=True,
+    help="a station's rig cache: the rig of the camera the controller names (camera_serial) "
+    "is DIR/<serial>.json, reused when it still fits a fresh chessboard view, else "
+    "calibrated and stored (default: calibrate in every run)")
 RIG_COVERAGE_OPTION = KindOption(
     "rig_coverage", metavar="F", number=True, least=0.5, most=1.0,
     help="rig calibration: chessboard coverage to plan for (default 0.5)")
@@ -33,4 +38,5 @@ KIND = KindDescriptor(
     sim=SimDefault(
         overrides={"motion": {"time_scale": 0.0}, "target": {"centre_error": [0.0, 0.0, 0.0]}},
         known=("target",)),
-    cli_options=(DEPTH_OPTION, PIXEL_FLOOR_OPTION, RIG_OPTION, RIG_COVERAGE_OPTION))
+    cli_options=(DEPTH_OPTION, PIXEL_FLOOR_OPTION, RIG_OPTION, RIG_CACHE_OPTION,
+                 RIG_COVERAGE_OPTION))

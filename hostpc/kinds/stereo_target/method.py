@@ -6,9 +6,11 @@ sample `q` (joint angles at exposure), `p` (m), `cov` (m^2), `uv` (px), `t` (s s
 run started) and `approach` (sign of each joint's last motion). A target the vision
 rejects is journaled as skipped with the reason.
 
-The rig: `--rig FILE` (copied into the run folder), else calibrated first from the
-controller's chessboard captures (`capture("chessboard", view)` for every view the cell's
-chessboard description lists) and saved as `rig.json` in the run folder; a resume reuses it.
+The rig: `--rig FILE` (copied into the run folder), else with `--rig-cache DIR` the cached
+rig of the camera the controller names if it still fits a fresh chessboard view
+(`rig_cache.py`), else calibrated first from the controller's chessboard captures
+(`capture("chessboard", view)` for every view the cell's chessboard description lists); saved
+as `rig.json` in the run folder; a resume reuses it.
 
 Dataset frames: `tool` = left camera optical frame in the flange frame (nominal mount from
 the cell), `target` = target centre in base (nominal from the cell); `known` from the cell.
@@ -51,7 +53,13 @@ RIG_REPORT_FILE = "rig_calibration.json"
 CENTROID_SIGMA_PX = 0.05
 """Planning noise model without a calibrated rig: pixel precision of the dot centre in
 each image (conservative, a real camera's; the simulator's images are better);
-`planning_sigma_px` takes the rig's measured RMS instead."""
+`planning_sigma_px` takes the rig's measured RMS instead (CENTRE_PER_CORNER)."""
+CENTRE_PER_CORNER = 0.25
+"""The dot centre's pixel sigma per unit of the rig calibration's reprojection RMS (a
+chessboard corner's). Both scale with the camera's grey-level noise over its edge
+gradient; the dot's centroid averages some hundred edge pixels, a corner a few. Measured
+in the simulator: the detector states 0.0057-0.0083 px per image coordinate (a 47-23 px
+radius dot at 0.3-0.6 m) against a rig RMS of 0.030 px, 0.19-0.28 of it."""
 PIXEL_FLOOR_PX = 0.01
 """Floor added to every measured covariance, in px per image coordinate (independent per
 sample): a weighting, and what the push's chi2/dof band sees. The reported covariance takes
@@ -76,6 +84,7 @@ class StereoTargetMethod(Method):
     name: ClassVar[str] = "stereo_target"
     default_target_sigma_deg: ClassVar[float | None] = 0.002
     staged: ClassVar[bool] = True
+    selection_per_second: ClassVar[bool] = True
 
     @classmethod
     def short_plan_warning(cls, n_fit: int) -> str | None:
@@ -149,7 +158,13 @@ class StereoTargetMethod(Method):
             save_rig(self.rig, self.rig_path)
             progress.message(f"rig: {self.settings.options['rig']}")
         else:
-            self.rig = await self._calibrate_rig(robot, progress)
+            self.rig = await self._cached_rig(robot, progress)
+            if self.rig is None:
+                self.rig = await self._calibrate_rig(robot, progress)
+                if self._rig_cache_file is not None:
+                    self._rig_cache_file.parent.mkdir(parents=True, exist_ok=True)
+                    save_rig(self.rig, self._rig_cache_file)
+                    progress.message(f"rig: stored in the cache as {self._rig_cache_file}")
             save_rig(self.rig, self.rig_path)
         if self.cell.image_size and tuple(self.rig.image_size) != tuple(self.cell.image_size):
             raise InputError(
@@ -159,6 +174,54 @@ class StereoTargetMethod(Method):
             )
         depth = self.settings.options.get("depth", "triangulate")
         self._measurer = TargetMeasurer(self.rig, self.cell.target_radius, depth=depth)
+
+    @property
+    def _rig_cache_file(self) -> Path | None:
+        """The cached rig of this camera (option rig_cache, the controller's camera_serial:
+        rig_cache.py), None without either."""
+        from hostpc.kinds.stereo_target.rig_cache import cache_path
+
+        folder = self.settings.options.get("rig_cache")
+        serial = self.cell.raw.get("camera_serial")
+        if not folder or not isinstance(serial, str) or not serial.strip():
+            return None
+        return cache_path(folder, serial)
+
+    async def _cached_rig(self, robot: RobotAdapter, progress: Progress) -> Any:
+        """The cached rig of this camera if it still fits chessboard view 0 (rig_cache.py),
+        else None (the run then calibrates one)."""
+        from hostpc.kinds.stereo_target.rig_cache import fits, view_fit
+        from hostpc.vision import ChessboardSpec, load_rig
+        from hostpc.vision.rig_calibration import as_gray, find_chessboard
+
+        path, board = self._rig_cache_file, self.cell.chessboard
+        if path is None or not board:
+            return None
+        if not path.is_file():
+            progress.message(f"rig: none cached for camera {self.cell.raw['camera_serial']} "
+                             f"({path}): calibrating")
+            return None
+        rig = load_rig(path)
+        spec = ChessboardSpec(int(board["cols"]), int(board["rows"]),
+                              float(board["square_size"]))
+        capture = await robot.capture("chessboard", 0)
+        left = find_chessboard(as_gray(capture.left, "left"), spec)
+        right = find_chessboard(as_gray(capture.right, "right"), spec)
+        rms = ((float("inf"), float("inf")) if left is None or right is None
+               else view_fit(rig, spec.object_points(), left, right))
+        self.rig_report = {"cached": str(path), "check_view": 0,
+                           "check_rms_px": [None if not np.isfinite(r) else r for r in rms]}
+        if not fits(rig, rms):
+            progress.message(f"rig: the cached rig {path} does not fit chessboard view 0 "
+                             f"(RMS {rms[0]:.3f} / {rms[1]:.3f} px): calibrating anew")
+            self.rig_report["fits"] = False
+            return None
+        self.rig_report["fits"] = True
+        write_json_atomic(self.run_dir / RIG_REPORT_FILE, self.rig_report)
+        progress.message(f"rig: cached for camera {self.cell.raw['camera_serial']} ({path}), "
+                         f"fits chessboard view 0: RMS {rms[0]:.3f} / {rms[1]:.3f} px "
+                         "(left / right)")
+        return rig
 
     async def _calibrate_rig(self, robot: RobotAdapter, progress: Progress) -> Any:
         from hostpc.vision import ChessboardSpec, calibrate_rig
@@ -202,6 +265,7 @@ class StereoTargetMethod(Method):
         progress.stage("rig solve")
         result = calibrate_rig(pairs, spec, corners)
         self.rig_report = {
+            **({"cache_check": self.rig_report} if self.rig_report else {}),  # did not fit
             "ok": bool(result.ok),
             "rms_px": float(result.rms),
             "per_view_rms_px": [float(v) for v in result.per_view_rms],
@@ -294,14 +358,17 @@ class StereoTargetMethod(Method):
 
     @property
     def planning_sigma_px(self) -> float:
-        """The pixel noise the plan assumes: the rig calibration's reprojection RMS when
-        there is one (measured on this camera, this run or the station's --rig file: 0.03
-        px in the simulator, a real camera's more, which plans more poses), else
-        CENTROID_SIGMA_PX. Still conservative: a dot centre is a centroid of many edge
-        pixels, and the fit's reported sigma is about 7x below the plan's prediction
-        (docs/performance.md "Robot time against its physical floor")."""
+        """The pixel noise the plan assumes per image coordinate: what each sample's
+        covariance will hold, the dot centre's noise and the systematic floor added to it
+        (`pixel_floor`) in quadrature. The dot centre's is CENTRE_PER_CORNER x the rig
+        calibration's reprojection RMS when there is one (measured on this camera, this run
+        or the station's --rig file: 0.030 px in the simulator, 0.0075 px for the centre,
+        0.0125 px with the floor; a real camera's more, which plans more poses), else
+        CENTROID_SIGMA_PX. The fit reports its own sigma from the measurements; the bench
+        (bench/bench_robot_time.py) prints both."""
         rms = float(getattr(self.rig, "rms", 0.0) or 0.0)
-        return rms if rms > 0.0 else CENTROID_SIGMA_PX
+        centre = CENTRE_PER_CORNER * rms if rms > 0.0 else CENTROID_SIGMA_PX
+        return float(np.hypot(centre, self.pixel_floor))
 
     @property
     def pixel_floor(self) -> float:
@@ -408,7 +475,9 @@ class StereoTargetMethod(Method):
             "rig": {"file": str(self.rig_path), "rms_px": float(self.rig.rms),
                     "baseline_mm": self.rig.baseline * 1e3,
                     "image_size": list(self.rig.image_size),
-                    "calibrated_in_this_run": bool(self.rig_report)},
+                    "calibrated_in_this_run": "rms_px" in self.rig_report,
+                    "cached": self.rig_report.get("cached") if self.rig_report.get(
+                        "fits") else None},
             "depth": self.settings.options.get("depth", "triangulate"),
             "pixel_floor_px": self.pixel_floor,
         }

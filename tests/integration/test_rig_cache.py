@@ -1,0 +1,63 @@
+"""A station's rig cache (`--rig-cache DIR`, hostpc/kinds/stereo_target/rig_cache.py): one
+stereo camera mounted on robot after robot keeps its rig, named by the camera identity the
+controller reports; a run reuses it only when it still fits a fresh chessboard view.
+
+Real stub (subprocess, real sockets), real captures. A cached rig with the camera's true
+model fits and costs one capture; the same rig with its left focal length 0.3 % off (a
+changed focus) does not, and the run calibrates anew and replaces it."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from controller_stub.scenario.spec import Scenario
+from controller_stub.sensors.stereo_target import camera_serial
+from hostpc.kinds.stereo_target.rig_cache import cache_path
+from hostpc.robots.simulator import default_sim_scenario
+from hostpc.vision import load_rig, save_rig
+from tests.integration.test_calibrate_sim import run_cli, truth_rig_file
+
+
+@pytest.mark.slow
+def test_a_cached_rig_is_reused_when_it_fits_and_replaced_when_it_does_not(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    scenario = default_sim_scenario(method="stereo_target")
+    serial = camera_serial(Scenario.model_validate(scenario))
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    cached = cache_path(cache, serial)
+    truth_rig_file(scenario, cached)
+
+    out = tmp_path / "reused"
+    code, _, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--out", str(out),
+                              "--rig-cache", str(cache), "--no-report", "--no-push")
+    assert code == 0, stderr
+    assert f"rig: cached for camera {serial}" in stderr and "rig calibrated" not in stderr
+    result = json.loads((out / "result.json").read_text())
+    assert result["robot_time_s"]["rig"] == pytest.approx(0.1)  # one chessboard capture
+    check = json.loads((out / "rig_calibration.json").read_text())
+    assert check["fits"] and max(check["check_rms_px"]) < 0.1
+    camera = json.loads((out / "run.json").read_text())["initial"]["camera"]
+    assert camera["camera_serial"] == serial
+
+    rig = load_rig(cached)
+    K_left = rig.K_left.copy()
+    K_left[0, 0] *= 1.003  # a changed focus: 4 px of focal length
+    save_rig(dataclasses.replace(rig, K_left=K_left), cached)
+    out = tmp_path / "recalibrated"
+    code, _, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--out", str(out),
+                              "--rig-cache", str(cache), "--no-report", "--no-push")
+    assert code == 0, stderr
+    assert "does not fit chessboard view 0" in stderr and "rig calibrated" in stderr
+    report = json.loads((out / "rig_calibration.json").read_text())
+    assert report["ok"] and report["cache_check"]["fits"] is False
+    assert max(report["cache_check"]["check_rms_px"]) > 0.1  # the right image: 0.84 px
+    assert json.loads((out / "result.json").read_text())["robot_time_s"]["rig"] > 1.5
+    stored = load_rig(cached)  # replaced by this run's calibration
+    assert stored.rms > 0.0 and abs(stored.K_left[0, 0] - 1400.0) < 1.0
+    assert np.allclose(stored.K_left, load_rig(out / "rig.json").K_left)
