@@ -18,7 +18,7 @@ without ``.pyc`` files and with PYTHONDONTWRITEBYTECODE=1, as an editable instal
 machine this project is measured on (which sets it): every command then compiles its
 ~500 modules of the project.
 
-Run: ``python bench/bench_quick_host.py --old HEAD~5 [--runs 10]``
+Run: ``python bench/bench_quick_host.py --old HEAD~5 [--runs 10] [--only diagnose]``
 """
 
 from __future__ import annotations
@@ -70,7 +70,8 @@ Times = dict[str, dict[str, list[tuple[float, float]]]]
 """command -> tree -> (wall s, CPU s) of each counted run."""
 
 
-def run(runs: int, old_commit: str | None, byte_code: bool = True) -> Times:
+def run(runs: int, old_commit: str | None, byte_code: bool = True,
+        only: str | None = None) -> Times:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         trees = {"now": ROOT}
@@ -87,6 +88,8 @@ def run(runs: int, old_commit: str | None, byte_code: bool = True) -> Times:
             "diagnose --ladder (120 poses)": lambda k: ["diagnose", "--ladder", "--json",
                                                         str(LADDER_DATASET)],
         }
+        if only:
+            commands = {c: a for c, a in commands.items() if c.split()[0] == only}
         times: Times = {c: {t: [] for t in trees} for c in commands}
         count = 0
         for _ in range(runs + 1):  # the first round (writes the byte code) is not counted
@@ -107,9 +110,11 @@ def main() -> None:
     parser.add_argument("--old", metavar="COMMIT", help="interleave that commit's tree")
     parser.add_argument("--no-byte-code", action="store_true",
                         help="no .pyc files (an editable install with PYTHONDONTWRITEBYTECODE)")
+    parser.add_argument("--only", choices=("calibrate", "diagnose"),
+                        help="time only this command")
     args = parser.parse_args()
     load_before = os.getloadavg()[0]
-    times = run(args.runs, args.old, byte_code=not args.no_byte_code)
+    times = run(args.runs, args.old, byte_code=not args.no_byte_code, only=args.only)
     print("byte code: " + ("none (PYTHONDONTWRITEBYTECODE=1, as an editable install here)"
                            if args.no_byte_code else "written first (as after pip install .)"))
     print(f"load average (1 min) before: {load_before:.2f}, at the end: "

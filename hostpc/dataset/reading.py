@@ -139,7 +139,7 @@ def _dataset_from_document(doc: Any, kinds: Mapping[str, type[MeasurementKind]],
                          f"{plugin}")
     kind = kinds[method]()
 
-    document: schema.DocumentSchema = schema.validate(schema.DocumentSchema, doc)
+    document = schema.validate_document(doc)
     if not document.samples and columnar_samples is None:
         raise FieldError(("samples",), "no samples (expected at least one)")
     units = Units(document.units)
@@ -307,16 +307,16 @@ def _read_frames(frames: JsonObject, method: MeasurementKind, units: Units
             raise FieldError(loc, "required field missing")
         value = frames[name]
         if kind == "pose":
-            pose: schema.FramePoseSchema = schema.validate(schema.FramePoseSchema, value, loc)
+            pose = schema.validate_frame_pose(value, loc)
             result[name] = FramePose(xyz=units.length(pose.xyz), rpy=units.angle(pose.rpy))
         elif kind == "tip":
             tip: schema.TipFrameSchema = schema.validate(schema.TipFrameSchema, value, loc)
             rpy = np.zeros(3) if tip.rpy is None else units.angle(tip.rpy)
             result[name] = FramePose(xyz=units.length(tip.xyz), rpy=rpy)
         elif kind == "point":
-            result[name] = units.length(schema.validate(schema.Vec3, value, loc))
+            result[name] = units.length(schema.validate_vec3(value, loc))
         elif kind == "points":
-            points: dict[str, list[float]] = schema.validate(dict[str, schema.Vec3], value, loc)
+            points = schema.validate_points(value, loc)
             if not points:
                 raise FieldError(loc, "expected at least one named point")
             result[name] = {key: units.length(point) for key, point in points.items()}

@@ -1,9 +1,14 @@
-"""The ``zerocal-dataset/1`` file as pydantic models, and one-line field errors.
+"""The ``zerocal-dataset/1`` file's structure and types, and one-line field errors.
 
-This is the only module of hostpc.dataset that uses pydantic. The models check structure
-and types only (strict: numbers must be JSON numbers, no strings, no booleans); the
-checks that need the method, the units or several fields at once live in
-``hostpc.dataset.reading``. Numbers here are in the file's units.
+The models (pydantic, in ``hostpc.dataset.schema_models``; ``schema.SampleSchema`` etc.
+name them here) check structure and types only (strict: numbers must be JSON numbers, no
+strings, no booleans); the checks that need the method, the units or several fields at
+once live in ``hostpc.dataset.reading``. Numbers here are in the file's units.
+
+:func:`validate` first tries plain checks that accept only what the models accept and
+return what they return (a well-formed file is then read without importing pydantic, a
+quarter of ``hostpc diagnose``'s start-up); any value they do not accept goes to the
+models, so every error message stays the models' own.
 
 Every failure is a :class:`FieldError` carrying the location of the offending value
 (``("samples", 3, "cov")``) and a one-line message; ``io`` prefixes the file name and
@@ -12,258 +17,137 @@ turns it into ``hostpc.errors.DatasetError``.
 
 from __future__ import annotations
 
-import functools
-import json
 import math
-import re
 from collections.abc import Callable, Sequence
-from typing import Annotated, Any, Literal
+from types import SimpleNamespace
+from typing import TYPE_CHECKING, Any
 
-from pydantic import (
-    AfterValidator,
-    BaseModel,
-    BeforeValidator,
-    ConfigDict,
-    Field,
-    TypeAdapter,
-    ValidationError,
-)
-from pydantic_core import PydanticCustomError
-
+from hostpc.dataset.field_errors import FieldError as FieldError
+from hostpc.dataset.field_errors import Loc as Loc
+from hostpc.dataset.field_errors import format_error as format_error
+from hostpc.dataset.field_errors import format_loc as format_loc
+from hostpc.dataset.field_errors import show as show
 from hostpc.json_object import JsonObject
+
+if TYPE_CHECKING:
+    from hostpc.dataset.schema_models import Covariance as Covariance
+    from hostpc.dataset.schema_models import DocumentSchema as DocumentSchema
+    from hostpc.dataset.schema_models import FramePoseSchema as FramePoseSchema
+    from hostpc.dataset.schema_models import JointRowSchema as JointRowSchema
+    from hostpc.dataset.schema_models import Mat2 as Mat2
+    from hostpc.dataset.schema_models import Mat3 as Mat3
+    from hostpc.dataset.schema_models import RobotSchema as RobotSchema
+    from hostpc.dataset.schema_models import SampleSchema as SampleSchema
+    from hostpc.dataset.schema_models import SphereSchema as SphereSchema
+    from hostpc.dataset.schema_models import StrictSchema as StrictSchema
+    from hostpc.dataset.schema_models import TipFrameSchema as TipFrameSchema
+    from hostpc.dataset.schema_models import UnitsSchema as UnitsSchema
+    from hostpc.dataset.schema_models import Vec2 as Vec2
+    from hostpc.dataset.schema_models import Vec3 as Vec3
 
 FORMAT_TAG = "zerocal-dataset/1"
 
-Loc = tuple[str | int, ...]
-_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+#: the fields of ``SampleSchema`` and ``DocumentSchema``, in their order (a test holds
+#: them equal to the models' fields)
+SAMPLE_FIELDS: tuple[str, ...] = (
+    "q", "chain", "q_head", "q_arm", "p", "cov", "sigma", "group", "t", "approach",
+    "temperature", "speed", "extra", "uv",
+)
+DOCUMENT_FIELDS: tuple[str, ...] = (
+    "format", "method", "units", "robot", "frames", "known", "samples",
+)
 
 
-class FieldError(Exception):
-    """A value of the document breaks the format; ``loc`` says where, ``message`` what."""
-
-    def __init__(self, loc: Loc, message: str) -> None:
-        super().__init__(format_error(loc, message))
-        self.loc = loc
-        self.message = message
+class _Unsure(Exception):
+    """A plain check cannot vouch for the value: the models decide (and word any error)."""
 
 
-def format_loc(loc: Loc) -> str:
-    """``("samples", 3, "p", 1)`` -> ``"samples[3].p[1]"``."""
-    text = ""
-    for part in loc:
-        if isinstance(part, int):
-            text += f"[{part}]"
-        elif not _NAME.fullmatch(part):
-            text += f"[{show(part)}]"
-        else:
-            text += f".{part}" if text else part
-    return text
-
-
-def format_error(loc: Loc, message: str) -> str:
-    """One line: ``"<field path>: <message>"`` (just the message at the top level)."""
-    return f"{format_loc(loc)}: {message}" if loc else message
-
-
-def show(value: Any, limit: int = 40) -> str:
-    """A short JSON-like rendering of an offending value for an error message."""
-    if isinstance(value, str):
-        text = repr(value)
-        return text if len(text) <= limit else text[: limit - 4] + "...'"
-    try:
-        text = json.dumps(value, allow_nan=True)
-    except (TypeError, ValueError):
-        text = repr(value)
-    text = text.replace("\n", " ")
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-def _length(n: int) -> AfterValidator:
-    """Validator: the list has exactly ``n`` entries."""
-
-    def check(value: list[Any]) -> list[Any]:
-        if len(value) != n:
-            raise PydanticCustomError(
-                "wrong_length", "expected {n} values, got {got}", {"n": n, "got": len(value)}
-            )
+def _number(value: Any) -> float:
+    """A strict ``float`` as the models return it (an int becomes a float)."""
+    if type(value) is float:
         return value
-
-    return AfterValidator(check)
-
-
-def _matrix(rows: int, cols: int) -> BeforeValidator:
-    """Validator: a list of ``rows`` lists of ``cols`` entries (checked before the entries)."""
-
-    def check(value: Any) -> Any:
-        if isinstance(value, list) and (
-            len(value) != rows
-            or not all(isinstance(row, list) and len(row) == cols for row in value)
-        ):
-            raise PydanticCustomError(
-                "wrong_shape",
-                "expected a {rows}x{cols} matrix ({rows} lists of {cols} numbers), got {got}",
-                {"rows": rows, "cols": cols, "got": show(value)},
-            )
-        return value
-
-    return BeforeValidator(check)
+    if type(value) is int and abs(value) <= 2**53:  # exact as a float
+        return float(value)
+    raise _Unsure
 
 
-def _square(*sizes: int) -> BeforeValidator:
-    """Validator: a square matrix of one of ``sizes`` (the message names the first)."""
-
-    def check(value: Any) -> Any:
-        if isinstance(value, list) and (
-            len(value) not in sizes
-            or not all(isinstance(row, list) and len(row) == len(value) for row in value)
-        ):
-            n = sizes[0]
-            raise PydanticCustomError(
-                "wrong_shape",
-                "expected a {rows}x{cols} matrix ({rows} lists of {cols} numbers), got {got}",
-                {"rows": n, "cols": n, "got": show(value)},
-            )
-        return value
-
-    return BeforeValidator(check)
+def _numbers(value: Any, depth: int) -> list[Any]:
+    """``list[float]`` (depth 1), ``list[list[float]]`` (2), ... as the models return it."""
+    if type(value) is not list:
+        raise _Unsure
+    if depth == 1:
+        return [_number(item) for item in value]
+    return [_numbers(item, depth - 1) for item in value]
 
 
-Vec2 = Annotated[list[float], _length(2)]
-Vec3 = Annotated[list[float], _length(3)]
-Mat3 = Annotated[list[Vec3], _matrix(3, 3)]
-Mat2 = Annotated[list[Vec2], _matrix(2, 2)]
-#: a 3x3 covariance, or world_pose's 6x6 (the kind checks which it needs)
-Covariance = Annotated[list[list[float]], _square(3, 6)]
+def _vec3(value: Any) -> list[float]:
+    numbers = _numbers(value, 1)
+    if len(numbers) != 3:
+        raise _Unsure
+    return numbers
 
 
-class StrictSchema(BaseModel):
-    """A JSON object with exactly these fields (a kind's own blocks subclass it too)."""
-
-    # built on first use: a file reads only some of them (defer_build: no behaviour change)
-    model_config = ConfigDict(strict=True, extra="forbid", frozen=True, defer_build=True)
-
-
-class UnitsSchema(StrictSchema):
-    """``units``: the units of the file's numbers (default SI)."""
-
-    length: Literal["m", "mm"] = "m"
-    angle: Literal["rad", "deg"] = "rad"
-    time: Literal["s", "ms"] = "s"
+def _text(value: Any) -> str:
+    if type(value) is not str:
+        raise _Unsure
+    return value
 
 
-class JointRowSchema(StrictSchema):
-    """One row of an explicit DH/MDH table (lengths and angles in the file's units)."""
+_PLAIN: dict[Any, Callable[[Any], Any]] = {
+    float: _number,
+    str: _text,
+    list[float]: lambda value: _numbers(value, 1),
+    list[list[float]]: lambda value: _numbers(value, 2),
+    list[list[list[float]]]: lambda value: _numbers(value, 3),
+}
+"""The plain checks of the types the column reader asks for (``reading_columns``)."""
 
-    a: float
-    alpha: float
-    d: float
-    theta: float
-    type: Literal["revolute", "prismatic"] = "revolute"  # extension A: prismatic q adds to d
-
-
-class RobotSchema(StrictSchema):
-    """``robot``: ``{"name": ...}`` or ``{"convention", "joints", "mass"?, "com"?}``."""
-
-    name: str | None = None
-    convention: Literal["dh", "mdh"] | None = None
-    joints: list[JointRowSchema] | None = None
-    mass: list[float] | None = None
-    com: list[Vec3] | None = None
-    urdf: str | None = None  # extension A: a URDF file, relative to the dataset file
-    base_link: str | None = None
-    tip_link: str | None = None
+_UNIT_CHOICES = {"length": ("m", "mm"), "angle": ("rad", "deg"), "time": ("s", "ms")}
 
 
-class FramePoseSchema(StrictSchema):
-    """A frame as ``xyz`` (length) and ``rpy`` (angle)."""
-
-    xyz: Vec3
-    rpy: Vec3
-
-
-class TipFrameSchema(StrictSchema):
-    """``frames.tool`` of sphere_probe: only ``xyz`` matters, ``rpy`` may be omitted."""
-
-    xyz: Vec3
-    rpy: Vec3 | None = None
-
-
-class SphereSchema(StrictSchema):
-    """``frames.sphere``: centre (length, base frame) and radius (length)."""
-
-    center: Vec3
-    radius: float
+def _units(value: Any) -> SimpleNamespace:
+    """``UnitsSchema``: the file's units, defaults m, rad, s."""
+    if type(value) is not dict:
+        raise _Unsure
+    units = {name: choices[0] for name, choices in _UNIT_CHOICES.items()}
+    for name, unit in value.items():
+        if name not in _UNIT_CHOICES or type(unit) is not str \
+                or unit not in _UNIT_CHOICES[name]:
+            raise _Unsure
+        units[name] = unit
+    return SimpleNamespace(**units)
 
 
-class SampleSchema(BaseModel):
-    """One sample, all built-in methods together; the measurement kind checks which fields
-    its method needs. Fields a plugin's kind declares arrive as extra fields (checked by
-    that kind; any other extra field is an error)."""
-
-    model_config = ConfigDict(strict=True, extra="allow", frozen=True)
-
-    q: list[float] | None = None
-    chain: Literal["left", "right"] | None = None
-    q_head: list[float] | None = None
-    q_arm: list[float] | None = None
-    p: Vec3 | None = None
-    cov: Covariance | None = None
-    sigma: float | None = None
-    group: Annotated[int, Field(ge=0, lt=2**31)] | None = None
-    t: float | None = None
-    approach: list[float] | None = None
-    temperature: float | None = None
-    speed: float | None = None
-    extra: dict[str, float] | None = None
-    uv: Mat2 | None = None
+_ROBOT_FIELDS = ("name", "convention", "joints", "mass", "com", "urdf", "base_link",
+                 "tip_link")
 
 
-class DocumentSchema(BaseModel):
-    """The whole document; unknown top-level fields are allowed and kept."""
-
-    model_config = ConfigDict(strict=True, extra="allow", frozen=True)
-
-    format: str
-    method: str
-    units: UnitsSchema = UnitsSchema()
-    robot: RobotSchema
-    frames: JsonObject
-    known: list[str] = []
-    samples: list[SampleSchema]
-
-
-SAMPLE_FIELDS: tuple[str, ...] = tuple(SampleSchema.model_fields)
-DOCUMENT_FIELDS: tuple[str, ...] = tuple(DocumentSchema.model_fields)
-
-
-def _describe(error: Any) -> str:
-    """One line for one pydantic error dict."""
-    kind = error["type"]
-    ctx = error.get("ctx") or {}
-    got = show(error.get("input"))
-    messages: dict[str, Callable[[], str]] = {
-        "missing": lambda: "required field missing",
-        "extra_forbidden": lambda: "unknown field",
-        "float_type": lambda: f"expected a number, got {got}",
-        "int_type": lambda: f"expected an integer, got {got}",
-        "string_type": lambda: f"expected a string, got {got}",
-        "list_type": lambda: f"expected a list, got {got}",
-        "dict_type": lambda: f"expected a JSON object, got {got}",
-        "model_type": lambda: f"expected a JSON object, got {got}",
-        "model_attributes_type": lambda: f"expected a JSON object, got {got}",
-        "literal_error": lambda: f"expected {ctx.get('expected')}, got {got}",
-        "too_short": lambda: f"expected at least {ctx.get('min_length')} entries, got {got}",
-        "greater_than_equal": lambda: f"must be >= {ctx.get('ge')}, got {got}",
-        "less_than": lambda: f"must be < {ctx.get('lt')}, got {got}",
-    }
-    if kind in messages:
-        return messages[kind]()
-    return " ".join(str(error.get("msg", kind)).split())
+def _document(doc: Any) -> SimpleNamespace:
+    """``DocumentSchema`` of a document whose robot is a built-in ``name`` and whose samples
+    are read by columns (``samples`` empty): the attributes the reader uses."""
+    if type(doc) is not dict or doc.get("samples") != [] \
+            or not {"format", "method", "robot", "frames"} <= doc.keys():
+        raise _Unsure
+    robot = doc["robot"]
+    if type(robot) is not dict or robot.keys() != {"name"}:
+        raise _Unsure
+    known = doc.get("known", [])
+    if type(known) is not list or type(doc["frames"]) is not dict:
+        raise _Unsure
+    return SimpleNamespace(
+        format=_text(doc["format"]), method=_text(doc["method"]),
+        units=_units(doc.get("units", {})),
+        robot=SimpleNamespace(**{**dict.fromkeys(_ROBOT_FIELDS), "name": _text(robot["name"])}),
+        frames=doc["frames"], known=[_text(name) for name in known], samples=[],
+    )
 
 
-@functools.cache
-def _adapter(kind: Any) -> TypeAdapter[Any]:
-    return TypeAdapter(kind)
+def _frame_pose(value: Any) -> SimpleNamespace:
+    """``FramePoseSchema``: ``{"xyz", "rpy"}``."""
+    if type(value) is not dict or value.keys() != {"xyz", "rpy"}:
+        raise _Unsure
+    return SimpleNamespace(xyz=_vec3(value["xyz"]), rpy=_vec3(value["rpy"]))
 
 
 def validate(kind: Any, value: Any, loc: Loc = ()) -> Any:
@@ -272,12 +156,75 @@ def validate(kind: Any, value: Any, loc: Loc = ()) -> Any:
     Raises:
         FieldError: at the first offending value, located under ``loc``.
     """
+    check = _PLAIN.get(kind) if isinstance(kind, type | type(list[float])) else None
+    if check is not None:
+        try:
+            return check(value)
+        except _Unsure:
+            pass
+    from hostpc.dataset import schema_models
+
+    return schema_models.validate(kind, value, loc)
+
+
+def _plain_or_model(check: Callable[[Any], Any], model: str, value: Any, loc: Loc) -> Any:
     try:
-        return _adapter(kind).validate_python(value, strict=True)
-    except ValidationError as exc:
-        errors = exc.errors(include_url=False)
-        first = errors[0]
-        raise FieldError(loc + tuple(first["loc"]), _describe(first)) from None
+        return check(value)
+    except _Unsure:
+        from hostpc.dataset import schema_models
+
+        return schema_models.validate(getattr(schema_models, model), value, loc)
+
+
+def validate_document(doc: Any) -> DocumentSchema:
+    """``validate(DocumentSchema, doc)``; a plain record of the same attributes where the
+    plain checks accept the document."""
+    result: DocumentSchema = _plain_or_model(_document, "DocumentSchema", doc, ())
+    return result
+
+
+def validate_frame_pose(value: Any, loc: Loc) -> FramePoseSchema:
+    """``validate(FramePoseSchema, value, loc)``, plainly where it can."""
+    result: FramePoseSchema = _plain_or_model(_frame_pose, "FramePoseSchema", value, loc)
+    return result
+
+
+def validate_vec3(value: Any, loc: Loc) -> list[float]:
+    """``validate(Vec3, value, loc)``, plainly where it can."""
+    result: list[float] = _plain_or_model(_vec3, "Vec3", value, loc)
+    return result
+
+
+def _points(value: Any) -> dict[str, list[float]]:
+    if type(value) is not dict:
+        raise _Unsure
+    return {_text(name): _vec3(point) for name, point in value.items()}
+
+
+def validate_points(value: Any, loc: Loc) -> dict[str, list[float]]:
+    """``validate(dict[str, Vec3], value, loc)`` (named points), plainly where it can."""
+    try:
+        return _points(value)
+    except _Unsure:
+        from hostpc.dataset import schema_models
+
+        result: dict[str, list[float]] = schema_models.validate(
+            dict[str, schema_models.Vec3], value, loc)
+        return result
+
+
+_MODELS = ("Covariance", "DocumentSchema", "FramePoseSchema", "JointRowSchema", "Mat2",
+           "Mat3", "RobotSchema", "SampleSchema", "SphereSchema", "StrictSchema",
+           "TipFrameSchema", "UnitsSchema", "Vec2", "Vec3")
+
+
+def __getattr__(name: str) -> Any:
+    """``schema.SampleSchema`` etc.: the models, imported (with pydantic) on first use."""
+    if name in _MODELS:
+        from hostpc.dataset import schema_models
+
+        return getattr(schema_models, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 class DuplicateKeys(JsonObject):

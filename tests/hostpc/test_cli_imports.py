@@ -47,6 +47,18 @@ def test_offline_commands_import_no_scipy(args: tuple[str, ...]) -> None:
     assert not heavy, heavy[:5]
 
 
+@pytest.mark.parametrize("example", ["ur5e_stereo.json", "ur5e_stereo_hidden_compliance.json",
+                                     "ur5e_stereo_known_frames.json"])
+def test_diagnose_of_a_well_formed_file_imports_no_pydantic(example: str) -> None:
+    """A well-formed dataset passes the plain checks of hostpc.dataset.schema: pydantic and
+    the dataset models (~0.1 s of start-up) are not imported (a broken file still gets the
+    models' checks and messages: test_dataset_plain_checks.py)."""
+    code, modules = imported_by("diagnose", "--ladder", f"examples/{example}")
+    assert code in (0, 1)
+    assert not [m for m in modules if m.split(".")[0] in ("pydantic", "pydantic_core")
+                or m == "hostpc.dataset.schema_models"]
+
+
 def test_calibrate_against_the_simulator_imports_no_scipy(tmp_path: Path) -> None:
     """The main job: a whole `hostpc calibrate --robot sim` (plan, rig, fit, push, verify,
     report) runs without scipy (its verification power imported scipy.special: ~0.3 s of

@@ -25,12 +25,6 @@ from hostpc.dataset.schema import FieldError, Loc, show
 from hostpc.json_object import JsonObject
 
 
-class ProbeSchema(schema.StrictSchema):
-    """``probe``: the stylus ball radius (length)."""
-
-    stylus_radius: float
-
-
 @dataclass(frozen=True, eq=False)
 class Probe(KindBlock):
     """sphere_probe's ``probe`` block: the stylus ball radius, m."""
@@ -81,6 +75,8 @@ class SphereProbeFile(MeasurementKind):
         """``probe``: ``{"stylus_radius": r}``, a length >= 0."""
         if value is None:
             raise FieldError((name,), 'required field missing ({"stylus_radius": r})')
+        from hostpc.kinds.sphere_probe.probe_schema import ProbeSchema  # imports pydantic
+
         probe: ProbeSchema = schema.validate(ProbeSchema, value, (name,))
         if probe.stylus_radius < 0:
             raise FieldError((name, "stylus_radius"),
