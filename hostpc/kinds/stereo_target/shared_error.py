@@ -11,8 +11,6 @@ functions taking ``block`` read its JSON), with the rig.
 
 from __future__ import annotations
 
-import hashlib
-
 import numpy as np
 
 from hostpc.errors import InputError
@@ -47,6 +45,8 @@ def rig_point_sensitivity(problem: Problem, block: JsonObject) -> np.ndarray | N
     uv = problem.dataset.samples.uv
     if uv is None or problem.measured.shape[1] != 3:
         return None
+    import hashlib  # here: the most datasets hold no uv (its import is ~5 ms of start-up)
+
     uv = np.asarray(uv, float)
     digest = hashlib.sha1(np.ascontiguousarray(uv).tobytes())
     digest.update(repr(block.get("rig")).encode())
