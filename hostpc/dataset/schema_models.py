@@ -41,6 +41,14 @@ def _length(n: int) -> AfterValidator:
     return AfterValidator(check)
 
 
+def _wrong_shape(rows: int, cols: int, value: Any) -> PydanticCustomError:
+    return PydanticCustomError(
+        "wrong_shape",
+        "expected a {rows}x{cols} matrix ({rows} lists of {cols} numbers), got {got}",
+        {"rows": rows, "cols": cols, "got": show(value)},
+    )
+
+
 def _matrix(rows: int, cols: int) -> BeforeValidator:
     """Validator: a list of ``rows`` lists of ``cols`` entries (checked before the entries)."""
 
@@ -49,11 +57,7 @@ def _matrix(rows: int, cols: int) -> BeforeValidator:
             len(value) != rows
             or not all(isinstance(row, list) and len(row) == cols for row in value)
         ):
-            raise PydanticCustomError(
-                "wrong_shape",
-                "expected a {rows}x{cols} matrix ({rows} lists of {cols} numbers), got {got}",
-                {"rows": rows, "cols": cols, "got": show(value)},
-            )
+            raise _wrong_shape(rows, cols, value)
         return value
 
     return BeforeValidator(check)
@@ -67,12 +71,7 @@ def _square(*sizes: int) -> BeforeValidator:
             len(value) not in sizes
             or not all(isinstance(row, list) and len(row) == len(value) for row in value)
         ):
-            n = sizes[0]
-            raise PydanticCustomError(
-                "wrong_shape",
-                "expected a {rows}x{cols} matrix ({rows} lists of {cols} numbers), got {got}",
-                {"rows": n, "cols": n, "got": show(value)},
-            )
+            raise _wrong_shape(sizes[0], sizes[0], value)
         return value
 
     return BeforeValidator(check)
