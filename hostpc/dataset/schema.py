@@ -6,9 +6,9 @@ strings, no booleans); the checks that need the method, the units or several fie
 once live in ``hostpc.dataset.reading``. Numbers here are in the file's units.
 
 :func:`validate` first tries plain checks that accept only what the models accept and
-return what they return (a well-formed file is then read without importing pydantic, a
-quarter of ``hostpc diagnose``'s start-up); any value they do not accept goes to the
-models, so every error message stays the models' own.
+return what they return (a well-formed file is then read without importing pydantic:
+~0.07 s of the 0.42 s CPU ``hostpc diagnose --ladder`` took); any value they do not accept
+goes to the models, so every error message stays the models' own.
 
 Every failure is a :class:`FieldError` carrying the location of the offending value
 (``("samples", 3, "cov")``) and a one-line message; ``io`` prefixes the file name and
