@@ -164,3 +164,18 @@ def test_fewest_groups_for_a_target_sigma_and_no_sigma_from_too_few_rows() -> No
     assert groups_for_target_sigma(design, chosen, 1e-12, n_params) is None
     # one group (3 rows) cannot determine 4 parameters: no sigma, not a pseudo-inverse's
     assert np.all(np.isnan(predicted_covariance(design.subset(chosen[0]))))
+
+
+def test_the_stepping_model_brackets_the_contact() -> None:
+    """The Modbus stepping probe's modelled steps: the coarse steps up to the first past the
+    contact, then halvings of that step until the bracket is below the resolution."""
+    from hostpc.kinds.sphere_probe.planning.contacts import step_fractions
+
+    steps = step_fractions(0.69, coarse_steps=40, resolution=2e-5)
+    assert steps[:28] == [k / 40 for k in range(1, 29)]  # 28/40 = 0.7 first reads high
+    bisection = steps[28:]
+    assert len(bisection) == 11  # 0.025 / 2^11 < 2e-5 <= 0.025 / 2^10
+    below = max([27 / 40] + [s for s in bisection if s < 0.69])
+    above = min([28 / 40] + [s for s in bisection if s >= 0.69])
+    assert above - below <= 2e-5
+    assert step_fractions(1.5, coarse_steps=40) == [k / 40 for k in range(1, 41)]  # no contact
