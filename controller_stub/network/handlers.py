@@ -275,14 +275,14 @@ class RequestHandlers:
         except UnknownSensor as exc:
             raise SimulationRefused("unsupported", f"{self.sim.robot_name}: {exc}") from None
         self.sim.settle_for_measurement()  # a reading of the robot: it stands still first
+        q, time = float_list(self.sim.joint_positions()), float(self.sim.time)
         try:
             reading = sensor.read(request.request)
         except SensorRequestError as exc:
             raise RequestRefusedError(ErrorCode.BAD_MESSAGE,
                                       f"sensor_read {request.sensor}: {exc}") from None
-        return SensorReading(reply_to=request.id, sensor=request.sensor,
-                               q=float_list(self.sim.joint_positions()),
-                               time=float(self.sim.time),
+        self.sim.hold_for_capture()  # the reading takes capture_s, as any measurement does
+        return SensorReading(reply_to=request.id, sensor=request.sensor, q=q, time=time,
                                reading=json.loads(json.dumps(reading, default=json_default)))
 
     async def _get_offsets(self, request: m.GetOffsets) -> m.Offsets:

@@ -28,8 +28,9 @@ The interface, all a sensor sees of the simulation::
     sensor.truth() -> dict                           # its hidden truth (for tests)
 
 The server settles the robot before every reading (it measures the robot, as a capture
-does: the clock waits out what is left of `motion.settle_s` since the robot last moved) and
-adds the joint angles and the clock to it. Never imports hostpc.
+does: the clock waits out what is left of `motion.settle_s` since the robot last moved),
+adds the joint angles and the clock at its start to it, and charges `motion.capture_s` for
+it, as for any measurement. Never imports hostpc.
 """
 
 from __future__ import annotations

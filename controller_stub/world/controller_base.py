@@ -65,6 +65,12 @@ class ControllerBase:
         """See `ControllerState.settle_for_measurement`."""
         return self.state.settle_for_measurement()
 
+    def hold_for_capture(self) -> None:
+        """The robot stands still for one measurement (settled before it,
+        `settle_for_measurement`): the clock advances by the scenario's `motion.capture_s`
+        (a stereo capture, a tracker reading, a kind's own sensor reading)."""
+        self.state.advance_clock(float(self.state.scenario.motion.capture_s))
+
     def reset_estop(self) -> None:
         self.state.reset_estop()
 

@@ -227,10 +227,10 @@ class HumanoidSimulation(ControllerBase):
 
     def finish_move(self, plan: MotionPlan, fraction: float = 1.0) -> MoveResult:
         """Execute `plan` up to `fraction` (clipped to [0, 1]) of it: the robot stops there
-        and a move stopped early reports completed=False / reason "aborted". A completed
-        move that went somewhere leaves the robot to settle before its next measurement
-        (`ControllerState.end_motion`: charged by `measure_targets`, not here); an aborted
-        one charges no settling of its own, as on the arm."""
+        and a move stopped early reports completed=False / reason "aborted". A move that
+        went somewhere, completed or aborted (an abort decelerates the body), leaves the
+        robot to settle before its next measurement (`ControllerState.end_motion`: charged
+        by `measure_targets`, not here), as on the arm."""
         self.state.release_plan(plan)
         fraction = min(max(float(fraction), 0.0), 1.0)
         stopped = fraction < 1.0
@@ -238,7 +238,7 @@ class HumanoidSimulation(ControllerBase):
         duration = fraction * plan.duration_s
         self.state.set_position(q_end)
         self.state.advance_clock(duration)
-        if duration > 0.0 and not stopped:
+        if duration > 0.0:
             self.state.end_motion()
         self._moves += 1
         return MoveResult(completed=not stopped, q=q_end, duration_s=duration,

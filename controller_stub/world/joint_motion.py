@@ -72,18 +72,16 @@ class JointMotion:
         `motion.PathProfile`)."""
         return self.state.move_profile(q_from, q_to, speed).duration_s
 
-    def arrive(self, q_start: np.ndarray, q_end: np.ndarray, duration: float,
-               stopped: bool) -> None:
-        """A motion from q_start ended at q_end (n,) after `duration` s (`stopped`: cut
+    def arrive(self, q_start: np.ndarray, q_end: np.ndarray, duration: float) -> None:
+        """A motion from q_start ended at q_end (n,) after `duration` s (to its end or cut
         short, an abort): the body's approach, the reported angles and the clock follow;
-        counts the move (estop fault). A completed motion that went somewhere leaves the
-        robot to settle before its next measurement (`ControllerState.end_motion`); an
-        aborted one charges no settling of its own (the settling the moves before it owe
-        stays owed)."""
+        counts the move (estop fault). A motion that went somewhere, completed or aborted
+        (an abort decelerates the arm), leaves the robot to settle before its next
+        measurement (`ControllerState.end_motion`); the move itself charges no settling."""
         self.body.note_motion(q_start, q_end)
         self.state.set_position(q_end)
         self.state.advance_clock(duration)
-        if duration > 0.0 and not stopped:
+        if duration > 0.0:
             self.state.end_motion()
         self._completed_moves += 1
         after = self.scenario.faults.estop_after_moves
@@ -151,7 +149,7 @@ class JointMotion:
         if plan.io_line is not None:
             return self._finish_guarded(plan, s, duration, stopped)
         q_end = plan.q_start + s * (plan.q_target - plan.q_start) if stopped else plan.q_target
-        self.arrive(plan.q_start, q_end, duration, stopped)
+        self.arrive(plan.q_start, q_end, duration)
         return MoveResult(
             completed=not stopped,
             q=q_end.copy(),
@@ -194,7 +192,7 @@ class JointMotion:
         q_end = plan.q_start + s * (plan.q_target - plan.q_start)
         if contact is not None and contact.s_latch <= s:
             self.guarded.latch(contact)
-            self.arrive(plan.q_start, q_end, duration, stopped)
+            self.arrive(plan.q_start, q_end, duration)
             self.guarded.update_input(emit=True)
             return GuardedMoveResult(
                 contact=True,
@@ -212,7 +210,7 @@ class JointMotion:
             self.guarded.set_input(True, t_touch, q_touch, emit=False)
         if not stopped:
             q_end = plan.q_target.copy()
-        self.arrive(plan.q_start, q_end, duration, stopped)
+        self.arrive(plan.q_start, q_end, duration)
         return GuardedMoveResult(
             contact=False,
             q_latched=None,

@@ -170,12 +170,6 @@ class Simulation(ControllerBase):
         """(4, 4) true T_base_flange at the current pose."""
         return self.body.flange_pose()
 
-    def hold_for_capture(self) -> None:
-        """The robot stands still for one measurement (settled before it,
-        `settle_for_measurement`): the clock advances by the scenario's `motion.capture_s`
-        (a stereo capture, a tracker reading)."""
-        self.state.advance_clock(float(self.scenario.motion.capture_s))
-
     def camera_pose(self) -> np.ndarray:
         """(4, 4) true T_base_leftcamera at the current pose."""
         return self.flange_pose() @ self.stereo.T_flange_camera

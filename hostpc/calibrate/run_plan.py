@@ -64,8 +64,9 @@ from hostpc.planning.robot_time import (
     RobotPath,
     TimeLimits,
     Waypoints,
-    measuring_motion,
+    path_floor,
     predicted_robot_time,
+    robot_time_floor,
 )
 from hostpc.planning.tour import Rates, full_turn_joints, short_path, unwrap_plan
 from hostpc.planning.verify_poses import POWER_EFFECTS, PowerDesign, nearby_verify_poses
@@ -354,25 +355,28 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         "structural_fixed": [d.fixed for d in structural],
     }
     path = method.robot_path if isinstance(method, RobotPath) else Waypoints.plain
-    floor_motion = 0.0
     if groups is None:
         fewest = poses_for_target_sigma(
             design, selection, math.radians(settings.target_sigma_deg or FLOOR_SIGMA_DEG),
             state.q.size)
         if short and method.shortens_tour and fewest is not None:  # fewer poses reach it
             fewest = min(fewest, len(fit_indices))
+        n_fewest = fewest or len(selection)
+
+        def floor(verify: np.ndarray) -> float:
+            return robot_time_floor(n_fewest + verify.shape[0], time_limits)
     else:  # the fewest whole groups, with their measuring moves (guarded approaches)
-        floor_q = np.vstack([pool[np.concatenate(floor_groups)], q_verify])
-        fewest = floor_q.shape[0] - q_verify.shape[0]
-        floor_motion = measuring_motion(path(floor_q), settings.speed, time_limits)
+        fewest_q = pool[np.concatenate(floor_groups)]
+
+        def floor(verify: np.ndarray) -> float:
+            return path_floor(path(np.vstack([fewest_q, verify])), settings.speed, time_limits)
     planned = predicted_robot_time(state.q, path(q_fit), path(q_verify), settings.speed,
-                                   time_limits, (fewest or len(selection)) + q_verify.shape[0],
-                                   floor_motion)
+                                   time_limits, floor(q_verify))
     info["predicted_robot_time_s"] = planned
     if q_more is not None and q_verify_grown is not None:  # the plan if its model fails
         info[GROWN_TIME] = predicted_robot_time(
             state.q, path(np.vstack([q_fit, q_more])), path(q_verify_grown), settings.speed,
-            time_limits, (fewest or len(selection)) + q_verify_grown.shape[0], floor_motion)
+            time_limits, floor(q_verify_grown))
     progress.message(
         f"plan: {len(fit_indices)} poses from {pool.shape[0]} candidates "
         f"({settings.criterion}-optimal), {q_verify.shape[0]} verification poses; "

@@ -20,10 +20,13 @@ The controller's limits come from its state when it reports them (`RobotState.ex
 `capture_s`), else a UR's: 180 deg/s and 1.4 rad/s^2 (UR's default movej acceleration) on
 every joint, 0.3 s settling, 0.1 s a capture (the simulator's defaults but its
 acceleration, 4.0 rad/s^2, which it reports). The floor is what no
-tour can save: settle and capture of the fewest poses that reach the target sigma and of
-the verification poses, no motion (the planner counts the poses: hostpc.calibrate.run_plan),
-plus the moves that are the measurement itself (`measuring_motion`: sphere_probe's guarded
-approaches from the start pose to the contact at the contact's speed).
+tour can save, by the same rule per measurement type as the prediction: the fewest poses
+that reach the target sigma and the verification poses (the planner picks them:
+hostpc.calibrate.run_plan) each settle once and take their captures, no motion but the
+moves that are the measurement itself (`path_floor`: a plain pose settles and captures
+once; a sphere_probe contact settles at its start and its guarded approach runs, from the
+start pose to the contact at the contact's speed, `measuring_motion`; no capture: the
+contact is latched in motion).
 """
 
 from __future__ import annotations
@@ -151,17 +154,16 @@ def waypoints_time(q_start: np.ndarray, path: Waypoints, speed: float, limits: T
 
 
 def predicted_robot_time(q_start: np.ndarray, fit: Waypoints, verify: Waypoints,
-                         speed: float, limits: TimeLimits, floor_poses: int,
-                         floor_motion: float = 0.0) -> dict[str, float]:
+                         speed: float, limits: TimeLimits, floor: float) -> dict[str, float]:
     """{"motion", "settle", "capture", "total", "floor"} in s of the fit's waypoints then
-    the verification's from q_start (n,) at the run's speed fraction `speed`; the floor
-    that of `floor_poses` poses (the planner's: the fewest that reach the target sigma,
-    and the verification poses) plus `floor_motion` (s, their `measuring_motion`)."""
+    the verification's from q_start (n,) at the run's speed fraction `speed`; `floor` (s):
+    the planner's (`robot_time_floor` or `path_floor` of the fewest poses that reach the
+    target sigma and the verification poses)."""
     motion, settle, capture = waypoints_time(np.asarray(q_start, float), fit.then(verify),
                                              speed, limits)
     return {"motion": motion, "settle": settle, "capture": capture,
             "total": motion + settle + capture,
-            "floor": robot_time_floor(floor_poses, limits) + floor_motion}
+            "floor": floor}
 
 
 def measuring_motion(path: Waypoints, speed: float, limits: TimeLimits) -> float:
@@ -175,9 +177,19 @@ def measuring_motion(path: Waypoints, speed: float, limits: TimeLimits) -> float
 
 
 def robot_time_floor(n_poses: int, limits: TimeLimits) -> float:
-    """The physical floor (s) of a plan of n_poses poses: settle + capture each (every
-    measured pose settles once, as the simulator charges), no motion."""
+    """The physical floor (s) of a plan of n_poses plain poses (`Waypoints.plain`, as
+    `path_floor`): settle + capture each (every measured pose settles once, as the
+    simulator charges), no motion."""
     return n_poses * (limits.settle_s + limits.capture_s)
+
+
+def path_floor(path: Waypoints, speed: float, limits: TimeLimits) -> float:
+    """The physical floor (s) of the measurements of `path` with no travel between them,
+    charged as the prediction charges them: each measurement settles once (a `settle`
+    waypoint), takes its captures, and the moves that are themselves the measurement run
+    (`measuring_motion`; a sphere_probe contact: its guarded approach, no capture)."""
+    return (limits.settle_s * int(np.count_nonzero(path.settle))
+            + limits.capture_s * path.captures + measuring_motion(path, speed, limits))
 
 
 def largest_joint_moves(q_start: np.ndarray, q: np.ndarray) -> np.ndarray:

@@ -108,6 +108,17 @@ def test_measure_targets_at_home_sees_both_targets(sim: HumanoidSimulation) -> N
     assert sim.targets.measure_targets()["targets"] == {}
 
 
+def test_an_aborted_move_settles_before_the_next_capture(sim: HumanoidSimulation) -> None:
+    """An abort decelerates the body: the capture after it waits settle_s, as after a
+    completed move (the abort itself charges none)."""
+    q = HOME.copy()
+    q[1] = -0.75
+    cut = sim.finish_move(sim.begin_move(q, 1.0), 0.5)
+    assert not cut.completed and sim.time == pytest.approx(cut.duration_s)
+    reading = sim.targets.measure_targets()
+    assert reading["time"] == pytest.approx(cut.duration_s + 0.3)
+
+
 def test_true_frames_compose_as_documented(sim: HumanoidSimulation) -> None:
     truth = sim.truth()
     q = sim.physical_angles()

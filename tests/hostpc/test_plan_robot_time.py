@@ -21,6 +21,7 @@ from hostpc.planning.robot_time import (
     TimeLimits,
     Waypoints,
     largest_joint_moves,
+    path_floor,
     predicted_robot_time,
     robot_time_floor,
 )
@@ -39,7 +40,7 @@ def test_predicted_robot_time_is_motion_settle_and_capture() -> None:
     fit = np.array([[np.pi / 2, 0, 0, 0, 0, 0], [np.pi / 2, 0, 0, 0, 0, np.pi]])
     verify = np.array([[0.0, 0, 0, 0, 0, np.pi]])
     planned = predicted_robot_time(start, Waypoints.plain(fit), Waypoints.plain(verify), 0.5,
-                                   limits, 3)
+                                   limits, robot_time_floor(3, limits))
     # moves of 90, 180 and 90 deg at half of 180 deg/s, ramped at 1.4 rad/s^2: a 90 deg
     # move never reaches 90 deg/s (v^2 / a = 1.76 rad > 1.57 rad): 2 sqrt(d / a); the 180 deg
     # one cruises: d / v + v / a
@@ -49,10 +50,13 @@ def test_predicted_robot_time_is_motion_settle_and_capture() -> None:
     assert planned["settle"] == pytest.approx(0.9) and planned["capture"] == pytest.approx(0.3)
     assert planned["total"] == pytest.approx(motion + 1.2, rel=1e-12)
     assert planned["floor"] == pytest.approx(robot_time_floor(3, limits)) == pytest.approx(1.2)
+    # one rule: plain poses' path floor is theirs (settle + capture each, no motion)
+    assert path_floor(Waypoints.plain(np.vstack([fit, verify])), 0.5, limits) == pytest.approx(
+        robot_time_floor(3, limits))
     # without a ramp (infinite acceleration): at speed from the first instant, 1 + 2 + 1 s
     instant = TimeLimits(np.full(6, np.pi), np.full(6, np.inf))
     assert predicted_robot_time(start, Waypoints.plain(fit), Waypoints.plain(verify), 0.5,
-                                instant, 3)["motion"] == pytest.approx(4.0)
+                                instant, 0.0)["motion"] == pytest.approx(4.0)
 
 
 def test_limits_come_from_the_controller_when_it_reports_them() -> None:

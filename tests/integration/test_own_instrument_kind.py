@@ -86,6 +86,9 @@ def test_calibrate_sim_with_its_own_instrument_recorded_and_replayed(
     assert len(errors) == 6 and all(e is not None and abs(e) <= TOLERANCE_DEG
                                     for e in errors), errors
     assert document["push"]["status"] == "pushed" and document["verify"]["passed"] is True
+    planned = document["plan"]["predicted_robot_time_s"]  # a reading costs capture_s
+    spent = document["robot_time_s"]
+    assert spent["measure"] + spent["verify"] == pytest.approx(planned["total"], rel=0.01)
     truth = json.loads((out / "sim" / "truth.json").read_text())
     assert set(truth["sensors"]) == {"string_pot"}  # the stub simulated it from the folder
     tape = [json.loads(line) for line in
@@ -158,6 +161,9 @@ async def test_sensor_read_answers_with_the_true_cable_length(stub: ControllerSe
         reading = await client.sensor_read("string_pot", {"what": "length", "average": 4})
     assert described.reading["sigma"] == 1e-6 and described.reading["max_length"] == 2.0
     assert np.allclose(reading.q, stub.sim.joint_positions())
+    capture = stub.sim.scenario.motion.capture_s  # each reading, stamped at its start
+    assert reading.time == pytest.approx(described.time + capture, abs=1e-9)
+    assert stub.sim.time == pytest.approx(reading.time + capture, abs=1e-9)
     truth = stub.sensors.truth()["string_pot"]
     T = stub.sim.flange_pose()
     true_length = np.linalg.norm(T[:3, :3] @ truth["tool"] + T[:3, 3] - truth["anchor"])

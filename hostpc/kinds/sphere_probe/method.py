@@ -50,11 +50,13 @@ from hostpc.kinds.sphere_probe.dataset import (
 )
 from hostpc.kinds.sphere_probe.file_face import probe_blocks, reference_sphere
 from hostpc.kinds.sphere_probe.planning.contacts import (
+    STEP_SPEED,
     Location,
     PlannedContact,
     PlannedOrientation,
     ProbePlan,
     balance_probe_plan,
+    contact_fraction,
     contact_pose,
     design_speeds,
     free_moves,
@@ -63,6 +65,7 @@ from hostpc.kinds.sphere_probe.planning.contacts import (
     plan_sphere_probe,
     plan_to_dict,
     retract,
+    step_fractions,
 )
 from hostpc.kinds.sphere_probe.planning.setup import (
     CONTACTS_PER_ORIENTATION,
@@ -370,18 +373,30 @@ class SphereProbeMethod(Method):
         orientation's last contact on to its hover); the free moves at the plan's move
         speed, the approach at the contact's. The robot settles once per contact, at its
         start, before the guarded approach (a measurement); the free moves before it and
-        the retract end at rest and measure nothing, so no settling follows them."""
+        the retract end at rest and measure nothing, so no settling follows them. The Modbus
+        stepping probe (``probe_io`` modbus) steps instead (``step_fractions``, each step at
+        ``STEP_SPEED``, all of them the measurement) and settles nowhere: its readings
+        are digital reads at rest after a short slow step, which the simulator does not
+        settle either (docs/sphere-probe.md)."""
         rows, speeds, settles, measuring = [], [], [], []
         here: Location | None = None
+        stepping = self.modbus is not None
         for row in np.asarray(q, float):
             orientation, contact = self._lookup(row)
             via = self._free_moves(orientation, contact, here)
             q_back, there = retract(orientation, contact)
-            rows += [*via, row, q_back]
-            speeds += [self.config.move_speed] * len(via) + [contact.speed,
-                                                             self.config.move_speed]
-            settles += [False] * (len(via) - 1) + [True, False, False]
-            measuring += [False] * len(via) + [True, False]
+            if stepping:
+                approach = [contact.q_start + s * (contact.q_target - contact.q_start)
+                            for s in step_fractions(contact_fraction(self.config))]
+                approach_speeds = [STEP_SPEED] * len(approach)
+            else:
+                approach, approach_speeds = [row], [contact.speed]
+            rows += [*via, *approach, q_back]
+            speeds += ([self.config.move_speed] * len(via) + approach_speeds
+                       + [self.config.move_speed])
+            settles += ([False] * (len(via) - 1) + [not stepping] + [False] * len(approach)
+                        + [False])
+            measuring += [False] * len(via) + [True] * len(approach) + [False]
             here = there
         n = np.size(q, 1) if np.ndim(q) == 2 else 0
         return Waypoints(np.asarray(rows, float).reshape(-1, n), np.asarray(speeds, float),

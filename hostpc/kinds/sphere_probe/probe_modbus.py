@@ -28,6 +28,11 @@ from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.exceptions import ModbusException
 
 from hostpc.errors import ConnectionFailed
+from hostpc.kinds.sphere_probe.planning.contacts import (
+    STEP_COARSE,
+    STEP_RESOLUTION,
+    STEP_SPEED,
+)
 from hostpc.robots.base import ContactOutcome, RobotAdapter
 
 
@@ -80,14 +85,16 @@ class SteppedGuardedMove:
     robot: moves the joints; probe: reads the line; coarse_steps: equal steps over the
     whole travel; resolution: final bracket length in path units (fraction of the travel);
     step_speed: speed fraction of the step moves. Callable as the ``guarded`` hook of
-    ``sphere_probe.acquire``: ``await stepped(q_target, speed) -> ContactOutcome``.
+    ``sphere_probe.acquire``: ``await stepped(q_target, speed) -> ContactOutcome``. The
+    plan predicts its steps with ``planning.contacts.step_fractions``; no reading settles
+    (a digital read at rest after a short slow step), so neither does the plan.
     """
 
     robot: RobotAdapter
     probe: ModbusProbe
-    coarse_steps: int = 40
-    resolution: float = 2e-5
-    step_speed: float = 0.1
+    coarse_steps: int = STEP_COARSE
+    resolution: float = STEP_RESOLUTION
+    step_speed: float = STEP_SPEED
     moves: int = 0
 
     async def _go(self, q: np.ndarray) -> None:

@@ -333,12 +333,50 @@ def plan_from_dict(data: JsonObject) -> ProbePlan:
     return ProbePlan(tuple(orientations), int(data.get("rejected", 0)))
 
 
+STEP_COARSE = 40
+"""The Modbus stepping probe's equal steps over the whole travel (`SteppedGuardedMove`)."""
+STEP_RESOLUTION = 2e-5
+"""Its final bracket length (path units s: fraction of the travel)."""
+STEP_SPEED = 0.1
+"""The speed fraction of its step moves."""
+
+
+def step_fractions(s_contact: float, coarse_steps: int = STEP_COARSE,
+                   resolution: float = STEP_RESOLUTION) -> list[float]:
+    """The path fractions s, in order, that a Modbus stepping approach
+    (``hostpc.kinds.sphere_probe.probe_modbus.SteppedGuardedMove``) moves to when the probe
+    line reads high from s_contact on: the coarse steps up to the first past the contact,
+    then the bisection of that step down to `resolution`. The plan's model of the approach
+    (``SphereProbeMethod.robot_path``); no contact within the travel: every coarse step."""
+    steps: list[float] = []
+    s_lo, s_hi = 0.0, None
+    for k in range(1, coarse_steps + 1):
+        steps.append(k / coarse_steps)
+        if steps[-1] >= s_contact:
+            s_hi = steps[-1]
+            break
+        s_lo = steps[-1]
+    if s_hi is None:
+        return steps
+    while s_hi - s_lo > resolution:
+        s_mid = 0.5 * (s_lo + s_hi)
+        steps.append(s_mid)
+        s_lo, s_hi = (s_lo, s_mid) if s_mid >= s_contact else (s_mid, s_hi)
+    return steps
+
+
 def contact_pose(contact: PlannedContact, config: PlanConfig) -> np.ndarray:
     """(n,) nominal pose of the contact on the guarded line (tip on the nominal surface):
     the pose the shared planner and the design dataset see for this contact."""
-    s = config.standoff / (config.standoff + config.overtravel)
+    s = contact_fraction(config)
     q: np.ndarray = contact.q_start + s * (contact.q_target - contact.q_start)
     return q
+
+
+def contact_fraction(config: PlanConfig) -> float:
+    """Where on its guarded line (path fraction s from the start) a contact touches the
+    nominal surface."""
+    return config.standoff / (config.standoff + config.overtravel)
 
 
 def design_speeds(chain: Chain, contacts: Sequence[PlannedContact], q: np.ndarray,
