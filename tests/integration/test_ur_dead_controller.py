@@ -10,7 +10,6 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -22,7 +21,7 @@ rtde_receive = pytest.importorskip("rtde_receive")
 from hostpc.robots.simulator import default_sim_scenario  # noqa: E402
 from tests.integration.test_calibrate_sim import sim_scenario, truth_rig_file  # noqa: E402
 from tests.integration.test_interrupt_motion import ENV, REPO  # noqa: E402
-from tests.integration.ur_stub import ur_stub_process  # noqa: E402
+from tests.integration.ur_stub import calibrate_command, ur_stub_process  # noqa: E402
 
 SPEED = 0.05
 """Speed fraction of the run: 0.157 rad/s, so a move lasts seconds."""
@@ -39,11 +38,7 @@ def test_a_controller_lost_mid_move_ends_the_run(tmp_path: Path, signum: int) ->
     out = tmp_path / "run"
     with ur_stub_process(tmp_path / "stub", base=default_sim_scenario(1.0)) as stub:
         receive = rtde_receive.RTDEReceiveInterface("127.0.0.1")
-        command = [sys.executable, "-m", "hostpc.cli.main", "calibrate",
-                   "--robot", f"{stub.host}:{stub.port}", "--driver", "ur", "--rig", str(rig),
-                   "--known", "target", "--poses", "8", "--verify-poses", "0", "--cv-folds",
-                   "0", "--no-report", "--speed", str(SPEED), "--timeout", str(TIMEOUT_S),
-                   "--out", str(out)]
+        command = calibrate_command(stub, rig, out, SPEED, "--timeout", str(TIMEOUT_S))
         process = subprocess.Popen(command, cwd=REPO, env=ENV, stdout=subprocess.DEVNULL,
                                    stderr=subprocess.PIPE, text=True)
         try:
