@@ -93,6 +93,8 @@ class PacedMotion:
         """Path parameter at controller cycle `cycle`."""
         t = self.sim_time_at(cycle)
         s = self._plan_s(t)
+        if self.stop is not None and t >= self.stop.t_end:
+            return self.stop.s_final  # exactly: a ramp that reaches the target ends there
         if self.stop is not None and t > self.stop.t0:
             s = min(s, self.stop.s_at(t))
         return s

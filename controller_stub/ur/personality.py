@@ -298,10 +298,15 @@ class UrPersonality:
         along the path, planned as the simulation's guarded move on the probe line (the
         probe's trigger latency and repeatability, the contact and the stop point past it: a
         move nobody stops ends there, stylus overtravelled) and paced in real time (one cycle
-        per 2 ms, so a 500 Hz RTDE client sees every cycle). Any other movej, synchronous or
-        not, is a joint move like the zerocal protocol's (settling charged), paced by the
-        scenario's time_scale: a real UR moves the same way whether the host waits for the
-        move or polls its progress. Returns (completed, reason): reason
+        per 2 ms, so a 500 Hz RTDE client sees every cycle), settled at its start like a
+        guarded move (`settle_for_measurement`; the touch is judged at that settled clock).
+        A watched movej that misses the sphere cannot be told from a plain one (a UR movej
+        carries no "measure" flag): it settles nowhere. Any other movej, synchronous or not,
+        is a joint move like the zerocal protocol's (settling is charged before a
+        measurement, not here), paced by the scenario's time_scale: a real UR moves the
+        same way whether the host waits for the move or polls its progress. A stop ramp
+        that runs past the plan's end ends the motion (the settle timer) at the ramp's end.
+        Returns (completed, reason): reason
         "busy" (another motion runs), "stopped" (stop_motion, or the program ended),
         "contact" (a watched move that reached its stop point past the contact),
         "invalid_acceleration" (an acceleration of 0, negative or not finite), or the
@@ -322,10 +327,14 @@ class UrPersonality:
             return False, "invalid_acceleration"
         probe_line = int(self.sim.scenario.probe.io_line)
         target = np.asarray(q_target, float)
-        watch_probe = watch_probe and self._touches(target, min(fraction, 1.0), acceleration)
         try:
             if self.server is not None:
                 self.server.begin_motion()
+            if watch_probe:  # judged at the settled clock a guarded move starts at
+                wait = self.sim.settle_for_measurement()
+                watch_probe = self._touches(target, min(fraction, 1.0), acceleration)
+                if not watch_probe:  # a plain move: it measures nothing, so no settling
+                    self.sim.state.advance_clock(-wait)
             plan = self.sim.begin_move(target, min(fraction, 1.0),
                                        probe_line if watch_probe else None,
                                        None if acceleration is None else float(acceleration))
@@ -351,10 +360,14 @@ class UrPersonality:
             motion = self._motion or motion
             fraction_done = motion.fraction_at(self.cycle)
             self._motion = None
+            ramp_s = (0.0 if motion.stop is None else
+                      max(motion.sim_time_at(self.cycle) - fraction_done * plan.duration_s, 0.0))
             result = self.sim.finish_move(plan, fraction_done)
-            if motion.stop is not None:
-                ramp_s = motion.sim_time_at(self.cycle) - fraction_done * plan.duration_s
-                self.sim.state.advance_clock(max(ramp_s, 0.0))
+            if ramp_s > 0.0:
+                self.sim.state.advance_clock(ramp_s)
+                if fraction_done >= 1.0 and plan.duration_s > 0.0:
+                    # finish_move's end_motion came a ramp early: the arm rests only now
+                    self.sim.state.end_motion()
         if plan.contact is not None:
             logger.info("probe contact: latched q %s, edge time %.6f s, stopped %.1f ms later",
                         np.round(plan.contact.q_latched, 9).tolist(), plan.contact.time_latch,

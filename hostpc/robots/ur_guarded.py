@@ -179,8 +179,10 @@ class UrGuardedMove:
     def _watch(self, io_line: int, start: Sample, cancel: threading.Event) -> _Watch:
         """Blocking (a worker thread): read every new RTDE sample of the asynchronous move
         until the input rises (stopJ at once), the move ends, or `cancel` is set (the
-        caller stops the arm)."""
+        caller stops the arm). ConnectionFailed when no new sample came for the link's
+        timeout (a dead or frozen controller: ur_rtde repeats its last state)."""
         low = start
+        fresh_at = time.monotonic()
         period = math.inf
         deadline = time.monotonic() + max(self.link.timeout, 60.0)
         next_status = 0.0
@@ -189,6 +191,7 @@ class UrGuardedMove:
         while True:
             sample = self.link.sample()
             if sample[0] > low[0]:
+                fresh_at = time.monotonic()
                 if sample[2] >> io_line & 1:
                     seen = time.monotonic()
                     self.link.control.stopJ(STOP_DECELERATION, False)
@@ -209,6 +212,8 @@ class UrGuardedMove:
                     continue  # the edge came with the last samples
             if cancel.is_set():
                 return _Watch(None, sample, period, 0.0)
+            if now - fresh_at > self.link.timeout:
+                raise self.link.lost(f"no new RTDE sample for {self.link.timeout:.1f} s")
             if now > deadline:
                 self.link.control.stopJ(STOP_DECELERATION, False)
                 raise RuntimeError("guarded move did not end")

@@ -15,6 +15,13 @@ could not be stopped: the control script runs it to its end before it reads anot
 command. When the move has ended, the receive interface may still hold a sample from before
 its end, so `move` waits for a sample newer than the one held then and at the target (within
 SETTLE_TOLERANCE_RAD, up to SETTLE_TIMEOUT_S). Angles rad, times s.
+
+A controller that dies or freezes mid-move does not make ur_rtde fail: its getters return the
+last state they received (the move "running", the program running, the same timestamp).
+So `move` gives up with ConnectionFailed ("connection lost") when the receive timestamp has
+not advanced for `timeout` s or the control interface reports itself disconnected. The
+ur_rtde calls run in daemon threads: one blocked on a dead link (stopScript, disconnect) is
+left behind, `close` bounds every step, and the process can still exit.
 """
 
 from __future__ import annotations
@@ -23,12 +30,13 @@ import asyncio
 import contextlib
 import logging
 import math
+import threading
 from collections.abc import Callable
 from typing import Any, TypeVar
 
 import numpy as np
 
-from hostpc.errors import ControllerError, InputError, RequestTimeout
+from hostpc.errors import ConnectionFailed, ControllerError, InputError, RequestTimeout
 from hostpc.planning.robot_time import DEFAULT_JOINT_ACCELERATION
 from hostpc.robots.base import MoveOutcome
 
@@ -53,6 +61,8 @@ POLL_INTERVAL_S = 0.004
 """Pause between two reads of a move's progress."""
 PROGRAM_CHECK_S = 0.25
 """While a move's operation has not started, how often to check the control script runs."""
+CLOSE_STEP_TIMEOUT_S = 2.0
+"""How long each step of `close` may take (a dead controller never answers stopScript)."""
 T = TypeVar("T")
 
 
@@ -69,6 +79,35 @@ def joint_velocity(speed: float) -> float:
     if not 0.0 < float(speed) <= 1.0:
         raise InputError(f"speed {speed!r}: expected a fraction in (0, 1]")
     return max(1e-3, float(speed) * MAX_JOINT_SPEED)
+
+
+def _settle(future: asyncio.Future[Any], result: Any, exc: BaseException | None) -> None:
+    """Resolve `future` (on its loop) unless its awaiter gave up on it already."""
+    if future.done():
+        return
+    if exc is None:
+        future.set_result(result)
+    else:
+        future.set_exception(exc)
+
+
+async def in_daemon_thread(function: Callable[..., T], *args: Any) -> T:
+    """function(*args) in a new daemon thread: a call blocked on a dead controller is left
+    behind when its awaiter gives up, and never holds up the process's exit (asyncio's
+    default executor joins its threads at exit)."""
+    loop = asyncio.get_running_loop()
+    future: asyncio.Future[T] = loop.create_future()
+
+    def run() -> None:
+        try:
+            result, exc = function(*args), None
+        except BaseException as error:  # handed to the awaiter
+            result, exc = None, error
+        with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
+            loop.call_soon_threadsafe(_settle, future, result, exc)
+
+    threading.Thread(target=run, name="ur_rtde call", daemon=True).start()
+    return await future
 
 
 def _at(q: np.ndarray, target: np.ndarray) -> bool:
@@ -92,7 +131,7 @@ class UrLink:
     async def call(self, function: Callable[..., T], *args: Any) -> T:
         """Run a blocking ur_rtde call in a worker thread; errors -> ControllerError."""
         try:
-            return await asyncio.to_thread(function, *args)
+            return await in_daemon_thread(function, *args)
         except (RuntimeError, ValueError, TypeError) as exc:
             name = getattr(function, "__name__", "ur_rtde call")  # a function's, for the message
             raise ControllerError(f"UR {self.host}: {name} failed: {exc}") from exc
@@ -168,13 +207,28 @@ class UrLink:
             reason = None if _at(q, target) else "stopped"
         return MoveOutcome(completed=reason is None, q=q, reason=reason)
 
+    def lost(self, why: str) -> ConnectionFailed:
+        """The error of a controller that stopped talking mid-move (`why`)."""
+        return ConnectionFailed(f"UR {self.host}: connection lost ({why})")
+
     async def _wait_async(self, op0: int) -> None:
         """Poll the asynchronous operation after `op0` until it has started and ended (or the
-        control script stopped: a refused move ends the program)."""
+        control script stopped: a refused move ends the program). ConnectionFailed if the
+        link is lost: no new RTDE sample for `timeout` s, or the control interface
+        disconnected. (No deadline from the move's planned duration: the teach pendant's
+        speed slider slows a move by a factor the host does not know.)"""
         loop = asyncio.get_running_loop()
         started = False
         check_at = loop.time() + PROGRAM_CHECK_S
+        stamp, fresh_at = -math.inf, loop.time()
         while True:
+            now_stamp = float(await self.call(self.receive.getTimestamp))
+            if now_stamp > stamp:
+                stamp, fresh_at = now_stamp, loop.time()
+            elif loop.time() - fresh_at > self.timeout:
+                raise self.lost(f"no new RTDE sample for {self.timeout:.1f} s")
+            if not await self.call(self.control.isConnected):
+                raise self.lost("the control interface disconnected")
             status = await self.call(self.control.getAsyncOperationProgressEx)
             started = started or status.operationId() != op0
             if started and not status.isAsyncOperationRunning():
@@ -191,10 +245,12 @@ class UrLink:
         ur_rtde `commands` in flight finish (one ur_rtde command at a time), stop the arm
         (`stop_interrupted`) and note on `exc` what was done, as the zerocal client does
         ("move_joints interrupted: ..."). The caller re-raises."""
-        for command in commands:
-            if command is not None:
-                with contextlib.suppress(Exception):
-                    await command
+        pending = [command for command in commands if command is not None]
+        if pending:  # bounded: a command on a dead link never returns
+            done, _ = await asyncio.wait(pending, timeout=STOP_TIMEOUT_S)
+            for command in done:  # its failure is the stop's business now
+                if not command.cancelled():
+                    command.exception()
         stopped = await self.stop_interrupted(target)
         logger.info("UR %s: %s interrupted: %s", self.host, kind, stopped)
         exc.add_note(f"{kind} interrupted: {stopped}")
@@ -210,7 +266,7 @@ class UrLink:
             q = await asyncio.wait_for(self.fresh_q(after, None), STOP_TIMEOUT_S)
         except (ControllerError, RequestTimeout, TimeoutError) as exc:
             logger.warning("UR %s: stopJ after an interrupted move failed: %s", self.host,
-                           exc or type(exc).__name__)
+                           str(exc) or type(exc).__name__)
             return "stopJ sent, not confirmed"
         short = float(np.degrees(np.max(np.abs(target - q))))
         logger.info("UR %s: stopJ(%.1f rad/s^2): the arm stopped at %s deg (UR angles), %.2f "
@@ -222,7 +278,8 @@ class UrLink:
 
     async def close(self) -> None:
         """Stop the control script and disconnect every interface (each failure logged,
-        closing goes on)."""
+        closing goes on; each step bounded by CLOSE_STEP_TIMEOUT_S: a dead controller never
+        answers, and its blocked call is left in its daemon thread)."""
         steps: tuple[tuple[str, Any, Callable[[Any], object]], ...] = (
             ("stopScript", self.control, lambda control: control.stopScript()),
             ("control.disconnect", self.control, lambda control: control.disconnect()),
@@ -233,6 +290,8 @@ class UrLink:
             if interface is None:
                 continue
             try:
-                await asyncio.to_thread(step, interface)
+                await asyncio.wait_for(in_daemon_thread(step, interface),
+                                       CLOSE_STEP_TIMEOUT_S)
             except Exception as exc:  # closing must go on
-                logger.warning("UR %s: %s failed: %s", self.host, name, exc)
+                logger.warning("UR %s: %s failed: %s", self.host, name,
+                               str(exc) or type(exc).__name__)

@@ -7,6 +7,7 @@ tests/integration/test_ur_probe.py."""
 from __future__ import annotations
 
 import asyncio
+import logging
 import threading
 import time
 from dataclasses import dataclass
@@ -14,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
+from hostpc.robots import ur_link
 from hostpc.robots.ur import UrAdapter
 from hostpc.robots.ur_precheck import UrControllerInfo
 
@@ -85,6 +87,9 @@ class ScriptedUr:
         return False
 
     def isProgramRunning(self) -> bool:  # noqa: N802
+        return True
+
+    def isConnected(self) -> bool:  # noqa: N802
         return True
 
     # control
@@ -174,3 +179,27 @@ def test_a_cancelled_guarded_move_stops_the_arm() -> None:
     short = np.degrees(np.max(np.abs(0.5 - q)))
     assert exc.__notes__ == [f"guarded_move interrupted: stopJ sent: motion stopped "
                              f"{short:.1f} deg short of the target"]
+
+
+class _StopHangs(ScriptedUr):
+    """A controller that never answers stopJ (a frozen one)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.release = threading.Event()
+
+    def stopJ(self, deceleration: float, asynchronous: bool = False) -> None:  # noqa: N802
+        self.release.wait(5.0)
+
+
+def test_a_stopj_that_times_out_logs_the_error_type(monkeypatch: pytest.MonkeyPatch,
+                                                    caplog: pytest.LogCaptureFixture) -> None:
+    """str(TimeoutError()) is empty: the log line names the type instead."""
+    monkeypatch.setattr(ur_link, "STOP_TIMEOUT_S", 0.2)
+    ur = _StopHangs()
+    adapter = _adapter(ur)
+    with caplog.at_level(logging.WARNING, logger="hostpc.robots.ur"):
+        said = asyncio.run(adapter.link.stop_interrupted(np.full(6, 0.5)))
+    ur.release.set()
+    assert said == "stopJ sent, not confirmed"
+    assert "stopJ after an interrupted move failed: TimeoutError" in caplog.text

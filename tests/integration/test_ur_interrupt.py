@@ -10,7 +10,6 @@ from __future__ import annotations
 import re
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -23,7 +22,7 @@ from hostpc.robots.simulator import default_sim_scenario  # noqa: E402
 from hostpc.robots.ur_link import INTERRUPT_DECELERATION, MAX_JOINT_SPEED  # noqa: E402
 from tests.integration.test_calibrate_sim import sim_scenario, truth_rig_file  # noqa: E402
 from tests.integration.test_interrupt_motion import ENV, REPO  # noqa: E402
-from tests.integration.ur_stub import ur_stub_process  # noqa: E402
+from tests.integration.ur_stub import calibrate_command, ur_stub_process  # noqa: E402
 
 SPEED = 0.05
 """Speed fraction of the run: 0.157 rad/s, so a move lasts seconds."""
@@ -49,11 +48,7 @@ def test_ctrl_c_during_a_ur_move_stops_the_arm(tmp_path: Path, signum: int, code
     with ur_stub_process(tmp_path / "stub", base=default_sim_scenario(1.0)) as stub:
         receive = rtde_receive.RTDEReceiveInterface("127.0.0.1")
         try:
-            command = [sys.executable, "-m", "hostpc.cli.main", "calibrate",
-                       "--robot", f"{stub.host}:{stub.port}", "--driver", "ur", "--rig",
-                       str(rig), "--known", "target", "--poses", "8", "--verify-poses", "0",
-                       "--cv-folds", "0", "--no-report", "--speed", str(SPEED),
-                       "--out", str(out)]
+            command = calibrate_command(stub, rig, out, SPEED)
             process = subprocess.Popen(command, cwd=REPO, env=ENV, stdout=subprocess.PIPE,
                                        stderr=subprocess.PIPE, text=True)
             try:

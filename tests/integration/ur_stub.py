@@ -127,3 +127,13 @@ def dashboard(command: str, host: str = "127.0.0.1") -> str:
         reader.readline()
         sock.sendall(f"{command}\n".encode())
         return reader.readline().strip()
+
+
+def calibrate_command(stub: UrStub, rig: Path, out: Path, speed: float, *extra: str
+                      ) -> list[str]:
+    """`hostpc calibrate --driver ur` against `stub`: 8 poses of the known target, no
+    verification, no report, at speed fraction `speed`, then `extra` arguments."""
+    return [sys.executable, "-m", "hostpc.cli.main", "calibrate",
+            "--robot", f"{stub.host}:{stub.port}", "--driver", "ur", "--rig", str(rig),
+            "--known", "target", "--poses", "8", "--verify-poses", "0", "--cv-folds", "0",
+            "--no-report", "--speed", str(speed), *extra, "--out", str(out)]
