@@ -61,3 +61,50 @@ def test_a_cached_rig_is_reused_when_it_fits_and_replaced_when_it_does_not(
     stored = load_rig(cached)  # replaced by this run's calibration
     assert stored.rms > 0.0 and abs(stored.K_left[0, 0] - 1400.0) < 1.0
     assert np.allclose(stored.K_left, load_rig(out / "rig.json").K_left)
+
+
+def test_cache_names_keep_serials_apart_and_short() -> None:
+    assert cache_path("c", "sim-0123abcd").name == "sim-0123abcd.json"
+    assert cache_path("c", "a/b") != cache_path("c", "a_b")
+    assert "/" not in cache_path("c", "a/b").name and "\n" not in cache_path("c", "x\ny").name
+    long_name = cache_path("c", "s" * 300).name
+    assert len(long_name) <= 70 and cache_path("c", "s" * 299).name != long_name
+    assert not cache_path("c", "..").name.startswith(".")
+
+
+def test_an_unwritable_cache_folder_is_refused_before_anything_moves(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    afile = tmp_path / "afile"
+    afile.write_text("not a folder\n")
+    out = tmp_path / "run"
+    code, _, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--out", str(out),
+                              "--rig-cache", str(afile / "sub"), "--no-report", "--no-push")
+    assert code == 2, stderr
+    assert "--rig-cache" in stderr and "Traceback" not in stderr
+    assert not (out / "samples.jsonl").exists() and not (out / "rig.json").exists()
+
+
+@pytest.mark.slow
+def test_a_broken_cached_rig_is_a_miss_and_an_unwritable_entry_a_warning(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    scenario = default_sim_scenario(method="stereo_target")
+    serial = camera_serial(Scenario.model_validate(scenario))
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    cached = cache_path(cache, serial)
+    cached.write_text('{"image_size": [1280, 9')  # a write cut short
+    out = tmp_path / "truncated"
+    code, _, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--out", str(out),
+                              "--rig-cache", str(cache), "--no-report", "--no-push")
+    assert code == 0, stderr
+    assert "the cached rig is unusable" in stderr and "rig calibrated" in stderr
+    assert np.allclose(load_rig(cached).K_left, load_rig(out / "rig.json").K_left)
+
+    cached.unlink()
+    cached.mkdir()  # the entry cannot be written (a folder in its place)
+    out = tmp_path / "unwritable"
+    code, _, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--out", str(out),
+                              "--rig-cache", str(cache), "--no-report", "--no-push")
+    assert code == 0, stderr
+    assert "warning: rig not stored in the cache" in stderr and "Traceback" not in stderr
+    assert load_rig(out / "rig.json").rms > 0.0

@@ -141,6 +141,13 @@ class StereoTargetMethod(Method):
         rig_option = self.settings.options.get("rig")
         if rig_option and not self.rig_path.is_file():
             self.rig = load_rig(rig_option)
+        cache = self.settings.options.get("rig_cache")
+        if cache and not rig_option and not self.rig_path.is_file():
+            from hostpc.kinds.stereo_target.rig_cache import check_folder
+
+            problem = check_folder(cache)
+            if problem:
+                raise InputError(problem)
         depth = self.settings.options.get("depth", "triangulate")
         if depth not in ("triangulate", "sgbm"):
             raise InputError(f"--depth {depth!r}: expected triangulate or sgbm")
@@ -161,11 +168,10 @@ class StereoTargetMethod(Method):
             self.rig = await self._cached_rig(robot, progress)
             if self.rig is None:
                 self.rig = await self._calibrate_rig(robot, progress)
-                if self._rig_cache_file is not None:
-                    self._rig_cache_file.parent.mkdir(parents=True, exist_ok=True)
-                    save_rig(self.rig, self._rig_cache_file)
-                    progress.message(f"rig: stored in the cache as {self._rig_cache_file}")
-            save_rig(self.rig, self.rig_path)
+                save_rig(self.rig, self.rig_path)
+                self._store_in_cache(progress)
+            else:
+                save_rig(self.rig, self.rig_path)
         if self.cell.image_size and tuple(self.rig.image_size) != tuple(self.cell.image_size):
             raise InputError(
                 f"rig image size {self.rig.image_size[0]}x{self.rig.image_size[1]} differs "
@@ -174,6 +180,21 @@ class StereoTargetMethod(Method):
             )
         depth = self.settings.options.get("depth", "triangulate")
         self._measurer = TargetMeasurer(self.rig, self.cell.target_radius, depth=depth)
+
+    def _store_in_cache(self, progress: Progress) -> None:
+        """Store the rig just calibrated in the rig cache; a failed write is a warning (the
+        run has its own rig.json)."""
+        from hostpc.vision import save_rig
+
+        path = self._rig_cache_file
+        if path is None:
+            return
+        try:
+            save_rig(self.rig, path)
+        except InputError as exc:
+            progress.message(f"warning: rig not stored in the cache: {exc}")
+            return
+        progress.message(f"rig: stored in the cache as {path}")
 
     @property
     def _rig_cache_file(self) -> Path | None:
@@ -195,13 +216,24 @@ class StereoTargetMethod(Method):
         from hostpc.vision.rig_calibration import as_gray, find_chessboard
 
         path, board = self._rig_cache_file, self.cell.chessboard
+        if path is None and self.settings.options.get("rig_cache"):
+            progress.message("rig: the controller reports no camera_serial, so --rig-cache "
+                             "is not used: calibrating")
         if path is None or not board:
             return None
+        camera = path.stem
         if not path.is_file():
-            progress.message(f"rig: none cached for camera {self.cell.raw['camera_serial']} "
-                             f"({path}): calibrating")
+            progress.message(f"rig: none cached for camera {camera} ({path}): calibrating")
             return None
-        rig = load_rig(path)
+        try:
+            rig = load_rig(path)
+        except InputError as exc:
+            progress.message(f"rig: the cached rig is unusable ({exc}): calibrating anew")
+            return None
+        if self.cell.image_size and tuple(rig.image_size) != tuple(self.cell.image_size):
+            progress.message(f"rig: the cached rig {path} is for another image size "
+                             f"({rig.image_size[0]}x{rig.image_size[1]}): calibrating anew")
+            return None
         spec = ChessboardSpec(int(board["cols"]), int(board["rows"]),
                               float(board["square_size"]))
         capture = await robot.capture("chessboard", 0)
@@ -218,7 +250,7 @@ class StereoTargetMethod(Method):
             return None
         self.rig_report["fits"] = True
         write_json_atomic(self.run_dir / RIG_REPORT_FILE, self.rig_report)
-        progress.message(f"rig: cached for camera {self.cell.raw['camera_serial']} ({path}), "
+        progress.message(f"rig: cached for camera {camera} ({path}), "
                          f"fits chessboard view 0: RMS {rms[0]:.3f} / {rms[1]:.3f} px "
                          "(left / right)")
         return rig

@@ -22,7 +22,9 @@ for a rig calibrated in the run; every robot calibrated with one cached rig shar
 
 from __future__ import annotations
 
+import hashlib
 import re
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -35,10 +37,38 @@ MIN_FIT_PX = 0.1
 """...and never asked below this (px): a rig file without an RMS, or a very good one."""
 
 
+MAX_NAME = 64
+"""A serial longer than this (characters) is cut and gets a hash suffix (no ENAMETOOLONG)."""
+
+
+def cache_name(serial: str) -> str:
+    """The serial made a file name: characters other than A-Z a-z 0-9 . _ - become `_`;
+    a name so changed, or longer than MAX_NAME, gets a short hash of the raw serial (so
+    "a/b" and "a_b" differ). Also how messages name the camera (never the raw serial)."""
+    raw = serial.strip()
+    name = re.sub(r"[^A-Za-z0-9._-]", "_", raw)
+    if name == raw and 0 < len(name) <= MAX_NAME and not name.startswith("."):
+        return name
+    digest = hashlib.sha256(raw.encode("utf-8", "surrogatepass")).hexdigest()[:12]
+    return f"{name.lstrip('.')[:MAX_NAME - 13] or 'camera'}-{digest}"
+
+
 def cache_path(folder: str | Path, serial: str) -> Path:
-    """The cached rig of the camera `serial` in `folder` (the serial made a file name)."""
-    name = re.sub(r"[^A-Za-z0-9._-]", "_", serial.strip()) or "camera"
-    return Path(folder) / f"{name}.json"
+    """The cached rig of the camera `serial` in `folder` (cache_name)."""
+    return Path(folder) / f"{cache_name(serial)}.json"
+
+
+def check_folder(folder: str | Path) -> str | None:
+    """None if the cache folder exists or can be created, and a file can be written in it;
+    else why not (one line)."""
+    path = Path(folder)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path, prefix=".zerocal-probe-"):
+            pass
+    except OSError as exc:
+        return f"--rig-cache {path}: cannot write there ({exc.strerror or exc})"
+    return None
 
 
 def view_fit(rig: Any, object_points: np.ndarray, left: np.ndarray, right: np.ndarray
@@ -49,8 +79,11 @@ def view_fit(rig: Any, object_points: np.ndarray, left: np.ndarray, right: np.nd
     import cv2
 
     obj = np.asarray(object_points, np.float64).reshape(-1, 3)
-    ok, rvec, tvec = cv2.solvePnP(obj, np.asarray(left, np.float64).reshape(-1, 1, 2),
-                                  rig.K_left, rig.dist_left)
+    try:
+        ok, rvec, tvec = cv2.solvePnP(obj, np.asarray(left, np.float64).reshape(-1, 1, 2),
+                                      rig.K_left, rig.dist_left)
+    except cv2.error:  # a degenerate cached rig (a zero focal length): it does not fit
+        ok = False
     if not ok:
         return float("inf"), float("inf")
     R_board, _ = cv2.Rodrigues(rvec)
