@@ -209,9 +209,14 @@ class StereoTargetMethod(Method):
         return cache_path(folder, serial)
 
     async def _cached_rig(self, robot: RobotAdapter, progress: Progress) -> Any:
-        """The cached rig of this camera if it still fits chessboard view 0 (rig_cache.py),
+        """The cached rig of this camera if it still fits two chessboard views (rig_cache.py),
         else None (the run then calibrates one)."""
-        from hostpc.kinds.stereo_target.rig_cache import fits, view_fit
+        from hostpc.kinds.stereo_target.rig_cache import (
+            CHECK_VIEWS,
+            board_tilt_deg,
+            fit_bound,
+            view_fit,
+        )
         from hostpc.vision import ChessboardSpec, load_rig
         from hostpc.vision.rig_calibration import as_gray, find_chessboard
 
@@ -236,23 +241,29 @@ class StereoTargetMethod(Method):
             return None
         spec = ChessboardSpec(int(board["cols"]), int(board["rows"]),
                               float(board["square_size"]))
-        capture = await robot.capture("chessboard", 0)
-        left = find_chessboard(as_gray(capture.left, "left"), spec)
-        right = find_chessboard(as_gray(capture.right, "right"), spec)
-        rms = ((float("inf"), float("inf")) if left is None or right is None
-               else view_fit(rig, spec.object_points(), left, right))
-        self.rig_report = {"cached": str(path), "check_view": 0,
-                           "check_rms_px": [None if not np.isfinite(r) else r for r in rms]}
-        if not fits(rig, rms):
-            progress.message(f"rig: the cached rig {path} does not fit chessboard view 0 "
-                             f"(RMS {rms[0]:.3f} / {rms[1]:.3f} px): calibrating anew")
-            self.rig_report["fits"] = False
+        corners = []
+        for view in range(CHECK_VIEWS):
+            capture = await robot.capture("chessboard", view)
+            corners.append((find_chessboard(as_gray(capture.left, "left"), spec),
+                            find_chessboard(as_gray(capture.right, "right"), spec)))
+        tilts = [-1.0 if left is None else board_tilt_deg(rig, spec.object_points(), left)
+                 for left, _ in corners]
+        views = [0, max(range(1, CHECK_VIEWS), key=lambda v: tilts[v])]
+        rms = [(float("inf"), float("inf")) if left is None or right is None
+               else view_fit(rig, spec.object_points(), left, right)
+               for left, right in (corners[v] for v in views)]
+        worst, bound = max(max(pair) for pair in rms), fit_bound(rig)
+        said = (f"chessboard views {views[0]} and {views[1]} (tilt {tilts[views[1]]:.0f} deg): "
+                f"RMS {worst:.3f} px, bound {bound:.3f} px")
+        self.rig_report = {"cached": str(path), "check_views": views, "bound_px": bound,
+                           "check_rms_px": [[r if np.isfinite(r) else None for r in pair]
+                                            for pair in rms],
+                           "fits": bool(worst <= bound)}
+        if not self.rig_report["fits"]:
+            progress.message(f"rig: the cached rig {path} does not fit {said}: calibrating anew")
             return None
-        self.rig_report["fits"] = True
         write_json_atomic(self.run_dir / RIG_REPORT_FILE, self.rig_report)
-        progress.message(f"rig: cached for camera {camera} ({path}), "
-                         f"fits chessboard view 0: RMS {rms[0]:.3f} / {rms[1]:.3f} px "
-                         "(left / right)")
+        progress.message(f"rig: cached for camera {camera} ({path}), fits {said}")
         return rig
 
     async def _calibrate_rig(self, robot: RobotAdapter, progress: Progress) -> Any:
