@@ -42,6 +42,7 @@ def test_a_cached_rig_is_reused_when_it_fits_and_replaced_when_it_does_not(
     assert result["robot_time_s"]["rig"] == pytest.approx(0.1 * CHECK_VIEWS)  # the captures
     check = json.loads((out / "rig_calibration.json").read_text())
     assert check["fits"] and check["check_views"][0] == 0
+    assert f"rig: cached {cached}\n" in (out / "summary.txt").read_text()
     assert max(max(pair) for pair in check["check_rms_px"]) < 0.07
     camera = json.loads((out / "run.json").read_text())["initial"]["camera"]
     assert camera["camera_serial"] == serial
@@ -60,6 +61,7 @@ def test_a_cached_rig_is_reused_when_it_fits_and_replaced_when_it_does_not(
     assert report["cache_check"]["bound_px"] == MAX_FIT_PX  # not 2.5 x 5.0 px
     assert max(max(pair) for pair in report["cache_check"]["check_rms_px"]) > MAX_FIT_PX
     assert json.loads((out / "result.json").read_text())["robot_time_s"]["rig"] > 1.5
+    assert "rig: calibrated in this run\n" in (out / "summary.txt").read_text()
     stored = load_rig(cached)  # replaced by this run's calibration
     assert stored.rms > 0.0 and abs(stored.K_left[0, 0] - 1400.0) < 1.0
     assert np.allclose(stored.K_left, load_rig(out / "rig.json").K_left)

@@ -158,6 +158,7 @@ class StereoTargetMethod(Method):
 
         if self.rig_path.is_file():
             self.rig = load_rig(self.rig_path)
+            self._rig_report_of_this_run()
             progress.message(f"rig: {self.rig_path} (from this run)")
         elif self.settings.options.get("rig"):
             if self.rig is None:
@@ -180,6 +181,28 @@ class StereoTargetMethod(Method):
             )
         depth = self.settings.options.get("depth", "triangulate")
         self._measurer = TargetMeasurer(self.rig, self.cell.target_radius, depth=depth)
+
+    def _rig_report_of_this_run(self) -> None:
+        """A resumed run: what rig_calibration.json says of its rig (calibrated or cached)."""
+        import json
+
+        try:
+            report = json.loads((self.run_dir / RIG_REPORT_FILE).read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return
+        if isinstance(report, dict):
+            self.rig_report = report
+
+    def rig_source(self) -> str:
+        """Which rig the run used, as summary.txt says it: cached FILE, calibrated in this
+        run, --rig FILE."""
+        if self.rig_report.get("fits") and self.rig_report.get("cached"):
+            return f"cached {self.rig_report['cached']}"
+        if "rms_px" in self.rig_report:
+            return "calibrated in this run"
+        if self.settings.options.get("rig"):
+            return f"--rig {self.settings.options['rig']}"
+        return f"{self.rig_path}"
 
     def _store_in_cache(self, progress: Progress) -> None:
         """Store the rig just calibrated in the rig cache; a failed write is a warning (the
@@ -517,7 +540,7 @@ class StereoTargetMethod(Method):
         return {
             "rig": {"file": str(self.rig_path), "rms_px": float(self.rig.rms),
                     "baseline_mm": self.rig.baseline * 1e3,
-                    "image_size": list(self.rig.image_size),
+                    "image_size": list(self.rig.image_size), "source": self.rig_source(),
                     "calibrated_in_this_run": "rms_px" in self.rig_report,
                     "cached": self.rig_report.get("cached") if self.rig_report.get(
                         "fits") else None},
