@@ -138,3 +138,22 @@ def test_a_focal_length_error_both_cameras_share_is_caught_by_the_tilted_view(
     assert code == 0, stderr
     assert "does not fit chessboard" in stderr, stderr
     assert load_rig(cached).K_left[0, 0] == pytest.approx(1400.0, abs=1.0)
+
+
+@pytest.mark.slow
+def test_a_refused_push_with_a_cached_rig_names_the_cached_file_before_force(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    scenario = default_sim_scenario(method="stereo_target")
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    cached = cache_path(cache, camera_serial(Scenario.model_validate(scenario)))
+    truth_rig_file(scenario, cached)
+    out = tmp_path / "run"
+    code, stdout, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--out", str(out),
+                                   "--rig-cache", str(cache), "--no-report",
+                                   "--max-correction", "0.000001")
+    assert code != 0, stderr
+    summary = (out / "summary.txt").read_text()
+    hint = f"the rig was the cached {cached}: rerun without --rig-cache, or delete {cached}"
+    assert hint in summary, summary
+    assert summary.index(hint) < summary.index("--force")

@@ -204,6 +204,15 @@ class StereoTargetMethod(Method):
             return f"--rig {self.settings.options['rig']}"
         return f"{self.rig_path}"
 
+    def refusal_hint(self) -> str | None:
+        """A cached rig is the first suspect of a refused push: say which file, and how
+        to do without it, before --force."""
+        if not (self.rig_report.get("fits") and self.rig_report.get("cached")):
+            return None
+        cached = self.rig_report["cached"]
+        return (f"the rig was the cached {cached}: rerun without --rig-cache, or delete "
+                f"{cached}, before --force")
+
     def _store_in_cache(self, progress: Progress) -> None:
         """Store the rig just calibrated in the rig cache; a failed write is a warning (the
         run has its own rig.json)."""
