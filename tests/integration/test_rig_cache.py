@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -23,14 +24,20 @@ from hostpc.vision import load_rig, save_rig
 from tests.integration.test_calibrate_sim import run_cli, truth_rig_file
 
 
-@pytest.mark.slow
-def test_a_cached_rig_is_reused_when_it_fits_and_replaced_when_it_does_not(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def stereo_cache(tmp_path: Path) -> tuple[dict[str, Any], str, Path, Path]:
+    """(the default stereo_target world, its camera's serial, an empty cache folder, the
+    serial's cached rig file there)."""
     scenario = default_sim_scenario(method="stereo_target")
     serial = camera_serial(Scenario.model_validate(scenario))
     cache = tmp_path / "cache"
     cache.mkdir()
-    cached = cache_path(cache, serial)
+    return scenario, serial, cache, cache_path(cache, serial)
+
+
+@pytest.mark.slow
+def test_a_cached_rig_is_reused_when_it_fits_and_replaced_when_it_does_not(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    scenario, serial, cache, cached = stereo_cache(tmp_path)
     truth_rig_file(scenario, cached)
 
     out = tmp_path / "reused"
@@ -91,11 +98,7 @@ def test_an_unwritable_cache_folder_is_refused_before_anything_moves(
 @pytest.mark.slow
 def test_a_broken_cached_rig_is_a_miss_and_an_unwritable_entry_a_warning(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    scenario = default_sim_scenario(method="stereo_target")
-    serial = camera_serial(Scenario.model_validate(scenario))
-    cache = tmp_path / "cache"
-    cache.mkdir()
-    cached = cache_path(cache, serial)
+    scenario, serial, cache, cached = stereo_cache(tmp_path)
     cached.write_text('{"image_size": [1280, 9')  # a write cut short
     out = tmp_path / "truncated"
     code, _, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--out", str(out),
@@ -124,9 +127,7 @@ def test_a_focal_length_error_both_cameras_share_is_caught_by_the_tilted_view(
     scenario["seed"] = 3
     world = tmp_path / "world.json"
     world.write_text(json.dumps(scenario))
-    cache = tmp_path / "cache"
-    cache.mkdir()
-    cached = cache_path(cache, camera_serial(Scenario.model_validate(scenario)))
+    _, _, cache, cached = stereo_cache(tmp_path)
     rig = load_rig(truth_rig_file(scenario, cached))
     scale = np.diag([1.01, 1.01, 1.0])
     save_rig(dataclasses.replace(rig, K_left=scale @ rig.K_left, K_right=scale @ rig.K_right,
@@ -143,10 +144,7 @@ def test_a_focal_length_error_both_cameras_share_is_caught_by_the_tilted_view(
 @pytest.mark.slow
 def test_a_refused_push_with_a_cached_rig_names_the_cached_file_before_force(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    scenario = default_sim_scenario(method="stereo_target")
-    cache = tmp_path / "cache"
-    cache.mkdir()
-    cached = cache_path(cache, camera_serial(Scenario.model_validate(scenario)))
+    scenario, _, cache, cached = stereo_cache(tmp_path)
     truth_rig_file(scenario, cached)
     out = tmp_path / "run"
     code, stdout, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--out", str(out),
