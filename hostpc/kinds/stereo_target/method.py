@@ -196,20 +196,25 @@ class StereoTargetMethod(Method):
     def rig_source(self) -> str:
         """Which rig the run used, as summary.txt says it: cached FILE, calibrated in this
         run, --rig FILE."""
-        if self.rig_report.get("fits") and self.rig_report.get("cached"):
-            return f"cached {self.rig_report['cached']}"
+        if self._cached_rig_used():
+            return f"cached {self._cached_rig_used()}"
         if "rms_px" in self.rig_report:
             return "calibrated in this run"
         if self.settings.options.get("rig"):
             return f"--rig {self.settings.options['rig']}"
         return f"{self.rig_path}"
 
+    def _cached_rig_used(self) -> str | None:
+        """The cached rig file the run used (it fit), None if it used none."""
+        cached = self.rig_report.get("cached")
+        return str(cached) if cached and self.rig_report.get("fits") else None
+
     def refusal_hint(self) -> str | None:
         """A cached rig is the first suspect of a refused push: say which file, and how
         to do without it, before --force."""
-        if not (self.rig_report.get("fits") and self.rig_report.get("cached")):
+        cached = self._cached_rig_used()
+        if not cached:
             return None
-        cached = self.rig_report["cached"]
         return (f"the rig was the cached {cached}: rerun without --rig-cache, or delete "
                 f"{cached}, before --force")
 
@@ -551,8 +556,7 @@ class StereoTargetMethod(Method):
                     "baseline_mm": self.rig.baseline * 1e3,
                     "image_size": list(self.rig.image_size), "source": self.rig_source(),
                     "calibrated_in_this_run": "rms_px" in self.rig_report,
-                    "cached": self.rig_report.get("cached") if self.rig_report.get(
-                        "fits") else None},
+                    "cached": self._cached_rig_used()},
             "depth": self.settings.options.get("depth", "triangulate"),
             "pixel_floor_px": self.pixel_floor,
         }
