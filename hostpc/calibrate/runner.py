@@ -335,6 +335,12 @@ class Runner:
                               limits_deg=limits_deg)
         push_plan = cell_reference.refuse_if_moved(push_plan, check, self.reference,
                                                    self.run_dir)
+        hint = method.refusal_hint() if push_plan.refusal is not None else None
+        if hint and push_plan.refusal is not None:  # the method's suspect before --force
+            reason = f"{hint}; {push_plan.refusal.reason}"
+            push_plan = dataclasses.replace(
+                push_plan, refused=reason,
+                refusal=dataclasses.replace(push_plan.refusal, reason=reason))
         push_status, pushed_delta, offsets = await self._push(push_plan, settings, offsets)
         if self._controller_refusal is not None:
             push_plan = dataclasses.replace(push_plan, refused=self._controller_refusal.reason,

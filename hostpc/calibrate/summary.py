@@ -170,6 +170,9 @@ def format_summary(run: RunResult) -> str:
         f"run folder: {run.run_dir}",
         f"known frames: {', '.join(run.known) or 'none (every frame estimated)'}",
         plan_line(plan, acq.to_dict()),
+        *([f"rig: {run.method_setup['rig']['source']}"]
+          if isinstance(run.method_setup.get("rig"), dict)
+          and run.method_setup["rig"].get("source") else []),
         (f"measured: {n_poses} of {acq.n_planned} fit poses" if n_poses <= acq.n_planned
          else f"measured: {n_poses} fit poses for a plan of {acq.n_planned} (the plan's "
          "poses measured again, shifted, in coarse-to-fine stages, or further poses)")

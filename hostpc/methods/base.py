@@ -494,6 +494,11 @@ class Method(ABC):
         return dataset_from_dict(self.dataset_document(samples),
                                  plugins=self.settings.plugins)
 
+    def refusal_hint(self) -> str | None:
+        """What to try before `--force` when the run's push is refused, from this method's
+        inputs (stereo_target: a cached rig, the first suspect), one clause; None: nothing."""
+        return None
+
     def default_effects(self) -> str | None:
         """The effect spec fitted (and planned for) when the settings give none; None: the
         dataset's default model (joint offsets + the unknown frames)."""

@@ -187,10 +187,13 @@ def rig_from_dict(data: Any, source: str = "<rig>") -> StereoRig:
 
 
 def save_rig(rig: StereoRig, path: str | Path) -> None:
-    """Write `rig` as JSON to `path` (InputError if the file cannot be written)."""
+    """Write `rig` as JSON to `path` atomically (a crash never leaves half a rig file;
+    InputError if the file cannot be written)."""
+    from hostpc.files import write_text_atomic
+
     path = Path(path)
     try:
-        path.write_text(json.dumps(rig.to_dict(), indent=2) + "\n", encoding="utf-8")
+        write_text_atomic(path, json.dumps(rig.to_dict(), indent=2) + "\n")
     except OSError as exc:
         raise InputError(f"{path}: cannot write rig file ({exc.strerror})") from None
 

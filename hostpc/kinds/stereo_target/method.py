@@ -141,6 +141,13 @@ class StereoTargetMethod(Method):
         rig_option = self.settings.options.get("rig")
         if rig_option and not self.rig_path.is_file():
             self.rig = load_rig(rig_option)
+        cache = self.settings.options.get("rig_cache")
+        if cache and not rig_option and not self.rig_path.is_file():
+            from hostpc.kinds.stereo_target.rig_cache import check_folder
+
+            problem = check_folder(cache)
+            if problem:
+                raise InputError(problem)
         depth = self.settings.options.get("depth", "triangulate")
         if depth not in ("triangulate", "sgbm"):
             raise InputError(f"--depth {depth!r}: expected triangulate or sgbm")
@@ -151,6 +158,7 @@ class StereoTargetMethod(Method):
 
         if self.rig_path.is_file():
             self.rig = load_rig(self.rig_path)
+            self._rig_report_of_this_run()
             progress.message(f"rig: {self.rig_path} (from this run)")
         elif self.settings.options.get("rig"):
             if self.rig is None:
@@ -161,11 +169,10 @@ class StereoTargetMethod(Method):
             self.rig = await self._cached_rig(robot, progress)
             if self.rig is None:
                 self.rig = await self._calibrate_rig(robot, progress)
-                if self._rig_cache_file is not None:
-                    self._rig_cache_file.parent.mkdir(parents=True, exist_ok=True)
-                    save_rig(self.rig, self._rig_cache_file)
-                    progress.message(f"rig: stored in the cache as {self._rig_cache_file}")
-            save_rig(self.rig, self.rig_path)
+                save_rig(self.rig, self.rig_path)
+                self._store_in_cache(progress)
+            else:
+                save_rig(self.rig, self.rig_path)
         if self.cell.image_size and tuple(self.rig.image_size) != tuple(self.cell.image_size):
             raise InputError(
                 f"rig image size {self.rig.image_size[0]}x{self.rig.image_size[1]} differs "
@@ -174,6 +181,57 @@ class StereoTargetMethod(Method):
             )
         depth = self.settings.options.get("depth", "triangulate")
         self._measurer = TargetMeasurer(self.rig, self.cell.target_radius, depth=depth)
+
+    def _rig_report_of_this_run(self) -> None:
+        """A resumed run: what rig_calibration.json says of its rig (calibrated or cached)."""
+        import json
+
+        try:
+            report = json.loads((self.run_dir / RIG_REPORT_FILE).read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return
+        if isinstance(report, dict):
+            self.rig_report = report
+
+    def rig_source(self) -> str:
+        """Which rig the run used, as summary.txt says it: cached FILE, calibrated in this
+        run, --rig FILE."""
+        if self._cached_rig_used():
+            return f"cached {self._cached_rig_used()}"
+        if "rms_px" in self.rig_report:
+            return "calibrated in this run"
+        if self.settings.options.get("rig"):
+            return f"--rig {self.settings.options['rig']}"
+        return f"{self.rig_path}"
+
+    def _cached_rig_used(self) -> str | None:
+        """The cached rig file the run used (it fit), None if it used none."""
+        cached = self.rig_report.get("cached")
+        return str(cached) if cached and self.rig_report.get("fits") else None
+
+    def refusal_hint(self) -> str | None:
+        """A cached rig is the first suspect of a refused push: say which file, and how
+        to do without it, before --force."""
+        cached = self._cached_rig_used()
+        if not cached:
+            return None
+        return (f"the rig was the cached {cached}: rerun without --rig-cache, or delete "
+                f"{cached}, before --force")
+
+    def _store_in_cache(self, progress: Progress) -> None:
+        """Store the rig just calibrated in the rig cache; a failed write is a warning (the
+        run has its own rig.json)."""
+        from hostpc.vision import save_rig
+
+        path = self._rig_cache_file
+        if path is None:
+            return
+        try:
+            save_rig(self.rig, path)
+        except InputError as exc:
+            progress.message(f"warning: rig not stored in the cache: {exc}")
+            return
+        progress.message(f"rig: stored in the cache as {path}")
 
     @property
     def _rig_cache_file(self) -> Path | None:
@@ -188,39 +246,61 @@ class StereoTargetMethod(Method):
         return cache_path(folder, serial)
 
     async def _cached_rig(self, robot: RobotAdapter, progress: Progress) -> Any:
-        """The cached rig of this camera if it still fits chessboard view 0 (rig_cache.py),
+        """The cached rig of this camera if it still fits two chessboard views (rig_cache.py),
         else None (the run then calibrates one)."""
-        from hostpc.kinds.stereo_target.rig_cache import fits, view_fit
+        from hostpc.kinds.stereo_target.rig_cache import (
+            CHECK_VIEWS,
+            board_tilt_deg,
+            fit_bound,
+            view_fit,
+        )
         from hostpc.vision import ChessboardSpec, load_rig
         from hostpc.vision.rig_calibration import as_gray, find_chessboard
 
         path, board = self._rig_cache_file, self.cell.chessboard
+        if path is None and self.settings.options.get("rig_cache"):
+            progress.message("rig: the controller reports no camera_serial, so --rig-cache "
+                             "is not used: calibrating")
         if path is None or not board:
             return None
+        camera = path.stem
         if not path.is_file():
-            progress.message(f"rig: none cached for camera {self.cell.raw['camera_serial']} "
-                             f"({path}): calibrating")
+            progress.message(f"rig: none cached for camera {camera} ({path}): calibrating")
             return None
-        rig = load_rig(path)
+        try:
+            rig = load_rig(path)
+        except InputError as exc:
+            progress.message(f"rig: the cached rig is unusable ({exc}): calibrating anew")
+            return None
+        if self.cell.image_size and tuple(rig.image_size) != tuple(self.cell.image_size):
+            progress.message(f"rig: the cached rig {path} is for another image size "
+                             f"({rig.image_size[0]}x{rig.image_size[1]}): calibrating anew")
+            return None
         spec = ChessboardSpec(int(board["cols"]), int(board["rows"]),
                               float(board["square_size"]))
-        capture = await robot.capture("chessboard", 0)
-        left = find_chessboard(as_gray(capture.left, "left"), spec)
-        right = find_chessboard(as_gray(capture.right, "right"), spec)
-        rms = ((float("inf"), float("inf")) if left is None or right is None
-               else view_fit(rig, spec.object_points(), left, right))
-        self.rig_report = {"cached": str(path), "check_view": 0,
-                           "check_rms_px": [None if not np.isfinite(r) else r for r in rms]}
-        if not fits(rig, rms):
-            progress.message(f"rig: the cached rig {path} does not fit chessboard view 0 "
-                             f"(RMS {rms[0]:.3f} / {rms[1]:.3f} px): calibrating anew")
-            self.rig_report["fits"] = False
+        corners = []
+        for view in range(CHECK_VIEWS):
+            capture = await robot.capture("chessboard", view)
+            corners.append((find_chessboard(as_gray(capture.left, "left"), spec),
+                            find_chessboard(as_gray(capture.right, "right"), spec)))
+        tilts = [-1.0 if left is None else board_tilt_deg(rig, spec.object_points(), left)
+                 for left, _ in corners]
+        views = [0, max(range(1, CHECK_VIEWS), key=lambda v: tilts[v])]
+        rms = [(float("inf"), float("inf")) if left is None or right is None
+               else view_fit(rig, spec.object_points(), left, right)
+               for left, right in (corners[v] for v in views)]
+        worst, bound = max(max(pair) for pair in rms), fit_bound(rig)
+        said = (f"chessboard views {views[0]} and {views[1]} (tilt {tilts[views[1]]:.0f} deg): "
+                f"RMS {worst:.3f} px, bound {bound:.3f} px")
+        self.rig_report = {"cached": str(path), "check_views": views, "bound_px": bound,
+                           "check_rms_px": [[r if np.isfinite(r) else None for r in pair]
+                                            for pair in rms],
+                           "fits": bool(worst <= bound)}
+        if not self.rig_report["fits"]:
+            progress.message(f"rig: the cached rig {path} does not fit {said}: calibrating anew")
             return None
-        self.rig_report["fits"] = True
         write_json_atomic(self.run_dir / RIG_REPORT_FILE, self.rig_report)
-        progress.message(f"rig: cached for camera {self.cell.raw['camera_serial']} ({path}), "
-                         f"fits chessboard view 0: RMS {rms[0]:.3f} / {rms[1]:.3f} px "
-                         "(left / right)")
+        progress.message(f"rig: cached for camera {camera} ({path}), fits {said}")
         return rig
 
     async def _calibrate_rig(self, robot: RobotAdapter, progress: Progress) -> Any:
@@ -474,10 +554,9 @@ class StereoTargetMethod(Method):
         return {
             "rig": {"file": str(self.rig_path), "rms_px": float(self.rig.rms),
                     "baseline_mm": self.rig.baseline * 1e3,
-                    "image_size": list(self.rig.image_size),
+                    "image_size": list(self.rig.image_size), "source": self.rig_source(),
                     "calibrated_in_this_run": "rms_px" in self.rig_report,
-                    "cached": self.rig_report.get("cached") if self.rig_report.get(
-                        "fits") else None},
+                    "cached": self._cached_rig_used()},
             "depth": self.settings.options.get("depth", "triangulate"),
             "pixel_floor_px": self.pixel_floor,
         }
