@@ -131,7 +131,7 @@ def run(worlds: int = 8, methods: tuple[str, ...] = METHODS, first_seed: int = 2
             if cache is not None:
                 out[method]["rig"] = ("one camera's rig, calibrated in a warm-up world not "
                                       "counted, reused from the station's --rig-cache after "
-                                      "a one-view check")
+                                      "a two-view check")
             print(f"  {method}: {out[method]}", file=sys.stderr, flush=True)
         if "stereo_target" in methods:
             forced = power(worlds, folder, first_seed)
