@@ -166,13 +166,12 @@ class StereoTargetMethod(Method):
             save_rig(self.rig, self.rig_path)
             progress.message(f"rig: {self.settings.options['rig']}")
         else:
-            self.rig = await self._cached_rig(robot, progress)
-            if self.rig is None:
-                self.rig = await self._calibrate_rig(robot, progress)
-                save_rig(self.rig, self.rig_path)
+            cached = await self._cached_rig(robot, progress)
+            self.rig = cached if cached is not None else await self._calibrate_rig(robot,
+                                                                                  progress)
+            save_rig(self.rig, self.rig_path)  # the run's own rig.json first
+            if cached is None:
                 self._store_in_cache(progress)
-            else:
-                save_rig(self.rig, self.rig_path)
         if self.cell.image_size and tuple(self.rig.image_size) != tuple(self.cell.image_size):
             raise InputError(
                 f"rig image size {self.rig.image_size[0]}x{self.rig.image_size[1]} differs "
@@ -254,8 +253,7 @@ class StereoTargetMethod(Method):
             fit_bound,
             view_fit,
         )
-        from hostpc.vision import ChessboardSpec, load_rig
-        from hostpc.vision.rig_calibration import as_gray, find_chessboard
+        from hostpc.vision import load_rig
 
         path, board = self._rig_cache_file, self.cell.chessboard
         if path is None and self.settings.options.get("rig_cache"):
@@ -276,13 +274,9 @@ class StereoTargetMethod(Method):
             progress.message(f"rig: the cached rig {path} is for another image size "
                              f"({rig.image_size[0]}x{rig.image_size[1]}): calibrating anew")
             return None
-        spec = ChessboardSpec(int(board["cols"]), int(board["rows"]),
-                              float(board["square_size"]))
-        corners = []
-        for view in range(CHECK_VIEWS):
-            capture = await robot.capture("chessboard", view)
-            corners.append((find_chessboard(as_gray(capture.left, "left"), spec),
-                            find_chessboard(as_gray(capture.right, "right"), spec)))
+        spec = self._board_spec(board)
+        corners = [(await self._chessboard_view(robot, view, spec))[1]
+                   for view in range(CHECK_VIEWS)]
         tilts = [-1.0 if left is None else board_tilt_deg(rig, spec.object_points(), left)
                  for left, _ in corners]
         views = [0, max(range(1, CHECK_VIEWS), key=lambda v: tilts[v])]
@@ -303,9 +297,27 @@ class StereoTargetMethod(Method):
         progress.message(f"rig: cached for camera {camera} ({path}), fits {said}")
         return rig
 
-    async def _calibrate_rig(self, robot: RobotAdapter, progress: Progress) -> Any:
-        from hostpc.vision import ChessboardSpec, calibrate_rig
+    @staticmethod
+    def _board_spec(board: Mapping[str, Any]) -> Any:
+        """The ChessboardSpec of the cell's chessboard description."""
+        from hostpc.vision import ChessboardSpec
+
+        return ChessboardSpec(int(board["cols"]), int(board["rows"]),
+                              float(board["square_size"]))
+
+    @staticmethod
+    async def _chessboard_view(robot: RobotAdapter, view: int, spec: Any
+                               ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[Any, Any]]:
+        """Chessboard view `view` captured: its (left, right) grey images and the corners
+        found in each (None where the board was not found)."""
         from hostpc.vision.rig_calibration import as_gray, find_chessboard
+
+        capture = await robot.capture("chessboard", view)
+        left, right = as_gray(capture.left, "left"), as_gray(capture.right, "right")
+        return (left, right), (find_chessboard(left, spec), find_chessboard(right, spec))
+
+    async def _calibrate_rig(self, robot: RobotAdapter, progress: Progress) -> Any:
+        from hostpc.vision import calibrate_rig
         from hostpc.vision.rig_planning import TARGET_COVERAGE, CoveragePlanner
 
         board = self.cell.chessboard
@@ -314,19 +326,16 @@ class StereoTargetMethod(Method):
                              "calibrate one; give --rig FILE")
         n_views = int(board.get("n_views", 20))
         max_views = max(n_views, int(board.get("max_views", n_views)))
-        spec = ChessboardSpec(int(board["cols"]), int(board["rows"]),
-                              float(board["square_size"]))
+        spec = self._board_spec(board)
         progress.stage("rig calibration", n_views)
         pairs, corners, planner = [], [], None
         for view in range(max_views):
             if planner is not None and planner.done():
                 break
-            capture = await robot.capture("chessboard", view)
-            left, right = as_gray(capture.left, "left"), as_gray(capture.right, "right")
+            (left, right), found = await self._chessboard_view(robot, view, spec)
             if planner is None:
                 planner = CoveragePlanner(n_views, (left.shape[1], left.shape[0]), float(
                     self.settings.options.get("rig_coverage", TARGET_COVERAGE)))
-            found = (find_chessboard(left, spec), find_chessboard(right, spec))
             if planner.offer(view, *found):
                 pairs.append((left, right))
                 corners.append(found)  # detected once: calibrate_rig reuses them
