@@ -317,8 +317,9 @@ class ControllerState:
         self._time += dt
 
     def end_motion(self) -> None:
-        """A completed motion that went somewhere ended now: the robot is at rest but still
-        vibrating; a measurement waits until it has stood still `motion.settle_s`."""
+        """A motion that went somewhere ended now, completed or aborted (an abort
+        decelerates the arm): the robot is at rest but still vibrating; a measurement waits
+        until it has stood still `motion.settle_s`."""
         self._settled_at = self._time + float(self.scenario.motion.settle_s)
 
     def settle_for_measurement(self) -> float:
