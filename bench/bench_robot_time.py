@@ -19,8 +19,13 @@ one default `hostpc calibrate --robot sim --method M --scenario <the method's wo
 - verdict power (stereo_target only, the one hidden-effect world: `bench_verdicts.power`,
   the stereo_hidden_compliance world with --force: FAILs of --worlds forced pushes).
 
+--all-joints: each method's all-joint plan instead (`all_joint_world`): the frames that make
+every joint identifiable (J1 and J6; dual_loop's head and q1/q7) declared known and true (their
+hidden errors zero), so the plan aims its target sigma at every joint; the power column then
+gives the clean worlds' PASS count (issue 28 asks these plans to meet the same floor).
+
     python bench/bench_robot_time.py [--worlds 40] [--first-seed 201] [--methods ...]
-                                     [--jobs 2] [--json OUT] [--speed S]
+                                     [--jobs 2] [--json OUT] [--speed S] [--all-joints]
 
 (--speed: the calibrations' `--speed`, default the CLI's; the verdict power's forced pushes
 keep the default.)
@@ -54,12 +59,44 @@ METHODS = ("stereo_target", "sphere_probe", "world_point", "dual_loop")
 OPTIONAL = True
 """bench/run.py skips this module unless its name is asked for (slow)."""
 
+ALL_JOINT_FRAMES: dict[str, tuple[tuple[str, ...], dict[str, Any]]] = {
+    "stereo_target": (("tool", "target"), {"camera": {"mount_error": {
+        "xyz": [0.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]}},
+        "target": {"centre_error": [0.0, 0.0, 0.0]}}),
+    # the default tip sits on the flange axis, where no frame gives J6 (docs/calibrate.md):
+    # the all-joint cell's stylus is off it, as tests/integration/test_calibrate_reference.py
+    "sphere_probe": (("tool", "sphere"), {"probe": {
+        "tip": [0.03, -0.02, 0.12], "tip_error": [0.0, 0.0, 0.0],
+        "sphere_centre_error": [0.0, 0.0, 0.0]}}),
+    "world_point": (("world", "markers"), {}),  # the default tracker's frames are true
+    "dual_loop": (("camera", "left_base", "right_base", "left_target", "right_target"),
+                  {"humanoid": {
+                      "camera_error": {"xyz": [0.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]},
+                      "left_base_error": {"xyz": [0.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]},
+                      "right_base_error": {"xyz": [0.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]},
+                      "left_target_error": [0.0, 0.0, 0.0],
+                      "right_target_error": [0.0, 0.0, 0.0]}}),
+}
+"""Per method: the frames its all-joint plan declares known, and the scenario sections that
+make them true (hidden errors zero)."""
+
+
+def all_joint_world(method: str, seed: int) -> tuple[dict[str, Any], list[str]]:
+    """`method`'s world `seed` (`bench_sigma_mc.world`) as an all-joint cell: the frames of
+    ALL_JOINT_FRAMES true and declared known."""
+    scenario, _known = world(method, seed)  # its options are one --known: replaced
+    frames, sections = ALL_JOINT_FRAMES[method]
+    for key, section in sections.items():
+        scenario[key] = {**scenario.get(key, {}), **section}
+    return scenario, ["--known", ",".join(frames)]
+
 
 def run_world(method: str, seed: int, folder: Path, speed: float | None = None,
-              rig_cache: Path | None = None) -> dict[str, Any]:
+              rig_cache: Path | None = None, all_joints: bool = False) -> dict[str, Any]:
     """One default calibration in `method`'s world `seed` (at `speed`, None: the CLI's
-    default; rig_cache: stereo_target's --rig-cache folder): robot time, plan, errors."""
-    scenario, options = world(method, seed)
+    default; rig_cache: stereo_target's --rig-cache folder; all_joints: its all-joint cell,
+    `all_joint_world`): robot time, plan, errors."""
+    scenario, options = (all_joint_world if all_joints else world)(method, seed)
     if rig_cache is not None:
         options = [*options, "--rig-cache", str(rig_cache)]
     scenario_path = folder / f"{method}_{seed}.yaml"
@@ -95,9 +132,11 @@ def run_world(method: str, seed: int, folder: Path, speed: float | None = None,
 
 
 def run(worlds: int = 8, methods: tuple[str, ...] = METHODS, first_seed: int = 201,
-        jobs: int = 2, speed: float | None = None, station: bool = True) -> dict[str, Any]:
+        jobs: int = 2, speed: float | None = None, station: bool = True,
+        all_joints: bool = False) -> dict[str, Any]:
     """{method: figures}; see the module docstring (station: stereo_target's worlds share
-    one camera's cached rig, calibrated in a warm-up world first_seed - 1 not counted)."""
+    one camera's cached rig, calibrated in a warm-up world first_seed - 1 not counted;
+    all_joints: each method's all-joint cell, no verdict power)."""
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory(prefix="zerocal-robot-time-") as tmp:
         folder = Path(tmp)
@@ -106,10 +145,10 @@ def run(worlds: int = 8, methods: tuple[str, ...] = METHODS, first_seed: int = 2
             cache = None
             if method == "stereo_target" and station:  # the station's camera, once
                 cache = folder / "rig-cache"
-                run_world(method, first_seed - 1, folder, speed, cache)
+                run_world(method, first_seed - 1, folder, speed, cache, all_joints)
             with ThreadPoolExecutor(jobs) as pool:
-                runs = list(pool.map(
-                    lambda s, m=method, c=cache: run_world(m, s, folder, speed, c), seeds))
+                runs = list(pool.map(lambda s, m=method, c=cache: run_world(
+                    m, s, folder, speed, c, all_joints), seeds))
             good = [r for r in runs if "failed" not in r]
             times = np.array([r["robot_time"] for r in good])
             floors = np.array([r["floor"] for r in good if r["floor"] is not None])
@@ -133,7 +172,7 @@ def run(worlds: int = 8, methods: tuple[str, ...] = METHODS, first_seed: int = 2
                                       "counted, reused from the station's --rig-cache after "
                                       "a two-view check")
             print(f"  {method}: {out[method]}", file=sys.stderr, flush=True)
-        if "stereo_target" in methods:
+        if "stereo_target" in methods and not all_joints:
             forced = power(worlds, folder, first_seed)
             out["stereo_target"]["power"] = f"{forced['fails']} of {forced['runs']}"
     return out
@@ -149,10 +188,11 @@ def print_table(figures: dict[str, Any]) -> None:
             continue
         ratio = f["robot_time_median"] / f["floor_median"] if f["floor_median"] else math.nan
         mse = ", ".join(f"{k} {v:.2f}" for k, v in f["mse_over_sigma2"].items())
+        power = f.get("power", f"- ({f['pass']} of {f['worlds']} clean PASS)")
         print(f"| {method} | {f['worlds']} | {f['robot_time_median']:.1f} / "
               f"{f['robot_time_max']:.1f} | {f['rig_median']:.1f} | {f['planned_median']:.1f} "
               f"| {f['floor_median']:.1f} | {ratio:.1f}x | {f['poses_median']:.0f} | "
-              f"{f['largest_move_deg']:.0f} deg | {mse} | {f.get('power', '-')} |")
+              f"{f['largest_move_deg']:.0f} deg | {mse} | {power} |")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -163,12 +203,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=2, help="calibrations at a time")
     parser.add_argument("--json", metavar="OUT", help="also write the figures as JSON")
     parser.add_argument("--speed", type=float, help="the calibrations' --speed")
+    parser.add_argument("--all-joints", action="store_true",
+                        help="each method's all-joint cell: the frames that make every joint "
+                        "identifiable known and true")
     parser.add_argument("--no-station", action="store_true",
                         help="stereo_target calibrates its rig in every world (default: one "
                         "camera's rig from a station's --rig-cache, as on a line)")
     args = parser.parse_args(argv)
     figures = run(args.worlds, tuple(m for m in args.methods.split(",") if m),
-                  args.first_seed, args.jobs, args.speed, not args.no_station)
+                  args.first_seed, args.jobs, args.speed, not args.no_station,
+                  args.all_joints)
     print_table(figures)
     for method, f in figures.items():
         if f.get("rig"):
