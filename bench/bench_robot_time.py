@@ -21,8 +21,10 @@ one default `hostpc calibrate --robot sim --method M --scenario <the method's wo
 
 --all-joints: each method's all-joint plan instead (`all_joint_world`): the frames that make
 every joint identifiable (J1 and J6; dual_loop's head and q1/q7) declared known and true (their
-hidden errors zero), so the plan aims its target sigma at every joint; the power column then
-gives the clean worlds' PASS count (issue 28 asks these plans to meet the same floor).
+hidden errors zero); stereo_target a cell reference recorded in each world from a
+commissioning run (its own rig; the recording is not counted). The plan aims its target
+sigma at every joint; the power column gives the clean worlds' PASS count (issue 28 asks
+these plans to meet the same floor).
 
     python bench/bench_robot_time.py [--worlds 40] [--first-seed 201] [--methods ...]
                                      [--jobs 2] [--json OUT] [--speed S] [--all-joints]
@@ -60,9 +62,6 @@ OPTIONAL = True
 """bench/run.py skips this module unless its name is asked for (slow)."""
 
 ALL_JOINT_FRAMES: dict[str, tuple[tuple[str, ...], dict[str, Any]]] = {
-    "stereo_target": (("tool", "target"), {"camera": {"mount_error": {
-        "xyz": [0.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]}},
-        "target": {"centre_error": [0.0, 0.0, 0.0]}}),
     # the default tip sits on the flange axis, where no frame gives J6 (docs/calibrate.md):
     # the all-joint cell's stylus is off it, as tests/integration/test_calibrate_reference.py
     "sphere_probe": (("tool", "sphere"), {"probe": {
@@ -78,17 +77,52 @@ ALL_JOINT_FRAMES: dict[str, tuple[tuple[str, ...], dict[str, Any]]] = {
                       "right_target_error": [0.0, 0.0, 0.0]}}),
 }
 """Per method: the frames its all-joint plan declares known, and the scenario sections that
-make them true (hidden errors zero)."""
+make them true (hidden errors zero). stereo_target has none: its camera frame is the rig's
+left optical frame, which no housing survey gives (`--known tool` with a zero mount error is
+still off by the rig's own error), so its all-joint cell is a reference (`stereo_reference`)."""
+COMMISSIONING_ZEROS = [0.0, 0.0021, -0.0013, 0.0017, -0.0009, 0.0]
+"""The zero errors (rad) of the run a stereo reference is recorded from: J1 and J6 good."""
 
 
-def all_joint_world(method: str, seed: int) -> tuple[dict[str, Any], list[str]]:
+def _calibrate(scenario: dict[str, Any], method: str, out: Path, options: list[str],
+               speed: float | None) -> None:
+    """`hostpc calibrate --robot sim --scenario` (written beside `out`) into `out`."""
+    scenario_path = out.parent / f"{out.name}.yaml"
+    scenario_path.write_text(yaml.safe_dump(scenario))
+    subprocess.run([sys.executable, "-m", "hostpc.cli.main", "calibrate", "--robot", "sim",
+                    "--method", method, "--scenario", str(scenario_path), "--no-report",
+                    "--out", str(out), *options,
+                    *(() if speed is None else ("--speed", str(speed)))],
+                   cwd=ROOT, capture_output=True, text=True, check=False, timeout=900)
+
+
+def stereo_reference(seed: int, folder: Path, speed: float | None) -> list[str]:
+    """stereo_target's all-joint options in world `seed`: a cell reference recorded (`hostpc
+    reference record`) from a commissioning run of the same cell (the world's frames and
+    target, its own rig, zero errors COMMISSIONING_ZEROS, noise seed + 10000), and its rig."""
+    scenario, options = world("stereo_target", seed + 10000)
+    scenario["truth"] = {**scenario["truth"], "zero_errors": COMMISSIONING_ZEROS}
+    out = folder / f"stereo_target_{seed}_commissioning"
+    _calibrate(scenario, "stereo_target", out, options, speed)
+    reference = folder / f"stereo_target_{seed}_cell_ref.json"
+    subprocess.run([sys.executable, "-m", "hostpc.cli.main", "reference", "record", "--run",
+                    str(out), "--out", str(reference)],
+                   cwd=ROOT, capture_output=True, text=True, check=False, timeout=900)
+    return [*options, "--reference", str(reference),
+            "--rig", str(reference.with_suffix(".rig.json"))]
+
+
+def all_joint_world(method: str, seed: int, folder: Path, speed: float | None = None
+                    ) -> tuple[dict[str, Any], list[str]]:
     """`method`'s world `seed` (`bench_sigma_mc.world`) as an all-joint cell: the frames of
-    ALL_JOINT_FRAMES true and declared known."""
-    scenario, _known = world(method, seed)  # its options are one --known: replaced
+    ALL_JOINT_FRAMES true and declared known, or stereo_target's `stereo_reference`."""
+    scenario, options = world(method, seed)
+    if method == "stereo_target":
+        return scenario, stereo_reference(seed, folder, speed)
     frames, sections = ALL_JOINT_FRAMES[method]
     for key, section in sections.items():
         scenario[key] = {**scenario.get(key, {}), **section}
-    return scenario, ["--known", ",".join(frames)]
+    return scenario, ["--known", ",".join(frames)]  # replaces world's one --known
 
 
 def run_world(method: str, seed: int, folder: Path, speed: float | None = None,
@@ -96,17 +130,12 @@ def run_world(method: str, seed: int, folder: Path, speed: float | None = None,
     """One default calibration in `method`'s world `seed` (at `speed`, None: the CLI's
     default; rig_cache: stereo_target's --rig-cache folder; all_joints: its all-joint cell,
     `all_joint_world`): robot time, plan, errors."""
-    scenario, options = (all_joint_world if all_joints else world)(method, seed)
+    scenario, options = (all_joint_world(method, seed, folder, speed) if all_joints
+                         else world(method, seed))
     if rig_cache is not None:
         options = [*options, "--rig-cache", str(rig_cache)]
-    scenario_path = folder / f"{method}_{seed}.yaml"
-    scenario_path.write_text(yaml.safe_dump(scenario))
     out = folder / f"{method}_{seed}"
-    subprocess.run([sys.executable, "-m", "hostpc.cli.main", "calibrate", "--robot", "sim",
-                    "--method", method, "--scenario", str(scenario_path), "--no-report",
-                    "--out", str(out), *options,
-                    *(() if speed is None else ("--speed", str(speed)))],
-                   cwd=ROOT, capture_output=True, text=True, check=False, timeout=900)
+    _calibrate(scenario, method, out, options, speed)
     try:
         document = json.loads((out / "result.json").read_text())
         parameters = json.loads((out / "fit.json").read_text())["parameters"]
@@ -143,9 +172,9 @@ def run(worlds: int = 8, methods: tuple[str, ...] = METHODS, first_seed: int = 2
         for method in methods:
             seeds = range(first_seed, first_seed + worlds)
             cache = None
-            if method == "stereo_target" and station:  # the station's camera, once
+            if method == "stereo_target" and station and not all_joints:  # one camera
                 cache = folder / "rig-cache"
-                run_world(method, first_seed - 1, folder, speed, cache, all_joints)
+                run_world(method, first_seed - 1, folder, speed, cache)
             with ThreadPoolExecutor(jobs) as pool:
                 runs = list(pool.map(lambda s, m=method, c=cache: run_world(
                     m, s, folder, speed, c, all_joints), seeds))
