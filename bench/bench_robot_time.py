@@ -234,7 +234,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--speed", type=float, help="the calibrations' --speed")
     parser.add_argument("--all-joints", action="store_true",
                         help="each method's all-joint cell: the frames that make every joint "
-                        "identifiable known and true")
+                        "identifiable known and true (stereo_target: a cell reference "
+                        "recorded in each world)")
     parser.add_argument("--no-station", action="store_true",
                         help="stereo_target calibrates its rig in every world (default: one "
                         "camera's rig from a station's --rig-cache, as on a line)")
