@@ -147,13 +147,14 @@ class UrGuardedMove:
                     _, q_now, _, _ = await link.call(link.sample)
                     return ContactOutcome(False, None, self.offsets.reported(q_now),
                                           reason=reason)
-                link.rest_since = float(await link.call(link.receive.getTimestamp))
-                if watch.edge is None:
-                    measured = await link.fresh_q(watch.last[0] - 1e-9, None)
+                if watch.edge is None:  # the move ran to its end, the target
+                    measured = await link.fresh_q(watch.last[0] - 1e-9, target)
+                    await link.came_to_rest()
                     return ContactOutcome(False, None, self.offsets.reported(measured),
                                           reason="no_contact")
                 low, high = watch.edge
                 q_stop = await link.fresh_q(high[0], None)
+                await link.came_to_rest()
                 latch = LatchTiming(
                     edge_window_s=high[0] - low[0],
                     sample_period_s=(watch.period if math.isfinite(watch.period)

@@ -231,7 +231,7 @@ class UrLink:
         if reason is None and not _at(q, target):
             q = await self.fresh_q(after, target)
             reason = None if _at(q, target) else "stopped"
-        self.rest_since = after
+        await self.came_to_rest()
         return MoveOutcome(completed=reason is None, q=q, reason=reason)
 
     def lost(self, why: str) -> ConnectionFailed:
@@ -261,6 +261,12 @@ class UrLink:
                     return
                 check_at = loop.time() + PROGRAM_CHECK_S
             await asyncio.sleep(POLL_INTERVAL_S)
+
+    async def came_to_rest(self) -> None:
+        """The arm is at rest after a motion (a sample where it ended was read): note the
+        controller's time (`rest_since`). Read after that sample, never before it: a move
+        that took no wall time shows its simulated time in the same sample as its end."""
+        self.rest_since = float(await self.call(self.receive.getTimestamp))
 
     async def settle(self, settle_s: float = SETTLE_S) -> float:
         """Before a measurement taken in motion: wait until the arm has stood still
@@ -305,7 +311,7 @@ class UrLink:
                 self.call(self.control.stopJ, INTERRUPT_DECELERATION, False), STOP_TIMEOUT_S)
             after = float(await self.call(self.receive.getTimestamp))
             q = await asyncio.wait_for(self.fresh_q(after, None), STOP_TIMEOUT_S)
-            self.rest_since = after
+            await self.came_to_rest()
         except (ControllerError, RequestTimeout, TimeoutError) as exc:
             logger.warning("UR %s: stopJ after an interrupted move failed: %s", self.host,
                            str(exc) or type(exc).__name__)
