@@ -29,13 +29,16 @@ pytest.importorskip("rtde_control")
 
 from hostpc.planning.robot_time import TimeLimits, Waypoints, waypoints_time  # noqa: E402
 from hostpc.robots.simulator import default_sim_scenario  # noqa: E402
-from hostpc.robots.ur import UrAdapter, connect_ur  # noqa: E402
+from hostpc.robots.ur import UrAdapter  # noqa: E402
 from hostpc.robots.ur_link import SETTLE_S  # noqa: E402
 from tests.integration.test_calibrate_sim import sim_scenario, truth_rig_file  # noqa: E402
 from tests.integration.test_interrupt_motion import ENV, REPO  # noqa: E402
-from tests.integration.ur_stub import TOKEN, UrStub, calibrate_command, ur_stub_process  # noqa: E402
-
-HOST = "127.0.0.1"
+from tests.integration.ur_stub import (  # noqa: E402
+    UrStub,
+    calibrate_command,
+    ur_adapter,
+    ur_stub_process,
+)
 
 
 def test_a_ur_run_at_time_scale_0_spends_the_robot_time_it_plans(tmp_path: Path) -> None:
@@ -69,9 +72,8 @@ def ur_stub(tmp_path_factory: pytest.TempPathFactory) -> Iterator[UrStub]:
 
 @pytest.fixture
 async def adapter(ur_stub: UrStub) -> AsyncIterator[UrAdapter]:
-    robot = await connect_ur(HOST, ur_stub.host, ur_stub.port, TOKEN, timeout=10.0)
-    yield robot
-    await robot.close()
+    async with ur_adapter(ur_stub) as robot:
+        yield robot
 
 
 async def _clock(adapter: UrAdapter) -> float:
