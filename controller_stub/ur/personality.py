@@ -48,6 +48,7 @@ from controller_stub.ur.rtde_values import (
 )
 from controller_stub.ur.rtde_wire import N_REGISTERS
 from controller_stub.ur.script_server import ScriptServer
+from controller_stub.ur.uptime import ControllerUptime
 from controller_stub.world.controller_state import SimulatedController
 from controller_stub.world.motion import GuardedMoveResult
 from controller_stub.world.robot_model import forward
@@ -121,6 +122,7 @@ class UrPersonality:
         self.cycle = 0
         """The controller cycle counter (`paced_motion.py`)."""
         self._cycle_event = asyncio.Event()
+        self._uptime = ControllerUptime(sim.state)
         self._clock: asyncio.Task[None] | None = None
         self._rtde = RtdeServer(self.rtde_values, max_stream_hz=max_stream_hz)
         self._dashboard = DashboardServer(self)
@@ -167,8 +169,16 @@ class UrPersonality:
             next_at = max(next_at + CYCLE_S, loop.time())
             await asyncio.sleep(next_at - loop.time())
             self.cycle += 1
+            self._uptime.tick(self._motion is not None
+                              or (self.server is not None and self.server.mode() == "moving"))
             event, self._cycle_event = self._cycle_event, asyncio.Event()
             event.set()
+
+    @property
+    def uptime(self) -> float:
+        """The controller's uptime (s), RTDE `timestamp` (`uptime.py`): the wall time of its
+        cycles plus the simulated time it charged beyond them."""
+        return self._uptime.seconds
 
     async def next_cycle(self, after: int) -> int:
         """Wait until the controller cycle is past `after`; returns the cycle."""
@@ -298,13 +308,17 @@ class UrPersonality:
         along the path, planned as the simulation's guarded move on the probe line (the
         probe's trigger latency and repeatability, the contact and the stop point past it: a
         move nobody stops ends there, stylus overtravelled) and paced in real time (one cycle
-        per 2 ms, so a 500 Hz RTDE client sees every cycle), settled at its start like a
-        guarded move (`settle_for_measurement`; the touch is judged at that settled clock).
-        A watched movej that misses the sphere cannot be told from a plain one (a UR movej
-        carries no "measure" flag): it settles nowhere. Any other movej, synchronous or not,
-        is a joint move like the zerocal protocol's (settling is charged before a
-        measurement, not here), paced by the scenario's time_scale: a real UR moves the
-        same way whether the host waits for the move or polls its progress. A stop ramp
+        per 2 ms, so a 500 Hz RTDE client sees every cycle). A UR does not settle before a
+        movej (it carries no "measure" flag): a host that measures during the move waits
+        until the arm has stood still long enough, on the controller's clock (`uptime.py`;
+        hostpc's UR driver does, `ur_guarded.py`), and that wait counts toward the
+        simulation's settling (`ControllerState.stand_still`). The simulation's guarded
+        move starts settled (it does not model a touch taken unsettled), so a touching
+        movej whose host did not wait is charged the rest it still needs; a watched movej
+        that misses the sphere is a plain move. Any other movej, synchronous or not, is a
+        joint move like the zerocal protocol's (settling is charged before a measurement,
+        not here), paced by the scenario's time_scale: a real UR moves the same way whether
+        the host waits for the move or polls its progress. A stop ramp
         that runs past the plan's end ends the motion (the settle timer) at the ramp's end.
         Returns (completed, reason): reason
         "busy" (another motion runs), "stopped" (stop_motion, or the program ended),
@@ -330,11 +344,8 @@ class UrPersonality:
         try:
             if self.server is not None:
                 self.server.begin_motion()
-            if watch_probe:  # judged at the settled clock a guarded move starts at
-                wait = self.sim.settle_for_measurement()
+            if watch_probe:
                 watch_probe = self._touches(target, min(fraction, 1.0), acceleration)
-                if not watch_probe:  # a plain move: it measures nothing, so no settling
-                    self.sim.state.advance_clock(-wait)
             plan = self.sim.begin_move(target, min(fraction, 1.0),
                                        probe_line if watch_probe else None,
                                        None if acceleration is None else float(acceleration))

@@ -16,7 +16,6 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from controller_stub.ur.paced_motion import CYCLE_S
 from controller_stub.ur.registers import UrRegisters
 from controller_stub.ur.rtde_wire import output_type, register_field
 from controller_stub.world.controller_state import SimulatedController
@@ -50,6 +49,8 @@ class RtdeRobot(Protocol):
     def sim(self) -> SimulatedController: ...
     @property
     def cycle(self) -> int: ...
+    @property
+    def uptime(self) -> float: ...
     @property
     def controller_version(self) -> tuple[int, int, int, int]: ...
     async def next_cycle(self, after: int) -> int: ...
@@ -95,7 +96,7 @@ class RtdeValues:
         if name in ("actual_qd", "target_qd"):
             return tuple(robot.displayed_qd().tolist())
         if name == "timestamp":
-            return robot.cycle * CYCLE_S
+            return robot.uptime
         if name == "actual_digital_input_bits":
             return _mask(robot.displayed_inputs())
         if name == "actual_digital_output_bits":

@@ -322,6 +322,12 @@ class ControllerState:
         until it has stood still `motion.settle_s`."""
         self._settled_at = self._time + float(self.scenario.motion.settle_s)
 
+    def stand_still(self, seconds: float) -> None:
+        """The robot stood still `seconds` s that the simulated clock does not count (a UR
+        controller's idle wall time, `controller_stub.ur.uptime`): they count toward its
+        settling."""
+        self._settled_at -= seconds
+
     def settle_for_measurement(self) -> float:
         """Settle before a measurement: the clock waits max(0, settle_s - the time the robot
         has stood still since its last motion ended, `end_motion`); returns that wait (s).

@@ -62,6 +62,7 @@ from hostpc.robots.ur_guarded import N_DIGITAL_IO, LatchTiming, UrGuardedMove, r
 from hostpc.robots.ur_link import (
     JOINT_ACCELERATION,
     MAX_JOINT_SPEED,
+    SETTLE_S,
     UrLink,
     check_joints,
     joint_velocity,
@@ -179,6 +180,8 @@ class UrAdapter:
                 # moveJ ramps at JOINT_ACCELERATION (the host's robot time, robot_time.py)
                 "max_joint_speed": [MAX_JOINT_SPEED] * 6,
                 "max_joint_acceleration": [JOINT_ACCELERATION] * 6,
+                # the rest it waits for before a guarded approach (UrLink.settle)
+                "settle_s": SETTLE_S,
             },
         )
 

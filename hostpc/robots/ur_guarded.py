@@ -25,6 +25,7 @@ from hostpc.robots.base import ContactOutcome
 from hostpc.robots.ur_link import (
     JOINT_ACCELERATION,
     MAX_JOINT_SPEED,
+    FreshSamples,
     Sample,
     UrLink,
     check_joints,
@@ -120,11 +121,13 @@ class UrGuardedMove:
         target = self.offsets.to_ur(check_joints(q))
         velocity = joint_velocity(speed)
         async with link.motion_lock:
-            start = await link.call(link.sample)
             for attempt in range(MAX_LATCH_RETRIES + 1):
+                await link.settle()  # the touch is a measurement: the arm stands still first
+                start = await link.call(link.sample)
                 if start[2] >> io_line & 1:
                     return ContactOutcome(False, None, self.offsets.reported(start[1]),
                                           reason="probe_already_triggered")
+                op0 = (await link.call(link.control.getAsyncOperationProgressEx)).operationId()
                 command = asyncio.ensure_future(link.call(
                     link.control.moveJ, target.tolist(), velocity, JOINT_ACCELERATION, True))
                 cancel = threading.Event()
@@ -133,7 +136,7 @@ class UrGuardedMove:
                     ok = await asyncio.shield(command)
                     if ok:
                         watching = asyncio.ensure_future(
-                            link.call(self._watch, io_line, start, cancel))
+                            link.call(self._watch, io_line, start, op0, cancel))
                         watch = await asyncio.shield(watching)
                 except asyncio.CancelledError as exc:  # Ctrl-C, SIGTERM: stop the arm
                     cancel.set()
@@ -144,12 +147,14 @@ class UrGuardedMove:
                     _, q_now, _, _ = await link.call(link.sample)
                     return ContactOutcome(False, None, self.offsets.reported(q_now),
                                           reason=reason)
-                if watch.edge is None:
-                    measured = await link.fresh_q(watch.last[0] - 1e-9, None)
+                if watch.edge is None:  # the move ran to its end, the target
+                    measured = await link.fresh_q(watch.last[0] - 1e-9, target)
+                    await link.came_to_rest()
                     return ContactOutcome(False, None, self.offsets.reported(measured),
                                           reason="no_contact")
                 low, high = watch.edge
                 q_stop = await link.fresh_q(high[0], None)
+                await link.came_to_rest()
                 latch = LatchTiming(
                     edge_window_s=high[0] - low[0],
                     sample_period_s=(watch.period if math.isfinite(watch.period)
@@ -171,27 +176,27 @@ class UrGuardedMove:
                 back = await link.move(start[1], RETRY_SPEED * MAX_JOINT_SPEED)
                 if not back.completed:
                     break
-                start = await link.call(link.sample)
             # every attempt missed samples at the edge: no contact of known precision
             return ContactOutcome(False, None, self.offsets.reported(q_stop),
                                   reason="edge_window_missed_samples")
 
-    def _watch(self, io_line: int, start: Sample, cancel: threading.Event) -> _Watch:
+    def _watch(self, io_line: int, start: Sample, op0: int, cancel: threading.Event
+               ) -> _Watch:
         """Blocking (a worker thread): read every new RTDE sample of the asynchronous move
-        until the input rises (stopJ at once), the move ends, or `cancel` is set (the
-        caller stops the arm). ConnectionFailed when no new sample came for the link's
-        timeout (a dead or frozen controller: ur_rtde repeats its last state)."""
+        until the input rises (stopJ at once), the move ends (an operation after `op0`, the
+        one before the moveJ, ran and ended: a move that takes no wall time may have ended
+        before the watch began), or `cancel` is set (the caller stops the arm).
+        ConnectionFailed when no new sample came for the link's timeout (a dead or frozen
+        controller: ur_rtde repeats its last state; `FreshSamples`)."""
         low = start
-        fresh_at = time.monotonic()
+        fresh = FreshSamples(self.link)
         period = math.inf
         deadline = time.monotonic() + max(self.link.timeout, 60.0)
         next_status = 0.0
         started = False
-        op0 = self.link.control.getAsyncOperationProgressEx().operationId()
         while True:
             sample = self.link.sample()
             if sample[0] > low[0]:
-                fresh_at = time.monotonic()
                 if sample[2] >> io_line & 1:
                     seen = time.monotonic()
                     self.link.control.stopJ(STOP_DECELERATION, False)
@@ -212,8 +217,7 @@ class UrGuardedMove:
                     continue  # the edge came with the last samples
             if cancel.is_set():
                 return _Watch(None, sample, period, 0.0)
-            if now - fresh_at > self.link.timeout:
-                raise self.link.lost(f"no new RTDE sample for {self.link.timeout:.1f} s")
+            fresh.check(sample[0])
             if now > deadline:
                 self.link.control.stopJ(STOP_DECELERATION, False)
                 raise RuntimeError("guarded move did not end")

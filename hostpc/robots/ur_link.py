@@ -31,13 +31,14 @@ import contextlib
 import logging
 import math
 import threading
+import time
 from collections.abc import Callable
 from typing import Any, TypeVar
 
 import numpy as np
 
 from hostpc.errors import ConnectionFailed, ControllerError, InputError, RequestTimeout
-from hostpc.planning.robot_time import DEFAULT_JOINT_ACCELERATION
+from hostpc.planning.robot_time import DEFAULT_JOINT_ACCELERATION, DEFAULT_SETTLE_S
 from hostpc.robots.base import MoveOutcome
 
 logger = logging.getLogger("hostpc.robots.ur")
@@ -50,6 +51,10 @@ MAX_JOINT_SPEED = 3.14
 JOINT_ACCELERATION = DEFAULT_JOINT_ACCELERATION
 """rad/s^2, UR's default movej acceleration (1.4; the robot time's default when a
 controller does not report one, written once there)."""
+SETTLE_S = DEFAULT_SETTLE_S
+"""s the arm must have stood still, on the controller's clock, before a measurement taken
+in motion starts (a guarded approach, `ur_guarded.py`): a UR does not settle by itself (a
+moveJ carries no "measure" flag). The robot time's default (written once there)."""
 SETTLE_TOLERANCE_RAD = 1e-3
 SETTLE_TIMEOUT_S = 2.0
 INTERRUPT_DECELERATION = 2.0
@@ -115,6 +120,24 @@ def _at(q: np.ndarray, target: np.ndarray) -> bool:
     return bool(np.max(np.abs(q - target)) <= SETTLE_TOLERANCE_RAD)
 
 
+class FreshSamples:
+    """The dead-controller check (the module docstring): `check(stamp)` with each RTDE
+    timestamp read; ConnectionFailed from `link.lost` once it has not advanced for the
+    link's timeout (s of host time). Blocking-safe (no event loop)."""
+
+    def __init__(self, link: UrLink) -> None:
+        self.link = link
+        self.stamp = -math.inf
+        self.fresh_at = time.monotonic()
+
+    def check(self, stamp: float) -> None:
+        now = time.monotonic()
+        if stamp > self.stamp:
+            self.stamp, self.fresh_at = stamp, now
+        elif now - self.fresh_at > self.link.timeout:
+            raise self.link.lost(f"no new RTDE sample for {self.link.timeout:.1f} s")
+
+
 class UrLink:
     """ur_rtde's receive / control / IO interfaces of the UR at `host` (tests may pass
     fakes), the lock that keeps one motion at a time, timeout: s per request."""
@@ -127,6 +150,9 @@ class UrLink:
         self.io = io
         self.timeout = float(timeout)
         self.motion_lock = asyncio.Lock()
+        self.rest_since: float | None = None
+        """RTDE timestamp (s) at which the arm came to rest after this session's last
+        motion; None before any (at rest, settled)."""
 
     async def call(self, function: Callable[..., T], *args: Any) -> T:
         """Run a blocking ur_rtde call in a worker thread; errors -> ControllerError."""
@@ -205,6 +231,7 @@ class UrLink:
         if reason is None and not _at(q, target):
             q = await self.fresh_q(after, target)
             reason = None if _at(q, target) else "stopped"
+        await self.came_to_rest()
         return MoveOutcome(completed=reason is None, q=q, reason=reason)
 
     def lost(self, why: str) -> ConnectionFailed:
@@ -220,13 +247,9 @@ class UrLink:
         loop = asyncio.get_running_loop()
         started = False
         check_at = loop.time() + PROGRAM_CHECK_S
-        stamp, fresh_at = -math.inf, loop.time()
+        fresh = FreshSamples(self)
         while True:
-            now_stamp = float(await self.call(self.receive.getTimestamp))
-            if now_stamp > stamp:
-                stamp, fresh_at = now_stamp, loop.time()
-            elif loop.time() - fresh_at > self.timeout:
-                raise self.lost(f"no new RTDE sample for {self.timeout:.1f} s")
+            fresh.check(float(await self.call(self.receive.getTimestamp)))
             if not await self.call(self.control.isConnected):
                 raise self.lost("the control interface disconnected")
             status = await self.call(self.control.getAsyncOperationProgressEx)
@@ -238,6 +261,30 @@ class UrLink:
                     return
                 check_at = loop.time() + PROGRAM_CHECK_S
             await asyncio.sleep(POLL_INTERVAL_S)
+
+    async def came_to_rest(self) -> None:
+        """The arm is at rest after a motion (a sample where it ended was read): note the
+        controller's time (`rest_since`). Read after that sample, never before it: a move
+        that took no wall time shows its simulated time in the same sample as its end."""
+        self.rest_since = float(await self.call(self.receive.getTimestamp))
+
+    async def settle(self, settle_s: float = SETTLE_S) -> float:
+        """Before a measurement taken in motion: wait until the arm has stood still
+        `settle_s` since its last motion ended (`rest_since`), on the controller's clock
+        (its RTDE timestamp, which runs while the host waits); returns the controller
+        seconds waited. ConnectionFailed if the timestamp stops advancing (`FreshSamples`)."""
+        rest = self.rest_since
+        if rest is None:
+            return 0.0
+        fresh = FreshSamples(self)
+        first: float | None = None
+        while True:
+            stamp = float(await self.call(self.receive.getTimestamp))
+            fresh.check(stamp)
+            first = stamp if first is None else first
+            if stamp - rest >= settle_s:
+                return stamp - first
+            await asyncio.sleep(min(max(rest + settle_s - stamp, POLL_INTERVAL_S), 0.1))
 
     async def interrupted(self, exc: asyncio.CancelledError, kind: str, target: np.ndarray,
                           *commands: asyncio.Future[Any] | None) -> None:
@@ -264,6 +311,7 @@ class UrLink:
                 self.call(self.control.stopJ, INTERRUPT_DECELERATION, False), STOP_TIMEOUT_S)
             after = float(await self.call(self.receive.getTimestamp))
             q = await asyncio.wait_for(self.fresh_q(after, None), STOP_TIMEOUT_S)
+            await self.came_to_rest()
         except (ControllerError, RequestTimeout, TimeoutError) as exc:
             logger.warning("UR %s: stopJ after an interrupted move failed: %s", self.host,
                            str(exc) or type(exc).__name__)

@@ -16,11 +16,9 @@ pytest.importorskip("rtde_control")
 
 from hostpc.errors import ControllerError, InputError  # noqa: E402
 from hostpc.planning.robot_time import TimeLimits, Waypoints, waypoints_time  # noqa: E402
-from hostpc.robots.ur import UrAdapter, connect_ur  # noqa: E402
+from hostpc.robots.ur import UrAdapter  # noqa: E402
 from hostpc.transport import ControllerClient  # noqa: E402
-from tests.integration.ur_stub import TOKEN, UrStub, ur_stub_process  # noqa: E402
-
-HOST = "127.0.0.1"
+from tests.integration.ur_stub import TOKEN, UrStub, ur_adapter, ur_stub_process  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -33,9 +31,8 @@ def ur_stub(tmp_path_factory: pytest.TempPathFactory) -> Iterator[UrStub]:
 
 @pytest.fixture
 async def adapter(ur_stub: UrStub) -> AsyncIterator[UrAdapter]:
-    robot = await connect_ur(HOST, ur_stub.host, ur_stub.port, TOKEN, timeout=10.0)
-    yield robot
-    await robot.close()
+    async with ur_adapter(ur_stub) as robot:
+        yield robot
 
 
 async def stub_q(stub: UrStub) -> np.ndarray:

@@ -16,12 +16,15 @@ import socket
 import subprocess
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import AsyncIterator, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
+
+if TYPE_CHECKING:
+    from hostpc.robots.ur import UrAdapter
 
 UR_PORTS = (30004, 29999, 30003)
 TOKEN = "test-token"
@@ -118,6 +121,18 @@ def ur_stub_process(
         except subprocess.TimeoutExpired:
             process.kill()
             process.wait(timeout=10)
+
+
+@contextlib.asynccontextmanager
+async def ur_adapter(stub: UrStub) -> AsyncIterator[UrAdapter]:
+    """hostpc's UR adapter (ur_rtde) on `stub`, 10 s timeout; closed after."""
+    from hostpc.robots.ur import connect_ur  # needs ur_rtde: the tests skip without it
+
+    robot = await connect_ur("127.0.0.1", stub.host, stub.port, TOKEN, timeout=10.0)
+    try:
+        yield robot
+    finally:
+        await robot.close()
 
 
 def dashboard(command: str, host: str = "127.0.0.1") -> str:
