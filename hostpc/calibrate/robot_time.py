@@ -52,9 +52,11 @@ class RobotTimer:
 
     The controller's clock is read after each pose and at each phase end (one `state`
     request each): a reading counts from the previous one (the run's first `state`, then
-    the last reading), so nothing happens to the controller's clock between phases but the
-    fit and the push, which do not advance a simulated clock. With the host's clock (free
-    to read) `begin` restarts the count, so the fit's time is not the robot's."""
+    the last reading), so what the controller's clock counts between phases is the fit and
+    the push: nothing on the simulated arm's clock (it advances only with what the arm
+    does), their wall time on a UR controller's uptime (a real robot stands idle while the
+    host computes, and that is robot time the plan does not predict). With the host's
+    clock (free to read) `begin` restarts the count, so the fit's time is not the robot's."""
 
     def __init__(self, robot: RobotAdapter, journal: Journal, state: RobotState) -> None:
         self.robot = robot
