@@ -22,6 +22,7 @@ chi-square with the same mean and variance).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -52,9 +53,13 @@ def power(noncentrality: float, critical: float, dof: int = 1) -> float:
     return chi2_sf(critical / scale, mean / scale)
 
 
+@functools.lru_cache(maxsize=64)
 def required_noncentrality(alpha: float, target: float = DEFAULT_POWER, dof: int = 1
                            ) -> float:
-    """The noncentrality at which the chi-square test at level alpha has power target."""
+    """The noncentrality at which the chi-square test at level alpha has power target.
+
+    A bisection of ~60 power evaluations, kept per arguments: every candidate of a
+    diagnosis asks it at the same threshold."""
     critical = chi2_isf(alpha, dof)
     low, high = 0.0, 1.0
     while power(high, critical, dof) < target:
