@@ -373,6 +373,7 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
     effect tried again on the same fit (a ladder step's candidate, then a confounded
     pair's nested test) is judged afresh without being fitted again."""
     candidate = _fitted_candidate(base, effect, cv_folds, loss)
+    # nothing selected: the data need none of its parameters, so it is never starred
     p_significant = bool(candidate.testable and candidate.selected
                          and candidate.p_value is not None and candidate.p_value < threshold)
     cv_whitened = candidate.cv_whitened_rms
@@ -439,7 +440,6 @@ def _fit_candidate(base: FitResult, effect: Effect, cv_folds: int, loss: Loss) -
             p_subset = min(1.0, float(f_sf(statistic, len(chosen), dof_subset))
                            * math.exp(_log_choose(n_new, len(chosen))))
     p_value = min(1.0, 2.0 * min(p_full, p_subset))
-    # nothing selected: the data need none of its parameters, so it is never starred
     selected = tuple(problem.layout.names[k] for k in chosen) if testable else ()
     return Candidate(
         effect=effect.name, delta_bic=delta_bic if testable else None,
