@@ -1,8 +1,8 @@
 """The options that say which robot a command reads its dataset with (``--robot``,
 ``--base-link``, ``--tip-link``) and how to carry them, with ``--plugin``, into a next
 command. Shared by `hostpc fit`, `diagnose` and `predict`, and kept apart from `hostpc
-robots` (hostpc.cli.robots, which reads robots and tables) so that a command's parser
-imports no other command (issue 28's quick host)."""
+robots` (hostpc.cli.robots, which reads robots and tables) so that their parsers do not
+import it (issue 28's quick host: diagnose imports it only with --robot, --prior or --hold)."""
 
 from __future__ import annotations
 
