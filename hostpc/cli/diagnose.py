@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from hostpc.cli.fit import add_constraint_options, add_model_options
 from hostpc.cli.format import repeated_lines
-from hostpc.cli.robots import add_robot_override, load_dataset_as_asked, robot_options
+from hostpc.cli.robot_options import add_robot_override, robot_options
 from hostpc.diagnostics.advice import mm, without
 from hostpc.errors import InputError, ZerocalError
 
@@ -87,6 +87,7 @@ def _run(args: argparse.Namespace) -> int:
         candidates = [c.strip() for c in args.candidates.split(",") if c.strip()]
     source: Any = args.dataset
     if args.prior or args.hold or args.robot:
+        from hostpc.cli.robots import load_dataset_as_asked
         from hostpc.fitting.priors import with_constraints
 
         source = with_constraints(load_dataset_as_asked(args.dataset, args), args.prior,

@@ -10,7 +10,7 @@ import sys
 from hostpc.cli.archive_options import add_archive_options, dataset_from_archive
 from hostpc.cli.format import format_fit_summary, model_adequacy
 from hostpc.cli.numbers import CV_FOLDS
-from hostpc.cli.robots import add_robot_override, data_options, load_dataset_as_asked
+from hostpc.cli.robot_options import add_robot_override, data_options
 from hostpc.cli.urdf_out import add_write_urdf_option, check_urdf_robot, write_calibrated_urdf
 from hostpc.errors import InputError
 from hostpc.fitting import fit
@@ -79,6 +79,8 @@ def run(args: argparse.Namespace) -> int:
         args.dataset = dataset_from_archive(args)
     elif not args.dataset:
         raise InputError("a dataset file is required (or --db URL --run ID)")
+    from hostpc.cli.robots import load_dataset_as_asked  # reads robots: only to fit
+
     dataset = with_constraints(load_dataset_as_asked(args.dataset, args), args.prior,
                                args.hold)
     options = data_options(args)  # carried into every next command

@@ -68,7 +68,7 @@ class ModelAdequacy:
 def model_adequacy(result: FitResult, source: str = "DATASET", options: str = ""
                    ) -> ModelAdequacy:
     """The fit's `ModelAdequacy`; `source` names the dataset in the next command and
-    `options` are the options that define its data (hostpc.cli.robots.data_options: --robot,
+    `options` are the options that define its data (hostpc.cli.robot_options.data_options: --robot,
     --base-link, --tip-link, --plugin), carried into it."""
     band = chi2_dof_upper(result.dof)
     judged = math.isfinite(band) and math.isfinite(result.chi2_dof)

@@ -26,7 +26,8 @@ import math
 from typing import Any
 
 from hostpc.calibrate.offline_push import SavedFit, load_saved_fit
-from hostpc.cli.robots import add_robot_override, data_options, load_dataset_as_asked
+from hostpc.cli.robot_options import add_robot_override, data_options
+from hostpc.cli.robots import load_dataset_as_asked
 from hostpc.dataset import Dataset
 from hostpc.dataset.writing import frames_from_json
 from hostpc.errors import EffectError, InputError

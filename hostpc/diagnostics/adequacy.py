@@ -66,13 +66,25 @@ def held_out_residuals(problem: Problem, x: np.ndarray, free: np.ndarray, folds:
 
     Same folds and computation as ``hostpc.fit`` (so the RMS equals ``FitResult.cv_rms`` for
     a linear loss); None when there are too few samples for ``folds`` folds.
+
+    The latest one of each problem is kept on its memo (read-only): a model's check, its
+    candidates' ranking and the ladder step that adopts a candidate's fit ask again for
+    the same x and free parameters.
     """
+    key = f"held out {folds} {max_iterations}"
+    kept = problem.memo.recall(key)
+    if kept is not None and np.array_equal(kept[0], x) and np.array_equal(kept[1], free):
+        return kept[2]
     held = held_out_by_fold(problem, x, free, folds, max_iterations=max_iterations)
-    if held is None:
-        return None
-    raw, whitened = held
-    return HeldOut(raw=raw, whitened=whitened, folds=folds,
-                   length_columns=problem.length_columns)
+    result = None
+    if held is not None:
+        raw, whitened = held
+        raw.setflags(write=False)
+        whitened.setflags(write=False)
+        result = HeldOut(raw=raw, whitened=whitened, folds=folds,
+                         length_columns=problem.length_columns)
+    problem.memo.remember(key, (np.array(x), np.array(free), result))
+    return result
 
 
 @dataclass(frozen=True)

@@ -366,7 +366,45 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
     fits. The selected subset ranks it (delta BIC, its p) but is not the
     row's model: holding at nominal parameters the data determine biases the zero offsets
     (a 4 sigma error with compliance and geometry hidden together). Held out on the same
-    pose-grouped folds (``cv_folds``) as ``base_cv``."""
+    pose-grouped folds (``cv_folds``) as ``base_cv``.
+
+    The fits depend on the base fit, the effect, ``cv_folds`` and ``loss`` only, not on
+    ``threshold`` or ``base_cv``: they are kept on the base problem's memo, so the same
+    effect tried again on the same fit (a ladder step's candidate, then a confounded
+    pair's nested test) is judged afresh without being fitted again."""
+    candidate = _fitted_candidate(base, effect, cv_folds, loss)
+    # nothing selected: the data need none of its parameters, so it is never starred
+    p_significant = bool(candidate.testable and candidate.selected
+                         and candidate.p_value is not None and candidate.p_value < threshold)
+    cv_whitened = candidate.cv_whitened_rms
+    held_out_better = (cv_whitened is None or base_cv is None or cv_whitened < base_cv)
+    candidate = replace(candidate, significant=p_significant and held_out_better
+                        and candidate.fit.converged)
+    return replace(candidate, not_taken=not_taken_reason(candidate, p_significant, threshold,
+                                                         base_cv))
+
+
+def _fitted_candidate(base: FitResult, effect: Effect, cv_folds: int, loss: Loss
+                      ) -> Candidate:
+    """``try_candidate``'s fits and figures, not yet judged (``significant`` False,
+    ``not_taken`` None), computed once per base fit, effect class, folds and loss."""
+    state = vars(effect)
+    if not all(isinstance(v, str | int | float | bool | None) for v in state.values()):
+        return _fit_candidate(base, effect, cv_folds, loss)  # not comparable: not kept
+    identity = (type(effect), tuple(sorted(state.items())))
+    key = f"candidate {effect.name} {cv_folds} {loss}"
+    recalled = base.problem.memo.recall(key)
+    if recalled is not None:
+        kept_identity, x, fixed, candidate = recalled
+        if (kept_identity == identity and np.array_equal(x, base.x)
+                and np.array_equal(fixed, base.fixed)):
+            return candidate
+    candidate = _fit_candidate(base, effect, cv_folds, loss)
+    base.problem.memo.remember(key, (identity, base.x.copy(), base.fixed.copy(), candidate))
+    return candidate
+
+
+def _fit_candidate(base: FitResult, effect: Effect, cv_folds: int, loss: Loss) -> Candidate:
     problem = extend_problem(base.problem, [effect])
     x0 = warm_start(base, problem)
     start = evaluate(problem, x0)  # shared by the fit, the subset choice and the subset fit
@@ -403,22 +441,16 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
                            * math.exp(_log_choose(n_new, len(chosen))))
     p_value = min(1.0, 2.0 * min(p_full, p_subset))
     selected = tuple(problem.layout.names[k] for k in chosen) if testable else ()
-    # nothing selected: the data need none of its parameters, so it is never starred
-    p_significant = bool(testable and selected and p_value < threshold)
-    held_out_better = (cv_whitened is None or base_cv is None or cv_whitened < base_cv)
-    candidate = Candidate(
+    return Candidate(
         effect=effect.name, delta_bic=delta_bic if testable else None,
         delta_bic_full=bic(extended) - bic(base) if testable else None,
         selected=selected, delta_chi2=delta_chi2, added_parameters=added, rms=extended.rms,
         max=extended.max, cv_rms=extended.cv_rms, cv_folds=extended.cv_folds,
         chi2_dof=extended.chi2_dof, p_value=p_value if testable else None,
-        significant=p_significant and held_out_better and extended.converged,
-        strongest=_strongest(extended, effect.name, selected), fit=extended,
-        testable=testable, cv_whitened_rms=cv_whitened,
+        significant=False, strongest=_strongest(extended, effect.name, selected),
+        fit=extended, testable=testable, cv_whitened_rms=cv_whitened,
         unidentifiable=lost_parameters(base, extended),
     )
-    return replace(candidate, not_taken=not_taken_reason(candidate, p_significant, threshold,
-                                                         base_cv))
 
 
 def _subset_fit(problem: Problem, hold: Sequence[str], x0: np.ndarray, loss: Loss,

@@ -22,6 +22,7 @@ chi-square with the same mean and variance).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -52,9 +53,13 @@ def power(noncentrality: float, critical: float, dof: int = 1) -> float:
     return chi2_sf(critical / scale, mean / scale)
 
 
+@functools.lru_cache(maxsize=64)
 def required_noncentrality(alpha: float, target: float = DEFAULT_POWER, dof: int = 1
                            ) -> float:
-    """The noncentrality at which the chi-square test at level alpha has power target."""
+    """The noncentrality at which the chi-square test at level alpha has power target.
+
+    A bisection of ~60 power evaluations, kept per arguments: every candidate of a
+    diagnosis asks it at the same threshold."""
     critical = chi2_isf(alpha, dof)
     low, high = 0.0, 1.0
     while power(high, critical, dof) < target:
@@ -175,13 +180,14 @@ def _sizes(problem: Problem, x0: np.ndarray, fixed: np.ndarray, effect: Effect,
            alpha: float, target: float, scale: float) -> tuple[DetectableSize, ...]:
     """The sizes of ``effect``'s parameters in ``problem`` (the model's parameters first,
     ``fixed`` of them held) linearised at x0, at the noise ``scale``."""
-    J = evaluate(problem, x0).jacobian
-    assert J is not None
+    # one prediction for both Jacobians: the whitened one as ``evaluate`` forms it (the
+    # same operations, so the same values) and the raw one, for the lengths
+    _, raw = predict(problem, x0, jacobian=True)
+    assert raw is not None
+    J = -(problem.sqrt_information @ raw).reshape(-1, x0.size)
     n_base = fixed.size
     fitted = J[:, :n_base][:, ~fixed]
     basis = np.linalg.qr(fitted)[0] if fitted.shape[1] else np.zeros((J.shape[0], 0))
-    _, raw = predict(problem, x0, jacobian=True)
-    assert raw is not None
     lengths = raw[:, problem.length_columns, :]
     root = math.sqrt(required_noncentrality(alpha, target))
     span = problem.layout.effect_slices[effect.name]

@@ -59,6 +59,16 @@ def test_diagnose_of_a_well_formed_file_imports_no_pydantic(example: str) -> Non
                 or m == "hostpc.dataset.schema_models"]
 
 
+def test_diagnose_imports_no_other_command() -> None:
+    """diagnose's parser takes its robot options from hostpc.cli.robot_options: the
+    `hostpc robots` command's module (its chain tables, six dataclasses: ~2 % of the
+    command's instructions) and `hostpc fit`'s dataset reading are not imported."""
+    code, modules = imported_by("diagnose", "--ladder", "examples/ur5e_stereo.json")
+    assert code in (0, 1)
+    assert "hostpc.cli.robot_options" in modules
+    assert "hostpc.cli.robots" not in modules
+
+
 def test_calibrate_against_the_simulator_imports_no_scipy(tmp_path: Path) -> None:
     """The main job: a whole `hostpc calibrate --robot sim` (plan, rig, fit, push, verify,
     report) runs without scipy (its verification power imported scipy.special: ~0.3 s of
