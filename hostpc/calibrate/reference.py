@@ -22,8 +22,7 @@ how the fitted frame moves with the rig's calibration error, from the fit's shar
 hostpc.fitting.shared_errors.parameter_shared_sensitivity); its covariance includes that
 error. A later run with the same rig carries the same error in its own samples, so the prior
 block says so (`shared_sensitivity`) and the fit counts the rig's error once, correlated,
-instead of twice as independent: independent, the all-joint offsets' sigmas were
-optimistic (MSE / sigma^2 up to 1.9, docs/performance.md).
+instead of twice as independent (which loses the cross terms, of either sign).
 
 Per frame: the parameter names (after the frame's name, in the fit's order), the nominal
 the recording run fitted its deltas against (a pose's rotation as a rotation vector), the

@@ -109,8 +109,8 @@ def added_parameter_covariance(problem: Problem, jacobian_free: np.ndarray,
     errs by the SAME shared error as the samples: its part B S B^T of the block's
     covariance is taken out of the noise (A_p S A_p^T, A_p = Cov Jp^T Bw) and the shared
     error enters once, through samples and prior together: (A + A_p) S (A + A_p)^T.
-    Counted as independent noise instead, the cross terms are lost (the reference's rig
-    error and the new samples' are one error) and the offsets' sigmas are optimistic."""
+    Counted as independent noise instead, the cross terms (of either sign) are lost: the
+    reference's rig error and the new samples' are one error."""
     shared = problem.measurement.shared_error(problem)
     if shared is None:
         return None
