@@ -17,6 +17,13 @@ File (`zerocal-cell-reference/1`, JSON, SI units, written by `hostpc reference r
      "frames": {"target": {"parameters": ["x", "y", "z"], "nominal": [..], "delta": [..],
                            "covariance": [[..], ..]}, "tool": {...}}}
 
+A frame the recording run measured with a stereo rig also keeps `rig_sensitivity` (K x 24:
+how the fitted frame moves with the rig's calibration error, from the fit's shared error,
+hostpc.fitting.shared_errors.parameter_shared_sensitivity); its covariance includes that
+error. A later run with the same rig carries the same error in its own samples, so the prior
+block says so (`shared_sensitivity`) and the fit counts the rig's error once, correlated,
+instead of twice as independent (which loses the cross terms, of either sign).
+
 Per frame: the parameter names (after the frame's name, in the fit's order), the nominal
 the recording run fitted its deltas against (a pose's rotation as a rotation vector), the
 fitted delta and its covariance block. On load, a frame enters a run as a prior block
@@ -71,6 +78,8 @@ class ReferenceFrame:
     nominal: np.ndarray
     delta: np.ndarray
     covariance: np.ndarray
+    rig_sensitivity: np.ndarray | None = None
+    """(K, 24) d frame / d rig error of the recording fit, or None (no rig)."""
 
     @property
     def full_names(self) -> list[str]:
@@ -91,7 +100,9 @@ class ReferenceFrame:
     def to_dict(self) -> JsonObject:
         return {"parameters": list(self.parameters), "nominal": self.nominal.tolist(),
                 "delta": self.delta.tolist(), "covariance": self.covariance.tolist(),
-                "value": self.absolute().tolist()}
+                "value": self.absolute().tolist(),
+                **({"rig_sensitivity": self.rig_sensitivity.tolist()}
+                   if self.rig_sensitivity is not None else {})}
 
 
 @dataclass(frozen=True)
@@ -216,8 +227,12 @@ def reference_from_fit(result: FitResult, *, robot_serial: str, cell: JsonObject
                        source_run: str, software: str,
                        recorded: str | None = None) -> CellReference:
     """The reference of a fit: every frame it estimated, with its delta and covariance
-    block (a parameter the fit held is left out: the data did not determine it)."""
+    block (a parameter the fit held is left out: the data did not determine it), and, with
+    a stereo rig, its rig sensitivity."""
+    from hostpc.fitting.shared_errors import parameter_shared_sensitivity
+
     problem = result.problem
+    sensitivity = parameter_shared_sensitivity(problem, result.x, ~np.asarray(result.fixed))
     dataset = problem.dataset
     names = list(result.names)
     frames = []
@@ -234,7 +249,8 @@ def reference_from_fit(result: FitResult, *, robot_serial: str, cell: JsonObject
         frames.append(ReferenceFrame(frame, parameters,
                                      nominal_vector(dataset, frame, parameters),
                                      np.asarray(result.x, float)[index],
-                                     0.5 * (covariance + covariance.T)))
+                                     0.5 * (covariance + covariance.T),
+                                     None if sensitivity is None else sensitivity[index]))
     if not frames:
         raise InputError("the fit estimated no frame (all known): nothing to record")
     return CellReference(
@@ -294,7 +310,8 @@ def reference_from_dict(data: Any, where: str) -> CellReference:
                 or np.min(np.linalg.eigvalsh(symmetric)) < -1e-12 * max(
                     1e-30, float(np.max(np.abs(symmetric))))):
             raise InputError(f"{here}.covariance: not symmetric positive semi-definite")
-        frames.append(ReferenceFrame(str(name), tuple(parameters), nominal, delta, symmetric))
+        frames.append(ReferenceFrame(str(name), tuple(parameters), nominal, delta, symmetric,
+                                     _rig_sensitivity(spec, k, here)))
     if not frames:
         raise InputError(f"{where}: frames: none recorded")
     cell, rig = data.get("cell"), data.get("rig")
@@ -307,6 +324,21 @@ def reference_from_dict(data: Any, where: str) -> CellReference:
         software=str(data.get("software", "")), frames=tuple(frames),
         cell=cell if isinstance(cell, dict) else {},
         source_run=str(data.get("source_run", "")), rig=rig)
+
+
+def _rig_sensitivity(spec: JsonObject, k: int, where: str) -> np.ndarray | None:
+    """A recorded frame's `rig_sensitivity` (k rows, finite), or None if it has none."""
+    raw = spec.get("rig_sensitivity")
+    if raw is None:
+        return None
+    try:
+        sensitivity = np.asarray(raw, float)
+    except (TypeError, ValueError):
+        raise InputError(f"{where}.rig_sensitivity: must be numbers") from None
+    if sensitivity.ndim != 2 or sensitivity.shape[0] != k or not np.all(
+            np.isfinite(sensitivity)):
+        raise InputError(f"{where}.rig_sensitivity: expected {k} rows of finite numbers")
+    return sensitivity
 
 
 def load_reference(path: str | Path) -> CellReference:
@@ -358,11 +390,15 @@ class FramePrior:
     names: tuple[str, ...]
     value: np.ndarray
     covariance: np.ndarray
+    shared_sensitivity: np.ndarray | None = None
+    """(K, 24) how the value moves with this run's rig error (the same rig), or None."""
 
     def block(self) -> JsonObject:
         """The dataset's `prior_blocks` entry (hostpc.fitting.priors)."""
         return {"names": list(self.names), "value": self.value.tolist(),
-                "covariance": self.covariance.tolist(), "reference_frame": self.frame}
+                "covariance": self.covariance.tolist(), "reference_frame": self.frame,
+                **({"shared_sensitivity": self.shared_sensitivity.tolist()}
+                   if self.shared_sensitivity is not None else {})}
 
 
 def frame_priors(reference: CellReference, dataset: Dataset,
@@ -371,10 +407,14 @@ def frame_priors(reference: CellReference, dataset: Dataset,
     estimates (`estimated`; a frame the run holds known keeps its surveyed value).
 
     The recorded value (nominal + delta) is re-expressed against this dataset's nominal,
-    and the covariance carried through by the (numeric) Jacobian of that change. A camera
-    frame measured with another rig than this dataset's is left out (RIG_FRAMES)."""
+    and the covariance (and rig sensitivity) carried through by the (numeric) Jacobian of
+    that change. A camera frame measured with another rig than this dataset's is left out
+    (RIG_FRAMES); a frame measured with this dataset's rig keeps its rig sensitivity (the
+    same error as this run's samples)."""
     out = []
     same_rig = reference.rig_matches(dataset)
+    this_rig = (dataset.extra_fields.get("rig_uncertainty") or {}).get("rig")
+    shared_rig = same_rig and reference.rig is not None and this_rig is not None
     for frame in reference.frames:
         if frame.name not in estimated or (frame.name in RIG_FRAMES and not same_rig):
             continue
@@ -393,6 +433,8 @@ def frame_priors(reference: CellReference, dataset: Dataset,
                                              frame.delta - bump))
                 J[:, k] = (plus - minus) / (2 * step)
         covariance = J @ frame.floored_covariance() @ J.T
+        sensitivity = (J @ frame.rig_sensitivity
+                       if shared_rig and frame.rig_sensitivity is not None else None)
         out.append(FramePrior(frame.name, tuple(frame.full_names), value,
-                              0.5 * (covariance + covariance.T)))
+                              0.5 * (covariance + covariance.T), sensitivity))
     return out

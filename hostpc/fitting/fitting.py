@@ -246,7 +246,8 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
     if np.any(free) and np.all(np.isfinite(J_free)):
         covariance[np.ix_(free, free)] = _covariance(J_free_priors)
         shared = added_parameter_covariance(problem, J_free, covariance[np.ix_(free, free)],
-                                            row_weight, whitened_rows)
+                                            row_weight, whitened_rows,
+                                            prior_rows[:, free] if prior_rows.size else None)
         if shared is not None:  # the rig's calibration error, shared by all samples
             covariance[np.ix_(free, free)] += shared
     elif np.any(free):

@@ -16,7 +16,11 @@ marginal sigmas alone would claim too much in some directions and too little in 
 enters as K residuals whitened by the inverse Cholesky factor of its covariance:
 L^-1 (x_block - value), C = L L^T. In the dataset: `"prior_blocks": [{"names": [...],
 "value": [...], "covariance": [[...]]}]` (SI), beside `priors`; a name may not be in two
-priors.
+priors. A block may also say how its value moves with the dataset's shared error
+(`"shared_sensitivity"`: K x Ks, the value's change per unit of the shared error, e.g. a
+reference frame recorded with the same stereo rig, whose calibration error it carries): its
+covariance then includes that part, and the fit's covariance counts it as the SAME error as
+the measurements' (hostpc.fitting.shared_errors), not as independent noise.
 
 Where they come from (all end up in the dataset's top-level `priors` and `hold` fields, which
 the fit reads from the problem's dataset):
@@ -71,7 +75,9 @@ class Constraints:
     index: (K,) parameter index of each prior; value, sigma: (K,) SI (sigma: the marginal
     one of a prior block's parameter); held: (P,) bool; whitening: (K, K) the matrix that
     whitens x[index] - value when prior blocks are present (block-diagonal: 1 / sigma for a
-    single prior, L^-1 for a block), None: diag(1 / sigma)."""
+    single prior, L^-1 for a block), None: diag(1 / sigma); shared: (K, Ks) how each prior's
+    value moves with the dataset's shared error (zero rows for priors that do not), None:
+    no block states one."""
 
     priors: tuple[Prior, ...]
     index: np.ndarray
@@ -79,6 +85,16 @@ class Constraints:
     sigma: np.ndarray
     held: np.ndarray
     whitening: np.ndarray | None = None
+    shared: np.ndarray | None = None
+
+    def whitened_shared(self) -> np.ndarray | None:
+        """(K, Ks) `shared` whitened as the residuals are, or None."""
+        if self.shared is None:
+            return None
+        if self.whitening is not None:
+            whitened: np.ndarray = self.whitening @ self.shared
+            return whitened
+        return self.shared / self.sigma[:, None]
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         """(K,) whitened prior residuals (x_i - value) / sigma (or whitening @ (x - value))."""
@@ -204,10 +220,13 @@ def constraints_for(extra_fields: Mapping[str, Any], names: tuple[str, ...],
         else:
             raise InputError(f"prior {entry!r}: expected NAME=VALUE+-SIGMA")
     whitening: np.ndarray | None = None
+    shared: np.ndarray | None = None
     if raw_blocks:
-        blocks = [prior_block(entry, unit_of) for entry in _block_entries(raw_blocks)]
+        entries = _block_entries(raw_blocks)
+        blocks = [prior_block(entry, unit_of) for entry in entries]
         whitening = block_whitening([np.diag(1.0 / np.array([p.sigma for p in priors]))]
                                     + [w for _, w in blocks])
+        shared = _shared_rows(len(priors), [len(b) for b, _ in blocks], entries)
         priors += [p for block, _ in blocks for p in block]
     seen: set[str] = set()
     for prior in priors:
@@ -227,7 +246,30 @@ def constraints_for(extra_fields: Mapping[str, Any], names: tuple[str, ...],
         held[names.index(name)] = True
     index = np.array([names.index(p.name) for p in priors], dtype=int)
     return Constraints(tuple(priors), index, np.array([p.value for p in priors], float),
-                       np.array([p.sigma for p in priors], float), held, whitening)
+                       np.array([p.sigma for p in priors], float), held, whitening, shared)
+
+
+def _shared_rows(n_single: int, sizes: list[int], entries: list[JsonObject]
+                 ) -> np.ndarray | None:
+    """(K, Ks) the blocks' `shared_sensitivity` stacked under `n_single` zero rows (the
+    single priors'), zero rows for a block without one; None if no block has one."""
+    given = [entry.get("shared_sensitivity") for entry in entries]
+    if all(g is None for g in given):
+        return None
+    try:
+        parts = [None if g is None else np.asarray(g, dtype=float) for g in given]
+    except (TypeError, ValueError):
+        raise InputError("prior_blocks: shared_sensitivity must be numbers") from None
+    width = {p.shape[1] for p in parts if p is not None and p.ndim == 2}
+    if len(width) != 1 or any(p is not None and (p.shape != (k, *width) or
+                                                 not np.all(np.isfinite(p)))
+                              for p, k in zip(parts, sizes, strict=True)):
+        raise InputError("prior_blocks: shared_sensitivity must be finite, one row per name "
+                         "and the same width in every block")
+    (ks,) = width
+    return np.vstack([np.zeros((n_single, ks))]
+                     + [np.zeros((k, ks)) if p is None else p
+                        for p, k in zip(parts, sizes, strict=True)])
 
 
 def _block_entries(raw: Any) -> list[JsonObject]:

@@ -89,7 +89,8 @@ def residual_scale(jacobian_free: np.ndarray, D_whitened: np.ndarray, S: np.ndar
 
 def added_parameter_covariance(problem: Problem, jacobian_free: np.ndarray,
                                covariance_free: np.ndarray, row_weight: np.ndarray,
-                               residuals: np.ndarray | None = None) -> np.ndarray | None:
+                               residuals: np.ndarray | None = None,
+                               prior_free: np.ndarray | None = None) -> np.ndarray | None:
     """(F, F) what the shared error changes in the free parameters' covariance, or None.
 
     jacobian_free: (N*m, F) whitened (and robust-weighted) Jacobian of the free parameters;
@@ -101,7 +102,15 @@ def added_parameter_covariance(problem: Problem, jacobian_free: np.ndarray,
     When the block declares a `pixel_floor_px` (a floor the method added to each sample's
     covariance to stand for the shared error in the weights and in chi2), the floor is a
     weighting only: the covariance is the sandwich for the samples' noise without the floor
-    plus the (scaled) shared error, and the returned change can be negative."""
+    plus the (scaled) shared error, and the returned change can be negative.
+
+    prior_free: (K, F) the whitened prior rows (by the free parameters). A prior block that
+    states its `shared_sensitivity` (a cell reference's frame recorded with the same rig)
+    errs by the SAME shared error as the samples: its part B S B^T of the block's
+    covariance is taken out of the noise (A_p S A_p^T, A_p = Cov Jp^T Bw) and the shared
+    error enters once, through samples and prior together: (A + A_p) S (A + A_p)^T.
+    Counted as independent noise instead, the cross terms (of either sign) are lost: the
+    reference's rig error and the new samples' are one error."""
     shared = problem.measurement.shared_error(problem)
     if shared is None:
         return None
@@ -117,13 +126,62 @@ def added_parameter_covariance(problem: Problem, jacobian_free: np.ndarray,
         M = weight[:, :, None] * M * weight[:, None, :]
         J3 = jacobian_free.reshape(W.shape[0], W.shape[1], -1)
         meat = np.einsum("nif,nij,njg->fg", J3, M, J3)
+        if prior_free is not None:  # the prior rows' noise is theirs in full (no floor)
+            meat += prior_free.T @ prior_free
         change += covariance_free @ meat @ covariance_free - covariance_free
         noise_blocks = M
     if residuals is not None:
         S = S * residual_scale(jacobian_free, D_whitened, S, np.ravel(residuals), noise_blocks)
     A = covariance_free @ (jacobian_free.T @ D_whitened)
+    prior_shared = _prior_shared(problem, S.shape[0])
+    if prior_shared is not None and prior_free is not None:
+        A_prior = covariance_free @ (prior_free.T @ prior_shared)
+        change -= A_prior @ shared.covariance @ A_prior.T  # was in the prior's noise
+        A = A + A_prior
     change += A @ S @ A.T
     return 0.5 * (change + change.T)
+
+
+def _prior_shared(problem: Problem, width: int) -> np.ndarray | None:
+    """(K, Ks) the whitened `shared_sensitivity` of the problem's prior rows, or None (no
+    block states one, or not of the shared error's width)."""
+    from hostpc.fitting.priors import problem_constraints
+
+    constraints = problem_constraints(problem)
+    shared = None if constraints is None else constraints.whitened_shared()
+    return shared if shared is not None and shared.shape[1] == width else None
+
+
+def parameter_shared_sensitivity(problem: Problem, x: np.ndarray, free: np.ndarray
+                                 ) -> np.ndarray | None:
+    """(P, Ks) how a fit's estimate at x moves with the shared error, d x / d delta (zero
+    rows for fixed parameters; the linear loss's weights), or None without a shared error.
+    What a cell reference records of a frame measured with a stereo rig
+    (hostpc.calibrate.reference), so that a later run with the same rig knows the frame's
+    error is its own samples' error too."""
+    from hostpc.fitting.priors import problem_constraints
+    from hostpc.fitting.solver import evaluate
+
+    shared = problem.measurement.shared_error(problem)
+    if shared is None:
+        return None
+    x = np.asarray(x, dtype=float)
+    free = np.asarray(free, dtype=bool)
+    evaluation = evaluate(problem, x)
+    assert evaluation.jacobian is not None
+    J = evaluation.jacobian[:, free]
+    D = np.einsum("nij,njk->nik", problem.sqrt_information, shared.sensitivity)
+    Dw = D.reshape(J.shape[0], -1)
+    Jall = J
+    constraints = problem_constraints(problem)
+    prior_shared = _prior_shared(problem, Dw.shape[1])
+    if constraints is not None and constraints.index.size:
+        Jall = np.vstack([J, constraints.jacobian(x.size)[:, free]])
+        Dw = np.vstack([Dw, np.zeros((constraints.index.size, Dw.shape[1]))
+                        if prior_shared is None else prior_shared])
+    out = np.zeros((x.size, Dw.shape[1]))
+    out[free] = np.linalg.pinv(Jall.T @ Jall) @ (Jall.T @ Dw)
+    return out
 
 
 @dataclass(frozen=True)

@@ -267,14 +267,9 @@ def test_planned_views_pass_the_coverage_check(world: str) -> None:
     assert result.rig.covariance is not None and result.corner_sigma_px < 0.1
 
 
-def test_declared_pixel_floor_is_a_weighting_not_a_reported_noise(stereo_poses) -> None:  # type: ignore[no-untyped-def]
-    """A floor added to the samples' covariances and declared in the block leaves the reported
-    covariance that of the noise alone (the sandwich for the floor-weighted estimator: within
-    a few % of the unfloored fit's), where an undeclared floor inflates it."""
-    rig = _rig()
-    cov = np.zeros((N_RIG, N_RIG))
-    cov[0, 0] = 0.5**2
-    _, with_rig = _dataset_with_rig(rig, cov, stereo_poses)
+def _floored(with_rig, rig: StereoRig, cov: np.ndarray):  # type: ignore[no-untyped-def]
+    """(the dataset's document with a pixel floor added to every sample's covariance, as
+    stereo_target adds it, the floor in px): the depth floor as large as the noise."""
     document = dataset_to_dict(with_rig)
     p = np.array([s["p"] for s in document["samples"]])
     depth_var = np.mean([s["cov"][2][2] for s in document["samples"]])
@@ -287,6 +282,18 @@ def test_declared_pixel_floor_is_a_weighting_not_a_reported_noise(stereo_poses) 
         c[1, 1] += (zi * floor_px / fx) ** 2
         c[2, 2] += (zi**2 * np.sqrt(2.0) * floor_px / (fx * baseline)) ** 2
         sample["cov"] = c.tolist()
+    return document, floor_px
+
+
+def test_declared_pixel_floor_is_a_weighting_not_a_reported_noise(stereo_poses) -> None:  # type: ignore[no-untyped-def]
+    """A floor added to the samples' covariances and declared in the block leaves the reported
+    covariance that of the noise alone (the sandwich for the floor-weighted estimator: within
+    a few % of the unfloored fit's), where an undeclared floor inflates it."""
+    rig = _rig()
+    cov = np.zeros((N_RIG, N_RIG))
+    cov[0, 0] = 0.5**2
+    _, with_rig = _dataset_with_rig(rig, cov, stereo_poses)
+    document, floor_px = _floored(with_rig, rig, cov)
     undeclared = fit(dataset_from_dict(document), cv_folds=0)
     document["rig_uncertainty"] = uncertainty_document(rig, cov, floor_px)
     declared = fit(dataset_from_dict(document), cv_folds=0)
@@ -296,3 +303,88 @@ def test_declared_pixel_floor_is_a_weighting_not_a_reported_noise(stereo_poses) 
     ratio = declared.std[free] / reference.std[free]
     assert np.all(ratio > 0.999) and np.all(ratio < 1.1), ratio  # sandwich >= optimal
     assert np.mean(undeclared.std[free] / reference.std[free]) > 1.2
+
+
+def test_a_declared_floor_keeps_the_noise_of_a_prior_block(stereo_poses) -> None:  # type: ignore[no-untyped-def]
+    """With a declared floor, the sandwich's noise holds the prior rows too: a cell
+    reference's tool frame (the only thing that gives q6 with the target known) keeps q6's
+    sigma that of the unfloored fit with the same prior. The old sandwich summed the
+    samples' noise only and dropped the prior's: the sigmas the prior gives fell towards the
+    rig term alone (stereo_target's all-joint MSE / sigma^2 up to 1.9, docs/performance.md)."""
+    from hostpc.fitting.priors import with_prior_blocks
+
+    rig = _rig()
+    cov = np.zeros((N_RIG, N_RIG))
+    cov[0, 0] = 0.5**2
+    _, with_rig = _dataset_with_rig(rig, cov, stereo_poses[30:42])
+    block = {"names": [f"tool.{p}" for p in ("x", "y", "z", "rx", "ry", "rz")],
+             "value": [0.0] * 6,
+             "covariance": np.diag([1e-5] * 3 + [1e-4] * 3).__pow__(2).tolist()}
+    document, floor_px = _floored(with_rig, rig, cov)
+    document["rig_uncertainty"] = uncertainty_document(rig, cov, floor_px)
+    declared = fit(with_prior_blocks(dataset_from_dict(document), [block]), cv_folds=0)
+    reference = fit(with_prior_blocks(with_rig, [block]), cv_folds=0)
+    q6 = reference.names.index("joint_offsets.q6")
+    assert not reference.fixed[q6] and reference.std[q6] > 5e-5  # the prior gives it
+    free = ~reference.fixed
+    ratio = declared.std[free] / reference.std[free]
+    assert np.all(ratio > 0.999) and np.all(ratio < 1.1), ratio
+
+
+def test_a_reference_recorded_with_the_same_rig_shares_its_error(stereo_poses) -> None:  # type: ignore[no-untyped-def]
+    """A cell reference's camera frame recorded with the rig a later run uses carries that
+    rig's error, and so do the later run's samples: the later fit's covariance is the noise
+    of both plus (A_run + A_ref) S (A_run + A_ref)^T, A measured end to end (re-triangulate
+    BOTH runs' pixels with a perturbed rig, re-record the reference, refit). Counted as
+    independent (the old code) the cross terms were lost and q6's sigma was optimistic."""
+    from hostpc.calibrate.reference import (
+        MOUNT_FLOOR_M,
+        MOUNT_FLOOR_RAD,
+        frame_priors,
+        reference_from_fit,
+    )
+    from hostpc.fitting.priors import with_prior_blocks
+
+    rig = _rig()
+    chosen = [RIG_PARAMETERS.index(n) for n in ("left.fx", "stereo.ry", "stereo.tx")]
+    steps = np.array([0.5, 2e-4, 2e-4])
+    cov = np.zeros((N_RIG, N_RIG))
+    cov[chosen, chosen] = steps**2
+    plain_ref, rig_ref = _dataset_with_rig(rig, cov, stereo_poses[:30])
+    plain_run, rig_run = _dataset_with_rig(rig, cov, stereo_poses[30:42])
+
+    def later_fit(recording, run):  # type: ignore[no-untyped-def]
+        reference = reference_from_fit(fit(recording, cv_folds=0), robot_serial="SN-1",
+                                       cell={}, source_run="r", software="t")
+        blocks = [p.block() for p in frame_priors(reference, rig_run, ("tool",))]
+        return fit(with_prior_blocks(run, blocks), cv_folds=0), blocks
+
+    shared, blocks = later_fit(rig_ref, rig_run)
+    assert "shared_sensitivity" in blocks[0]
+    C = np.asarray(blocks[0]["covariance"])  # the weights: noise and rig error
+    base, _ = later_fit(rig_ref, plain_run)  # same weights, no shared error: (J^T J)^-1
+    tool = [base.names.index(f"tool.{p}") for p in ("x", "y", "z", "rx", "ry", "rz")]
+    # the reference's noise alone: a fit without the rig block, plus the mount floor
+    C_noise = (fit(plain_ref, cv_folds=0).covariance[np.ix_(tool, tool)]
+               + np.diag([MOUNT_FLOOR_M**2] * 3 + [MOUNT_FLOOR_RAD**2] * 3))
+    G = base.covariance[:, tool] @ np.linalg.inv(C)
+    noise = base.covariance + G @ (C_noise - C) @ G.T
+    A = []
+    for k, step in zip(chosen, steps, strict=True):
+        moved = rig_vector(rig)
+        moved[k] += step
+        rect = rectification_for(rig_with_vector(rig, moved))
+
+        def retriangulated(data, rect=rect):  # type: ignore[no-untyped-def]
+            p = np.array([triangulate(rect, u[0], u[1]).p for u in data.samples.uv])
+            return dataclasses.replace(data, samples=dataclasses.replace(data.samples, p=p))
+
+        refit, _ = later_fit(retriangulated(rig_ref), retriangulated(plain_run))
+        A.append(refit.x - base.x)  # per one sigma of this rig parameter
+    A = np.array(A).T
+    expected = noise + A @ A.T
+    offsets = [k for k, n in enumerate(base.names) if n.startswith("joint_offsets.")
+               and not base.fixed[k]]
+    assert len(offsets) == 6  # q1 and q6 too: the reference gives them
+    np.testing.assert_allclose(shared.std[offsets], np.sqrt(np.diag(expected))[offsets],
+                               rtol=0.003)  # the old code: 1.3 % low
