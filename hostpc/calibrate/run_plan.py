@@ -4,7 +4,9 @@ moves. Pure numerics apart from the progress messages.
 
 With a target sigma (stereo_target's default) the fit poses are the fewest that reach it
 (at least MIN_TARGET_POSES, which stereo_target's centre refinement needs; the selection is
-travel-aware, TRAVEL_SLACK) and CHECK_POSES more that let the fit's own chi-square see a
+travel-aware, TRAVEL_SLACK; a method with `shortens_selection`, stereo_target, swaps them
+for nearer ones that keep the sigma: `hostpc.planning.design.shorten_tour`) and
+CHECK_POSES more, chosen against that fit, that let the fit's own chi-square see a
 missing joint compliance, visited as a tour (which a method with `shortens_tour`,
 world_point, has shortened: `hostpc.planning.design.shorten_tour`; its floor then counts
 the shortened plan's poses when fewer); the verification poses are chosen after them
