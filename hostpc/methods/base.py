@@ -427,8 +427,8 @@ class Method(ABC):
     (`hostpc.planning.design.shorten_tour`: poses dropped or swapped for nearer ones while
     the target sigma holds): world_point."""
     shortens_selection: ClassVar[bool] = False
-    """A target-sigma plan's selected poses are swapped for nearer ones while the target
-    sigma holds (`hostpc.planning.design.shorten_tour`, never fewer than
+    """A target-sigma plan's selected poses are swapped for nearer ones, or dropped, while
+    the target sigma holds (`hostpc.planning.design.shorten_tour`, never fewer than
     `run_plan.MIN_TARGET_POSES`) BEFORE its check poses are chosen, so that these see the
     fit the run measures: stereo_target (shortened after them, with the check poses fixed,
     the forced push of the lean model on the hidden compliance was caught in 3 of 8
