@@ -426,6 +426,13 @@ class Method(ABC):
     """A target-sigma plan's tour is shortened after the selection
     (`hostpc.planning.design.shorten_tour`: poses dropped or swapped for nearer ones while
     the target sigma holds): world_point."""
+    shortens_selection: ClassVar[bool] = False
+    """A target-sigma plan's selected poses are swapped for nearer ones, or dropped, while
+    the target sigma holds (`hostpc.planning.design.shorten_tour`, never fewer than
+    `run_plan.MIN_TARGET_POSES`) BEFORE its check poses are chosen, so that these see the
+    fit the run measures: stereo_target (shortened after them, with the check poses fixed,
+    the forced push of the lean model on the hidden compliance was caught in 3 of 8
+    worlds: the check poses had been chosen against a fit no longer measured)."""
     staged: ClassVar[bool] = False
     """The runner may measure the plan again in stages, its poses shifted by the current
     joint offset estimate, when a joint is found far off (hostpc.calibrate.swaps: a motor

@@ -482,10 +482,10 @@ def poses_for_target_sigma(design: Design, order: np.ndarray, target_sigma: floa
     return low
 
 
-def shorten_tour(design: Design, q: np.ndarray, tour: Sequence[int], q_start: np.ndarray,
-                 target_sigma: float, n_joints: int, per_pose_s: float,
+def shorten_tour(design: Design, q: np.ndarray, tour: Sequence[int] | np.ndarray,
+                 q_start: np.ndarray, target_sigma: float, n_joints: int, per_pose_s: float,
                  joint_speed: Rates = None, periodic: np.ndarray | None = None,
-                 fixed: Iterable[int] = ()) -> np.ndarray:
+                 fixed: Iterable[int] = (), min_poses: int = 0) -> np.ndarray:
     """`tour` (pool indices into q (N, n), in visiting order from q_start (n,)) made
     shorter in robot time while every identifiable joint offset keeps its predicted sigma
     <= target_sigma (rad, the poses alone): a local search that, while one saves time,
@@ -493,11 +493,12 @@ def shorten_tour(design: Design, q: np.ndarray, tour: Sequence[int], q_start: np
     one, and its settle and capture, per_pose_s, go) or replacing it with a pool pose
     nearer its neighbours in the tour (`tour.move_times` with joint_speed; periodic:
     joints timed the short way round). The poses in `fixed` (a short plan's check poses)
-    stay. A selection picks poses for their information and a tour then visits them; this
-    trades information the plan does not need for shorter moves (world_point: 14 poses in
-    14.2 s of motion became 9 in 8.1 s, docs/performance.md). A design with a prior (a
-    cell reference) is returned unchanged (its joints' sigmas are counted with the prior,
-    `poses_for_target_sigma`)."""
+    stay, and no pose is dropped from a tour of `min_poses`. A selection picks poses for
+    their information and a tour then visits them; this trades information the plan does
+    not need for shorter moves (world_point: 14 poses in 14.2 s of motion became 9 in 8.1
+    s; stereo_target's 6 selected poses, none dropped: 1.0 s less, docs/performance.md). A
+    design with a prior (a cell reference) is returned unchanged (its joints' sigmas are
+    counted with the prior, `poses_for_target_sigma`)."""
     tour_list = [int(k) for k in tour]
     if design.prior is not None or len(tour_list) == 0:
         return np.asarray(tour_list, dtype=int)
@@ -532,7 +533,7 @@ def shorten_tour(design: Design, q: np.ndarray, tour: Sequence[int], q_start: np
             now = float(times(path[i], q[k])) + (0.0 if nxt is None else
                                                  float(times(q[k], nxt)))
             without = M - info[k]
-            if reaches(without):  # drop it
+            if len(tour_list) > min_poses and reaches(without):  # drop it
                 saving = now + per_pose_s - (0.0 if nxt is None else
                                               float(times(path[i], nxt)))
                 if saving > best_saving:

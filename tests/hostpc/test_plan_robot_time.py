@@ -180,3 +180,33 @@ def test_poses_is_the_most_a_target_sigma_plan_measures_check_poses_included(
                         target_sigma_deg=0.002, n_candidates=600)
     plan = plan_run(stereo_method(("target",), tmp_path / "b"), state, roomy, NullProgress())
     assert plan.q.shape[0] >= 6 + 2
+
+
+def test_stereo_selection_is_shortened_before_its_check_poses(tmp_path: Path) -> None:
+    """stereo_target's selected fit poses are swapped for nearer ones (or dropped) while
+    the target sigma holds, before the check poses are chosen (Method.shortens_selection):
+    over planning seeds 0-3 (a nominal rig, 0.05 px planned: 15-21 fit poses unshortened,
+    34-41 s; shortened 8-16 poses, 25-33 s) every plan is predicted faster than the same
+    plan unshortened (the code before: 0 s saved) and keeps the target sigma on every
+    identifiable joint and at least MIN_TARGET_POSES + CHECK_POSES fit poses."""
+    from hostpc.calibrate.run_plan import CHECK_POSES, MIN_TARGET_POSES
+    from hostpc.kinds.stereo_target.method import StereoTargetMethod
+
+    class Unshortened(StereoTargetMethod):
+        shortens_selection = False
+
+    state, saved = home_state(), []
+    for seed in range(4):
+        settings = RunSettings(method="stereo_target", seed=seed, n_verify=4,
+                               target_sigma_deg=0.002, n_candidates=600)
+        plain = stereo_method(("target",), tmp_path / f"plain{seed}")
+        plain.__class__ = Unshortened
+        before = plan_run(plain, state, settings, NullProgress())
+        after = plan_run(stereo_method(("target",), tmp_path / str(seed)), state, settings,
+                         NullProgress())
+        assert after.q.shape[0] >= MIN_TARGET_POSES + CHECK_POSES
+        sigmas = [s for s in after.info["predicted_joint_sigma_deg"] if s is not None]
+        assert len(sigmas) == 5 and max(sigmas) <= 0.002
+        saved.append(before.info["predicted_robot_time_s"]["total"]
+                     - after.info["predicted_robot_time_s"]["total"])
+    assert min(saved) > 1.0, saved

@@ -85,6 +85,7 @@ class StereoTargetMethod(Method):
     default_target_sigma_deg: ClassVar[float | None] = 0.002
     staged: ClassVar[bool] = True
     selection_per_second: ClassVar[bool] = True
+    shortens_selection: ClassVar[bool] = True
 
     @classmethod
     def short_plan_warning(cls, n_fit: int) -> str | None:
