@@ -4,10 +4,11 @@ moves. Pure numerics apart from the progress messages.
 
 With a target sigma (stereo_target's default) the fit poses are the fewest that reach it
 (at least MIN_TARGET_POSES, which stereo_target's centre refinement needs; the selection is
-travel-aware, TRAVEL_SLACK; a method with `shortens_selection`, stereo_target, swaps them
-for nearer ones that keep the sigma: `hostpc.planning.design.shorten_tour`) and
-CHECK_POSES more, chosen against that fit, that let the fit's own chi-square see a
-missing joint compliance, visited as a tour (which a method with `shortens_tour`,
+travel-aware, TRAVEL_SLACK; a method whose `ShortPlan` shortens its selection,
+stereo_target, swaps them for nearer ones that keep the sigma:
+`hostpc.planning.design.shorten_tour`) and CHECK_POSES more, chosen against that fit, that
+let the fit's own chi-square see a missing joint compliance, visited as a tour (which a
+method whose `ShortPlan` shortens the tour,
 world_point, has shortened: `hostpc.planning.design.shorten_tour`; its floor then counts
 the shortened plan's poses when fewer); the verification poses are chosen after them
 for the most signal against that missing effect per second of robot time
@@ -234,7 +235,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
             travel = (Travel(pool, np.asarray(state.q, float), full_turn_joints(*limits),
                              rates=rates,
                              per_pose_s=per_pose_s)
-                      if method.selection_per_second else
+                      if method.short_plan.selection == "per_second" else
                       Travel(pool, np.asarray(state.q, float), full_turn_joints(*limits),
                              TRAVEL_SLACK))
         chosen = select(design, settings.n_poses, settings.criterion, rng, travel)
@@ -252,7 +253,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
                 math.radians(settings.target_sigma_deg or FLOOR_SIGMA_DEG), state.q.size,
                 per_pose_s, rates, full_turn_joints(*limits), fixed, min_poses)
 
-        if short and method.shortens_selection and enough is not None:
+        if short and method.short_plan.shorten == "selection" and enough is not None:
             # nearer poses that keep the target sigma, before the check poses are chosen
             # against the fit the run measures
             chosen = shortened(chosen[short_path(pool[chosen], state.q, *limits, rates)[0]],
@@ -270,7 +271,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         if short:  # a tour, full-turn joints the short way round (tour.short_path)
             order, q_short = short_path(pool[chosen], state.q, *limits, rates)
             fit_indices = chosen[order]
-            if method.shortens_tour and enough is not None:  # fewer, nearer poses
+            if method.short_plan.shorten == "tour" and enough is not None:  # fewer, nearer
                 fit_indices = shortened(fit_indices, check_poses, 0)
                 order, q_short = short_path(pool[fit_indices], state.q, *limits, rates)
                 fit_indices = fit_indices[order]
@@ -372,7 +373,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         fewest = poses_for_target_sigma(
             design, selection, math.radians(settings.target_sigma_deg or FLOOR_SIGMA_DEG),
             state.q.size)
-        if short and method.shortens_tour and fewest is not None:  # fewer poses reach it
+        if short and method.short_plan.shorten == "tour" and fewest is not None:  # fewer reach it
             fewest = min(fewest, len(fit_indices))
         n_fewest = fewest or len(selection)
 

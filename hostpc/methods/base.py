@@ -59,7 +59,7 @@ import numpy as np
 from hostpc.dataset import Dataset, Samples
 from hostpc.json_object import JsonObject
 from hostpc.methods.cell import Cell
-from hostpc.planning.design import PoseGroups
+from hostpc.planning.design import PoseGroups, ShortPlan
 from hostpc.robots.base import MoveOutcome, Need, RobotAdapter, RobotState
 
 Phase = Literal["fit", "verify"]
@@ -415,24 +415,12 @@ class Method(ABC):
     plans_whole_groups: ClassVar[bool] = False
     """The plan takes whole groups of poses (`pose_groups`: sphere_probe's orientations of
     5 contacts), so it has no per-pose stop at a target sigma (--target-sigma refused)."""
-    selection_per_second: ClassVar[bool] = False
-    """A target-sigma plan selects its fit poses as a path, the most information per
-    second of move, settle and capture (`hostpc.planning.design.Travel.per_pose_s`:
-    stereo_target), instead of the nearest within `run_plan.TRAVEL_SLACK` of the best."""
+    short_plan: ClassVar[ShortPlan] = ShortPlan()
+    """How a target-sigma plan keeps its robot time short: how it selects its fit poses
+    and whether it shortens them (`hostpc.planning.design.ShortPlan`)."""
     needs: ClassVar[tuple[Need, ...]] = ()
     """Calls beyond `RobotAdapter` the method makes (hostpc.robots.base capabilities),
     checked by the runner before `prepare`."""
-    shortens_tour: ClassVar[bool] = False
-    """A target-sigma plan's tour is shortened after the selection
-    (`hostpc.planning.design.shorten_tour`: poses dropped or swapped for nearer ones while
-    the target sigma holds): world_point."""
-    shortens_selection: ClassVar[bool] = False
-    """A target-sigma plan's selected poses are swapped for nearer ones, or dropped, while
-    the target sigma holds (`hostpc.planning.design.shorten_tour`, never fewer than
-    `run_plan.MIN_TARGET_POSES`) BEFORE its check poses are chosen, so that these see the
-    fit the run measures: stereo_target (shortened after them, with the check poses fixed,
-    the forced push of the lean model on the hidden compliance was caught in 3 of 8
-    worlds: the check poses had been chosen against a fit no longer measured)."""
     staged: ClassVar[bool] = False
     """The runner may measure the plan again in stages, its poses shifted by the current
     joint offset estimate, when a joint is found far off (hostpc.calibrate.swaps: a motor

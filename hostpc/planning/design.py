@@ -41,6 +41,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -200,7 +201,7 @@ class Travel:
     candidate with the most information gain per second of its move from the LAST pose
     chosen (from q_start for the first; `move_times` at `rates`, the run's trapezoidal law)
     plus its settle and capture (`per_pose_s`), so the selection is itself a short tour
-    through informative poses (stereo_target, `Method.selection_per_second`). Nested too."""
+    through informative poses (stereo_target's `ShortPlan`). Nested too."""
 
     q: np.ndarray
     q_start: np.ndarray
@@ -208,6 +209,28 @@ class Travel:
     slack: float = 0.0
     rates: Rates = None
     per_pose_s: float | None = None
+
+
+@dataclass(frozen=True)
+class ShortPlan:
+    """How a method's target-sigma plan keeps its robot time short
+    (`hostpc.calibrate.run_plan.plan_run`): one value per method, `Method.short_plan`.
+
+    selection: "near_best", each fit pose the nearest (move time) of those whose
+    information gain is within `run_plan.TRAVEL_SLACK` of the best step's; "per_second", a
+    path, each pose the most information per second of its move from the last one, settle
+    and capture (`Travel.per_pose_s`: stereo_target).
+
+    shorten: after the selection, `shorten_tour` swaps poses for nearer ones, or drops
+    them, while every identifiable offset keeps the target sigma. "none"; "selection", the
+    selected poses (never fewer than `run_plan.MIN_TARGET_POSES`) BEFORE the check poses
+    are chosen, so that these see the fit the run measures (stereo_target: shortened after
+    them, with the check poses fixed, the forced push of the lean model on the hidden
+    compliance was caught in 3 of 8 worlds); "tour", the whole tour with the check poses
+    fixed (world_point), and the floor then counts the shortened plan's poses when fewer."""
+
+    selection: Literal["near_best", "per_second"] = "near_best"
+    shorten: Literal["none", "selection", "tour"] = "none"
 
 
 def greedy_d_optimal_groups(design: Design, members: Sequence[np.ndarray], n_select: int,

@@ -17,6 +17,7 @@ from hostpc.calibrate.run_plan import plan_run
 from hostpc.methods import method_class
 from hostpc.methods.base import NullProgress, Plan, RunSettings
 from hostpc.methods.cell import build_cell
+from hostpc.planning.design import ShortPlan
 from hostpc.planning.robot_time import (
     TimeLimits,
     Waypoints,
@@ -184,7 +185,7 @@ def test_poses_is_the_most_a_target_sigma_plan_measures_check_poses_included(
 
 def test_stereo_selection_is_shortened_before_its_check_poses(tmp_path: Path) -> None:
     """stereo_target's selected fit poses are swapped for nearer ones (or dropped) while
-    the target sigma holds, before the check poses are chosen (Method.shortens_selection):
+    the target sigma holds, before the check poses are chosen (`ShortPlan.shorten` "selection"):
     over planning seeds 0-3 (a nominal rig, 0.05 px planned: 15-21 fit poses unshortened,
     34-41 s; shortened 8-16 poses, 25-33 s) every plan is predicted faster than the same
     plan unshortened (the code before: 0 s saved) and keeps the target sigma on every
@@ -193,7 +194,7 @@ def test_stereo_selection_is_shortened_before_its_check_poses(tmp_path: Path) ->
     from hostpc.kinds.stereo_target.method import StereoTargetMethod
 
     class Unshortened(StereoTargetMethod):
-        shortens_selection = False
+        short_plan = ShortPlan(selection="per_second")
 
     state, saved = home_state(), []
     for seed in range(4):

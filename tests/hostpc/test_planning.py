@@ -322,7 +322,7 @@ def test_a_joint_only_a_prior_identifies_is_planned_with_the_prior() -> None:
 
 def test_per_second_selection_reaches_the_target_sigma_in_less_robot_time(
         pool_and_design) -> None:  # type: ignore[no-untyped-def]
-    """stereo_target's short plan (`Method.selection_per_second`, design.Travel.per_pose_s):
+    """stereo_target's short plan (`ShortPlan.selection` "per_second", design.Travel.per_pose_s):
     each pose the most information per second of its move from the last one, settle and
     capture. Nested, and the fewest of its poses that reach a target sigma cost less robot
     time as a tour from home (moves ramped at the simulator's 4 rad/s^2, half speed) than
@@ -331,7 +331,7 @@ def test_per_second_selection_reaches_the_target_sigma_in_less_robot_time(
     from hostpc.kinds.stereo_target.method import StereoTargetMethod
     from hostpc.planning.robot_time import TimeLimits
 
-    assert StereoTargetMethod.selection_per_second
+    assert StereoTargetMethod.short_plan.selection == "per_second"
     _, pool, design = pool_and_design
     chain = get_robot("ur5e")
     periodic = full_turn_joints(chain.q_min, chain.q_max)

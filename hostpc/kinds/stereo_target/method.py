@@ -42,7 +42,7 @@ from hostpc.methods.base import (
 from hostpc.methods.cell import require_camera_cell
 from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem
-from hostpc.planning.design import look_at_candidates
+from hostpc.planning.design import ShortPlan, look_at_candidates
 from hostpc.robots.base import RobotAdapter, RobotState
 
 if TYPE_CHECKING:  # OpenCV's layer, loaded by prepare
@@ -84,8 +84,7 @@ class StereoTargetMethod(Method):
     name: ClassVar[str] = "stereo_target"
     default_target_sigma_deg: ClassVar[float | None] = 0.002
     staged: ClassVar[bool] = True
-    selection_per_second: ClassVar[bool] = True
-    shortens_selection: ClassVar[bool] = True
+    short_plan: ClassVar[ShortPlan] = ShortPlan(selection="per_second", shorten="selection")
 
     @classmethod
     def short_plan_warning(cls, n_fit: int) -> str | None:

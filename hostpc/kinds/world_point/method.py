@@ -41,7 +41,7 @@ from hostpc.methods.base import (
     floats,
     matrix,
 )
-from hostpc.planning.design import sine_swings
+from hostpc.planning.design import ShortPlan, sine_swings
 from hostpc.robots.base import Need, RobotAdapter, RobotState, tracker_of
 
 TRACKER_FILE = "tracker.json"
@@ -113,7 +113,7 @@ class WorldPointMethod(Method):
     default_target_sigma_deg: ClassVar[float | None] = 0.002
     needs: ClassVar[tuple[Need, ...]] = (Need.TRACKER,)
     staged: ClassVar[bool] = True
-    shortens_tour: ClassVar[bool] = True
+    short_plan: ClassVar[ShortPlan] = ShortPlan(shorten="tour")
 
     def __init__(self, settings: Any, cell: Any, run_dir: Path) -> None:
         super().__init__(settings, cell, run_dir)
