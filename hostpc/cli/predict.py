@@ -27,7 +27,6 @@ from typing import Any
 
 from hostpc.calibrate.offline_push import SavedFit, load_saved_fit
 from hostpc.cli.robot_options import add_robot_override, data_options
-from hostpc.cli.robots import load_dataset_as_asked
 from hostpc.dataset import Dataset
 from hostpc.dataset.writing import frames_from_json
 from hostpc.errors import EffectError, InputError
@@ -80,6 +79,8 @@ def check_same_robot(saved: SavedFit, dataset: Dataset, fit_path: str, dataset_p
 
 
 def run(args: argparse.Namespace) -> int:
+    from hostpc.cli.robots import load_dataset_as_asked  # reads robots: only to predict
+
     saved = load_saved_fit(args.fit, offsets=False)
     dataset = load_dataset_as_asked(args.dataset, args)
     check_same_robot(saved, dataset, args.fit, args.dataset)

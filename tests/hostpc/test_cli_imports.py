@@ -69,6 +69,17 @@ def test_diagnose_imports_no_other_command() -> None:
     assert "hostpc.cli.robots" not in modules
 
 
+def test_the_offline_parsers_import_no_robots_command() -> None:
+    """fit's, diagnose's and predict's modules (what `hostpc` imports to build their
+    parsers) take their robot options from hostpc.cli.robot_options and import the `hostpc
+    robots` command's module only when a command runs (docs/architecture.md)."""
+    code = ("import sys, hostpc.cli.fit, hostpc.cli.diagnose, hostpc.cli.predict; "
+            "print('hostpc.cli.robots' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
+                          text=True, check=True, timeout=120)
+    assert done.stdout.strip() == "False"
+
+
 def test_calibrate_against_the_simulator_imports_no_scipy(tmp_path: Path) -> None:
     """The main job: a whole `hostpc calibrate --robot sim` (plan, rig, fit, push, verify,
     report) runs without scipy (its verification power imported scipy.special: ~0.3 s of
