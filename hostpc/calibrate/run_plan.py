@@ -228,6 +228,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
     time_limits = TimeLimits.from_extra(state.extra, state.q.size)
     rates = time_limits.rates(settings.speed)  # every move's time (tour.move_times)
     q_more: np.ndarray | None = None
+    reaching: int | None = None  # the poses of a shortened plan (they reach the target)
     per_pose_s = time_limits.settle_s + time_limits.capture_s
     if groups is None:
         travel = None
@@ -259,6 +260,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
             chosen = shortened(chosen[short_path(pool[chosen], state.q, *limits, rates)[0]],
                                np.zeros(0, dtype=int), MIN_TARGET_POSES)
             more = more[~np.isin(more, chosen)]
+            reaching = chosen.size
         power = power_design(method, design, pool, settings) if short else None
         # fit poses that see a missing effect, within --poses (the most the plan measures)
         n_check = min(CHECK_POSES, max(0, settings.n_poses - chosen.size))
@@ -275,6 +277,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
                 fit_indices = shortened(fit_indices, check_poses, 0)
                 order, q_short = short_path(pool[fit_indices], state.q, *limits, rates)
                 fit_indices = fit_indices[order]
+                reaching = fit_indices.size
                 more = more[~np.isin(more, fit_indices)]
         else:
             fit_indices = chosen[order_for_travel(pool[chosen], state.q, rates)]
@@ -373,8 +376,8 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         fewest = poses_for_target_sigma(
             design, selection, math.radians(settings.target_sigma_deg or FLOOR_SIGMA_DEG),
             state.q.size)
-        if short and method.short_plan.shorten == "tour" and fewest is not None:  # fewer reach it
-            fewest = min(fewest, len(fit_indices))
+        if reaching is not None and fewest is not None:  # a shortened plan: fewer reach it
+            fewest = min(fewest, reaching)
         n_fewest = fewest or len(selection)
 
         def floor(verify: np.ndarray) -> float:
