@@ -80,7 +80,9 @@ EXTENDED_VERIFY_POSES = 12
 nearby-in-time poses lack the power against the unmodelled effect (docs/performance.md: 15
 of 20 forced pushes caught with 4, 20 of 20 with 10); 12, not a fixed plan's 10: after a
 60-pose fit of the lean model the hidden compliance world's seed 214 passed 10 poses at p =
-0.054 and FAILs 12 at p = 0.0005. Only a run whose model failed pays for them."""
+0.054 and FAILs 12 at p = 0.0005. Only a run whose model failed pays for them. A method
+that plans whole groups takes whole groups up to at least this count (sphere_probe: 3
+orientations of 5 contacts, 15)."""
 
 
 FLOOR_SIGMA_DEG = 0.002
@@ -326,7 +328,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         # the way to the verification poses (tour.unwrap_plan)
         orders, (q_fit, q_verify) = unwrap_plan([q_fit, q_verify], state.q, *limits, rates)
         fit_indices, verify_indices = fit_indices[orders[0]], verify_indices[orders[1]]
-        if q_more is not None:  # if the model fails: q_more, then a fixed plan's count
+        if q_more is not None:  # if the model fails: q_more, then EXTENDED_VERIFY_POSES
             rest = np.setdiff1d(rest, verify_indices)
             from_pose = q_verify[-1] if verify_indices.size else last
             extra = nearby_verify_poses(
@@ -344,7 +346,7 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         verify_indices = verify_groups(groups, used, settings.n_verify, rng)
         if settings.target_sigma_deg is not None:
             verify_indices = tour_groups(pool, groups, verify_indices, last, rates)
-        if more.size:  # a grown plan verifies with a fixed plan's count
+        if more.size:  # a grown plan verifies with EXTENDED_VERIFY_POSES, whole groups
             extra = verify_groups(groups, np.concatenate([used, verify_indices]),
                                   EXTENDED_VERIFY_POSES - verify_indices.size, rng)
             from_pose = pool[verify_indices[-1]] if verify_indices.size else last
