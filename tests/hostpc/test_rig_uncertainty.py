@@ -388,3 +388,68 @@ def test_a_reference_recorded_with_the_same_rig_shares_its_error(stereo_poses) -
     assert len(offsets) == 6  # q1 and q6 too: the reference gives them
     np.testing.assert_allclose(shared.std[offsets], np.sqrt(np.diag(expected))[offsets],
                                rtol=0.003)  # the old code: 1.3 % low
+
+
+def test_shared_sensitivity_is_plus_the_estimate_change_per_shared_error(stereo_poses) -> None:  # type: ignore[no-untyped-def]
+    """`parameter_shared_sensitivity` is +d x / d delta as documented: moving every measured
+    point by D delta (and a prior block's value by its `shared_sensitivity` B times delta)
+    and refitting moves x by (sensitivity) @ delta. A block whose B is written as
+    documented (here measured by refits, not by that function) gets the refits' covariance:
+    noise plus A S A^T, A the refitted change. The old code returned -d x / d delta and
+    paired it with the same sign in the covariance: a B stated as +d value / d delta
+    flipped the cross terms between the block's rig error and the samples'."""
+    from hostpc.dataset import Dataset
+    from hostpc.fitting.priors import with_prior_blocks
+    from hostpc.fitting.shared_errors import parameter_shared_sensitivity
+
+    rig = _rig()
+    chosen = [RIG_PARAMETERS.index(n) for n in ("left.fx", "stereo.ry", "stereo.tx")]
+    steps = np.array([0.5, 2e-4, 2e-4])
+    S = np.zeros((N_RIG, N_RIG))
+    S[chosen, chosen] = steps**2
+    plain_ref, rig_ref = _dataset_with_rig(rig, S, stereo_poses[:30])
+    plain_run, rig_run = _dataset_with_rig(rig, S, stereo_poses[30:42])
+
+    def moved(data: Dataset, delta: np.ndarray) -> Dataset:  # the points moved by D delta
+        problem = fit(data, cv_folds=0).problem
+        shared = problem.measurement.shared_error(problem)
+        assert shared is not None
+        p = data.samples.p + np.einsum("nik,k->ni", shared.sensitivity, delta)
+        return dataclasses.replace(data, samples=dataclasses.replace(data.samples, p=p))
+
+    # the reference's tool frame and its B = +d tool / d delta, by refits
+    recorded = fit(rig_ref, cv_folds=0)
+    tool = [recorded.names.index(f"tool.{p}") for p in ("x", "y", "z", "rx", "ry", "rz")]
+    B = np.zeros((6, N_RIG))
+    for k, step in zip(chosen, steps, strict=True):
+        delta = np.zeros(N_RIG)
+        delta[k] = step
+        B[:, k] = (fit(moved(rig_ref, delta), cv_folds=0).x[tool] - recorded.x[tool]) / step
+    C_noise = fit(plain_ref, cv_folds=0).covariance[np.ix_(tool, tool)]
+    C = C_noise + B @ S @ B.T
+
+    def block(delta: np.ndarray, shared: bool = True) -> dict[str, object]:
+        return {"names": [recorded.names[k] for k in tool],
+                "value": (recorded.x[tool] + B @ delta).tolist(), "covariance": C.tolist(),
+                **({"shared_sensitivity": B.tolist()} if shared else {})}
+
+    zero = np.zeros(N_RIG)
+    base = fit(with_prior_blocks(rig_run, [block(zero)]), cv_folds=0)
+    sensitivity = parameter_shared_sensitivity(base.problem, base.x, ~base.fixed)
+    assert sensitivity is not None
+    A = []
+    for k, step in zip(chosen, steps, strict=True):
+        delta = np.zeros(N_RIG)
+        delta[k] = step
+        refit = fit(with_prior_blocks(moved(rig_run, delta), [block(delta)]), cv_folds=0)
+        change = refit.x - base.x
+        np.testing.assert_allclose(change, sensitivity @ delta, rtol=0.02,
+                                   atol=0.02 * np.max(np.abs(change)))
+        A.append(change)  # per one sigma of this rig parameter
+    A = np.array(A).T
+    # the noise: the same weights without the shared error, the block's rig part taken out
+    plain = fit(with_prior_blocks(plain_run, [block(zero, shared=False)]), cv_folds=0)
+    G = plain.covariance[:, tool] @ np.linalg.inv(C)
+    expected = plain.covariance + G @ (C_noise - C) @ G.T + A @ A.T
+    free = ~base.fixed
+    np.testing.assert_allclose(base.std[free], np.sqrt(np.diag(expected))[free], rtol=0.003)
