@@ -331,6 +331,22 @@ def test_a_declared_floor_keeps_the_noise_of_a_prior_block(stereo_poses) -> None
     assert np.all(ratio > 0.999) and np.all(ratio < 1.1), ratio
 
 
+def _three_rig_errors() -> tuple[StereoRig, list[int], np.ndarray, np.ndarray]:
+    """(the rig, three of its parameters, their sigmas, S: the 24 x 24 covariance of those
+    three)."""
+    chosen = [RIG_PARAMETERS.index(n) for n in ("left.fx", "stereo.ry", "stereo.tx")]
+    steps = np.array([0.5, 2e-4, 2e-4])
+    cov = np.zeros((N_RIG, N_RIG))
+    cov[chosen, chosen] = steps**2
+    return _rig(), chosen, steps, cov
+
+
+def _reference_and_run(rig: StereoRig, cov: np.ndarray, stereo_poses: np.ndarray):  # type: ignore[no-untyped-def]
+    """(plain, with rig) of a recording run (30 poses) and of a later run (12 others)."""
+    return (_dataset_with_rig(rig, cov, stereo_poses[:30]),
+            _dataset_with_rig(rig, cov, stereo_poses[30:42]))
+
+
 def test_a_reference_recorded_with_the_same_rig_shares_its_error(stereo_poses) -> None:  # type: ignore[no-untyped-def]
     """A cell reference's camera frame recorded with the rig a later run uses carries that
     rig's error, and so do the later run's samples: the later fit's covariance is the noise
@@ -345,13 +361,8 @@ def test_a_reference_recorded_with_the_same_rig_shares_its_error(stereo_poses) -
     )
     from hostpc.fitting.priors import with_prior_blocks
 
-    rig = _rig()
-    chosen = [RIG_PARAMETERS.index(n) for n in ("left.fx", "stereo.ry", "stereo.tx")]
-    steps = np.array([0.5, 2e-4, 2e-4])
-    cov = np.zeros((N_RIG, N_RIG))
-    cov[chosen, chosen] = steps**2
-    plain_ref, rig_ref = _dataset_with_rig(rig, cov, stereo_poses[:30])
-    plain_run, rig_run = _dataset_with_rig(rig, cov, stereo_poses[30:42])
+    rig, chosen, steps, cov = _three_rig_errors()
+    (plain_ref, rig_ref), (plain_run, rig_run) = _reference_and_run(rig, cov, stereo_poses)
 
     def later_fit(recording, run):  # type: ignore[no-untyped-def]
         reference = reference_from_fit(fit(recording, cv_folds=0), robot_serial="SN-1",
@@ -402,13 +413,8 @@ def test_shared_sensitivity_is_plus_the_estimate_change_per_shared_error(stereo_
     from hostpc.fitting.priors import with_prior_blocks
     from hostpc.fitting.shared_errors import parameter_shared_sensitivity
 
-    rig = _rig()
-    chosen = [RIG_PARAMETERS.index(n) for n in ("left.fx", "stereo.ry", "stereo.tx")]
-    steps = np.array([0.5, 2e-4, 2e-4])
-    S = np.zeros((N_RIG, N_RIG))
-    S[chosen, chosen] = steps**2
-    plain_ref, rig_ref = _dataset_with_rig(rig, S, stereo_poses[:30])
-    plain_run, rig_run = _dataset_with_rig(rig, S, stereo_poses[30:42])
+    rig, chosen, steps, S = _three_rig_errors()
+    (plain_ref, rig_ref), (plain_run, rig_run) = _reference_and_run(rig, S, stereo_poses)
 
     def moved(data: Dataset, delta: np.ndarray) -> Dataset:  # the points moved by D delta
         problem = fit(data, cv_folds=0).problem
