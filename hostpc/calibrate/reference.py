@@ -18,11 +18,13 @@ File (`zerocal-cell-reference/1`, JSON, SI units, written by `hostpc reference r
                            "covariance": [[..], ..]}, "tool": {...}}}
 
 A frame the recording run measured with a stereo rig also keeps `rig_sensitivity` (K x 24:
-how the fitted frame moves with the rig's calibration error, from the fit's shared error,
-hostpc.fitting.shared_errors.parameter_shared_sensitivity); its covariance includes that
-error. A later run with the same rig carries the same error in its own samples, so the prior
-block says so (`shared_sensitivity`) and the fit counts the rig's error once, correlated,
-instead of twice as independent (which loses the cross terms, of either sign).
+how the fitted frame moves with the rig's calibration error, +d frame / d delta (the frame
+a refit gives moves by rig_sensitivity @ delta when the rig errs by delta), from the fit's
+shared error, hostpc.fitting.shared_errors.parameter_shared_sensitivity); its covariance
+includes that error. A later run with the same rig carries the same error in its own
+samples, so the prior block says so (`shared_sensitivity`) and the fit counts the rig's
+error once, correlated, instead of twice as independent (which loses the cross terms, of
+either sign).
 
 Per frame: the parameter names (after the frame's name, in the fit's order), the nominal
 the recording run fitted its deltas against (a pose's rotation as a rotation vector), the

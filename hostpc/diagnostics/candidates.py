@@ -384,6 +384,16 @@ def try_candidate(base: FitResult, effect: Effect, *, cv_folds: int, loss: Loss,
                                                          base_cv))
 
 
+CANDIDATE_SLOT = "candidate "
+"""How the memo keys of ``try_candidate``'s kept fits begin (``forget_candidate_fits``)."""
+
+
+def forget_candidate_fits(problem: Problem) -> None:
+    """Drop the candidate fits kept on ``problem``'s memo: once a diagnosis is done, nothing
+    judges them again, and a retained result would carry every candidate's fit."""
+    problem.memo.forget(CANDIDATE_SLOT)
+
+
 def _fitted_candidate(base: FitResult, effect: Effect, cv_folds: int, loss: Loss
                       ) -> Candidate:
     """``try_candidate``'s fits and figures, not yet judged (``significant`` False,
@@ -392,7 +402,7 @@ def _fitted_candidate(base: FitResult, effect: Effect, cv_folds: int, loss: Loss
     if not all(isinstance(v, str | int | float | bool | None) for v in state.values()):
         return _fit_candidate(base, effect, cv_folds, loss)  # not comparable: not kept
     identity = (type(effect), tuple(sorted(state.items())))
-    key = f"candidate {effect.name} {cv_folds} {loss}"
+    key = f"{CANDIDATE_SLOT}{effect.name} {cv_folds} {loss}"
     recalled = base.problem.memo.recall(key)
     if recalled is not None:
         kept_identity, x, fixed, candidate = recalled

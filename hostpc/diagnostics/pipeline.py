@@ -16,6 +16,7 @@ from hostpc.diagnostics.candidates import (
     Candidate,
     candidate_effects,
     check_candidate_names,
+    forget_candidate_fits,
     rank_candidates,
     try_candidate,
     warm_start,
@@ -275,6 +276,19 @@ def diagnose(
     ranked = start.ranked
     confounded = confounded_pairs(ranked.fit, ranked.candidates, registry, alpha=alpha,
                                   cv_folds=rank_cv_folds, loss=loss, plugins=plugin_paths)
+    _forget_candidate_fits([start, *(step.check for step in steps or ())])
     return Diagnosis(check=start, residuals=residuals, ladder=steps, advice=advice,
                      alpha=alpha, source=source, plugins=plugin_paths, ladder_stop=stop,
                      detectable=detectable, confounded=confounded)
+
+
+def _forget_candidate_fits(checks: list[ModelCheck]) -> None:
+    """Drop the candidate fits kept on the memos of every problem the diagnosis holds (its
+    checks' fits, their cleaned checks', their candidates'): they served its rankings and
+    nested tests, and a retained diagnosis would carry every candidate's fit twice over."""
+    while checks:
+        check = checks.pop()
+        if check.cleaned is not None:
+            checks.append(check.cleaned)
+        for fit in (check.fit, *(candidate.fit for candidate in check.candidates)):
+            forget_candidate_fits(fit.problem)

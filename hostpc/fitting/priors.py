@@ -17,10 +17,11 @@ enters as K residuals whitened by the inverse Cholesky factor of its covariance:
 L^-1 (x_block - value), C = L L^T. In the dataset: `"prior_blocks": [{"names": [...],
 "value": [...], "covariance": [[...]]}]` (SI), beside `priors`; a name may not be in two
 priors. A block may also say how its value moves with the dataset's shared error
-(`"shared_sensitivity"`: K x Ks, the value's change per unit of the shared error, e.g. a
-reference frame recorded with the same stereo rig, whose calibration error it carries): its
-covariance then includes that part, and the fit's covariance counts it as the SAME error as
-the measurements' (hostpc.fitting.shared_errors), not as independent noise.
+(`"shared_sensitivity"`: K x Ks, the value's change per unit of the shared error,
++d value / d delta, e.g. a reference frame recorded with the same stereo rig, whose
+calibration error it carries): its covariance then includes that part, and the fit's
+covariance counts it as the SAME error as the measurements' (hostpc.fitting.shared_errors),
+not as independent noise.
 
 Where they come from (all end up in the dataset's top-level `priors` and `hold` fields, which
 the fit reads from the problem's dataset):

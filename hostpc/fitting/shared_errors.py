@@ -10,7 +10,8 @@ is its knowledge (hostpc.kinds.stereo_target.shared_error), not this module's.
 
 The fit's estimator is unchanged (weighted by the per-sample covariances); its covariance is
 the sandwich for the full, correlated measurement covariance. To first order the estimate
-moves by dx = A @ delta, A = (J^T W J)^-1 J^T W D (whitened: A = Cov @ Jw^T @ Dw), so
+moves by dx = A @ delta, A = (J^T W J)^-1 J^T W D with J = d(predicted)/dx (whitened, with
+the solver's Jw = d(W (measured - predicted))/dx = -W J: A = -Cov @ Jw^T @ Dw), so
 
     Cov(x) = Cov_noise + A @ S @ A^T.
 
@@ -105,10 +106,12 @@ def added_parameter_covariance(problem: Problem, jacobian_free: np.ndarray,
     plus the (scaled) shared error, and the returned change can be negative.
 
     prior_free: (K, F) the whitened prior rows (by the free parameters). A prior block that
-    states its `shared_sensitivity` (a cell reference's frame recorded with the same rig)
-    errs by the SAME shared error as the samples: its part B S B^T of the block's
-    covariance is taken out of the noise (A_p S A_p^T, A_p = Cov Jp^T Bw) and the shared
-    error enters once, through samples and prior together: (A + A_p) S (A + A_p)^T.
+    states its `shared_sensitivity` B (+d value / d delta: a cell reference's frame recorded
+    with the same rig) errs by the SAME shared error as the samples: its part B S B^T of the
+    block's covariance is taken out of the noise (A_p S A_p^T, A_p = Cov Jp^T Bw) and the
+    shared error enters once, through samples and prior together: (A + A_p) S (A + A_p)^T,
+    both +d x / d delta (A = -Cov Jw^T Dw: the samples' rows are measured - predicted, the
+    prior's x - value).
     Counted as independent noise instead, the cross terms (of either sign) are lost: the
     reference's rig error and the new samples' are one error."""
     shared = problem.measurement.shared_error(problem)
@@ -132,7 +135,7 @@ def added_parameter_covariance(problem: Problem, jacobian_free: np.ndarray,
         noise_blocks = M
     if residuals is not None:
         S = S * residual_scale(jacobian_free, D_whitened, S, np.ravel(residuals), noise_blocks)
-    A = covariance_free @ (jacobian_free.T @ D_whitened)
+    A = -covariance_free @ (jacobian_free.T @ D_whitened)  # + d x / d delta
     prior_shared = _prior_shared(problem, S.shape[0])
     if prior_shared is not None and prior_free is not None:
         A_prior = covariance_free @ (prior_free.T @ prior_shared)
@@ -154,11 +157,15 @@ def _prior_shared(problem: Problem, width: int) -> np.ndarray | None:
 
 def parameter_shared_sensitivity(problem: Problem, x: np.ndarray, free: np.ndarray
                                  ) -> np.ndarray | None:
-    """(P, Ks) how a fit's estimate at x moves with the shared error, d x / d delta (zero
-    rows for fixed parameters; the linear loss's weights), or None without a shared error.
-    What a cell reference records of a frame measured with a stereo rig
-    (hostpc.calibrate.reference), so that a later run with the same rig knows the frame's
-    error is its own samples' error too."""
+    """(P, Ks) how a fit's estimate at x moves with the shared error, +d x / d delta (zero
+    rows for fixed parameters; the linear loss's weights), or None without a shared error:
+    measurements moved by D delta and prior blocks' values by their `shared_sensitivity`
+    times delta move the refitted x by (this) @ delta. What a cell reference records of a
+    frame measured with a stereo rig (hostpc.calibrate.reference), so that a later run with
+    the same rig knows the frame's error is its own samples' error too.
+
+    The rows are r = [W (measured - predicted); L^-1 (x - value)]: dr = [Dw; -Bw] delta
+    and Gauss-Newton dx = -(Jall^T Jall)^+ Jall^T dr, hence the stack [-Dw; Bw]."""
     from hostpc.fitting.priors import problem_constraints
     from hostpc.fitting.solver import evaluate
 
@@ -171,7 +178,7 @@ def parameter_shared_sensitivity(problem: Problem, x: np.ndarray, free: np.ndarr
     assert evaluation.jacobian is not None
     J = evaluation.jacobian[:, free]
     D = np.einsum("nij,njk->nik", problem.sqrt_information, shared.sensitivity)
-    Dw = D.reshape(J.shape[0], -1)
+    Dw = -D.reshape(J.shape[0], -1)
     Jall = J
     constraints = problem_constraints(problem)
     prior_shared = _prior_shared(problem, Dw.shape[1])

@@ -87,7 +87,8 @@ class ParameterLayout:
 class Problem:
     """Everything a fit needs; constant during the fit.
 
-    measured: (N, m) measurements; sqrt_information: (N, m, m) whitening matrices W with
+    measured: (N, m) measurements (read-only, as sqrt_information: the memos cache what is
+    derived from them); sqrt_information: (N, m, m) whitening matrices W with
     W^T W = cov^-1, so whitened residuals are W @ (measured - predicted). model: the
     measurement model that predicts them (``hostpc.model.measurements``).
     """
@@ -151,11 +152,13 @@ class Problem:
         """The same model on a subset of the samples (for cross-validation): a view that
         takes the rows of the built context, whitening and linear bases, no rebuild."""
         index = np.atleast_1d(np.asarray(indices))
+        measured = self.measured[index]
+        measured.setflags(write=False)  # as the problem's (build_problem)
         return replace(
             self,
             dataset=self.dataset.with_samples(self.dataset.samples.subset(index)),
             context=self.context.subset(index),
-            measured=self.measured[index],
+            measured=measured,
             sqrt_information=self.sqrt_information[index],
             linear_bases=tuple(None if b is None else _rows(b, index)
                                for b in self.linear_bases),

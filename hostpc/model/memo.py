@@ -84,3 +84,12 @@ class ProblemMemo:
         """Keep ``value`` for key in place of any earlier one (a one-value slot, e.g. the
         latest evaluation); the caller makes it immutable."""
         self._values[key] = value
+
+    def forget(self, prefix: str) -> None:
+        """Drop every value whose key starts with ``prefix`` (computed again when asked)."""
+        for key in [k for k in self._values if k.startswith(prefix)]:
+            del self._values[key]
+
+    def keys(self) -> tuple[str, ...]:
+        """The keys of the values kept."""
+        return tuple(self._values)

@@ -162,7 +162,12 @@ def build_problem(
     terms, layout = _terms(model, dataset, context, instances)
     bases = _linear_bases(terms, context)
     measured, W = model.measurements(dataset)
-    W.setflags(write=False)  # shared by the problem's views and extensions
+    # read-only: shared by the problem's views and extensions, and the memos cache what is
+    # derived from them (a held-out residual of changed measurements would be stale); a
+    # copy, so the dataset's own arrays stay as they were
+    measured = np.array(measured, dtype=float)
+    for array in (measured, W):
+        array.setflags(write=False)
     return Problem(
         dataset=dataset,
         chain=chain,

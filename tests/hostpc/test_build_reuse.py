@@ -64,6 +64,23 @@ def test_builds_of_one_dataset_share_chain_torques_and_whitening() -> None:
         first.sqrt_information[0, 0, 0] = 1.0
 
 
+@pytest.mark.parametrize("method", ["world_pose", "stereo_target"])
+def test_a_problems_measurements_are_read_only(method: str) -> None:
+    """The memos cache what is derived from problem.measured (the latest evaluation, the
+    held-out residuals): an edit in place would leave them stale, so it raises, in the
+    problem and in its views; the dataset's own arrays are left as they were."""
+    from hostpc.model.measurements.registry import measurement_models
+
+    dataset = measurement_models()[method].example(np.random.default_rng(0))
+    writable = dataset.samples.p.flags.writeable
+    problem = build_problem(dataset)
+    for measured in (problem.measured, problem.subset(np.arange(3)).measured):
+        assert not measured.flags.writeable
+        with pytest.raises(ValueError):
+            measured[:] += 1e-3
+    assert dataset.samples.p.flags.writeable == writable
+
+
 def test_another_dataset_gets_its_own_values() -> None:
     one, other = _dataset(4), _dataset(5)
     a, b = build_problem(one), build_problem(other)

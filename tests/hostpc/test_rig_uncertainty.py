@@ -331,6 +331,22 @@ def test_a_declared_floor_keeps_the_noise_of_a_prior_block(stereo_poses) -> None
     assert np.all(ratio > 0.999) and np.all(ratio < 1.1), ratio
 
 
+def _three_rig_errors() -> tuple[StereoRig, list[int], np.ndarray, np.ndarray]:
+    """(the rig, three of its parameters, their sigmas, S: the 24 x 24 covariance of those
+    three)."""
+    chosen = [RIG_PARAMETERS.index(n) for n in ("left.fx", "stereo.ry", "stereo.tx")]
+    steps = np.array([0.5, 2e-4, 2e-4])
+    cov = np.zeros((N_RIG, N_RIG))
+    cov[chosen, chosen] = steps**2
+    return _rig(), chosen, steps, cov
+
+
+def _reference_and_run(rig: StereoRig, cov: np.ndarray, stereo_poses: np.ndarray):  # type: ignore[no-untyped-def]
+    """(plain, with rig) of a recording run (30 poses) and of a later run (12 others)."""
+    return (_dataset_with_rig(rig, cov, stereo_poses[:30]),
+            _dataset_with_rig(rig, cov, stereo_poses[30:42]))
+
+
 def test_a_reference_recorded_with_the_same_rig_shares_its_error(stereo_poses) -> None:  # type: ignore[no-untyped-def]
     """A cell reference's camera frame recorded with the rig a later run uses carries that
     rig's error, and so do the later run's samples: the later fit's covariance is the noise
@@ -345,13 +361,8 @@ def test_a_reference_recorded_with_the_same_rig_shares_its_error(stereo_poses) -
     )
     from hostpc.fitting.priors import with_prior_blocks
 
-    rig = _rig()
-    chosen = [RIG_PARAMETERS.index(n) for n in ("left.fx", "stereo.ry", "stereo.tx")]
-    steps = np.array([0.5, 2e-4, 2e-4])
-    cov = np.zeros((N_RIG, N_RIG))
-    cov[chosen, chosen] = steps**2
-    plain_ref, rig_ref = _dataset_with_rig(rig, cov, stereo_poses[:30])
-    plain_run, rig_run = _dataset_with_rig(rig, cov, stereo_poses[30:42])
+    rig, chosen, steps, cov = _three_rig_errors()
+    (plain_ref, rig_ref), (plain_run, rig_run) = _reference_and_run(rig, cov, stereo_poses)
 
     def later_fit(recording, run):  # type: ignore[no-untyped-def]
         reference = reference_from_fit(fit(recording, cv_folds=0), robot_serial="SN-1",
@@ -388,3 +399,63 @@ def test_a_reference_recorded_with_the_same_rig_shares_its_error(stereo_poses) -
     assert len(offsets) == 6  # q1 and q6 too: the reference gives them
     np.testing.assert_allclose(shared.std[offsets], np.sqrt(np.diag(expected))[offsets],
                                rtol=0.003)  # the old code: 1.3 % low
+
+
+def test_shared_sensitivity_is_plus_the_estimate_change_per_shared_error(stereo_poses) -> None:  # type: ignore[no-untyped-def]
+    """`parameter_shared_sensitivity` is +d x / d delta as documented: moving every measured
+    point by D delta (and a prior block's value by its `shared_sensitivity` B times delta)
+    and refitting moves x by (sensitivity) @ delta. A block whose B is written as
+    documented (here measured by refits, not by that function) gets the refits' covariance:
+    noise plus A S A^T, A the refitted change. The old code returned -d x / d delta and
+    paired it with the same sign in the covariance: a B stated as +d value / d delta
+    flipped the cross terms between the block's rig error and the samples'."""
+    from hostpc.dataset import Dataset
+    from hostpc.fitting.priors import with_prior_blocks
+    from hostpc.fitting.shared_errors import parameter_shared_sensitivity
+
+    rig, chosen, steps, S = _three_rig_errors()
+    (plain_ref, rig_ref), (plain_run, rig_run) = _reference_and_run(rig, S, stereo_poses)
+
+    def moved(data: Dataset, delta: np.ndarray) -> Dataset:  # the points moved by D delta
+        problem = fit(data, cv_folds=0).problem
+        shared = problem.measurement.shared_error(problem)
+        assert shared is not None
+        p = data.samples.p + np.einsum("nik,k->ni", shared.sensitivity, delta)
+        return dataclasses.replace(data, samples=dataclasses.replace(data.samples, p=p))
+
+    # the reference's tool frame and its B = +d tool / d delta, by refits
+    recorded = fit(rig_ref, cv_folds=0)
+    tool = [recorded.names.index(f"tool.{p}") for p in ("x", "y", "z", "rx", "ry", "rz")]
+    B = np.zeros((6, N_RIG))
+    for k, step in zip(chosen, steps, strict=True):
+        delta = np.zeros(N_RIG)
+        delta[k] = step
+        B[:, k] = (fit(moved(rig_ref, delta), cv_folds=0).x[tool] - recorded.x[tool]) / step
+    C_noise = fit(plain_ref, cv_folds=0).covariance[np.ix_(tool, tool)]
+    C = C_noise + B @ S @ B.T
+
+    def block(delta: np.ndarray, shared: bool = True) -> dict[str, object]:
+        return {"names": [recorded.names[k] for k in tool],
+                "value": (recorded.x[tool] + B @ delta).tolist(), "covariance": C.tolist(),
+                **({"shared_sensitivity": B.tolist()} if shared else {})}
+
+    zero = np.zeros(N_RIG)
+    base = fit(with_prior_blocks(rig_run, [block(zero)]), cv_folds=0)
+    sensitivity = parameter_shared_sensitivity(base.problem, base.x, ~base.fixed)
+    assert sensitivity is not None
+    A = []
+    for k, step in zip(chosen, steps, strict=True):
+        delta = np.zeros(N_RIG)
+        delta[k] = step
+        refit = fit(with_prior_blocks(moved(rig_run, delta), [block(delta)]), cv_folds=0)
+        change = refit.x - base.x
+        np.testing.assert_allclose(change, sensitivity @ delta, rtol=0.02,
+                                   atol=0.02 * np.max(np.abs(change)))
+        A.append(change)  # per one sigma of this rig parameter
+    A = np.array(A).T
+    # the noise: the same weights without the shared error, the block's rig part taken out
+    plain = fit(with_prior_blocks(plain_run, [block(zero, shared=False)]), cv_folds=0)
+    G = plain.covariance[:, tool] @ np.linalg.inv(C)
+    expected = plain.covariance + G @ (C_noise - C) @ G.T + A @ A.T
+    free = ~base.fixed
+    np.testing.assert_allclose(base.std[free], np.sqrt(np.diag(expected))[free], rtol=0.003)
