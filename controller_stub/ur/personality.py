@@ -176,8 +176,9 @@ class UrPersonality:
 
     @property
     def uptime(self) -> float:
-        """The controller's uptime (s), RTDE `timestamp` (`uptime.py`): the wall time of its
-        cycles plus the simulated time it charged beyond them."""
+        """The controller's uptime (s), RTDE `timestamp` (`uptime.py`): 2 ms per cycle
+        (slower than the wall clock when a loaded machine slows the cycles) plus the
+        simulated time it charged beyond them."""
         return self._uptime.seconds
 
     async def next_cycle(self, after: int) -> int:

@@ -6,8 +6,10 @@ charges those seconds to its own clock (`SimulatedController.time`: motions, set
 captures) whether or not it spends them in wall time: at time_scale 0 a move takes no wall
 time at all, and a capture never does. The uptime is therefore
 
-    uptime = CYCLE_S per controller cycle (the wall time that passes: the arm stands
-             still while the host computes, as a real one does)
+    uptime = CYCLE_S per controller cycle (about the wall time that passes: the arm
+             stands still while the host computes, as a real one does; a loaded
+             machine slows the cycle clock, which never skips a cycle, so then the
+             uptime runs slower than the wall clock)
            + every advance of the simulated clock, less the cycles that paced it (a
              motion shown in wall time, by the personality or the zerocal server)
 

@@ -122,7 +122,13 @@ class UrGuardedMove:
         velocity = joint_velocity(speed)
         async with link.motion_lock:
             for attempt in range(MAX_LATCH_RETRIES + 1):
-                await link.settle()  # the touch is a measurement: the arm stands still first
+                try:  # the touch is a measurement: the arm stands still first
+                    await link.settle()
+                except asyncio.CancelledError as exc:  # Ctrl-C, SIGTERM before the approach
+                    logger.info("UR %s: guarded_move interrupted while settling", link.host)
+                    exc.add_note("guarded_move interrupted while settling: arm at rest, "
+                                 "no stop needed")
+                    raise
                 start = await link.call(link.sample)
                 if start[2] >> io_line & 1:
                     return ContactOutcome(False, None, self.offsets.reported(start[1]),
@@ -147,11 +153,15 @@ class UrGuardedMove:
                     _, q_now, _, _ = await link.call(link.sample)
                     return ContactOutcome(False, None, self.offsets.reported(q_now),
                                           reason=reason)
-                if watch.edge is None:  # the move ran to its end, the target
-                    measured = await link.fresh_q(watch.last[0] - 1e-9, target)
+                if watch.edge is None:
+                    # the controller ended the move (dashboard stop, protective stop, ...):
+                    # the arm stands where it stopped; otherwise the move ran to its end
+                    ended = await link.failure_reason(None)
+                    measured = await link.fresh_q(watch.last[0] - 1e-9,
+                                                  None if ended else target)
                     await link.came_to_rest()
                     return ContactOutcome(False, None, self.offsets.reported(measured),
-                                          reason="no_contact")
+                                          reason=ended or "no_contact")
                 low, high = watch.edge
                 q_stop = await link.fresh_q(high[0], None)
                 await link.came_to_rest()

@@ -272,7 +272,9 @@ class UrLink:
         """Before a measurement taken in motion: wait until the arm has stood still
         `settle_s` since its last motion ended (`rest_since`), on the controller's clock
         (its RTDE timestamp, which runs while the host waits); returns the controller
-        seconds waited. ConnectionFailed if the timestamp stops advancing (`FreshSamples`)."""
+        seconds waited. ConnectionFailed if the timestamp stops advancing (`FreshSamples`).
+        A timestamp below `rest_since` is a restarted controller (its uptime began again
+        behind a live link): the rest counts from that sample."""
         rest = self.rest_since
         if rest is None:
             return 0.0
@@ -282,6 +284,8 @@ class UrLink:
             stamp = float(await self.call(self.receive.getTimestamp))
             fresh.check(stamp)
             first = stamp if first is None else first
+            if stamp < rest:  # a restart: never wait out the old uptime
+                rest = self.rest_since = stamp
             if stamp - rest >= settle_s:
                 return stamp - first
             await asyncio.sleep(min(max(rest + settle_s - stamp, POLL_INTERVAL_S), 0.1))

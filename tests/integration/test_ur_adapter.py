@@ -7,6 +7,8 @@ service, and that a move's outcome is a fresh sample at the target.
 
 from __future__ import annotations
 
+import asyncio
+import time
 from collections.abc import AsyncIterator, Iterator
 
 import numpy as np
@@ -17,8 +19,15 @@ pytest.importorskip("rtde_control")
 from hostpc.errors import ControllerError, InputError  # noqa: E402
 from hostpc.planning.robot_time import TimeLimits, Waypoints, waypoints_time  # noqa: E402
 from hostpc.robots.ur import UrAdapter  # noqa: E402
+from hostpc.robots.ur_link import SETTLE_TIMEOUT_S  # noqa: E402
 from hostpc.transport import ControllerClient  # noqa: E402
-from tests.integration.ur_stub import TOKEN, UrStub, ur_adapter, ur_stub_process  # noqa: E402
+from tests.integration.ur_stub import (  # noqa: E402
+    TOKEN,
+    UrStub,
+    dashboard,
+    ur_adapter,
+    ur_stub_process,
+)
 
 
 @pytest.fixture(scope="module")
@@ -114,6 +123,25 @@ async def test_move_outside_limits_fails_cleanly(adapter: UrAdapter) -> None:
     outcome = await adapter.move_joints(q, 0.5)
     assert not outcome.completed
     assert outcome.reason in ("protective_stop", "control_script_stopped")
-    from tests.integration.ur_stub import dashboard
-
     assert dashboard("unlock protective stop") == "Protective stop releasing"
+
+
+async def test_a_guarded_approach_the_controller_stops_says_why(adapter: UrAdapter) -> None:
+    """A guarded approach that would miss the sphere, ended about 1 s in by the dashboard's
+    `stop` (the program ends, as on a protective stop): the outcome says why
+    (control_script_stopped) and where the arm stopped, at once. The old driver waited
+    SETTLE_TIMEOUT_S for an arm that never reached the target and reported no_contact."""
+    q0 = (await adapter.state()).q
+    target = q0 + np.radians([0.0, 0.0, 0.0, 0.0, 0.0, 90.0])  # 10 s at 0.157 rad/s, x 0.3
+    approach = asyncio.ensure_future(adapter.guarded_move(target, 0.05, 0))
+    await asyncio.sleep(1.0)
+    assert not approach.done()
+    assert await asyncio.to_thread(dashboard, "stop") == "Stopped"
+    stopped = time.monotonic()
+    outcome = await approach
+    answered = time.monotonic() - stopped
+    assert not outcome.contact
+    assert outcome.reason == "control_script_stopped"
+    assert answered < SETTLE_TIMEOUT_S, answered
+    np.testing.assert_allclose(outcome.q, (await adapter.state()).q, atol=1e-6)
+    assert float(np.degrees(np.max(np.abs(target - outcome.q)))) > 30.0

@@ -111,3 +111,35 @@ async def test_a_missed_guarded_approach_is_charged_its_settle(adapter: UrAdapte
     assert missed.reason == "no_contact"
     assert approach - 0.01 <= spent <= approach + SETTLE_S - 0.05, (spent, approach)
     assert (await adapter.move_joints(q0, 1.0)).completed
+
+
+async def test_a_restarted_controller_does_not_hold_up_the_settle(adapter: UrAdapter) -> None:
+    """A controller restarted behind a live link: its uptime begins again below the rest
+    the link noted before (here: a rest noted 1000 s ahead of the uptime). The settle counts
+    the rest from the first lower sample (SETTLE_S on the new clock); the old settle waited
+    out the old uptime (1000 s)."""
+    assert (await adapter.move_joints((await adapter.state()).q, 1.0)).completed
+    rest = adapter.link.rest_since
+    assert rest is not None
+    adapter.link.rest_since = rest + 1000.0
+    waited = await asyncio.wait_for(adapter.link.settle(), 10.0)
+    assert SETTLE_S - 0.01 <= waited <= SETTLE_S + 0.5, waited
+
+
+async def test_an_interrupt_while_settling_says_the_arm_is_at_rest(adapter: UrAdapter) -> None:
+    """A guarded approach cancelled (Ctrl-C, SIGTERM) while it waits for the arm to settle:
+    the cancellation carries a note saying the arm stood still (no stop sent), as one
+    cancelled mid-move says where stopJ stopped it; the old driver added no note."""
+    q0 = (await adapter.state()).q
+    assert (await adapter.move_joints(q0, 1.0)).completed  # the settle starts now
+    approach = asyncio.ensure_future(
+        adapter.guarded_move(q0 + np.radians([0.0, 0.0, 0.0, 0.0, 0.0, 40.0]), 0.2, 0))
+    await asyncio.sleep(0.3 * SETTLE_S)
+    assert not approach.done()
+    approach.cancel()
+    with pytest.raises(asyncio.CancelledError) as raised:
+        await approach
+    assert getattr(raised.value, "__notes__", []) == [
+        "guarded_move interrupted while settling: arm at rest, no stop needed"]
+    np.testing.assert_allclose((await adapter.state()).q, q0, atol=1e-9)
+
