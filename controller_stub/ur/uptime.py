@@ -35,10 +35,22 @@ class ControllerUptime:
 
     def __init__(self, state: ControllerState) -> None:
         self.state = state
-        self.seconds = 0.0
-        """The uptime (s), what RTDE `timestamp` shows."""
+        self._ticked = 0.0  # the uptime (s) up to the last cycle
         self._sim_seen = state.time
         self._paced = 0.0  # wall time (s) of the cycles pacing a motion not yet charged
+
+    @property
+    def seconds(self) -> float:
+        """The uptime (s), what RTDE `timestamp` shows: up to the last cycle, and the
+        simulated time charged since (a move's end, a settle, a capture) at once, so that a
+        sample that shows the arm where a move ended shows that move's time too (before,
+        it showed at the next cycle, and a host that read the end sooner on a loaded
+        machine took the move's time as none and its rest as begun before the move)."""
+        return self._ticked + self._uncounted(self.state.time - self._sim_seen)
+
+    def _uncounted(self, charged: float) -> float:
+        """Of `charged` simulated seconds, those the cycles that paced them did not count."""
+        return max(0.0, charged - self._paced) if charged > 0.0 else 0.0
 
     def tick(self, pacing: bool) -> None:
         """One controller cycle passed; `pacing`: a motion was shown in wall time during it
@@ -46,7 +58,7 @@ class ControllerUptime:
         charged = self.state.time - self._sim_seen
         self._sim_seen = self.state.time
         if charged > 0.0:
-            self.seconds += max(0.0, charged - self._paced)
+            self._ticked += self._uncounted(charged)
             self._paced = max(0.0, self._paced - charged)
         if pacing:
             self._paced += CYCLE_S
@@ -54,4 +66,4 @@ class ControllerUptime:
             self._paced = 0.0
             if charged <= 0.0:  # the arm stood still this cycle
                 self.state.stand_still(CYCLE_S)
-        self.seconds += CYCLE_S
+        self._ticked += CYCLE_S

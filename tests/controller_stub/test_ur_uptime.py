@@ -35,13 +35,16 @@ def test_every_simulated_second_counts_once_with_the_wall_time() -> None:
     assert sim.move_joints(q0 + [0.5, 0, 0, 0, 0, 0], 1.0).completed
     moved = sim.state.time - t0
     assert moved > 0.4
+    # in the same step as the arm's new position, not at the next cycle (the old uptime
+    # showed it one cycle late: a host reading the end first took the move's time as none)
+    assert uptime.seconds - before == pytest.approx(moved, abs=1e-12)
     uptime.tick(False)
     assert uptime.seconds - before == pytest.approx(moved + CYCLE_S, abs=1e-12)
 
     # 0.1 s standing still (the host computes): it counts, and toward the settle
     _idle(uptime, 50)
-    assert sim.settle_for_measurement() == pytest.approx(SETTLE_S - 50 * CYCLE_S, abs=1e-9)
     before = uptime.seconds
+    assert sim.settle_for_measurement() == pytest.approx(SETTLE_S - 50 * CYCLE_S, abs=1e-9)
     sim.hold_for_capture()
     uptime.tick(False)
     assert uptime.seconds - before == pytest.approx(
