@@ -195,7 +195,11 @@ class UrPersonality:
         return self._motion is not None
 
     def program_running(self) -> bool:
-        return self._program is not None and not self._program.done()
+        """A program runs, and no stop of it was asked (dashboard `stop`): a UR reports its
+        program stopped once the stop is taken, not when its task has wound down (a host
+        asking why a move ended read "running" in that gap and took a stop for a miss)."""
+        return (self._program is not None and not self._program.done()
+                and not self._program.cancelling())
 
     def program_name(self) -> str:
         return self._program_name

@@ -28,6 +28,7 @@ from hostpc.robots.ur_link import (
     FreshSamples,
     Sample,
     UrLink,
+    at_target,
     check_joints,
     joint_velocity,
 )
@@ -159,6 +160,9 @@ class UrGuardedMove:
                     ended = await link.failure_reason(None)
                     measured = await link.fresh_q(watch.last[0] - 1e-9,
                                                   None if ended else target)
+                    if ended is None and not at_target(measured, target):
+                        # short of the target: the controller's flags may have come late
+                        ended = await link.failure_reason(None)
                     await link.came_to_rest()
                     return ContactOutcome(False, None, self.offsets.reported(measured),
                                           reason=ended or "no_contact")

@@ -115,7 +115,7 @@ async def in_daemon_thread(function: Callable[..., T], *args: Any) -> T:
     return await future
 
 
-def _at(q: np.ndarray, target: np.ndarray) -> bool:
+def at_target(q: np.ndarray, target: np.ndarray) -> bool:
     """True if q is at target (6,) within SETTLE_TOLERANCE_RAD."""
     return bool(np.max(np.abs(q - target)) <= SETTLE_TOLERANCE_RAD)
 
@@ -187,7 +187,7 @@ class UrLink:
             stamp, q, _, _ = await self.call(self.sample)
             if stamp > after:
                 fresh = q
-                if target is None or _at(q, target):
+                if target is None or at_target(q, target):
                     return q
             if loop.time() > deadline:
                 if fresh is not None:
@@ -228,9 +228,9 @@ class UrLink:
         after = float(await self.call(self.receive.getTimestamp))
         q = await self.fresh_q(after, None)
         reason = await self.failure_reason(None if ok else "refused")
-        if reason is None and not _at(q, target):
+        if reason is None and not at_target(q, target):
             q = await self.fresh_q(after, target)
-            reason = None if _at(q, target) else "stopped"
+            reason = None if at_target(q, target) else "stopped"
         await self.came_to_rest()
         return MoveOutcome(completed=reason is None, q=q, reason=reason)
 
