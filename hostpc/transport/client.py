@@ -89,6 +89,22 @@ ABORT_AFTER_TIMEOUT_S = 2.0
 """How long the abort sent after a motion timeout or interruption may take (s)."""
 
 ReplyT = TypeVar("ReplyT", bound=Reply)
+T = TypeVar("T")
+
+
+async def wait_for_reply(future: asyncio.Future[T], timeout: float) -> T:
+    """`asyncio.wait_for(future, timeout)` that never drops a cancellation. Python 3.11's
+    returns the result of a future that completed in the same loop step as its caller was
+    cancelled, and the cancellation is lost (CPython gh-86296, fixed in 3.12): a SIGTERM or
+    Ctrl-C that came with a reply went unheard and the run went on to push (seen under load,
+    test_sigterm_stops_cleanly_and_a_sim_resume_keeps_time_increasing). The reply is
+    dropped then, as if it had come a moment later."""
+    task = asyncio.current_task()
+    cancels = task.cancelling() if task is not None else 0
+    result = await asyncio.wait_for(future, timeout)
+    if task is not None and task.cancelling() > cancels:
+        raise asyncio.CancelledError
+    return result
 
 
 class _Connect:
@@ -400,7 +416,7 @@ class ControllerClient:
             request = make(link.conn.next_id())
             future = link.send(request)
             try:
-                reply = await asyncio.wait_for(future, timeout)
+                reply = await wait_for_reply(future, timeout)
             except asyncio.CancelledError as exc:  # Ctrl-C / SIGTERM (hostpc.cli.termination)
                 link.pending.pop(request.id, None)
                 if request.kind in MOTION_KINDS:

@@ -14,6 +14,7 @@ from controller_stub.scenario.spec import scenario_from_dict
 from controller_stub.world.simulation import Simulation
 from hostpc.errors import ConnectionFailed, ControllerError, RequestTimeout
 from hostpc.transport import ControllerClient, ControllerRefusedError
+from hostpc.transport.client import wait_for_reply
 from tests.integration.conftest import BASE_SCENARIO, TOKEN, StartStub
 
 pytestmark = pytest.mark.asyncio
@@ -302,3 +303,22 @@ async def test_modbus_is_read_only_by_default(stub: ControllerServer) -> None:
     finally:
         modbus_client.close()
         await modbus.close()
+
+
+async def test_a_cancel_that_comes_with_the_reply_is_not_lost() -> None:
+    """A reply and a cancellation (SIGTERM, Ctrl-C: hostpc.cli.termination) in the same loop
+    step: the request is cancelled. Python 3.11's asyncio.wait_for returned the reply and lost
+    the cancellation, and a SIGTERMed calibrate ran on to push."""
+    reply: asyncio.Future[str] = asyncio.get_running_loop().create_future()
+    request = asyncio.create_task(wait_for_reply(reply, 5.0))
+    await asyncio.sleep(0)  # the request waits for its reply
+    reply.set_result("moved")
+    request.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await request
+    # without a cancellation the reply is the result
+    reply = asyncio.get_running_loop().create_future()
+    request = asyncio.create_task(wait_for_reply(reply, 5.0))
+    await asyncio.sleep(0)
+    reply.set_result("moved")
+    assert await request == "moved"
