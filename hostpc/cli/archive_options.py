@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 from pathlib import Path
 
 
@@ -33,8 +34,6 @@ def archive_run(args: argparse.Namespace, run_dir: Path, exit_code: int) -> None
 
 def dataset_from_archive(args: argparse.Namespace) -> str:
     """The dataset of archived run `--run` written to a temporary file; returns its path."""
-    import tempfile  # with shutil, random, bz2, lzma: not for the commands that only parse --db
-
     from hostpc.archive import open_archive
     from hostpc.errors import InputError
 
