@@ -16,7 +16,6 @@ from hostpc.errors import InputError
 from hostpc.kinematics import Chain, gravity_torque
 from hostpc.kinematics.robots import get_robot
 from hostpc.kinematics.tables import chain_from_table
-from hostpc.kinematics.urdf import chain_joints
 from hostpc.model.effect import ModelContext
 
 
@@ -118,6 +117,8 @@ def check_coupled_joints(chain: Chain, q: np.ndarray,
         name_f, name_l = f"q{follower + 1}", f"q{leader + 1}"
         end = "or end the chain before it"
         if urdf is not None:
+            from hostpc.kinematics.urdf import chain_joints  # xml.etree: only for a URDF
+
             path, base_link, _ = urdf
             joints = chain_joints(*urdf)
             name_f = f"{joints[follower].name} (q{follower + 1})"

@@ -80,6 +80,7 @@ def _terms(model: MeasurementPredictor, dataset: Dataset, context: ModelContext,
     all_units: list[str] = []
     slices: dict[str, slice] = {}
     start = 0
+    builtin = set(builtin_effects().values())  # asked once: it reads every kind's descriptor
     for effect in instances:
         if effect.hook == "frame" and effect.name not in allowed_frames:
             raise EffectError(
@@ -102,7 +103,7 @@ def _terms(model: MeasurementPredictor, dataset: Dataset, context: ModelContext,
                 f"effect {effect.name!r} does not apply to method {dataset.method!r} "
                 f"(only to {', '.join(_kinds_accepting(type(effect)))})"
             )
-        if type(effect) not in builtin_effects().values():
+        if type(effect) not in builtin:
             check_effect(effect, context, model.measurement_size)
         span = slice(start, start + len(local))
         terms.append(EffectTerm(effect=effect, names=local, slice=span))

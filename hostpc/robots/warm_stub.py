@@ -8,7 +8,9 @@ on stdin (controller_stub/warm.py); `SimulatedController.start` (simulator.py) h
 same `serve` arguments, token and log it would give a fresh process (`hand_over`), or starts
 a fresh one when there is no warm process. A warm process nobody took is ended by `discard`
 (terminated). `wait_for_exit` waits for a simulator's end without polling. Standard
-library only: this module is imported before everything else.
+library only: this module is imported before everything else, by every command, so what
+only a started process needs (subprocess with its threading, selectors and signal) is
+imported where it is used.
 
 On Linux the process gets PR_SET_PDEATHSIG (SIGTERM): if hostpc dies, even by SIGKILL, the
 simulator is terminated too.
@@ -20,11 +22,13 @@ import contextlib
 import json
 import os
 import select
-import signal
-import subprocess
 import sys
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import subprocess
 
 PR_SET_PDEATHSIG = 1
 """prctl option (linux/prctl.h): the signal this process gets when its parent dies."""
@@ -38,6 +42,7 @@ def die_with_parent() -> Callable[[], None] | None:
     if not sys.platform.startswith("linux"):
         return None
     import ctypes
+    import signal
 
     try:
         libc = ctypes.CDLL(None, use_errno=True)
@@ -68,6 +73,8 @@ def prestart() -> None:
     global _warm
     if _warm is not None and _warm.poll() is None:
         return
+    import subprocess
+
     with contextlib.suppress(OSError):
         _warm = subprocess.Popen(
             [sys.executable, "-m", "controller_stub.warm"], stdin=subprocess.PIPE,
@@ -108,6 +115,8 @@ def discard() -> None:
     process = take()
     if process is None:
         return
+    import subprocess
+
     process.terminate()
     try:
         wait_for_exit(process, timeout=5)
@@ -121,6 +130,8 @@ def wait_for_exit(process: subprocess.Popen[str], timeout: float) -> int:
     """`process.wait(timeout)`, woken the moment the process ends (a pidfd, Linux): Popen's
     own wait polls with sleeps growing to 50 ms, which hostpc would spend after every run's
     simulator ended. subprocess.TimeoutExpired if it has not ended within `timeout` s."""
+    import subprocess
+
     try:
         handle = os.pidfd_open(process.pid)
     except (AttributeError, OSError):  # not Linux, or the process is reaped already

@@ -69,6 +69,20 @@ def test_diagnose_imports_no_other_command() -> None:
     assert "hostpc.cli.robots" not in modules
 
 
+@pytest.mark.parametrize("example", ["ur5e_stereo.json", "ur5e_stereo_hidden_compliance.json"])
+def test_diagnose_imports_no_process_or_urdf_machinery(example: str) -> None:
+    """Every command imports hostpc.robots.warm_stub (it may start a simulator before the
+    command's imports); only `hostpc calibrate --robot sim` starts one, so subprocess (with
+    threading, selectors and signal) is imported where a process is started. The URDF
+    reader (xml.etree, two dataclasses) is imported only for a dataset whose robot is a
+    URDF chain. Together ~1 % of the command's instructions."""
+    code, modules = imported_by("diagnose", "--ladder", f"examples/{example}")
+    assert code in (0, 1)
+    unwanted = [m for m in modules if m in ("subprocess", "hostpc.kinematics.urdf")
+                or m.startswith("xml.")]
+    assert not unwanted, unwanted
+
+
 def test_the_offline_parsers_import_no_robots_command() -> None:
     """fit's, diagnose's and predict's modules (what `hostpc` imports to build their
     parsers) take their robot options from hostpc.cli.robot_options and import the `hostpc
