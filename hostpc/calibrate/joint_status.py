@@ -51,6 +51,12 @@ class JointSource:
         return self.source == "data"
 
 
+def prior_dominated(sigma: float, sigma_prior: float) -> bool:
+    """THE RULE (module docstring): a joint with a prior of sigma_prior whose fitted (or
+    predicted) sigma is `sigma` is determined by its prior, not by the data."""
+    return not (math.isfinite(sigma) and sigma <= PRIOR_DOMINATED_RATIO * sigma_prior)
+
+
 def _frames_of(parameters: tuple[str, ...]) -> list[str]:
     frames: list[str] = []
     for name in parameters:
@@ -119,8 +125,7 @@ def joint_sources(result: FitVerdict, n_joints: int) -> tuple[JointSource, ...]:
             continue
         sigma_prior = prior_sigma.get(name)
         std = float(np.asarray(result.std, float)[k])
-        if sigma_prior is not None and not (
-                math.isfinite(std) and std <= PRIOR_DOMINATED_RATIO * sigma_prior):
+        if sigma_prior is not None and prior_dominated(std, sigma_prior):
             out.append(JointSource(
                 j + 1, label, "prior",
                 f"determined by its --prior (+-{math.degrees(sigma_prior):.4g} deg), not by "

@@ -58,6 +58,8 @@ journal whose `push_refused` event has no structured next command (written befor
 JOURNAL_KINDS = ("push_intent", "push", "verify", "rollback", "push_refused", "resumed",
                  "result")
 """The journal events an outcome reads (Journal.timeline)."""
+_KNOWN_FIX = re.compile(r"--known (\S+)")
+"""The frames a joint's fix names (joint_status: `--known target (or a cell reference...)`)."""
 _MATCH = 1e-9  # rad: the verified offsets are the pushed ones
 
 
@@ -194,12 +196,15 @@ def _span(run: list[int]) -> str:
 
 def derive_outcome(events: Sequence[JsonObject], sources: Sequence[JointSource], *,
                    run_dir: str, finished: bool, required: Sequence[int] = (),
-                   new_run: str = "--robot ROBOT", known: Sequence[str] = ()) -> RobotOutcome:
+                   new_run: str = "--robot ROBOT", known: Sequence[str] = (),
+                   swapped: Sequence[int] = ()) -> RobotOutcome:
     """The outcome from the journal's events (`Journal.timeline(*JOURNAL_KINDS)`, in
     order) and the fit's per-joint sources. finished: the run wrote (or is writing) its
     result; run_dir / new_run / known: for the next command (new_run: a new run's
     options for this robot and cell, `RunHeader.new_run_options`; known: the run's known
-    frames, kept in a new run's `--known`)."""
+    frames, kept in a new run's `--known`); swapped: the joints declared swapped
+    (`--swapped`): one this run did not calibrate has an unknown zero, so no reference is
+    proposed from this run (`unknown_swapped_zeros`)."""
     state = _replay(events)
     active = state.pushed_new is not None and state.rolled_at is None
     pushed_mask = state.pushed_mask if active else ()
@@ -238,7 +243,8 @@ def derive_outcome(events: Sequence[JsonObject], sources: Sequence[JointSource],
         joints=tuple(joints), required_joints=required, missing_required=missing,
         headline="", next_command=None, events=tuple(state.events),
         refused_reason=state.refused, refusal=state.refusal if state.refused else None)
-    return _with_words(outcome, run_dir, new_run, tuple(known), state.intent_open)
+    return _with_words(outcome, run_dir, new_run, tuple(known), state.intent_open,
+                       tuple(swapped))
 
 
 @dataclass
@@ -311,7 +317,7 @@ def _controller_text(state: _Replay, active: bool) -> str:
 
 
 def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[str, ...],
-                intent_open: bool) -> RobotOutcome:
+                intent_open: bool, swapped: tuple[int, ...]) -> RobotOutcome:
     """The outcome with its headline and next command filled in."""
     joints = outcome.joints
     good = [j.joint for j in joints if j.status == "calibrated"]
@@ -332,8 +338,13 @@ def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[
     elif verdict == "JOINTS_MISSING":
         missing = joint_names(joints, outcome.missing_required)
         head = f"JOINTS_MISSING: {good_text}; {bad_text} (required: {missing})"
-        next_command = _fix_command(joints, outcome, run, new_run, known)
-        if next_command is not None:  # the reference: only from zeros known good
+        unknown = unknown_swapped_zeros(joints, swapped)
+        if unknown:  # a reference from this run would absorb the swapped zero's error
+            head += f"; {_unknown_zero_text(joints, unknown)}"
+            next_command = _swap_fix_command(joints, outcome, new_run, known, unknown)
+        else:
+            next_command = _fix_command(joints, outcome, run, new_run, known)
+        if next_command is not None and not unknown:  # the reference: zeros known good
             head += ("; record the cell's reference from a run whose zeros are known "
                      "good (this one, if no zero was disturbed since the cell was "
                      "last verified), then every joint is calibrated")
@@ -350,6 +361,11 @@ def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[
         next_command = f"hostpc calibrate --resume {run} --push"
     elif verdict == "REFUSED":
         head = f"REFUSED: push refused, offsets unchanged ({outcome.refused_reason})"
+        constrained = _constraints_text(joints)
+        if constrained and outcome.refusal is not None and outcome.refusal.rule in (
+                "not_converged", "model"):  # the user's own constraints come first
+            head += (f"; the fit failed with {constrained}: a likely cause; run again "
+                     "without them or check them")
         next_command = (outcome.refusal.next_command(run) if outcome.refusal is not None
                         else _legacy_refusal_command(outcome.refused_reason or "", run))
     elif verdict == "NOT_PUSHED":
@@ -366,6 +382,15 @@ def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[
     if intent_open and verdict == "ERROR":
         next_command = f"hostpc calibrate --resume {run}"
     return dataclasses.replace(outcome, headline=head, next_command=next_command)
+
+
+def _constraints_text(joints: Sequence[JointOutcome]) -> str:
+    """"J3 held and a prior on J2": the joints the user's --hold / --prior decided."""
+    held = [j.joint for j in joints if j.source == "hold"]
+    prior = [j.joint for j in joints if j.source == "prior"]
+    parts = ([f"{joint_names(joints, held)} held"] if held else []) + (
+        [f"a prior on {joint_names(joints, prior)}"] if prior else [])
+    return " and ".join(parts)
 
 
 def _legacy_refusal_command(reason: str, run: str) -> str:
@@ -409,6 +434,54 @@ def _short_reason(joint: JointOutcome) -> str:
     return reason.split(" (")[0]
 
 
+def unknown_swapped_zeros(joints: Sequence[JointOutcome] | Sequence[JointSource],
+                          swapped: Sequence[int]) -> tuple[int, ...]:
+    """The joints declared swapped (`--swapped`) that the run did not calibrate: their
+    zeros are unknown, and every frame the run estimated carries their error (a reference
+    recorded from the run would take it for the cell's geometry)."""
+    calibrated = {j.joint for j in joints
+                  if (j.status == "calibrated" if isinstance(j, JointOutcome) else j.calibrated)}
+    return tuple(sorted({int(n) for n in swapped} - calibrated))
+
+
+def _unknown_zero_text(joints: Sequence[JointOutcome], unknown: Sequence[int]) -> str:
+    names = joint_names(joints, unknown)
+    return (f"{names} declared swapped and not calibrated: its zero is unknown, so this "
+            "run's frames carry its error and a reference recorded from this run would "
+            f"hide it; calibrate {names} with a reference recorded before the swap, a "
+            "surveyed frame, or the robot maker's zeroing procedure")
+
+
+def _swap_fix_command(joints: Sequence[JointOutcome], outcome: RobotOutcome, new_run: str,
+                      known: tuple[str, ...], unknown: Sequence[int]) -> str:
+    """The honest ways to calibrate a swapped joint this run could not: a new run with a
+    reference recorded before the swap, or with the frame it needs surveyed (`--known`),
+    or the robot maker's zeroing procedure (never a reference from this run)."""
+    required = _required_text(joints, outcome)
+    frames = [f for f in known if f != "none"]
+    kept = f" --known {','.join(frames)}" if frames else ""
+    needed = list(frames)
+    for j in joints:
+        match = _KNOWN_FIX.search(j.fix or "") if j.joint in unknown else None
+        for frame in match.group(1).split(",") if match else ():
+            if frame not in needed:
+                needed.append(frame)
+    names = joint_names(joints, unknown)
+    ways = [f"hostpc calibrate {new_run}{kept} --reference REFERENCE_FROM_BEFORE_THE_SWAP.json "
+            f"--require-joints {required}"]
+    if needed != frames:
+        surveyed = " and ".join(f for f in needed if f not in frames)
+        ways.append(f"hostpc calibrate {new_run} --known {','.join(needed)} --require-joints "
+                    f"{required} (with the {surveyed} frame surveyed)")
+    ways.append(f"set {names} with the robot maker's zeroing procedure")
+    return ", or ".join(ways)
+
+
+def _required_text(joints: Sequence[JointOutcome], outcome: RobotOutcome) -> str:
+    return ("all" if len(outcome.required_joints) == len(joints)
+            else ",".join(str(n) for n in outcome.required_joints))
+
+
 def _fix_command(joints: Sequence[JointOutcome], outcome: RobotOutcome, run: str,
                  new_run: str, known: tuple[str, ...]) -> str | None:
     """The commands that would calibrate the missing joints: the frames that would make
@@ -416,8 +489,7 @@ def _fix_command(joints: Sequence[JointOutcome], outcome: RobotOutcome, run: str
     reference is recorded (from a run whose zeros are known good) and a new run uses it."""
     if not any(j.joint in outcome.missing_required and j.fix for j in joints):
         return None
-    required = ("all" if len(outcome.required_joints) == len(joints)
-                else ",".join(str(n) for n in outcome.required_joints))
+    required = _required_text(joints, outcome)
     reference = f"{run.rstrip('/')}.cell_ref.json"
     frames = [f for f in known if f != "none"]  # the run's own surveyed frames stay known
     kept = f" --known {','.join(frames)}" if frames else ""

@@ -42,7 +42,7 @@ def run_outcome(journal: Journal, sources: Sequence[JointSource], *, run_dir: Pa
     required = (*parse_required_joints(require_joints, len(sources)), *swapped)
     return derive_outcome(journal.timeline(*JOURNAL_KINDS), sources, run_dir=str(run_dir),
                           finished=finished, required=required,
-                          new_run=header.new_run_options(), known=known)
+                          new_run=header.new_run_options(), known=known, swapped=swapped)
 
 
 def rewrite_outcome(run_dir: Path) -> RobotOutcome | None:

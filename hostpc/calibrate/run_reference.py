@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.calibrate.joint_status import prior_dominated
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.journal_events import Note
 from hostpc.calibrate.push import PushPlan, joint_display_name
@@ -38,7 +39,13 @@ from hostpc.calibrate.run_result import RunResult
 from hostpc.dataset import Dataset
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
-from hostpc.fitting.priors import analyse_with_constraints, constraints_for, with_prior_blocks
+from hostpc.fitting.priors import (
+    Constraints,
+    analyse_with_constraints,
+    constraints_for,
+    with_constraints,
+    with_prior_blocks,
+)
 from hostpc.json_object import JsonObject
 from hostpc.methods.base import Method, Plan, Progress, RunSettings
 from hostpc.methods.cell import Cell
@@ -198,7 +205,7 @@ def joint_coverage(method: Method, plan: Plan, settings: RunSettings, cell: Cell
     from hostpc.model.measurements.predict import predict
     from hostpc.model.problem import build_problem
 
-    dataset = method.design_dataset(plan.q)
+    dataset = with_constraints(method.design_dataset(plan.q), settings.priors, settings.hold)
     dataset, priors = reference_priors(reference, dataset, settings)
     problem = build_problem(dataset, settings.effects, plugins=settings.plugins)
     _, J = predict(problem, np.zeros(problem.layout.size), jacobian=True)
@@ -215,9 +222,22 @@ def joint_coverage(method: Method, plan: Plan, settings: RunSettings, cell: Cell
     labels = [joint_display_name(j, label) for j, label in enumerate(table.labels)]
     held_bare = {d.fixed: d for d in bare.null_directions}
     held_full = {d.fixed: d for d in full.null_directions}
-    measured, referenced, resolved, missing = [], [], [], {}
-    for label, name in zip(labels, offsets, strict=True):
-        if name not in names:
+    user_held = ({n for n, h in zip(names, constraints.held, strict=True) if h}
+                 if constraints is not None else set())
+    prior_sigma = ({p.name: float(p.sigma) for p in constraints.priors}
+                   if constraints is not None else {})
+    sigma = _predicted_sigmas(A, constraints, full.fixed)
+    measured, referenced, resolved, held, from_prior = [], [], [], [], []
+    missing: dict[str, str] = {}
+    held_joints = []
+    for j, (label, name) in enumerate(zip(labels, offsets, strict=True)):
+        if name in user_held:  # joint_status's sources: hold, prior, data, none
+            held.append(label)
+            held_joints.append(j + 1)
+        elif name in prior_sigma and prior_dominated(sigma[names.index(name)],
+                                                     prior_sigma[name]):
+            from_prior.append(label)
+        elif name not in names:
             missing[label] = "not in the model"
         elif name in held_full:
             others = [p.split(".", 1)[0] for p in held_full[name].parameters[1:]]
@@ -244,12 +264,31 @@ def joint_coverage(method: Method, plan: Plan, settings: RunSettings, cell: Cell
         text += (f"; {', '.join(referenced)} from the reference of {reference.date} "  # type: ignore[union-attr]
                  f"({', '.join(p.frame for p in priors)}: valid only while those frames "
                  "sit as recorded; the reference check tests it)")
+    if held:
+        text += f"; {', '.join(held)} held at nominal by --hold (not calibrated)"
+    if from_prior:
+        text += (f"; {', '.join(from_prior)} from its --prior, not the data (not "
+                 "calibrated)")
     if missing:
         text += "; cannot calibrate " + "; ".join(f"{k} ({v})" for k, v in missing.items())
-    else:
+    elif not held and not from_prior:
         text += "; every joint calibrated"
     return {"from_measurements": measured, "from_reference": referenced,
-            "resolved_by_reference": resolved, "not_calibrated": missing, "text": text}
+            "resolved_by_reference": resolved, "held": held, "held_joints": held_joints,
+            "from_prior": from_prior,
+            "not_calibrated": missing, "text": text}
+
+
+def _predicted_sigmas(A: np.ndarray, constraints: Constraints | None,
+                      fixed: np.ndarray) -> np.ndarray:
+    """(P,) each parameter's predicted sigma from the whitened Jacobian A and the priors'
+    rows, the fixed (held or unidentifiable) parameters left out (NaN)."""
+    rows = A if constraints is None else np.vstack([A, constraints.jacobian(A.shape[1])])
+    free = ~np.asarray(fixed, bool)
+    sigma = np.full(A.shape[1], np.nan)
+    sub = rows[:, free]
+    sigma[free] = np.sqrt(np.clip(np.diag(np.linalg.pinv(sub.T @ sub)), 0.0, None))
+    return sigma
 
 
 def with_joint_coverage(plan: Plan, method: Method, settings: RunSettings, cell: Cell,
@@ -261,6 +300,11 @@ def with_joint_coverage(plan: Plan, method: Method, settings: RunSettings, cell:
         coverage = {"text": f"not analysed ({exc})"}
     progress.message(f"joints: {coverage['text']}")
     info = {**plan.info, "joints": coverage}
+    held = set(coverage.get("held_joints", []))
+    sigmas = info.get("predicted_joint_sigma_deg")
+    if held and isinstance(sigmas, list):  # a held joint is not estimated: no sigma
+        info["predicted_joint_sigma_deg"] = [None if j + 1 in held else s
+                                             for j, s in enumerate(sigmas)]
     resolved = set(coverage.get("resolved_by_reference", []))
     fixed = list(info.get("structural_fixed", []))
     if resolved and len(fixed) == len(info.get("structural_unidentifiable", [])):

@@ -130,10 +130,14 @@ def controller_limit_refusal(exc: ControllerError, run_dir: Any, *,
             + ": this is the controller's setting, not zerocal's --max-correction or "
             f"--swap-limit; the fitted offsets are kept in {run_dir}/fit.json")
     if scenario:
+        largest = largest_fitted_correction(run_dir)
+        above = ("the largest correction" if largest is None else
+                 f"the largest correction ({math.degrees(largest):.3g} deg, {largest:.3g} "
+                 f"rad), e.g. {suggested_limit_rad(largest):g} rad")
         text = (f"{head}; the simulated controller's limit is server.offset_limit_rad in "
                 f"{scenario} (a resume starts the simulated controller from that file): "
-                "raise it there above the largest correction (e.g. 3.2 rad), then push and "
-                f"verify with: hostpc calibrate --resume {run_dir} --push")
+                f"raise it there above {above}, then push and verify with: "
+                f"hostpc calibrate --resume {run_dir} --push")
     elif again:
         text = (f"{head}; pushing again meets the same refusal: raise the limit on the "
                 "controller (its configuration, or the robot maker's tool), or set the "
@@ -145,6 +149,31 @@ def controller_limit_refusal(exc: ControllerError, run_dir: Any, *,
                 "the robot maker's zeroing procedure), then push and verify with: "
                 f"hostpc calibrate --resume {run_dir} --push")
     return PushRefusal(text, "controller_limit", resume_with("--push"))
+
+
+LIMIT_MARGIN = 1.25
+"""A suggested controller limit: the largest fitted correction times this (rounded up)."""
+
+
+def largest_fitted_correction(run_dir: Any) -> float | None:
+    """The largest fitted joint offset correction (rad, absolute) in the run's fit.json,
+    None if it has none (no file, or no joint offset)."""
+    import json
+    from pathlib import Path
+
+    try:
+        document = json.loads((Path(run_dir) / "fit.json").read_text(encoding="utf-8"))
+        values = [abs(float(p["value"])) for name, p in document["parameters"].items()
+                  if joint_offsets.is_offset(name)]
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return None
+    return max(values) if values else None
+
+
+def suggested_limit_rad(largest: float) -> float:
+    """A controller limit above `largest` (rad) with a margin (LIMIT_MARGIN), rounded up to
+    0.01 rad."""
+    return math.ceil(largest * LIMIT_MARGIN * 100.0 + 1e-9) / 100.0
 
 
 def lost_plan_line(n_measured: int, n_planned: int, reasons: Sequence[str | None],

@@ -9,7 +9,9 @@ block, tied to the robot (model, serial), the method and the cell
 (hostpc.calibrate.reference, format zerocal-cell-reference/1). It refuses a run whose
 verification did not PASS (its zeros are not known good), whose fit did not converge, or
 whose own reference check found a moved frame; `--force` records anyway (commissioning
-with zeros known good by other means). Whatever J1 / J6 zeros the controller had in that
+with zeros known good by other means). It refuses, even with `--force`, a run that declared
+a joint swapped (`--swapped`) and did not calibrate it: that zero is unknown, and the frames
+the run estimated carry its error. Whatever J1 / J6 zeros the controller had in that
 run are declared good: record right after a verified calibration, or at commissioning.
 Later runs load it with `hostpc calibrate --reference cell_ref.json` (docs/calibrate.md).
 
@@ -52,8 +54,34 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     show.set_defaults(func=run_show)
 
 
-def _refusal(run: Path, result: RunResult, force: bool) -> str | None:
-    """Why this run cannot be a reference (None: it can)."""
+def _refusal(run: Path, result: RunResult, force: bool) -> tuple[str, str] | None:
+    """(why this run cannot be a reference, the next command), None: it can."""
+    calibrate = f"calibrate and verify first: hostpc calibrate --resume {run} --push"
+    unknown = _unknown_swapped_zeros(result)
+    if unknown:  # even with --force: the frames the run estimated carry the swapped zero
+        names = ", ".join(f"J{n}" for n in unknown)
+        stored = str((result.outcome or {}).get("next_command") or "")
+        honest = stored if stored and "reference record" not in stored else (  # an older run's
+            "hostpc calibrate ... --reference REFERENCE_FROM_BEFORE_THE_SWAP.json, or "
+            f"--known FRAME with that frame surveyed, or set {names} with the robot maker's "
+            "zeroing procedure")
+        return (f"{names} was declared swapped (--swapped) and this run did not calibrate "
+                "it: its zero is unknown, so the frames the run estimated carry its error",
+                f"next: {honest}")
+    reason = _verdict_refusal(result, force)
+    return (reason, calibrate) if reason else None
+
+
+def _unknown_swapped_zeros(result: RunResult) -> tuple[int, ...]:
+    """The joints the run declared swapped and did not calibrate (outcome.py)."""
+    from hostpc.calibrate.outcome import sources_from_outcome, unknown_swapped_zeros
+
+    swapped = [int(j) for j in result.settings.get("swapped") or ()]
+    return unknown_swapped_zeros(sources_from_outcome(result.outcome or {}), swapped)
+
+
+def _verdict_refusal(result: RunResult, force: bool) -> str | None:
+    """Why the run's fit or verification cannot make it a reference (None: they can)."""
     if not result.fit.get("converged"):
         return "its fit did not converge"
     check = result.reference_check or {}
@@ -86,8 +114,7 @@ def run_record(args: argparse.Namespace) -> int:
         raise InputError(f"{path}: not a calibration result document ({exc!r})") from None
     refused = _refusal(run, result, args.force)
     if refused:
-        raise InputError(f"--run {run}: cannot be a reference: {refused}; calibrate and "
-                         f"verify first: hostpc calibrate --resume {run} --push")
+        raise InputError(f"--run {run}: cannot be a reference: {refused[0]}; {refused[1]}")
     header = read_run_header(Journal(run))
     settings = header.settings
     dataset = load_dataset(run / "dataset.json")

@@ -6,6 +6,7 @@ own limit on a simulated run, and JOINTS_MISSING's advice."""
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -129,6 +130,68 @@ def test_joints_missing_sends_to_a_reference_not_to_a_false_known() -> None:
         "hostpc reference record --run /abs/runs/x --out /abs/runs/x.cell_ref.json && "
         "hostpc calibrate --robot sim --method stereo_target --seed 7 --reference "
         "/abs/runs/x.cell_ref.json --require-joints all")
+
+
+def test_a_swapped_joint_the_run_did_not_calibrate_is_never_sent_to_a_reference_of_this_run(
+        ) -> None:
+    """J1 declared swapped and not calibrated: its zero is unknown, and a reference recorded
+    from this run would absorb its error into the target frame (a later false PASS)."""
+    sources = (JointSource(1, "q1", "none", "unidentifiable with the target frame estimated",
+                           "--known target (or a cell reference that fixes the target "
+                           "frame)"),
+               *(JointSource(j, f"q{j}", "data") for j in range(2, 6)),
+               JointSource(6, "q6", "none", "unidentifiable with the tool frame estimated",
+                           "--known tool"))
+    new_run = "--robot sim --method stereo_target --swapped J1 --seed 7"
+    outcome = derive_outcome([], sources, run_dir="/abs/runs/x", finished=True,
+                             required=(1,), new_run=new_run, swapped=(1,))
+    assert outcome.verdict == "JOINTS_MISSING"
+    assert outcome.next_command is not None
+    assert "reference record" not in outcome.next_command
+    assert "record the cell's reference" not in outcome.headline
+    assert outcome.next_command == (
+        f"hostpc calibrate {new_run} --reference REFERENCE_FROM_BEFORE_THE_SWAP.json "
+        "--require-joints 1, or "
+        f"hostpc calibrate {new_run} --known target --require-joints 1 (with the target "
+        "frame surveyed), or set J1 with the robot maker's zeroing procedure")
+    assert "J1 declared swapped and not calibrated: its zero is unknown" in outcome.headline
+    # the swap declared on a joint the run did calibrate: its zero is known, as before
+    calibrated = derive_outcome([], sources, run_dir="/abs/runs/x", finished=True,
+                                required=(1, 6), new_run=new_run, swapped=(2,))
+    assert calibrated.next_command is not None
+    assert calibrated.next_command.startswith("hostpc reference record --run /abs/runs/x")
+
+
+def test_a_fit_that_failed_with_holds_and_priors_names_them_in_the_refusal() -> None:
+    sources = (JointSource(1, "q1", "data"),
+               JointSource(2, "q2", "prior", "determined by its --prior"),
+               JointSource(3, "q3", "hold", "held at its nominal value by --hold"),
+               *(JointSource(j, f"q{j}", "data") for j in range(4, 7)))
+    refused = {"event": "push_refused", "reason": "the model does not explain the "
+               "measurements", "rule": "model", "next": ["diagnose", "{run}/dataset.json"]}
+    outcome = derive_outcome([refused], sources, run_dir="runs/x", finished=True)
+    assert outcome.verdict == "REFUSED"
+    assert outcome.headline.endswith("; the fit failed with J3 held and a prior on J2: a "
+                                     "likely cause; run again without them or check them")
+    # a limit refusal is not a failed fit: the holds are not its cause
+    limit = {**refused, "rule": "correction_limit", "next": ["calibrate", "--force"]}
+    assert "held" not in derive_outcome([limit], sources, run_dir="runs/x",
+                                        finished=True).headline
+
+
+def test_the_controllers_limit_suggests_a_value_from_the_largest_fitted_correction(
+        tmp_path: Path) -> None:
+    """A 10 deg J1 correction (0.1745 rad): raise the limit to 0.22 rad, not 3.2 rad."""
+    fit = {"parameters": {
+        "joint_offsets.q1": {"value": math.radians(10.0), "unit": "rad"},
+        "joint_offsets.q2": {"value": -math.radians(0.5), "unit": "rad"},
+        "tool.x": {"value": 0.9, "unit": "m"}}}
+    (tmp_path / "fit.json").write_text(json.dumps(fit))
+    refusal = controller_limit_refusal(_Refused(), tmp_path, scenario="/abs/scenario.json")
+    assert refusal is not None
+    assert "3.2 rad" not in refusal.reason
+    assert ("raise it there above the largest correction (10 deg, 0.175 rad), e.g. 0.22 rad"
+            in refusal.reason)
 
 
 def test_a_separation_with_its_poses_lost_or_no_dof_left_is_not_tested(tmp_path: Path) -> None:

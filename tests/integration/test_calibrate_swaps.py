@@ -172,15 +172,51 @@ def test_a_declared_swap_on_a_joint_the_run_cannot_calibrate_is_never_a_pass(
     assert code == 7, document["outcome"]["headline"]
     assert document["outcome"]["verdict"] == "JOINTS_MISSING"
     assert document["outcome"]["missing_required"] == [6]
-    # the new run it suggests is this robot's and cell's: the same method, simulated world
-    # and declared swap, with the frame J6 needs known
-    # (the frames were estimated, so not --known: a reference, and the run's seed kept)
+    # the new runs it suggests are this robot's and cell's: the same method, simulated
+    # world, declared swap and seed, with the run's surveyed target kept; never a
+    # reference recorded from this run (J6's zero is unknown: the tool frame carries it)
     seed = document["settings"]["seed"]
+    new_run = (f"hostpc calibrate --robot sim --method stereo_target --scenario "
+               f"{out / 'sim' / 'scenario.json'} --swapped J6 --seed {seed}")
     assert document["outcome"]["next_command"] == (
-        f"hostpc reference record --run {out} --out {out}.cell_ref.json && hostpc calibrate "
-        f"--robot sim --method stereo_target --scenario {out / 'sim' / 'scenario.json'} "
-        f"--swapped J6 --seed {seed} --known target --reference {out}.cell_ref.json "
-        "--require-joints 6")
+        f"{new_run} --known target --reference REFERENCE_FROM_BEFORE_THE_SWAP.json "
+        f"--require-joints 6, or {new_run} --known target,tool --require-joints 6 (with the "
+        "tool frame surveyed), or set J6 with the robot maker's zeroing procedure")
+
+
+def test_a_swapped_joint_the_run_could_not_calibrate_never_becomes_a_reference(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """J1 10 deg off, declared swapped, every frame estimated: J1 is not calibrated. The run
+    does not propose a reference from itself, and `hostpc reference record` refuses it (a
+    reference from it takes the 10 deg for the target's place: the next run would PASS with
+    J1 still 10 deg off)."""
+    scenario = default_sim_scenario()
+    scenario["truth"] = {**scenario["truth"], "zero_errors": [
+        math.radians(10.0), -0.001, 0.0015, -0.002, 0.001, 0.0005]}
+    world = tmp_path / "world.json"
+    world.write_text(json.dumps(scenario))
+    out = tmp_path / "run"
+    code = main(["calibrate", "--robot", "sim", "--scenario", str(world), "--swapped", "J1",
+                 "--known", "none", "--no-report", "--out", str(out)])
+    document = json.loads((out / "result.json").read_text())
+    outcome = document["outcome"]
+    assert code == 7, outcome["headline"]
+    assert outcome["missing_required"] == [1]
+    assert "reference record" not in outcome["next_command"]
+    assert "--reference REFERENCE_FROM_BEFORE_THE_SWAP.json" in outcome["next_command"]
+    assert "--known target" in outcome["next_command"]
+    assert "zeroing procedure" in outcome["next_command"]
+    assert "J1 declared swapped and not calibrated" in outcome["headline"]
+    capsys.readouterr()
+    for force in ((), ("--force",)):  # the zero is unknown, whatever --force says
+        assert main(["reference", "record", "--run", str(out), "--out",
+                     str(tmp_path / "ref.json"), *force]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1
+        assert (f"--run {out}: cannot be a reference: J1 was declared swapped (--swapped) "
+                "and this run did not calibrate it: its zero is unknown") in err
+        assert err.endswith(f"next: {outcome['next_command']}")
+        assert not (tmp_path / "ref.json").exists()
 
 
 def test_a_swapped_joint_the_robot_does_not_have_is_refused_before_moving(
@@ -213,6 +249,8 @@ def test_a_resumes_overrides_are_kept_for_the_next_resume(
     # a simulated controller's limit: the scenario key, in the file a resume starts from
     assert (f"server.offset_limit_rad in {(out / 'sim' / 'scenario.json').resolve()}"
             in document["push"]["reason"])
+    # a limit above the largest fitted correction (J3 14.93 deg), with a margin
+    assert "(14.9 deg, 0.261 rad), e.g. 0.33 rad" in document["push"]["reason"]
     # unchanged, the same push is refused again: said so, not advised as if new
     capsys.readouterr()
     assert main([*second.split()[1:], "--no-report"]) == 5

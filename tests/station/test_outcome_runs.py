@@ -172,6 +172,37 @@ def test_held_and_prior_values_are_marked_and_never_pushed(
     assert mark not in table["J1"]
     report = (out / "report.html").read_text()
     assert mark in report and 'id="joints"' in report
+    # the plan's joints line, the summary's and result.json's plan.joints say the same
+    plan = json.loads((out / "result.json").read_text())["plan"]
+    words = {"hold": "held at nominal by --hold", "prior": "from its --prior"}[source]
+    assert f"J{joint} {words}" in plan["joints"]["text"]
+    assert f"J{joint}" not in plan["joints"]["text"].split(" from the measurements")[0]
+    assert f"J{joint} {words}" in next(line for line in summary.splitlines()
+                                        if line.startswith("joints: "))
+    assert plan["joints"]["held" if source == "hold" else "from_prior"] == [f"J{joint}"]
+    if source == "hold":  # a held joint is not estimated: no predicted sigma
+        assert plan["predicted_joint_sigma_deg"][joint - 1] is None
+
+
+def test_a_fit_failed_with_a_hold_and_a_prior_names_them(
+        tmp_path: Path, fast_rig: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The default world's zero errors are random (0.5 deg scale): J3 held at nominal and a
+    tight prior J2 = 0 +- 0.0001 deg are both wrong and make the model fail; the refusal
+    names them as the likely cause."""
+    out = tmp_path / "run"
+    code, stdout, stderr = _cli(
+        capsys, "calibrate", "--robot", "sim", "--poses", "12", "--verify-poses", "4",
+        "--rig", str(fast_rig), "--hold", "joint_offsets.q3", "--prior",
+        "joint_offsets.q2=0+-0.0001deg", "--out", str(out))
+    assert code == 5, stderr
+    outcome = _outcome(out)
+    assert outcome["verdict"] == "REFUSED"
+    assert ("the fit failed with J3 held and a prior on J2: a likely cause; run again "
+            "without them or check them") in outcome["headline"]
+    assert stdout.splitlines()[0] == outcome["headline"]
+    joints = json.loads((out / "result.json").read_text())["plan"]["joints"]
+    assert (joints["held"], joints["from_prior"]) == (["J3"], ["J2"])
+    assert "J2" not in joints["from_measurements"] and "J3" not in joints["from_measurements"]
 
 
 def _older(**blocks: dict[str, object]) -> RunResult:
