@@ -41,7 +41,7 @@ from hostpc.calibrate.run_result import GROWN_TIME
 from hostpc.diagnostics.detectable import planned_sizes
 from hostpc.diagnostics.pipeline import DEFAULT_ALPHA
 from hostpc.errors import InputError
-from hostpc.fitting.priors import constraints_for
+from hostpc.fitting.priors import constraints_for, with_constraints
 from hostpc.json_object import JsonObject
 from hostpc.methods import method_class
 from hostpc.methods.base import Method, Plan, Progress, RunSettings
@@ -212,7 +212,8 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
         raise PlanningError(
             f"only {pool.shape[0]} reachable poses see the target (need {needed}); check "
             "the cell (target position, camera mount) and the joint limits")
-    dataset = method.design_dataset(pool)
+    # the run's --hold and --prior are part of the design: a held joint gets no sigma
+    dataset = with_constraints(method.design_dataset(pool), settings.priors, settings.hold)
     try:  # a --reference's frames: the joints they resolve get the target sigma too
         dataset = reference_priors(reference, dataset, settings)[0]
     except (InputError, ValueError, np.linalg.LinAlgError):
@@ -221,7 +222,8 @@ def plan_run(method: Method, state: RobotState, settings: RunSettings, progress:
                                     pool.shape[0])
     constraints = constraints_for(dataset.extra_fields, names, units)
     design = make_design(A, names, units, None if constraints is None or not
-                         constraints.index.size else constraints.jacobian(len(names)))
+                         constraints.index.size else constraints.jacobian(len(names)),
+                         None if constraints is None else constraints.held)
     structural = design.structural
     groups = method.pose_groups(pool)
     more = np.zeros(0, dtype=int)

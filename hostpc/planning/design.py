@@ -64,7 +64,8 @@ class Design:
     """Whitened model Jacobian of a set of poses.
 
     A: (N, m, P) whitened Jacobian blocks; names / units: parameter names and SI units
-    (layout order); free: (P,) False for the structural gauge (fixed on the pool);
+    (layout order); free: (P,) False for the structural gauge (fixed on the pool) and
+    for a parameter the fit holds (`--hold`);
     structural: the pool's null directions, described in words. The selection, the
     plan's check and the poses' own target sigma use the poses alone.
 
@@ -131,9 +132,10 @@ def per_pose(A: np.ndarray, poses: int | None) -> np.ndarray:
 
 
 def make_design(A: np.ndarray, names: Sequence[str], units: Sequence[str],
-                prior: np.ndarray | None = None) -> Design:
+                prior: np.ndarray | None = None, held: np.ndarray | None = None) -> Design:
     """A Design whose structural gauge is found on all of A's poses (the pool), with the
-    prior rows (K, P) if any."""
+    prior rows (K, P) if any; held (P,) True for the parameters the fit holds at their
+    nominal (`--hold`): not free, no sigma."""
     rows = A.reshape(-1, A.shape[2])
     ident = analyse(rows, list(names), list(units))
     by_prior = None
@@ -141,8 +143,10 @@ def make_design(A: np.ndarray, names: Sequence[str], units: Sequence[str],
         hidden = {p for d in ident.null_directions for p in d.parameters}
         with_prior = analyse(np.vstack([rows, prior]), list(names), list(units))
         by_prior = np.array([n in hidden for n in names]) & ~with_prior.fixed
-    return Design(A, tuple(names), tuple(units), ~ident.fixed, ident.null_directions,
-                  prior, by_prior)
+        if held is not None:
+            by_prior &= ~held
+    free = ~ident.fixed if held is None else ~ident.fixed & ~held
+    return Design(A, tuple(names), tuple(units), free, ident.null_directions, prior, by_prior)
 
 
 def _normalised_free(design: Design) -> tuple[np.ndarray, np.ndarray]:

@@ -224,3 +224,21 @@ async def test_the_floor_of_a_shortened_plan_is_no_more_than_its_own_settle_and_
     for plan in plans:
         planned = plan.info["predicted_robot_time_s"]
         assert planned["floor"] <= planned["settle"] + planned["capture"] + 1e-9, planned
+
+
+def test_a_held_joint_has_no_predicted_sigma_and_a_prior_bounds_its_joint(
+        tmp_path: Path) -> None:
+    """`--hold joint_offsets.q3 --prior joint_offsets.q2=0+-0.0001deg`: the plan is made with
+    them (review: the plan printed a sigma for the held J3 and the data's sigma for J2)."""
+    method = stereo_method(("target",), tmp_path)
+    base = dict(method="stereo_target", seed=0, n_verify=4, target_sigma_deg=0.002,
+                n_candidates=600)
+    plain = plan_run(method, home_state(), RunSettings(**base), NullProgress())  # type: ignore[arg-type]
+    held = plan_run(method, home_state(), RunSettings(
+        **base, hold=("joint_offsets.q3",),  # type: ignore[arg-type]
+        priors=("joint_offsets.q2=0+-0.0001deg",)), NullProgress())
+    before = plain.info["predicted_joint_sigma_deg"]
+    after = held.info["predicted_joint_sigma_deg"]
+    assert before[2] is not None and after[2] is None  # J3 held: no sigma
+    assert before[1] > 0.0002 and after[1] <= 0.0001  # J2: bounded by its prior
+    assert all(a is not None for a in after[:2] + after[3:5])
