@@ -69,6 +69,21 @@ def preliminary_model(dataset: Dataset) -> tuple[tuple[str, ...], np.ndarray] | 
     return problem.effect_names, np.asarray(result.x, float)
 
 
+def frames_only(dataset: Dataset, fitted: tuple[tuple[str, ...], np.ndarray]
+                ) -> tuple[tuple[str, ...], np.ndarray]:
+    """(effects, x) of `fitted` with every parameter but the frames' (tool, target, base)
+    zeroed: what holds for any later set of this cell (a push moves the joint offsets into
+    the controller's readings, never the camera mount or the target); `dataset` is one the
+    model was fitted to (its layout)."""
+    effects, x = fitted
+    problem = build_problem(dataset, list(effects))
+    kept = np.zeros_like(x)
+    for name in problem.frame_names:
+        span = problem.layout.effect_slices[name]
+        kept[span] = x[span]
+    return effects, kept
+
+
 def refine_dataset(dataset: Dataset, rig: Any, target_radius: float,
                    target_normal: np.ndarray, fitted: tuple[tuple[str, ...], np.ndarray] | None
                    = None) -> tuple[Dataset, tuple[tuple[str, ...], np.ndarray] | None]:
