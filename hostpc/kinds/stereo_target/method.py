@@ -113,6 +113,8 @@ class StereoTargetMethod(Method):
         # both sides, through via-points where needed (methods/approach_moves.py)
         self._moves = ApproachMoves(settings, self._chain)
         self._joint_estimate = np.zeros(self._chain.n)  # set_joint_estimate
+        # (effects, x) of the frames the last refined set's own fit found (samples_dataset)
+        self._fitted_frames: tuple[tuple[str, ...], np.ndarray] | None = None
 
     def set_joint_estimate(self, estimate: np.ndarray, new_stage: bool = False) -> None:
         """The joints are about `estimate` off (staging): the plate normal the detector
@@ -533,17 +535,26 @@ class StereoTargetMethod(Method):
             extra_fields=self._rig_uncertainty())
         if self.rig is None or not typed or any(s.uv is None for s in typed):
             return dataset
-        from hostpc.kinds.stereo_target.refinement import refine_dataset
+        from hostpc.kinds.stereo_target.refinement import (
+            MIN_SAMPLES,
+            frames_only,
+            refine_dataset,
+        )
 
-        # each set by its own preliminary fit (never the fit set's model: after a push it
-        # would be wrong for the verify set); a set too small for its own fit (a short
-        # plan's 4 verify poses) is left as measured (stereo_refinement.MIN_SAMPLES).
-        # Staged: refined where the robot is (the detector's normal hint was taken there)
+        # each set of MIN_SAMPLES or more by its own preliminary fit; a smaller one (the 4
+        # verification poses of a plan) by the frames of the last such fit, the joints
+        # where the robot is (never that fit's joint offsets: a push moved them into the
+        # readings); left as measured before any. Staged: refined where the robot is (the
+        # detector's normal hint was taken there)
         shift = self._joint_estimate
         q = np.asarray(dataset.samples.q, float)
-        refined, _ = refine_dataset(
-            dataset.with_samples(dataclasses.replace(dataset.samples, q=q + shift)),
-            self.rig, self.cell.target_radius, self.cell.target_normal)
+        shifted = dataset.with_samples(dataclasses.replace(dataset.samples, q=q + shift))
+        small = len(typed) < MIN_SAMPLES
+        refined, fitted = refine_dataset(shifted, self.rig, self.cell.target_radius,
+                                         self.cell.target_normal,
+                                         self._fitted_frames if small else None)
+        if not small and fitted is not None:
+            self._fitted_frames = frames_only(shifted, fitted)
         return refined.with_samples(dataclasses.replace(refined.samples, q=q))
 
     def _rig_uncertainty(self) -> dict[str, Any]:

@@ -7,6 +7,9 @@ error tilt by ~0.5 deg; that leaves a pose-dependent error that does not average
 dataset's default model) gives better normals; the centres are re-corrected with them and
 re-triangulated, and the dataset keeps the refined `p` and `uv` (the covariances are those of
 the measurement: the correction moves a centre by ~0.01 px, it does not change its noise).
+A set too small for its own fit (the 4 verification poses) is re-corrected with the frames
+of the last fit (`frames_only`): after a motor swap into an estimated camera mount the
+nominal normal is 10 deg off, not 0.5.
 
 The fitted model's normal at pose i is read off the model itself: the prediction of the
 target shifted by eps along its base-frame normal, minus that of the target
@@ -67,6 +70,21 @@ def preliminary_model(dataset: Dataset) -> tuple[tuple[str, ...], np.ndarray] | 
     if not result.converged or not result.chi2_dof <= MAX_PRELIMINARY_CHI2_DOF:
         return None
     return problem.effect_names, np.asarray(result.x, float)
+
+
+def frames_only(dataset: Dataset, fitted: tuple[tuple[str, ...], np.ndarray]
+                ) -> tuple[tuple[str, ...], np.ndarray]:
+    """(effects, x) of `fitted` with every parameter but the frames' (tool, target, base)
+    zeroed: what holds for any later set of this cell (a push moves the joint offsets into
+    the controller's readings, never the camera mount or the target); `dataset` is one the
+    model was fitted to (its layout)."""
+    effects, x = fitted
+    problem = build_problem(dataset, list(effects))
+    kept = np.zeros_like(x)
+    for name in problem.frame_names:
+        span = problem.layout.effect_slices[name]
+        kept[span] = x[span]
+    return effects, kept
 
 
 def refine_dataset(dataset: Dataset, rig: Any, target_radius: float,
