@@ -319,10 +319,9 @@ def read_samples(csv_rows: CsvRows, mapping: ColumnMap, options: ImportOptions
                              f"drop marker.{unseen[0]}= from --columns")
     si = table * (factors[group] if several else factors[0])
     row_lines = np.frombuffer(lines, dtype=np.int64)
-    _check_ranges(header.source, table, si, row_lines,
-                  [group_columns[g] for g in group] if several and group is not None
-                  else group_columns[0], _ranges(options.prismatic, n_sigma, optional,
-                                                 len(orientation), mapping.orientation))
+    _check_ranges(header.source, table, si, row_lines, group_columns,
+                  group if several else None, _ranges(options.prismatic, n_sigma, optional,
+                                                      len(orientation), mapping.orientation))
     scaled = si[:, :at]
     sigmas = scaled[:, sigma_at]
     default_sigma = options.sigma * _unit_factor(options.length_unit, LENGTH_UNITS, "length")
@@ -364,16 +363,18 @@ def _ranges(prismatic: Sequence[bool], n_sigma: int, optional: Sequence[str],
 
 
 def _check_ranges(source: str, written: FloatArray, si: FloatArray,
-                  lines: NDArray[np.int64], columns: Sequence[Sequence[str]] | Sequence[str],
-                  ranges: Sequence[tuple[float, str]]) -> None:
+                  lines: NDArray[np.int64], group_columns: Sequence[Sequence[str]],
+                  group: NDArray[np.int64] | None, ranges: Sequence[tuple[float, str]]
+                  ) -> None:
     """InputError naming the row and column of the first value outside its range.
-    columns: the value columns' names, per row (reflector groups) or for every row."""
+    group_columns: the value columns' names per reflector group; group: each value row's
+    group (None: the first for every row)."""
     limits = np.array([limit for limit, _ in ranges])
     bad = ~(np.abs(si) < limits)
     if not bad.any():
         return
     r, c = (int(i) for i in np.argwhere(bad)[0])
-    names = columns[r] if not isinstance(columns[0], str) else columns
+    names = group_columns[0 if group is None else int(group[r])]
     limit, unit = ranges[c]
     si_text = f"{si[r, c]:.6g} {unit}".rstrip()
     value = si_text if written[r, c] == si[r, c] else f"{written[r, c]:.6g} ({si_text})"
@@ -391,9 +392,9 @@ def _repeated_rows(source: str, table: FloatArray, group: NDArray[np.int64] | No
         return None
     shown = ", ".join(f"row {k} = row {e}" for k, e in repeats[:5])
     more = f", and {len(repeats) - 5} more" if len(repeats) > 5 else ""
-    return (f"{source}: {len(repeats)} row{'s' if len(repeats) > 1 else ''} repeat an "
-            f"earlier row exactly ({shown}{more}): each counts as a measurement of its own; "
-            "delete the copies if the pose was not measured again")
+    counted = "1 row repeats" if len(repeats) == 1 else f"{len(repeats)} rows repeat"
+    return (f"{source}: {counted} an earlier row exactly ({shown}{more}): each counts as a "
+            "measurement of its own; delete the copies if the pose was not measured again")
 
 
 def _blank_rows(source: str, blank: Sequence[int], n_read: int) -> str | None:
