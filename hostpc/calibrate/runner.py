@@ -34,7 +34,9 @@ from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.journal_events import (
     MorePoses,
     Pushed,
+    PushIntent,
     Resumed,
+    Rollback,
     RunFinished,
     Verified,
     VerifyRoundLost,
@@ -170,8 +172,7 @@ class Runner:
         try:
             return await self._run(resume)
         except ConnectionFailed as exc:
-            raise ConnectionFailed(f"{exc}; {self._journaled()} continue with: hostpc "
-                                   f"calibrate --resume {self.run_dir}") from exc
+            raise ConnectionFailed(f"{exc}; {self._journaled()} {self._go_on()}") from exc
         except PushLost as exc:
             if not self.robot_info.sim:
                 raise
@@ -180,8 +181,7 @@ class Runner:
         except VerifyLost:
             raise  # its message says what happened and how to go on
         except ControllerError as exc:
-            hint = (f"{self._journaled()} continue with: hostpc calibrate --resume "
-                    f"{self.run_dir}" if self.journal.exists
+            hint = (f"{self._journaled()} {self._go_on()}" if self.journal.exists
                     else "nothing measured yet; rerun when the controller is ready")
             raise RunStopped(f"{refusal_text(exc)}; {hint}", getattr(exc, "code", None),
                              getattr(exc, "reason", None)) from exc
@@ -191,6 +191,30 @@ class Runner:
             return "nothing measured yet;"
         n = len(self.journal.records("fit")) + len(self.journal.records("verify"))
         return f"{n} poses journaled in {self.run_dir};"
+
+    def _go_on(self) -> str:
+        """The next step after a run stopped early, with what the controller holds when the
+        journal says this run wrote its offsets and no rollback undid them since."""
+        resume = f"hostpc calibrate --resume {self.run_dir}"
+        last = self.journal.last_event(PushIntent, Pushed, Rollback) if self.journal.exists \
+            else None
+        if isinstance(last, PushIntent):  # the controller's answer never came
+            return (f"a push was cut short: the controller may hold the new offsets, NOT "
+                    f"verified; settle and verify it with: {resume} (undo: hostpc rollback "
+                    f"--run {self.run_dir})")
+        if not isinstance(last, Pushed):
+            return f"continue with: {resume}"
+        record = last.record
+        pushed = f"the offsets pushed at {record.time or 'an unrecorded time'}" + (
+            f" (rollback id {record.rollback_id})" if record.rollback_id else "")
+        verified = self.journal.last(Verified)
+        verdict = ("NOT verified" if verified is None or self.journal.last_position(Verified)
+                   < self.journal.last_position(Pushed) else f"verification {verified.verdict}")
+        if self.robot_info.sim:  # its simulated controller ends with this command
+            return (f"the simulated controller held {pushed}, {verdict}, and ended with the "
+                    f"run; a resume restarts it with its initial offsets: {resume} --push")
+        return (f"the controller holds {pushed}, {verdict}; verify: {resume}; undo: hostpc "
+                f"rollback --run {self.run_dir}")
 
     async def _run(self, resume: bool) -> RunOutcome:
         progress = self.progress

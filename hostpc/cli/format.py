@@ -80,11 +80,24 @@ def model_adequacy(result: FitResult, source: str = "DATASET", options: str = ""
                       else f"hostpc diagnose {source}{options} --ladder"))
 
 
+UNITS_HINT_NOISE_RATIO = 100.0
+"""A fit whose residuals are this many times the stated noise (sqrt(chi2/dof)) or more
+points at the data before the model: numbers in another unit than `units` says."""
+
+
 def _converged_line(result: FitResult, source: str, options: str = "") -> str:
-    """Never a plain "converged: yes" for a model that does not explain the data."""
+    """Never a plain "converged: yes" for a model that does not explain the data; a fit
+    that did not converge says so with the next step."""
     how = f"({result.message}, {result.iterations} iterations)"
     if not result.converged:
-        return f"  converged: NO {how}"
+        ratio = math.sqrt(result.chi2_dof) if result.chi2_dof >= 0 else math.nan
+        units = (f"the residuals are {ratio:.3g} times the stated noise: check the dataset's "
+                 "`units` (e.g. units.length mm for numbers in metres); "
+                 if ratio >= UNITS_HINT_NOISE_RATIO else "")
+        next_command = (model_adequacy(result, source or "DATASET", options).next_command
+                        or f"hostpc diagnose {source or 'DATASET'}{options}")
+        return (f"  converged: NO {how}: the values below are not a fit (hostpc push "
+                f"refuses it); {units}next: {next_command}")
     if result.dof <= 0:
         n_samples, m = result.residuals_raw.shape
         # a sample adds m measured numbers: this many more give a positive dof

@@ -10,8 +10,9 @@
 
 The column mapping is described in ``hostpc.importing.column_map`` and docs/metrology.md.
 The output is SI (m, rad). A bad CSV (a mapped column missing from the header, text in a
-number, a missing joint value, an unknown unit in a header) gets one line naming the row
-and the column, and exit code 2.
+number, a value outside the dataset's physical range, a missing joint value, an unknown
+unit in a header) gets one line naming the row and the column, and exit code 2; repeated
+rows and dropped blank rows get a warning line each (stderr).
 """
 
 from __future__ import annotations
@@ -146,6 +147,8 @@ def run(args: argparse.Namespace) -> int:
         sigma=args.sigma if args.sigma is not None else 1e-4 / LENGTH_UNITS[args.length_unit],
         sigma_angle=args.sigma_angle, known=known, decimal=args.decimal, euler=args.euler)
     samples, derived = _read_csv_file(Path(args.csv), args, chain, options)
+    for warning in samples.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
     for follower, leader, multiplier, offset in chain.coupled:
         if follower in derived:  # left out of --columns: computed from its leader
             samples.q[:, follower] = multiplier * samples.q[:, leader] + offset

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from hostpc.calibrate.fit_file import parse_fit_text
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.offline_push import (
     LedgerEntry,
@@ -38,6 +39,7 @@ from hostpc.calibrate.offline_push import (
 from hostpc.calibrate.push import DEFAULT_MAX_CORRECTION_DEG, PushPlan, execute_push, plan_push
 from hostpc.calibrate.summary import EXIT_PUSH_REFUSED
 from hostpc.errors import InputError, ZerocalError
+from hostpc.input_files import FIT, read_input_text
 from hostpc.robots.base import RobotAdapter
 from hostpc.robots.connect import RobotAddress, open_robot, parse_robot
 from hostpc.robots.drivers import DEFAULT_DRIVER, DRIVER_NAMES
@@ -83,6 +85,8 @@ def _default_out() -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
+    if not args.force:
+        _refuse_if_not_converged(args.fit)
     saved = load_saved_fit(args.fit)
     address = parse_robot(args.robot)
     if address.sim:
@@ -109,6 +113,27 @@ def run(args: argparse.Namespace) -> int:
     if plan.refused:
         raise PushRefused(f"push refused: {plan.refused}")
     return 0
+
+
+def _refuse_if_not_converged(fit: str) -> None:
+    """PushRefused if FIT.json says its fit did not converge: said before its values are
+    checked, whose ranges a fit that did not converge may well exceed (the range's remedy,
+    fitting the same dataset again, would give the same fit); the fit's own next command
+    (its model_adequacy block) names the dataset."""
+    try:
+        document = parse_fit_text(read_input_text(fit, FIT, fit), fit)
+    except InputError:
+        return  # load_saved_fit says what is wrong with the file
+    if not isinstance(document, dict) or document.get("converged") is not False:
+        return  # checked in full by load_saved_fit
+    adequacy = document.get("model_adequacy")
+    diagnose = (adequacy.get("next") if isinstance(adequacy, dict)
+                and isinstance(adequacy.get("next"), str) else None)
+    raise PushRefused(
+        f"push refused: {fit}: the fit did not converge ({document.get('message')}): its "
+        f"values are not a fit; find why with `{diagnose or 'hostpc diagnose DATASET'}` (do "
+        "the dataset's `units` match its numbers?), fit again, then push (--force to push "
+        "anyway)")
 
 
 def _print_plan(plan: PushPlan, args: argparse.Namespace, address: RobotAddress,

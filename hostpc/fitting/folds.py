@@ -155,8 +155,13 @@ def repeated_samples(samples: Samples, measured: np.ndarray) -> tuple[tuple[int,
     measurement of a pose differs by its noise; an exact repeat is a copied row, which a
     fit would count as new data (its dof, chi2 and sigmas as if measured twice)."""
     keys = pose_keys(samples)
-    rows = np.concatenate([keys, np.asarray(measured, float).reshape(keys.shape[0], -1)],
-                          axis=1)
+    return exact_repeats(np.concatenate(
+        [keys, np.asarray(measured, float).reshape(keys.shape[0], -1)], axis=1))
+
+
+def exact_repeats(rows: np.ndarray) -> tuple[tuple[int, int], ...]:
+    """(repeat, first) index pairs of the rows of ``rows`` (N, k) equal to an earlier row in
+    every value (also `hostpc import`'s check of a CSV's rows)."""
     if rows.shape[0] < 2:
         return ()
     _, first, inverse = np.unique(rows, axis=0, return_index=True, return_inverse=True)

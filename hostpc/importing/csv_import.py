@@ -6,7 +6,11 @@ Pure (no file writing): :func:`parse_column_map` (``hostpc.importing.column_map`
 a time, into columns of SI values (m, rad), an
 :class:`~hostpc.importing.imported.ImportedSamples`; memory grows by the numbers a row holds,
 not by its text. Every bad input raises :class:`~hostpc.errors.InputError` with one line that
-names the file, the row (the file's line number; the header is row 1) and the column.
+names the file, the row (the file's line number; the header is row 1) and the column: a
+cell that is not a plain ASCII number (``_PLAIN_NUMBER``), or a value outside the dataset's
+physical range (``hostpc.dataset.validation``, in SI). Rows that repeat an earlier row and
+blank rows dropped between data rows are read, each kind said in one warning
+(``ImportedSamples.warnings``).
 
 A header may carry its unit in brackets or parentheses, ``x [mm]`` or ``q1 (deg)``; the
 mapping names the column without it, and the header's unit overrides the default.
@@ -28,10 +32,17 @@ from itertools import chain
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from hostpc.dataset.kind_registry import csv_row_shape
-from hostpc.dataset.validation import MAX_ABS_CONTEXT
+from hostpc.dataset.validation import (
+    MAX_ABS_CONTEXT,
+    MAX_ANGLE_RAD,
+    MAX_POSITION_M,
+    MAX_STD_M,
+)
 from hostpc.errors import InputError
+from hostpc.fitting.folds import exact_repeats
 from hostpc.importing.column_map import (
     ORIENTATIONS,
     ColumnMap,
@@ -55,6 +66,10 @@ DECIMALS = ("auto", ".", ",")
 _DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+([eE][+-]?\d+)?")
 # a decimal comma becomes a point; a point becomes a character float() refuses
 _FROM_DECIMAL_COMMA = str.maketrans({",": ".", ".": "!"})
+_PLAIN_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?", re.ASCII)
+"""A number as a CSV cell may write it: ASCII digits, a sign, the decimal mark (a point
+here: a decimal comma is translated first) and an exponent. Python's float() also takes
+"1_000" and other scripts' digits ("٣"), which no metrology export writes."""
 
 
 @dataclass(frozen=True)
@@ -125,8 +140,9 @@ class _Cells:
 
     def number(self, line: int, cells: tuple[str, ...], column: str) -> float:
         raw = self.text(line, cells, column)
+        plain = raw.translate(_FROM_DECIMAL_COMMA) if self.decimal_comma else raw
         try:
-            value = float(raw.translate(_FROM_DECIMAL_COMMA) if self.decimal_comma else raw)
+            value = float(plain)
         except ValueError:
             hint = (" (this file writes decimal commas, 1,5; a decimal point is ambiguous "
                     "here)" if self.decimal_comma and "." in raw else "")
@@ -139,19 +155,29 @@ class _Cells:
         if not math.isfinite(value):
             raise InputError(f"{self.header.source}: row {line}, column {column!r}: "
                              f"{raw!r} is not finite")
+        if not _PLAIN_NUMBER.fullmatch(plain):
+            mark = "," if self.decimal_comma else "."
+            raise InputError(f"{self.header.source}: row {line}, column {column!r}: "
+                             f"{raw!r} is not a plain number (ASCII digits, a sign, "
+                             f"'{mark}' and an exponent only)")
         return value
 
     def numbers(self, line: int, cells: tuple[str, ...], columns: Sequence[str],
                 indices: Sequence[int]) -> list[float]:
         """The values of ``columns`` (at ``indices``) in one row: the plain conversion,
-        and the checking one (which names the first bad cell) only when that fails."""
+        and the checking one (which names the first bad cell) only when that fails. The
+        fast path takes ASCII text without "_" only: then float() reads exactly the plain
+        numbers and the non-finite words (``_PLAIN_NUMBER``)."""
         try:
-            if self.decimal_comma:
-                values = [float(cells[k].translate(_FROM_DECIMAL_COMMA)) for k in indices]
-            else:
-                values = [float(cells[k]) for k in indices]
-            if all(map(math.isfinite, values)):
-                return values
+            texts = [cells[k] for k in indices]
+            joined = "".join(texts)
+            if joined.isascii() and "_" not in joined:
+                if self.decimal_comma:
+                    values = [float(t.translate(_FROM_DECIMAL_COMMA)) for t in texts]
+                else:
+                    values = [float(t) for t in texts]
+                if all(map(math.isfinite, values)):
+                    return values
         except (ValueError, IndexError):
             pass
         return [self.number(line, cells, column) for column in columns]
@@ -247,6 +273,7 @@ def read_samples(csv_rows: CsvRows, mapping: ColumnMap, options: ImportOptions
     marker_column = fields.get("marker") if csv_row_shape(options.method) == "point" else None
     width = len(header.columns)
     values = array("d")
+    lines = array("q")  # the file line of each row of values
     marker_index = array("q")
     marker_ids: dict[str, int] = {p.marker: k for k, p in enumerate(points) if p.marker}
     mapped = sorted({k for group in indices for k in group}
@@ -272,6 +299,7 @@ def read_samples(csv_rows: CsvRows, mapping: ColumnMap, options: ImportOptions
                 raise InputError(f"{header.source}: row {line}, column {fields['qw']!r}: "
                                  "the quaternion is zero")
             values.extend(numbers)
+            lines.append(line)
             if several:
                 marker_index.append(g)
         if marker_column is not None:
@@ -289,7 +317,12 @@ def read_samples(csv_rows: CsvRows, mapping: ColumnMap, options: ImportOptions
         if unseen:
             raise InputError(f"{header.source}: reflector {unseen[0]!r} is empty in every row; "
                              f"drop marker.{unseen[0]}= from --columns")
-    scaled = table[:, :at] * (factors[group, :at] if several else factors[0, :at])
+    si = table * (factors[group] if several else factors[0])
+    row_lines = np.frombuffer(lines, dtype=np.int64)
+    _check_ranges(header.source, table, si, row_lines, group_columns,
+                  group if several else None, _ranges(options.prismatic, n_sigma, optional,
+                                                      len(orientation), mapping.orientation))
+    scaled = si[:, :at]
     sigmas = scaled[:, sigma_at]
     default_sigma = options.sigma * _unit_factor(options.length_unit, LENGTH_UNITS, "length")
     return ImportedSamples(
@@ -309,7 +342,68 @@ def read_samples(csv_rows: CsvRows, mapping: ColumnMap, options: ImportOptions
                      if world_pose else None),
         marker_index=group,
         marker_names=tuple(marker_ids),
+        warnings=tuple(w for w in (_repeated_rows(header.source, table, group, row_lines),
+                                   _blank_rows(header.source, csv_rows.blank,
+                                               int(np.unique(row_lines).size)))
+                       if w is not None),
     )
+
+
+def _ranges(prismatic: Sequence[bool], n_sigma: int, optional: Sequence[str],
+            n_orientation: int, orientation: str | None) -> list[tuple[float, str]]:
+    """(limit, unit) of each value of a row in SI: the dataset's physical ranges
+    (hostpc.dataset.validation), so a number the fit would refuse is refused here with its
+    row and column; the time (a clock time is taken from the earliest row) and a
+    quaternion's components (normalised) are only bounded in size."""
+    return [*((MAX_POSITION_M, "m") if p else (MAX_ANGLE_RAD, "rad") for p in prismatic),
+            *[(MAX_POSITION_M, "m")] * 3, *[(MAX_STD_M, "m")] * n_sigma,
+            *((math.inf, "s") if k == "t" else (MAX_ABS_CONTEXT, "") for k in optional),
+            *[(MAX_ABS_CONTEXT, "") if orientation == "quat" else (MAX_ANGLE_RAD, "rad")]
+            * n_orientation]
+
+
+def _check_ranges(source: str, written: FloatArray, si: FloatArray,
+                  lines: NDArray[np.int64], group_columns: Sequence[Sequence[str]],
+                  group: NDArray[np.int64] | None, ranges: Sequence[tuple[float, str]]
+                  ) -> None:
+    """InputError naming the row and column of the first value outside its range.
+    group_columns: the value columns' names per reflector group; group: each value row's
+    group (None: the first for every row)."""
+    limits = np.array([limit for limit, _ in ranges])
+    bad = ~(np.abs(si) < limits)
+    if not bad.any():
+        return
+    r, c = (int(i) for i in np.argwhere(bad)[0])
+    names = group_columns[0 if group is None else int(group[r])]
+    limit, unit = ranges[c]
+    si_text = f"{si[r, c]:.6g} {unit}".rstrip()
+    value = si_text if written[r, c] == si[r, c] else f"{written[r, c]:.6g} ({si_text})"
+    raise InputError(f"{source}: row {int(lines[r])}, column {names[c]!r}: {value} is outside "
+                     f"the physical range (|value| < {f'{limit:g} {unit}'.rstrip()})")
+
+
+def _repeated_rows(source: str, table: FloatArray, group: NDArray[np.int64] | None,
+                   lines: NDArray[np.int64]) -> str | None:
+    """A warning if rows repeat an earlier row's every number (a copy, or a pose written
+    twice: each counts as a measurement of its own)."""
+    pairs = exact_repeats(table if group is None else np.column_stack([table, group]))
+    repeats = sorted({(int(lines[k]), int(lines[e])) for k, e in pairs if lines[k] != lines[e]})
+    if not repeats:
+        return None
+    shown = ", ".join(f"row {k} = row {e}" for k, e in repeats[:5])
+    more = f", and {len(repeats) - 5} more" if len(repeats) > 5 else ""
+    counted = "1 row repeats" if len(repeats) == 1 else f"{len(repeats)} rows repeat"
+    return (f"{source}: {counted} an earlier row exactly ({shown}{more}): each counts as a "
+            "measurement of its own; delete the copies if the pose was not measured again")
+
+
+def _blank_rows(source: str, blank: Sequence[int], n_read: int) -> str | None:
+    """A warning if blank rows between data rows were dropped (a pose not written?)."""
+    if not blank:
+        return None
+    shown = ", ".join(str(k) for k in blank[:5]) + (", ..." if len(blank) > 5 else "")
+    return (f"{source}: {len(blank)} blank row{'s' if len(blank) > 1 else ''} dropped "
+            f"(row{'s' if len(blank) > 1 else ''} {shown}); {n_read} rows read")
 
 
 def _run_time(t: FloatArray) -> FloatArray:

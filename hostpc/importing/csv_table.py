@@ -18,7 +18,7 @@ import csv
 import itertools
 import re
 from collections.abc import Iterable, Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from hostpc.errors import InputError
@@ -43,10 +43,13 @@ class CsvHeader:
 
 @dataclass(frozen=True)
 class CsvRows:
-    """The header of a CSV stream and an iterator over its non-blank data rows (read once)."""
+    """The header of a CSV stream and an iterator over its non-blank data rows (read once);
+    blank: the rows (line numbers) skipped as blank between the header and the last data
+    row read so far (a pose not written; blank lines at the end are not counted)."""
 
     header: CsvHeader
     rows: Iterator[Row]
+    blank: list[int] = field(default_factory=list)
 
 
 def _parse_header(cells: list[str], source: str, delimiter: str = ",") -> CsvHeader:
@@ -66,11 +69,15 @@ def _parse_header(cells: list[str], source: str, delimiter: str = ",") -> CsvHea
     return CsvHeader(source=source, columns=tuple(columns), units=units, delimiter=delimiter)
 
 
-def _data_rows(reader: Any, source: str) -> Iterator[Row]:
+def _data_rows(reader: Any, source: str, blank: list[int]) -> Iterator[Row]:
+    pending: list[int] = []
     try:
         for cells in reader:
             if not any(c.strip() for c in cells):
+                pending.append(reader.line_num)
                 continue
+            blank.extend(pending)
+            pending.clear()
             yield reader.line_num, tuple(c.strip() for c in cells)
     except csv.Error as exc:
         raise InputError(f"{source}: row {reader.line_num}: {exc}") from None
@@ -102,5 +109,6 @@ def read_csv(lines: Iterable[str], source: str) -> CsvRows:
         header = next(reader)
     except (StopIteration, csv.Error) as exc:
         raise InputError(f"{source}: row 1: cannot read the header ({exc})") from None
+    blank: list[int] = []
     return CsvRows(header=_parse_header(header, source, str(dialect.delimiter)),
-                   rows=_data_rows(reader, source))
+                   rows=_data_rows(reader, source, blank), blank=blank)

@@ -102,12 +102,21 @@ def _hand_eye(T_base_flange: FloatArray, T_world_meas: FloatArray) -> FloatArray
     return X
 
 
+MIN_POSES = {"pose": 3, "point": 4}
+"""The fewest measurements that place the world frame, per CSV row shape (full poses;
+points)."""
+
+
+def _too_few(method: str, needed: int) -> str:
+    return f"{method}: at least {needed} poses are needed to place the world frame"
+
+
 def guess_world_pose(T_base_flange: FloatArray, T_world_meas: FloatArray,
                      iterations: int = 20) -> tuple[FloatArray, FloatArray]:
     """``(T_world_base, T_flange_meas)`` that best explain full-pose measurements: the
     hand-eye solution for ``X``, then alternating rigid averages (module docstring)."""
-    if len(T_base_flange) < 3:
-        raise InputError("world_pose: at least 3 poses are needed to place the world frame")
+    if len(T_base_flange) < MIN_POSES["pose"]:
+        raise InputError(_too_few("world_pose", MIN_POSES["pose"]))
     X = _hand_eye(T_base_flange, T_world_meas)
     W = np.eye(4)
     for _ in range(iterations):
@@ -137,8 +146,8 @@ def guess_world_point(T_base_flange: FloatArray, points_world: FloatArray,
 
     ``marker_index`` (N,) says which marker each point is (default: all marker 0)."""
     N = len(T_base_flange)
-    if N < 4:
-        raise InputError("world_point: at least 4 poses are needed to place the world frame")
+    if N < MIN_POSES["point"]:
+        raise InputError(_too_few("world_point", MIN_POSES["point"]))
     index = np.zeros(N, dtype=np.int64) if marker_index is None else np.asarray(marker_index)
     M = int(index.max()) + 1
     markers = np.zeros((M, 3))
@@ -206,6 +215,13 @@ def guessed_frames(samples: ImportedSamples, chain: Chain, frames: JsonObject) -
     from hostpc.kinematics.rotations import pose_to_transform
 
     world_pose = csv_row_shape(samples.method) == "pose"
+    needed = MIN_POSES["pose" if world_pose else "point"]
+    if len(samples) < needed:
+        raise InputError(
+            f"{samples.source}: {len(samples)} measurement{'s' if len(samples) != 1 else ''}; "
+            f"{_too_few(samples.method, needed)} (and a fit of the joint offsets "
+            "needs many more, spread over the joints' ranges: docs/metrology.md); measure "
+            "more poses and import the file again")
     pick = guess_sample_indices(len(samples), None if world_pose else samples.marker_index)
     T_base_flange = forward(chain, np.ascontiguousarray(samples.q[pick])).T_base_flange
     points = np.ascontiguousarray(samples.p[pick])

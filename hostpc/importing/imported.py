@@ -48,6 +48,9 @@ class ImportedSamples:
     marker_names: tuple[str, ...] = ()
     sigma_xyz: FloatArray | None = None
     temperature: FloatArray | None = None
+    warnings: tuple[str, ...] = ()
+    """What the import noticed but did not refuse (repeated rows, blank rows dropped):
+    one line each, printed by the CLI."""
 
     def __len__(self) -> int:
         return len(self.q)

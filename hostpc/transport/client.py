@@ -462,7 +462,7 @@ class ControllerClient:
             future = link.send(m.Abort(id=link.conn.next_id()))
             reply = await asyncio.wait_for(future, ABORT_AFTER_TIMEOUT_S)
         except (TimeoutError, _LinkLostError, OSError, LocalProtocolError) as exc:
-            logger.warning("abort of a motion failed: %s", exc or type(exc).__name__)
+            logger.warning("abort of a motion failed: %s", str(exc) or type(exc).__name__)
             return "abort sent, not confirmed"
         if isinstance(reply, m.Aborted):
             return "abort sent: motion stopped" if reply.was_moving else "abort sent: not moving"

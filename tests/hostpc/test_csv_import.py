@@ -189,3 +189,81 @@ def test_frame_guesses_recover_exact_frames():
     W_hat, markers = guess_world_point(F, points)
     np.testing.assert_allclose(W_hat, W, atol=1e-8)
     np.testing.assert_allclose(markers[0], marker, atol=1e-8)
+
+
+def _figaroh_changed(tmp_path: Path, change) -> Path:  # type: ignore[no-untyped-def]
+    """The FIGAROH UR10e file with its lines (header first) changed by ``change``."""
+    lines = FIGAROH.read_text().splitlines()
+    path = tmp_path / "poses.csv"
+    path.write_text("\n".join(change(lines)) + "\n", encoding="utf-8")
+    return path
+
+
+def _with_cell(lines: list[str], line: int, column: int, text: str) -> list[str]:
+    cells = lines[line].split(",")
+    cells[column] = text
+    return [*lines[:line], ",".join(cells), *lines[line + 1:]]
+
+
+@pytest.mark.parametrize(("cell", "fragment"), [
+    ("1_000", "'1_000' is not a plain number (ASCII digits, a sign, '.' and an exponent"),
+    ("\u0663", "'\u0663' is not a plain number"),  # an Arabic-Indic three
+    ("1e300", "1e+300 rad is outside the physical range (|value| < 100 rad)"),
+    ("1000", "1000 rad is outside the physical range (|value| < 100 rad)"),
+], ids=["underscore", "arabic-indic-digit", "1e300", "1000-rad"])
+def test_a_number_the_fit_would_refuse_is_refused_with_its_row_and_column(
+        tmp_path, capsys, cell, fragment):
+    """Python's float() reads "1_000" and other scripts' digits, and the dataset's range
+    check ran only at `hostpc fit`, naming the sample (samples[5].q[2]), not the CSV's
+    row; both are refused at import now, naming row 7 (the file's line) and the column."""
+    path = _figaroh_changed(tmp_path, lambda lines: _with_cell(lines, 6, 8, cell))
+    code, _, err = _run(capsys, path, "--method", "world_pose", "--robot", "ur10e",
+                        "--columns", FIGAROH_COLUMNS, "-o", tmp_path / "out.json")
+    assert code == 2, err
+    assert err.startswith(f"hostpc import: error: {path}: row 7, column 'elbow_joint': "), err
+    assert fragment in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "out.json").exists()
+
+
+def test_a_length_beyond_the_range_names_its_unit(tmp_path, capsys):
+    """The range is the dataset's, in SI: a cell in mm is compared after conversion and
+    the line says both."""
+    path = _figaroh_changed(tmp_path, lambda lines: _with_cell(lines, 3, 1, "200000"))
+    code, _, err = _run(capsys, path, "--method", "world_pose", "--robot", "ur10e",
+                        "--columns", FIGAROH_COLUMNS, "--length-unit", "mm",
+                        "-o", tmp_path / "out.json")
+    assert code == 2
+    assert err.strip().endswith("row 4, column 'y1': 200000 (200 m) is outside the "
+                                "physical range (|value| < 100 m)"), err
+
+
+def test_repeated_and_blank_rows_are_read_with_a_warning(tmp_path, capsys):
+    """Five rows written again at the end and a blank row inside: imported as they are
+    (28 samples; 22), each with one warning line that counts them."""
+    path = _figaroh_changed(tmp_path, lambda lines: [*lines, *lines[1:6]])
+    code, stdout, err = _run(capsys, path, "--method", "world_pose", "--robot", "ur10e",
+                             "--columns", FIGAROH_COLUMNS, "-o", tmp_path / "out.json")
+    assert code == 0 and "28 samples" in stdout, err
+    assert err.strip().splitlines() == [
+        f"warning: {path}: 5 rows repeat an earlier row exactly (row 25 = row 2, row 26 = "
+        "row 3, row 27 = row 4, row 28 = row 5, row 29 = row 6): each counts as a "
+        "measurement of its own; delete the copies if the pose was not measured again"]
+    path = _figaroh_changed(tmp_path, lambda lines: [*lines[:6], "", *lines[7:], "", ""])
+    code, stdout, err = _run(capsys, path, "--method", "world_pose", "--robot", "ur10e",
+                             "--columns", FIGAROH_COLUMNS, "-o", tmp_path / "out.json")
+    assert code == 0 and "22 samples" in stdout, err
+    # the blank lines at the end are no pose lost: not counted
+    assert err.strip().splitlines() == [
+        f"warning: {path}: 1 blank row dropped (row 7); 22 rows read"]
+
+
+def test_too_few_poses_names_the_file_and_the_next_step(tmp_path, capsys):
+    path = _figaroh_changed(tmp_path, lambda lines: lines[:2])
+    code, _, err = _run(capsys, path, "--method", "world_pose", "--robot", "ur10e",
+                        "--columns", FIGAROH_COLUMNS, "-o", tmp_path / "out.json")
+    assert code == 2
+    assert err.strip() == (
+        f"hostpc import: error: {path}: 1 measurement; world_pose: at least 3 poses are "
+        "needed to place the world frame (and a fit of the joint offsets needs many more, "
+        "spread over the joints' ranges: docs/metrology.md); measure more poses and import "
+        "the file again")

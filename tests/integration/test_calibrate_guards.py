@@ -121,6 +121,10 @@ def test_push_intent_is_journaled_first_and_settled_on_resume(
             "--known", "target", "--poses", str(poses), "--verify-poses", "0",
             "--cv-folds", "0", "--no-report", "--out", str(out))
         assert code == 3, stderr
+        assert stderr.strip().splitlines()[-1].endswith(
+            "a push was cut short: the controller may hold the new offsets, NOT verified; "
+            f"settle and verify it with: hostpc calibrate --resume {out} (undo: hostpc "
+            f"rollback --run {out})"), stderr
         events = [json.loads(line) for line in (out / "journal.jsonl").read_text().splitlines()]
         assert events[-1]["event"] == "push_intent"
         assert events[-1]["previous_offsets"] == before.tolist() and events[-1]["time"]

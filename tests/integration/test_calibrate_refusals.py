@@ -6,12 +6,14 @@ and a resume measures the poses a storm skipped."""
 from __future__ import annotations
 
 import asyncio
+import json
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from hostpc.calibrate.journal import Journal
@@ -100,6 +102,32 @@ def test_estop_exit_4_one_line_with_resume_hint(
     assert line.startswith("hostpc calibrate: error: controller refused (estop): ")
     assert line.endswith(f"continue with: hostpc calibrate --resume {out}")
     assert "5 poses journaled" in line
+
+
+def test_a_stop_after_the_push_says_the_controller_holds_unverified_offsets(
+        tmp_path: Path, rig: Path, out: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """An estop after the first verification pose (the fit's 16 moves, the push, one):
+    the error line says the controller holds the pushed offsets, not verified, and how to
+    verify or undo them (it used to say only "continue with: ... --resume"); the undo
+    command it names restores the previous offsets."""
+    with SimulatedController(_scenario(faults={"estop_after_moves": int(POSES) + 1}),
+                             tmp_path / "s") as sim:
+        before = np.asarray(sim.truth()["zero_offsets"], float)
+        code, _, stderr = _calibrate(capsys, sim, rig, out, "--verify-poses", "4")
+        line = _error_line(stderr)
+        push = json.loads((out / "push.json").read_text())
+        assert code == 4, stderr
+        assert line.startswith("hostpc calibrate: error: controller refused (estop): "), line
+        assert line.endswith(
+            f"; {int(POSES) + 1} poses journaled in {out}; the controller holds the offsets "
+            f"pushed at {push['time']} (rollback id {push['rollback_id']}), NOT verified; verify: "
+            f"hostpc calibrate --resume {out}; undo: hostpc rollback --run {out}"), line
+        np.testing.assert_allclose(sim.truth()["zero_offsets"], push["new_offsets"],
+                                   rtol=0.0, atol=1e-12)
+        code, stdout, stderr = run_cli(capsys, "rollback", "--run", str(out), "--token", TOKEN)
+        assert code == 0, stderr
+        np.testing.assert_array_equal(sim.truth()["zero_offsets"], before)
 
 
 def test_offset_limit_is_the_controllers_own_said_once_and_nothing_half_pushed(

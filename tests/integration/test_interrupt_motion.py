@@ -113,3 +113,42 @@ def test_a_resume_on_a_controller_that_ran_on_counts_all_its_robot_time(tmp_path
     robot_time = json.loads((out / "result.json").read_text())["robot_time_s"]
     assert robot_time["clock"] == "controller"
     assert robot_time["total"] == pytest.approx(spent, rel=1e-9), (robot_time, spent)
+
+
+def test_a_sim_controller_killed_after_the_push_names_the_offsets_it_held(tmp_path: Path
+                                                                         ) -> None:
+    """`hostpc calibrate --robot sim` whose simulated controller (its child process) is
+    killed (SIGKILL) once the push is journaled, during verification: exit 3, and the line
+    says the controller held the pushed offsets, not verified, and the resume that pushes
+    them again, which passes (before, only "continue with: ... --resume", which reports
+    "push lost")."""
+    out = tmp_path / "run"
+    command = [sys.executable, "-m", "hostpc.cli.main", "calibrate", "--robot", "sim",
+               "--time-scale", "0.3", "--cv-folds", "0", "--no-report", "--out", str(out)]
+    process = subprocess.Popen(command, cwd=REPO, env=ENV, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.PIPE, text=True)
+    journal = out / "journal.jsonl"
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and process.poll() is None and not (
+                journal.is_file() and '"event":"push"' in journal.read_text().replace(" ", "")):
+            time.sleep(0.05)
+        children = Path(f"/proc/{process.pid}/task/{process.pid}/children").read_text().split()
+        assert children, "no simulated controller"
+        for child in children:
+            os.kill(int(child), signal.SIGKILL)
+        _, stderr = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    push = json.loads((out / "push.json").read_text())
+    assert process.returncode == 3, stderr
+    assert stderr.strip().splitlines()[-1].endswith(
+        f"the simulated controller held the offsets pushed at {push['time']} (rollback id "
+        f"{push['rollback_id']}), NOT verified, and ended with the run; a resume restarts it "
+        f"with its initial offsets: hostpc calibrate --resume {out} --push"), stderr
+    done = subprocess.run([sys.executable, "-m", "hostpc.cli.main", "calibrate", "--resume",
+                           str(out), "--push"], cwd=REPO, env=ENV, capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]  # the command it names: pushed, PASS

@@ -322,3 +322,18 @@ async def test_a_cancel_that_comes_with_the_reply_is_not_lost() -> None:
     await asyncio.sleep(0)
     reply.set_result("moved")
     assert await request == "moved"
+
+
+async def test_an_abort_that_times_out_logs_why(start_stub: StartStub,
+                                                caplog: pytest.LogCaptureFixture) -> None:
+    """A motion's timeout sends an abort; when the abort's reply does not come within its
+    own limit either, the warning names the cause (TimeoutError has no text: the line used
+    to end with "failed: " and nothing after it)."""
+    server = await start_stub({"faults": {"reply_delay_s": 3.0}})
+    async with connect(server) as client:
+        q0 = (await client.state(timeout=5.0)).q
+        with caplog.at_level("WARNING", logger="hostpc.transport.client"), \
+                pytest.raises(RequestTimeout, match="abort sent, not confirmed"):
+            await client.move_joints(q0 + STEP, 0.5, timeout=0.2)
+    assert [r.getMessage() for r in caplog.records if "abort" in r.getMessage()] == [
+        "abort of a motion failed: TimeoutError"]
