@@ -53,6 +53,7 @@ from hostpc.transport.types import (
     TargetsMeasurement,
     TrackerReading,
 )
+from hostpc.transport.waiting import wait_for_reply
 from protocol import DEFAULT_PORT, measurement_messages
 from protocol import messages as m
 from protocol.connection import Connection
@@ -89,22 +90,6 @@ ABORT_AFTER_TIMEOUT_S = 2.0
 """How long the abort sent after a motion timeout or interruption may take (s)."""
 
 ReplyT = TypeVar("ReplyT", bound=Reply)
-T = TypeVar("T")
-
-
-async def wait_for_reply(future: asyncio.Future[T], timeout: float) -> T:
-    """`asyncio.wait_for(future, timeout)` that never drops a cancellation. Python 3.11's
-    returns the result of a future that completed in the same loop step as its caller was
-    cancelled, and the cancellation is lost (CPython gh-86296, fixed in 3.12): a SIGTERM or
-    Ctrl-C that came with a reply went unheard and the run went on to push (seen under load,
-    test_sigterm_stops_cleanly_and_a_sim_resume_keeps_time_increasing). The reply is
-    dropped then, as if it had come a moment later."""
-    task = asyncio.current_task()
-    cancels = task.cancelling() if task is not None else 0
-    result = await asyncio.wait_for(future, timeout)
-    if task is not None and task.cancelling() > cancels:
-        raise asyncio.CancelledError
-    return result
 
 
 class _Connect:
@@ -485,9 +470,9 @@ class ControllerClient:
     async def _open_link(self) -> _Link:
         address = f"{self.host}:{self.port}"
         try:
-            reader, writer = await asyncio.wait_for(
+            reader, writer = await wait_for_reply(
                 asyncio.open_connection(self.host, self.port, limit=READ_CHUNK),
-                self.connect_timeout,
+                self.connect_timeout, lambda opened: opened[1].close(),
             )
         except TimeoutError:
             raise ConnectionFailed(
@@ -510,7 +495,7 @@ class ControllerClient:
         link = _Link(reader, writer, conn, self._on_io_edge)
         writer.write(conn.initiate())
         try:
-            await asyncio.wait_for(asyncio.shield(link.handshake), self.connect_timeout)
+            await wait_for_reply(asyncio.shield(link.handshake), self.connect_timeout)
         except TimeoutError:
             await link.close()
             raise ConnectionFailed(

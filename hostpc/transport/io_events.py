@@ -13,6 +13,7 @@ from collections.abc import AsyncIterator, Callable
 
 from hostpc.errors import RequestTimeout
 from hostpc.transport.types import IoEdgeEvent
+from hostpc.transport.waiting import wait_for_reply
 
 # the client's logger: log records keep the name they had before the client was split
 logger = logging.getLogger("hostpc.transport.client")
@@ -40,7 +41,7 @@ class IoEventSubscription:
     async def get(self, timeout: float | None = None) -> IoEdgeEvent:
         """The next event; RequestTimeout if none arrives within `timeout` seconds."""
         try:
-            return await asyncio.wait_for(self.queue.get(), timeout)
+            return await wait_for_reply(self.queue.get(), timeout)
         except TimeoutError:
             raise RequestTimeout(f"no IO edge event within {timeout} s") from None
 

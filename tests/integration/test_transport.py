@@ -14,7 +14,9 @@ from controller_stub.scenario.spec import scenario_from_dict
 from controller_stub.world.simulation import Simulation
 from hostpc.errors import ConnectionFailed, ControllerError, RequestTimeout
 from hostpc.transport import ControllerClient, ControllerRefusedError
-from hostpc.transport.client import wait_for_reply
+from hostpc.transport.io_events import IoEventSubscription
+from hostpc.transport.types import IoEdgeEvent
+from hostpc.transport.waiting import wait_for_reply
 from tests.integration.conftest import BASE_SCENARIO, TOKEN, StartStub
 
 pytestmark = pytest.mark.asyncio
@@ -322,6 +324,30 @@ async def test_a_cancel_that_comes_with_the_reply_is_not_lost() -> None:
     await asyncio.sleep(0)
     reply.set_result("moved")
     assert await request == "moved"
+
+
+async def test_a_cancel_that_comes_with_an_io_edge_is_not_lost() -> None:
+    """A probe's contact edge and a cancellation in the same loop step (the sphere probe waits
+    on `IoEventSubscription.get`): the wait is cancelled; with asyncio.wait_for (3.11) the
+    edge was returned and the cancellation lost. Opening a connection and its handshake wait
+    the same way (hostpc.transport.waiting)."""
+    subscription = IoEventSubscription(8, lambda _: None)
+    waiting = asyncio.create_task(subscription.get(5.0))
+    await asyncio.sleep(0)
+    subscription.deliver(IoEdgeEvent(1, True, 0.0, np.zeros(6)))
+    waiting.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await waiting
+    # a result dropped by a cancellation is released
+    released: list[str] = []
+    reply: asyncio.Future[str] = asyncio.get_running_loop().create_future()
+    request = asyncio.create_task(wait_for_reply(reply, 5.0, released.append))
+    await asyncio.sleep(0)
+    reply.set_result("connection")
+    request.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await request
+    assert released == ["connection"]
 
 
 async def test_an_abort_that_times_out_logs_why(start_stub: StartStub,
