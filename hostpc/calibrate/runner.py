@@ -172,7 +172,8 @@ class Runner:
         try:
             return await self._run(resume)
         except ConnectionFailed as exc:
-            raise ConnectionFailed(f"{exc}; {self._journaled()} {self._go_on()}") from exc
+            raise ConnectionFailed(
+                f"{exc}; {self._journaled()} {self._go_on(link_lost=True)}") from exc
         except PushLost as exc:
             if not self.robot_info.sim:
                 raise
@@ -192,29 +193,40 @@ class Runner:
         n = len(self.journal.records("fit")) + len(self.journal.records("verify"))
         return f"{n} poses journaled in {self.run_dir};"
 
-    def _go_on(self) -> str:
+    def _go_on(self, link_lost: bool = False) -> str:
         """The next step after a run stopped early, with what the controller holds when the
-        journal says this run wrote its offsets and no rollback undid them since."""
+        journal says this run wrote its offsets and no rollback undid them since;
+        `link_lost`: the link closed, so what it held then may have changed since (a
+        controller that restarted has its previous offsets again)."""
         resume = f"hostpc calibrate --resume {self.run_dir}"
         last = self.journal.last_event(PushIntent, Pushed, Rollback) if self.journal.exists \
             else None
         if isinstance(last, PushIntent):  # the controller's answer never came
+            if self.robot_info.sim:  # its simulated controller ended with the run
+                return ("a push was cut short: the simulated controller may have held the "
+                        "new offsets, NOT verified, and ended with the run; a resume "
+                        "restarts it with its initial offsets and pushes again: "
+                        f"{resume} --push")
             return (f"a push was cut short: the controller may hold the new offsets, NOT "
                     f"verified; settle and verify it with: {resume} (undo: hostpc rollback "
                     f"--run {self.run_dir})")
         if not isinstance(last, Pushed):
             return f"continue with: {resume}"
         record = last.record
-        pushed = f"the offsets pushed at {record.time or 'an unrecorded time'}" + (
-            f" (rollback id {record.rollback_id})" if record.rollback_id else "")
+        at = f"the offsets pushed at {record.time or 'an unrecorded time'}"
+        rollback_id = f" (rollback id {record.rollback_id})" if record.rollback_id else ""
+        pushed = at + rollback_id
         verified = self.journal.last(Verified)
         verdict = ("NOT verified" if verified is None or self.journal.last_position(Verified)
                    < self.journal.last_position(Pushed) else f"verification {verified.verdict}")
         if self.robot_info.sim:  # its simulated controller ends with this command
             return (f"the simulated controller held {pushed}, {verdict}, and ended with the "
                     f"run; a resume restarts it with its initial offsets: {resume} --push")
-        return (f"the controller holds {pushed}, {verdict}; verify: {resume}; undo: hostpc "
-                f"rollback --run {self.run_dir}")
+        undo = f"undo: hostpc rollback --run {self.run_dir}"
+        if link_lost:
+            return (f"the controller held {at} when the link was lost{rollback_id}, "
+                    f"{verdict}; the resume checks what it holds now: {resume}; {undo}")
+        return f"the controller holds {pushed}, {verdict}; verify: {resume}; {undo}"
 
     async def _run(self, resume: bool) -> RunOutcome:
         progress = self.progress

@@ -134,8 +134,11 @@ def run(args: argparse.Namespace) -> int:
             if choice.outlier_note:
                 print(f"outliers: {choice.outlier_note}")
             print()
+        from hostpc.cli.units_hint import declared_length_unit, length_unit_hint
+
+        hint = length_unit_hint(dataset, declared_length_unit(args.dataset))
         print(format_fit_summary(result, source=args.dataset, scaled=scaled,
-                                 jackknife=jackknife, options=options))
+                                 jackknife=jackknife, options=options, units_hint=hint))
     if args.write_urdf:
         write_calibrated_urdf(result, args.write_urdf, args.dataset + options, args.json)
     return 0

@@ -85,14 +85,16 @@ UNITS_HINT_NOISE_RATIO = 100.0
 points at the data before the model: numbers in another unit than `units` says."""
 
 
-def _converged_line(result: FitResult, source: str, options: str = "") -> str:
+def _converged_line(result: FitResult, source: str, options: str = "",
+                    units_hint: str = "") -> str:
     """Never a plain "converged: yes" for a model that does not explain the data; a fit
-    that did not converge says so with the next step."""
+    that did not converge says so with the next step; `units_hint`: what the numbers say of
+    the declared length unit (hostpc.cli.units_hint)."""
     how = f"({result.message}, {result.iterations} iterations)"
     if not result.converged:
         ratio = math.sqrt(result.chi2_dof) if result.chi2_dof >= 0 else math.nan
-        units = (f"the residuals are {ratio:.3g} times the stated noise: check the dataset's "
-                 "`units` (e.g. units.length mm for numbers in metres); "
+        hint = units_hint or "check the dataset's `units`"
+        units = (f"the residuals are {ratio:.3g} times the stated noise: {hint}; "
                  if ratio >= UNITS_HINT_NOISE_RATIO else "")
         next_command = (model_adequacy(result, source or "DATASET", options).next_command
                         or f"hostpc diagnose {source or 'DATASET'}{options}")
@@ -121,16 +123,17 @@ def _converged_line(result: FitResult, source: str, options: str = "") -> str:
 
 def format_fit_summary(result: FitResult, source: str = "",
                        scaled: np.ndarray | None = None,
-                       jackknife: np.ndarray | None = None, options: str = "") -> str:
+                       jackknife: np.ndarray | None = None, options: str = "",
+                       units_hint: str = "") -> str:
     """The fit as text; `scaled` / `jackknife`: further sigma columns (see
     format_parameter_table), with a line that says which sigma is which; `options`: as for
-    model_adequacy."""
+    model_adequacy; `units_hint`: as for _converged_line."""
     n_samples = result.residuals_raw.shape[0]
     head = f"fit of {source}" if source else "fit"
     lines = [
         f"{head}: method {result.problem.method}, {n_samples} samples, "
         f"effects {', '.join(result.problem.effect_names)}",
-        _converged_line(result, source, options),
+        _converged_line(result, source, options, units_hint),
         f"  residual RMS {result.rms * 1e3:.4f} mm, max {result.max * 1e3:.4f} mm, "
         f"chi2/dof {result.chi2_dof:.3f} (dof {result.dof})"
         + (f", {result.cv_folds}-fold cross-validated RMS {result.cv_rms * 1e3:.4f} mm"

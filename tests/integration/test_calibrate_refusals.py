@@ -212,3 +212,23 @@ def test_lost_verification_says_so_and_stays_resumable(
         assert sim.truth()["zero_offsets"] == pushed  # no second push
     rounds = Journal(out).events("verify_start")
     assert [r["round"] for r in rounds] == [0, 1]
+
+
+def test_a_link_lost_after_the_push_says_what_the_controller_held_then(
+        tmp_path: Path, rig: Path, out: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """The link cut after the push (the stub drops a verification pose's request): the
+    error line says what the controller held when the link was lost, not verified, and that
+    the resume checks what it holds now (it used to say "the controller holds" as a fact,
+    while a controller restarted since has its previous offsets again)."""
+    with SimulatedController(_scenario(faults={"drop_after_requests": 4 + 3 * int(POSES) + 4}),
+                             tmp_path / "s") as sim:
+        code, _, stderr = _calibrate(capsys, sim, rig, out, "--verify-poses", "4")
+    line = _error_line(stderr)
+    push = json.loads((out / "push.json").read_text())
+    assert code == 3, stderr
+    assert line.endswith(
+        f"poses journaled in {out}; the controller held the offsets pushed at {push['time']} "
+        f"when the link was lost (rollback id {push['rollback_id']}), NOT verified; the resume "
+        f"checks what it holds now: hostpc calibrate --resume {out}; undo: hostpc rollback "
+        f"--run {out}"), line

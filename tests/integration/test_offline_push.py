@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -161,7 +162,10 @@ def test_a_fit_that_did_not_converge_says_why_and_push_refuses_it(
     assert code == 0, stderr
     line = stdout.splitlines()[1]
     assert line.startswith("  converged: NO (") and "the values below are not a fit" in line
-    assert "times the stated noise: check the dataset's `units`" in line, line
+    # the hint names the declared unit and what the numbers' scale says (before: "e.g.
+    # units.length mm for numbers in metres", to a file that declares mm already)
+    assert re.search(r"times the stated noise: units.length is mm, but the positions span "
+                     r"\d\.\d+-\d\.\d+: metres\? set units.length m; next", line), line
     assert line.endswith(f"next: hostpc diagnose {dataset} --ladder"), line
     code, stdout, stderr = run_cli(capsys, "fit", str(dataset), "--cv-folds", "0", "--json")
     assert code == 0 and json.loads(stdout)["converged"] is False, stderr
