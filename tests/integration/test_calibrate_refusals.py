@@ -232,3 +232,27 @@ def test_a_link_lost_after_the_push_says_what_the_controller_held_then(
         f"when the link was lost (rollback id {push['rollback_id']}), NOT verified; the resume "
         f"checks what it holds now: hostpc calibrate --resume {out}; undo: hostpc rollback "
         f"--run {out}"), line
+
+
+def test_a_sim_push_cut_short_names_the_resume_that_pushes_again(
+        tmp_path: Path, rig: Path, out: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """A `--robot sim` run whose push is cut short (the stub drops set_offsets: the
+    intent journaled, no answer): its simulated controller ended with the run, so the line
+    names the resume that pushes again, and that command pushes (it used to name `hostpc
+    rollback --run`, which finds nothing to roll back there)."""
+    scenario = tmp_path / "scenario.json"
+    scenario.write_text(json.dumps(sim_scenario(drop_after_requests=4 + 3 * int(POSES))))
+    code, _, stderr = run_cli(capsys, "calibrate", "--robot", "sim", "--scenario",
+                              str(scenario), "--rig", str(rig), "--known", "target",
+                              "--poses", POSES, "--verify-poses", "0", "--cv-folds", "0",
+                              "--no-report", "--out", str(out))
+    line = _error_line(stderr)
+    assert code == 3, stderr
+    assert line.endswith(
+        "a push was cut short: the simulated controller may have held the new offsets, NOT "
+        "verified, and ended with the run; a resume restarts it with its initial offsets and "
+        f"pushes again: hostpc calibrate --resume {out} --push"), line
+    code, _, stderr = run_cli(capsys, "calibrate", "--resume", str(out), "--push")
+    assert code == 0, stderr
+    assert json.loads((out / "push.json").read_text())["status"] == "pushed"

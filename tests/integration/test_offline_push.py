@@ -140,6 +140,18 @@ def test_bad_fit_file_is_one_line(tmp_path, capsys, content, message) -> None:
     assert code == 2 and message in stderr and len(stderr.strip().splitlines()) == 1
 
 
+def _figaroh_poses(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Path:
+    """FIGAROH's UR10e poses (metres) imported as a world_pose dataset (units.length m)."""
+    data = Path(__file__).resolve().parents[1] / "data" / "figaroh_ur10e_calibration.csv"
+    dataset = tmp_path / "poses.json"
+    code, _, stderr = run_cli(capsys, "import", str(data), "--method", "world_pose",
+                              "--robot", "ur10e", "--no-guess", "--columns",
+                              "q=shoulder_pan_joint:wrist_3_joint,x=x1,y=y1,z=z1,roll=phix1,"
+                              "pitch=phiy1,yaw=phiz1", "-o", str(dataset))
+    assert code == 0, stderr
+    return dataset
+
+
 def test_a_fit_that_did_not_converge_says_why_and_push_refuses_it(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """FIGAROH's UR10e poses (metres) in a dataset that says `units.length: mm`: the fit
@@ -148,13 +160,7 @@ def test_a_fit_that_did_not_converge_says_why_and_push_refuses_it(
     never raised: docs/fitting.md); `hostpc push` of its --json refuses it as not
     converged, naming the dataset to diagnose, before anything reaches the controller
     (before: "converged: NO" alone, and push said only what its guard rails say of any fit)."""
-    data = Path(__file__).resolve().parents[1] / "data" / "figaroh_ur10e_calibration.csv"
-    dataset = tmp_path / "poses.json"
-    code, _, stderr = run_cli(capsys, "import", str(data), "--method", "world_pose",
-                              "--robot", "ur10e", "--no-guess", "--columns",
-                              "q=shoulder_pan_joint:wrist_3_joint,x=x1,y=y1,z=z1,roll=phix1,"
-                              "pitch=phiy1,yaw=phiz1", "-o", str(dataset))
-    assert code == 0, stderr
+    dataset = _figaroh_poses(tmp_path, capsys)
     document = json.loads(dataset.read_text())
     document["units"]["length"] = "mm"
     dataset.write_text(json.dumps(document))
@@ -183,3 +189,17 @@ def test_a_fit_that_did_not_converge_says_why_and_push_refuses_it(
             f"`hostpc diagnose {dataset} --ladder` (do the dataset's `units` match its "
             "numbers?), fit again, then push (--force to push anyway)")
         assert np.array_equal(_offsets(sim), before)
+
+
+def test_the_units_hint_asks_to_check_a_unit_the_numbers_do_not_contradict(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """FIGAROH's UR10e poses declared in metres, as they are: the hint's facts name the
+    declared unit and the positions' span, and suggest no other unit (nothing says one)."""
+    from hostpc.cli.units_hint import declared_length_unit, length_unit_hint
+    from hostpc.dataset import load_dataset
+
+    dataset = _figaroh_poses(tmp_path, capsys)
+    assert declared_length_unit(dataset) == "m"
+    hint = length_unit_hint(load_dataset(dataset), "m")
+    assert re.fullmatch(r"units.length is m: check that the numbers are in m \(the positions "
+                        r"span 1\.4\d-1\.8\d\)", hint), hint
