@@ -64,7 +64,7 @@ def rewrite_outcome(run_dir: Path) -> RobotOutcome | None:
     journal.load()
     outcome = run_outcome(journal, sources_from_outcome(document["outcome"]), run_dir=run_dir,
                           header=header, require_joints=header.settings.require_joints,
-                          swapped=tuple(int(j) for j in stored.settings.get("swapped", ())),
+                          swapped=header.settings.swapped,  # run.json: every declaration
                           finished=journal.last(RunFinished) is not None,
                           known=stored.known)
     run = dataclasses.replace(stored, outcome=outcome.to_dict(), exit_code=outcome.exit_code)

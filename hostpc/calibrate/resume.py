@@ -99,8 +99,21 @@ def resume_settings(settings: RunSettings, overrides: ResumeOverrides, journal: 
     keeps them (--swapped, --swap-limit, --max-correction, ... ; --known is kept in its
     cell). --force is one push's decision: never kept, so only a resume that gives it
     forces. A --separate resume measures and tests, and pushes only with its own --push.
+    --swapped adds to the run's declared swaps (their union: a joint declared swapped
+    anywhere in the run's history stays declared; a note says so when fewer are named).
     The same `settings` object when nothing changed."""
-    changed = {k: v for k, v in overrides.items()
+    asked = dict(overrides.items())
+    if asked.get("swapped") is not None:  # a resume adds swapped joints, never un-declares
+        kept = sorted(set(settings.swapped) - set(asked["swapped"]))
+        asked["swapped"] = tuple(sorted(set(settings.swapped) | set(asked["swapped"])))
+        if kept:
+            text = (f"note: {', '.join(f'J{j}' for j in kept)} "
+                    f"{'stays' if len(kept) == 1 else 'stay'} declared swapped (an "
+                    "earlier --swapped of this run): a resume adds swapped joints, it cannot "
+                    "un-declare one")
+            journal.append(Note(text))
+            progress.message(text)
+    changed = {k: v for k, v in asked.items()
                if k in RESUME_OVERRIDABLE and v is not None
                and getattr(settings, k) != v}
     if settings.force and not overrides.force:

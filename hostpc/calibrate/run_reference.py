@@ -205,31 +205,38 @@ def joint_coverage(method: Method, plan: Plan, settings: RunSettings, cell: Cell
     from hostpc.model.measurements.predict import predict
     from hostpc.model.problem import build_problem
 
-    dataset = with_constraints(method.design_dataset(plan.q), settings.priors, settings.hold)
-    dataset, priors = reference_priors(reference, dataset, settings)
+    user = with_constraints(method.design_dataset(plan.q), settings.priors, settings.hold)
+    dataset, priors = reference_priors(reference, user, settings)
     problem = build_problem(dataset, settings.effects, plugins=settings.plugins)
     _, J = predict(problem, np.zeros(problem.layout.size), jacobian=True)
     assert J is not None
     A = np.einsum("nij,njp->nip", problem.sqrt_information, J).reshape(-1, problem.layout.size)
     names, units = tuple(problem.layout.names), tuple(problem.layout.units)
     frames = problem.frame_names
-    bare, _ = analyse_with_constraints(A, names, units, None, frames=frames)
+    # bare: the measurements with the user's --hold/--prior; full: also the reference's
+    # frames. A joint only `full` resolves is the reference's; one the user's constraint
+    # resolves is the measurements' (with that constraint), reference or not.
+    user_constraints = constraints_for(user.extra_fields, names, units)
+    bare, _ = analyse_with_constraints(A, names, units, user_constraints, frames=frames)
     constraints = constraints_for(dataset.extra_fields, names, units)
     full, _ = analyse_with_constraints(A, names, units, constraints, frames=frames)
+    held_data = ({d.fixed: d for d in analyse_with_constraints(
+        A, names, units, None, frames=frames)[0].null_directions}
+        if user_constraints is not None else {})
     n = int(np.asarray(plan.q).shape[1])
     table = PushTable.for_controller(n, problem.context.joint_labels)
     offsets = table.names
     labels = [joint_display_name(j, label) for j, label in enumerate(table.labels)]
     held_bare = {d.fixed: d for d in bare.null_directions}
     held_full = {d.fixed: d for d in full.null_directions}
-    user_held = ({n for n, h in zip(names, constraints.held, strict=True) if h}
-                 if constraints is not None else set())
-    prior_sigma = ({p.name: float(p.sigma) for p in constraints.priors}
-                   if constraints is not None else {})
+    user_held = ({n for n, h in zip(names, user_constraints.held, strict=True) if h}
+                 if user_constraints is not None else set())
+    prior_sigma = ({p.name: float(p.sigma) for p in user_constraints.priors}
+                   if user_constraints is not None else {})
     sigma = _predicted_sigmas(A, constraints, full.fixed)
     measured, referenced, resolved, held, from_prior = [], [], [], [], []
     missing: dict[str, str] = {}
-    held_joints = []
+    held_joints, by_user = [], []
     for j, (label, name) in enumerate(zip(labels, offsets, strict=True)):
         if name in user_held:  # joint_status's sources: hold, prior, data, none
             held.append(label)
@@ -258,8 +265,13 @@ def joint_coverage(method: Method, plan: Plan, settings: RunSettings, cell: Cell
             resolved.append(name)
         else:
             measured.append(label)
+            if name in held_data:  # the user's --hold/--prior on a frame separates it
+                others = [p.split(".", 1)[0] for p in held_data[name].parameters[1:]]
+                frame = next((o for o in others if o in frames), None)
+                by_user.append(f"{label} with --hold/--prior on {frame or 'other parameters'}")
     known = ", ".join(cell.known) or "none"
-    text = f"{', '.join(measured) or 'none'} from the measurements (known frames: {known})"
+    text = f"{', '.join(measured) or 'none'} from the measurements (known frames: {known}"
+    text += f"; {', '.join(by_user)})" if by_user else ")"
     if referenced:
         text += (f"; {', '.join(referenced)} from the reference of {reference.date} "  # type: ignore[union-attr]
                  f"({', '.join(p.frame for p in priors)}: valid only while those frames "

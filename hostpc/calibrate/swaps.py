@@ -84,7 +84,7 @@ def parse_swapped(text: str | None, option: str = "--swapped") -> tuple[int, ...
     joints = []
     for part in text.split(","):
         word = part.strip().upper().removeprefix("J")
-        if not word.isdigit() or int(word) < 1:
+        if not (word.isascii() and word.isdigit()) or int(word) < 1:  # not "²"
             raise InputError(f"{option} {text}: expected joints like J3 or J1,J6")
         joints.append(int(word))
     return tuple(sorted(set(joints)))

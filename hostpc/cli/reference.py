@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Sequence
 from pathlib import Path
 
 from hostpc.calibrate.run_result import RunResult
@@ -54,10 +55,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     show.set_defaults(func=run_show)
 
 
-def _refusal(run: Path, result: RunResult, force: bool) -> tuple[str, str] | None:
-    """(why this run cannot be a reference, the next command), None: it can."""
+def _refusal(run: Path, result: RunResult, swapped: Sequence[int], force: bool
+             ) -> tuple[str, str] | None:
+    """(why this run cannot be a reference, the next command), None: it can. swapped: the
+    joints the run header (run.json) says were declared swapped."""
     calibrate = f"calibrate and verify first: hostpc calibrate --resume {run} --push"
-    unknown = _unknown_swapped_zeros(result)
+    unknown = _unknown_swapped_zeros(result, swapped)
     if unknown:  # even with --force: the frames the run estimated carry the swapped zero
         names = ", ".join(f"J{n}" for n in unknown)
         stored = str((result.outcome or {}).get("next_command") or "")
@@ -72,11 +75,11 @@ def _refusal(run: Path, result: RunResult, force: bool) -> tuple[str, str] | Non
     return (reason, calibrate) if reason else None
 
 
-def _unknown_swapped_zeros(result: RunResult) -> tuple[int, ...]:
-    """The joints the run declared swapped and did not calibrate (outcome.py)."""
+def _unknown_swapped_zeros(result: RunResult, swapped: Sequence[int]) -> tuple[int, ...]:
+    """The joints the run declared swapped (`swapped`, from run.json) and did not
+    calibrate (outcome.py)."""
     from hostpc.calibrate.outcome import sources_from_outcome, unknown_swapped_zeros
 
-    swapped = [int(j) for j in result.settings.get("swapped") or ()]
     return unknown_swapped_zeros(sources_from_outcome(result.outcome or {}), swapped)
 
 
@@ -112,10 +115,10 @@ def run_record(args: argparse.Namespace) -> int:
         result = RunResult.from_dict(read_json(path, "result document (result.json)"))
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise InputError(f"{path}: not a calibration result document ({exc!r})") from None
-    refused = _refusal(run, result, args.force)
+    header = read_run_header(Journal(run))  # its swaps: run.json is the run's record
+    refused = _refusal(run, result, header.settings.swapped, args.force)
     if refused:
         raise InputError(f"--run {run}: cannot be a reference: {refused[0]}; {refused[1]}")
-    header = read_run_header(Journal(run))
     settings = header.settings
     dataset = load_dataset(run / "dataset.json")
     fitted = fit(dataset, _fitted_effects(result) or settings.effects,

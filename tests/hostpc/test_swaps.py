@@ -25,7 +25,7 @@ def test_swapped_joints_parse_and_size_their_own_limit_only() -> None:
     assert parse_swapped("J3") == (3,)
     assert parse_swapped("j6, 1") == (1, 6)
     assert parse_swapped(None) == ()
-    for bad in ("J0", "X3", "J3,"):
+    for bad in ("J0", "X3", "J3,", "\u00b2", "J\u00b2", "\u0663"):  # isdigit, not int()
         with pytest.raises(InputError, match="--swapped"):
             parse_swapped(bad)
     settings = RunSettings(method="stereo_target", swapped=(3,), swap_limit_deg=30.0)
@@ -68,3 +68,15 @@ def test_station_passes_its_swap_keys_to_calibrate(tmp_path: Path) -> None:
     assert options[options.index("--swap-limit") + 1] == "30"
     plain = calibrate_options(StationConfig(robot="sim"), tmp_path / "run")
     assert "--swapped" not in plain and "--swap-limit" not in plain
+
+
+def test_a_superscript_joint_is_one_clear_line_exit_2(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`--swapped \u00b2`: str.isdigit() is true, int() fails: an input error, no traceback."""
+    from hostpc.cli.main import main
+
+    code = main(["calibrate", "--robot", "sim", "--swapped", "\u00b2", "--no-report",
+                 "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2, err
+    assert "Traceback" not in err and "--swapped \u00b2: expected joints like J3" in err

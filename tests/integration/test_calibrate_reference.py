@@ -9,6 +9,8 @@ fresh 2 deg error on J1 and J6 (small errors elsewhere, another noise seed).
 
 from __future__ import annotations
 
+import asyncio
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -18,6 +20,7 @@ import pytest
 
 from hostpc.calibrate.journal import Journal
 from hostpc.cli.main import main
+from hostpc.methods.base import NullProgress
 from hostpc.robots.simulator import default_sim_scenario
 from tests.integration.test_calibrate_sim import run_cli
 
@@ -177,3 +180,51 @@ def test_resume_with_known_none_refits_without_the_surveyed_target(
     assert resumed["known"] == [] and "J1" in resumed["plan"]["joints"]["not_calibrated"]
     assert resumed["truth"]["joint_offsets_error_deg"][0] is None
     assert json.loads((run / "run.json").read_text())["cell"]["known"] == []
+
+
+def test_a_user_prior_on_a_frame_that_resolves_a_joint_is_the_measurements_not_a_reference(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`--prior tool.x=...` (the --help's example) resolves J6 from the measurements: the run
+    gets past the plan and says so (joint_coverage: bare with the user's constraints, full
+    with the reference's as well; a reference alone still resolves J6)."""
+    from hostpc.calibrate.reference import load_reference
+    from hostpc.calibrate.run_header import read_run_header
+    from hostpc.calibrate.run_reference import joint_coverage
+    from hostpc.methods import method_class
+    from hostpc.methods.cell import cell_from_dict
+
+    out = tmp_path / "prior"
+    code = main(["calibrate", "--robot", "sim", "--prior", "tool.x=0.045+-0.0005m",
+                 "--out", str(out), "--no-report"])
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and code in (0, 5, 7), err[-2000:]
+    document = json.loads((out / "result.json").read_text())
+    assert document["outcome"]["headline"]  # whatever the verdict, it is stated
+    joints = document["plan"]["joints"]
+    assert "J6" in joints["from_measurements"] and joints["from_reference"] == []
+    assert "J6 with --hold/--prior on tool" in joints["text"]
+
+    # the same plan, straight through joint_coverage, with and without a reference
+    record = tmp_path / "record"
+    assert main(["calibrate", "--robot", "sim", "--out", str(record), "--no-report"]) == 0
+    assert main(["reference", "record", "--run", str(record), "--out",
+                 str(tmp_path / "ref.json")]) == 0
+    reference = load_reference(tmp_path / "ref.json")
+    header = read_run_header(Journal(record))
+    assert header.plan is not None
+    cell = cell_from_dict(header.cell, header.settings.plugins)
+    settings = header.settings
+    method = method_class(settings.method, settings.plugins)(settings, cell, record)
+    asyncio.run(method.prepare(None, NullProgress()))  # type: ignore[arg-type]  # rig.json
+    plan = header.plan
+    assert joint_coverage(method, plan, settings, cell, reference)["from_reference"] == ["J6"]
+    prior = dataclasses.replace(settings, priors=("tool.x=0.045+-0.0005m",))
+    coverage = joint_coverage(method, plan, prior, cell, None)  # AttributeError on the old
+    assert coverage["from_reference"] == [] and coverage["resolved_by_reference"] == []
+    assert coverage["from_measurements"] == ["J1", "J2", "J3", "J4", "J5", "J6"]
+    assert "J6 with --hold/--prior on tool" in coverage["text"]
+    held = dataclasses.replace(settings, hold=("tool.rz",))
+    coverage = joint_coverage(method, plan, held, cell, None)
+    assert coverage["from_reference"] == [] and coverage["resolved_by_reference"] == []
+    assert "J6" in coverage["from_measurements"] and coverage["not_calibrated"] == {}
+    assert "J6 with --hold/--prior on tool" in coverage["text"]

@@ -219,6 +219,47 @@ def test_a_swapped_joint_the_run_could_not_calibrate_never_becomes_a_reference(
         assert not (tmp_path / "ref.json").exists()
 
 
+def test_a_resume_that_names_another_swap_keeps_the_earlier_one(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """J1 10 deg off, declared swapped, not calibrated (JOINTS_MISSING). A resume that
+    declares J2 adds it: J1 stays declared (run.json, a note says so), the run is no PASS,
+    and `reference record` refuses it. A hand-edited result.json that drops the swap does
+    not make a reference either: record reads the swaps from run.json."""
+    scenario = default_sim_scenario()
+    scenario["truth"] = {**scenario["truth"], "zero_errors": [
+        math.radians(10.0), -0.001, 0.0015, -0.002, 0.001, 0.0005]}
+    scenario["server"] = {**scenario.get("server", {}), "offset_limit_rad": 0.5}
+    world = tmp_path / "world.json"
+    world.write_text(json.dumps(scenario))
+    out = tmp_path / "run"
+    assert main(["calibrate", "--robot", "sim", "--scenario", str(world), "--swapped", "J1",
+                 "--known", "none", "--no-report", "--out", str(out)]) == 7
+    # result.json hand-edited to drop the swap: run.json still says J1
+    edited = json.loads((out / "result.json").read_text())
+    edited["settings"]["swapped"] = []
+    (out / "result.json").write_text(json.dumps(edited))
+    capsys.readouterr()
+    assert main(["reference", "record", "--run", str(out), "--out",
+                 str(tmp_path / "edited.json"), "--force"]) == 2
+    assert "J1 was declared swapped" in capsys.readouterr().err
+    assert not (tmp_path / "edited.json").exists()
+    # the resume names J2 only: J1 stays declared
+    code = main(["calibrate", "--resume", str(out), "--swapped", "J2", "--push",
+                 "--no-report"])
+    err = capsys.readouterr().err
+    document = json.loads((out / "result.json").read_text())
+    outcome = document["outcome"]
+    assert code == 7 and outcome["verdict"] != "PASS", outcome["headline"]
+    assert "J1 declared swapped and not calibrated" in outcome["headline"]
+    assert ("note: J1 stays declared swapped (an earlier --swapped of this run): a resume "
+            "adds swapped joints, it cannot un-declare one") in err
+    assert json.loads((out / "run.json").read_text())["settings"]["swapped"] == [1, 2]
+    assert document["settings"]["swapped"] == [1, 2]
+    assert main(["reference", "record", "--run", str(out), "--out",
+                 str(tmp_path / "ref.json")]) == 2
+    assert "J1 was declared swapped" in capsys.readouterr().err
+    assert not (tmp_path / "ref.json").exists()
+
 def test_a_swapped_joint_the_robot_does_not_have_is_refused_before_moving(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "run"
