@@ -140,6 +140,7 @@ def run_record(args: argparse.Namespace) -> int:
           f"({reference.method} on {reference.robot_model}"
           f"{', serial ' + reference.robot_serial if reference.robot_serial else ''}) "
           f"in {out}; use it with: hostpc calibrate --reference {out}{rig} ...")
+    print(reference.distances_line())
     for line in _zeros_taken_as_good(result):
         print(line)
     return 0

@@ -140,3 +140,17 @@ def test_recording_names_the_zeros_it_takes_as_good() -> None:
     lines = _zeros_taken_as_good(result)
     assert len(lines) == 1 and lines[0].startswith("note: J6 was not calibrated by runs/first")
     assert "+0.00000 deg" in lines[0] and "as good" in lines[0]
+
+
+def test_a_frames_distance_from_its_nominal_is_its_largest_point_move_and_its_turn() -> None:
+    from hostpc.calibrate.reference import ReferenceFrame
+
+    pose = ReferenceFrame("target", ("x", "y", "z", "rx", "ry", "rz"), np.zeros(6),
+                          np.array([0.03, 0.04, 0.0, 0.0, 0.0, math.radians(2.0)]),
+                          np.eye(6))
+    move, turn = pose.distance_from_nominal()
+    assert move == pytest.approx(0.05) and math.degrees(turn) == pytest.approx(2.0)
+    markers = ReferenceFrame("markers", ("smr1.x", "smr1.y", "smr1.z", "smr2.x", "smr2.y",
+                                         "smr2.z"), np.zeros(6),
+                             np.array([0.001, 0.0, 0.0, 0.0, 0.0, -0.002]), np.eye(6))
+    assert markers.distance_from_nominal() == pytest.approx((0.002, 0.0))

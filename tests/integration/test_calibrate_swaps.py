@@ -184,17 +184,25 @@ def test_a_declared_swap_on_a_joint_the_run_cannot_calibrate_is_never_a_pass(
         "tool frame surveyed), or set J6 with the robot maker's zeroing procedure")
 
 
+def j1_ten_degrees_off(tmp_path: Path, **server: float) -> Path:
+    """A default simulated world whose J1 zero is 10 deg off (the others a few mdeg), with
+    these server settings; its scenario file."""
+    scenario = default_sim_scenario()
+    scenario["truth"] = {**scenario["truth"], "zero_errors": [
+        math.radians(10.0), -0.001, 0.0015, -0.002, 0.001, 0.0005]}
+    scenario["server"] = {**scenario.get("server", {}), **server}
+    world = tmp_path / "world.json"
+    world.write_text(json.dumps(scenario))
+    return world
+
+
 def test_a_swapped_joint_the_run_could_not_calibrate_never_becomes_a_reference(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """J1 10 deg off, declared swapped, every frame estimated: J1 is not calibrated. The run
     does not propose a reference from itself, and `hostpc reference record` refuses it (a
     reference from it takes the 10 deg for the target's place: the next run would PASS with
     J1 still 10 deg off)."""
-    scenario = default_sim_scenario()
-    scenario["truth"] = {**scenario["truth"], "zero_errors": [
-        math.radians(10.0), -0.001, 0.0015, -0.002, 0.001, 0.0005]}
-    world = tmp_path / "world.json"
-    world.write_text(json.dumps(scenario))
+    world = j1_ten_degrees_off(tmp_path)
     out = tmp_path / "run"
     code = main(["calibrate", "--robot", "sim", "--scenario", str(world), "--swapped", "J1",
                  "--known", "none", "--no-report", "--out", str(out)])
@@ -219,18 +227,33 @@ def test_a_swapped_joint_the_run_could_not_calibrate_never_becomes_a_reference(
         assert not (tmp_path / "ref.json").exists()
 
 
+def test_a_reference_recorded_after_an_undeclared_swap_says_how_far_its_frames_moved(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """J1 10 deg off and NOT declared swapped, every frame estimated: the run cannot know, J1
+    is not calibrated, and the reference it records takes the 10 deg for the target's place.
+    `reference record` says how far each frame lies from the cell's nominal (review: the
+    target was 83 mm off with no word), so the technician can see it before using it."""
+    world = j1_ten_degrees_off(tmp_path)
+    out = tmp_path / "run"
+    assert main(["calibrate", "--robot", "sim", "--scenario", str(world), "--known", "none",
+                 "--no-report", "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["reference", "record", "--run", str(out), "--out",
+                 str(tmp_path / "ref.json")]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines()
+                if x.startswith("from the cell's nominal: "))
+    target = float(line.split("target ", 1)[1].split(" mm", 1)[0])
+    assert target > 50.0, line  # the 10 deg about J1 moved the fitted target by ~80 mm
+    assert "check the robot's zeros" in line
+
+
 def test_a_resume_that_names_another_swap_keeps_the_earlier_one(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """J1 10 deg off, declared swapped, not calibrated (JOINTS_MISSING). A resume that
     declares J2 adds it: J1 stays declared (run.json, a note says so), the run is no PASS,
     and `reference record` refuses it. A hand-edited result.json that drops the swap does
     not make a reference either: record reads the swaps from run.json."""
-    scenario = default_sim_scenario()
-    scenario["truth"] = {**scenario["truth"], "zero_errors": [
-        math.radians(10.0), -0.001, 0.0015, -0.002, 0.001, 0.0005]}
-    scenario["server"] = {**scenario.get("server", {}), "offset_limit_rad": 0.5}
-    world = tmp_path / "world.json"
-    world.write_text(json.dumps(scenario))
+    world = j1_ten_degrees_off(tmp_path, offset_limit_rad=0.5)
     out = tmp_path / "run"
     assert main(["calibrate", "--robot", "sim", "--scenario", str(world), "--swapped", "J1",
                  "--known", "none", "--no-report", "--out", str(out)]) == 7
