@@ -79,9 +79,14 @@ class JointOutcome:
     fix: str | None
 
     @property
+    def calibrated(self) -> bool:
+        """Calibrated from the data (and, if pushed, not failed in verification)."""
+        return self.status == "calibrated"
+
+    @property
     def on_robot(self) -> bool:
         """Calibrated from data and, if pushed, verified (station register 14)."""
-        return self.status == "calibrated" and (not self.pushed or self.verified is True)
+        return self.calibrated and (not self.pushed or self.verified is True)
 
     def to_dict(self) -> JsonObject:
         return {"joint": self.joint, "label": self.label, "status": self.status,
@@ -320,7 +325,7 @@ def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[
                 intent_open: bool, swapped: tuple[int, ...]) -> RobotOutcome:
     """The outcome with its headline and next command filled in."""
     joints = outcome.joints
-    good = [j.joint for j in joints if j.status == "calibrated"]
+    good = [j.joint for j in joints if j.calibrated]
     bad = [j for j in joints if j.source != "data"]
     done = ("verified" if outcome.verified else "pushed, NOT verified" if outcome.pushed
             else "fitted, not pushed")
@@ -439,8 +444,7 @@ def unknown_swapped_zeros(joints: Sequence[JointOutcome] | Sequence[JointSource]
     """The joints declared swapped (`--swapped`) that the run did not calibrate: their
     zeros are unknown, and every frame the run estimated carries their error (a reference
     recorded from the run would take it for the cell's geometry)."""
-    calibrated = {j.joint for j in joints
-                  if (j.status == "calibrated" if isinstance(j, JointOutcome) else j.calibrated)}
+    calibrated = {j.joint for j in joints if j.calibrated}
     return tuple(sorted({int(n) for n in swapped} - calibrated))
 
 
