@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from protocol import DEFAULT_PORT
-from protocol.auth import read_token_file
+from protocol.auth import is_loopback, read_token_file
 
 if TYPE_CHECKING:
     from controller_stub.network.modbus_io import ModbusIoServer
@@ -217,24 +217,13 @@ def _exposure_refusal(host: str, token: str, scenario: Any) -> str | None:
     """Why serving on `host` with `token` is refused, or None: a non-loopback address with
     the public default token would let anyone on the network move the robot."""
     default_token = type(scenario.server).model_fields["token"].default
-    if token != default_token or _is_loopback(host):
+    if token != default_token or is_loopback(host):
         return None
     return (
         f"--host {host} is reachable from the network and the token is the public default "
         f"{default_token!r}; give another with --token-file (or ${TOKEN_ENV}, or server.token "
         "in the scenario)"
     )
-
-
-def _is_loopback(host: str) -> bool:
-    import ipaddress
-
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host.strip("[]")).is_loopback
-    except ValueError:
-        return False  # a host name: may resolve to anything
 
 
 def main(argv: list[str] | None = None) -> int:

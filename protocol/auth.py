@@ -74,3 +74,16 @@ def read_token_file(path: Path) -> str:
     if not token:
         raise ValueError(f"--token-file {path}: the token is empty")
     return token
+
+
+def is_loopback(host: str) -> bool:
+    """Whether a server bound to `host` is reachable from this machine only: "localhost" or
+    a loopback address. A host name is not (it may resolve to anything)."""
+    import ipaddress
+
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False

@@ -82,18 +82,25 @@ def _open(args: argparse.Namespace) -> Any:
 def run_serve(args: argparse.Namespace) -> int:
     """`hostpc camera serve`: returns the exit code (0 after Ctrl-C / SIGTERM)."""
     from hostpc.methods.cell import load_cell_file
-    from hostpc.robots.connect import resolve_token
+    from hostpc.robots.connect import DEFAULT_TOKEN, TOKEN_ENV, resolve_token
     from hostpc.sensors.camera_service import CameraService
+    from protocol.auth import is_loopback
 
     if not 0 <= args.port < 65536:
         raise InputError(f"--port {args.port}: out of range 0..65535")
+    token = resolve_token(args.token)
+    if token == DEFAULT_TOKEN and not is_loopback(args.host):
+        raise InputError(
+            f"--host {args.host} is reachable from the network and the token is the public "
+            f"default {DEFAULT_TOKEN!r}: anyone there could take pictures through it; give "
+            f"another with --token-file FILE (mode 0600) or ${TOKEN_ENV}")
     description = load_cell_file(args.describe) if args.describe else None
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", stream=sys.stderr)
     from hostpc.serving.log_limits import limit_logging
 
     limit_logging("asyncio")  # a peer can make it write: one line per record, a few per interval
     with _open(args) as camera:
-        service = CameraService(camera, resolve_token(args.token), description)
+        service = CameraService(camera, token, description)
         try:
             asyncio.run(_serve(service, args.host, args.port))
         except KeyboardInterrupt:

@@ -91,6 +91,9 @@ def _add_token_file_options(subparsers: argparse._SubParsersAction) -> None:  # 
         if "--token" in options and "--token-file" not in options:
             command.add_argument("--token-file", metavar="FILE",
                                  help="read the shared token from FILE (mode 0600)")
+        for action in command._actions:  # a command's own actions (`camera serve`)
+            if isinstance(action, argparse._SubParsersAction):
+                _add_token_file_options(action)
 
 
 def _token_from_options(args: argparse.Namespace) -> None:
