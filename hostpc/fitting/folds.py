@@ -29,9 +29,13 @@ import numpy as np
 
 from hostpc.dataset import Samples
 
-POSE_TOLERANCE_RAD = 1e-4
-"""Two samples are of one pose if every joint agrees within this (rad; 0.006 deg, m for a
-prismatic joint): far below the spacing of planned poses, far above encoder noise."""
+POSE_TOLERANCE_RAD = 1e-3
+"""Two samples are of one pose if every joint agrees within this (rad; 0.057 deg, m for a
+prismatic joint): far below the spacing of planned poses (degrees), far above the read-back
+of one commanded pose (encoder noise, servo error: a pose measured twice and read back with
+5e-5 rad of noise per joint split into two poses at the former 1e-4, and its held-out
+figure came out 4-6 % optimistic, review of the ninth stop). The poses of the public data
+sets and the examples group alike at 1e-4, 1e-3 and 3e-3."""
 
 FOLD_SEED = 20261126
 """Seed of the permutation that deals poses to folds (fixed: the same folds on every run)."""
