@@ -126,6 +126,10 @@ class RobotOutcome:
     refusal: PushRefusal | None = None
     """The refusal's structured form (which guard, the next command), None when the
     journal predates it."""
+    unknown_zeros: tuple[int, ...] = ()
+    """The joints declared swapped that the run did not calibrate (`unknown_swapped_zeros`),
+    known when the next command was written: it never proposes a reference from this run
+    then (result.json `unknown_zeros`; a result without the key predates the rule)."""
 
     @property
     def exit_code(self) -> int:
@@ -139,7 +143,8 @@ class RobotOutcome:
                 "missing_required": list(self.missing_required),
                 "headline": self.headline, "next_command": self.next_command,
                 "events": [e.to_dict() for e in self.events],
-                "refused_reason": self.refused_reason, "exit_code": self.exit_code}
+                "refused_reason": self.refused_reason, "exit_code": self.exit_code,
+                "unknown_zeros": list(self.unknown_zeros)}
 
 
 def parse_required_joints(text: str | None, n_joints: int | None = None) -> tuple[int, ...]:
@@ -337,13 +342,13 @@ def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[
     bad_text = _not_calibrated_text(joints, bad)
     verdict = outcome.verdict
     run = run_dir
+    unknown = unknown_swapped_zeros(joints, swapped)
     next_command: str | None = None
     if verdict == "PASS":
         head = f"PASS: {good_text}" + (f"; {bad_text}" if bad_text else "")
     elif verdict == "JOINTS_MISSING":
         missing = joint_names(joints, outcome.missing_required)
         head = f"JOINTS_MISSING: {good_text}; {bad_text} (required: {missing})"
-        unknown = unknown_swapped_zeros(joints, swapped)
         if unknown:  # a reference from this run would absorb the swapped zero's error
             head += f"; {_unknown_zero_text(joints, unknown)}"
             next_command = _swap_fix_command(joints, outcome, new_run, known, unknown)
@@ -386,7 +391,8 @@ def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[
         next_command = f"hostpc calibrate --resume {run}"
     if intent_open and verdict == "ERROR":
         next_command = f"hostpc calibrate --resume {run}"
-    return dataclasses.replace(outcome, headline=head, next_command=next_command)
+    return dataclasses.replace(outcome, headline=head, next_command=next_command,
+                               unknown_zeros=unknown)
 
 
 def _constraints_text(joints: Sequence[JointOutcome]) -> str:

@@ -40,7 +40,6 @@ from hostpc.dataset import Dataset
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
 from hostpc.fitting.priors import (
-    Constraints,
     analyse_with_constraints,
     constraints_for,
     with_constraints,
@@ -201,9 +200,14 @@ def joint_coverage(method: Method, plan: Plan, settings: RunSettings, cell: Cell
     """Which joints the planned poses calibrate with this run's frames: from the
     measurements (with the known frames), from the reference, or not at all (and why):
     the plan's `joints` info, in its JSON form (run.json, result.json).
-    Linear analysis at the nominal model of the fit poses; nothing moves."""
+    Linear analysis at the nominal model of the fit poses; nothing moves. Derived again
+    from the run's current settings on every start and resume (a resume may change the
+    reference and the known frames, while it reuses the plan made at the run's start), so
+    it predicts its own sigmas (design.parameter_covariance, as the plan does) to tell a
+    joint its --prior decides."""
     from hostpc.model.measurements.predict import predict
     from hostpc.model.problem import build_problem
+    from hostpc.planning.design import parameter_covariance
 
     user = with_constraints(method.design_dataset(plan.q), settings.priors, settings.hold)
     dataset, priors = reference_priors(reference, user, settings)
@@ -233,7 +237,9 @@ def joint_coverage(method: Method, plan: Plan, settings: RunSettings, cell: Cell
                  if user_constraints is not None else set())
     prior_sigma = ({p.name: float(p.sigma) for p in user_constraints.priors}
                    if user_constraints is not None else {})
-    sigma = _predicted_sigmas(A, constraints, full.fixed)
+    # each parameter's predicted sigma with the priors' rows, held or unidentifiable: NaN
+    rows = A if constraints is None else np.vstack([A, constraints.jacobian(A.shape[1])])
+    sigma = np.sqrt(np.diag(parameter_covariance(rows, ~full.fixed)))
     measured, referenced, resolved, held, from_prior = [], [], [], [], []
     missing: dict[str, str] = {}
     held_joints, by_user = [], []
@@ -289,18 +295,6 @@ def joint_coverage(method: Method, plan: Plan, settings: RunSettings, cell: Cell
             "resolved_by_reference": resolved, "held": held, "held_joints": held_joints,
             "from_prior": from_prior,
             "not_calibrated": missing, "text": text}
-
-
-def _predicted_sigmas(A: np.ndarray, constraints: Constraints | None,
-                      fixed: np.ndarray) -> np.ndarray:
-    """(P,) each parameter's predicted sigma from the whitened Jacobian A and the priors'
-    rows, the fixed (held or unidentifiable) parameters left out (NaN)."""
-    rows = A if constraints is None else np.vstack([A, constraints.jacobian(A.shape[1])])
-    free = ~np.asarray(fixed, bool)
-    sigma = np.full(A.shape[1], np.nan)
-    sub = rows[:, free]
-    sigma[free] = np.sqrt(np.clip(np.diag(np.linalg.pinv(sub.T @ sub)), 0.0, None))
-    return sigma
 
 
 def with_joint_coverage(plan: Plan, method: Method, settings: RunSettings, cell: Cell,

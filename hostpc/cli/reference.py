@@ -63,8 +63,13 @@ def _refusal(run: Path, result: RunResult, swapped: Sequence[int], force: bool
     unknown = _unknown_swapped_zeros(result, swapped)
     if unknown:  # even with --force: the frames the run estimated carry the swapped zero
         names = ", ".join(f"J{n}" for n in unknown)
-        stored = str((result.outcome or {}).get("next_command") or "")
-        honest = stored if stored and "reference record" not in stored else (  # an older run's
+        outcome = result.outcome or {}
+        stored = str(outcome.get("next_command") or "")
+        # written knowing these zeros unknown (outcome.unknown_zeros), the stored command
+        # proposes no reference from this run; an older run's (no unknown_zeros) may
+        recorded = outcome.get("unknown_zeros")
+        knowing = isinstance(recorded, list) and set(unknown) <= set(recorded)
+        honest = stored if stored and knowing else (
             "hostpc calibrate ... --reference REFERENCE_FROM_BEFORE_THE_SWAP.json, or "
             f"--known FRAME with that frame surveyed, or set {names} with the robot maker's "
             "zeroing procedure")

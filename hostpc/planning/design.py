@@ -393,14 +393,25 @@ def _concatenate(parts: Sequence[np.ndarray]) -> np.ndarray:
 def predicted_covariance(design: Design) -> np.ndarray:
     """(P, P) covariance of the parameters from the design (free part; NaN where fixed
     or where the design cannot determine them)."""
-    P = len(design.names)
     free = design.free if design.by_prior is None else design.free | design.by_prior
-    A = design.A[:, :, free].reshape(-1, int(np.count_nonzero(free)))
+    rows = design.A.reshape(-1, len(design.names))
+    if rows.shape[0] == 0:  # no pose: the prior alone predicts nothing
+        return np.full((len(design.names),) * 2, np.nan)
+    if design.prior is not None:
+        rows = np.vstack([rows, design.prior])
+    return parameter_covariance(rows, free)
+
+
+def parameter_covariance(rows: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """(P, P) covariance of the parameters from whitened rows (M, P) (the measurements'
+    Jacobian and any prior rows under it): the free (P,) parameters' part, NaN where not
+    free, and NaN everywhere when the rows cannot determine the free parameters."""
+    free = np.asarray(free, bool)
+    P = rows.shape[1]
+    A = rows[:, free]
     cov = np.full((P, P), np.nan)
     if A.shape[0] == 0:
         return cov
-    if design.prior is not None:
-        A = np.vstack([A, design.prior[:, free]])
     _, s, Vt = np.linalg.svd(A, full_matrices=False)
     if s.size < A.shape[1] or s.size == 0 or s[-1] <= s[0] * 1e-10:  # fewer rows: rank-poor
         return cov

@@ -28,6 +28,7 @@ from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException
 
 from hostpc.errors import ConnectionFailed, ControllerError, InputError, RequestTimeout
+from hostpc.transport.waiting import wait_for_reply
 
 logger = logging.getLogger(__name__)
 
@@ -64,11 +65,14 @@ class ModbusIo:
     ) -> ModbusIo:
         """Connect to `host:port`; ConnectionFailed if it cannot. options: see the class."""
         client = AsyncModbusTcpClient(host, port=port, timeout=timeout, retries=1)
-        try:
-            connected = await asyncio.wait_for(client.connect(), timeout + 1.0)
+        try:  # a cancel in the step the connection opens is not lost (transport.waiting)
+            connected = await wait_for_reply(client.connect(), timeout + 1.0)
         except (TimeoutError, OSError, ConnectionException) as exc:
             client.close()
             raise ConnectionFailed(f"Modbus {host}:{port}: cannot connect: {exc}") from exc
+        except asyncio.CancelledError:  # SIGTERM, Ctrl-C: the connection is not kept
+            client.close()
+            raise
         if not connected:
             client.close()
             raise ConnectionFailed(f"Modbus {host}:{port}: cannot connect")

@@ -310,6 +310,8 @@ class UrLink:
         """Best effort, within STOP_TIMEOUT_S: stopJ(INTERRUPT_DECELERATION) after a move to
         the UR angles target (6,) was cancelled, and wait for the arm at rest; says what
         happened and where the arm stopped (logged in UR angles)."""
+        # plain wait_for: only ever run for a cancellation its caller re-raises, so a second
+        # one lost here (CPython gh-86296, hostpc.transport.waiting) changes nothing
         try:
             await asyncio.wait_for(
                 self.call(self.control.stopJ, INTERRUPT_DECELERATION, False), STOP_TIMEOUT_S)
@@ -341,7 +343,7 @@ class UrLink:
         for name, interface, step in steps:
             if interface is None:
                 continue
-            try:
+            try:  # a cancel lost with a step's result (gh-86296) only lets closing go on
                 await asyncio.wait_for(in_daemon_thread(step, interface),
                                        CLOSE_STEP_TIMEOUT_S)
             except Exception as exc:  # closing must go on

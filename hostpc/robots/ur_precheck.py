@@ -17,6 +17,7 @@ import struct
 from dataclasses import dataclass
 
 from hostpc.errors import ConnectionFailed
+from hostpc.transport.waiting import wait_for_reply
 
 RTDE_PORT = 30004
 DASHBOARD_PORT = 29999
@@ -62,7 +63,8 @@ async def _open(host: str, port: int, timeout: float, what: str) -> tuple[
     asyncio.StreamReader, asyncio.StreamWriter
 ]:
     try:
-        return await asyncio.wait_for(asyncio.open_connection(host, port), timeout)
+        return await wait_for_reply(asyncio.open_connection(host, port), timeout,
+                                    lambda opened: opened[1].close())
     except TimeoutError as exc:
         raise ConnectionFailed(
             f"UR {what} {host}:{port}: no connection within {timeout:.1f} s"

@@ -41,6 +41,7 @@ import numpy as np
 from hostpc.errors import ZerocalError
 from hostpc.json_object import JsonObject
 from hostpc.sensors.stereo_camera import StereoCamera, StereoPair
+from hostpc.transport.waiting import wait_for_reply
 from protocol import messages as m
 from protocol.admission import AuthThrottle, LogBudget, SessionSlots
 from protocol.connection import Connection
@@ -154,7 +155,7 @@ class CameraService:
             timeout = IDLE_TIMEOUT_S if conn.state is ConnectionState.READY \
                 else handshake_deadline - loop.time()
             try:
-                data = await asyncio.wait_for(reader.read(READ_CHUNK), max(timeout, 0.0))
+                data = await wait_for_reply(reader.read(READ_CHUNK), max(timeout, 0.0))
             except (TimeoutError, ConnectionError, OSError):
                 break
             events = conn.receive_data(data)
@@ -232,7 +233,7 @@ async def _closed(writer: asyncio.StreamWriter) -> None:
     """Close `writer` and wait (briefly) until it is."""
     if not writer.is_closing():
         writer.close()
-    with contextlib.suppress(Exception):
+    with contextlib.suppress(Exception):  # a cancel lost here (gh-86296): the session ends
         await asyncio.wait_for(writer.wait_closed(), CLOSE_DRAIN_S)
 
 

@@ -132,7 +132,7 @@ class ConnectionGuard:
         for connection in list(self._by_transport.values()):
             connection.close()
         if self._server is not None:
-            with contextlib.suppress(Exception):
+            with contextlib.suppress(Exception):  # closing: a cancel lost here is harmless
                 await asyncio.wait_for(self._server.wait_closed(), 5.0)
 
     def now(self) -> float:

@@ -113,7 +113,8 @@ class Station:
                 self._serve_unacknowledged()
             while not self._stopping.is_set():
                 await self._poll_command()
-                with contextlib.suppress(TimeoutError):
+                with contextlib.suppress(TimeoutError):  # a cancel lost (gh-86296) with
+                    # the stop event (its only result) ends the loop all the same
                     await asyncio.wait_for(self._stopping.wait(), 0.1)
         finally:
             heartbeat.cancel()

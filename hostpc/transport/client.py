@@ -445,7 +445,7 @@ class ControllerClient:
             return "the link is down, abort not sent"
         try:
             future = link.send(m.Abort(id=link.conn.next_id()))
-            reply = await asyncio.wait_for(future, ABORT_AFTER_TIMEOUT_S)
+            reply = await wait_for_reply(future, ABORT_AFTER_TIMEOUT_S)
         except (TimeoutError, _LinkLostError, OSError, LocalProtocolError) as exc:
             logger.warning("abort of a motion failed: %s", str(exc) or type(exc).__name__)
             return "abort sent, not confirmed"

@@ -5,7 +5,10 @@ same loop step as its caller was cancelled, and the cancellation is lost (CPytho
 fixed in 3.12): a SIGTERM or Ctrl-C (hostpc.cli.termination) that came with a controller's
 reply went unheard and the run went on to push (seen under load,
 test_sigterm_stops_cleanly_and_a_sim_resume_keeps_time_increasing). Every wait of the
-transport for a reply, an IO edge, a connection or a handshake goes through `wait_for_reply`.
+transport for a reply, an abort, an IO edge, a connection or a handshake goes through
+`wait_for_reply`, and so does every wait outside it whose result a run goes on with (the UR
+pre-check, the Modbus connection, the camera service's reads); a plain `asyncio.wait_for`
+elsewhere waits on clean-up only and says why a lost cancel is harmless there.
 """
 
 from __future__ import annotations

@@ -225,6 +225,22 @@ def test_a_swapped_joint_the_run_could_not_calibrate_never_becomes_a_reference(
                 "and this run did not calibrate it: its zero is unknown") in err
         assert err.endswith(f"next: {outcome['next_command']}")
         assert not (tmp_path / "ref.json").exists()
+    assert outcome["unknown_zeros"] == [1]  # the fact the stored next command was written on
+    # result.json of a run made before the rule (no unknown_zeros): its next command may
+    # propose the reference, in words that need not say "reference record"; the refusal
+    # names the honest ways, never the stored command
+    older = {k: v for k, v in outcome.items() if k != "unknown_zeros"}
+    for stored in (f"hostpc reference record --run {out} --out {out}.cell_ref.json && "
+                   f"hostpc calibrate --robot sim --reference {out}.cell_ref.json",
+                   "hostpc calibrate --robot sim --known target --require-joints 1"):
+        (out / "result.json").write_text(json.dumps(
+            {**document, "outcome": {**older, "next_command": stored}}))
+        assert main(["reference", "record", "--run", str(out), "--out",
+                     str(tmp_path / "ref.json")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.endswith("next: hostpc calibrate ... --reference REFERENCE_FROM_BEFORE_THE_"
+                            "SWAP.json, or --known FRAME with that frame surveyed, or set J1 "
+                            "with the robot maker's zeroing procedure"), err
 
 
 def test_a_reference_recorded_after_an_undeclared_swap_says_how_far_its_frames_moved(
