@@ -58,18 +58,11 @@ def _declared_unit(path: str | os.PathLike[str], key: str, units: tuple[str, str
 def length_unit_hint(dataset: Dataset, declared: str, chain: Chain | None = None,
                      declared_angle: str = "rad") -> str:
     """The declared length unit, the span of the measured positions' distances in the file's
-    numbers, and the unit that span suggests when it tells one. With the dataset's
+    numbers, and the unit that span suggests when it tells one. Else, with the dataset's
     ``chain``, for a kind whose positions are world-frame points (the kinds hostpc import
-    writes): first a unit slip (``unit_slip``) when the points do not spread as the
-    robot's motion says."""
-    from hostpc.dataset.kind_registry import csv_row_kinds
-
+    writes): a unit slip (``unit_slip``) when the points do not spread as the robot's
+    motion says."""
     p = dataset.samples.p
-    if chain is not None and p is not None and dataset.method in csv_row_kinds():
-        slip = unit_slip(chain, dataset.samples.q, p, declared, declared_angle)
-        if slip is not None:
-            return (f"{unit_slip_sentence(slip, 'units.length', 'units.angle', chain.name)} "
-                    "(re-import with the units the numbers are in, or set the file's units)")
     check = f"units.length is {declared}: check that the numbers are in {declared}"
     if p is None or not np.isfinite(p).any():
         return check
@@ -81,6 +74,13 @@ def length_unit_hint(dataset: Dataset, declared: str, chain: Chain | None = None
         return f"{span}: metres? set units.length m"
     if declared == "m" and lo >= FAR_M:
         return f"{span}: millimetres? set units.length mm"
+    from hostpc.dataset.kind_registry import csv_row_kinds
+
+    if chain is not None and dataset.method in csv_row_kinds():
+        slip = unit_slip(chain, dataset.samples.q, p, declared, declared_angle)
+        if slip is not None:
+            return (f"{unit_slip_sentence(slip, 'units.length', 'units.angle', chain.name)} "
+                    "(re-import with the units the numbers are in, or set the file's units)")
     return f"{check} (the positions span {lo:.3g}-{hi:.3g})"
 
 

@@ -152,3 +152,20 @@ def test_real_sets_get_no_unit_warning(tmp_path: Path, capsys: pytest.CaptureFix
     assert SLIP not in capsys.readouterr().err
     document = json.loads((tmp_path / "d.json").read_text())
     assert document["samples"]
+
+
+def test_fit_says_the_slip(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`hostpc fit`: the units hint of a fit 100x above the stated noise names the joint
+    values that look too small; +geometry on metres read as mm is far below its band and
+    its geometry implausible (before: "converged: yes")."""
+    csv = _tracker_csv(tmp_path / "tracker.csv")
+    deg, mm = tmp_path / "deg.json", tmp_path / "mm.json"
+    _import(capsys, csv, deg, "--sigma", "2e-5", "--joint-unit", "deg")
+    _import(capsys, csv, mm, "--sigma", "0.02", "--length-unit", "mm")
+    assert main(["fit", str(deg), "--cv-folds", "0"]) == 0
+    line = capsys.readouterr().out.splitlines()[1]
+    assert "every revolute joint spans under" in line and "(rad read as deg?)" in line
+    assert main(["fit", str(mm), "--effects", "+geometry", "--cv-folds", "0"]) == 0
+    out = capsys.readouterr().out
+    assert "is far below its band" in out.splitlines()[1]
+    assert "warning: the fitted geometry is implausible: geometry.a2" in out
