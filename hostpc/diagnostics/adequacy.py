@@ -7,8 +7,8 @@ probability of a chi-square as large as its own is at least ``ADEQUACY_P_MIN``
 below the band is no sign of a missing effect (the stated covariances are pessimistic); one
 *far* below it (``chi2_far_below``) is no adequate model either: the stated noise is not the
 instrument's, or the model absorbs the data. Neither is a fitted table length that moved by
-a sizeable part of the robot (``implausible_geometry``): the numbers are in another unit, or
-of another robot. Those two make diagnose's verdict NOT adequate; the push's rule is
+more than any calibration corrects (``implausible_geometry``): the numbers are in another
+unit, or of another robot. Those two make diagnose's verdict NOT adequate; the push's rule is
 ``chi2_adequate`` alone.
 
 All lengths in metres (SI); the CLI and the report convert to mm. ``m`` is the size of one
@@ -26,6 +26,7 @@ from hostpc.diagnostics.distributions import chi2_isf, chi2_ppf, chi2_sf
 from hostpc.diagnostics.outliers import Outlier
 from hostpc.fitting import FitResult
 from hostpc.fitting.fitting import held_out_by_fold
+from hostpc.fitting.identifiability import WEAK_SIGMA_LIMIT
 from hostpc.model.layout import Problem
 
 _TABLE_LENGTH = re.compile(r"geometry\.(?P<kind>a|d)(?P<joint>\d+)$")
@@ -37,10 +38,11 @@ FAR_BELOW_NOISE_FACTOR = 10.0
 noise divided by this: residuals more than ten times smaller than the stated noise, beyond
 chance. A stated noise two or three times the real one is common pessimism (a datasheet
 figure, the import's default 0.1 mm: adequate); ten times is not an instrument's noise."""
-IMPLAUSIBLE_LENGTH_FRACTION = 0.1
-"""A fitted change of a DH/MDH table length (geometry.aJ, geometry.dJ) larger than this part
-of the chain's longest nominal table length is implausible: manufacturing and assembly move a
-link by millimetres, not by a tenth of the robot (numbers read in the wrong unit do)."""
+IMPLAUSIBLE_LENGTH_M = WEAK_SIGMA_LIMIT["m"]
+"""A fitted change of a DH/MDH table length (geometry.aJ, geometry.dJ) beyond this (50 mm,
+the largest length a real robot could need calibrated: ``detectable.PLAUSIBLE_SIZE``) is
+implausible: manufacturing and assembly move a link by millimetres (FIGAROH's TIAGo and
+TALOS: up to 16 and 27 mm); numbers read in the wrong unit move it by its whole length."""
 
 
 @dataclass(frozen=True)
@@ -182,15 +184,13 @@ def chi2_far_below(chi2: float, dof: int, p_min: float = ADEQUACY_P_MIN) -> bool
 
 def implausible_geometry(result: FitResult) -> str | None:
     """The sentence naming the fitted table lengths (geometry.aJ, geometry.dJ) that moved by
-    more than ``IMPLAUSIBLE_LENGTH_FRACTION`` of the chain's longest nominal table length,
-    largest first with their nominal values, or None (also without a geometry effect)."""
+    more than ``IMPLAUSIBLE_LENGTH_M``, largest first with their nominal values, or None
+    (also without a geometry effect)."""
     chain = result.problem.context.chain
-    longest = float(max(np.max(np.abs(chain.a)), np.max(np.abs(chain.d))))
-    limit = IMPLAUSIBLE_LENGTH_FRACTION * longest
     moved = []
     for k, name in enumerate(result.names):
         match = _TABLE_LENGTH.match(name)
-        if match is None or result.fixed[k] or not abs(result.x[k]) > limit:
+        if match is None or result.fixed[k] or not abs(result.x[k]) > IMPLAUSIBLE_LENGTH_M:
             continue
         joint = int(match["joint"])
         if not 1 <= joint <= chain.n:
@@ -202,10 +202,9 @@ def implausible_geometry(result: FitResult) -> str | None:
     listed = ", ".join(f"{name} {value * 1e3:+.1f} mm (nominal {nominal * 1e3:.1f} mm)"
                        for _, name, value, nominal in sorted(moved, reverse=True))
     return (f"the fitted geometry is implausible: {listed} moved by more than "
-            f"{IMPLAUSIBLE_LENGTH_FRACTION:.0%} of the robot's longest link "
-            f"({longest * 1e3:.1f} mm); no robot is built that far off its table: check the "
-            "length and joint units of the data (hostpc import warns of a unit slip) and "
-            "the robot model")
+            f"{IMPLAUSIBLE_LENGTH_M * 1e3:.0f} mm, beyond any correction a calibration "
+            "makes: check the length and joint units of the data (hostpc import warns of a "
+            "unit slip) and the robot model")
 
 
 def far_below_reason(chi2_dof: float, band: tuple[float, float], dof: int) -> str:

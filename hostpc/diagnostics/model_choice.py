@@ -15,7 +15,7 @@ user will be judged, on poses the fit never saw:
 - the one-standard-error rule: among the models whose held-out score is within one
   standard error of the best, the one with the fewest free parameters. A model whose fit
   did not converge, or whose fitted geometry is implausible (``adequacy.implausible_geometry``:
-  a table length moved by a tenth of the robot, as numbers read in the wrong unit make it), is
+  a table length moved by more than 50 mm, as numbers read in the wrong unit make it), is
   listed, never chosen.
 """
 
@@ -170,7 +170,7 @@ def choose_model(dataset: Dataset, *, plugins: Iterable[str | Path] = (),
         if result.converged and score is None:
             note = "too few poses for a held-out score"
         elif result.converged and implausible_geometry(result) is not None:
-            note = "implausible geometry (a link moved by a tenth of the robot): not chosen"
+            note = "implausible geometry (a table length moved by over 50 mm): not chosen"
         scores.append(ModelScore(name, tuple(effects), int(np.count_nonzero(~result.fixed)),
                                  result.converged, score, error, result.cv_rms, note))
     scored = [s for s in scores
