@@ -10,6 +10,7 @@ of hostpc ends as exit 2 here, so 1 always means "ran, and the model failed".
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 from pathlib import Path
@@ -20,7 +21,6 @@ from hostpc.cli.format import repeated_lines
 from hostpc.cli.robot_options import add_robot_override, robot_options
 from hostpc.diagnostics.advice import mm, without
 from hostpc.errors import InputError, ZerocalError
-from hostpc.json_object import dumps_indented
 
 if TYPE_CHECKING:
     from hostpc.diagnostics import Diagnosis, LadderStep, ModelCheck
@@ -109,7 +109,7 @@ def _run(args: argparse.Namespace) -> int:
     written = write_plugins(args.write_plugins, diagnosis) if args.write_plugins else []
     if args.json:
         # one write: json.dump would write each of its ~10^4 pieces
-        sys.stdout.write(dumps_indented(diagnosis.to_dict()))
+        sys.stdout.write(json.dumps(diagnosis.to_dict(), indent=2, allow_nan=False))
         sys.stdout.write("\n")
     else:
         print(format_diagnosis(diagnosis))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 
@@ -15,7 +16,6 @@ from hostpc.errors import InputError
 from hostpc.fitting import fit
 from hostpc.fitting.priors import with_constraints
 from hostpc.fitting.resampling import jackknife_std, scaled_std
-from hostpc.json_object import dumps_indented
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -124,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
                 for k, entry in enumerate(document["parameters"].values()):
                     entry[column] = float(values[k]) if math.isfinite(values[k]) else None
         document["model_adequacy"] = adequacy.to_json()
-        sys.stdout.write(dumps_indented(document))
+        sys.stdout.write(json.dumps(document, indent=2, allow_nan=False))
         sys.stdout.write("\n")
     else:
         if choice is not None:
