@@ -1,0 +1,158 @@
+"""Does the rig cache's check catch a bad cached rig? (issue 28, docs/vision.md's rig cache)
+
+A cached rig is checked against fresh chessboard views before a run uses it
+(`hostpc.kinds.stereo_target.rig_cache.check_rig`). The failure the check views are chosen
+for is a focal length error both cameras share (a fronto-parallel view hides it). For each
+world seed k, the stereo_target world's camera (the simulator's renderer, its chessboard
+views; seed k draws the views and the noise), with the camera's true rig (RMS set to a
+calibration's 0.03 px: bound 0.075 px):
+
+- the check view a calibration in that world stores (`choose_check_view` over its views
+  0..n_views-1; with --station, over the views of the warm-up world first_seed - 1, as a
+  station that calibrated the camera once: the bench worlds draw their own board poses);
+- each check made twice, on fresh captures: the true rig (a miss here is a false alarm:
+  20 captures of robot time for nothing) and both focal lengths x1.01 (a miss is a bad rig
+  used);
+- the old check (a cache file without a check view: views 0-3, view 0 and the most tilted
+  must fit) and the new one (views 0 and the stored check view, views added while no view
+  shows x1.01 above the bound).
+
+    python bench/bench_rig_check.py [--worlds 12] [--first-seed 0] [--station] [--scale 1.01]
+
+Offline (no controller, no robot time): about 1 s a world.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import dataclasses
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+from controller_stub.geometry import rpy_to_matrix  # noqa: E402
+from controller_stub.scenario.spec import Scenario  # noqa: E402
+from controller_stub.sensors.stereo_target import StereoCamera  # noqa: E402
+from hostpc.kinds.stereo_target.rig_cache import (  # noqa: E402
+    RigCheck,
+    check_rig,
+    choose_check_view,
+)
+from hostpc.robots.simulator import default_sim_scenario  # noqa: E402
+from hostpc.vision import ChessboardSpec, StereoRig  # noqa: E402
+from hostpc.vision.rig_calibration import find_chessboard  # noqa: E402
+
+CALIBRATION_RMS = 0.03
+"""The cached rig's own RMS (px): a calibration's in the simulator (its bound 0.075 px)."""
+
+
+def true_rig(scenario: dict[str, Any]) -> StereoRig:
+    """The scenario's true camera model as a rig (RMS CALIBRATION_RMS)."""
+    cam = scenario["camera"]
+    K = np.array([[cam["fx"], 0.0, cam["cx"]], [0.0, cam["fy"], cam["cy"]], [0.0, 0.0, 1.0]])
+    R_left_right = rpy_to_matrix(np.asarray(cam["right_rpy"], float))
+    return StereoRig(image_size=(cam["image_width"], cam["image_height"]), K_left=K,
+                     dist_left=np.asarray(cam["distortion"], float), K_right=K,
+                     dist_right=np.asarray(cam["distortion"], float), R=R_left_right.T,
+                     T=-R_left_right.T @ np.array([cam["baseline"], 0.0, 0.0]),
+                     rms=CALIBRATION_RMS)
+
+
+class World:
+    """World `seed`'s camera and chessboard; every capture draws fresh noise."""
+
+    def __init__(self, seed: int) -> None:
+        self.scenario = default_sim_scenario(method="stereo_target")
+        self.scenario["seed"] = seed
+        self.camera = StereoCamera(Scenario.model_validate(self.scenario))
+        board = self.scenario["chessboard"]
+        self.spec = ChessboardSpec(int(board["cols"]), int(board["rows"]),
+                                   float(board["square_size"]))
+        self.n_views = int(board["n_views"])
+
+    def corners(self, view: int) -> tuple[Any, Any]:
+        left, right = self.camera.render("chessboard", view, np.eye)
+        return find_chessboard(left, self.spec), find_chessboard(right, self.spec)
+
+    async def capture(self, view: int) -> tuple[Any, Any]:
+        return self.corners(view)
+
+    def check_view(self, rig: StereoRig) -> int:
+        """The check view a calibration of this world's views stores."""
+        views = [(v, self.corners(v)[0]) for v in range(self.n_views)]
+        chosen = choose_check_view(rig, self.spec.object_points(),
+                                   [(v, left) for v, left in views if left is not None])
+        assert chosen is not None
+        return int(chosen["view"])
+
+    def check(self, rig: StereoRig, check_view: int | None) -> RigCheck:
+        return asyncio.run(check_rig(rig, self.spec.object_points(), check_view,
+                                     self.capture))
+
+
+def worst(check: RigCheck) -> float:
+    return max(max(pair) for pair in check.rms)
+
+
+def run(worlds: int, first_seed: int, station: bool, scale: float) -> dict[str, Any]:
+    rows = []
+    stored = None
+    if station:
+        warm = World(first_seed - 1)
+        stored = warm.check_view(true_rig(warm.scenario))
+    for seed in range(first_seed, first_seed + worlds):
+        world = World(seed)
+        good = true_rig(world.scenario)
+        S = np.diag([scale, scale, 1.0])
+        bad = dataclasses.replace(good, K_left=S @ good.K_left, K_right=S @ good.K_right)
+        view = stored if station else world.check_view(good)
+        row: dict[str, Any] = {"seed": seed, "check_view": view}
+        for name, check_view in (("old", None), ("new", view)):
+            true_check, bad_check = world.check(good, check_view), world.check(bad, check_view)
+            row[name] = {"views": bad_check.views, "captures": bad_check.captures,
+                         "true_rms": worst(true_check), "true_fits": true_check.fits,
+                         "bad_rms": worst(bad_check), "caught": not bad_check.fits,
+                         "bound": bad_check.bound, "signal": bad_check.signal}
+        rows.append(row)
+        print(f"world {seed}: check view {view}; " + "; ".join(
+            f"{name} views {row[name]['views']} true {row[name]['true_rms']:.3f} "
+            f"x{scale} {row[name]['bad_rms']:.3f} px (bound {row[name]['bound']:.3f})"
+            for name in ("old", "new")), file=sys.stderr, flush=True)
+    return {"rows": rows, "station_check_view": stored}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--worlds", type=int, default=12)
+    parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument("--station", action="store_true",
+                        help="the check view of the warm-up world first_seed - 1")
+    parser.add_argument("--scale", type=float, default=1.01,
+                        help="the shared focal length error of the bad rig")
+    args = parser.parse_args(argv)
+    out = run(args.worlds, args.first_seed, args.station, args.scale)
+    rows = out["rows"]
+    print(f"| check | worlds | x{args.scale} caught | its RMS (px) min-max | true rig fits | "
+          "true rig RMS max | captures |")
+    print("|---|---|---|---|---|---|---|")
+    for name in ("old", "new"):
+        figures = [r[name] for r in rows]
+        counts = ", ".join(f"{c}: {sum(f['captures'] == c for f in figures)}"
+                           for c in sorted({f["captures"] for f in figures}))
+        print(f"| {name} | {len(rows)} | {sum(f['caught'] for f in figures)} | "
+              f"{min(f['bad_rms'] for f in figures):.3f}-{max(f['bad_rms'] for f in figures):.3f}"
+              f" | {sum(f['true_fits'] for f in figures)} | "
+              f"{max(f['true_rms'] for f in figures):.3f} | {counts} |")
+    if out["station_check_view"] is not None:
+        print(f"station: check view {out['station_check_view']} of warm-up world "
+              f"{args.first_seed - 1}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
