@@ -14,7 +14,8 @@ one default `hostpc calibrate --robot sim --method M --scenario <the method's wo
 - stereo_target as on a line (default; --no-station: a rig calibrated in every world):
   one stereo camera mounted on robot after robot, its rig calibrated once (in a warm-up
   world, first seed - 1, not counted) and reused from the station's `--rig-cache` after a
-  check against one fresh chessboard view per world (the table says so); every world's
+  check against two fresh chessboard views per world, view 0 and the check view the cache
+  stored (the table says so; docs/vision.md); every world's
   fit then shares that rig's calibration error, as a line's robots do;
 - verdict power (stereo_target only, the one hidden-effect world: `bench_verdicts.power`,
   the stereo_hidden_compliance world with --force: FAILs of --worlds forced pushes).
@@ -244,7 +245,8 @@ def run(worlds: int = 8, methods: tuple[str, ...] = METHODS, first_seed: int = 2
             if cache is not None:
                 out[method]["rig"] = ("one camera's rig, calibrated in a warm-up world not "
                                       "counted, reused from the station's --rig-cache after "
-                                      "a two-view check")
+                                      "a 2-capture check (view 0 and the cache's check "
+                                      "view)")
             print(f"  {method}: {out[method]}", file=sys.stderr, flush=True)
         if "stereo_target" in methods and not all_joints:
             forced = power(worlds, folder, first_seed)
