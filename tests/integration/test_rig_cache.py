@@ -148,8 +148,9 @@ def test_a_cache_file_names_a_check_view_the_controller_has_or_none() -> None:
         for entry, expected in (({"view": 3, "focal_signal_px": 0.3}, 3), ({"view": 79}, 79)):
             save_rig(rig, path, {CHECK_VIEW_KEY: entry})
             assert load_cached(path, 80)[1] == expected
-        for entry in ({"view": 0}, {"view": 80}, {"view": "3"}, {"view": True}, 3, {}):
-            save_rig(rig, path, {CHECK_VIEW_KEY: entry})
+        bad: tuple[Any, ...] = ({"view": 0}, {"view": 80}, {"view": "3"}, {"view": True}, 3, {})
+        for wrong in bad:
+            save_rig(rig, path, {CHECK_VIEW_KEY: wrong})
             with pytest.raises(InputError, match=CHECK_VIEW_KEY):
                 load_cached(path, 80)
 
@@ -172,7 +173,8 @@ def test_the_focal_signal_is_what_a_shared_focal_error_shows_in_a_rendered_view(
     signals = {}
     for view in (3, 4):
         left, right = (find_chessboard(image, spec)
-                       for image in camera.render("chessboard", view, np.eye))
+                       for image in camera.render("chessboard", view, lambda: np.eye(4)))
+        assert left is not None and right is not None
         signals[view] = focal_signal(rig, spec.object_points(), left)
         noise = max(view_fit(rig, spec.object_points(), left, right))
         shown = max(view_fit(bad, spec.object_points(), left, right))
