@@ -44,6 +44,7 @@ from hostpc.kinds.stereo_target.rig_cache import (  # noqa: E402
     RigCheck,
     check_rig,
     choose_check_view,
+    focal_scaled,
 )
 from hostpc.robots.simulator import default_sim_scenario  # noqa: E402
 from hostpc.vision import ChessboardSpec, StereoRig  # noqa: E402
@@ -115,8 +116,10 @@ def _scaled(rig: StereoRig, left: tuple[float, ...], right: tuple[float, ...]
 
 FAULTS: dict[str, Callable[[StereoRig], StereoRig]] = {
     "true rig": lambda rig: rig,
-    "both focal lengths x1.01": lambda rig: _scaled(rig, (1.01, 1.01, 0, 0),
-                                                    (1.01, 1.01, 0, 0)),
+    "both focal lengths x1.01": lambda rig: focal_scaled(rig, 1.01),
+    "both K x1.01 (principal points too, as the older tests)": lambda rig: dataclasses.replace(
+        rig, K_left=np.diag([1.01, 1.01, 1.0]) @ rig.K_left,
+        K_right=np.diag([1.01, 1.01, 1.0]) @ rig.K_right),
     "left focal length x1.003 (focus)": lambda rig: _scaled(rig, (1.003, 1.0, 0, 0),
                                                             (1.0, 1.0, 0, 0)),
     "left principal point (+1, +1) px (a knocked lens)": lambda rig: _scaled(

@@ -169,9 +169,19 @@ def focal_signal(rig: Any, object_points: np.ndarray, left: np.ndarray) -> float
     ideal = [cv2.projectPoints(points, np.zeros(3), np.zeros(3), K, dist)[0].reshape(-1, 2)
              for points, K, dist in ((in_left, rig.K_left, rig.dist_left),
                                      (in_right, rig.K_right, rig.dist_right))]
-    scale = np.diag([FOCAL_ERROR, FOCAL_ERROR, 1.0])
-    scaled = dataclasses.replace(rig, K_left=scale @ rig.K_left, K_right=scale @ rig.K_right)
-    return max(view_fit(scaled, obj, ideal[0], ideal[1]))
+    return max(view_fit(focal_scaled(rig, FOCAL_ERROR), obj, ideal[0], ideal[1]))
+
+
+def focal_scaled(rig: Any, factor: float) -> Any:
+    """`rig` with both cameras' focal lengths (fx, fy) times `factor`, the principal points
+    where they were (a changed focus)."""
+    def scaled(K: np.ndarray) -> np.ndarray:
+        out = np.array(K, float)
+        out[0, 0] *= factor
+        out[1, 1] *= factor
+        return out
+
+    return dataclasses.replace(rig, K_left=scaled(rig.K_left), K_right=scaled(rig.K_right))
 
 
 def choose_check_view(rig: Any, object_points: np.ndarray,
