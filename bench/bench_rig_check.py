@@ -19,6 +19,7 @@ calibration's 0.03 px: bound 0.075 px):
   shows x1.01 above the bound).
 
     python bench/bench_rig_check.py [--worlds 12] [--first-seed 0] [--station]
+    python bench/bench_rig_check.py --target-poses 40   # no chessboard: target_pose_check
 
 Offline (no controller, no robot time): a few seconds a world.
 """
@@ -161,13 +162,93 @@ def run(worlds: int, first_seed: int, station: bool) -> dict[str, Any]:
     return {"rows": rows, "station_check_view": stored}
 
 
+def _look_at(T_base_target: np.ndarray, distance: float, tilt_deg: float, azimuth: float
+             ) -> np.ndarray:
+    """(4, 4) a left camera pose `distance` m from the target centre, its line of sight
+    `tilt_deg` off the plate normal (about an in-plane axis at `azimuth`), looking at it."""
+    import cv2
+
+    normal, centre = T_base_target[:3, 2], T_base_target[:3, 3]
+    axis = T_base_target[:3, 0] * np.cos(azimuth) + T_base_target[:3, 1] * np.sin(azimuth)
+    eye = centre + distance * (cv2.Rodrigues(axis * np.radians(tilt_deg))[0] @ normal)
+    z = (centre - eye) / np.linalg.norm(centre - eye)
+    x = np.cross([0.0, 0.0, 1.0], z)
+    x /= np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+    T[:3, 3] = eye - 0.06 * x  # the pair's middle faces the target
+    return T
+
+
+def target_pose_check(poses: int, seed: int = 1) -> dict[str, Any]:
+    """The stretch measurement: can one target pose's stereo pair check the rig, with no
+    chessboard? The dot's distance from its apparent size (known radius: pi R^2 cos(view
+    angle) f^2 / (area cos^3(off-axis angle))) in each camera against the triangulated
+    one; per cached rig of FAULTS, the ratio size / stereo - 1 (%) at `poses` random
+    look-at poses (0.30-0.55 m, 0-35 deg off the plate normal) of world `seed`, and how many
+    poses fall outside the true rig's mean +- 3 sd."""
+    from hostpc.vision import TargetMeasurer
+    from hostpc.vision.target_detection import DiskBlob, detect_disk
+
+    world = World(seed)
+    radius = float(world.scenario["target"]["radius"])
+    truth = true_rig(world.scenario)
+    T_base_target = world.camera.T_base_target
+    rng = np.random.default_rng(seed)
+    ratios: dict[str, list[list[float]]] = {fault: [] for fault in FAULTS}
+    for _ in range(poses):
+        T = _look_at(T_base_target, rng.uniform(0.3, 0.55), rng.uniform(0.0, 35.0),
+                     rng.uniform(0.0, 2 * np.pi))
+        left, right = world.camera.render("target", 0, T.copy)
+        blobs = [detect_disk(image) for image in (left, right)]
+        normal = T[:3, :3].T @ T_base_target[:3, 2]  # the plate normal in the left camera,
+        normal = normal if normal[2] < 0 else -normal  # towards it
+        for fault, make in FAULTS.items():
+            rig = make(truth)
+            seen = TargetMeasurer(rig, radius).measure(left, right, normal_hint=normal)
+            p = getattr(seen, "p", None)
+            if p is None:
+                continue
+            row = []
+            for blob, K, point, n in ((blobs[0], rig.K_left, p, normal),
+                                      (blobs[1], rig.K_right, rig.R @ p + rig.T,
+                                       rig.R @ normal)):
+                assert isinstance(blob, DiskBlob)
+                r = float(np.linalg.norm(point))
+                cos_view, cos_axis = abs(n @ point) / r, point[2] / r
+                size = np.sqrt(np.pi * radius**2 * cos_view * K[0, 0] * K[1, 1]
+                               / (blob.area * cos_axis**3))
+                row.append(100.0 * (size / r - 1.0))
+            ratios[fault].append(row)
+    true = np.asarray(ratios["true rig"])
+    low, high = true.mean(axis=0) - 3 * true.std(axis=0), true.mean(axis=0) + 3 * true.std(axis=0)
+    return {fault: {"mean_pct": np.asarray(r).mean(axis=0).round(3).tolist(),
+                    "sd_pct": np.asarray(r).std(axis=0).round(3).tolist(),
+                    "outside": int(np.any((np.asarray(r) < low) | (np.asarray(r) > high),
+                                          axis=1).sum()),
+                    "poses": len(r)}
+            for fault, r in ratios.items() if r}  # a rig every pose rejects: no figure
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--worlds", type=int, default=12)
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--station", action="store_true",
                         help="the check view of the warm-up world first_seed - 1")
+    parser.add_argument("--target-poses", type=int, metavar="N",
+                        help="instead: the stretch measurement, a rig check from N target "
+                        "poses' own images (target_pose_check)")
     args = parser.parse_args(argv)
+    if args.target_poses:
+        print("| cached rig | size / stereo distance - 1, left, right (%) | sd (%) | poses "
+              "outside the true rig's +-3 sd |")
+        print("|---|---|---|---|")
+        for fault, f in target_pose_check(args.target_poses).items():
+            print(f"| {fault} | {f['mean_pct'][0]:+.3f}, {f['mean_pct'][1]:+.3f} | "
+                  f"{f['sd_pct'][0]:.3f}, {f['sd_pct'][1]:.3f} | {f['outside']} of "
+                  f"{f['poses']} |")
+        return 0
     out = run(args.worlds, args.first_seed, args.station)
     rows = out["rows"]
     print("| cached rig | check | worlds | fits | caught | worst view RMS (px) min-max | "
