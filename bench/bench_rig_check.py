@@ -133,10 +133,6 @@ FAULTS: dict[str, Callable[[StereoRig], StereoRig]] = {
 the faults the check must catch."""
 
 
-def worst(check: RigCheck) -> float:
-    return max(max(pair) for pair in check.rms)
-
-
 def run(worlds: int, first_seed: int, station: bool) -> dict[str, Any]:
     rows = []
     stored = None
@@ -152,7 +148,7 @@ def run(worlds: int, first_seed: int, station: bool) -> dict[str, Any]:
             for name, check_view in (("old", None), ("new", view)):
                 check = world.check(make(good), check_view)
                 row[fault, name] = {"views": check.views, "captures": check.captures,
-                                    "rms": worst(check), "fits": check.fits,
+                                    "rms": check.worst, "fits": check.fits,
                                     "bound": check.bound}
         rows.append(row)
         print(f"world {seed}: check view {view}; " + "; ".join(

@@ -235,13 +235,17 @@ class RigCheck:
     check: str
 
     @property
+    def worst(self) -> float:
+        """The largest RMS (px) of any checked view and image."""
+        return max(max(pair) for pair in self.rms)
+
+    @property
     def fits(self) -> bool:
-        return max(max(pair) for pair in self.rms) <= self.bound
+        return self.worst <= self.bound
 
     def said(self) -> str:
         """The check in one clause: views, worst RMS, bound, signal, which check."""
-        worst = max(max(pair) for pair in self.rms)
-        return (f"chessboard views {', '.join(map(str, self.views))}: RMS {worst:.3f} px, "
+        return (f"chessboard views {', '.join(map(str, self.views))}: RMS {self.worst:.3f} px, "
                 f"bound {self.bound:.3f} px; a x{FOCAL_ERROR} focal error would show "
                 f"{self.signal:.3f} px; {self.check}")
 
