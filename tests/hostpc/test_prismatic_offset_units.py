@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hostpc.calibrate.offline_push import load_saved_fit
 from hostpc.cli.main import main
 from hostpc.dataset.reading import dataset_from_dict
 from hostpc.errors import InputError
@@ -167,3 +168,20 @@ def test_diagnose_report_shows_the_lift_in_mm(measured: tuple[Path, np.ndarray],
     start = html.index(f">{LIFT}<")
     row = html[start:html.index("</tr>", start)]
     assert ">mm<" in row and ">deg<" not in row, row
+
+
+def test_a_fit_with_the_lifts_offset_is_never_pushed_as_an_angle(
+        measured: tuple[Path, np.ndarray], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    # a controller's zero offsets are radians (protocol/): 3 mm would be written as 3 mrad
+    path, _ = measured
+    assert main(["fit", str(path), "--cv-folds", "0", "--json"]) == 0
+    saved = tmp_path / "fit.json"
+    saved.write_text(capsys.readouterr().out)
+    with pytest.raises(InputError, match=rf"parameters\.{LIFT} is a prismatic joint's zero "
+                                         r"offset \(unit m\).*--write-urdf"):
+        load_saved_fit(saved)
+    assert load_saved_fit(saved, offsets=False).x.size  # a prediction reads it
+    # refused before any connection (nothing listens on 127.0.0.1:9: none is made)
+    assert main(["push", str(saved), "--robot", "127.0.0.1:9", "--dry-run"]) == 2
+    assert "prismatic" in capsys.readouterr().err
