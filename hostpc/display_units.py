@@ -11,6 +11,8 @@ DISPLAY_UNITS = {
     "m": ("mm", 1e3),
     # a compliance is ~1e-4 deg per N m: per kN m it shows digits ("+0.1719", not "+0.0002")
     "rad/(N m)": ("deg/(kN m)", math.degrees(1.0) * 1e3),
+    # a prismatic joint's compliance (m per N of the force along its axis): ~1e-6 m/N
+    "m/N": ("mm/kN", 1e6),
     "1": ("ppm", 1e6),
 }
 

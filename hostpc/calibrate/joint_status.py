@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hostpc.display_units import quantity
 from hostpc.fitting.identifiability import NullDirection
 from hostpc.fitting.result import FitVerdict
 from hostpc.model.joint_offsets import PushTable
@@ -126,10 +127,12 @@ def joint_sources(result: FitVerdict, n_joints: int) -> tuple[JointSource, ...]:
         sigma_prior = prior_sigma.get(name)
         std = float(np.asarray(result.std, float)[k])
         if sigma_prior is not None and prior_dominated(std, sigma_prior):
+            assert result.problem is not None  # a prior comes from the fit's problem
+            unit = result.problem.layout.units[k]  # rad, m for a prismatic joint
             out.append(JointSource(
                 j + 1, label, "prior",
-                f"determined by its --prior (+-{math.degrees(sigma_prior):.4g} deg), not by "
-                f"the data (fit sigma {math.degrees(std):.4g} deg)",
+                f"determined by its --prior (+-{quantity(sigma_prior, unit, False)}), not by "
+                f"the data (fit sigma {quantity(std, unit, False)})",
                 "more poses that move this joint, or a tighter reference"))
             continue
         out.append(JointSource(j + 1, label, "data"))

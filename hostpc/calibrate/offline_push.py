@@ -27,7 +27,7 @@ from hostpc.errors import InputError
 from hostpc.fitting.identifiability import NullDirection
 from hostpc.input_files import FIT, read_input_bytes, read_input_text
 from hostpc.json_object import JsonObject
-from hostpc.model.joint_offsets import is_offset
+from hostpc.model.joint_offsets import LENGTH_UNIT, is_offset
 from hostpc.model.joint_offsets import labels as offset_labels
 
 __all__ = ["LedgerEntry", "SavedFit", "already_pushed", "ledger_path", "load_saved_fit",
@@ -86,9 +86,11 @@ class SavedFit:
 def saved_fit_from_dict(document: Any, source: str, *, offsets: bool = True) -> SavedFit:
     """Rebuild a SavedFit from `FitResult.to_dict()`, validated first
     (`hostpc.calibrate.fit_file`: strict types, finite statistics, consistent fields, the
-    robot's joint count; joint offsets required unless ``offsets`` is False, as for a
-    prediction); InputError naming the field."""
+    robot's joint count; joint offsets required, and angles (a push), unless ``offsets`` is
+    False, as for a prediction); InputError naming the field."""
     fit = validate_fit_document(document, source, offsets=offsets)
+    if offsets:
+        _angles_only({name: entry.unit for name, entry in fit.parameters.items()}, source)
     names = tuple(fit.parameters)
     entries = list(fit.parameters.values())
     return SavedFit(
@@ -109,6 +111,19 @@ def saved_fit_from_dict(document: Any, source: str, *, offsets: bool = True) -> 
                          "kinematics": fit.robot_identity.kinematics}),
         frames=fit.frames,
     )
+
+
+def _angles_only(units: dict[str, str], source: str) -> None:
+    """A controller's zero offsets are angles (rad on the wire, protocol/): a fit with a
+    prismatic joint's offset (a length, ``joint_offsets.unit``) has none to write there;
+    InputError naming it and the way to use the fit instead (a calibrated URDF)."""
+    lengths = [name for name, unit in units.items()
+               if is_offset(name) and unit == LENGTH_UNIT]
+    if lengths:
+        raise InputError(f"{source}: parameters.{lengths[0]} is a prismatic joint's zero "
+                         f"offset (unit {LENGTH_UNIT}), and a controller's zero offsets are "
+                         "angles (rad): this fit is not pushed; write the calibrated robot "
+                         "instead: hostpc fit DATASET --write-urdf OUT.urdf")
 
 
 def load_saved_fit(path: str | Path, *, offsets: bool = True) -> SavedFit:

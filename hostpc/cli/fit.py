@@ -64,8 +64,8 @@ def add_constraint_options(parser: argparse.ArgumentParser) -> None:
     """--prior, --hold: shared with diagnose (hostpc.fitting.priors)."""
     parser.add_argument("--prior", action="append", default=[], metavar="NAME=VALUE+-SIGMA",
                         help="a parameter known to within a tolerance, units as printed "
-                        "(e.g. tool.x=0.045+-0.0005m, joint_offsets.q1=0+-0.01deg); "
-                        "repeatable")
+                        "(e.g. tool.x=0.045+-0.0005m, joint_offsets.q1=0+-0.01deg; a "
+                        "prismatic joint's offset is a length: =0+-0.1mm); repeatable")
     parser.add_argument("--hold", action="append", default=[], metavar="NAME[,NAME...]",
                         help="parameters kept at their nominal value by the fit")
 

@@ -17,7 +17,6 @@ from hostpc.diagnostics.adequacy import (
 from hostpc.display_units import DISPLAY_UNITS
 from hostpc.fitting import FitResult
 from hostpc.json_object import JsonObject
-from hostpc.model import joint_offsets
 from hostpc.model.joint_offsets import is_offset
 
 __all__ = ["display", "format_fit_summary", "format_parameter_table"]
@@ -176,11 +175,14 @@ def format_fit_summary(result: FitResult, source: str = "",
         if len(result.correlations) > 10:
             lines.append(f"  ... and {len(result.correlations) - 10} more")
     lines += repeated_lines(result)
-    offsets = [p for p in result.parameters.values() if is_offset(p.name)]
-    if offsets:
-        worst = max(abs(p.value) for p in offsets)
-        lines += ["", "largest joint offset correction: "
-                  f"{joint_offsets.degrees(worst):.4f} {joint_offsets.DISPLAY_UNIT}"]
+    largest: dict[str, float] = {}  # per unit: a revolute joint's angle, a prismatic one's length
+    for p in result.parameters.values():
+        if is_offset(p.name):
+            largest[p.unit] = max(largest.get(p.unit, 0.0), abs(p.value))
+    if largest:
+        lines += ["", "largest joint offset correction: " + ", ".join(
+            "{} {}".format(*display(value, unit)).lstrip("+")
+            for unit, value in largest.items())]
     return "\n".join(lines)
 
 

@@ -76,11 +76,12 @@ seen at all (50 mm, the bound beyond which the fit holds a length as undetermine
 ``hostpc.fitting.identifiability.WEAK_SIGMA_LIMIT``: far beyond any calibration)."""
 
 
-PLAUSIBLE_SIZE = {**WEAK_SIGMA_LIMIT, "rad/(N m)": 1e-3, "rad/rad": 0.1, "": 0.1, "1": 0.1,
-                  "1/K": 1e-3, "1/s": 1e-4, "s": 1.0}
+PLAUSIBLE_SIZE = {**WEAK_SIGMA_LIMIT, "rad/(N m)": 1e-3, "m/N": 1e-5, "rad/rad": 0.1, "": 0.1,
+                  "1": 0.1, "1/K": 1e-3, "1/s": 1e-4, "s": 1.0}
 """The largest size of a parameter, by unit, that a real robot could need calibrated: 5 deg
 and 50 mm (the fit's bounds, ``hostpc.fitting.identifiability.WEAK_SIGMA_LIMIT``), a
-compliance of 1e-3 rad/(N m) (0.057 deg per N m; real joints bend 1e-6..1e-4), a coupling
+compliance of 1e-3 rad/(N m) (0.057 deg per N m; real joints bend 1e-6..1e-4), of a
+prismatic joint 1e-5 m/N (10 mm per kN; a lift axis gives 1e-7..1e-6), a coupling
 or a scale of 10 %, an expansion of 1e-3 per K (80 times steel's), 1e-4 per s, a latency of
 1 s. A detectable size beyond it means the poses barely move the effect (a wrist joint's
 compliance with no gravity torque on it): not detectable with these poses."""

@@ -32,9 +32,11 @@ the fit reads from the problem's dataset):
 - Python: `hostpc.fit(dataset, priors=[...] or {...}, hold=[...])`.
 
 Units as printed: m, mm, um for lengths; rad, mrad, urad, deg for angles; none means the
-parameter's SI unit. An unknown name or a unit that does not fit raises InputError (one line),
-as do a value outside the dataset's physical ranges (|m| <= 100, |rad| <= 100), a sigma not
-finite or below 1e-12 (SI), and a parameter both held and given a prior.
+parameter's SI unit, the one its layout states (a joint offset's is its joint's:
+``hostpc.model.joint_offsets.unit``, rad for a revolute joint, m for a prismatic one). An
+unknown name or a unit that does not fit raises InputError (one line, naming the units
+that fit), as do a value outside the dataset's physical ranges (|m| <= 100, |rad| <= 100),
+a sigma not finite or below 1e-12 (SI), and a parameter both held and given a prior.
 """
 
 from __future__ import annotations
@@ -134,8 +136,11 @@ def _convert(name: str, number: float, unit: str, param_unit: str, what: str) ->
     if unit == param_unit:
         return number
     if unit not in _SCALE or _SCALE[unit][0] != param_unit:
+        fitting = [u for u, (base, _) in _SCALE.items() if base == param_unit]
+        give = (f"; give it in {', '.join(fitting)}" if fitting
+                else f"; give it in {param_unit} with no unit")
         raise InputError(f"prior {name}: unit {unit!r} does not fit the parameter's unit "
-                         f"{param_unit!r} ({what})")
+                         f"{param_unit!r} ({what}{give})")
     return number * _SCALE[unit][1]
 
 

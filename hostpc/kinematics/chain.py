@@ -188,10 +188,6 @@ class Chain:
             and np.array_equal(self.T_link_flange, np.eye(4))
         )
 
-    def joint_units(self) -> list[str]:
-        """Unit of each joint variable and its zero offset: ``"rad"`` or ``"m"``."""
-        return ["m" if p else "rad" for p in self.joint_is_prismatic]
-
     def kin_vector(self) -> FloatArray:
         """Nominal kinematic parameters ``[theta, d, a, alpha, beta]``, shape ``(5n,)``.
 

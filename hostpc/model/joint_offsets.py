@@ -1,14 +1,19 @@
 """The joint zero offset, the product's output: the one owner of its parameter names.
 
 The ``joint_offsets`` effect (``hostpc.model.effects.joint_space.JointOffsets``) gives every
-joint one parameter, ``dq_j = p_j`` (rad; q_true = q_cmd + p). Its full parameter name is
-the effect's name, a dot and the joint's label: ``joint_offsets.q1`` .. ``joint_offsets.qn``
-on a serial robot, ``joint_offsets.head.q1``, ``joint_offsets.left.q3``, ... on a kinematic
-tree (its chain's name before the joint, docs/dual-loop.md). Fitting, planning, push, verify,
+joint one parameter, ``dq_j = p_j`` (q_true = q_cmd + p; rad, m for a prismatic joint). Its
+full parameter name is the effect's name, a dot and the joint's label: ``joint_offsets.q1``
+.. ``joint_offsets.qn`` on a serial robot, ``joint_offsets.head.q1``,
+``joint_offsets.left.q3``, ... on a kinematic tree (its chain's name before the joint,
+docs/dual-loop.md). Fitting, planning, push, verify,
 the report, the CLI and the station build and read these names here, never by the prefix.
 
-Units: radians inside (parameters, the push table, the controller's offsets); degrees only
-at the edges (CLI, report, station), through :func:`degrees` / :func:`radians`.
+Units: an offset has its joint's unit (:func:`unit`, :func:`units`): a revolute joint's is an
+angle (rad inside: parameters, the push table, the controller's offsets), a prismatic
+joint's a length (m inside). The fit's parameter layout carries that unit
+(``JointOffsets.parameter_units``), so every edge shows it as the layout says: deg for a
+revolute joint, mm for a prismatic one (``hostpc.display_units``), and a prior is parsed
+in it (``hostpc.fitting.priors``).
 
 The push table (:class:`PushTable`): the controller's joints in its order, each with the
 name of its offset parameter, so a fit's values go to the right joint index and back.
@@ -17,22 +22,27 @@ Pure: no numpy state, no I/O; importable from every layer above ``hostpc.model``
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from hostpc.errors import InputError
 
-__all__ = ["EFFECT", "JointOffsetName", "PushTable", "chain_prefix", "degrees",
-           "is_offset", "label", "labels", "match", "offset_name", "parse", "radians"]
+if TYPE_CHECKING:
+    from hostpc.kinematics import Chain
+
+__all__ = ["ANGLE_UNIT", "EFFECT", "LENGTH_UNIT", "JointOffsetName", "PushTable",
+           "chain_prefix", "is_offset", "label", "labels", "match", "offset_name", "parse",
+           "unit", "units"]
 
 #: the effect whose parameters are the joint zero offsets
 EFFECT = "joint_offsets"
 _PREFIX = EFFECT + "."
-#: the unit of an offset inside hostpc (and on the wire); degrees only for people
-UNIT = "rad"
-DISPLAY_UNIT = "deg"
+#: the unit of a revolute joint's offset inside hostpc (and on the wire); deg for people
+ANGLE_UNIT = "rad"
+#: the unit of a prismatic joint's offset inside hostpc; mm for people
+LENGTH_UNIT = "m"
 #: a joint label: ``q<j>``, or ``<chain>.q<j>`` on a kinematic tree
 _NAME = re.compile(re.escape(_PREFIX) + r"(?P<label>(?:(?P<chain>\w+)\.)?q(?P<joint>\d+))$")
 
@@ -107,14 +117,16 @@ def parse(name: str) -> JointOffsetName:
     return parsed
 
 
-def degrees(value: float) -> float:
-    """An offset in radians (inside) -> degrees (CLI, report, station)."""
-    return math.degrees(value)
+def unit(prismatic: bool) -> str:
+    """The SI unit of one joint's offset: its joint variable's, a length ("m") for a
+    prismatic joint, an angle ("rad") for a revolute one."""
+    return LENGTH_UNIT if prismatic else ANGLE_UNIT
 
 
-def radians(value: float) -> float:
-    """An offset in degrees (user input) -> radians (inside)."""
-    return math.radians(value)
+def units(chain: Chain) -> tuple[str, ...]:
+    """(n,) the SI unit of each joint's offset of ``chain``, joint 1 first (a kinematic
+    tree's stacked chain: in its joint-vector order, as its offset labels)."""
+    return tuple(unit(bool(prismatic)) for prismatic in chain.joint_is_prismatic)
 
 
 @dataclass(frozen=True)
@@ -152,6 +164,6 @@ class PushTable:
                              f"({', '.join(self.labels)})") from None
 
     def values(self, parameters: Mapping[str, float]) -> list[float]:
-        """(n,) rad per controller joint from a fit's values by name; 0 (nominal) where
-        the fit has no such parameter."""
+        """(n,) rad (m for a prismatic joint) per controller joint from a fit's values by
+        name; 0 (nominal) where the fit has no such parameter."""
         return [float(parameters.get(name, 0.0)) for name in self.names]

@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
 from hostpc.errors import InputError
+from hostpc.kinematics import get_robot
 from hostpc.model import joint_offsets
 from hostpc.model.joint_offsets import JointOffsetName, PushTable
 
@@ -65,10 +64,11 @@ def test_a_name_the_controller_has_not() -> None:
         joint_offsets.label("tool.x")
 
 
-def test_units_radians_inside_degrees_at_the_edges() -> None:
-    assert joint_offsets.UNIT == "rad" and joint_offsets.DISPLAY_UNIT == "deg"
-    assert joint_offsets.degrees(math.pi) == pytest.approx(180.0)
-    assert joint_offsets.radians(90.0) == pytest.approx(math.pi / 2)
+def test_an_offset_has_its_joints_unit() -> None:
+    # radians for a revolute joint, metres for a prismatic one (shown as deg / mm)
+    assert joint_offsets.unit(False) == joint_offsets.ANGLE_UNIT == "rad"
+    assert joint_offsets.unit(True) == joint_offsets.LENGTH_UNIT == "m"
+    assert joint_offsets.units(get_robot("ur5e")) == ("rad",) * 6
 
 
 def test_the_effect_names_its_parameters_as_the_owner_does() -> None:

@@ -19,6 +19,7 @@ from hostpc.kinematics import (
     screws,
 )
 from hostpc.kinematics.urdf import chain_from_urdf, load_urdf_chain, parse_urdf
+from hostpc.model import joint_offsets
 
 URDF = Path(__file__).resolve().parents[1] / "data" / "arm7_prismatic.urdf"
 
@@ -57,7 +58,7 @@ def _random_q(chain, rng, count):
 def test_urdf_chain_matches_the_product_of_urdf_transforms(arm7):
     assert arm7.n == 7
     assert list(arm7.joint_is_prismatic) == [True] + [False] * 6
-    assert arm7.joint_units()[0] == "m"
+    assert joint_offsets.units(arm7) == ("m",) + ("rad",) * 6
     rng = np.random.default_rng(3)
     q = _random_q(arm7, rng, 25)
     T = forward(arm7, q).T_base_flange

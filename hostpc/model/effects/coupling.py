@@ -48,12 +48,12 @@ def coupled_pairs(ctx: ModelContext, wrist_only: bool = True) -> list[tuple[str,
 
 class JointCoupling(Effect):
     """dq_a = k_ab * q_cmd_b for each neighbouring wrist pair (a, b) of one chain (rad per
-    rad); ``JointCoupling("all")``: every neighbouring pair."""
+    rad; a prismatic joint's m in its place: ``parameter_units``); ``JointCoupling("all")``:
+    every neighbouring pair."""
 
     name = "joint_coupling"
     hook: ClassVar[Hook] = "joint"
     is_linear: ClassVar[bool] = True
-    unit = "rad/rad"
     description = "a joint's angle error proportional to its neighbour's angle (coupled wrists)"
     advice = ("Residuals follow a neighbouring joint's angle (joint {j}'s angle error is "
               "proportional to it)")
@@ -65,6 +65,11 @@ class JointCoupling(Effect):
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         return [name for name, _, _ in coupled_pairs(ctx, self.wrist_only)]
+
+    def parameter_units(self, ctx: ModelContext) -> Sequence[str]:
+        units = joint_offsets.units(ctx.chain)
+        return [f"{units[affected]}/{units[driving]}"
+                for _, affected, driving in coupled_pairs(ctx, self.wrist_only)]
 
     @classmethod
     def explains(cls, parameter: str, variable: str, ctx: ModelContext | None = None) -> bool:

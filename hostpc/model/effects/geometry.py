@@ -22,23 +22,27 @@ class Geometry(Effect):
     advice = "Residuals follow the link geometry ({parameter} differs from the nominal table)"
     traded_freely = True
 
-    def _slots(self, ctx: ModelContext) -> list[tuple[str, int]]:
+    def _kinds(self, ctx: ModelContext) -> list[tuple[str, int]]:
+        """(kind, joint from 1) of each parameter, in order."""
         chain = ctx.chain
-        slots = []
-        for kind in ("d", "a", "alpha"):
-            for joint in range(1, chain.n + 1):
-                slots.append((f"{kind}{joint}", kin_index(kind, joint, chain.n)))
-        for joint in range(1, chain.n + 1):
-            if chain.hayati[joint - 1]:
-                slots.append((f"beta{joint}", kin_index("beta", joint, chain.n)))
-        return slots
+        kinds = [(kind, joint) for kind in ("d", "a", "alpha")
+                 for joint in range(1, chain.n + 1)]
+        return kinds + [("beta", joint) for joint in range(1, chain.n + 1)
+                        if chain.hayati[joint - 1]]
+
+    def _slots(self, ctx: ModelContext) -> list[tuple[str, int]]:
+        n = ctx.chain.n
+        return [(f"{kind}{joint}", kin_index(kind, joint, n)) for kind, joint in self._kinds(ctx)]
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         return [name for name, _ in self._slots(ctx)]
 
     def parameter_units(self, ctx: ModelContext) -> Sequence[str]:
-        return ["m" if name[0] in "ad" and not name.startswith("alpha") else "rad"
-                for name in self.parameter_names(ctx)]
+        """m for a and d, rad for alpha and beta; a prismatic joint's d slot is the delta of
+        its fixed rotation about its axis (docs/conventions.md), an angle: rad."""
+        prismatic = ctx.chain.joint_is_prismatic
+        return ["rad" if kind in ("alpha", "beta") or (kind == "d" and prismatic[joint - 1])
+                else "m" for kind, joint in self._kinds(ctx)]
 
     def basis(self, ctx: ModelContext) -> np.ndarray:
         slots = self._slots(ctx)

@@ -1,4 +1,7 @@
-"""Joint-space effects: q_true = q_cmd + delta(q_cmd, context, p). All are linear in p."""
+"""Joint-space effects: q_true = q_cmd + delta(q_cmd, context, p). All are linear in p.
+
+A delta has its joint's unit (``joint_offsets.unit``: rad, m for a prismatic joint), so
+each per-joint parameter's unit follows its joint's type (``parameter_units``)."""
 
 from __future__ import annotations
 
@@ -27,6 +30,17 @@ def _diagonal_basis(values: np.ndarray) -> np.ndarray:
     return basis
 
 
+def _joint_units(ctx: ModelContext, per: str = "") -> list[str]:
+    """The unit of each joint's delta (its offset's, ``joint_offsets.units``) per unit of
+    its regressor: ``per`` "" (none), or "load" (a gravity torque in N m, a force along a
+    prismatic joint's axis in N)."""
+    units = joint_offsets.units(ctx.chain)
+    if per == "load":
+        return [f"{unit}/N" if unit == joint_offsets.LENGTH_UNIT else f"{unit}/(N m)"
+                for unit in units]
+    return list(units)
+
+
 class _LinearJointEffect(Effect):
     hook: ClassVar[Hook] = "joint"
     is_linear: ClassVar[bool] = True
@@ -36,26 +50,29 @@ class _LinearJointEffect(Effect):
 
 
 class JointOffsets(_LinearJointEffect):
-    """Joint zero offsets: dq_i = p_i (rad). A coupled joint (``Chain.coupled``, a URDF
-    ``<mimic>``) has no offset of its own: it follows its leader's (its parameter moves
-    nothing and the fit holds it at 0; hostpc.model.measurements.terms.kinematic_deltas)."""
+    """Joint zero offsets: dq_i = p_i (rad; m for a prismatic joint). A coupled joint
+    (``Chain.coupled``, a URDF ``<mimic>``) has no offset of its own: it follows its
+    leader's (its parameter moves nothing and the fit holds it at 0;
+    hostpc.model.measurements.terms.kinematic_deltas)."""
 
     name = "joint_offsets"
-    unit = "rad"
     description = "constant zero offset of every joint"
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         return ctx.per_joint_names("q")
+
+    def parameter_units(self, ctx: ModelContext) -> Sequence[str]:
+        return _joint_units(ctx)
 
     def basis(self, ctx: ModelContext) -> np.ndarray:
         return _diagonal_basis(np.ones_like(ctx.q_cmd))
 
 
 class JointCompliance(_LinearJointEffect):
-    """Joint compliance under gravity: dq_i = c_i * tau_i(q_cmd) (rad per N m)."""
+    """Joint compliance under gravity: dq_i = c_i * tau_i(q_cmd) (rad per N m; m per N for a
+    prismatic joint, whose tau_i is the force along its axis)."""
 
     name = "joint_compliance"
-    unit = "rad/(N m)"
     description = "joints bend under the gravity load torque"
     advice = "Residuals follow the gravity torque on joint {j}"
 
@@ -66,6 +83,9 @@ class JointCompliance(_LinearJointEffect):
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         return ctx.per_joint_names("c")
+
+    def parameter_units(self, ctx: ModelContext) -> Sequence[str]:
+        return _joint_units(ctx, per="load")
 
     def basis(self, ctx: ModelContext) -> np.ndarray:
         if not np.all(np.isfinite(ctx.tau)):
@@ -95,10 +115,10 @@ class EncoderScale(_LinearJointEffect):
 
 
 class Backlash(_LinearJointEffect):
-    """Backlash: dq_i = b_i * approach_i (approach = +1/-1 direction of the last motion)."""
+    """Backlash: dq_i = b_i * approach_i (approach = +1/-1 direction of the last motion;
+    b_i in rad, m for a prismatic joint)."""
 
     name = "backlash"
-    unit = "rad"
     approach_dependent = True
     description = "joint angle depends on the direction of the last motion"
     advice = "Residuals depend on the direction of the last motion of joint {j}"
@@ -111,15 +131,19 @@ class Backlash(_LinearJointEffect):
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         return ctx.per_joint_names("b")
 
+    def parameter_units(self, ctx: ModelContext) -> Sequence[str]:
+        return _joint_units(ctx)
+
     def basis(self, ctx: ModelContext) -> np.ndarray:
         return _diagonal_basis(ctx.approach)
 
 
 class TransmissionHarmonic(_LinearJointEffect):
-    """Transmission harmonics per joint: dq = a1 sin q + b1 cos q + a2 sin 2q + b2 cos 2q."""
+    """Transmission harmonics per joint: dq = a1 sin q + b1 cos q + a2 sin 2q + b2 cos 2q
+    (rad; on a prismatic joint m, with q in m as the argument: no revolution to follow, a
+    term there fits nothing physical)."""
 
     name = "transmission_harmonic"
-    unit = "rad"
     description = "once- and twice-per-revolution errors of each joint's transmission"
     advice = ("Residuals follow a once- or twice-per-revolution pattern of joint {j}'s "
               "angle")
@@ -133,6 +157,9 @@ class TransmissionHarmonic(_LinearJointEffect):
 
     def parameter_names(self, ctx: ModelContext) -> Sequence[str]:
         return [f"{term}_{label}" for label in ctx.joint_labels for term, _, _ in self._terms]
+
+    def parameter_units(self, ctx: ModelContext) -> Sequence[str]:
+        return [unit for unit in _joint_units(ctx) for _ in self._terms]
 
     def basis(self, ctx: ModelContext) -> np.ndarray:
         n_samples, n_joints = ctx.q_cmd.shape
