@@ -42,7 +42,7 @@ from hostpc.calibrate.journal_events import (
     VerifyRoundLost,
 )
 from hostpc.calibrate.more_poses import more_poses_message, more_poses_reason
-from hostpc.calibrate.outcome import parse_required_joints
+from hostpc.calibrate.outcome import parse_required_joints, restored_to_reference
 from hostpc.calibrate.outcome_files import run_outcome
 from hostpc.calibrate.push import (
     PUSH_FILE,
@@ -390,7 +390,9 @@ class Runner:
             verify_result = await self._verify(method, plan, result, settings, offsets,
                                                pushed_delta, q_now)
 
-        outcome = run_outcome(self.journal, joint_sources(result, initial_offsets.size),
+        sources = restored_to_reference(joint_sources(result, initial_offsets.size),
+                                        plan.info.get("joints"), self.reference)
+        outcome = run_outcome(self.journal, sources,
                               run_dir=self.run_dir, header=header,
                               require_joints=settings.require_joints, finished=True,
                               known=cell.known, swapped=settings.swapped)

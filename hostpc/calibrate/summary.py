@@ -267,11 +267,17 @@ def joint_status_text(joint: JsonObject, said: str = "") -> str:
     if joint.get("status") != "calibrated":
         return "NOT CALIBRATED" + ("" if said else ": " + str(
             joint.get("reason") or "not determined by the data"))
-    if joint.get("verified") is True:
-        return "calibrated, verified"
-    if joint.get("pushed"):
-        return "calibrated, pushed, NOT verified"
-    return "calibrated (not pushed)"
+    done = ("verified" if joint.get("verified") is True else
+            "pushed, NOT verified" if joint.get("pushed") else "not pushed")
+    zero = joint.get("zero_from")
+    if isinstance(zero, Mapping) and zero.get("reference_zero") != "measured":
+        why = ("its zero as at that run, not measured against a surveyed frame"
+               if zero.get("reference_zero") == "as_found" else
+               "whether that run calibrated it is not recorded")
+        return f"restored to the cell reference of {zero.get('reference_run')} ({why}), {done}"
+    if done == "not pushed":
+        return "calibrated (not pushed)"
+    return f"calibrated, {done}"
 
 
 def _mm(value: float | None) -> str:
