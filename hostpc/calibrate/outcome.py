@@ -20,6 +20,12 @@ Verdicts (the first that applies, top down):
     NOT_VERIFIED    offsets pushed, no verification measured (`--verify-poses 0`)  (exit 0)
     NOT_PUSHED      --no-push, nothing to push (a model check at most)             (exit 0)
 
+A robot that keeps no zero offsets (a UR, `--driver ur`: the driver table's `host_offsets`)
+takes a "push" in the driver on the host, for that session only: its outcome is not
+`pushed` but `applied_on_host`, its controller text says the controller's zeros are
+unchanged and how to keep the offsets (the exported files), and each joint's row says so;
+the verdict (PASS: verified through the host's offsets) is as for a push.
+
 A refusal counts while no push of the run is in the controller (a refused re-push on a
 resume leaves the earlier, verified push standing).
 
@@ -68,6 +74,9 @@ JOURNAL_KINDS = ("push_intent", "push", "verify", "rollback", "push_refused", "r
 _KNOWN_FIX = re.compile(r"--known (\S+)")
 """The frames a joint's fix names (joint_status: `--known target (or a cell reference...)`)."""
 _MATCH = 1e-9  # rad: the verified offsets are the pushed ones
+_ARCHIVED_COMMANDS = ("hostpc rollback --run", "hostpc calibrate --resume")
+"""Next commands that change the run's outcome: with the run's archive (`--db`) they
+revise its archived record too."""
 
 
 @dataclass(frozen=True)
@@ -88,6 +97,9 @@ class JointOutcome:
     """The recording run of the cell reference this joint is restored to (JointSource)."""
     reference_zero: str | None = None
     """"measured" | "as_found" | "unknown" with `restored_from` (JointSource)."""
+    applied_on_host: bool = False
+    """Its new offset is applied in the driver on the host for the session only (a robot
+    that keeps no zero offsets): not pushed, the controller's zero is unchanged."""
 
     @property
     def calibrated(self) -> bool:
@@ -118,7 +130,8 @@ class JointOutcome:
     def to_dict(self) -> JsonObject:
         return {"joint": self.joint, "label": self.label, "status": self.status,
                 "source": self.source, "pushed": self.pushed, "verified": self.verified,
-                "reason": self.reason, "fix": self.fix, "zero_from": self.zero_from()}
+                "reason": self.reason, "fix": self.fix, "zero_from": self.zero_from(),
+                "applied_on_host": self.applied_on_host}
 
 
 @dataclass(frozen=True)
@@ -153,6 +166,9 @@ class RobotOutcome:
     refusal: PushRefusal | None = None
     """The refusal's structured form (which guard, the next command), None when the
     journal predates it."""
+    applied_on_host: bool = False
+    """The new offsets are applied on the host for the session only (module docstring):
+    `pushed` is False, the controller's zeros are unchanged."""
 
     @property
     def exit_code(self) -> int:
@@ -166,7 +182,8 @@ class RobotOutcome:
                 "missing_required": list(self.missing_required),
                 "headline": self.headline, "next_command": self.next_command,
                 "events": [e.to_dict() for e in self.events],
-                "refused_reason": self.refused_reason, "exit_code": self.exit_code}
+                "refused_reason": self.refused_reason, "exit_code": self.exit_code,
+                "applied_on_host": self.applied_on_host}
 
 
 def parse_required_joints(text: str | None, n_joints: int | None = None) -> tuple[int, ...]:
@@ -276,15 +293,21 @@ def _span(run: list[int]) -> str:
 def derive_outcome(events: Sequence[JsonObject], sources: Sequence[JointSource], *,
                    run_dir: str, finished: bool, required: Sequence[int] = (),
                    new_run: str = "--robot ROBOT", known: Sequence[str] = (),
-                   swapped: Sequence[int] = ()) -> RobotOutcome:
+                   swapped: Sequence[int] = (), host_offsets: str | None = None,
+                   archive: str | None = None) -> RobotOutcome:
     """The outcome from the journal's events (`Journal.timeline(*JOURNAL_KINDS)`, in
     order) and the fit's per-joint sources. finished: the run wrote (or is writing) its
     result; run_dir / new_run / known: for the next command (new_run: a new run's
     options for this robot and cell, `RunHeader.new_run_options`; known: the run's known
     frames, kept in a new run's `--known`); swapped: the joints declared swapped
     (`--swapped`): one this run did not calibrate has an unknown zero, so no reference is
-    proposed from this run (`unknown_swapped_zeros`)."""
+    proposed from this run (`unknown_swapped_zeros`); host_offsets: for a robot that keeps
+    no zero offsets, how to keep the offsets its driver applied on the host ({run}: the run
+    folder; `Driver.host_offsets`), None: the controller keeps what is pushed; archive: the
+    results archive the run is archived in (`--db`, without a password): a rollback or a
+    resume the next command names keeps it (`--db`), so the archive follows."""
     state = _replay(events)
+    host_only = host_offsets is not None
     active = state.pushed_new is not None and state.rolled_at is None
     pushed_mask = state.pushed_mask if active else ()
     joints = []
@@ -296,9 +319,9 @@ def derive_outcome(events: Sequence[JsonObject], sources: Sequence[JointSource],
             None if calibrated else "its pushed offset failed verification")
         joints.append(JointOutcome(s.joint, s.label,
                                    "calibrated" if calibrated else "not_calibrated",
-                                   s.source, pushed, verified, reason,
+                                   s.source, pushed and not host_only, verified, reason,
                                    s.fix if not s.calibrated else None,
-                                   s.restored_from, s.reference_zero))
+                                   s.restored_from, s.reference_zero, pushed and host_only))
     required = tuple(sorted(set(required)))
     missing = tuple(n for n in required
                     if not any(j.joint == n and j.source == "data" for j in joints))
@@ -317,14 +340,24 @@ def derive_outcome(events: Sequence[JsonObject], sources: Sequence[JointSource],
     else:
         verdict = "NOT_PUSHED"
     controller = _controller_text(state, active)
+    if host_only and active:
+        keep = (host_offsets or "").format(run=run_dir)
+        controller = (f"zero offsets unchanged: the new ones are applied on the host for "
+                      f"this session only ({controller.split(', ', 1)[1]}); to keep them: "
+                      f"{keep}")
     outcome = RobotOutcome(
-        verdict=verdict, controller=controller, pushed=active,
+        verdict=verdict, controller=controller, pushed=active and not host_only,
+        applied_on_host=active and host_only,
         verified=state.verified if active else None, rolled_back_at=state.rolled_at,
         joints=tuple(joints), required_joints=required, missing_required=missing,
         headline="", next_command=None, events=tuple(state.events),
         refused_reason=state.refused, refusal=state.refusal if state.refused else None)
-    return _with_words(outcome, run_dir, new_run, tuple(known), state.intent_open,
-                       tuple(swapped))
+    outcome = _with_words(outcome, run_dir, new_run, tuple(known), state.intent_open,
+                          tuple(swapped))
+    command = outcome.next_command
+    if archive and command and command.startswith(_ARCHIVED_COMMANDS) and " or " not in command:
+        outcome = dataclasses.replace(outcome, next_command=f"{command} --db {archive}")
+    return outcome
 
 
 @dataclass
@@ -402,16 +435,20 @@ def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[
     joints = outcome.joints
     good = [j.joint for j in joints if j.calibrated and not j.as_found]
     bad = [j for j in joints if j.source != "data"]
-    done = ("verified" if outcome.verified else "pushed, NOT verified" if outcome.pushed
+    applied = outcome.pushed or outcome.applied_on_host
+    done = ("verified" if outcome.verified else "pushed, NOT verified" if applied
             else "fitted, not pushed")
     good_text = f"{joint_names(joints, good)} calibrated and {done}" if good else \
         "no joint calibrated"
-    if outcome.verdict in ("PASS", "NOT_VERIFIED", "JOINTS_MISSING") and not outcome.pushed:
+    if outcome.verdict in ("PASS", "NOT_VERIFIED", "JOINTS_MISSING") and not applied:
         good_text = f"{joint_names(joints, good)} fitted from data, not pushed" if good \
             else "no joint fitted from data"
     restored = _restored_text(joints)
     if restored:  # never "calibrated" for a zero the reference only carries over
         good_text = f"{good_text}; {restored}" if good else restored
+    if outcome.applied_on_host and outcome.verdict != "FAIL":  # never "the controller holds"
+        good_text += ("; applied on the host for this session only: the controller's zero "
+                      "offsets are unchanged (" + outcome.controller.split("; ", 1)[1] + ")")
     bad_text = _not_calibrated_text(joints, bad)
     verdict = outcome.verdict
     run = run_dir
@@ -437,6 +474,11 @@ def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[
     elif verdict == "NOT_VERIFIED":
         head = f"PUSHED, NOT VERIFIED: {good_text} (no verification poses)" + (
             f"; {bad_text}" if bad_text else "")
+    elif verdict == "FAIL" and outcome.applied_on_host:  # nothing to roll back
+        head = ("FAIL: the offsets applied on the host (this session only) failed "
+                "verification; the controller's zero offsets are unchanged"
+                + (f"; {bad_text}" if bad_text else ""))
+        next_command = f"hostpc diagnose {run}/dataset.json"
     elif verdict == "FAIL":
         head = ("FAIL: the pushed offsets failed verification; the controller holds them"
                 + (f"; {bad_text}" if bad_text else ""))

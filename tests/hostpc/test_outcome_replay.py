@@ -122,3 +122,33 @@ def test_a_joint_restored_to_a_reference_is_calibrated_only_if_its_run_measured_
     again = derive_outcome([PUSH, VERIFY_PASS], sources_from_outcome(block),
                            run_dir="runs/x", finished=True)
     assert again.headline == headline(as_found)
+
+
+def test_a_push_a_robot_keeps_no_offsets_for_is_applied_on_the_host_not_pushed() -> None:
+    """A UR's push sets the driver's offsets on the host for the session only: the
+    controller's zeros are unchanged, and the outcome says so (review item 6)."""
+    from hostpc.robots.drivers import DRIVERS
+
+    keep = DRIVERS["ur"].host_offsets
+    outcome = derive_outcome([PUSH, VERIFY_PASS], SOURCES, run_dir="runs/x", finished=True,
+                             host_offsets=keep)
+    assert outcome.verdict == "PASS" and not outcome.pushed and outcome.applied_on_host
+    assert outcome.controller.startswith(
+        "zero offsets unchanged: the new ones are applied on the host for this session only "
+        "(verified); to keep them: load runs/x/ur_calibration.yaml")
+    assert "new offsets, verified" not in outcome.controller
+    assert outcome.headline.startswith(
+        "PASS: J1-J6 calibrated and verified; applied on the host for this session only: "
+        "the controller's zero offsets are unchanged (to keep them: load "
+        "runs/x/ur_calibration.yaml")
+    assert all(not j.pushed and j.applied_on_host and j.verified for j in outcome.joints)
+    block = outcome.to_dict()
+    assert block["pushed"] is False and block["applied_on_host"] is True
+    # a failed verification has nothing on the controller to roll back
+    failed = derive_outcome([PUSH, {**VERIFY_PASS, "verdict": "FAIL"}], SOURCES,
+                            run_dir="runs/x", finished=True, host_offsets=keep)
+    assert failed.verdict == "FAIL" and "rollback" not in (failed.next_command or "")
+    assert "the controller's zero offsets are unchanged" in failed.headline
+    # the controller that keeps them: pushed, as before
+    assert derive_outcome([PUSH, VERIFY_PASS], SOURCES, run_dir="runs/x",
+                          finished=True).controller == "new offsets, verified"

@@ -14,6 +14,7 @@ import pytest
 from hostpc.archive import open_archive
 from hostpc.archive.records import read_result, verdict_of
 from hostpc.calibrate.run_result import RunResult
+from hostpc.cli.archive_options import redacted_url
 from hostpc.cli.main import main
 from hostpc.robots.simulator import SimulatedController
 from tests.integration.test_calibrate_sim import TOKEN, sim_scenario
@@ -42,7 +43,9 @@ def test_a_refused_push_is_refused_everywhere_and_a_forced_resume_revises_the_ar
     outcome = _outcome(out)
     assert outcome["verdict"] == "REFUSED" and not outcome["pushed"]
     assert outcome["controller"] == "offsets unchanged"
-    assert outcome["next_command"] == f"hostpc calibrate --resume {out} --force"
+    # the archive the run used, without a password: following it revises the record
+    assert outcome["next_command"] == (f"hostpc calibrate --resume {out} --force --db "
+                                       f"{redacted_url(archive_url)}")
     assert stdout.splitlines()[0].startswith("REFUSED: push refused, offsets unchanged")
     with open_archive(archive_url) as archive:
         (run,) = archive.runs("SN-1")
