@@ -46,6 +46,13 @@ class JointSource:
     source: str
     reason: str | None = None
     fix: str | None = None
+    restored_from: str | None = None
+    """The recording run of the cell reference whose frames alone identify this joint (its
+    zero is restored to the zero it had at that run's frames); None: the measurements."""
+    reference_zero: str | None = None
+    """With `restored_from`, that reference's record of this joint (REFERENCE_ZEROS):
+    "measured" (its recording run calibrated it), "as_found" (it did not: the zero as it
+    was then) or "unknown" (a reference written before the record was kept)."""
 
     @property
     def calibrated(self) -> bool:

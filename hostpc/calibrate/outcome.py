@@ -20,11 +20,22 @@ Verdicts (the first that applies, top down):
     NOT_VERIFIED    offsets pushed, no verification measured (`--verify-poses 0`)  (exit 0)
     NOT_PUSHED      --no-push, nothing to push (a model check at most)             (exit 0)
 
+A robot that keeps no zero offsets (a UR, `--driver ur`: the driver table's `host_offsets`)
+takes a "push" in the driver on the host, for that session only: its outcome is not
+`pushed` but `applied_on_host`, its controller text says the controller's zeros are
+unchanged and how to keep the offsets (the exported files), and each joint's row says so;
+the verdict (PASS: verified through the host's offsets) is as for a push.
+
 A refusal counts while no push of the run is in the controller (a refused re-push on a
 resume leaves the earlier, verified push standing).
 
 A joint is "calibrated" when the data determine it (source "data") and, if it was pushed,
-its verification did not fail; a hold or prior value never is (joint_status.py).
+its verification did not fail; a hold or prior value never is (joint_status.py). A joint
+only a cell reference's frames identify (J1, J6 with every frame estimated) is restored TO
+THE REFERENCE: its `zero_from` names the reference's recording run and whether that run
+calibrated it ("measured") or not ("as_found": its zero as at that run, not measured
+against a surveyed frame; "unknown": a reference written before zerocal recorded it). The
+headline and the joint's row say so unless it was "measured".
 """
 
 from __future__ import annotations
@@ -38,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.calibrate.joint_status import JointSource
+from hostpc.calibrate.reference import CellReference
 from hostpc.calibrate.refusals import PushRefusal
 from hostpc.calibrate.summary import (
     EXIT_JOINTS_NOT_CALIBRATED,
@@ -45,6 +57,7 @@ from hostpc.calibrate.summary import (
     EXIT_VERIFY_FAILED,
 )
 from hostpc.json_object import JsonObject
+from hostpc.model.joint_offsets import offset_name
 
 VERDICTS = ("PASS", "FAIL", "REFUSED", "NOT_PUSHED", "NOT_VERIFIED", "ROLLED_BACK",
             "JOINTS_MISSING", "ERROR")
@@ -61,6 +74,9 @@ JOURNAL_KINDS = ("push_intent", "push", "verify", "rollback", "push_refused", "r
 _KNOWN_FIX = re.compile(r"--known (\S+)")
 """The frames a joint's fix names (joint_status: `--known target (or a cell reference...)`)."""
 _MATCH = 1e-9  # rad: the verified offsets are the pushed ones
+_ARCHIVED_COMMANDS = ("hostpc rollback --run", "hostpc calibrate --resume")
+"""Next commands that change the run's outcome: with the run's archive (`--db`) they
+revise its archived record too."""
 
 
 @dataclass(frozen=True)
@@ -77,11 +93,34 @@ class JointOutcome:
     verified: bool | None
     reason: str | None
     fix: str | None
+    restored_from: str | None = None
+    """The recording run of the cell reference this joint is restored to (JointSource)."""
+    reference_zero: str | None = None
+    """"measured" | "as_found" | "unknown" with `restored_from` (JointSource)."""
+    applied_on_host: bool = False
+    """Its new offset is applied in the driver on the host for the session only (a robot
+    that keeps no zero offsets): not pushed, the controller's zero is unchanged."""
 
     @property
     def calibrated(self) -> bool:
         """Calibrated from the data (and, if pushed, not failed in verification)."""
         return self.status == "calibrated"
+
+    @property
+    def as_found(self) -> bool:
+        """Calibrated only through a cell reference whose recording run did not calibrate
+        it (or may not have: "unknown"): its zero is the one it had then."""
+        return self.calibrated and self.restored_from is not None and \
+            self.reference_zero != "measured"
+
+    def zero_from(self) -> JsonObject | str | None:
+        """result.json's record of where the value came from: "measurements", the cell
+        reference ({"reference_run", "reference_zero"}), or None (not from the data)."""
+        if self.source != "data":
+            return None
+        if self.restored_from is None:
+            return "measurements"
+        return {"reference_run": self.restored_from, "reference_zero": self.reference_zero}
 
     @property
     def on_robot(self) -> bool:
@@ -91,7 +130,8 @@ class JointOutcome:
     def to_dict(self) -> JsonObject:
         return {"joint": self.joint, "label": self.label, "status": self.status,
                 "source": self.source, "pushed": self.pushed, "verified": self.verified,
-                "reason": self.reason, "fix": self.fix}
+                "reason": self.reason, "fix": self.fix, "zero_from": self.zero_from(),
+                "applied_on_host": self.applied_on_host}
 
 
 @dataclass(frozen=True)
@@ -130,6 +170,9 @@ class RobotOutcome:
     """The joints declared swapped that the run did not calibrate (`unknown_swapped_zeros`),
     known when the next command was written: it never proposes a reference from this run
     then (result.json `unknown_zeros`; a result without the key predates the rule)."""
+    applied_on_host: bool = False
+    """The new offsets are applied on the host for the session only (module docstring):
+    `pushed` is False, the controller's zeros are unchanged."""
 
     @property
     def exit_code(self) -> int:
@@ -144,7 +187,8 @@ class RobotOutcome:
                 "headline": self.headline, "next_command": self.next_command,
                 "events": [e.to_dict() for e in self.events],
                 "refused_reason": self.refused_reason, "exit_code": self.exit_code,
-                "unknown_zeros": list(self.unknown_zeros)}
+                "unknown_zeros": list(self.unknown_zeros),
+                "applied_on_host": self.applied_on_host}
 
 
 def parse_required_joints(text: str | None, n_joints: int | None = None) -> tuple[int, ...]:
@@ -172,10 +216,57 @@ def parse_required_joints(text: str | None, n_joints: int | None = None) -> tupl
 def sources_from_outcome(block: JsonObject) -> tuple[JointSource, ...]:
     """The fit's per-joint sources as a stored outcome block holds them (for a rollback or
     a later view to derive the outcome again without the fit)."""
-    return tuple(JointSource(int(row["joint"]), str(row.get("label", f"q{row['joint']}")),
-                             str(row.get("source", "none")), row.get("reason"),
-                             row.get("fix"))
-                 for row in block.get("joints", []) if isinstance(row, Mapping))
+    out = []
+    for row in block.get("joints", []):
+        if not isinstance(row, Mapping):
+            continue
+        zero = row.get("zero_from")
+        restored = zero if isinstance(zero, Mapping) else {}
+        out.append(JointSource(int(row["joint"]), str(row.get("label", f"q{row['joint']}")),
+                               str(row.get("source", "none")), row.get("reason"),
+                               row.get("fix"), restored.get("reference_run"),
+                               restored.get("reference_zero")))
+    return tuple(out)
+
+
+def restored_to_reference(sources: Sequence[JointSource], coverage: Mapping[str, Any] | None,
+                          reference: CellReference | None) -> tuple[JointSource, ...]:
+    """The fit's sources with the joints only the reference's frames identify (the plan's
+    joint coverage, `resolved_by_reference`) marked as restored to that reference, with
+    its record of their zeros (CellReference.zero_of)."""
+    resolved = set((coverage or {}).get("resolved_by_reference") or ())
+    if reference is None or not resolved:
+        return tuple(sources)
+    run = reference.source_run or f"the reference of {reference.date}"
+    return tuple(dataclasses.replace(s, restored_from=run,
+                                     reference_zero=reference.zero_of(s.joint))
+                 if s.calibrated and offset_name(s.label) in resolved else s
+                 for s in sources)
+
+
+def reference_zeros(block: JsonObject, coverage: Mapping[str, Any] | None
+                    ) -> dict[int, str]:
+    """What a reference recorded from a run keeps of each joint's zero (`joint_zeros`):
+    "measured" if the run calibrated it from its measurements or through a reference that
+    had measured it, else "as_found" (a reference's "as_found" / "unknown" is carried on).
+    block: the run's outcome block; coverage: its plan's joint coverage (an older run
+    whose rows lack `zero_from` and whose plan took the joint from a reference: unknown)."""
+    from_reference = set((coverage or {}).get("from_reference") or ())
+    zeros: dict[int, str] = {}
+    for row in block.get("joints", []):
+        if not isinstance(row, Mapping):
+            continue
+        joint = int(row["joint"])
+        zero = row.get("zero_from")
+        if row.get("status") != "calibrated":
+            zeros[joint] = "as_found"
+        elif isinstance(zero, Mapping):
+            zeros[joint] = str(zero.get("reference_zero") or "unknown")
+        elif zero is None and f"J{joint}" in from_reference:
+            zeros[joint] = "unknown"
+        else:
+            zeros[joint] = "measured"
+    return zeros
 
 
 def joint_names(joints: Sequence[JointOutcome] | Sequence[JointSource],
@@ -207,15 +298,21 @@ def _span(run: list[int]) -> str:
 def derive_outcome(events: Sequence[JsonObject], sources: Sequence[JointSource], *,
                    run_dir: str, finished: bool, required: Sequence[int] = (),
                    new_run: str = "--robot ROBOT", known: Sequence[str] = (),
-                   swapped: Sequence[int] = ()) -> RobotOutcome:
+                   swapped: Sequence[int] = (), host_offsets: str | None = None,
+                   archive: str | None = None) -> RobotOutcome:
     """The outcome from the journal's events (`Journal.timeline(*JOURNAL_KINDS)`, in
     order) and the fit's per-joint sources. finished: the run wrote (or is writing) its
     result; run_dir / new_run / known: for the next command (new_run: a new run's
     options for this robot and cell, `RunHeader.new_run_options`; known: the run's known
     frames, kept in a new run's `--known`); swapped: the joints declared swapped
     (`--swapped`): one this run did not calibrate has an unknown zero, so no reference is
-    proposed from this run (`unknown_swapped_zeros`)."""
+    proposed from this run (`unknown_swapped_zeros`); host_offsets: for a robot that keeps
+    no zero offsets, how to keep the offsets its driver applied on the host ({run}: the run
+    folder; `Driver.host_offsets`), None: the controller keeps what is pushed; archive: the
+    results archive the run is archived in (`--db`, without a password): a rollback or a
+    resume the next command names keeps it (`--db`), so the archive follows."""
     state = _replay(events)
+    host_only = host_offsets is not None
     active = state.pushed_new is not None and state.rolled_at is None
     pushed_mask = state.pushed_mask if active else ()
     joints = []
@@ -227,8 +324,9 @@ def derive_outcome(events: Sequence[JsonObject], sources: Sequence[JointSource],
             None if calibrated else "its pushed offset failed verification")
         joints.append(JointOutcome(s.joint, s.label,
                                    "calibrated" if calibrated else "not_calibrated",
-                                   s.source, pushed, verified, reason,
-                                   s.fix if not s.calibrated else None))
+                                   s.source, pushed and not host_only, verified, reason,
+                                   s.fix if not s.calibrated else None,
+                                   s.restored_from, s.reference_zero, pushed and host_only))
     required = tuple(sorted(set(required)))
     missing = tuple(n for n in required
                     if not any(j.joint == n and j.source == "data" for j in joints))
@@ -247,14 +345,24 @@ def derive_outcome(events: Sequence[JsonObject], sources: Sequence[JointSource],
     else:
         verdict = "NOT_PUSHED"
     controller = _controller_text(state, active)
+    if host_only and active:
+        keep = (host_offsets or "").format(run=run_dir)
+        controller = (f"zero offsets unchanged: the new ones are applied on the host for "
+                      f"this session only ({controller.split(', ', 1)[1]}); to keep them: "
+                      f"{keep}")
     outcome = RobotOutcome(
-        verdict=verdict, controller=controller, pushed=active,
+        verdict=verdict, controller=controller, pushed=active and not host_only,
+        applied_on_host=active and host_only,
         verified=state.verified if active else None, rolled_back_at=state.rolled_at,
         joints=tuple(joints), required_joints=required, missing_required=missing,
         headline="", next_command=None, events=tuple(state.events),
         refused_reason=state.refused, refusal=state.refusal if state.refused else None)
-    return _with_words(outcome, run_dir, new_run, tuple(known), state.intent_open,
-                       tuple(swapped))
+    outcome = _with_words(outcome, run_dir, new_run, tuple(known), state.intent_open,
+                          tuple(swapped))
+    command = outcome.next_command
+    if archive and command and command.startswith(_ARCHIVED_COMMANDS) and " or " not in command:
+        outcome = dataclasses.replace(outcome, next_command=f"{command} --db {archive}")
+    return outcome
 
 
 @dataclass
@@ -330,15 +438,22 @@ def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[
                 intent_open: bool, swapped: tuple[int, ...]) -> RobotOutcome:
     """The outcome with its headline and next command filled in."""
     joints = outcome.joints
-    good = [j.joint for j in joints if j.calibrated]
+    good = [j.joint for j in joints if j.calibrated and not j.as_found]
     bad = [j for j in joints if j.source != "data"]
-    done = ("verified" if outcome.verified else "pushed, NOT verified" if outcome.pushed
+    applied = outcome.pushed or outcome.applied_on_host
+    done = ("verified" if outcome.verified else "pushed, NOT verified" if applied
             else "fitted, not pushed")
     good_text = f"{joint_names(joints, good)} calibrated and {done}" if good else \
         "no joint calibrated"
-    if outcome.verdict in ("PASS", "NOT_VERIFIED", "JOINTS_MISSING") and not outcome.pushed:
+    if outcome.verdict in ("PASS", "NOT_VERIFIED", "JOINTS_MISSING") and not applied:
         good_text = f"{joint_names(joints, good)} fitted from data, not pushed" if good \
             else "no joint fitted from data"
+    restored = _restored_text(joints)
+    if restored:  # never "calibrated" for a zero the reference only carries over
+        good_text = f"{good_text}; {restored}" if good else restored
+    if outcome.applied_on_host and outcome.verdict != "FAIL":  # never "the controller holds"
+        good_text += ("; applied on the host for this session only: the controller's zero "
+                      "offsets are unchanged (" + outcome.controller.split("; ", 1)[1] + ")")
     bad_text = _not_calibrated_text(joints, bad)
     verdict = outcome.verdict
     run = run_dir
@@ -354,13 +469,21 @@ def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[
             next_command = _swap_fix_command(joints, outcome, new_run, known, unknown)
         else:
             next_command = _fix_command(joints, outcome, run, new_run, known)
-        if next_command is not None and not unknown:  # the reference: zeros known good
-            head += ("; record the cell's reference from a run whose zeros are known "
-                     "good (this one, if no zero was disturbed since the cell was "
-                     "last verified), then every joint is calibrated")
+        if next_command is not None and not unknown:  # no reference of this run's zeros
+            names = joint_names(joints, [j.joint for j in joints if j.joint in
+                                         outcome.missing_required and j.fix])
+            head += (f"; {names} need their frames surveyed (--known) or a cell reference "
+                     f"recorded from a run that calibrated {names} (a reference recorded "
+                     f"from this run keeps this robot's present {names} zeros, whatever "
+                     "they are)")
     elif verdict == "NOT_VERIFIED":
         head = f"PUSHED, NOT VERIFIED: {good_text} (no verification poses)" + (
             f"; {bad_text}" if bad_text else "")
+    elif verdict == "FAIL" and outcome.applied_on_host:  # nothing to roll back
+        head = ("FAIL: the offsets applied on the host (this session only) failed "
+                "verification; the controller's zero offsets are unchanged"
+                + (f"; {bad_text}" if bad_text else ""))
+        next_command = f"hostpc diagnose {run}/dataset.json"
     elif verdict == "FAIL":
         head = ("FAIL: the pushed offsets failed verification; the controller holds them"
                 + (f"; {bad_text}" if bad_text else ""))
@@ -393,6 +516,25 @@ def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[
         next_command = f"hostpc calibrate --resume {run}"
     return dataclasses.replace(outcome, headline=head, next_command=next_command,
                                unknown_zeros=unknown)
+
+
+def _restored_text(joints: Sequence[JointOutcome]) -> str:
+    """"J1, J6 restored to the cell reference of RUN (their zeros as at that run, ...)":
+    the joints only a reference identifies whose recording run did not calibrate them."""
+    groups: dict[tuple[str, str], list[int]] = {}
+    for j in joints:
+        if j.as_found:
+            groups.setdefault((str(j.restored_from), str(j.reference_zero)), []).append(j.joint)
+    parts = []
+    for (run, zero), numbers in groups.items():
+        their = "its zero" if len(numbers) == 1 else "their zeros"
+        why = (f"{their} as at that run, not measured against a surveyed frame"
+               if zero == "as_found" else
+               f"whether that run calibrated them is not recorded (a reference from before "
+               f"zerocal kept it): {their} may be as at that run")
+        parts.append(f"{joint_names(joints, numbers)} restored to the cell reference of "
+                     f"{run} ({why})")
+    return "; ".join(parts)
 
 
 def _constraints_text(joints: Sequence[JointOutcome]) -> str:
@@ -470,12 +612,7 @@ def _swap_fix_command(joints: Sequence[JointOutcome], outcome: RobotOutcome, new
     required = _required_text(joints, outcome)
     frames = [f for f in known if f != "none"]
     kept = f" --known {','.join(frames)}" if frames else ""
-    needed = list(frames)
-    for j in joints:
-        match = _KNOWN_FIX.search(j.fix or "") if j.joint in unknown else None
-        for frame in match.group(1).split(",") if match else ():
-            if frame not in needed:
-                needed.append(frame)
+    needed = _frames_needed(joints, unknown, frames)
     names = joint_names(joints, unknown)
     ways = [f"hostpc calibrate {new_run}{kept} --reference REFERENCE_FROM_BEFORE_THE_SWAP.json "
             f"--require-joints {required}"]
@@ -487,6 +624,19 @@ def _swap_fix_command(joints: Sequence[JointOutcome], outcome: RobotOutcome, new
     return ", or ".join(ways)
 
 
+def _frames_needed(joints: Sequence[JointOutcome], numbers: Sequence[int],
+                   frames: Sequence[str]) -> list[str]:
+    """The run's surveyed `frames` and those the fixes of joints `numbers` name
+    (`--known target`)."""
+    needed = list(frames)
+    for j in joints:
+        match = _KNOWN_FIX.search(j.fix or "") if j.joint in numbers else None
+        for frame in match.group(1).split(",") if match else ():
+            if frame not in needed:
+                needed.append(frame)
+    return needed
+
+
 def _required_text(joints: Sequence[JointOutcome], outcome: RobotOutcome) -> str:
     return ("all" if len(outcome.required_joints) == len(joints)
             else ",".join(str(n) for n in outcome.required_joints))
@@ -494,14 +644,28 @@ def _required_text(joints: Sequence[JointOutcome], outcome: RobotOutcome) -> str
 
 def _fix_command(joints: Sequence[JointOutcome], outcome: RobotOutcome, run: str,
                  new_run: str, known: tuple[str, ...]) -> str | None:
-    """The commands that would calibrate the missing joints: the frames that would make
-    them identifiable were estimated, not surveyed (a `--known` would be false), so a cell
-    reference is recorded (from a run whose zeros are known good) and a new run uses it."""
-    if not any(j.joint in outcome.missing_required and j.fix for j in joints):
+    """The honest ways to calibrate the missing joints: a new run with the frames they
+    trade against surveyed (`--known`), or with a cell reference recorded from a run that
+    calibrated them. Never a reference recorded from THIS run as the way: it would keep
+    this robot's present zeros of those joints, and later runs would restore them to those
+    (on a station every robot is new: they are no robot's known-good zeros)."""
+    missing = [j for j in joints if j.joint in outcome.missing_required and j.fix]
+    if not missing:
         return None
     required = _required_text(joints, outcome)
-    reference = f"{run.rstrip('/')}.cell_ref.json"
     frames = [f for f in known if f != "none"]  # the run's own surveyed frames stay known
     kept = f" --known {','.join(frames)}" if frames else ""
-    return (f"hostpc reference record --run {run} --out {reference} && hostpc calibrate "
-            f"{new_run}{kept} --reference {reference} --require-joints {required}")
+    needed = _frames_needed(joints, [j.joint for j in missing], frames)
+    names = joint_names(joints, [j.joint for j in missing])
+    if needed == frames:  # no frame would identify them (a hold, a prior): no reference
+        return None
+    surveyed = " and ".join(f for f in needed if f not in frames)
+    ways = [f"hostpc calibrate {new_run} --known {','.join(needed)} --require-joints "
+            f"{required} (with the {surveyed} frame surveyed)",
+            f"hostpc calibrate {new_run}{kept} --reference CELL_REFERENCE.json "
+            f"--require-joints {required} (CELL_REFERENCE.json: hostpc reference record "
+            f"--run RUN of a run that calibrated {names}: with those frames surveyed, or on "
+            "a robot whose zeros the maker's mastering set; recorded from this run "
+            f"({run}) it keeps this robot's present {names} zeros and later runs restore "
+            f"{names} to them)"]
+    return ", or ".join(ways)

@@ -31,6 +31,7 @@ from hostpc.calibrate.run_result import RunResult
 from hostpc.calibrate.summary import format_summary
 from hostpc.errors import InputError
 from hostpc.files import write_json_atomic
+from hostpc.robots.drivers import DRIVERS
 
 
 def run_outcome(journal: Journal, sources: Sequence[JointSource], *, run_dir: Path,
@@ -40,9 +41,12 @@ def run_outcome(journal: Journal, sources: Sequence[JointSource], *, run_dir: Pa
     declared swapped (`--swapped`) is required too: the technician said its zero is wrong,
     so a run that cannot calibrate it must not read PASS."""
     required = (*parse_required_joints(require_joints, len(sources)), *swapped)
+    driver = DRIVERS.get(header.robot.driver)  # a UR's push stays on the host
     return derive_outcome(journal.timeline(*JOURNAL_KINDS), sources, run_dir=str(run_dir),
                           finished=finished, required=required,
-                          new_run=header.new_run_options(), known=known, swapped=swapped)
+                          new_run=header.new_run_options(), known=known, swapped=swapped,
+                          host_offsets=driver.host_offsets if driver is not None else None,
+                          archive=header.archive)
 
 
 def rewrite_outcome(run_dir: Path) -> RobotOutcome | None:

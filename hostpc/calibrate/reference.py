@@ -13,7 +13,7 @@ File (`zerocal-cell-reference/1`, JSON, SI units, written by `hostpc reference r
     {"format": "zerocal-cell-reference/1", "recorded": "2025-01-10T09:12:00+00:00",
      "software": "zerocal 0.1.0", "robot": {"model": "ur5e", "serial": "SN-1234"},
      "method": "stereo_target", "cell": {... the run's cell description ...},
-     "source_run": "/abs/run/folder",
+     "source_run": "/abs/run/folder", "joint_zeros": {"1": "as_found", "2": "measured", ..},
      "frames": {"target": {"parameters": ["x", "y", "z"], "nominal": [..], "delta": [..],
                            "covariance": [[..], ..]}, "tool": {...}}}
 
@@ -25,6 +25,13 @@ includes that error. A later run with the same rig carries the same error in its
 samples, so the prior block says so (`shared_sensitivity`) and the fit counts the rig's
 error once, correlated, instead of twice as independent (which loses the cross terms, of
 either sign).
+
+`joint_zeros` says, per joint, whether the recording run calibrated its zero ("measured")
+or not ("as_found": the zero as it was then, e.g. J1 with every frame estimated). A frame
+fitted while a joint trades against it (J1 and the target's turn about base z) carries
+that joint's zero as it was: a later run that can calibrate J1 only through that frame
+restores J1 TO THE REFERENCE, which is the true zero only if the recording run measured
+it. A file written before this record has none: every joint reads "unknown".
 
 Per frame: the parameter names (after the frame's name, in the fit's order), the nominal
 the recording run fitted its deltas against (a pose's rotation as a rotation vector), the
@@ -64,6 +71,8 @@ touched (a few um). It keeps a reference recorded from a very long run from clai
 than the cell's mechanics hold."""
 MOUNT_FLOOR_RAD = math.radians(0.001)
 """The same floor for angles (17 urad: a kinematic mount's angular repeatability)."""
+REFERENCE_ZEROS = ("measured", "as_found", "unknown")
+"""A reference's record of each joint's zero at its recording run (module docstring)."""
 RIG_FRAMES = ("tool", "camera")
 """Frames that are a stereo rig's left optical frame: defined by the rig calibration, so a
 reference's value holds only for runs with the same rig (the reference keeps the rig;
@@ -135,6 +144,14 @@ class CellReference:
     rig: JsonObject | None = None
     """The stereo rig the camera frame was measured with (the dataset's
     rig_uncertainty.rig document), or None."""
+    zeros: Mapping[int, str] | None = None
+    """Per joint (1-based) "measured" or "as_found" at the recording run (`joint_zeros`),
+    None: a file written before it was kept."""
+
+    def zero_of(self, joint: int) -> str:
+        """"measured" | "as_found" | "unknown": whether the recording run calibrated the
+        zero of `joint` (REFERENCE_ZEROS)."""
+        return "unknown" if self.zeros is None else self.zeros.get(joint, "unknown")
 
     def distances_line(self) -> str:
         """One line: each frame's distance from the cell's nominal, and what a large one can
@@ -173,7 +190,9 @@ class CellReference:
                 "source_run": self.source_run,
                 "floor": {"length_m": MOUNT_FLOOR_M, "angle_rad": MOUNT_FLOOR_RAD},
                 "frames": {f.name: f.to_dict() for f in self.frames},
-                **({"rig": dict(self.rig)} if self.rig is not None else {})}
+                **({"rig": dict(self.rig)} if self.rig is not None else {}),
+                **({"joint_zeros": {str(j): z for j, z in sorted(self.zeros.items())}}
+                   if self.zeros is not None else {})}
 
 
 def _digest(document: JsonObject) -> str:
@@ -253,11 +272,12 @@ def _rpy_matrix(rpy: np.ndarray) -> np.ndarray:
 
 
 def reference_from_fit(result: FitResult, *, robot_serial: str, cell: JsonObject,
-                       source_run: str, software: str,
-                       recorded: str | None = None) -> CellReference:
+                       source_run: str, software: str, recorded: str | None = None,
+                       zeros: Mapping[int, str] | None = None) -> CellReference:
     """The reference of a fit: every frame it estimated, with its delta and covariance
     block (a parameter the fit held is left out: the data did not determine it), and, with
-    a stereo rig, its rig sensitivity."""
+    a stereo rig, its rig sensitivity; zeros: the recording run's record of each joint's
+    zero (`joint_zeros`, outcome.reference_zeros)."""
     from hostpc.fitting.shared_errors import parameter_shared_sensitivity
 
     problem = result.problem
@@ -287,7 +307,8 @@ def reference_from_fit(result: FitResult, *, robot_serial: str, cell: JsonObject
         robot_serial=robot_serial,
         recorded=recorded or _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         software=software, frames=tuple(frames), cell=dict(cell), source_run=source_run,
-        rig=(dataset.extra_fields.get("rig_uncertainty") or {}).get("rig"))
+        rig=(dataset.extra_fields.get("rig_uncertainty") or {}).get("rig"),
+        zeros=None if zeros is None else dict(zeros))
 
 
 # ------------------------------------------------------------------ load
@@ -352,7 +373,20 @@ def reference_from_dict(data: Any, where: str) -> CellReference:
         recorded=str(_field(data, "recorded", str, where)),
         software=str(data.get("software", "")), frames=tuple(frames),
         cell=cell if isinstance(cell, dict) else {},
-        source_run=str(data.get("source_run", "")), rig=rig)
+        source_run=str(data.get("source_run", "")), rig=rig, zeros=_joint_zeros(data, where))
+
+
+def _joint_zeros(data: JsonObject, where: str) -> dict[int, str] | None:
+    """A reference's `joint_zeros` ({"1": "measured", ..}), None if it has none (older)."""
+    raw = data.get("joint_zeros")
+    if raw is None:
+        return None
+    if not isinstance(raw, dict) or not all(
+            isinstance(k, str) and k.isdigit() and v in REFERENCE_ZEROS
+            for k, v in raw.items()):
+        raise InputError(f"{where}: joint_zeros: expected {{\"JOINT\": one of "
+                         f"{', '.join(REFERENCE_ZEROS)}}}")
+    return {int(k): str(v) for k, v in raw.items()}
 
 
 def _rig_sensitivity(spec: JsonObject, k: int, where: str) -> np.ndarray | None:

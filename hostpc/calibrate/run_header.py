@@ -65,6 +65,9 @@ class RunHeader:
     cell: JsonObject  # Cell.to_dict()
     initial: InitialState
     plan: Plan | None = None
+    archive: str | None = None
+    """The results archive the run is archived in (`--db`), its URL without a password
+    (archive_options.redacted_url): a next command names it, so the archive follows."""
 
     @property
     def seed(self) -> int:
@@ -77,6 +80,8 @@ class RunHeader:
             "seed": self.seed, "cell": dict(self.cell), "initial": self.initial.to_dict()}
         if self.plan is not None:
             document["plan"] = self.plan.to_dict()
+        if self.archive is not None:
+            document["archive"] = self.archive
         return document
 
     @classmethod
@@ -90,7 +95,8 @@ class RunHeader:
             robot_serial=data.get("robot_serial"),
             settings=RunSettings.from_dict(data["settings"]),
             cell=data.get("cell") or {}, initial=InitialState.from_dict(data["initial"]),
-            plan=Plan.from_dict(data["plan"]) if "plan" in data else None)
+            plan=Plan.from_dict(data["plan"]) if "plan" in data else None,
+            archive=data.get("archive"))
 
     def robot_argument(self) -> str:
         """How a new run would name this run's robot: `sim` or its address."""

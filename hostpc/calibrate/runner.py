@@ -42,7 +42,7 @@ from hostpc.calibrate.journal_events import (
     VerifyRoundLost,
 )
 from hostpc.calibrate.more_poses import more_poses_message, more_poses_reason
-from hostpc.calibrate.outcome import parse_required_joints
+from hostpc.calibrate.outcome import parse_required_joints, restored_to_reference
 from hostpc.calibrate.outcome_files import run_outcome
 from hostpc.calibrate.push import (
     PUSH_FILE,
@@ -141,6 +141,7 @@ class Runner:
         resume_overrides: ResumeOverrides | None = None,
         reference: str | None = None,
         robot_serial: str | None = None,
+        archive: str | None = None,
     ) -> None:
         self.robot = robot
         self.run_dir = Path(run_dir)
@@ -155,6 +156,7 @@ class Runner:
         self.resume_overrides = resume_overrides or ResumeOverrides()
         self.reference_option = reference  # --reference FILE|none (run_reference.py)
         self.robot_serial = robot_serial
+        self.archive = archive  # --db, without a password (RunHeader.archive)
         self.reference: Any = None  # the CellReference the run uses, and its frames' priors
         self._priors: list[Any] = []
         self.journal = Journal(self.run_dir)
@@ -260,6 +262,9 @@ class Runner:
                 header = dataclasses.replace(header, settings=persisted(
                     settings, header.settings, self.resume_overrides))
                 self.journal.write_header(header.to_dict())
+            if self.archive is not None and self.archive != header.archive:
+                header = dataclasses.replace(header, archive=self.archive)
+                self.journal.write_header(header.to_dict())
             self.journal.append(Resumed(at=_now()))
             cell, header = cell_reference.resume_known(
                 cell_from_dict(header.cell, settings.plugins), self.known, header,
@@ -285,7 +290,7 @@ class Runner:
             initial = _initial_state(state, offsets)
             header = RunHeader(_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
                                self.robot_info, self.robot_serial, settings, cell.to_dict(),
-                               initial)
+                               initial, archive=self.archive)
 
         method = method_class(settings.method, settings.plugins)(settings, cell, self.run_dir)
         clock = method.sample_clock()
@@ -390,7 +395,9 @@ class Runner:
             verify_result = await self._verify(method, plan, result, settings, offsets,
                                                pushed_delta, q_now)
 
-        outcome = run_outcome(self.journal, joint_sources(result, initial_offsets.size),
+        sources = restored_to_reference(joint_sources(result, initial_offsets.size),
+                                        plan.info.get("joints"), self.reference)
+        outcome = run_outcome(self.journal, sources,
                               run_dir=self.run_dir, header=header,
                               require_joints=settings.require_joints, finished=True,
                               known=cell.known, swapped=settings.swapped)

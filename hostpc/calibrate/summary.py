@@ -41,6 +41,9 @@ from hostpc.methods.base import Method, Plan, RunSettings
 from hostpc.methods.cell import Cell
 
 RESULT_FORMAT = "zerocal-calibration/1"
+HOST_ONLY_NOTE = "applied on the host for this session only; the controller's zero unchanged"
+"""The offset row of a joint whose new offset a robot that keeps none (UR) took on the
+host only."""
 EXIT_PUSH_REFUSED = 5
 EXIT_VERIFY_FAILED = 6
 EXIT_JOINTS_NOT_CALIBRATED = 7
@@ -61,8 +64,11 @@ def run_result(journal: Journal, run_dir: Path, robot: RobotInfo, settings: RunS
                     for phase in ("fit", "verify") for r in journal.records(phase)
                     if not r.ok)
     written = push_status == "pushed"
-    rows = tuple(dataclasses.replace(row, pushed=row.pushed and written,
-                                     new_deg=row.new_deg if written else row.old_deg)
+    on_host = exports is not None  # a robot that keeps no offsets: the host's session only
+    rows = tuple(dataclasses.replace(row, pushed=row.pushed and written and not on_host,
+                                     new_deg=row.new_deg if written else row.old_deg,
+                                     note=HOST_ONLY_NOTE if row.pushed and written and on_host
+                                     else row.note)
                  for row in push_plan.joints())
     pushes = journal.events(Pushed)
     push = PushResult(push_status, push_plan.refused, push_plan.max_correction_deg,
@@ -267,11 +273,18 @@ def joint_status_text(joint: JsonObject, said: str = "") -> str:
     if joint.get("status") != "calibrated":
         return "NOT CALIBRATED" + ("" if said else ": " + str(
             joint.get("reason") or "not determined by the data"))
-    if joint.get("verified") is True:
-        return "calibrated, verified"
-    if joint.get("pushed"):
-        return "calibrated, pushed, NOT verified"
-    return "calibrated (not pushed)"
+    done = ("verified" if joint.get("verified") is True else
+            "pushed, NOT verified" if joint.get("pushed") or joint.get("applied_on_host")
+            else "not pushed")
+    zero = joint.get("zero_from")
+    if isinstance(zero, Mapping) and zero.get("reference_zero") != "measured":
+        why = ("its zero as at that run, not measured against a surveyed frame"
+               if zero.get("reference_zero") == "as_found" else
+               "whether that run calibrated it is not recorded")
+        return f"restored to the cell reference of {zero.get('reference_run')} ({why}), {done}"
+    if done == "not pushed":
+        return "calibrated (not pushed)"
+    return f"calibrated, {done}"
 
 
 def _mm(value: float | None) -> str:

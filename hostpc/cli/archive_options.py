@@ -20,6 +20,21 @@ def add_archive_options(parser: argparse.ArgumentParser, *, read: bool) -> None:
                             "its address), and the robot a cell reference belongs to")
 
 
+def redacted_url(url: str) -> str:
+    """`url` without a password (`postgresql://USER:SECRET@HOST/DB` -> `postgresql://USER@HOST/DB`):
+    what a run folder or a printed command may hold. The password comes from PGPASSWORD
+    or ~/.pgpass (hostpc.archive.database)."""
+    from urllib.parse import urlsplit, urlunsplit
+
+    parts = urlsplit(url)
+    if parts.password is None:
+        return url
+    host = parts.hostname or ""
+    netloc = (f"{parts.username}@" if parts.username else "") + host + (
+        f":{parts.port}" if parts.port else "")
+    return urlunsplit(parts._replace(netloc=netloc))
+
+
 def archive_run(args: argparse.Namespace, run_dir: Path, exit_code: int) -> None:
     """Archive the run in `run_dir` when `--db` was given; says so on stderr."""
     if not getattr(args, "db", None) or not (run_dir / "result.json").exists():
@@ -29,7 +44,7 @@ def archive_run(args: argparse.Namespace, run_dir: Path, exit_code: int) -> None
     serial = args.robot_serial or str(args.robot or "unknown")
     with open_archive(args.db) as archive:
         run_id = archive.add(record_from_run(run_dir, serial=serial, exit_code=exit_code))
-    print(f"archived as run {run_id} in {args.db}", file=sys.stderr)
+    print(f"archived as run {run_id} in {redacted_url(args.db)}", file=sys.stderr)
 
 
 def dataset_from_archive(args: argparse.Namespace) -> str:
@@ -43,7 +58,22 @@ def dataset_from_archive(args: argparse.Namespace) -> str:
         stored = archive.run(args.run)
     if stored.dataset_json is None:
         raise InputError(f"--run {args.run}: the archived run has no dataset")
-    folder = Path(tempfile.mkdtemp(prefix="zerocal-archived-"))
-    path = folder / f"run-{args.run}-dataset.json"
+    path = _archived_folder() / f"run-{args.run}-dataset.json"
     path.write_text(stored.dataset_json)
     return str(path)
+
+
+def _archived_folder() -> Path:
+    """The one folder (this user's, mode 0700, in the temp dir) that holds the datasets
+    read back from the archive, one file per archived run, rewritten on each read: the
+    fit's next commands name the file, and repeated reads leave no new folders behind."""
+    import os
+
+    folder = Path(tempfile.gettempdir()) / f"zerocal-archived-{os.getuid()}"
+    folder.mkdir(mode=0o700, exist_ok=True)
+    info = folder.lstat()
+    if folder.is_symlink() or not folder.is_dir() or info.st_uid != os.getuid():
+        from hostpc.errors import InputError
+
+        raise InputError(f"{folder}: not this user's folder; remove it, or set TMPDIR")
+    return folder

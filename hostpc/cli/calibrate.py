@@ -48,7 +48,7 @@ from hostpc.calibrate.run_values import RobotInfo, RunOutcome
 from hostpc.calibrate.runner import Runner
 from hostpc.calibrate.separate import parse_separate
 from hostpc.calibrate.swaps import DEFAULT_SWAP_LIMIT_DEG, parse_swapped
-from hostpc.cli.archive_options import add_archive_options, archive_run
+from hostpc.cli.archive_options import add_archive_options, archive_run, redacted_url
 from hostpc.cli.calibrate_checks import (
     check_known_frames,
     check_model_options,
@@ -74,7 +74,7 @@ from hostpc.json_object import JsonObject
 from hostpc.methods.base import RunSettings
 from hostpc.methods.cell import load_cell_file, parse_known
 from hostpc.robots.connect import RobotAddress, open_robot, parse_robot, resolve_token
-from hostpc.robots.drivers import DEFAULT_DRIVER, DRIVER_NAMES, SIM_DRIVER
+from hostpc.robots.drivers import DEFAULT_DRIVER, DRIVER_NAMES, SIM_DRIVER, check_sim_driver
 from hostpc.sensors.calibrate_options import (
     add_sensor_options,
     check_replay_options,
@@ -301,6 +301,8 @@ def run(args: argparse.Namespace) -> int:
             raise InputError("--robot HOST[:PORT] or --robot sim is required (or --resume DIR)")
         address = parse_robot(args.robot)
         driver = args.driver
+        if address.sim:
+            check_sim_driver(driver)
         settings = _settings(args)
         if (settings.options.get("probe_io") == "modbus" and not settings.options.get("modbus")
                 and not address.sim):
@@ -474,7 +476,8 @@ async def _calibrate(args: argparse.Namespace, address: RobotAddress, driver: st
                         cell_file=cell_file, known=known, default_known=default_known,
                         progress=progress, truth=truth, report=not args.no_report,
                         resume_overrides=overrides, reference=args.reference,
-                        robot_serial=args.robot_serial)
+                        robot_serial=args.robot_serial,
+                        archive=redacted_url(args.db) if args.db else None)
         return await runner.run()
     finally:
         await robot.close()

@@ -105,6 +105,7 @@ def _verdict_refusal(result: RunResult, force: bool) -> str | None:
 def run_record(args: argparse.Namespace) -> int:
     import hostpc
     from hostpc.calibrate.journal import Journal
+    from hostpc.calibrate.outcome import reference_zeros
     from hostpc.calibrate.reference import reference_from_fit
     from hostpc.calibrate.run_header import read_run_header
     from hostpc.cli.report import read_json
@@ -131,7 +132,9 @@ def run_record(args: argparse.Namespace) -> int:
     serial = args.robot_serial or header.robot_serial or ""
     reference = reference_from_fit(fitted, robot_serial=str(serial),
                                    cell=header.cell, source_run=str(run.resolve()),
-                                   software=f"zerocal {hostpc.__version__}")
+                                   software=f"zerocal {hostpc.__version__}",
+                                   zeros=reference_zeros(result.outcome or {},
+                                                         result.plan.get("joints")))
     out = Path(args.out)
     if out.exists() and out.is_dir():
         raise InputError(f"--out {out}: is a folder")

@@ -54,6 +54,11 @@ def run(args: argparse.Namespace) -> int:
     folder = Path(args.run)
     if not folder.is_dir():
         raise InputError(f"{folder}: not a run folder")
+    if not (folder / "result.json").exists() and (folder / "run.json").is_file():
+        raise InputError(f"{folder}: no result.json: the run did not finish (ERROR); "
+                         f"finish it with hostpc calibrate --resume {folder}, then hostpc "
+                         f"report {folder} (what the controller holds now: hostpc status "
+                         f"--robot HOST)")
     result = read_json(folder / "result.json", "result document (result.json)")
     diagnosis = None
     dataset = folder / "dataset.json"

@@ -81,6 +81,8 @@ def run(args: argparse.Namespace) -> int:
     record: dict[str, Any] | None = None
     address: RobotAddress | None = parse_robot(args.robot) if args.robot else None
     if args.run:
+        if args.db and _archive_rolled_back(Path(args.run), args):
+            return 0
         _refuse_if_rolled_back(Path(args.run))
         nothing = _nothing_pushed(Path(args.run))
         if nothing is not None:  # known from the journal: no controller to ask
@@ -165,6 +167,21 @@ def _refuse_if_rolled_back(run_dir: Path) -> None:
         raise InputError(f"--run {run_dir}: its push was rolled back already "
                          f"({last.time or 'at an unrecorded time'}); nothing of it is "
                          f"left to undo ({_status_hint(run_dir)})")
+
+
+def _archive_rolled_back(run_dir: Path, args: argparse.Namespace) -> bool:
+    """A run rolled back already, given `--db`: revise its archived record to the rolled
+    back outcome (a rollback without `--db` left the archive saying PASS/FAIL); True if
+    done. Nothing is rolled back twice."""
+    journal = Journal(run_dir)
+    if (not journal.exists or not (run_dir / "result.json").is_file()
+            or not isinstance(journal.last_event(Pushed, Rollback), Rollback)):
+        return False
+    result = json.loads((run_dir / "result.json").read_text(encoding="utf-8"))
+    archive_run(args, run_dir, int(result["exit_code"]))
+    print(f"{run_dir}: rolled back already; its archived record now says "
+          f"{(result.get('outcome') or {}).get('verdict', 'ROLLED_BACK')}")
+    return True
 
 
 def _status_hint(run_dir: Path) -> str:

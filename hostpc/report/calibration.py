@@ -123,10 +123,16 @@ def outcome_table(result: Document) -> str:
         def flag(value: Any) -> str:
             return "-" if value is None else ("yes" if value else "NO")
 
+        zero = row.get("zero_from")
         status = ("calibrated" if row.get("status") == "calibrated"
                   else '<span class="significant">NOT CALIBRATED</span>')
+        if (row.get("status") == "calibrated" and isinstance(zero, Mapping)
+                and zero.get("reference_zero") != "measured"):  # outcome.py: as found
+            status = escape(f"restored to the cell reference of {zero.get('reference_run')} "
+                            "(its zero as at that run, not measured)")
+        pushed = "host session only" if row.get("applied_on_host") else flag(row.get("pushed"))
         rows.append([escape(joint_name(j, str(row.get("label", "")))), status,
-                     escape(row.get("source", "")), flag(row.get("pushed")),
+                     escape(row.get("source", "")), pushed,
                      flag(row.get("verified")), prose(row.get("reason") or ""),
                      prose(row.get("fix") or "")])
     return ("<h2>Joints</h2>" + table(("joint", "status", "source", "pushed", "verified",

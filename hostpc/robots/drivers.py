@@ -40,12 +40,15 @@ class Driver:
     """One row of the table. connect(host, port, options) opens an adapter;
     camera_service: captures come from a camera service (`--camera-service`);
     no_rollback: why `hostpc rollback` does not apply (None: the controller keeps the
-    offsets and their rollback ids)."""
+    offsets and their rollback ids); host_offsets: for a robot that keeps no zero offsets
+    (its push is applied on the host for the session only), how to keep them ({run}: the
+    run folder), None: the controller keeps what is pushed (hostpc.calibrate.outcome)."""
 
     name: str
     connect: Callable[[str, int, ConnectOptions], Awaitable[RobotAdapter]]
     camera_service: bool = False
     no_rollback: str | None = None
+    host_offsets: str | None = None
 
 
 async def _connect_zerocal(host: str, port: int, options: ConnectOptions) -> RobotAdapter:
@@ -66,7 +69,9 @@ DRIVERS: dict[str, Driver] = {
             "rollback is not applicable to a UR (--driver ur): it has no writable zero "
             "offsets, so the calibration was applied on the host for that session only and "
             "nothing on the robot changed; to undo, stop loading the run's "
-            "ur_calibration.yaml")),
+            "ur_calibration.yaml"),
+        host_offsets=("load {run}/ur_calibration.yaml in the robot's UR/ROS setup (or "
+                      "{run}/ur_offsets.script in its program; docs/calibrate.md, A UR)")),
 }
 DRIVER_NAMES = tuple(DRIVERS)
 """`--driver` choices."""
@@ -75,6 +80,20 @@ DEFAULT_DRIVER = "zerocal"
 SIM_DRIVER = "zerocal"
 """The driver of `--robot sim`: the simulated controller (controller-stub) speaks our
 protocol."""
+
+
+def check_sim_driver(name: str) -> None:
+    """InputError (one line, with the command that does it) if `--robot sim` is asked to
+    run `--driver name`: the simulator speaks only SIM_DRIVER's protocol, and running it
+    silently would calibrate with another driver than the one asked for."""
+    if name == SIM_DRIVER:
+        return
+    stub = ("controller-stub serve --ur --port 0, then hostpc calibrate --robot "
+            "127.0.0.1:PORT --driver ur (PORT: the port it prints)" if name == "ur"
+            else f"a controller the {name} driver speaks to: --robot HOST:PORT --driver {name}")
+    raise InputError(f"--robot sim --driver {name}: the simulator speaks only the "
+                     f"{SIM_DRIVER} protocol; drop --driver for the simulator, or run "
+                     f"{stub}")
 
 
 def driver_named(name: str) -> Driver:

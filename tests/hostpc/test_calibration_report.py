@@ -215,3 +215,19 @@ def test_true_value_mapping() -> None:
     sparse = copy.deepcopy(truth)
     del sparse["effects"]
     assert true_value(sparse, "backlash.b3", 6) is None
+
+
+def test_the_joints_table_says_restored_and_host_only() -> None:
+    """A joint restored to a reference that did not measure it, and an offset a UR took on
+    the host only, are never shown as plain "calibrated" / pushed "yes" (review items 5, 6)."""
+    from hostpc.report.calibration import outcome_table
+
+    restored = {"joint": 1, "label": "q1", "status": "calibrated", "source": "data",
+                "pushed": True, "verified": True,
+                "zero_from": {"reference_run": "/runs/rec", "reference_zero": "as_found"}}
+    host = {"joint": 2, "label": "q2", "status": "calibrated", "source": "data",
+            "pushed": False, "applied_on_host": True, "verified": True,
+            "zero_from": "measurements"}
+    html = outcome_table({"outcome": {"joints": [restored, host]}})
+    assert "restored to the cell reference of /runs/rec" in html
+    assert "host session only" in html

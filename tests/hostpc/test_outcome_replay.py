@@ -82,3 +82,73 @@ def test_a_refusals_next_command_is_read_from_its_structured_fields_not_its_word
     event = {"event": "push_refused", "at": "t1", **limit.to_event(), "by": "controller"}
     outcome = derive_outcome([event], SOURCES, run_dir="runs/x", finished=True)
     assert outcome.next_command == "hostpc calibrate --resume runs/x --push"
+
+
+def _restored(zeros: dict[str, str] | None) -> tuple[JointSource, ...]:
+    """SOURCES with J1 and J6 resolved by a reference of run /runs/rec with `zeros` (its
+    `joint_zeros`; None: a file written before it was kept)."""
+    from hostpc.calibrate.outcome import restored_to_reference
+    from hostpc.calibrate.reference import reference_from_dict
+
+    document = {"format": "zerocal-cell-reference/1", "recorded": "2026-01-02T00:00:00",
+                "robot": {"model": "ur5e"}, "method": "stereo_target",
+                "source_run": "/runs/rec",
+                "frames": {"target": {"parameters": ["x"], "nominal": [0.0], "delta": [0.0],
+                                      "covariance": [[1e-8]]}},
+                **({"joint_zeros": zeros} if zeros is not None else {})}
+    reference = reference_from_dict(document, "test")
+    coverage = {"resolved_by_reference": ["joint_offsets.q1", "joint_offsets.q6"]}
+    return restored_to_reference(SOURCES, coverage, reference)
+
+
+def test_a_joint_restored_to_a_reference_is_calibrated_only_if_its_run_measured_it() -> None:
+    def headline(zeros: dict[str, str] | None) -> str:
+        return derive_outcome([PUSH, VERIFY_PASS], _restored(zeros), run_dir="runs/x",
+                              finished=True).headline
+
+    measured = {str(j): "measured" for j in range(1, 7)}
+    assert headline(measured) == "PASS: J1-J6 calibrated and verified"
+    as_found = {**measured, "1": "as_found", "6": "as_found"}
+    assert headline(as_found) == (
+        "PASS: J2-J5 calibrated and verified; J1, J6 restored to the cell reference of "
+        "/runs/rec (their zeros as at that run, not measured against a surveyed frame)")
+    assert "J1, J6 restored to the cell reference of /runs/rec (whether that run " \
+        "calibrated them is not recorded" in headline(None)
+    # a rollback re-derives the outcome from the stored block: the record survives it
+    from hostpc.calibrate.outcome import sources_from_outcome
+
+    block = derive_outcome([PUSH, VERIFY_PASS], _restored(as_found), run_dir="runs/x",
+                           finished=True).to_dict()
+    again = derive_outcome([PUSH, VERIFY_PASS], sources_from_outcome(block),
+                           run_dir="runs/x", finished=True)
+    assert again.headline == headline(as_found)
+
+
+def test_a_push_a_robot_keeps_no_offsets_for_is_applied_on_the_host_not_pushed() -> None:
+    """A UR's push sets the driver's offsets on the host for the session only: the
+    controller's zeros are unchanged, and the outcome says so (review item 6)."""
+    from hostpc.robots.drivers import DRIVERS
+
+    keep = DRIVERS["ur"].host_offsets
+    outcome = derive_outcome([PUSH, VERIFY_PASS], SOURCES, run_dir="runs/x", finished=True,
+                             host_offsets=keep)
+    assert outcome.verdict == "PASS" and not outcome.pushed and outcome.applied_on_host
+    assert outcome.controller.startswith(
+        "zero offsets unchanged: the new ones are applied on the host for this session only "
+        "(verified); to keep them: load runs/x/ur_calibration.yaml")
+    assert "new offsets, verified" not in outcome.controller
+    assert outcome.headline.startswith(
+        "PASS: J1-J6 calibrated and verified; applied on the host for this session only: "
+        "the controller's zero offsets are unchanged (to keep them: load "
+        "runs/x/ur_calibration.yaml")
+    assert all(not j.pushed and j.applied_on_host and j.verified for j in outcome.joints)
+    block = outcome.to_dict()
+    assert block["pushed"] is False and block["applied_on_host"] is True
+    # a failed verification has nothing on the controller to roll back
+    failed = derive_outcome([PUSH, {**VERIFY_PASS, "verdict": "FAIL"}], SOURCES,
+                            run_dir="runs/x", finished=True, host_offsets=keep)
+    assert failed.verdict == "FAIL" and "rollback" not in (failed.next_command or "")
+    assert "the controller's zero offsets are unchanged" in failed.headline
+    # the controller that keeps them: pushed, as before
+    assert derive_outcome([PUSH, VERIFY_PASS], SOURCES, run_dir="runs/x",
+                          finished=True).controller == "new offsets, verified"

@@ -126,10 +126,18 @@ def test_joints_missing_sends_to_a_reference_not_to_a_false_known() -> None:
                              required=range(1, 7),
                              new_run="--robot sim --method stereo_target --seed 7")
     assert outcome.verdict == "JOINTS_MISSING"
+    # the surveyed frames, or a reference of a run that calibrated J1, J6; never a
+    # reference of this run as the way (it keeps this robot's present J1, J6 zeros)
     assert outcome.next_command == (
-        "hostpc reference record --run /abs/runs/x --out /abs/runs/x.cell_ref.json && "
-        "hostpc calibrate --robot sim --method stereo_target --seed 7 --reference "
-        "/abs/runs/x.cell_ref.json --require-joints all")
+        "hostpc calibrate --robot sim --method stereo_target --seed 7 --known target,tool "
+        "--require-joints all (with the target and tool frame surveyed), or hostpc "
+        "calibrate --robot sim --method stereo_target --seed 7 --reference "
+        "CELL_REFERENCE.json --require-joints all (CELL_REFERENCE.json: hostpc reference "
+        "record --run RUN of a run that calibrated J1, J6: with those frames surveyed, or "
+        "on a robot whose zeros the maker's mastering set; recorded from this run "
+        "(/abs/runs/x) it keeps this robot's present J1, J6 zeros and later runs restore "
+        "J1, J6 to them)")
+    assert "reference record --run /abs/runs/x" not in outcome.next_command
 
 
 def test_a_swapped_joint_the_run_did_not_calibrate_is_never_sent_to_a_reference_of_this_run(
@@ -159,7 +167,7 @@ def test_a_swapped_joint_the_run_did_not_calibrate_is_never_sent_to_a_reference_
     calibrated = derive_outcome([], sources, run_dir="/abs/runs/x", finished=True,
                                 required=(1, 6), new_run=new_run, swapped=(2,))
     assert calibrated.next_command is not None
-    assert calibrated.next_command.startswith("hostpc reference record --run /abs/runs/x")
+    assert calibrated.next_command.startswith(f"hostpc calibrate {new_run} --known target,tool")
 
 
 def test_a_fit_that_failed_with_holds_and_priors_names_them_in_the_refusal() -> None:

@@ -77,6 +77,11 @@ def test_bad_rig_file_exit_2_before_connecting(tmp_path: Path,
         (["--known", "flange"], "unknown frame 'flange'"),
         (["--robot", "host:99999"], "out of range"),
         (["--scenario", "x.yaml"], "--scenario needs --robot sim"),
+        # the simulator speaks the zerocal protocol: never silently another driver's run
+        (["--robot", "sim", "--driver", "ur"],
+         "--robot sim --driver ur: the simulator speaks only the zerocal protocol; drop "
+         "--driver for the simulator, or run controller-stub serve --ur --port 0, then "
+         "hostpc calibrate --robot 127.0.0.1:PORT --driver ur"),
     ],
 )
 def test_bad_options_exit_2(args: list[str], message: str, tmp_path: Path,

@@ -102,3 +102,38 @@ def _check_ur_exports(run_dir: Path, document: dict[str, Any]) -> None:
     assert rollback.returncode == 2
     assert rollback.stdout == "" and len(rollback.stderr.strip().splitlines()) == 1
     assert "not applicable to a UR" in rollback.stderr
+
+
+def test_a_ur_push_is_applied_on_the_host_and_every_view_says_so(tmp_path: Path) -> None:
+    """Review item 6: a UR run read "controller: new offsets, verified" and every row
+    "pushed yes" while the UR's zeros never changed: the outcome, the rows, result.json
+    and the station's pushed flag say the offsets are applied on the host only."""
+    document, _ = _calibrate(tmp_path, "ur", "ur")
+    outcome = document["outcome"]
+    run_dir = tmp_path / "ur"
+    assert outcome["verdict"] == "PASS" and outcome["exit_code"] == 0
+    assert outcome["pushed"] is False and outcome["applied_on_host"] is True
+    assert outcome["controller"] == (
+        "zero offsets unchanged: the new ones are applied on the host for this session "
+        f"only (verified); to keep them: load {run_dir}/ur_calibration.yaml in the robot's "
+        f"UR/ROS setup (or {run_dir}/ur_offsets.script in its program; docs/calibrate.md, "
+        "A UR)")
+    assert "applied on the host for this session only: the controller's zero offsets are " \
+        "unchanged" in outcome["headline"]
+    calibrated = [j for j in outcome["joints"] if j["status"] == "calibrated"]
+    assert calibrated and all(j["pushed"] is False and j["applied_on_host"] is True
+                              and j["verified"] is True for j in calibrated)
+    rows = [r for r in document["offsets"]["joints"] if r["correction_deg"] is not None]
+    assert rows and not any(r["pushed"] for r in rows)
+    assert all(r["note"].startswith("applied on the host for this session only") for r in rows)
+    summary = (run_dir / "summary.txt").read_text()
+    assert "controller: new offsets" not in summary and "  yes  " not in summary
+    # the station's flags: not pushed (the controller holds nothing new), verified
+    from hostpc.archive.records import outcome_of
+    from hostpc.calibrate.run_result import RunResult
+    from hostpc.station.registers import FLAG_PUSHED, FLAG_VERIFIED, outcome_bits
+
+    figures = outcome_of(RunResult.from_dict(document))
+    assert figures is not None and figures.pushed is False and figures.verified is True
+    flags = outcome_bits(figures).outcome_flags
+    assert not flags & FLAG_PUSHED and flags & FLAG_VERIFIED

@@ -14,6 +14,7 @@ import pytest
 from hostpc.archive import open_archive
 from hostpc.archive.records import read_result, verdict_of
 from hostpc.calibrate.run_result import RunResult
+from hostpc.cli.archive_options import redacted_url
 from hostpc.cli.main import main
 from hostpc.robots.simulator import SimulatedController
 from tests.integration.test_calibrate_sim import TOKEN, sim_scenario
@@ -42,7 +43,9 @@ def test_a_refused_push_is_refused_everywhere_and_a_forced_resume_revises_the_ar
     outcome = _outcome(out)
     assert outcome["verdict"] == "REFUSED" and not outcome["pushed"]
     assert outcome["controller"] == "offsets unchanged"
-    assert outcome["next_command"] == f"hostpc calibrate --resume {out} --force"
+    # the archive the run used, without a password: following it revises the record
+    assert outcome["next_command"] == (f"hostpc calibrate --resume {out} --force --db "
+                                       f"{redacted_url(archive_url)}")
     assert stdout.splitlines()[0].startswith("REFUSED: push refused, offsets unchanged")
     with open_archive(archive_url) as archive:
         (run,) = archive.runs("SN-1")
@@ -132,11 +135,13 @@ def test_an_estimated_target_leaves_j1_and_j6_not_calibrated_exit_7(
     assert joints[1]["fix"].startswith("--known target")
     assert "tool frame estimated" in joints[6]["reason"]
     seed = json.loads((out / "result.json").read_text())["settings"]["seed"]
-    assert outcome["next_command"] == (
-        f"hostpc reference record --run {out} --out {out}.cell_ref.json && hostpc calibrate "
-        f"--robot sim --method stereo_target --scenario {out / 'sim' / 'scenario.json'} "
-        f"--seed {seed} --reference {out}.cell_ref.json --require-joints all")
-    assert "--known" not in outcome["next_command"]  # the frames were never surveyed
+    new_run = (f"hostpc calibrate --robot sim --method stereo_target --scenario "
+               f"{out / 'sim' / 'scenario.json'} --seed {seed}")
+    # a new run with the frames surveyed, or a reference of a run that calibrated J1, J6
+    assert outcome["next_command"].startswith(
+        f"{new_run} --known target,tool --require-joints all (with the target and tool "
+        f"frame surveyed), or {new_run} --reference CELL_REFERENCE.json --require-joints all")
+    assert f"reference record --run {out}" not in outcome["next_command"]
     head = stdout.splitlines()[0]
     assert head.startswith("JOINTS_MISSING: J2-J5 calibrated and verified; J1 NOT CALIBRATED")
     report = (out / "report.html").read_text()
