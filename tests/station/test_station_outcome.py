@@ -116,7 +116,13 @@ def test_target_estimated_is_fail_code_7_with_the_joint_bitmasks(
     assert values[reg.JOINTS_NOT_CALIBRATED] == 0b100001  # J1 (target), J6 (tool)
     assert values[reg.JOINTS_REQUIRED_MISSING] == 0b100001
     assert values[reg.OUTCOME_FLAGS] == reg.FLAG_PUSHED | reg.FLAG_VERIFIED
-    assert [r.verdict for r in _archived(config)] == ["JOINTS_MISSING"]
+    (run,) = _archived(config)
+    assert run.verdict == "JOINTS_MISSING"
+    # the station's next step: the reference goes into its config (a hand-run's next
+    # command would not reach the station's runs)
+    reference = f"{run.run_dir.rstrip('/')}.cell_ref.json"
+    assert f'add "--reference", "{reference}" to calibrate_args in ' in str(run.reason)
+    assert f"hostpc reference record --run {run.run_dir} --out {reference}" in str(run.reason)
 
 
 def test_an_abort_after_the_push_lets_verification_finish(make_station: Factory) -> None:
