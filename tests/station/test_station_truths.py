@@ -302,3 +302,43 @@ def test_a_failed_verification_names_the_pushed_joints_and_the_next_step(
     assert reason.startswith("FAIL: the pushed offsets failed verification")
     assert "nothing to roll back" in reason and "START SN-VF again" in reason
     assert f"run of SN-VF: FAIL (result code 6, archive id 1): {reason}" in log
+
+
+@pytest.mark.slow
+def test_a_pending_sim_push_is_resumed_by_a_start_of_its_own_serial(
+        tmp_path: Path, station_on: StationFactory) -> None:
+    droppush = tmp_path / "droppush.json"
+    droppush.write_text(json.dumps(_world(token=None, drop_after_requests=47)))
+    process, config = station_on("sim", sim={"scenarios_by_serial": {  # no resume
+        "SN-DROPPUSH": str(droppush)}})
+    runs_dir = Path(config["runs_dir"])
+    plc = Plc(config["modbus"]["port"])
+    try:
+        plc.start("SN-DROPPUSH")
+        values = plc.wait_state(FINISHED, 300)
+        log = process.log.read_text()
+        assert reg.State(values[reg.STATE]) == reg.State.ERROR, log[-3000:]
+        assert values[reg.OUTCOME_FLAGS] == reg.FLAG_PUSHED
+        (run_dir,) = runs_dir.glob("SN-DROPPUSH-*/")
+        # a simulated controller ends with its run: settling it pushes again (--push)
+        assert f"hostpc calibrate --resume {run_dir} --push --db " in log
+        plc.command(reg.Command.ACKNOWLEDGE)
+        plc.wait_state({reg.State.IDLE}, 10)
+        plc.start("SN-DROPPUSH")  # the same robot again: its run is resumed, not a new one
+        values = plc.wait_state(FINISHED, 300)
+        log = process.log.read_text()
+        assert f"START SN-DROPPUSH: resuming its run {run_dir} first" in log
+        assert reg.State(values[reg.STATE]) == reg.State.PASS, log[-3000:]
+        assert values[reg.OUTCOME_FLAGS] == reg.FLAG_PUSHED | reg.FLAG_VERIFIED
+        assert list(runs_dir.glob("SN-DROPPUSH-*/")) == [run_dir]
+        assert not (runs_dir / "current.json").exists()  # settled
+        with open_archive(str(config["db"]), create=False) as archive:
+            assert [(r.id, r.verdict) for r in archive.runs()] == [(1, "PASS")]  # revised
+        plc.command(reg.Command.ACKNOWLEDGE)
+        plc.wait_state({reg.State.IDLE}, 10)
+        plc.start("SN-NEXT")  # nothing pending: the next robot runs
+        values = plc.wait_state(FINISHED, 300)
+        assert values[reg.RESULT_CODE] != reg.RESULT_PUSH_PENDING
+        assert list(runs_dir.glob("SN-NEXT-*/"))
+    finally:
+        plc.close()
