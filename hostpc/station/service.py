@@ -473,11 +473,14 @@ class Station:
         block = result.outcome if result is not None else None
         next_command = str(block.get("next_command") or "") if block else ""
         if verdict == "JOINTS_MISSING" and "--reference" in next_command:
-            reference = f"{str(run_dir).rstrip('/')}.cell_ref.json"
+            reference = Path(f"{str(run_dir).rstrip('/')}.cell_ref.json")
+            args = f'"--reference", "{reference}"'
+            if (run_dir / "rig.json").is_file():  # its camera frame holds for this rig only
+                args += f', "--rig", "{reference.with_suffix(".rig.json")}"'
             return (f"for this station: record the cell's reference from a run whose zeros "
                     f"are known good (this one: hostpc reference record --run {run_dir} "
-                    f"--out {reference}), add \"--reference\", \"{reference}\" to "
-                    f"calibrate_args in {self.source} and restart the station")
+                    f"--out {reference}), put {args} in calibrate_args of {self.source} "
+                    "and restart the station")
         return ""
 
     def _finish(self, outcome: reg.RunOutcome) -> None:

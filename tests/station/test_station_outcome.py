@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import signal
+import subprocess
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -21,6 +22,7 @@ import yaml
 from hostpc.archive import open_archive
 from hostpc.archive.rows import ArchivedRun
 from hostpc.station import registers as reg
+from tests.station.conftest import REPO, hostpc_command
 from tests.station.plc_client import Plc
 from tests.station.test_station import StationProcess, _free_port
 
@@ -121,8 +123,28 @@ def test_target_estimated_is_fail_code_7_with_the_joint_bitmasks(
     # the station's next step: the reference goes into its config (a hand-run's next
     # command would not reach the station's runs)
     reference = f"{run.run_dir.rstrip('/')}.cell_ref.json"
-    assert f'add "--reference", "{reference}" to calibrate_args in ' in str(run.reason)
+    assert f'put "--reference", "{reference}", "--rig", "{reference[:-5]}.rig.json" in ' \
+        "calibrate_args of " in str(run.reason)
     assert f"hostpc reference record --run {run.run_dir} --out {reference}" in str(run.reason)
+
+    # the step done: the station's next robot has every joint calibrated (no loop)
+    record = subprocess.run(hostpc_command("reference", "record", "--run", run.run_dir,
+                                           "--out", reference),
+                            cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert record.returncode == 0, record.stderr
+    assert process.stop() == 0
+    process, config = make_station(known="none", calibrate_args=[
+        "--reference", reference, "--rig", f"{reference[:-5]}.rig.json"])
+    plc = Plc(config["modbus"]["port"])
+    try:
+        plc.command(reg.Command.ACKNOWLEDGE)  # SN-NOREF's result, served again
+        plc.wait_state({reg.State.IDLE}, 10)
+        plc.start("SN-NOREF-2")
+        values = plc.wait_state(FINISHED, 300)
+    finally:
+        plc.close()
+    assert reg.State(values[reg.STATE]) == reg.State.PASS, process.log.read_text()[-2000:]
+    assert values[reg.JOINTS_CALIBRATED] == 0b111111
 
 
 def test_an_abort_after_the_push_lets_verification_finish(make_station: Factory) -> None:
