@@ -18,6 +18,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from hostpc import __version__
+from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.journal_events import Pushed, Rollback
 from hostpc.calibrate.run_result import RunResult
 from hostpc.errors import InputError
 from hostpc.json_object import JsonObject
@@ -171,9 +173,6 @@ def _journal_offsets(folder: Path) -> tuple[JointOffset, ...]:
     """The offsets of a run that wrote no result.json (it stopped after its push, e.g. an
     estop during the verification), from its journal: the last push, unless a rollback
     followed it (none: nothing pushed, or a journal that cannot be read)."""
-    from hostpc.calibrate.journal import Journal
-    from hostpc.calibrate.journal_events import Pushed, Rollback
-
     try:
         last = Journal(folder).last_event(Pushed, Rollback)
     except InputError:
