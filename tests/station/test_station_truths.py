@@ -24,6 +24,7 @@ import yaml
 
 from hostpc.archive import open_archive
 from hostpc.robots.simulator import default_sim_scenario
+from hostpc.serving.log_limits import MAX_LINE
 from hostpc.station import registers as reg
 from tests.station.conftest import REPO, hostpc_command
 from tests.station.plc_client import Plc
@@ -146,6 +147,7 @@ def test_an_estop_after_the_push_is_pushed_not_verified_and_blocks_the_next_robo
         # the whole reason with the station's next step, in the log (never cut)
         assert row.reason is not None and "START SN-R3 again" in row.reason
         assert f"hostpc calibrate --resume {run_dir} --db " in row.reason
+        assert len(row.reason) > MAX_LINE  # the limit peer-reachable lines are cut to
         assert f"run of SN-R3: ERROR (result code 4, archive id 1): {row.reason}" in log
         assert json.loads((runs_dir / "current.json").read_text())["run_dir"] == \
             str(run_dir)
