@@ -100,6 +100,7 @@ class Station:
         self._aborted = False
         self._child_error = ""
         self._served: tuple[int, int] | None = None  # (archive id, revision) on the registers
+        self._refusal_logged = ""  # the pending run whose refusals the log has said whole
         self.modbus_address: tuple[str, int] | None = None
 
     # -- life cycle -------------------------------------------------------------------
@@ -224,7 +225,12 @@ class Station:
             self.status.serial, self.status.model = serial, model
             self._finish(reg.RunOutcome(reg.State.ERROR, reg.RESULT_PUSH_PENDING,
                                         reason=reason))
-            run_log.error("%s", reason)
+            if self._refusal_logged != pending.run_dir:  # whole, once per pending run
+                self._refusal_logged = pending.run_dir
+                run_log.error("%s", reason)
+            else:  # again: a PLC can repeat it; the rate-limited logger, one short line
+                logger.error("start of %s refused: the pending run %s (see above)", serial,
+                             pending.run_dir)
             return
         stamp = datetime.now(UTC)
         safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in serial)
