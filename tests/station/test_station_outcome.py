@@ -8,50 +8,20 @@ Real station process, real pymodbus client, simulated controller, real SQLite ar
 from __future__ import annotations
 
 import json
-import signal
 import subprocess
 import time
-from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pytest
-import yaml
 
 from hostpc.archive import open_archive
 from hostpc.archive.rows import ArchivedRun
 from hostpc.station import registers as reg
-from tests.station.conftest import REPO, hostpc_command
-from tests.station.plc_client import Plc
-from tests.station.test_station import StationProcess, _free_port
+from tests.station.conftest import REPO, StationFactory, hostpc_command
+from tests.station.plc_client import Plc, run_one
 
 FINISHED = {reg.State.PASS, reg.State.FAIL, reg.State.ERROR}
-Factory = Callable[..., tuple[StationProcess, dict[str, Any]]]
-
-
-@pytest.fixture
-def make_station(tmp_path: Path, fast_rig: Path) -> Iterator[Factory]:
-    started: list[StationProcess] = []
-
-    def make(**overrides: Any) -> tuple[StationProcess, dict[str, Any]]:
-        extra = list(overrides.pop("calibrate_args", []))
-        config = {"station": "eol-2", "robot": "sim", "known": "target", "poses": 12,
-                  "verify_poses": 4, "calibrate_args": ["--rig", str(fast_rig), *extra],
-                  "db": f"sqlite:///{tmp_path / 'archive.db'}",
-                  "runs_dir": str(tmp_path / "runs"),
-                  "modbus": {"host": "127.0.0.1", "port": _free_port()}, **overrides}
-        path = tmp_path / "station.yaml"
-        path.write_text(yaml.safe_dump(config))
-        process = StationProcess(path, tmp_path / "station.log")
-        process.start()
-        started.append(process)
-        return process, config
-
-    yield make
-    for process in started:
-        if process.process is not None and process.process.poll() is None:
-            process.stop(signal.SIGKILL)
 
 
 def _archived(config: dict[str, Any]) -> list[ArchivedRun]:
@@ -60,7 +30,7 @@ def _archived(config: dict[str, Any]) -> list[ArchivedRun]:
 
 
 def test_a_refused_push_is_fail_code_5_and_served_again_after_a_restart(
-        make_station: Factory) -> None:
+        make_station: StationFactory) -> None:
     process, config = make_station(calibrate_args=["--max-correction", "0.01"])
     plc = Plc(config["modbus"]["port"])
     try:
@@ -104,14 +74,9 @@ def test_a_refused_push_is_fail_code_5_and_served_again_after_a_restart(
 
 
 def test_target_estimated_is_fail_code_7_with_the_joint_bitmasks(
-        make_station: Factory) -> None:
+        make_station: StationFactory) -> None:
     process, config = make_station(known="none")
-    plc = Plc(config["modbus"]["port"])
-    try:
-        plc.start("SN-NOREF")
-        values = plc.wait_state(FINISHED, 300)
-    finally:
-        plc.close()
+    values = run_one(config["modbus"]["port"], "SN-NOREF")
     assert reg.State(values[reg.STATE]) == reg.State.FAIL, process.log.read_text()[-2000:]
     assert values[reg.RESULT_CODE] == 7
     assert values[reg.JOINTS_CALIBRATED] == 0b011110  # J2-J5 pushed and verified
@@ -139,15 +104,14 @@ def test_target_estimated_is_fail_code_7_with_the_joint_bitmasks(
     try:
         plc.command(reg.Command.ACKNOWLEDGE)  # SN-NOREF's result, served again
         plc.wait_state({reg.State.IDLE}, 10)
-        plc.start("SN-NOREF-2")
-        values = plc.wait_state(FINISHED, 300)
+        values = plc.run("SN-NOREF-2")
     finally:
         plc.close()
     assert reg.State(values[reg.STATE]) == reg.State.PASS, process.log.read_text()[-2000:]
     assert values[reg.JOINTS_CALIBRATED] == 0b111111
 
 
-def test_an_abort_after_the_push_lets_verification_finish(make_station: Factory) -> None:
+def test_an_abort_after_the_push_lets_verification_finish(make_station: StationFactory) -> None:
     process, config = make_station(verify_poses=8, calibrate_args=["--time-scale", "0.3"],
                                    require_joints="1,2,3,4,5")  # J6: tool estimated
     plc = Plc(config["modbus"]["port"])

@@ -11,7 +11,6 @@ from __future__ import annotations
 import json
 import math
 import re
-import signal
 import subprocess
 import sys
 import time
@@ -20,15 +19,14 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-import yaml
 
 from hostpc.archive import open_archive
 from hostpc.robots.simulator import default_sim_scenario
 from hostpc.serving.log_limits import MAX_LINE
 from hostpc.station import registers as reg
-from tests.station.conftest import REPO, hostpc_command
-from tests.station.plc_client import Plc
-from tests.station.test_station import StationProcess, _free_port
+from tests.station.conftest import REPO, StationFactory, hostpc_command
+from tests.station.plc_client import Plc, run_one
+from tests.station.test_station import StationProcess
 
 FINISHED = {reg.State.PASS, reg.State.FAIL, reg.State.ERROR}
 TOKEN = "station-truths-token"
@@ -48,7 +46,6 @@ def _world(token: str | None = TOKEN, **faults: int) -> dict[str, Any]:
 
 
 StubFactory = Callable[..., str]
-StationFactory = Callable[..., tuple[StationProcess, dict[str, Any]]]
 
 
 @pytest.fixture
@@ -78,27 +75,15 @@ def controller(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Stub
 
 
 @pytest.fixture
-def station_on(tmp_path: Path, fast_rig: Path) -> Iterator[StationFactory]:
-    started: list[StationProcess] = []
-
-    def make(robot: str, *args: str, **overrides: Any) -> tuple[StationProcess, dict[str, Any]]:
-        config = {"station": "eol-truth", "robot": robot, "known": "target",
-                  "require_joints": "1,2,3,4,5", "poses": 12, "verify_poses": 4,
-                  "calibrate_args": ["--rig", str(fast_rig), *args], "resume_attempts": 0,
-                  "db": f"sqlite:///{tmp_path / 'archive.db'}",
-                  "runs_dir": str(tmp_path / "runs"),
-                  "modbus": {"host": "127.0.0.1", "port": _free_port()}, **overrides}
-        path = tmp_path / "station.yaml"
-        path.write_text(yaml.safe_dump(config))
-        process = StationProcess(path, tmp_path / "station.log")
-        process.start()
-        started.append(process)
-        return process, config
-
-    yield make
-    for process in started:
-        if process.process is not None and process.process.poll() is None:
-            process.stop(signal.SIGKILL)
+def station_on(make_station: StationFactory) -> StationFactory:
+    """A station of this module's cell on `robot`: J1-J5 required (J6: tool estimated),
+    no resume unless `resume_attempts`, `args` after the rig."""
+    def make(robot: str, *args: str, **overrides: Any) -> tuple[StationProcess,
+                                                                  dict[str, Any]]:
+        return make_station(**{"station": "eol-truth", "robot": robot,
+                               "require_joints": "1,2,3,4,5", "resume_attempts": 0,
+                               "calibrate_args": list(args), **overrides})
+    return make
 
 
 def _reason(values: list[int]) -> str:
@@ -117,8 +102,7 @@ def test_an_estop_after_the_push_is_pushed_not_verified_and_blocks_the_next_robo
     plc = Plc(config["modbus"]["port"])                              # the estop verifying
     runs_dir = Path(config["runs_dir"])
     try:
-        plc.start("SN-R3")
-        values = plc.wait_state(FINISHED, 300)
+        values = plc.run("SN-R3")
         log = process.log.read_text()
         assert reg.State(values[reg.STATE]) == reg.State.ERROR, log[-3000:]
         assert values[reg.RESULT_CODE] == 4
@@ -213,8 +197,7 @@ def test_a_pass_rolled_back_since_is_served_as_rolled_back(
     db, runs_dir = str(config["db"]), Path(config["runs_dir"])
     plc = Plc(config["modbus"]["port"])
     try:
-        plc.start("SN-R4")
-        values = plc.wait_state(FINISHED, 300)
+        values = plc.run("SN-R4")
         assert reg.State(values[reg.STATE]) == reg.State.PASS, process.log.read_text()[-3000:]
         assert values[reg.OUTCOME_FLAGS] == reg.FLAG_PUSHED | reg.FLAG_VERIFIED
     finally:
@@ -235,8 +218,7 @@ def test_a_pass_rolled_back_since_is_served_as_rolled_back(
         plc.wait_state({reg.State.IDLE}, 10)
 
         # rolled back while the station serves the PASS: the registers follow
-        plc.start("SN-R5")
-        values = plc.wait_state(FINISHED, 300)
+        values = plc.run("SN-R5")
         assert reg.State(values[reg.STATE]) == reg.State.PASS, process.log.read_text()[-3000:]
         (run_dir,) = runs_dir.glob("SN-R5-*/")
         _rollback(run_dir, db)
@@ -258,20 +240,21 @@ def test_a_pass_rolled_back_since_is_served_as_rolled_back(
         plc.close()
 
 
+def _droppush_station(tmp_path: Path, station_on: StationFactory, **overrides: Any
+                      ) -> tuple[StationProcess, dict[str, Any]]:
+    """A sim station whose robot SN-DROPPUSH's link drops after the push, before the
+    verification's verdict."""
+    droppush = tmp_path / "droppush.json"
+    droppush.write_text(json.dumps(_world(token=None, drop_after_requests=47)))
+    return station_on("sim", sim={"scenarios_by_serial": {"SN-DROPPUSH": str(droppush)}},
+                      **overrides)
+
+
 @pytest.mark.slow
 def test_a_sim_push_cut_off_is_pushed_again_on_the_resume(
         tmp_path: Path, station_on: StationFactory) -> None:
-    droppush = tmp_path / "droppush.json"
-    # the link drops after the push, before the verification's verdict
-    droppush.write_text(json.dumps(_world(token=None, drop_after_requests=47)))
-    process, config = station_on("sim", resume_attempts=2, sim={"scenarios_by_serial": {
-        "SN-DROPPUSH": str(droppush)}})
-    plc = Plc(config["modbus"]["port"])
-    try:
-        plc.start("SN-DROPPUSH")
-        values = plc.wait_state(FINISHED, 300)
-    finally:
-        plc.close()
+    process, config = _droppush_station(tmp_path, station_on, resume_attempts=2)
+    values = run_one(config["modbus"]["port"], "SN-DROPPUSH")
     log = process.log.read_text()
     # its simulated controller ended with the run: the resume pushes again, verifies
     assert "the run ended with pushed offsets not verified (its simulated controller " \
@@ -286,12 +269,7 @@ def test_a_failed_verification_names_the_pushed_joints_and_the_next_step(
         station_on: StationFactory) -> None:
     # a verification tolerance no fit meets: pushed, then FAIL
     process, config = station_on("sim", "--verify-tolerance", "0.001")
-    plc = Plc(config["modbus"]["port"])
-    try:
-        plc.start("SN-VF")
-        values = plc.wait_state(FINISHED, 300)
-    finally:
-        plc.close()
+    values = run_one(config["modbus"]["port"], "SN-VF")
     log = process.log.read_text()
     assert reg.State(values[reg.STATE]) == reg.State.FAIL, log[-3000:]
     assert values[reg.RESULT_CODE] == 6
@@ -309,15 +287,11 @@ def test_a_failed_verification_names_the_pushed_joints_and_the_next_step(
 @pytest.mark.slow
 def test_a_pending_sim_push_is_resumed_by_a_start_of_its_own_serial(
         tmp_path: Path, station_on: StationFactory) -> None:
-    droppush = tmp_path / "droppush.json"
-    droppush.write_text(json.dumps(_world(token=None, drop_after_requests=47)))
-    process, config = station_on("sim", sim={"scenarios_by_serial": {  # no resume
-        "SN-DROPPUSH": str(droppush)}})
+    process, config = _droppush_station(tmp_path, station_on)  # no resume
     runs_dir = Path(config["runs_dir"])
     plc = Plc(config["modbus"]["port"])
     try:
-        plc.start("SN-DROPPUSH")
-        values = plc.wait_state(FINISHED, 300)
+        values = plc.run("SN-DROPPUSH")
         log = process.log.read_text()
         assert reg.State(values[reg.STATE]) == reg.State.ERROR, log[-3000:]
         assert values[reg.OUTCOME_FLAGS] == reg.FLAG_PUSHED
@@ -326,8 +300,7 @@ def test_a_pending_sim_push_is_resumed_by_a_start_of_its_own_serial(
         assert f"hostpc calibrate --resume {run_dir} --push --db " in log
         plc.command(reg.Command.ACKNOWLEDGE)
         plc.wait_state({reg.State.IDLE}, 10)
-        plc.start("SN-DROPPUSH")  # the same robot again: its run is resumed, not a new one
-        values = plc.wait_state(FINISHED, 300)
+        values = plc.run("SN-DROPPUSH")  # the same robot again: its run is resumed, not a new one
         log = process.log.read_text()
         assert f"START SN-DROPPUSH: resuming its run {run_dir} first" in log
         assert reg.State(values[reg.STATE]) == reg.State.PASS, log[-3000:]
@@ -338,8 +311,7 @@ def test_a_pending_sim_push_is_resumed_by_a_start_of_its_own_serial(
             assert [(r.id, r.verdict) for r in archive.runs()] == [(1, "PASS")]  # revised
         plc.command(reg.Command.ACKNOWLEDGE)
         plc.wait_state({reg.State.IDLE}, 10)
-        plc.start("SN-NEXT")  # nothing pending: the next robot runs
-        values = plc.wait_state(FINISHED, 300)
+        values = plc.run("SN-NEXT")  # nothing pending: the next robot runs
         assert values[reg.RESULT_CODE] != reg.RESULT_PUSH_PENDING
         assert list(runs_dir.glob("SN-NEXT-*/"))
     finally:
