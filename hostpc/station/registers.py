@@ -22,7 +22,7 @@ from hostpc.archive.records import OutcomeFigures
 
 N_REGISTERS = 96
 
-COMMAND = 0            # PLC writes: 1 start, 2 abort, 3 acknowledge; the station clears it
+COMMAND = 0            # PLC writes: 1 start, 2 abort, 3 acknowledge; cleared when read
 STATE = 1              # State below
 RESULT_CODE = 2        # `hostpc calibrate`'s exit code of the last run (0 = pass)
 HEARTBEAT = 3          # +1 every second while the station lives (wraps at 65535)
