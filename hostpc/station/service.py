@@ -340,8 +340,15 @@ class Station:
 
     async def _watch_abort(self, child: ChildRun) -> None:
         while True:
-            if self.plc.values[reg.COMMAND] == reg.Command.ABORT:
+            command = self.plc.values[reg.COMMAND]
+            if command not in (reg.Command.NONE, reg.Command.ABORT):  # not while running
                 self.plc.set(reg.COMMAND, reg.Command.NONE)
+                self.plc.set(reg.COMMAND_IGNORED, command)
+                logger.warning("command %d ignored while running (COMMAND_IGNORED = %d)",
+                               command, command)
+            if command == reg.Command.ABORT:
+                self.plc.set(reg.COMMAND, reg.Command.NONE)
+                self.plc.set(reg.COMMAND_IGNORED, 0)
                 if push_in_flight(Path(self.status.run_dir)):
                     logger.warning("PLC abort deferred: the run has written the controller's "
                                    "offsets; their verification finishes first")

@@ -129,6 +129,12 @@ def test_an_abort_after_the_push_lets_verification_finish(make_station: StationF
             time.sleep(0.02)
         assert journal is not None, process.log.read_text()[-2000:]
         assert '"event":"result"' not in journal.read_text()  # still verifying
+        plc.command(reg.Command.START)  # not while running: cleared, and said so
+        deadline = time.monotonic() + 5
+        while plc.read()[reg.COMMAND_IGNORED] != reg.Command.START:
+            assert time.monotonic() < deadline, "a START while running looks taken"
+            time.sleep(0.05)
+        assert plc.read()[reg.COMMAND] == 0
         plc.command(reg.Command.ABORT)
         values = plc.wait_state(FINISHED, 300)
     finally:
