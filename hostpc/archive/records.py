@@ -10,6 +10,7 @@ before and after with their sigmas.
 from __future__ import annotations
 
 import json
+import math
 import uuid
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -17,6 +18,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from hostpc import __version__
+from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.journal_events import Pushed, Rollback
 from hostpc.calibrate.run_result import RunResult
 from hostpc.errors import InputError
 from hostpc.json_object import JsonObject
@@ -166,7 +169,26 @@ def _offsets(result: RunResult | None) -> tuple[JointOffset, ...]:
                  for row in rows)
 
 
-def _verify_figures(result: RunResult | None) -> VerifyFigures:
+def _journal_offsets(folder: Path) -> tuple[JointOffset, ...]:
+    """The offsets of a run that wrote no result.json (it stopped after its push, e.g. an
+    estop during the verification), from its journal: the last push, unless a rollback
+    followed it (none: nothing pushed, or a journal that cannot be read)."""
+    try:
+        last = Journal(folder).last_event(Pushed, Rollback)
+    except InputError:
+        return ()
+    if not isinstance(last, Pushed):
+        return ()
+    previous, new = last.record.previous.tolist(), last.record.new.tolist()
+    pushed = last.record.pushed or tuple(n != o for o, n in zip(previous, new, strict=True))
+    return tuple(JointOffset(joint=j, label=f"q{j}", old_deg=math.degrees(o),
+                             correction_deg=math.degrees(n - o), sigma_deg=None,
+                             new_deg=math.degrees(n), pushed=p)
+                 for j, (o, n, p) in enumerate(zip(previous, new, pushed, strict=True),
+                                               start=1))
+
+
+def verify_figures(result: RunResult | None) -> VerifyFigures:
     verify = (result.verify if result is not None else None) or {}
     return VerifyFigures(_float_or_none(verify.get("statistic")),
                          _float_or_none(verify.get("p_value")), int(verify.get("dof") or 0))
@@ -204,7 +226,7 @@ def record_from_run(run_dir: str | Path, *, serial: str, model: str = "", statio
                result.exit_code if result is not None else 1)
     dataset_path = folder / "dataset.json"
     dataset_json = json.dumps(_read_json(dataset_path)) if dataset_path.exists() else None
-    offsets = _offsets(result)
+    offsets = _offsets(result) if result is not None else _journal_offsets(folder)
     corrections = [abs(o.correction_deg) for o in offsets
                    if o.correction_deg is not None and o.pushed]
     run_json = folder / "run.json"
@@ -220,9 +242,10 @@ def record_from_run(run_dir: str | Path, *, serial: str, model: str = "", statio
         method=result.method if result is not None else "",
         effects=tuple(str(e) for e in fit.get("effects", []) or []),
         verdict=verdict_of(result, code), exit_code=code,
-        push_status=result.push.status if result is not None else "none",
+        push_status=(result.push.status if result is not None
+                     else "pushed" if any(o.pushed for o in offsets) else "none"),
         largest_correction_deg=max(corrections) if corrections else None,
-        verify=_verify_figures(result), offsets=offsets,
+        verify=verify_figures(result), offsets=offsets,
         software_version=__version__, result=result, dataset_json=dataset_json,
         run_dir=str(folder), uid_from_folder=run_uid is None, reason=reason,
         report_path=str(folder / "report.html") if (folder / "report.html").is_file() else "")

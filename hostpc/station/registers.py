@@ -14,6 +14,7 @@ programmer.
 from __future__ import annotations
 
 import enum
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -21,7 +22,7 @@ from hostpc.archive.records import OutcomeFigures
 
 N_REGISTERS = 96
 
-COMMAND = 0            # PLC writes: 1 start, 2 abort, 3 acknowledge; the station clears it
+COMMAND = 0            # PLC writes: 1 start, 2 abort, 3 acknowledge; cleared when read
 STATE = 1              # State below
 RESULT_CODE = 2        # `hostpc calibrate`'s exit code of the last run (0 = pass)
 HEARTBEAT = 3          # +1 every second while the station lives (wraps at 65535)
@@ -38,10 +39,12 @@ JOINTS_NOT_CALIBRATED = 15   # not determined by the data (unidentifiable, held,
 JOINTS_REQUIRED_MISSING = 16  # required (--require-joints) but not calibrated
 OUTCOME_FLAGS = 17     # bit0 pushed, bit1 verified, bit2 rolled back, bit3 refused
 REASON_CODE = 18       # why the last run did not PASS (Reason below; 0 = it did, or idle)
+COMMAND_IGNORED = 19   # the last command the station did NOT take in its state (0: taken)
 SERIAL = 20            # 20-35: robot serial number, 32 ASCII characters
 SERIAL_LENGTH = 16
 MODEL = 40             # 40-55: robot model, 32 ASCII characters
 MODEL_LENGTH = 16
+JOINTS_PUSHED = 56     # bit j-1 = joint j's offset written to the controller by the run
 REASON = 64            # 64-95: the last run's one-line reason, 64 ASCII characters (cut)
 REASON_LENGTH = 32
 
@@ -69,6 +72,7 @@ RESULT_NO_SERIAL = 20       # start without a serial number in SERIAL
 RESULT_ABORTED = 21         # the PLC aborted the run
 RESULT_ARCHIVE_FAILED = 22  # the run finished but could not be archived
 RESULT_STATION_ERROR = 23   # the calibration could not be started at all
+RESULT_PUSH_PENDING = 24    # start refused: an earlier run's pushed offsets are not verified
 
 
 class Reason(enum.IntEnum):
@@ -88,19 +92,28 @@ class Reason(enum.IntEnum):
     NOT_ARCHIVED = 11       # the run finished but could not be archived (result code 22)
     CANNOT_START = 12       # the calibration could not be started (result code 23)
     INTERNAL = 13           # any other failure of the calibration process
+    PUSH_LOST = 14          # the controller lost the run's pushed offsets (exit 4)
+    PUSH_PENDING = 15       # start refused: an earlier run's push is not verified (24)
 
 
 _REASON_BY_CODE = {2: Reason.INPUT, 3: Reason.CONTROLLER_UNREACHABLE,
                    4: Reason.CONTROLLER_REFUSED, 5: Reason.PUSH_REFUSED,
                    6: Reason.VERIFY_FAILED, 7: Reason.JOINTS_MISSING, 130: Reason.INTERRUPTED,
                    143: Reason.INTERRUPTED, 20: Reason.NO_SERIAL, 21: Reason.ABORTED,
-                   22: Reason.NOT_ARCHIVED, 23: Reason.CANNOT_START}
+                   22: Reason.NOT_ARCHIVED, 23: Reason.CANNOT_START,
+                   24: Reason.PUSH_PENDING}
+PUSH_LOST_PREFIX = "push lost:"
+"""How `hostpc calibrate`'s error line (hostpc.calibrate.resume.PushLost) begins when the
+controller no longer has the offsets the run pushed (exit code 4, like a refusal)."""
 
 
-def reason_of(state: State, result_code: int) -> Reason:
-    """The REASON_CODE of a finished run in `state` with `result_code`."""
+def reason_of(state: State, result_code: int, reason: str = "") -> Reason:
+    """The REASON_CODE of a finished run in `state` with `result_code` and one-line
+    `reason` (a push lost is exit code 4 like a refusal: its reason tells them apart)."""
     if state in (State.IDLE, State.RUNNING, State.PASS):
         return Reason.NONE
+    if result_code == 4 and reason.startswith(PUSH_LOST_PREFIX):
+        return Reason.PUSH_LOST
     if result_code == 0:
         return Reason.NOT_PUSHED
     return _REASON_BY_CODE.get(result_code, Reason.INTERNAL)
@@ -149,6 +162,7 @@ class RunOutcome:
     joints_not_calibrated: int = 0
     joints_required_missing: int = 0
     outcome_flags: int = 0
+    joints_pushed: int = 0
     reason: str = ""
     """The one-line reason of a run that did not PASS (REASON; its kind: REASON_CODE)."""
 
@@ -157,29 +171,34 @@ FLAG_PUSHED, FLAG_VERIFIED, FLAG_ROLLED_BACK, FLAG_REFUSED = 1, 2, 4, 8
 
 
 class OutcomeBits(NamedTuple):
-    """RunOutcome's last four fields: joint bitmasks (joint j sets bit j-1) and flags."""
+    """RunOutcome's joint bitmasks (joint j sets bit j-1) and flags."""
 
     joints_calibrated: int
     joints_not_calibrated: int
     joints_required_missing: int
     outcome_flags: int
+    joints_pushed: int
 
 
-def outcome_bits(outcome: OutcomeFigures | None) -> OutcomeBits:
-    """The bitmasks and flags of a run's outcome (none: all zero); joints beyond 16 are
-    left out."""
+def _mask(numbers: Iterable[int]) -> int:
+    return sum(1 << (n - 1) for n in numbers if 1 <= n <= 16)
+
+
+def outcome_bits(outcome: OutcomeFigures | None, push_status: str,
+                 pushed_joints: Iterable[int]) -> OutcomeBits:
+    """The bitmasks and flags of a run: its outcome (None: a run that wrote no result, e.g.
+    stopped during the verification) and what the archive says it pushed (`push_status`,
+    the joints whose offsets it wrote: from the result, or the journal of a run without
+    one); joints beyond 16 are left out."""
+    pushed = _mask(pushed_joints)
     if outcome is None:
-        return OutcomeBits(0, 0, 0, 0)
-
-    def mask(numbers: tuple[int, ...]) -> int:
-        return sum(1 << (n - 1) for n in numbers if 1 <= n <= 16)
-
+        return OutcomeBits(0, 0, 0, FLAG_PUSHED if push_status == "pushed" else 0, pushed)
     flags = ((FLAG_PUSHED if outcome.pushed else 0)
              | (FLAG_VERIFIED if outcome.verified is True else 0)
              | (FLAG_ROLLED_BACK if outcome.verdict == "ROLLED_BACK" else 0)
              | (FLAG_REFUSED if outcome.verdict == "REFUSED" else 0))
-    return OutcomeBits(mask(outcome.calibrated), mask(outcome.not_calibrated),
-                       mask(outcome.missing_required), flags)
+    return OutcomeBits(_mask(outcome.calibrated), _mask(outcome.not_calibrated),
+                       _mask(outcome.missing_required), flags, pushed)
 
 
 def outcome_registers(outcome: RunOutcome) -> dict[int, int]:
@@ -199,7 +218,8 @@ def outcome_registers(outcome: RunOutcome) -> dict[int, int]:
     values[JOINTS_NOT_CALIBRATED] = outcome.joints_not_calibrated & 0xFFFF
     values[JOINTS_REQUIRED_MISSING] = outcome.joints_required_missing & 0xFFFF
     values[OUTCOME_FLAGS] = outcome.outcome_flags & 0xFFFF
-    values[REASON_CODE] = int(reason_of(outcome.state, outcome.result_code))
+    values[JOINTS_PUSHED] = outcome.joints_pushed & 0xFFFF
+    values[REASON_CODE] = int(reason_of(outcome.state, outcome.result_code, outcome.reason))
     for address, value in enumerate(encode_text(outcome.reason, REASON_LENGTH), start=REASON):
         values[address] = value
     return values

@@ -8,6 +8,7 @@ is an ordinary `hostpc calibrate` run, resumable with `--resume`.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import hashlib
 import json
 import os
@@ -18,6 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from hostpc.calibrate.journal import JOURNAL_FILE
 from hostpc.json_object import JsonObject
 from hostpc.station.config import StationConfig
 
@@ -80,17 +82,54 @@ def calibrate_options(config: StationConfig, run_dir: Path,
     return [*options, *config.calibrate_args]
 
 
+def resume_options(config: StationConfig, run_dir: Path) -> list[str]:
+    """The `hostpc calibrate` options that resume the run in `run_dir`: `--resume DIR`, and
+    `--push` for a simulated robot whose run had pushed (its simulated controller ended
+    with the run, so a resume restarts it with its initial offsets: without `--push` the
+    push is lost and never verified)."""
+    options = ["--resume", str(run_dir)]
+    if config.robot == "sim" and push_in_flight(run_dir):
+        options.append("--push")
+    return options
+
+
+def resume_text(config: StationConfig, run_dir: Path) -> str:
+    """The command a technician types to resume the run in `run_dir` and archive it."""
+    return " ".join(["hostpc calibrate", *resume_options(config, run_dir),
+                     "--db", config.database_url()])
+
+
 def calibrate_command(config: StationConfig, run_dir: Path, serial: str,
                       resume: bool) -> list[str]:
     """The `hostpc calibrate` command line of one run (or of its resume)."""
     if resume:
-        return [*CALIBRATE, "--resume", str(run_dir)]
+        return [*CALIBRATE, *resume_options(config, run_dir)]
     scenario_file = None
     if config.robot == "sim":
         scenario_file = run_dir.parent / ".scenarios" / f"{run_dir.name}.json"
         scenario_file.parent.mkdir(parents=True, exist_ok=True)
         scenario_file.write_text(json.dumps(sim_scenario(config, serial), indent=1))
     return [*CALIBRATE, *calibrate_options(config, run_dir, scenario_file)]
+
+
+def push_in_flight(run_dir: Path) -> bool:
+    """True if the run's journal holds a push (or a push intent) not followed by the run's
+    result or a rollback: the controller may hold offsets nobody verified yet. Read only
+    (the child may be appending: an unfinished last line is skipped, never cut)."""
+    try:
+        data = (run_dir / JOURNAL_FILE).read_bytes()
+    except OSError:
+        return False
+    last = None
+    for raw in data.splitlines(keepends=True):
+        if not raw.endswith(b"\n") or b'"event":"sample"' in raw:
+            continue
+        with contextlib.suppress(ValueError):
+            obj = json.loads(raw)
+            event = obj.get("event") if isinstance(obj, dict) else None
+            if event in ("push_intent", "push", "result", "rollback"):
+                last = event
+    return last in ("push_intent", "push")
 
 
 def error_line(line: str) -> str | None:

@@ -14,10 +14,16 @@ A PLC abort once the run has written (or started writing) the controller's offse
 DEFERRED: the child is not interrupted, the verification of the pushed offsets finishes,
 and the registers show the real verdict (the log says the abort was deferred). If the
 child ends anyway with a push not followed by a result (killed, link lost), the station
-resumes it (`--resume`, up to resume_attempts) so the offsets get verified; current.json
-stays while the controller may hold unverified offsets. The last finished result is kept
-in `last_outcome.json` under the runs folder until the PLC acknowledges it: a station
-restarted before ACKNOWLEDGE serves the same result registers again.
+resumes it (`--resume`, up to resume_attempts; a simulated robot's with `--push`, its
+controller ended with the run) so the offsets get verified; current.json stays while the
+controller may hold unverified offsets: that run is PENDING, and a START of another robot
+is refused (result code 24) until it is settled (START of the same serial or a station
+restart resumes it; a resume or rollback by hand shows in its journal). A run without a
+result that pushed is reported pushed, with its journal's offsets (hostpc.archive). The
+result on the registers is the run's archived record, kept in `last_outcome.json` under
+the runs folder until the PLC acknowledges it (a station restarted before ACKNOWLEDGE
+serves it again) and following the record: a revision (a rollback, a resume with --db)
+is served as the archive has it now.
 
 Reasons: a run that does not PASS has a one-line reason (calibrate's own error line, the
 outcome's headline, or the station's: aborted, cannot start, not archived). It goes to the
@@ -39,13 +45,20 @@ import dataclasses
 import json
 import logging
 import uuid
+from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 
 from hostpc.archive import open_archive, record_from_run
 from hostpc.archive.database import Archive
-from hostpc.archive.records import VerifyFigures, outcome_of, read_result, verdict_of
-from hostpc.calibrate.journal import JOURNAL_FILE
+from hostpc.archive.records import (
+    JointOffset,
+    outcome_of,
+    read_result,
+    verdict_of,
+    verify_figures,
+)
+from hostpc.archive.rows import StoredRun
 from hostpc.calibrate.run_result import RunResult
 from hostpc.errors import InputError, ZerocalError
 from hostpc.files import write_json_atomic
@@ -53,11 +66,23 @@ from hostpc.station import registers as reg
 from hostpc.station.config import StationConfig
 from hostpc.station.plc import PlcServer
 from hostpc.station.run_report import write_station_report
-from hostpc.station.runner import ChildRun, calibrate_command, start_child
+from hostpc.station.runner import (
+    ChildRun,
+    calibrate_command,
+    push_in_flight,
+    resume_text,
+    start_child,
+)
 from hostpc.station.status import CurrentRun, RecentRun, StationStatus
 
 logger = logging.getLogger("hostpc.station")
+run_log = logging.getLogger("hostpc.station.run")
+"""The lines of the station's runs and their reasons: whole (hostpc.station's own lines,
+which a PLC can cause many of, are rate-limited and cut; a run's line is never cut, so its
+next command stays whole)."""
 EXIT_CONNECTION = 3  # `hostpc calibrate`: the controller could not be reached / link lost
+FOLLOW_INTERVAL_S = 1.0
+"""How often the result on the registers is checked against its archived record (s)."""
 
 
 class Station:
@@ -74,6 +99,8 @@ class Station:
         self._stopping = asyncio.Event()
         self._aborted = False
         self._child_error = ""
+        self._served: tuple[int, int] | None = None  # (archive id, revision) on the registers
+        self._refusal_logged = ""  # the pending run whose refusals the log has said whole
         self.modbus_address: tuple[str, int] | None = None
 
     # -- life cycle -------------------------------------------------------------------
@@ -111,8 +138,13 @@ class Station:
                 await self._resume_interrupted()
             else:
                 self._serve_unacknowledged()
+            followed = 0.0
             while not self._stopping.is_set():
                 await self._poll_command()
+                now = asyncio.get_running_loop().time()
+                if now - followed >= FOLLOW_INTERVAL_S:
+                    followed = now
+                    await self._follow_archive()
                 with contextlib.suppress(TimeoutError):  # a cancel lost (gh-86296) with
                     # the stop event (its only result) ends the loop all the same
                     await asyncio.wait_for(self._stopping.wait(), 0.1)
@@ -150,16 +182,23 @@ class Station:
         self.plc.set(reg.COMMAND, reg.Command.NONE)
         state = reg.State(self.plc.values[reg.STATE])
         if command == reg.Command.START and state == reg.State.IDLE:
+            self.plc.set(reg.COMMAND_IGNORED, 0)
             await self._start_run()
         elif command == reg.Command.ACKNOWLEDGE and state in (
                 reg.State.PASS, reg.State.FAIL, reg.State.ERROR):
             self.plc.set_many(reg.outcome_registers(reg.RunOutcome(reg.State.IDLE, 0)))
             self.plc.set(reg.PROGRESS, 0)
+            self.plc.set(reg.COMMAND_IGNORED, 0)
             self.status.clear_run()
+            self._served = None
             self._publish_state(reg.State.IDLE)
             self.last_outcome_file.unlink(missing_ok=True)  # acknowledged: not served again
-        else:
-            logger.warning("command %d ignored in state %s", command, state.name)
+        else:  # not taken: the PLC reads so in COMMAND_IGNORED, not only the log
+            self.plc.set(reg.COMMAND_IGNORED, command)
+            logger.warning("command %d ignored in state %s (COMMAND_IGNORED = %d)%s",
+                           command, state.name, command,
+                           ": acknowledge the result first (COMMAND = 3)"
+                           if state != reg.State.IDLE else "")
 
     async def _start_run(self) -> None:
         serial = reg.decode_text(self.plc.values[reg.SERIAL:reg.SERIAL + reg.SERIAL_LENGTH])
@@ -171,6 +210,29 @@ class Station:
             self._finish(reg.RunOutcome(reg.State.ERROR, reg.RESULT_NO_SERIAL, reason=reason))
             logger.error("%s", reason)
             return
+        pending = self._pending_run()
+        if pending is not None:
+            if pending.serial == serial:  # the same robot again: verify its push first
+                run_log.warning("START %s: resuming its run %s first (its pushed offsets "
+                                "are not verified)", serial, pending.run_dir)
+                current = dataclasses.replace(pending, attempts=0)
+                self._write_current(current)
+                await self._execute(current, resume=True)
+                return
+            reason = (f"start of {serial} refused: the run of {pending.serial} pushed "
+                      "offsets that are NOT verified; "
+                      + self._pending_text(pending.serial, Path(pending.run_dir)))
+            self.status.clear_run()
+            self.status.serial, self.status.model = serial, model
+            self._finish(reg.RunOutcome(reg.State.ERROR, reg.RESULT_PUSH_PENDING,
+                                        reason=reason))
+            if self._refusal_logged != pending.run_dir:  # whole, once per pending run
+                self._refusal_logged = pending.run_dir
+                run_log.error("%s", reason)
+            else:  # again: a PLC can repeat it; the rate-limited logger, one short line
+                logger.error("start of %s refused: the pending run %s (see above)", serial,
+                             pending.run_dir)
+            return
         stamp = datetime.now(UTC)
         safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in serial)
         run_dir = self.runs_dir / f"{safe}-{stamp:%Y%m%dT%H%M%S%f}"
@@ -178,6 +240,33 @@ class Station:
                              run_dir=str(run_dir), started_at=stamp.isoformat())
         self._write_current(current)
         await self._execute(current, resume=False)
+
+    def _pending_run(self) -> CurrentRun | None:
+        """The concluded run whose pushed offsets are not verified (current.json kept for
+        it), or None; a pending run settled by hand since (resumed or rolled back: its
+        journal says so) is pending no more."""
+        try:
+            pending = CurrentRun.from_json(json.loads(self.current_file.read_text()))
+        except FileNotFoundError:
+            return None
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
+            run_log.error("%s is damaged: no pending run is kept", self.current_file)
+            self.current_file.unlink(missing_ok=True)
+            return None
+        if push_in_flight(Path(pending.run_dir)):
+            return pending
+        run_log.info("the pending run of %s in %s was settled by hand (its journal has a "
+                     "result or a rollback since)", pending.serial, pending.run_dir)
+        self.current_file.unlink(missing_ok=True)
+        return None
+
+    def _pending_text(self, serial: str, run_dir: Path) -> str:
+        """What settles a run pending with pushed offsets not verified."""
+        undo = ("" if self.config.robot == "sim" else
+                f"; undo it: hostpc rollback --run {run_dir} --db {self.config.database_url()}")
+        return (f"the station starts no other robot until it is settled: START {serial} "
+                f"again to resume it (its robot in the cell), or resume it by hand: "
+                f"{resume_text(self.config, run_dir)}{undo}")
 
     async def _resume_interrupted(self) -> None:
         try:
@@ -236,9 +325,14 @@ class Station:
                     and current.attempts < self.config.resume_attempts:
                 current = dataclasses.replace(current, attempts=current.attempts + 1)
                 self._write_current(current)
-                why = ("the controller holds pushed offsets not yet verified" if in_flight
-                       else "link lost")
-                logger.warning("%s during the run of %s: resuming (attempt %d of %d)", why,
+                why = ("link lost" if not in_flight else
+                       "push lost (the controller no longer has the run's offsets)"
+                       if child.error.startswith(reg.PUSH_LOST_PREFIX) else
+                       "the run ended with pushed offsets not verified (its simulated "
+                       "controller with it: the resume pushes again)"
+                       if self.config.robot == "sim" else
+                       "the controller holds pushed offsets not yet verified")
+                run_log.warning("%s during the run of %s: resuming (attempt %d of %d)", why,
                                current.serial, current.attempts,
                                self.config.resume_attempts)
                 resume, self._aborted = True, False
@@ -247,8 +341,15 @@ class Station:
 
     async def _watch_abort(self, child: ChildRun) -> None:
         while True:
-            if self.plc.values[reg.COMMAND] == reg.Command.ABORT:
+            command = self.plc.values[reg.COMMAND]
+            if command not in (reg.Command.NONE, reg.Command.ABORT):  # not while running
                 self.plc.set(reg.COMMAND, reg.Command.NONE)
+                self.plc.set(reg.COMMAND_IGNORED, command)
+                logger.warning("command %d ignored while running (COMMAND_IGNORED = %d)",
+                               command, command)
+            if command == reg.Command.ABORT:
+                self.plc.set(reg.COMMAND, reg.Command.NONE)
+                self.plc.set(reg.COMMAND_IGNORED, 0)
                 if push_in_flight(Path(self.status.run_dir)):
                     logger.warning("PLC abort deferred: the run has written the controller's "
                                    "offsets; their verification finishes first")
@@ -266,7 +367,8 @@ class Station:
         serial = current.serial
         started_at = datetime.fromisoformat(current.started_at)
         result = _read_result(run_dir)
-        reason = self._reason(code, result)
+        pending = push_in_flight(run_dir)  # unverified offsets in the controller
+        reason = self._reason(code, result, run_dir, serial, pending)
         log_path = run_dir.parent / f"{run_dir.name}.log"
         if not (run_dir / "report.html").is_file():  # ended before calibrate wrote one
             try:
@@ -279,6 +381,7 @@ class Station:
                 logger.error("run %s: no report written (%s)", run_dir, exc.strerror or exc)
         archive_id = None
         record = None
+        stored = None
         try:
             record = record_from_run(
                 run_dir, serial=serial, model=current.model,
@@ -286,49 +389,76 @@ class Station:
                 started_at=started_at, reason=reason)
             assert self.archive is not None
             archive_id = await asyncio.to_thread(self.archive.add, record)
+            stored = await asyncio.to_thread(self.archive.run, archive_id)
         except ZerocalError as exc:
             logger.error("run %s not archived: %s", run_dir, exc)
             if not code:
                 code, reason = reg.RESULT_ARCHIVE_FAILED, f"not archived: {exc}"
-        outcome_state = reg.State.ERROR
-        if record is not None and code != reg.RESULT_ABORTED:
-            # PASS only for the outcome verdict PASS; ERROR if the run did not finish
-            outcome_state = (reg.State.PASS if record.verdict == "PASS" else
-                             reg.State.ERROR if record.verdict == "ERROR" else reg.State.FAIL)
-        if outcome_state == reg.State.PASS:
-            reason = ""
-        verify = record.verify if record is not None else VerifyFigures()
-        outcome = reg.RunOutcome(
-            outcome_state, code,
-            largest_correction_deg=record.largest_correction_deg if record else None,
-            verify_statistic=verify.statistic, verify_p_value=verify.p_value,
-            verify_dof=verify.dof, archive_id=archive_id, reason=reason,
-            **reg.outcome_bits(record.outcome if record is not None else None)._asdict())
+        if stored is not None:  # the registers say what the archive holds
+            outcome = archived_outcome(stored)
+            self._served = (stored.run.id, stored.run.revision)
+        else:
+            self._served = None
+            outcome = reg.RunOutcome(reg.State.ERROR, code, reason=reason)
+            if record is not None and code != reg.RESULT_ARCHIVE_FAILED:
+                outcome = run_outcome(record.verdict, code, record.push_status,
+                                      record.largest_correction_deg, record.offsets,
+                                      record.result, None, reason)
         self.status.last_line = ""  # the run's output: acted on, the result says the rest
         self.status.archive_id = archive_id
         self.status.report = (f"/runs/{archive_id}/report.html"
                               if archive_id is not None and record is not None
                               and record.report_path else "")
         self._finish(outcome)
-        if push_in_flight(run_dir):  # unverified offsets in the controller: resume later
-            logger.error("run %s ended with pushed offsets not verified: current.json kept, "
-                         "the next station start resumes it (or: hostpc calibrate --resume "
-                         "%s)", run_dir, run_dir)
+        if pending:
+            run_log.error("run %s ended with pushed offsets not verified: current.json kept "
+                          "(the next station start resumes it); %s", run_dir,
+                          self._pending_text(serial, run_dir))
         else:
             self.current_file.unlink(missing_ok=True)
         self.status.runs_done += 1
-        self.status.recent = ([RecentRun(serial, outcome_state.name, code, archive_id,
-                                          str(run_dir), reason)] + self.status.recent)[:20]
-        if reason:
-            logger.error("run of %s: %s (result code %d, archive id %s): %s", serial,
-                         outcome_state.name, code, archive_id, reason)
+        self.status.recent = ([RecentRun(serial, outcome.state.name, outcome.result_code,
+                                         archive_id, str(run_dir), outcome.reason)]
+                              + self.status.recent)[:20]
+        if outcome.reason:
+            run_log.error("run of %s: %s (result code %d, archive id %s): %s", serial,
+                          outcome.state.name, outcome.result_code, archive_id, outcome.reason)
         else:
-            logger.info("run of %s: %s (result code %d, archive id %s)", serial,
-                        outcome_state.name, code, archive_id)
+            run_log.info("run of %s: %s (result code %d, archive id %s)", serial,
+                         outcome.state.name, outcome.result_code, archive_id)
 
-    def _reason(self, code: int, result: RunResult | None) -> str:
-        """One line: why the run with exit `code` and `result` (result.json) did not PASS
-        (empty when it did)."""
+    async def _follow_archive(self) -> None:
+        """The result on the registers follows its archived record: a run revised since
+        (`hostpc rollback --run DIR --db URL`, a resume by hand with --db) is served as the
+        archive has it now, never the outcome it had."""
+        if self._served is None or self.archive is None:
+            return
+        archive_id, revision = self._served
+        try:  # its revisions first (small rows); the run with its documents if revised
+            revisions = await asyncio.to_thread(self.archive.revisions, archive_id)
+            if not revisions or revisions[-1].revision == revision:
+                return
+            stored = await asyncio.to_thread(self.archive.run, archive_id)
+        except ZerocalError as exc:
+            logger.error("archived run %d cannot be read: %s", archive_id, exc)
+            return
+        outcome = archived_outcome(stored)
+        self._served = (archive_id, stored.run.revision)
+        self._finish(outcome)
+        self.status.recent = [dataclasses.replace(r, verdict=outcome.state.name,
+                                                  result_code=outcome.result_code,
+                                                  reason=outcome.reason)
+                              if r.archive_id == archive_id else r
+                              for r in self.status.recent]
+        run_log.warning("run of %s (archive id %d) was revised (revision %d, verdict %s): "
+                        "now serving %s (result code %d): %s", stored.run.serial, archive_id,
+                        stored.run.revision, stored.run.verdict, outcome.state.name,
+                        outcome.result_code, outcome.reason)
+
+    def _reason(self, code: int, result: RunResult | None, run_dir: Path, serial: str,
+                pending: bool) -> str:
+        """One line: why the run with exit `code` and `result` (result.json) did not PASS,
+        and the station's next step (empty when it passed)."""
         outcome = outcome_of(result)
         if code == reg.RESULT_ABORTED:
             return "aborted by the PLC before the push"
@@ -337,7 +467,35 @@ class Station:
         text = self._child_error or (outcome.headline if outcome is not None else "")
         if not text and code:
             text = f"hostpc calibrate ended with exit code {code}"
-        return " ".join(text.split())
+        step = self._next_step(outcome.verdict if outcome is not None else None, result,
+                               run_dir, serial, pending)
+        return " ".join(f"{text}; station: {step}".split() if step else text.split())
+
+    def _next_step(self, verdict: str | None, result: RunResult | None, run_dir: Path,
+                   serial: str, pending: bool) -> str:
+        """The station's own next step of a run that did not PASS (empty: calibrate's
+        reason says it): its commands as a station's technician types them."""
+        if pending:
+            return f"pushed offsets NOT verified; {self._pending_text(serial, run_dir)}"
+        if verdict == "FAIL":
+            if self.config.robot == "sim":
+                return ("the simulated controller ended with the run (nothing to roll "
+                        f"back): START {serial} again")
+            return (f"next: hostpc rollback --run {run_dir} --db "
+                    f"{self.config.database_url()} (the controller's previous offsets "
+                    f"back), then START {serial} again")
+        block = result.outcome if result is not None else None
+        next_command = str(block.get("next_command") or "") if block else ""
+        if verdict == "JOINTS_MISSING" and "--reference" in next_command:
+            reference = Path(f"{str(run_dir).rstrip('/')}.cell_ref.json")
+            args = f'"--reference", "{reference}"'
+            if (run_dir / "rig.json").is_file():  # its camera frame holds for this rig only
+                args += f', "--rig", "{reference.with_suffix(".rig.json")}"'
+            return (f"for this station: record the cell's reference from a run whose zeros "
+                    f"are known good (this one: hostpc reference record --run {run_dir} "
+                    f"--out {reference}), put {args} in calibrate_args of {self.source} "
+                    "and restart the station")
+        return ""
 
     def _finish(self, outcome: reg.RunOutcome) -> None:
         self.plc.set_many(reg.outcome_registers(outcome))
@@ -345,7 +503,8 @@ class Station:
                      self.plc.values[reg.PROGRESS])
         self.status.result_code = outcome.result_code
         self.status.reason = outcome.reason
-        self.status.reason_code = int(reg.reason_of(outcome.state, outcome.result_code))
+        self.status.reason_code = int(reg.reason_of(outcome.state, outcome.result_code,
+                                                     outcome.reason))
         self.status.progress = self.plc.values[reg.PROGRESS]
         self._publish_state(outcome.state)
         registers = {**reg.outcome_registers(outcome), reg.PROGRESS: self.plc.values[reg.PROGRESS]}
@@ -354,6 +513,7 @@ class Station:
                            "result_code": outcome.result_code, "reason": outcome.reason,
                            "serial": self.status.serial, "model": self.status.model,
                            "archive_id": self.status.archive_id,
+                           "revision": self._served[1] if self._served else None,
                            "report": self.status.report})
 
     def _serve_unacknowledged(self) -> None:
@@ -378,28 +538,40 @@ class Station:
         self.status.archive_id = saved.get("archive_id")
         self.status.report = str(saved.get("report") or "")
         self._publish_state(state)
+        archive_id, revision = saved.get("archive_id"), saved.get("revision")
+        if isinstance(archive_id, int):  # follow its record: revised since, served so
+            self._served = (archive_id, revision if isinstance(revision, int) else 0)
         logger.info("serving the unacknowledged result again: %s (result code %s)",
                     state.name, registers.get(reg.RESULT_CODE))
 
 
-def push_in_flight(run_dir: Path) -> bool:
-    """True if the run's journal holds a push (or a push intent) not followed by the run's
-    result or a rollback: the controller may hold offsets nobody verified yet. Read only
-    (the child may be appending: an unfinished last line is skipped, never cut)."""
-    try:
-        data = (run_dir / JOURNAL_FILE).read_bytes()
-    except OSError:
-        return False
-    last = None
-    for raw in data.splitlines(keepends=True):
-        if not raw.endswith(b"\n") or b'"event":"sample"' in raw:
-            continue
-        with contextlib.suppress(ValueError):
-            obj = json.loads(raw)
-            event = obj.get("event") if isinstance(obj, dict) else None
-            if event in ("push_intent", "push", "result", "rollback"):
-                last = event
-    return last in ("push_intent", "push")
+def run_outcome(verdict: str, exit_code: int, push_status: str,
+                largest_correction_deg: float | None, offsets: Sequence[JointOffset],
+                result: RunResult | None, archive_id: int | None, reason: str
+                ) -> reg.RunOutcome:
+    """The result registers of a concluded run as its record says: STATE PASS only for
+    the verdict PASS, ERROR for a run that did not finish (it may still have pushed: the
+    pushed flag and joints, from its journal), FAIL otherwise."""
+    state = (reg.State.PASS if verdict == "PASS" else
+             reg.State.ERROR if verdict == "ERROR" else reg.State.FAIL)
+    verify = verify_figures(result)
+    bits = reg.outcome_bits(outcome_of(result), push_status,
+                            [o.joint for o in offsets if o.pushed])
+    return reg.RunOutcome(
+        state, exit_code, largest_correction_deg=largest_correction_deg,
+        verify_statistic=verify.statistic, verify_p_value=verify.p_value,
+        verify_dof=verify.dof, archive_id=archive_id,
+        reason="" if state == reg.State.PASS else reason, **bits._asdict())
+
+
+def archived_outcome(stored: StoredRun) -> reg.RunOutcome:
+    """The result registers of an archived run as its record holds it now (its current
+    revision); its reason: the archived one, else its outcome's headline."""
+    run = stored.run
+    outcome = outcome_of(stored.result)
+    reason = run.reason or (outcome.headline if outcome is not None else "")
+    return run_outcome(run.verdict, run.exit_code, run.push_status,
+                       run.largest_correction_deg, run.offsets, stored.result, run.id, reason)
 
 
 def _read_result(run_dir: Path) -> RunResult | None:

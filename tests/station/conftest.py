@@ -14,10 +14,14 @@ import shutil
 import socket
 import subprocess
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import pytest
+
+if TYPE_CHECKING:
+    from tests.station.test_station import StationProcess
 
 
 def _postgres_bin() -> Path | None:
@@ -120,3 +124,39 @@ def sim_run_dir(tmp_path_factory: pytest.TempPathFactory, fast_rig: Path) -> Pat
                          cwd=REPO, capture_output=True, text=True, timeout=300)
     assert (folder / "result.json").exists(), run.stderr[-2000:]
     return folder
+
+
+StationFactory = Callable[..., tuple["StationProcess", dict[str, Any]]]
+
+
+@pytest.fixture
+def make_station(tmp_path: Path, fast_rig: Path) -> Iterator[StationFactory]:
+    """A station process on a config of a simulated cell (known target, 12 + 4 poses, the
+    fast rig), `overrides` winning over its keys, `calibrate_args` added after the rig's;
+    each started station is killed at the end if still running."""
+    import signal
+
+    import yaml
+
+    from tests.station.test_station import StationProcess, _free_port
+
+    started: list[StationProcess] = []
+
+    def make(**overrides: Any) -> tuple[StationProcess, dict[str, Any]]:
+        extra = list(overrides.pop("calibrate_args", []))
+        config = {"station": "eol-2", "robot": "sim", "known": "target", "poses": 12,
+                  "verify_poses": 4, "calibrate_args": ["--rig", str(fast_rig), *extra],
+                  "db": f"sqlite:///{tmp_path / 'archive.db'}",
+                  "runs_dir": str(tmp_path / "runs"),
+                  "modbus": {"host": "127.0.0.1", "port": _free_port()}, **overrides}
+        path = tmp_path / "station.yaml"
+        path.write_text(yaml.safe_dump(config))
+        process = StationProcess(path, tmp_path / "station.log")
+        process.start()
+        started.append(process)
+        return process, config
+
+    yield make
+    for process in started:
+        if process.process is not None and process.process.poll() is None:
+            process.stop(signal.SIGKILL)

@@ -38,5 +38,20 @@ class Plc:
             time.sleep(0.1)
         raise AssertionError(f"station not in {states} after {timeout} s: {self.read()[:14]}")
 
+    def run(self, serial: str, timeout: float = 300) -> list[int]:
+        """START robot `serial`; the registers once its run has finished."""
+        self.start(serial)
+        return self.wait_state({reg.State.PASS, reg.State.FAIL, reg.State.ERROR}, timeout)
+
     def close(self) -> None:
         self.client.close()
+
+
+def run_one(port: int, serial: str, timeout: float = 300) -> list[int]:
+    """A PLC connected to the station on `port` for one run of robot `serial`: the
+    registers once it finished."""
+    plc = Plc(port)
+    try:
+        return plc.run(serial, timeout)
+    finally:
+        plc.close()

@@ -27,6 +27,6 @@ def test_the_documented_register_map_is_the_served_one() -> None:
 def test_the_documented_reason_codes_are_the_served_ones() -> None:
     text = " ".join((REPO / "docs" / "station.md").read_text().split())
     block = text[text.index("Reason codes (REASON_CODE"):]
-    block = block[:block.index("calibration process.")]
+    block = block[:block.index("## Config file")]
     documented = [int(n) for n in re.findall(r"(?:: |; )(\d+) [a-z]", block)]
     assert documented == [int(reason) for reason in reg.Reason]

@@ -8,48 +8,20 @@ Real station process, real pymodbus client, simulated controller, real SQLite ar
 from __future__ import annotations
 
 import json
-import signal
+import subprocess
 import time
-from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pytest
-import yaml
 
 from hostpc.archive import open_archive
 from hostpc.archive.rows import ArchivedRun
 from hostpc.station import registers as reg
-from tests.station.plc_client import Plc
-from tests.station.test_station import StationProcess, _free_port
+from tests.station.conftest import REPO, StationFactory, hostpc_command
+from tests.station.plc_client import Plc, run_one
 
 FINISHED = {reg.State.PASS, reg.State.FAIL, reg.State.ERROR}
-Factory = Callable[..., tuple[StationProcess, dict[str, Any]]]
-
-
-@pytest.fixture
-def make_station(tmp_path: Path, fast_rig: Path) -> Iterator[Factory]:
-    started: list[StationProcess] = []
-
-    def make(**overrides: Any) -> tuple[StationProcess, dict[str, Any]]:
-        extra = list(overrides.pop("calibrate_args", []))
-        config = {"station": "eol-2", "robot": "sim", "known": "target", "poses": 12,
-                  "verify_poses": 4, "calibrate_args": ["--rig", str(fast_rig), *extra],
-                  "db": f"sqlite:///{tmp_path / 'archive.db'}",
-                  "runs_dir": str(tmp_path / "runs"),
-                  "modbus": {"host": "127.0.0.1", "port": _free_port()}, **overrides}
-        path = tmp_path / "station.yaml"
-        path.write_text(yaml.safe_dump(config))
-        process = StationProcess(path, tmp_path / "station.log")
-        process.start()
-        started.append(process)
-        return process, config
-
-    yield make
-    for process in started:
-        if process.process is not None and process.process.poll() is None:
-            process.stop(signal.SIGKILL)
 
 
 def _archived(config: dict[str, Any]) -> list[ArchivedRun]:
@@ -58,7 +30,7 @@ def _archived(config: dict[str, Any]) -> list[ArchivedRun]:
 
 
 def test_a_refused_push_is_fail_code_5_and_served_again_after_a_restart(
-        make_station: Factory) -> None:
+        make_station: StationFactory) -> None:
     process, config = make_station(calibrate_args=["--max-correction", "0.01"])
     plc = Plc(config["modbus"]["port"])
     try:
@@ -102,24 +74,44 @@ def test_a_refused_push_is_fail_code_5_and_served_again_after_a_restart(
 
 
 def test_target_estimated_is_fail_code_7_with_the_joint_bitmasks(
-        make_station: Factory) -> None:
+        make_station: StationFactory) -> None:
     process, config = make_station(known="none")
-    plc = Plc(config["modbus"]["port"])
-    try:
-        plc.start("SN-NOREF")
-        values = plc.wait_state(FINISHED, 300)
-    finally:
-        plc.close()
+    values = run_one(config["modbus"]["port"], "SN-NOREF")
     assert reg.State(values[reg.STATE]) == reg.State.FAIL, process.log.read_text()[-2000:]
     assert values[reg.RESULT_CODE] == 7
     assert values[reg.JOINTS_CALIBRATED] == 0b011110  # J2-J5 pushed and verified
     assert values[reg.JOINTS_NOT_CALIBRATED] == 0b100001  # J1 (target), J6 (tool)
     assert values[reg.JOINTS_REQUIRED_MISSING] == 0b100001
     assert values[reg.OUTCOME_FLAGS] == reg.FLAG_PUSHED | reg.FLAG_VERIFIED
-    assert [r.verdict for r in _archived(config)] == ["JOINTS_MISSING"]
+    (run,) = _archived(config)
+    assert run.verdict == "JOINTS_MISSING"
+    # the station's next step: the reference goes into its config (a hand-run's next
+    # command would not reach the station's runs)
+    reference = f"{run.run_dir.rstrip('/')}.cell_ref.json"
+    assert f'put "--reference", "{reference}", "--rig", "{reference[:-5]}.rig.json" in ' \
+        "calibrate_args of " in str(run.reason)
+    assert f"hostpc reference record --run {run.run_dir} --out {reference}" in str(run.reason)
+
+    # the step done: the station's next robot has every joint calibrated (no loop)
+    record = subprocess.run(hostpc_command("reference", "record", "--run", run.run_dir,
+                                           "--out", reference),
+                            cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert record.returncode == 0, record.stderr
+    assert process.stop() == 0
+    process, config = make_station(known="none", calibrate_args=[
+        "--reference", reference, "--rig", f"{reference[:-5]}.rig.json"])
+    plc = Plc(config["modbus"]["port"])
+    try:
+        plc.command(reg.Command.ACKNOWLEDGE)  # SN-NOREF's result, served again
+        plc.wait_state({reg.State.IDLE}, 10)
+        values = plc.run("SN-NOREF-2")
+    finally:
+        plc.close()
+    assert reg.State(values[reg.STATE]) == reg.State.PASS, process.log.read_text()[-2000:]
+    assert values[reg.JOINTS_CALIBRATED] == 0b111111
 
 
-def test_an_abort_after_the_push_lets_verification_finish(make_station: Factory) -> None:
+def test_an_abort_after_the_push_lets_verification_finish(make_station: StationFactory) -> None:
     process, config = make_station(verify_poses=8, calibrate_args=["--time-scale", "0.3"],
                                    require_joints="1,2,3,4,5")  # J6: tool estimated
     plc = Plc(config["modbus"]["port"])
@@ -137,6 +129,12 @@ def test_an_abort_after_the_push_lets_verification_finish(make_station: Factory)
             time.sleep(0.02)
         assert journal is not None, process.log.read_text()[-2000:]
         assert '"event":"result"' not in journal.read_text()  # still verifying
+        plc.command(reg.Command.START)  # not while running: cleared, and said so
+        deadline = time.monotonic() + 5
+        while plc.read()[reg.COMMAND_IGNORED] != reg.Command.START:
+            assert time.monotonic() < deadline, "a START while running looks taken"
+            time.sleep(0.05)
+        assert plc.read()[reg.COMMAND] == 0
         plc.command(reg.Command.ABORT)
         values = plc.wait_state(FINISHED, 300)
     finally:
