@@ -299,7 +299,7 @@ def derive_outcome(events: Sequence[JsonObject], sources: Sequence[JointSource],
                    run_dir: str, finished: bool, required: Sequence[int] = (),
                    new_run: str = "--robot ROBOT", known: Sequence[str] = (),
                    swapped: Sequence[int] = (), host_offsets: str | None = None,
-                   archive: str | None = None) -> RobotOutcome:
+                   archive: str | None = None, simulated: bool = False) -> RobotOutcome:
     """The outcome from the journal's events (`Journal.timeline(*JOURNAL_KINDS)`, in
     order) and the fit's per-joint sources. finished: the run wrote (or is writing) its
     result; run_dir / new_run / known: for the next command (new_run: a new run's
@@ -310,7 +310,8 @@ def derive_outcome(events: Sequence[JsonObject], sources: Sequence[JointSource],
     no zero offsets, how to keep the offsets its driver applied on the host ({run}: the run
     folder; `Driver.host_offsets`), None: the controller keeps what is pushed; archive: the
     results archive the run is archived in (`--db`, without a password): a rollback or a
-    resume the next command names keeps it (`--db`), so the archive follows."""
+    resume the next command names keeps it (`--db`), so the archive follows; simulated: the
+    run's controller was `--robot sim`, which ended with the run (nothing to roll back)."""
     state = _replay(events)
     host_only = host_offsets is not None
     active = state.pushed_new is not None and state.rolled_at is None
@@ -358,7 +359,7 @@ def derive_outcome(events: Sequence[JsonObject], sources: Sequence[JointSource],
         headline="", next_command=None, events=tuple(state.events),
         refused_reason=state.refused, refusal=state.refusal if state.refused else None)
     outcome = _with_words(outcome, run_dir, new_run, tuple(known), state.intent_open,
-                          tuple(swapped))
+                          tuple(swapped), simulated)
     command = outcome.next_command
     if archive and command and command.startswith(_ARCHIVED_COMMANDS) and " or " not in command:
         outcome = dataclasses.replace(outcome, next_command=f"{command} --db {archive}")
@@ -435,7 +436,8 @@ def _controller_text(state: _Replay, active: bool) -> str:
 
 
 def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[str, ...],
-                intent_open: bool, swapped: tuple[int, ...]) -> RobotOutcome:
+                intent_open: bool, swapped: tuple[int, ...], simulated: bool = False
+                ) -> RobotOutcome:
     """The outcome with its headline and next command filled in."""
     joints = outcome.joints
     good = [j.joint for j in joints if j.calibrated and not j.as_found]
@@ -484,6 +486,11 @@ def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[
                 "verification; the controller's zero offsets are unchanged"
                 + (f"; {bad_text}" if bad_text else ""))
         next_command = f"hostpc diagnose {run}/dataset.json"
+    elif verdict == "FAIL" and simulated:  # its controller ended with the run
+        head = ("FAIL: the pushed offsets failed verification; the simulated controller "
+                "held them and ended with the run (nothing to roll back)"
+                + (f"; {bad_text}" if bad_text else ""))
+        next_command = f"hostpc diagnose {run}/dataset.json --ladder"
     elif verdict == "FAIL":
         head = ("FAIL: the pushed offsets failed verification; the controller holds them"
                 + (f"; {bad_text}" if bad_text else ""))

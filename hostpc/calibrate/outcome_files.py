@@ -46,7 +46,7 @@ def run_outcome(journal: Journal, sources: Sequence[JointSource], *, run_dir: Pa
                           finished=finished, required=required,
                           new_run=header.new_run_options(), known=known, swapped=swapped,
                           host_offsets=driver.host_offsets if driver is not None else None,
-                          archive=header.archive)
+                          archive=header.archive, simulated=header.robot.sim)
 
 
 def rewrite_outcome(run_dir: Path) -> RobotOutcome | None:

@@ -152,3 +152,18 @@ def test_a_push_a_robot_keeps_no_offsets_for_is_applied_on_the_host_not_pushed()
     # the controller that keeps them: pushed, as before
     assert derive_outcome([PUSH, VERIFY_PASS], SOURCES, run_dir="runs/x",
                           finished=True).controller == "new offsets, verified"
+
+
+def test_a_simulated_run_that_fails_verification_names_a_step_that_works() -> None:
+    """`--robot sim`'s controller ends with the run: `hostpc rollback --run DIR` would exit 2
+    ("nothing left to roll back"), so a failed verification there says so and names the
+    diagnosis (review of the ninth stop, station item 10); a real controller's FAIL still
+    names the rollback."""
+    failed = derive_outcome([PUSH, {**VERIFY_PASS, "verdict": "FAIL"}], SOURCES,
+                            run_dir="runs/x", finished=True, simulated=True)
+    assert failed.verdict == "FAIL"
+    assert failed.next_command == "hostpc diagnose runs/x/dataset.json --ladder"
+    assert "nothing to roll back" in failed.headline
+    real = derive_outcome([PUSH, {**VERIFY_PASS, "verdict": "FAIL"}], SOURCES,
+                          run_dir="runs/x", finished=True)
+    assert real.next_command == "hostpc rollback --run runs/x"
