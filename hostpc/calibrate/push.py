@@ -23,7 +23,11 @@ Guard rails:
   controller is written, then the result (status "pushed", the controller's rollback id);
   so a push cut between the two is recognised from the controller's offsets (equal to the
   new ones: pushed; equal to the previous ones: not pushed) and `hostpc rollback --run DIR`
-  can undo it either way.
+  can undo it either way;
+- the controller's word is never taken for the push: the previous offsets recorded are
+  the ones read before the write, and the offsets are read back after it; a controller
+  that holds other ones than pushed or names other previous ones fails the push
+  (PushMismatch, exit 4) with the rollback to run.
 """
 
 from __future__ import annotations

@@ -11,7 +11,11 @@ does not explain its data, a correction exceeds --max-correction degrees, the co
 another robot than the fit's dataset, or it already carries this fit (the ledger
 FIT.json.pushes.jsonl beside the fit, hostpc.calibrate.offline_push), unless --force.
 The intent is written to DIR/push.json before the controller is, so
-`hostpc rollback --run DIR` can always undo it. Offsets are printed in degrees.
+`hostpc rollback --run DIR` can always undo it; a push cut short (exit 3 link lost, 4 no
+reply) names `hostpc status --robot` and that rollback. The controller's offsets are read
+back after the write: other ones than pushed, or a reply naming other previous ones than
+were read, fail the push (exit 4, hostpc.calibrate.push.PushMismatch: one line with the
+joints, both values and the next command). Offsets are printed in degrees.
 """
 
 from __future__ import annotations

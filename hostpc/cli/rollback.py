@@ -3,9 +3,12 @@
     hostpc rollback --run DIR [--robot HOST[:PORT]]      the push recorded in DIR/push.json
     hostpc rollback --robot HOST[:PORT] --id ROLLBACK_ID the controller's rollback id
 
-With --run, the controller address defaults to the one the run pushed to, and if the
-controller no longer knows the rollback id (it restarted) the previous offsets saved in
-push.json are written directly. A push.json without a rollback id (the run stopped between
+With --run, the controller address defaults to the one the run pushed to, push.json is
+validated first (hostpc.calibrate.push_file: one line, exit 2, nothing written, for a file
+that is not this run's push or not this controller's joint count), and if the controller
+no longer knows the rollback id (it restarted), or its rollback leaves other offsets than
+the ones read before the push, the previous offsets saved in push.json are written
+directly. A push.json without a rollback id (the run stopped between
 recording its intent and the controller's answer) is settled from the controller's offsets:
 the intended new ones -> the previous ones are written; still the previous ones -> nothing
 to undo. A run whose journal shows that no push reached the controller (refused, e.g. by
