@@ -152,9 +152,9 @@ def run(args: argparse.Namespace) -> int:
         if outcome is not None:
             print(f"{args.run}: {outcome.headline} (result.json, summary.txt rewritten)")
     if not matches:
-        print(f"hostpc rollback: the controller at {address} does not hold the offsets read "
-              "before the push after the rollback (it holds the ones above); see what it "
-              f"holds with: hostpc status --robot {address}", file=sys.stderr)
+        print(f"hostpc rollback: after the rollback the controller at {address} still does "
+              "not hold the offsets read before the push (it holds the ones above); see what "
+              f"it holds with: hostpc status --robot {address}", file=sys.stderr)
     return 0 if matches else ControllerError.exit_code
 
 

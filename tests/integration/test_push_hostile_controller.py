@@ -130,6 +130,24 @@ def test_push_reads_back_what_the_controller_holds(
         assert controller.offsets == ZERO
 
 
+def test_a_rollback_the_controller_does_not_take_says_so(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], fit_file: Path) -> None:
+    """Offsets of 0.01 rad before the push, a controller that clamps every write to 0.001
+    rad and whose rollback undoes nothing: the rollback writes the offsets read before the
+    push, the controller clamps them too, and the rollback says so (exit 4, one line)."""
+    out = tmp_path / "push"
+    with HostileController("clamp", offsets=[0.01] * 6) as controller:
+        code, _, stderr = run_cli(capsys, "push", str(fit_file), "--robot",
+                                  controller.address, "--out", str(out))
+        assert code == 4 and "did not store" in _line(stderr), stderr
+        code, stdout, stderr = run_cli(capsys, *_next_command(_line(stderr), "restore them"))
+        assert code == 4, stderr
+        assert "still does not hold the offsets read before the push" in _line(stderr)
+        assert f"hostpc status --robot {controller.address}" in stderr
+        assert controller.offsets == [CLAMP_RAD] * 6
+        assert "J1 +0.05730" in stdout  # what it holds, in degrees
+
+
 @pytest.mark.parametrize("mode, exit_code", [("slow_set", 4), ("drop_set_once", 3)])
 def test_a_push_cut_short_names_the_next_commands_and_they_work(
         mode: str, exit_code: int, tmp_path: Path, capsys: pytest.CaptureFixture[str],
