@@ -7,7 +7,7 @@ trusted (as FIT.json, hostpc.calibrate.fit_file):
 - the JSON itself (`parse_strict_json`): no duplicated key, no NaN / Infinity literal, no
   endless nesting or digits; strict types (pydantic, strict mode);
 - `status` "intent" (written before the controller was) or "pushed" (then `rollback_id`
-  is a string);
+  is a string, unless `recovered`: a push a resume settled from its intent);
 - `previous_offsets` and `new_offsets`: lists of finite numbers, as many of each, every
   one below half a turn (`MAX_JOINT_OFFSET_RAD`, rad); `pushed` one boolean per joint, and
   a joint not pushed has the same previous and new offset;
@@ -110,8 +110,9 @@ def read_push_file(run_dir: str | Path) -> PushFile:
 def _problem(push: PushDocument) -> str:
     """Why the fields of a well-typed push.json disagree with each other ("" if not)."""
     n = len(push.previous_offsets)
-    if push.status == "pushed" and push.rollback_id is None:
-        return 'rollback_id: required for status "pushed" (the controller\'s id of the write)'
+    if push.status == "pushed" and push.rollback_id is None and not push.recovered:
+        return ('rollback_id: required for status "pushed" (the controller\'s id of the '
+                'write; none only for a push a resume recovered, "recovered": true)')
     if len(push.new_offsets) != n:
         return (f"new_offsets: {len(push.new_offsets)} offsets, previous_offsets has {n}: "
                 "one of each per joint")
