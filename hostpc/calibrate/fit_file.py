@@ -151,17 +151,24 @@ def _no_constant(token: str) -> Any:
 
 def parse_fit_text(text: str, source: str) -> Any:
     """The JSON document of FIT.json; InputError for anything `json` would bend."""
+    return parse_strict_json(text, source, REMEDY)
+
+
+def parse_strict_json(text: str, source: str, remedy: str) -> Any:
+    """A JSON document read as the module docstring says (no duplicated key, no NaN or
+    Infinity, no endless nesting or digits); InputError naming `source`, ending with
+    `remedy` (how to make a good file). FIT.json and push.json are read with it."""
     try:
         return json.loads(text, object_pairs_hook=_no_duplicates, parse_constant=_no_constant)
     except _Refused as exc:
-        raise InputError(f"{source}: {exc}; {REMEDY}") from None
+        raise InputError(f"{source}: {exc}; {remedy}") from None
     except json.JSONDecodeError as exc:
         raise InputError(f"{source}: not valid JSON (line {exc.lineno}, column {exc.colno}: "
-                         f"{exc.msg}); {REMEDY}") from None
+                         f"{exc.msg}); {remedy}") from None
     except RecursionError:
-        raise InputError(f"{source}: not valid JSON (nested too deeply); {REMEDY}") from None
+        raise InputError(f"{source}: not valid JSON (nested too deeply); {remedy}") from None
     except ValueError as exc:  # an integer literal with thousands of digits
-        raise InputError(f"{source}: not valid JSON ({exc}); {REMEDY}") from None
+        raise InputError(f"{source}: not valid JSON ({exc}); {remedy}") from None
 
 
 _EXPECTED = {
@@ -185,6 +192,17 @@ def _field(loc: tuple[int | str, ...]) -> str:
     return text or "(top level)"
 
 
+def validation_line(exc: ValidationError) -> str:
+    """The first error of a strict model's validation, as `field: what was expected, got
+    VALUE` (FIT.json's and push.json's one-line messages)."""
+    first = exc.errors()[0]
+    value = first.get("input")
+    shown = repr(value) if not isinstance(value, dict | list) else type(value).__name__
+    why = _EXPECTED.get(first["type"], first["msg"].lower())
+    got = "" if first["type"] == "missing" else f", got {shown[:80]}"
+    return f"{_field(tuple(first['loc']))}: {why}{got}"
+
+
 def validate_fit_document(document: Any, source: str, *, offsets: bool = True) -> FitDocument:
     """The validated document (see the module docstring); InputError naming the field.
     ``offsets=False`` accepts a fit without joint offsets (a nominal model predicts too:
@@ -199,13 +217,7 @@ def validate_fit_document(document: Any, source: str, *, offsets: bool = True) -
     try:
         fit = FitDocument.model_validate(document)
     except ValidationError as exc:
-        first = exc.errors()[0]
-        value = first.get("input")
-        shown = repr(value) if not isinstance(value, dict | list) else type(value).__name__
-        why = _EXPECTED.get(first["type"], first["msg"].lower())
-        got = "" if first["type"] == "missing" else f", got {shown[:80]}"
-        raise InputError(f"{source}: {_field(tuple(first['loc']))}: {why}{got}; "
-                         f"{REMEDY}") from None
+        raise InputError(f"{source}: {validation_line(exc)}; {REMEDY}") from None
     _check_consistency(fit, source, offsets)
     return fit
 

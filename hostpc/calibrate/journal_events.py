@@ -48,35 +48,58 @@ def _number(value: Any) -> float:
 
 @dataclass(frozen=True)
 class PushRecord:
-    """What was written: previous and new offsets (n,) rad, the controller's rollback id
-    (None for a push recovered from its intent: the id was never received), which joints
-    changed, and when (ISO 8601, UTC)."""
+    """What was written: previous offsets (n,) rad (the ones the host read before the
+    write, never the controller's claim) and new ones (the ones asked for), the
+    controller's rollback id (None for a push recovered from its intent: the id was never
+    received), which joints changed, and when (ISO 8601, UTC).
+
+    A controller whose report of the write disagrees (hostpc.calibrate.push, PushMismatch)
+    adds what it said: ``held`` (n,) rad, the offsets read back after the write when they
+    are not the new ones (it clamped or ignored them), ``reported_previous`` (n,) rad, the
+    previous offsets its reply named when they are not the ones read before; None when
+    they agree (and absent from the JSON form, whose lines then stay as they were)."""
 
     previous: np.ndarray
     new: np.ndarray
     rollback_id: str | None
     pushed: tuple[bool, ...]
     time: str = ""
+    held: np.ndarray | None = None
+    reported_previous: np.ndarray | None = None
+
+    @property
+    def inconsistent(self) -> bool:
+        """True if the controller's report of the write disagreed (see the class)."""
+        return self.held is not None or self.reported_previous is not None
 
     def to_dict(self) -> JsonObject:
         """JSON form (radians): the journal's `push` event and push.json."""
+        extra: JsonObject = {}
+        if self.held is not None:
+            extra["held_offsets"] = self.held.tolist()
+        if self.reported_previous is not None:
+            extra["reported_previous_offsets"] = self.reported_previous.tolist()
         return {
             "rollback_id": self.rollback_id,
             "previous_offsets": self.previous.tolist(),
             "new_offsets": self.new.tolist(),
             "pushed": list(self.pushed),
             "time": self.time,
+            **extra,
         }
 
     @classmethod
     def from_dict(cls, data: JsonObject) -> PushRecord:
         """Inverse of to_dict (push.json, a `push` or `push_intent` event)."""
         rollback_id = data.get("rollback_id")
+        held, reported = data.get("held_offsets"), data.get("reported_previous_offsets")
         return cls(previous=np.asarray(data["previous_offsets"], float),
                    new=np.asarray(data["new_offsets"], float),
                    rollback_id=None if rollback_id is None else str(rollback_id),
                    pushed=tuple(bool(v) for v in data.get("pushed", ())),
-                   time=str(data.get("time", "")))
+                   time=str(data.get("time", "")),
+                   held=None if held is None else np.asarray(held, float),
+                   reported_previous=None if reported is None else np.asarray(reported, float))
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,11 @@ Guard rails:
   controller is written, then the result (status "pushed", the controller's rollback id);
   so a push cut between the two is recognised from the controller's offsets (equal to the
   new ones: pushed; equal to the previous ones: not pushed) and `hostpc rollback --run DIR`
-  can undo it either way.
+  can undo it either way;
+- the controller's word is never taken for the push: the previous offsets recorded are
+  the ones read before the write, and the offsets are read back after it; a controller
+  that holds other ones than pushed or names other previous ones fails the push
+  (PushMismatch, exit 4) with the rollback to run.
 """
 
 from __future__ import annotations
@@ -43,10 +47,9 @@ from hostpc.calibrate.refusals import PushRefusal, resume_with
 from hostpc.calibrate.run_result import OffsetRow
 from hostpc.calibrate.swaps import MAX_SWAP_LIMIT_DEG
 from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN, chi2_dof_upper
-from hostpc.errors import InputError
+from hostpc.errors import ControllerError, InputError
 from hostpc.files import write_json_atomic
 from hostpc.fitting.result import FitVerdict
-from hostpc.json_object import JsonObject
 from hostpc.model.joint_offsets import PushTable
 from hostpc.robots.base import RobotAdapter
 
@@ -251,14 +254,34 @@ def _now() -> str:
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
 
 
+class PushMismatch(ControllerError):
+    """The controller's report of a push disagrees with what the host read before the
+    write or asked of it: other previous offsets than the ones read (its report is
+    inconsistent), or other offsets held after the write than the new ones (it clamped or
+    ignored them). Exit 4, a controller that failed; the message names the joints, both
+    values, what the controller holds now and the next command (`mismatch_line`);
+    `record` is the push as recorded."""
+
+    def __init__(self, message: str, record: PushRecord) -> None:
+        super().__init__(message)
+        self.record = record
+
+
 async def execute_push(robot: RobotAdapter, plan: PushPlan, run_dir: Path, address: str,
                        journal: Journal | None = None) -> PushRecord:
-    """Write plan.new to the controller, recording the intent durably first.
+    """Write plan.new to the controller, recording the intent durably first, and check what
+    the controller then holds.
 
     Order: push.json (status "intent": previous and new offsets, time) and the journal's
-    `push_intent` event, both fsync'ed; then the controller's write; then push.json (status
-    "pushed", rollback id) and the journal's `push` event. Raises InputError if the guard
-    rail refused the plan (callers check `plan.refused`)."""
+    `push_intent` event, both fsync'ed; then the controller's write; then the controller's
+    offsets read back (`get_offsets`, the same read plan.old came from); then push.json
+    (status "pushed", rollback id) and the journal's `push` event. The previous offsets
+    kept are plan.old, the ones read before the write, never the reply's `previous` (a
+    rollback writes them back). A reply whose `previous` is not plan.old, or a read-back
+    that is not plan.new (both to OFFSET_MATCH_TOLERANCE, the tolerance a resume
+    recognises a push by), is recorded (PushRecord.reported_previous, .held) and raises
+    PushMismatch. Raises InputError if the guard rail refused the plan (callers check
+    `plan.refused`)."""
     if plan.refused:
         raise InputError(f"push refused: {plan.refused}")
     pushed = tuple(bool(v) for v in plan.pushed)
@@ -268,14 +291,77 @@ async def execute_push(robot: RobotAdapter, plan: PushPlan, run_dir: Path, addre
                       {"controller": address, "status": "intent", **intent.to_dict()})
     if journal is not None:
         journal.append(PushIntent(intent))
-    previous, rollback_id = await robot.set_offsets(plan.new)
-    record = PushRecord(previous=np.asarray(previous, float), new=plan.new.copy(),
-                        rollback_id=str(rollback_id), pushed=pushed, time=_now())
+    reported_previous, rollback_id = await robot.set_offsets(plan.new)
+    reported_previous = np.asarray(reported_previous, float)
+    held = np.asarray(await robot.get_offsets(), float)
+    record = PushRecord(
+        previous=plan.old.copy(), new=plan.new.copy(), rollback_id=str(rollback_id),
+        pushed=pushed, time=_now(), held=None if same_offsets(held, plan.new) else held,
+        reported_previous=(None if same_offsets(reported_previous, plan.old)
+                           else reported_previous))
     write_json_atomic(run_dir / PUSH_FILE,
                       {"controller": address, "status": "pushed", **record.to_dict()})
     if journal is not None:
         journal.append(Pushed(record))
+    if record.inconsistent:
+        raise PushMismatch(mismatch_line(record, address, run_dir, plan.display_names()),
+                           record)
     return record
+
+
+def _deg(value: float) -> str:
+    return f"{math.degrees(value):+.5f}"
+
+
+def _differences(names: list[str], shown: np.ndarray, expected: np.ndarray,
+                 what: str) -> str:
+    """`J2 +0.05730 deg (pushed +0.81930)`, per joint where shown and expected (n,) rad
+    differ; a count when their lengths do."""
+    if shown.shape != expected.shape:
+        return f"{shown.size} offsets for {expected.size} joints"
+    return ", ".join(f"{names[j]} {_deg(shown[j])} deg ({what} {_deg(expected[j])})"
+                     for j in range(expected.size)
+                     if not same_offsets(shown[j:j + 1], expected[j:j + 1]))
+
+
+def mismatch_line(record: PushRecord, address: str, run_dir: Path,
+                  names: list[str] | None = None) -> str:
+    """The one line of a push the controller reported inconsistently (PushMismatch):
+    which joints, its values and the host's (degrees), what it holds now, the next
+    command. names: how the joints are called (default J1..Jn)."""
+    names = names or [f"J{j + 1}" for j in range(record.new.size)]
+    if record.held is None:
+        head = (f"push not trusted: the controller at {address} holds the pushed offsets, "
+                "but its report is inconsistent")
+        now = record.new
+    else:
+        head = (f"push failed: the controller at {address} did not store the pushed zero "
+                "offsets (read back after its reply): "
+                + _differences(names, record.held, record.new, "pushed"))
+        now = record.held
+    if record.reported_previous is not None:
+        head += ("; its reply names as the offsets it replaced "
+                 + _differences(names, record.reported_previous, record.previous,
+                                "read before the write:"))
+    holds = ", ".join(f"{names[j] if j < len(names) else f'J{j + 1}'} {_deg(v)}"
+                      for j, v in enumerate(now))
+    line = f"{head}; it holds now [deg]: {holds}"
+    if (record.held is not None and record.reported_previous is None
+            and same_offsets(record.held, record.previous)):
+        return (f"{line} (its previous offsets: the write changed nothing); see what it "
+                f"holds with: hostpc status --robot {address}")
+    return (f"{line}; {run_dir}/{PUSH_FILE} keeps the offsets read before the push: restore "
+            f"them with: hostpc rollback --run {run_dir} (see what it holds with: hostpc "
+            f"status --robot {address})")
+
+
+def cut_short_line(exc: Exception, run_dir: Path, address: str) -> str:
+    """The line of a push whose answer never came (`exc`: link lost, no reply, a reply
+    that broke the protocol): the controller may hold either offsets; the next commands."""
+    return (f"{exc}; the push was cut short: the controller at {address} may hold the new "
+            f"offsets or the previous ones ({run_dir}/{PUSH_FILE} keeps both); see which with: "
+            f"hostpc status --robot {address}; restore the previous ones either way with: "
+            f"hostpc rollback --run {run_dir}")
 
 
 def same_offsets(a: Any, b: Any) -> bool:
@@ -296,30 +382,10 @@ def intent_outcome(intent: PushRecord, offsets_now: np.ndarray) -> str | None:
     return None
 
 
-def read_push_file(run_dir: str | Path) -> JsonObject:
-    """The push record of a run folder (status "pushed" with a rollback id, or "intent":
-    written before the controller was, result unknown); InputError if the run pushed
-    nothing."""
-    import json
-
-    path = Path(run_dir) / PUSH_FILE
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"{run_dir}: this run pushed no offsets (no {PUSH_FILE})") from None
-    except (OSError, ValueError) as exc:
-        raise InputError(f"{path}: cannot read ({exc})") from None
-    status = data.get("status", "pushed") if isinstance(data, dict) else None
-    if (status not in ("intent", "pushed")
-            or not {"previous_offsets", "new_offsets"} <= set(data)
-            or (status == "pushed" and "rollback_id" not in data)):
-        raise InputError(f"{path}: not a push record (previous_offsets, new_offsets, "
-                         "rollback_id)")
-    return data
-
-
-async def rollback_run(robot: RobotAdapter, record: PushRecord) -> tuple[np.ndarray, str]:
-    """Undo the push recorded in a run's push.json (`read_push_file`, as a PushRecord).
+async def rollback_run(robot: RobotAdapter, record: PushRecord,
+                       offsets_now: np.ndarray) -> tuple[np.ndarray, str]:
+    """Undo the push recorded in a run's push.json (hostpc.calibrate.push_file, validated),
+    the controller's offsets being `offsets_now` (n,) rad.
 
     With a rollback id: `rollback` (falling back to writing the previous offsets). Without
     one (the run stopped between writing its intent and recording the result, or the push
@@ -330,10 +396,9 @@ async def rollback_run(robot: RobotAdapter, record: PushRecord) -> tuple[np.ndar
     previous = record.previous
     if record.rollback_id is not None:
         return await rollback(robot, record.rollback_id, previous)
-    now = np.asarray(await robot.get_offsets(), float)
-    outcome = intent_outcome(record, now)
+    outcome = intent_outcome(record, offsets_now)
     if outcome == "not_pushed":
-        return now, "not_pushed"
+        return offsets_now, "not_pushed"
     if outcome is None:
         raise InputError("the controller's zero offsets are neither the ones the run meant "
                          "to write nor the ones it found; not writing anything")
@@ -345,13 +410,17 @@ async def rollback(robot: RobotAdapter, rollback_id: str,
                    previous: np.ndarray | None = None) -> tuple[np.ndarray, str]:
     """Restore the offsets replaced by the write `rollback_id`.
 
-    If the controller no longer knows the id (it restarted) and `previous` is given, the
-    previous offsets are written directly instead. Returns (offsets now (n,), how)."""
+    With `previous` (n,) rad, the offsets the host read before that write: if the
+    controller no longer knows the id (it restarted), or its rollback leaves other offsets
+    than those (it replaced others than it was read to hold, or does not undo), the
+    previous offsets are written directly ("previous_offsets_written"). Returns (offsets
+    now (n,), how)."""
     from hostpc.transport import ControllerRefusedError
 
     try:
-        now = await robot.rollback(rollback_id)
-        return np.asarray(now, float), "rollback_id"
+        now = np.asarray(await robot.rollback(rollback_id), float)
+        if previous is None or same_offsets(now, previous):
+            return now, "rollback_id"
     except ControllerRefusedError as exc:
         if exc.code != "unknown_rollback" or previous is None:
             raise

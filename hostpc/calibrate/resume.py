@@ -32,7 +32,13 @@ from hostpc.calibrate.journal_events import (
     Verified,
     VerifyStart,
 )
-from hostpc.calibrate.push import PUSH_FILE, intent_outcome, same_offsets
+from hostpc.calibrate.push import (
+    PUSH_FILE,
+    PushMismatch,
+    intent_outcome,
+    mismatch_line,
+    same_offsets,
+)
 from hostpc.calibrate.refusals import stopped
 from hostpc.calibrate.run_result import RunResult
 from hostpc.errors import ControllerError, InputError
@@ -140,14 +146,20 @@ def persisted(settings: RunSettings, stored: RunSettings,
 
 
 def check_resume_offsets(journal: Journal, run_dir: Path, initial: np.ndarray,
-                         now: np.ndarray) -> None:
+                         now: np.ndarray, address: str) -> None:
     """A resume continues only if the controller's offsets are the run's initial ones,
-    the ones it pushed, or the ones a push cut short meant to write."""
+    the ones it pushed, or the ones a push cut short meant to write. Offsets that are the
+    ones a controller held after a push it did not store as asked (PushRecord.held) raise
+    PushMismatch again (its line and next command: hostpc rollback --run DIR)."""
     pushes = journal.events(Pushed)
     if same_offsets(now, initial):
         return
     if pushes and same_offsets(now, pushes[-1].record.new):
         return
+    held = pushes[-1].record.held if pushes else None
+    if held is not None and same_offsets(now, held):
+        raise PushMismatch(mismatch_line(pushes[-1].record, address, run_dir),
+                           pushes[-1].record)
     last = journal.last_event(PushIntent, Pushed)
     if isinstance(last, PushIntent) and same_offsets(now, last.record.new):
         return

@@ -46,6 +46,7 @@ from hostpc.calibrate.outcome import parse_required_joints, restored_to_referenc
 from hostpc.calibrate.outcome_files import run_outcome
 from hostpc.calibrate.push import (
     PUSH_FILE,
+    PushMismatch,
     PushPlan,
     execute_push,
     export_offsets,
@@ -181,7 +182,7 @@ class Runner:
                 raise
             raise PushLost(f"{exc} (a resumed --robot sim run restarts the simulated "
                            "controller with its initial offsets)") from None
-        except VerifyLost:
+        except (VerifyLost, PushMismatch):
             raise  # its message says what happened and how to go on
         except ControllerError as exc:
             hint = (f"{self._journaled()} {self._go_on()}" if self.journal.exists
@@ -241,7 +242,8 @@ class Runner:
             header = read_run_header(self.journal)
             self.journal.load()
             initial = header.initial
-            check_resume_offsets(self.journal, self.run_dir, initial.offsets, offsets)
+            check_resume_offsets(self.journal, self.run_dir, initial.offsets, offsets,
+                                 self.robot_info.address)
             settle_push_intent(self.journal, self.run_dir, self.robot_info.address, progress,
                                offsets)
             if self.resume_overrides.separate and self._pushed_ever():

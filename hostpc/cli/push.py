@@ -11,13 +11,18 @@ does not explain its data, a correction exceeds --max-correction degrees, the co
 another robot than the fit's dataset, or it already carries this fit (the ledger
 FIT.json.pushes.jsonl beside the fit, hostpc.calibrate.offline_push), unless --force.
 The intent is written to DIR/push.json before the controller is, so
-`hostpc rollback --run DIR` can always undo it. Offsets are printed in degrees.
+`hostpc rollback --run DIR` can always undo it; a push cut short (exit 3 link lost, 4 no
+reply) names `hostpc status --robot` and that rollback. The controller's offsets are read
+back after the write: other ones than pushed, or a reply naming other previous ones than
+were read, fail the push (exit 4, hostpc.calibrate.push.PushMismatch: one line with the
+joints, both values and the next command). Offsets are printed in degrees.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import datetime as _dt
 import json
 import math
@@ -36,9 +41,23 @@ from hostpc.calibrate.offline_push import (
     load_saved_fit,
     record_push,
 )
-from hostpc.calibrate.push import DEFAULT_MAX_CORRECTION_DEG, PushPlan, execute_push, plan_push
+from hostpc.calibrate.push import (
+    DEFAULT_MAX_CORRECTION_DEG,
+    PushMismatch,
+    PushPlan,
+    cut_short_line,
+    execute_push,
+    plan_push,
+    same_offsets,
+)
 from hostpc.calibrate.summary import EXIT_PUSH_REFUSED
-from hostpc.errors import InputError, ZerocalError
+from hostpc.errors import (
+    ConnectionFailed,
+    InputError,
+    ProtocolViolation,
+    RequestTimeout,
+    ZerocalError,
+)
 from hostpc.input_files import FIT, read_input_text
 from hostpc.robots.base import RobotAdapter
 from hostpc.robots.connect import RobotAddress, open_robot, parse_robot
@@ -176,14 +195,31 @@ async def _push(args: argparse.Namespace, saved: SavedFit, address: RobotAddress
         journal = Journal(run_dir)
         journal.write_header({"kind": "offline_push", "fit": str(Path(args.fit).resolve()),
                               "robot": {"address": str(address), "driver": args.driver}})
-        record_push(args.fit, LedgerEntry(
+        entry = LedgerEntry(
             controller=str(address), run_dir=str(run_dir.resolve()),
             time=_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
-            before=tuple(plan.old.tolist()), after=tuple(plan.new.tolist())))
-        record = await execute_push(robot, plan, run_dir, str(address), journal)
+            before=tuple(plan.old.tolist()), after=tuple(plan.new.tolist()))
+        record_push(args.fit, entry)
+        try:
+            record = await execute_push(robot, plan, run_dir, str(address), journal)
+        except PushMismatch as exc:
+            _record_held(args.fit, entry, exc.record.held)
+            raise
+        except (ConnectionFailed, RequestTimeout, ProtocolViolation) as exc:
+            raise type(exc)(cut_short_line(exc, run_dir, str(address))) from exc
         return plan, record
     finally:
         await robot.close()
+
+
+def _record_held(fit: str, entry: LedgerEntry, held: np.ndarray | None) -> None:
+    """After a push the controller did not store as asked (PushMismatch): a second ledger
+    line with the offsets it holds (`held`, (n,) rad), so that the double-push guard knows
+    them as this fit's (unless they are the ones before the push: then the controller
+    carries nothing of the fit)."""
+    if held is not None and held.size == len(entry.before) and not same_offsets(
+            held, entry.before):
+        record_push(fit, dataclasses.replace(entry, after=tuple(held.tolist())))
 
 
 async def _check_same_robot_and_not_pushed(robot: RobotAdapter, saved: SavedFit, fit: str,

@@ -3,9 +3,12 @@
     hostpc rollback --run DIR [--robot HOST[:PORT]]      the push recorded in DIR/push.json
     hostpc rollback --robot HOST[:PORT] --id ROLLBACK_ID the controller's rollback id
 
-With --run, the controller address defaults to the one the run pushed to, and if the
-controller no longer knows the rollback id (it restarted) the previous offsets saved in
-push.json are written directly. A push.json without a rollback id (the run stopped between
+With --run, the controller address defaults to the one the run pushed to, push.json is
+validated first (hostpc.calibrate.push_file: one line, exit 2, nothing written, for a file
+that is not this run's push or not this controller's joint count), and if the controller
+no longer knows the rollback id (it restarted), or its rollback leaves other offsets than
+the ones read before the push, the previous offsets saved in push.json are written
+directly. A push.json without a rollback id (the run stopped between
 recording its intent and the controller's answer) is settled from the controller's offsets:
 the intended new ones -> the previous ones are written; still the previous ones -> nothing
 to undo. A run whose journal shows that no push reached the controller (refused, e.g. by
@@ -24,6 +27,7 @@ import argparse
 import asyncio
 import json
 import math
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -32,11 +36,18 @@ import numpy as np
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.journal_events import Pushed, PushRecord, Rollback
 from hostpc.calibrate.outcome_files import rewrite_outcome
-from hostpc.calibrate.push import read_push_file, rollback, rollback_run
+from hostpc.calibrate.push import rollback, rollback_run, same_offsets
+from hostpc.calibrate.push_file import PushFile, check_joint_count, read_push_file
 from hostpc.calibrate.run_header import read_run_header
 from hostpc.cli.archive_options import add_archive_options, archive_run
 from hostpc.cli.numbers import TIMEOUT_S
-from hostpc.errors import InputError
+from hostpc.errors import (
+    ConnectionFailed,
+    ControllerError,
+    InputError,
+    ProtocolViolation,
+    RequestTimeout,
+)
 from hostpc.robots.connect import RobotAddress, open_robot, parse_robot
 from hostpc.robots.drivers import DEFAULT_DRIVER, DRIVER_NAMES, DRIVERS
 
@@ -78,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
         if driver is not None and driver.no_rollback:  # e.g. a UR: offsets on the host
             raise InputError(driver.no_rollback)
     previous: np.ndarray | None = None
-    record: dict[str, Any] | None = None
+    push: PushFile | None = None
     address: RobotAddress | None = parse_robot(args.robot) if args.robot else None
     if args.run:
         if args.db and _archive_rolled_back(Path(args.run), args):
@@ -92,11 +103,11 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"--run {args.run}: it ran against `--robot sim`, whose "
                              "simulated controller lived only as long as the run: there is "
                              "nothing left to roll back")
-        record = read_push_file(Path(args.run))
-        rollback_id = str(record.get("rollback_id") or "(none: push recorded as intent)")
-        previous = np.asarray(record.get("previous_offsets"), float)
-        if address is None and record.get("controller"):
-            address = parse_robot(str(record["controller"]))
+        push = read_push_file(Path(args.run))
+        rollback_id = push.record.rollback_id or "(none: push recorded as intent)"
+        previous = push.record.previous
+        if address is None and push.controller:
+            address = parse_robot(push.controller)
     else:
         rollback_id = str(args.rollback_id)
     if address is None:
@@ -104,8 +115,14 @@ def run(args: argparse.Namespace) -> int:
     if address.sim:
         raise InputError("--robot sim: a simulated controller lives only as long as its run; "
                          "give the address of a running controller")
-    now, how = asyncio.run(_rollback(address, args, rollback_id, previous, record))
-    matches = previous is None or bool(np.allclose(now, previous, rtol=0.0, atol=1e-12))
+    try:
+        now, how = asyncio.run(_rollback(address, args, rollback_id, previous, push))
+    except (ConnectionFailed, RequestTimeout, ProtocolViolation) as exc:
+        again = f"--run {args.run}" if args.run else f"--robot {address} --id {rollback_id}"
+        raise type(exc)(f"{exc}; the rollback was cut short: see what the controller holds "
+                        f"with: hostpc status --robot {address}; then roll back again with: "
+                        f"hostpc rollback {again}") from exc
+    matches = previous is None or same_offsets(now, previous)
     outcome = None
     if args.run and how != "not_pushed":
         _journal_rollback(Path(args.run), now, how, str(address))
@@ -114,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
             archive_run(args, Path(args.run), outcome.exit_code)
     document = {
         "controller": str(address),
-        "rollback_id": record.get("rollback_id") if record is not None else rollback_id,
+        "rollback_id": push.record.rollback_id if push is not None else rollback_id,
         "method": how,
         "offsets_deg": [math.degrees(v) for v in now],
         "previous_offsets_deg": None if previous is None else [math.degrees(v)
@@ -136,20 +153,24 @@ def run(args: argparse.Namespace) -> int:
             f"J{j + 1} {math.degrees(v):+.5f}" for j, v in enumerate(now)))
         if outcome is not None:
             print(f"{args.run}: {outcome.headline} (result.json, summary.txt rewritten)")
-        if not matches:
-            print("warning: the offsets now differ from the ones saved before the push")
-    return 0 if matches else 4
+    if not matches:
+        print(f"hostpc rollback: after the rollback the controller at {address} still does "
+              "not hold the offsets read before the push (it holds the ones above); see what "
+              f"it holds with: hostpc status --robot {address}", file=sys.stderr)
+    return 0 if matches else ControllerError.exit_code
 
 
 async def _rollback(address: RobotAddress, args: argparse.Namespace, rollback_id: str,
-                    previous: np.ndarray | None, record: dict[str, Any] | None
+                    previous: np.ndarray | None, push: PushFile | None
                     ) -> tuple[np.ndarray, str]:
     """(offsets now (n,) rad, how): by the run's push record if given, else by id."""
     robot = await open_robot(address, args.driver, token=args.token, timeout=args.timeout)
     try:
-        if record is not None:
-            _warn_later_push(np.asarray(await robot.get_offsets(), float), record)
-            return await rollback_run(robot, PushRecord.from_dict(record))
+        if push is not None:
+            now = np.asarray(await robot.get_offsets(), float)
+            check_joint_count(push, now.size, args.run, str(address))
+            _warn_later_push(now, push.record)
+            return await rollback_run(robot, push.record, now)
         return await rollback(robot, rollback_id, previous)
     finally:
         await robot.close()
@@ -233,17 +254,14 @@ def _journal_rollback(run_dir: Path, now: np.ndarray, how: str, controller: str)
                                 time=_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")))
 
 
-def _warn_later_push(now: np.ndarray, record: dict[str, Any]) -> None:
-    """Warn (stderr) if the controller's offsets are neither the ones the run pushed nor
-    the ones it replaced: someone pushed later, and rolling back discards that push."""
-    import sys
-
-    from hostpc.calibrate.push import same_offsets
-
-    if record.get("rollback_id") is None:
+def _warn_later_push(now: np.ndarray, record: PushRecord) -> None:
+    """Warn (stderr) if the controller's offsets are neither the ones the run pushed (or
+    the ones it held after the push, `PushRecord.held`) nor the ones it replaced: someone
+    pushed later, and rolling back discards that push."""
+    if record.rollback_id is None:
         return  # settled from the offsets by rollback_run, which refuses this case
-    if not (same_offsets(now, record["new_offsets"])
-            or same_offsets(now, record["previous_offsets"])):
+    if not any(same_offsets(now, offsets) for offsets in (record.new, record.previous,
+                                                          record.held) if offsets is not None):
         print("hostpc rollback: warning: the controller's zero offsets are not the ones this "
               "run pushed (another host pushed later?): rolling back discards that later "
               "push", file=sys.stderr)

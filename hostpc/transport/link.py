@@ -101,13 +101,31 @@ class _Link:
             if event.new is ready and not self.handshake.done():
                 self.handshake.set_result(None)
         elif isinstance(event, Rejected):
+            self._rejected(event)
+
+    def _rejected(self, event: Rejected) -> None:
+        """The controller sent something invalid: the request it answers fails with
+        ProtocolViolation. A reply naming no request in flight (a wrong id) fails every
+        request in flight instead, unless the link closes (then they are re-sent or fail
+        as lost): their replies can no longer be told apart, and waiting for them would
+        only end in a timeout after the real reason. Logged only when no caller hears it."""
+        error = ProtocolViolation(f"controller sent an invalid message: {event.message}")
+        heard = not self.handshake.done()
+        if heard:
+            self.handshake.set_exception(error)
+        future = self.pending.pop(event.reply_to, None) if event.reply_to is not None else None
+        if future is not None:
+            waiting = [future]
+        elif event.fatal:
+            waiting = []
+        else:
+            waiting, self.pending = list(self.pending.values()), {}
+        for waiter in waiting:
+            if not waiter.done():
+                waiter.set_exception(error)
+                heard = True
+        if not heard:
             logger.warning("controller broke the protocol: %s (%s)", event.message, event.code)
-            error = ProtocolViolation(f"controller sent an invalid message: {event.message}")
-            if not self.handshake.done():
-                self.handshake.set_exception(error)
-            future = self.pending.pop(event.reply_to, None) if event.reply_to is not None else None
-            if future is not None and not future.done():
-                future.set_exception(error)
 
     def _lost(self, reason: str) -> None:
         if self.closed_reason is None:

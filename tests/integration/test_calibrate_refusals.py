@@ -221,7 +221,8 @@ def test_a_link_lost_after_the_push_says_what_the_controller_held_then(
     error line says what the controller held when the link was lost, not verified, and that
     the resume checks what it holds now (it used to say "the controller holds" as a fact,
     while a controller restarted since has its previous offsets again)."""
-    with SimulatedController(_scenario(faults={"drop_after_requests": 4 + 3 * int(POSES) + 4}),
+    # + 5: the push's set_offsets, its read-back (get_offsets), then a verification move
+    with SimulatedController(_scenario(faults={"drop_after_requests": 4 + 3 * int(POSES) + 5}),
                              tmp_path / "s") as sim:
         code, _, stderr = _calibrate(capsys, sim, rig, out, "--verify-poses", "4")
     line = _error_line(stderr)
