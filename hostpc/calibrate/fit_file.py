@@ -99,6 +99,26 @@ class RobotIdentityEntry(_Strict):
     kinematics: StrictStr
 
 
+class KeptSamplesEntry(_Strict):
+    """model_adequacy.kept_samples: a robust-loss fit judged on the samples its loss keeps
+    (hostpc.diagnostics.robust_kept.KeptSamples)."""
+
+    loss: StrictStr
+    left_out: Annotated[list[Count], Field(min_length=1)]
+    max_weight: NonNegative
+    chi2: NonNegative
+    dof: StrictInt
+    n_kept: Count
+
+
+class ModelAdequacyEntry(_Strict):
+    """model_adequacy, the part a push reads (the rest is for people)."""
+
+    kept_samples: KeptSamplesEntry | None = None
+    #: the diagnosis to run when the model does not explain the data (names the dataset)
+    next: StrictStr | None = None
+
+
 class FitDocument(_Strict):
     """The fields of `FitResult.to_dict` (hostpc/fitting/result.py); unknown keys ignored.
     Required: what the push reads (parameters, chi2, dof, converged)."""
@@ -130,6 +150,7 @@ class FitDocument(_Strict):
     cv_folds: Count | None = None
     loss: StrictStr = ""
     chi2_dof_with_calibration: NonNegative | None = None
+    model_adequacy: ModelAdequacyEntry | None = None
 
 
 class _Refused(ValueError):
@@ -223,6 +244,7 @@ def _check_consistency(fit: FitDocument, source: str, offsets: bool) -> None:
             fit.chi2_dof, fit.chi2 / fit.dof, rel_tol=RELATIVE_TOLERANCE, abs_tol=1e-300):
         raise _fail(source, "chi2_dof", f"{fit.chi2_dof!r} is not chi2 / dof = "
                     f"{fit.chi2 / fit.dof!r}")
+    _check_kept(fit, source)
     if fit.n_parameters is not None and fit.n_parameters != len(fit.parameters):
         raise _fail(source, "n_parameters", f"{fit.n_parameters} but "
                     f"{len(fit.parameters)} parameters are listed")
@@ -256,6 +278,25 @@ def _check_consistency(fit: FitDocument, source: str, offsets: bool) -> None:
             if side not in fit.parameters:
                 raise _fail(source, f"correlations[{k}]", f"{side!r} is not a parameter")
     _check_joint_offsets(fit, source, offsets)
+
+
+def _check_kept(fit: FitDocument, source: str) -> None:
+    """The samples a robust loss left out of the chi-square test: of this fit's loss, each
+    once and a sample of the fit, with fewer (positive) degrees of freedom than the fit."""
+    kept = None if fit.model_adequacy is None else fit.model_adequacy.kept_samples
+    if kept is None:
+        return
+    where = "model_adequacy.kept_samples"
+    if kept.loss != fit.loss or kept.loss in ("", "linear"):
+        raise _fail(source, f"{where}.loss", f"{kept.loss!r}, but the fit's loss is "
+                    f"{fit.loss!r} (only a robust loss leaves samples out)")
+    n_samples = fit.n_samples
+    if len(set(kept.left_out)) != len(kept.left_out) or (
+            n_samples is not None and max(kept.left_out) >= n_samples):
+        raise _fail(source, f"{where}.left_out", "expected distinct samples of the fit")
+    if not 0 < kept.dof < fit.dof:
+        raise _fail(source, f"{where}.dof", f"{kept.dof}, expected 1..{fit.dof - 1} (fewer "
+                    "than the fit's: samples are left out)")
 
 
 def _check_range(name: str, entry: ParameterEntry, source: str) -> None:

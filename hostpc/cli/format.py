@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hostpc.diagnostics.adequacy import chi2_dof_upper
+from hostpc.diagnostics.robust_kept import KeptSamples, kept_samples
 from hostpc.display_units import DISPLAY_UNITS
 from hostpc.fitting import FitResult
 from hostpc.json_object import JsonObject
@@ -58,11 +59,17 @@ class ModelAdequacy:
     chi2_dof_upper: float | None
     explains_data: bool | None
     next_command: str | None
+    kept: KeptSamples | None = None
+    """A robust-loss fit judged on the samples its loss keeps (chi2_dof and its band are
+    then theirs; hostpc.diagnostics.robust_kept), else None."""
 
     def to_json(self) -> JsonObject:
         """`hostpc fit --json`'s "model_adequacy" block."""
-        return {"chi2_dof": self.chi2_dof, "chi2_dof_upper": self.chi2_dof_upper,
-                "explains_data": self.explains_data, "next": self.next_command}
+        block: JsonObject = {"chi2_dof": self.chi2_dof, "chi2_dof_upper": self.chi2_dof_upper,
+                             "explains_data": self.explains_data, "next": self.next_command}
+        if self.kept is not None:
+            block["kept_samples"] = self.kept.to_json()
+        return block
 
 
 def model_adequacy(result: FitResult, source: str = "DATASET", options: str = ""
@@ -70,14 +77,16 @@ def model_adequacy(result: FitResult, source: str = "DATASET", options: str = ""
     """The fit's `ModelAdequacy`; `source` names the dataset in the next command and
     `options` are the options that define its data (hostpc.cli.robot_options.data_options: --robot,
     --base-link, --tip-link, --plugin), carried into it."""
-    band = chi2_dof_upper(result.dof)
-    judged = math.isfinite(band) and math.isfinite(result.chi2_dof)
-    explains = (result.chi2_dof <= band) if judged else None
+    kept = kept_samples(result)  # a robust loss: judged on the samples it keeps
+    dof, chi2_dof = (result.dof, result.chi2_dof) if kept is None else (kept.dof, kept.chi2_dof)
+    band = chi2_dof_upper(dof)
+    judged = math.isfinite(band) and math.isfinite(chi2_dof)
+    explains = (chi2_dof <= band) if judged else None
     return ModelAdequacy(
-        chi2_dof=result.chi2_dof if math.isfinite(result.chi2_dof) else None,
+        chi2_dof=chi2_dof if math.isfinite(chi2_dof) else None,
         chi2_dof_upper=band if math.isfinite(band) else None, explains_data=explains,
         next_command=(None if explains is not False
-                      else f"hostpc diagnose {source}{options} --ladder"))
+                      else f"hostpc diagnose {source}{options} --ladder"), kept=kept)
 
 
 UNITS_HINT_NOISE_RATIO = 100.0
@@ -111,14 +120,17 @@ def _converged_line(result: FitResult, source: str, options: str = "",
                 f"{more} more sample{'s' if more > 1 else ''} for one degree of freedom ({m} "
                 "numbers each), several times that to test the model")
     adequacy = model_adequacy(result, source or "DATASET", options)
+    kept = adequacy.kept
     if adequacy.explains_data is False and adequacy.chi2_dof_upper is not None:
-        ratio = result.chi2_dof / adequacy.chi2_dof_upper  # > 1; said, never "far" at 1.001
+        chi2_dof = result.chi2_dof if kept is None else kept.chi2_dof
+        ratio = chi2_dof / adequacy.chi2_dof_upper  # > 1; said, never "far" at 1.001
         by = f"{ratio:.3g} times" if ratio >= 2 else f"by {ratio - 1:.2%}"
+        over = "" if kept is None else f" ({kept.sentence()})"
         return (f"  converged (solver) {how}, but the model does not explain the data: "
-                f"chi2/dof {result.chi2_dof:.4g} above its band "
-                f"{adequacy.chi2_dof_upper:.4g} ({by}); next: "
+                f"chi2/dof {chi2_dof:.4g} above its band "
+                f"{adequacy.chi2_dof_upper:.4g} ({by}){over}; next: "
                 f"{adequacy.next_command}")
-    return f"  converged: yes {how}"
+    return f"  converged: yes {how}" + ("" if kept is None else f"; {kept.sentence()}")
 
 
 def format_fit_summary(result: FitResult, source: str = "",
