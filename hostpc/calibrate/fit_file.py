@@ -26,23 +26,14 @@ ending with the command that makes a good one.
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from typing import Annotated, Any
 
-from pydantic import (
-    BaseModel,
-    ConfigDict,
-    Field,
-    StrictBool,
-    StrictInt,
-    StrictStr,
-    ValidationError,
-)
+from pydantic import Field, StrictBool, StrictInt, StrictStr
 
+from hostpc.calibrate.strict_json import StrictFile, parse_strict_json, validate_strict
 from hostpc.errors import InputError
-from hostpc.json_object import JsonObject
 from hostpc.model.joint_offsets import is_offset, offset_name
 from hostpc.model.joint_offsets import labels as offset_labels
 
@@ -61,11 +52,9 @@ NonNegative = Annotated[float, Field(allow_inf_nan=False, ge=0.0)]
 Count = Annotated[int, Field(strict=True, ge=0)]
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(strict=True, extra="ignore", frozen=True)
 
 
-class ParameterEntry(_Strict):
+class ParameterEntry(StrictFile):
     """One parameter: value (SI delta from nominal), std (null where held), unit, fixed."""
 
     value: Finite
@@ -74,7 +63,7 @@ class ParameterEntry(_Strict):
     fixed: StrictBool
 
 
-class NullDirectionEntry(_Strict):
+class NullDirectionEntry(StrictFile):
     """A held null direction: the parameter held and the combination it belongs to."""
 
     fixed: StrictStr
@@ -83,7 +72,7 @@ class NullDirectionEntry(_Strict):
     description: StrictStr = ""
 
 
-class CorrelationEntry(_Strict):
+class CorrelationEntry(StrictFile):
     """A strong correlation between two parameters."""
 
     a: StrictStr
@@ -91,7 +80,7 @@ class CorrelationEntry(_Strict):
     rho: Annotated[float, Field(allow_inf_nan=False, ge=-1.0 - 1e-9, le=1.0 + 1e-9)]
 
 
-class RobotIdentityEntry(_Strict):
+class RobotIdentityEntry(StrictFile):
     """The fit's robot: its name and the fingerprint of its nominal kinematics
     (hostpc.model.context.robot_identity)."""
 
@@ -99,7 +88,7 @@ class RobotIdentityEntry(_Strict):
     kinematics: StrictStr
 
 
-class KeptSamplesEntry(_Strict):
+class KeptSamplesEntry(StrictFile):
     """model_adequacy.kept_samples: a robust-loss fit judged on the samples its loss keeps
     (hostpc.diagnostics.robust_kept.KeptSamples)."""
 
@@ -111,7 +100,7 @@ class KeptSamplesEntry(_Strict):
     n_kept: Count
 
 
-class ModelAdequacyEntry(_Strict):
+class ModelAdequacyEntry(StrictFile):
     """model_adequacy, the part a push reads (the rest is for people)."""
 
     kept_samples: KeptSamplesEntry | None = None
@@ -119,7 +108,7 @@ class ModelAdequacyEntry(_Strict):
     next: StrictStr | None = None
 
 
-class FitDocument(_Strict):
+class FitDocument(StrictFile):
     """The fields of `FitResult.to_dict` (hostpc/fitting/result.py); unknown keys ignored.
     Required: what the push reads (parameters, chi2, dof, converged)."""
 
@@ -153,57 +142,9 @@ class FitDocument(_Strict):
     model_adequacy: ModelAdequacyEntry | None = None
 
 
-class _Refused(ValueError):
-    """A JSON text refused by the parser hooks (duplicated key, non-finite literal)."""
-
-
-def _no_duplicates(pairs: list[tuple[str, Any]]) -> JsonObject:
-    result: JsonObject = {}
-    for key, value in pairs:
-        if key in result:
-            raise _Refused(f"key {key!r} appears twice in one object")
-        result[key] = value
-    return result
-
-
-def _no_constant(token: str) -> Any:
-    raise _Refused(f"{token} is not a number JSON allows")
-
-
 def parse_fit_text(text: str, source: str) -> Any:
     """The JSON document of FIT.json; InputError for anything `json` would bend."""
-    try:
-        return json.loads(text, object_pairs_hook=_no_duplicates, parse_constant=_no_constant)
-    except _Refused as exc:
-        raise InputError(f"{source}: {exc}; {REMEDY}") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{source}: not valid JSON (line {exc.lineno}, column {exc.colno}: "
-                         f"{exc.msg}); {REMEDY}") from None
-    except RecursionError:
-        raise InputError(f"{source}: not valid JSON (nested too deeply); {REMEDY}") from None
-    except ValueError as exc:  # an integer literal with thousands of digits
-        raise InputError(f"{source}: not valid JSON ({exc}); {REMEDY}") from None
-
-
-_EXPECTED = {
-    "finite_number": "expected a finite number",
-    "float_type": "expected a finite number (a JSON number, not a string)",
-    "int_type": "expected an integer (a JSON number without a fraction)",
-    "bool_type": "expected true or false (a JSON boolean, not a string)",
-    "string_type": "expected a string",
-    "dict_type": "expected an object",
-    "list_type": "expected a list",
-    "missing": "required field missing",
-    "too_short": "expected at least one entry",
-}
-"""How a pydantic error type reads in the one-line message."""
-
-
-def _field(loc: tuple[int | str, ...]) -> str:
-    text = ""
-    for part in loc:
-        text += f"[{part}]" if isinstance(part, int) else (f".{part}" if text else str(part))
-    return text or "(top level)"
+    return parse_strict_json(text, source, REMEDY)
 
 
 def validate_fit_document(document: Any, source: str, *, offsets: bool = True) -> FitDocument:
@@ -217,16 +158,7 @@ def validate_fit_document(document: Any, source: str, *, offsets: bool = True) -
         if key not in document:
             raise InputError(f"{source}: no {key!r}: not the output of `hostpc fit --json`; "
                              f"{REMEDY}")
-    try:
-        fit = FitDocument.model_validate(document)
-    except ValidationError as exc:
-        first = exc.errors()[0]
-        value = first.get("input")
-        shown = repr(value) if not isinstance(value, dict | list) else type(value).__name__
-        why = _EXPECTED.get(first["type"], first["msg"].lower())
-        got = "" if first["type"] == "missing" else f", got {shown[:80]}"
-        raise InputError(f"{source}: {_field(tuple(first['loc']))}: {why}{got}; "
-                         f"{REMEDY}") from None
+    fit = validate_strict(FitDocument, document, source, REMEDY)
     _check_consistency(fit, source, offsets)
     return fit
 
