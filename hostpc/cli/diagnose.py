@@ -20,6 +20,7 @@ from hostpc.cli.fit import add_constraint_options, add_model_options
 from hostpc.cli.format import repeated_lines
 from hostpc.cli.robot_options import add_robot_override, robot_options
 from hostpc.diagnostics.advice import mm, without
+from hostpc.diagnostics.sample_names import poses_text, whole_poses
 from hostpc.errors import InputError, ZerocalError
 
 if TYPE_CHECKING:
@@ -216,8 +217,11 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
                       for w in diagnosis.residuals.worst[:5])
     lines += ["", f"worst samples: {worst}"]
     if check.outliers:
+        poses = whole_poses([o.sample for o in check.outliers],
+                            check.fit.problem.dataset.samples)
         lines.append("outliers: " + ", ".join(f"#{o.sample} {o.sigma:.3g} sigma "
                                               f"(p = {_p(o.p_value)})" for o in check.outliers)
+                     + (f"; {poses_text(poses)}" if poses else "")
                      + f"; left out below ({without(check)})")
     lines += ["", "residuals binned against each variable (* significant):"]
     for pattern in diagnosis.residuals.patterns:

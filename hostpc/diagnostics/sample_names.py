@@ -42,13 +42,18 @@ def whole_poses(indices: Iterable[int], samples: Samples) -> dict[int, list[int]
     return poses
 
 
+def poses_text(poses: dict[int, list[int]]) -> str:
+    """'pose #11 (samples #33-#35, every sample of it)' for each of ``whole_poses``."""
+    return ", ".join(f"pose #{pose} (samples {_span(members)}, every sample of it)"
+                     for pose, members in poses.items())
+
+
 def name_samples(indices: Iterable[int], samples: Samples) -> str:
     """The samples ``indices`` (dataset indices), a whole pose as 'pose #11 (samples
     #33-#35, every sample of it)', the rest as '#85'."""
     chosen = sorted({int(i) for i in indices})
     poses = whole_poses(chosen, samples)
     grouped = {i for members in poses.values() for i in members}
-    parts = [f"pose #{pose} (samples {_span(members)}, every sample of it)"
-             for pose, members in poses.items()]
+    parts = [poses_text(poses)] if poses else []
     parts += [f"#{i}" for i in chosen if i not in grouped]
     return ", ".join(parts)

@@ -124,3 +124,27 @@ def test_a_hand_edited_kept_block_is_refused_in_one_line(
         assert main(["push", str(fit_file), "--robot", "127.0.0.1:9", "--dry-run"]) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and message in err, err
+
+
+def test_diagnose_names_the_pose_whose_every_sample_is_an_outlier(
+        bad_pose: tuple[Path, dict[str, float]], capsys: pytest.CaptureFixture[str],
+        tmp_path: Path) -> None:
+    """One pose read wrong is one measurement to check, not three outliers; a single bad
+    reflector of a pose stays a sample."""
+    path, _ = bad_pose
+    main(["diagnose", str(path), "--cv-folds", "0"])
+    text = capsys.readouterr().out
+    assert ("are outliers, all of pose #11 (samples #33-#35, every sample of it): check that "
+            "pose's measurement, or fit with --loss cauchy") in text
+    assert "; pose #11 (samples #33-#35, every sample of it); left out below" in text
+
+    document = json.loads(path.read_text())
+    for sample in document["samples"][3 * BAD_POSE:3 * BAD_POSE + 3]:
+        sample["q"][2] -= BAD_J3  # the pose read right again ...
+    document["samples"][3 * BAD_POSE + 1]["p"][0] += 1e-3  # ... one reflector 1 mm off
+    one = tmp_path / "one.json"
+    one.write_text(json.dumps(document))
+    main(["diagnose", str(one), "--cv-folds", "0"])
+    text = capsys.readouterr().out
+    assert "Sample #34 (" in text and "is an outlier: check that measurement" in text
+    assert "every sample of it" not in text
