@@ -266,9 +266,7 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
             lines.append(f"  {pair.sentence}")
             if pair.gain_sentence is not None:
                 lines.append(f"  {pair.gain_sentence}")
-            lines.append(f"  separate them: {diagnosis.separate_command(pair)} (plans the "
-                         "fewest extra poses that give both, prints their predicted "
-                         "separation, measures them and tests again)")
+            lines.append(f"  separate them: {diagnosis.separate_instruction(pair)}")
     lines += ["", "advice:"] + [f"  - {sentence}" for sentence in diagnosis.advice]
     return "\n".join(lines)
 
