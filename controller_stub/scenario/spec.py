@@ -149,6 +149,9 @@ class ChessboardSpec(_Model):
     distance_min: Annotated[float, Field(gt=0.0)] = 0.3
     distance_max: Annotated[float, Field(gt=0.0)] = 0.8
     max_tilt_deg: Annotated[float, Field(ge=0.0, le=70.0)] = 35.0
+    views_seed: int | None = None
+    """The seed the board poses are drawn with; None: the scenario's. A station that shows
+    its camera the same board poses robot after robot: worlds sharing a views_seed."""
     dark_level: Annotated[float, Field(ge=0.0, le=255.0)] = 25.0
     light_level: Annotated[float, Field(ge=0.0, le=255.0)] = 230.0
 

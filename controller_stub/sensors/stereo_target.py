@@ -124,6 +124,12 @@ class StereoCamera:
             self._renderers = (left.result(), right.result())
         return self._renderers
 
+    @property
+    def _views_seed(self) -> int:
+        """The seed of the board poses: the chessboard's views_seed, else the scenario's."""
+        views_seed = self.scenario.chessboard.views_seed
+        return self.scenario.seed if views_seed is None else views_seed
+
     def chessboard_poses(self) -> np.ndarray:
         """(n_views, 4, 4) T_leftcamera_board of the rig-calibration views (truth)."""
         if self._board_views is None:
@@ -135,7 +141,7 @@ class StereoCamera:
                 board.n_views,
                 (board.distance_min, board.distance_max),
                 math.radians(board.max_tilt_deg),
-                stream_rng(self.scenario.seed, STREAM_VIEWS),
+                stream_rng(self._views_seed, STREAM_VIEWS),
             )
         return self._board_views.copy()
 
@@ -152,7 +158,7 @@ class StereoCamera:
                 EXTRA_VIEW_FACTOR * board.n_views,
                 (board.distance_min, board.distance_max),
                 math.radians(board.max_tilt_deg),
-                stream_rng(self.scenario.seed, STREAM_EXTRA_VIEWS),
+                stream_rng(self._views_seed, STREAM_EXTRA_VIEWS),
                 centre_range=(0.05, 0.95),
             )
         return self._extra_board_views.copy()

@@ -134,9 +134,14 @@ def run(args: argparse.Namespace) -> int:
             if choice.outlier_note:
                 print(f"outliers: {choice.outlier_note}")
             print()
-        from hostpc.cli.units_hint import declared_length_unit, length_unit_hint
+        from hostpc.cli.units_hint import (
+            declared_angle_unit,
+            declared_length_unit,
+            length_unit_hint,
+        )
 
-        hint = length_unit_hint(dataset, declared_length_unit(args.dataset))
+        hint = length_unit_hint(dataset, declared_length_unit(args.dataset),
+                                result.problem.context.chain, declared_angle_unit(args.dataset))
         print(format_fit_summary(result, source=args.dataset, scaled=scaled,
                                  jackknife=jackknife, options=options, units_hint=hint))
     if args.write_urdf:

@@ -7,7 +7,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hostpc.diagnostics.adequacy import chi2_dof_upper
+from hostpc.diagnostics.adequacy import (
+    chi2_band,
+    chi2_dof_upper,
+    chi2_far_below,
+    far_below_reason,
+    implausible_geometry,
+)
 from hostpc.diagnostics.robust_kept import KeptSamples, kept_samples
 from hostpc.display_units import DISPLAY_UNITS
 from hostpc.fitting import FitResult
@@ -125,11 +131,17 @@ def _converged_line(result: FitResult, source: str, options: str = "",
         chi2_dof = result.chi2_dof if kept is None else kept.chi2_dof
         ratio = chi2_dof / adequacy.chi2_dof_upper  # > 1; said, never "far" at 1.001
         by = f"{ratio:.3g} times" if ratio >= 2 else f"by {ratio - 1:.2%}"
+        units = (f"the residuals are {math.sqrt(result.chi2_dof):.3g} times the stated "
+                 f"noise: {units_hint}; " if units_hint and math.sqrt(result.chi2_dof)
+                 >= UNITS_HINT_NOISE_RATIO else "")
         over = "" if kept is None else f" ({kept.sentence()})"
         return (f"  converged (solver) {how}, but the model does not explain the data: "
                 f"chi2/dof {chi2_dof:.4g} above its band "
-                f"{adequacy.chi2_dof_upper:.4g} ({by}){over}; next: "
+                f"{adequacy.chi2_dof_upper:.4g} ({by}){over}; {units}next: "
                 f"{adequacy.next_command}")
+    if chi2_far_below(result.chi2, result.dof):  # a unit slip the geometry absorbed
+        far_below = far_below_reason(result.chi2_dof, chi2_band(result.dof), result.dof)
+        return f"  converged (solver) {how}, but {far_below}"
     return f"  converged: yes {how}" + ("" if kept is None else f"; {kept.sentence()}")
 
 
@@ -164,6 +176,9 @@ def format_fit_summary(result: FitResult, source: str = "",
         if jackknife is not None:
             lines.append("  jackknife: the spread of the fits leaving one pose out (no noise "
                          "model assumed)")
+    implausible = implausible_geometry(result)
+    if implausible is not None:
+        lines += ["", f"warning: {implausible}"]
     if result.unidentifiable:
         lines += ["", "identifiability warnings:"]
         lines += [f"  - {d.description}" for d in result.unidentifiable]

@@ -155,6 +155,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"q{follower + 1} follows q{leader + 1} (<mimic>: {multiplier:g} x leader "
                   f"+ {offset:g}): computed from it")
     _warn_short_prismatic_travel(samples, prismatic, args)
+    _warn_unit_slip(samples, chain, args)
     check_coupled_joints(chain, samples.q, (str(Path(args.robot).resolve()), args.base_link,
                                             args.tip_link) if robot.urdf else None)
     head = document_head(samples, options)
@@ -189,6 +190,55 @@ def _warn_short_prismatic_travel(samples: ImportedSamples, prismatic: tuple[bool
             print(f"warning: prismatic joint q{j + 1} spans only {span * 1e3:.3g} mm read "
                   f"in {unit}: a unit mix-up? its unit is --prismatic-unit "
                   f"{'/'.join(LENGTH_UNITS)} (default: the --length-unit)", file=sys.stderr)
+
+
+def _warn_unit_slip(samples: ImportedSamples, chain: Chain, args: argparse.Namespace) -> None:
+    """One warning line (stderr) when the measured points spread ten times less or more
+    than the nominal robot's flange over the same joint values (hostpc.cli.units_hint): it
+    names the declared units, the ones the numbers suggest and the import command that reads
+    them so."""
+    from hostpc.cli.units_hint import unit_slip, unit_slip_sentence
+
+    slip = unit_slip(chain, samples.q, samples.p, args.length_unit, args.joint_unit,
+                     args.prismatic_unit)
+    if slip is None:
+        return
+    sentence = unit_slip_sentence(slip, "--length-unit", "--joint-unit", chain.name)
+    units = slip.suggested_units
+    if units is not None:
+        sentence += f": {_import_command(args, *units)}"
+    print(f"warning: {sentence}", file=sys.stderr)
+
+
+_OPTIONS = (("method", "--method"), ("robot", "--robot"), ("base_link", "--base-link"),
+            ("tip_link", "--tip-link"), ("columns", "--columns"),
+            ("length_unit", "--length-unit"), ("angle_unit", "--angle-unit"),
+            ("euler", "--euler"), ("decimal", "--decimal"), ("joint_unit", "--joint-unit"),
+            ("prismatic_unit", "--prismatic-unit"), ("sigma", "--sigma"),
+            ("sigma_angle", "--sigma-angle"), ("known", "--known"))
+"""The import's options with a value, in the order of its help: the command rebuilt."""
+_DEFAULTS = {"angle_unit": "rad", "decimal": "auto", "known": ""}
+"""Values left out of the rebuilt command (the parser's defaults)."""
+
+
+def _import_command(args: argparse.Namespace, length_unit: str, joint_unit: str) -> str:
+    """This import's command with the length and joint units replaced; --sigma (in the
+    length unit) converted so that it states the same noise."""
+    import shlex
+
+    values = {**vars(args), "length_unit": length_unit, "joint_unit": joint_unit}
+    if args.sigma is not None:
+        same_noise = args.sigma * LENGTH_UNITS[args.length_unit] / LENGTH_UNITS[length_unit]
+        values["sigma"] = float(f"{same_noise:.6g}")
+    words = ["hostpc", "import", shlex.quote(args.csv)]
+    for dest, option in _OPTIONS:
+        value = values.get(dest)
+        if value is None or value == _DEFAULTS.get(dest):
+            continue
+        words += [option, shlex.quote(f"{value:g}" if isinstance(value, float) else str(value))]
+    if args.no_guess:
+        words.append("--no-guess")
+    return " ".join([*words, "-o", shlex.quote(args.output)])
 
 
 def _read_csv_file(path: Path, args: argparse.Namespace, chain: Chain,

@@ -4,7 +4,12 @@ One chi-square rule serves every verdict (``hostpc diagnose``, the push guard ra
 ``hostpc calibrate``, the report): a fit explains its measurements when the upper-tail
 probability of a chi-square as large as its own is at least ``ADEQUACY_P_MIN``
 (``chi2_adequate``), i.e. when chi2/dof is at most ``chi2_dof_upper(dof)``. A chi2/dof
-below the band is no sign of a missing effect (the stated covariances are pessimistic).
+below the band is no sign of a missing effect (the stated covariances are pessimistic); one
+*far* below it (``chi2_far_below``) is no adequate model either: the stated noise is not the
+instrument's, or the model absorbs the data. Neither is a fitted table length that moved by
+more than any calibration corrects (``implausible_geometry``): the numbers are in another
+unit, or of another robot. Those two make diagnose's verdict NOT adequate; the push's rule is
+``chi2_adequate`` alone.
 
 All lengths in metres (SI); the CLI and the report convert to mm. ``m`` is the size of one
 measurement (3 for a stereo point, 1 for a probe contact distance).
@@ -12,6 +17,7 @@ measurement (3 for a stereo point, 1 for a probe contact distance).
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,10 +26,23 @@ from hostpc.diagnostics.distributions import chi2_isf, chi2_ppf, chi2_sf
 from hostpc.diagnostics.outliers import Outlier
 from hostpc.fitting import FitResult
 from hostpc.fitting.fitting import held_out_by_fold
+from hostpc.fitting.identifiability import WEAK_SIGMA_LIMIT
 from hostpc.model.layout import Problem
+
+_TABLE_LENGTH = re.compile(r"geometry\.(?P<kind>a|d)(?P<joint>\d+)$")
 
 ADEQUACY_P_MIN = 1e-3
 """A fit is adequate (chi-square test) when P(chi2 this large | model right) >= this."""
+FAR_BELOW_NOISE_FACTOR = 10.0
+"""chi2/dof is far below its band when it is still in the band's lower tail with the stated
+noise divided by this: residuals more than ten times smaller than the stated noise, beyond
+chance. A stated noise two or three times the real one is common pessimism (a datasheet
+figure, the import's default 0.1 mm: adequate); ten times is not an instrument's noise."""
+IMPLAUSIBLE_LENGTH_M = WEAK_SIGMA_LIMIT["m"]
+"""A fitted change of a DH/MDH table length (geometry.aJ, geometry.dJ) beyond this (50 mm,
+the largest length a real robot could need calibrated: ``detectable.PLAUSIBLE_SIZE``) is
+implausible: manufacturing and assembly move a link by millimetres (FIGAROH's TIAGo and
+TALOS: up to 16 and 27 mm); numbers read in the wrong unit move it by its whole length."""
 
 
 @dataclass(frozen=True)
@@ -155,6 +174,50 @@ def chi2_adequate(chi2: float, dof: int, p_min: float = ADEQUACY_P_MIN) -> bool:
     return bool(dof > 0 and p_value >= p_min)
 
 
+def chi2_far_below(chi2: float, dof: int, p_min: float = ADEQUACY_P_MIN) -> bool:
+    """True when ``chi2`` is in the lower ``p_min`` tail of its band even with the stated
+    noise divided by ``FAR_BELOW_NOISE_FACTOR`` (chi2 times its square): the residuals are
+    far smaller than the stated noise (the noise is stated in another unit or far too
+    large, or the model absorbs the data). False without degrees of freedom."""
+    return bool(dof > 0 and chi2 * FAR_BELOW_NOISE_FACTOR**2 < chi2_ppf(p_min, dof))
+
+
+def implausible_geometry(result: FitResult) -> str | None:
+    """The sentence naming the fitted table lengths (geometry.aJ, geometry.dJ) that moved by
+    more than ``IMPLAUSIBLE_LENGTH_M``, largest first with their nominal values, or None
+    (also without a geometry effect)."""
+    chain = result.problem.context.chain
+    moved = []
+    for k, name in enumerate(result.names):
+        match = _TABLE_LENGTH.match(name)
+        if match is None or result.fixed[k] or not abs(result.x[k]) > IMPLAUSIBLE_LENGTH_M:
+            continue
+        joint = int(match["joint"])
+        if not 1 <= joint <= chain.n:
+            continue
+        nominal = float(getattr(chain, match["kind"])[joint - 1])
+        moved.append((abs(float(result.x[k])), name, float(result.x[k]), nominal))
+    if not moved:
+        return None
+    listed = ", ".join(f"{name} {value * 1e3:+.1f} mm (nominal {nominal * 1e3:.1f} mm)"
+                       for _, name, value, nominal in sorted(moved, reverse=True))
+    return (f"the fitted geometry is implausible: {listed} moved by more than "
+            f"{IMPLAUSIBLE_LENGTH_M * 1e3:.0f} mm, beyond any correction a calibration "
+            "makes: check the length and joint units of the data (hostpc import warns of a "
+            "unit slip) and the robot model")
+
+
+def far_below_reason(chi2_dof: float, band: tuple[float, float], dof: int) -> str:
+    """The sentence for a chi2/dof far below its band, with the next step."""
+    times = 1.0 / max(float(np.sqrt(max(chi2_dof, 0.0))), 1e-300)
+    return (f"chi2/dof {chi2_dof:.3g} is far below its band [{band[0]:.3f}, {band[1]:.3f}] "
+            f"for {dof} degrees of freedom: the residuals are {times:.3g} times smaller than "
+            f"the stated noise (more than {FAR_BELOW_NOISE_FACTOR:g} times, beyond chance), "
+            "so the stated noise is far too large or the model absorbs the data; next: check "
+            "the data's length and joint units (hostpc import warns of a unit slip), then "
+            "state the instrument's noise (hostpc import --sigma)")
+
+
 def expected_noise_rms(problem: Problem) -> float:
     """RMS residual norm (m) the stated covariances predict: sqrt(mean trace(cov))."""
     W = problem.sqrt_information
@@ -185,8 +248,10 @@ def assess(result: FitResult, held_out: HeldOut | None, alpha: float = ADEQUACY_
            missing: tuple[str, ...] = (), outliers: tuple[Outlier, ...] = ()) -> Adequacy:
     """The verdict: no sample is an outlier (``outliers``), the chi-square passes
     ``chi2_adequate`` at ``alpha`` (by default ``ADEQUACY_P_MIN``, the push's threshold;
-    ``hostpc diagnose --alpha`` changes it for the diagnosis only) and no missing effect was
-    found significant (``missing``: sentences naming what was). Reasons in that order."""
+    ``hostpc diagnose --alpha`` changes it for the diagnosis only) and is not far below its
+    band (``chi2_far_below``), no fitted table length is implausible
+    (``implausible_geometry``) and no missing effect was found significant (``missing``:
+    sentences naming what was). Reasons in that order."""
     dof = result.dof
     chi2_dof = result.chi2_dof
     with_calibration = result.chi2_dof_with_calibration
@@ -208,6 +273,11 @@ def assess(result: FitResult, held_out: HeldOut | None, alpha: float = ADEQUACY_
         reasons.append(f"chi2/dof {chi2_dof:.3f}{inside} is above its band "
                        f"[{band[0]:.3f}, {band[1]:.3f}] for {dof} degrees of freedom "
                        f"(p = {p_value:.2g})")
+    elif chi2_far_below(tested, dof, alpha):
+        reasons.append(far_below_reason(tested / dof, band, dof))
+    geometry = implausible_geometry(result)
+    if geometry is not None:
+        reasons.append(geometry)
     reasons.extend(missing)
     return Adequacy(
         chi2=result.chi2, dof=dof, chi2_dof=chi2_dof, chi2_band=band, p_value=p_value,

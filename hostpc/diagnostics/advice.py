@@ -7,7 +7,7 @@ import math
 import re
 from collections.abc import Sequence
 
-from hostpc.diagnostics.adequacy import Adequacy
+from hostpc.diagnostics.adequacy import Adequacy, implausible_geometry
 from hostpc.diagnostics.candidates import Candidate
 from hostpc.diagnostics.diagnosis import LadderStep, ModelCheck
 from hostpc.diagnostics.interactions import Interaction
@@ -76,6 +76,9 @@ def candidate_sentence(check: ModelCheck, candidate: Candidate, source: str | No
                 f"{candidate.chi2_dof:.3f}, held-out RMS {mm(a.cv_rms)} -> {mm(candidate.cv_rms)}")
     if check.outliers:
         evidence += f" ({without(check)})"
+    implausible = implausible_geometry(candidate.fit)
+    if implausible is not None:  # a unit slip fits as a shrunken robot: said, not advised
+        evidence += f"; but with it {implausible}"
     return (f"{phrase}: add {candidate.effect} "
             f"({command(check, candidate.effect, source, plugins)}); {evidence}.")
 
@@ -286,7 +289,8 @@ def ladder_sentences(check: ModelCheck, ladder: Sequence[LadderStep],
     added = [s.added for s in ladder if s.added]
     removed = [r for s in ladder for r in s.removed]
     if added:
-        verdict = "adequate" if last.adequate else "still NOT adequate"
+        verdict = ("adequate" if last.adequate else
+                   f"still NOT adequate: {'; '.join(last.check.adequacy.reasons)}")
         dropped = (f" (and dropping {', '.join(removed)} again: once the later effects were "
                    f"in, the model no longer needed {'them' if len(removed) > 1 else 'it'})"
                    if removed else "")

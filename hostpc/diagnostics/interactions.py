@@ -196,7 +196,7 @@ def search_interactions(result: FitResult, variables: Mapping[str, np.ndarray], 
                     float(math.exp(lp)), bool(math.exp(lp) < threshold), basis, is_fitted,
                     equivalent, units[column_of[parameter]])
         for (parameter, variable, s, g, basis, is_fitted, equivalent), lp
-        in zip(pairs, log_p, strict=True)
+        in zip(pairs, log_p.tolist(), strict=True)  # Python floats: the same digits, faster
     ]
     for i, interaction in enumerate(found):
         if interaction.significant and interaction.basis == "per level":
@@ -260,9 +260,9 @@ def _statistics(columns: np.ndarray, tested: np.ndarray, F_rows: np.ndarray, Q: 
         ranks[sizes <= 0.0] = 0
         projected = np.einsum("krg,r->kg", U, r) ** 2
         drops = np.sum(np.where(np.arange(g) < ranks[:, None], projected, 0.0), axis=1)
-        for i, k in enumerate(ks):
-            rank = int(ranks[i])
-            yield int(k), ((float(drops[i]), rank, U[i, :, :rank]) if rank else (0.0, 0, None))
+        for i, (k, rank, drop) in enumerate(zip(ks.tolist(), ranks.tolist(), drops.tolist(),
+                                                strict=True)):
+            yield k, ((drop, rank, U[i, :, :rank]) if rank else (0.0, 0, None))
 
 
 class _ListedSpans:
@@ -278,6 +278,8 @@ class _ListedSpans:
         tolerance = 1e-8 * max(statistic, 1e-12)
         low = bisect.bisect_left(self.statistics, statistic - tolerance)
         high = bisect.bisect_right(self.statistics, statistic + tolerance)
+        if low == high:  # no listed span has this statistic (most tests)
+            return None
         for index, basis in sorted(self.entries[low:high], key=lambda e: e[0]):
             if _same_span(basis, U):
                 return index

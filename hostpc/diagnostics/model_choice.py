@@ -14,7 +14,9 @@ user will be judged, on poses the fit never saw:
   row (1 at the stated noise), averaged over the poses, with its standard error over them;
 - the one-standard-error rule: among the models whose held-out score is within one
   standard error of the best, the one with the fewest free parameters. A model whose fit
-  did not converge is listed, never chosen.
+  did not converge, or whose fitted geometry is implausible (``adequacy.implausible_geometry``:
+  a table length moved by more than 50 mm, as numbers read in the wrong unit make it), is
+  listed, never chosen.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from typing import cast
 import numpy as np
 
 from hostpc.dataset import Dataset
+from hostpc.diagnostics.adequacy import implausible_geometry
 from hostpc.diagnostics.candidates import warm_start
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, fit, solve
@@ -42,7 +45,8 @@ from hostpc.model.problem import build_problem, extend_problem
 class ModelScore:
     """One model of the table. score, standard_error: the held-out mean squared whitened
     residual per scalar row, over poses, and its standard error (None without held-out
-    residuals); cv_rms: the held-out position RMS (m); note: why it cannot be chosen."""
+    residuals); cv_rms: the held-out position RMS (m); note: why it cannot be chosen ("":
+    it can)."""
 
     name: str
     effects: tuple[str, ...]
@@ -165,9 +169,12 @@ def choose_model(dataset: Dataset, *, plugins: Iterable[str | Path] = (),
         note = "" if result.converged else "did not converge: not chosen"
         if result.converged and score is None:
             note = "too few poses for a held-out score"
+        elif result.converged and implausible_geometry(result) is not None:
+            note = "implausible geometry (a table length moved by over 50 mm): not chosen"
         scores.append(ModelScore(name, tuple(effects), int(np.count_nonzero(~result.fixed)),
                                  result.converged, score, error, result.cv_rms, note))
-    scored = [s for s in scores if s.score is not None and s.standard_error is not None]
+    scored = [s for s in scores
+              if s.score is not None and s.standard_error is not None and not s.note]
     if scored:
         best = min(scored, key=lambda s: s.score or math.inf)
         assert best.score is not None and best.standard_error is not None

@@ -31,6 +31,10 @@ _STIRLING = (1.0 / 12.0, -1.0 / 360.0, 1.0 / 1260.0, -1.0 / 1680.0, 1.0 / 1188.0
              -691.0 / 360360.0, 1.0 / 156.0)
 GAMMA_MAX_TERMS = 100_000
 BETA_MAX_TERMS = 2_000
+SCALAR_BELOW = 24
+"""`_beta_fraction`'s stacked state goes on element by element (Python floats) once this
+few elements are unfinished: a stacked step (~60 numpy calls) costs about what 24
+elements' steps in Python do (the best of 12, 24, 64 and 160 for the interaction search)."""
 BETA_SCIPY_FROM = 5e3
 """Above this a or b (an F test's dfd above 1e4, some 3300 stereo poses) the incomplete
 beta is scipy's: near x = 1 each step of the fraction cancels, and its error grows as
@@ -352,7 +356,11 @@ def _beta_fraction(a: np.ndarray, b: np.ndarray, x: np.ndarray, y: np.ndarray
     (value, converged). Each element leaves the loop when its own factor is 1 to the
     double's resolution (one stacked state, compressed as they finish). The first
     denominator 1 - (a + b) x / (a + 1) is written ((a + 1) y + (1 - b) x) / (a + 1): it
-    keeps its digits for x near 1 (large a, small b: an F test's dfd)."""
+    keeps its digits for x near 1 (large a, small b: an F test's dfd). The last
+    ``SCALAR_BELOW`` unfinished elements go on in Python floats (`_continue_fraction`, the
+    same operations, so the same digits): a step of the stacked state costs ~60 numpy
+    calls whatever its width, and the slowest few elements of an interaction search's
+    ~500 take ten times the median's steps."""
     qab, qap, qam = a + b, a + 1.0, a - 1.0
     d = (qap * y + (1.0 - b) * x) / qap
     d = 1.0 / np.where(np.abs(d) < _TINY, _TINY, d)
@@ -379,19 +387,30 @@ def _beta_fraction(a: np.ndarray, b: np.ndarray, x: np.ndarray, y: np.ndarray
             value[index] = h[finished]
             converged[index] = True
             state = state[:, ~finished]
-            if state.shape[1] == 0:
+            if state.shape[1] <= SCALAR_BELOW:
+                for k, a_k, b_k, x_k, _, _, _, c_k, d_k, h_k in state.T.tolist():
+                    h_k, done = _continue_fraction(a_k, b_k, x_k, c_k, d_k, h_k, m + 1)
+                    if done:  # an unfinished one keeps its start value, as above
+                        value[int(k)], converged[int(k)] = h_k, True
                 break
     return value, converged
 
 
 def _beta_fraction_scalar(a: float, b: float, x: float, y: float) -> tuple[float, bool]:
     """`_beta_fraction` for one element, in Python floats (the same steps)."""
-    qab, qap, qam = a + b, a + 1.0, a - 1.0
-    c = 1.0
+    qap = a + 1.0
     d = (qap * y + (1.0 - b) * x) / qap
     d = 1.0 / (_TINY if abs(d) < _TINY else d)
-    h = d
-    for m in range(1, BETA_MAX_TERMS + 1):
+    return _continue_fraction(a, b, x, 1.0, d, d, 1)
+
+
+def _continue_fraction(a: float, b: float, x: float, c: float, d: float, h: float,
+                       first: int) -> tuple[float, bool]:
+    """The fraction's steps ``first`` to ``BETA_MAX_TERMS`` of one element from its state
+    (c, d, h), in Python floats: each operation the one `_beta_fraction` makes on the
+    element's column (IEEE double either way), so the same digits. (value, converged)."""
+    qab, qap, qam = a + b, a + 1.0, a - 1.0
+    for m in range(first, BETA_MAX_TERMS + 1):
         m2 = 2.0 * m
         for aa in (m * (b - m) * x / ((qam + m2) * (a + m2)),
                    -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2))):

@@ -186,24 +186,31 @@ def rig_from_dict(data: Any, source: str = "<rig>") -> StereoRig:
     return rig
 
 
-def save_rig(rig: StereoRig, path: str | Path) -> None:
+def save_rig(rig: StereoRig, path: str | Path, extra: JsonObject | None = None) -> None:
     """Write `rig` as JSON to `path` atomically (a crash never leaves half a rig file;
-    InputError if the file cannot be written)."""
+    InputError if the file cannot be written), with the fields of `extra` beside it (a
+    rig cache's check view: hostpc/kinds/stereo_target/rig_cache.py)."""
     from hostpc.files import write_text_atomic
 
     path = Path(path)
     try:
-        write_text_atomic(path, json.dumps(rig.to_dict(), indent=2) + "\n")
+        write_text_atomic(path, json.dumps({**rig.to_dict(), **(extra or {})}, indent=2)
+                          + "\n")
     except OSError as exc:
         raise InputError(f"{path}: cannot write rig file ({exc.strerror})") from None
 
 
 def load_rig(path: str | Path) -> StereoRig:
     """Read a rig JSON file; InputError (one line naming the file and field) on any problem."""
+    return rig_from_dict(rig_document(path), str(path))
+
+
+def rig_document(path: str | Path) -> Any:
+    """The parsed JSON of a rig file, not yet checked (`rig_from_dict` checks it); InputError
+    naming the file if it cannot be read or is not JSON."""
     path = Path(path)
     text = read_input_text(path, RIG)  # a regular file within the rig size limit
     try:
-        data = json.loads(text)
+        return json.loads(text)
     except json.JSONDecodeError as exc:
         raise InputError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
-    return rig_from_dict(data, str(path))

@@ -162,3 +162,26 @@ def test_pivoted_columns_take_the_first_of_tied_columns() -> None:
     matrix = np.array([[0.1, 2.0, 0.3, 2.0], [0.2, 1.0, 0.1, 1.0]])
     assert pivoted_columns(matrix)[0] == 1
     assert pivoted_columns(matrix[:, ::-1])[0] == 0
+
+
+def test_fraction_element_by_element_gives_the_stacked_digits() -> None:
+    """The continued fraction's last few elements go on in Python floats: every element's
+    value is the one its own stacked steps give, digit for digit (an F test of an interaction
+    search: dfd / 2 ~ 170, dfn / 2 of 0.5, 1 or 1.5, x from 1e-10 to 0.99)."""
+    rng = np.random.default_rng(3)
+    n = 600
+    a = rng.choice([160.0, 171.0, 173.0, 1200.0], n)
+    b = rng.choice([0.5, 1.0, 1.5, 40.0], n)
+    x = rng.uniform(0.0, 1.0, n) ** rng.uniform(0.1, 12.0, n)
+    direct = x < (a + 1.0) / (a + b + 2.0)
+    p, r = np.where(direct, a, b), np.where(direct, b, a)
+    u = np.where(direct, x, 1.0 - x)
+    stacked, converged = special_functions._beta_fraction(p, r, u, 1.0 - u)
+    assert np.count_nonzero(converged) == n
+    alone = [special_functions._beta_fraction_scalar(*values)
+             for values in zip(p.tolist(), r.tolist(), u.tolist(), (1.0 - u).tolist(),
+                               strict=True)]
+    assert stacked.tolist() == [value for value, _ in alone]
+    one_each = [special_functions._beta_fraction(p[k:k + 1], r[k:k + 1], u[k:k + 1],
+                                                 1.0 - u[k:k + 1])[0][0] for k in range(40)]
+    assert stacked[:40].tolist() == one_each

@@ -198,7 +198,9 @@ class StereoTargetMethod(Method):
         """Which rig the run used, as summary.txt says it: cached FILE, calibrated in this
         run, --rig FILE."""
         if self._cached_rig_used():
-            return f"cached {self._cached_rig_used()}"
+            captures = self.rig_report.get("captures")
+            return f"cached {self._cached_rig_used()}" + (
+                f" ({captures}-capture check)" if captures else "")
         if "rms_px" in self.rig_report:
             return "calibrated in this run"
         if self.settings.options.get("rig"):
@@ -222,13 +224,15 @@ class StereoTargetMethod(Method):
     def _store_in_cache(self, progress: Progress) -> None:
         """Store the rig just calibrated in the rig cache; a failed write is a warning (the
         run has its own rig.json)."""
+        from hostpc.kinds.stereo_target.rig_cache import CHECK_VIEW_KEY
         from hostpc.vision import save_rig
 
         path = self._rig_cache_file
         if path is None:
             return
+        check_view = self.rig_report.get(CHECK_VIEW_KEY)
         try:
-            save_rig(self.rig, path)
+            save_rig(self.rig, path, {CHECK_VIEW_KEY: check_view} if check_view else None)
         except InputError as exc:
             progress.message(f"warning: rig not stored in the cache: {exc}")
             return
@@ -247,15 +251,10 @@ class StereoTargetMethod(Method):
         return cache_path(folder, serial)
 
     async def _cached_rig(self, robot: RobotAdapter, progress: Progress) -> Any:
-        """The cached rig of this camera if it still fits two chessboard views (rig_cache.py),
-        else None (the run then calibrates one)."""
-        from hostpc.kinds.stereo_target.rig_cache import (
-            CHECK_VIEWS,
-            board_tilt_deg,
-            fit_bound,
-            view_fit,
-        )
-        from hostpc.vision import load_rig
+        """The cached rig of this camera if it still fits fresh chessboard views (rig_cache.py:
+        view 0 and the cache file's check view, or views 0..CHECK_VIEWS-1 for a file without
+        one), else None (the run then calibrates one)."""
+        from hostpc.kinds.stereo_target.rig_cache import check_rig, load_cached
 
         path, board = self._rig_cache_file, self.cell.chessboard
         if path is None and self.settings.options.get("rig_cache"):
@@ -268,7 +267,7 @@ class StereoTargetMethod(Method):
             progress.message(f"rig: none cached for camera {camera} ({path}): calibrating")
             return None
         try:
-            rig = load_rig(path)
+            rig, check_view = load_cached(path, self._board_views(board)[1])
         except InputError as exc:
             progress.message(f"rig: the cached rig is unusable ({exc}): calibrating anew")
             return None
@@ -277,27 +276,26 @@ class StereoTargetMethod(Method):
                              f"({rig.image_size[0]}x{rig.image_size[1]}): calibrating anew")
             return None
         spec = self._board_spec(board)
-        corners = [(await self._chessboard_view(robot, view, spec))[1]
-                   for view in range(CHECK_VIEWS)]
-        tilts = [-1.0 if left is None else board_tilt_deg(rig, spec.object_points(), left)
-                 for left, _ in corners]
-        views = [0, max(range(1, CHECK_VIEWS), key=lambda v: tilts[v])]
-        rms = [(float("inf"), float("inf")) if left is None or right is None
-               else view_fit(rig, spec.object_points(), left, right)
-               for left, right in (corners[v] for v in views)]
-        worst, bound = max(max(pair) for pair in rms), fit_bound(rig)
-        said = (f"chessboard views {views[0]} and {views[1]} (tilt {tilts[views[1]]:.0f} deg): "
-                f"RMS {worst:.3f} px, bound {bound:.3f} px")
-        self.rig_report = {"cached": str(path), "check_views": views, "bound_px": bound,
-                           "check_rms_px": [[r if np.isfinite(r) else None for r in pair]
-                                            for pair in rms],
-                           "fits": bool(worst <= bound)}
-        if not self.rig_report["fits"]:
-            progress.message(f"rig: the cached rig {path} does not fit {said}: calibrating anew")
+
+        async def capture(view: int) -> tuple[Any, Any]:
+            return (await self._chessboard_view(robot, view, spec))[1]
+
+        check = await check_rig(rig, spec.object_points(), check_view, capture)
+        self.rig_report = {"cached": str(path), **check.report()}
+        if not check.fits:
+            progress.message(f"rig: the cached rig {path} does not fit {check.said()}: "
+                             "calibrating anew")
             return None
         write_json_atomic(self.run_dir / RIG_REPORT_FILE, self.rig_report)
-        progress.message(f"rig: cached for camera {camera} ({path}), fits {said}")
+        progress.message(f"rig: cached for camera {camera} ({path}), fits {check.said()}")
         return rig
+
+    @staticmethod
+    def _board_views(board: Mapping[str, Any]) -> tuple[int, int]:
+        """(the views a rig calibration plans, the views the controller offers) of the cell's
+        chessboard description."""
+        n_views = int(board.get("n_views", 20))
+        return n_views, max(n_views, int(board.get("max_views", n_views)))
 
     @staticmethod
     def _board_spec(board: Mapping[str, Any]) -> Any:
@@ -326,8 +324,7 @@ class StereoTargetMethod(Method):
         if not board:
             raise InputError("no --rig given and the controller describes no chessboard to "
                              "calibrate one; give --rig FILE")
-        n_views = int(board.get("n_views", 20))
-        max_views = max(n_views, int(board.get("max_views", n_views)))
+        n_views, max_views = self._board_views(board)
         spec = self._board_spec(board)
         progress.stage("rig calibration", n_views)
         pairs, corners, planner = [], [], None
@@ -357,6 +354,7 @@ class StereoTargetMethod(Method):
         result = calibrate_rig(pairs, spec, corners)
         self.rig_report = {
             **({"cache_check": self.rig_report} if self.rig_report else {}),  # did not fit
+            **self._check_view(result, spec, planner.kept, corners),
             "ok": bool(result.ok),
             "rms_px": float(result.rms),
             "per_view_rms_px": [float(v) for v in result.per_view_rms],
@@ -378,6 +376,19 @@ class StereoTargetMethod(Method):
                          f"{len(result.used_views)} views, baseline "
                          f"{result.rig.baseline * 1e3:.2f} mm")
         return result.rig
+
+    def _check_view(self, result: Any, spec: Any, kept: Sequence[int],
+                    corners: Sequence[tuple[Any, Any]]) -> dict[str, Any]:
+        """{CHECK_VIEW_KEY: ...} of a rig calibrated for the rig cache: the calibration's
+        used view a later run's 2-capture check captures besides view 0
+        (rig_cache.choose_check_view); {} without a cache."""
+        from hostpc.kinds.stereo_target.rig_cache import CHECK_VIEW_KEY, choose_check_view
+
+        if self._rig_cache_file is None:
+            return {}
+        chosen = choose_check_view(result.rig, spec.object_points(),
+                                   [(kept[i], corners[i][0]) for i in result.used_views])
+        return {} if chosen is None else {CHECK_VIEW_KEY: chosen}
 
     # ---------------------------------------------------------------- planning
 
