@@ -26,23 +26,14 @@ ending with the command that makes a good one.
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from typing import Annotated, Any
 
-from pydantic import (
-    BaseModel,
-    ConfigDict,
-    Field,
-    StrictBool,
-    StrictInt,
-    StrictStr,
-    ValidationError,
-)
+from pydantic import Field, StrictBool, StrictInt, StrictStr
 
+from hostpc.calibrate.strict_json import StrictFile, parse_strict_json, validate_strict
 from hostpc.errors import InputError
-from hostpc.json_object import JsonObject
 from hostpc.model.joint_offsets import is_offset, offset_name
 from hostpc.model.joint_offsets import labels as offset_labels
 
@@ -61,11 +52,9 @@ NonNegative = Annotated[float, Field(allow_inf_nan=False, ge=0.0)]
 Count = Annotated[int, Field(strict=True, ge=0)]
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(strict=True, extra="ignore", frozen=True)
 
 
-class ParameterEntry(_Strict):
+class ParameterEntry(StrictFile):
     """One parameter: value (SI delta from nominal), std (null where held), unit, fixed."""
 
     value: Finite
@@ -74,7 +63,7 @@ class ParameterEntry(_Strict):
     fixed: StrictBool
 
 
-class NullDirectionEntry(_Strict):
+class NullDirectionEntry(StrictFile):
     """A held null direction: the parameter held and the combination it belongs to."""
 
     fixed: StrictStr
@@ -83,7 +72,7 @@ class NullDirectionEntry(_Strict):
     description: StrictStr = ""
 
 
-class CorrelationEntry(_Strict):
+class CorrelationEntry(StrictFile):
     """A strong correlation between two parameters."""
 
     a: StrictStr
@@ -91,7 +80,7 @@ class CorrelationEntry(_Strict):
     rho: Annotated[float, Field(allow_inf_nan=False, ge=-1.0 - 1e-9, le=1.0 + 1e-9)]
 
 
-class RobotIdentityEntry(_Strict):
+class RobotIdentityEntry(StrictFile):
     """The fit's robot: its name and the fingerprint of its nominal kinematics
     (hostpc.model.context.robot_identity)."""
 
@@ -99,7 +88,27 @@ class RobotIdentityEntry(_Strict):
     kinematics: StrictStr
 
 
-class FitDocument(_Strict):
+class KeptSamplesEntry(StrictFile):
+    """model_adequacy.kept_samples: a robust-loss fit judged on the samples its loss keeps
+    (hostpc.diagnostics.robust_kept.KeptSamples)."""
+
+    loss: StrictStr
+    left_out: Annotated[list[Count], Field(min_length=1)]
+    max_weight: NonNegative
+    chi2: NonNegative
+    dof: StrictInt
+    n_kept: Count
+
+
+class ModelAdequacyEntry(StrictFile):
+    """model_adequacy, the part a push reads (the rest is for people)."""
+
+    kept_samples: KeptSamplesEntry | None = None
+    #: the diagnosis to run when the model does not explain the data (names the dataset)
+    next: StrictStr | None = None
+
+
+class FitDocument(StrictFile):
     """The fields of `FitResult.to_dict` (hostpc/fitting/result.py); unknown keys ignored.
     Required: what the push reads (parameters, chi2, dof, converged)."""
 
@@ -130,77 +139,12 @@ class FitDocument(_Strict):
     cv_folds: Count | None = None
     loss: StrictStr = ""
     chi2_dof_with_calibration: NonNegative | None = None
-
-
-class _Refused(ValueError):
-    """A JSON text refused by the parser hooks (duplicated key, non-finite literal)."""
-
-
-def _no_duplicates(pairs: list[tuple[str, Any]]) -> JsonObject:
-    result: JsonObject = {}
-    for key, value in pairs:
-        if key in result:
-            raise _Refused(f"key {key!r} appears twice in one object")
-        result[key] = value
-    return result
-
-
-def _no_constant(token: str) -> Any:
-    raise _Refused(f"{token} is not a number JSON allows")
+    model_adequacy: ModelAdequacyEntry | None = None
 
 
 def parse_fit_text(text: str, source: str) -> Any:
     """The JSON document of FIT.json; InputError for anything `json` would bend."""
     return parse_strict_json(text, source, REMEDY)
-
-
-def parse_strict_json(text: str, source: str, remedy: str) -> Any:
-    """A JSON document read as the module docstring says (no duplicated key, no NaN or
-    Infinity, no endless nesting or digits); InputError naming `source`, ending with
-    `remedy` (how to make a good file). FIT.json and push.json are read with it."""
-    try:
-        return json.loads(text, object_pairs_hook=_no_duplicates, parse_constant=_no_constant)
-    except _Refused as exc:
-        raise InputError(f"{source}: {exc}; {remedy}") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{source}: not valid JSON (line {exc.lineno}, column {exc.colno}: "
-                         f"{exc.msg}); {remedy}") from None
-    except RecursionError:
-        raise InputError(f"{source}: not valid JSON (nested too deeply); {remedy}") from None
-    except ValueError as exc:  # an integer literal with thousands of digits
-        raise InputError(f"{source}: not valid JSON ({exc}); {remedy}") from None
-
-
-_EXPECTED = {
-    "finite_number": "expected a finite number",
-    "float_type": "expected a finite number (a JSON number, not a string)",
-    "int_type": "expected an integer (a JSON number without a fraction)",
-    "bool_type": "expected true or false (a JSON boolean, not a string)",
-    "string_type": "expected a string",
-    "dict_type": "expected an object",
-    "list_type": "expected a list",
-    "missing": "required field missing",
-    "too_short": "expected at least one entry",
-}
-"""How a pydantic error type reads in the one-line message."""
-
-
-def _field(loc: tuple[int | str, ...]) -> str:
-    text = ""
-    for part in loc:
-        text += f"[{part}]" if isinstance(part, int) else (f".{part}" if text else str(part))
-    return text or "(top level)"
-
-
-def validation_line(exc: ValidationError) -> str:
-    """The first error of a strict model's validation, as `field: what was expected, got
-    VALUE` (FIT.json's and push.json's one-line messages)."""
-    first = exc.errors()[0]
-    value = first.get("input")
-    shown = repr(value) if not isinstance(value, dict | list) else type(value).__name__
-    why = _EXPECTED.get(first["type"], first["msg"].lower())
-    got = "" if first["type"] == "missing" else f", got {shown[:80]}"
-    return f"{_field(tuple(first['loc']))}: {why}{got}"
 
 
 def validate_fit_document(document: Any, source: str, *, offsets: bool = True) -> FitDocument:
@@ -214,10 +158,7 @@ def validate_fit_document(document: Any, source: str, *, offsets: bool = True) -
         if key not in document:
             raise InputError(f"{source}: no {key!r}: not the output of `hostpc fit --json`; "
                              f"{REMEDY}")
-    try:
-        fit = FitDocument.model_validate(document)
-    except ValidationError as exc:
-        raise InputError(f"{source}: {validation_line(exc)}; {REMEDY}") from None
+    fit = validate_strict(FitDocument, document, source, REMEDY)
     _check_consistency(fit, source, offsets)
     return fit
 
@@ -235,6 +176,7 @@ def _check_consistency(fit: FitDocument, source: str, offsets: bool) -> None:
             fit.chi2_dof, fit.chi2 / fit.dof, rel_tol=RELATIVE_TOLERANCE, abs_tol=1e-300):
         raise _fail(source, "chi2_dof", f"{fit.chi2_dof!r} is not chi2 / dof = "
                     f"{fit.chi2 / fit.dof!r}")
+    _check_kept(fit, source)
     if fit.n_parameters is not None and fit.n_parameters != len(fit.parameters):
         raise _fail(source, "n_parameters", f"{fit.n_parameters} but "
                     f"{len(fit.parameters)} parameters are listed")
@@ -268,6 +210,25 @@ def _check_consistency(fit: FitDocument, source: str, offsets: bool) -> None:
             if side not in fit.parameters:
                 raise _fail(source, f"correlations[{k}]", f"{side!r} is not a parameter")
     _check_joint_offsets(fit, source, offsets)
+
+
+def _check_kept(fit: FitDocument, source: str) -> None:
+    """The samples a robust loss left out of the chi-square test: of this fit's loss, each
+    once and a sample of the fit, with fewer (positive) degrees of freedom than the fit."""
+    kept = None if fit.model_adequacy is None else fit.model_adequacy.kept_samples
+    if kept is None:
+        return
+    where = "model_adequacy.kept_samples"
+    if kept.loss != fit.loss or kept.loss in ("", "linear"):
+        raise _fail(source, f"{where}.loss", f"{kept.loss!r}, but the fit's loss is "
+                    f"{fit.loss!r} (only a robust loss leaves samples out)")
+    n_samples = fit.n_samples
+    if len(set(kept.left_out)) != len(kept.left_out) or (
+            n_samples is not None and max(kept.left_out) >= n_samples):
+        raise _fail(source, f"{where}.left_out", "expected distinct samples of the fit")
+    if not 0 < kept.dof < fit.dof:
+        raise _fail(source, f"{where}.dof", f"{kept.dof}, expected 1..{fit.dof - 1} (fewer "
+                    "than the fit's: samples are left out)")
 
 
 def _check_range(name: str, entry: ParameterEntry, source: str) -> None:

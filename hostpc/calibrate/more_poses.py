@@ -39,11 +39,11 @@ def more_poses_reason(journal: Journal, plan: Plan, result: FitResult,
         return asked.reason
     if pushed:
         return None
-    upper = chi2_dof_upper(result.dof)
-    chi2_dof, shared = adequacy_chi2(result)
+    tested = adequacy_chi2(result)
+    chi2_dof, upper = tested.chi2_dof, chi2_dof_upper(tested.dof)
     if not (math.isfinite(upper) and chi2_dof > upper):
         return None
-    what = " with the camera calibration's covariance" if shared else ""
+    what = " with the camera calibration's covariance" if tested.shared else ""
     reason = (f"the model does not explain the {plan.q.shape[0]} poses (chi2/dof{what} "
               f"{chi2_dof:.3g} above its band {upper:.3g})")
     journal.append(MorePoses(reason=reason, n=int(plan.more.shape[0])))

@@ -22,7 +22,13 @@ from typing import Any
 
 import numpy as np
 
-from hostpc.calibrate.fit_file import REMEDY, parse_fit_text, validate_fit_document
+from hostpc.calibrate.fit_file import (
+    REMEDY,
+    FitDocument,
+    parse_fit_text,
+    validate_fit_document,
+)
+from hostpc.diagnostics.robust_kept import KeptSamples
 from hostpc.errors import InputError
 from hostpc.fitting.identifiability import NullDirection
 from hostpc.input_files import FIT, read_input_bytes, read_input_text
@@ -62,6 +68,12 @@ class SavedFit:
     #: the fit dataset's nominal frames as saved (SI JSON; hostpc.dataset.writing.
     #: frames_from_json reads them); None for a fit written before fits recorded them
     frames: dict[str, Any] | None = None
+    #: a robust-loss fit's chi2 over the samples its loss keeps (model_adequacy.kept_samples,
+    #: the one the push guard tests); None for a linear loss or a fit that left none out
+    kept_samples: KeptSamples | None = None
+    #: model_adequacy.next: the diagnosis of the fit's dataset (`hostpc diagnose DATASET
+    #: ... --ladder`), None when the fit explains its data or the file has none
+    next_command: str | None = None
 
     @property
     def chi2_dof(self) -> float:
@@ -110,6 +122,8 @@ def saved_fit_from_dict(document: Any, source: str, *, offsets: bool = True) -> 
                         {"name": fit.robot_identity.name,
                          "kinematics": fit.robot_identity.kinematics}),
         frames=fit.frames,
+        kept_samples=_kept(fit),
+        next_command=None if fit.model_adequacy is None else fit.model_adequacy.next,
     )
 
 
@@ -124,6 +138,16 @@ def _angles_only(units: dict[str, str], source: str) -> None:
                          f"offset (unit {LENGTH_UNIT}), and a controller's zero offsets are "
                          "angles (rad): this fit is not pushed; write the calibrated robot "
                          "instead: hostpc fit DATASET --write-urdf OUT.urdf")
+
+
+def _kept(fit: FitDocument) -> KeptSamples | None:
+    """The validated model_adequacy.kept_samples as the push guard reads it."""
+    kept = None if fit.model_adequacy is None else fit.model_adequacy.kept_samples
+    if kept is None:
+        return None
+    return KeptSamples(loss=kept.loss, left_out=tuple(kept.left_out),
+                       max_weight=kept.max_weight, chi2=kept.chi2, dof=kept.dof,
+                       n_kept=kept.n_kept)
 
 
 def load_saved_fit(path: str | Path, *, offsets: bool = True) -> SavedFit:

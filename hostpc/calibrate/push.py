@@ -17,7 +17,8 @@ Guard rails:
   covariance), the chi2 tested is the one with that covariance inside
   (`hostpc.fitting.shared_chi2`: the residuals against noise + floor + D S D^T, with the
   residual projector, same dof): a rig that errs within its stated covariance is no reason
-  to refuse (docs/vision.md 3.3);
+  to refuse (docs/vision.md 3.3). A robust-loss fit is tested on the samples its loss keeps
+  (hostpc.diagnostics.robust_kept: the outliers of diagnose's test left out);
 - the intent (previous and new offsets, time) is saved durably in the run folder
   (`push.json`, status "intent", and the journal's `push_intent` event) BEFORE the
   controller is written, then the result (status "pushed", the controller's rollback id);
@@ -47,8 +48,10 @@ from hostpc.calibrate.refusals import PushRefusal, resume_with
 from hostpc.calibrate.run_result import OffsetRow
 from hostpc.calibrate.swaps import MAX_SWAP_LIMIT_DEG
 from hostpc.diagnostics.adequacy import ADEQUACY_P_MIN, chi2_dof_upper
+from hostpc.diagnostics.robust_kept import KeptSamples, kept_samples
 from hostpc.errors import ControllerError, InputError
 from hostpc.files import write_json_atomic
+from hostpc.fitting import FitResult
 from hostpc.fitting.result import FitVerdict
 from hostpc.model.joint_offsets import PushTable
 from hostpc.robots.base import RobotAdapter
@@ -162,45 +165,66 @@ def plan_push(result: FitVerdict, old_offsets: np.ndarray,
         notes.append("")
     delta = np.where(pushed, fitted, 0.0)
     labels = table.labels
-    chi2_dof, shared = adequacy_chi2(result)
     limits = (np.full(n, float(max_correction_deg)) if limits_deg is None
               else np.asarray(limits_deg, float))
-    refusal = None if force else _refusal(result, delta, pushed, labels, max_correction_deg,
-                                          limits, dataset_file, chi2_dof, shared)
+    tested = None if force else adequacy_chi2(result)
+    refusal = None if tested is None else _refusal(result, delta, pushed, labels,
+                                                   max_correction_deg, limits, dataset_file,
+                                                   tested)
     return PushPlan(old=old, delta=delta, new=old + delta, sigma=sigma, pushed=pushed,
                     notes=tuple(notes), refused=None if refusal is None else refusal.reason,
                     max_correction_deg=max_correction_deg, fitted=fitted, labels=labels,
-                    chi2_dof_tested=chi2_dof if shared else None, refusal=refusal)
+                    chi2_dof_tested=(tested.chi2_dof if tested is not None and tested.shared
+                                     else None),
+                    refusal=refusal)
 
 
-def adequacy_chi2(result: FitVerdict) -> tuple[float, bool]:
-    """(chi2/dof the guard tests, True if it includes the dataset's shared error).
+@dataclass(frozen=True)
+class AdequacyChi2:
+    """The chi2/dof the guard tests and its dof; shared: it includes the dataset's shared
+    error; kept: a robust-loss fit judged on the samples its loss keeps, else None."""
 
-    With a `rig_uncertainty` block in the fit's dataset: the chi2 with the shared error's
-    covariance inside (`FitVerdict.chi2_dof_with_calibration`: a live fit computes it, a
-    saved fit carries it); else the fit's plain chi2/dof."""
+    chi2_dof: float
+    dof: int
+    shared: bool = False
+    kept: KeptSamples | None = None
+
+
+def adequacy_chi2(result: FitVerdict) -> AdequacyChi2:
+    """What the guard tests. With a `rig_uncertainty` block in the fit's dataset: the chi2
+    with the shared error's covariance inside (`FitVerdict.chi2_dof_with_calibration`: a
+    live fit computes it, a saved fit carries it); else, for a robust-loss fit whose loss
+    set samples aside, the chi2 over the samples it keeps (hostpc.diagnostics.robust_kept:
+    a live fit computes it, a saved fit carries it in model_adequacy); else the fit's plain
+    chi2/dof."""
     if not result.converged:
-        return result.chi2_dof, False
+        return AdequacyChi2(result.chi2_dof, result.dof)
     full = result.chi2_dof_with_calibration
     if full is not None:
-        return float(full), True
-    return result.chi2_dof, False
+        return AdequacyChi2(float(full), result.dof, shared=True)
+    kept = (kept_samples(result) if isinstance(result, FitResult)
+            else getattr(result, "kept_samples", None))
+    if isinstance(kept, KeptSamples):
+        return AdequacyChi2(kept.chi2_dof, kept.dof, kept=kept)
+    return AdequacyChi2(result.chi2_dof, result.dof)
 
 
 def _refusal(result: FitVerdict, delta: np.ndarray, pushed: np.ndarray,
              labels: tuple[str, ...], max_correction_deg: float, limits: np.ndarray,
-             dataset_file: str, chi2_dof: float, shared: bool) -> PushRefusal | None:
+             dataset_file: str, tested: AdequacyChi2) -> PushRefusal | None:
     """Why the guard rails refuse the push (first reason that applies), or None.
 
-    delta: (n,) rad corrections, zero where not pushed; pushed: (n,) bool; chi2_dof,
-    shared: what `adequacy_chi2` returned."""
+    delta: (n,) rad corrections, zero where not pushed; pushed: (n,) bool; tested: what
+    `adequacy_chi2` returned."""
     if not result.converged:
         return PushRefusal(f"the fit did not converge ({result.message}); not pushing "
                            "(--force to push anyway)", "not_converged",
                            resume_with("--force"))
-    band = chi2_dof_upper(result.dof)
+    chi2_dof, band = tested.chi2_dof, chi2_dof_upper(tested.dof)
     if math.isfinite(chi2_dof) and math.isfinite(band) and chi2_dof > band:
-        what = " with the camera calibration's covariance" if shared else ""
+        what = (" with the camera calibration's covariance" if tested.shared else
+                "" if tested.kept is None else
+                f" over the {tested.kept.n_kept} samples the {tested.kept.loss} loss keeps")
         return PushRefusal(
             f"the model does not explain the measurements (chi2/dof{what} "
             f"{chi2_dof:.3g} above its band {band:.3g}); run `hostpc diagnose "

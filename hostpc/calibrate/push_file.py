@@ -29,12 +29,13 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictStr, ValidationError
+from pydantic import Field, StrictBool, StrictStr
 
-from hostpc.calibrate.fit_file import MAX_JOINT_OFFSET_RAD, parse_strict_json, validation_line
+from hostpc.calibrate.fit_file import MAX_JOINT_OFFSET_RAD
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.journal_events import Pushed, PushIntent, PushRecord
 from hostpc.calibrate.push import PUSH_FILE, same_offsets
+from hostpc.calibrate.strict_json import StrictFile, parse_strict_json, validate_strict
 from hostpc.errors import InputError
 from hostpc.input_files import CONFIG, read_input_text
 
@@ -43,11 +44,9 @@ Offset = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_JOINT_OFFSET_RAD,
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 
 
-class PushDocument(BaseModel):
+class PushDocument(StrictFile):
     """The fields of push.json (`PushRecord.to_dict` plus `controller`, `status`,
     `recovered`); unknown keys ignored."""
-
-    model_config = ConfigDict(strict=True, extra="ignore", frozen=True)
 
     controller: StrictStr | None = None
     status: Literal["intent", "pushed"] = "pushed"
@@ -95,10 +94,7 @@ def read_push_file(run_dir: str | Path) -> PushFile:
         raise InputError(f"{source}: expected a JSON object, got {type(document).__name__}; "
                          f"{_remedy(run_dir)}")
     remedy = _remedy(run_dir, document)
-    try:
-        push = PushDocument.model_validate(document)
-    except ValidationError as exc:
-        raise InputError(f"{source}: {validation_line(exc)}; {remedy}") from None
+    push = validate_strict(PushDocument, document, source, remedy)
     problem = _problem(push)
     if problem:
         raise InputError(f"{source}: {problem}; {remedy}")

@@ -18,7 +18,14 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Annotated
 
+from pydantic import Field, StrictBool, StrictInt, StrictStr
+
+from hostpc.calibrate.strict_json import StrictFile, parse_strict_json, validate_strict
+from hostpc.errors import InputError
+from hostpc.input_files import CONFIG, read_input_text
 from hostpc.json_object import JsonObject
 
 GROWN_TIME = "predicted_robot_time_grown_s"
@@ -206,3 +213,92 @@ class RunResult:
     def with_files(self, **files: str) -> RunResult:
         """This result naming more files (the UR exports, the report)."""
         return dataclasses.replace(self, files={**self.files, **files})
+
+
+RESULT_REMEDY = ("result.json is written by `hostpc calibrate`: use the run folder as the run "
+                 "wrote it (or calibrate again)")
+"""The end of a refused result.json's line."""
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class _FitFields(StrictFile):
+    converged: StrictBool
+    effects: list[StrictStr] | None = None
+
+
+class _VerifyFields(StrictFile):
+    verdict: StrictStr | None = None
+
+
+class _ReferenceCheckFields(StrictFile):
+    moved: StrictBool | None = None
+    likely_cause: StrictStr | None = None
+
+
+class _JointFields(StrictFile):
+    joint: StrictInt
+    label: StrictStr = ""
+    status: StrictStr | None = None
+    source: StrictStr | None = None
+    reason: StrictStr | None = None
+    fix: StrictStr | None = None
+
+
+class _OutcomeFields(StrictFile):
+    next_command: StrictStr | None = None
+    unknown_zeros: list[StrictInt] | None = None
+    joints: list[_JointFields] = []
+
+
+class _OffsetFields(StrictFile):
+    joint: StrictInt | None = None
+    old_deg: Finite
+    new_deg: Finite
+    correction_deg: Finite | None = None
+    sigma_deg: Finite | None = None
+    pushed: StrictBool
+
+
+class _OffsetsFields(StrictFile):
+    joints: list[_OffsetFields] = []
+
+
+class _AcquisitionFields(StrictFile):
+    n_planned: StrictInt
+    n_measured: StrictInt
+
+
+class DecisionFields(StrictFile):
+    """The fields of result.json a decision reads (`hostpc reference record`: did the fit
+    converge, with which effects; the verification's verdict; did the reference check find a
+    moved frame; the outcome's joints, unknown zeros and stored next command; the offsets),
+    in strict types; the rest of the file is read as `RunResult.from_dict` reads it."""
+
+    run_dir: StrictStr = ""
+    acquisition: _AcquisitionFields
+    fit: _FitFields
+    offsets: _OffsetsFields | None = None
+    verify: _VerifyFields | None = None
+    reference_check: _ReferenceCheckFields | None = None
+    outcome: _OutcomeFields | None = None
+
+
+def read_run_result(path: Path) -> RunResult:
+    """A run's result.json read strictly, for a decision (`hostpc.calibrate.strict_json`:
+    no duplicated key, no NaN, the fields of `DecisionFields` in strict types); InputError
+    (one line naming the file and the field) otherwise."""
+    source = str(path)
+    if not path.exists():
+        raise InputError(f"{source}: no result document (result.json) here: not a finished "
+                         "run folder")
+    document = parse_strict_json(read_input_text(path, CONFIG, source), source, RESULT_REMEDY)
+    if not isinstance(document, dict):
+        raise InputError(f"{source}: expected a JSON object, got {type(document).__name__}; "
+                         f"{RESULT_REMEDY}")
+    validate_strict(DecisionFields, document, source, RESULT_REMEDY)
+    try:
+        return RunResult.from_dict(document)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise InputError(f"{source}: not a calibration result document ({exc!r}); "
+                         f"{RESULT_REMEDY}") from None

@@ -20,6 +20,7 @@ from hostpc.cli.fit import add_constraint_options, add_model_options
 from hostpc.cli.format import repeated_lines
 from hostpc.cli.robot_options import add_robot_override, robot_options
 from hostpc.diagnostics.advice import mm, without
+from hostpc.diagnostics.sample_names import poses_text, whole_poses
 from hostpc.errors import InputError, ZerocalError
 
 if TYPE_CHECKING:
@@ -216,8 +217,11 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
                       for w in diagnosis.residuals.worst[:5])
     lines += ["", f"worst samples: {worst}"]
     if check.outliers:
+        poses = whole_poses([o.sample for o in check.outliers],
+                            check.fit.problem.dataset.samples)
         lines.append("outliers: " + ", ".join(f"#{o.sample} {o.sigma:.3g} sigma "
                                               f"(p = {_p(o.p_value)})" for o in check.outliers)
+                     + (f"; {poses_text(poses)}" if poses else "")
                      + f"; left out below ({without(check)})")
     lines += ["", "residuals binned against each variable (* significant):"]
     for pattern in diagnosis.residuals.patterns:
@@ -262,9 +266,7 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
             lines.append(f"  {pair.sentence}")
             if pair.gain_sentence is not None:
                 lines.append(f"  {pair.gain_sentence}")
-            lines.append(f"  separate them: {diagnosis.separate_command(pair)} (plans the "
-                         "fewest extra poses that give both, prints their predicted "
-                         "separation, measures them and tests again)")
+            lines.append(f"  separate them: {diagnosis.separate_instruction(pair)}")
     lines += ["", "advice:"] + [f"  - {sentence}" for sentence in diagnosis.advice]
     return "\n".join(lines)
 

@@ -14,6 +14,7 @@ from hostpc.diagnostics.adequacy import (
     far_below_reason,
     implausible_geometry,
 )
+from hostpc.diagnostics.robust_kept import KeptSamples, kept_samples
 from hostpc.display_units import DISPLAY_UNITS
 from hostpc.fitting import FitResult
 from hostpc.json_object import JsonObject
@@ -63,11 +64,17 @@ class ModelAdequacy:
     chi2_dof_upper: float | None
     explains_data: bool | None
     next_command: str | None
+    kept: KeptSamples | None = None
+    """A robust-loss fit judged on the samples its loss keeps (chi2_dof and its band are
+    then theirs; hostpc.diagnostics.robust_kept), else None."""
 
     def to_json(self) -> JsonObject:
         """`hostpc fit --json`'s "model_adequacy" block."""
-        return {"chi2_dof": self.chi2_dof, "chi2_dof_upper": self.chi2_dof_upper,
-                "explains_data": self.explains_data, "next": self.next_command}
+        block: JsonObject = {"chi2_dof": self.chi2_dof, "chi2_dof_upper": self.chi2_dof_upper,
+                             "explains_data": self.explains_data, "next": self.next_command}
+        if self.kept is not None:
+            block["kept_samples"] = self.kept.to_json()
+        return block
 
 
 def model_adequacy(result: FitResult, source: str = "DATASET", options: str = ""
@@ -75,14 +82,16 @@ def model_adequacy(result: FitResult, source: str = "DATASET", options: str = ""
     """The fit's `ModelAdequacy`; `source` names the dataset in the next command and
     `options` are the options that define its data (hostpc.cli.robot_options.data_options: --robot,
     --base-link, --tip-link, --plugin), carried into it."""
-    band = chi2_dof_upper(result.dof)
-    judged = math.isfinite(band) and math.isfinite(result.chi2_dof)
-    explains = (result.chi2_dof <= band) if judged else None
+    kept = kept_samples(result)  # a robust loss: judged on the samples it keeps
+    dof, chi2_dof = (result.dof, result.chi2_dof) if kept is None else (kept.dof, kept.chi2_dof)
+    band = chi2_dof_upper(dof)
+    judged = math.isfinite(band) and math.isfinite(chi2_dof)
+    explains = (chi2_dof <= band) if judged else None
     return ModelAdequacy(
-        chi2_dof=result.chi2_dof if math.isfinite(result.chi2_dof) else None,
+        chi2_dof=chi2_dof if math.isfinite(chi2_dof) else None,
         chi2_dof_upper=band if math.isfinite(band) else None, explains_data=explains,
         next_command=(None if explains is not False
-                      else f"hostpc diagnose {source}{options} --ladder"))
+                      else f"hostpc diagnose {source}{options} --ladder"), kept=kept)
 
 
 UNITS_HINT_NOISE_RATIO = 100.0
@@ -116,20 +125,23 @@ def _converged_line(result: FitResult, source: str, options: str = "",
                 f"{more} more sample{'s' if more > 1 else ''} for one degree of freedom ({m} "
                 "numbers each), several times that to test the model")
     adequacy = model_adequacy(result, source or "DATASET", options)
+    kept = adequacy.kept
     if adequacy.explains_data is False and adequacy.chi2_dof_upper is not None:
-        ratio = result.chi2_dof / adequacy.chi2_dof_upper  # > 1; said, never "far" at 1.001
+        chi2_dof = result.chi2_dof if kept is None else kept.chi2_dof
+        ratio = chi2_dof / adequacy.chi2_dof_upper  # > 1; said, never "far" at 1.001
         by = f"{ratio:.3g} times" if ratio >= 2 else f"by {ratio - 1:.2%}"
         units = (f"the residuals are {math.sqrt(result.chi2_dof):.3g} times the stated "
                  f"noise: {units_hint}; " if units_hint and math.sqrt(result.chi2_dof)
                  >= UNITS_HINT_NOISE_RATIO else "")
+        over = "" if kept is None else f" ({kept.sentence()})"
         return (f"  converged (solver) {how}, but the model does not explain the data: "
-                f"chi2/dof {result.chi2_dof:.4g} above its band "
-                f"{adequacy.chi2_dof_upper:.4g} ({by}); {units}next: "
+                f"chi2/dof {chi2_dof:.4g} above its band "
+                f"{adequacy.chi2_dof_upper:.4g} ({by}){over}; {units}next: "
                 f"{adequacy.next_command}")
     if chi2_far_below(result.chi2, result.dof):  # a unit slip the geometry absorbed
         far_below = far_below_reason(result.chi2_dof, chi2_band(result.dof), result.dof)
         return f"  converged (solver) {how}, but {far_below}"
-    return f"  converged: yes {how}"
+    return f"  converged: yes {how}" + ("" if kept is None else f"; {kept.sentence()}")
 
 
 def format_fit_summary(result: FitResult, source: str = "",

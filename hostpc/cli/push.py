@@ -188,7 +188,7 @@ async def _push(args: argparse.Namespace, saved: SavedFit, address: RobotAddress
         if not args.force:
             await _check_same_robot_and_not_pushed(robot, saved, args.fit, address, offsets)
         plan = plan_push(saved, offsets, args.max_correction,
-                         force=args.force, dataset_file=_dataset_file(args.fit))
+                         force=args.force, dataset_file=_dataset_file(args.fit, saved))
         if plan.refused or args.dry_run:
             return plan, None
         run_dir.mkdir(parents=True, exist_ok=True)
@@ -240,8 +240,18 @@ async def _check_same_robot_and_not_pushed(robot: RobotAdapter, saved: SavedFit,
             f"`hostpc rollback --run {entry.run_dir or 'DIR'}` or use --force")
 
 
-def _dataset_file(fit_file: str) -> str:
+DIAGNOSE = "hostpc diagnose "
+LADDER = " --ladder"
+
+
+def _dataset_file(fit_file: str, saved: SavedFit) -> str:
     """The dataset to diagnose for a refused push: the one beside the fit (a run folder's
-    dataset.json), else the fit's own `dataset` file name when it records one."""
+    dataset.json), else the one the fit's own next command names (model_adequacy.next,
+    `hostpc diagnose DATASET [options] --ladder`, with the options that define its data)."""
     beside = Path(fit_file).parent / "dataset.json"
-    return str(beside) if beside.exists() else "DATASET (the dataset the fit was made from)"
+    if beside.exists():
+        return str(beside)
+    named = saved.next_command or ""
+    if named.startswith(DIAGNOSE) and named.endswith(LADDER):
+        return named[len(DIAGNOSE):-len(LADDER)]
+    return "DATASET (the dataset the fit was made from)"

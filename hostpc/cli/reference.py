@@ -16,7 +16,8 @@ run are declared good: record right after a verified calibration, or at commissi
 Later runs load it with `hostpc calibrate --reference cell_ref.json` (docs/calibrate.md).
 
 Exit codes: 0 written / shown; 2 bad input (no run, a run that cannot be a reference, a
-malformed reference file).
+malformed reference file, a result.json that is not what the run wrote: read strictly,
+hostpc.calibrate.run_result.read_run_result).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
-from hostpc.calibrate.run_result import RunResult
+from hostpc.calibrate.run_result import RunResult, read_run_result
 from hostpc.errors import InputError
 
 
@@ -108,7 +109,6 @@ def run_record(args: argparse.Namespace) -> int:
     from hostpc.calibrate.outcome import reference_zeros
     from hostpc.calibrate.reference import reference_from_fit
     from hostpc.calibrate.run_header import read_run_header
-    from hostpc.cli.report import read_json
     from hostpc.dataset import load_dataset
     from hostpc.files import write_json_atomic
     from hostpc.fitting import fit
@@ -116,11 +116,7 @@ def run_record(args: argparse.Namespace) -> int:
     run = Path(args.run)
     if not run.is_dir():
         raise InputError(f"--run {run}: not a run folder")
-    path = run / "result.json"
-    try:
-        result = RunResult.from_dict(read_json(path, "result document (result.json)"))
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
-        raise InputError(f"{path}: not a calibration result document ({exc!r})") from None
+    result = read_run_result(run / "result.json")  # strictly: decisions depend on it
     header = read_run_header(Journal(run))  # its swaps: run.json is the run's record
     refused = _refusal(run, result, header.settings.swapped, args.force)
     if refused:
@@ -149,7 +145,7 @@ def run_record(args: argparse.Namespace) -> int:
           f"{', serial ' + reference.robot_serial if reference.robot_serial else ''}) "
           f"in {out}; use it with: hostpc calibrate --reference {out}{rig} ...")
     print(reference.distances_line())
-    for line in _zeros_taken_as_good(result):
+    for line in _zeros_taken_as_good(result, run):
         print(line)
     return 0
 
@@ -164,9 +160,10 @@ def _fitted_effects(result: RunResult) -> list[str] | None:
     return None
 
 
-def _zeros_taken_as_good(result: RunResult) -> list[str]:
-    """A line per joint the recording run did not calibrate: the reference fixes the frame
-    that joint trades against, so that joint's present zero is taken as good for good."""
+def _zeros_taken_as_good(result: RunResult, run: Path) -> list[str]:
+    """A line per joint the recording run (the folder `run`, as --run named it) did not
+    calibrate: the reference fixes the frame that joint trades against, so that joint's
+    present zero is taken as good for good."""
     joints = (result.outcome or {}).get("joints") or []
     zeros = {row.joint: row.new_deg for row in result.offsets}
     lines = []
@@ -176,7 +173,7 @@ def _zeros_taken_as_good(result: RunResult) -> list[str]:
         number = joint.get("joint")
         zero = zeros.get(int(number)) if isinstance(number, int) else None
         value = f"{zero:+.5f} deg" if isinstance(zero, (int, float)) else "as it is"
-        lines.append(f"note: J{number} was not calibrated by {result.run_dir or 'this run'}"
+        lines.append(f"note: J{number} was not calibrated by {run}"
                      f" ({joint.get('reason') or 'not determined'}); the reference takes its "
                      f"present zero ({value}) as good, and every later run with it is only as "
                      "right as that zero: record at commissioning or right after a verified "

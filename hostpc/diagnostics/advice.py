@@ -13,6 +13,7 @@ from hostpc.diagnostics.diagnosis import LadderStep, ModelCheck
 from hostpc.diagnostics.interactions import Interaction
 from hostpc.diagnostics.patterns import pattern_effect
 from hostpc.diagnostics.residual_analysis import ResidualAnalysis
+from hostpc.diagnostics.sample_names import poses_text, whole_poses
 from hostpc.display_units import quantity
 from hostpc.errors import InputError
 from hostpc.model.problem import default_effects
@@ -101,6 +102,13 @@ def outlier_note(check: ModelCheck) -> str:
     one = len(outliers) == 1
     head = (f"Sample {listed} is an outlier" if one else f"Samples {listed} are outliers")
     measurement = "that measurement" if one else "those measurements"
+    poses = whole_poses([o.sample for o in outliers], check.fit.problem.dataset.samples)
+    if poses:  # every sample of a pose: one measurement (its joint reading) to check
+        every = sum(len(members) for members in poses.values()) == len(outliers)
+        head += f", {'all of' if every else 'among them'} {poses_text(poses)}"
+        if every:
+            measurement = ("that pose's measurement" if len(poses) == 1
+                           else "those poses' measurements")
     it = "it" if one else "them"
     loss = check.fit.loss
     fix = (f" (the {loss} loss of this fit already down-weights {it})" if loss != "linear"

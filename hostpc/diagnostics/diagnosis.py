@@ -169,13 +169,38 @@ class Diagnosis:
     detectable: tuple[DetectableSize, ...] = ()
     confounded: tuple[PairTest, ...] = ()
 
-    def separate_command(self, pair: PairTest) -> str:
-        """``hostpc calibrate --resume RUN --separate A,B`` for the run the dataset is
-        in (RUN: the dataset's folder when it holds a calibrate run's journal, else the
-        word RUN)."""
+    @property
+    def run_folder(self) -> str | None:
+        """The calibrate run the dataset came from: its folder, when it holds that run's
+        journal; None for a dataset that did not come from a run (imported with `hostpc
+        import`, written by hand, copied out of its run folder)."""
         folder = Path(self.source).parent if self.source else None
-        run = str(folder) if folder is not None and (folder / RUN_JOURNAL).is_file() else "RUN"
-        return f"hostpc calibrate --resume {run} --separate {','.join(pair.names)}"
+        return str(folder) if folder is not None and (folder / RUN_JOURNAL).is_file() else None
+
+    def separate_command(self, pair: PairTest) -> str | None:
+        """``hostpc calibrate --resume RUN --separate A,B`` for the run the dataset came
+        from (``run_folder``); None without one: no run to resume."""
+        run = self.run_folder
+        return None if run is None else (
+            f"hostpc calibrate --resume {run} --separate {','.join(pair.names)}")
+
+    def separate_instruction(self, pair: PairTest) -> str:
+        """What measures the poses that tell the pair apart: the command for a run's
+        dataset; for one that did not come from a run, which poses to add (there is no
+        run whose plan's pool `--separate` could choose from)."""
+        command = self.separate_command(pair)
+        if command is not None:
+            return (f"{command} (plans the fewest extra poses that give both, prints their "
+                    "predicted separation, measures them and tests again)")
+        first, second = pair.names
+        imported = self.check.fit.problem.dataset.extra_fields.get("source")
+        csv = imported.get("csv") if isinstance(imported, dict) else None
+        origin = (f"this dataset was imported from {csv}" if isinstance(csv, str) and csv
+                  else "this dataset did not come from a calibrate run")
+        return (f"{origin}, so there is no run for `hostpc calibrate --separate` to resume: "
+                f"measure more poses where {first} and {second} predict different "
+                "residuals (spread over every joint's range, not near the poses already "
+                "measured), add them to the dataset and diagnose it again")
 
     # the headline numbers of the current model ------------------------------------------
     @property
@@ -289,7 +314,8 @@ class Diagnosis:
             "fit": fit.to_dict(),
             "advice": list(self.advice),
             "detectable": [d.to_dict() for d in self.detectable],
-            "confounded": [{**c.to_dict(), "next": self.separate_command(c)}
+            "confounded": [{**c.to_dict(), "next": self.separate_command(c),
+                            "instruction": self.separate_instruction(c)}
                            for c in self.confounded],
         }
         if self.ladder is not None:

@@ -111,8 +111,11 @@ def _ladder(diagnosis: Diagnosis) -> str:
         seen = "".join(f"<li>{_e(d.sentence)}</li>" for d in diagnosis.detectable)
         notes += f"<p>What these poses can see (80 % power):</p><ul>{seen}</ul>"
     if diagnosis.confounded:
-        pairs = "".join(f"<li>{_e(c.sentence)}: <code>{_e(diagnosis.separate_command(c))}"
-                        "</code></li>" for c in diagnosis.confounded)
+        pairs = "".join(
+            f"<li>{_e(c.sentence)}: <code>{_e(command)}</code></li>" if command is not None
+            else f"<li>{_e(c.sentence)}: {_e(diagnosis.separate_instruction(c))}</li>"
+            for c in diagnosis.confounded
+            for command in (diagnosis.separate_command(c),))
         notes += f"<p>Confounded candidates:</p><ul>{pairs}</ul>"
     return _img(plots.ladder_chart(diagnosis), "ladder chart") + notes + table
 

@@ -137,8 +137,8 @@ def test_recording_names_the_zeros_it_takes_as_good() -> None:
             {"joint": 2, "status": "calibrated"},
             {"joint": 6, "status": "not_calibrated",
              "reason": "unidentifiable with the tool frame estimated"}]}})
-    lines = _zeros_taken_as_good(result)
-    assert len(lines) == 1 and lines[0].startswith("note: J6 was not calibrated by runs/first")
+    lines = _zeros_taken_as_good(result, Path("runs/copy"))  # the --run given, not run_dir
+    assert len(lines) == 1 and lines[0].startswith("note: J6 was not calibrated by runs/copy")
     assert "+0.00000 deg" in lines[0] and "as good" in lines[0]
 
 

@@ -128,3 +128,26 @@ def test_detectable_sizes_read_in_mm_and_an_unseeable_one_says_so() -> None:
                                       "poses")
     assert "e+13" not in absurd.sentence and absurd.short.startswith(
         "joint_compliance.c6 not detectable with these poses")
+
+
+def test_an_imported_dataset_is_told_which_poses_to_add_not_a_run_to_resume(
+        ur10e: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A dataset that did not come from a calibrate run has no run for `--separate` to
+    resume (its folder holds no run journal): the confounded pair's advice says which poses
+    to add, not `hostpc calibrate --resume RUN --separate A,B`."""
+    import json
+
+    from hostpc.cli.main import main
+
+    main(["diagnose", str(ur10e)])
+    text = capsys.readouterr().out
+    assert "confounded candidates" in text
+    assert "--resume RUN" not in text and "--separate" in text
+    csv = DATA / "figaroh_ur10e_calibration.csv"
+    assert (f"separate them: this dataset was imported from {csv}, "
+            "so there is no run for `hostpc calibrate --separate` to resume: measure more "
+            "poses where") in text
+    main(["diagnose", str(ur10e), "--json"])
+    pairs = json.loads(capsys.readouterr().out)["confounded"]
+    assert pairs and all(p["next"] is None and "measure more poses" in p["instruction"]
+                         for p in pairs)

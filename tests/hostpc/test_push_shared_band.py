@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import copy
+from typing import Any
 
 import numpy as np
 import pytest
@@ -17,6 +18,11 @@ from hostpc.kinds.dual_loop.planning import plan_poses
 from tests.hostpc.test_head_camera_uncertainty import world_documents
 
 
+def _chi2_shared(result: Any) -> tuple[float, bool]:
+    """(the chi2/dof the push guard tests, whether the shared error is inside)."""
+    tested = adequacy_chi2(result)
+    return tested.chi2_dof, tested.shared
+
 def test_a_calibration_error_within_its_stated_covariance_does_not_refuse_the_push() -> None:
     """A humanoid world whose head camera calibration errs by 1 px (and says so): the
     plain chi2/dof is above the band (the old guard refused), the chi2 with the stated
@@ -27,7 +33,7 @@ def test_a_calibration_error_within_its_stated_covariance_does_not_refuse_the_pu
     result = hostpc.fit(dataset_from_dict(document), cv_folds=0)
     band = chi2_dof_upper(result.dof)
     assert result.converged and result.chi2_dof > band
-    tested, shared = adequacy_chi2(result)
+    tested, shared = _chi2_shared(result)
     assert shared and tested < band
     old = np.zeros(16)
     plan = plan_push(result, old, max_correction_deg=5.0)
@@ -37,7 +43,7 @@ def test_a_calibration_error_within_its_stated_covariance_does_not_refuse_the_pu
     block = exact["rig_uncertainty"]
     block["covariance"] = (np.asarray(block["covariance"]) * 1e-8).tolist()
     claimed = hostpc.fit(dataset_from_dict(exact), cv_folds=0)
-    tested, shared = adequacy_chi2(claimed)
+    tested, shared = _chi2_shared(claimed)
     assert shared and tested > band
     refusal = plan_push(claimed, old, max_correction_deg=5.0).refused
     assert refusal is not None and "with the camera calibration's covariance" in refusal
@@ -45,7 +51,7 @@ def test_a_calibration_error_within_its_stated_covariance_does_not_refuse_the_pu
     plain = copy.deepcopy(document)
     plain.pop("rig_uncertainty")
     without = hostpc.fit(dataset_from_dict(plain), cv_folds=0)
-    assert adequacy_chi2(without) == (without.chi2_dof, False)
+    assert _chi2_shared(without) == (without.chi2_dof, False)
     assert plan_push(without, old, max_correction_deg=5.0).chi2_dof_tested is None
 
 
@@ -57,7 +63,7 @@ def test_a_saved_fit_carries_the_chi2_the_push_tests() -> None:
     document, _ = world_documents(1, plan_poses(40, np.random.default_rng(3)), 1.0)
     result = hostpc.fit(dataset_from_dict(document), cv_folds=0)
     saved_document = result.to_dict()
-    tested, _ = adequacy_chi2(result)
+    tested, _ = _chi2_shared(result)
     assert saved_document["chi2_dof_with_calibration"] == tested
     saved = saved_fit_from_dict(saved_document, "fit.json")
     assert saved.chi2_dof > chi2_dof_upper(saved.dof)
@@ -80,7 +86,7 @@ def test_diagnose_judges_the_chi2_the_push_tests() -> None:
 
     document, _ = world_documents(1, plan_poses(40, np.random.default_rng(3)), 1.0)
     result = hostpc.fit(dataset_from_dict(document), cv_folds=0)
-    tested, shared = adequacy_chi2(result)
+    tested, shared = _chi2_shared(result)
     assert shared and result.chi2_dof > chi2_dof_upper(result.dof) >= tested
     adequacy = assess(result, None)
     assert adequacy.chi2_dof_with_calibration == pytest.approx(tested, rel=1e-12)
