@@ -46,6 +46,7 @@ from hostpc.archive.rows import (
     as_utc,
     stored_result,
 )
+from hostpc.db_url import redacted_url
 from hostpc.errors import InputError, ZerocalError
 from hostpc.kinematics.robots import canonical_name
 
@@ -157,8 +158,8 @@ def _existing_sqlite(url: str) -> sa.engine.URL:
         return parsed  # nothing on disk to create, or the caller's own URI
     path = Path(parsed.database).resolve()
     if not path.is_file():
-        raise InputError(f"--db {url}: no archive at {path} (reading never creates one; "
-                         f"a calibration with --db or the station does): {_look(url)}")
+        raise InputError(f"--db {redacted_url(url)}: no archive at {path} (reading never "
+                         f"creates one; a calibration with --db or the station does): {_look(url)}")
     return parsed.set(database=path.as_uri()).update_query_dict({"mode": "rw", "uri": "true"})
 
 
@@ -167,7 +168,7 @@ def _look(url: str) -> str:
     if url.startswith("sqlite:"):
         folder = Path(sa.engine.make_url(url).database or ".").resolve().parent
         return f"ls {shlex.quote(str(folder))}"
-    return f"psql {shlex.quote(url)} -c '\\dt'"
+    return f"psql {shlex.quote(redacted_url(url))} -c '\\dt'"
 
 
 def _engine(url: str, create: bool = True) -> Engine:
@@ -193,7 +194,7 @@ def _engine(url: str, create: bool = True) -> Engine:
     if url.startswith(("postgresql://", "postgres://", "postgresql+psycopg://")):
         scheme, rest = url.split("://", 1)
         return sa.create_engine(f"postgresql+psycopg://{rest}", pool_pre_ping=True)
-    raise InputError(f"--db {url}: expected sqlite:///PATH or postgresql://USER@HOST/DB")
+    raise InputError(f"--db {redacted_url(url)}: expected sqlite:///PATH or postgresql://USER@HOST/DB")
 
 
 def _current_version(connection: Connection) -> int:
@@ -209,9 +210,9 @@ def _migrate(engine: Engine, url: str, create: bool = True) -> None:
             connection.execute(sa.text("SELECT pg_advisory_xact_lock(:key)"),
                                {"key": _ADVISORY_LOCK_KEY})
         if not create and not sa.inspect(connection).has_table("zerocal_schema"):
-            raise InputError(f"--db {url}: no zerocal archive there (no zerocal tables; "
-                             "reading never creates them, a calibration with --db or the "
-                             f"station does): {_look(url)}")
+            raise InputError(f"--db {redacted_url(url)}: no zerocal archive there (no "
+                             "zerocal tables; reading never creates them, a calibration with "
+                             f"--db or the station does): {_look(url)}")
         schema_table.create(connection, checkfirst=True)
         version = _current_version(connection)
         if version > SCHEMA_VERSION:
@@ -252,7 +253,7 @@ class Archive:
 
     def __init__(self, engine: Engine, url: str):
         self.engine = engine
-        self.url = url
+        self.url = redacted_url(url)  # shown in messages: never a password
 
     def add(self, record: RunRecord) -> int:
         """Store `record`; returns its archive id. A record whose run_uid (or run folder)
@@ -431,7 +432,8 @@ def open_archive(url: str, *, create: bool = True) -> Archive:
         _migrate(engine, url, create)
     except sa.exc.SQLAlchemyError as exc:
         engine.dispose()
-        raise ArchiveError(f"archive {url}: cannot open ({_first_line(exc)})") from None
+        raise ArchiveError(f"archive {redacted_url(url)}: cannot open "
+                           f"({_first_line(exc)})") from None
     except InputError:
         engine.dispose()
         raise

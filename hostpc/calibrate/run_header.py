@@ -67,7 +67,7 @@ class RunHeader:
     plan: Plan | None = None
     archive: str | None = None
     """The results archive the run is archived in (`--db`), its URL without a password
-    (archive_options.redacted_url): a next command names it, so the archive follows."""
+    (hostpc.db_url.redacted_url): a next command names it, so the archive follows."""
 
     @property
     def seed(self) -> int:

@@ -7,6 +7,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from hostpc.db_url import redacted_url
+
 
 def add_archive_options(parser: argparse.ArgumentParser, *, read: bool) -> None:
     parser.add_argument("--db", metavar="URL",
@@ -18,21 +20,6 @@ def add_archive_options(parser: argparse.ArgumentParser, *, read: bool) -> None:
         parser.add_argument("--robot-serial", metavar="SERIAL",
                             help="the robot's serial number: the archive's key with --db (default: "
                             "its address), and the robot a cell reference belongs to")
-
-
-def redacted_url(url: str) -> str:
-    """`url` without a password (`postgresql://USER:SECRET@HOST/DB` -> `postgresql://USER@HOST/DB`):
-    what a run folder or a printed command may hold. The password comes from PGPASSWORD
-    or ~/.pgpass (hostpc.archive.database)."""
-    from urllib.parse import urlsplit, urlunsplit
-
-    parts = urlsplit(url)
-    if parts.password is None:
-        return url
-    host = parts.hostname or ""
-    netloc = (f"{parts.username}@" if parts.username else "") + host + (
-        f":{parts.port}" if parts.port else "")
-    return urlunsplit(parts._replace(netloc=netloc))
 
 
 def archive_run(args: argparse.Namespace, run_dir: Path, exit_code: int) -> None:

@@ -48,7 +48,7 @@ from hostpc.calibrate.run_values import RobotInfo, RunOutcome
 from hostpc.calibrate.runner import Runner
 from hostpc.calibrate.separate import parse_separate
 from hostpc.calibrate.swaps import DEFAULT_SWAP_LIMIT_DEG, parse_swapped
-from hostpc.cli.archive_options import add_archive_options, archive_run, redacted_url
+from hostpc.cli.archive_options import add_archive_options, archive_run
 from hostpc.cli.calibrate_checks import (
     check_known_frames,
     check_model_options,
@@ -69,6 +69,7 @@ from hostpc.cli.termination import (
     sigterm_as_interrupt,
 )
 from hostpc.dataset.kind_registry import DEFAULT_METHOD
+from hostpc.db_url import redacted_url
 from hostpc.errors import InputError, ZerocalError
 from hostpc.json_object import JsonObject
 from hostpc.methods.base import RunSettings

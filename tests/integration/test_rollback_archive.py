@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 
 from hostpc.archive import open_archive
-from hostpc.cli.archive_options import redacted_url
 from hostpc.cli.main import main
+from hostpc.db_url import redacted_url
 from hostpc.robots.simulator import SimulatedController
 from tests.integration.calibrate_cli import robot_args
 from tests.integration.test_calibrate_sim import sim_scenario, truth_rig_file
@@ -61,3 +61,17 @@ def test_an_archive_password_is_never_printed_nor_kept() -> None:
         "postgresql://zc@db.local:5433/cal"
     assert redacted_url("postgresql://zc@db.local/cal") == "postgresql://zc@db.local/cal"
     assert redacted_url("sqlite:///runs/real.db") == "sqlite:///runs/real.db"
+
+
+def test_the_archive_never_prints_a_password_in_its_errors() -> None:
+    """The archive's own error lines name the URL without its password: a station's log
+    and a terminal get them (they printed `--db URL` as given before)."""
+    from hostpc.errors import ZerocalError
+
+    for url in ("postgresql://zc:s3cret@127.0.0.1:1/cal",  # nothing listens on port 1
+                "mysql://zc:s3cret@127.0.0.1/cal"):         # not an archive URL
+        with pytest.raises(ZerocalError) as caught:
+            with open_archive(url, create=False):
+                pass
+        assert "s3cret" not in str(caught.value), caught.value
+        assert "zc@127.0.0.1" in str(caught.value)

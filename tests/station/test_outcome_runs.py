@@ -14,8 +14,8 @@ import pytest
 from hostpc.archive import open_archive
 from hostpc.archive.records import read_result, verdict_of
 from hostpc.calibrate.run_result import RunResult
-from hostpc.cli.archive_options import redacted_url
 from hostpc.cli.main import main
+from hostpc.db_url import redacted_url
 from hostpc.robots.simulator import SimulatedController
 from tests.integration.test_calibrate_sim import TOKEN, sim_scenario
 
