@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 from hostpc import __version__
 from hostpc.calibrate.journal import Journal
@@ -62,6 +63,9 @@ class OutcomeFigures:
     calibrated: tuple[int, ...]
     not_calibrated: tuple[int, ...]
     missing_required: tuple[int, ...]
+    as_found: tuple[int, ...] = ()
+    """Of `calibrated`: restored to a cell reference whose recording run did not measure
+    the zero (`JointOutcome.as_found`: its zero is as it was then)."""
 
 
 @dataclass(frozen=True)
@@ -121,7 +125,16 @@ def outcome_of(result: RunResult | None) -> OutcomeFigures | None:
         calibrated=tuple(int(j["joint"]) for j in joints if j.get("status") == "calibrated"
                          and (not j.get("pushed") or j.get("verified") is True)),
         not_calibrated=tuple(int(j["joint"]) for j in joints if j.get("source") != "data"),
-        missing_required=tuple(int(n) for n in block.get("missing_required") or []))
+        missing_required=tuple(int(n) for n in block.get("missing_required") or []),
+        as_found=tuple(int(j["joint"]) for j in joints if _as_found(j)))
+
+
+def _as_found(joint: Mapping[str, Any]) -> bool:
+    """A joint row of result.json restored to a reference whose run did not measure its
+    zero (`zero_from` names the reference and its zero "as_found" or "unknown")."""
+    zero = joint.get("zero_from")
+    return (joint.get("status") == "calibrated" and isinstance(zero, Mapping)
+            and zero.get("reference_zero") != "measured")
 
 
 def verdict_of(result: RunResult | None, exit_code: int) -> str:

@@ -45,6 +45,8 @@ SERIAL_LENGTH = 16
 MODEL = 40             # 40-55: robot model, 32 ASCII characters
 MODEL_LENGTH = 16
 JOINTS_PUSHED = 56     # bit j-1 = joint j's offset written to the controller by the run
+JOINTS_AS_FOUND = 57   # of JOINTS_CALIBRATED: restored to a cell reference whose recording
+                       # run did not measure the zero (it is as it was then)
 REASON = 64            # 64-95: the last run's one-line reason, 64 ASCII characters (cut)
 REASON_LENGTH = 32
 
@@ -163,6 +165,7 @@ class RunOutcome:
     joints_required_missing: int = 0
     outcome_flags: int = 0
     joints_pushed: int = 0
+    joints_as_found: int = 0
     reason: str = ""
     """The one-line reason of a run that did not PASS (REASON; its kind: REASON_CODE)."""
 
@@ -178,6 +181,7 @@ class OutcomeBits(NamedTuple):
     joints_required_missing: int
     outcome_flags: int
     joints_pushed: int
+    joints_as_found: int
 
 
 def _mask(numbers: Iterable[int]) -> int:
@@ -192,13 +196,14 @@ def outcome_bits(outcome: OutcomeFigures | None, push_status: str,
     one); joints beyond 16 are left out."""
     pushed = _mask(pushed_joints)
     if outcome is None:
-        return OutcomeBits(0, 0, 0, FLAG_PUSHED if push_status == "pushed" else 0, pushed)
+        return OutcomeBits(0, 0, 0, FLAG_PUSHED if push_status == "pushed" else 0, pushed, 0)
     flags = ((FLAG_PUSHED if outcome.pushed else 0)
              | (FLAG_VERIFIED if outcome.verified is True else 0)
              | (FLAG_ROLLED_BACK if outcome.verdict == "ROLLED_BACK" else 0)
              | (FLAG_REFUSED if outcome.verdict == "REFUSED" else 0))
     return OutcomeBits(_mask(outcome.calibrated), _mask(outcome.not_calibrated),
-                       _mask(outcome.missing_required), flags, pushed)
+                       _mask(outcome.missing_required), flags, pushed,
+                       _mask(outcome.as_found))
 
 
 def outcome_registers(outcome: RunOutcome) -> dict[int, int]:
@@ -219,6 +224,7 @@ def outcome_registers(outcome: RunOutcome) -> dict[int, int]:
     values[JOINTS_REQUIRED_MISSING] = outcome.joints_required_missing & 0xFFFF
     values[OUTCOME_FLAGS] = outcome.outcome_flags & 0xFFFF
     values[JOINTS_PUSHED] = outcome.joints_pushed & 0xFFFF
+    values[JOINTS_AS_FOUND] = outcome.joints_as_found & 0xFFFF
     values[REASON_CODE] = int(reason_of(outcome.state, outcome.result_code, outcome.reason))
     for address, value in enumerate(encode_text(outcome.reason, REASON_LENGTH), start=REASON):
         values[address] = value

@@ -491,10 +491,13 @@ class Station:
             args = f'"--reference", "{reference}"'
             if (run_dir / "rig.json").is_file():  # its camera frame holds for this rig only
                 args += f', "--rig", "{reference.with_suffix(".rig.json")}"'
-            return (f"for this station: record the cell's reference from a run whose zeros "
-                    f"are known good (this one: hostpc reference record --run {run_dir} "
-                    f"--out {reference}), put {args} in calibrate_args of {self.source} "
-                    "and restart the station")
+            return (f"for this station: record the cell's reference from a run on a robot "
+                    "whose zeros are known good (mastered by the maker's procedure, or "
+                    "calibrated with its frames surveyed: --known): hostpc reference record "
+                    f"--run THAT_RUN --out {reference}; one recorded from this run keeps "
+                    "this robot's present J1/J6 zeros for every later robot (JOINTS_AS_FOUND "
+                    f"then says so); put {args} in calibrate_args of {self.source} and "
+                    "restart the station")
         return ""
 
     def _finish(self, outcome: reg.RunOutcome) -> None:

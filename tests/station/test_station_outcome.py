@@ -90,9 +90,13 @@ def test_target_estimated_is_fail_code_7_with_the_joint_bitmasks(
     reference = f"{run.run_dir.rstrip('/')}.cell_ref.json"
     assert f'put "--reference", "{reference}", "--rig", "{reference[:-5]}.rig.json" in ' \
         "calibrate_args of " in str(run.reason)
-    assert f"hostpc reference record --run {run.run_dir} --out {reference}" in str(run.reason)
+    # never a reference of this run's zeros: every later robot would inherit them
+    assert f"hostpc reference record --run THAT_RUN --out {reference}" in str(run.reason)
+    assert "known good" in str(run.reason)
 
-    # the step done: the station's next robot has every joint calibrated (no loop)
+    # the step done with this run all the same (the simulated robot's J1/J6 zeros are off):
+    # the next robot has every joint set (no loop), and the PLC is told that J1 and J6
+    # are as this run found them, not measured
     record = subprocess.run(hostpc_command("reference", "record", "--run", run.run_dir,
                                            "--out", reference),
                             cwd=REPO, capture_output=True, text=True, timeout=300)
@@ -109,6 +113,7 @@ def test_target_estimated_is_fail_code_7_with_the_joint_bitmasks(
         plc.close()
     assert reg.State(values[reg.STATE]) == reg.State.PASS, process.log.read_text()[-2000:]
     assert values[reg.JOINTS_CALIBRATED] == 0b111111
+    assert values[reg.JOINTS_AS_FOUND] == 0b100001  # J1, J6: restored to SN-NOREF's zeros
 
 
 def test_an_abort_after_the_push_lets_verification_finish(make_station: StationFactory) -> None:
