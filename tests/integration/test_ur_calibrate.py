@@ -135,5 +135,5 @@ def test_a_ur_push_is_applied_on_the_host_and_every_view_says_so(tmp_path: Path)
 
     figures = outcome_of(RunResult.from_dict(document))
     assert figures is not None and figures.pushed is False and figures.verified is True
-    flags = outcome_bits(figures).outcome_flags
+    flags = outcome_bits(figures, "none", ()).outcome_flags
     assert not flags & FLAG_PUSHED and flags & FLAG_VERIFIED

@@ -245,7 +245,7 @@ def _droppush_station(tmp_path: Path, station_on: StationFactory, **overrides: A
     """A sim station whose robot SN-DROPPUSH's link drops after the push, before the
     verification's verdict."""
     droppush = tmp_path / "droppush.json"
-    droppush.write_text(json.dumps(_world(token=None, drop_after_requests=47)))
+    droppush.write_text(json.dumps(_world(token=None, drop_after_requests=48)))
     return station_on("sim", sim={"scenarios_by_serial": {"SN-DROPPUSH": str(droppush)}},
                       **overrides)
 
