@@ -56,7 +56,7 @@ from hostpc.model.layout import Problem
 from hostpc.model.problem import extend_problem
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: compared by identity (__init__.py)
 class Candidate:
     """One effect tried on top of the current model.
 
