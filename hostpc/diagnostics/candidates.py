@@ -49,7 +49,7 @@ from hostpc.diagnostics.distributions import f_sf
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, solve
 from hostpc.fitting.priors import with_constraints
-from hostpc.fitting.solver import CHUNK_SAMPLES, Evaluation, Loss, evaluate
+from hostpc.fitting.solver import REUSE_ELEMENTS, Evaluation, Loss, evaluate
 from hostpc.json_object import JsonObject
 from hostpc.model import joint_offsets
 from hostpc.model.effect import Effect
@@ -411,7 +411,7 @@ def _fitted_candidate(base: FitResult, effect: Effect, cv_folds: int, loss: Loss
 CandidateStart = tuple[Problem, np.ndarray, Evaluation, np.ndarray | None]
 """``candidate_start``'s (the base model plus the effect, the warm start x0 in it, the
 evaluation at x0, and the raw derivative of the predictions at x0, (N, m, P), or None for
-a problem ``evaluate`` takes in chunks)."""
+a problem too large to keep)."""
 
 
 def candidate_start(base: FitResult, effect: Effect) -> CandidateStart:
@@ -420,23 +420,22 @@ def candidate_start(base: FitResult, effect: Effect) -> CandidateStart:
     (``try_candidate``), its detectable sizes are linearised there (``hostpc.diagnostics.
     detectable``) and the interaction search takes geometry's columns there: kept on the
     base problem's memo like the candidate fits (``forget_candidate_fits`` drops it), so
-    they share one prediction. The evaluation is ``evaluate``'s: the same operations on
-    the same prediction, so the same values."""
+    they share one prediction; a problem whose Jacobian ``evaluate`` would not keep
+    (``REUSE_ELEMENTS``) is not kept either, and each asks for it again. The evaluation is
+    ``evaluate``'s: the same operations on the same prediction, so the same values."""
     key = f"{CANDIDATE_SLOT}{effect.name} start"
     kept: CandidateStart | None = _recall(base, key, effect)
     if kept is not None:
         return kept
     problem = extend_problem(base.problem, [effect])
     x0 = warm_start(base, problem)
-    if problem.measured.shape[0] > 2 * CHUNK_SAMPLES:  # evaluated in chunks: no raw derivative
-        start: CandidateStart = (problem, x0, evaluate(problem, x0), None)
-    else:
-        evaluation, d_predicted = evaluated_with_derivative(problem, x0)
-        for array in (x0, evaluation.raw, evaluation.whitened, evaluation.jacobian,
-                      d_predicted):
-            if array is not None:
-                array.setflags(write=False)  # shared by the fit, the sizes and the search
-        start = (problem, x0, evaluation, d_predicted)
+    if problem.measured.size * x0.size > REUSE_ELEMENTS:  # large: not kept (as ``evaluate``)
+        return problem, x0, evaluate(problem, x0), None
+    evaluation, d_predicted = evaluated_with_derivative(problem, x0)
+    for array in (x0, evaluation.raw, evaluation.whitened, evaluation.jacobian, d_predicted):
+        if array is not None:
+            array.setflags(write=False)  # shared by the fit, the sizes and the search
+    start = (problem, x0, evaluation, d_predicted)
     _keep(base, key, effect, start)
     return start
 

@@ -176,7 +176,7 @@ def detectable_sizes(base: FitResult, effect: Effect, alpha: float,
     significance ``alpha`` (the per-candidate threshold) and power ``target``, linearised
     at the candidate fit's start (``candidate_start``: the same prediction)."""
     problem, x0, start, raw = candidate_start(base, effect)
-    if raw is None:  # a problem evaluated in chunks: the raw derivative predicted here
+    if raw is None:  # a large problem (not kept): the raw derivative predicted here
         start, raw = evaluated_with_derivative(problem, x0)
     scale = math.sqrt(max(base.chi2_dof, 1.0)) if base.dof > 0 else 1.0
     return _sizes(problem, start, raw, base.fixed, effect, alpha, target, scale)
