@@ -18,13 +18,20 @@ without ``.pyc`` files and with PYTHONDONTWRITEBYTECODE=1, as an editable instal
 machine this project is measured on (which sets it): every command then compiles its
 ~500 modules of the project.
 
-Run: ``python bench/bench_quick_host.py --old HEAD~5 [--runs 10] [--only diagnose]``
+``--instructions`` also counts each command's instructions once per tree under valgrind's
+callgrind (the command's own process, not the simulator's; byte code present, the same
+folder): unlike the wall and CPU times, the count does not depend on what else runs on the
+machine, so it resolves a change of 1 % where ten timed runs on a shared machine do not.
+
+Run: ``python bench/bench_quick_host.py --old HEAD~5 [--runs 10] [--only diagnose]
+[--instructions]``
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import re
 import resource
 import shutil
 import statistics
@@ -66,12 +73,29 @@ def wall_s(source_root: Path, args: list[str], work: Path, byte_code: bool
     return seconds, cpu
 
 
+def instructions(source_root: Path, args: list[str], work: Path) -> int:
+    """Instructions of one ``hostpc ARGS`` (its own process) counted by valgrind's callgrind,
+    ``source_root`` first on the import path, run from ``work``, byte code present."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env["PYTHONPATH"] = str(source_root)
+    done = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null",
+                           sys.executable, "-m", "hostpc.cli.main", *args], env=env, cwd=work,
+                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                          timeout=3600)
+    found = re.search(r"Collected : (\d+)", done.stderr)
+    if found is None:
+        raise RuntimeError(f"callgrind counted nothing: {done.stderr.strip()[-300:]}")
+    return int(found.group(1))
+
+
 Times = dict[str, dict[str, list[tuple[float, float]]]]
 """command -> tree -> (wall s, CPU s) of each counted run."""
 
 
 def run(runs: int, old_commit: str | None, byte_code: bool = True,
-        only: str | None = None) -> Times:
+        only: str | None = None, counted: dict[str, dict[str, int]] | None = None) -> Times:
+    """The timed runs; with ``counted`` (a dict to fill), each command's instructions per
+    tree as well (``instructions``), after the timed runs."""
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         trees = {"now": ROOT}
@@ -101,6 +125,10 @@ def run(runs: int, old_commit: str | None, byte_code: bool = True,
                         times[command][tree].append(measured)
             print(".", end="", file=sys.stderr, flush=True)
         print(file=sys.stderr)
+        if counted is not None:
+            for command, arguments in commands.items():
+                counted[command] = {tree: instructions(root, arguments(0), folder)
+                                    for tree, root in trees.items()}
     return times
 
 
@@ -112,9 +140,13 @@ def main() -> None:
                         help="no .pyc files (an editable install with PYTHONDONTWRITEBYTECODE)")
     parser.add_argument("--only", choices=("calibrate", "diagnose"),
                         help="time only this command")
+    parser.add_argument("--instructions", action="store_true",
+                        help="also count each command's instructions once per tree (valgrind)")
     args = parser.parse_args()
     load_before = os.getloadavg()[0]
-    times = run(args.runs, args.old, byte_code=not args.no_byte_code, only=args.only)
+    counted: dict[str, dict[str, int]] | None = {} if args.instructions else None
+    times = run(args.runs, args.old, byte_code=not args.no_byte_code, only=args.only,
+                counted=counted)
     print("byte code: " + ("none (PYTHONDONTWRITEBYTECODE=1, as an editable install here)"
                            if args.no_byte_code else "written first (as after pip install .)"))
     print(f"load average (1 min) before: {load_before:.2f}, at the end: "
@@ -127,6 +159,13 @@ def main() -> None:
             cpu = [c for _, c in measured]
             print(f"| {command} | {tree} | {statistics.median(wall):.2f} | {min(wall):.2f} | "
                   f"{max(wall):.2f} | {statistics.median(cpu):.2f} |")
+    if counted:
+        print()
+        print("| command | tree | instructions (callgrind, its own process) |")
+        print("|---|---|---|")
+        for command, per_tree in counted.items():
+            for tree, count in per_tree.items():
+                print(f"| {command} | {tree} | {count / 1e9:.3f} G |")
 
 if __name__ == "__main__":
     main()

@@ -7,15 +7,12 @@ import json
 import math
 import sys
 
-from hostpc.cli.archive_options import add_archive_options, dataset_from_archive
 from hostpc.cli.format import format_fit_summary, model_adequacy
 from hostpc.cli.numbers import CV_FOLDS
 from hostpc.cli.robot_options import add_robot_override, data_options
-from hostpc.cli.urdf_out import add_write_urdf_option, check_urdf_robot, write_calibrated_urdf
 from hostpc.errors import InputError
 from hostpc.fitting import fit
 from hostpc.fitting.priors import with_constraints
-from hostpc.fitting.resampling import jackknife_std, scaled_std
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -27,6 +24,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
             "model is joint_offsets plus every frame the dataset does not mark as known."
         ),
     )
+    # fit's own options (an archive, a URDF to write): imported here, not by diagnose
+    from hostpc.cli.archive_options import add_archive_options
+    from hostpc.cli.urdf_out import add_write_urdf_option
+
     parser.add_argument("dataset", nargs="?",
                         help="dataset file (zerocal-dataset/1 JSON); or --db URL --run ID")
     add_model_options(parser)
@@ -71,6 +72,10 @@ def add_constraint_options(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hostpc.cli.archive_options import dataset_from_archive
+    from hostpc.cli.urdf_out import check_urdf_robot, write_calibrated_urdf
+    from hostpc.fitting.resampling import jackknife_std, scaled_std
+
     if args.db or args.run is not None:
         if args.dataset:
             raise InputError("give a dataset file or --db URL --run ID, not both")

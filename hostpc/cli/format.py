@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -14,11 +15,13 @@ from hostpc.diagnostics.adequacy import (
     far_below_reason,
     implausible_geometry,
 )
-from hostpc.diagnostics.robust_kept import KeptSamples, kept_samples
 from hostpc.display_units import DISPLAY_UNITS
 from hostpc.fitting import FitResult
 from hostpc.json_object import JsonObject
 from hostpc.model.joint_offsets import is_offset
+
+if TYPE_CHECKING:
+    from hostpc.diagnostics.robust_kept import KeptSamples
 
 __all__ = ["display", "format_fit_summary", "format_parameter_table"]
 
@@ -82,6 +85,8 @@ def model_adequacy(result: FitResult, source: str = "DATASET", options: str = ""
     """The fit's `ModelAdequacy`; `source` names the dataset in the next command and
     `options` are the options that define its data (hostpc.cli.robot_options.data_options: --robot,
     --base-link, --tip-link, --plugin), carried into it."""
+    from hostpc.diagnostics.robust_kept import kept_samples  # fit's: diagnose needs none
+
     kept = kept_samples(result)  # a robust loss: judged on the samples it keeps
     dof, chi2_dof = (result.dof, result.chi2_dof) if kept is None else (kept.dof, kept.chi2_dof)
     band = chi2_dof_upper(dof)

@@ -7,6 +7,11 @@
         print(sentence)
 
 See docs/diagnostics.md for the walk-through and the JSON schema.
+
+The results are frozen dataclasses. Those that hold arrays (or a fit, which does) are
+declared ``eq=False``: a field-wise ``==`` would raise on the arrays and their hash on
+hashing one, so they compare (and hash) by identity, and Python generates no ``__eq__``
+and ``__hash__`` for them at import (~0.5 % of ``hostpc diagnose``'s instructions).
 """
 
 from hostpc.diagnostics.adequacy import Adequacy, HeldOut, held_out_residuals

@@ -45,7 +45,7 @@ implausible: manufacturing and assembly move a link by millimetres (FIGAROH's TI
 TALOS: up to 16 and 27 mm); numbers read in the wrong unit move it by its whole length."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: compared by identity (__init__.py)
 class HeldOut:
     """Residuals of every sample predicted by a fit that did not see it (k-fold).
 

@@ -40,6 +40,7 @@ import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -48,15 +49,16 @@ from hostpc.diagnostics.distributions import f_sf
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, solve
 from hostpc.fitting.priors import with_constraints
-from hostpc.fitting.solver import Evaluation, Loss, evaluate
+from hostpc.fitting.solver import REUSE_ELEMENTS, Evaluation, Loss, evaluate
 from hostpc.json_object import JsonObject
 from hostpc.model import joint_offsets
 from hostpc.model.effect import Effect
 from hostpc.model.layout import Problem
+from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import extend_problem
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: compared by identity (__init__.py)
 class Candidate:
     """One effect tried on top of the current model.
 
@@ -398,26 +400,90 @@ def _fitted_candidate(base: FitResult, effect: Effect, cv_folds: int, loss: Loss
                       ) -> Candidate:
     """``try_candidate``'s fits and figures, not yet judged (``significant`` False,
     ``not_taken`` None), computed once per base fit, effect class, folds and loss."""
+    key = f"{CANDIDATE_SLOT}{effect.name} {cv_folds} {loss}"
+    kept: Candidate | None = _recall(base, key, effect)
+    if kept is None:
+        kept = _fit_candidate(base, effect, cv_folds, loss)
+        _keep(base, key, effect, kept)
+    return kept
+
+
+CandidateStart = tuple[Problem, np.ndarray, Evaluation, np.ndarray | None]
+"""``candidate_start``'s (the base model plus the effect, the warm start x0 in it, the
+evaluation at x0, and the raw derivative of the predictions at x0, (N, m, P), or None for
+a problem too large to keep)."""
+
+
+def candidate_start(base: FitResult, effect: Effect) -> CandidateStart:
+    """The base model plus ``effect`` (``extend_problem``) evaluated at the warm start
+    (``warm_start``), from one prediction. The candidate's fit starts there
+    (``try_candidate``), its detectable sizes are linearised there (``hostpc.diagnostics.
+    detectable``) and the interaction search takes geometry's columns there: kept on the
+    base problem's memo like the candidate fits (``forget_candidate_fits`` drops it), so
+    they share one prediction; a problem whose Jacobian ``evaluate`` would not keep
+    (``REUSE_ELEMENTS``) is not kept either, and each asks for it again. The evaluation is
+    ``evaluate``'s: the same operations on the same prediction, so the same values."""
+    key = f"{CANDIDATE_SLOT}{effect.name} start"
+    kept: CandidateStart | None = _recall(base, key, effect)
+    if kept is not None:
+        return kept
+    problem = extend_problem(base.problem, [effect])
+    x0 = warm_start(base, problem)
+    if problem.measured.size * x0.size > REUSE_ELEMENTS:  # large: not kept (as ``evaluate``)
+        return problem, x0, evaluate(problem, x0), None
+    evaluation, d_predicted = evaluated_with_derivative(problem, x0)
+    for array in (x0, evaluation.raw, evaluation.whitened, evaluation.jacobian, d_predicted):
+        if array is not None:
+            array.setflags(write=False)  # shared by the fit, the sizes and the search
+    start = (problem, x0, evaluation, d_predicted)
+    _keep(base, key, effect, start)
+    return start
+
+
+def evaluated_with_derivative(problem: Problem, x: np.ndarray
+                              ) -> tuple[Evaluation, np.ndarray]:
+    """``evaluate``'s evaluation at x with its Jacobian (the same operations on the same
+    prediction, so the same values) and the raw derivative of the predictions (N, m, P),
+    from one prediction, in one piece."""
+    predicted, d_predicted = predict(problem, x, True)
+    assert d_predicted is not None
+    raw = problem.measured - predicted
+    W = problem.sqrt_information
+    return Evaluation(x=x, raw=raw, whitened=(W @ raw[:, :, None])[:, :, 0],
+                      jacobian=-(W @ d_predicted).reshape(-1, x.size)), d_predicted
+
+
+def _recall(base: FitResult, key: str, effect: Effect) -> Any:
+    """The value kept under ``key`` on the base problem's memo for this effect (its class
+    and state) at this base fit (its x and fixed mask), or None."""
+    recalled = base.problem.memo.recall(key)
+    if recalled is None:
+        return None
+    identity, x, fixed, value = recalled
+    if (identity == _identity(effect) and np.array_equal(x, base.x)
+            and np.array_equal(fixed, base.fixed)):
+        return value
+    return None
+
+
+def _keep(base: FitResult, key: str, effect: Effect, value: object) -> None:
+    """Keep ``value`` for ``_recall``; an effect whose state does not compare is not kept."""
+    identity = _identity(effect)
+    if identity is not None:
+        base.problem.memo.remember(key, (identity, base.x.copy(), base.fixed.copy(), value))
+
+
+def _identity(effect: Effect) -> tuple[type, tuple[tuple[str, Any], ...]] | None:
+    """The effect's class and state, or None if its state is not plain values."""
     state = vars(effect)
     if not all(isinstance(v, str | int | float | bool | None) for v in state.values()):
-        return _fit_candidate(base, effect, cv_folds, loss)  # not comparable: not kept
-    identity = (type(effect), tuple(sorted(state.items())))
-    key = f"{CANDIDATE_SLOT}{effect.name} {cv_folds} {loss}"
-    recalled = base.problem.memo.recall(key)
-    if recalled is not None:
-        kept_identity, x, fixed, candidate = recalled
-        if (kept_identity == identity and np.array_equal(x, base.x)
-                and np.array_equal(fixed, base.fixed)):
-            return candidate
-    candidate = _fit_candidate(base, effect, cv_folds, loss)
-    base.problem.memo.remember(key, (identity, base.x.copy(), base.fixed.copy(), candidate))
-    return candidate
+        return None
+    return type(effect), tuple(sorted(state.items()))
 
 
 def _fit_candidate(base: FitResult, effect: Effect, cv_folds: int, loss: Loss) -> Candidate:
-    problem = extend_problem(base.problem, [effect])
-    x0 = warm_start(base, problem)
-    start = evaluate(problem, x0)  # shared by the fit, the subset choice and the subset fit
+    # shared by the fit, the subset choice and the subset fit (and the detectable sizes)
+    problem, x0, start, _ = candidate_start(base, effect)
     extended = solve(problem, x0=x0, loss=loss, cv_folds=0, max_iterations=50, initial=start)
     extended, cv_whitened = with_held_out(extended, cv_folds)
     delta_chi2, p_full, added = f_test(base, extended)

@@ -30,16 +30,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from hostpc.dataset import Dataset
-from hostpc.diagnostics.candidates import candidate_effects, warm_start
+from hostpc.diagnostics.candidates import (
+    candidate_effects,
+    candidate_start,
+    evaluated_with_derivative,
+)
 from hostpc.diagnostics.distributions import chi2_isf, chi2_sf
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, analyse
 from hostpc.fitting.identifiability import WEAK_SIGMA_LIMIT
-from hostpc.fitting.solver import evaluate
+from hostpc.fitting.solver import Evaluation, evaluate
 from hostpc.json_object import JsonObject
 from hostpc.model.effect import Effect
 from hostpc.model.layout import Problem
-from hostpc.model.measurements.predict import predict
 from hostpc.model.problem import build_problem, extend_problem
 from hostpc.model.registry import available_effects
 
@@ -170,22 +173,23 @@ def best_seen(sizes: Sequence[DetectableSize]) -> DetectableSize:
 def detectable_sizes(base: FitResult, effect: Effect, alpha: float,
                      target: float = DEFAULT_POWER) -> tuple[DetectableSize, ...]:
     """The minimum detectable size of each parameter of ``effect`` added to ``base`` at
-    significance ``alpha`` (the per-candidate threshold) and power ``target``."""
-    problem = extend_problem(base.problem, [effect])
+    significance ``alpha`` (the per-candidate threshold) and power ``target``, linearised
+    at the candidate fit's start (``candidate_start``: the same prediction)."""
+    problem, x0, start, raw = candidate_start(base, effect)
+    if raw is None:  # a large problem (not kept): the raw derivative predicted here
+        start, raw = evaluated_with_derivative(problem, x0)
     scale = math.sqrt(max(base.chi2_dof, 1.0)) if base.dof > 0 else 1.0
-    return _sizes(problem, warm_start(base, problem), base.fixed, effect, alpha, target,
-                  scale)
+    return _sizes(problem, start, raw, base.fixed, effect, alpha, target, scale)
 
 
-def _sizes(problem: Problem, x0: np.ndarray, fixed: np.ndarray, effect: Effect,
-           alpha: float, target: float, scale: float) -> tuple[DetectableSize, ...]:
+def _sizes(problem: Problem, start: Evaluation, raw: np.ndarray, fixed: np.ndarray,
+           effect: Effect, alpha: float, target: float, scale: float
+           ) -> tuple[DetectableSize, ...]:
     """The sizes of ``effect``'s parameters in ``problem`` (the model's parameters first,
-    ``fixed`` of them held) linearised at x0, at the noise ``scale``."""
-    # one prediction for both Jacobians: the whitened one as ``evaluate`` forms it (the
-    # same operations, so the same values) and the raw one, for the lengths
-    _, raw = predict(problem, x0, jacobian=True)
-    assert raw is not None
-    J = -(problem.sqrt_information @ raw).reshape(-1, x0.size)
+    ``fixed`` of them held) linearised at ``start`` (its whitened Jacobian; ``raw``: the
+    raw derivative of the predictions there, for the lengths), at the noise ``scale``."""
+    J = start.jacobian
+    assert J is not None
     n_base = fixed.size
     fitted = J[:, :n_base][:, ~fixed]
     basis = np.linalg.qr(fitted)[0] if fitted.shape[1] else np.zeros((J.shape[0], 0))
@@ -226,8 +230,8 @@ def planned_sizes(design: Dataset, effects: str | Sequence[str] | None,
         effect = registry[name]()
         try:
             extended = extend_problem(problem, [effect])
-            sizes = _sizes(extended, np.zeros(extended.layout.size), fixed, effect,
-                           threshold, target, 1.0)
+            start, raw = evaluated_with_derivative(extended, np.zeros(extended.layout.size))
+            sizes = _sizes(extended, start, raw, fixed, effect, threshold, target, 1.0)
         except InputError:
             continue
         if sizes:

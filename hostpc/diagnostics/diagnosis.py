@@ -36,7 +36,7 @@ def finite(value: float | None) -> float | None:
     return None if value is None or not math.isfinite(value) else float(value)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: compared by identity (__init__.py)
 class ModelCheck:
     """One model checked: its fit, held-out residuals, verdict, candidates and interactions.
 
@@ -100,7 +100,7 @@ class ModelCheck:
         return tuple(i for i in self.interactions if i.significant)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: compared by identity (__init__.py)
 class LadderStep:
     """One rung of the ladder: the model, what was added to reach it (None for the start),
     and its in-sample and held-out residual norms (m), the held-out whitened RMS per scalar
@@ -142,7 +142,7 @@ class LadderStep:
         }
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: compared by identity (__init__.py)
 class Diagnosis:
     """Everything ``diagnose`` found about one dataset and model.
 

@@ -29,6 +29,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from hostpc.diagnostics.candidates import candidate_start
 from hostpc.diagnostics.distributions import f_logsf
 from hostpc.diagnostics.residual_analysis import is_angle, sorted_distinct, usable_variables
 from hostpc.errors import InputError
@@ -36,7 +37,6 @@ from hostpc.fitting import FitResult
 from hostpc.fitting.solver import evaluate
 from hostpc.json_object import JsonObject
 from hostpc.model.effects import Geometry
-from hostpc.model.problem import extend_problem
 
 RANK_TOLERANCE = 1e-6
 
@@ -115,12 +115,11 @@ def _geometry_columns(result: FitResult) -> tuple[list[str], list[str], np.ndarr
     problem = result.problem
     if "geometry" in problem.effect_names:
         return None
-    try:
-        extended = extend_problem(problem, [Geometry()])
+    try:  # at the geometry candidate's start: the same evaluation, shared
+        extended, _, start, _ = candidate_start(result, Geometry())
     except InputError:  # a method without a geometry effect
         return None
-    x = np.concatenate([result.x, np.zeros(extended.layout.size - result.x.size)])
-    J = evaluate(extended, x).jacobian
+    J = start.jacobian
     assert J is not None
     span = extended.layout.effect_slices["geometry"]
     columns = J[:, span]

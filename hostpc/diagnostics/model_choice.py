@@ -62,7 +62,7 @@ class ModelScore:
         return None if self.score is None else math.sqrt(self.score)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: compared by identity (__init__.py)
 class ModelChoice:
     """The table (in order of complexity), the chosen model's name and its fit;
     outlier_note: the diagnosis's outlier note (hostpc.diagnostics.advice.outlier_note),

@@ -61,7 +61,7 @@ class Outlier:
                 "test": self.test}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: compared by identity (__init__.py)
 class DeletionStatistics:
     """Per-sample leave-one-out statistics of one fit (arrays of length N).
 

@@ -29,7 +29,7 @@ ALL_PAIRS_UP_TO = 6
 consecutive pairs only."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: compared by identity (__init__.py)
 class RepeatCheck:
     """pairs: (K, 2) sample indices measured at one pose with one identity; statistic:
     (K,) chi-square of each pair's difference with ``dof`` degrees of freedom; p_value:

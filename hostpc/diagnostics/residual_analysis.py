@@ -83,7 +83,7 @@ class SampleResidual:
     raw: tuple[float, ...]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: compared by identity (__init__.py)
 class VariablePattern:
     """Residuals binned against one variable.
 
@@ -127,7 +127,7 @@ class VariablePattern:
                 f"{level} are off by {float(np.linalg.norm(mean)) * 1e3:.3g} mm on average")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: compared by identity (__init__.py)
 class ResidualAnalysis:
     """norms: (N,) raw residual norms (m); whitened_norms: (N,); worst: the largest whitened
     residuals first; patterns: one per variable, most significant first; threshold: the

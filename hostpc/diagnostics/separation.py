@@ -197,7 +197,7 @@ def confounded_pairs(base: FitResult, candidates: Sequence[Candidate],
 
 # ---------------------------------------------------------------- the predicted separation
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds arrays: compared by identity (__init__.py)
 class PairModel:
     """A confounded pair on one dataset, linearised for planning: the model with both
     effects (its parameter names ``layout``), the point of linearisation ``x``, the signal of each

@@ -67,6 +67,11 @@ def test_diagnose_imports_no_other_command() -> None:
     assert code in (0, 1)
     assert "hostpc.cli.robot_options" in modules
     assert "hostpc.cli.robots" not in modules
+    # fit's own options and figures (an archive, a URDF to write, the jackknife, a robust
+    # fit's kept samples): diagnose's parser shares fit's model options, not these
+    fit_only = ("hostpc.cli.archive_options", "hostpc.cli.urdf_out",
+                "hostpc.fitting.resampling", "hostpc.diagnostics.robust_kept")
+    assert not [m for m in modules if m in fit_only]
 
 
 @pytest.mark.parametrize("example", ["ur5e_stereo.json", "ur5e_stereo_hidden_compliance.json"])

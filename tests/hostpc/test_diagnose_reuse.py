@@ -1,7 +1,9 @@
 """What diagnose computes once and reuses (issue 28, the quick host): a candidate's fits,
-kept on the base problem's memo, are judged afresh at each threshold; the held-out residuals
-of a problem are kept for the same x and free parameters. Reused or not, every figure is
-the one a fresh computation gives."""
+kept on the base problem's memo, are judged afresh at each threshold; a candidate's start
+(the model plus the effect at the warm start) is one prediction shared by its fit, its
+detectable sizes and the interaction search; the held-out residuals of a problem are kept
+for the same x and free parameters. Reused or not, every figure is the one a fresh
+computation gives."""
 
 from __future__ import annotations
 
@@ -14,9 +16,13 @@ import pytest
 from hostpc.dataset import load_dataset
 from hostpc.diagnostics.adequacy import held_out_residuals
 from hostpc.diagnostics.candidates import Candidate, try_candidate
+from hostpc.diagnostics.detectable import detectable_sizes
+from hostpc.diagnostics.interactions import search_interactions
 from hostpc.fitting import FitResult, solve
+from hostpc.model.effects import Geometry
 from hostpc.model.effects.coupling import JointCoupling
 from hostpc.model.layout import Problem
+from hostpc.model.measurements import predict as predict_module
 from hostpc.model.problem import build_problem
 from hostpc.model.registry import available_effects
 
@@ -65,6 +71,43 @@ def test_a_candidate_is_fitted_again_for_other_folds_or_another_effect_state() -
                           threshold=1e-3)
     assert every.fit is not wrist.fit
     assert len(every.fit.x) > len(wrist.fit.x)  # "all" couples more neighbouring pairs
+
+
+def _predictions(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """A list that grows by one at every prediction with a Jacobian (the real one runs)."""
+    calls: list[int] = []
+    real = predict_module.predict
+
+    def counted(problem: Problem, x: np.ndarray, jacobian: bool = True
+                ) -> tuple[np.ndarray, np.ndarray | None]:
+        if jacobian:
+            calls.append(x.size)
+        return real(problem, x, jacobian)
+
+    for module in ("candidates", "detectable", "interactions"):
+        monkeypatch.setattr(f"hostpc.diagnostics.{module}.predict", counted, raising=False)
+    monkeypatch.setattr("hostpc.fitting.solver.predict", counted)
+    return calls
+
+
+def test_a_candidates_start_is_one_prediction_for_its_fit_sizes_and_search(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The detectable sizes of a candidate tried on a fit, and the interaction search's
+    geometry columns of that fit, take the candidate fit's start: no prediction of their
+    own; and they are the sizes of a fresh computation."""
+    base = _fresh_fit()
+    registry = available_effects()
+    try_candidate(base, registry["joint_compliance"](), cv_folds=0, loss="linear",
+                  threshold=1e-3)
+    try_candidate(base, Geometry(), cv_folds=0, loss="linear", threshold=1e-3)
+    calls = _predictions(monkeypatch)
+    sizes = detectable_sizes(base, registry["joint_compliance"](), 1e-4)
+    assert calls == []  # the candidate's start, kept
+    search_interactions(base, {"q1": base.problem.dataset.samples.q[:, 0]}, 1e-3)
+    assert calls == []  # the base fit's evaluation and geometry's start, both kept
+    monkeypatch.undo()
+    fresh = detectable_sizes(_fresh_fit(), registry["joint_compliance"](), 1e-4)
+    assert fresh == sizes
 
 
 def test_held_out_residuals_are_kept_per_x_and_free_parameters() -> None:
