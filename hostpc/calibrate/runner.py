@@ -41,6 +41,7 @@ from hostpc.calibrate.journal_events import (
     Verified,
     VerifyRoundLost,
 )
+from hostpc.calibrate.measured_under import measured_under_field
 from hostpc.calibrate.more_poses import more_poses_message, more_poses_reason
 from hostpc.calibrate.outcome import parse_required_joints, restored_to_reference
 from hostpc.calibrate.outcome_files import run_outcome
@@ -366,7 +367,9 @@ class Runner:
         if separate:  # --separate A,B: the poses that tell them apart (separate.py)
             q_now, result, dataset = await self._separate(method, state, plan, settings,
                                                           result, dataset, separate, q_now)
-        write_json_atomic(self.run_dir / "fit.json", result.to_dict())
+        write_json_atomic(self.run_dir / "fit.json",  # with the offsets measured under
+                          {**result.to_dict(), **measured_under_field(
+                              self.run_dir / "dataset.json")})
         status = "converged" if result.converged else "NOT converged"
         progress.message(f"fit: RMS {result.rms * 1e3:.4f} mm, chi2/dof "
                          f"{result.chi2_dof:.3f}, {status}")
