@@ -52,7 +52,9 @@ from hostpc.calibrate.push import (
     execute_push,
     export_offsets,
     plan_push,
+    read_back_lost_line,
     same_offsets,
+    written_rollback_id,
 )
 from hostpc.calibrate.refusals import (
     MAX_POSE_ATTEMPTS,
@@ -211,6 +213,10 @@ class Runner:
                         "new offsets, NOT verified, and ended with the run; a resume "
                         "restarts it with its initial offsets and pushes again: "
                         f"{resume} --push")
+            written = written_rollback_id(self.journal)
+            if written is not None:  # answered, but its read-back never came
+                return (f"{read_back_lost_line(written, self.run_dir, self.robot_info.address)}"
+                        f"; settle and verify it with: {resume}")
             return (f"a push was cut short: the controller may hold the new offsets, NOT "
                     f"verified; settle and verify it with: {resume} (undo: hostpc rollback "
                     f"--run {self.run_dir})")

@@ -52,6 +52,7 @@ from hostpc.calibrate.push import (
     execute_push,
     plan_push,
     same_offsets,
+    written_rollback_id,
 )
 from hostpc.calibrate.summary import EXIT_PUSH_REFUSED
 from hostpc.errors import (
@@ -220,7 +221,8 @@ async def _push(args: argparse.Namespace, saved: SavedFit, address: RobotAddress
             _record_held(args.fit, entry, exc.record.held)
             raise
         except (ConnectionFailed, RequestTimeout, ProtocolViolation) as exc:
-            raise type(exc)(cut_short_line(exc, run_dir, str(address))) from exc
+            raise type(exc)(cut_short_line(exc, run_dir, str(address),
+                                           written_rollback_id(journal))) from exc
         return plan, record
     finally:
         await robot.close()

@@ -64,7 +64,7 @@ def test_push_offline_fit_guard_rail_dry_run_push_and_rollback(
         push = json.loads((out / "push.json").read_text())
         assert push["status"] == "pushed" and push["previous_offsets"] == before.tolist()
         assert [e["event"] for e in map(json.loads, (out / "journal.jsonl").read_text()
-                                        .splitlines())] == ["push_intent", "push"]
+                                        .splitlines())] == ["push_intent", "push_written", "push"]
         # the same fit again: the ledger beside the fit says this controller carries it
         code, stdout, stderr = run_cli(capsys, "push", str(path), "--robot", address,
                                        "--token", TOKEN, "--out", str(tmp_path / "again"))

@@ -84,7 +84,7 @@ def test_push_keeps_the_offsets_it_read_and_rollback_restores_them(
         assert record["previous_offsets"] == ZERO and record["new_offsets"] == pushed
         assert record["reported_previous_offsets"] == [0.5] * 6
         events = [json.loads(text) for text in (out / "journal.jsonl").read_text().splitlines()]
-        assert [e["event"] for e in events] == ["push_intent", "push"]
+        assert [e["event"] for e in events] == ["push_intent", "push_written", "push"]
         assert events[-1]["previous_offsets"] == ZERO
         code, stdout, stderr = run_cli(capsys, *_next_command(line, "restore them"))
         assert code == 0, stderr
@@ -173,6 +173,34 @@ def test_a_push_cut_short_names_the_next_commands_and_they_work(
         assert code == 0, stderr
         assert controller.offsets == ZERO
         assert ("nothing to roll back" if mode == "slow_set" else "rolled back") in stdout
+
+
+def test_a_read_back_lost_after_a_good_write_keeps_the_rollback_id(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], fit_file: Path) -> None:
+    """The controller answers the write (rollback id rb-1) but stores the offsets clamped
+    and never answers the read-back (exit 4): push.json and the journal keep the id, the
+    line names it and `hostpc rollback --run DIR`, which undoes the write by that id (the
+    controller holds neither the new nor the previous offsets, so without the id nothing
+    could tell what to restore)."""
+    out = tmp_path / "push"
+    with HostileController("clamp_no_readback") as controller:
+        code, _, stderr = run_cli(capsys, "push", str(fit_file), "--robot",
+                                  controller.address, "--out", str(out), "--timeout", "1")
+        assert code == 4, stderr
+        line = _line(stderr)
+        assert "took the write (rollback id rb-1)" in line, line
+        assert controller.offsets != ZERO  # clamped: neither previous nor new
+        record = json.loads((out / "push.json").read_text())
+        assert record["rollback_id"] == "rb-1" and record["previous_offsets"] == ZERO
+        events = [json.loads(text) for text in (out / "journal.jsonl").read_text().splitlines()]
+        assert [e["event"] for e in events] == ["push_intent", "push_written"]
+        assert events[-1]["rollback_id"] == "rb-1"
+        rollback = _next_command(line, "restore the previous ones")
+        assert rollback == ["rollback", "--run", str(out)]
+        code, stdout, stderr = run_cli(capsys, *rollback)
+        assert code == 0, stderr
+        assert "rolled back rb-1" in stdout
+        assert controller.offsets == ZERO
 
 
 def _edited(text: str, **fields: object) -> str:
