@@ -85,8 +85,11 @@ def _units_first(diagnosis: Diagnosis, path: str) -> Diagnosis:
     look like an effect (radians read as degrees: an encoder scale), so before any effect
     is added, the units are checked."""
     from hostpc.cli.units_hint import declared_angle_unit, declared_length_unit, slip_hint
+    from hostpc.dataset.kind_registry import csv_row_kinds
 
     problem = diagnosis.check.fit.problem
+    if problem.dataset.method not in csv_row_kinds():  # no world-frame points: no file read
+        return diagnosis
     slip = slip_hint(problem.dataset, problem.context.chain, declared_length_unit(path),
                      declared_angle_unit(path))
     if slip is None:

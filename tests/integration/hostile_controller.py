@@ -187,12 +187,17 @@ class HostileController(ThreadServer):
 class ClampingProxy(ThreadServer):
     """Forwards every connection to `upstream` (host, port), clamping the offsets of each
     `set_offsets` request to +-CLAMP_RAD on the way: the controller behind it stores the
-    clamped offsets and reports them truthfully."""
+    clamped offsets and reports them truthfully. With `drop_read_back`, it clamps nothing
+    and instead swallows the first `get_offsets` after the first `set_offsets` (the push's
+    read-back never reaches the controller, so it never answers)."""
 
-    def __init__(self, upstream: tuple[str, int]) -> None:
+    def __init__(self, upstream: tuple[str, int], drop_read_back: bool = False) -> None:
         super().__init__(self._session)
         self.upstream = upstream
         self.clamped = 0
+        self.drop_read_back = drop_read_back
+        self.dropped = 0
+        self._written = False
 
     async def _session(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         up_reader, up_writer = await asyncio.open_connection(*self.upstream)
@@ -200,10 +205,16 @@ class ClampingProxy(ThreadServer):
         try:
             decoder = FrameDecoder()
             while (message := await read_message(reader, decoder)) is not None:
-                if message.get("kind") == "set_offsets":
+                if message.get("kind") == "set_offsets" and self.drop_read_back:
+                    self._written = True
+                elif message.get("kind") == "set_offsets":
                     message["offsets"] = [max(-CLAMP_RAD, min(CLAMP_RAD, v))
                                           for v in message["offsets"]]
                     self.clamped += 1
+                elif message.get("kind") == "get_offsets" and self._written \
+                        and not self.dropped:
+                    self.dropped += 1
+                    continue  # never forwarded: the controller never answers it
                 up_writer.write(frame(message))
                 await up_writer.drain()
         finally:

@@ -316,3 +316,40 @@ def test_a_calibration_whose_push_the_controller_clamps_is_not_pass(
         code, _, stderr = run_cli(capsys, *_next_command(line, "restore them"))
         assert code == 0, stderr
         assert sim.truth()["zero_offsets"] == before
+
+
+def test_a_calibration_whose_read_back_is_lost_keeps_the_id_and_its_resume_settles_it(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`hostpc calibrate` through a proxy that swallows the push's read-back (the write
+    reached the stub and was answered, rb-1): the run stops (exit 4) with one line naming
+    the id, the resume and the rollback; the resume finds the new offsets, records the push
+    with that id and verifies it; the rollback then undoes the write by the id."""
+    scenario = sim_scenario()
+    rig = truth_rig_file(scenario, tmp_path / "rig.json")
+    out = tmp_path / "run"
+    with SimulatedController(scenario, tmp_path / "stub") as sim, \
+            ClampingProxy((sim.address.host, sim.address.port), drop_read_back=True) as proxy:
+        before = list(sim.truth()["zero_offsets"])
+        code, _, stderr = run_cli(
+            capsys, "calibrate", "--robot", proxy.address, "--rig", str(rig), "--known",
+            "target", "--poses", "16", "--verify-poses", "3", "--no-report", "--timeout",
+            "1", "--out", str(out))
+        assert code == 4 and proxy.dropped == 1, stderr
+        errors = [t for t in stderr.splitlines() if t.startswith("hostpc calibrate: error:")]
+        assert len(errors) == 1, stderr
+        line = errors[0]
+        assert "took the write (rollback id rb-1) but reading its offsets back failed" in line
+        assert f"settle and verify it with: hostpc calibrate --resume {out}" in line, line
+        assert f"restore the previous ones with: hostpc rollback --run {out}" in line, line
+        assert json.loads((out / "push.json").read_text())["rollback_id"] == "rb-1"
+        pushed = list(sim.truth()["zero_offsets"])
+        assert pushed != before
+        code, stdout, stderr = run_cli(capsys, "calibrate", "--resume", str(out), "--json")
+        assert code == 0, stderr
+        assert "recorded as pushed, rollback id rb-1" in stderr
+        record = json.loads((out / "push.json").read_text())
+        assert (record["status"], record["rollback_id"]) == ("pushed", "rb-1")
+        assert json.loads(stdout)["outcome"]["verdict"] == "PASS"
+        code, stdout, stderr = run_cli(capsys, "rollback", "--run", str(out))
+        assert code == 0, stderr
+        assert "rolled back rb-1" in stdout and sim.truth()["zero_offsets"] == before
