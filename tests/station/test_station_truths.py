@@ -362,6 +362,19 @@ def test_a_push_the_controller_did_not_store_is_not_resumed_but_rolled_back(
             assert log.count("start of SN-CLAMP refused: the run of SN-CLAMP pushed offsets "
                              "that are NOT stored as asked (push failed); no resume "
                              "settles it") == 1, log[-3000:]
+        finally:
+            plc.close()
+        assert process.stop() == 0
+        process.start()  # a restart does not resume it either
+        plc = Plc(config["modbus"]["port"])
+        try:
+            plc.start("SN-CLAMP")
+            values = plc.wait_state(FINISHED, 60)
+            assert values[reg.RESULT_CODE] == reg.RESULT_PUSH_PENDING
+            assert (run_dir / "journal.jsonl").read_text() == journal
+            assert f"the run of SN-CLAMP in {run_dir} is not resumed" in process.log.read_text()
+            plc.command(reg.Command.ACKNOWLEDGE)
+            plc.wait_state({reg.State.IDLE}, 10)
             _rollback(run_dir, db)
             plc.start("SN-CLAMP")  # settled: a new run of the robot
             plc.wait_state(FINISHED, 300)
