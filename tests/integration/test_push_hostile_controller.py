@@ -198,7 +198,7 @@ def test_a_read_back_lost_after_a_good_write_keeps_the_rollback_id(
         rollback = _next_command(line, "restore the previous ones")
         assert rollback == ["rollback", "--run", str(out)]
         code, stdout, stderr = run_cli(capsys, *rollback)
-        assert code == 0, stderr
+        assert code == 0 and not stderr, stderr  # no "another host pushed later?"
         assert "rolled back rb-1" in stdout
         assert controller.offsets == ZERO
 
