@@ -16,11 +16,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
 from hostpc import __version__
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.journal_events import Pushed, Rollback
+from hostpc.calibrate.outcome import JointOutcome
 from hostpc.calibrate.run_result import RunResult
 from hostpc.errors import InputError
 from hostpc.json_object import JsonObject
@@ -116,25 +116,17 @@ def outcome_of(result: RunResult | None) -> OutcomeFigures | None:
     block = result.outcome if result is not None else None
     if not isinstance(block, Mapping):
         return None
-    joints = [j for j in block.get("joints") or [] if isinstance(j, Mapping)]
+    joints = [JointOutcome.from_dict(j) for j in block.get("joints") or []
+              if isinstance(j, Mapping)]  # the rows read as the run's own JointOutcomes
     verdict = block.get("verdict")
     return OutcomeFigures(
         verdict=verdict if isinstance(verdict, str) else None,
         headline=str(block.get("headline") or ""), pushed=bool(block.get("pushed")),
         verified=block.get("verified"),
-        calibrated=tuple(int(j["joint"]) for j in joints if j.get("status") == "calibrated"
-                         and (not j.get("pushed") or j.get("verified") is True)),
-        not_calibrated=tuple(int(j["joint"]) for j in joints if j.get("source") != "data"),
+        calibrated=tuple(j.joint for j in joints if j.on_robot),
+        not_calibrated=tuple(j.joint for j in joints if j.source != "data"),
         missing_required=tuple(int(n) for n in block.get("missing_required") or []),
-        as_found=tuple(int(j["joint"]) for j in joints if _as_found(j)))
-
-
-def _as_found(joint: Mapping[str, Any]) -> bool:
-    """A joint row of result.json restored to a reference whose run did not measure its
-    zero (`zero_from` names the reference and its zero "as_found" or "unknown")."""
-    zero = joint.get("zero_from")
-    return (joint.get("status") == "calibrated" and isinstance(zero, Mapping)
-            and zero.get("reference_zero") != "measured")
+        as_found=tuple(j.joint for j in joints if j.as_found))
 
 
 def verdict_of(result: RunResult | None, exit_code: int) -> str:

@@ -108,6 +108,17 @@ class ModelAdequacyEntry(StrictFile):
     next: StrictStr | None = None
 
 
+class MeasuredUnderEntry(StrictFile):
+    """measured_under: the controller's zero offsets (rad) the fit's dataset was measured
+    under, when it lay in a run folder (hostpc.calibrate.measured_under)."""
+
+    run: StrictStr
+    dataset: StrictStr
+    zero_offsets: Annotated[list[Annotated[float, Field(
+        allow_inf_nan=False, ge=-MAX_JOINT_OFFSET_RAD, le=MAX_JOINT_OFFSET_RAD)]],
+        Field(min_length=1)]
+
+
 class FitDocument(StrictFile):
     """The fields of `FitResult.to_dict` (hostpc/fitting/result.py); unknown keys ignored.
     Required: what the push reads (parameters, chi2, dof, converged)."""
@@ -140,6 +151,7 @@ class FitDocument(StrictFile):
     loss: StrictStr = ""
     chi2_dof_with_calibration: NonNegative | None = None
     model_adequacy: ModelAdequacyEntry | None = None
+    measured_under: MeasuredUnderEntry | None = None  # absent: outside a run folder
 
 
 def parse_fit_text(text: str, source: str) -> Any:

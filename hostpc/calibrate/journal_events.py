@@ -137,6 +137,25 @@ class Pushed:
 
 
 @dataclass(frozen=True)
+class PushWritten:
+    """The controller answered the write of the last `push_intent` (its rollback id, when,
+    ISO 8601 UTC) and the read-back of its offsets has not come yet: written before that
+    read, so a read-back that fails still leaves the id (`hostpc rollback --run DIR`
+    undoes the write with it). The `push` event follows once the read-back came."""
+
+    kind: ClassVar[str] = "push_written"
+    rollback_id: str
+    time: str = ""
+
+    def to_json(self) -> JsonObject:
+        return {"rollback_id": self.rollback_id, "time": self.time}
+
+    @classmethod
+    def from_json(cls, data: JsonObject) -> PushWritten:
+        return cls(str(data["rollback_id"]), str(data.get("time", "")))
+
+
+@dataclass(frozen=True)
 class PushRefused:
     """A guard rail (by None) or the controller (by "controller") refused the push."""
 
@@ -382,9 +401,9 @@ class Note:
                    number("last_t"), number("time_origin"), number("t_shift"))
 
 
-EVENT_TYPES: tuple[type[Any], ...] = (PushIntent, Pushed, PushRefused, Rollback, VerifyStart,
-                                      Verified, VerifyRoundLost, RunFinished, Resumed, MorePoses,
-                                      RobotTimeSpent, Stage, Note)
+EVENT_TYPES: tuple[type[Any], ...] = (PushIntent, PushWritten, Pushed, PushRefused, Rollback,
+                                      VerifyStart, Verified, VerifyRoundLost, RunFinished,
+                                      Resumed, MorePoses, RobotTimeSpent, Stage, Note)
 """Every event kind a run writes."""
 _READERS: dict[str, Callable[[JsonObject], JournalEvent]] = {
     kind.kind: kind.from_json for kind in EVENT_TYPES}

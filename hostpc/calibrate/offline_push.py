@@ -28,6 +28,7 @@ from hostpc.calibrate.fit_file import (
     parse_fit_text,
     validate_fit_document,
 )
+from hostpc.calibrate.measured_under import MeasuredUnder
 from hostpc.diagnostics.robust_kept import KeptSamples
 from hostpc.errors import InputError
 from hostpc.fitting.identifiability import NullDirection
@@ -74,6 +75,9 @@ class SavedFit:
     #: model_adequacy.next: the diagnosis of the fit's dataset (`hostpc diagnose DATASET
     #: ... --ladder`), None when the fit explains its data or the file has none
     next_command: str | None = None
+    #: the controller's zero offsets the fit's dataset was measured under and its run
+    #: (FIT.json measured_under); None when its dataset lay outside a run folder
+    measured_under: MeasuredUnder | None = None
 
     @property
     def chi2_dof(self) -> float:
@@ -124,6 +128,9 @@ def saved_fit_from_dict(document: Any, source: str, *, offsets: bool = True) -> 
         frames=fit.frames,
         kept_samples=_kept(fit),
         next_command=None if fit.model_adequacy is None else fit.model_adequacy.next,
+        measured_under=(None if fit.measured_under is None else MeasuredUnder(
+            fit.measured_under.run, fit.measured_under.dataset,
+            tuple(fit.measured_under.zero_offsets))),
     )
 
 

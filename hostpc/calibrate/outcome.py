@@ -133,6 +133,26 @@ class JointOutcome:
                 "reason": self.reason, "fix": self.fix, "zero_from": self.zero_from(),
                 "applied_on_host": self.applied_on_host}
 
+    @classmethod
+    def from_dict(cls, row: Mapping[str, Any]) -> JointOutcome:
+        """A joint row as stored (result.json's outcome block, `to_dict`), for readers of
+        stored runs (the archive, the station's registers) to ask the same properties;
+        absent keys (an older result) take their defaults. KeyError without "joint"."""
+        joint = int(row["joint"])
+        zero = row.get("zero_from")
+        restored = zero if isinstance(zero, Mapping) else None
+        verified = row.get("verified")
+        return cls(
+            joint=joint, label=str(row.get("label") or f"q{joint}"),
+            status=str(row.get("status") or "not_calibrated"),
+            source=str(row.get("source") or "none"), pushed=row.get("pushed") is True,
+            verified=verified if isinstance(verified, bool) else None,
+            reason=row.get("reason"), fix=row.get("fix"),
+            restored_from=(None if restored is None
+                           else str(restored.get("reference_run") or "")),
+            reference_zero=None if restored is None else restored.get("reference_zero"),
+            applied_on_host=row.get("applied_on_host") is True)
+
 
 @dataclass(frozen=True)
 class OutcomeEvent:
@@ -216,17 +236,10 @@ def parse_required_joints(text: str | None, n_joints: int | None = None) -> tupl
 def sources_from_outcome(block: JsonObject) -> tuple[JointSource, ...]:
     """The fit's per-joint sources as a stored outcome block holds them (for a rollback or
     a later view to derive the outcome again without the fit)."""
-    out = []
-    for row in block.get("joints", []):
-        if not isinstance(row, Mapping):
-            continue
-        zero = row.get("zero_from")
-        restored = zero if isinstance(zero, Mapping) else {}
-        out.append(JointSource(int(row["joint"]), str(row.get("label", f"q{row['joint']}")),
-                               str(row.get("source", "none")), row.get("reason"),
-                               row.get("fix"), restored.get("reference_run"),
-                               restored.get("reference_zero")))
-    return tuple(out)
+    rows = [JointOutcome.from_dict(row) for row in block.get("joints", [])
+            if isinstance(row, Mapping)]
+    return tuple(JointSource(j.joint, j.label, j.source, j.reason, j.fix, j.restored_from,
+                             j.reference_zero) for j in rows)
 
 
 def restored_to_reference(sources: Sequence[JointSource], coverage: Mapping[str, Any] | None,

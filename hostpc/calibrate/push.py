@@ -33,6 +33,7 @@ Guard rails:
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import math
 from dataclasses import dataclass, field
@@ -43,7 +44,7 @@ import numpy as np
 
 from hostpc.calibrate.joint_status import joint_sources
 from hostpc.calibrate.journal import Journal
-from hostpc.calibrate.journal_events import Pushed, PushIntent, PushRecord
+from hostpc.calibrate.journal_events import Pushed, PushIntent, PushRecord, PushWritten
 from hostpc.calibrate.refusals import PushRefusal, resume_with
 from hostpc.calibrate.run_result import OffsetRow
 from hostpc.calibrate.swaps import MAX_SWAP_LIMIT_DEG
@@ -297,9 +298,11 @@ async def execute_push(robot: RobotAdapter, plan: PushPlan, run_dir: Path, addre
     the controller then holds.
 
     Order: push.json (status "intent": previous and new offsets, time) and the journal's
-    `push_intent` event, both fsync'ed; then the controller's write; then the controller's
-    offsets read back (`get_offsets`, the same read plan.old came from); then push.json
-    (status "pushed", rollback id) and the journal's `push` event. The previous offsets
+    `push_intent` event, both fsync'ed; then the controller's write; then push.json again
+    with the write's rollback id (still "intent") and the journal's `push_written` event,
+    so that a read-back that fails leaves the id (`written_rollback_id`); then the
+    controller's offsets read back (`get_offsets`, the same read plan.old came from); then
+    push.json (status "pushed", rollback id) and the journal's `push` event. The previous offsets
     kept are plan.old, the ones read before the write, never the reply's `previous` (a
     rollback writes them back). A reply whose `previous` is not plan.old, or a read-back
     that is not plan.new (both to OFFSET_MATCH_TOLERANCE, the tolerance a resume
@@ -317,6 +320,12 @@ async def execute_push(robot: RobotAdapter, plan: PushPlan, run_dir: Path, addre
         journal.append(PushIntent(intent))
     reported_previous, rollback_id = await robot.set_offsets(plan.new)
     reported_previous = np.asarray(reported_previous, float)
+    # the write was answered: its rollback id kept before the read-back, which may fail
+    write_json_atomic(run_dir / PUSH_FILE,
+                      {"controller": address, "status": "intent",
+                       **dataclasses.replace(intent, rollback_id=str(rollback_id)).to_dict()})
+    if journal is not None:
+        journal.append(PushWritten(str(rollback_id), _now()))
     held = np.asarray(await robot.get_offsets(), float)
     record = PushRecord(
         previous=plan.old.copy(), new=plan.new.copy(), rollback_id=str(rollback_id),
@@ -379,9 +388,31 @@ def mismatch_line(record: PushRecord, address: str, run_dir: Path,
             f"status --robot {address})")
 
 
-def cut_short_line(exc: Exception, run_dir: Path, address: str) -> str:
+def written_rollback_id(journal: Journal) -> str | None:
+    """The rollback id of a write the controller answered whose read-back never came (the
+    journal's last push event is `push_written`), else None."""
+    last = journal.last_event(PushIntent, PushWritten, Pushed)
+    return last.rollback_id if isinstance(last, PushWritten) else None
+
+
+def read_back_lost_line(rollback_id: str, run_dir: Path, address: str) -> str:
+    """What a push whose write the controller answered (`rollback_id`) but whose read-back
+    never came leaves: offsets nobody checked; the next commands."""
+    return (f"the controller at {address} took the write (rollback id {rollback_id}) but "
+            "reading its offsets back failed: it holds the new offsets or others, NOT "
+            f"checked ({run_dir}/{PUSH_FILE} keeps the previous ones and the rollback id); "
+            f"see which with: hostpc status --robot {address}; restore the previous ones "
+            f"with: hostpc rollback --run {run_dir}")
+
+
+def cut_short_line(exc: Exception, run_dir: Path, address: str,
+                   rollback_id: str | None = None) -> str:
     """The line of a push whose answer never came (`exc`: link lost, no reply, a reply
-    that broke the protocol): the controller may hold either offsets; the next commands."""
+    that broke the protocol): the controller may hold either offsets; the next commands.
+    rollback_id: the write's (`written_rollback_id`), when it was answered and only the
+    read-back failed."""
+    if rollback_id is not None:
+        return f"{exc}; {read_back_lost_line(rollback_id, run_dir, address)}"
     return (f"{exc}; the push was cut short: the controller at {address} may hold the new "
             f"offsets or the previous ones ({run_dir}/{PUSH_FILE} keeps both); see which with: "
             f"hostpc status --robot {address}; restore the previous ones either way with: "

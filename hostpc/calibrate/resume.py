@@ -38,6 +38,7 @@ from hostpc.calibrate.push import (
     intent_outcome,
     mismatch_line,
     same_offsets,
+    written_rollback_id,
 )
 from hostpc.calibrate.refusals import stopped
 from hostpc.calibrate.run_result import RunResult
@@ -256,15 +257,17 @@ def settle_push_intent(journal: Journal, run_dir: Path, address: str, progress: 
                        offsets_now: np.ndarray) -> None:
     """A `push_intent` without its result (the run stopped while writing the offsets):
     the controller's offsets say whether the write happened. Written: journal it as the
-    push (no rollback id; `hostpc rollback --run` writes the previous offsets). Not
-    written: note it and drop the intent's push.json."""
+    push (with the write's rollback id if the controller answered it and only the
+    read-back was lost, `push_written`; else none, and `hostpc rollback --run` writes the
+    previous offsets). Not written: note it and drop the intent's push.json."""
     last = journal.last_event(PushIntent, Pushed)
     if not isinstance(last, PushIntent):
         return
     latest = journal.last_event("push_intent", "push", "push_refused")
     if latest is not None and latest.get("event") == "push_refused":
         return  # the controller refused the write (its own limit): nothing was cut short
-    record = last.record
+    written = written_rollback_id(journal)  # the write answered, its read-back lost
+    record = dataclasses.replace(last.record, rollback_id=written)
     outcome = intent_outcome(record, offsets_now)
     if outcome == "pushed":
         journal.append(Pushed(record, recovered=True))
@@ -273,7 +276,8 @@ def settle_push_intent(journal: Journal, run_dir: Path, address: str, progress: 
                            **record.to_dict(), "recovered": True})
         progress.message("the push cut short in the last session reached the "
                          "controller (it has the intended offsets): recorded as "
-                         "pushed, without a rollback id")
+                         "pushed, " + ("without a rollback id" if written is None
+                                       else f"rollback id {written}"))
     elif outcome == "not_pushed":
         journal.append(Note("the push cut short in the last session did not reach the "
                             "controller"))

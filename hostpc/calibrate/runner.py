@@ -41,6 +41,7 @@ from hostpc.calibrate.journal_events import (
     Verified,
     VerifyRoundLost,
 )
+from hostpc.calibrate.measured_under import measured_under_field
 from hostpc.calibrate.more_poses import more_poses_message, more_poses_reason
 from hostpc.calibrate.outcome import parse_required_joints, restored_to_reference
 from hostpc.calibrate.outcome_files import run_outcome
@@ -51,7 +52,9 @@ from hostpc.calibrate.push import (
     execute_push,
     export_offsets,
     plan_push,
+    read_back_lost_line,
     same_offsets,
+    written_rollback_id,
 )
 from hostpc.calibrate.refusals import (
     MAX_POSE_ATTEMPTS,
@@ -210,6 +213,10 @@ class Runner:
                         "new offsets, NOT verified, and ended with the run; a resume "
                         "restarts it with its initial offsets and pushes again: "
                         f"{resume} --push")
+            written = written_rollback_id(self.journal)
+            if written is not None:  # answered, but its read-back never came
+                return (f"{read_back_lost_line(written, self.run_dir, self.robot_info.address)}"
+                        f"; settle and verify it with: {resume}")
             return (f"a push was cut short: the controller may hold the new offsets, NOT "
                     f"verified; settle and verify it with: {resume} (undo: hostpc rollback "
                     f"--run {self.run_dir})")
@@ -366,7 +373,9 @@ class Runner:
         if separate:  # --separate A,B: the poses that tell them apart (separate.py)
             q_now, result, dataset = await self._separate(method, state, plan, settings,
                                                           result, dataset, separate, q_now)
-        write_json_atomic(self.run_dir / "fit.json", result.to_dict())
+        write_json_atomic(self.run_dir / "fit.json",  # with the offsets measured under
+                          {**result.to_dict(), **measured_under_field(
+                              self.run_dir / "dataset.json")})
         status = "converged" if result.converged else "NOT converged"
         progress.message(f"fit: RMS {result.rms * 1e3:.4f} mm, chi2/dof "
                          f"{result.chi2_dof:.3f}, {status}")

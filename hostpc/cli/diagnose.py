@@ -10,6 +10,7 @@ of hostpc ends as exit 2 here, so 1 always means "ran, and the model failed".
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -78,6 +79,26 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(str(exc)) from exc
 
 
+def _units_first(diagnosis: Diagnosis, path: str) -> Diagnosis:
+    """The diagnosis with a unit slip of its dataset (hostpc.cli.units_hint, as `hostpc
+    import` and `hostpc fit` name it) as the first advice: numbers read in the wrong unit
+    look like an effect (radians read as degrees: an encoder scale), so before any effect
+    is added, the units are checked."""
+    from hostpc.cli.units_hint import declared_angle_unit, declared_length_unit, slip_hint
+    from hostpc.dataset.kind_registry import csv_row_kinds
+
+    problem = diagnosis.check.fit.problem
+    if problem.dataset.method not in csv_row_kinds():  # no world-frame points: no file read
+        return diagnosis
+    slip = slip_hint(problem.dataset, problem.context.chain, declared_length_unit(path),
+                     declared_angle_unit(path))
+    if slip is None:
+        return diagnosis
+    first = (f"Check the units first: {slip}; the effects advised below may only fit "
+             "numbers read in the wrong unit.")
+    return dataclasses.replace(diagnosis, advice=(first, *diagnosis.advice))
+
+
 def _run(args: argparse.Namespace) -> int:
     from hostpc.diagnostics import DEFAULT_ALPHA, diagnose
 
@@ -99,6 +120,7 @@ def _run(args: argparse.Namespace) -> int:
         cv_folds=args.cv_folds, loss=args.loss, source=args.dataset,
         data_options=robot_options(args),
     )
+    diagnosis = _units_first(diagnosis, args.dataset)
     if args.report:
         from hostpc.report import write_report
 

@@ -129,6 +129,9 @@ def run(args: argparse.Namespace) -> int:
                 for k, entry in enumerate(document["parameters"].values()):
                     entry[column] = float(values[k]) if math.isfinite(values[k]) else None
         document["model_adequacy"] = adequacy.to_json()
+        from hostpc.calibrate.measured_under import measured_under_field
+
+        document.update(measured_under_field(args.dataset))  # a run folder's: for push
         sys.stdout.write(json.dumps(document, indent=2, allow_nan=False))
         sys.stdout.write("\n")
     else:

@@ -9,7 +9,10 @@ hostpc.calibrate.offline_push): joints the fit held are left unchanged; the push
 (exit 5, as `hostpc calibrate`; 4 is a controller's refusal) if the fit did not converge,
 does not explain its data, a correction exceeds --max-correction degrees, the controller is
 another robot than the fit's dataset, or it already carries this fit (the ledger
-FIT.json.pushes.jsonl beside the fit, hostpc.calibrate.offline_push), unless --force.
+FIT.json.pushes.jsonl beside the fit, hostpc.calibrate.offline_push), or it holds other
+offsets than the fit's dataset was measured under (FIT.json `measured_under`, recorded for
+a run folder's dataset: hostpc.calibrate.measured_under; a fit without it is pushed with
+one `not checked:` line), unless --force.
 The intent is written to DIR/push.json before the controller is, so
 `hostpc rollback --run DIR` can always undo it; a push cut short (exit 3 link lost, 4 no
 reply) names `hostpc status --robot` and that rollback. The controller's offsets are read
@@ -49,6 +52,7 @@ from hostpc.calibrate.push import (
     execute_push,
     plan_push,
     same_offsets,
+    written_rollback_id,
 )
 from hostpc.calibrate.summary import EXIT_PUSH_REFUSED
 from hostpc.errors import (
@@ -124,11 +128,14 @@ def run(args: argparse.Namespace) -> int:
         "joints": [row.to_dict() for row in plan.joints()],
         "run_dir": None if args.dry_run else str(run_dir),
         "rollback_id": None if record is None else record.rollback_id,
+        "measured_under": (None if saved.measured_under is None
+                           else saved.measured_under.to_json()),
+        "not_checked": UNCHECKED if saved.measured_under is None else None,
     }
     if args.json:
         print(json.dumps(document, indent=2, default=float))
     else:
-        _print_plan(plan, args, address, run_dir, record)
+        _print_plan(plan, args, address, run_dir, record, saved)
     if plan.refused:
         raise PushRefused(f"push refused: {plan.refused}")
     return 0
@@ -155,8 +162,14 @@ def _refuse_if_not_converged(fit: str) -> None:
         "anyway)")
 
 
+UNCHECKED = ("not checked: the fit records no controller offsets its dataset was measured "
+             "under (the dataset lay outside a run folder), so this push cannot tell whether "
+             "the controller already carries its corrections")
+"""Said (one line) by a push of such a fit; a fit of a run folder's dataset records them."""
+
+
 def _print_plan(plan: PushPlan, args: argparse.Namespace, address: RobotAddress,
-                run_dir: Path, record: Any) -> None:
+                run_dir: Path, record: Any, saved: SavedFit) -> None:
     print(f"{'joint':>5s} {'old deg':>11s} {'correction':>11s} {'sigma':>9s} {'new deg':>11s}")
     for j in range(plan.old.size):
         sigma = (f"{math.degrees(plan.sigma[j]):9.5f}" if np.isfinite(plan.sigma[j])
@@ -167,6 +180,8 @@ def _print_plan(plan: PushPlan, args: argparse.Namespace, address: RobotAddress,
               f"{math.degrees(plan.new[j]):11.5f}{note}")
     if plan.refused:
         return
+    if saved.measured_under is None:
+        print(UNCHECKED)
     if args.dry_run:
         print(f"dry run: nothing written to {address}")
     else:
@@ -206,7 +221,8 @@ async def _push(args: argparse.Namespace, saved: SavedFit, address: RobotAddress
             _record_held(args.fit, entry, exc.record.held)
             raise
         except (ConnectionFailed, RequestTimeout, ProtocolViolation) as exc:
-            raise type(exc)(cut_short_line(exc, run_dir, str(address))) from exc
+            raise type(exc)(cut_short_line(exc, run_dir, str(address),
+                                           written_rollback_id(journal))) from exc
         return plan, record
     finally:
         await robot.close()
@@ -238,6 +254,41 @@ async def _check_same_robot_and_not_pushed(robot: RobotAdapter, saved: SavedFit,
             f"{entry.controller or '?'} at {entry.time or '?'}, "
             f"{ledger_path(fit)}); pushing again would double the corrections; roll back with "
             f"`hostpc rollback --run {entry.run_dir or 'DIR'}` or use --force")
+    _refuse_if_measured_under_other_offsets(saved, fit, address, offsets)
+
+
+def _refuse_if_measured_under_other_offsets(saved: SavedFit, fit: str, address: RobotAddress,
+                                            offsets: np.ndarray) -> None:
+    """PushRefused (exit 5, unless --force) if FIT.json records the controller's offsets
+    its dataset was measured under (a run folder's dataset, measured_under) and the
+    controller holds other ones now (`offsets`, (n,) rad): the fit's corrections are
+    relative to those; when it holds those plus this fit's corrections (the run's own
+    push), pushing them again would double them."""
+    measured = saved.measured_under
+    if measured is None:
+        return
+    then = np.asarray(measured.zero_offsets, float)
+    if same_offsets(then, offsets):
+        return
+    run = measured.run
+    if then.shape == offsets.shape and same_offsets(
+            plan_push(saved, then, force=True).new, offsets):
+        raise PushRefused(
+            f"push refused: the controller at {address} already carries this fit's "
+            f"corrections: its offsets are the ones {run}/{measured.dataset} was measured "
+            f"under plus this fit's (its run pushed them); pushing again would double them; "
+            f"nothing to push (to undo that push: hostpc rollback --run {run})")
+    labels = [f"J{j + 1}" for j in range(offsets.size)]
+    changed = ", ".join(
+        f"{labels[j]} {math.degrees(then[j]):+.5f} -> {math.degrees(offsets[j]):+.5f}"
+        for j in range(min(then.size, offsets.size))
+        if not same_offsets(then[j:j + 1], offsets[j:j + 1]))
+    raise PushRefused(
+        f"push refused: {fit} was measured under other zero offsets than the controller at "
+        f"{address} holds now ({changed or f'{then.size} offsets for {offsets.size} joints'}"
+        f" deg; {run}/{measured.dataset}): its corrections are relative to those; measure "
+        f"again with: hostpc calibrate --robot {address} (or --force to add them to the "
+        "offsets it holds)")
 
 
 DIAGNOSE = "hostpc diagnose "

@@ -169,7 +169,8 @@ async def _rollback(address: RobotAddress, args: argparse.Namespace, rollback_id
         if push is not None:
             now = np.asarray(await robot.get_offsets(), float)
             check_joint_count(push, now.size, args.run, str(address))
-            _warn_later_push(now, push.record)
+            if push.status != "intent":  # an intent's read-back never came: unknown
+                _warn_later_push(now, push.record)
             return await rollback_run(robot, push.record, now)
         return await rollback(robot, rollback_id, previous)
     finally:

@@ -74,14 +74,25 @@ def length_unit_hint(dataset: Dataset, declared: str, chain: Chain | None = None
         return f"{span}: metres? set units.length m"
     if declared == "m" and lo >= FAR_M:
         return f"{span}: millimetres? set units.length mm"
+    slip = None if chain is None else slip_hint(dataset, chain, declared, declared_angle)
+    return slip or f"{check} (the positions span {lo:.3g}-{hi:.3g})"
+
+
+def slip_hint(dataset: Dataset, chain: Chain, declared: str = "m",
+              declared_angle: str = "rad") -> str | None:
+    """The unit slip (``unit_slip``) of a dataset whose kind's positions are world-frame
+    points (the kinds hostpc import writes), read in its declared units, in words with the
+    next step; None when there is none (or the kind's positions are not such points)."""
     from hostpc.dataset.kind_registry import csv_row_kinds
 
-    if chain is not None and dataset.method in csv_row_kinds():
-        slip = unit_slip(chain, dataset.samples.q, p, declared, declared_angle)
-        if slip is not None:
-            return (f"{unit_slip_sentence(slip, 'units.length', 'units.angle', chain.name)} "
-                    "(re-import with the units the numbers are in, or set the file's units)")
-    return f"{check} (the positions span {lo:.3g}-{hi:.3g})"
+    p = dataset.samples.p
+    if p is None or dataset.method not in csv_row_kinds():
+        return None
+    slip = unit_slip(chain, dataset.samples.q, p, declared, declared_angle)
+    if slip is None:
+        return None
+    return (f"{unit_slip_sentence(slip, 'units.length', 'units.angle', chain.name)} "
+            "(re-import with the units the numbers are in, or set the file's units)")
 
 
 SPREAD_FACTOR = 10.0

@@ -19,6 +19,7 @@ from hostpc.diagnostics.detectable import DetectableSize
 from hostpc.diagnostics.interactions import Interaction
 from hostpc.diagnostics.outliers import Outlier
 from hostpc.diagnostics.residual_analysis import ResidualAnalysis
+from hostpc.diagnostics.sample_names import whole_poses
 from hostpc.diagnostics.separation import PairTest
 from hostpc.fitting import FitResult
 from hostpc.json_object import JsonObject
@@ -272,6 +273,10 @@ class Diagnosis:
             "adequate": a.adequate,
             "reasons": list(a.reasons),
             "outliers": [o.to_dict() for o in check.outliers],
+            "outlier_poses": [  # whole poses among them, as the text groups them
+                {"pose": pose, "samples": members} for pose, members in whole_poses(
+                    [o.sample for o in check.outliers],
+                    fit.problem.dataset.samples).items()],
             "rms": a.rms,
             "max": a.max,
             "cv_rms": finite(a.cv_rms),

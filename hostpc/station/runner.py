@@ -112,14 +112,14 @@ def calibrate_command(config: StationConfig, run_dir: Path, serial: str,
     return [*CALIBRATE, *calibrate_options(config, run_dir, scenario_file)]
 
 
-def push_in_flight(run_dir: Path) -> bool:
-    """True if the run's journal holds a push (or a push intent) not followed by the run's
-    result or a rollback: the controller may hold offsets nobody verified yet. Read only
-    (the child may be appending: an unfinished last line is skipped, never cut)."""
+def _last_push_event(run_dir: Path) -> JsonObject | None:
+    """The run journal's last line among push_intent, push, result and rollback (None if
+    none). Read only (the child may be appending: an unfinished last line is skipped,
+    never cut)."""
     try:
         data = (run_dir / JOURNAL_FILE).read_bytes()
     except OSError:
-        return False
+        return None
     last = None
     for raw in data.splitlines(keepends=True):
         if not raw.endswith(b"\n") or b'"event":"sample"' in raw:
@@ -128,8 +128,23 @@ def push_in_flight(run_dir: Path) -> bool:
             obj = json.loads(raw)
             event = obj.get("event") if isinstance(obj, dict) else None
             if event in ("push_intent", "push", "result", "rollback"):
-                last = event
-    return last in ("push_intent", "push")
+                last = obj
+    return last
+
+
+def push_in_flight(run_dir: Path) -> bool:
+    """True if the run's journal holds a push (or a push intent) not followed by the run's
+    result or a rollback: the controller may hold offsets nobody verified yet."""
+    last = _last_push_event(run_dir)
+    return last is not None and last.get("event") in ("push_intent", "push")
+
+
+def push_not_stored(run_dir: Path) -> bool:
+    """True if the push in flight (`push_in_flight`) is one the controller did not store as
+    asked (its `push` event has `held_offsets`, the offsets read back: hostpc.calibrate.
+    push.PushMismatch): a resume fails on it again, only a rollback settles it."""
+    last = _last_push_event(run_dir)
+    return last is not None and last.get("event") == "push" and "held_offsets" in last
 
 
 def error_line(line: str) -> str | None:

@@ -70,6 +70,7 @@ from hostpc.station.runner import (
     ChildRun,
     calibrate_command,
     push_in_flight,
+    push_not_stored,
     resume_text,
     start_child,
 )
@@ -212,7 +213,8 @@ class Station:
             return
         pending = self._pending_run()
         if pending is not None:
-            if pending.serial == serial:  # the same robot again: verify its push first
+            if pending.serial == serial and not self._needs_rollback(Path(pending.run_dir)):
+                # the same robot again: verify its push first
                 run_log.warning("START %s: resuming its run %s first (its pushed offsets "
                                 "are not verified)", serial, pending.run_dir)
                 current = dataclasses.replace(pending, attempts=0)
@@ -220,7 +222,7 @@ class Station:
                 await self._execute(current, resume=True)
                 return
             reason = (f"start of {serial} refused: the run of {pending.serial} pushed "
-                      "offsets that are NOT verified; "
+                      f"offsets that are NOT {self._unsettled(Path(pending.run_dir))}; "
                       + self._pending_text(pending.serial, Path(pending.run_dir)))
             self.status.clear_run()
             self.status.serial, self.status.model = serial, model
@@ -260,8 +262,25 @@ class Station:
         self.current_file.unlink(missing_ok=True)
         return None
 
+    def _needs_rollback(self, run_dir: Path) -> bool:
+        """True if the run's push in flight is one the controller did not store as asked
+        (a real controller: `push_not_stored`): no resume settles it, only a rollback, so
+        the station resumes it never and says so (docs/station.md)."""
+        return self.config.robot != "sim" and push_not_stored(run_dir)
+
+    def _unsettled(self, run_dir: Path) -> str:
+        """What is wrong with a pending run's pushed offsets, in a few words."""
+        return ("stored as asked (push failed)" if self._needs_rollback(run_dir)
+                else "verified")
+
     def _pending_text(self, serial: str, run_dir: Path) -> str:
         """What settles a run pending with pushed offsets not verified."""
+        if self._needs_rollback(run_dir):
+            return ("no resume settles it (the controller holds other offsets than the run "
+                    "pushed: a resume meets them again), and the station starts no robot "
+                    "until it is rolled back: hostpc rollback --run "
+                    f"{run_dir} --db {self.config.database_url()}, then START {serial} "
+                    "again")
         undo = ("" if self.config.robot == "sim" else
                 f"; undo it: hostpc rollback --run {run_dir} --db {self.config.database_url()}")
         return (f"the station starts no other robot until it is settled: START {serial} "
@@ -274,6 +293,14 @@ class Station:
         except (OSError, ValueError, KeyError, TypeError, AttributeError):
             logger.error("%s is damaged: the interrupted run is not resumed", self.current_file)
             self.current_file.unlink(missing_ok=True)
+            return
+        if self._needs_rollback(Path(current.run_dir)):  # a resume would fail on it again
+            self._refusal_logged = current.run_dir
+            run_log.error("the run of %s in %s is not resumed: its pushed offsets are NOT "
+                          "%s; %s", current.serial, current.run_dir,
+                          self._unsettled(Path(current.run_dir)),
+                          self._pending_text(current.serial, Path(current.run_dir)))
+            self._serve_unacknowledged()
             return
         logger.info("resuming the interrupted run of %s in %s", current.serial,
                     current.run_dir)
@@ -322,7 +349,8 @@ class Station:
             if self._stopping.is_set():
                 return code
             if (code == EXIT_CONNECTION or in_flight) and run_dir.exists() \
-                    and current.attempts < self.config.resume_attempts:
+                    and current.attempts < self.config.resume_attempts \
+                    and not self._needs_rollback(run_dir):  # a resume fails on it again
                 current = dataclasses.replace(current, attempts=current.attempts + 1)
                 self._write_current(current)
                 why = ("link lost" if not in_flight else
@@ -411,8 +439,10 @@ class Station:
                               and record.report_path else "")
         self._finish(outcome)
         if pending:
-            run_log.error("run %s ended with pushed offsets not verified: current.json kept "
-                          "(the next station start resumes it); %s", run_dir,
+            run_log.error("run %s ended with pushed offsets not %s: current.json kept (%s); "
+                          "%s", run_dir, self._unsettled(run_dir),
+                          "until it is rolled back" if self._needs_rollback(run_dir)
+                          else "the next station start resumes it",
                           self._pending_text(serial, run_dir))
         else:
             self.current_file.unlink(missing_ok=True)
@@ -476,7 +506,8 @@ class Station:
         """The station's own next step of a run that did not PASS (empty: calibrate's
         reason says it): its commands as a station's technician types them."""
         if pending:
-            return f"pushed offsets NOT verified; {self._pending_text(serial, run_dir)}"
+            return (f"pushed offsets NOT {self._unsettled(run_dir)}; "
+                    f"{self._pending_text(serial, run_dir)}")
         if verdict == "FAIL":
             if self.config.robot == "sim":
                 return ("the simulated controller ended with the run (nothing to roll "

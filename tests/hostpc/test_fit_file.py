@@ -118,6 +118,12 @@ DAMAGE = [
     (("effects",), ["joint_offsets", "tool"], "parameters.target.x: effect 'target' is not"),
     (("parameters",), {}, "parameters: expected at least one entry"),
     (("parameters",), [], "parameters: expected an object"),
+    (("measured_under",), {"run": "/r1", "dataset": "dataset.json", "zero_offsets": ["0"]},
+     "measured_under.zero_offsets[0]: expected a finite number"),
+    (("measured_under",), {"run": "/r1", "dataset": "dataset.json", "zero_offsets": [7.0]},
+     "measured_under.zero_offsets[0]: input should be less than or equal to 3.14"),
+    (("measured_under",), {"run": "/r1", "zero_offsets": [0.0]},
+     "measured_under.dataset: required field missing"),
 ]
 
 

@@ -53,6 +53,7 @@ LINES = [  # as `hostpc calibrate` writes them (a refused run, resumed with --fo
     '{"event":"more_poses","reason":"chi2/dof 4.1 above its band","n":20}',
     '{"event":"push_intent","previous_offsets":[0.0,0.0,0.0,0.0],"new_offsets":' + OFFSETS
     + ',"pushed":[true,true,true,false],"time":"2026-11-28T09:08:50.208+00:00"}',
+    '{"event":"push_written","rollback_id":"rb-1","time":"2026-11-28T09:08:50.230+00:00"}',
     '{"event":"push","rollback_id":"rb-1","previous_offsets":[0.0,0.0,0.0,0.0],'
     '"new_offsets":' + OFFSETS + ',"pushed":[true,true,true,false],'
     '"time":"2026-11-28T09:08:50.250+00:00"}',

@@ -137,6 +137,10 @@ def test_diagnose_names_the_pose_whose_every_sample_is_an_outlier(
     assert ("are outliers, all of pose #11 (samples #33-#35, every sample of it): check that "
             "pose's measurement, or fit with --loss cauchy") in text
     assert "; pose #11 (samples #33-#35, every sample of it); left out below" in text
+    main(["diagnose", str(path), "--cv-folds", "0", "--json"])  # the same grouping
+    report = json.loads(capsys.readouterr().out)
+    assert report["outlier_poses"] == [{"pose": 11, "samples": [33, 34, 35]}]
+    assert sorted(o["sample"] for o in report["outliers"]) == [33, 34, 35]  # kept as were
 
     document = json.loads(path.read_text())
     for sample in document["samples"][3 * BAD_POSE:3 * BAD_POSE + 3]:
@@ -148,3 +152,5 @@ def test_diagnose_names_the_pose_whose_every_sample_is_an_outlier(
     text = capsys.readouterr().out
     assert "Sample #34 (" in text and "is an outlier: check that measurement" in text
     assert "every sample of it" not in text
+    main(["diagnose", str(one), "--cv-folds", "0", "--json"])
+    assert json.loads(capsys.readouterr().out)["outlier_poses"] == []

@@ -169,3 +169,24 @@ def test_fit_says_the_slip(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     out = capsys.readouterr().out
     assert "is far below its band" in out.splitlines()[1]
     assert "warning: the fitted geometry is implausible: geometry.a2" in out
+
+
+def test_diagnose_names_the_unit_slip_before_any_effect(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Radians imported as degrees look like an encoder scale to the diagnosis: its first
+    advice names the unit slip, as `hostpc import` and `hostpc fit` do (text and --json);
+    correct units get no such advice."""
+    csv = _tracker_csv(tmp_path / "tracker.csv")
+    deg, si = tmp_path / "deg.json", tmp_path / "si.json"
+    _import(capsys, csv, deg, "--sigma", "2e-5", "--joint-unit", "deg")
+    _import(capsys, csv, si, "--sigma", "2e-5")
+    main(["diagnose", str(deg), "--cv-folds", "0", "--json"])
+    advice = json.loads(capsys.readouterr().out)["advice"]
+    assert advice[0].startswith("Check the units first: the measured points spread"), advice
+    assert "every revolute joint spans under" in advice[0] and "(rad read as deg?)" in advice[0]
+    assert "encoder_scale" not in advice[0]
+    main(["diagnose", str(deg), "--cv-folds", "0"])
+    text = capsys.readouterr().out
+    assert text.split("advice:\n", 1)[1].startswith("  - Check the units first:"), text
+    main(["diagnose", str(si), "--cv-folds", "0", "--json"])
+    assert not any("Check the units" in a for a in json.loads(capsys.readouterr().out)["advice"])

@@ -21,12 +21,15 @@ from protocol.framing import FrameDecoder, encode_frame
 
 TOKEN = "zerocal-sim"
 N_JOINTS = 6
-MODES = ("ok", "lie_prev", "clamp", "ignore", "slow_set", "drop_set_once", "wrongid")
+MODES = ("ok", "lie_prev", "clamp", "ignore", "slow_set", "drop_set_once", "wrongid",
+         "clamp_no_readback")
 """ok: honest; lie_prev: stores the offsets but names 0.5 rad as the ones it replaced, and
 knows no rollback id; clamp: stores them clamped to +-CLAMP_RAD and says so in its reply;
 ignore: stores nothing, replies as if it had; slow_set: never answers set_offsets;
 drop_set_once: stores the first set_offsets, then closes the connection without a reply;
-wrongid: answers get_state and get_offsets with a reply_to 100 too high."""
+wrongid: answers get_state and get_offsets with a reply_to 100 too high;
+clamp_no_readback: as clamp, and never answers the first get_offsets after its first
+set_offsets (the push's read-back); it undoes a write by its rollback id."""
 CLAMP_RAD = 0.001
 
 Handler = Callable[[asyncio.StreamReader, asyncio.StreamWriter], Awaitable[None]]
@@ -131,6 +134,10 @@ class HostileController(ThreadServer):
                          "digital_inputs": [False] * 8, "digital_outputs": [False] * 8,
                          "camera": {}, "authenticated": True}
             elif kind == "get_offsets":
+                if self.mode == "clamp_no_readback" and len(self.replaced) == 1 \
+                        and not self._dropped:
+                    self._dropped = True
+                    await asyncio.sleep(3600)
                 reply = {"kind": "offsets", "reply_to": i, "offsets": self.offsets}
             elif kind == "set_offsets":
                 answer = await self._set_offsets(message["offsets"], i)
@@ -150,7 +157,7 @@ class HostileController(ThreadServer):
     async def _set_offsets(self, requested: list[float], i: int) -> dict[str, Any] | None:
         previous = list(self.offsets)
         reported = previous
-        if self.mode == "clamp":
+        if self.mode in ("clamp", "clamp_no_readback"):
             self.offsets = [max(-CLAMP_RAD, min(CLAMP_RAD, v)) for v in requested]
         elif self.mode == "lie_prev":
             self.offsets, reported = list(requested), [0.5] * N_JOINTS
@@ -180,12 +187,17 @@ class HostileController(ThreadServer):
 class ClampingProxy(ThreadServer):
     """Forwards every connection to `upstream` (host, port), clamping the offsets of each
     `set_offsets` request to +-CLAMP_RAD on the way: the controller behind it stores the
-    clamped offsets and reports them truthfully."""
+    clamped offsets and reports them truthfully. With `drop_read_back`, it clamps nothing
+    and instead swallows the first `get_offsets` after the first `set_offsets` (the push's
+    read-back never reaches the controller, so it never answers)."""
 
-    def __init__(self, upstream: tuple[str, int]) -> None:
+    def __init__(self, upstream: tuple[str, int], drop_read_back: bool = False) -> None:
         super().__init__(self._session)
         self.upstream = upstream
         self.clamped = 0
+        self.drop_read_back = drop_read_back
+        self.dropped = 0
+        self._written = False
 
     async def _session(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         up_reader, up_writer = await asyncio.open_connection(*self.upstream)
@@ -193,10 +205,16 @@ class ClampingProxy(ThreadServer):
         try:
             decoder = FrameDecoder()
             while (message := await read_message(reader, decoder)) is not None:
-                if message.get("kind") == "set_offsets":
+                if message.get("kind") == "set_offsets" and self.drop_read_back:
+                    self._written = True
+                elif message.get("kind") == "set_offsets":
                     message["offsets"] = [max(-CLAMP_RAD, min(CLAMP_RAD, v))
                                           for v in message["offsets"]]
                     self.clamped += 1
+                elif message.get("kind") == "get_offsets" and self._written \
+                        and not self.dropped:
+                    self.dropped += 1
+                    continue  # never forwarded: the controller never answers it
                 up_writer.write(frame(message))
                 await up_writer.drain()
         finally:

@@ -64,7 +64,7 @@ def test_push_offline_fit_guard_rail_dry_run_push_and_rollback(
         push = json.loads((out / "push.json").read_text())
         assert push["status"] == "pushed" and push["previous_offsets"] == before.tolist()
         assert [e["event"] for e in map(json.loads, (out / "journal.jsonl").read_text()
-                                        .splitlines())] == ["push_intent", "push"]
+                                        .splitlines())] == ["push_intent", "push_written", "push"]
         # the same fit again: the ledger beside the fit says this controller carries it
         code, stdout, stderr = run_cli(capsys, "push", str(path), "--robot", address,
                                        "--token", TOKEN, "--out", str(tmp_path / "again"))
@@ -203,3 +203,57 @@ def test_the_units_hint_asks_to_check_a_unit_the_numbers_do_not_contradict(
     hint = length_unit_hint(load_dataset(dataset), "m")
     assert re.fullmatch(r"units.length is m: check that the numbers are in m \(the positions "
                         r"span 1\.4\d-1\.8\d\)", hint), hint
+
+
+def test_a_run_folders_fit_pushed_after_the_runs_own_push_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], fit_file) -> None:
+    """`calibrate` pushes r1's correction; `fit r1/dataset.json --json > f.json` then
+    `push f.json` (and a push of r1's own fit.json) would add it again: FIT.json records
+    the offsets r1 measured under, and the push refuses (exit 5, one line, nothing written)
+    because the controller holds them plus the fit's corrections. Rolled back, the
+    controller holds the measured-under offsets again and the fit may be pushed. A fit of a
+    dataset outside a run folder says it cannot check this."""
+    from tests.integration.test_calibrate_sim import truth_rig_file
+
+    rig = truth_rig_file(sim_scenario(), tmp_path / "rig.json")
+    run = tmp_path / "r1"
+    with SimulatedController(sim_scenario(), tmp_path / "stub") as sim:
+        address = f"{sim.address.host}:{sim.address.port}"
+        before = _offsets(sim)
+        code, _, stderr = run_cli(
+            capsys, "calibrate", "--robot", address, "--token", TOKEN, "--rig", str(rig),
+            "--known", "target", "--poses", "16", "--verify-poses", "0", "--no-report",
+            "--out", str(run))
+        assert code == 0, stderr
+        pushed = _offsets(sim)
+        assert not np.array_equal(pushed, before)
+        code, stdout, stderr = run_cli(capsys, "fit", str(run / "dataset.json"), "--json")
+        assert code == 0, stderr
+        document = json.loads(stdout)
+        assert document["measured_under"] == {"run": str(run.resolve()),
+                                              "dataset": "dataset.json",
+                                              "zero_offsets": before.tolist()}
+        refit = tmp_path / "elsewhere" / "f.json"
+        refit.parent.mkdir()
+        refit.write_text(stdout)
+        for fit_path in (refit, run / "fit.json"):
+            code, stdout, stderr = run_cli(capsys, "push", str(fit_path), "--robot", address,
+                                           "--token", TOKEN, "--out", str(tmp_path / "p"))
+            assert code == 5, stderr
+            (line,) = [text for text in stderr.strip().splitlines() if "warning" not in text]
+            assert "already carries this fit's corrections" in line, line
+            assert f"hostpc rollback --run {run.resolve()}" in line, line
+            assert np.array_equal(_offsets(sim), pushed) and not (tmp_path / "p").exists()
+        code, _, stderr = run_cli(capsys, "rollback", "--run", str(run), "--token", TOKEN)
+        assert code == 0, stderr
+        code, stdout, stderr = run_cli(capsys, "push", str(refit), "--robot", address,
+                                       "--token", TOKEN, "--dry-run")
+        assert code == 0, stderr
+        assert "not checked" not in stdout
+        # a fit from outside a run folder: the push says it cannot check, in one line
+        path, _ = fit_file
+        code, stdout, stderr = run_cli(capsys, "push", str(path), "--robot", address,
+                                       "--token", TOKEN, "--dry-run")
+        assert code == 0, stderr
+        assert len([text for text in stdout.splitlines() if text.startswith("not checked:")]
+                   ) == 1, stdout

@@ -84,7 +84,7 @@ def test_push_keeps_the_offsets_it_read_and_rollback_restores_them(
         assert record["previous_offsets"] == ZERO and record["new_offsets"] == pushed
         assert record["reported_previous_offsets"] == [0.5] * 6
         events = [json.loads(text) for text in (out / "journal.jsonl").read_text().splitlines()]
-        assert [e["event"] for e in events] == ["push_intent", "push"]
+        assert [e["event"] for e in events] == ["push_intent", "push_written", "push"]
         assert events[-1]["previous_offsets"] == ZERO
         code, stdout, stderr = run_cli(capsys, *_next_command(line, "restore them"))
         assert code == 0, stderr
@@ -173,6 +173,34 @@ def test_a_push_cut_short_names_the_next_commands_and_they_work(
         assert code == 0, stderr
         assert controller.offsets == ZERO
         assert ("nothing to roll back" if mode == "slow_set" else "rolled back") in stdout
+
+
+def test_a_read_back_lost_after_a_good_write_keeps_the_rollback_id(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], fit_file: Path) -> None:
+    """The controller answers the write (rollback id rb-1) but stores the offsets clamped
+    and never answers the read-back (exit 4): push.json and the journal keep the id, the
+    line names it and `hostpc rollback --run DIR`, which undoes the write by that id (the
+    controller holds neither the new nor the previous offsets, so without the id nothing
+    could tell what to restore)."""
+    out = tmp_path / "push"
+    with HostileController("clamp_no_readback") as controller:
+        code, _, stderr = run_cli(capsys, "push", str(fit_file), "--robot",
+                                  controller.address, "--out", str(out), "--timeout", "1")
+        assert code == 4, stderr
+        line = _line(stderr)
+        assert "took the write (rollback id rb-1)" in line, line
+        assert controller.offsets != ZERO  # clamped: neither previous nor new
+        record = json.loads((out / "push.json").read_text())
+        assert record["rollback_id"] == "rb-1" and record["previous_offsets"] == ZERO
+        events = [json.loads(text) for text in (out / "journal.jsonl").read_text().splitlines()]
+        assert [e["event"] for e in events] == ["push_intent", "push_written"]
+        assert events[-1]["rollback_id"] == "rb-1"
+        rollback = _next_command(line, "restore the previous ones")
+        assert rollback == ["rollback", "--run", str(out)]
+        code, stdout, stderr = run_cli(capsys, *rollback)
+        assert code == 0 and not stderr, stderr  # no "another host pushed later?"
+        assert "rolled back rb-1" in stdout
+        assert controller.offsets == ZERO
 
 
 def _edited(text: str, **fields: object) -> str:
@@ -288,3 +316,40 @@ def test_a_calibration_whose_push_the_controller_clamps_is_not_pass(
         code, _, stderr = run_cli(capsys, *_next_command(line, "restore them"))
         assert code == 0, stderr
         assert sim.truth()["zero_offsets"] == before
+
+
+def test_a_calibration_whose_read_back_is_lost_keeps_the_id_and_its_resume_settles_it(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`hostpc calibrate` through a proxy that swallows the push's read-back (the write
+    reached the stub and was answered, rb-1): the run stops (exit 4) with one line naming
+    the id, the resume and the rollback; the resume finds the new offsets, records the push
+    with that id and verifies it; the rollback then undoes the write by the id."""
+    scenario = sim_scenario()
+    rig = truth_rig_file(scenario, tmp_path / "rig.json")
+    out = tmp_path / "run"
+    with SimulatedController(scenario, tmp_path / "stub") as sim, \
+            ClampingProxy((sim.address.host, sim.address.port), drop_read_back=True) as proxy:
+        before = list(sim.truth()["zero_offsets"])
+        code, _, stderr = run_cli(
+            capsys, "calibrate", "--robot", proxy.address, "--rig", str(rig), "--known",
+            "target", "--poses", "16", "--verify-poses", "3", "--no-report", "--timeout",
+            "1", "--out", str(out))
+        assert code == 4 and proxy.dropped == 1, stderr
+        errors = [t for t in stderr.splitlines() if t.startswith("hostpc calibrate: error:")]
+        assert len(errors) == 1, stderr
+        line = errors[0]
+        assert "took the write (rollback id rb-1) but reading its offsets back failed" in line
+        assert f"settle and verify it with: hostpc calibrate --resume {out}" in line, line
+        assert f"restore the previous ones with: hostpc rollback --run {out}" in line, line
+        assert json.loads((out / "push.json").read_text())["rollback_id"] == "rb-1"
+        pushed = list(sim.truth()["zero_offsets"])
+        assert pushed != before
+        code, stdout, stderr = run_cli(capsys, "calibrate", "--resume", str(out), "--json")
+        assert code == 0, stderr
+        assert "recorded as pushed, rollback id rb-1" in stderr
+        record = json.loads((out / "push.json").read_text())
+        assert (record["status"], record["rollback_id"]) == ("pushed", "rb-1")
+        assert json.loads(stdout)["outcome"]["verdict"] == "PASS"
+        code, stdout, stderr = run_cli(capsys, "rollback", "--run", str(out))
+        assert code == 0, stderr
+        assert "rolled back rb-1" in stdout and sim.truth()["zero_offsets"] == before

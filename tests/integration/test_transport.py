@@ -363,3 +363,32 @@ async def test_an_abort_that_times_out_logs_why(start_stub: StartStub,
             await client.move_joints(q0 + STEP, 0.5, timeout=0.2)
     assert [r.getMessage() for r in caplog.records if "abort" in r.getMessage()] == [
         "abort of a motion failed: TimeoutError"]
+
+
+async def test_a_cancel_that_comes_with_the_abort_reply_is_not_lost(
+        start_stub: StartStub) -> None:
+    """A motion times out, the client sends its abort, and a cancellation (SIGTERM, Ctrl-C)
+    comes in the loop step the abort's reply does: the request is cancelled, not turned into
+    a RequestTimeout the run would go on from (Python 3.11's asyncio.wait_for returned the
+    reply and lost the cancellation, CPython gh-86296)."""
+    server = await start_stub({"motion": {"time_scale": 1.0, "max_joint_speed": 0.5}})
+    async with connect(server) as client:
+        q0 = (await client.state()).q
+        move = asyncio.create_task(client.move_joints(q0 + 1.0, 1.0, timeout=0.2))  # ~2 s
+        link = client._link
+        assert link is not None
+        while not link.pending:
+            await asyncio.sleep(0)
+        (motion,) = link.pending  # the move's request id
+        while not any(i != motion for i in link.pending):  # its timeout sends the abort
+            assert not move.done()
+            await asyncio.sleep(0)
+        abort = next(f for i, f in link.pending.items() if i != motion)
+        while not abort.done():  # the abort's reply came: cancel before the move resumes
+            assert not move.done()
+            await asyncio.sleep(0)
+        move.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await move
+        assert abort.result().kind == "aborted"
+        assert (await client.state()).mode == "idle"  # the abort stopped the motion

@@ -221,3 +221,35 @@ def test_an_old_result_with_a_refused_push_is_never_pass() -> None:
     assert verdict_of(old, 5) == "REFUSED"
     model_check = _older(push={"status": "disabled"}, verify={"verdict": "PASS"})
     assert verdict_of(model_check, 0) == "NOT_PUSHED"
+
+
+def test_a_stored_joint_row_reads_as_the_runs_own_joint_outcome() -> None:
+    """The archive and the station's registers (57 JOINTS_AS_FOUND, 14 JOINTS_CALIBRATED)
+    read result.json's joint rows as `JointOutcome`s (`from_dict`), so they ask the same
+    properties as the run's headline: every kind of row reads back equal, and the
+    archive's figures are those properties."""
+    from hostpc.archive.records import outcome_of
+    from hostpc.calibrate.outcome import JointOutcome
+
+    def joint(number: int, **fields: Any) -> JointOutcome:
+        row: dict[str, Any] = {"joint": number, "label": f"q{number}",
+                               "status": "calibrated", "source": "data", "pushed": True,
+                               "verified": True, "reason": None, "fix": None}
+        return JointOutcome(**{**row, **fields})
+
+    joints = [joint(1, restored_from="/runs/ref", reference_zero="as_found"),
+              joint(2, restored_from="/runs/ref", reference_zero="measured"),
+              joint(3, restored_from="/runs/ref", reference_zero="unknown"),
+              joint(4, verified=False, status="not_calibrated"),
+              joint(5, pushed=False, verified=None, applied_on_host=True),
+              joint(6, status="not_calibrated", source="hold", pushed=False, verified=None,
+                    reason="held by --hold", fix="drop --hold")]
+    rows = json.loads(json.dumps([j.to_dict() for j in joints]))  # as result.json has them
+    assert [JointOutcome.from_dict(row) for row in rows] == joints
+    result = _older(outcome={"verdict": "PASS", "headline": "", "pushed": True,
+                             "verified": True, "joints": rows})
+    figures = outcome_of(result)
+    assert figures is not None
+    assert figures.as_found == tuple(j.joint for j in joints if j.as_found) == (1, 3)
+    assert figures.calibrated == tuple(j.joint for j in joints if j.on_robot) == (1, 2, 3, 5)
+    assert figures.not_calibrated == (6,)

@@ -316,3 +316,68 @@ def test_a_pending_sim_push_is_resumed_by_a_start_of_its_own_serial(
         assert list(runs_dir.glob("SN-NEXT-*/"))
     finally:
         plc.close()
+
+
+@pytest.mark.slow
+def test_a_push_the_controller_did_not_store_is_not_resumed_but_rolled_back(
+        controller: StubFactory, station_on: StationFactory) -> None:
+    """The cell's controller stores every pushed offset clamped (ClampingProxy in front of
+    the stub): the run ends on the read-back mismatch (push failed, result code 4). No
+    resume settles that (it meets the clamped offsets again), so the station resumes it
+    never, neither after the run (resume_attempts 1) nor on a START of the same robot: the
+    START is refused (result 24) with the rollback that settles it, said whole once in the
+    log; once rolled back, the next START runs."""
+    from tests.integration.hostile_controller import ClampingProxy
+
+    host, port = controller().split(":")
+    with ClampingProxy((host, int(port))) as proxy:
+        process, config = station_on(proxy.address, resume_attempts=1)
+        runs_dir, db = Path(config["runs_dir"]), str(config["db"])
+        plc = Plc(config["modbus"]["port"])
+        try:
+            values = plc.run("SN-CLAMP")
+            log = process.log.read_text()
+            assert reg.State(values[reg.STATE]) == reg.State.ERROR, log[-3000:]
+            assert values[reg.RESULT_CODE] == 4 and proxy.clamped == 1  # never resumed
+            assert "resuming (attempt" not in log
+            (run_dir,) = runs_dir.glob("SN-CLAMP-*/")
+            rollback = f"hostpc rollback --run {run_dir} --db "
+            with open_archive(db, create=False) as archive:
+                (row,) = archive.runs()
+            assert row.reason is not None and row.reason.startswith("push failed"), row.reason
+            assert "no resume settles it" in row.reason and rollback in row.reason
+            journal = (run_dir / "journal.jsonl").read_text()
+            plc.command(reg.Command.ACKNOWLEDGE)
+            plc.wait_state({reg.State.IDLE}, 10)
+            for _ in range(2):  # the same robot again: refused, not resumed
+                plc.start("SN-CLAMP")
+                values = plc.wait_state(FINISHED, 60)
+                assert values[reg.RESULT_CODE] == reg.RESULT_PUSH_PENDING
+                assert values[reg.REASON_CODE] == reg.Reason.PUSH_PENDING
+                plc.command(reg.Command.ACKNOWLEDGE)
+                plc.wait_state({reg.State.IDLE}, 10)
+            assert (run_dir / "journal.jsonl").read_text() == journal  # no resume ran
+            assert proxy.clamped == 1 and list(runs_dir.glob("SN-CLAMP-*/")) == [run_dir]
+            log = process.log.read_text()
+            assert log.count("start of SN-CLAMP refused: the run of SN-CLAMP pushed offsets "
+                             "that are NOT stored as asked (push failed); no resume "
+                             "settles it") == 1, log[-3000:]
+        finally:
+            plc.close()
+        assert process.stop() == 0
+        process.start()  # a restart does not resume it either
+        plc = Plc(config["modbus"]["port"])
+        try:
+            plc.start("SN-CLAMP")
+            values = plc.wait_state(FINISHED, 60)
+            assert values[reg.RESULT_CODE] == reg.RESULT_PUSH_PENDING
+            assert (run_dir / "journal.jsonl").read_text() == journal
+            assert f"the run of SN-CLAMP in {run_dir} is not resumed" in process.log.read_text()
+            plc.command(reg.Command.ACKNOWLEDGE)
+            plc.wait_state({reg.State.IDLE}, 10)
+            _rollback(run_dir, db)
+            plc.start("SN-CLAMP")  # settled: a new run of the robot
+            plc.wait_state(FINISHED, 300)
+            assert len(list(runs_dir.glob("SN-CLAMP-*/"))) == 2
+        finally:
+            plc.close()
