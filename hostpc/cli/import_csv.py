@@ -146,7 +146,8 @@ def run(args: argparse.Namespace) -> int:
         prismatic_unit=args.prismatic_unit,
         sigma=args.sigma if args.sigma is not None else 1e-4 / LENGTH_UNITS[args.length_unit],
         sigma_angle=args.sigma_angle, known=known, decimal=args.decimal, euler=args.euler)
-    samples, derived = _read_csv_file(Path(args.csv), args, chain, options)
+    samples, derived = _read_csv_file(Path(args.csv), args, chain, options,
+                                      _joint_names(args) if robot.urdf else ())
     for warning in samples.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     for follower, leader, multiplier, offset in chain.coupled:
@@ -241,17 +242,28 @@ def _import_command(args: argparse.Namespace, length_unit: str, joint_unit: str)
     return " ".join([*words, "-o", shlex.quote(args.output)])
 
 
+def _joint_names(args: argparse.Namespace) -> tuple[str, ...]:
+    """The URDF's names of the chain's movable joints, in joint order."""
+    from hostpc.kinematics.urdf import chain_joints  # xml.etree: only for a URDF
+
+    return tuple(j.name for j in chain_joints(args.robot, args.base_link, args.tip_link))
+
+
 def _read_csv_file(path: Path, args: argparse.Namespace, chain: Chain,
-                   options: ImportOptions) -> tuple[ImportedSamples, tuple[int, ...]]:
+                   options: ImportOptions, joint_names: tuple[str, ...] = ()
+                   ) -> tuple[ImportedSamples, tuple[int, ...]]:
     """The samples of the CSV at ``path``, read row by row from the open file (never the
     whole text at once: a tracker export may have millions of rows), and the coupled
-    joints --columns left out (0-based; their values are still to be computed)."""
+    joints --columns left out (0-based; their values are still to be computed).
+    joint_names: the robot's (a URDF's), by which a joint range is read (column_map)."""
     followers = {f + 1: leader + 1 for f, leader, _, _ in chain.coupled}
     try:
         with path.open(encoding="utf-8-sig", newline="") as stream:
             table = read_csv(stream, args.csv)
             mapping = parse_column_map(args.columns, table.header.columns, chain.n,
-                                       args.method, args.csv, followers)
+                                       args.method, args.csv, followers, joint_names)
+            for note in mapping.notes:
+                print(f"note: {note}")
             return read_samples(table, mapping, options), mapping.derived
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{args.csv}: cannot read ({getattr(exc, 'strerror', None) or exc})"
