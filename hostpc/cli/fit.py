@@ -8,7 +8,7 @@ import math
 import sys
 
 from hostpc.cli.archive_options import add_archive_options, dataset_from_archive
-from hostpc.cli.format import format_fit_summary, model_adequacy
+from hostpc.cli.format import below_band, format_fit_summary, model_adequacy
 from hostpc.cli.numbers import CV_FOLDS
 from hostpc.cli.robot_options import add_robot_override, data_options
 from hostpc.cli.urdf_out import add_write_urdf_option, check_urdf_robot, write_calibrated_urdf
@@ -101,8 +101,10 @@ def run(args: argparse.Namespace) -> int:
         result = fit(dataset, args.effects, plugins=args.plugin, loss=args.loss,
                      cv_folds=args.cv_folds)
     adequacy = model_adequacy(result, args.dataset, options)  # chi2/dof vs its band, once
-    # above the band: the sigmas scaled by sqrt(chi2/dof) are shown beside the stated ones
-    scaled = scaled_std(result) if adequacy.explains_data is False else None
+    # outside the band (above: the noise is understated or an effect is missing; below: the
+    # stated noise is pessimistic): the sigmas scaled by sqrt(chi2/dof) beside the stated
+    scaled = (scaled_std(result) if adequacy.explains_data is False
+              or below_band(result.chi2_dof, result.dof) else None)
     jackknife = jackknife_std(result) if args.jackknife else None
     if args.json:
         document = result.to_dict()

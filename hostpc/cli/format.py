@@ -20,7 +20,13 @@ from hostpc.fitting import FitResult
 from hostpc.json_object import JsonObject
 from hostpc.model.joint_offsets import is_offset
 
-__all__ = ["display", "format_fit_summary", "format_parameter_table"]
+__all__ = ["below_band", "display", "format_fit_summary", "format_parameter_table"]
+
+
+def below_band(chi2_dof: float, dof: int) -> bool:
+    """chi2/dof below the lower edge of its band (``chi2_band``): the stated noise is
+    pessimistic, and the sigmas from it too large by 1/sqrt(chi2/dof)."""
+    return dof > 0 and math.isfinite(chi2_dof) and chi2_dof < chi2_band(dof)[0]
 
 
 def display(value: float | None, unit: str) -> tuple[str, str]:
@@ -168,7 +174,12 @@ def format_fit_summary(result: FitResult, source: str = "",
     ]
     if scaled is not None or jackknife is not None:
         lines += ["", "  sigma: from the stated noise of the samples"]
-        if scaled is not None:
+        if scaled is not None and below_band(result.chi2_dof, result.dof):
+            lines.append(f"  x sqrt(chi2/dof): scaled by the measured noise "
+                         f"({math.sqrt(result.chi2_dof):.2f}x; chi2/dof is below its band "
+                         f"{chi2_band(result.dof)[0]:.3f}: the stated noise is pessimistic, "
+                         "the sigmas from it too large; these are the ones the data shows)")
+        elif scaled is not None:
             lines.append(f"  x sqrt(chi2/dof): scaled by the measured noise "
                          f"({math.sqrt(result.chi2_dof):.2f}x; chi2/dof is above its band: "
                          "the stated noise is too small, or the model misses an effect)")
