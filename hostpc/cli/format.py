@@ -37,6 +37,16 @@ def display(value: float | None, unit: str) -> tuple[str, str]:
     return f"{value * factor:+.4f}", shown_unit
 
 
+def display_sigma(value: float | None, unit: str) -> str:
+    """A sigma's number text in the display unit: four decimals, or three significant digits
+    where four decimals would round it to nothing (5e-05 deg, never 0.0000)."""
+    text, _ = display(value, unit)
+    if value is None or not math.isfinite(value) or value == 0.0:
+        return text.lstrip("+")
+    shown = abs(value) * DISPLAY_UNITS.get(unit, (unit, 1.0))[1]
+    return f"{shown:.3g}" if shown < 0.00995 else text.lstrip("+")
+
+
 def format_parameter_table(result: FitResult, scaled: np.ndarray | None = None,
                            jackknife: np.ndarray | None = None) -> list[str]:
     """The parameter table; `scaled` / `jackknife`: (P,) further sigma columns (the sigmas
@@ -51,9 +61,8 @@ def format_parameter_table(result: FitResult, scaled: np.ndarray | None = None,
             sigma = "  (fixed)"
             columns = "".join(f" {'':>16}" for _ in extra)
         else:
-            sigma = display(p.std, p.unit)[0].lstrip("+")
-            columns = "".join(f" {display(float(v[k]), p.unit)[0].lstrip('+'):>16}"
-                              for _, v in extra)
+            sigma = display_sigma(p.std, p.unit)
+            columns = "".join(f" {display_sigma(float(v[k]), p.unit):>16}" for _, v in extra)
         lines.append(f"  {p.name:<32} {value:>12} {sigma:>11}{columns}  {unit}")
     return lines
 

@@ -64,3 +64,16 @@ def test_a_chi2_below_its_band_shows_the_sigmas_at_the_measured_noise(
     out = capsys.readouterr().out
     assert "x sqrt(chi2/dof)" in out
     assert "chi2/dof is below its band" in out and "the stated noise is pessimistic" in out
+
+
+def test_small_sigmas_print_with_significant_digits(imports: dict[str, Path]) -> None:
+    from hostpc.cli.format import format_parameter_table
+
+    result = hostpc.fit(hostpc.load_dataset(imports["0.00036"]), cv_folds=0)
+    # sigmas 1e-4 of these (a stiff rig's, ~5e-5 deg): each printed, none as 0.0000
+    tiny = dataclasses.replace(result, std=result.std * 1e-4)
+    rows = [line.split() for line in format_parameter_table(tiny)[1:]]
+    free = [row for row in rows if "(fixed)" not in row]
+    assert free and all(float(row[2]) > 0.0 for row in free), rows
+    q4 = next(row for row in free if row[0] == "joint_offsets.q4")
+    assert float(q4[2]) == pytest.approx(np.degrees(tiny.sigma("joint_offsets.q4")), rel=5e-3)
