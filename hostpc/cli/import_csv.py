@@ -12,7 +12,8 @@ The column mapping is described in ``hostpc.importing.column_map`` and docs/metr
 The output is SI (m, rad). A bad CSV (a mapped column missing from the header, text in a
 number, a value outside the dataset's physical range, a missing joint value, an unknown
 unit in a header) gets one line naming the row and the column, and exit code 2; repeated
-rows and dropped blank rows get a warning line each (stderr).
+rows, dropped blank rows and a last row without a line end (a file cut while written)
+get a warning line each (stderr).
 """
 
 from __future__ import annotations

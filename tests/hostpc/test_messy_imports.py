@@ -83,3 +83,18 @@ def test_headers_that_are_not_joint_names_keep_the_positional_range(
     code, out, _ = _import(capsys, _write(tmp_path / "j.csv", rows), tmp_path / "j.json",
                            "q=J1:J9,x=x1,y=y1,z=z1")
     assert code == 0 and "note:" not in out
+
+
+def test_a_last_row_without_a_line_end_is_named(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    text = CSV.read_text()
+    assert text.endswith("\n")
+    cut = tmp_path / "cut.csv"
+    cut.write_text(text.rstrip("\n")[:-3])  # copied while written: its last value cut short
+    code, _, err = _import(capsys, cut, tmp_path / "cut.json")
+    assert code == 0
+    warned = [line for line in err.splitlines() if "no line end" in line]
+    assert len(warned) == 1 and "row 62" in warned[0], err
+    # the complete file says nothing of it
+    code, _, err = _import(capsys, CSV, tmp_path / "whole.json")
+    assert code == 0 and "no line end" not in err
