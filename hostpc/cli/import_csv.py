@@ -204,12 +204,44 @@ def _warn_unit_slip(samples: ImportedSamples, chain: Chain, args: argparse.Names
     slip = unit_slip(chain, samples.q, samples.p, args.length_unit, args.joint_unit,
                      args.prismatic_unit)
     if slip is None:
+        _warn_mirrored_axes(samples, chain, args)
         return
     sentence = unit_slip_sentence(slip, "--length-unit", "--joint-unit", chain.name)
     units = slip.suggested_units
     if units is not None:
         sentence += f": {_import_command(args, *units)}"
     print(f"warning: {sentence}", file=sys.stderr)
+
+
+def _warn_mirrored_axes(samples: ImportedSamples, chain: Chain,
+                        args: argparse.Namespace) -> None:
+    """One warning line (stderr) when the measured points fit the nominal robot far better
+    with two axes exchanged (hostpc.cli.units_hint.mirrored_axes), with the import command
+    that exchanges their columns (when --columns maps them one by one)."""
+    from hostpc.cli.units_hint import mirrored_axes, mirrored_axes_sentence
+
+    mirror = mirrored_axes(chain, samples.q, samples.p, args.method, samples.marker_index)
+    if mirror is None:
+        return
+    sentence = mirrored_axes_sentence(mirror, chain.name)
+    columns = _exchanged(args.columns, *mirror.axes)
+    fix = (_import_command(args, args.length_unit, args.joint_unit, columns)
+           if columns is not None else f"exchange the {mirror.axes[0]} and {mirror.axes[1]} "
+           "columns in --columns")
+    print(f"warning: {sentence}: {fix}", file=sys.stderr)
+
+
+def _exchanged(columns: str, a: str, b: str) -> str | None:
+    """``--columns`` with the columns of keys ``a`` and ``b`` exchanged; None unless both
+    are mapped one by one."""
+    parts = [part.strip() for part in columns.split(",")]
+    keys = [part.partition("=")[0].strip() for part in parts]
+    if a not in keys or b not in keys:
+        return None
+    i, j = keys.index(a), keys.index(b)
+    parts[i], parts[j] = (f"{a}={parts[j].partition('=')[2].strip()}",
+                          f"{b}={parts[i].partition('=')[2].strip()}")
+    return ",".join(parts)
 
 
 _OPTIONS = (("method", "--method"), ("robot", "--robot"), ("base_link", "--base-link"),
@@ -223,12 +255,14 @@ _DEFAULTS = {"angle_unit": "rad", "decimal": "auto", "known": ""}
 """Values left out of the rebuilt command (the parser's defaults)."""
 
 
-def _import_command(args: argparse.Namespace, length_unit: str, joint_unit: str) -> str:
-    """This import's command with the length and joint units replaced; --sigma (in the
-    length unit) converted so that it states the same noise."""
+def _import_command(args: argparse.Namespace, length_unit: str, joint_unit: str,
+                    columns: str | None = None) -> str:
+    """This import's command with the length and joint units (and ``columns``, if given)
+    replaced; --sigma (in the length unit) converted so that it states the same noise."""
     import shlex
 
-    values = {**vars(args), "length_unit": length_unit, "joint_unit": joint_unit}
+    values = {**vars(args), "length_unit": length_unit, "joint_unit": joint_unit,
+              "columns": columns or args.columns}
     if args.sigma is not None:
         same_noise = args.sigma * LENGTH_UNITS[args.length_unit] / LENGTH_UNITS[length_unit]
         values["sigma"] = float(f"{same_noise:.6g}")

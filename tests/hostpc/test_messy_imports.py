@@ -98,3 +98,23 @@ def test_a_last_row_without_a_line_end_is_named(
     # the complete file says nothing of it
     code, _, err = _import(capsys, CSV, tmp_path / "whole.json")
     assert code == 0 and "no line end" not in err
+
+
+def test_exchanged_instrument_axes_are_named_with_the_corrected_import(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    swapped = "q=torso_1_joint:arm_left_7_joint,x=x1,y=z1,z=y1,t=t"
+    code, _, err = _import(capsys, CSV, tmp_path / "yz.json", swapped)
+    assert code == 0
+    warned = [line for line in err.splitlines() if "mirror image" in line]
+    assert len(warned) == 1, err
+    # as read the nominal robot misses the points by ~240 mm; exchanged, by 3.7 mm
+    assert "with y and z exchanged by 3.69 mm" in warned[0]
+    assert "--columns q=torso_1_joint:arm_left_7_joint,x=x1,y=y1,z=z1,t=t" in warned[0]
+    # the fit of the mirrored set names it too (not "check that the numbers are in m")
+    capsys.readouterr()
+    assert main(["fit", str(tmp_path / "yz.json"), "--cv-folds", "0"]) == 0
+    out = capsys.readouterr().out
+    assert "mirror image" in out and "y and z columns exchanged" in out
+    # the mapping as the instrument wrote it: no warning
+    code, _, err = _import(capsys, CSV, tmp_path / "ok.json")
+    assert code == 0 and "mirror image" not in err
