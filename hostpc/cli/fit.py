@@ -8,7 +8,12 @@ import math
 import sys
 
 from hostpc.cli.archive_options import add_archive_options, dataset_from_archive
-from hostpc.cli.format import below_band, format_fit_summary, model_adequacy
+from hostpc.cli.format import (
+    UNITS_HINT_NOISE_RATIO,
+    below_band,
+    format_fit_summary,
+    model_adequacy,
+)
 from hostpc.cli.numbers import CV_FOLDS
 from hostpc.cli.robot_options import add_robot_override, data_options
 from hostpc.cli.urdf_out import add_write_urdf_option, check_urdf_robot, write_calibrated_urdf
@@ -142,8 +147,11 @@ def run(args: argparse.Namespace) -> int:
             length_unit_hint,
         )
 
-        hint = length_unit_hint(dataset, declared_length_unit(args.dataset),
-                                result.problem.context.chain, declared_angle_unit(args.dataset))
+        # only where the summary says it (residuals 100 times the stated noise): the hint
+        # registers the robot onto the points
+        hint = (length_unit_hint(dataset, declared_length_unit(args.dataset),
+                                 result.problem.context.chain, declared_angle_unit(args.dataset))
+                if math.sqrt(max(result.chi2_dof, 0.0)) >= UNITS_HINT_NOISE_RATIO else "")
         print(format_fit_summary(result, source=args.dataset, scaled=scaled,
                                  jackknife=jackknife, options=options, units_hint=hint))
     if args.write_urdf:
