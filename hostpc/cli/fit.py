@@ -7,7 +7,12 @@ import json
 import math
 import sys
 
-from hostpc.cli.format import format_fit_summary, model_adequacy
+from hostpc.cli.format import (
+    UNITS_HINT_NOISE_RATIO,
+    below_band,
+    format_fit_summary,
+    model_adequacy,
+)
 from hostpc.cli.numbers import CV_FOLDS
 from hostpc.cli.robot_options import add_robot_override, data_options
 from hostpc.errors import InputError
@@ -106,8 +111,10 @@ def run(args: argparse.Namespace) -> int:
         result = fit(dataset, args.effects, plugins=args.plugin, loss=args.loss,
                      cv_folds=args.cv_folds)
     adequacy = model_adequacy(result, args.dataset, options)  # chi2/dof vs its band, once
-    # above the band: the sigmas scaled by sqrt(chi2/dof) are shown beside the stated ones
-    scaled = scaled_std(result) if adequacy.explains_data is False else None
+    # outside the band (above: the noise is understated or an effect is missing; below: the
+    # stated noise is pessimistic): the sigmas scaled by sqrt(chi2/dof) beside the stated
+    scaled = (scaled_std(result) if adequacy.explains_data is False
+              or below_band(result.chi2_dof, result.dof) else None)
     jackknife = jackknife_std(result) if args.jackknife else None
     if args.json:
         document = result.to_dict()
@@ -148,8 +155,11 @@ def run(args: argparse.Namespace) -> int:
             length_unit_hint,
         )
 
-        hint = length_unit_hint(dataset, declared_length_unit(args.dataset),
-                                result.problem.context.chain, declared_angle_unit(args.dataset))
+        # only where the summary says it (residuals 100 times the stated noise): the hint
+        # registers the robot onto the points
+        hint = (length_unit_hint(dataset, declared_length_unit(args.dataset),
+                                 result.problem.context.chain, declared_angle_unit(args.dataset))
+                if math.sqrt(max(result.chi2_dof, 0.0)) >= UNITS_HINT_NOISE_RATIO else "")
         print(format_fit_summary(result, source=args.dataset, scaled=scaled,
                                  jackknife=jackknife, options=options, units_hint=hint))
     if args.write_urdf:

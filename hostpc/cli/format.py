@@ -23,7 +23,13 @@ from hostpc.model.joint_offsets import is_offset
 if TYPE_CHECKING:
     from hostpc.diagnostics.robust_kept import KeptSamples
 
-__all__ = ["display", "format_fit_summary", "format_parameter_table"]
+__all__ = ["below_band", "display", "format_fit_summary", "format_parameter_table"]
+
+
+def below_band(chi2_dof: float, dof: int) -> bool:
+    """chi2/dof below the lower edge of its band (``chi2_band``): the stated noise is
+    pessimistic, and the sigmas from it too large by 1/sqrt(chi2/dof)."""
+    return dof > 0 and math.isfinite(chi2_dof) and chi2_dof < chi2_band(dof)[0]
 
 
 def display(value: float | None, unit: str) -> tuple[str, str]:
@@ -32,6 +38,16 @@ def display(value: float | None, unit: str) -> tuple[str, str]:
     if value is None or not math.isfinite(value):
         return "-", shown_unit
     return f"{value * factor:+.4f}", shown_unit
+
+
+def display_sigma(value: float | None, unit: str) -> str:
+    """A sigma's number text in the display unit: four decimals, or three significant digits
+    where four decimals would round it to nothing (5e-05 deg, never 0.0000)."""
+    text, _ = display(value, unit)
+    if value is None or not math.isfinite(value) or value == 0.0:
+        return text.lstrip("+")
+    shown = abs(value) * DISPLAY_UNITS.get(unit, (unit, 1.0))[1]
+    return f"{shown:.3g}" if shown < 0.00995 else text.lstrip("+")
 
 
 def format_parameter_table(result: FitResult, scaled: np.ndarray | None = None,
@@ -48,9 +64,8 @@ def format_parameter_table(result: FitResult, scaled: np.ndarray | None = None,
             sigma = "  (fixed)"
             columns = "".join(f" {'':>16}" for _ in extra)
         else:
-            sigma = display(p.std, p.unit)[0].lstrip("+")
-            columns = "".join(f" {display(float(v[k]), p.unit)[0].lstrip('+'):>16}"
-                              for _, v in extra)
+            sigma = display_sigma(p.std, p.unit)
+            columns = "".join(f" {display_sigma(float(v[k]), p.unit):>16}" for _, v in extra)
         lines.append(f"  {p.name:<32} {value:>12} {sigma:>11}{columns}  {unit}")
     return lines
 
@@ -173,7 +188,12 @@ def format_fit_summary(result: FitResult, source: str = "",
     ]
     if scaled is not None or jackknife is not None:
         lines += ["", "  sigma: from the stated noise of the samples"]
-        if scaled is not None:
+        if scaled is not None and below_band(result.chi2_dof, result.dof):
+            lines.append(f"  x sqrt(chi2/dof): scaled by the measured noise "
+                         f"({math.sqrt(result.chi2_dof):.2f}x; chi2/dof is below its band "
+                         f"{chi2_band(result.dof)[0]:.3f}: the stated noise is pessimistic, "
+                         "the sigmas from it too large; these are the ones the data shows)")
+        elif scaled is not None:
             lines.append(f"  x sqrt(chi2/dof): scaled by the measured noise "
                          f"({math.sqrt(result.chi2_dof):.2f}x; chi2/dof is above its band: "
                          "the stated noise is too small, or the model misses an effect)")

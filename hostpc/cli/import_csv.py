@@ -12,7 +12,8 @@ The column mapping is described in ``hostpc.importing.column_map`` and docs/metr
 The output is SI (m, rad). A bad CSV (a mapped column missing from the header, text in a
 number, a value outside the dataset's physical range, a missing joint value, an unknown
 unit in a header) gets one line naming the row and the column, and exit code 2; repeated
-rows and dropped blank rows get a warning line each (stderr).
+rows, dropped blank rows and a last row without a line end (a file cut while written)
+get a warning line each (stderr).
 """
 
 from __future__ import annotations
@@ -146,7 +147,8 @@ def run(args: argparse.Namespace) -> int:
         prismatic_unit=args.prismatic_unit,
         sigma=args.sigma if args.sigma is not None else 1e-4 / LENGTH_UNITS[args.length_unit],
         sigma_angle=args.sigma_angle, known=known, decimal=args.decimal, euler=args.euler)
-    samples, derived = _read_csv_file(Path(args.csv), args, chain, options)
+    samples, derived = _read_csv_file(Path(args.csv), args, chain, options,
+                                      _joint_names(args) if robot.urdf else ())
     for warning in samples.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     for follower, leader, multiplier, offset in chain.coupled:
@@ -202,12 +204,44 @@ def _warn_unit_slip(samples: ImportedSamples, chain: Chain, args: argparse.Names
     slip = unit_slip(chain, samples.q, samples.p, args.length_unit, args.joint_unit,
                      args.prismatic_unit)
     if slip is None:
+        _warn_mirrored_axes(samples, chain, args)
         return
     sentence = unit_slip_sentence(slip, "--length-unit", "--joint-unit", chain.name)
     units = slip.suggested_units
     if units is not None:
         sentence += f": {_import_command(args, *units)}"
     print(f"warning: {sentence}", file=sys.stderr)
+
+
+def _warn_mirrored_axes(samples: ImportedSamples, chain: Chain,
+                        args: argparse.Namespace) -> None:
+    """One warning line (stderr) when the measured points fit the nominal robot far better
+    with two axes exchanged (hostpc.cli.units_hint.mirrored_axes), with the import command
+    that exchanges their columns (when --columns maps them one by one)."""
+    from hostpc.cli.units_hint import mirrored_axes, mirrored_axes_sentence
+
+    mirror = mirrored_axes(chain, samples.q, samples.p, args.method, samples.marker_index)
+    if mirror is None:
+        return
+    sentence = mirrored_axes_sentence(mirror, chain.name)
+    columns = _exchanged(args.columns, *mirror.axes)
+    fix = (_import_command(args, args.length_unit, args.joint_unit, columns)
+           if columns is not None else f"exchange the {mirror.axes[0]} and {mirror.axes[1]} "
+           "columns in --columns")
+    print(f"warning: {sentence}: {fix}", file=sys.stderr)
+
+
+def _exchanged(columns: str, a: str, b: str) -> str | None:
+    """``--columns`` with the columns of keys ``a`` and ``b`` exchanged; None unless both
+    are mapped one by one."""
+    parts = [part.strip() for part in columns.split(",")]
+    keys = [part.partition("=")[0].strip() for part in parts]
+    if a not in keys or b not in keys:
+        return None
+    i, j = keys.index(a), keys.index(b)
+    parts[i], parts[j] = (f"{a}={parts[j].partition('=')[2].strip()}",
+                          f"{b}={parts[i].partition('=')[2].strip()}")
+    return ",".join(parts)
 
 
 _OPTIONS = (("method", "--method"), ("robot", "--robot"), ("base_link", "--base-link"),
@@ -221,12 +255,14 @@ _DEFAULTS = {"angle_unit": "rad", "decimal": "auto", "known": ""}
 """Values left out of the rebuilt command (the parser's defaults)."""
 
 
-def _import_command(args: argparse.Namespace, length_unit: str, joint_unit: str) -> str:
-    """This import's command with the length and joint units replaced; --sigma (in the
-    length unit) converted so that it states the same noise."""
+def _import_command(args: argparse.Namespace, length_unit: str, joint_unit: str,
+                    columns: str | None = None) -> str:
+    """This import's command with the length and joint units (and ``columns``, if given)
+    replaced; --sigma (in the length unit) converted so that it states the same noise."""
     import shlex
 
-    values = {**vars(args), "length_unit": length_unit, "joint_unit": joint_unit}
+    values = {**vars(args), "length_unit": length_unit, "joint_unit": joint_unit,
+              "columns": columns or args.columns}
     if args.sigma is not None:
         same_noise = args.sigma * LENGTH_UNITS[args.length_unit] / LENGTH_UNITS[length_unit]
         values["sigma"] = float(f"{same_noise:.6g}")
@@ -241,17 +277,28 @@ def _import_command(args: argparse.Namespace, length_unit: str, joint_unit: str)
     return " ".join([*words, "-o", shlex.quote(args.output)])
 
 
+def _joint_names(args: argparse.Namespace) -> tuple[str, ...]:
+    """The URDF's names of the chain's movable joints, in joint order."""
+    from hostpc.kinematics.urdf import chain_joints  # xml.etree: only for a URDF
+
+    return tuple(j.name for j in chain_joints(args.robot, args.base_link, args.tip_link))
+
+
 def _read_csv_file(path: Path, args: argparse.Namespace, chain: Chain,
-                   options: ImportOptions) -> tuple[ImportedSamples, tuple[int, ...]]:
+                   options: ImportOptions, joint_names: tuple[str, ...] = ()
+                   ) -> tuple[ImportedSamples, tuple[int, ...]]:
     """The samples of the CSV at ``path``, read row by row from the open file (never the
     whole text at once: a tracker export may have millions of rows), and the coupled
-    joints --columns left out (0-based; their values are still to be computed)."""
+    joints --columns left out (0-based; their values are still to be computed).
+    joint_names: the robot's (a URDF's), by which a joint range is read (column_map)."""
     followers = {f + 1: leader + 1 for f, leader, _, _ in chain.coupled}
     try:
         with path.open(encoding="utf-8-sig", newline="") as stream:
             table = read_csv(stream, args.csv)
             mapping = parse_column_map(args.columns, table.header.columns, chain.n,
-                                       args.method, args.csv, followers)
+                                       args.method, args.csv, followers, joint_names)
+            for note in mapping.notes:
+                print(f"note: {note}")
             return read_samples(table, mapping, options), mapping.derived
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{args.csv}: cannot read ({getattr(exc, 'strerror', None) or exc})"

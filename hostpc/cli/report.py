@@ -1,11 +1,18 @@
-"""`hostpc report RUN`: (re)write a calibration run's report.html from its files, offline.
+"""`hostpc report RUN` / `hostpc report DATASET.json`: a calibration run's report.html
+written again from its files, offline; or the report of any dataset (an imported metrology
+file, a dataset written by hand: docs/dataset-format.md).
 
-Reads RUN/result.json (the verdict, offsets, verification, truth comparison), diagnoses
+A dataset: fitted and diagnosed with the model of ``--effects``, ``--loss``, ``--plugin``
+(as `hostpc fit` and `hostpc diagnose` take them; ``--robot`` to read it with another
+robot), and rendered by the same renderer as `hostpc diagnose --report`
+(``hostpc.report.write_report``), to ``--out`` (default: DATASET with ``.html``).
+
+A run: reads RUN/result.json (the verdict, offsets, verification, truth comparison), diagnoses
 RUN/dataset.json with the run's model (effects, plugins, loss as recorded in the result's
 settings) and, for a simulated run, reads RUN/sim/truth.json for the effect sizes. Works on
 runs of older versions too: what their result lacks is left out of the report.
-Exit codes: 0 written; 2 bad input (no run folder, no or malformed result.json, a report
-path that cannot be written).
+Exit codes: 0 written; 2 bad input (no run folder nor dataset file, no or malformed
+result.json, a malformed dataset, a report path that cannot be written).
 """
 
 from __future__ import annotations
@@ -22,16 +29,26 @@ from hostpc.json_object import JsonObject
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     parser = subparsers.add_parser(
         "report",
-        help="write a calibration run's report.html again from its files (no robot)",
-        description=("Render RUN/report.html from RUN/result.json and RUN/dataset.json: the "
-                     "verdict, offsets table, verification and (simulated runs) the truth "
-                     "comparison, then the diagnosis. See docs/diagnostics.md."),
+        help="write the HTML report of a calibration run, or of a dataset (no robot)",
+        description=("RUN: render RUN/report.html from RUN/result.json and RUN/dataset.json: "
+                     "the verdict, offsets table, verification and (simulated runs) the truth "
+                     "comparison, then the diagnosis. DATASET.json: fit and diagnose it with "
+                     "the model of --effects/--loss/--plugin (as hostpc fit) and render "
+                     "the diagnosis report. See docs/diagnostics.md."),
     )
-    parser.add_argument("run", help="run folder of `hostpc calibrate` (holds result.json)")
+    parser.add_argument("run", metavar="RUN|DATASET.json",
+                        help="run folder of `hostpc calibrate` (holds result.json), or a "
+                        "dataset file (zerocal-dataset/1 JSON)")
     parser.add_argument("--out", metavar="FILE.html",
-                        help="where to write (default RUN/report.html)")
+                        help="where to write (default RUN/report.html; for a dataset, the "
+                        "dataset's path with .html)")
     parser.add_argument("--no-diagnosis", action="store_true",
-                        help="only the result (skip diagnosing the dataset)")
+                        help="a run: only the result (skip diagnosing the dataset)")
+    from hostpc.cli.fit import add_model_options
+    from hostpc.cli.robot_options import add_robot_override
+
+    add_model_options(parser)
+    add_robot_override(parser)
     parser.set_defaults(func=run)
 
 
@@ -52,8 +69,17 @@ def run(args: argparse.Namespace) -> int:
     from hostpc.report import write_calibration_report
 
     folder = Path(args.run)
+    if folder.is_file():
+        return _dataset_report(args)
     if not folder.is_dir():
-        raise InputError(f"{folder}: not a run folder")
+        raise InputError(f"{folder}: not a run folder nor a dataset file")
+    given = [option for option, value in (("--effects", args.effects), ("--plugin", args.plugin),
+                                          ("--loss", args.loss != "linear"),
+                                          ("--robot", args.robot)) if value]
+    if given:
+        raise InputError(f"{folder}: a run's report uses the model the run recorded; "
+                         f"{', '.join(given)}: for the report of a dataset, hostpc report "
+                         f"{folder / 'dataset.json'} {' '.join(given)} ...")
     if not (folder / "result.json").exists() and (folder / "run.json").is_file():
         raise InputError(f"{folder}: no result.json: the run did not finish (ERROR); "
                          f"finish it with hostpc calibrate --resume {folder}, then hostpc "
@@ -74,6 +100,34 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else folder / "report.html"
     try:
         write_calibration_report(out, result, diagnosis, truth)
+    except OSError as exc:
+        raise InputError(f"{out}: cannot write the report ({exc.strerror or exc})") from exc
+    print(f"report written to {out}")
+    return 0
+
+
+def _dataset_report(args: argparse.Namespace) -> int:
+    """`hostpc report DATASET.json`: the dataset fitted and diagnosed with the model asked
+    for, its report written by the diagnosis report's renderer."""
+    from hostpc.cli.robot_options import robot_options
+    from hostpc.cli.robots import load_dataset_as_asked
+    from hostpc.diagnostics import diagnose
+    from hostpc.report import write_report
+
+    if args.no_diagnosis:
+        raise InputError("--no-diagnosis: a dataset's report is its diagnosis; the option is "
+                         "for a run folder")
+    if args.cv_folds < 0:
+        raise InputError(f"--cv-folds {args.cv_folds}: must not be negative")
+    if args.effects and "auto" in [e.strip() for e in args.effects.split(",")]:
+        raise InputError("--effects auto: give the model (hostpc fit DATASET --effects auto "
+                         "names the one it chooses)")
+    source = load_dataset_as_asked(args.run, args) if args.robot else args.run
+    diagnosis = diagnose(source, args.effects, plugins=args.plugin, cv_folds=args.cv_folds,
+                         loss=args.loss, source=args.run, data_options=robot_options(args))
+    out = Path(args.out) if args.out else Path(args.run).with_suffix(".html")
+    try:
+        write_report(out, diagnosis)
     except OSError as exc:
         raise InputError(f"{out}: cannot write the report ({exc.strerror or exc})") from exc
     print(f"report written to {out}")

@@ -2,13 +2,17 @@
 hint (hostpc.cli.format), for a fit whose residuals are far above the stated noise, and
 behind `hostpc import`'s unit warning.
 
-Two facts. The measured positions' distances from the sensor (a cell in mm whose numbers all
-lie within 5 cm reads as metres). And their spread against the robot's motion
+Three facts. The measured positions' distances from the sensor (a cell in mm whose numbers
+all lie within 5 cm reads as metres). Their spread against the robot's motion
 (``unit_slip``): the nominal robot moved through the samples' joint values spreads its
 flange over some RMS distance; world-frame points measured on it (a laser tracker's, a
 motion capture's) spread about as much. Points that spread ten times less or more were read
 in another length unit, or the joint values in another angle unit, and the unit pair that
-makes the two agree is named."""
+makes the two agree is named. And their handedness (``mirrored_axes``): the nominal robot
+registered rigidly onto the points (world frame and marker, ``frame_guess``) as read and
+with two axes swapped; points that fit far better swapped were mapped with two of the
+instrument's axes exchanged (a mirror image, which no world frame undoes), and the swap is
+named."""
 
 from __future__ import annotations
 
@@ -22,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.dataset import Dataset
+from hostpc.dataset.kind_registry import csv_row_shape
 from hostpc.dataset.validation import read_dataset_bytes
 from hostpc.importing.csv_import import ANGLE_UNITS, LENGTH_UNITS
 from hostpc.kinematics import Chain
@@ -75,7 +80,8 @@ def length_unit_hint(dataset: Dataset, declared: str, chain: Chain | None = None
     if declared == "m" and lo >= FAR_M:
         return f"{span}: millimetres? set units.length mm"
     slip = None if chain is None else slip_hint(dataset, chain, declared, declared_angle)
-    return slip or f"{check} (the positions span {lo:.3g}-{hi:.3g})"
+    mirror = None if chain is None or slip else mirror_hint(dataset, chain)
+    return slip or mirror or f"{check} (the positions span {lo:.3g}-{hi:.3g})"
 
 
 def slip_hint(dataset: Dataset, chain: Chain, declared: str = "m",
@@ -93,6 +99,23 @@ def slip_hint(dataset: Dataset, chain: Chain, declared: str = "m",
         return None
     return (f"{unit_slip_sentence(slip, 'units.length', 'units.angle', chain.name)} "
             "(re-import with the units the numbers are in, or set the file's units)")
+
+
+def mirror_hint(dataset: Dataset, chain: Chain) -> str | None:
+    """Two of the instrument's axes exchanged (``mirrored_axes``) in a dataset whose kind's
+    positions are world-frame points, in words with the next step; None when there is none."""
+    from hostpc.dataset.kind_registry import csv_row_kinds
+
+    p = dataset.samples.p
+    if p is None or dataset.method not in csv_row_kinds():
+        return None
+    markers = dataset.samples.fields.get("marker")
+    mirror = mirrored_axes(chain, dataset.samples.q, p, dataset.method, None if
+                           markers is None else np.unique(markers, return_inverse=True)[1])
+    if mirror is None:
+        return None
+    return (f"{mirrored_axes_sentence(mirror, chain.name)} (re-import with the "
+            f"{mirror.axes[0]} and {mirror.axes[1]} columns exchanged)")
 
 
 SPREAD_FACTOR = 10.0
@@ -242,3 +265,77 @@ def _times(factor: float, units: dict[str, float]) -> str:
     pair = next(((a, b) for a, b in itertools.permutations(units, 2)
                  if math.isclose(units[a] / units[b], factor, rel_tol=1e-9)), None)
     return size if pair is None else f"{size} ({pair[0]} read as {pair[1]}?)"
+
+
+MIRROR_FACTOR = 5.0
+"""Points that the nominal robot fits this many times better with two axes swapped than as
+read are a mirror image (a wrong axis mapping fits no better than a few times, by chance)."""
+AXIS_SWAPS = (("x", "y"), ("y", "z"), ("x", "z"))
+
+
+@dataclass(frozen=True)
+class MirroredAxes:
+    """World-frame points that fit the nominal robot far better with two axes swapped:
+    as_read, swapped: the RMS (m) of the nominal robot registered onto the points as read
+    and with ``axes`` swapped (every swap fits alike, a mirror being one up to a rotation;
+    ``axes`` is the one whose world frame turns least from the instrument's, the usual
+    mounting)."""
+
+    as_read: float
+    swapped: float
+    axes: tuple[str, str]
+
+
+def _registered(T_base_flange: np.ndarray, points: np.ndarray,
+                marker_index: np.ndarray | None) -> tuple[float, float]:
+    """(RMS (m), world rotation angle (rad)) of the nominal flange's markers registered
+    rigidly onto ``points`` (``frame_guess.guess_world_point``)."""
+    from hostpc.importing.frame_guess import guess_world_point
+
+    W, markers = guess_world_point(T_base_flange, points, marker_index)
+    index = np.zeros(len(points), dtype=np.int64) if marker_index is None else marker_index
+    in_base = (np.einsum("nij,nj->ni", T_base_flange[:, :3, :3], markers[index])
+               + T_base_flange[:, :3, 3])
+    residual = in_base @ W[:3, :3].T + W[:3, 3] - points
+    angle = math.acos(min(1.0, max(-1.0, (float(np.trace(W[:3, :3])) - 1.0) / 2.0)))
+    return float(np.sqrt(np.mean(np.sum(residual**2, axis=1)))), angle
+
+
+def mirrored_axes(chain: Chain, q: np.ndarray, points: np.ndarray, method: str,
+                  marker_index: np.ndarray | None = None) -> MirroredAxes | None:
+    """Do world-frame ``points`` (N, 3, m) of a point kind (``method``) fit the nominal
+    ``chain`` moved through ``q`` (N, n) ``MIRROR_FACTOR`` times better with two axes
+    swapped than as read? The facts when so, else None (also for full poses, whose
+    orientations a swap would change too, and for too few or non-finite rows)."""
+    from hostpc.errors import InputError
+
+    if csv_row_shape(method) != "point" or q.ndim != 2 or q.shape[1] != chain.n:
+        return None
+    rows = np.unique(np.linspace(0, len(q) - 1, min(len(q), MAX_POSES)).astype(int))
+    keep = rows[np.all(np.isfinite(q[rows]), axis=1) & np.all(np.isfinite(points[rows]),
+                                                              axis=1)]
+    index = None if marker_index is None else np.asarray(marker_index, dtype=np.int64)[keep]
+    try:
+        T_base_flange = forward(chain, q[keep]).T_base_flange
+        as_read, _ = _registered(T_base_flange, points[keep], index)
+        swaps = []
+        for a, b in AXIS_SWAPS:
+            order = [0, 1, 2]
+            order["xyz".index(a)], order["xyz".index(b)] = "xyz".index(b), "xyz".index(a)
+            rms, angle = _registered(T_base_flange, points[keep][:, order], index)
+            swaps.append((angle, rms, (a, b)))
+    except (InputError, np.linalg.LinAlgError):
+        return None
+    _, swapped, axes = min(swaps)
+    if not swapped * MIRROR_FACTOR < as_read:
+        return None
+    return MirroredAxes(as_read, swapped, axes)
+
+
+def mirrored_axes_sentence(mirror: MirroredAxes, robot: str) -> str:
+    """The facts of mirrored axes in words; ends before the next step."""
+    a, b = mirror.axes
+    return (f"the measured points are a mirror image of the nominal {robot}'s motion: "
+            f"registered onto them as read, it misses them by {mirror.as_read * 1e3:.3g} mm "
+            f"RMS, with {a} and {b} exchanged by {mirror.swapped * 1e3:.3g} mm: two of the "
+            "instrument's axes were exchanged in the mapping")

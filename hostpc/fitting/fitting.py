@@ -23,6 +23,7 @@ from hostpc.fitting.shared_errors import added_parameter_covariance
 from hostpc.fitting.solver import (
     Evaluation,
     Loss,
+    SolverOutcome,
     evaluate,
     levenberg_marquardt,
     normal_equations,
@@ -32,6 +33,20 @@ from hostpc.model.memo import SharedValues
 from hostpc.model.problem import build_problem
 
 DEFAULT_CV_FOLDS = 5
+PRELIMINARY_ITERATIONS = 30
+"""The iterations of the fit that measures the noise before the weak parameters are chosen
+(``_hold_weak``): the cost falls within a few; what is left is the walk along the weak
+directions, which barely changes it."""
+
+
+def measured_rows(problem: Problem) -> int:
+    """The measured components of the problem's samples: N x m less the axes a sample's
+    ``mask`` field (N, m) marks unmeasured (world_point's; their rows are zero by
+    construction and carry no information, so they are no degrees of freedom)."""
+    mask = problem.dataset.samples.fields.get("mask")
+    if mask is not None and np.shape(mask) == problem.measured.shape:
+        return int(np.count_nonzero(mask))
+    return int(problem.measured.size)
 
 
 def _covariance(J_free: np.ndarray) -> np.ndarray:
@@ -220,18 +235,24 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
                   else np.zeros((0, layout.size)))
     finite = bool(np.all(np.isfinite(start.jacobian)) and np.all(np.isfinite(start.whitened)))
     prior_notes: list[str] = []
+    preliminary: SolverOutcome | None = None
+    preliminary_free = np.zeros(0, dtype=bool)
     if finite:  # a prior is a row like any measurement: it can make a direction identifiable
         ident, prior_notes = analyse_with_constraints(start.jacobian, layout.names,
                                                       layout.units, constraints,
                                                       frames=problem.frame_names)
-        ident = hold_weak_parameters(start.jacobian, prior_rows, ident, layout.names,
-                                     layout.units)
+        preliminary_free = ~ident.fixed
+        ident, preliminary = _hold_weak(problem, x_start, start, prior_rows, ident,
+                                        loss=loss, loss_scale=loss_scale,
+                                        max_iterations=max_iterations)
     else:  # reported through the solver's "failed" status; nothing can be analysed
         ident = Identifiability(0, np.zeros(layout.size), math.nan,
                                 np.zeros(layout.size, dtype=bool), ())
     free = ~ident.fixed
-    outcome = levenberg_marquardt(problem, x_start, free, loss=loss, loss_scale=loss_scale,
-                                  max_iterations=max_iterations, initial=start)
+    outcome = preliminary if preliminary is not None and np.array_equal(
+        preliminary_free, free) else levenberg_marquardt(
+        problem, x_start, free, loss=loss, loss_scale=loss_scale,
+        max_iterations=max_iterations, initial=start)
     final = outcome.evaluation
     assert final.jacobian is not None
     m = problem.measured.shape[1]
@@ -256,7 +277,6 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
     std[~free] = np.nan
     correlations = _strong_correlations(covariance, std, free, layout.names)
     norms = np.linalg.norm(final.raw[:, problem.length_columns], axis=1)
-    n_rows = final.whitened.size
     cv = (cross_validated_rms(problem, outcome.x, free, cv_folds, loss, loss_scale, final)
           if outcome.converged else None)
     return FitResult(
@@ -271,7 +291,7 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
         rms=float(np.sqrt(np.mean(norms**2))),
         max=float(np.max(norms)) if norms.size else 0.0,
         chi2=float(np.sum(final.whitened**2)),
-        dof=int(n_rows + prior_rows.shape[0] - np.count_nonzero(free)),
+        dof=int(measured_rows(problem) + prior_rows.shape[0] - np.count_nonzero(free)),
         rank=ident.rank,
         singular_values=ident.singular_values,
         condition_number=ident.condition_number,
@@ -284,6 +304,57 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
         cv_folds=cv_folds if cv is not None else 0,
         loss=loss,
     )
+
+
+def measured_noise(problem: Problem, whitened: np.ndarray, free: int) -> float | None:
+    """The measured noise over the stated one, robustly: sqrt of the median per-sample
+    whitened square norm over the median of a chi-square of as many rows (Wilson-Hilferty),
+    times the rows over the degrees of freedom (the fitted parameters' share). The median,
+    not chi2/dof: a few gross outliers (a 10 m slip in one sample) leave it alone, as they
+    would not a mean; a model that misses an effect raises it as chi2/dof. Scale-invariant:
+    a uniform stated sigma k times larger makes it k times smaller. None without degrees
+    of freedom."""
+    mask = problem.dataset.samples.fields.get("mask")
+    rows = (np.count_nonzero(mask, axis=1) if mask is not None
+            and np.shape(mask) == problem.measured.shape
+            else np.full(len(whitened), whitened.shape[1]))
+    dof = measured_rows(problem) - free
+    if dof <= 0 or not len(whitened):
+        return None
+    median_chi2 = rows * (1.0 - 2.0 / (9.0 * rows)) ** 3
+    ratio = float(np.median(np.sum(whitened**2, axis=1) / median_chi2))
+    return math.sqrt(max(ratio * measured_rows(problem) / dof, 1e-300))
+
+
+def _hold_weak(problem: Problem, x_start: np.ndarray, start: Evaluation,
+               prior_rows: np.ndarray, ident: Identifiability, *, loss: Loss,
+               loss_scale: float, max_iterations: int
+               ) -> tuple[Identifiability, SolverOutcome | None]:
+    """``ident`` with the weakly determined parameters held (``hold_weak_parameters``),
+    judged at the measured noise (``measured_noise``) of the fit with only the exact gauge
+    held, so that a uniform stated sigma (1 mm or 0.36 mm) never changes what is held, nor
+    the fitted values (docs/fitting.md, "Weak directions"). That fit (its outcome is
+    returned, to be reused when nothing more is held) runs only when the rule could hold
+    something at the noise measured at the start."""
+    assert start.jacobian is not None
+    layout = problem.layout
+    free = int(np.count_nonzero(~ident.fixed))
+    at_start = measured_noise(problem, start.whitened, free)
+    if at_start is None:  # no noise measured: the stated noise is the only scale
+        return hold_weak_parameters(start.jacobian, prior_rows, ident, layout.names,
+                                    layout.units), None
+    if np.array_equal(hold_weak_parameters(start.jacobian, prior_rows, ident, layout.names,
+                                           layout.units, noise_scale=at_start).fixed,
+                      ident.fixed):
+        return ident, None
+    outcome = levenberg_marquardt(problem, x_start, ~ident.fixed, loss=loss,
+                                  loss_scale=loss_scale,
+                                  max_iterations=min(max_iterations, PRELIMINARY_ITERATIONS),
+                                  initial=start)
+    noise = measured_noise(problem, outcome.evaluation.whitened, free) or 1.0
+    held = hold_weak_parameters(start.jacobian, prior_rows, ident, layout.names, layout.units,
+                                noise_scale=noise)
+    return held, outcome if outcome.converged else None
 
 
 def _strong_correlations(covariance: np.ndarray, std: np.ndarray, free: np.ndarray,

@@ -182,21 +182,28 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], units: Sequence[str],
 
 
 WEAK_SIGMA_LIMIT = {"rad": float(np.radians(5.0)), "m": 0.05}
-"""A parameter whose sigma (from the data, at the start) exceeds this bound per unit is not
-determined by the data, though not exactly unobservable: 5 deg for an angle, 50 mm for a
-length, far beyond any correction a calibration makes and far beyond what a determined
-parameter's sigma is (micrometres, thousandths of a degree)."""
+"""A parameter whose sigma (from the data at the measured noise, at the start) exceeds this
+bound per unit is not determined by the data, though not exactly unobservable: 5 deg for an
+angle, 50 mm for a length, far beyond any correction a calibration makes and far beyond
+what a determined parameter's sigma is (micrometres, thousandths of a degree)."""
 
 
 def hold_weak_parameters(jacobian: np.ndarray, prior_rows: np.ndarray,
-                         ident: Identifiability, names: Sequence[str], units: Sequence[str]
-                         ) -> Identifiability:
+                         ident: Identifiability, names: Sequence[str], units: Sequence[str],
+                         noise_scale: float = 1.0) -> Identifiability:
     """`ident` with every weakly determined parameter held as well (the stated rule: a free
     parameter whose sigma from `jacobian` (M, P) and `prior_rows` (K, P) exceeds
     ``WEAK_SIGMA_LIMIT`` of its unit), so the solver cannot wander along a direction the
     data barely sees. Greedy: the parameter furthest beyond its bound is held, the sigmas
     recomputed, until every free one is within. Each held one is a NullDirection saying so
-    in words."""
+    in words.
+
+    noise_scale: the measured noise over the stated one (sqrt(chi2/dof) of a fit, see
+    ``hostpc.fitting.fitting``): the measurement rows count with the noise the data shows,
+    the prior rows with their own stated sigma, so the decision does not depend on a
+    uniform stated sigma (docs/fitting.md)."""
+    if noise_scale != 1.0:
+        jacobian = jacobian / noise_scale
     limits = np.array([WEAK_SIGMA_LIMIT.get(unit, np.inf) for unit in units])
     if not np.all(np.isfinite(jacobian)) or not np.any(np.isfinite(limits)):
         return ident
@@ -223,6 +230,8 @@ def hold_weak_parameters(jacobian: np.ndarray, prior_rows: np.ndarray,
                       else f"{limits[index] * 1e3:.0f} mm")
         shown = (f"{np.degrees(sigma[worst]):.3g} deg" if units[index] == "rad"
                  else f"{sigma[worst] * 1e3:.3g} mm")
+        if noise_scale != 1.0:
+            shown += " at the measured noise"
         directions.append(NullDirection(
             names[index], (names[index],), (1.0,),
             f"the data does not determine {names[index]} (sigma {shown}, beyond the "

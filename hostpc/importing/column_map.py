@@ -2,7 +2,11 @@
 
 Comma-separated ``KEY=COLUMN`` pairs, checked against the CSV header:
 
-- joints: ``q1=COL, q2=COL, ...`` or a header range ``q=FIRST:LAST`` (consecutive columns);
+- joints: ``q1=COL, q2=COL, ...`` or a header range ``q=FIRST:LAST`` (consecutive columns,
+  in the robot's joint order; when every header of the range names a joint of the robot
+  (a URDF's joint names), each column goes to the joint it names, and a range in another
+  order than the robot's says so in one line; a range that mixes joint names and other
+  headers with a joint name out of its place is refused with the mapping to write);
 - position in the world frame: ``x=COL, y=COL, z=COL``; or, for several reflectors seen in
   one pose (world_point), ``marker.NAME=FIRST:LAST`` per reflector: three consecutive
   header columns x, y, z, each row giving one sample per reflector with the row's joints
@@ -58,6 +62,8 @@ class ColumnMap:
     #: coupled joints (0-based) the mapping left out: read from their leader's column, to
     #: be computed from it (hostpc.cli.import_csv), never a value of their own
     derived: tuple[int, ...] = ()
+    #: one line each for the user: how the mapping was read (a joint range mapped by name)
+    notes: tuple[str, ...] = ()
 
 
 def _header_range(key: str, column: str, header: Sequence[str]) -> list[str]:
@@ -72,6 +78,32 @@ def _header_range(key: str, column: str, header: Sequence[str]) -> list[str]:
                          f"comes after {last!r} in the header); write {key}={last}:{first} "
                          "or list the columns one by one")
     return list(header[start:stop + 1])
+
+
+def _joint_range(raw: str, columns: Sequence[str], joint_names: Sequence[str],
+                 header: Sequence[str]) -> tuple[dict[int, str], str | None]:
+    """The joints (1-based) of the range ``q=FIRST:LAST`` whose header ``columns`` are given:
+    by position, or, when every column names a joint of the robot (``joint_names``, in
+    joint order), each to the joint it names, with a note when that is not the position
+    (None otherwise). InputError for a range whose joint names are out of place among other
+    headers: neither reading is safe; the message gives the mapping by name."""
+    by_position = {k + 1: name for k, name in enumerate(columns)}
+    misplaced = [name for k, name in enumerate(columns)
+                 if name in joint_names and joint_names.index(name) != k]
+    if not misplaced:
+        return by_position, None
+    if all(name in joint_names for name in columns) and len(set(columns)) == len(columns):
+        by_name = {joint_names.index(name) + 1: name for name in columns}
+        moved = ", ".join(f"q{joint_names.index(name) + 1}={name}" for name in misplaced)
+        return by_name, (f"--columns {raw}: the header names the robot's joints in another "
+                         f"order than the robot's; each column read as the joint it names "
+                         f"({moved}, not by position)")
+    present = [name for name in joint_names if name in header]
+    fix = (",".join(f"q{k + 1}={name}" for k, name in enumerate(joint_names))
+           if len(present) == len(joint_names) else "q1=COL,q2=COL,... one by one")
+    raise InputError(f"--columns {raw}: the range's columns name joints of the robot at "
+                     f"other places ({', '.join(misplaced)}) among other columns; map the "
+                     f"joints by name: --columns \"{fix},...\" (the other keys as given)")
 
 
 def _groups(groups: Mapping[str, dict[str, str]], fields: Mapping[str, str],
@@ -112,15 +144,18 @@ def _groups(groups: Mapping[str, dict[str, str]], fields: Mapping[str, str],
 
 
 def parse_column_map(spec: str, header: Sequence[str], n_joints: int, method: str,
-                     source: str = "CSV", followers: Mapping[int, int] | None = None
-                     ) -> ColumnMap:
+                     source: str = "CSV", followers: Mapping[int, int] | None = None,
+                     joint_names: Sequence[str] = ()) -> ColumnMap:
     """Parse ``--columns`` against the CSV header; InputError naming the offending pair.
     ``followers``: coupled joints (a URDF ``<mimic>``), follower -> leader, 1-based: a
-    follower left out of the mapping is computed from its leader (``ColumnMap.derived``)."""
+    follower left out of the mapping is computed from its leader (``ColumnMap.derived``).
+    ``joint_names``: the robot's joint names in joint order (a URDF's; empty: unknown), by
+    which a ``q=FIRST:LAST`` range of joint-named headers is read (``_joint_range``)."""
     joints: dict[int, str] = {}
     fields: dict[str, str] = {}
     groups: dict[str, dict[str, str]] = {}  # reflector -> {"marker": range, "sigma": ...}
     given: dict[str, str] = {}  # key -> the pair that gave it (q=A:B gives q1..qN)
+    notes: list[str] = []
 
     def claim(key: str, raw: str) -> None:
         if key in given:
@@ -134,9 +169,12 @@ def parse_column_map(spec: str, header: Sequence[str], n_joints: int, method: st
         if not sep or not column:
             raise InputError(f"--columns: {raw!r} is not KEY=COLUMN")
         if key == "q":
-            for k, name in enumerate(_header_range("q", column, header)):
-                claim(f"q{k + 1}", raw)
-                joints[k + 1] = name
+            ranged, note = _joint_range(raw, _header_range("q", column, header),
+                                        tuple(joint_names), header)
+            for k, name in ranged.items():
+                claim(f"q{k}", raw)
+                joints[k] = name
+            notes.extend([note] if note else [])
             continue
         kind, dot, name = key.partition(".")
         if dot and kind in _GROUP_KEYS and name:
@@ -202,7 +240,8 @@ def parse_column_map(spec: str, header: Sequence[str], n_joints: int, method: st
         raise InputError(f"--columns: {method} measures points; drop the orientation "
                          f"columns or use --method {', '.join(csv_row_kinds('pose'))}")
     return ColumnMap(joints=tuple(joints[k] for k in range(1, n_joints + 1)), fields=fields,
-                     orientation=orientation, points=points, derived=derived)
+                     orientation=orientation, points=points, derived=derived,
+                     notes=tuple(notes))
 
 
 def listed_columns(header: Sequence[str], most: int = 40) -> str:

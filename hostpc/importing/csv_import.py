@@ -344,7 +344,8 @@ def read_samples(csv_rows: CsvRows, mapping: ColumnMap, options: ImportOptions
         marker_names=tuple(marker_ids),
         warnings=tuple(w for w in (_repeated_rows(header.source, table, group, row_lines),
                                    _blank_rows(header.source, csv_rows.blank,
-                                               int(np.unique(row_lines).size)))
+                                               int(np.unique(row_lines).size)),
+                                   _cut_last_row(header.source, csv_rows.cut))
                        if w is not None),
     )
 
@@ -404,6 +405,15 @@ def _blank_rows(source: str, blank: Sequence[int], n_read: int) -> str | None:
     shown = ", ".join(str(k) for k in blank[:5]) + (", ..." if len(blank) > 5 else "")
     return (f"{source}: {len(blank)} blank row{'s' if len(blank) > 1 else ''} dropped "
             f"(row{'s' if len(blank) > 1 else ''} {shown}); {n_read} rows read")
+
+
+def _cut_last_row(source: str, cut: Sequence[int]) -> str | None:
+    """A warning if the file ends in a data row without a line end (copied while written)."""
+    if not cut:
+        return None
+    return (f"{source}: row {cut[0]}, the last, has no line end: the file may have been cut "
+            "while it was written, that row's last value with it; check it against the "
+            "instrument, or delete the row")
 
 
 def _run_time(t: FloatArray) -> FloatArray:

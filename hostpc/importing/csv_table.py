@@ -45,11 +45,14 @@ class CsvHeader:
 class CsvRows:
     """The header of a CSV stream and an iterator over its non-blank data rows (read once);
     blank: the rows (line numbers) skipped as blank between the header and the last data
-    row read so far (a pose not written; blank lines at the end are not counted)."""
+    row read so far (a pose not written; blank lines at the end are not counted); cut: once
+    the rows are read, the last data row's line number if the file ends in it without a
+    line end (a file copied while it was written: its last value may be cut short)."""
 
     header: CsvHeader
     rows: Iterator[Row]
     blank: list[int] = field(default_factory=list)
+    cut: list[int] = field(default_factory=list)
 
 
 def _parse_header(cells: list[str], source: str, delimiter: str = ",") -> CsvHeader:
@@ -69,7 +72,15 @@ def _parse_header(cells: list[str], source: str, delimiter: str = ",") -> CsvHea
     return CsvHeader(source=source, columns=tuple(columns), units=units, delimiter=delimiter)
 
 
-def _data_rows(reader: Any, source: str, blank: list[int]) -> Iterator[Row]:
+def _tracked(lines: Iterator[str], last: list[str]) -> Iterator[str]:
+    """``lines``, keeping the latest in ``last`` (one item)."""
+    for line in lines:
+        last[:] = [line]
+        yield line
+
+
+def _data_rows(reader: Any, source: str, blank: list[int], last: list[str],
+               cut: list[int]) -> Iterator[Row]:
     pending: list[int] = []
     try:
         for cells in reader:
@@ -79,6 +90,8 @@ def _data_rows(reader: Any, source: str, blank: list[int]) -> Iterator[Row]:
             blank.extend(pending)
             pending.clear()
             yield reader.line_num, tuple(c.strip() for c in cells)
+        if not pending and last and not last[0].endswith(("\n", "\r")):
+            cut.append(reader.line_num)
     except csv.Error as exc:
         raise InputError(f"{source}: row {reader.line_num}: {exc}") from None
     except UnicodeDecodeError as exc:
@@ -104,11 +117,13 @@ def read_csv(lines: Iterable[str], source: str) -> CsvRows:
         dialect: Any = csv.Sniffer().sniff(first.rstrip("\r\n"), delimiters=",;\t")
     except csv.Error:
         dialect = csv.excel
-    reader = csv.reader(itertools.chain([first], line_iter), dialect)
+    last: list[str] = []
+    reader = csv.reader(_tracked(itertools.chain([first], line_iter), last), dialect)
     try:
         header = next(reader)
     except (StopIteration, csv.Error) as exc:
         raise InputError(f"{source}: row 1: cannot read the header ({exc})") from None
     blank: list[int] = []
+    cut: list[int] = []
     return CsvRows(header=_parse_header(header, source, str(dialect.delimiter)),
-                   rows=_data_rows(reader, source, blank), blank=blank)
+                   rows=_data_rows(reader, source, blank, last, cut), blank=blank, cut=cut)

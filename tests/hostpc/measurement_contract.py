@@ -100,7 +100,10 @@ def check_recovery(problem: Problem, rng: np.random.Generator) -> None:
     clean, _ = predict(problem, truth, jacobian=False)
     result = solve(replace(problem, measured=clean), cv_folds=0)
     assert result.converged, result.message
-    assert np.array_equal(result.fixed, gauge.fixed)
+    # the exact gauge is the data's; the weak-parameter rule judges sigmas at the measured
+    # noise (docs/fitting.md), which noise-free data makes tiny: it holds no more than the
+    # gauge fit did, and what it frees is recovered too (its truth is 0)
+    assert not np.any(result.fixed & ~gauge.fixed)
     scale = np.array([PARAMETER_SCALE.get(u, 1e-4) for u in problem.layout.units])
     assert np.max(np.abs(result.x - truth) / scale) < 1e-6, problem.layout.names
 

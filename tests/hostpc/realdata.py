@@ -18,8 +18,9 @@ from hostpc.cli.main import main
 DATA = Path(__file__).resolve().parents[1] / "data"
 
 FEW_DEGREES = math.radians(5.0)
-"""The largest offset sigma a real fit may report: the fit holds at nominal any parameter
-whose sigma the data leaves beyond 5 deg (docs/fitting.md), so none is reported above it."""
+"""The largest offset sigma at the measured noise (the stated sigma times sqrt(chi2/dof)) a
+real fit may report: the fit holds at nominal any parameter whose sigma at the measured
+noise the data leaves beyond 5 deg (docs/fitting.md), so none is reported above it."""
 
 
 def import_csv(csv: Path, out: Path, *arguments: str) -> Path:
@@ -53,7 +54,7 @@ def check_every_level(dataset: Path, nominal: list[str]) -> dict[str, Any]:
     """Fit the nominal model (frames only), the default (offsets + frames) and +geometry;
     each must converge and report no free offset with a sigma beyond a few degrees. Then
     `--effects auto`: every model of its table converged, and the chosen one is within one
-    standard error of the best held-out score. Returns the fits by level."""
+    standard error of the best held-out score of a plausible model. Returns the fits by level."""
     data = hostpc.load_dataset(dataset)
     fits = {}
     for level, effects in (("nominal", nominal), ("offsets", None), ("geometry", "+geometry")):
@@ -61,11 +62,16 @@ def check_every_level(dataset: Path, nominal: list[str]) -> dict[str, Any]:
         assert result.converged, (level, result.message)
         for name, estimate in result.parameters.items():
             if name.startswith("joint_offsets.") and not estimate.fixed:
-                assert estimate.std is not None and estimate.std < FEW_DEGREES, (level, name)
+                assert estimate.std is not None, (level, name)
+                assert estimate.std * math.sqrt(result.chi2_dof) < FEW_DEGREES, (level, name)
         fits[level] = result
     table = held_out_table(dataset)
     assert all(model["converged"] for model in table.values())
-    best = min(table.values(), key=lambda model: model["held_out_score"])
+    # the best of the models auto may take (a geometry that moves a table length by over
+    # 50 mm is never one, docs/real-data.md TALOS)
+    best = min((model for model in table.values()
+                if "implausible" not in (model["note"] or "")),
+               key=lambda model: model["held_out_score"])
     assert table["auto"]["held_out_score"] <= best["held_out_score"] + best["standard_error"]
     fits["table"] = table
     return fits

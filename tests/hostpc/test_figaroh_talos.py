@@ -34,14 +34,16 @@ def test_talos_converges_at_every_level(talos: Path) -> None:
     geometry = fits["geometry"]
     # what the data leaves beyond the physical bounds is held at nominal, by name
     held = {d.fixed for d in geometry.unidentifiable}
-    assert {"joint_offsets.q6", "joint_offsets.q7", "joint_offsets.q8"} <= held
+    assert {"joint_offsets.q6", "joint_offsets.q8"} <= held
     assert geometry.rank < len(geometry.names)
     # pose-grouped held-out position error (docs/real-data.md): the real robot's zero
-    # offsets matter (3.9 -> 1.09 mm) and so does its geometry (-> 0.75 mm); auto takes it
+    # offsets matter (3.9 -> 1.09 mm); its geometry predicts better still (-> 0.78 mm) but
+    # moves table lengths by over 50 mm: auto takes the ladder's one generated effect
     table = fits["table"]
     assert table["nominal"]["cv_rms"] == pytest.approx(3.899e-3, rel=0.01)
     assert table["offsets"]["cv_rms"] == pytest.approx(1.092e-3, rel=0.01)
-    assert table["offsets + geometry"]["cv_rms"] == pytest.approx(0.7516e-3, rel=0.01)
-    assert table["auto"]["name"] == "offsets + geometry"
+    assert table["offsets + geometry"]["cv_rms"] == pytest.approx(0.7818e-3, rel=0.01)
+    assert "implausible" in (table["offsets + geometry"]["note"] or "")
+    assert table["auto"]["name"] == "ladder"
     assert table["auto"]["held_out_score"] + table["auto"]["standard_error"] < \
         table["offsets"]["held_out_score"]
