@@ -306,7 +306,7 @@ def _push_line(document: JsonObject) -> str:
         if document["robot"].get("sim"):
             undo = "simulated controller: nothing to roll back after the run"
         else:
-            undo = f"undo with {rollback_command(document['run_dir'], document['archive'])}"
+            undo = f"undo with {rollback_command(document['run_dir'], document.get('archive'))}"
         rollback_id = push.get("rollback_id")
         what = (f"rollback id {rollback_id}" if rollback_id is not None
                 else "recovered after an interruption, no rollback id")

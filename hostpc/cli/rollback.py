@@ -17,8 +17,12 @@ sim` has no controller left (its simulator ended with the run): both without con
 Offsets are printed in degrees.
 
 With --run, the rollback is journaled and the run's outcome is derived again: result.json
-(outcome verdict ROLLED_BACK), summary.txt and report.html say so; with --db the archived
-record of the run is revised (hostpc.archive: its history of outcomes is kept).
+(outcome verdict ROLLED_BACK, no joint calibrated), summary.txt and report.html say so; the
+archived record of the run is revised (hostpc.archive: its history of outcomes is kept):
+in the archive --db names, else the one the run's run.json names; a run that stopped
+after its push (no result.json) from its journal. With --run, a controller that holds
+neither the offsets the run pushed nor the ones it replaced (a later push, e.g. the next
+robot's on a station) is refused, exit 2, nothing written, unless --discard-later-push.
 """
 
 from __future__ import annotations
@@ -43,6 +47,7 @@ from hostpc.calibrate.push_file import PushFile, check_joint_count, read_push_fi
 from hostpc.calibrate.run_header import read_run_header
 from hostpc.cli.archive_options import add_archive_options, archive_run, run_archive
 from hostpc.cli.numbers import TIMEOUT_S
+from hostpc.db_url import redacted_url
 from hostpc.errors import (
     ConnectionFailed,
     ControllerError,
@@ -189,7 +194,8 @@ async def _rollback(address: RobotAddress, args: argparse.Namespace, rollback_id
             now = np.asarray(await robot.get_offsets(), float)
             check_joint_count(push, now.size, args.run, str(address))
             if not args.discard_later_push:
-                _refuse_later_push(now, push, Path(args.run), address)
+                _refuse_later_push(now, push, Path(args.run), address,
+                                   redacted_url(args.db) if args.db else None)
             return await rollback_run(robot, push.record, now)
         return await rollback(robot, rollback_id, previous)
     finally:
@@ -212,16 +218,21 @@ def _refuse_if_rolled_back(run_dir: Path) -> None:
 
 def _archive_rolled_back(run_dir: Path, args: argparse.Namespace) -> bool:
     """A run rolled back already, given `--db`: revise its archived record to the rolled
-    back outcome (a rollback without `--db` left the archive saying PASS/FAIL); True if
-    done. Nothing is rolled back twice."""
+    back outcome (a rollback whose archive was not reached left it saying PASS/FAIL/ERROR);
+    True if done. Nothing is rolled back twice."""
     journal = Journal(run_dir)
-    if (not journal.exists or not (run_dir / "result.json").is_file()
-            or not isinstance(journal.last_event(Pushed, Rollback), Rollback)):
+    if not journal.exists or not isinstance(journal.last_event(Pushed, Rollback), Rollback):
         return False
-    result = json.loads((run_dir / "result.json").read_text(encoding="utf-8"))
-    archive_run(args, run_dir, int(result["exit_code"]))
-    print(f"{run_dir}: rolled back already; its archived record now says "
-          f"{(result.get('outcome') or {}).get('verdict', 'ROLLED_BACK')}")
+    if (run_dir / "result.json").is_file():
+        result = json.loads((run_dir / "result.json").read_text(encoding="utf-8"))
+        archive_run(args, run_dir, int(result["exit_code"]))
+        verdict = (result.get("outcome") or {}).get("verdict", "ROLLED_BACK")
+    else:  # stopped after its push (ERROR): from the journal, as the rollback did
+        push = read_push_file(run_dir)
+        archive_run(args, run_dir, EXIT_CODES["ROLLED_BACK"],
+                    revise=lambda record: _rolled_back_record(record, push.record))
+        verdict = "ROLLED_BACK"
+    print(f"{run_dir}: rolled back already; its archived record now says {verdict}")
     return True
 
 
@@ -277,7 +288,7 @@ def _journal_rollback(run_dir: Path, now: np.ndarray, how: str, controller: str)
 
 
 def _refuse_later_push(now: np.ndarray, push: PushFile, run_dir: Path,
-                       address: RobotAddress) -> None:
+                       address: RobotAddress, archive: str | None) -> None:
     """InputError (nothing written) if the controller's offsets are neither the ones this
     run pushed (or held after the push, `PushRecord.held`) nor the ones it replaced:
     someone pushed later (on a station: the next robot's run), and rolling back would
@@ -293,7 +304,7 @@ def _refuse_later_push(now: np.ndarray, push: PushFile, run_dir: Path,
         f"run pushed ({_later_push(run_dir, push)}); rolling back would overwrite them with "
         f"the ones this run replaced; nothing written. See what it holds: hostpc status "
         f"--robot {address}; roll back anyway (discarding that push) with: "
-        f"{rollback_command(run_dir)} --robot {address} {DISCARD_LATER}")
+        f"{rollback_command(run_dir, archive)} --robot {address} {DISCARD_LATER}")
 
 
 def _later_push(run_dir: Path, push: PushFile) -> str:

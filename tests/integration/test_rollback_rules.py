@@ -161,7 +161,7 @@ def rolled_back_error(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any
 
 
 def test_rolling_back_a_run_stopped_after_its_push_revises_its_record(
-        rolled_back_error: dict[str, Any]) -> None:
+        rolled_back_error: dict[str, Any], capsys: pytest.CaptureFixture[str]) -> None:
     pushed = rolled_back_error["push"]
     assert np.allclose(rolled_back_error["offsets"], pushed["previous_offsets"], atol=1e-12)
     with open_archive(rolled_back_error["url"], create=False) as archive:
@@ -176,6 +176,12 @@ def test_rolling_back_a_run_stopped_after_its_push_revises_its_record(
     registers = archived_outcome(stored)  # the station follows its record
     assert registers.state == reg.State.FAIL and registers.joints_calibrated == 0
     assert registers.outcome_flags == reg.FLAG_ROLLED_BACK
+    # its rollback again: nothing rolled back twice, the record stays as it is
+    code, out, _ = run_cli(capsys, "rollback", "--run", str(rolled_back_error["run"]),
+                           "--db", rolled_back_error["url"])
+    assert code == 0 and "rolled back already" in out and "ROLLED_BACK" in out
+    with open_archive(rolled_back_error["url"], create=False) as archive:
+        assert len(archive.revisions(rolled_back_error["archive_id"])) == 2
 
 
 def test_the_report_of_a_rolled_back_unfinished_run_names_no_resume_to_finish(
@@ -208,6 +214,7 @@ def test_a_rollback_after_the_next_robots_push_refuses(
         line = err.strip().splitlines()[-1]
         assert f"run {runs / 'h'} at {h['time']}" in line, line
         assert "--discard-later-push" in line and "nothing written" in line
+        assert f"--db {url} " in line
         assert np.allclose(_offsets(sim), h["new_offsets"], atol=1e-12)  # H's, untouched
         events = [json.loads(line).get("event") for line in
                   (runs / "g" / "journal.jsonl").read_text().splitlines()]
