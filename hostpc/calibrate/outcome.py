@@ -30,7 +30,8 @@ A refusal counts while no push of the run is in the controller (a refused re-pus
 resume leaves the earlier, verified push standing).
 
 A joint is "calibrated" when the data determine it (source "data") and, if it was pushed,
-its verification did not fail; a hold or prior value never is (joint_status.py). A joint
+its verification did not fail; a hold or prior value never is (joint_status.py); after a
+rollback no joint is (its zero is the one before the run again: ROLLED_BACK is no pass). A joint
 only a cell reference's frames identify (J1, J6 with every frame estimated) is restored TO
 THE REFERENCE: its `zero_from` names the reference's recording run and whether that run
 calibrated it ("measured") or not ("as_found": its zero as at that run, not measured
@@ -49,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from hostpc.calibrate.joint_status import JointSource
+from hostpc.calibrate.next_commands import resume_command, rollback_command, with_archive
 from hostpc.calibrate.reference import CellReference
 from hostpc.calibrate.refusals import PushRefusal
 from hostpc.calibrate.summary import (
@@ -74,9 +76,6 @@ JOURNAL_KINDS = ("push_intent", "push", "verify", "rollback", "push_refused", "r
 _KNOWN_FIX = re.compile(r"--known (\S+)")
 """The frames a joint's fix names (joint_status: `--known target (or a cell reference...)`)."""
 _MATCH = 1e-9  # rad: the verified offsets are the pushed ones
-_ARCHIVED_COMMANDS = ("hostpc rollback --run", "hostpc calibrate --resume")
-"""Next commands that change the run's outcome: with the run's archive (`--db`) they
-revise its archived record too."""
 
 
 @dataclass(frozen=True)
@@ -193,6 +192,9 @@ class RobotOutcome:
     applied_on_host: bool = False
     """The new offsets are applied on the host for the session only (module docstring):
     `pushed` is False, the controller's zeros are unchanged."""
+    archive: str | None = None
+    """The results archive the run is archived in (run.json `archive`, without a
+    password): every command that acts on the run again names it (next_commands.py)."""
 
     @property
     def exit_code(self) -> int:
@@ -208,7 +210,7 @@ class RobotOutcome:
                 "events": [e.to_dict() for e in self.events],
                 "refused_reason": self.refused_reason, "exit_code": self.exit_code,
                 "unknown_zeros": list(self.unknown_zeros),
-                "applied_on_host": self.applied_on_host}
+                "applied_on_host": self.applied_on_host, "archive": self.archive}
 
 
 def parse_required_joints(text: str | None, n_joints: int | None = None) -> tuple[int, ...]:
@@ -330,12 +332,16 @@ def derive_outcome(events: Sequence[JsonObject], sources: Sequence[JointSource],
     active = state.pushed_new is not None and state.rolled_at is None
     pushed_mask = state.pushed_mask if active else ()
     joints = []
+    rolled_back = not active and state.rolled_at is not None
     for s in sources:
         pushed = bool(active and (s.joint - 1 < len(pushed_mask) and pushed_mask[s.joint - 1]))
         verified = state.verified if pushed else None
-        calibrated = s.calibrated and verified is not False
+        # rolled back: every zero is the previous one again, whatever the fit found
+        calibrated = s.calibrated and verified is not False and not rolled_back
         reason = s.reason if not s.calibrated else (
-            None if calibrated else "its pushed offset failed verification")
+            None if calibrated else
+            "rolled back: its zero is the one before the run" if rolled_back else
+            "its pushed offset failed verification")
         joints.append(JointOutcome(s.joint, s.label,
                                    "calibrated" if calibrated else "not_calibrated",
                                    s.source, pushed and not host_only, verified, reason,
@@ -374,9 +380,8 @@ def derive_outcome(events: Sequence[JsonObject], sources: Sequence[JointSource],
     outcome = _with_words(outcome, run_dir, new_run, tuple(known), state.intent_open,
                           tuple(swapped), simulated)
     command = outcome.next_command
-    if archive and command and command.startswith(_ARCHIVED_COMMANDS) and " or " not in command:
-        outcome = dataclasses.replace(outcome, next_command=f"{command} --db {archive}")
-    return outcome
+    return dataclasses.replace(outcome, archive=archive, next_command=(
+        None if command is None else with_archive(command, archive)))
 
 
 @dataclass
@@ -507,11 +512,11 @@ def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[
     elif verdict == "FAIL":
         head = ("FAIL: the pushed offsets failed verification; the controller holds them"
                 + (f"; {bad_text}" if bad_text else ""))
-        next_command = f"hostpc rollback --run {run}"
+        next_command = rollback_command(run)
     elif verdict == "ROLLED_BACK":
         head = (f"ROLLED BACK at {outcome.rolled_back_at}: the controller has its previous "
                 "offsets again")
-        next_command = f"hostpc calibrate --resume {run} --push"
+        next_command = resume_command(run, "--push")
     elif verdict == "REFUSED":
         head = f"REFUSED: push refused, offsets unchanged ({outcome.refused_reason})"
         constrained = _constraints_text(joints)
@@ -524,16 +529,16 @@ def _with_words(outcome: RobotOutcome, run_dir: str, new_run: str, known: tuple[
     elif verdict == "NOT_PUSHED":
         head = f"NOT PUSHED: offsets unchanged; {good_text}" + (
             f"; {bad_text}" if bad_text else "")
-        next_command = f"hostpc calibrate --resume {run} --push" if good else None
+        next_command = resume_command(run, "--push") if good else None
         if _model_check_failed(outcome.events):
             # the push would be refused for the same reason: find the missing effect first
             head += "; the model does not explain fresh poses (model check FAIL)"
             next_command = f"hostpc diagnose {run}/dataset.json --ladder"
     else:
         head = f"ERROR: the run did not finish; controller: {outcome.controller}"
-        next_command = f"hostpc calibrate --resume {run}"
+        next_command = resume_command(run)
     if intent_open and verdict == "ERROR":
-        next_command = f"hostpc calibrate --resume {run}"
+        next_command = resume_command(run)
     return dataclasses.replace(outcome, headline=head, next_command=next_command,
                                unknown_zeros=unknown)
 
@@ -573,10 +578,10 @@ def _legacy_refusal_command(reason: str, run: str) -> str:
     if "hostpc diagnose" in reason:
         return f"hostpc diagnose {run}/dataset.json"
     if "controller's own offset limit" in reason:  # --force would meet it again
-        return f"hostpc calibrate --resume {run} --push"
+        return resume_command(run, "--push")
     if swapped is not None:
-        return f"hostpc calibrate --resume {run} --swapped {swapped.group(1)}"
-    return f"hostpc calibrate --resume {run} --force"
+        return resume_command(run, "--swapped", swapped.group(1))
+    return resume_command(run, "--force")
 
 
 def _model_check_failed(events: Sequence[OutcomeEvent]) -> bool:

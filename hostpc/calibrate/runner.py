@@ -43,6 +43,7 @@ from hostpc.calibrate.journal_events import (
 )
 from hostpc.calibrate.measured_under import measured_under_field
 from hostpc.calibrate.more_poses import more_poses_message, more_poses_reason
+from hostpc.calibrate.next_commands import resume_command, rollback_command
 from hostpc.calibrate.outcome import parse_required_joints, restored_to_reference
 from hostpc.calibrate.outcome_files import run_outcome
 from hostpc.calibrate.push import (
@@ -204,7 +205,7 @@ class Runner:
         journal says this run wrote its offsets and no rollback undid them since;
         `link_lost`: the link closed, so what it held then may have changed since (a
         controller that restarted has its previous offsets again)."""
-        resume = f"hostpc calibrate --resume {self.run_dir}"
+        resume = resume_command(self.run_dir, archive=self.archive)
         last = self.journal.last_event(PushIntent, Pushed, Rollback) if self.journal.exists \
             else None
         if isinstance(last, PushIntent):  # the controller's answer never came
@@ -212,14 +213,14 @@ class Runner:
                 return ("a push was cut short: the simulated controller may have held the "
                         "new offsets, NOT verified, and ended with the run; a resume "
                         "restarts it with its initial offsets and pushes again: "
-                        f"{resume} --push")
+                        f"{resume_command(self.run_dir, '--push', archive=self.archive)}")
             written = written_rollback_id(self.journal)
             if written is not None:  # answered, but its read-back never came
                 return (f"{read_back_lost_line(written, self.run_dir, self.robot_info.address)}"
                         f"; settle and verify it with: {resume}")
             return (f"a push was cut short: the controller may hold the new offsets, NOT "
-                    f"verified; settle and verify it with: {resume} (undo: hostpc rollback "
-                    f"--run {self.run_dir})")
+                    f"verified; settle and verify it with: {resume} (undo: "
+                    f"{rollback_command(self.run_dir, self.archive)})")
         if not isinstance(last, Pushed):
             return f"continue with: {resume}"
         record = last.record
@@ -231,8 +232,9 @@ class Runner:
                    < self.journal.last_position(Pushed) else f"verification {verified.verdict}")
         if self.robot_info.sim:  # its simulated controller ends with this command
             return (f"the simulated controller held {pushed}, {verdict}, and ended with the "
-                    f"run; a resume restarts it with its initial offsets: {resume} --push")
-        undo = f"undo: hostpc rollback --run {self.run_dir}"
+                    f"run; a resume restarts it with its initial offsets: "
+                    f"{resume_command(self.run_dir, '--push', archive=self.archive)}")
+        undo = f"undo: {rollback_command(self.run_dir, self.archive)}"
         if link_lost:
             return (f"the controller held {at} when the link was lost{rollback_id}, "
                     f"{verdict}; the resume checks what it holds now: {resume}; {undo}")
@@ -271,7 +273,9 @@ class Runner:
                 header = dataclasses.replace(header, settings=persisted(
                     settings, header.settings, self.resume_overrides))
                 self.journal.write_header(header.to_dict())
-            if self.archive is not None and self.archive != header.archive:
+            if self.archive is None:  # the run's own archive (next_commands.py)
+                self.archive = header.archive
+            elif self.archive != header.archive:
                 header = dataclasses.replace(header, archive=self.archive)
                 self.journal.write_header(header.to_dict())
             self.journal.append(Resumed(at=_now()))

@@ -21,6 +21,7 @@ import numpy as np
 
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.journal_events import MorePoses, Pushed
+from hostpc.calibrate.next_commands import rollback_command
 from hostpc.calibrate.push import PUSH_FILE, PushPlan, joint_display_name
 from hostpc.calibrate.robot_time import format_robot_time, robot_time_document
 from hostpc.calibrate.run_reference import reference_summary_lines
@@ -220,7 +221,7 @@ def format_summary(run: RunResult) -> str:
     if outcome:
         lines.append(f"controller: {outcome['controller']}")
     lines.append(_push_line({"push": run.push.to_dict(), "robot": robot,
-                             "run_dir": run.run_dir}))
+                             "run_dir": run.run_dir, "archive": outcome.get("archive")}))
     if run.verify:
         verify_line = _verify_line(run.verify)
         if outcome and outcome.get("verdict") == "ROLLED_BACK":  # no longer the robot's
@@ -305,7 +306,7 @@ def _push_line(document: JsonObject) -> str:
         if document["robot"].get("sim"):
             undo = "simulated controller: nothing to roll back after the run"
         else:
-            undo = f"undo with hostpc rollback --run {document['run_dir']}"
+            undo = f"undo with {rollback_command(document['run_dir'], document.get('archive'))}"
         rollback_id = push.get("rollback_id")
         what = (f"rollback id {rollback_id}" if rollback_id is not None
                 else "recovered after an interruption, no rollback id")

@@ -1,13 +1,19 @@
-"""`--db URL` for commands that archive a run or read one back (calibrate, fit)."""
+"""`--db URL` for commands that archive a run or read one back (calibrate, fit, rollback);
+a resume or rollback given none uses the archive its run names (`run_archive`)."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hostpc.db_url import redacted_url
+
+if TYPE_CHECKING:
+    from hostpc.archive import RunRecord
 
 
 def add_archive_options(parser: argparse.ArgumentParser, *, read: bool) -> None:
@@ -22,16 +28,56 @@ def add_archive_options(parser: argparse.ArgumentParser, *, read: bool) -> None:
                             "its address), and the robot a cell reference belongs to")
 
 
-def archive_run(args: argparse.Namespace, run_dir: Path, exit_code: int) -> None:
-    """Archive the run in `run_dir` when `--db` was given; says so on stderr."""
-    if not getattr(args, "db", None) or not (run_dir / "result.json").exists():
+def run_archive(args: argparse.Namespace, run_dir: Path) -> None:
+    """A resume or rollback of the run in `run_dir` given no `--db`: the archive its
+    run.json names (hostpc.calibrate.next_commands), so following a command printed
+    without `--db` still revises the archived record."""
+    from hostpc.calibrate.journal import Journal
+    from hostpc.calibrate.run_header import read_run_header
+    from hostpc.errors import InputError
+
+    try:
+        header = read_run_header(Journal(run_dir))
+    except InputError:
+        return  # the command itself says what is wrong with the run folder
+    if not getattr(args, "db", None) and header.archive:
+        args.db = header.archive
+        print(f"archive: {header.archive} (the run's, from {run_dir}/run.json)",
+              file=sys.stderr)
+
+
+def archive_run(args: argparse.Namespace, run_dir: Path, exit_code: int,
+                revise: Callable[[RunRecord], RunRecord] | None = None) -> None:
+    """Archive the run in `run_dir` when `--db` was given; says so on stderr. A run
+    without result.json only with `revise`, which states its record (a rollback of a run
+    that stopped after its push: hostpc.cli.rollback)."""
+    if not getattr(args, "db", None):
+        return
+    if revise is None and not (run_dir / "result.json").exists():
         return
     from hostpc.archive import open_archive, record_from_run
 
-    serial = args.robot_serial or str(args.robot or "unknown")
+    recorded, address = _run_serial(run_dir)
+    serial = args.robot_serial or recorded or str(args.robot or address or "unknown")
     with open_archive(args.db) as archive:
-        run_id = archive.add(record_from_run(run_dir, serial=serial, exit_code=exit_code))
+        record = record_from_run(run_dir, serial=serial, exit_code=exit_code)
+        run_id = archive.add(record if revise is None else revise(record))
     print(f"archived as run {run_id} in {redacted_url(args.db)}", file=sys.stderr)
+
+
+def _run_serial(run_dir: Path) -> tuple[str | None, str | None]:
+    """The run's `--robot-serial` and its controller's address ("sim" for `--robot sim`)
+    from run.json: a resume or rollback given neither archives it under the key it was
+    started with."""
+    from hostpc.calibrate.journal import Journal
+    from hostpc.calibrate.run_header import read_run_header
+    from hostpc.errors import InputError
+
+    try:
+        header = read_run_header(Journal(run_dir))
+    except InputError:
+        return None, None
+    return header.robot_serial, "sim" if header.robot.sim else header.robot.address
 
 
 def dataset_from_archive(args: argparse.Namespace) -> str:

@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.next_commands import resume_command
 from hostpc.calibrate.outcome import parse_required_joints
 from hostpc.calibrate.resume import ResumeOverrides
 from hostpc.calibrate.run_header import parse_run_header, read_run_header
@@ -48,7 +49,7 @@ from hostpc.calibrate.run_values import RobotInfo, RunOutcome
 from hostpc.calibrate.runner import Runner
 from hostpc.calibrate.separate import parse_separate
 from hostpc.calibrate.swaps import DEFAULT_SWAP_LIMIT_DEG, parse_swapped
-from hostpc.cli.archive_options import add_archive_options, archive_run
+from hostpc.cli.archive_options import add_archive_options, archive_run, run_archive
 from hostpc.cli.calibrate_checks import (
     check_known_frames,
     check_model_options,
@@ -281,6 +282,7 @@ def run(args: argparse.Namespace) -> int:
         data = journal.read_header()
         journal.load()  # a damaged journal line: one line, exit 2, before connecting
         header = parse_run_header(data, journal)
+        run_archive(args, run_dir)  # no --db: the run's own archive (next_commands.py)
         recorded = header.robot
         address = parse_robot(args.robot) if args.robot else (
             RobotAddress(sim=True) if recorded.sim else parse_robot(recorded.address))
@@ -335,8 +337,8 @@ def run(args: argparse.Namespace) -> int:
         stopped = interrupt_notes(exc)
         interrupted = f"interrupted ({stopped})" if stopped else "interrupted"
         if Journal(run_dir).exists:
-            print(f"hostpc calibrate: {interrupted}: continue with hostpc calibrate --resume "
-                  f"{run_dir}", file=sys.stderr)
+            resume = resume_command(run_dir, archive=redacted_url(args.db) if args.db else None)
+            print(f"hostpc calibrate: {interrupted}: continue with {resume}", file=sys.stderr)
         else:
             print(f"hostpc calibrate: {interrupted} before the run started (nothing to "
                   "resume)", file=sys.stderr)

@@ -65,6 +65,32 @@ def read_json(path: Path, what: str) -> JsonObject:
     return document
 
 
+def _unfinished(folder: Path) -> str:
+    """Why a run folder without result.json has no report, and what to do: a run whose
+    push was rolled back since has nothing to finish on the controller."""
+    from hostpc.calibrate.journal import Journal
+    from hostpc.calibrate.journal_events import Pushed, Rollback
+    from hostpc.calibrate.next_commands import resume_command
+    from hostpc.calibrate.run_header import read_run_header
+    from hostpc.cli.rollback import status_hint
+
+    journal = Journal(folder)
+    try:
+        archive = read_run_header(journal).archive
+        last = journal.last_event(Pushed, Rollback)
+    except InputError:
+        archive, last = None, None
+    if isinstance(last, Rollback):
+        return (f"{folder}: no result.json: the run stopped after its push, and the push "
+                f"was rolled back ({last.time or 'at an unrecorded time'}): the controller "
+                f"has its previous offsets, nothing of the run is left on it; to calibrate it "
+                f"again: {resume_command(folder, '--push', archive=archive)}, then hostpc "
+                f"report {folder} ({status_hint(folder)})")
+    return (f"{folder}: no result.json: the run did not finish (ERROR); finish it with "
+            f"{resume_command(folder, archive=archive)}, then hostpc report {folder} "
+            f"({status_hint(folder)})")
+
+
 def run(args: argparse.Namespace) -> int:
     from hostpc.report import write_calibration_report
 
@@ -81,10 +107,7 @@ def run(args: argparse.Namespace) -> int:
                          f"{', '.join(given)}: for the report of a dataset, hostpc report "
                          f"{folder / 'dataset.json'} {' '.join(given)} ...")
     if not (folder / "result.json").exists() and (folder / "run.json").is_file():
-        raise InputError(f"{folder}: no result.json: the run did not finish (ERROR); "
-                         f"finish it with hostpc calibrate --resume {folder}, then hostpc "
-                         f"report {folder} (what the controller holds now: hostpc status "
-                         f"--robot HOST)")
+        raise InputError(_unfinished(folder))
     result = read_json(folder / "result.json", "result document (result.json)")
     diagnosis = None
     dataset = folder / "dataset.json"

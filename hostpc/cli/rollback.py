@@ -17,8 +17,12 @@ sim` has no controller left (its simulator ended with the run): both without con
 Offsets are printed in degrees.
 
 With --run, the rollback is journaled and the run's outcome is derived again: result.json
-(outcome verdict ROLLED_BACK), summary.txt and report.html say so; with --db the archived
-record of the run is revised (hostpc.archive: its history of outcomes is kept).
+(outcome verdict ROLLED_BACK, no joint calibrated), summary.txt and report.html say so; the
+archived record of the run is revised (hostpc.archive: its history of outcomes is kept):
+in the archive --db names, else the one the run's run.json names; a run that stopped
+after its push (no result.json) from its journal. With --run, a controller that holds
+neither the offsets the run pushed nor the ones it replaced (a later push, e.g. the next
+robot's on a station) is refused, exit 2, nothing written, unless --discard-later-push.
 """
 
 from __future__ import annotations
@@ -29,18 +33,21 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from hostpc.calibrate.journal import Journal
 from hostpc.calibrate.journal_events import Pushed, PushRecord, Rollback
+from hostpc.calibrate.next_commands import resume_command, rollback_command
+from hostpc.calibrate.outcome import EXIT_CODES
 from hostpc.calibrate.outcome_files import rewrite_outcome
 from hostpc.calibrate.push import rollback, rollback_run, same_offsets
 from hostpc.calibrate.push_file import PushFile, check_joint_count, read_push_file
 from hostpc.calibrate.run_header import read_run_header
-from hostpc.cli.archive_options import add_archive_options, archive_run
+from hostpc.cli.archive_options import add_archive_options, archive_run, run_archive
 from hostpc.cli.numbers import TIMEOUT_S
+from hostpc.db_url import redacted_url
 from hostpc.errors import (
     ConnectionFailed,
     ControllerError,
@@ -50,6 +57,13 @@ from hostpc.errors import (
 )
 from hostpc.robots.connect import RobotAddress, open_robot, parse_robot
 from hostpc.robots.drivers import DEFAULT_DRIVER, DRIVER_NAMES, DRIVERS
+
+if TYPE_CHECKING:
+    from hostpc.archive import RunRecord
+
+
+DISCARD_LATER = "--discard-later-push"
+"""The override of the refusal to roll back over a later push (`_refuse_later_push`)."""
 
 
 def register(subparsers: Any) -> None:
@@ -68,7 +82,13 @@ def register(subparsers: Any) -> None:
                         "simulator's default)")
     parser.add_argument("--timeout", type=TIMEOUT_S, default=10.0, help="seconds per request")
     parser.add_argument("--json", action="store_true", help="print JSON")
+    parser.add_argument(DISCARD_LATER, action="store_true",
+                        help="with --run: roll back although the controller holds other "
+                        "offsets than this run pushed (a later push, e.g. the next robot's "
+                        "on a station): they are overwritten")
     add_archive_options(parser, read=False)
+    parser.epilog = ("with --run and no --db: the archive the run's run.json names is "
+                     "revised (docs/calibrate.md)")
     parser.set_defaults(func=run)
 
 
@@ -92,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
     push: PushFile | None = None
     address: RobotAddress | None = parse_robot(args.robot) if args.robot else None
     if args.run:
+        run_archive(args, Path(args.run))  # no --db: the run's own (next_commands.py)
         if args.db and _archive_rolled_back(Path(args.run), args):
             return 0
         _refuse_if_rolled_back(Path(args.run))
@@ -129,6 +150,9 @@ def run(args: argparse.Namespace) -> int:
         outcome = rewrite_outcome(Path(args.run))  # result.json, summary, report say so
         if outcome is not None:
             archive_run(args, Path(args.run), outcome.exit_code)
+        elif push is not None:  # stopped after its push (ERROR): from the journal
+            archive_run(args, Path(args.run), EXIT_CODES["ROLLED_BACK"],
+                        revise=lambda record: _rolled_back_record(record, push.record))
     document = {
         "controller": str(address),
         "rollback_id": push.record.rollback_id if push is not None else rollback_id,
@@ -169,8 +193,10 @@ async def _rollback(address: RobotAddress, args: argparse.Namespace, rollback_id
         if push is not None:
             now = np.asarray(await robot.get_offsets(), float)
             check_joint_count(push, now.size, args.run, str(address))
-            if push.status != "intent":  # an intent's read-back never came: unknown
-                _warn_later_push(now, push.record)
+            if push.status != "intent" and not args.discard_later_push:
+                # an intent's read-back never came: what it holds is unknown
+                _refuse_later_push(now, push, Path(args.run), address,
+                                   redacted_url(args.db) if args.db else None)
             return await rollback_run(robot, push.record, now)
         return await rollback(robot, rollback_id, previous)
     finally:
@@ -188,33 +214,40 @@ def _refuse_if_rolled_back(run_dir: Path) -> None:
     if isinstance(last, Rollback):
         raise InputError(f"--run {run_dir}: its push was rolled back already "
                          f"({last.time or 'at an unrecorded time'}); nothing of it is "
-                         f"left to undo ({_status_hint(run_dir)})")
+                         f"left to undo ({status_hint(run_dir)})")
 
 
 def _archive_rolled_back(run_dir: Path, args: argparse.Namespace) -> bool:
     """A run rolled back already, given `--db`: revise its archived record to the rolled
-    back outcome (a rollback without `--db` left the archive saying PASS/FAIL); True if
-    done. Nothing is rolled back twice."""
+    back outcome (a rollback whose archive was not reached left it saying PASS/FAIL/ERROR);
+    True if done. Nothing is rolled back twice."""
     journal = Journal(run_dir)
-    if (not journal.exists or not (run_dir / "result.json").is_file()
-            or not isinstance(journal.last_event(Pushed, Rollback), Rollback)):
+    if not journal.exists or not isinstance(journal.last_event(Pushed, Rollback), Rollback):
         return False
-    result = json.loads((run_dir / "result.json").read_text(encoding="utf-8"))
-    archive_run(args, run_dir, int(result["exit_code"]))
-    print(f"{run_dir}: rolled back already; its archived record now says "
-          f"{(result.get('outcome') or {}).get('verdict', 'ROLLED_BACK')}")
+    if (run_dir / "result.json").is_file():
+        result = json.loads((run_dir / "result.json").read_text(encoding="utf-8"))
+        archive_run(args, run_dir, int(result["exit_code"]))
+        verdict = (result.get("outcome") or {}).get("verdict", "ROLLED_BACK")
+    else:  # stopped after its push (ERROR): from the journal, as the rollback did
+        push = read_push_file(run_dir)
+        archive_run(args, run_dir, EXIT_CODES["ROLLED_BACK"],
+                    revise=lambda record: _rolled_back_record(record, push.record))
+        verdict = "ROLLED_BACK"
+    print(f"{run_dir}: rolled back already; its archived record now says {verdict}")
     return True
 
 
-def _status_hint(run_dir: Path) -> str:
+def status_hint(run_dir: Path) -> str:
     """How to see what the run's controller holds now, with its address."""
     try:
-        robot = read_run_header(Journal(run_dir)).robot
+        header = read_run_header(Journal(run_dir))
     except InputError:
         return "to see what the controller holds now: hostpc status --robot HOST"
+    robot = header.robot
     if robot.sim:
         return ("a --robot sim run: its simulated controller starts from the run's initial "
-                f"offsets again; to push again: hostpc calibrate --resume {run_dir} --push")
+                "offsets again; to push again: "
+                + resume_command(run_dir, "--push", archive=header.archive))
     return f"to see what the controller holds now: hostpc status --robot {robot.address}"
 
 
@@ -255,14 +288,67 @@ def _journal_rollback(run_dir: Path, now: np.ndarray, how: str, controller: str)
                                 time=_dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")))
 
 
-def _warn_later_push(now: np.ndarray, record: PushRecord) -> None:
-    """Warn (stderr) if the controller's offsets are neither the ones the run pushed (or
-    the ones it held after the push, `PushRecord.held`) nor the ones it replaced: someone
-    pushed later, and rolling back discards that push."""
+def _refuse_later_push(now: np.ndarray, push: PushFile, run_dir: Path,
+                       address: RobotAddress, archive: str | None) -> None:
+    """InputError (nothing written) if the controller's offsets are neither the ones this
+    run pushed (or held after the push, `PushRecord.held`) nor the ones it replaced:
+    someone pushed later (on a station: the next robot's run), and rolling back would
+    overwrite that push with this run's previous offsets."""
+    record = push.record
     if record.rollback_id is None:
         return  # settled from the offsets by rollback_run, which refuses this case
-    if not any(same_offsets(now, offsets) for offsets in (record.new, record.previous,
-                                                          record.held) if offsets is not None):
-        print("hostpc rollback: warning: the controller's zero offsets are not the ones this "
-              "run pushed (another host pushed later?): rolling back discards that later "
-              "push", file=sys.stderr)
+    if any(same_offsets(now, offsets) for offsets in (record.new, record.previous,
+                                                      record.held) if offsets is not None):
+        return
+    raise InputError(
+        f"--run {run_dir}: the controller at {address} holds other zero offsets than this "
+        f"run pushed ({_later_push(run_dir, push)}); rolling back would overwrite them with "
+        f"the ones this run replaced; nothing written. See what it holds: hostpc status "
+        f"--robot {address}; roll back anyway (discarding that push) with: "
+        f"{rollback_command(run_dir, archive)} --robot {address} {DISCARD_LATER}")
+
+
+def _later_push(run_dir: Path, push: PushFile) -> str:
+    """The later push to the same controller that the run folders beside this one hold
+    (a station's runs folder): `a later push: run R at T`, else `a later push, by another
+    run or host`."""
+    later: tuple[str, str] = ("", push.record.time)
+    try:
+        since = (run_dir / "push.json").stat().st_mtime
+        folders = [p for p in run_dir.resolve().parent.iterdir() if p != run_dir.resolve()]
+        files = [f / "push.json" for f in folders if (f / "push.json").is_file()
+                 and (f / "push.json").stat().st_mtime >= since]
+    except OSError:
+        files = []
+    for file in files:
+        try:
+            other = read_push_file(file.parent)
+        except InputError:
+            continue
+        if other.controller == push.controller and other.record.time > later[1]:
+            later = (str(file.parent), other.record.time)
+    if not later[0]:
+        return "a later push, by another run or host"
+    return f"a later push: run {later[0]} at {later[1]}"
+
+
+def _rolled_back_record(record: RunRecord, push: PushRecord) -> RunRecord:
+    """The archive record of a run that stopped after its push (no result.json: ERROR)
+    and was rolled back: ROLLED_BACK, nothing pushed now, its offsets the push's (the
+    previous ones back in the controller)."""
+    import dataclasses
+
+    from hostpc.archive import JointOffset
+
+    pushed = push.pushed or tuple(bool(n != o) for o, n in zip(push.previous, push.new,
+                                                               strict=True))
+    rows = tuple(JointOffset(joint=j, label=f"q{j}", old_deg=math.degrees(o),
+                             correction_deg=math.degrees(n - o) if p else None,
+                             sigma_deg=None, new_deg=math.degrees(n), pushed=False)
+                 for j, (o, n, p) in enumerate(zip(push.previous, push.new, pushed,
+                                                   strict=True), start=1))
+    return dataclasses.replace(
+        record, verdict="ROLLED_BACK", exit_code=EXIT_CODES["ROLLED_BACK"],
+        push_status="rolled_back", offsets=rows, largest_correction_deg=None,
+        reason="ROLLED BACK: the run stopped after its push (not verified), and its push "
+        "was rolled back: the controller has its previous offsets again")

@@ -196,7 +196,8 @@ def outcome_bits(outcome: OutcomeFigures | None, push_status: str,
     one); joints beyond 16 are left out."""
     pushed = _mask(pushed_joints)
     if outcome is None:
-        return OutcomeBits(0, 0, 0, FLAG_PUSHED if push_status == "pushed" else 0, pushed, 0)
+        flags = {"pushed": FLAG_PUSHED, "rolled_back": FLAG_ROLLED_BACK}.get(push_status, 0)
+        return OutcomeBits(0, 0, 0, flags, pushed, 0)
     flags = ((FLAG_PUSHED if outcome.pushed else 0)
              | (FLAG_VERIFIED if outcome.verified is True else 0)
              | (FLAG_ROLLED_BACK if outcome.verdict == "ROLLED_BACK" else 0)

@@ -512,9 +512,11 @@ class Station:
             if self.config.robot == "sim":
                 return ("the simulated controller ended with the run (nothing to roll "
                         f"back): START {serial} again")
-            return (f"next: hostpc rollback --run {run_dir} --db "
-                    f"{self.config.database_url()} (the controller's previous offsets "
-                    f"back), then START {serial} again")
+            return (f"while {serial} is still the robot on this station: hostpc rollback "
+                    f"--run {run_dir} --db {self.config.database_url()} (its previous "
+                    f"offsets back), then START {serial} again; once another robot was "
+                    "started, do not roll back (it would refuse: the controller holds "
+                    "that robot's offsets)")
         block = result.outcome if result is not None else None
         next_command = str(block.get("next_command") or "") if block else ""
         if verdict == "JOINTS_MISSING" and "--reference" in next_command:

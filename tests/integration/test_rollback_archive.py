@@ -2,8 +2,9 @@
 that FAILs verification printed `next: hostpc rollback --run RUN` without `--db`;
 following it rolled the controller back but left the archive saying FAIL, and a later
 `rollback --run RUN --db URL` was refused ("rolled back already"), so the archived record
-could never be corrected. Against a real simulated controller (sockets) and a real SQLite
-archive."""
+could never be corrected. (A rollback given no --db now uses the run's archive too:
+tests/integration/test_rollback_rules.py.) Against a real simulated controller (sockets)
+and a real SQLite archive."""
 
 from __future__ import annotations
 
@@ -37,14 +38,15 @@ def test_the_printed_rollback_names_the_archive_and_revises_it(
         assert outcome["next_command"] == command
         assert f"next: {command}" in capsys.readouterr().out
         assert json.loads((run / "run.json").read_text())["archive"] == url
-        # a rollback without --db (as the old next line said): the archive still says FAIL
+        # a rollback without --db (as the old next line said): the run's archive, from
+        # run.json, is revised all the same (it stayed FAIL before)
         assert main(["rollback", "--run", str(run), "--robot",
                      f"{sim.address.host}:{sim.address.port}"]) == 0
         with open_archive(url, create=False) as archive:
             (record,) = archive.runs("SN-R1")
-            assert record.verdict == "FAIL"
-        # the printed command: the run is rolled back already, so it revises the archive
-        # (nothing is rolled back twice) instead of refusing
+            assert record.verdict == "ROLLED_BACK"
+        # the printed command again: the run is rolled back already, so it (re)states the
+        # archived record (nothing is rolled back twice) instead of refusing
         assert main(shlex.split(command)[1:]) == 0
         assert "rolled back already; its archived record now says ROLLED_BACK" in \
             capsys.readouterr().out
