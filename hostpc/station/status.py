@@ -28,8 +28,11 @@ class CurrentRun:
     held: str = ""
 
     def to_json(self) -> JsonObject:
-        """current.json's document."""
-        return dataclasses.asdict(self)
+        """current.json's document ("held" only once a resume found it)."""
+        document = dataclasses.asdict(self)
+        if not self.held:
+            del document["held"]
+        return document
 
     @classmethod
     def from_json(cls, document: JsonObject) -> CurrentRun:
