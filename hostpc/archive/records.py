@@ -247,7 +247,7 @@ def record_from_run(run_dir: str | Path, *, serial: str, model: str = "", statio
         method=result.method if result is not None else "",
         effects=tuple(str(e) for e in fit.get("effects", []) or []),
         verdict=verdict_of(result, code), exit_code=code,
-        push_status=(result.push.status if result is not None
+        push_status=(result.push.stated_status if result is not None
                      else "pushed" if any(o.pushed for o in offsets) else "none"),
         largest_correction_deg=max(corrections) if corrections else None,
         verify=verify_figures(result), offsets=offsets,

@@ -109,12 +109,20 @@ class OffsetRow:
                    float(data["new_deg"]), bool(data["pushed"]), str(data.get("note", "")))
 
 
+APPLIED_ON_HOST = "applied_on_host"
+"""The push status result.json and the archive state for a push of a robot that keeps
+no zero offsets (UR): applied on the host for this session only, the controller unchanged
+(`PushResult.stated_status`)."""
+
+
 @dataclass(frozen=True)
 class PushResult:
     """What happened to the controller: the push status (pushed, refused, disabled,
     rolled_back, nothing), the refusal, the guard's limit; for a written push its rollback
     id, whether it was recovered after an interruption, and the push file; for a robot
-    that keeps no offsets (UR) the exported files that are the push."""
+    that keeps no offsets (UR) the exported files that are the push. `status` is the run's
+    push step ("pushed" also for such a robot); result.json and the archive state
+    `stated_status`."""
 
     status: str
     reason: str | None
@@ -122,8 +130,15 @@ class PushResult:
     written: JsonObject | None = None  # {"rollback_id", "recovered", "file"} of a push
     exports: Mapping[str, str] | None = None
 
+    @property
+    def stated_status(self) -> str:
+        """The status as result.json and the archive state it: APPLIED_ON_HOST for a push
+        of a robot that keeps no offsets (its exports), else `status`."""
+        return (APPLIED_ON_HOST if self.status == "pushed" and self.exports is not None
+                else self.status)
+
     def to_dict(self) -> JsonObject:
-        block: JsonObject = {"status": self.status, "reason": self.reason,
+        block: JsonObject = {"status": self.stated_status, "reason": self.reason,
                              "max_correction_deg": self.max_correction_deg}
         block.update(self.written or {})
         if self.exports is not None:
@@ -134,7 +149,8 @@ class PushResult:
     def from_dict(cls, data: JsonObject) -> PushResult:
         written: JsonObject = {key: data[key] for key in ("rollback_id", "recovered", "file")
                                if key in data}
-        return cls(str(data.get("status", "nothing")), data.get("reason"),
+        status = str(data.get("status", "nothing"))
+        return cls("pushed" if status == APPLIED_ON_HOST else status, data.get("reason"),
                    data.get("max_correction_deg"), written or None, data.get("exports"))
 
 

@@ -26,6 +26,7 @@ from hostpc.calibrate.push import PUSH_FILE, PushPlan, joint_display_name
 from hostpc.calibrate.robot_time import format_robot_time, robot_time_document
 from hostpc.calibrate.run_reference import reference_summary_lines
 from hostpc.calibrate.run_result import (
+    APPLIED_ON_HOST,
     Acquisition,
     PushResult,
     RunResult,
@@ -296,7 +297,7 @@ def _push_line(document: JsonObject) -> str:
     """The summary's push line: what happened to the controller and how to undo it."""
     push = document["push"]
     status = push["status"]
-    if status == "pushed" and push.get("on_controller") is False:
+    if status == APPLIED_ON_HOST:
         return ("push: applied on the host for this session only (UR has no writable zero "
                 f"offsets); load {push['exports']['yaml']} in your UR/ROS setup")
     if status == "pushed" and document["robot"].get("driver") == "replay":

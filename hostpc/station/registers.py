@@ -96,6 +96,8 @@ class Reason(enum.IntEnum):
     INTERNAL = 13           # any other failure of the calibration process
     PUSH_LOST = 14          # the controller lost the run's pushed offsets (exit 4)
     PUSH_PENDING = 15       # start refused: an earlier run's push is not verified (24)
+    OFFSETS_CHANGED = 16    # the controller holds neither the run's previous nor its
+                            # pushed offsets: no resume continues it (exit 2)
 
 
 _REASON_BY_CODE = {2: Reason.INPUT, 3: Reason.CONTROLLER_UNREACHABLE,
@@ -107,15 +109,22 @@ _REASON_BY_CODE = {2: Reason.INPUT, 3: Reason.CONTROLLER_UNREACHABLE,
 PUSH_LOST_PREFIX = "push lost:"
 """How `hostpc calibrate`'s error line (hostpc.calibrate.resume.PushLost) begins when the
 controller no longer has the offsets the run pushed (exit code 4, like a refusal)."""
+OFFSETS_CHANGED_PREFIX = "the controller's zero offsets changed since the run"
+"""How `hostpc calibrate --resume`'s error line begins (exit code 2, like any input) when
+the controller holds offsets that are neither the run's previous nor its pushed ones
+(hostpc.calibrate.resume.check_resume_offsets): no resume continues that run."""
 
 
 def reason_of(state: State, result_code: int, reason: str = "") -> Reason:
     """The REASON_CODE of a finished run in `state` with `result_code` and one-line
-    `reason` (a push lost is exit code 4 like a refusal: its reason tells them apart)."""
+    `reason` (a push lost is exit code 4 like a refusal, offsets changed exit code 2 like
+    any input: their reasons tell them apart)."""
     if state in (State.IDLE, State.RUNNING, State.PASS):
         return Reason.NONE
     if result_code == 4 and reason.startswith(PUSH_LOST_PREFIX):
         return Reason.PUSH_LOST
+    if result_code == 2 and reason.startswith(OFFSETS_CHANGED_PREFIX):
+        return Reason.OFFSETS_CHANGED
     if result_code == 0:
         return Reason.NOT_PUSHED
     return _REASON_BY_CODE.get(result_code, Reason.INTERNAL)

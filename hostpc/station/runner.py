@@ -22,6 +22,7 @@ from pathlib import Path
 from hostpc.calibrate.journal import JOURNAL_FILE
 from hostpc.json_object import JsonObject
 from hostpc.station.config import StationConfig
+from hostpc.station.registers import OFFSETS_CHANGED_PREFIX, PUSH_LOST_PREFIX
 
 _PROGRESS = re.compile(r"\]\s+(\S+)\s+(\d+)/(\d+)")
 # progress bands of a run's phases, in percent
@@ -82,28 +83,30 @@ def calibrate_options(config: StationConfig, run_dir: Path,
     return [*options, *config.calibrate_args]
 
 
-def resume_options(config: StationConfig, run_dir: Path) -> list[str]:
+def resume_options(config: StationConfig, run_dir: Path, push_again: bool = False
+                   ) -> list[str]:
     """The `hostpc calibrate` options that resume the run in `run_dir`: `--resume DIR`, and
-    `--push` for a simulated robot whose run had pushed (its simulated controller ended
-    with the run, so a resume restarts it with its initial offsets: without `--push` the
-    push is lost and never verified)."""
+    `--push` when its push is lost (`push_again`: a resume found the controller at the
+    run's previous offsets again, PREVIOUS) or for a simulated robot whose run had pushed
+    (its simulated controller ended with the run, so a resume restarts it with its initial
+    offsets: without `--push` the push is lost and never verified)."""
     options = ["--resume", str(run_dir)]
-    if config.robot == "sim" and push_in_flight(run_dir):
+    if push_again or (config.robot == "sim" and push_in_flight(run_dir)):
         options.append("--push")
     return options
 
 
-def resume_text(config: StationConfig, run_dir: Path) -> str:
+def resume_text(config: StationConfig, run_dir: Path, push_again: bool = False) -> str:
     """The command a technician types to resume the run in `run_dir` and archive it."""
-    return " ".join(["hostpc calibrate", *resume_options(config, run_dir),
+    return " ".join(["hostpc calibrate", *resume_options(config, run_dir, push_again),
                      "--db", config.database_url()])
 
 
 def calibrate_command(config: StationConfig, run_dir: Path, serial: str,
-                      resume: bool) -> list[str]:
+                      resume: bool, push_again: bool = False) -> list[str]:
     """The `hostpc calibrate` command line of one run (or of its resume)."""
     if resume:
-        return [*CALIBRATE, *resume_options(config, run_dir)]
+        return [*CALIBRATE, *resume_options(config, run_dir, push_again)]
     scenario_file = None
     if config.robot == "sim":
         scenario_file = run_dir.parent / ".scenarios" / f"{run_dir.name}.json"
@@ -145,6 +148,24 @@ def push_not_stored(run_dir: Path) -> bool:
     push.PushMismatch): a resume fails on it again, only a rollback settles it."""
     last = _last_push_event(run_dir)
     return last is not None and last.get("event") == "push" and "held_offsets" in last
+
+
+PREVIOUS, OTHER = "previous", "other"
+"""What a resume of a pending run found the controller holding (`controller_held`)."""
+
+
+def controller_held(code: int, error: str) -> str:
+    """What the controller holds, as a resume of a run with a push in flight found it:
+    the resume compares the controller's offsets now with the run's journal (its previous
+    and pushed ones) and its exit says which. PREVIOUS: the run's previous offsets again,
+    its push lost (exit 4, "push lost: ..."); OTHER: neither its previous nor its pushed
+    ones (exit 2, "the controller's zero offsets changed since the run ..."): no resume
+    settles the run; "": anything else (the pushed offsets, or not read)."""
+    if code == 4 and error.startswith(PUSH_LOST_PREFIX):
+        return PREVIOUS
+    if code == 2 and error.startswith(OFFSETS_CHANGED_PREFIX):
+        return OTHER
+    return ""
 
 
 def error_line(line: str) -> str | None:

@@ -18,7 +18,11 @@ resumes it (`--resume`, up to resume_attempts; a simulated robot's with `--push`
 controller ended with the run) so the offsets get verified; current.json stays while the
 controller may hold unverified offsets: that run is PENDING, and a START of another robot
 is refused (result code 24) until it is settled (START of the same serial or a station
-restart resumes it; a resume or rollback by hand shows in its journal). A run without a
+restart resumes it; a resume or rollback by hand shows in its journal). What a resume
+finds the controller holding decides the step (current.json "held"): its previous
+offsets again (push lost) -> the station pushes them again (`--push`) and names that
+push; neither its previous nor its pushed offsets -> no resume settles it: archived
+ERROR, and the PLC's ACKNOWLEDGE releases it (current.json removed). A run without a
 result that pushed is reported pushed, with its journal's offsets (hostpc.archive). The
 result on the registers is the run's archived record, kept in `last_outcome.json` under
 the runs folder until the PLC acknowledges it (a station restarted before ACKNOWLEDGE
@@ -67,8 +71,11 @@ from hostpc.station.config import StationConfig
 from hostpc.station.plc import PlcServer
 from hostpc.station.run_report import write_station_report
 from hostpc.station.runner import (
+    OTHER,
+    PREVIOUS,
     ChildRun,
     calibrate_command,
+    controller_held,
     push_in_flight,
     push_not_stored,
     resume_text,
@@ -194,6 +201,7 @@ class Station:
             self._served = None
             self._publish_state(reg.State.IDLE)
             self.last_outcome_file.unlink(missing_ok=True)  # acknowledged: not served again
+            self._release_unsettleable()
         else:  # not taken: the PLC reads so in COMMAND_IGNORED, not only the log
             self.plc.set(reg.COMMAND_IGNORED, command)
             logger.warning("command %d ignored in state %s (COMMAND_IGNORED = %d)%s",
@@ -215,15 +223,17 @@ class Station:
         if pending is not None:
             if pending.serial == serial and not self._needs_rollback(Path(pending.run_dir)):
                 # the same robot again: verify its push first
-                run_log.warning("START %s: resuming its run %s first (its pushed offsets "
-                                "are not verified)", serial, pending.run_dir)
+                run_log.warning("START %s: resuming its run %s first (%s)", serial,
+                                pending.run_dir,
+                                "its push was lost: pushing again" if pending.held == PREVIOUS
+                                else "its pushed offsets are not verified")
                 current = dataclasses.replace(pending, attempts=0)
                 self._write_current(current)
                 await self._execute(current, resume=True)
                 return
             reason = (f"start of {serial} refused: the run of {pending.serial} pushed "
                       f"offsets that are NOT {self._unsettled(Path(pending.run_dir))}; "
-                      + self._pending_text(pending.serial, Path(pending.run_dir)))
+                      + self._pending_text(pending))
             self.status.clear_run()
             self.status.serial, self.status.model = serial, model
             self._finish(reg.RunOutcome(reg.State.ERROR, reg.RESULT_PUSH_PENDING,
@@ -273,19 +283,46 @@ class Station:
         return ("stored as asked (push failed)" if self._needs_rollback(run_dir)
                 else "verified")
 
-    def _pending_text(self, serial: str, run_dir: Path) -> str:
-        """What settles a run pending with pushed offsets not verified."""
+    def _pending_text(self, pending: CurrentRun) -> str:
+        """The one action that settles a run pending with pushed offsets not verified, as
+        what the controller holds decides (`pending.held`, its last resume's finding)."""
+        serial, run_dir = pending.serial, Path(pending.run_dir)
         if self._needs_rollback(run_dir):
             return ("no resume settles it (the controller holds other offsets than the run "
                     "pushed: a resume meets them again), and the station starts no robot "
                     "until it is rolled back: hostpc rollback --run "
                     f"{run_dir} --db {self.config.database_url()}, then START {serial} "
                     "again")
+        if pending.held == OTHER:
+            return ("the controller holds neither the run's previous nor its pushed "
+                    "offsets (it restarted, or someone wrote them): no resume settles the "
+                    "run; ACKNOWLEDGE (COMMAND = 3) releases it (archived ERROR, the "
+                    f"controller's offsets left as they are), then START {serial} again "
+                    "for a new run")
+        if pending.held == PREVIOUS:
+            return ("the controller has the run's previous offsets again (push lost); the "
+                    "station starts no other robot until it is settled: START "
+                    f"{serial} again to push them again and verify (its robot in the "
+                    "cell), or by hand: "
+                    f"{resume_text(self.config, run_dir, push_again=True)}")
         undo = ("" if self.config.robot == "sim" else
                 f"; undo it: hostpc rollback --run {run_dir} --db {self.config.database_url()}")
         return (f"the station starts no other robot until it is settled: START {serial} "
                 f"again to resume it (its robot in the cell), or resume it by hand: "
                 f"{resume_text(self.config, run_dir)}{undo}")
+
+    def _release_unsettleable(self) -> None:
+        """On ACKNOWLEDGE: release a pending run no resume settles (its controller holds
+        neither its previous nor its pushed offsets; the archive has it ERROR): the
+        station takes other robots again."""
+        pending = self._pending_run()
+        if pending is None or pending.held != OTHER:
+            return
+        self.current_file.unlink(missing_ok=True)
+        run_log.warning("the pending run of %s in %s released by ACKNOWLEDGE: its controller "
+                        "holds neither its previous nor its pushed offsets (archived ERROR); "
+                        "the station takes other robots again", pending.serial,
+                        pending.run_dir)
 
     async def _resume_interrupted(self) -> None:
         try:
@@ -299,7 +336,7 @@ class Station:
             run_log.error("the run of %s in %s is not resumed: its pushed offsets are NOT "
                           "%s; %s", current.serial, current.run_dir,
                           self._unsettled(Path(current.run_dir)),
-                          self._pending_text(current.serial, Path(current.run_dir)))
+                          self._pending_text(current))
             self._serve_unacknowledged()
             return
         logger.info("resuming the interrupted run of %s in %s", current.serial,
@@ -319,19 +356,23 @@ class Station:
         self.plc.set(reg.PROGRESS, 0)
         self._publish_state(reg.State.RUNNING)
         self._aborted, self._child_error = False, ""
-        code = await self._attempts(current, run_dir, resume)
+        code, current = await self._attempts(current, run_dir, resume)
         if self._stopping.is_set() and not self._aborted:
             logger.info("station stopping: run %s left resumable", run_dir)
             return  # current.json stays: the next start resumes it
         await self._conclude(current, run_dir, code)
 
-    async def _attempts(self, current: CurrentRun, run_dir: Path, resume: bool) -> int:
+    async def _attempts(self, current: CurrentRun, run_dir: Path, resume: bool
+                        ) -> tuple[int, CurrentRun]:
+        """Run the child, and resume it while that may settle the run: the exit code and
+        the run as current.json has it now (its resumes, what the controller holds)."""
         while True:
             try:
-                command = calibrate_command(self.config, run_dir, current.serial, resume)
+                command = calibrate_command(self.config, run_dir, current.serial, resume,
+                                            push_again=current.held == PREVIOUS)
             except (ZerocalError, OSError) as exc:
                 self._child_error = f"the calibration cannot start: {exc}"
-                return reg.RESULT_STATION_ERROR
+                return reg.RESULT_STATION_ERROR, current
             log_path = (run_dir.parent / f"{run_dir.name}.log")
             self.status.last_line = ""  # (a resume: the last child's hint is acted on)
             child, done = await start_child(command, log_path, self._on_progress)
@@ -345,27 +386,38 @@ class Station:
             self._child_error = child.error
             in_flight = push_in_flight(run_dir)
             if self._aborted and not in_flight:
-                return reg.RESULT_ABORTED
+                return reg.RESULT_ABORTED, current
             if self._stopping.is_set():
-                return code
-            if (code == EXIT_CONNECTION or in_flight) and run_dir.exists() \
+                return code, current
+            held = controller_held(code, child.error) if in_flight else ""
+            if held != current.held:  # what the controller holds decides the next step
+                current = dataclasses.replace(current, held=held)
+                self._write_current(current)
+            if held == PREVIOUS and "--push" not in command and self.config.resume_attempts \
+                    and not self._needs_rollback(run_dir):
+                # the one step that settles it; not a resume attempt: a resume that pushes
+                # again never finds the push lost
+                run_log.warning("push lost during the run of %s (the controller has the "
+                                "run's previous offsets again): pushing them again and "
+                                "verifying", current.serial)
+                resume, self._aborted = True, False
+                continue
+            if held != OTHER and (code == EXIT_CONNECTION or in_flight) and run_dir.exists() \
                     and current.attempts < self.config.resume_attempts \
                     and not self._needs_rollback(run_dir):  # a resume fails on it again
                 current = dataclasses.replace(current, attempts=current.attempts + 1)
                 self._write_current(current)
                 why = ("link lost" if not in_flight else
-                       "push lost (the controller no longer has the run's offsets)"
-                       if child.error.startswith(reg.PUSH_LOST_PREFIX) else
                        "the run ended with pushed offsets not verified (its simulated "
                        "controller with it: the resume pushes again)"
                        if self.config.robot == "sim" else
-                       "the controller holds pushed offsets not yet verified")
+                       "the run ended with pushed offsets not verified")
                 run_log.warning("%s during the run of %s: resuming (attempt %d of %d)", why,
                                current.serial, current.attempts,
                                self.config.resume_attempts)
                 resume, self._aborted = True, False
                 continue
-            return code
+            return code, current
 
     async def _watch_abort(self, child: ChildRun) -> None:
         while True:
@@ -395,7 +447,7 @@ class Station:
         serial = current.serial
         started_at = datetime.fromisoformat(current.started_at)
         result = _read_result(run_dir)
-        pending = push_in_flight(run_dir)  # unverified offsets in the controller
+        pending = current if push_in_flight(run_dir) else None  # pushed, not verified
         reason = self._reason(code, result, run_dir, serial, pending)
         log_path = run_dir.parent / f"{run_dir.name}.log"
         if not (run_dir / "report.html").is_file():  # ended before calibrate wrote one
@@ -438,12 +490,12 @@ class Station:
                               if archive_id is not None and record is not None
                               and record.report_path else "")
         self._finish(outcome)
-        if pending:
+        if pending is not None:
             run_log.error("run %s ended with pushed offsets not %s: current.json kept (%s); "
                           "%s", run_dir, self._unsettled(run_dir),
-                          "until it is rolled back" if self._needs_rollback(run_dir)
-                          else "the next station start resumes it",
-                          self._pending_text(serial, run_dir))
+                          "until it is rolled back" if self._needs_rollback(run_dir) else
+                          "until ACKNOWLEDGE releases it" if pending.held == OTHER else
+                          "the next station start resumes it", self._pending_text(pending))
         else:
             self.current_file.unlink(missing_ok=True)
         self.status.runs_done += 1
@@ -486,7 +538,7 @@ class Station:
                         outcome.result_code, outcome.reason)
 
     def _reason(self, code: int, result: RunResult | None, run_dir: Path, serial: str,
-                pending: bool) -> str:
+                pending: CurrentRun | None) -> str:
         """One line: why the run with exit `code` and `result` (result.json) did not PASS,
         and the station's next step (empty when it passed)."""
         outcome = outcome_of(result)
@@ -502,12 +554,14 @@ class Station:
         return " ".join(f"{text}; station: {step}".split() if step else text.split())
 
     def _next_step(self, verdict: str | None, result: RunResult | None, run_dir: Path,
-                   serial: str, pending: bool) -> str:
+                   serial: str, pending: CurrentRun | None) -> str:
         """The station's own next step of a run that did not PASS (empty: calibrate's
-        reason says it): its commands as a station's technician types them."""
-        if pending:
-            return (f"pushed offsets NOT {self._unsettled(run_dir)}; "
-                    f"{self._pending_text(serial, run_dir)}")
+        reason says it): its commands as a station's technician types them; of a `pending`
+        run (pushed, not verified), the one that settles it."""
+        if pending is not None:
+            if pending.held == OTHER and not self._needs_rollback(run_dir):
+                return self._pending_text(pending)
+            return f"pushed offsets NOT {self._unsettled(run_dir)}; {self._pending_text(pending)}"
         if verdict == "FAIL":
             if self.config.robot == "sim":
                 return ("the simulated controller ended with the run (nothing to roll "

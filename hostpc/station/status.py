@@ -15,7 +15,9 @@ from hostpc.json_object import JsonObject
 class CurrentRun:
     """The run in progress (``current.json`` under the runs folder: hostpc.station.service
     resumes it after a restart): its archive uid, robot serial and model, run folder,
-    start time (ISO 8601 UTC) and the resumes taken so far."""
+    start time (ISO 8601 UTC), the resumes taken so far and what the last resume of its
+    push in flight found the controller holding (hostpc.station.runner.controller_held:
+    "previous", "other", "" not known or the pushed offsets)."""
 
     run_uid: str
     serial: str
@@ -23,10 +25,14 @@ class CurrentRun:
     run_dir: str
     started_at: str
     attempts: int = 0
+    held: str = ""
 
     def to_json(self) -> JsonObject:
-        """current.json's document."""
-        return dataclasses.asdict(self)
+        """current.json's document ("held" only once a resume found it)."""
+        document = dataclasses.asdict(self)
+        if not self.held:
+            del document["held"]
+        return document
 
     @classmethod
     def from_json(cls, document: JsonObject) -> CurrentRun:
@@ -34,7 +40,8 @@ class CurrentRun:
         return cls(run_uid=str(document["run_uid"]), serial=str(document["serial"]),
                    model=str(document.get("model", "")), run_dir=str(document["run_dir"]),
                    started_at=str(document["started_at"]),
-                   attempts=int(document.get("attempts", 0)))
+                   attempts=int(document.get("attempts", 0)),
+                   held=str(document.get("held", "")))
 
 
 @dataclass(frozen=True)

@@ -46,7 +46,7 @@ def test_ur_driver_recovers_the_offsets_like_the_protocol_driver(tmp_path: Path)
     document, truth_ur = _calibrate(tmp_path, "ur", "ur")
     np.testing.assert_allclose(truth_ur, truth)
     assert document["robot"]["driver"] == "ur"
-    assert document["push"]["status"] == "pushed"
+    assert document["push"]["status"] == "applied_on_host"
     assert document["verify"]["passed"]
 
     rows = document["offsets"]["joints"]
