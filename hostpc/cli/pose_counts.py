@@ -6,8 +6,8 @@
 - with a target sigma the verification takes the fewest poses whose chi-square test has
   95 % power for an error of d2 = 10 per pose at the run's --verify-alpha
   (hostpc.planning.verify_poses: 4 at alpha 0.01, 5 at 0.001; stereo_target, whose short
-  plan chooses them for power, 94 %: 3 at 0.01, `ShortPlan.verify_power`), else 10; a method that
-  plans whole groups of poses (sphere_probe) takes whole groups for both (the fewest
+  plan chooses them for power, 94 %, `ShortPlan.verify_power`: 3 at 0.01), else 10; a
+  method that plans whole groups of poses (sphere_probe) takes whole groups for both (the fewest
   orientations that reach the sigma; verification: 3 contacts, one orientation).
 """
 
