@@ -5,8 +5,9 @@
   count (the behaviour before the short plan: exactly N poses);
 - with a target sigma the verification takes the fewest poses whose chi-square test has
   95 % power for an error of d2 = 10 per pose at the run's --verify-alpha
-  (hostpc.planning.verify_poses: 4 at alpha 0.01, 5 at 0.001), else 10; a method that
-  plans whole groups of poses (sphere_probe) takes whole groups for both (the fewest
+  (hostpc.planning.verify_poses: 4 at alpha 0.01, 5 at 0.001; stereo_target, whose short
+  plan chooses them for power, 94 %, `ShortPlan.verify_power`: 3 at 0.01), else 10; a
+  method that plans whole groups of poses (sphere_probe) takes whole groups for both (the fewest
   orientations that reach the sigma; verification: 3 contacts, one orientation).
 """
 
@@ -16,7 +17,7 @@ import argparse
 
 from hostpc.methods import method_class
 from hostpc.model.measurements.registry import measurement_model
-from hostpc.planning.verify_poses import verify_poses_for_power
+from hostpc.planning.verify_poses import DETECTABLE_POWER, verify_poses_for_power
 
 DEFAULT_MAX_POSES = 60
 """Fit poses without --poses: the most with a target sigma, else the count."""
@@ -46,6 +47,7 @@ def pose_counts(args: argparse.Namespace) -> tuple[int, int, float | None]:
     verify = args.verify_poses
     if verify is None:
         alpha = VERIFY_ALPHA if args.verify_alpha is None else float(args.verify_alpha)
-        verify = (verify_poses_for_power(alpha=alpha, m=_measured_per_pose(args))
+        power = method.short_plan.verify_power or DETECTABLE_POWER  # stereo_target: 3
+        verify = (verify_poses_for_power(power=power, alpha=alpha, m=_measured_per_pose(args))
                   if target is not None else DEFAULT_VERIFY_POSES)
     return poses, verify, target

@@ -231,10 +231,18 @@ class ShortPlan:
     are chosen, so that these see the fit the run measures (stereo_target: shortened after
     them, with the check poses fixed, the forced push of the lean model on the hidden
     compliance was caught in 3 of 8 worlds); "tour", the whole tour with the check poses
-    fixed (world_point), and the floor then counts the shortened plan's poses when fewer."""
+    fixed (world_point), and the floor then counts the shortened plan's poses when fewer.
+
+    verify_power: the power for an error of `verify_poses.DETECTABLE_D2` per pose that the
+    default verification count aims at (`hostpc.cli.pose_counts`, the fewest poses that
+    reach it, `verify_poses.verify_poses_for_power`); None: `verify_poses.DETECTABLE_POWER`
+    (0.95: 4 poses at alpha 0.01). stereo_target 0.94: 3 poses (their power 0.947; 4: 0.985),
+    chosen for their power against a missing compliance (`verify_poses.PowerDesign.choose`);
+    its forced pushes were caught as with 4 (docs/performance.md, "This round's tenth stop")."""
 
     selection: Literal["near_best", "per_second"] = "near_best"
     shorten: Literal["none", "selection", "tour"] = "none"
+    verify_power: float | None = None
 
 
 def greedy_d_optimal_groups(design: Design, members: Sequence[np.ndarray], n_select: int,

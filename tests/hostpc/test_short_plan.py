@@ -27,9 +27,14 @@ def _counts(*options: str) -> tuple[int, int, float | None]:
 
 
 def test_default_pose_counts_and_the_old_behaviour_with_poses() -> None:
-    assert _counts() == (60, 4, 0.002)  # stereo_target: stop at 0.002 deg, 60 at most
+    # stereo_target: stop at 0.002 deg, 60 at most; 3 verification poses chosen for power
+    # (ShortPlan.verify_power: test_verify_pose_count_follows_the_runs_alpha)
+    assert _counts() == (60, 3, 0.002)
     assert _counts("--poses", "30") == (30, 10, None)  # --poses alone: exactly 30, as before
-    assert _counts("--poses", "30", "--target-sigma", "0.001") == (30, 4, 0.001)
+    assert _counts("--poses", "30", "--target-sigma", "0.001") == (30, 3, 0.001)
+    # the other methods' verification keeps the 95 % of DETECTABLE_POWER: 4 poses
+    assert _counts("--method", "world_point") == (60, 4, 0.002)
+    assert _counts("--method", "dual_loop") == (60, 4, 0.02)
     assert _counts("--verify-poses", "7") == (60, 7, 0.002)
     # sphere_probe: its own default target (whole orientations), 3 verification contacts
     assert _counts("--method", "sphere_probe") == (60, 3, 0.002)
@@ -130,9 +135,12 @@ def test_full_turn_joints_go_the_short_way_within_their_limits() -> None:
 def test_verify_pose_count_follows_the_runs_alpha() -> None:
     """A stricter --verify-alpha needs more poses for the same power (review finding: the
     count was always computed at alpha 0.01, giving 0.93 power at 0.001)."""
-    assert _counts()[1] == 4
-    assert _counts("--verify-alpha", "0.001")[1] == 5
+    assert _counts("--method", "world_point")[1] == 4
+    assert _counts("--method", "world_point", "--verify-alpha", "0.001")[1] == 5
     assert verify_power(5, DETECTABLE_D2, 0.001) >= DETECTABLE_POWER
+    # stereo_target's 94 % (ShortPlan.verify_power): 3 poses at 0.01, 5 at 0.001 (4: 0.934)
+    assert _counts()[1] == 3 and _counts("--verify-alpha", "0.001")[1] == 5
+    assert verify_power(3, DETECTABLE_D2, 0.01) >= 0.94 > verify_power(4, DETECTABLE_D2, 0.001)
 
 
 def test_target_sigma_on_a_method_that_plans_whole_groups_is_its_default() -> None:

@@ -94,7 +94,9 @@ def test_verification_poses_chosen_for_power_see_more_of_a_missing_compliance(
     # plan's poses: each pose's residual r = b_v - A_v K b weighed by the noise plus the
     # fit's prediction uncertainty; the poses chosen for power against the plain random
     # choice of the same count (the choice before), drawn 5 times
-    from hostpc.planning.verify_poses import nearby_verify_poses
+    from hostpc.diagnostics.distributions import chi2_isf, ncx2_sf
+    from hostpc.kinds.stereo_target.method import StereoTargetMethod
+    from hostpc.planning.verify_poses import nearby_verify_poses, verify_poses_for_power
 
     w = World(seed, tmp_path)
     method, state, pool, settings, design = w.method, w.state, w.pool, w.settings, w.design
@@ -118,6 +120,18 @@ def test_verification_poses_chosen_for_power_see_more_of_a_missing_compliance(
                              limits.settle_s + limits.capture_s, (state.q_min, state.q_max))
     assert chosen.size == 4 and not np.isin(chosen, fit).any()
     rng = np.random.default_rng(seed)
-    random = np.mean([noncentrality(nearby_verify_poses(pool, unused, pool[fit[-1]], 4, rng))
-                      for _ in range(5)])
+    drawn = [nearby_verify_poses(pool, unused, pool[fit[-1]], 4, rng) for _ in range(5)]
+    random = np.mean([noncentrality(v) for v in drawn])
     assert noncentrality(chosen) > 2.0 * random
+    # stereo_target's default count (ShortPlan.verify_power: 3) chosen for power: its test,
+    # on 9 dof, has more power against the bending than 4 random poses on 12 had
+
+    def chance(verify: np.ndarray) -> float:
+        n = 3 * verify.size
+        return ncx2_sf(chi2_isf(0.01, n), n, noncentrality(verify))
+
+    n_default = verify_poses_for_power(power=StereoTargetMethod.short_plan.verify_power or 0)
+    three = power.choose(fit, unused, n_default, pool, pool[fit[-1]], limits.joint_speed * 0.5,
+                         limits.settle_s + limits.capture_s, (state.q_min, state.q_max))
+    assert three.size == 3
+    assert chance(three) > np.mean([chance(v) for v in drawn])

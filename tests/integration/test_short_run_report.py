@@ -34,9 +34,10 @@ def test_the_default_runs_report_sizes_its_advice_to_a_calibration(
     page = (run / "report.html").read_text(encoding="utf-8")
     advice = page[page.index("<h2>Advice</h2>"):page.index("<h2>Is the model adequate?")]
     assert "Too few samples to judge" not in advice  # the run verified: not "too few"
-    n_fit = json.loads((run / "result.json").read_text())["plan"]["n_poses"]
+    plan = json.loads((run / "result.json").read_text())["plan"]
+    n_fit = plan["n_poses"]
     assert f"Enough samples for a calibration: {n_fit} samples" in advice
-    assert "verified on 4 fresh poses" in advice
+    assert plan["n_verify"] == 3 and "verified on 3 fresh poses" in advice
     # what a diagnosis would need, as commands (code, never literal backticks)
     commands = [html.unescape(c) for c in re.findall(r"<code>(.*?)</code>", advice)]
     measure = next(c for c in commands if c.startswith("hostpc calibrate"))

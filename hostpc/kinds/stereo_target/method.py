@@ -84,7 +84,8 @@ class StereoTargetMethod(Method):
     name: ClassVar[str] = "stereo_target"
     default_target_sigma_deg: ClassVar[float | None] = 0.002
     staged: ClassVar[bool] = True
-    short_plan: ClassVar[ShortPlan] = ShortPlan(selection="per_second", shorten="selection")
+    short_plan: ClassVar[ShortPlan] = ShortPlan(selection="per_second", shorten="selection",
+                                                verify_power=0.94)  # 3 verification poses
 
     @classmethod
     def short_plan_warning(cls, n_fit: int) -> str | None:

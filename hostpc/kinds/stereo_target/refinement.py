@@ -7,7 +7,7 @@ error tilt by ~0.5 deg; that leaves a pose-dependent error that does not average
 dataset's default model) gives better normals; the centres are re-corrected with them and
 re-triangulated, and the dataset keeps the refined `p` and `uv` (the covariances are those of
 the measurement: the correction moves a centre by ~0.01 px, it does not change its noise).
-A set too small for its own fit (the 4 verification poses) is re-corrected with the frames
+A set too small for its own fit (the 3 verification poses) is re-corrected with the frames
 of the last fit (`frames_only`): after a motor swap into an estimated camera mount the
 nominal normal is 10 deg off, not 0.5.
 
