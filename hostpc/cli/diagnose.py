@@ -258,7 +258,9 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
         if diagnosis.ladder_stop:
             lines.append(f"  stopped: {diagnosis.ladder_stop}")
     if diagnosis.detectable:
-        lines += ["", "what these poses can see (80 % power at the candidates' threshold):"]
+        noise = f"; the noise {without(check)}" if check.outliers else ""
+        lines += ["", f"what these poses can see (80 % power at the candidates' threshold"
+                      f"{noise}):"]
         lines += [f"  {d.sentence}" for d in diagnosis.detectable]
     if diagnosis.confounded:
         lines += ["", "confounded candidates (neither significant given the other):"]

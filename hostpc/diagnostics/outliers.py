@@ -1,5 +1,6 @@
-"""Is one sample an outlier? A Bonferroni-corrected test of the largest leave-one-out
-residual, so one bad measurement is named instead of being blamed on a missing effect.
+"""Is one sample, or one pose, an outlier? A Bonferroni-corrected test of the largest
+leave-one-out residual, so one bad measurement is named instead of being blamed on a missing
+effect.
 
 For sample i with whitened residual r_i (m,) and the block H_ii (m, m) of the hat matrix of
 the (robust-weighted) whitened Jacobian, the residual it would have if the fit had not seen
@@ -11,15 +12,23 @@ is chi-square with m degrees of freedom in units of the stated noise. The test i
 scale-free, like the candidate tests: the noise level is estimated from the other samples
 (``S_(i) = chi2 - d_i^2`` over ``dof - m``), and ``F_i = (d_i^2 / m) / (S_(i) / (dof - m))``
 is F(m, dof - m) distributed if sample i is as good as the rest. A covariance that is wrong
-by a constant factor therefore flags no sample. A sample is an outlier when its p-value is
-below ``alpha / N`` (Bonferroni over the N samples, so ``alpha`` is family-wise).
+by a constant factor therefore flags no sample.
+
+A pose of several samples (one per marker, or the same pose read twice) is also tested as
+one: leave the whole pose out (i and r_i above become the pose's samples and rows). A pose
+read twice is one pose, not two witnesses for it: its repeats agreeing shows that the
+instrument repeated the reading, not that the model is right there, and the fit that has
+seen one copy predicts the other, so the one-sample test cannot see a bad pose read twice
+(an exact duplicate row least of all). The family is every sample plus every pose of more
+than one sample: a sample or pose is an outlier when its p-value is below ``alpha`` over
+that count (Bonferroni, so ``alpha`` is family-wise); a pose named so names every sample of
+it.
 
 A pose measured twice is tested directly first (``repeats``): a pair of repeats that
-disagrees beyond the stated noise names its worse-fitted sample, and a sample whose repeats
-agree is never flagged by the leave-one-out test (its misfit is the model's, not a glitch).
-Outliers are found one at a time: the most significant sample is set aside, the model is
-refitted without it, and the test is repeated on the rest (a gross outlier drags the fit and
-would otherwise hide, or fake, others), at most ``max(1, N // 10)`` times.
+disagrees beyond the stated noise names its worse-fitted sample. Outliers are found one at
+a time: the most significant sample or pose is set aside, the model is refitted without
+it, and the test is repeated on the rest (a gross outlier drags the fit and would otherwise
+hide, or fake, others), until ``max(1, N // 10)`` samples are set aside.
 """
 
 from __future__ import annotations
@@ -29,9 +38,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hostpc.dataset import Samples
 from hostpc.diagnostics.distributions import f_sf
 from hostpc.diagnostics.repeats import check_repeats
 from hostpc.fitting import FitResult
+from hostpc.fitting.folds import pose_groups
 from hostpc.fitting.solver import evaluate
 from hostpc.json_object import JsonObject
 
@@ -51,9 +62,10 @@ class Outlier:
     sample: int
     sigma: float
     p_value: float
-    #: which test named it: "leave-one-out", or "repeat" (a pose measured twice whose
-    #: measurements disagree beyond the noise: ``repeats``; the sample of the pair the fit
-    #: explains worse)
+    #: which test named it: "leave-one-out"; "pose" (every sample of a pose of several,
+    #: left out together; ``sigma`` and ``p_value`` are the pose's); or "repeat" (a pose
+    #: measured twice whose measurements disagree beyond the noise: ``repeats``; the sample
+    #: of the pair the fit explains worse)
     test: str = "leave-one-out"
 
     def to_dict(self) -> JsonObject:
@@ -74,8 +86,21 @@ class DeletionStatistics:
     p_value: np.ndarray
 
 
-def deletion_statistics(result: FitResult) -> DeletionStatistics:
-    """Leave-one-out statistics of every sample of a fit (see the module doc)."""
+@dataclass(frozen=True)
+class _Design:
+    """What every leave-out test of one fit needs: Q (N, m, k) the orthonormal basis of the
+    (robust-weighted) whitened Jacobian's free columns, per sample; whitened (N, m); the
+    robust weights (N,); the weighted chi2 and the degrees of freedom."""
+
+    Q: np.ndarray
+    whitened: np.ndarray
+    weights: np.ndarray
+    chi2: float
+    dof: int
+
+
+def _design(result: FitResult) -> _Design | None:
+    """The fit's ``_Design``; None where the Jacobian or the residuals are not finite."""
     problem = result.problem
     n_samples, m = problem.measured.shape
     evaluation = evaluate(problem, result.x)
@@ -85,47 +110,105 @@ def deletion_statistics(result: FitResult) -> DeletionStatistics:
     row_weight = np.repeat(np.sqrt(weights), m)
     J_free = J[:, ~result.fixed] * row_weight[:, None]
     whitened = evaluation.whitened
-    untestable = DeletionStatistics(np.zeros(n_samples), np.zeros(n_samples, dtype=int),
-                                    np.ones(n_samples))
     if not (np.all(np.isfinite(J_free)) and np.all(np.isfinite(whitened))):
-        return untestable
+        return None
     if J_free.shape[1]:
         Q = np.linalg.qr(J_free)[0].reshape(n_samples, m, -1)
-        H = np.einsum("nik,njk->nij", Q, Q)
     else:
-        H = np.zeros((n_samples, m, m))
-    h, V = np.linalg.eigh(H)  # (N, m), (N, m, m)
+        Q = np.zeros((n_samples, m, 0))
+    return _Design(Q, whitened, weights,
+                   float(np.sum(weights * np.sum(whitened**2, axis=1))),
+                   whitened.size - J_free.shape[1])
+
+
+def _left_out(design: _Design, members: np.ndarray) -> DeletionStatistics:
+    """The leave-out statistics of each row of ``members`` (G, s): sample indices left out
+    together (s = 1: one sample; more: one pose), as in the module doc."""
+    n_groups, size = members.shape
+    m = design.whitened.shape[1]
+    Q = design.Q[members].reshape(n_groups, size * m, -1)
+    H = np.einsum("nik,njk->nij", Q, Q)
+    h, V = np.linalg.eigh(H)  # (G, s m), (G, s m, s m)
     keep = (1.0 - h) > LEVERAGE_TOLERANCE
-    projected = np.einsum("nji,nj->ni", V, whitened)  # V^T r per sample
+    r = design.whitened[members].reshape(n_groups, size * m)
+    projected = np.einsum("nji,nj->ni", V, r)  # V^T r per group
     d2 = np.sum(np.where(keep, projected**2 / np.where(keep, 1.0 - h, 1.0), 0.0), axis=1)
     dfn = keep.sum(axis=1)
-    weighted_chi2 = float(np.sum(weights * np.sum(whitened**2, axis=1)))
-    dof = whitened.size - J_free.shape[1]
-    dfd = dof - dfn
-    rest = weighted_chi2 - weights * d2
-    testable = (dfn > 0) & (dfd > 0) & (rest > 1e-12 * max(weighted_chi2, 1e-300))
+    dfd = design.dof - dfn
+    rest = design.chi2 - np.mean(design.weights[members], axis=1) * d2
+    testable = (dfn > 0) & (dfd > 0) & (rest > 1e-12 * max(design.chi2, 1e-300))
     statistic = np.where(testable, (d2 / np.maximum(dfn, 1))
                          / (np.maximum(rest, 1e-300) / np.maximum(dfd, 1)), 0.0)
     p_value = np.where(testable, f_sf(statistic, np.maximum(dfn, 1), np.maximum(dfd, 1)), 1.0)
     return DeletionStatistics(d2=d2, dfn=dfn, p_value=p_value)
 
 
+def deletion_statistics(result: FitResult, design: _Design | None = None
+                        ) -> DeletionStatistics:
+    """Leave-one-out statistics of every sample of a fit (see the module doc); design: the
+    fit's ``_design`` if already computed."""
+    n_samples = result.problem.measured.shape[0]
+    design = design or _design(result)
+    if design is None:
+        return DeletionStatistics(np.zeros(n_samples), np.zeros(n_samples, dtype=int),
+                                  np.ones(n_samples))
+    return _left_out(design, np.arange(n_samples)[:, None])
+
+
+def several_sample_poses(samples: Samples) -> int:
+    """How many poses of more than one sample ``samples`` hold (each is one test of the
+    family besides the samples)."""
+    poses = pose_groups(samples)
+    return int(np.count_nonzero(np.bincount(poses) > 1)) if poses.size else 0
+
+
+@dataclass(frozen=True)
+class _Worst:
+    """The most significant pose of several samples: its samples (indices into the fit's
+    own samples), the whitened norm of its leave-out residual, its p-value."""
+
+    samples: np.ndarray
+    sigma: float
+    p_value: float
+
+
+def _worst_pose(design: _Design, poses: np.ndarray) -> _Worst | None:
+    """The pose of more than one sample (``poses``: the pose of each of the fit's samples)
+    whose leave-one-pose-out test is the most significant; None without such poses."""
+    order = np.argsort(poses, kind="stable")
+    bounds = np.flatnonzero(np.diff(poses[order])) + 1
+    by_size: dict[int, list[np.ndarray]] = {}
+    for members in np.split(order, bounds):
+        if members.size > 1:
+            by_size.setdefault(members.size, []).append(members)
+    worst: _Worst | None = None
+    for groups in by_size.values():  # one stacked test per pose size
+        members = np.stack(groups)
+        stats = _left_out(design, members)
+        k = int(np.argmin(stats.p_value))
+        if worst is None or stats.p_value[k] < worst.p_value:
+            worst = _Worst(members[k], float(np.sqrt(stats.d2[k])), float(stats.p_value[k]))
+    return worst
+
+
 def find_outliers(result: FitResult, alpha: float,
                   refit: Callable[[FitResult, np.ndarray], FitResult]
                   ) -> tuple[tuple[Outlier, ...], FitResult]:
-    """The outliers of a fit, most significant first, and the fit without them.
+    """The outliers of a fit, most significant first (every sample of a pose named as one
+    outlier: ``test`` "pose"), and the fit without them.
 
     refit(fit, keep): the fit's model refitted on the samples ``keep`` (indices into the
     fit's own samples). Returns the input fit unchanged when no sample is an outlier.
     """
     n_samples = result.problem.measured.shape[0]
-    threshold = alpha / max(n_samples, 1)
+    poses = pose_groups(result.problem.dataset.samples)
+    n_poses = several_sample_poses(result.problem.dataset.samples)
+    threshold = alpha / max(n_samples + n_poses, 1)
     limit = max(1, int(MAX_OUTLIER_FRACTION * n_samples))
     kept = np.arange(n_samples)  # dataset indices of the current fit's samples
     current = result
     found: list[Outlier] = []
-    # repeats first: a pair that disagrees names its worse-fitted sample; a sample whose
-    # repeats agree is never a glitch (its misfit is the model's)
+    # repeats first: a pair that disagrees names its worse-fitted sample
     repeats = check_repeats(result.problem, alpha)
     if repeats.pairs.size:
         d2 = deletion_statistics(result).d2
@@ -140,18 +223,25 @@ def find_outliers(result: FitResult, alpha: float,
             keep_local = np.setdiff1d(kept, [o.sample for o in found])
             current = refit(current, keep_local)
             kept = kept[keep_local]
-    protected = repeats.agreeing_samples()
     while len(found) < limit:
-        stats = deletion_statistics(current)
-        stats = DeletionStatistics(stats.d2, stats.dfn, np.where(
-            np.isin(kept, protected), 1.0, stats.p_value))
+        design = _design(current)
+        stats = deletion_statistics(current, design)
         worst = int(np.argmin(stats.p_value))
-        p_value = float(stats.p_value[worst])
-        if not p_value < threshold:
-            break
-        found.append(Outlier(sample=int(kept[worst]), sigma=float(np.sqrt(stats.d2[worst])),
-                             p_value=p_value))
-        keep_local = np.delete(np.arange(kept.size), worst)
+        pose = _worst_pose(design, poses[kept]) if n_poses and design is not None else None
+        if pose is not None and pose.p_value < stats.p_value[worst] \
+                and len(found) + pose.samples.size <= limit:
+            if not pose.p_value < threshold:
+                break
+            found += [Outlier(sample=int(kept[i]), sigma=pose.sigma, p_value=pose.p_value,
+                              test="pose") for i in np.sort(pose.samples)]
+            keep_local = np.setdiff1d(np.arange(kept.size), pose.samples)
+        else:
+            p_value = float(stats.p_value[worst])
+            if not p_value < threshold:
+                break
+            found.append(Outlier(sample=int(kept[worst]),
+                                 sigma=float(np.sqrt(stats.d2[worst])), p_value=p_value))
+            keep_local = np.delete(np.arange(kept.size), worst)
         current = refit(current, keep_local)
         kept = kept[keep_local]
     return tuple(found), current
