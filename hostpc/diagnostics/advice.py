@@ -77,6 +77,9 @@ def candidate_sentence(check: ModelCheck, candidate: Candidate, source: str | No
     delta_bic = "-" if candidate.delta_bic is None else f"{candidate.delta_bic:.1f}"
     evidence = (f"delta BIC {delta_bic}, chi2/dof {a.chi2_dof:.3f} -> "
                 f"{candidate.chi2_dof:.3f}, held-out RMS {mm(a.cv_rms)} -> {mm(candidate.cv_rms)}")
+    if a.cv_whitened_rms is not None and candidate.cv_whitened_rms is not None:
+        evidence += (f" (whitened {a.cv_whitened_rms:.3f} -> {candidate.cv_whitened_rms:.3f} "
+                     "sigma, the figure judged)")
     if check.outliers:
         evidence += f" ({without(check)})"
     implausible = implausible_geometry(candidate.fit)
