@@ -14,15 +14,19 @@ scale-free, like the candidate tests: the noise level is estimated from the othe
 is F(m, dof - m) distributed if sample i is as good as the rest. A covariance that is wrong
 by a constant factor therefore flags no sample.
 
-A pose of several samples (one per marker, or the same pose read twice) is also tested as
-one: leave the whole pose out (i and r_i above become the pose's samples and rows). A pose
-read twice is one pose, not two witnesses for it: its repeats agreeing shows that the
-instrument repeated the reading, not that the model is right there, and the fit that has
-seen one copy predicts the other, so the one-sample test cannot see a bad pose read twice
-(an exact duplicate row least of all). The family is every sample plus every pose of more
-than one sample: a sample or pose is an outlier when its p-value is below ``alpha`` over
-that count (Bonferroni, so ``alpha`` is family-wise); a pose named so names every sample of
-it.
+A pose that repeats a measurement (the same pose and marker read more than once, a copied
+row included: ``repeats.repeat_pairs``) is also tested as one: the whole pose left out (i
+and r_i above become its samples and rows). A pose read twice is one pose, not two
+witnesses for it: its repeats agreeing shows that the instrument repeated the reading, not
+that the pose is good, and the fit that has seen one copy predicts the other, so the
+one-sample test cannot see a bad pose read twice (an exact duplicate row least of all). A
+pose of several markers read once needs no such test: each marker is a point of its own,
+which the others do not predict, and the one-sample test names them (as one pose, in the
+text); tested as one, such poses would mostly be blamed for the model's own misfit where
+it is largest (FIGAROH's TIAGo, 34 poses of 3 markers: 3 poses named against the offsets
+model, one of which the geometry explains). The family is every sample plus every
+repeated pose: a sample or pose is an outlier when its p-value is below ``alpha`` over that
+count (Bonferroni, so ``alpha`` is family-wise); a pose named so names every sample of it.
 
 A pose measured twice is tested directly first (``repeats``): a pair of repeats that
 disagrees beyond the stated noise names its worse-fitted sample. Outliers are found one at
@@ -38,13 +42,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hostpc.dataset import Samples
 from hostpc.diagnostics.distributions import f_sf
-from hostpc.diagnostics.repeats import check_repeats
+from hostpc.diagnostics.repeats import check_repeats, repeat_pairs
 from hostpc.fitting import FitResult
 from hostpc.fitting.folds import pose_groups
 from hostpc.fitting.solver import evaluate
 from hostpc.json_object import JsonObject
+from hostpc.model.layout import Problem
 
 #: directions of a sample's residual that its own leverage fixes (1 - h below this) are
 #: not testable: the fit reproduces them whatever the measurement says
@@ -155,11 +159,20 @@ def deletion_statistics(result: FitResult, design: _Design | None = None
     return _left_out(design, np.arange(n_samples)[:, None])
 
 
-def several_sample_poses(samples: Samples) -> int:
-    """How many poses of more than one sample ``samples`` hold (each is one test of the
-    family besides the samples)."""
-    poses = pose_groups(samples)
-    return int(np.count_nonzero(np.bincount(poses) > 1)) if poses.size else 0
+def repeated_poses(problem: Problem) -> np.ndarray:
+    """(N,) the pose of each sample (``pose_groups``) where that pose repeats a measurement
+    (``repeats.repeat_pairs``: the same pose and marker more than once, a copied row
+    included), -1 elsewhere: the poses tested as one."""
+    poses = pose_groups(problem.dataset.samples)
+    pairs = repeat_pairs(problem)
+    return np.where(np.isin(poses, poses[pairs.ravel()]), poses, -1)
+
+
+def n_repeated_poses(problem: Problem, poses: np.ndarray | None = None) -> int:
+    """How many poses are tested as one (``repeated_poses``, or ``poses`` if given: its
+    result), each one test of the family."""
+    poses = repeated_poses(problem) if poses is None else poses
+    return int(np.unique(poses[poses >= 0]).size)
 
 
 @dataclass(frozen=True)
@@ -173,9 +186,11 @@ class _Worst:
 
 
 def _worst_pose(design: _Design, poses: np.ndarray) -> _Worst | None:
-    """The pose of more than one sample (``poses``: the pose of each of the fit's samples)
-    whose leave-one-pose-out test is the most significant; None without such poses."""
-    order = np.argsort(poses, kind="stable")
+    """The pose of more than one sample (``poses``: the pose of each of the fit's samples,
+    -1 for one not tested as a pose) whose leave-one-pose-out test is the most significant;
+    None without such poses."""
+    tested = np.flatnonzero(poses >= 0)
+    order = tested[np.argsort(poses[tested], kind="stable")]
     bounds = np.flatnonzero(np.diff(poses[order])) + 1
     by_size: dict[int, list[np.ndarray]] = {}
     for members in np.split(order, bounds):
@@ -194,15 +209,15 @@ def _worst_pose(design: _Design, poses: np.ndarray) -> _Worst | None:
 def find_outliers(result: FitResult, alpha: float,
                   refit: Callable[[FitResult, np.ndarray], FitResult]
                   ) -> tuple[tuple[Outlier, ...], FitResult]:
-    """The outliers of a fit, most significant first (every sample of a pose named as one
-    outlier: ``test`` "pose"), and the fit without them.
+    """The outliers of a fit, most significant first (every sample of a pose read more than
+    once named as one outlier: ``test`` "pose"), and the fit without them.
 
     refit(fit, keep): the fit's model refitted on the samples ``keep`` (indices into the
     fit's own samples). Returns the input fit unchanged when no sample is an outlier.
     """
     n_samples = result.problem.measured.shape[0]
-    poses = pose_groups(result.problem.dataset.samples)
-    n_poses = several_sample_poses(result.problem.dataset.samples)
+    poses = repeated_poses(result.problem)
+    n_poses = n_repeated_poses(result.problem, poses)
     threshold = alpha / max(n_samples + n_poses, 1)
     limit = max(1, int(MAX_OUTLIER_FRACTION * n_samples))
     kept = np.arange(n_samples)  # dataset indices of the current fit's samples
