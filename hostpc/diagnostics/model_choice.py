@@ -16,8 +16,8 @@ user will be judged, on poses the fit never saw:
   fit's adequacy uses (``robust_kept``): the samples the loss rejects on the default model
   (diagnose's leave-one-out and leave-one-pose-out outliers, refitted with the loss) are
   left out of every model's score and held-out RMS, the same samples for every model. They
-  stay in every fit (the loss weighs them); a pose three of sixty read 25 mm off would
-  otherwise decide the choice by how badly each model predicts a reading no model should;
+  stay in every fit (the loss weighs them); scored, three poses of sixty read 25 mm off
+  would decide the choice by how badly each model predicts readings no model should;
 - the one-standard-error rule: among the models whose held-out score is within one
   standard error of the best, the one with the fewest free parameters. A model whose fit
   did not converge, or whose fitted geometry is implausible (``adequacy.implausible_geometry``:

@@ -66,8 +66,8 @@ class Outlier:
     sample: int
     sigma: float
     p_value: float
-    #: which test named it: "leave-one-out"; "pose" (every sample of a pose of several,
-    #: left out together; ``sigma`` and ``p_value`` are the pose's); or "repeat" (a pose
+    #: which test named it: "leave-one-out"; "pose" (every sample of a pose read more than
+    #: once, left out together; ``sigma`` and ``p_value`` are the pose's); or "repeat" (a pose
     #: measured twice whose measurements disagree beyond the noise: ``repeats``; the sample
     #: of the pair the fit explains worse)
     test: str = "leave-one-out"
