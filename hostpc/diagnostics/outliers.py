@@ -16,10 +16,16 @@ by a constant factor therefore flags no sample.
 
 A pose that repeats a measurement (the same pose and marker read more than once, a copied
 row included: ``repeats.repeat_pairs``) is also tested as one: the whole pose left out (i
-and r_i above become its samples and rows). A pose read twice is one pose, not two
-witnesses for it: its repeats agreeing shows that the instrument repeated the reading, not
-that the pose is good, and the fit that has seen one copy predicts the other, so the
-one-sample test cannot see a bad pose read twice (an exact duplicate row least of all). A
+and r_i above become its samples and rows), so no copy predicts another; the fit that has
+seen one copy predicts the other, so the one-sample test cannot see a bad pose read twice
+(an exact duplicate row least of all). A pose read twice is one pose, not two witnesses
+for it: repeats that agree show that the instrument repeated the reading, not that the
+pose is good, and whatever is wrong at a pose (a bumped target, a wrong joint reading, the
+model's own misfit there) repeats with it. So the pose is judged as one reading: its d^2
+and its dimensions are divided by the number of times it was read (a pose read k times
+with d^2 = k D^2 over k m dimensions tests as D^2 over m, the test of one sample), and a
+pose the model misses by 2.5 mm at 0.6 mm of noise is no more an outlier for being read
+twice than once. A
 pose of several markers read once needs no such test: each marker is a point of its own,
 which the others do not predict, and the one-sample test names them (as one pose, in the
 text); tested as one, such poses would mostly be blamed for the model's own misfit where
@@ -43,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hostpc.diagnostics.distributions import f_sf
-from hostpc.diagnostics.repeats import check_repeats, repeat_pairs
+from hostpc.diagnostics.repeats import check_repeats, measured_identity, repeat_pairs
 from hostpc.fitting import FitResult
 from hostpc.fitting.folds import pose_groups
 from hostpc.fitting.solver import evaluate
@@ -67,7 +73,8 @@ class Outlier:
     sigma: float
     p_value: float
     #: which test named it: "leave-one-out"; "pose" (every sample of a pose read more than
-    #: once, left out together; ``sigma`` and ``p_value`` are the pose's); or "repeat" (a pose
+    #: once, left out together; ``sigma`` is the sample's own residual had the fit not seen
+    #: the pose, ``p_value`` the pose's); or "repeat" (a pose
     #: measured twice whose measurements disagree beyond the noise: ``repeats``; the sample
     #: of the pair the fit explains worse)
     test: str = "leave-one-out"
@@ -125,9 +132,11 @@ def _design(result: FitResult) -> _Design | None:
                    whitened.size - J_free.shape[1])
 
 
-def _left_out(design: _Design, members: np.ndarray) -> DeletionStatistics:
+def _left_out(design: _Design, members: np.ndarray, reads: np.ndarray | None = None
+              ) -> DeletionStatistics:
     """The leave-out statistics of each row of ``members`` (G, s): sample indices left out
-    together (s = 1: one sample; more: one pose), as in the module doc."""
+    together (s = 1: one sample; more: one pose), as in the module doc; reads (G,): how
+    many times each pose was read (its d2 and dimensions are those of one reading)."""
     n_groups, size = members.shape
     m = design.whitened.shape[1]
     Q = design.Q[members].reshape(n_groups, size * m, -1)
@@ -140,6 +149,9 @@ def _left_out(design: _Design, members: np.ndarray) -> DeletionStatistics:
     dfn = keep.sum(axis=1)
     dfd = design.dof - dfn
     rest = design.chi2 - np.mean(design.weights[members], axis=1) * d2
+    if reads is not None:  # one pose, one witness: the mean reading's share, m per read
+        d2 = d2 / reads
+        dfn = np.maximum(np.rint(dfn / reads).astype(np.int64), 1)
     testable = (dfn > 0) & (dfd > 0) & (rest > 1e-12 * max(design.chi2, 1e-300))
     statistic = np.where(testable, (d2 / np.maximum(dfn, 1))
                          / (np.maximum(rest, 1e-300) / np.maximum(dfd, 1)), 0.0)
@@ -177,17 +189,31 @@ def n_repeated_poses(problem: Problem, poses: np.ndarray | None = None) -> int:
 
 @dataclass(frozen=True)
 class _Worst:
-    """The most significant pose of several samples: its samples (indices into the fit's
-    own samples), the whitened norm of its leave-out residual, its p-value."""
+    """The most significant pose tested as one: its samples (indices into the fit's own
+    samples, ascending), each one's whitened leave-pose-out residual norm, the pose's
+    p-value."""
 
     samples: np.ndarray
-    sigma: float
+    sigmas: np.ndarray
     p_value: float
 
 
-def _worst_pose(design: _Design, poses: np.ndarray) -> _Worst | None:
+def _pose_residuals(design: _Design, members: np.ndarray) -> np.ndarray:
+    """(s,) the whitened norm of each sample's residual had the fit not seen any sample of
+    ``members`` (its pose): e = (I - H_gg)^-1 r_g, per sample."""
+    m = design.whitened.shape[1]
+    Q = design.Q[members].reshape(members.size * m, -1)
+    h, V = np.linalg.eigh(Q @ Q.T)
+    keep = (1.0 - h) > LEVERAGE_TOLERANCE
+    projected = V.T @ design.whitened[members].ravel()
+    e = V @ np.where(keep, projected / np.where(keep, 1.0 - h, 1.0), 0.0)
+    return np.linalg.norm(e.reshape(members.size, m), axis=1)
+
+
+def _worst_pose(design: _Design, poses: np.ndarray, identity: np.ndarray) -> _Worst | None:
     """The pose of more than one sample (``poses``: the pose of each of the fit's samples,
-    -1 for one not tested as a pose) whose leave-one-pose-out test is the most significant;
+    -1 for one not tested as a pose; ``identity``: what each measures,
+    ``repeats.measured_identity``) whose leave-one-pose-out test is the most significant;
     None without such poses."""
     tested = np.flatnonzero(poses >= 0)
     order = tested[np.argsort(poses[tested], kind="stable")]
@@ -195,15 +221,18 @@ def _worst_pose(design: _Design, poses: np.ndarray) -> _Worst | None:
     by_size: dict[int, list[np.ndarray]] = {}
     for members in np.split(order, bounds):
         if members.size > 1:
-            by_size.setdefault(members.size, []).append(members)
-    worst: _Worst | None = None
+            by_size.setdefault(members.size, []).append(np.sort(members))
+    best: tuple[float, np.ndarray] | None = None
     for groups in by_size.values():  # one stacked test per pose size
         members = np.stack(groups)
-        stats = _left_out(design, members)
-        k = int(np.argmin(stats.p_value))
-        if worst is None or stats.p_value[k] < worst.p_value:
-            worst = _Worst(members[k], float(np.sqrt(stats.d2[k])), float(stats.p_value[k]))
-    return worst
+        reads = np.array([g.size / np.unique(identity[g]).size for g in groups])
+        p_value = _left_out(design, members, reads).p_value
+        k = int(np.argmin(p_value))
+        if best is None or p_value[k] < best[0]:
+            best = (float(p_value[k]), members[k])
+    if best is None:
+        return None
+    return _Worst(best[1], _pose_residuals(design, best[1]), best[0])
 
 
 def find_outliers(result: FitResult, alpha: float,
@@ -218,6 +247,7 @@ def find_outliers(result: FitResult, alpha: float,
     n_samples = result.problem.measured.shape[0]
     poses = repeated_poses(result.problem)
     n_poses = n_repeated_poses(result.problem, poses)
+    identity = measured_identity(result.problem)
     threshold = alpha / max(n_samples + n_poses, 1)
     limit = max(1, int(MAX_OUTLIER_FRACTION * n_samples))
     kept = np.arange(n_samples)  # dataset indices of the current fit's samples
@@ -242,13 +272,15 @@ def find_outliers(result: FitResult, alpha: float,
         design = _design(current)
         stats = deletion_statistics(current, design)
         worst = int(np.argmin(stats.p_value))
-        pose = _worst_pose(design, poses[kept]) if n_poses and design is not None else None
+        pose = (_worst_pose(design, poses[kept], identity[kept])
+                if n_poses and design is not None else None)
         if pose is not None and pose.p_value < stats.p_value[worst] \
                 and len(found) + pose.samples.size <= limit:
             if not pose.p_value < threshold:
                 break
-            found += [Outlier(sample=int(kept[i]), sigma=pose.sigma, p_value=pose.p_value,
-                              test="pose") for i in np.sort(pose.samples)]
+            found += [Outlier(sample=int(kept[i]), sigma=float(sigma), p_value=pose.p_value,
+                              test="pose")
+                      for i, sigma in zip(pose.samples, pose.sigmas, strict=True)]
             keep_local = np.setdiff1d(np.arange(kept.size), pose.samples)
         else:
             p_value = float(stats.p_value[worst])

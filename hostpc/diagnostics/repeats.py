@@ -48,16 +48,22 @@ class RepeatCheck:
         return self.p_value < self.threshold
 
 
+def measured_identity(problem: Problem) -> np.ndarray:
+    """(N,) int: what each sample measures at its pose (a marker for world_point, an arm for
+    dual_loop; 0 when a pose measures one thing), so that two samples of one pose with the
+    same identity repeat one measurement."""
+    samples = problem.dataset.samples
+    measured = samples.fields.get("marker", samples.chain)
+    if measured is None:
+        return np.zeros(samples.n, dtype=np.int64)
+    _, codes = np.unique(np.asarray(measured).astype(str), return_inverse=True)
+    return np.ravel(codes).astype(np.int64)
+
+
 def repeat_pairs(problem: Problem) -> np.ndarray:
     """(K, 2) pairs of samples that repeat one measurement (same pose, same marker)."""
-    samples = problem.dataset.samples
-    groups = pose_groups(samples)
-    identity = np.zeros(samples.n, dtype=np.int64)
-    # what one pose measures more than once: a marker (world_point), an arm (dual_loop)
-    measured = samples.fields.get("marker", samples.chain)
-    if measured is not None:
-        _, codes = np.unique(np.asarray(measured).astype(str), return_inverse=True)
-        identity = np.ravel(codes).astype(np.int64)
+    groups = pose_groups(problem.dataset.samples)
+    identity = measured_identity(problem)
     key = groups * (int(identity.max(initial=0)) + 1) + identity
     order = np.argsort(key, kind="stable")
     bounds = np.flatnonzero(np.diff(key[order])) + 1
