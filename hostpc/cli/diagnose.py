@@ -252,16 +252,19 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
                      f"{cell(pattern.chi2, 10, 1)} / {pattern.dof:<3} p = {_p(pattern.p_value)}")
         if pattern.levels and pattern.significant:
             lines.append(f"      {pattern.sentence}")
-    folds = f" on the current model's {a.cv_folds} folds" if a.cv_folds else ""
+    base_sigma = check.ranked.adequacy.cv_whitened_rms
+    folds = (f": sigma, the whitened held-out RMS, below the current model's "
+             f"{base_sigma:.3f} on its {a.cv_folds} folds" if a.cv_folds and base_sigma
+             else "")
     lines += ["", "candidate effects (best first; * significant and better held out"
               f"{folds}; each row's figures are one model's):",
               f"    {name_cell('effect', 24)}{'dBIC':>9}{'dBIC all':>10}{'RMS mm':>10}"
-              f"{'held-out':>10}{'chi2/dof':>10}{'p':>11}"]
+              f"{'held-out':>10}{'sigma':>8}{'chi2/dof':>10}{'p':>11}"]
     for c in check.candidates:
         mark = "*" if c.significant else " "
         lines.append(f"  {mark} {name_cell(c.effect, 24)}{cell(c.delta_bic, 9, 1)}"
                      f"{cell(c.delta_bic_full, 10, 1)}{_mm_cell(c.rms)}{_mm_cell(c.cv_rms)}"
-                     f"{cell(c.chi2_dof, 10, 3)}"
+                     f"{cell(c.cv_whitened_rms, 8, 3)}{cell(c.chi2_dof, 10, 3)}"
                      f"{cell(_p(c.p_value) if c.testable else 'untestable', 11)}")
         if c.not_taken is not None and c.not_taken.startswith(("significant", "adding")):
             lines.append(f"      not taken: {c.not_taken}")
@@ -280,7 +283,9 @@ def format_diagnosis(diagnosis: Diagnosis) -> str:
         if diagnosis.ladder_stop:
             lines.append(f"  stopped: {diagnosis.ladder_stop}")
     if diagnosis.detectable:
-        lines += ["", "what these poses can see (80 % power at the candidates' threshold):"]
+        noise = f"; the noise {without(check)}" if check.outliers else ""
+        lines += ["", f"what these poses can see (80 % power at the candidates' threshold"
+                      f"{noise}):"]
         lines += [f"  {d.sentence}" for d in diagnosis.detectable]
     if diagnosis.confounded:
         lines += ["", "confounded candidates (neither significant given the other):"]

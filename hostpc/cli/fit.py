@@ -128,7 +128,8 @@ def run(args: argparse.Namespace) -> int:
                             "held_out_score": m.score, "standard_error": m.standard_error,
                             "cv_rms": m.cv_rms, "note": m.note or None}
                            for m in choice.scores],
-                "outliers": choice.outlier_note or None}
+                "outliers": choice.outlier_note or None,
+                "scored_without": [] if choice.kept is None else list(choice.kept.left_out)}
         document["noise_scale"] = (math.sqrt(result.chi2_dof)
                                    if math.isfinite(result.chi2_dof) else None)
         for column, values in (("std_scaled", scaled), ("std_jackknife", jackknife)):

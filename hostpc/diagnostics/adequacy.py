@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hostpc.diagnostics.distributions import chi2_isf, chi2_ppf, chi2_sf
-from hostpc.diagnostics.outliers import Outlier
+from hostpc.diagnostics.outliers import Outlier, n_repeated_poses
 from hostpc.fitting import FitResult
 from hostpc.fitting.fitting import held_out_by_fold
 from hostpc.fitting.identifiability import WEAK_SIGMA_LIMIT
@@ -226,14 +226,19 @@ def expected_noise_rms(problem: Problem) -> float:
     return float(np.sqrt(np.mean(np.sum(cov[:, lengths, lengths], axis=1))))
 
 
-def outlier_reason(outliers: tuple[Outlier, ...], n_samples: int) -> str:
-    """The sentence that names the outliers (most significant first)."""
+def outlier_reason(outliers: tuple[Outlier, ...], n_samples: int, n_poses: int = 0) -> str:
+    """The sentence that names the outliers (most significant first); n_poses: the poses
+    read more than once, tested as one each (``outliers.repeated_poses``)."""
     listed = ", ".join(f"#{o.sample} ({o.sigma:.3g} sigma, p = {o.p_value:.2g})"
                        for o in outliers)
     head = (f"sample {listed} is an outlier" if len(outliers) == 1
             else f"samples {listed} are outliers")
-    return (f"{head} (leave-one-out residual against the noise of the other samples, "
-            f"Bonferroni over {n_samples} samples)")
+    if not n_poses:
+        return (f"{head} (leave-one-out residual against the noise of the other samples, "
+                f"Bonferroni over {n_samples} samples)")
+    return (f"{head} (leave-one-out residual of a sample, or of every sample of a pose, "
+            f"against the noise of the other samples, Bonferroni over {n_samples} samples "
+            f"and {n_poses} pose{'s' if n_poses > 1 else ''} read more than once)")
 
 
 def too_few_reason(result: FitResult) -> str:
@@ -264,7 +269,8 @@ def assess(result: FitResult, held_out: HeldOut | None, alpha: float = ADEQUACY_
     band = chi2_band(dof, alpha)
     reasons: list[str] = []
     if outliers:
-        reasons.append(outlier_reason(outliers, result.residuals_raw.shape[0]))
+        reasons.append(outlier_reason(outliers, result.residuals_raw.shape[0],
+                                      n_repeated_poses(result.problem)))
     if dof <= 0:
         reasons.append(too_few_reason(result))
     elif not chi2_ok:

@@ -7,15 +7,18 @@ import math
 import re
 from collections.abc import Sequence
 
+import numpy as np
+
 from hostpc.diagnostics.adequacy import Adequacy, implausible_geometry
 from hostpc.diagnostics.candidates import Candidate
 from hostpc.diagnostics.diagnosis import LadderStep, ModelCheck
 from hostpc.diagnostics.interactions import Interaction
 from hostpc.diagnostics.patterns import pattern_effect
 from hostpc.diagnostics.residual_analysis import ResidualAnalysis
-from hostpc.diagnostics.sample_names import poses_text, whole_poses
+from hostpc.diagnostics.sample_names import name_samples, poses_text, whole_poses
 from hostpc.display_units import quantity
 from hostpc.errors import InputError
+from hostpc.fitting.folds import pose_groups
 from hostpc.model.problem import default_effects
 from hostpc.model.registry import available_effects
 
@@ -74,6 +77,9 @@ def candidate_sentence(check: ModelCheck, candidate: Candidate, source: str | No
     delta_bic = "-" if candidate.delta_bic is None else f"{candidate.delta_bic:.1f}"
     evidence = (f"delta BIC {delta_bic}, chi2/dof {a.chi2_dof:.3f} -> "
                 f"{candidate.chi2_dof:.3f}, held-out RMS {mm(a.cv_rms)} -> {mm(candidate.cv_rms)}")
+    if a.cv_whitened_rms is not None and candidate.cv_whitened_rms is not None:
+        evidence += (f" (whitened {a.cv_whitened_rms:.3f} -> {candidate.cv_whitened_rms:.3f} "
+                     "sigma, the figure judged)")
     if check.outliers:
         evidence += f" ({without(check)})"
     implausible = implausible_geometry(candidate.fit)
@@ -114,6 +120,41 @@ def outlier_note(check: ModelCheck) -> str:
     fix = (f" (the {loss} loss of this fit already down-weights {it})" if loss != "linear"
            else ", or fit with --loss cauchy")
     return f"{head}: check {measurement}{fix}."
+
+
+#: a few poses "carry most of chi2" when at most this fraction of the poses (at least one)
+#: carries at least MOST_OF_CHI2 of the chi-square of the fit the candidates were ranked on
+FEW_POSES = 0.1
+MOST_OF_CHI2 = 0.5
+
+
+def concentrated_sentence(check: ModelCheck) -> str | None:
+    """When a few poses carry most of the chi-square of the ranked fit (without the named
+    outliers): which, their share, and what to check (None when the excess is spread)."""
+    fit = check.ranked.fit
+    samples = check.fit.problem.dataset.samples
+    dataset_index = np.setdiff1d(np.arange(samples.n), check.excluded)  # ranked -> dataset
+    per_sample = np.sum(np.asarray(fit.residuals_whitened) ** 2, axis=1)
+    total = float(np.sum(per_sample))
+    if not total > 0 or per_sample.size != dataset_index.size:
+        return None
+    poses = pose_groups(samples)[dataset_index]
+    per_pose = np.bincount(poses, weights=per_sample)
+    n_poses = int(np.count_nonzero(np.bincount(poses)))
+    order = np.argsort(-per_pose)
+    needed = int(np.searchsorted(np.cumsum(per_pose[order]) / total, MOST_OF_CHI2)) + 1
+    if needed > max(1, int(FEW_POSES * n_poses)):
+        return None
+    chosen = order[:needed]
+    share = float(np.sum(per_pose[chosen])) / total
+    members = dataset_index[np.isin(poses, chosen)]
+    one = needed == 1
+    return (f"the excess is not spread evenly: {needed} of {n_poses} "
+            f"{'pose' if one else 'poses'} ({name_samples(members, samples)}; {members.size} "
+            f"of {dataset_index.size} samples) {'carries' if one else 'carry'} "
+            f"{100 * share:.0f} % of chi2. Check {'that pose' if one else 'those poses'}: "
+            "the joint reading, the marker or target seen (a bumped or swapped one), a row "
+            "copied or read twice; or fit with --loss cauchy.")
 
 
 def outlier_sentence(check: ModelCheck) -> str:
@@ -329,9 +370,11 @@ def advise(check: ModelCheck, residuals: ResidualAnalysis, ladder: Sequence[Ladd
     ranked = check.ranked.adequacy
     if not ranked.adequate and ranked.dof > 0 and best is None and costly is None \
             and not top:
+        few_poses = concentrated_sentence(check)
         sentences.append("No candidate effect and no parameter-variable pattern is "
-                         "significant: the excess is spread evenly; check the stated "
-                         "covariances and the worst samples.")
+                         "significant" + (f", but {few_poses}" if few_poses else
+                                          ": the excess is spread evenly; check the stated "
+                                          "covariances and the worst samples."))
     patterns = [p for p in residuals.patterns if p.significant][:3]
     if patterns:
         listed = ", ".join(f"{p.variable} (p = {p.p_value:.2g})" for p in patterns)

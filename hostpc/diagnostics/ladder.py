@@ -2,7 +2,9 @@
 significant candidate added, and so on - until the model is adequate, the evidence for any
 further effect runs out, or a step would predict held-out samples worse. After each
 addition an effect an earlier step added that is no longer needed is dropped (stepwise
-selection), so the models are nested except where a step says what it removed.
+selection), so the models are nested except where a step says what it removed; a drop that
+would leave the step predicting held-out samples no better than the step before is not
+made, so every step taken lowers the held-out error.
 
 "Worse" is judged on the whitened held-out RMS (every axis of every sample in units of its
 own stated noise, which is what the fit minimises): the RMS in mm is dominated by the
@@ -81,7 +83,9 @@ def climb(start: ModelCheck, check_model: Callable[[FitResult], ModelCheck],
     would not be significant) and its name, or None. With several effects hidden at once,
     the first pick can be a flexible effect that mimics the sum of the others (a
     transmission harmonic standing in for compliance and backlash); once those are in, it
-    is dropped and the step records it (``LadderStep.removed``).
+    is dropped and the step records it (``LadderStep.removed``), unless the model without
+    it would predict the held-out samples no better than the step before (then it stays:
+    a step is taken only when it lowers the held-out error).
 
     Returns the steps and, when the ladder stopped for one of these reasons, a sentence
     saying which effect was not added and why (else None).
@@ -105,13 +109,16 @@ def climb(start: ModelCheck, check_model: Callable[[FitResult], ModelCheck],
         if worse is not None:
             return tuple(steps), (f"{best.effect} is significant in-sample but was not added: "
                                   f"{worse}")
-        check = extended
+        before, check = check, extended
         removed: list[str] = []
         while prune is not None and len(removed) < len(check.effects):
             dropped = prune(check, best.effect)
             if dropped is None:
                 break
-            check = check_model(dropped[0])
+            pruned = check_model(dropped[0])
+            if held_out_worse(before, pruned) is not None:
+                break  # every step predicts the held-out samples better than the last
+            check = pruned
             removed.append(dropped[1])
         steps.append(step_of(len(steps), check, best.effect, best.delta_bic, tuple(removed)))
     return tuple(steps), None

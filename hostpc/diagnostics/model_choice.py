@@ -12,6 +12,12 @@ user will be judged, on poses the fit never saw:
 - each is scored by its pose-grouped held-out error (``hostpc.fitting.folds``; the same
   folds for every model): per pose, the mean squared whitened held-out residual per scalar
   row (1 at the stated noise), averaged over the poses, with its standard error over them;
+- with a robust loss (``--loss huber|cauchy``) the score is robust too, by the rule the
+  fit's adequacy uses (``robust_kept``): the samples the loss rejects on the default model
+  (diagnose's leave-one-out and leave-one-pose-out outliers, refitted with the loss) are
+  left out of every model's score and held-out RMS, the same samples for every model. They
+  stay in every fit (the loss weighs them); scored, three poses of sixty read 25 mm off
+  would decide the choice by how badly each model predicts readings no model should;
 - the one-standard-error rule: among the models whose held-out score is within one
   standard error of the best, the one with the fewest free parameters. A model whose fit
   did not converge, or whose fitted geometry is implausible (``adequacy.implausible_geometry``:
@@ -32,6 +38,7 @@ import numpy as np
 from hostpc.dataset import Dataset
 from hostpc.diagnostics.adequacy import implausible_geometry
 from hostpc.diagnostics.candidates import warm_start
+from hostpc.diagnostics.robust_kept import KeptSamples, kept_samples
 from hostpc.errors import InputError
 from hostpc.fitting import FitResult, fit, solve
 from hostpc.fitting.fitting import DEFAULT_CV_FOLDS, held_out_by_fold
@@ -66,13 +73,17 @@ class ModelScore:
 class ModelChoice:
     """The table (in order of complexity), the chosen model's name and its fit;
     outlier_note: the diagnosis's outlier note (hostpc.diagnostics.advice.outlier_note),
-    "" when it found none or did not run."""
+    "" when it found none or did not run; kept: the samples the scores are taken over
+    with a robust loss."""
 
     scores: tuple[ModelScore, ...]
     chosen: str
     fit: FitResult
     folds: int
     outlier_note: str = ""
+    #: with a robust loss, the samples its score leaves out (``robust_kept``); None: every
+    #: sample is scored
+    kept: KeptSamples | None = None
 
     def table(self) -> list[str]:
         """The table as text lines (mm, whitened)."""
@@ -88,22 +99,33 @@ class ModelChoice:
             note = f"  ({s.note})" if s.note else ""
             lines.append(f"  {s.name:<20} {s.free_parameters:>5} {held:>20} {rms:>13}"
                          f"{mark}{note}")
+        if self.kept is not None:
+            lines.append(f"  held out over the {self.kept.n_kept} samples the {self.kept.loss} "
+                         f"loss keeps on the offsets model ({self.kept.left_out_text} left "
+                         "out: its outliers, as the fit's adequacy is judged)")
         return lines
 
 
-def _score(result: FitResult, folds: int) -> tuple[float | None, float | None]:
+def _score(result: FitResult, folds: int, left_out: tuple[int, ...] = ()
+           ) -> tuple[float | None, float | None, float | None]:
+    """The held-out score, its standard error and the held-out RMS (m) of one model, over
+    the samples not ``left_out`` (module docstring)."""
     held = held_out_by_fold(result.problem, result.x, ~result.fixed, folds,
                             loss=cast(Loss, result.loss))
     if held is None:
-        return None, None
-    _, whitened = held
-    groups = pose_groups(result.problem.dataset.samples)
-    per_row = np.mean(whitened**2, axis=1)
+        return None, None, None
+    raw, whitened = held
+    kept = np.ones(whitened.shape[0], dtype=bool)
+    kept[list(left_out)] = False
+    groups = pose_groups(result.problem.dataset.samples)[kept]
+    per_row = np.mean(whitened[kept]**2, axis=1)
     count = np.bincount(groups)
     per_pose = np.bincount(groups, weights=per_row) / np.maximum(count, 1)
     per_pose = per_pose[count > 0]
+    lengths = raw[kept][:, result.problem.length_columns]
     return (float(np.mean(per_pose)),
-            float(np.std(per_pose, ddof=1) / math.sqrt(per_pose.size)))
+            float(np.std(per_pose, ddof=1) / math.sqrt(per_pose.size)),
+            float(np.sqrt(np.mean(np.sum(lengths**2, axis=1)))))
 
 
 def _models(dataset: Dataset, plugins: tuple[str | Path, ...], shared: SharedValues
@@ -156,23 +178,30 @@ def choose_model(dataset: Dataset, *, plugins: Iterable[str | Path] = (),
                 fitted["ladder"] = final
     scores: list[ModelScore] = []
     fits: dict[str, FitResult] = {}
+    failed: dict[str, str] = {}
     for name, effects in models:
         try:
-            result = fitted.get(name) or fit(dataset, list(effects), plugins=plugin_files,
-                                             cv_folds=cv_folds, shared=shared, loss=loss)
+            fits[name] = fitted.get(name) or fit(dataset, list(effects), plugins=plugin_files,
+                                                 cv_folds=cv_folds, shared=shared, loss=loss)
         except InputError as exc:  # e.g. a nominal model with every frame known: nothing free
+            failed[name] = f"not fitted: {exc}"
+    kept = kept_samples(fits["offsets"]) if "offsets" in fits else None
+    left_out = kept.left_out if kept is not None else ()
+    for name, effects in models:
+        if name in failed:
             scores.append(ModelScore(name, tuple(effects), 0, False, None, None, None,
-                                     f"not fitted: {exc}"))
+                                     failed[name]))
             continue
-        fits[name] = result
-        score, error = _score(result, cv_folds) if result.converged else (None, None)
+        result = fits[name]
+        score, error, cv_rms = (_score(result, cv_folds, left_out) if result.converged
+                                else (None, None, None))
         note = "" if result.converged else "did not converge: not chosen"
         if result.converged and score is None:
             note = "too few poses for a held-out score"
         elif result.converged and implausible_geometry(result) is not None:
             note = "implausible geometry (a table length moved by over 50 mm): not chosen"
         scores.append(ModelScore(name, tuple(effects), int(np.count_nonzero(~result.fixed)),
-                                 result.converged, score, error, result.cv_rms, note))
+                                 result.converged, score, error, cv_rms, note))
     scored = [s for s in scores
               if s.score is not None and s.standard_error is not None and not s.note]
     if scored:
@@ -183,4 +212,4 @@ def choose_model(dataset: Dataset, *, plugins: Iterable[str | Path] = (),
         chosen = min(within, key=lambda s: (s.free_parameters, s.score or math.inf)).name
     else:  # no held-out score for any: the default model, as without --effects auto
         chosen = "offsets"
-    return ModelChoice(tuple(scores), chosen, fits[chosen], cv_folds, outliers)
+    return ModelChoice(tuple(scores), chosen, fits[chosen], cv_folds, outliers, kept)

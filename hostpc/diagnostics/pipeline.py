@@ -271,9 +271,10 @@ def diagnose(
                             prune=lambda check, keep: climber.prune(check, base, keep))
     advice = advise(start, residuals, steps, source + data_options if source else None,
                     plugin_paths, ladder_stop=stop)
-    detectable = candidate_sizes(start.fit, registry, [c.effect for c in start.candidates],
-                                 alpha)
     ranked = start.ranked
+    # at the noise of the samples the candidates were ranked on: without the named outliers
+    detectable = candidate_sizes(ranked.fit, registry, [c.effect for c in start.candidates],
+                                 alpha)
     confounded = confounded_pairs(ranked.fit, ranked.candidates, registry, alpha=alpha,
                                   cv_folds=rank_cv_folds, loss=loss, plugins=plugin_paths)
     _forget_candidate_fits([start, *(step.check for step in steps or ())])

@@ -2,9 +2,10 @@
 
 A pose measured twice (the same joints, the same marker) must give the same measurement up
 to the noise: a pair that disagrees beyond it is a glitch (a bumped nest, a beam break, a
-mis-latched contact), whatever the model says; a pair that agrees is not, even where the
-model fits it badly (then the model misses an effect at that pose, and the leave-one-out
-test of ``outliers`` must not blame the measurement).
+mis-latched contact), whatever the model says. A pair that agrees shows only that the
+instrument repeated its reading: a pose read wrong the same way twice (a bumped target, a
+wrong joint reading, a copied row) agrees with itself, so whether the pose is good is the
+leave-one-pose-out test's question (``outliers``), never settled here.
 
 For a pair (i, j) with measurements y_i, y_j (m,) and stated covariances C_i, C_j, the
 difference d = y_i - y_j is zero-mean with covariance C_i + C_j if both are good, so
@@ -46,24 +47,23 @@ class RepeatCheck:
         """(K,) bool: pairs that disagree beyond the noise."""
         return self.p_value < self.threshold
 
-    def agreeing_samples(self) -> np.ndarray:
-        """Sample indices whose every repeat pair agrees (never glitches)."""
-        if not self.pairs.size:
-            return np.zeros(0, dtype=np.int64)
-        bad = set(self.pairs[self.disagreeing].ravel().tolist())
-        return np.array(sorted(set(self.pairs.ravel().tolist()) - bad), dtype=np.int64)
+
+def measured_identity(problem: Problem) -> np.ndarray:
+    """(N,) int: what each sample measures at its pose (a marker for world_point, an arm for
+    dual_loop; 0 when a pose measures one thing), so that two samples of one pose with the
+    same identity repeat one measurement."""
+    samples = problem.dataset.samples
+    measured = samples.fields.get("marker", samples.chain)
+    if measured is None:
+        return np.zeros(samples.n, dtype=np.int64)
+    _, codes = np.unique(np.asarray(measured).astype(str), return_inverse=True)
+    return np.ravel(codes).astype(np.int64)
 
 
 def repeat_pairs(problem: Problem) -> np.ndarray:
     """(K, 2) pairs of samples that repeat one measurement (same pose, same marker)."""
-    samples = problem.dataset.samples
-    groups = pose_groups(samples)
-    identity = np.zeros(samples.n, dtype=np.int64)
-    # what one pose measures more than once: a marker (world_point), an arm (dual_loop)
-    measured = samples.fields.get("marker", samples.chain)
-    if measured is not None:
-        _, codes = np.unique(np.asarray(measured).astype(str), return_inverse=True)
-        identity = np.ravel(codes).astype(np.int64)
+    groups = pose_groups(problem.dataset.samples)
+    identity = measured_identity(problem)
     key = groups * (int(identity.max(initial=0)) + 1) + identity
     order = np.argsort(key, kind="stable")
     bounds = np.flatnonzero(np.diff(key[order])) + 1

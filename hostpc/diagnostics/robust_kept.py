@@ -4,12 +4,14 @@ A robust loss (``--loss huber|cauchy``) down-weights a sample whose residual is 
 the rest, so its fitted values are those of the other samples; judging such a fit by the
 chi2 of every sample would refuse it for the very measurements its loss set aside. The
 samples left out of the test are the ones diagnose names as outliers (``outliers.
-find_outliers``: the Bonferroni-corrected, scale-free leave-one-out test at the adequacy
-level ``ADEQUACY_P_MIN``, refitted with the same loss after each); a covariance wrong by a
-constant factor therefore leaves out nothing, and at most ``MAX_OUTLIER_FRACTION`` of the
-samples is ever left out. The chi2 is that of the fit's own values (the ones pushed) over
-the other samples, with m degrees of freedom fewer per sample left out. A linear-loss fit
-is judged on every sample, as before.
+find_outliers``: the Bonferroni-corrected, scale-free leave-one-out test of each sample and
+of each pose of several samples, at the adequacy level ``ADEQUACY_P_MIN``, refitted with
+the same loss after each); a covariance wrong by a constant factor therefore leaves out
+nothing, and at most ``MAX_OUTLIER_FRACTION`` of the samples is ever left out. The chi2 is
+that of the fit's own values (the ones pushed) over the other samples, with m degrees of
+freedom fewer per sample left out. A linear-loss fit is judged on every sample, as before.
+`hostpc fit --effects auto` scores every model's held-out error without the samples this
+rule leaves out on the default model (``model_choice``).
 """
 
 from __future__ import annotations

@@ -200,12 +200,18 @@ def test_ladder_text_pins_the_chosen_effects_and_their_figures(
         "  - adding joint_compliance is significant (p = 4.3e-12, delta BIC -44.5)",
         "  - the residuals say joint_offsets.q2 varies with tau2 (p = 1.1e-12)",
         "    tau4           chi2      32.4 / 18  p = 0.019",
-        "  * joint_compliance            -44.5     -38.8    0.2059    0.2112     1.095    4.3e-12",
-        "  * encoder_scale               -39.4     -22.0    0.2064    0.2125     1.116    8.9e-11",
-        "  * transmission_harmonic       -36.2      58.7    0.2025    0.2138     1.099    4.5e-10",
-        "  * geometry                    -12.1      29.5    0.2100    0.2179     1.157    1.3e-05",
-        "    thermal_expansion             0.0       3.5    0.2082    0.2119     1.282       0.26",
-        "    backlash                      0.0      28.5    0.2086    0.2128     1.285       0.75",
+        "  * joint_compliance            -44.5     -38.8    0.2059    0.2112   1.087     1.095    "
+            "4.3e-12",
+        "  * encoder_scale               -39.4     -22.0    0.2064    0.2125   1.103     1.116    "
+            "8.9e-11",
+        "  * transmission_harmonic       -36.2      58.7    0.2025    0.2138   1.149     1.099    "
+            "4.5e-10",
+        "  * geometry                    -12.1      29.5    0.2100    0.2179   1.134     1.157    "
+            "1.3e-05",
+        "    thermal_expansion             0.0       3.5    0.2082    0.2119   1.177     1.282    "
+            "   0.26",
+        "    backlash                      0.0      28.5    0.2086    0.2128   1.197     1.285    "
+            "   0.75",
         "  * joint_offsets.q2 varies with tau2            score   12.0  p = 1.1e-12",
         "  0    (current model)             0.2086    0.2123    0.7674   1.180     1.287  "
         "NOT adequate",

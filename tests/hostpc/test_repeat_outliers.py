@@ -1,5 +1,6 @@
 """Repeated poses as the direct test of measurement consistency (hostpc.diagnostics.repeats):
-repeats that disagree beyond the noise are named, repeats that agree never are."""
+repeats that disagree beyond the noise are named; repeats that agree are one pose, tested as
+one."""
 
 from __future__ import annotations
 
@@ -52,12 +53,14 @@ def test_a_repeat_that_disagrees_is_named(repeated) -> None:
     assert outliers[0].test == "repeat"
 
 
-def test_repeats_that_agree_are_never_blamed_for_the_models_misfit(repeated) -> None:
-    # both visits of pose 7 (rows 42-47) read 0.3 mm off the same way: the measurements
-    # are consistent, the model misses something at that pose; the leave-one-out test
-    # alone named these samples (the behaviour before the repeat test)
+def test_a_pose_read_wrong_the_same_way_twice_is_named_as_that_pose(repeated) -> None:
+    # both visits of pose 7 (rows 42-47) read 0.3 mm off the same way: the repeats agree,
+    # which shows the instrument repeated its reading, not that the pose is good. Before,
+    # agreeing repeats were never flagged, and the one-sample test could not see them (the
+    # fit that saw one visit predicts the other); the pose is now tested as one
     consistent = _shifted(repeated, list(range(42, 48)), [0.0003, 0.0, 0.0])
     result = fit(consistent)
     assert not check_repeats(result.problem, 0.01).disagreeing.any()
     outliers, _ = find_outliers(result, 0.01, _refit)
-    assert not {o.sample for o in outliers} & set(range(42, 48))
+    assert sorted(o.sample for o in outliers) == list(range(42, 48))
+    assert {o.test for o in outliers} == {"pose"}
