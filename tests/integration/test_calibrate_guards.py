@@ -145,8 +145,11 @@ def test_push_intent_is_journaled_first_and_settled_on_resume(
         # a push whose write reached the controller but whose result was never recorded
         # (the run stopped before its push result: no push event, no result written)
         lines = (out / "journal.jsonl").read_text().splitlines(keepends=True)
-        assert [json.loads(line)["event"] for line in lines[-2:]] == ["push", "result"]
-        (out / "journal.jsonl").write_text("".join(lines[:-2]))
+        # (stopped before the controller's answer was journaled: push_written is the
+        # answer's record, with the rollback id)
+        assert [json.loads(line)["event"] for line in lines[-3:]] == [
+            "push_written", "push", "result"]
+        (out / "journal.jsonl").write_text("".join(lines[:-3]))
         (out / "result.json").unlink()
         record = json.loads((out / "push.json").read_text())
         (out / "push.json").write_text(json.dumps({**record, "status": "intent",

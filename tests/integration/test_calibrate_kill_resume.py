@@ -200,17 +200,22 @@ def test_restarted_controller_lost_the_push(complete_run, tmp_path: Path,  # typ
 
 
 @pytest.mark.slow
-def test_rollback_warns_when_it_discards_a_later_push(complete_run, tmp_path: Path,  # type: ignore[no-untyped-def]
-                                                      capsys: pytest.CaptureFixture[str]) -> None:
+def test_rollback_refuses_to_discard_a_later_push_unless_told(  # type: ignore[no-untyped-def]
+        complete_run, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     complete, _, push = complete_run
     run = _stopped_run(complete, tmp_path)
     with _controller(tmp_path, push["new_offsets"]) as sim:  # this run's push (rb-1 too)
         later = (np.asarray(push["new_offsets"]) + 1e-4).tolist()
         _set_offsets(sim, later)  # another host's later push
+        # refused, nothing written: the controller holds another push than this run's
         code, stdout, stderr = run_cli(capsys, "rollback", "--run", str(run),
                                        *robot_args(sim))
+        assert code == 2 and "--discard-later-push" in stderr, stderr
+        np.testing.assert_allclose(sim.truth()["zero_offsets"], later, rtol=0, atol=1e-12)
+        # the override the refusal names discards it
+        code, stdout, stderr = run_cli(capsys, "rollback", "--run", str(run),
+                                       *robot_args(sim), "--discard-later-push")
         assert code == 0, stderr
-        assert "discards that later push" in stderr
         np.testing.assert_allclose(sim.truth()["zero_offsets"], push["previous_offsets"],
                                    rtol=0, atol=1e-12)
     rollback = _events(run)[-1]

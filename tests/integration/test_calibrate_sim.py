@@ -185,7 +185,7 @@ def test_readme_command_calibrates_the_rig_first(tmp_path: Path,
         assert abs(errors[j]) <= 3 * joints[j]["sigma_deg"], (j, errors[j])
     assert result["verify"]["passed"] and result["push"]["status"] == "pushed"
     assert "PASS" in stdout and "truth (simulation)" in stdout
-    assert "verify: 4 fresh poses: RMS before (old offsets) " in stdout
+    assert "verify: 3 fresh poses: RMS before (old offsets) " in stdout
     assert result["robot_time_s"]["clock"] == "controller"
     assert "robot time: " in stdout
     # issue 17's target: every offset at <= 0.002 deg in <= 20 s of robot time (rig,
