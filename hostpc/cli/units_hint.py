@@ -80,8 +80,17 @@ def length_unit_hint(dataset: Dataset, declared: str, chain: Chain | None = None
     if declared == "m" and lo >= FAR_M:
         return f"{span}: millimetres? set units.length mm"
     slip = None if chain is None else slip_hint(dataset, chain, declared, declared_angle)
-    mirror = None if chain is None or slip else mirror_hint(dataset, chain)
+    mirror = None if chain is None or slip else _mirror_hint(dataset, chain)
     return slip or mirror or f"{check} (the positions span {lo:.3g}-{hi:.3g})"
+
+
+def _world_points(dataset: Dataset) -> np.ndarray | None:
+    """The measured positions (N, 3) of a dataset whose kind's positions are world-frame
+    points (the kinds hostpc import writes); None for any other kind."""
+    from hostpc.dataset.kind_registry import csv_row_kinds
+
+    p = dataset.samples.p
+    return None if p is None or dataset.method not in csv_row_kinds() else p
 
 
 def slip_hint(dataset: Dataset, chain: Chain, declared: str = "m",
@@ -89,10 +98,8 @@ def slip_hint(dataset: Dataset, chain: Chain, declared: str = "m",
     """The unit slip (``unit_slip``) of a dataset whose kind's positions are world-frame
     points (the kinds hostpc import writes), read in its declared units, in words with the
     next step; None when there is none (or the kind's positions are not such points)."""
-    from hostpc.dataset.kind_registry import csv_row_kinds
-
-    p = dataset.samples.p
-    if p is None or dataset.method not in csv_row_kinds():
+    p = _world_points(dataset)
+    if p is None:
         return None
     slip = unit_slip(chain, dataset.samples.q, p, declared, declared_angle)
     if slip is None:
@@ -101,13 +108,11 @@ def slip_hint(dataset: Dataset, chain: Chain, declared: str = "m",
             "(re-import with the units the numbers are in, or set the file's units)")
 
 
-def mirror_hint(dataset: Dataset, chain: Chain) -> str | None:
+def _mirror_hint(dataset: Dataset, chain: Chain) -> str | None:
     """Two of the instrument's axes exchanged (``mirrored_axes``) in a dataset whose kind's
     positions are world-frame points, in words with the next step; None when there is none."""
-    from hostpc.dataset.kind_registry import csv_row_kinds
-
-    p = dataset.samples.p
-    if p is None or dataset.method not in csv_row_kinds():
+    p = _world_points(dataset)
+    if p is None:
         return None
     markers = dataset.samples.fields.get("marker")
     mirror = mirrored_axes(chain, dataset.samples.q, p, dataset.method, None if
