@@ -63,6 +63,7 @@ from hostpc.archive.records import (
     verify_figures,
 )
 from hostpc.archive.rows import StoredRun
+from hostpc.calibrate.next_commands import rollback_command
 from hostpc.calibrate.run_result import RunResult
 from hostpc.errors import InputError, ZerocalError
 from hostpc.files import write_json_atomic
@@ -290,9 +291,9 @@ class Station:
         if self._needs_rollback(run_dir):
             return ("no resume settles it (the controller holds other offsets than the run "
                     "pushed: a resume meets them again), and the station starts no robot "
-                    "until it is rolled back: hostpc rollback --run "
-                    f"{run_dir} --db {self.config.database_url()}, then START {serial} "
-                    "again")
+                    "until it is rolled back: "
+                    f"{rollback_command(run_dir, self.config.database_url())}, then START "
+                    f"{serial} again")
         if pending.held == OTHER:
             return ("the controller holds neither the run's previous nor its pushed "
                     "offsets (it restarted, or someone wrote them): no resume settles the "
@@ -306,7 +307,7 @@ class Station:
                     "cell), or by hand: "
                     f"{resume_text(self.config, run_dir, push_again=True)}")
         undo = ("" if self.config.robot == "sim" else
-                f"; undo it: hostpc rollback --run {run_dir} --db {self.config.database_url()}")
+                f"; undo it: {rollback_command(run_dir, self.config.database_url())}")
         return (f"the station starts no other robot until it is settled: START {serial} "
                 f"again to resume it (its robot in the cell), or resume it by hand: "
                 f"{resume_text(self.config, run_dir)}{undo}")
@@ -566,8 +567,8 @@ class Station:
             if self.config.robot == "sim":
                 return ("the simulated controller ended with the run (nothing to roll "
                         f"back): START {serial} again")
-            return (f"while {serial} is still the robot on this station: hostpc rollback "
-                    f"--run {run_dir} --db {self.config.database_url()} (its previous "
+            return (f"while {serial} is still the robot on this station: "
+                    f"{rollback_command(run_dir, self.config.database_url())} (its previous "
                     f"offsets back), then START {serial} again; once another robot was "
                     "started, do not roll back (it would refuse: the controller holds "
                     "that robot's offsets)")
