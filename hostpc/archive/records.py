@@ -19,7 +19,7 @@ from pathlib import Path
 
 from hostpc import __version__
 from hostpc.calibrate.journal import Journal
-from hostpc.calibrate.journal_events import Pushed, Rollback
+from hostpc.calibrate.journal_events import Pushed, PushRecord, Rollback
 from hostpc.calibrate.outcome import JointOutcome
 from hostpc.calibrate.run_result import RunResult
 from hostpc.errors import InputError
@@ -184,11 +184,20 @@ def _journal_offsets(folder: Path) -> tuple[JointOffset, ...]:
         return ()
     if not isinstance(last, Pushed):
         return ()
-    previous, new = last.record.previous.tolist(), last.record.new.tolist()
-    pushed = last.record.pushed or tuple(n != o for o, n in zip(previous, new, strict=True))
+    return push_offsets(last.record)
+
+
+def push_offsets(record: PushRecord, rolled_back: bool = False) -> tuple[JointOffset, ...]:
+    """The archive's offset rows of a push (`record`: previous and new per joint, which
+    joints it changed). rolled_back: the push was undone since, so no joint holds its new
+    offset (pushed false) and the joints it left alone show no correction."""
+    previous, new = record.previous.tolist(), record.new.tolist()
+    pushed = record.pushed or tuple(n != o for o, n in zip(previous, new, strict=True))
     return tuple(JointOffset(joint=j, label=f"q{j}", old_deg=math.degrees(o),
-                             correction_deg=math.degrees(n - o), sigma_deg=None,
-                             new_deg=math.degrees(n), pushed=p)
+                             correction_deg=(None if rolled_back and not p
+                                             else math.degrees(n - o)),
+                             sigma_deg=None, new_deg=math.degrees(n),
+                             pushed=bool(p) and not rolled_back)
                  for j, (o, n, p) in enumerate(zip(previous, new, pushed, strict=True),
                                                start=1))
 

@@ -151,8 +151,7 @@ def run(args: argparse.Namespace) -> int:
         if outcome is not None:
             archive_run(args, Path(args.run), outcome.exit_code)
         elif push is not None:  # stopped after its push (ERROR): from the journal
-            archive_run(args, Path(args.run), EXIT_CODES["ROLLED_BACK"],
-                        revise=lambda record: _rolled_back_record(record, push.record))
+            _archive_from_journal(args, Path(args.run), push.record)
     document = {
         "controller": str(address),
         "rollback_id": push.record.rollback_id if push is not None else rollback_id,
@@ -229,9 +228,7 @@ def _archive_rolled_back(run_dir: Path, args: argparse.Namespace) -> bool:
         archive_run(args, run_dir, int(result["exit_code"]))
         verdict = (result.get("outcome") or {}).get("verdict", "ROLLED_BACK")
     else:  # stopped after its push (ERROR): from the journal, as the rollback did
-        push = read_push_file(run_dir)
-        archive_run(args, run_dir, EXIT_CODES["ROLLED_BACK"],
-                    revise=lambda record: _rolled_back_record(record, push.record))
+        _archive_from_journal(args, run_dir, read_push_file(run_dir).record)
         verdict = "ROLLED_BACK"
     print(f"{run_dir}: rolled back already; its archived record now says {verdict}")
     return True
@@ -332,23 +329,24 @@ def _later_push(run_dir: Path, push: PushFile) -> str:
     return f"a later push: run {later[0]} at {later[1]}"
 
 
+def _archive_from_journal(args: argparse.Namespace, run_dir: Path, push: PushRecord) -> None:
+    """Revise the archived record of a run that stopped after its push (no result.json) and
+    was rolled back (`_rolled_back_record`)."""
+    archive_run(args, run_dir, EXIT_CODES["ROLLED_BACK"],
+                revise=lambda record: _rolled_back_record(record, push))
+
+
 def _rolled_back_record(record: RunRecord, push: PushRecord) -> RunRecord:
     """The archive record of a run that stopped after its push (no result.json: ERROR)
     and was rolled back: ROLLED_BACK, nothing pushed now, its offsets the push's (the
     previous ones back in the controller)."""
     import dataclasses
 
-    from hostpc.archive import JointOffset
+    from hostpc.archive.records import push_offsets
 
-    pushed = push.pushed or tuple(bool(n != o) for o, n in zip(push.previous, push.new,
-                                                               strict=True))
-    rows = tuple(JointOffset(joint=j, label=f"q{j}", old_deg=math.degrees(o),
-                             correction_deg=math.degrees(n - o) if p else None,
-                             sigma_deg=None, new_deg=math.degrees(n), pushed=False)
-                 for j, (o, n, p) in enumerate(zip(push.previous, push.new, pushed,
-                                                   strict=True), start=1))
     return dataclasses.replace(
         record, verdict="ROLLED_BACK", exit_code=EXIT_CODES["ROLLED_BACK"],
-        push_status="rolled_back", offsets=rows, largest_correction_deg=None,
+        push_status="rolled_back", offsets=push_offsets(push, rolled_back=True),
+        largest_correction_deg=None,
         reason="ROLLED BACK: the run stopped after its push (not verified), and its push "
         "was rolled back: the controller has its previous offsets again")
