@@ -39,14 +39,19 @@ PRELIMINARY_ITERATIONS = 30
 directions, which barely changes it."""
 
 
-def measured_rows(problem: Problem) -> int:
-    """The measured components of the problem's samples: N x m less the axes a sample's
-    ``mask`` field (N, m) marks unmeasured (world_point's; their rows are zero by
-    construction and carry no information, so they are no degrees of freedom)."""
+def measured_per_sample(problem: Problem) -> np.ndarray:
+    """(N,) the measured components of each sample: m less the axes its ``mask`` field
+    (N, m) marks unmeasured (world_point's; their rows are zero by construction and carry
+    no information, so they are no degrees of freedom)."""
     mask = problem.dataset.samples.fields.get("mask")
     if mask is not None and np.shape(mask) == problem.measured.shape:
-        return int(np.count_nonzero(mask))
-    return int(problem.measured.size)
+        return np.count_nonzero(mask, axis=1)
+    return np.full(problem.measured.shape[0], problem.measured.shape[1])
+
+
+def measured_components(problem: Problem) -> int:
+    """The measured components of the problem's samples (``measured_per_sample``)."""
+    return int(np.sum(measured_per_sample(problem)))
 
 
 def _covariance(J_free: np.ndarray) -> np.ndarray:
@@ -291,7 +296,7 @@ def solve(problem: Problem, *, x0: np.ndarray | None = None, loss: Loss = "linea
         rms=float(np.sqrt(np.mean(norms**2))),
         max=float(np.max(norms)) if norms.size else 0.0,
         chi2=float(np.sum(final.whitened**2)),
-        dof=int(measured_rows(problem) + prior_rows.shape[0] - np.count_nonzero(free)),
+        dof=int(measured_components(problem) + prior_rows.shape[0] - np.count_nonzero(free)),
         rank=ident.rank,
         singular_values=ident.singular_values,
         condition_number=ident.condition_number,
@@ -314,16 +319,14 @@ def measured_noise(problem: Problem, whitened: np.ndarray, free: int) -> float |
     would not a mean; a model that misses an effect raises it as chi2/dof. Scale-invariant:
     a uniform stated sigma k times larger makes it k times smaller. None without degrees
     of freedom."""
-    mask = problem.dataset.samples.fields.get("mask")
-    rows = (np.count_nonzero(mask, axis=1) if mask is not None
-            and np.shape(mask) == problem.measured.shape
-            else np.full(len(whitened), whitened.shape[1]))
-    dof = measured_rows(problem) - free
+    rows = measured_per_sample(problem)
+    measured = int(np.sum(rows))
+    dof = measured - free
     if dof <= 0 or not len(whitened):
         return None
     median_chi2 = rows * (1.0 - 2.0 / (9.0 * rows)) ** 3
     ratio = float(np.median(np.sum(whitened**2, axis=1) / median_chi2))
-    return math.sqrt(max(ratio * measured_rows(problem) / dof, 1e-300))
+    return math.sqrt(max(ratio * measured / dof, 1e-300))
 
 
 def _hold_weak(problem: Problem, x_start: np.ndarray, start: Evaluation,
