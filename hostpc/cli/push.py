@@ -36,6 +36,7 @@ import numpy as np
 
 from hostpc.calibrate.fit_file import parse_fit_text
 from hostpc.calibrate.journal import Journal
+from hostpc.calibrate.next_commands import rollback_command
 from hostpc.calibrate.offline_push import (
     LedgerEntry,
     SavedFit,
@@ -277,7 +278,7 @@ def _refuse_if_measured_under_other_offsets(saved: SavedFit, fit: str, address: 
             f"push refused: the controller at {address} already carries this fit's "
             f"corrections: its offsets are the ones {run}/{measured.dataset} was measured "
             f"under plus this fit's (its run pushed them); pushing again would double them; "
-            f"nothing to push (to undo that push: hostpc rollback --run {run})")
+            f"nothing to push (to undo that push: {rollback_command(run)})")
     labels = [f"J{j + 1}" for j in range(offsets.size)]
     changed = ", ".join(
         f"{labels[j]} {math.degrees(then[j]):+.5f} -> {math.degrees(offsets[j]):+.5f}"
